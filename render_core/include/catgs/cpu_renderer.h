@@ -1,0 +1,113 @@
+// The CPU reference renderer: the forward model of forward_model.h as five stages, one per file
+// under src/cpu/, mirroring the CUDA core stage for stage:
+//   preprocess -> emit_keys -> sort_render_list -> identify_tile_ranges -> rasterize
+// Multi-threaded over Gaussians and tiles; deterministic (the same input gives the same bits).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "catgs/forward_model.h"
+#include "catgs/renderer.h"
+
+namespace catgs::cpu {
+
+// The tile grid of an image: ceil(W / 16) x ceil(H / 16) tiles, row-major tile ids.
+struct TileGrid {
+  int width = 0, height = 0;      // pixels
+  int tiles_x = 0, tiles_y = 0;   // tiles
+  static TileGrid of(int width, int height) {
+    return {width, height, (width + fm::kTileSize - 1) / fm::kTileSize,
+            (height + fm::kTileSize - 1) / fm::kTileSize};
+  }
+  int tile_count() const { return tiles_x * tiles_y; }
+};
+
+// Stage 1 output, one entry per scene Gaussian (N). A Gaussian with tiles_touched == 0 is culled
+// and its other fields are unspecified.
+struct ProjectedGaussians {
+  std::vector<glm::vec2> mean2d;        // [N] pixel units (pixel (i, j) centre at (i, j))
+  std::vector<glm::vec3> conic;         // [N] inverse 2D covariance (A, B, C), 1/px^2
+  std::vector<float> opacity;           // [N] sigmoid(logit), (0, 1)
+  std::vector<float> depth;             // [N] camera-space z, world units
+  std::vector<float> q_max;             // [N] exact pipeline: alpha >= 1/255 iff q <= q_max
+  std::vector<glm::vec3> color;         // [N] RGB from SH (+0.5, >= 0)
+  std::vector<fm::TileRect> tile_rect;  // [N] tiles to test, [x0, x1) x [y0, y1)
+  std::vector<uint32_t> tiles_touched;  // [N] render-list entries this Gaussian emits
+  void resize(std::size_t n);
+};
+
+// The render list: (key, value) pairs, key = [tile | depth bits], value = Gaussian index.
+struct RenderList {
+  std::vector<uint64_t> keys;    // [L]
+  std::vector<uint32_t> values;  // [L]
+  std::vector<uint64_t> offsets; // [N] exclusive prefix sum of tiles_touched (emission offsets)
+};
+
+// Tile ranges: [start, end) of each tile's entries in the sorted render list.
+using TileRanges = std::vector<glm::uvec2>;  // [tiles]
+
+// Stage 1 (src/cpu/preprocess.cpp): frustum culling (z < near), 3D -> 2D covariance (EWA), conic,
+// SH colour, tile bounds and the number of tiles each Gaussian reaches: vanilla counts every tile of
+// its 3-sigma square; exact counts the tiles passing fm::ellipse_touches_tile (opacity-aware).
+void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline,
+                ProjectedGaussians& out);
+
+// Stage 2 (src/cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
+// its keys at its offset (same order as the GPU: Gaussian index, then tile row-major).
+// Throws std::length_error past 2^32 - 1 entries (values and ranges are 32-bit).
+void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
+               RenderList& list);
+
+// Stage 3 (src/cpu/sort.cpp): sorts the list by key; equal keys keep emission order (a stable
+// radix sort on the GPU).
+void sort_render_list(RenderList& list);
+
+// Stage 4 (src/cpu/tile_ranges.cpp): tile ranges of a sorted list; tiles without entries get
+// [0, 0).
+void identify_tile_ranges(const RenderList& list, const TileGrid& grid, TileRanges& ranges);
+
+// Stage 5 (src/cpu/rasterize.cpp): front-to-back alpha blending per pixel over its tile's range
+// (paper eq. 3): alpha = min(0.99, opacity * exp(power)), skipped below 1/255, a pixel stops
+// before the Gaussian that would take T below 1e-4; C + T * background. Fills out.rgb and
+// out.rgba8 at grid size.
+void rasterize(const ProjectedGaussians& projected, const RenderList& list,
+               const TileRanges& ranges, const TileGrid& grid, glm::vec3 background, Image& out);
+
+// Runs fn(i) for i in [0, n) on all hardware threads, dynamically scheduled in chunks of `grain`.
+void parallel_for(std::size_t n, std::size_t grain, const std::function<void(std::size_t)>& fn);
+
+// The CPU Renderer: the five stages, buffers reused across frames.
+class CpuRenderer final : public Renderer {
+ public:
+  // Throws std::invalid_argument for a null model.
+  CpuRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options);
+  std::string name() const override { return "cpu"; }
+  void render(const Camera& camera, Image& out) override;
+  const FrameStats& last_stats() const override { return stats_; }
+  const RenderOptions& options() const override { return options_; }
+  void set_options(const RenderOptions& options) override;
+
+  // The intermediate state of the last frame (tests and tools).
+  const ProjectedGaussians& projected() const { return projected_; }
+  const RenderList& render_list() const { return list_; }
+  const TileRanges& tile_ranges() const { return ranges_; }
+
+ private:
+  std::shared_ptr<const GaussianModel> model_;
+  RenderOptions options_;
+  ProjectedGaussians projected_;
+  RenderList list_;
+  TileRanges ranges_;
+  FrameStats stats_;
+};
+
+// Checks a camera a renderer can draw: size in [1, 8192], finite R, t and intrinsics, fx, fy > 0.
+// Throws std::invalid_argument saying what is wrong.
+void validate_camera(const Camera& camera);
+
+}  // namespace catgs::cpu

@@ -1,0 +1,62 @@
+// The Gaussian model: N 3D Gaussians as a structure of arrays (DESIGN.md "Render core").
+#pragma once
+
+#include <cstddef>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+namespace catgs {
+
+inline constexpr int kMaxShDegree = 3;
+
+// Number of SH coefficients per colour channel for a degree: (degree + 1)^2 (1, 4, 9 or 16).
+constexpr int sh_coeff_count(int degree) { return (degree + 1) * (degree + 1); }
+
+// Axis-aligned bounds, world units.
+struct Bounds {
+  glm::vec3 min{0.0f};
+  glm::vec3 max{0.0f};
+  glm::vec3 center() const { return 0.5f * (min + max); }
+  glm::vec3 extent() const { return max - min; }
+};
+
+// A scene of 3D Gaussians. All arrays are float32, world units, one row per Gaussian:
+//   means          [N, 3]  centre (x, y, z)
+//   log_scales     [N, 3]  log of the standard deviations along the Gaussian's local axes
+//   rotations      [N, 4]  quaternion (w, x, y, z), not necessarily unit (normalised on use)
+//   opacity_logits [N]     opacity = sigmoid(logit)
+//   sh             [N, K, 3] SH coefficients, K = sh_coeff_count(sh_degree), coefficient-major:
+//                  sh[(i * K + k) * 3 + c]; k = 0 is the DC term (INRIA f_dc), k >= 1 the rest.
+// (DESIGN.md says [N, 16, 3]; we keep only the K coefficients of the scene's degree so a 7 M
+// Gaussian degree-0 city does not carry 15 zero bands.)
+struct GaussianModel {
+  std::string name;   // scene name for logs and the protocol (file stem)
+  int sh_degree = 0;  // 0..3
+  std::vector<float> means;
+  std::vector<float> log_scales;
+  std::vector<float> rotations;
+  std::vector<float> opacity_logits;
+  std::vector<float> sh;
+
+  std::size_t size() const { return opacity_logits.size(); }
+  int sh_coeffs() const { return sh_coeff_count(sh_degree); }
+  // Resizes every array for n Gaussians (contents zeroed).
+  void resize(std::size_t n);
+  // Bounds of the means. Throws std::logic_error on an empty model.
+  Bounds bounds() const;
+  // Checks shapes agree and every value is finite; throws std::runtime_error naming the first bad
+  // Gaussian and property.
+  void validate() const;
+};
+
+// Thrown for any unreadable or malformed scene file; what() names the file and the problem.
+class SceneFileError : public std::runtime_error {
+ public:
+  SceneFileError(const std::string& path, const std::string& problem)
+      : std::runtime_error(path + ": " + problem) {}
+};
+
+}  // namespace catgs

@@ -1,0 +1,82 @@
+// The render-core interface the server and tools use; implemented by the CPU reference
+// (cpu_renderer.h) and the CUDA core.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "catgs/camera.h"
+#include "catgs/gaussian_model.h"
+
+namespace catgs {
+
+// vanilla: reference 3DGS (3-sigma square bounds, every touched tile).
+// exact:   opacity-aware extent + exact ellipse-vs-tile test (render list = tiles really reached).
+// catgs:   exact + speculation, caches, task splitting (paper sec. 3; not yet implemented).
+enum class Pipeline { vanilla, exact, catgs };
+
+// "vanilla" | "exact" | "catgs" -> Pipeline; throws std::invalid_argument otherwise.
+Pipeline parse_pipeline(const std::string& name);
+const char* pipeline_name(Pipeline pipeline);
+
+struct RenderOptions {
+  Pipeline pipeline = Pipeline::exact;
+  glm::vec3 background{0.0f};  // linear RGB in [0, 1], composited behind the Gaussians
+};
+
+// An image in host memory, row-major, top row first.
+struct Image {
+  int width = 0, height = 0;
+  std::vector<float> rgb;      // [H, W, 3], unclamped composited colour
+  std::vector<uint8_t> rgba8;  // [H, W, 4], clamp([0,1]) * 255 rounded, alpha 255
+};
+
+// Converts a float colour to 8 bits as the forward model says: clamp to [0, 1], * 255, round.
+inline uint8_t to_unorm8(float v) {
+  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+  return static_cast<uint8_t>(v * 255.0f + 0.5f);
+}
+
+// Per-frame counters and stage times (milliseconds, wall clock on CPU, CUDA events on GPU).
+struct FrameStats {
+  std::size_t visible = 0;             // Gaussians that passed culling
+  std::size_t render_list_length = 0;  // Gaussian-tile pairs (keys) rasterized
+  double preprocess_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, rasterize_ms = 0;
+  double total_ms = 0;
+};
+
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+  // "cpu" or "cuda".
+  virtual std::string name() const = 0;
+  // Renders `camera` (its width x height) into `out`, reusing out's storage. Throws
+  // std::invalid_argument for a camera with a non-positive or > 8192 size or non-finite values.
+  virtual void render(const Camera& camera, Image& out) = 0;
+  // Stats of the last render().
+  virtual const FrameStats& last_stats() const = 0;
+  virtual const RenderOptions& options() const = 0;
+  virtual void set_options(const RenderOptions& options) = 0;
+};
+
+// Creates a renderer by name: "cpu", "cuda" or "auto" (CUDA if built and a device is usable, else
+// CPU; `why` receives a one-line reason). The model must outlive the renderer.
+// Throws std::runtime_error when "cuda" is asked for and unavailable.
+std::unique_ptr<Renderer> make_renderer(const std::string& kind,
+                                        std::shared_ptr<const GaussianModel> model,
+                                        const RenderOptions& options, std::string* why = nullptr);
+
+// PSNR in dB of two 8-bit images over RGB (alpha ignored); +inf when identical.
+// Throws std::invalid_argument when sizes differ.
+double psnr_rgba8(const Image& a, const Image& b);
+
+// Writes out.rgba8 as an 8-bit RGB PNG. Throws std::runtime_error naming the path.
+void write_png(const Image& image, const std::string& path);
+// Reads an 8-bit PNG (RGB or RGBA) into rgba8 (rgb left empty). Throws std::runtime_error.
+Image read_png(const std::string& path);
+
+}  // namespace catgs
