@@ -1,0 +1,244 @@
+// Unit tests of the web client's pure modules (camera maths, H.264 parsing, the protocol through
+// protobufjs), run by node without a browser or a server:  node tests/e2e/unit_web.mjs
+// Exits 77 (ctest SKIP) when the npm dependencies are not installed (scripts/setup_web.sh).
+import assert from 'node:assert/strict';
+import { existsSync, readFileSync } from 'node:fs';
+import { createRequire } from 'node:module';
+import path from 'node:path';
+import { test } from 'node:test';
+import { fileURLToPath, pathToFileURL } from 'node:url';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const repo = path.resolve(here, '../..');
+const web = path.join(repo, 'web_client');
+
+if (!existsSync(path.join(here, 'node_modules/protobufjs'))) {
+  console.log('SKIP: tests/e2e/node_modules is missing; run scripts/setup_web.sh');
+  process.exit(77);
+}
+const require = createRequire(import.meta.url);
+const pb = require('protobufjs');
+const imp = (f) => import(pathToFileURL(path.join(web, f)).href);
+const cam = await imp('camera.js');
+const h264 = await imp('h264.js');
+const proto = await imp('protocol.js');
+const conn = await imp('connection.js');
+
+const close = (a, b, eps = 1e-9) => {
+  assert.equal(a.length, b.length);
+  a.forEach((v, i) => assert.ok(Math.abs(v - b[i]) <= eps, `${a} != ${b} (index ${i})`));
+};
+
+test('quaternion rotation matches the axis-angle definition', () => {
+  const q = cam.qfromAxisAngle([0, 0, 1], Math.PI / 2);
+  close(cam.qrotate(q, [1, 0, 0]), [0, 1, 0]);
+  const r = cam.qmul(q, q); // 180 degrees about z
+  close(cam.qrotate(r, [1, 2, 3]), [-1, -2, 3]);
+});
+
+test('lookAt gives OpenCV axes: forward to the target, image down opposite to up', () => {
+  const up = [0, -1, 0]; // a y-down scene
+  const q = cam.lookAt([0, 0, -5], [0, 0, 0], up);
+  close(cam.cameraForward(q), [0, 0, 1]);
+  close(cam.cameraDown(q), [0, 1, 0]);
+  close(cam.cameraRight(q), [1, 0, 0]);
+  // quatFromAxes inverts the axes for an arbitrary rotation.
+  const q2 = cam.qnorm(cam.qmul(cam.qfromAxisAngle([1, 2, 3], 0.7), cam.qfromAxisAngle([0, 1, 0], 2.5)));
+  close(cam.quatFromAxes(cam.cameraRight(q2), cam.cameraDown(q2), cam.cameraForward(q2)), q2, 1e-9);
+});
+
+const welcome = () => ({
+  initial_pose: {
+    position: { x: 0, y: -1, z: -5 },
+    orientation: (() => {
+      const q = cam.lookAt([0, -1, -5], [0, 0, 0], [0, -1, 0]);
+      return { w: q[0], x: q[1], y: q[2], z: q[3] };
+    })(),
+    vertical_fov_deg: 50,
+  },
+  scene_bounds: { min: { x: -1, y: -1, z: -1 }, max: { x: 1, y: 1, z: 1 } },
+});
+
+test('fromWelcome: initial pose, bounds centre target, up from the camera -y axis', () => {
+  const w = welcome();
+  const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  close(c.position, [0, -1, -5]);
+  close(c.target, [0, 0, 0]);
+  assert.equal(c.fovDeg, 50);
+  // The camera is tilted, but world up is its -y axis at the start.
+  close(c.up, cam.vscale(cam.cameraDown(c.orientation), -1), 1e-12);
+  close([c.sceneScale], [Math.sqrt(12)]);
+  // proto3 leaves missing fields out: no pose and no bounds still give a usable camera.
+  const d = cam.OrbitCamera.fromWelcome(undefined, undefined);
+  close(d.orientation, [1, 0, 0, 0]);
+  assert.ok(d.sceneScale > 0);
+  assert.equal(d.fovDeg, 60);
+});
+
+test('orbit: drag right moves the camera left around the target at a fixed distance', () => {
+  const w = welcome();
+  const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  const right0 = cam.cameraRight(c.orientation);
+  const d0 = cam.vlen(cam.vsub(c.position, c.target));
+  const p0 = c.position.slice();
+  const v0 = c.version;
+  c.orbit(40, 0);
+  assert.ok(c.version > v0);
+  assert.ok(cam.vdot(cam.vsub(c.position, p0), right0) < 0);
+  close([cam.vlen(cam.vsub(c.position, c.target))], [d0], 1e-9);
+  // Still looking at the target (it did at the start), and the horizon stays level.
+  close(cam.vnorm(cam.vsub(c.target, c.position)), cam.cameraForward(c.orientation), 1e-9);
+  close([cam.vdot(cam.cameraRight(c.orientation), c.up)], [0], 1e-9);
+  // Drag down: the camera rises (moves along up).
+  const h0 = cam.vdot(c.position, c.up);
+  c.orbit(0, 30);
+  assert.ok(cam.vdot(c.position, c.up) > h0);
+  // Pitch stops short of the pole instead of flipping over.
+  for (let i = 0; i < 200; i++) c.orbit(0, 50);
+  const elev = cam.vdot(cam.vnorm(cam.vsub(c.position, c.target)), c.up);
+  assert.ok(elev < 0.9999 && elev > 0.9, `elevation ${elev}`);
+});
+
+test('pan moves camera and target together; zoom scales the distance', () => {
+  const w = welcome();
+  const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  const off0 = cam.vsub(c.position, c.target);
+  const right = cam.cameraRight(c.orientation);
+  c.pan(100, 0, 360);
+  close(cam.vsub(c.position, c.target), off0, 1e-9);
+  assert.ok(cam.vdot(c.target, right) < 0, 'drag right moves the scene right (camera left)');
+  const d = cam.vlen(cam.vsub(c.position, c.target));
+  c.zoom(0.5);
+  close([cam.vlen(cam.vsub(c.position, c.target))], [d * 0.5], 1e-9);
+  // Zooming far in keeps moving (dolly) instead of sticking at the target.
+  for (let i = 0; i < 100; i++) c.zoom(0.5);
+  const p = c.position.slice();
+  c.zoom(0.5);
+  assert.ok(cam.vlen(cam.vsub(c.position, p)) > 0);
+});
+
+test('fly moves along forward/right/up; setPose validates and keeps the target distance', () => {
+  const w = welcome();
+  const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  const p0 = c.position.slice();
+  const f = cam.cameraForward(c.orientation);
+  c.fly(0.5, 1, 0, 0, 2);
+  close(c.position, cam.vadd(p0, f), 1e-9);
+  c.fly(1, 0, 0, 1, 1);
+  close(cam.vsub(c.position, cam.vadd(p0, f)), c.up, 1e-9);
+  const d = cam.vlen(cam.vsub(c.target, c.position));
+  c.setPose([1, 2, 3], [1, 0, 0, 0], 70);
+  close(c.target, [1, 2, 3 + d], 1e-9);
+  assert.equal(c.fovDeg, 70);
+  assert.throws(() => c.setPose([NaN, 0, 0], [1, 0, 0, 0]));
+  assert.throws(() => c.setPose([0, 0, 0], [1, 0, 0, 0], 180));
+});
+
+test('intrinsics match Camera::from_pose', () => {
+  const k = cam.intrinsicsFor(90, 480, 360);
+  close([k.fx, k.fy, k.cx, k.cy], [180, 180, 240, 180], 1e-9);
+});
+
+// A Baseline SPS (level 3.0) followed by PPS and an IDR slice header, as x264 would start an IDR.
+const sps = [0x67, 0x42, 0xc0, 0x1e, 0xd9, 0x00, 0xa0, 0x47, 0xfe, 0xc8];
+const pps = [0x68, 0xce, 0x38, 0x80];
+const idr = [0x65, 0x88, 0x84, 0x00, 0x33, 0xff];
+const annexB = (...nals) => {
+  const out = [];
+  nals.forEach((n, i) => out.push(...(i === 0 ? [0, 0, 0, 1] : [0, 0, 1]), ...n));
+  return new Uint8Array(out);
+};
+
+test('Annex B split, IDR detection and codec string', () => {
+  const au = annexB(sps, pps, idr);
+  const nals = h264.splitAnnexB(au);
+  assert.deepEqual(nals.map(h264.nalType), [7, 8, 5]);
+  assert.deepEqual([...nals[0]], sps);
+  const info = h264.inspectAccessUnit(au);
+  assert.equal(info.hasIdr, true);
+  assert.equal(info.codec, 'avc1.42C01E');
+  const delta = h264.inspectAccessUnit(annexB([0x41, 0x9a, 0x02]));
+  assert.equal(delta.hasIdr, false);
+  assert.equal(delta.hasSlice, true);
+  assert.equal(delta.codec, null);
+  // High profile, level 4.0; four-byte start codes everywhere.
+  const high = new Uint8Array([0, 0, 0, 1, 0x67, 0x64, 0x00, 0x28, 0xac, 0, 0, 0, 1, 0x65, 0x88]);
+  assert.equal(h264.inspectAccessUnit(high).codec, 'avc1.640028');
+  assert.deepEqual([...h264.splitAnnexB(high)[0]], [0x67, 0x64, 0x00, 0x28, 0xac]);
+  // Emulation prevention bytes are removed before the header is read.
+  assert.deepEqual([...h264.unescapeRbsp(new Uint8Array([0x67, 0, 0, 3, 1]))], [0x67, 0, 0, 1]);
+  assert.throws(() => h264.parseSpsHeader(new Uint8Array(pps)));
+});
+
+const protoText = readFileSync(path.join(repo, 'proto/catgs_stream.proto'), 'utf8');
+
+test('web_client/catgs_stream.proto is identical to proto/catgs_stream.proto', () => {
+  const copy = path.join(web, 'catgs_stream.proto');
+  assert.ok(existsSync(copy), 'run scripts/setup_web.sh');
+  assert.equal(readFileSync(copy, 'utf8'), protoText, 'stale copy: run scripts/setup_web.sh');
+  const json = JSON.parse(readFileSync(path.join(web, 'catgs_stream.json'), 'utf8'));
+  assert.deepEqual(json, JSON.parse(JSON.stringify(pb.parse(protoText, { keepCase: true }).root.toJSON())), 'stale JSON: run scripts/setup_web.sh');
+});
+
+test('client messages encode as the protocol says', () => {
+  const p = proto.makeProtocol(pb.parse(protoText, { keepCase: true }).root);
+  const hello = p.decodeClient(p.encodeHello({ width: 480, height: 360, token: 't' }));
+  assert.equal(hello.kind, 'hello');
+  assert.equal(hello.msg.protocol_version, 1);
+  assert.equal(hello.msg.viewport_width, 480);
+  assert.equal(hello.msg.viewport_height, 360);
+  assert.deepEqual(hello.msg.codecs, [p.Codec.CODEC_H264]);
+  assert.equal(p.Codec.CODEC_H264, 1);
+  assert.equal(hello.msg.token, 't');
+
+  const pose = p.decodeClient(
+    p.encodePose({ sequence: 7, clientTimeMs: 1234.5, position: [1, -2, 3.25], orientation: [0.5, 0.5, -0.5, 0.5], fovDeg: 55 }),
+  );
+  assert.equal(pose.kind, 'pose');
+  assert.equal(pose.msg.sequence, 7);
+  assert.equal(pose.msg.client_time_ms, 1234.5);
+  assert.deepEqual({ ...pose.msg.position }, { x: 1, y: -2, z: 3.25 });
+  assert.deepEqual({ ...pose.msg.orientation }, { w: 0.5, x: 0.5, y: -0.5, z: 0.5 });
+  assert.equal(pose.msg.vertical_fov_deg, 55);
+
+  const resize = p.decodeClient(p.encodeResize(640, 480));
+  assert.equal(resize.kind, 'resize');
+  assert.equal(resize.msg.viewport_width, 640);
+  assert.equal(p.decodeClient(p.encodeKeyFrameRequest()).kind, 'key_frame_request');
+  assert.equal(p.decodeClient(p.encodePing(9)).msg.client_time_ms, 9);
+  // Field numbers on the wire: ClientMessage.pose is field 2 (tag 0x12), Pose.sequence field 1.
+  const bytes = p.encodePose({ sequence: 1, clientTimeMs: 0, position: [0, 0, 0], orientation: [1, 0, 0, 0], fovDeg: 60 });
+  assert.equal(bytes[0], 0x12);
+});
+
+test('server messages decode (the .proto and its JSON descriptor agree)', () => {
+  const fromProto = proto.makeProtocol(pb.parse(protoText, { keepCase: true }).root);
+  const json = JSON.parse(readFileSync(path.join(web, 'catgs_stream.json'), 'utf8'));
+  const fromJson = proto.makeProtocol(pb.Root.fromJSON(json));
+  const frame = fromProto.encodeServer({
+    frame: { sequence: 3, pose_sequence: 2, client_time_ms: 99.5, key_frame: true, width: 480, height: 360, payload: new Uint8Array([0, 0, 0, 1, 0x65]) },
+  });
+  for (const p of [fromProto, fromJson]) {
+    const f = p.decodeServer(frame);
+    assert.equal(f.kind, 'frame');
+    assert.equal(f.msg.pose_sequence, 2);
+    assert.equal(f.msg.client_time_ms, 99.5);
+    assert.equal(f.msg.key_frame, true);
+    assert.deepEqual([...f.msg.payload], [0, 0, 0, 1, 0x65]);
+    const e = p.decodeServer(p.encodeServer({ error: { code: 8, reason: 'slow' } }));
+    assert.equal(e.kind, 'error');
+    assert.equal(p.errorCodeName(e.msg.code), 'ERROR_TOO_SLOW');
+    const w = p.decodeServer(p.encodeServer({ welcome: { renderer: 'cpu', width: 480, height: 360, codec: 1, initial_pose: { vertical_fov_deg: 60 } } }));
+    assert.equal(w.kind, 'welcome');
+    assert.equal(w.msg.renderer, 'cpu');
+    assert.equal(w.msg.initial_pose.vertical_fov_deg, 60);
+    assert.equal(p.codecName(w.msg.codec), 'CODEC_H264');
+  }
+});
+
+test('reconnect backoff grows and is capped; the socket URL sits beside the page', () => {
+  assert.deepEqual([0, 1, 2, 3, 4, 9].map(conn.backoffMs), [1000, 2000, 4000, 8000, 10000, 10000]);
+  assert.equal(conn.defaultWebSocketUrl({ protocol: 'http:', host: '127.0.0.1:8080', search: '' }), 'ws://127.0.0.1:8080/ws');
+  assert.equal(conn.defaultWebSocketUrl({ protocol: 'https:', host: 'x.org', search: '' }), 'wss://x.org/ws');
+  assert.equal(conn.defaultWebSocketUrl({ protocol: 'http:', host: 'h', search: '?ws=ws://o:1/s' }), 'ws://o:1/s');
+});

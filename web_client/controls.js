@@ -1,0 +1,104 @@
+// Mouse, touch and keyboard input mapped onto the OrbitCamera:
+//   drag: orbit around the target; right-drag or shift-drag: pan; wheel: zoom;
+//   one finger: orbit; two fingers: pinch zoom + pan;
+//   WASD / arrow keys: fly (W/S/Up/Down forward/back, A/D/Left/Right strafe), E/Q up/down,
+//   Shift flies faster.
+
+const FLY_KEYS = new Set(['KeyW', 'KeyA', 'KeyS', 'KeyD', 'KeyQ', 'KeyE', 'ArrowUp', 'ArrowDown', 'ArrowLeft', 'ArrowRight']);
+
+export class Controls {
+  // getCamera(): the current OrbitCamera or null (before the first Welcome).
+  constructor(element, getCamera) {
+    this.el = element;
+    this.getCamera = getCamera;
+    this.pointers = new Map(); // pointerId -> { x, y, button, shift }
+    this.pinch = null; // { dist, mid } of the previous two-finger event
+    this.keys = new Set();
+    this.shiftHeld = false;
+
+    element.addEventListener('pointerdown', (e) => this._down(e));
+    element.addEventListener('pointermove', (e) => this._move(e));
+    element.addEventListener('pointerup', (e) => this._up(e));
+    element.addEventListener('pointercancel', (e) => this._up(e));
+    element.addEventListener('wheel', (e) => this._wheel(e), { passive: false });
+    element.addEventListener('contextmenu', (e) => e.preventDefault()); // right-drag pans
+    window.addEventListener('keydown', (e) => this._key(e, true));
+    window.addEventListener('keyup', (e) => this._key(e, false));
+    // Keys released while the window had no focus never send keyup: forget them.
+    window.addEventListener('blur', () => this.keys.clear());
+  }
+
+  _down(e) {
+    this.el.setPointerCapture(e.pointerId);
+    this.pointers.set(e.pointerId, { x: e.clientX, y: e.clientY, button: e.button, shift: e.shiftKey });
+    this.pinch = null;
+    e.preventDefault();
+  }
+
+  _up(e) {
+    this.pointers.delete(e.pointerId);
+    this.pinch = null;
+  }
+
+  _move(e) {
+    const p = this.pointers.get(e.pointerId);
+    if (!p) return;
+    const cam = this.getCamera();
+    const dx = e.clientX - p.x;
+    const dy = e.clientY - p.y;
+    p.x = e.clientX;
+    p.y = e.clientY;
+    if (!cam) return;
+    if (this.pointers.size >= 2) {
+      this._twoFinger(cam);
+      return;
+    }
+    // Movement and height both in CSS pixels: the pan needs only their ratio.
+    const heightCss = this.el.clientHeight || 1;
+    if (p.button === 2 || p.button === 1 || e.shiftKey || p.shift) cam.pan(dx, dy, heightCss);
+    else cam.orbit(dx, dy);
+  }
+
+  _twoFinger(cam) {
+    const [a, b] = [...this.pointers.values()];
+    const dist = Math.hypot(a.x - b.x, a.y - b.y);
+    const mid = [(a.x + b.x) / 2, (a.y + b.y) / 2];
+    if (this.pinch && dist > 0 && this.pinch.dist > 0) {
+      cam.zoom(this.pinch.dist / dist); // fingers apart = closer
+      cam.pan(mid[0] - this.pinch.mid[0], mid[1] - this.pinch.mid[1], this.el.clientHeight || 1);
+    }
+    this.pinch = { dist, mid };
+  }
+
+  _wheel(e) {
+    e.preventDefault();
+    const cam = this.getCamera();
+    if (!cam) return;
+    // deltaMode 1 = lines, 2 = pages: bring them to roughly pixels.
+    const scale = e.deltaMode === 1 ? 16 : e.deltaMode === 2 ? 400 : 1;
+    cam.zoom(Math.exp(e.deltaY * scale * 0.001));
+  }
+
+  _key(e, down) {
+    const t = e.target;
+    if (t && (t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.isContentEditable)) return;
+    this.shiftHeld = e.shiftKey;
+    if (!FLY_KEYS.has(e.code)) return;
+    if (down) this.keys.add(e.code);
+    else this.keys.delete(e.code);
+    e.preventDefault(); // arrows would scroll the page
+  }
+
+  // Applies held keys for `dt` seconds; called once per animation frame.
+  update(dt) {
+    const cam = this.getCamera();
+    if (!cam || this.keys.size === 0) return;
+    const k = (code) => (this.keys.has(code) ? 1 : 0);
+    const forward = k('KeyW') + k('ArrowUp') - k('KeyS') - k('ArrowDown');
+    const right = k('KeyD') + k('ArrowRight') - k('KeyA') - k('ArrowLeft');
+    const up = k('KeyE') - k('KeyQ');
+    // A quarter of the scene's size per second crosses a room-sized capture in a few seconds.
+    const speed = cam.sceneScale * 0.25 * (this.shiftHeld ? 4 : 1);
+    cam.fly(Math.min(dt, 0.1), Math.sign(forward), Math.sign(right), Math.sign(up), speed);
+  }
+}

@@ -1,0 +1,108 @@
+// Stats overlay (FPS, pose-to-frame latency, frame size, renderer/encoder) and status messages.
+
+export class Overlay {
+  constructor(statsEl, messagesEl) {
+    this.statsEl = statsEl;
+    this.messagesEl = messagesEl;
+    this.messages = new Map(); // id -> { text, level }
+    this.info = null;
+    this.drawTimes = [];
+    this.latencyMs = null;
+    this.frameSize = null;
+    this.rttMs = null;
+    this.serverStats = null;
+    this.codec = null;
+  }
+
+  setSession(welcome, codecName) {
+    this.info = {
+      scene: welcome.scene_name || '?',
+      renderer: welcome.renderer || '?',
+      encoder: welcome.encoder || '?',
+      pipeline: welcome.pipeline || '',
+      codec: codecName,
+    };
+    this.render();
+  }
+
+  clearSession() {
+    this.info = null;
+    this.drawTimes = [];
+    this.latencyMs = null;
+    this.render();
+  }
+
+  frameDrawn(nowMs, latencyMs, width, height, codec) {
+    this.drawTimes.push(nowMs);
+    // Smooth so the number can be read while it updates every frame.
+    if (Number.isFinite(latencyMs)) {
+      this.latencyMs = this.latencyMs === null ? latencyMs : this.latencyMs * 0.8 + latencyMs * 0.2;
+    }
+    this.frameSize = `${width}x${height}`;
+    this.codec = codec;
+  }
+
+  setRtt(ms) {
+    this.rttMs = ms;
+  }
+
+  setServerStats(stats) {
+    this.serverStats = stats;
+  }
+
+  fps(nowMs) {
+    // Frames drawn during the last second.
+    while (this.drawTimes.length && this.drawTimes[0] < nowMs - 1000) this.drawTimes.shift();
+    return this.drawTimes.length;
+  }
+
+  showMessage(id, text, level = 'error') {
+    this.messages.set(id, { text, level });
+    this.renderMessages();
+  }
+
+  clearMessage(id) {
+    if (this.messages.delete(id)) this.renderMessages();
+  }
+
+  text() {
+    return `${this.statsEl.textContent}\n${this.messagesEl.textContent}`;
+  }
+
+  render(nowMs = performance.now()) {
+    const lines = [];
+    lines.push(
+      `FPS ${this.fps(nowMs)}  latency ${this.latencyMs === null ? '-' : `${Math.round(this.latencyMs)} ms`}` +
+        `  frame ${this.frameSize || '-'}`,
+    );
+    if (this.info) {
+      const pipeline = this.info.pipeline ? ` (${this.info.pipeline})` : '';
+      lines.push(`renderer ${this.info.renderer}${pipeline}  encoder ${this.info.encoder}  ${this.codec || this.info.codec}`);
+      lines.push(`scene ${this.info.scene}${this.rttMs === null ? '' : `  rtt ${Math.round(this.rttMs)} ms`}`);
+    } else {
+      lines.push('not connected');
+    }
+    const s = this.serverStats;
+    if (s) {
+      lines.push(
+        `server: render ${num(s.render_ms_mean)} ms  encode ${num(s.encode_ms_mean)} ms` +
+          `  ${num((s.bytes_per_second * 8) / 1e6)} Mbit/s  skipped ${s.poses_skipped || 0}`,
+      );
+    }
+    this.statsEl.textContent = lines.join('\n');
+  }
+
+  renderMessages() {
+    this.messagesEl.replaceChildren();
+    for (const [id, { text, level }] of this.messages) {
+      const div = document.createElement('div');
+      div.className = `msg ${level}`;
+      div.dataset.id = id;
+      div.textContent = text;
+      this.messagesEl.appendChild(div);
+    }
+    this.messagesEl.hidden = this.messages.size === 0;
+  }
+}
+
+const num = (v) => (Number.isFinite(v) ? v.toFixed(1) : '-');

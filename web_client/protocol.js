@@ -1,0 +1,107 @@
+// The wire protocol (proto/catgs_stream.proto, package catgs.stream.v1) through protobufjs
+// reflection: the schema is loaded at run time, so the page and the server cannot drift apart by
+// a code-generation step. Field names are kept as in the .proto (keepCase), e.g. client_time_ms.
+
+export const PROTOCOL_VERSION = 1;
+const PKG = 'catgs.stream.v1';
+
+// Loads the schema with the protobufjs runtime (`pb`: the global `protobuf` from
+// vendor/protobuf.min.js in the page, the npm module in node). The .proto is served beside the
+// page; a static server that will not serve the .proto extension (libwebsockets answers 415 for
+// unknown types) is covered by the JSON descriptor that scripts/setup_web.sh generates from it.
+export async function loadProtocol(pb, baseUrl = '') {
+  const errors = [];
+  try {
+    const res = await fetch(`${baseUrl}catgs_stream.proto`, { cache: 'no-cache' });
+    if (!res.ok) throw new Error(`HTTP ${res.status}`);
+    const text = await res.text();
+    return makeProtocol(pb.parse(text, { keepCase: true }).root);
+  } catch (e) {
+    errors.push(`catgs_stream.proto: ${e.message || e}`);
+  }
+  try {
+    const res = await fetch(`${baseUrl}catgs_stream.json`, { cache: 'no-cache' });
+    if (!res.ok) throw new Error(`HTTP ${res.status}`);
+    return makeProtocol(pb.Root.fromJSON(await res.json()));
+  } catch (e) {
+    errors.push(`catgs_stream.json: ${e.message || e}`);
+  }
+  throw new Error(`cannot load the protocol schema (${errors.join('; ')})`);
+}
+
+const vec3 = (v) => ({ x: v[0], y: v[1], z: v[2] });
+const quat = (q) => ({ w: q[0], x: q[1], y: q[2], z: q[3] });
+
+export function makeProtocol(root) {
+  const ClientMessage = root.lookupType(`${PKG}.ClientMessage`);
+  const ServerMessage = root.lookupType(`${PKG}.ServerMessage`);
+  const Codec = root.lookupEnum(`${PKG}.Codec`);
+  const ErrorCode = root.lookupEnum(`${PKG}.ErrorCode`);
+
+  const encode = (body) => {
+    const obj = ClientMessage.fromObject(body);
+    return ClientMessage.encode(obj).finish();
+  };
+
+  return {
+    root,
+    Codec: Codec.values,
+    ErrorCode: ErrorCode.values,
+    codecName: (v) => Codec.valuesById[v] || `codec ${v}`,
+    errorCodeName: (v) => ErrorCode.valuesById[v] || `ERROR_${v}`,
+
+    encodeHello({ width, height, token = '', clientName = 'catgs-web' }) {
+      return encode({
+        hello: {
+          protocol_version: PROTOCOL_VERSION,
+          viewport_width: width,
+          viewport_height: height,
+          codecs: [Codec.values.CODEC_H264],
+          token,
+          client_name: clientName,
+        },
+      });
+    },
+
+    encodePose({ sequence, clientTimeMs, position, orientation, fovDeg }) {
+      return encode({
+        pose: {
+          sequence,
+          client_time_ms: clientTimeMs,
+          position: vec3(position),
+          orientation: quat(orientation),
+          vertical_fov_deg: fovDeg,
+        },
+      });
+    },
+
+    encodeResize(width, height) {
+      return encode({ resize: { viewport_width: width, viewport_height: height } });
+    },
+
+    encodePing(clientTimeMs) {
+      return encode({ ping: { client_time_ms: clientTimeMs } });
+    },
+
+    encodeKeyFrameRequest() {
+      return encode({ key_frame_request: {} });
+    },
+
+    // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | null, msg }
+    decodeServer(bytes) {
+      const m = ServerMessage.decode(bytes);
+      const kind = m.body || null; // protobufjs' oneof getter names the field that is set
+      return { kind, msg: kind ? m[kind] : null };
+    },
+
+    // For tests: the inverse directions.
+    decodeClient(bytes) {
+      const m = ClientMessage.decode(bytes);
+      const kind = m.body || null;
+      return { kind, msg: kind ? m[kind] : null };
+    },
+    encodeServer(body) {
+      return ServerMessage.encode(ServerMessage.fromObject(body)).finish();
+    },
+  };
+}
