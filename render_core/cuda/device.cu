@@ -1,0 +1,83 @@
+// Device queries and CUDA error reporting for the CUDA core.
+#include <cstdio>
+#include <string>
+
+#include "cuda_check.h"
+
+namespace catgs::cuda {
+
+namespace detail {
+
+void throw_cuda_error(cudaError_t err, const char* call, const char* file, int line) {
+  // Clear a non-sticky error so the next call does not report it again.
+  (void)cudaGetLastError();
+  const char* base = file;
+  for (const char* p = file; *p; ++p)
+    if (*p == '/') base = p + 1;
+  throw CudaError(std::string(call) + " failed at " + base + ":" + std::to_string(line) + ": " +
+                      cudaGetErrorName(err) + " (" + std::to_string(static_cast<int>(err)) +
+                      "): " + cudaGetErrorString(err),
+                  static_cast<int>(err));
+}
+
+}  // namespace detail
+
+namespace {
+// Probe: does this binary hold code the device can run (sm_90 SASS or compute_90 PTX)?
+__global__ void probe_kernel() {}
+}  // namespace
+
+bool device_usable(std::string* reason) {
+  auto say = [reason](const std::string& s) { if (reason) *reason = s; };
+  int count = 0;
+  cudaError_t err = cudaGetDeviceCount(&count);
+  if (err != cudaSuccess) {
+    (void)cudaGetLastError();
+    say(std::string("cudaGetDeviceCount: ") + cudaGetErrorString(err));
+    return false;
+  }
+  if (count == 0) {
+    say("no CUDA device");
+    return false;
+  }
+  int device = 0;
+  cudaDeviceProp prop{};
+  if ((err = cudaGetDevice(&device)) != cudaSuccess ||
+      (err = cudaGetDeviceProperties(&prop, device)) != cudaSuccess) {
+    (void)cudaGetLastError();
+    say(std::string("device query: ") + cudaGetErrorString(err));
+    return false;
+  }
+  cudaFuncAttributes attr{};
+  err = cudaFuncGetAttributes(&attr, probe_kernel);
+  const std::string who = std::string(prop.name) + " (sm_" + std::to_string(prop.major) +
+                          std::to_string(prop.minor) + ")";
+  if (err != cudaSuccess) {
+    (void)cudaGetLastError();
+    say(who + ": this build has no code for it: " + cudaGetErrorString(err));
+    return false;
+  }
+  say(who);
+  return true;
+}
+
+std::string device_description() {
+  int device = 0;
+  cudaDeviceProp prop{};
+  CATGS_CUDA(cudaGetDevice(&device));
+  CATGS_CUDA(cudaGetDeviceProperties(&prop, device));
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "%s, sm_%d%d, %d SMs, %.1f GiB, L2 %.0f MiB", prop.name,
+                prop.major, prop.minor, prop.multiProcessorCount,
+                static_cast<double>(prop.totalGlobalMem) / (1024.0 * 1024.0 * 1024.0),
+                static_cast<double>(prop.l2CacheSize) / (1024.0 * 1024.0));
+  return buf;
+}
+
+std::size_t device_memory_used() {
+  std::size_t free_bytes = 0, total = 0;
+  CATGS_CUDA(cudaMemGetInfo(&free_bytes, &total));
+  return total - free_bytes;
+}
+
+}  // namespace catgs::cuda

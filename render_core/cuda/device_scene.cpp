@@ -1,0 +1,64 @@
+// DeviceScene: one read-only copy of a GaussianModel in device memory, shared by renderers.
+#include <limits>
+#include <string>
+
+#include "cuda_check.h"
+
+namespace catgs::cuda {
+
+namespace {
+
+float* upload_array(const std::vector<float>& host, std::size_t* bytes_total, const char* what) {
+  if (host.empty()) return nullptr;
+  const std::size_t bytes = host.size() * sizeof(float);
+  float* d = nullptr;
+  try {
+    CATGS_CUDA(cudaMalloc(&d, bytes));
+  } catch (const CudaError& e) {
+    throw CudaError(std::string("scene upload: ") + what + " needs " + std::to_string(bytes) +
+                        " bytes: " + e.what(),
+                    e.code());
+  }
+  try {
+    CATGS_CUDA(cudaMemcpy(d, host.data(), bytes, cudaMemcpyHostToDevice));
+  } catch (...) {
+    cudaFree(d);
+    throw;
+  }
+  *bytes_total += bytes;
+  return d;
+}
+
+}  // namespace
+
+std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& model) {
+  const std::size_t n = model.size();
+  if (n > std::numeric_limits<uint32_t>::max())
+    throw std::length_error("scene '" + model.name + "' has " + std::to_string(n) +
+                            " Gaussians; the CUDA core indexes them with 32 bits (max 2^32 - 1)");
+  const std::size_t K = static_cast<std::size_t>(model.sh_coeffs());
+  if (model.sh_degree < 0 || model.sh_degree > kMaxShDegree || model.means.size() != 3 * n ||
+      model.log_scales.size() != 3 * n || model.rotations.size() != 4 * n ||
+      model.sh.size() != n * K * 3)
+    throw std::invalid_argument("scene '" + model.name + "': array sizes disagree with " +
+                                std::to_string(n) + " Gaussians");
+  std::shared_ptr<DeviceScene> s(new DeviceScene());
+  s->name_ = model.name;
+  s->n_ = n;
+  s->sh_degree_ = model.sh_degree;
+  // On a throw, the partially filled scene's destructor frees what was uploaded.
+  s->means_ = upload_array(model.means, &s->bytes_, "means");
+  s->log_scales_ = upload_array(model.log_scales, &s->bytes_, "log-scales");
+  s->rotations_ = upload_array(model.rotations, &s->bytes_, "rotations");
+  s->opacity_logits_ = upload_array(model.opacity_logits, &s->bytes_, "opacities");
+  s->sh_ = upload_array(model.sh, &s->bytes_, "SH coefficients");
+  return s;
+}
+
+DeviceScene::~DeviceScene() {
+  // Destructors must not throw: errors here (a dead context at exit) are ignored.
+  for (float* p : {means_, log_scales_, rotations_, opacity_logits_, sh_})
+    if (p) cudaFree(p);
+}
+
+}  // namespace catgs::cuda

@@ -1,0 +1,102 @@
+// Stage 2: render-list key emission (mirrors src/cpu/key_emission.cpp). Offsets come from a device
+// scan of the per-Gaussian tile counts, so no Gaussian ever touches a shared counter (DESIGN.md:
+// FlashGS's contended global atomicAdd per Gaussian is what slows it on the city). Built with
+// -fmad=false, like pre-processing, so the exact tile test here answers exactly as it did when
+// the tiles were counted.
+#include <cub/device/device_scan.cuh>
+#include <thrust/iterator/transform_iterator.h>
+
+#include "cuda_check.h"
+#include "stages.h"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+namespace {
+
+struct WidenToU64 {
+  __host__ __device__ uint64_t operator()(uint32_t v) const { return v; }
+};
+
+using WideCounts = thrust::transform_iterator<WidenToU64, const uint32_t*, uint64_t>;
+
+// counts[0] = render list length (ends[n-1]), counts[1] = visible Gaussians: one 16-byte readback.
+__global__ void gather_counts_kernel(const uint64_t* ends,           // [n]
+                                     uint64_t n,
+                                     const unsigned long long* visible,  // [1]
+                                     unsigned long long* counts) {       // [2]
+  counts[0] = n > 0 ? ends[n - 1] : 0ull;
+  counts[1] = *visible;
+}
+
+// One thread per Gaussian writes its run of keys. Writes are bounded by its own slot
+// [begin, end): a disagreement between counting and emitting could never spill into a neighbour.
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+emit_keys_kernel(const float2* mean2d,          // [N]
+                 const float4* conic_opacity,   // [N]
+                 const float* depth,            // [N]
+                 const float* q_max,            // [N] (exact only)
+                 const ushort4* rect,           // [N]
+                 const uint32_t* tiles_touched, // [N]
+                 const uint64_t* ends,          // [N] inclusive scan of tiles_touched
+                 uint64_t n, int tiles_x, int tiles_y, int width, int height, bool exact,
+                 uint64_t* keys,                // [L]
+                 uint32_t* values) {            // [L]
+  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n || tiles_touched[i] == 0) return;
+  const uint64_t end = ends[i];
+  uint64_t at = end - tiles_touched[i];
+  const ushort4 r = rect[i];
+  const uint32_t depth_bits = __float_as_uint(depth[i]);
+  const glm::vec2 mean(mean2d[i].x, mean2d[i].y);
+  const float4 co = conic_opacity[i];
+  const glm::vec3 conic(co.x, co.y, co.z);
+  const float qm = exact ? q_max[i] : 0.0f;
+  for (int ty = r.y; ty < r.w && at < end; ++ty) {
+    for (int tx = r.x; tx < r.z && at < end; ++tx) {
+      if (exact && !fm::ellipse_touches_tile(mean, conic, qm, tx, ty, width, height)) continue;
+      const auto tile = static_cast<uint32_t>(ty * tiles_x + tx);
+      keys[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
+      values[at] = static_cast<uint32_t>(i);
+      ++at;
+    }
+  }
+  // Unfilled slots (counting said more than emission found: never expected) become sentinels.
+  const auto sentinel = static_cast<uint64_t>(static_cast<uint32_t>(tiles_x * tiles_y)) << 32;
+  for (; at < end; ++at) {
+    keys[at] = sentinel | 0xffffffffull;
+    values[at] = static_cast<uint32_t>(i);
+  }
+}
+
+}  // namespace
+
+std::size_t scan_temp_bytes(uint64_t n) {
+  std::size_t bytes = 0;
+  WideCounts in(nullptr, WidenToU64{});
+  CATGS_CUDA(cub::DeviceScan::InclusiveSum(nullptr, bytes, in, static_cast<uint64_t*>(nullptr), n));
+  return bytes;
+}
+
+void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp,
+                        std::size_t temp_bytes, const unsigned long long* visible,
+                        unsigned long long* counts, cudaStream_t stream) {
+  if (n > 0) {
+    WideCounts in(tiles_touched, WidenToU64{});
+    CATGS_CUDA(cub::DeviceScan::InclusiveSum(temp, temp_bytes, in, ends, n, stream));
+  }
+  gather_counts_kernel<<<1, 1, 0, stream>>>(ends, n, visible, counts);
+  CATGS_CUDA_LAUNCHED("gather_counts_kernel");
+}
+
+void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam,
+               bool exact, uint64_t* keys, uint32_t* values, cudaStream_t stream) {
+  if (n == 0) return;
+  const uint64_t blocks = (n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
+      p.mean2d, p.conic_opacity, p.depth, p.q_max, p.rect, p.tiles_touched, ends, n, cam.tiles_x,
+      cam.tiles_y, cam.width, cam.height, exact, keys, values);
+  CATGS_CUDA_LAUNCHED("emit_keys_kernel");
+}
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,96 @@
+// Stage 1: per-Gaussian pre-processing (mirrors src/cpu/preprocess.cpp line for line, through the
+// shared forward_model.h maths). Built with -fmad=false (CMakeLists.txt) so the arithmetic that
+// decides culling and tile counts rounds as the CPU reference does, and so the tile test gives the
+// same answer here as in key emission.
+#include "cuda_check.h"
+#include "stages.h"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+namespace {
+
+// Tiles of `rect` the opacity-aware ellipse reaches (exact pipeline); as count_exact_tiles on CPU.
+__device__ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic,
+                                      float q_max, int width, int height) {
+  uint32_t n = 0;
+  for (int ty = rect.y0; ty < rect.y1; ++ty)
+    for (int tx = rect.x0; tx < rect.x1; ++tx)
+      n += fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) ? 1u : 0u;
+  return n;
+}
+
+// One thread per Gaussian. Reads the scene once (SH only for visible Gaussians), writes the
+// projected features of visible ones and tiles_touched of all.
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
+                  unsigned long long* visible) {  // [1] running count of visible Gaussians
+  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  uint32_t touched = 0;
+  if (i < scene.n) {
+    do {
+      const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
+      const glm::vec3 p_cam = cam.R * mean + cam.t;
+      if (!(p_cam.z > cam.near_plane) || p_cam.z > cam.far_plane) break;  // frustum (near/far)
+
+      const float opacity = fm::sigmoid(scene.opacity_logits[i]);
+      float q_max = 0.0f;
+      if (exact) {
+        q_max = fm::opacity_aware_qmax(opacity);
+        if (!(q_max > 0.0f)) break;  // never reaches alpha 1/255 anywhere
+      }
+      const fm::Cov3 cov3 = fm::covariance_3d(
+          {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
+          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
+           scene.rotations[4 * i + 3]});
+      const glm::vec3 cov2 = fm::covariance_2d(cov3, cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
+      glm::vec3 conic;
+      if (!fm::conic_from_cov2d(cov2, &conic)) break;
+
+      const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f,
+                             cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
+      fm::TileRect rect;
+      if (exact) {
+        rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height);
+        touched = fm::tile_count(rect) == 0
+                      ? 0u
+                      : count_exact_tiles(rect, mean2d, conic, q_max, cam.width, cam.height);
+      } else {
+        const float radius = fm::three_sigma_radius(cov2);
+        rect = fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y);
+        touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
+      }
+      if (touched == 0) break;
+
+      const glm::vec3 dir = glm::normalize(mean - cam.position);
+      const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
+      const glm::vec3 c = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i, dir);
+      out.mean2d[i] = make_float2(mean2d.x, mean2d.y);
+      out.conic_opacity[i] = make_float4(conic.x, conic.y, conic.z, opacity);
+      out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
+      out.depth[i] = p_cam.z;
+      out.q_max[i] = q_max;
+      out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
+                                 static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
+    } while (false);
+    out.tiles_touched[i] = touched;
+  }
+  // Visible count: one atomic per block, not per Gaussian (DESIGN.md: no contended atomics).
+  const int block_visible = __syncthreads_count(touched > 0);
+  if (threadIdx.x == 0 && block_visible > 0)
+    atomicAdd(visible, static_cast<unsigned long long>(block_visible));
+}
+
+}  // namespace
+
+void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
+                unsigned long long* visible, cudaStream_t stream) {
+  if (scene.n == 0) return;
+  const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  if (blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
+  preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
+      scene, cam, exact, out, visible);
+  CATGS_CUDA_LAUNCHED("preprocess_kernel");
+}
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,123 @@
+// Stage 5: tile rasterization, front-to-back alpha blending (mirrors src/cpu/rasterize.cpp).
+//
+// Design.
+// - One 256-thread block per 16 x 16 tile; thread (x, y) of the block owns pixel
+//   (16 tx + x, 16 ty + y) and keeps its colour C and transmittance T in registers. Threads whose
+//   pixel lies outside the image (right and bottom border tiles) start "done" but stay in the
+//   block: they still fetch Gaussians for the others and take part in every barrier.
+// - The tile's range [start, end) of the sorted render list is walked in rounds of 256 entries.
+//   In a round each thread fetches one entry (Gaussian index, 2D mean, conic + opacity, colour)
+//   into shared memory: one coalesced read of the value array and 256 independent gathers in
+//   flight, instead of 256 threads each re-reading the same Gaussian from global memory. Every
+//   fetch is bounds-checked against `end` (a tile holding fewer entries than a round, one or two
+//   say, fetches only those: DESIGN.md's FlashGS lesson).
+// - After the barrier every thread blends the round's Gaussians in depth order, skipping those
+//   with power > 0 or alpha < 1/255, and stops before the Gaussian that would take T below 1e-4
+//   (the reference 3DGS rule, as on the CPU). A second barrier protects shared memory before the
+//   next fetch.
+// - Early termination: __syncthreads_count(done) at the top of each round ends the whole block
+//   once all its pixels are saturated, so opaque tiles never walk the rest of their list.
+// - Shared memory: 256 x (8 + 16 + 16) bytes = 10 KiB per block, so occupancy is set by
+//   registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
+// - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
+//   later encoder can read the frame without a host copy.
+#include "cuda_check.h"
+#include "stages.h"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+namespace {
+
+// As catgs::to_unorm8 (renderer.h): clamp to [0, 1], * 255, round half up.
+__device__ __forceinline__ uint32_t unorm8(float v) {
+  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+  return static_cast<uint32_t>(v * 255.0f + 0.5f);
+}
+
+__global__ void __launch_bounds__(tune::kRasterThreads)
+rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the sorted list
+                 const uint32_t* values,       // [L] sorted Gaussian indices
+                 const float2* mean2d,         // [N]
+                 const float4* conic_opacity,  // [N]
+                 const float4* color,          // [N]
+                 int width, int height, int tiles_x, float3 background,
+                 float* out_rgb,               // [H, W, 3]
+                 uint32_t* out_rgba8) {        // [H, W]
+  __shared__ float2 s_mean[tune::kRasterBatch];
+  __shared__ float4 s_conic_opacity[tune::kRasterBatch];
+  __shared__ float4 s_color[tune::kRasterBatch];
+
+  const uint32_t tile = blockIdx.x;
+  const int tx = static_cast<int>(tile % static_cast<uint32_t>(tiles_x));
+  const int ty = static_cast<int>(tile / static_cast<uint32_t>(tiles_x));
+  const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
+  const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
+  const bool inside = px < width && py < height;
+  const float fpx = static_cast<float>(px), fpy = static_cast<float>(py);
+
+  const uint2 range = ranges[tile];
+  bool done = !inside;
+  float T = 1.0f;
+  float3 C = make_float3(0.0f, 0.0f, 0.0f);
+
+  for (uint32_t base = range.x; base < range.y; base += tune::kRasterBatch) {
+    if (__syncthreads_count(done) == tune::kRasterThreads) break;
+    const uint32_t fetch = base + static_cast<uint32_t>(rank);
+    if (fetch < range.y) {  // bounds-checked prefetch
+      const uint32_t g = values[fetch];
+      s_mean[rank] = mean2d[g];
+      s_conic_opacity[rank] = conic_opacity[g];
+      s_color[rank] = color[g];
+    }
+    __syncthreads();
+    const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), range.y - base);
+    for (uint32_t j = 0; j < count && !done; ++j) {
+      const float2 m = s_mean[j];
+      const float4 co = s_conic_opacity[j];
+      const float dx = m.x - fpx, dy = m.y - fpy;
+      const float power = fm::gaussian_power(glm::vec3(co.x, co.y, co.z), dx, dy);
+      if (power > 0.0f) continue;
+      const float alpha = fminf(fm::kMaxAlpha, co.w * expf(power));
+      if (alpha < fm::kMinAlpha) continue;
+      const float test_T = T * (1.0f - alpha);
+      if (test_T < fm::kMinTransmittance) {
+        done = true;
+        break;
+      }
+      const float4 c = s_color[j];
+      const float w = alpha * T;
+      C.x += c.x * w;
+      C.y += c.y * w;
+      C.z += c.z * w;
+      T = test_T;
+    }
+    __syncthreads();  // shared memory is refilled next round
+  }
+
+  if (!inside) return;
+  C.x += T * background.x;
+  C.y += T * background.y;
+  C.z += T * background.z;
+  const uint64_t p = static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px);
+  out_rgb[3 * p] = C.x;
+  out_rgb[3 * p + 1] = C.y;
+  out_rgb[3 * p + 2] = C.z;
+  out_rgba8[p] = unorm8(C.x) | (unorm8(C.y) << 8) | (unorm8(C.z) << 16) | (255u << 24);
+}
+
+}  // namespace
+
+void rasterize(const uint2* ranges, const uint32_t* sorted_values, const Projected& projected,
+               const CameraParams& cam, float3 background, float* out_rgb, uint32_t* out_rgba8,
+               cudaStream_t stream) {
+  const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
+  const dim3 block(tune::kTileSize, tune::kTileSize);
+  rasterize_kernel<<<tiles, block, 0, stream>>>(ranges, sorted_values, projected.mean2d,
+                                                projected.conic_opacity, projected.color,
+                                                cam.width, cam.height, cam.tiles_x, background,
+                                                out_rgb, out_rgba8);
+  CATGS_CUDA_LAUNCHED("rasterize_kernel");
+}
+
+}  // namespace catgs::cuda::stages

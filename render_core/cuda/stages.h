@@ -1,0 +1,85 @@
+// The five stages of the CUDA core, one per .cu file, each mirroring the CPU reference stage of the
+// same name (cpu_renderer.h). Raw device pointers and an explicit stream; no ownership here (the
+// CudaRenderer owns the buffers). Every launcher checks its launch and throws CudaError.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include <cuda_runtime.h>
+#include <glm/glm.hpp>
+
+namespace catgs::cuda::stages {
+
+// The camera as the kernels see it (by value in kernel parameters).
+struct CameraParams {
+  glm::mat3 R;            // world-to-camera rotation
+  glm::vec3 t;            // world-to-camera translation
+  glm::vec3 position;     // camera centre, world
+  float fx, fy, cx, cy;   // pixels; (cx, cy) in continuous image coordinates
+  int width, height;      // pixels
+  float near_plane, far_plane;
+  glm::vec2 tan_half_fov; // (W / (2 fx), H / (2 fy))
+  int tiles_x, tiles_y;
+};
+
+// The scene in device memory (layouts of GaussianModel).
+struct SceneView {
+  const float* means;           // [N, 3]
+  const float* log_scales;      // [N, 3]
+  const float* rotations;       // [N, 4] (w, x, y, z)
+  const float* opacity_logits;  // [N]
+  const float* sh;              // [N, K, 3], K = (sh_degree + 1)^2
+  int sh_degree;
+  uint64_t n;
+};
+
+// Stage 1 output, one entry per Gaussian; tiles_touched == 0 marks a culled Gaussian whose other
+// fields are left unwritten.
+struct Projected {
+  float2* mean2d;             // [N] pixel units
+  float4* conic_opacity;      // [N] (A, B, C, opacity)
+  float4* color;              // [N] (r, g, b, unused): 16-byte loads in the rasterizer
+  float* depth;               // [N] camera-space z
+  float* q_max;               // [N] exact pipeline: alpha >= 1/255 iff q <= q_max
+  ushort4* rect;              // [N] tile rectangle [x0, x1) x [y0, y1)
+  uint32_t* tiles_touched;    // [N] render-list entries this Gaussian emits
+};
+
+// Stage 1 (preprocess.cu): frustum culling, EWA 2D covariance, conic, SH colour, tile bounds and
+// per-Gaussian tile counts (vanilla: 3-sigma square; exact: opacity-aware ellipse-vs-tile test).
+// Adds the number of visible Gaussians to *visible (one atomic per block).
+void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
+                unsigned long long* visible, cudaStream_t stream);
+
+// Stage 2a (key_emission.cu): inclusive scan of tiles_touched into 64-bit ends[N] (CUB), then a
+// one-thread kernel copies ends[N-1] and *visible into counts[0..1] for one 16-byte readback.
+std::size_t scan_temp_bytes(uint64_t n);
+void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp,
+                        std::size_t temp_bytes, const unsigned long long* visible,
+                        unsigned long long* counts, cudaStream_t stream);
+
+// Stage 2b (key_emission.cu): each Gaussian writes its keys [tile | depth bits] and values (its
+// index) at [ends[i-1], ends[i]), in row-major tile order; never more than tiles_touched[i]
+// entries; slots it cannot fill get the sentinel tile id `tiles` (sorted last, ignored later).
+void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
+               bool exact, uint64_t* keys, uint32_t* values, cudaStream_t stream);
+
+// Stage 3 (sort.cu): CUB radix sort of (key, value) pairs over the low `key_bits` bits. Sorts
+// between the two halves of each double buffer; returns which half holds the result (0 or 1).
+std::size_t sort_temp_bytes(uint64_t entries, int key_bits);
+int sort_pairs(uint64_t* keys[2], uint32_t* values[2], uint64_t entries, int key_bits, void* temp,
+               std::size_t temp_bytes, cudaStream_t stream);
+
+// Stage 4 (tile_ranges.cu): [start, end) of each tile in the sorted list; tiles without entries get
+// [0, 0). Sentinel entries (tile id >= tiles) are ignored.
+void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream);
+
+// Stage 5 (rasterize.cu): one block per tile, front-to-back blending; writes float RGB and packed
+// 8-bit RGBA (R | G << 8 | B << 16 | 255 << 24) in device memory.
+void rasterize(const uint2* ranges, const uint32_t* sorted_values, const Projected& projected,
+               const CameraParams& cam, float3 background, float* out_rgb, uint32_t* out_rgba8,
+               cudaStream_t stream);
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,51 @@
+// Tunables of the CUDA render core, in one place, with the constraints that tie them together.
+#pragma once
+
+#include <cstdint>
+
+#include "catgs/forward_model.h"
+
+namespace catgs::cuda::tune {
+
+// Rasterizer: one block per 16 x 16 tile, one thread per pixel.
+inline constexpr int kTileSize = fm::kTileSize;
+inline constexpr int kRasterThreads = kTileSize * kTileSize;
+// Gaussians fetched into shared memory per round of the rasterizer (one per thread).
+inline constexpr int kRasterBatch = kRasterThreads;
+
+// Threads per block of the per-Gaussian (pre-processing, key emission) and per-entry kernels.
+inline constexpr int kGaussianThreads = 256;
+inline constexpr int kEntryThreads = 256;
+// Grid-stride kernels over the render list launch at most this many blocks (a list can pass 2^31).
+inline constexpr unsigned kMaxEntryBlocks = 65535u * 8u;
+
+// Largest image side the renderer accepts (validate_camera) and the tile grid that follows.
+inline constexpr int kMaxImageSide = 8192;
+inline constexpr int kMaxTilesPerSide = (kMaxImageSide + kTileSize - 1) / kTileSize;
+
+// Render-list keys are [tile id | 32 bits of view depth]; the tile id lives in the upper 32 bits,
+// so the sort only visits 32 + bit_width(tiles) bits (sentinel tile id `tiles` included).
+inline constexpr int kDepthBits = 32;
+
+// Reusable buffers grow to this multiple of the size asked for, so a trace whose render list
+// creeps upwards does not reallocate every frame.
+inline constexpr double kGrowthFactor = 1.25;
+
+static_assert(kRasterThreads == 256, "rasterizer assumes 16 x 16 tiles and 256-thread blocks");
+static_assert(kRasterBatch == kRasterThreads, "each thread fetches exactly one Gaussian per round");
+static_assert(kRasterThreads % 32 == 0, "rasterizer blocks are whole warps");
+static_assert(kMaxTilesPerSide <= 65535, "tile rectangles are stored as ushort4");
+static_assert(static_cast<uint64_t>(kMaxTilesPerSide) * kMaxTilesPerSide < (1ull << 32),
+              "tile ids (and the sentinel) must fit the 32 key bits above the depth");
+static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0, "blocks are whole warps");
+
+// Number of key bits the tile id needs for a grid of `tiles` tiles, sentinel id `tiles` included.
+constexpr int tile_key_bits(uint32_t tiles) {
+  int bits = 0;
+  while (bits < 32 && (tiles >> bits) != 0u) ++bits;
+  return bits;
+}
+static_assert(tile_key_bits(8160) == 13, "1920x1080 has 120 x 68 tiles");
+static_assert(tile_key_bits(65535) == 16 && tile_key_bits(65536) == 17, "sentinel needs a bit");
+
+}  // namespace catgs::cuda::tune

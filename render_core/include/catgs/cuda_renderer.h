@@ -1,0 +1,142 @@
+// The CUDA render core (DESIGN.md "Render core"): the CPU reference's five stages on the GPU
+// (render_core/cuda/, one .cu per stage), vanilla and exact pipelines chosen at run time.
+//
+// Ownership: a DeviceScene holds one copy of a GaussianModel in device memory and is shared,
+// read-only, by any number of CudaRenderers (shared_ptr<const DeviceScene>). Each CudaRenderer
+// owns a CUDA stream and reusable device buffers that grow when a frame needs more (by 1.25x) and
+// are never freed between frames: a steady trace allocates nothing.
+//
+// Host-device synchronisation per frame: ONE, in render_device(): after the scan of per-Gaussian
+// tile counts, 16 bytes (render list length, visible count) come back to the host, because CUB's
+// radix sort takes its item count from the host and the list buffers may have to grow first.
+// render(camera, Image&) adds a second one, the download of the image to host memory.
+// last_stats() waits for the frame's last event (the caller chooses to pay for timing).
+//
+// Errors: every CUDA call and launch is checked; failures throw CudaError naming the call, the
+// source line and the CUDA error. A render list past 2^32 - 1 entries (32-bit tile ranges and
+// Gaussian indices) throws std::length_error before any allocation; a scene past 2^32 - 1
+// Gaussians throws std::length_error at upload; running out of device memory throws CudaError
+// from the cudaMalloc that failed, with the byte count in its message.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "catgs/renderer.h"
+
+struct CUstream_st;  // cudaStream_t without the CUDA headers
+
+namespace catgs::cuda {
+
+// A failed CUDA call: what() = "<call> failed at <file>:<line>: <cudaErrorName> (<code>): <text>".
+class CudaError : public std::runtime_error {
+ public:
+  CudaError(const std::string& what, int code) : std::runtime_error(what), code_(code) {}
+  int code() const { return code_; }  // the cudaError_t value
+
+ private:
+  int code_;
+};
+
+// True when a CUDA device of compute capability >= 7.0 can be used; `reason` receives the device
+// name and capability, or why not (no driver, no device, ...). Never throws.
+bool device_usable(std::string* reason);
+
+// Name, multiprocessor count and memory of the current device ("NVIDIA H100 80GB HBM3, 132 SMs,
+// 79.1 GiB"). Throws CudaError.
+std::string device_description();
+
+// Device memory in use on the current device (total - free), bytes. Throws CudaError.
+std::size_t device_memory_used();
+
+// One copy of a scene in device memory (layouts as GaussianModel). Immutable after upload.
+class DeviceScene {
+ public:
+  // Uploads `model` (validated shapes). Throws std::length_error past 2^32 - 1 Gaussians,
+  // std::invalid_argument for inconsistent arrays, CudaError when device memory runs out.
+  static std::shared_ptr<const DeviceScene> upload(const GaussianModel& model);
+  ~DeviceScene();
+  DeviceScene(const DeviceScene&) = delete;
+  DeviceScene& operator=(const DeviceScene&) = delete;
+
+  const std::string& name() const { return name_; }
+  std::size_t size() const { return n_; }
+  int sh_degree() const { return sh_degree_; }
+  std::size_t bytes() const { return bytes_; }  // device memory held
+  // Device pointers: means [N, 3], log_scales [N, 3], rotations [N, 4], opacity_logits [N],
+  // sh [N, K, 3].
+  const float* means() const { return means_; }
+  const float* log_scales() const { return log_scales_; }
+  const float* rotations() const { return rotations_; }
+  const float* opacity_logits() const { return opacity_logits_; }
+  const float* sh() const { return sh_; }
+
+ private:
+  DeviceScene() = default;
+  std::string name_;
+  std::size_t n_ = 0, bytes_ = 0;
+  int sh_degree_ = 0;
+  float* means_ = nullptr;
+  float* log_scales_ = nullptr;
+  float* rotations_ = nullptr;
+  float* opacity_logits_ = nullptr;
+  float* sh_ = nullptr;
+};
+
+// A rendered frame in device memory, valid until the renderer's next frame; ready once `stream`
+// has reached the end of the frame (work queued on `stream` after render_device() sees it).
+struct DeviceFrame {
+  int width = 0, height = 0;
+  const float* rgb = nullptr;        // [H, W, 3] unclamped composited colour
+  const uint32_t* rgba8 = nullptr;   // [H, W] R | G << 8 | B << 16 | 255 << 24
+  CUstream_st* stream = nullptr;
+};
+
+class CudaRenderer final : public Renderer {
+ public:
+  // Throws std::invalid_argument for a null scene or the (unimplemented) catgs pipeline,
+  // CudaError when the stream or events cannot be created.
+  CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options);
+  ~CudaRenderer() override;
+
+  std::string name() const override { return "cuda"; }
+  // render_device() then a download into `out` (rgb and rgba8, as the CPU renderer fills them).
+  void render(const Camera& camera, Image& out) override;
+  // Renders `camera` into this renderer's device image; one host-device sync (see above).
+  // Throws std::invalid_argument for a bad camera, std::length_error for an oversized render
+  // list, CudaError for CUDA failures.
+  DeviceFrame render_device(const Camera& camera);
+  // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).
+  const FrameStats& last_stats() const override;
+  const RenderOptions& options() const override { return options_; }
+  void set_options(const RenderOptions& options) override;
+  // Switches to another scene; buffers are kept and grow if it needs more.
+  void set_scene(std::shared_ptr<const DeviceScene> scene);
+  const std::shared_ptr<const DeviceScene>& scene() const { return scene_; }
+
+  CUstream_st* stream() const;
+  // Bytes of device memory this renderer's reusable buffers hold now, and the most they held.
+  std::size_t buffer_bytes() const;
+  std::size_t peak_buffer_bytes() const;
+  // Number of buffer (re)allocations since construction (a steady trace should add none).
+  std::size_t allocation_count() const;
+  // Host-device synchronisations inside the last render_device() (1).
+  int syncs_last_frame() const;
+
+ private:
+  struct State;
+  std::shared_ptr<const DeviceScene> scene_;
+  RenderOptions options_;
+  std::unique_ptr<State> state_;
+  mutable FrameStats stats_;
+  mutable bool stats_ready_ = true;
+};
+
+// Uploads `model` to a new DeviceScene and makes a CudaRenderer over it (renderer_factory.cpp).
+std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model,
+                                             const RenderOptions& options);
+
+}  // namespace catgs::cuda

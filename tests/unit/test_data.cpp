@@ -1,0 +1,34 @@
+#include "test_data.h"
+
+#include <cstdlib>
+#include <filesystem>
+
+namespace fs = std::filesystem;
+
+namespace catgs::test {
+
+std::string data_dir() {
+  const char* env = std::getenv("CATGS_DATA_DIR");
+  const std::string dir = env && *env ? env : CATGS_DATA_DIR_DEFAULT;
+  return fs::is_directory(dir) ? dir : "";
+}
+
+std::string data_file(const std::string& relative) {
+  const std::string dir = data_dir();
+  if (dir.empty()) return "";
+  const fs::path p = fs::path(dir) / relative;
+  return fs::exists(p) ? p.string() : "";
+}
+
+std::string bundled_scene() { return std::string(CATGS_ASSETS_DIR) + "/scenes/biker.compressed.ply"; }
+
+std::string temp_dir() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  const fs::path p = fs::temp_directory_path() / "catgs_tests" /
+                     (std::string(info->test_suite_name()) + "." + info->name());
+  fs::remove_all(p);
+  fs::create_directories(p);
+  return p.string();
+}
+
+}  // namespace catgs::test

@@ -1,0 +1,27 @@
+// Where tests find real data: CATGS_DATA_DIR (environment, else the build's default, normally
+// ../shared/data beside the checkout) and the bundled assets.
+#pragma once
+
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace catgs::test {
+
+// The real-data folder, or "" when it does not exist.
+std::string data_dir();
+// Path of a file under the data folder (scenes/..., traces/...), or "" when absent.
+std::string data_file(const std::string& relative);
+// The bundled biker scene (always present).
+std::string bundled_scene();
+// A fresh temporary folder for this test.
+std::string temp_dir();
+
+}  // namespace catgs::test
+
+// Skips the test with a visible reason when a real-data file is missing.
+#define CATGS_REQUIRE_DATA(var, relative)                                                    \
+  const std::string var = ::catgs::test::data_file(relative);                               \
+  if (var.empty())                                                                           \
+    GTEST_SKIP() << "real data '" << (relative) << "' not found under CATGS_DATA_DIR ("      \
+                 << ::catgs::test::data_dir() << "); set CATGS_DATA_DIR to ../shared/data"
