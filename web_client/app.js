@@ -67,7 +67,7 @@ function onWelcome(w) {
   state.connection.markHealthy();
   state.decoder.reset();
   overlay.clearMessage('connection');
-  overlay.clearMessage('server');
+  overlay.clearMessage('server', 8000);
   overlay.setSession(w, state.protocol.codecName(w.codec));
   // Keep the user's view across a reconnect to the same scene; start fresh otherwise.
   if (!state.camera || state.camera.sceneName !== w.scene_name) {

@@ -27,6 +27,7 @@ export class Connection {
     this.attempt = 0;
     this.retryTimer = null;
     this.stopped = false;
+    this.healthySince = 0;
   }
 
   get isOpen() {
@@ -72,13 +73,16 @@ export class Connection {
     ws.onerror = () => {};
   }
 
-  // A session was established (Welcome): the next drop starts the backoff from the beginning.
+  // A session was established (Welcome). If it then lasts a while, the next drop starts the
+  // backoff from the beginning; a server that accepts and at once drops us still backs off.
   markHealthy() {
-    this.attempt = 0;
+    this.healthySince = Date.now();
   }
 
   _scheduleRetry(code, reason) {
     if (this.stopped) return;
+    if (this.healthySince && Date.now() - this.healthySince > 5000) this.attempt = 0;
+    this.healthySince = 0;
     const retryInMs = backoffMs(this.attempt++);
     this.retryTimer = setTimeout(() => this.connect(), retryInMs);
     this.handlers.onClose({ code, reason, retryInMs });

@@ -57,16 +57,30 @@ export class Overlay {
   }
 
   showMessage(id, text, level = 'error') {
-    this.messages.set(id, { text, level });
+    this.messages.set(id, { text, level, shownAt: performance.now() });
     this.renderMessages();
   }
 
-  clearMessage(id) {
-    if (this.messages.delete(id)) this.renderMessages();
+  // minAgeMs keeps a message up at least that long (a server error followed by a quick
+  // reconnect must still be readable).
+  clearMessage(id, minAgeMs = 0) {
+    const m = this.messages.get(id);
+    if (!m) return;
+    const wait = m.shownAt + minAgeMs - performance.now();
+    if (wait > 0) {
+      setTimeout(() => {
+        if (this.messages.get(id) === m) this.clearMessage(id);
+      }, wait);
+      return;
+    }
+    this.messages.delete(id);
+    this.renderMessages();
   }
 
+  // Everything the overlay shows, as text (for the test hook and logs).
   text() {
-    return `${this.statsEl.textContent}\n${this.messagesEl.textContent}`;
+    const msgs = [...this.messages.values()].map((m) => m.text);
+    return [this.statsEl.textContent, ...msgs].join('\n');
   }
 
   render(nowMs = performance.now()) {

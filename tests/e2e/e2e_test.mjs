@@ -1,0 +1,262 @@
+// End-to-end test: the real catgs-server (CPU renderer, bundled biker scene) serves web_client/;
+// headless Debian Chromium (driven by playwright-core) loads the page, streams, decodes H.264 with
+// WebCodecs; the canvas at a fixed pose must match catgs-render's CPU image of that pose
+// (PSNR >= 25 dB: the stream is lossy H.264, the reference is exact).
+//
+// usage: node e2e_test.mjs --server PATH/catgs-server --render PATH/catgs-render [--repo ROOT]
+//                          [--out DIR] [--min-psnr 25] [--frames 30]
+// (or CATGS_SERVER / CATGS_RENDER / CATGS_E2E_OUT in the environment)
+// Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / binaries; the reason is printed).
+import { spawn, spawnSync } from 'node:child_process';
+import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { createRequire } from 'node:module';
+import net from 'node:net';
+import os from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const SKIP = 77;
+const here = path.dirname(fileURLToPath(import.meta.url));
+const CHROMIUM = process.env.CATGS_CHROMIUM || '/usr/bin/chromium';
+
+function parseArgs(argv) {
+  const a = {};
+  for (let i = 0; i < argv.length; i++) {
+    const k = argv[i];
+    if (!k.startsWith('--')) throw new Error(`unexpected argument ${k}`);
+    a[k.slice(2)] = argv[++i];
+  }
+  return a;
+}
+const args = parseArgs(process.argv.slice(2));
+const repo = path.resolve(args.repo || process.env.CATGS_REPO || path.join(here, '../..'));
+const serverBin = args.server || process.env.CATGS_SERVER;
+const renderBin = args.render || process.env.CATGS_RENDER;
+const outDir = path.resolve(args.out || process.env.CATGS_E2E_OUT || mkdtempSync(path.join(os.tmpdir(), 'catgs-e2e-out-')));
+const minPsnr = Number(args['min-psnr'] || 25);
+const minFrames = Number(args.frames || 30);
+const scene = args.scene || path.join(repo, 'assets/scenes/biker.compressed.ply');
+const webRoot = path.join(repo, 'web_client');
+const VIEW = { width: 480, height: 360 }; // small: the CPU renderer keeps up
+
+const log = (...m) => console.log('[e2e]', ...m);
+function skip(reason) {
+  console.log(`SKIP: ${reason}`);
+  process.exit(SKIP);
+}
+
+// ---- preconditions: skip (not fail) when the environment cannot run the test at all ----
+if (!existsSync(CHROMIUM)) skip(`${CHROMIUM} is missing (apt-get install chromium)`);
+if (!existsSync(path.join(here, 'node_modules/playwright-core')) || !existsSync(path.join(here, 'node_modules/pngjs'))) {
+  skip('tests/e2e/node_modules is missing: run scripts/setup_web.sh');
+}
+if (!serverBin || !existsSync(serverBin)) skip(`catgs-server binary not given or missing (${serverBin || '--server'})`);
+if (!renderBin || !existsSync(renderBin)) skip(`catgs-render binary not given or missing (${renderBin || '--render'})`);
+// These are the project's own files: their absence is a failure, not a skip.
+for (const f of ['index.html', 'app.js', 'vendor/protobuf.min.js', 'catgs_stream.proto']) {
+  if (!existsSync(path.join(webRoot, f))) {
+    console.error(`FAIL: web_client/${f} is missing (run scripts/setup_web.sh)`);
+    process.exit(1);
+  }
+}
+if (!existsSync(scene)) {
+  console.error(`FAIL: scene ${scene} is missing`);
+  process.exit(1);
+}
+
+const require = createRequire(import.meta.url);
+const { chromium } = require('playwright-core');
+const { PNG } = require('pngjs');
+
+function freePort() {
+  return new Promise((resolve, reject) => {
+    const s = net.createServer();
+    s.once('error', reject);
+    s.listen(0, '127.0.0.1', () => {
+      const { port } = s.address();
+      s.close(() => resolve(port));
+    });
+  });
+}
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+async function waitFor(what, fn, timeoutMs, intervalMs = 100) {
+  const end = Date.now() + timeoutMs;
+  let last;
+  for (;;) {
+    last = await fn();
+    if (last) return last;
+    if (Date.now() > end) throw new Error(`timed out after ${timeoutMs} ms waiting for ${what}`);
+    await sleep(intervalMs);
+  }
+}
+
+function psnrRgb(a, b) {
+  if (a.width !== b.width || a.height !== b.height) throw new Error(`size mismatch ${a.width}x${a.height} vs ${b.width}x${b.height}`);
+  let se = 0;
+  for (let i = 0; i < a.data.length; i += 4) {
+    for (let c = 0; c < 3; c++) {
+      const d = a.data[i + c] - b.data[i + c];
+      se += d * d;
+    }
+  }
+  const mse = se / (a.width * a.height * 3);
+  return mse === 0 ? Infinity : 10 * Math.log10((255 * 255) / mse);
+}
+
+function meanRgb(img) {
+  let s = 0;
+  for (let i = 0; i < img.data.length; i += 4) s += img.data[i] + img.data[i + 1] + img.data[i + 2];
+  return s / (img.width * img.height * 3);
+}
+
+const failures = [];
+function check(ok, what) {
+  log(`${ok ? 'ok  ' : 'FAIL'} ${what}`);
+  if (!ok) failures.push(what);
+}
+
+let server = null;
+let serverLog = '';
+let context = null;
+const profileDir = mkdtempSync(path.join(os.tmpdir(), 'catgs-e2e-chromium-'));
+const pageLog = [];
+
+async function run() {
+  mkdirSync(outDir, { recursive: true });
+  const port = await freePort();
+  const serverArgs = ['--scene', scene, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot];
+  log(`starting ${serverBin} ${serverArgs.join(' ')}`);
+  server = spawn(serverBin, serverArgs, { stdio: ['ignore', 'pipe', 'pipe'] });
+  server.stdout.on('data', (d) => (serverLog += d));
+  server.stderr.on('data', (d) => (serverLog += d));
+  let serverExit = null;
+  server.on('exit', (code, sig) => (serverExit = `exited with ${code ?? sig}`));
+
+  const base = `http://127.0.0.1:${port}`;
+  await waitFor('the server to answer HTTP', async () => {
+    if (serverExit) throw new Error(`catgs-server ${serverExit} before serving`);
+    try {
+      const r = await fetch(`${base}/`);
+      return r.ok;
+    } catch (_) {
+      return false;
+    }
+  }, 60000, 200);
+  log(`server up on ${base}`);
+
+  context = await chromium.launchPersistentContext(profileDir, {
+    executablePath: CHROMIUM,
+    headless: true,
+    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+      '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+    viewport: VIEW,
+    deviceScaleFactor: 1,
+  });
+  const page = context.pages()[0] || (await context.newPage());
+  page.on('console', (m) => pageLog.push(`console.${m.type()}: ${m.text()}`));
+  page.on('pageerror', (e) => pageLog.push(`pageerror: ${e.message}`));
+  // Nothing may come from outside the server (no CDN at run time).
+  const foreign = [];
+  page.on('request', (r) => {
+    const u = r.url();
+    if (!u.startsWith(base) && !u.startsWith(`ws://127.0.0.1:${port}`) && !u.startsWith('data:')) foreign.push(u);
+  });
+
+  await page.goto(`${base}/`);
+  await page.waitForFunction(() => window.catgs && window.catgs.connected, null, { timeout: 30000 });
+  const welcome = await page.evaluate(() => window.catgs.welcome);
+  log(`welcome: scene=${welcome.scene_name} renderer=${welcome.renderer} encoder=${welcome.encoder} ` +
+    `pipeline=${welcome.pipeline} ${welcome.width}x${welcome.height}`);
+  check(welcome.renderer === 'cpu', `Welcome.renderer is cpu (${welcome.renderer})`);
+  const viewport = await page.evaluate(() => window.catgs.viewport);
+  check(viewport.width === VIEW.width && viewport.height === VIEW.height, `Hello viewport ${viewport.width}x${viewport.height}`);
+
+  // Stream: move the camera a little each tick through the hook so the server keeps rendering.
+  const ip = welcome.initial_pose;
+  const p0 = [ip.position.x, ip.position.y, ip.position.z];
+  const q0 = [ip.orientation.w, ip.orientation.x, ip.orientation.y, ip.orientation.z];
+  const fov0 = ip.vertical_fov_deg;
+  const b = welcome.scene_bounds;
+  const scale = Math.hypot(b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z) || 1;
+  const t0 = Date.now();
+  let i = 0;
+  await waitFor(`${minFrames} decoded frames`, async () => {
+    const d = 0.01 * scale * Math.sin(++i * 0.2);
+    return page.evaluate(([p, q, f, dd, n]) => {
+      window.catgs.setPose([p[0] + dd, p[1], p[2]], q, f);
+      return window.catgs.framesDecoded >= n;
+    }, [p0, q0, fov0, d, minFrames]);
+  }, 120000, 50);
+  const streamS = (Date.now() - t0) / 1000;
+  const decoded = await page.evaluate(() => window.catgs.framesDecoded);
+  log(`${decoded} frames decoded in ${streamS.toFixed(1)} s while moving (${(decoded / streamS).toFixed(1)} fps)`);
+
+  // Fixed pose: the server's initial view. Wait for the frame that answers it, then let the stream
+  // settle briefly (the server may send more frames of the same pose) and take the canvas.
+  const seq = await page.evaluate(([p, q, f]) => window.catgs.setPose(p, q, f), [p0, q0, fov0]);
+  check(Number.isInteger(seq) && seq > 0, `fixed pose sent with sequence ${seq}`);
+  await page.waitForFunction((s) => window.catgs.lastFrame && window.catgs.lastFrame.poseSequence >= s, seq, { timeout: 30000 });
+  await sleep(500);
+  const shot = await page.evaluate(() => ({ frame: window.catgs.lastFrame, png: window.catgs.snapshot(), overlay: window.catgs.overlayText() }));
+  check(shot.frame.poseSequence === seq, `last frame answers pose ${seq} (got ${shot.frame.poseSequence})`);
+  const { width, height } = shot.frame;
+  const streamedPath = path.join(outDir, 'streamed.png');
+  writeFileSync(streamedPath, Buffer.from(shot.png.split(',')[1], 'base64'));
+
+  // Reference: catgs-render of the same pose, with the intrinsics Camera::from_pose derives.
+  const f = height / (2 * Math.tan((fov0 * Math.PI) / 360));
+  const g = (v) => v.toPrecision(17);
+  const tracePath = path.join(outDir, 'fixed.trace');
+  writeFileSync(tracePath, `catgs-trace 1\n0 ${[...p0, ...q0, f, f, width / 2, height / 2].map(g).join(' ')} ${width} ${height}\n`);
+  const refPath = path.join(outDir, 'reference.png');
+  const r = spawnSync(renderBin, ['--scene', scene, '--trace', tracePath, '--out', refPath, '--renderer', 'cpu'], { encoding: 'utf8' });
+  if (r.status !== 0) throw new Error(`catgs-render failed (${r.status}): ${r.stderr}${r.stdout}`);
+  const streamed = PNG.sync.read(readFileSync(streamedPath));
+  const reference = PNG.sync.read(readFileSync(refPath));
+  const psnr = psnrRgb(streamed, reference);
+  log(`PSNR streamed vs catgs-render: ${psnr.toFixed(2)} dB (${width}x${height}; mean ${meanRgb(streamed).toFixed(1)} vs ${meanRgb(reference).toFixed(1)})`);
+  log(`images: ${streamedPath} ${refPath}`);
+  check(meanRgb(reference) > 5, 'the reference image is not black (the pose sees the scene)');
+  check(psnr >= minPsnr, `PSNR ${psnr.toFixed(2)} dB >= ${minPsnr} dB`);
+
+  // Overlay: sane numbers and the session's facts.
+  log(`overlay:\n${shot.overlay.replace(/^/gm, '    ')}`);
+  const fpsMatch = /FPS (\d+)/.exec(shot.overlay);
+  check(!!fpsMatch && Number(fpsMatch[1]) > 0, 'overlay shows a positive FPS');
+  check(/latency \d+ ms/.test(shot.overlay), 'overlay shows a latency in ms');
+  check(shot.overlay.includes(`frame ${width}x${height}`), `overlay shows the frame size ${width}x${height}`);
+  check(shot.overlay.includes('renderer cpu') && shot.overlay.includes(`encoder ${welcome.encoder}`), 'overlay shows renderer and encoder');
+  check(!/error/i.test(shot.overlay), 'overlay shows no error');
+  const decoderErrors = await page.evaluate(() => window.catgs.decoderErrors);
+  check(decoderErrors === 0, `no decoder errors (${decoderErrors})`);
+  check(foreign.length === 0, `no request outside the server (${foreign.join(', ') || 'none'})`);
+  const last = await page.evaluate(() => window.catgs.lastPoseSent);
+  check(last && last.sequence === seq, 'lastPoseSent reports the fixed pose');
+  log(`frames decoded: ${await page.evaluate(() => window.catgs.framesDecoded)}`);
+}
+
+let code = 0;
+try {
+  await run();
+  if (failures.length) code = 1;
+} catch (e) {
+  console.error(`[e2e] FAIL: ${e.stack || e}`);
+  code = 1;
+} finally {
+  if (context) await context.close().catch(() => {});
+  if (server && server.exitCode === null) {
+    server.kill('SIGTERM');
+    const killer = setTimeout(() => server.kill('SIGKILL'), 5000);
+    await new Promise((r) => server.once('exit', r));
+    clearTimeout(killer);
+  }
+  rmSync(profileDir, { recursive: true, force: true });
+}
+if (code !== 0) {
+  console.error('[e2e] page log:\n' + pageLog.slice(-60).join('\n'));
+  console.error('[e2e] server log (tail):\n' + serverLog.slice(-4000));
+}
+console.log(code === 0 ? '1 passed, 0 failed' : '0 passed, 1 failed');
+process.exit(code);
