@@ -199,8 +199,20 @@ async function run() {
   check(Number.isInteger(seq) && seq > 0, `fixed pose sent with sequence ${seq}`);
   await page.waitForFunction((s) => window.catgs.lastFrame && window.catgs.lastFrame.poseSequence >= s, seq, { timeout: 30000 });
   await sleep(500);
-  const shot = await page.evaluate(() => ({ frame: window.catgs.lastFrame, png: window.catgs.snapshot(), overlay: window.catgs.overlayText() }));
+  let shot = await page.evaluate(() => ({ frame: window.catgs.lastFrame, png: window.catgs.snapshot(), overlay: window.catgs.overlayText() }));
   check(shot.frame.poseSequence === seq, `last frame answers pose ${seq} (got ${shot.frame.poseSequence})`);
+  log(`frame answering pose ${seq}: ${shot.frame.keyFrame ? 'key' : 'delta'} frame ${shot.frame.sequence}`);
+  if (!shot.frame.keyFrame) {
+    // A P-frame right after motion can be soft; an IDR of the same pose is the fairest picture.
+    // Servers need not re-send a frame for an unchanged pose, so this is best effort.
+    const before = shot.frame.sequence;
+    await page.evaluate(() => window.catgs.requestKeyFrame());
+    const gotKey = await page
+      .waitForFunction(([s, b]) => { const f = window.catgs.lastFrame; return f.poseSequence === s && f.keyFrame && f.sequence > b; }, [seq, before], { timeout: 3000 })
+      .then(() => true, () => false);
+    if (gotKey) shot = await page.evaluate(() => ({ frame: window.catgs.lastFrame, png: window.catgs.snapshot(), overlay: window.catgs.overlayText() }));
+    log(gotKey ? `using the key frame ${shot.frame.sequence} sent for the KeyFrameRequest` : 'no key frame came for the unchanged pose; using the delta frame');
+  }
   const { width, height } = shot.frame;
   const streamedPath = path.join(outDir, 'streamed.png');
   writeFileSync(streamedPath, Buffer.from(shot.png.split(',')[1], 'base64'));
