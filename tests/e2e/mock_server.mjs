@@ -1,0 +1,165 @@
+// A stand-in for catgs-server in browser tests of the page's own behaviour (errors, reconnects,
+// decoder recovery, resize), which the real server cannot be made to show on demand. It serves
+// web_client/ over HTTP and speaks the protocol over a minimal RFC 6455 WebSocket, answering each
+// Pose with the next access unit of a canned H.264 fixture (fixtures/stream_160x120.bin).
+//
+// The WebSocket path picks the scenario: /ws normal; /ws-error sends Error(TOO_SLOW) after 5
+// frames and closes; /ws-garbage sends an undecodable "key frame" as the 4th frame. Under
+// /noproto/ the page is served but .proto answers 415 (as libwebsockets does without a MIME type).
+import crypto from 'node:crypto';
+import fs from 'node:fs';
+import http from 'node:http';
+import { createRequire } from 'node:module';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const require = createRequire(import.meta.url);
+const WS_GUID = '258EAFA5-E914-47DA-95CA-C5AB0DC85B11';
+const MIME = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.json': 'application/json', '.proto': 'text/plain' };
+
+export function loadFixture(file = path.join(here, 'fixtures/stream_160x120.bin')) {
+  const b = fs.readFileSync(file);
+  const frames = [];
+  for (let o = 0; o < b.length; ) {
+    const n = b.readUInt32LE(o);
+    frames.push({ key: b[o + 4] === 1, data: b.subarray(o + 5, o + 5 + n) });
+    o += 5 + n;
+  }
+  return frames;
+}
+
+function wsFrame(opcode, bytes) {
+  const n = bytes.length;
+  let h;
+  if (n < 126) h = Buffer.from([0x80 | opcode, n]);
+  else if (n < 65536) {
+    h = Buffer.alloc(4);
+    h[0] = 0x80 | opcode;
+    h[1] = 126;
+    h.writeUInt16BE(n, 2);
+  } else {
+    h = Buffer.alloc(10);
+    h[0] = 0x80 | opcode;
+    h[1] = 127;
+    h.writeBigUInt64BE(BigInt(n), 2);
+  }
+  return Buffer.concat([h, Buffer.from(bytes)]);
+}
+
+// Client frames (always masked); yields [opcode, payload] and keeps the unparsed rest.
+function* parseFrames(state) {
+  for (;;) {
+    const buf = state.buf;
+    if (buf.length < 2) return;
+    let len = buf[1] & 127;
+    let o = 2;
+    if (len === 126) {
+      if (buf.length < 4) return;
+      len = buf.readUInt16BE(2);
+      o = 4;
+    } else if (len === 127) {
+      if (buf.length < 10) return;
+      len = Number(buf.readBigUInt64BE(2));
+      o = 10;
+    }
+    if (buf.length < o + 4 + len) return;
+    const mask = buf.subarray(o, o + 4);
+    const payload = Buffer.from(buf.subarray(o + 4, o + 4 + len));
+    for (let i = 0; i < len; i++) payload[i] ^= mask[i & 3];
+    state.buf = buf.subarray(o + 4 + len);
+    yield [buf[0] & 15, payload];
+  }
+}
+
+export async function startMockServer({ webRoot, protoFile, port = 0 }) {
+  const pb = require('protobufjs');
+  const root = pb.parse(fs.readFileSync(protoFile, 'utf8'), { keepCase: true }).root;
+  const SM = root.lookupType('catgs.stream.v1.ServerMessage');
+  const CM = root.lookupType('catgs.stream.v1.ClientMessage');
+  const frames = loadFixture();
+  const received = []; // { session, path, body, msg } for the test to inspect
+  let sessions = 0;
+
+  const server = http.createServer((req, res) => {
+    let p = decodeURIComponent(new URL(req.url, 'http://x').pathname);
+    const noProto = p.startsWith('/noproto/');
+    if (noProto) p = p.slice('/noproto'.length);
+    if (p.endsWith('/')) p += 'index.html';
+    const file = path.join(webRoot, path.normalize(p));
+    const ext = path.extname(file);
+    if (!file.startsWith(webRoot) || !fs.existsSync(file) || !fs.statSync(file).isFile()) {
+      res.writeHead(404).end();
+      return;
+    }
+    if (noProto && ext === '.proto') {
+      res.writeHead(415).end();
+      return;
+    }
+    res.writeHead(200, { 'content-type': MIME[ext] || 'application/octet-stream' });
+    res.end(fs.readFileSync(file));
+  });
+
+  server.on('upgrade', (req, sock) => {
+    const scenario = new URL(req.url, 'http://x').pathname;
+    const protocols = String(req.headers['sec-websocket-protocol'] || '').split(',').map((s) => s.trim());
+    if (!protocols.includes('catgs.v1')) {
+      sock.end('HTTP/1.1 400 Bad Request\r\n\r\n');
+      return;
+    }
+    const accept = crypto.createHash('sha1').update(req.headers['sec-websocket-key'] + WS_GUID).digest('base64');
+    sock.write('HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n' +
+      `Sec-WebSocket-Accept: ${accept}\r\nSec-WebSocket-Protocol: catgs.v1\r\n\r\n`);
+    const session = ++sessions;
+    const state = { buf: Buffer.alloc(0) };
+    let next = 0;
+    let sent = 0;
+    const send = (body) => sock.write(wsFrame(2, SM.encode(SM.fromObject(body)).finish()));
+    sock.on('error', () => {});
+    sock.on('data', (d) => {
+      state.buf = Buffer.concat([state.buf, d]);
+      for (const [op, payload] of parseFrames(state)) {
+        if (op === 8) {
+          sock.end(wsFrame(8, Buffer.alloc(0)));
+          return;
+        }
+        if (op !== 2) continue;
+        const msg = CM.toObject(CM.decode(payload), { oneofs: true });
+        received.push({ session, path: scenario, body: msg.body, msg: msg[msg.body] });
+        if (msg.body === 'hello') {
+          send({ welcome: {
+            session_id: `mock-${session}`, scene_name: 'mock', renderer: 'cpu', encoder: 'x264', pipeline: 'exact',
+            codec: 1, width: 160, height: 120,
+            scene_bounds: { min: { x: -1, y: -1, z: -1 }, max: { x: 1, y: 1, z: 1 } },
+            initial_pose: { position: { x: 0, y: 0, z: -4 }, orientation: { w: 1 }, vertical_fov_deg: 50 },
+          } });
+        } else if (msg.body === 'key_frame_request') {
+          next = 0; // the fixture's first access unit is its IDR
+        } else if (msg.body === 'pose') {
+          let fr = frames[next];
+          next = (next + 1) % frames.length;
+          if (scenario === '/ws-garbage' && sent === 3) {
+            // An "IDR" whose SPS names an unknown profile: the decoder must fail and recover.
+            fr = { key: true, data: Buffer.from([0, 0, 0, 1, 0x67, 0xff, 0, 0x1f, 1, 0, 0, 1, 0x65, 9, 9]) };
+          }
+          send({ frame: { sequence: sent++, pose_sequence: msg.pose.sequence, client_time_ms: msg.pose.client_time_ms,
+            key_frame: fr.key, width: 160, height: 120, payload: fr.data } });
+          if (scenario === '/ws-error' && sent === 5) {
+            send({ error: { code: 8, reason: 'mock: too slow' } });
+            sock.end(wsFrame(8, Buffer.alloc(0)));
+          }
+        }
+      }
+    });
+  });
+
+  await new Promise((resolve) => server.listen(port, '127.0.0.1', resolve));
+  return {
+    port: server.address().port,
+    received,
+    close: () => new Promise((resolve) => {
+      server.closeAllConnections?.();
+      server.close(resolve);
+    }),
+  };
+}
