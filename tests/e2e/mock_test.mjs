@@ -86,6 +86,32 @@ try {
       s.text.includes('encoder x264') && s.text.includes('avc1.42'), `normal: overlay ${JSON.stringify(s.text)}`);
     check(s.errs === 0, 'normal: no decoder errors');
 
+    // Input: a mouse drag orbits (orientation changes, distance to the target is kept), the wheel
+    // zooms, a held W flies forward; each goes out as Poses through the animation-frame loop.
+    const before = await page.evaluate(() => window.catgs.lastPoseSent);
+    await page.mouse.move(80, 60);
+    await page.mouse.down();
+    await page.mouse.move(110, 70, { steps: 5 });
+    await page.mouse.up();
+    await page.waitForTimeout(200);
+    const afterDrag = await page.evaluate(() => window.catgs.lastPoseSent);
+    // The target sits 4 units ahead of the last setPose camera: (x, 0, 0) with x tiny.
+    const target = [before.position[0], 0, 0];
+    const dist = (p) => Math.hypot(p[0] - target[0], p[1] - target[1], p[2] - target[2]);
+    check(afterDrag.sequence > before.sequence && afterDrag.orientation[0] < 0.9999 &&
+      Math.abs(dist(afterDrag.position) - dist(before.position)) < 1e-6,
+    `input: drag orbits around the target (pose ${before.sequence} -> ${afterDrag.sequence})`);
+    await page.mouse.wheel(0, -200);
+    await page.waitForTimeout(200);
+    const afterWheel = await page.evaluate(() => window.catgs.lastPoseSent);
+    check(dist(afterWheel.position) < dist(afterDrag.position), 'input: wheel up zooms in');
+    await page.keyboard.down('KeyW');
+    await page.waitForTimeout(300);
+    await page.keyboard.up('KeyW');
+    await page.waitForTimeout(100);
+    const afterFly = await page.evaluate(() => window.catgs.lastPoseSent);
+    check(afterFly.sequence > afterWheel.sequence + 2 && dist(afterFly.position) < dist(afterWheel.position), 'input: W flies forward, a pose per frame');
+
     // Resize: the page sends Resize with the new size in device pixels (even).
     await page.setViewportSize({ width: 201, height: 151 });
     const gotResize = await moveUntil(page, () => true, null, 100) &&
