@@ -60,6 +60,19 @@ function sendPose() {
   return sequence;
 }
 
+// The server renders only when a pose arrives (a KeyFrameRequest or Resize just marks the next
+// frame as an IDR), so both are followed by the current pose again, even if the camera is still.
+function resendPose() {
+  state.sentVersion = -1;
+  return sendPose();
+}
+
+function requestKeyFrame() {
+  if (!state.sessionOpen) return null;
+  send(state.protocol.encodeKeyFrameRequest());
+  return resendPose();
+}
+
 function onWelcome(w) {
   state.welcome = w;
   state.sessionOpen = true;
@@ -155,7 +168,7 @@ function onResize() {
   const v = viewportSize();
   if (state.viewport && v.width === state.viewport.width && v.height === state.viewport.height) return;
   state.viewport = v;
-  if (state.sessionOpen) send(state.protocol.encodeResize(v.width, v.height));
+  if (state.sessionOpen && send(state.protocol.encodeResize(v.width, v.height))) resendPose();
 }
 
 // One step of the loop: apply held keys, send the pose if the camera moved, refresh the overlay.
@@ -217,8 +230,9 @@ function installTestHook() {
     pose() {
       return state.camera ? state.camera.pose() : null;
     },
+    // Asks for an IDR and re-sends the current pose; returns that pose's sequence.
     requestKeyFrame() {
-      return send(state.protocol.encodeKeyFrameRequest());
+      return requestKeyFrame();
     },
     overlayText() {
       return overlay.text();
@@ -256,7 +270,7 @@ async function main() {
       overlay.showMessage('decoder', `decoder error (${e.message || e}); waiting for a key frame`, 'warn');
       setTimeout(() => overlay.clearMessage('decoder'), 3000);
     },
-    requestKeyFrame: () => send(state.protocol.encodeKeyFrameRequest()),
+    requestKeyFrame,
   });
   state.controls = new Controls(canvas, () => state.camera);
   state.connection = new Connection(defaultWebSocketUrl(location), state.protocol, {

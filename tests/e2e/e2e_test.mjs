@@ -204,14 +204,14 @@ async function run() {
   log(`frame answering pose ${seq}: ${shot.frame.keyFrame ? 'key' : 'delta'} frame ${shot.frame.sequence}`);
   if (!shot.frame.keyFrame) {
     // A P-frame right after motion can be soft; an IDR of the same pose is the fairest picture.
-    // Servers need not re-send a frame for an unchanged pose, so this is best effort.
-    const before = shot.frame.sequence;
-    await page.evaluate(() => window.catgs.requestKeyFrame());
+    // The hook sends KeyFrameRequest and the same pose again (new sequence).
+    const seq2 = await page.evaluate(() => window.catgs.requestKeyFrame());
     const gotKey = await page
-      .waitForFunction(([s, b]) => { const f = window.catgs.lastFrame; return f.poseSequence === s && f.keyFrame && f.sequence > b; }, [seq, before], { timeout: 3000 })
+      .waitForFunction((s) => { const f = window.catgs.lastFrame; return f.poseSequence >= s; }, seq2, { timeout: 30000 })
       .then(() => true, () => false);
     if (gotKey) shot = await page.evaluate(() => ({ frame: window.catgs.lastFrame, png: window.catgs.snapshot(), overlay: window.catgs.overlayText() }));
-    log(gotKey ? `using the key frame ${shot.frame.sequence} sent for the KeyFrameRequest` : 'no key frame came for the unchanged pose; using the delta frame');
+    check(gotKey && shot.frame.poseSequence === seq2, `the same pose re-sent as ${seq2} after a KeyFrameRequest is answered`);
+    check(shot.frame.keyFrame, `... by a key frame (frame ${shot.frame.sequence})`);
   }
   const { width, height } = shot.frame;
   const streamedPath = path.join(outDir, 'streamed.png');
@@ -245,7 +245,7 @@ async function run() {
   check(decoderErrors === 0, `no decoder errors (${decoderErrors})`);
   check(foreign.length === 0, `no request outside the server (${foreign.join(', ') || 'none'})`);
   const last = await page.evaluate(() => window.catgs.lastPoseSent);
-  check(last && last.sequence === seq, 'lastPoseSent reports the fixed pose');
+  check(last && last.sequence === shot.frame.poseSequence, 'lastPoseSent reports the fixed pose');
   log(`frames decoded: ${await page.evaluate(() => window.catgs.framesDecoded)}`);
 }
 
