@@ -219,3 +219,149 @@ CATGS_HD uint64_t render_key(uint32_t tile, float depth) {
 }
 
 }  // namespace catgs::fm
+
+// ---- Speculative pre-processing: Gaussian trails (paper sec. 3.1 "Fine-grained Intersection
+// Detection"; DESIGN.md 1). A Gaussian's trail is the region its ellipse q <= q_trail sweeps when
+// its centre moves along the segment mean0 -> mean0 + motion. ----
+namespace catgs::fm {
+
+// Minimum of q(d) over the segment d = a + s (b - a), s in [0, 1].
+CATGS_HD float min_quadratic_on_segment(glm::vec3 conic, glm::vec2 a, glm::vec2 b) {
+  const glm::vec2 e = b - a;
+  const float qe = conic_quadratic(conic, e.x, e.y);
+  const float be = conic.x * a.x * e.x + conic.y * (a.x * e.y + a.y * e.x) + conic.z * a.y * e.y;
+  const float s = qe > 0.0f ? fminf(1.0f, fmaxf(0.0f, -be / qe)) : 0.0f;
+  const glm::vec2 d = a + s * e;
+  return conic_quadratic(conic, d.x, d.y);
+}
+
+// Minimum of the positive definite q(d) over the swept rectangle {r - t m : r in [x0,x1]x[y0,y1],
+// t in [0, 1]} (a convex polygon): zero if it holds the origin, else the least over the boundary,
+// which lies on the rectangle's edges at t = 0 and t = 1 and on the four corners' sweeps.
+CATGS_HD float min_quadratic_over_swept_rect(glm::vec3 conic, float x0, float x1, float y0, float y1,
+                                             glm::vec2 m) {
+  // Origin inside: some t in [0, 1] has x0 <= t mx <= x1 and y0 <= t my <= y1.
+  float lo = 0.0f, hi = 1.0f;
+  const float r0[2] = {x0, y0}, r1[2] = {x1, y1}, mv[2] = {m.x, m.y};
+  for (int a = 0; a < 2 && lo <= hi; ++a) {
+    if (mv[a] == 0.0f) {
+      if (r0[a] > 0.0f || r1[a] < 0.0f) hi = -1.0f;
+    } else {
+      const float ta = r0[a] / mv[a], tb = r1[a] / mv[a];
+      lo = fmaxf(lo, fminf(ta, tb));
+      hi = fminf(hi, fmaxf(ta, tb));
+    }
+  }
+  if (lo <= hi) return 0.0f;
+  const glm::vec2 c[4] = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+  float best = INFINITY;
+  for (int k = 0; k < 4; ++k) {
+    const glm::vec2 a = c[k], b = c[(k + 1) % 4];
+    best = fminf(best, min_quadratic_on_segment(conic, a, b));          // edge at t = 0
+    best = fminf(best, min_quadratic_on_segment(conic, a - m, b - m));  // edge at t = 1
+    best = fminf(best, min_quadratic_on_segment(conic, a, a - m));      // corner sweep
+  }
+  return best;
+}
+
+// Does tile (tx, ty) hold a pixel centre inside the trail of the ellipse (conic, q_trail) whose
+// centre moves from mean0 by `motion` (pixels)? Exact for that swept shape; conservative for a
+// Gaussian whose own ellipse along the path stays inside it (see trail_contains).
+CATGS_HD bool trail_touches_tile(glm::vec2 mean0, glm::vec2 motion, glm::vec3 conic, float q_trail,
+                                 int tx, int ty, int width, int height) {
+  const float x0 = static_cast<float>(tx * kTileSize), y0 = static_cast<float>(ty * kTileSize);
+  const float x1 = fminf(x0 + (kTileSize - 1), static_cast<float>(width - 1));
+  const float y1 = fminf(y0 + (kTileSize - 1), static_cast<float>(height - 1));
+  return min_quadratic_over_swept_rect(conic, x0 - mean0.x, x1 - mean0.x, y0 - mean0.y,
+                                       y1 - mean0.y, motion) <= q_trail + kExactQMargin;
+}
+
+// Tiles of the bounding box of a trail: both end ellipses (cov = the trail's 2D covariance).
+CATGS_HD TileRect trail_tile_rect(glm::vec2 mean0, glm::vec2 motion, glm::vec3 cov, float q_trail,
+                                  int width, int height) {
+  // The box of the swept shape: both end ellipses' boxes and all between (either end may lie
+  // off screen while the path crosses it).
+  const float hx = sqrtf(q_trail * cov.x), hy = sqrtf(q_trail * cov.z);
+  const glm::vec2 lo = glm::min(mean0, mean0 + motion) - glm::vec2(hx, hy);
+  const glm::vec2 hi = glm::max(mean0, mean0 + motion) + glm::vec2(hx, hy);
+  const float px0 = fmaxf(0.0f, ceilf(lo.x)), py0 = fmaxf(0.0f, ceilf(lo.y));
+  const float px1 = fminf(static_cast<float>(width - 1), floorf(hi.x));
+  const float py1 = fminf(static_cast<float>(height - 1), floorf(hi.y));
+  if (px1 < px0 || py1 < py0) return {0, 0, 0, 0};
+  return {static_cast<int>(px0) / kTileSize, static_cast<int>(py0) / kTileSize,
+          static_cast<int>(px1) / kTileSize + 1, static_cast<int>(py1) / kTileSize + 1};
+}
+
+// A 2D covariance that dominates both a and b (U - a and U - b positive semidefinite): a plus the
+// positive part of b - a. Equals a when b == a, so a still camera keeps the exact ellipse.
+CATGS_HD glm::vec3 dominating_cov2d(glm::vec3 a, glm::vec3 b) {
+  const float dx = b.x - a.x, dy = b.y - a.y, dz = b.z - a.z;  // D = [[dx, dy], [dy, dz]]
+  const float mid = 0.5f * (dx + dz);
+  const float rad = sqrtf(fmaxf(0.0f, 0.25f * (dx - dz) * (dx - dz) + dy * dy));
+  const float l1 = mid + rad, l2 = mid - rad;  // eigenvalues, l1 >= l2
+  if (l2 >= 0.0f) return b;                    // b >= a: b dominates
+  if (l1 <= 0.0f) return a;                    // a >= b
+  // Positive part l1 * v v^T with v the eigenvector of l1.
+  glm::vec2 v = fabsf(dy) > 1e-12f ? glm::vec2(dy, l1 - dx) : (dx >= dz ? glm::vec2(1, 0) : glm::vec2(0, 1));
+  v /= sqrtf(v.x * v.x + v.y * v.y);
+  return a + l1 * glm::vec3(v.x * v.x, v.x * v.y, v.y * v.y);
+}
+
+// Sub-frame check that a Gaussian's actual ellipse (centre `mean`, covariance `cov`, level q_max)
+// lies inside its key frame's trail (centre mean0 -> mean0 + motion, covariance `trail_cov`, level
+// q_trail): with lambda the largest generalised eigenvalue of (cov, trail_cov) and delta the
+// offset of `mean` from the nearest point of the path in the trail_cov metric,
+//   sqrt(lambda * q_max) + sqrt(delta^T trail_cov^-1 delta) <= sqrt(q_trail)
+// is sufficient (support functions, Cauchy-Schwarz). False: render this frame as a key frame.
+CATGS_HD bool trail_contains(glm::vec2 mean0, glm::vec2 motion, glm::vec3 trail_cov, float q_trail,
+                             glm::vec2 mean, glm::vec3 cov, float q_max) {
+  glm::vec3 trail_conic;
+  if (!conic_from_cov2d(trail_cov, &trail_conic)) return false;
+  const float det_u = trail_cov.x * trail_cov.z - trail_cov.y * trail_cov.y;
+  const float det_a = cov.x * cov.z - cov.y * cov.y;
+  const float bq = cov.x * trail_cov.z + cov.z * trail_cov.x - 2.0f * cov.y * trail_cov.y;
+  const float lambda = (bq + sqrtf(fmaxf(0.0f, bq * bq - 4.0f * det_u * det_a))) / (2.0f * det_u);
+  const float off = min_quadratic_on_segment(trail_conic, mean - mean0, mean - mean0 - motion);
+  return sqrtf(fmaxf(0.0f, lambda) * q_max) + sqrtf(off) <= sqrtf(q_trail);
+}
+
+}  // namespace catgs::fm
+
+namespace catgs::fm {
+
+// A Gaussian's trail over a speculation window (DESIGN.md 1): its ellipse (covariance `cov`,
+// level q_trail) swept from mean0 along `motion`, all in pixel units.
+struct Trail {
+  glm::vec2 mean0;
+  glm::vec2 motion;
+  glm::vec3 cov;
+  float q_trail;
+};
+
+// Builds the trail that holds the Gaussian's ellipse (level q_max) at each of n >= 1 sampled
+// poses of the predicted path (means[k], covs[k]; the first is the key frame, the last the end of
+// the window), scaled by (1 + slack) so that poses between and near the samples are held too:
+// the covariance dominates every sample's, and q_trail is the least level for which
+// trail_contains() accepts every sample.
+CATGS_HD Trail build_trail(const glm::vec2* means, const glm::vec3* covs, int n, float q_max,
+                           float slack) {
+  Trail t{means[0], means[n - 1] - means[0], covs[0], q_max};
+  for (int k = 1; k < n; ++k) t.cov = dominating_cov2d(t.cov, covs[k]);
+  glm::vec3 conic;
+  if (!conic_from_cov2d(t.cov, &conic)) return t;
+  const float det_u = t.cov.x * t.cov.z - t.cov.y * t.cov.y;
+  float level = 0.0f;
+  for (int k = 0; k < n; ++k) {
+    const glm::vec3 a = covs[k];
+    const float det_a = a.x * a.z - a.y * a.y;
+    const float bq = a.x * t.cov.z + a.z * t.cov.x - 2.0f * a.y * t.cov.y;
+    const float lambda = (bq + sqrtf(fmaxf(0.0f, bq * bq - 4.0f * det_u * det_a))) / (2.0f * det_u);
+    const float off = min_quadratic_on_segment(conic, means[k] - t.mean0, means[k] - t.mean0 - t.motion);
+    level = fmaxf(level, sqrtf(fmaxf(0.0f, lambda) * q_max) + sqrtf(off));
+  }
+  level *= 1.0f + slack;
+  t.q_trail = level * level;
+  return t;
+}
+
+}  // namespace catgs::fm
