@@ -1,0 +1,56 @@
+// A small blocking WebSocket client over a raw TCP socket (RFC 6455, client side, no TLS, no
+// extensions). Made for tests and load generation: besides normal use it can send malformed
+// frames, stop reading, and drop the TCP connection without a close frame.
+// Not thread-safe: one thread per client.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace catgs::loadgen {
+
+class WsClient {
+ public:
+  WsClient() = default;
+  ~WsClient();
+  WsClient(const WsClient&) = delete;
+  WsClient& operator=(const WsClient&) = delete;
+
+  // Connects to host:port (IPv4 literal or name) and performs the HTTP upgrade for `path`,
+  // asking for subprotocol `protocol` (empty: none). Throws std::runtime_error on failure or
+  // when the server does not answer 101 within `timeout_ms`.
+  // `receive_buffer` > 0 sets SO_RCVBUF before connecting (a small TCP window: a slow reader).
+  void connect(const std::string& host, int port, const std::string& path,
+               const std::string& protocol, int timeout_ms = 5000, int receive_buffer = 0);
+  bool connected() const { return fd_ >= 0; }
+
+  // Sends one complete binary / text message (a single masked frame). Throws on socket errors.
+  void send_binary(const std::string& payload);
+  void send_text(const std::string& payload);
+  // Sends arbitrary bytes on the socket (e.g. a broken frame).
+  void send_raw(const std::string& bytes);
+
+  enum class Recv { message, timeout, closed };
+  // Waits up to `timeout_ms` for one complete message (fragments reassembled; pings answered).
+  // `closed` when the server closed (close frame or EOF) or the socket failed.
+  Recv recv(std::string& payload, bool& binary, int timeout_ms);
+
+  // Sends a close frame and closes the socket.
+  void close();
+  // Closes the TCP connection at once, without a WebSocket close frame (RST via SO_LINGER 0).
+  void close_abrupt();
+
+ private:
+  void send_frame(int opcode, const std::string& payload);
+  void write_all(const char* data, std::size_t size);
+  // Tries to parse one frame from rx_; returns false when incomplete.
+  bool parse_frame(bool& fin, int& opcode, std::string& payload);
+
+  int fd_ = -1;
+  std::string rx_;           // bytes received, not yet parsed
+  std::string message_;      // fragments of the message being reassembled
+  int message_opcode_ = 0;
+  std::uint32_t mask_state_ = 0x9e3779b9u;
+};
+
+}  // namespace catgs::loadgen

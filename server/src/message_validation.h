@@ -1,0 +1,50 @@
+// Checks of client messages against the protocol's rules (proto/catgs_stream.proto).
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include <glm/gtc/quaternion.hpp>
+#include <glm/vec3.hpp>
+
+#include "catgs_stream.pb.h"
+
+namespace catgs::server {
+
+namespace pb = ::catgs::stream::v1;
+
+inline constexpr int kMinViewport = 16;
+inline constexpr int kMaxViewport = 4096;
+inline constexpr double kMinFovDeg = 1.0;    // exclusive
+inline constexpr double kMaxFovDeg = 170.0;  // exclusive
+
+// A protocol violation: the code and reason sent to the client in Error.
+struct Violation {
+  pb::ErrorCode code;
+  std::string reason;
+};
+
+// A viewport after validation: even sizes in [16, 4096].
+struct Viewport {
+  int width = 0, height = 0;
+};
+
+// Validates a viewport (each side in [16, 4096]) and rounds odd sizes down to even.
+// Returns the violation (ERROR_INVALID_ARGUMENT) for an out-of-range size.
+std::optional<Violation> check_viewport(std::uint32_t width, std::uint32_t height, Viewport& out);
+
+// Validates Hello: protocol_version 1 (else ERROR_PROTOCOL) and the viewport.
+std::optional<Violation> check_hello(const pb::Hello& hello, Viewport& out);
+
+// A pose ready for the renderer (world units; camera-to-world rotation, OpenCV axes).
+struct CameraPose {
+  glm::vec3 position{0.0f};
+  glm::quat orientation{1.0f, 0.0f, 0.0f, 0.0f};  // (w, x, y, z), unit
+  float vertical_fov_deg = 60.0f;
+};
+
+// Validates Pose: position and orientation present, every number finite, quaternion not zero
+// (it is normalised), fov in (1, 170) degrees. ERROR_INVALID_ARGUMENT otherwise.
+std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out);
+
+}  // namespace catgs::server

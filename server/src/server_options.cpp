@@ -1,0 +1,77 @@
+#include "server_options.h"
+
+#include <iostream>
+#include <stdexcept>
+
+namespace catgs::server {
+
+namespace {
+
+int parse_int(const std::string& name, const std::string& v, int lo, int hi) {
+  std::size_t used = 0;
+  int x = 0;
+  try {
+    x = std::stoi(v, &used);
+  } catch (const std::exception&) {
+    throw std::invalid_argument(name + " needs an integer, got '" + v + "'");
+  }
+  if (used != v.size()) throw std::invalid_argument(name + " needs an integer, got '" + v + "'");
+  if (x < lo || x > hi)
+    throw std::invalid_argument(name + " must be in [" + std::to_string(lo) + ", " +
+                                std::to_string(hi) + "], got " + v);
+  return x;
+}
+
+}  // namespace
+
+std::string server_usage() {
+  return "usage: catgs-server [options]\n"
+         "  --scene FILE          scene PLY (default: assets/scenes/biker.compressed.ply)\n"
+         "  --port N              TCP port (default 8080; 0 = any free port)\n"
+         "  --bind ADDR           listen address (default 0.0.0.0)\n"
+         "  --renderer K          cpu | cuda | auto (default auto)\n"
+         "  --encoder K           x264 | auto (default auto = x264 for now)\n"
+         "  --pipeline P          vanilla | exact | catgs (default exact)\n"
+         "  --web-root DIR        static files served at / (default: web_client/)\n"
+         "  --max-sessions N      concurrent sessions (default 8)\n"
+         "  --token T             require Hello.token == T\n"
+         "  --threads N           worker threads (default 4)\n"
+         "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
+         "  --crf N               x264 quality, 0..51 (default 23)\n"
+         "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n";
+}
+
+bool parse_server_options(int argc, char** argv, ServerOptions& out) {
+  out.scene = std::string(CATGS_SOURCE_DIR) + "/assets/scenes/biker.compressed.ply";
+  out.web_root = std::string(CATGS_SOURCE_DIR) + "/web_client";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--help" || a == "-h") {
+      std::cout << server_usage();
+      return false;
+    }
+    if (i + 1 >= argc) throw std::invalid_argument("option " + a + " needs a value");
+    const std::string v = argv[++i];
+    if (a == "--scene") out.scene = v;
+    else if (a == "--port") out.port = parse_int(a, v, 0, 65535);
+    else if (a == "--bind") out.bind = v;
+    else if (a == "--renderer") out.renderer = v;
+    else if (a == "--encoder") out.encoder = v;
+    else if (a == "--pipeline") out.pipeline = v;
+    else if (a == "--web-root") out.web_root = v;
+    else if (a == "--max-sessions") out.max_sessions = parse_int(a, v, 1, 10000);
+    else if (a == "--token") out.token = v;
+    else if (a == "--threads") out.threads = parse_int(a, v, 1, 256);
+    else if (a == "--slow-client-timeout-ms") out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
+    else if (a == "--crf") out.crf = parse_int(a, v, 0, 51);
+    else if (a == "--max-frames-in-flight") out.max_frames_in_flight = parse_int(a, v, 1, 16);
+    else throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());
+  }
+  if (out.renderer != "cpu" && out.renderer != "cuda" && out.renderer != "auto")
+    throw std::invalid_argument("--renderer must be cpu, cuda or auto");
+  if (out.encoder != "x264" && out.encoder != "auto")
+    throw std::invalid_argument("--encoder must be x264 or auto");
+  return true;
+}
+
+}  // namespace catgs::server

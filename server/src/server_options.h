@@ -1,0 +1,33 @@
+// Command-line options of catgs-server.
+#pragma once
+
+#include <string>
+
+namespace catgs::server {
+
+// Everything the server is configured with. Defaults match `catgs-server` with no arguments.
+struct ServerOptions {
+  std::string scene;             // scene file (INRIA or compressed PLY)
+  int port = 8080;               // TCP port; 0 lets the kernel pick (the chosen one is logged)
+  std::string bind = "0.0.0.0";  // interface address to listen on
+  std::string renderer = "auto"; // "cpu" | "cuda" | "auto"
+  std::string encoder = "auto";  // "x264" | "auto" (nvenc later)
+  std::string pipeline = "exact";// "vanilla" | "exact" | "catgs"
+  std::string web_root;          // folder served over HTTP at "/"
+  int max_sessions = 8;          // sessions open at once; one more gets ERROR_SERVER_FULL
+  std::string token;             // when non-empty, Hello.token must equal it
+  int threads = 4;               // Boost.Asio worker threads
+  int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
+  int crf = 23;                  // x264 constant rate factor (lower = better quality, more bytes)
+  int max_frames_in_flight = 2;  // frames queued to the transport but not yet written
+};
+
+// Parses argv (`--name value` pairs, `--help`). Fills defaults for scene and web_root from the
+// source directory compiled in. Throws std::invalid_argument with a message for bad input.
+// Returns false when --help was given (usage already printed).
+bool parse_server_options(int argc, char** argv, ServerOptions& out);
+
+// The usage text.
+std::string server_usage();
+
+}  // namespace catgs::server

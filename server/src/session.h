@@ -1,0 +1,127 @@
+// One client session (DESIGN.md "Server"): protocol state machine, latest-pose-wins render
+// scheduling, encoder, flow control and statistics.
+//
+// Threading: every member below "strand state" is touched only on the session's strand. Render
+// + encode run as a job on the shared io_context pool (never on the strand, so poses keep
+// arriving while a frame renders); the renderer, encoder and image are used only by that job
+// (one job at a time per session). Transport callbacks enter through the post_* functions.
+#pragma once
+
+#include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+
+#include "catgs/gaussian_model.h"
+#include "catgs/renderer.h"
+#include "encoder.h"
+#include "message_validation.h"
+#include "server_metrics.h"
+#include "server_options.h"
+#include "transport.h"
+
+namespace catgs::server {
+
+// What all sessions share (owned by the SessionManager).
+struct SessionShared {
+  boost::asio::io_context& io;
+  Transport& transport;
+  ServerMetrics& metrics;
+  const ServerOptions& options;
+  std::shared_ptr<const GaussianModel> model;
+  Bounds bounds;          // model bounds (Welcome.scene_bounds)
+  Bounds framing_bounds;  // robust bounds used for the initial pose
+  RenderOptions render_options;
+  std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
+};
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  // A connection waiting for Hello. The session slot (options.max_sessions) is taken at Hello.
+  Session(ConnId id, SessionShared& shared);
+  ~Session();
+
+  ConnId id() const { return id_; }
+  // Transport thread -> strand: a complete incoming message.
+  void post_message(MessageKind kind, std::string bytes);
+  // Transport thread -> strand: a Frame left the queue (written to the socket layer).
+  void post_sent();
+  // Transport thread -> strand: the connection is gone.
+  void post_closed();
+  // Server stopping: send ERROR_SHUTTING_DOWN and close.
+  void post_shutdown();
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  enum class State { awaiting_hello, open, closed };
+
+  struct PendingPose {
+    CameraPose pose;
+    std::uint32_t sequence = 0;
+    double client_time_ms = 0;
+    Clock::time_point received;
+  };
+  struct Job {
+    PendingPose pose;
+    int width = 0, height = 0;
+    bool force_idr = false;
+    std::uint32_t frame_sequence = 0;
+  };
+  struct JobResult {
+    std::string message;  // serialized ServerMessage{Frame}; empty on failure
+    std::string error;
+    bool key_frame = false;
+    std::size_t payload_bytes = 0;
+    double render_ms = 0, encode_ms = 0;
+  };
+
+  void handle_message(MessageKind kind, const std::string& bytes);
+  void handle_hello(const pb::Hello& hello);
+  void handle_pose(const pb::Pose& pose);
+  void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false);
+  void send(const pb::ServerMessage& message);
+  void maybe_start_render();
+  JobResult run_job(const Job& job);  // on the pool
+  void on_job_done(JobResult result);
+  void arm_tick();
+  void on_tick();
+  void send_stats();
+  void end_open_state();
+
+  const ConnId id_;
+  SessionShared& shared_;
+  boost::asio::strand<boost::asio::io_context::executor_type> strand_;
+  boost::asio::steady_timer tick_;
+
+  // --- strand state ---
+  State state_ = State::awaiting_hello;
+  bool counted_open_ = false;  // holds one of the server's session slots
+  std::string session_id_;
+  int width_ = 0, height_ = 0;
+  bool force_idr_ = true;
+  std::optional<PendingPose> pending_;
+  bool rendering_ = false;
+  int in_flight_ = 0;                 // frames queued to the transport, not yet written
+  Clock::time_point last_progress_;   // last time the transport wrote one of our frames
+  std::uint32_t next_frame_sequence_ = 0;
+  Clock::time_point last_stats_;
+  // Stats counters (totals, and sums since the last Stats message).
+  std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
+  double render_ms_sum_ = 0, encode_ms_sum_ = 0;
+  std::uint32_t frames_since_stats_ = 0;
+  std::uint64_t bytes_since_stats_ = 0;
+
+  // --- render job state (one job at a time) ---
+  std::unique_ptr<Renderer> renderer_;
+  std::unique_ptr<Encoder> encoder_;
+  Image image_;
+};
+
+}  // namespace catgs::server

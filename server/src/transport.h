@@ -1,0 +1,127 @@
+// WebSocket + HTTP transport on libwebsockets 4.1.6, on its own service thread.
+//
+// lws is not thread-safe: only its service thread touches lws objects. Other threads call send()
+// / close(), which queue under a mutex and wake the service thread with lws_cancel_service();
+// the service thread then asks for writable callbacks (TOOLCHAIN.md). Each connection has its own
+// outgoing queue; large messages are written in fragments so one slow socket never blocks the
+// loop. Handler callbacks run on the service thread and must return quickly (post work away).
+//
+// HTTP: "/" serves the web root (static files, extra MIME types for .mjs/.proto/.js/.json/.wasm),
+// "/healthz" answers 200 "ok", "/metrics" answers Handler::metrics_text() (Prometheus text).
+// WebSocket: subprotocol "catgs.v1" (or none) on any path.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+struct lws;
+struct lws_context;
+
+namespace catgs::server {
+
+// Identifies one WebSocket connection for its lifetime (never reused).
+using ConnId = std::uint64_t;
+
+// What arrived in one complete WebSocket message.
+enum class MessageKind { binary, text, oversize };
+
+class TransportHandler {
+ public:
+  virtual ~TransportHandler() = default;
+  // A WebSocket connection opened.
+  virtual void on_open(ConnId id) = 0;
+  // One complete message. For `oversize` the bytes are empty (the message exceeded the limit and
+  // was discarded).
+  virtual void on_message(ConnId id, MessageKind kind, std::string bytes) = 0;
+  // A message queued with send(..., counted = true) has been fully handed to the socket layer.
+  virtual void on_sent(ConnId id) = 0;
+  // The connection is gone (closed by either side or dropped). No callbacks follow for `id`.
+  virtual void on_close(ConnId id) = 0;
+  // Body of GET /metrics (Prometheus text format).
+  virtual std::string metrics_text() = 0;
+};
+
+struct TransportOptions {
+  std::string bind = "0.0.0.0";
+  int port = 8080;                            // 0: any free port (see Transport::port())
+  std::string web_root;                       // static files at "/"
+  std::size_t max_message_bytes = 64 * 1024;  // incoming messages above this are `oversize`
+};
+
+class Transport {
+ public:
+  // The handler must outlive the transport.
+  Transport(TransportOptions options, TransportHandler& handler);
+  ~Transport();
+  Transport(const Transport&) = delete;
+  Transport& operator=(const Transport&) = delete;
+
+  // Creates the lws context (binds the port) and starts the service thread. Throws
+  // std::runtime_error when the port cannot be bound.
+  void start();
+  // Closes every connection, stops the service thread and destroys the context. Idempotent.
+  void stop();
+  // The port actually listened on (after start()).
+  int port() const { return port_; }
+
+  // Thread-safe. Queues one binary message. `counted` messages produce on_sent() once written.
+  // Ignored when the connection is gone or closing.
+  void send(ConnId id, std::string bytes, bool counted);
+  // Thread-safe. Closes the connection after the queued messages are written (or after
+  // `grace_ms` at most, for a peer that does not read). `drop_queued` discards messages not yet
+  // started (used for too-slow clients, whose queue will never drain); `final_message`, when
+  // non-empty, is queued last (an Error).
+  void close(ConnId id, std::string final_message, bool drop_queued, int grace_ms = 2000);
+  // Thread-safe. Messages queued for `id` and not yet fully written (0 for unknown ids).
+  std::size_t queued(ConnId id) const;
+
+ private:
+  struct Outgoing {
+    std::vector<unsigned char> buf;  // LWS_PRE bytes of headroom, then the payload
+    std::size_t offset = 0;          // payload bytes written so far
+    bool counted = false;
+  };
+  struct Conn {
+    lws* wsi = nullptr;
+    std::deque<Outgoing> queue;
+    bool closing = false;       // no more sends accepted
+    bool close_armed = false;   // the service thread has set the close timeout
+    int grace_ms = 2000;
+    std::string rx;             // message being reassembled
+    bool rx_oversize = false;
+    bool rx_binary = true;      // opcode of the message's first fragment
+  };
+
+  static int callback(lws* wsi, int reason, void* user, void* in, std::size_t len);
+  int on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len);
+  int on_http(lws* wsi, int reason, void* user, void* in, std::size_t len);
+  int write_some(lws* wsi, ConnId id);
+  void service_loop();
+  void wake();
+
+  TransportOptions options_;
+  TransportHandler& handler_;
+  lws_context* context_ = nullptr;
+  std::thread thread_;
+  std::atomic<bool> stopping_{false};
+  int port_ = 0;
+
+  mutable std::mutex mutex_;  // guards conns_ and dirty_
+  std::unordered_map<ConnId, Conn> conns_;
+  std::vector<ConnId> dirty_;  // connections with new work for the service thread
+  ConnId next_id_ = 1;
+
+  // Storage lws points into (must outlive the context).
+  struct Static;
+  std::unique_ptr<Static> static_;
+};
+
+}  // namespace catgs::server

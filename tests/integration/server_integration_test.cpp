@@ -1,0 +1,589 @@
+// Integration tests: the real catgs-server on loopback, driven by the headless client.
+// Image checks decode the H.264 stream and compare each frame with a CPU render of the pose it
+// answers (Frame.pose_sequence) at PSNR >= 30 dB. Bad-input tests run next to a well-behaved
+// session that must keep receiving valid frames.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "catgs/cpu_renderer.h"
+#include "catgs/ply_io.h"
+#include "catgs/trace.h"
+#include "h264_decoder.h"
+#include "server_process.h"
+#include "stream_client.h"
+
+namespace {
+
+using namespace catgs;
+using namespace catgs::loadgen;
+using catgs::itest::http_get;
+using catgs::itest::ServerProcess;
+using Clock = std::chrono::steady_clock;
+
+const std::string kBiker = std::string(CATGS_ASSETS_DIR) + "/scenes/biker.compressed.ply";
+const std::string kDataDir = CATGS_DATA_DIR;
+const std::string kFlowers = kDataDir + "/scenes/flowers_sh3.ply";
+const std::string kFlowersCams = kDataDir + "/traces/flowers_sh3.cameras.json";
+
+// Server flags shared by the tests: CPU renderer, exact pipeline, a short slow-client timeout.
+std::vector<std::string> server_args(const std::string& scene, std::vector<std::string> extra = {}) {
+  std::vector<std::string> a = {"--scene", scene, "--renderer", "cpu", "--pipeline", "exact",
+                                "--threads", "4", "--slow-client-timeout-ms", "2000"};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return a;
+}
+
+std::shared_ptr<const GaussianModel> load_model(const std::string& path) {
+  static std::mutex m;
+  static std::map<std::string, std::shared_ptr<const GaussianModel>> cache;
+  std::lock_guard<std::mutex> lock(m);
+  auto& slot = cache[path];
+  if (!slot) slot = std::make_shared<const GaussianModel>(load_scene(path));
+  return slot;
+}
+
+// An orbit around the model's bounds at a distance that shows it whole.
+Trace biker_orbit(int width, int height, int frames) {
+  const Bounds b = load_model(kBiker)->bounds();
+  GeneratorParams p;
+  p.width = width;
+  p.height = height;
+  p.rate_hz = 10.0;
+  p.duration_s = (frames - 1) / p.rate_hz;
+  p.fov_deg = 50.0f;
+  const float r = 1.4f * glm::length(b.extent());
+  return make_orbit(b, r, 0.2f * r, 120.0f, p);
+}
+
+double now_ms() {
+  return std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count();
+}
+
+// Waits for the next message satisfying `want`, skipping Stats/Pong; nullopt on timeout.
+template <class Pred>
+std::optional<pb::ServerMessage> wait_for(StreamClient& c, int timeout_ms, Pred want) {
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (Clock::now() < deadline) {
+    auto m = c.recv(50);
+    if (m && want(*m)) return m;
+  }
+  return std::nullopt;
+}
+
+// Reads until the server sends Error (returned) or closes; nullopt if neither in time.
+std::optional<pb::Error> expect_error(StreamClient& c, int timeout_ms = 10000) {
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (Clock::now() < deadline) {
+    try {
+      auto m = c.recv(50);
+      if (m && m->has_error()) return m->error();
+    } catch (const std::exception&) {
+      return std::nullopt;  // closed without an Error
+    }
+  }
+  return std::nullopt;
+}
+
+// True when the server closes the connection within timeout_ms.
+bool expect_closed(StreamClient& c, int timeout_ms = 5000) {
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (Clock::now() < deadline) {
+    try {
+      c.recv(50);
+    } catch (const std::exception&) {
+      return true;
+    }
+  }
+  return false;
+}
+
+// Decoded frame vs the CPU render of the pose it answers.
+double frame_psnr(H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose) {
+  std::vector<std::uint8_t> rgba;
+  int w = 0, h = 0;
+  if (!dec.decode(f.payload(), rgba, w, h)) return -1;
+  EXPECT_EQ(w, static_cast<int>(f.width()));
+  EXPECT_EQ(h, static_cast<int>(f.height()));
+  Image got;
+  got.width = w;
+  got.height = h;
+  got.rgba8 = std::move(rgba);
+  Image want;
+  ref.render(camera_from_pose(pose, w, h), want);
+  return psnr_rgba8(got, want);
+}
+
+// A well-behaved session streaming an orbit in the background (one pose outstanding), decoding
+// every frame. Records any failure.
+class GoodClient {
+ public:
+  GoodClient(int port, int width = 160, int height = 120) : width_(width), height_(height) {
+    client_.connect(port);
+    client_.hello(width, height);
+    thread_ = std::thread([this] { run(); });
+  }
+  ~GoodClient() { stop(); }
+  void stop() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  int frames() const { return frames_.load(); }
+  std::string error() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return error_;
+  }
+  // Waits until `n` more frames arrived; false on timeout.
+  bool wait_frames(int n, int timeout_ms = 30000) {
+    const int target = frames() + n;
+    const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+    while (Clock::now() < deadline) {
+      if (frames() >= target) return true;
+      if (!error().empty()) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return false;
+  }
+
+ private:
+  void run() {
+    try {
+      const Trace orbit = biker_orbit(width_, height_, 24);
+      H264Decoder dec;
+      std::vector<std::uint8_t> rgba;
+      std::uint32_t seq = 0;
+      bool outstanding = false;
+      while (!stop_) {
+        if (!outstanding) {
+          client_.send_pose(pose_from_camera(orbit[seq % orbit.size()].camera, seq, now_ms()));
+          seq++;
+          outstanding = true;
+        }
+        auto m = client_.recv(50);
+        if (!m) continue;
+        if (m->has_error()) throw std::runtime_error("good client got Error: " + m->error().reason());
+        if (!m->has_frame()) continue;
+        int w = 0, h = 0;
+        if (!dec.decode(m->frame().payload(), rgba, w, h) || w != width_ || h != height_)
+          throw std::runtime_error("good client: frame did not decode to the viewport size");
+        if (m->frame().pose_sequence() + 1 == seq) outstanding = false;
+        frames_++;
+      }
+      client_.ws().close();
+    } catch (const std::exception& e) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      error_ = e.what();
+    }
+  }
+
+  int width_, height_;
+  StreamClient client_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<int> frames_{0};
+  std::mutex mutex_;
+  std::string error_;
+};
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(ServerIntegration, HealthzMetricsAndStaticFiles) {
+  ServerProcess server(server_args(kBiker));
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/healthz", body), 200);
+  EXPECT_EQ(body, "ok\n");
+  EXPECT_EQ(http_get(server.port(), "/metrics", body), 200);
+  EXPECT_NE(body.find("catgs_sessions 0"), std::string::npos) << body;
+  EXPECT_NE(body.find("catgs_frames_total"), std::string::npos) << body;
+  EXPECT_EQ(http_get(server.port(), "/no-such-file.txt", body), 404);
+  EXPECT_NE(server.log().find("Gaussians"), std::string::npos);
+}
+
+TEST(ServerIntegration, BikerOrbitFramesMatchCpuRender) {
+  ServerProcess server(server_args(kBiker));
+  const int W = 320, H = 240;
+  StreamClient c;
+  c.connect(server.port());
+  const pb::Welcome w = c.hello(W, H);
+  EXPECT_EQ(w.width(), 320u);
+  EXPECT_EQ(w.scene_name(), "biker");
+  EXPECT_EQ(w.codec(), pb::CODEC_H264);
+  EXPECT_EQ(w.renderer(), "cpu");
+  EXPECT_EQ(w.pipeline(), "exact");
+  EXPECT_FALSE(w.session_id().empty());
+
+  H264Decoder dec;
+  cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
+  // The initial pose must show the scene (not an empty image).
+  {
+    pb::Pose p = w.initial_pose();
+    p.set_sequence(100);
+    Image img;
+    ref.render(camera_from_pose(p, W, H), img);
+    std::size_t lit = 0;
+    for (std::size_t i = 0; i < img.rgba8.size(); i += 4) lit += img.rgba8[i] + img.rgba8[i + 1] > 20;
+    EXPECT_GT(lit, static_cast<std::size_t>(W * H / 20)) << "initial pose shows almost nothing";
+  }
+  const Trace orbit = biker_orbit(W, H, 6);
+  for (std::uint32_t i = 0; i < orbit.size(); ++i) {
+    const pb::Pose pose = pose_from_camera(orbit[i].camera, i, now_ms());
+    c.send_pose(pose);
+    auto m = wait_for(c, 20000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+    ASSERT_TRUE(m) << "no frame for pose " << i;
+    const pb::Frame& f = m->frame();
+    EXPECT_EQ(f.pose_sequence(), i);
+    EXPECT_EQ(f.sequence(), i);
+    EXPECT_EQ(f.key_frame(), i == 0);
+    EXPECT_EQ(f.width(), 320u);
+    EXPECT_GT(f.timings().render_ms(), 0.0);
+    EXPECT_GE(f.timings().total_ms(), f.timings().render_ms());
+    const double psnr = frame_psnr(dec, ref, f, pose);
+    EXPECT_GE(psnr, 30.0) << "frame " << i;
+  }
+}
+
+TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
+  if (!std::filesystem::exists(kFlowers) || !std::filesystem::exists(kFlowersCams))
+    GTEST_SKIP() << "real data not found under " << kDataDir
+                 << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
+  ServerProcess server(server_args(kFlowers));
+  const int W = 480, H = 320;
+  std::vector<Camera> keys = load_inria_cameras(kFlowersCams, W, H);
+  keys.resize(4);
+  const Trace path = interpolate_views(keys, 2.0, 1.0);  // 7 poses along the real path
+  StreamClient c;
+  c.connect(server.port());
+  c.hello(W, H);
+  H264Decoder dec;
+  cpu::CpuRenderer ref(load_model(kFlowers), RenderOptions{});
+  for (std::uint32_t i = 0; i < path.size(); ++i) {
+    const pb::Pose pose = pose_from_camera(path[i].camera, i, now_ms());
+    c.send_pose(pose);
+    auto m = wait_for(c, 30000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+    ASSERT_TRUE(m) << "no frame for pose " << i;
+    EXPECT_EQ(m->frame().pose_sequence(), i);
+    const double psnr = frame_psnr(dec, ref, m->frame(), pose);
+    EXPECT_GE(psnr, 30.0) << "frame " << i;
+  }
+}
+
+TEST(ServerIntegration, ResizeKeyFrameRequestPingAndStats) {
+  ServerProcess server(server_args(kBiker));
+  StreamClient c;
+  c.connect(server.port());
+  c.hello(161, 121);  // odd sizes round down to even
+  const Trace orbit = biker_orbit(160, 120, 4);
+  auto frame_for = [&](std::uint32_t seq) {
+    c.send_pose(pose_from_camera(orbit[seq % orbit.size()].camera, seq, now_ms()));
+    auto m = wait_for(c, 20000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+    EXPECT_TRUE(m);
+    return m ? m->frame() : pb::Frame();
+  };
+  pb::Frame f = frame_for(0);
+  EXPECT_EQ(f.width(), 160u);
+  EXPECT_EQ(f.height(), 120u);
+  EXPECT_TRUE(f.key_frame());
+  EXPECT_FALSE(frame_for(1).key_frame());
+
+  pb::ClientMessage kf;
+  kf.mutable_key_frame_request();
+  c.send(kf);
+  EXPECT_TRUE(frame_for(2).key_frame());
+
+  pb::ClientMessage rs;
+  rs.mutable_resize()->set_viewport_width(200);
+  rs.mutable_resize()->set_viewport_height(100);
+  c.send(rs);
+  f = frame_for(3);
+  EXPECT_EQ(f.width(), 200u);
+  EXPECT_EQ(f.height(), 100u);
+  EXPECT_TRUE(f.key_frame());
+  // The new stream decodes on its own.
+  H264Decoder dec;
+  std::vector<std::uint8_t> rgba;
+  int w = 0, h = 0;
+  EXPECT_TRUE(dec.decode(f.payload(), rgba, w, h));
+  EXPECT_EQ(w, 200);
+
+  pb::ClientMessage ping;
+  ping.mutable_ping()->set_client_time_ms(1234.5);
+  c.send(ping);
+  auto pong = wait_for(c, 5000, [](const pb::ServerMessage& s) { return s.has_pong(); });
+  ASSERT_TRUE(pong);
+  EXPECT_EQ(pong->pong().client_time_ms(), 1234.5);
+  auto stats = wait_for(c, 3000, [](const pb::ServerMessage& s) { return s.has_stats(); });
+  ASSERT_TRUE(stats);
+  EXPECT_EQ(stats->stats().frames_sent(), 4u);
+  EXPECT_EQ(stats->stats().poses_received(), 4u);
+}
+
+// Each bad input ends only its own session with the right Error; the good session streams on.
+TEST(ServerIntegration, BadInputEndsOnlyThatSession) {
+  ServerProcess server(server_args(kBiker));
+  GoodClient good(server.port());
+  ASSERT_TRUE(good.wait_frames(2)) << good.error();
+
+  struct Case {
+    const char* name;
+    bool hello_first;
+    std::function<void(StreamClient&)> act;
+    pb::ErrorCode code;
+  };
+  const Trace orbit = biker_orbit(160, 120, 2);
+  auto pose = [&](std::uint32_t s) { return pose_from_camera(orbit[0].camera, s, now_ms()); };
+  const std::vector<Case> cases = {
+      {"malformed bytes", true, [](StreamClient& c) { c.ws().send_binary("\xff\xff\xff\x07garbage"); },
+       pb::ERROR_MALFORMED},
+      {"malformed before hello", false, [](StreamClient& c) { c.ws().send_binary("\x0a\xff\xff\xff"); },
+       pb::ERROR_MALFORMED},
+      {"text frame", true, [](StreamClient& c) { c.ws().send_text("{\"hello\":1}"); }, pb::ERROR_MALFORMED},
+      {"oversize message", true, [](StreamClient& c) { c.ws().send_binary(std::string(70000, 'x')); },
+       pb::ERROR_MALFORMED},
+      {"pose before hello", false, [&](StreamClient& c) { c.send_pose(pose(0)); }, pb::ERROR_PROTOCOL},
+      {"second hello", true,
+       [](StreamClient& c) {
+         pb::ClientMessage m;
+         m.mutable_hello()->set_protocol_version(1);
+         m.mutable_hello()->set_viewport_width(64);
+         m.mutable_hello()->set_viewport_height(64);
+         c.send(m);
+       },
+       pb::ERROR_PROTOCOL},
+      {"wrong version", false,
+       [](StreamClient& c) {
+         pb::ClientMessage m;
+         m.mutable_hello()->set_protocol_version(2);
+         m.mutable_hello()->set_viewport_width(64);
+         m.mutable_hello()->set_viewport_height(64);
+         c.send(m);
+       },
+       pb::ERROR_PROTOCOL},
+      {"huge viewport", false,
+       [](StreamClient& c) {
+         pb::ClientMessage m;
+         m.mutable_hello()->set_protocol_version(1);
+         m.mutable_hello()->set_viewport_width(100000);
+         m.mutable_hello()->set_viewport_height(100000);
+         c.send(m);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"huge resize", true,
+       [](StreamClient& c) {
+         pb::ClientMessage m;
+         m.mutable_resize()->set_viewport_width(8);
+         m.mutable_resize()->set_viewport_height(100000);
+         c.send(m);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"NaN position", true,
+       [&](StreamClient& c) {
+         pb::Pose p = pose(0);
+         p.mutable_position()->set_y(std::numeric_limits<double>::quiet_NaN());
+         c.send_pose(p);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"Inf fov", true,
+       [&](StreamClient& c) {
+         pb::Pose p = pose(0);
+         p.set_vertical_fov_deg(std::numeric_limits<double>::infinity());
+         c.send_pose(p);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"zero quaternion", true,
+       [&](StreamClient& c) {
+         pb::Pose p = pose(0);
+         p.mutable_orientation()->set_w(0);
+         p.mutable_orientation()->set_x(0);
+         p.mutable_orientation()->set_y(0);
+         p.mutable_orientation()->set_z(0);
+         c.send_pose(p);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"fov 170", true,
+       [&](StreamClient& c) {
+         pb::Pose p = pose(0);
+         p.set_vertical_fov_deg(170.0);
+         c.send_pose(p);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"pose without orientation", true,
+       [&](StreamClient& c) {
+         pb::Pose p = pose(0);
+         p.clear_orientation();
+         c.send_pose(p);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"empty message", true, [](StreamClient& c) { c.ws().send_binary(""); }, pb::ERROR_MALFORMED},
+  };
+  for (const Case& k : cases) {
+    SCOPED_TRACE(k.name);
+    StreamClient bad;
+    bad.connect(server.port());
+    if (k.hello_first) bad.hello(64, 64);
+    k.act(bad);
+    auto err = expect_error(bad);
+    ASSERT_TRUE(err) << "no Error for " << k.name;
+    EXPECT_EQ(err->code(), k.code) << err->reason();
+    EXPECT_TRUE(expect_closed(bad)) << "connection not closed after " << k.name;
+  }
+  EXPECT_TRUE(good.wait_frames(2)) << good.error();
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/healthz", body), 200);
+  good.stop();
+  EXPECT_EQ(good.error(), "");
+}
+
+// A flood of 1000 poses: latest wins, the server renders a few and answers the last one.
+TEST(ServerIntegration, PoseFloodRendersOnlyLatest) {
+  ServerProcess server(server_args(kBiker));
+  GoodClient good(server.port());
+  ASSERT_TRUE(good.wait_frames(1)) << good.error();
+  StreamClient c;
+  c.connect(server.port());
+  c.hello(160, 120);
+  const Trace orbit = biker_orbit(160, 120, 50);
+  for (std::uint32_t i = 0; i < 1000; ++i)
+    c.send_pose(pose_from_camera(orbit[i % orbit.size()].camera, i, now_ms()));
+  int frames = 0;
+  bool got_last = false;
+  const auto deadline = Clock::now() + std::chrono::seconds(30);
+  while (!got_last && Clock::now() < deadline) {
+    auto m = c.recv(50);
+    if (!m || !m->has_frame()) continue;
+    frames++;
+    got_last = m->frame().pose_sequence() == 999;
+  }
+  EXPECT_TRUE(got_last) << "the newest pose was never rendered";
+  EXPECT_LT(frames, 100) << "server rendered a backlog";
+  auto stats = wait_for(c, 3000, [](const pb::ServerMessage& s) { return s.has_stats(); });
+  ASSERT_TRUE(stats);
+  EXPECT_EQ(stats->stats().poses_received(), 1000u);
+  EXPECT_GE(stats->stats().poses_skipped(), 900u);
+  EXPECT_TRUE(good.wait_frames(2)) << good.error();
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/healthz", body), 200);
+}
+
+// A client that never reads is dropped (ERROR_TOO_SLOW) without disturbing the good session;
+// abrupt disconnects mid-stream leave the server healthy.
+TEST(ServerIntegration, NonReaderAndAbruptDisconnects) {
+  ServerProcess server(server_args(kBiker));
+  GoodClient good(server.port());
+  ASSERT_TRUE(good.wait_frames(1)) << good.error();
+
+  StreamClient slow;
+  slow.connect(server.port(), "127.0.0.1", 5000, /*receive_buffer=*/4096);
+  slow.hello(320, 240);
+  const Trace orbit = biker_orbit(320, 240, 20);
+  // Poses (each wants an IDR, so frames are big) and pings, never reading a byte.
+  pb::ClientMessage ping, kf;
+  ping.mutable_ping()->set_client_time_ms(1);
+  kf.mutable_key_frame_request();
+  std::string ping_bytes, kf_bytes;
+  ping.SerializeToString(&ping_bytes);
+  kf.SerializeToString(&kf_bytes);
+  bool send_failed = false;
+  const auto flood_end = Clock::now() + std::chrono::seconds(5);
+  for (std::uint32_t i = 0; Clock::now() < flood_end && !send_failed; ++i) {
+    try {
+      slow.send_pose(pose_from_camera(orbit[i % orbit.size()].camera, i, now_ms()));
+      slow.ws().send_binary(kf_bytes);
+      for (int k = 0; k < 50; ++k) slow.ws().send_binary(ping_bytes);
+    } catch (const std::exception&) {
+      send_failed = true;  // the server already dropped us
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  // Now read: the server must have given up on this client.
+  bool saw_too_slow = false, closed = false;
+  const auto deadline = Clock::now() + std::chrono::seconds(20);
+  while (!closed && Clock::now() < deadline) {
+    try {
+      auto m = slow.recv(100);
+      if (m && m->has_error()) saw_too_slow = m->error().code() == pb::ERROR_TOO_SLOW;
+    } catch (const std::exception&) {
+      closed = true;
+    }
+  }
+  EXPECT_TRUE(closed) << "a client that never reads was not dropped";
+  std::string metrics;
+  http_get(server.port(), "/metrics", metrics);
+  EXPECT_NE(metrics.find("catgs_session_errors_total 1"), std::string::npos) << metrics;
+  std::cout << "[ info ] non-reader saw ERROR_TOO_SLOW before the close: " << saw_too_slow << "\n";
+  EXPECT_TRUE(good.wait_frames(2)) << good.error();
+
+  // Abrupt disconnects: mid-render, right after Hello, and before Hello.
+  for (int i = 0; i < 6; ++i) {
+    StreamClient c;
+    c.connect(server.port());
+    if (i % 3 != 2) c.hello(160, 120);
+    if (i % 3 == 0) {
+      for (std::uint32_t s = 0; s < 5; ++s)
+        c.send_pose(pose_from_camera(orbit[s].camera, s, now_ms()));
+      if (i == 3) c.recv(2000);  // sometimes after a frame arrived
+    }
+    c.ws().close_abrupt();
+  }
+  EXPECT_TRUE(good.wait_frames(3)) << good.error();
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/healthz", body), 200);
+  // Only the good session is left once the server has noticed the drops.
+  const auto settle = Clock::now() + std::chrono::seconds(10);
+  while (Clock::now() < settle) {
+    http_get(server.port(), "/metrics", metrics);
+    if (metrics.find("catgs_connections 1\n") != std::string::npos) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_NE(metrics.find("catgs_connections 1\n"), std::string::npos) << metrics;
+  good.stop();
+  EXPECT_EQ(good.error(), "");
+}
+
+TEST(ServerIntegration, SessionLimitAndToken) {
+  ServerProcess server(server_args(kBiker, {"--max-sessions", "1", "--token", "s3cret"}));
+  StreamClient wrong;
+  wrong.connect(server.port());
+  EXPECT_THROW(wrong.hello(64, 64, "nope"), std::runtime_error);
+
+  StreamClient first;
+  first.connect(server.port());
+  first.hello(64, 64, "s3cret");
+  StreamClient second;
+  second.connect(server.port());
+  try {
+    second.hello(64, 64, "s3cret");
+    ADD_FAILURE() << "second session accepted past --max-sessions 1";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("ERROR_SERVER_FULL"), std::string::npos) << e.what();
+  }
+  // The slot frees when the first session leaves.
+  first.ws().close();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  StreamClient third;
+  third.connect(server.port());
+  EXPECT_NO_THROW(third.hello(64, 64, "s3cret"));
+}
+
+TEST(ServerIntegration, GracefulShutdownSendsShuttingDown) {
+  ServerProcess server(server_args(kBiker));
+  StreamClient c;
+  c.connect(server.port());
+  c.hello(64, 64);
+  const auto t0 = Clock::now();
+  std::thread stopper([&] { EXPECT_EQ(server.terminate(10000), 0) << server.log(); });
+  auto err = expect_error(c, 10000);
+  stopper.join();
+  ASSERT_TRUE(err);
+  EXPECT_EQ(err->code(), pb::ERROR_SHUTTING_DOWN);
+  EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 8.0);
+}
+
+}  // namespace
