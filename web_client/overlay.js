@@ -6,7 +6,8 @@ export class Overlay {
     this.messagesEl = messagesEl;
     this.messages = new Map(); // id -> { text, level }
     this.info = null;
-    this.drawTimes = [];
+    this.lastDrawMs = null;
+    this.intervalMs = null;
     this.latencyMs = null;
     this.frameSize = null;
     this.rttMs = null;
@@ -27,13 +28,20 @@ export class Overlay {
 
   clearSession() {
     this.info = null;
-    this.drawTimes = [];
+    this.lastDrawMs = null;
+    this.intervalMs = null;
     this.latencyMs = null;
     this.render();
   }
 
   frameDrawn(nowMs, latencyMs, width, height, codec) {
-    this.drawTimes.push(nowMs);
+    // FPS from a smoothed frame interval: readable at 60 fps and at 0.5 fps alike (a count over
+    // the last second reads 0 or 1 for a slow CPU renderer).
+    if (this.lastDrawMs !== null) {
+      const interval = nowMs - this.lastDrawMs;
+      this.intervalMs = this.intervalMs === null ? interval : this.intervalMs * 0.8 + interval * 0.2;
+    }
+    this.lastDrawMs = nowMs;
     // Smooth so the number can be read while it updates every frame.
     if (Number.isFinite(latencyMs)) {
       this.latencyMs = this.latencyMs === null ? latencyMs : this.latencyMs * 0.8 + latencyMs * 0.2;
@@ -51,9 +59,10 @@ export class Overlay {
   }
 
   fps(nowMs) {
-    // Frames drawn during the last second.
-    while (this.drawTimes.length && this.drawTimes[0] < nowMs - 1000) this.drawTimes.shift();
-    return this.drawTimes.length;
+    if (this.lastDrawMs === null || this.intervalMs === null || !(this.intervalMs > 0)) return 0;
+    // No frame for a while (stream idle: the camera is still): say 0 rather than a stale rate.
+    if (nowMs - this.lastDrawMs > Math.max(3000, 3 * this.intervalMs)) return 0;
+    return 1000 / this.intervalMs;
   }
 
   showMessage(id, text, level = 'error') {
@@ -86,7 +95,7 @@ export class Overlay {
   render(nowMs = performance.now()) {
     const lines = [];
     lines.push(
-      `FPS ${this.fps(nowMs)}  latency ${this.latencyMs === null ? '-' : `${Math.round(this.latencyMs)} ms`}` +
+      `FPS ${fmtFps(this.fps(nowMs))}  latency ${this.latencyMs === null ? '-' : `${Math.round(this.latencyMs)} ms`}` +
         `  frame ${this.frameSize || '-'}`,
     );
     if (this.info) {
@@ -119,4 +128,5 @@ export class Overlay {
   }
 }
 
+const fmtFps = (v) => (v >= 10 || v === 0 ? v.toFixed(0) : v.toFixed(1));
 const num = (v) => (Number.isFinite(v) ? v.toFixed(1) : '-');

@@ -82,7 +82,7 @@ try {
     check(poses[0].vertical_fov_deg === 50 && poses[0].orientation.w === 1, 'normal: first pose is the Welcome initial pose');
     const s = await page.evaluate(() => ({ lf: window.catgs.lastFrame, text: window.catgs.overlayText(), errs: window.catgs.decoderErrors }));
     check(s.lf.width === 160 && s.lf.height === 120, 'normal: frame size 160x120');
-    check(/FPS [1-9]\d*/.test(s.text) && /latency \d+ ms/.test(s.text) && s.text.includes('renderer cpu (exact)') &&
+    check(/FPS (\d*[1-9]\d*(\.\d)?|0\.[1-9])/.test(s.text) && /latency \d+ ms/.test(s.text) && s.text.includes('renderer cpu (exact)') &&
       s.text.includes('encoder x264') && s.text.includes('avc1.42'), `normal: overlay ${JSON.stringify(s.text)}`);
     check(s.errs === 0, 'normal: no decoder errors');
 
