@@ -1,0 +1,284 @@
+// catgs-bench: replays a trace through the CUDA pipelines and reports frame times (a benchmark: it
+// reports, it never fails on time).
+//
+//   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
+//               --pipeline vanilla,exact [--frames N] [--warmup N] [--json OUT.json]
+//               [--snapshot-dir DIR] [--up X,Y,Z]
+//
+// --city builds DESIGN.md's city in memory from S (13 copies on a diamond grid, x10 scale; with
+// --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by --scale (default 1).
+// T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "real:CAMERAS.json" (a
+// real camera path moved onto the scene, scene_tiling.h), "orbit", or a catgs-trace file. Traces
+// are generated at 120 FPS; the first --warmup frames are rendered untimed, then --frames frames
+// (default 600) are timed.
+//
+// Each frame is timed with CUDA events on the renderer's stream around render_device(): pose in,
+// image in device memory out (pre-processing, the one host readback, key emission, sort, tile
+// ranges, rasterization), no disk I/O, no download. All pipelines share one DeviceScene and run in
+// this process on the same frames, one after the other.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <numeric>
+#include <sstream>
+
+#include <cuda_runtime.h>
+#include <nlohmann/json.hpp>
+
+#include "catgs/cuda_renderer.h"
+#include "catgs/ply_io.h"
+#include "catgs/scene_tiling.h"
+#include "catgs/trace.h"
+#include "cli_args.h"
+
+namespace {
+
+const char* kUsage =
+    "usage: catgs-bench --scene S [--city [--radius-sq 4] [--spacing 1.2] [--seed N]] [--scale F]\n"
+    "                   --trace flyover|orbit|real:CAMERAS.json|FILE.trace [--width 1920]\n"
+    "                   [--height 1080] [--pipeline vanilla,exact] [--frames 600] [--warmup 30]\n"
+    "                   [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
+    "                   [--seconds-per-view 0.5] [--distance 0.6]\n";
+
+void check(cudaError_t e, const char* what) {
+  if (e != cudaSuccess)
+    throw std::runtime_error(std::string(what) + ": " + cudaGetErrorName(e) + ": " + cudaGetErrorString(e));
+}
+
+struct Summary {
+  double mean = 0, median = 0, p99 = 0, min = 0, max = 0;
+};
+Summary summarize(std::vector<double> v) {
+  Summary s;
+  if (v.empty()) return s;
+  std::sort(v.begin(), v.end());
+  s.mean = std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+  s.median = v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+  s.p99 = v[std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(v.size()))) - 1)];
+  s.min = v.front();
+  s.max = v.back();
+  return s;
+}
+
+struct PipelineResult {
+  std::string name;
+  std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible;
+  std::size_t peak_buffer_bytes = 0, device_used_bytes = 0, allocations_timed = 0;
+  int syncs = 0;
+};
+
+glm::vec3 parse_vec3(const std::string& s) {
+  glm::vec3 v;
+  if (std::sscanf(s.c_str(), "%f,%f,%f", &v.x, &v.y, &v.z) != 3)
+    throw std::invalid_argument("expected X,Y,Z, got '" + s + "'");
+  return v;
+}
+
+int run(int argc, char** argv) {
+  using catgs::tools::Args;
+  const Args args(argc, argv, {"--scene", "--city!", "--radius-sq", "--spacing", "--seed", "--scale",
+                               "--trace", "--width", "--height", "--pipeline", "--frames", "--warmup",
+                               "--json", "--snapshot-dir", "--up", "--seconds-per-view", "--distance",
+                               "--help!"});
+  if (args.has("--help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  std::string why;
+  if (!catgs::cuda::device_usable(&why)) throw std::runtime_error("no usable CUDA device: " + why);
+  const std::string gpu = catgs::cuda::device_description();
+  const int width = args.get_int("--width", 1920), height = args.get_int("--height", 1080);
+  const int frames = args.get_int("--frames", 600), warmup = args.get_int("--warmup", 30);
+  const std::string trace_spec = args.require("--trace");
+
+  // Scene.
+  const auto t_load = std::chrono::steady_clock::now();
+  catgs::GaussianModel model = catgs::load_scene(args.require("--scene"));
+  catgs::CityLayout layout;
+  const bool city = args.has("--city");
+  glm::vec3 up = args.has("--up") ? parse_vec3(args.get("--up")) : glm::vec3(0.0f);
+  if (city) {
+    catgs::CityParams p;
+    p.radius_sq = args.get_int("--radius-sq", p.radius_sq);
+    p.spacing = static_cast<float>(args.get_double("--spacing", p.spacing));
+    p.scale = static_cast<float>(args.get_double("--scale", p.scale));
+    if (args.has("--seed")) p.seed = std::stoull(args.get("--seed"));
+    p.up = up;
+    model = catgs::tile_scene(model, p, &layout);
+    up = layout.up;
+  } else {
+    const float s = static_cast<float>(args.get_double("--scale", 1.0));
+    if (s != 1.0f) catgs::scale_scene(model, s);
+    if (glm::length(up) == 0.0f) up = catgs::estimate_up(model);
+  }
+  const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_load).count();
+
+  // Trace at 120 FPS.
+  catgs::GeneratorParams g;
+  g.width = width;
+  g.height = height;
+  g.rate_hz = 120.0;
+  g.duration_s = (warmup + frames - 1) / g.rate_hz;
+  g.up = up;
+  catgs::Trace trace;
+  if (trace_spec == "flyover") {
+    if (!city) throw std::invalid_argument("--trace flyover needs --city");
+    trace = catgs::make_city_flyover(layout, catgs::FlyoverParams{}, g);
+  } else if (trace_spec == "orbit") {
+    const auto rb = catgs::robust_bounds(model);
+    const glm::vec3 e = rb.extent();
+    const float r = 0.6f * std::max(e.x, std::max(e.y, e.z));
+    trace = catgs::make_orbit(rb, r, 0.3f * r, 100.0f, g);
+  } else if (trace_spec.rfind("real:", 0) == 0) {
+    const auto keys = catgs::load_inria_cameras(trace_spec.substr(5));
+    trace = catgs::fit_trace_to_scene(keys, model, up,
+                                      static_cast<float>(args.get_double("--distance", 0.6)), 120.0,
+                                      args.get_double("--seconds-per-view", 0.5), width, height);
+  } else {
+    trace = catgs::read_trace(trace_spec);
+    for (auto& tc : trace) tc.camera = tc.camera.rescaled(width, height);
+  }
+  if (trace.empty()) throw std::runtime_error("empty trace");
+  auto camera_at = [&](int k) { return trace[static_cast<std::size_t>(k) % trace.size()].camera; };
+
+  std::vector<catgs::Pipeline> pipelines;
+  {
+    std::stringstream ss(args.get("--pipeline", "vanilla,exact"));
+    for (std::string name; std::getline(ss, name, ',');) pipelines.push_back(catgs::parse_pipeline(name));
+  }
+
+  const std::size_t used_before_scene = catgs::cuda::device_memory_used();
+  const auto scene = catgs::cuda::DeviceScene::upload(model);
+  std::fprintf(stderr, "GPU: %s\nscene %s: %zu Gaussians (SH %d, %.0f MiB on device), built in %.1f s; "
+               "trace %s: %zu cameras, %d warm-up + %d timed frames at %dx%d\n",
+               gpu.c_str(), model.name.c_str(), model.size(), model.sh_degree,
+               static_cast<double>(scene->bytes()) / (1 << 20), load_s, trace_spec.c_str(),
+               trace.size(), warmup, frames, width, height);
+  model = catgs::GaussianModel{};  // the host copy is no longer needed
+
+  std::vector<PipelineResult> results;
+  for (const catgs::Pipeline pl : pipelines) {
+    catgs::RenderOptions o;
+    o.pipeline = pl;
+    catgs::cuda::CudaRenderer r(scene, o);
+    PipelineResult res;
+    res.name = catgs::pipeline_name(pl);
+    cudaEvent_t start, end;
+    check(cudaEventCreate(&start), "cudaEventCreate");
+    check(cudaEventCreate(&end), "cudaEventCreate");
+    for (int k = 0; k < warmup; ++k) {
+      r.render_device(camera_at(k));
+      (void)r.last_stats();
+    }
+    const std::size_t allocs_before = r.allocation_count();
+    for (int k = 0; k < frames; ++k) {
+      const catgs::Camera cam = camera_at(warmup + k);
+      check(cudaEventRecord(start, r.stream()), "cudaEventRecord");
+      r.render_device(cam);
+      check(cudaEventRecord(end, r.stream()), "cudaEventRecord");
+      check(cudaEventSynchronize(end), "cudaEventSynchronize");
+      float ms = 0;
+      check(cudaEventElapsedTime(&ms, start, end), "cudaEventElapsedTime");
+      const catgs::FrameStats& s = r.last_stats();
+      res.frame_ms.push_back(ms);
+      res.pre.push_back(s.preprocess_ms);
+      res.keys.push_back(s.keys_ms);
+      res.sort.push_back(s.sort_ms);
+      res.ranges.push_back(s.ranges_ms);
+      res.raster.push_back(s.rasterize_ms);
+      res.list.push_back(static_cast<double>(s.render_list_length));
+      res.visible.push_back(static_cast<double>(s.visible));
+    }
+    res.allocations_timed = r.allocation_count() - allocs_before;
+    res.peak_buffer_bytes = r.peak_buffer_bytes();
+    res.device_used_bytes = catgs::cuda::device_memory_used() - used_before_scene;
+    res.syncs = r.syncs_last_frame();
+    if (args.has("--snapshot-dir")) {
+      std::filesystem::create_directories(args.get("--snapshot-dir"));
+      catgs::Image img;
+      r.render(camera_at(warmup + frames / 2), img);
+      catgs::write_png(img, args.get("--snapshot-dir") + "/" + scene->name() + "_" +
+                                res.name + ".png");
+    }
+    cudaEventDestroy(start);
+    cudaEventDestroy(end);
+    results.push_back(std::move(res));
+  }
+
+  // Table.
+  std::printf("\nGPU: %s\nscene: %s, %zu Gaussians; trace: %s; %dx%d; %d timed frames (after %d warm-up)\n",
+              gpu.c_str(), scene->name().c_str(), scene->size(), trace_spec.c_str(), width, height,
+              frames, warmup);
+  std::printf("%-8s %8s %8s %8s %8s | %7s %7s %7s %7s %7s | %12s %12s %10s | %9s %9s %5s\n",
+              "pipeline", "mean ms", "median", "p99", "FPS", "pre", "keys", "sort", "ranges",
+              "raster", "list mean", "list max", "visible", "buf MiB", "dev MiB", "syncs");
+  nlohmann::json j;
+  j["gpu"] = gpu;
+  j["scene"] = scene->name();
+  j["gaussians"] = scene->size();
+  j["sh_degree"] = scene->sh_degree();
+  j["scene_device_bytes"] = scene->bytes();
+  j["trace"] = trace_spec;
+  j["width"] = width;
+  j["height"] = height;
+  j["frames"] = frames;
+  j["warmup"] = warmup;
+  j["timing"] = "CUDA events around render_device() on the renderer's stream; pose in, image in device memory out";
+  for (const auto& r : results) {
+    const Summary f = summarize(r.frame_ms), L = summarize(r.list);
+    auto mean = [](const std::vector<double>& v) { return summarize(v).mean; };
+    std::printf("%-8s %8.3f %8.3f %8.3f %8.1f | %7.3f %7.3f %7.3f %7.3f %7.3f | %12.0f %12.0f %10.0f | %9.1f %9.1f %5d\n",
+                r.name.c_str(), f.mean, f.median, f.p99, 1000.0 / f.mean, mean(r.pre), mean(r.keys),
+                mean(r.sort), mean(r.ranges), mean(r.raster), L.mean, L.max, mean(r.visible),
+                static_cast<double>(r.peak_buffer_bytes) / (1 << 20),
+                static_cast<double>(r.device_used_bytes) / (1 << 20), r.syncs);
+    nlohmann::json p;
+    p["pipeline"] = r.name;
+    p["frame_ms"] = {{"mean", f.mean}, {"median", f.median}, {"p99", f.p99}, {"min", f.min}, {"max", f.max}};
+    p["fps"] = 1000.0 / f.mean;
+    p["stages_ms_mean"] = {{"preprocess", mean(r.pre)}, {"keys", mean(r.keys)}, {"sort", mean(r.sort)},
+                           {"tile_ranges", mean(r.ranges)}, {"rasterize", mean(r.raster)}};
+    p["render_list"] = {{"mean", L.mean}, {"median", L.median}, {"min", L.min}, {"max", L.max}};
+    p["visible_mean"] = mean(r.visible);
+    p["peak_buffer_bytes"] = r.peak_buffer_bytes;
+    p["device_memory_used_bytes"] = r.device_used_bytes;
+    p["scene_plus_peak_buffers_bytes"] = r.peak_buffer_bytes + scene->bytes();
+    p["host_device_syncs_per_frame"] = r.syncs;
+    p["allocations_during_timed_frames"] = r.allocations_timed;
+    p["per_frame_ms"] = r.frame_ms;
+    p["per_frame_render_list"] = r.list;
+    j["pipelines"].push_back(p);
+  }
+  auto find = [&](const char* name) -> const PipelineResult* {
+    for (const auto& r : results)
+      if (r.name == name) return &r;
+    return nullptr;
+  };
+  if (const auto *v = find("vanilla"), *e = find("exact"); v && e) {
+    const double fps_ratio = summarize(v->frame_ms).mean / summarize(e->frame_ms).mean;
+    const double list_ratio = summarize(v->list).mean / summarize(e->list).mean;
+    std::printf("exact / vanilla: FPS x%.2f, render list %.2fx shorter\n", fps_ratio, list_ratio);
+    j["exact_over_vanilla"] = {{"fps_ratio", fps_ratio}, {"render_list_ratio", list_ratio}};
+  }
+  if (args.has("--json")) {
+    std::ofstream out(args.get("--json"));
+    out << j.dump(1) << "\n";
+    if (!out) throw std::runtime_error(args.get("--json") + ": write failed");
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::cerr << "catgs-bench: " << e.what() << "\n" << kUsage;
+    return 1;
+  }
+}

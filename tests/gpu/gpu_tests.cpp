@@ -1,0 +1,399 @@
+// GPU tests of the CUDA render core against the CPU reference (run on a GPU machine by
+// scripts/gpu_run.sh; no GoogleTest there). Prints a table, writes it with --out, and exits
+// non-zero when any check fails.
+//
+//   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large]
+//
+// DIR holds flowers_sh3.ply, biker.compressed.ply and tumblewood_sh2.compressed.ply (the compact
+// copy: the 85 MB original does not fit a GPU run's 64 MiB of files); TRACES holds
+// flowers_sh3.cameras.json.
+//
+// Checks:
+//  equal      CUDA == CPU for vanilla and exact, three scenes x 4 views at 1280x720: PSNR >= 50 dB
+//             over 8-bit RGB (max abs error of the float image and of the 8-bit image reported),
+//             and the render list lengths of both.
+//  exact~van  CUDA exact vs CUDA vanilla: PSNR >= 40 dB and a shorter render list.
+//  grow       one renderer across scenes and sizes (small -> large -> small): every frame equals
+//             a fresh renderer's frame, and buffers grow without errors.
+//  steady     1000 frames in a row (after a warm pass over the same trace): no buffer growth,
+//             no allocation, no change in device memory in use.
+//  tiles18    8192x4608 (147456 tiles, 18 tile-key bits) CUDA == CPU.
+//  list>2^31  a render list of more than 2^31 entries renders (or fails with a clear CudaError
+//             for lack of device memory); > 2^32 - 1 entries throws std::length_error.
+//  city26M    49 tumblewood copies (26.6 M Gaussians): CUDA == CPU on a fly-over view.
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "catgs/cpu_renderer.h"
+#include "catgs/cuda_renderer.h"
+#include "catgs/ply_io.h"
+#include "catgs/scene_tiling.h"
+#include "catgs/trace.h"
+#include "cli_args.h"
+
+namespace {
+
+using catgs::Camera;
+using catgs::GaussianModel;
+using catgs::Image;
+using catgs::Pipeline;
+
+struct Row {
+  std::string test, scene, view, pipeline;
+  double psnr = 0, max_abs = 0;
+  int max_abs8 = 0;
+  long long list_ref = -1, list_gpu = -1;
+  bool pass = false;
+  std::string note;
+};
+std::vector<Row> g_rows;
+
+struct Diff {
+  double psnr, max_abs;
+  int max_abs8;
+};
+Diff compare(const Image& a, const Image& b) {
+  Diff d{catgs::psnr_rgba8(a, b), 0.0, 0};
+  if (a.rgb.size() == b.rgb.size())
+    for (std::size_t i = 0; i < a.rgb.size(); ++i)
+      d.max_abs = std::max(d.max_abs, static_cast<double>(std::fabs(a.rgb[i] - b.rgb[i])));
+  for (std::size_t i = 0; i < a.rgba8.size(); ++i)
+    d.max_abs8 = std::max(d.max_abs8, std::abs(static_cast<int>(a.rgba8[i]) - static_cast<int>(b.rgba8[i])));
+  return d;
+}
+
+std::string fmt_psnr(double p) {
+  char b[32];
+  if (std::isinf(p)) return "inf";
+  std::snprintf(b, sizeof b, "%.2f", p);
+  return b;
+}
+
+void add(Row r) {
+  std::printf("%-10s %-16s %-7s %-8s %8s %10.3g %4d %12lld %12lld  %s %s\n", r.test.c_str(),
+              r.scene.c_str(), r.view.c_str(), r.pipeline.c_str(), fmt_psnr(r.psnr).c_str(),
+              r.max_abs, r.max_abs8, r.list_ref, r.list_gpu, r.pass ? "PASS" : "FAIL", r.note.c_str());
+  std::fflush(stdout);
+  g_rows.push_back(std::move(r));
+}
+
+std::shared_ptr<GaussianModel> load(const std::string& path, float scale) {
+  auto m = std::make_shared<GaussianModel>(catgs::load_scene(path));
+  if (scale != 1.0f) catgs::scale_scene(*m, scale);
+  return m;
+}
+
+// Four orbit views (0, 90, 180, 270 degrees) around the scene's robust bounds, world up -y.
+std::vector<Camera> orbit_views(const GaussianModel& m, int w, int h) {
+  catgs::GeneratorParams g;
+  g.width = w;
+  g.height = h;
+  g.rate_hz = 1.0;
+  g.duration_s = 3.0;
+  g.up = {0.0f, -1.0f, 0.0f};
+  const auto rb = catgs::robust_bounds(m);
+  const glm::vec3 e = rb.extent();
+  const float r = 0.6f * std::max(e.x, std::max(e.y, e.z));
+  std::vector<Camera> v;
+  for (const auto& tc : catgs::make_orbit(rb, r, 0.3f * r, 270.0f, g)) v.push_back(tc.camera);
+  return v;
+}
+
+// CUDA vs CPU for both pipelines over `views`, plus exact-vs-vanilla on the GPU.
+void equality(const std::string& name, std::shared_ptr<GaussianModel> model,
+              const std::vector<Camera>& views, std::shared_ptr<const catgs::cuda::DeviceScene> dev) {
+  catgs::RenderOptions ov, oe;
+  ov.pipeline = Pipeline::vanilla;
+  oe.pipeline = Pipeline::exact;
+  catgs::cpu::CpuRenderer cpu_v(model, ov), cpu_e(model, oe);
+  catgs::cuda::CudaRenderer gpu_v(dev, ov), gpu_e(dev, oe);  // two renderers, one scene
+  for (std::size_t k = 0; k < views.size(); ++k) {
+    Image cv, ce, gv, ge;
+    cpu_v.render(views[k], cv);
+    cpu_e.render(views[k], ce);
+    gpu_v.render(views[k], gv);
+    gpu_e.render(views[k], ge);
+    const std::string view = std::to_string(k);
+    for (int e = 0; e < 2; ++e) {
+      const Image& c = e ? ce : cv;
+      const Image& g = e ? ge : gv;
+      const auto& cs = e ? cpu_e.last_stats() : cpu_v.last_stats();
+      const auto& gs = e ? gpu_e.last_stats() : gpu_v.last_stats();
+      const Diff d = compare(c, g);
+      add({"equal", name, view, e ? "exact" : "vanilla", d.psnr, d.max_abs, d.max_abs8,
+           static_cast<long long>(cs.render_list_length), static_cast<long long>(gs.render_list_length),
+           d.psnr >= 50.0, ""});
+    }
+    const Diff d = compare(gv, ge);
+    const auto lv = gpu_v.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;
+    char note[64];
+    std::snprintf(note, sizeof note, "list x%.2f shorter", static_cast<double>(lv) / std::max<double>(1.0, static_cast<double>(le)));
+    add({"exact~van", name, view, "ex/van", d.psnr, d.max_abs, d.max_abs8, static_cast<long long>(lv),
+         static_cast<long long>(le), d.psnr >= 40.0 && le < lv, note});
+  }
+}
+
+// A scene of n huge, nearly opaque Gaussians stacked in front of the camera, each covering every
+// tile of a 1920x1080 image (vanilla emits n * 8160 entries).
+std::shared_ptr<GaussianModel> wall_scene(std::size_t n) {
+  auto m = std::make_shared<GaussianModel>();
+  m->name = "wall" + std::to_string(n);
+  m->sh_degree = 0;
+  m->resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    m->means[3 * i + 2] = 5.0f + 0.001f * static_cast<float>(i);
+    for (int a = 0; a < 3; ++a) m->log_scales[3 * i + a] = std::log(40.0f);
+    m->rotations[4 * i] = 1.0f;
+    m->opacity_logits[i] = 2.0f;  // 0.88: a few layers saturate a pixel
+    for (int c = 0; c < 3; ++c) m->sh[3 * i + c] = 0.5f * std::sin(0.7f * static_cast<float>(i) + 2.0f * c);
+  }
+  return m;
+}
+
+Camera front_camera(int w, int h) {
+  return Camera::from_pose({0.0f, 0.0f, 0.0f}, glm::quat(1, 0, 0, 0), 60.0f, w, h);
+}
+
+int run(int argc, char** argv) {
+  const catgs::tools::Args args(argc, argv, {"--scenes", "--traces", "--out", "--quick!", "--skip-large!"});
+  std::string why;
+  if (!catgs::cuda::device_usable(&why)) {
+    std::fprintf(stderr, "no usable CUDA device: %s\n", why.c_str());
+    return 2;
+  }
+  const std::string gpu = catgs::cuda::device_description();
+  const std::string dir = args.require("--scenes"), traces = args.get("--traces", dir);
+  const bool quick = args.has("--quick");
+  const int W = quick ? 640 : 1280, H = quick ? 360 : 720;
+  std::printf("GPU: %s\n", gpu.c_str());
+  std::printf("%-10s %-16s %-7s %-8s %8s %10s %4s %12s %12s  %s\n", "test", "scene", "view", "pipeline",
+              "PSNR dB", "max|err|", "8bit", "list (ref)", "list (gpu)", "result");
+
+  // 1-2: equality and exact ~ vanilla.
+  auto biker = load(dir + "/biker.compressed.ply", 1.0f);
+  auto biker_dev = catgs::cuda::DeviceScene::upload(*biker);
+  equality("biker", biker, orbit_views(*biker, W, H), biker_dev);
+  std::shared_ptr<GaussianModel> flowers, tumble;
+  std::shared_ptr<const catgs::cuda::DeviceScene> flowers_dev, tumble_dev;
+  if (!quick) {
+    flowers = load(dir + "/flowers_sh3.ply", 1.0f);
+    flowers_dev = catgs::cuda::DeviceScene::upload(*flowers);
+    auto cams = catgs::load_inria_cameras(traces + "/flowers_sh3.cameras.json", W, H);
+    std::vector<Camera> views;
+    for (int k = 0; k < 4; ++k) views.push_back(cams[cams.size() * static_cast<std::size_t>(k) / 4]);
+    equality("flowers_sh3", flowers, views, flowers_dev);
+    tumble = load(dir + "/tumblewood_sh2.compressed.ply", 10.0f);
+    tumble->name = "tumblewood_sh2";
+    tumble_dev = catgs::cuda::DeviceScene::upload(*tumble);
+    equality("tumblewood_sh2", tumble, orbit_views(*tumble, W, H), tumble_dev);
+  }
+
+  // 3: one renderer across scenes of different size and images of different size.
+  if (!quick) {
+    catgs::RenderOptions o;
+    catgs::cuda::CudaRenderer r(biker_dev, o);
+    struct Step { std::shared_ptr<const catgs::cuda::DeviceScene> dev; std::shared_ptr<GaussianModel> m; int w, h; };
+    const Step steps[] = {{biker_dev, biker, 640, 360}, {tumble_dev, tumble, 1920, 1080},
+                          {flowers_dev, flowers, 1280, 720}, {biker_dev, biker, 640, 360},
+                          {tumble_dev, tumble, 1920, 1080}};
+    int k = 0;
+    for (const Step& s : steps) {
+      Row row{"grow", s.m->name, std::to_string(k++), "exact"};
+      try {
+        r.set_scene(s.dev);
+        const Camera cam = orbit_views(*s.m, s.w, s.h)[1];
+        Image a, b;
+        r.render(cam, a);
+        catgs::cuda::CudaRenderer fresh(s.dev, o);
+        fresh.render(cam, b);
+        const Diff d = compare(a, b);
+        row.psnr = d.psnr;
+        row.max_abs = d.max_abs;
+        row.max_abs8 = d.max_abs8;
+        row.list_gpu = static_cast<long long>(r.last_stats().render_list_length);
+        row.list_ref = static_cast<long long>(fresh.last_stats().render_list_length);
+        row.pass = d.max_abs == 0.0 && row.list_gpu == row.list_ref;
+        row.note = std::to_string(s.w) + "x" + std::to_string(s.h) + ", buffers " +
+                   std::to_string(r.buffer_bytes() >> 20) + " MiB, allocations " +
+                   std::to_string(r.allocation_count());
+      } catch (const std::exception& e) {
+        row.note = e.what();
+      }
+      add(row);
+    }
+  }
+
+  // 4: 1000 frames in a row without growth of device memory.
+  {
+    auto& m = quick ? biker : tumble;
+    auto& dev = quick ? biker_dev : tumble_dev;
+    catgs::GeneratorParams g;
+    g.width = W;
+    g.height = H;
+    g.rate_hz = 120.0;
+    g.duration_s = 999.0 / 120.0;
+    const auto rb = catgs::robust_bounds(*m);
+    const glm::vec3 e = rb.extent();
+    const float rad = 0.6f * std::max(e.x, std::max(e.y, e.z));
+    const auto trace = catgs::make_orbit(rb, rad, 0.3f * rad, 360.0f, g);
+    catgs::RenderOptions o;
+    catgs::cuda::CudaRenderer r(dev, o);
+    auto pass = [&] {
+      for (std::size_t i = 0; i < trace.size(); ++i) {
+        o.pipeline = i % 2 ? Pipeline::vanilla : Pipeline::exact;
+        r.set_options(o);
+        r.render_device(trace[i].camera);
+      }
+      (void)r.last_stats();
+    };
+    pass();  // warm: buffers reach the trace's needs
+    const std::size_t used0 = catgs::cuda::device_memory_used(), buf0 = r.buffer_bytes(),
+                      alloc0 = r.allocation_count();
+    pass();
+    const std::size_t used1 = catgs::cuda::device_memory_used(), buf1 = r.buffer_bytes(),
+                      alloc1 = r.allocation_count();
+    Row row{"steady", m->name, "1000f", "both"};
+    row.pass = used0 == used1 && buf0 == buf1 && alloc0 == alloc1 && r.syncs_last_frame() == 1;
+    row.note = "device used " + std::to_string(used0 >> 20) + " -> " + std::to_string(used1 >> 20) +
+               " MiB, buffers " + std::to_string(buf0) + " -> " + std::to_string(buf1) +
+               " B, allocations " + std::to_string(alloc0) + " -> " + std::to_string(alloc1) +
+               ", syncs/frame " + std::to_string(r.syncs_last_frame());
+    add(row);
+  }
+
+  if (!quick && !args.has("--skip-large")) {
+    // 5: more tiles than 16 key bits.
+    {
+      const Camera cam = orbit_views(*biker, 8192, 4608)[0];
+      for (Pipeline p : {Pipeline::vanilla, Pipeline::exact}) {
+        catgs::RenderOptions o;
+        o.pipeline = p;
+        catgs::cpu::CpuRenderer c(biker, o);
+        catgs::cuda::CudaRenderer g(biker_dev, o);
+        Image a, b;
+        c.render(cam, a);
+        g.render(cam, b);
+        const Diff d = compare(a, b);
+        add({"tiles18", "biker", "8192x4608", catgs::pipeline_name(p), d.psnr, d.max_abs, d.max_abs8,
+             static_cast<long long>(c.last_stats().render_list_length),
+             static_cast<long long>(g.last_stats().render_list_length), d.psnr >= 50.0,
+             "147456 tiles, 18 tile bits"});
+      }
+    }
+    // 6: render lists past 2^31 and past 2^32 - 1 entries.
+    {
+      const Camera cam = front_camera(1920, 1080);
+      const std::size_t n = (std::size_t{1} << 31) / 8160 + 20000;  // ~2.3 G entries
+      auto wall = wall_scene(n);
+      catgs::RenderOptions o;
+      o.pipeline = Pipeline::vanilla;
+      Row row{"list>2^31", wall->name, "front", "vanilla"};
+      try {
+        auto dev = catgs::cuda::DeviceScene::upload(*wall);
+        Image big, small;
+        {
+          catgs::cuda::CudaRenderer r(dev, o);
+          r.render(cam, big);
+          row.list_gpu = static_cast<long long>(r.last_stats().render_list_length);
+          row.note = "buffers " + std::to_string(r.peak_buffer_bytes() >> 20) + " MiB";
+        }
+        // Only the nearest layers are visible: the first 64 Gaussians give the same image.
+        auto front = wall_scene(64);
+        catgs::cuda::CudaRenderer r2(catgs::cuda::DeviceScene::upload(*front), o);
+        r2.render(cam, small);
+        const Diff d = compare(big, small);
+        row.psnr = d.psnr;
+        row.max_abs = d.max_abs;
+        row.max_abs8 = d.max_abs8;
+        row.list_ref = static_cast<long long>(n * 8160);
+        row.pass = row.list_gpu == row.list_ref && row.list_gpu > (1ll << 31) && d.psnr >= 50.0;
+      } catch (const catgs::cuda::CudaError& e) {
+        row.note = std::string("clean failure: ") + e.what();
+        row.pass = e.code() == 2;  // cudaErrorMemoryAllocation: a clear message, no overflow
+      } catch (const std::exception& e) {
+        row.note = std::string("unexpected: ") + e.what();
+      }
+      add(row);
+
+      const std::size_t n2 = (std::size_t{1} << 32) / 8160 + 1000;
+      auto wall2 = wall_scene(n2);
+      Row row2{"list>2^32", wall2->name, "front", "vanilla"};
+      row2.list_ref = static_cast<long long>(n2 * 8160);
+      try {
+        catgs::cuda::CudaRenderer r(catgs::cuda::DeviceScene::upload(*wall2), o);
+        r.render_device(cam);
+        row2.note = "no error: overflow not detected";
+      } catch (const std::length_error& e) {
+        row2.pass = true;
+        row2.note = e.what();
+      } catch (const std::exception& e) {
+        row2.note = std::string("unexpected: ") + e.what();
+      }
+      add(row2);
+    }
+    // 7: tens of millions of Gaussians (49 copies), CUDA == CPU on a fly-over view.
+    {
+      catgs::CityParams p;
+      p.radius_sq = 16;  // 49 cells
+      p.up = {0.0f, -1.0f, 0.0f};
+      catgs::CityLayout layout;
+      auto base = catgs::load_scene(dir + "/tumblewood_sh2.compressed.ply");
+      auto city = std::make_shared<GaussianModel>(catgs::tile_scene(base, p, &layout));
+      catgs::GeneratorParams g;
+      g.width = W;
+      g.height = H;
+      g.duration_s = 1.0;
+      g.rate_hz = 2.0;
+      const auto trace = catgs::make_city_flyover(layout, catgs::FlyoverParams{}, g);
+      auto dev = catgs::cuda::DeviceScene::upload(*city);
+      for (Pipeline pl : {Pipeline::vanilla, Pipeline::exact}) {
+        catgs::RenderOptions o;
+        o.pipeline = pl;
+        catgs::cpu::CpuRenderer c(city, o);
+        catgs::cuda::CudaRenderer r(dev, o);
+        Image a, b;
+        c.render(trace[1].camera, a);
+        r.render(trace[1].camera, b);
+        const Diff d = compare(a, b);
+        add({"city", city->name, "fly1", catgs::pipeline_name(pl), d.psnr, d.max_abs, d.max_abs8,
+             static_cast<long long>(c.last_stats().render_list_length),
+             static_cast<long long>(r.last_stats().render_list_length), d.psnr >= 50.0,
+             std::to_string(city->size()) + " Gaussians, " + std::to_string(dev->bytes() >> 20) +
+                 " MiB on device"});
+      }
+    }
+  }
+
+  int failed = 0;
+  std::ostringstream md;
+  md << "GPU: " << gpu << "\n\n| test | scene | view | pipeline | PSNR dB | max abs err (float) | max abs err (8-bit) | "
+        "render list (ref) | render list (GPU) | result | note |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const Row& r : g_rows) {
+    failed += r.pass ? 0 : 1;
+    char err[32];
+    std::snprintf(err, sizeof err, "%.3g", r.max_abs);
+    md << "| " << r.test << " | " << r.scene << " | " << r.view << " | " << r.pipeline << " | "
+       << fmt_psnr(r.psnr) << " | " << err << " | " << r.max_abs8 << " | " << r.list_ref << " | "
+       << r.list_gpu << " | " << (r.pass ? "PASS" : "FAIL") << " | " << r.note << " |\n";
+  }
+  md << "\n" << (g_rows.size() - static_cast<std::size_t>(failed)) << " passed, " << failed << " failed\n";
+  if (args.has("--out")) std::ofstream(args.get("--out")) << md.str();
+  std::printf("%zu checks: %zu passed, %d failed\n", g_rows.size(), g_rows.size() - static_cast<std::size_t>(failed), failed);
+  return failed == 0 ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "catgs-gpu-tests: %s\n", e.what());
+    return 1;
+  }
+}
