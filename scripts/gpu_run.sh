@@ -1,0 +1,161 @@
+#!/usr/bin/env bash
+# scripts/gpu_run.sh: the one entry point for the CUDA render core on a GPU machine.
+#
+# On the GPU machine (from the repository root, .carry/ carried):
+#   scripts/gpu_run.sh [--prebuilt] [--quick] [--no-tests] [--no-bench] [--sanitize] [--frames N]
+#     1. builds the CUDA core, catgs-bench and catgs-gpu-tests (build/gpu, from the carried GLM,
+#        nlohmann-json and stb), unless --prebuilt, which runs the binaries in .carry/bin instead
+#        (built on the build machine by `prepare`; they need nothing but the CUDA driver);
+#     2. runs the GPU tests (CUDA vs the CPU reference) -> $OUT/gpu_tests.md;
+#        --sanitize first runs the quick subset under compute-sanitizer memcheck;
+#     3. runs the benchmark at 1920x1080, vanilla and exact, over 600 frames at 120 FPS:
+#        tumblewood_sh2 (x10, a real camera path moved onto it) -> $OUT/bench_tumblewood.json,
+#        and the 13-copy city built in memory (fly-over) -> $OUT/bench_city.json (+ snapshots).
+#     Everything printed goes to $OUT/gpu_run.log too. Exit status: non-zero if a test failed.
+#
+# On the build machine, once (fills .carry/, git-ignored):
+#   scripts/gpu_run.sh prepare [BUILD_DIR]     (BUILD_DIR defaults to build/cuda)
+#
+# Carry list (.carry/, about 40 MiB; the device gets at most 64 MiB per run):
+#   .carry/scenes/flowers_sh3.ply                   9.5 MB  (../shared/data/scenes)
+#   .carry/scenes/biker.compressed.ply              2.5 MB
+#   .carry/scenes/tumblewood_sh2.compressed.ply    21.8 MB  (catgs-scene compact: Morton order,
+#                                                            SuperSplat compressed; the 85 MB
+#                                                            original does not fit)
+#   .carry/traces/*.cameras.json                    0.3 MB
+#   .carry/deps/{include,share/cmake,lib}           ~7 MB   GLM, nlohmann-json, stb + libstb.a,
+#                                                            a pkg-config shim for stb
+#   .carry/bin/{catgs-bench,catgs-gpu-tests,catgs-scene}  prebuilt x86-64 (glibc 2.36), static
+#                                                            cudart and stb
+# Run with the device tool: command "scripts/gpu_run.sh", carry [".carry"].
+set -uo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+CARRY=$ROOT/.carry
+
+prepare() {
+  local build=${1:-build/cuda}
+  local data=${CATGS_DATA_DIR:-$ROOT/../shared/data}
+  mkdir -p "$CARRY"/{scenes,traces,bin,deps/include,deps/lib/pkgconfig,deps/share/cmake,deps/bin}
+  cp -f "$data/scenes/flowers_sh3.ply" "$data/scenes/biker.compressed.ply" "$CARRY/scenes/"
+  cp -f "$data"/traces/*.cameras.json "$CARRY/traces/"
+  if [ ! -f "$CARRY/scenes/tumblewood_sh2.compressed.ply" ]; then
+    "$build/render_core/catgs-scene" compact --scene "$data/scenes/tumblewood_sh2.ply" \
+      --out "$CARRY/scenes/tumblewood_sh2.compressed.ply" --check-views 4 --up 0,-1,0 || return 1
+  fi
+  cp -rf /usr/include/glm /usr/include/nlohmann /usr/include/stb "$CARRY/deps/include/"
+  cp -rf /usr/share/cmake/glm /usr/share/cmake/nlohmann_json "$CARRY/deps/share/cmake/"
+  cp -f /usr/lib/x86_64-linux-gnu/libstb.a "$CARRY/deps/lib/"
+  cat > "$CARRY/deps/lib/pkgconfig/stb.pc" <<'PC'
+prefix=${pcfiledir}/../..
+libdir=${prefix}/lib
+includedir=${prefix}/include/stb
+Name: stb
+Description: single-file image libraries (static, carried)
+Version: 0.0
+Libs: -L${libdir} -lstb
+Cflags: -I${includedir}
+PC
+  # The GPU machine may lack pkg-config: a shim that answers CMake's FindPkgConfig for stb.
+  cat > "$CARRY/deps/bin/pkg-config" <<'SHIM'
+#!/usr/bin/env bash
+d=$(cd "$(dirname "$0")/.." && pwd)
+out=()
+for a in "$@"; do
+  case "$a" in
+    --version) echo 0.29.2; exit 0 ;;
+    --modversion) echo 0.0; exit 0 ;;
+    --cflags|--cflags-only-I) out+=("-I$d/include/stb") ;;
+    --libs) out+=("-L$d/lib" "-lstb") ;;
+    --libs-only-L) out+=("-L$d/lib") ;;
+    --libs-only-l) out+=("-lstb") ;;
+    --variable=prefix) echo "$d"; exit 0 ;;
+    --variable=*) echo ""; exit 0 ;;
+  esac
+done
+echo "${out[@]:-}"
+SHIM
+  chmod +x "$CARRY/deps/bin/pkg-config"
+  for t in catgs-bench catgs-gpu-tests; do cp -f "$build/render_core/cuda/$t" "$CARRY/bin/"; done
+  cp -f "$build/render_core/catgs-scene" "$CARRY/bin/"
+  strip "$CARRY"/bin/* 2>/dev/null || true
+  du -sh "$CARRY"
+}
+
+if [ "${1:-}" = prepare ]; then
+  shift
+  prepare "$@"
+  exit $?
+fi
+
+PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --prebuilt) PREBUILT=1 ;;
+    --quick) QUICK=1 ;;
+    --no-tests) TESTS=0 ;;
+    --no-bench) BENCH=0 ;;
+    --sanitize) SANITIZE=1 ;;
+    --frames) FRAMES=$2; shift ;;
+    *) echo "gpu_run.sh: unknown option $1" >&2; exit 2 ;;
+  esac
+  shift
+done
+OUT=${OUT:-$ROOT/out/gpu}
+mkdir -p "$OUT"
+exec > >(tee "$OUT/gpu_run.log") 2>&1
+echo "== gpu_run.sh $(date -u +%FT%TZ)"
+nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.sm,clocks.max.sm --format=csv,noheader || true
+
+if [ "$PREBUILT" = 1 ]; then
+  BIN=$CARRY/bin
+  BENCH_EXE=$BIN/catgs-bench TEST_EXE=$BIN/catgs-gpu-tests
+else
+  export PATH=/usr/local/cuda/bin:$PATH
+  command -v pkg-config >/dev/null || export PATH=$PATH:$CARRY/deps/bin
+  export PKG_CONFIG_PATH=$CARRY/deps/lib/pkgconfig
+  t0=$(date +%s)
+  cmake -S "$ROOT" -B "$ROOT/build/gpu" -G Ninja -DCMAKE_BUILD_TYPE=Release -DWITH_CUDA=ON \
+    -DCMAKE_CUDA_COMPILER=/usr/local/cuda/bin/nvcc -DCMAKE_CUDA_ARCHITECTURES=90 \
+    -DCATGS_BUILD_SERVER=OFF -DCATGS_BUILD_TESTS=OFF -DCMAKE_PREFIX_PATH="$CARRY/deps" \
+    > "$OUT/build.log" 2>&1 &&
+  ninja -C "$ROOT/build/gpu" catgs-bench catgs-gpu-tests catgs-scene >> "$OUT/build.log" 2>&1
+  rc=$?
+  echo "== build: rc $rc in $(( $(date +%s) - t0 )) s (log: build.log)"
+  BENCH_EXE=$ROOT/build/gpu/render_core/cuda/catgs-bench TEST_EXE=$ROOT/build/gpu/render_core/cuda/catgs-gpu-tests
+  if [ $rc -ne 0 ]; then
+    tail -40 "$OUT/build.log"
+    [ -x "$CARRY/bin/catgs-gpu-tests" ] || exit $rc
+    echo "== BUILD FAILED: falling back to the prebuilt binaries in .carry/bin"
+    BENCH_EXE=$CARRY/bin/catgs-bench TEST_EXE=$CARRY/bin/catgs-gpu-tests
+    build_failed=1
+  fi
+fi
+
+S=$CARRY/scenes T=$CARRY/traces
+status=${build_failed:-0}
+if [ "$SANITIZE" = 1 ]; then
+  echo "== compute-sanitizer memcheck (quick subset)"
+  compute-sanitizer --tool memcheck --error-exitcode 9 --print-limit 20 \
+    "$TEST_EXE" --scenes "$S" --traces "$T" --quick > "$OUT/sanitizer.log" 2>&1
+  rc=$?; echo "memcheck rc $rc"; tail -5 "$OUT/sanitizer.log"; [ $rc -eq 0 ] || status=1
+fi
+if [ "$TESTS" = 1 ]; then
+  echo "== GPU tests"
+  q=(); [ "$QUICK" = 1 ] && q=(--quick)
+  t0=$(date +%s)
+  "$TEST_EXE" --scenes "$S" --traces "$T" --out "$OUT/gpu_tests.md" "${q[@]}"
+  rc=$?; echo "== GPU tests: rc $rc in $(( $(date +%s) - t0 )) s"; [ $rc -eq 0 ] || status=1
+fi
+if [ "$BENCH" = 1 ]; then
+  echo "== bench: tumblewood_sh2 x10, real camera path (mipnerf360_bicycle) at 120 FPS"
+  "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
+    --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
+    --pipeline vanilla,exact --frames "$FRAMES" --json "$OUT/bench_tumblewood.json"
+  echo "== bench: city, 13 tumblewood copies (~7 M), fly-over at 120 FPS"
+  "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
+    --width 1920 --height 1080 --pipeline vanilla,exact --frames "$FRAMES" \
+    --json "$OUT/bench_city.json" --snapshot-dir "$OUT"
+fi
+echo "== done: status $status"
+exit $status
