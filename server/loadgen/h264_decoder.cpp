@@ -57,10 +57,14 @@ bool H264Decoder::decode(const std::string& au, std::vector<std::uint8_t>& rgba,
       sws_w_ = width;
       sws_h_ = height;
     }
-    rgba.resize(static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4);
+    const std::size_t bytes = static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4;
+    // swscale's SIMD paths may write a little past the last row: give it slack, then trim
+    // (the slack stays in the vector's capacity).
+    rgba.resize(bytes + 256);
     std::uint8_t* dst[1] = {rgba.data()};
     const int dst_stride[1] = {width * 4};
     sws_scale(sws_, frame_->data, frame_->linesize, 0, height, dst, dst_stride);
+    rgba.resize(bytes);
     av_frame_unref(frame_);
     got = true;
   }

@@ -4,6 +4,8 @@
 #include <cstring>
 #include <stdexcept>
 
+#include <sys/socket.h>
+
 #include <libwebsockets.h>
 
 namespace catgs::server {
@@ -252,6 +254,14 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
         conns_[id].wsi = wsi;
       }
       pss->id = id;
+      // A bounded kernel send buffer: frames a peer does not read pile up in our queue, where
+      // the session sees them (latest pose wins, slow-reader timeout), instead of hiding in an
+      // autotuned multi-megabyte socket buffer as added latency.
+      if (options_.socket_send_buffer > 0) {
+        const int fd = static_cast<int>(lws_get_socket_fd(wsi));
+        const int size = options_.socket_send_buffer;
+        if (fd >= 0) setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &size, sizeof(size));
+      }
       handler_.on_open(id);
       return 0;
     }

@@ -54,6 +54,7 @@ struct TransportOptions {
   int port = 8080;                            // 0: any free port (see Transport::port())
   std::string web_root;                       // static files at "/"
   std::size_t max_message_bytes = 64 * 1024;  // incoming messages above this are `oversize`
+  int socket_send_buffer = 512 * 1024;        // SO_SNDBUF of WebSocket sockets; 0 = kernel's
 };
 
 class Transport {
