@@ -52,14 +52,13 @@ int main(int argc, char** argv) {
         make_renderer(options.renderer, model, render_options, &why)->name();
     std::cout << "renderer: " << renderer_kind << " (" << why << "), pipeline "
               << pipeline_name(render_options.pipeline) << "\n";
-    {
-      EncoderConfig probe;
-      probe.width = 64;
-      probe.height = 64;
-      std::string enc_why;
-      const std::string enc = make_encoder(options.encoder, probe, &enc_why)->name();
-      std::cout << "encoder: " << enc << " (" << enc_why << "), crf " << options.crf << "\n";
-    }
+    // Resolve the encoder once too (a probe at a small size); sessions create this kind.
+    EncoderConfig probe;
+    probe.width = 64;
+    probe.height = 64;
+    std::string enc_why;
+    const std::string encoder_kind = make_encoder(options.encoder, probe, &enc_why)->name();
+    std::cout << "encoder: " << encoder_kind << " (" << enc_why << "), crf " << options.crf << "\n";
 
     boost::asio::io_context io;
     ServerMetrics metrics;
@@ -85,7 +84,7 @@ int main(int argc, char** argv) {
     transport = std::make_unique<Transport>(topts, forward);
     shared = std::unique_ptr<SessionShared>(new SessionShared{
         io, *transport, metrics, options, model, model->bounds(), robust_bounds(*model),
-        render_options, renderer_kind});
+        render_options, renderer_kind, encoder_kind});
     manager = std::make_unique<SessionManager>(*shared);
     forward.m = manager.get();
 

@@ -200,7 +200,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   w->set_width(static_cast<std::uint32_t>(width_));
   w->set_height(static_cast<std::uint32_t>(height_));
   w->set_renderer(renderer_->name());
-  w->set_encoder("x264");
+  w->set_encoder(shared_.encoder_kind);
   w->set_pipeline(pipeline_name(shared_.render_options.pipeline));
   send(m);
   std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_
@@ -253,7 +253,7 @@ Session::JobResult Session::run_job(const Job& job) {
       cfg.width = job.width;
       cfg.height = job.height;
       cfg.crf = shared_.options.crf;
-      encoder_ = make_encoder(shared_.options.encoder, cfg);
+      encoder_ = make_encoder(shared_.encoder_kind, cfg);
       idr = true;
     }
     EncodedFrame enc = encoder_->encode(image_.rgba8.data(), job.width * 4, idr);

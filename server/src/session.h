@@ -40,6 +40,7 @@ struct SessionShared {
   Bounds framing_bounds;  // robust bounds used for the initial pose
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
+  std::string encoder_kind;   // resolved at start-up: "x264" (Welcome.encoder)
 };
 
 class Session : public std::enable_shared_from_this<Session> {
