@@ -10,6 +10,7 @@
 #        --sanitize first runs the quick subset under compute-sanitizer memcheck;
 #     3. runs the benchmark at 1920x1080, vanilla and exact, over 600 frames at 120 FPS:
 #        tumblewood_sh2 (x10, a real camera path moved onto it) -> $OUT/bench_tumblewood.json,
+#        the same over DESIGN.md's orbit (100 deg) -> $OUT/bench_tumblewood_orbit.json,
 #        and the 13-copy city built in memory (fly-over) -> $OUT/bench_city.json (+ snapshots).
 #     Everything printed goes to $OUT/gpu_run.log too. Exit status: non-zero if a test failed.
 #
@@ -118,13 +119,14 @@ else
   cmake -S "$ROOT" -B "$ROOT/build/gpu" -G Ninja -DCMAKE_BUILD_TYPE=Release -DWITH_CUDA=ON \
     -DCMAKE_CUDA_COMPILER=/usr/local/cuda/bin/nvcc -DCMAKE_CUDA_ARCHITECTURES=90 \
     -DCATGS_BUILD_SERVER=OFF -DCATGS_BUILD_TESTS=OFF -DCMAKE_PREFIX_PATH="$CARRY/deps" \
-    > "$OUT/build.log" 2>&1 &&
-  ninja -C "$ROOT/build/gpu" catgs-bench catgs-gpu-tests catgs-scene >> "$OUT/build.log" 2>&1
+    > "$ROOT/build/gpu.log" 2>&1 &&
+  ninja -C "$ROOT/build/gpu" catgs-bench catgs-gpu-tests catgs-scene >> "$ROOT/build/gpu.log" 2>&1
   rc=$?
-  echo "== build: rc $rc in $(( $(date +%s) - t0 )) s (log: build.log)"
+  echo "== build: rc $rc in $(( $(date +%s) - t0 )) s"
+  [ $rc -eq 0 ] || cp "$ROOT/build/gpu.log" "$OUT/build.log"
   BENCH_EXE=$ROOT/build/gpu/render_core/cuda/catgs-bench TEST_EXE=$ROOT/build/gpu/render_core/cuda/catgs-gpu-tests
   if [ $rc -ne 0 ]; then
-    tail -40 "$OUT/build.log"
+    tail -40 "$ROOT/build/gpu.log"
     [ -x "$CARRY/bin/catgs-gpu-tests" ] || exit $rc
     echo "== BUILD FAILED: falling back to the prebuilt binaries in .carry/bin"
     BENCH_EXE=$CARRY/bin/catgs-bench TEST_EXE=$CARRY/bin/catgs-gpu-tests
@@ -152,6 +154,10 @@ if [ "$BENCH" = 1 ]; then
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
     --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
     --pipeline vanilla,exact --frames "$FRAMES" --json "$OUT/bench_tumblewood.json"
+  echo "== bench: tumblewood_sh2 x10, orbit 100 deg (DESIGN.md's public-renderer table)"
+  "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 --trace orbit \
+    --width 1920 --height 1080 --pipeline vanilla,exact --frames "$FRAMES" \
+    --json "$OUT/bench_tumblewood_orbit.json"
   echo "== bench: city, 13 tumblewood copies (~7 M), fly-over at 120 FPS"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
     --width 1920 --height 1080 --pipeline vanilla,exact --frames "$FRAMES" \

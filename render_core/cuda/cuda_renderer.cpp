@@ -72,7 +72,7 @@ struct CudaRenderer::State {
   int width = 0, height = 0;
 
   // Per Gaussian.
-  GrowBuffer mean2d, conic_opacity, color, depth, q_max, rect, tiles_touched, ends, scan_temp;
+  GrowBuffer mean2d, conic_opacity, color, depth, q_max, rect, tiles_touched, ends, scan_temp, big;
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // Per tile / pixel, and the small counters.
@@ -82,7 +82,7 @@ struct CudaRenderer::State {
   std::size_t bytes() const {
     std::size_t b = 0;
     for (const GrowBuffer* g : {&mean2d, &conic_opacity, &color, &depth, &q_max, &rect,
-                                &tiles_touched, &ends, &scan_temp, &keys[0], &keys[1], &values[0],
+                                &tiles_touched, &ends, &scan_temp, &big, &keys[0], &keys[1], &values[0],
                                 &values[1], &sort_temp, &ranges, &rgb, &rgba8, &counters})
       b += g->bytes();
     return b;
@@ -108,7 +108,8 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   // The readback event only orders the host; no timing needed.
   CATGS_CUDA(cudaEventCreateWithFlags(&s.counts_ready, cudaEventDisableTiming));
   CATGS_CUDA(cudaMallocHost(&s.host_counts, 2 * sizeof(unsigned long long)));
-  s.counters.ensure(3 * sizeof(unsigned long long), "counters", &s.allocations);
+  // [0] visible, [1..2] readback (list length, visible), [3] big-Gaussian count (low 32 bits).
+  s.counters.ensure(4 * sizeof(unsigned long long), "counters", &s.allocations);
 }
 
 CudaRenderer::~CudaRenderer() = default;
@@ -168,6 +169,7 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
   s.rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs);
   s.tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs);
   s.ends.ensure(n * sizeof(uint64_t), "emission offsets", allocs);
+  s.big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
   s.scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);
   s.ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
   s.rgb.ensure(pixels * 3 * sizeof(float), "RGB image", allocs);
@@ -179,12 +181,13 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
                                s.color.as<float4>(),    s.depth.as<float>(),
                                s.q_max.as<float>(),     s.rect.as<ushort4>(),
                                s.tiles_touched.as<uint32_t>()};
-  auto* counters = s.counters.as<unsigned long long>();  // [0] visible, [1..2] readback
+  auto* counters = s.counters.as<unsigned long long>();
+  const stages::BigList big{s.big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters + 3)};
 
   s.syncs = 0;
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
-  CATGS_CUDA(cudaMemsetAsync(counters, 0, sizeof(unsigned long long), s.stream));
-  stages::preprocess(sv, cam, exact, proj, counters, s.stream);
+  CATGS_CUDA(cudaMemsetAsync(counters, 0, 4 * sizeof(unsigned long long), s.stream));
+  stages::preprocess(sv, cam, exact, proj, counters, big, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
   stages::scan_tiles_touched(proj.tiles_touched, s.ends.as<uint64_t>(), n, s.scan_temp.as<void>(),
@@ -213,7 +216,7 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
 
   uint64_t* keys[2] = {s.keys[0].as<uint64_t>(), s.keys[1].as<uint64_t>()};
   uint32_t* values[2] = {s.values[0].as<uint32_t>(), s.values[1].as<uint32_t>()};
-  stages::emit_keys(proj, s.ends.as<uint64_t>(), n, cam, exact, keys[0], values[0], s.stream);
+  stages::emit_keys(proj, s.ends.as<uint64_t>(), n, cam, exact, big, keys[0], values[0], s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kKeysEmitted], s.stream));
 
   const int half = stages::sort_pairs(keys, values, entries, key_bits, s.sort_temp.as<void>(),

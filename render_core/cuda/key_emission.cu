@@ -44,9 +44,10 @@ emit_keys_kernel(const float2* mean2d,          // [N]
                  uint32_t* values) {            // [L]
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n || tiles_touched[i] == 0) return;
+  const ushort4 r = rect[i];
+  if ((r.z - r.x) * (r.w - r.y) > tune::kBigRectTiles) return;  // emit_big_kernel's
   const uint64_t end = ends[i];
   uint64_t at = end - tiles_touched[i];
-  const ushort4 r = rect[i];
   const uint32_t depth_bits = __float_as_uint(depth[i]);
   const glm::vec2 mean(mean2d[i].x, mean2d[i].y);
   const float4 co = conic_opacity[i];
@@ -66,6 +67,57 @@ emit_keys_kernel(const float2* mean2d,          // [N]
   for (; at < end; ++at) {
     keys[at] = sentinel | 0xffffffffull;
     values[at] = static_cast<uint32_t>(i);
+  }
+}
+
+// Big Gaussians, a warp each: the rectangle is walked 32 tiles at a time in row-major order;
+// the lanes whose tile passes take consecutive slots (ballot + popc), so the order is the one the
+// per-thread loop (and the CPU reference) produces.
+__global__ void __launch_bounds__(tune::kBigThreads)
+emit_big_kernel(BigList big,
+                const float2* mean2d,          // [N]
+                const float4* conic_opacity,   // [N]
+                const float* depth,            // [N]
+                const float* q_max,            // [N] (exact only)
+                const ushort4* rect,           // [N]
+                const uint32_t* tiles_touched, // [N]
+                const uint64_t* ends,          // [N]
+                int tiles_x, int tiles_y, int width, int height, bool exact,
+                uint64_t* keys,                // [L]
+                uint32_t* values) {            // [L]
+  const unsigned lane = threadIdx.x & 31u;
+  const unsigned warps = gridDim.x * (blockDim.x / 32u);
+  const unsigned total = *big.count;
+  const auto sentinel = static_cast<uint64_t>(static_cast<uint32_t>(tiles_x * tiles_y)) << 32;
+  for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < total; w += warps) {
+    const uint32_t i = big.index[w];
+    const uint32_t touched = tiles_touched[i];
+    if (touched == 0) continue;  // warp-uniform
+    const uint64_t end = ends[i];
+    uint64_t at = end - touched;
+    const ushort4 r = rect[i];
+    const int rw = r.z - r.x, area = rw * (r.w - r.y);
+    const uint32_t depth_bits = __float_as_uint(depth[i]);
+    const glm::vec2 mean(mean2d[i].x, mean2d[i].y);
+    const float4 co = conic_opacity[i];
+    const glm::vec3 conic(co.x, co.y, co.z);
+    const float qm = exact ? q_max[i] : 0.0f;
+    for (int base = 0; base < area && at < end; base += 32) {
+      const int t = base + static_cast<int>(lane);
+      const int tx = r.x + (t % rw), ty = r.y + (t / rw);
+      const bool hit = t < area && (!exact || fm::ellipse_touches_tile(mean, conic, qm, tx, ty, width, height));
+      const unsigned hits = __ballot_sync(0xffffffffu, hit);
+      const uint64_t slot = at + static_cast<uint64_t>(__popc(hits & ((1u << lane) - 1u)));
+      if (hit && slot < end) {
+        keys[slot] = (static_cast<uint64_t>(static_cast<uint32_t>(ty * tiles_x + tx)) << 32) | depth_bits;
+        values[slot] = i;
+      }
+      at += static_cast<uint64_t>(__popc(hits));
+    }
+    for (uint64_t s = at + lane; s < end; s += 32) {  // never expected, as in emit_keys_kernel
+      keys[s] = sentinel | 0xffffffffull;
+      values[s] = i;
+    }
   }
 }
 
@@ -90,13 +142,18 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 }
 
 void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               bool exact, uint64_t* keys, uint32_t* values, cudaStream_t stream) {
+               bool exact, const BigList& big, uint64_t* keys, uint32_t* values,
+               cudaStream_t stream) {
   if (n == 0) return;
   const uint64_t blocks = (n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
       p.mean2d, p.conic_opacity, p.depth, p.q_max, p.rect, p.tiles_touched, ends, n, cam.tiles_x,
       cam.tiles_y, cam.width, cam.height, exact, keys, values);
   CATGS_CUDA_LAUNCHED("emit_keys_kernel");
+  emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(
+      big, p.mean2d, p.conic_opacity, p.depth, p.q_max, p.rect, p.tiles_touched, ends,
+      cam.tiles_x, cam.tiles_y, cam.width, cam.height, exact, keys, values);
+  CATGS_CUDA_LAUNCHED("emit_big_kernel");
 }
 
 }  // namespace catgs::cuda::stages

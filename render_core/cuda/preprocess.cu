@@ -24,9 +24,11 @@ __device__ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, 
 // projected features of visible ones and tiles_touched of all.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
 preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
-                  unsigned long long* visible) {  // [1] running count of visible Gaussians
+                  unsigned long long* visible,  // [1] running count of visible Gaussians
+                  BigList big) {
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   uint32_t touched = 0;
+  bool is_big = false;
   if (i < scene.n) {
     do {
       const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
@@ -52,15 +54,18 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
       fm::TileRect rect;
       if (exact) {
         rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height);
-        touched = fm::tile_count(rect) == 0
+        const int area = fm::tile_count(rect);
+        is_big = area > tune::kBigRectTiles;  // counted by count_big_kernel, a warp each
+        touched = area == 0 || is_big
                       ? 0u
                       : count_exact_tiles(rect, mean2d, conic, q_max, cam.width, cam.height);
       } else {
         const float radius = fm::three_sigma_radius(cov2);
         rect = fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y);
         touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
+        is_big = touched > static_cast<uint32_t>(tune::kBigRectTiles);  // emitted a warp each
       }
-      if (touched == 0) break;
+      if (touched == 0 && !is_big) break;
 
       const glm::vec3 dir = glm::normalize(mean - cam.position);
       const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
@@ -75,22 +80,64 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
     } while (false);
     out.tiles_touched[i] = touched;
   }
+  // Big Gaussians join the big list: one atomic per warp holding any (they are few).
+  const unsigned lanes = __ballot_sync(0xffffffffu, is_big);
+  if (lanes != 0u) {
+    const int lane = static_cast<int>(threadIdx.x & 31u);
+    const int leader = __ffs(lanes) - 1;
+    unsigned base = 0;
+    if (lane == leader) base = atomicAdd(big.count, static_cast<unsigned>(__popc(lanes)));
+    base = __shfl_sync(0xffffffffu, base, leader);
+    if (is_big) big.index[base + __popc(lanes & ((1u << lane) - 1u))] = static_cast<uint32_t>(i);
+  }
   // Visible count: one atomic per block, not per Gaussian (DESIGN.md: no contended atomics).
+  // Big exact Gaussians are counted by count_big_kernel once their tiles are known.
   const int block_visible = __syncthreads_count(touched > 0);
   if (threadIdx.x == 0 && block_visible > 0)
     atomicAdd(visible, static_cast<unsigned long long>(block_visible));
 }
 
+// Exact pipeline, big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and
+// writes the count; the same fm::ellipse_touches_tile as everywhere else.
+__global__ void __launch_bounds__(tune::kBigThreads)
+count_big_kernel(BigList big, Projected p, int width, int height,
+                 unsigned long long* visible) {  // [1]
+  const int lane = static_cast<int>(threadIdx.x & 31u);
+  const unsigned warps = gridDim.x * (blockDim.x / 32u);
+  const unsigned total = *big.count;
+  unsigned long long found = 0;
+  for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < total; w += warps) {
+    const uint32_t i = big.index[w];
+    const ushort4 r = p.rect[i];
+    const int rw = r.z - r.x, area = rw * (r.w - r.y);
+    const glm::vec2 mean(p.mean2d[i].x, p.mean2d[i].y);
+    const float4 co = p.conic_opacity[i];
+    const glm::vec3 conic(co.x, co.y, co.z);
+    const float qm = p.q_max[i];
+    uint32_t n = 0;
+    for (int t = lane; t < area; t += 32)
+      n += fm::ellipse_touches_tile(mean, conic, qm, r.x + t % rw, r.y + t / rw, width, height) ? 1u : 0u;
+    n = __reduce_add_sync(0xffffffffu, n);
+    if (lane == 0) p.tiles_touched[i] = n;
+    found += n > 0 ? 1u : 0u;
+  }
+  if (lane == 0 && found > 0) atomicAdd(visible, found);
+}
+
 }  // namespace
 
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
-                unsigned long long* visible, cudaStream_t stream) {
+                unsigned long long* visible, const BigList& big, cudaStream_t stream) {
   if (scene.n == 0) return;
   const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
   preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene, cam, exact, out, visible);
+      scene, cam, exact, out, visible, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
+  if (!exact) return;
+  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, out, cam.width,
+                                                                       cam.height, visible);
+  CATGS_CUDA_LAUNCHED("count_big_kernel");
 }
 
 }  // namespace catgs::cuda::stages

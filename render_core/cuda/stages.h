@@ -46,11 +46,20 @@ struct Projected {
   uint32_t* tiles_touched;    // [N] render-list entries this Gaussian emits
 };
 
+// Gaussians whose candidate rectangle has more than tune::kBigRectTiles tiles, handled a warp
+// each: their indices (order arbitrary) and how many there are, both in device memory.
+struct BigList {
+  uint32_t* index;   // [N] capacity
+  unsigned* count;   // [1]
+};
+
 // Stage 1 (preprocess.cu): frustum culling, EWA 2D covariance, conic, SH colour, tile bounds and
 // per-Gaussian tile counts (vanilla: 3-sigma square; exact: opacity-aware ellipse-vs-tile test).
-// Adds the number of visible Gaussians to *visible (one atomic per block).
+// Adds the number of visible Gaussians to *visible (one atomic per block). Big Gaussians are
+// appended to `big` (one atomic per warp that holds any); with `exact`, their tiles are counted
+// by a second kernel, a warp per Gaussian. `big.count` must be zero on entry.
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
-                unsigned long long* visible, cudaStream_t stream);
+                unsigned long long* visible, const BigList& big, cudaStream_t stream);
 
 // Stage 2a (key_emission.cu): inclusive scan of tiles_touched into 64-bit ends[N] (CUB), then a
 // one-thread kernel copies ends[N-1] and *visible into counts[0..1] for one 16-byte readback.
@@ -62,8 +71,9 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 // Stage 2b (key_emission.cu): each Gaussian writes its keys [tile | depth bits] and values (its
 // index) at [ends[i-1], ends[i]), in row-major tile order; never more than tiles_touched[i]
 // entries; slots it cannot fill get the sentinel tile id `tiles` (sorted last, ignored later).
+// Big Gaussians are emitted a warp each (ballot + popc keeps the row-major order).
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               bool exact, uint64_t* keys, uint32_t* values, cudaStream_t stream);
+               bool exact, const BigList& big, uint64_t* keys, uint32_t* values, cudaStream_t stream);
 
 // Stage 3 (sort.cu): CUB radix sort of (key, value) pairs over the low `key_bits` bits. Sorts
 // between the two halves of each double buffer; returns which half holds the result (0 or 1).

@@ -27,6 +27,15 @@ inline constexpr int kMaxTilesPerSide = (kMaxImageSide + kTileSize - 1) / kTileS
 // so the sort only visits 32 + bit_width(tiles) bits (sentinel tile id `tiles` included).
 inline constexpr int kDepthBits = 32;
 
+// A Gaussian whose candidate tile rectangle holds more than this many tiles is "big": its tiles
+// are counted (exact) and its keys emitted by a whole warp, 32 tiles at a time, instead of by one
+// thread in a serial loop. A few huge near Gaussians would otherwise hold their warps (and the
+// kernel's tail) for thousands of iterations.
+inline constexpr int kBigRectTiles = 32;
+// Grid of the warp-per-big-Gaussian kernels (they loop over a device-side count).
+inline constexpr int kBigBlocks = 1024;
+inline constexpr int kBigThreads = 256;
+
 // Reusable buffers grow to this multiple of the size asked for, so a trace whose render list
 // creeps upwards does not reallocate every frame.
 inline constexpr double kGrowthFactor = 1.25;
@@ -37,7 +46,9 @@ static_assert(kRasterThreads % 32 == 0, "rasterizer blocks are whole warps");
 static_assert(kMaxTilesPerSide <= 65535, "tile rectangles are stored as ushort4");
 static_assert(static_cast<uint64_t>(kMaxTilesPerSide) * kMaxTilesPerSide < (1ull << 32),
               "tile ids (and the sentinel) must fit the 32 key bits above the depth");
-static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0, "blocks are whole warps");
+static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0 && kBigThreads % 32 == 0,
+              "blocks are whole warps");
+static_assert(kBigRectTiles >= 1, "big Gaussians have more tiles than one thread handles well");
 
 // Number of key bits the tile id needs for a grid of `tiles` tiles, sentinel id `tiles` included.
 constexpr int tile_key_bits(uint32_t tiles) {

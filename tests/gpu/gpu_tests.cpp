@@ -146,7 +146,8 @@ std::shared_ptr<GaussianModel> wall_scene(std::size_t n) {
   m->sh_degree = 0;
   m->resize(n);
   for (std::size_t i = 0; i < n; ++i) {
-    m->means[3 * i + 2] = 5.0f + 0.001f * static_cast<float>(i);
+    // Depths 5 .. 10: near enough that every Gaussian covers the whole image, and distinct.
+    m->means[3 * i + 2] = 5.0f + 1e-5f * static_cast<float>(i);
     for (int a = 0; a < 3; ++a) m->log_scales[3 * i + a] = std::log(40.0f);
     m->rotations[4 * i] = 1.0f;
     m->opacity_logits[i] = 2.0f;  // 0.88: a few layers saturate a pixel
@@ -228,10 +229,11 @@ int run(int argc, char** argv) {
     }
   }
 
-  // 4: 1000 frames in a row without growth of device memory.
-  {
-    auto& m = quick ? biker : tumble;
-    auto& dev = quick ? biker_dev : tumble_dev;
+  // 4: 1000 frames in a row without growth of device memory (not under compute-sanitizer, whose
+  // own allocations move the device's memory in use: --quick skips it).
+  if (!quick) {
+    auto& m = tumble;
+    auto& dev = tumble_dev;
     catgs::GeneratorParams g;
     g.width = W;
     g.height = H;
