@@ -27,7 +27,7 @@
 #   .carry/deps/{include,share/cmake,lib}           ~7 MB   GLM, nlohmann-json, stb + libstb.a,
 #                                                            a pkg-config shim for stb
 #   .carry/bin/{catgs-bench,catgs-gpu-tests,catgs-scene}  prebuilt x86-64 (glibc 2.36), static
-#                                                            cudart and stb
+#                                                            cudart; bin/lib/libstb.so.0
 # Run with the device tool: command "scripts/gpu_run.sh", carry [".carry"].
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -79,6 +79,8 @@ SHIM
   chmod +x "$CARRY/deps/bin/pkg-config"
   for t in catgs-bench catgs-gpu-tests; do cp -f "$build/render_core/cuda/$t" "$CARRY/bin/"; done
   cp -f "$build/render_core/catgs-scene" "$CARRY/bin/"
+  mkdir -p "$CARRY/bin/lib"
+  cp -fL /usr/lib/x86_64-linux-gnu/libstb.so.0 "$CARRY/bin/lib/"  # the prebuilt tools link it
   strip "$CARRY"/bin/* 2>/dev/null || true
   du -sh "$CARRY"
 }
@@ -110,12 +112,14 @@ nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.sm,clocks.max.sm 
 
 if [ "$PREBUILT" = 1 ]; then
   BIN=$CARRY/bin
+  export LD_LIBRARY_PATH=$BIN/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
   BENCH_EXE=$BIN/catgs-bench TEST_EXE=$BIN/catgs-gpu-tests
 else
   export PATH=/usr/local/cuda/bin:$PATH
   command -v pkg-config >/dev/null || export PATH=$PATH:$CARRY/deps/bin
   export PKG_CONFIG_PATH=$CARRY/deps/lib/pkgconfig
   t0=$(date +%s)
+  mkdir -p "$ROOT/build"
   cmake -S "$ROOT" -B "$ROOT/build/gpu" -G Ninja -DCMAKE_BUILD_TYPE=Release -DWITH_CUDA=ON \
     -DCMAKE_CUDA_COMPILER=/usr/local/cuda/bin/nvcc -DCMAKE_CUDA_ARCHITECTURES=90 \
     -DCATGS_BUILD_SERVER=OFF -DCATGS_BUILD_TESTS=OFF -DCMAKE_PREFIX_PATH="$CARRY/deps" \
@@ -126,6 +130,7 @@ else
   [ $rc -eq 0 ] || cp "$ROOT/build/gpu.log" "$OUT/build.log"
   BENCH_EXE=$ROOT/build/gpu/render_core/cuda/catgs-bench TEST_EXE=$ROOT/build/gpu/render_core/cuda/catgs-gpu-tests
   if [ $rc -ne 0 ]; then
+    export LD_LIBRARY_PATH=$CARRY/bin/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
     tail -40 "$ROOT/build/gpu.log"
     [ -x "$CARRY/bin/catgs-gpu-tests" ] || exit $rc
     echo "== BUILD FAILED: falling back to the prebuilt binaries in .carry/bin"
