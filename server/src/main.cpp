@@ -66,6 +66,7 @@ int main(int argc, char** argv) {
     topts.bind = options.bind;
     topts.port = options.port;
     topts.web_root = options.web_root;
+    topts.socket_send_buffer = options.socket_send_buffer;
     // The manager and the transport refer to each other: the manager is built on a SessionShared
     // that names the transport, which is created right after with the manager as its handler.
     std::unique_ptr<Transport> transport;

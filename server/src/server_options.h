@@ -20,6 +20,7 @@ struct ServerOptions {
   int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
   int crf = 23;                  // x264 constant rate factor (lower = better quality, more bytes)
   int max_frames_in_flight = 2;  // frames queued to the transport but not yet written
+  int socket_send_buffer = 512 * 1024;  // SO_SNDBUF of WebSocket sockets, bytes (0 = kernel's)
 };
 
 // Parses argv (`--name value` pairs, `--help`). Fills defaults for scene and web_root from the

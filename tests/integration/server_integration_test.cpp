@@ -559,6 +559,36 @@ TEST(ServerIntegration, NonReaderAndAbruptDisconnects) {
   EXPECT_EQ(good.error(), "");
 }
 
+// A reader that stops while frames are in flight: after --slow-client-timeout-ms (2 s here) of no
+// progress the session ends with ERROR_TOO_SLOW. Lossless frames (--crf 0) and a tiny socket
+// buffer make the stall happen after a couple of frames.
+TEST(ServerIntegration, StalledFrameReaderTimesOut) {
+  ServerProcess server(server_args(kBiker, {"--crf", "0", "--socket-send-buffer", "8192"}));
+  StreamClient slow;
+  slow.connect(server.port(), "127.0.0.1", 5000, /*receive_buffer=*/4096);
+  slow.hello(320, 240);
+  const Trace orbit = biker_orbit(320, 240, 20);
+  pb::ClientMessage kf;
+  kf.mutable_key_frame_request();
+  const auto t0 = Clock::now();
+  bool dropped = false;
+  for (std::uint32_t i = 0; Clock::now() - t0 < std::chrono::seconds(40) && !dropped; ++i) {
+    try {
+      slow.send(kf);  // every frame an IDR: big frames fill the buffers sooner
+      slow.send_pose(pose_from_camera(orbit[i % orbit.size()].camera, i, now_ms()));
+    } catch (const std::exception&) {
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    dropped = server.log().find("ERROR_TOO_SLOW") != std::string::npos;
+  }
+  ASSERT_TRUE(dropped) << server.log();
+  EXPECT_NE(server.log().find("frames unread for 2000 ms"), std::string::npos) << server.log();
+  EXPECT_TRUE(expect_closed(slow, 10000));
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/healthz", body), 200);
+}
+
 TEST(ServerIntegration, SessionLimitAndToken) {
   ServerProcess server(server_args(kBiker, {"--max-sessions", "1", "--token", "s3cret"}));
   StreamClient wrong;
