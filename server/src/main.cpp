@@ -89,11 +89,12 @@ int main(int argc, char** argv) {
     manager = std::make_unique<SessionManager>(*shared);
     forward.m = manager.get();
 
+    // Listen first: a busy port then fails before any thread exists. Work posted before the
+    // pool starts just waits in the io_context.
+    transport->start();
     auto work = boost::asio::make_work_guard(io);
     std::vector<std::thread> pool;
     for (int i = 0; i < options.threads; ++i) pool.emplace_back([&io] { io.run(); });
-
-    transport->start();
     std::cout << "web root: " << options.web_root << "\n"
               << "sessions: at most " << options.max_sessions << ", " << options.threads
               << " worker threads\n"
