@@ -28,7 +28,7 @@ constexpr std::size_t kFragmentBytes = 64 * 1024;
 // Everything lws keeps pointers to for the life of the context.
 struct Transport::Static {
   lws_protocols protocols[3];
-  lws_protocol_vhost_options mime[5];
+  lws_protocol_vhost_options mime[6];
   lws_http_mount mount_root, mount_healthz, mount_metrics;
   std::string web_root;
 };
@@ -56,10 +56,12 @@ void Transport::start() {
                             {".js", "text/javascript"},
                             {".proto", "text/plain"},
                             {".json", "application/json"},
-                            {".wasm", "application/wasm"}};
-  for (int i = 0; i < 5; ++i) {
+                            {".wasm", "application/wasm"},
+                            {".md", "text/markdown; charset=utf-8"}};
+  constexpr int kTypes = static_cast<int>(sizeof(types) / sizeof(types[0]));
+  for (int i = 0; i < kTypes; ++i) {
     std::memset(&s.mime[i], 0, sizeof(s.mime[i]));
-    s.mime[i].next = i + 1 < 5 ? &s.mime[i + 1] : nullptr;
+    s.mime[i].next = i + 1 < kTypes ? &s.mime[i + 1] : nullptr;
     s.mime[i].name = types[i][0];
     s.mime[i].value = types[i][1];
   }
