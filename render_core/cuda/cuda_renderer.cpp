@@ -76,14 +76,14 @@ struct CudaRenderer::State {
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // Per tile / pixel, and the small counters.
-  GrowBuffer ranges, rgb, rgba8, counters;
+  GrowBuffer ranges, tile_scratch, tile_order, order_temp, rgb, rgba8, counters;
   const uint32_t* sorted_values = nullptr;
 
   std::size_t bytes() const {
     std::size_t b = 0;
     for (const GrowBuffer* g : {&mean2d, &conic_opacity, &color, &depth, &q_max, &rect,
                                 &tiles_touched, &ends, &scan_temp, &big, &keys[0], &keys[1], &values[0],
-                                &values[1], &sort_temp, &ranges, &rgb, &rgba8, &counters})
+                                &values[1], &sort_temp, &ranges, &tile_scratch, &tile_order, &order_temp, &rgb, &rgba8, &counters})
       b += g->bytes();
     return b;
   }
@@ -172,6 +172,11 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
   s.big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
   s.scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);
   s.ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
+  if (tune::kHeavyTilesFirst) {
+    s.tile_scratch.ensure(3 * static_cast<std::size_t>(tiles) * sizeof(uint32_t), "tile loads", allocs);
+    s.tile_order.ensure(tiles * sizeof(uint32_t), "tile order", allocs);
+    s.order_temp.ensure(stages::tile_order_temp_bytes(tiles), "tile order scratch", allocs);
+  }
   s.rgb.ensure(pixels * 3 * sizeof(float), "RGB image", allocs);
   s.rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
 
@@ -224,11 +229,18 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.events[kSorted], s.stream));
 
   stages::tile_ranges(keys[half], entries, tiles, s.ranges.as<uint2>(), s.stream);
+  const uint32_t* order = nullptr;
+  if (tune::kHeavyTilesFirst) {
+    stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(),
+                        s.tile_order.as<uint32_t>(), s.order_temp.as<void>(), s.order_temp.bytes(),
+                        s.stream);
+    order = s.tile_order.as<uint32_t>();
+  }
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-  stages::rasterize(s.ranges.as<uint2>(), values[half], proj, cam, bg, s.rgb.as<float>(),
-                    s.rgba8.as<uint32_t>(), s.stream);
+  stages::rasterize(s.ranges.as<uint2>(), order, values[half], proj, cam, exact && warp_culling_, bg,
+                    s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
 
   s.width = camera.width;

@@ -1,7 +1,7 @@
 // Stage 5: tile rasterization, front-to-back alpha blending (mirrors src/cpu/rasterize.cpp).
 //
 // Design.
-// - One 256-thread block per 16 x 16 tile; thread (x, y) of the block owns pixel
+// - One 256-thread block per 16 x 16 tile, blocks taking the tiles heaviest first (tile_order); thread (x, y) of the block owns pixel
 //   (16 tx + x, 16 ty + y) and keeps its colour C and transmittance T in registers. Threads whose
 //   pixel lies outside the image (right and bottom border tiles) start "done" but stay in the
 //   block: they still fetch Gaussians for the others and take part in every barrier.
@@ -19,6 +19,13 @@
 //   once all its pixels are saturated, so opaque tiles never walk the rest of their list.
 // - Shared memory: 256 x (8 + 16 + 16) bytes = 10 KiB per block, so occupancy is set by
 //   registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
+// - exact pipeline only: its ellipse-vs-tile test is applied once more at warp granularity. When
+//   a thread fetches an entry it also tests the Gaussian's opacity-aware ellipse (q <= q_max, the
+//   same fm::min_quadratic_over_rect as the tile test) against the 8 strips of 16 x 2 pixels that
+//   the block's 8 warps own, and stores an 8-bit mask. A warp skips an entry whose bit is clear:
+//   every one of its pixels would have found alpha < 1/255 and skipped it anyway, so the image is
+//   unchanged, but a Gaussian that touches a corner of a tile no longer costs all 256 threads an
+//   exp(). vanilla keeps the reference 3DGS loop (every pixel evaluates every entry).
 // - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
 //   later encoder can read the frame without a host copy.
 #include "cuda_check.h"
@@ -35,23 +42,48 @@ __device__ __forceinline__ uint32_t unorm8(float v) {
   return static_cast<uint32_t>(v * 255.0f + 0.5f);
 }
 
+constexpr int kWarps = tune::kRasterThreads / 32;
+constexpr int kRowsPerWarp = 32 / tune::kTileSize;
+static_assert(kWarps <= 8, "warp masks are 8 bits");
+static_assert(32 % tune::kTileSize == 0, "a warp covers whole pixel rows of its tile");
+
+// Bit w set: the ellipse q <= q_max (+ the tile test's margin) reaches a pixel centre of warp w's
+// strip of the tile whose first pixel is (x0, y0).
+__device__ __forceinline__ uint32_t warp_mask(float2 mean, float4 co, float q_max, float x0, float y0) {
+  const glm::vec3 conic(co.x, co.y, co.z);
+  const float dx0 = x0 - mean.x, dx1 = x0 + (tune::kTileSize - 1) - mean.x;
+  uint32_t mask = 0;
+  for (int w = 0; w < kWarps; ++w) {
+    const float dy0 = y0 + static_cast<float>(w * kRowsPerWarp) - mean.y;
+    const float dy1 = dy0 + static_cast<float>(kRowsPerWarp - 1);
+    if (fm::min_quadratic_over_rect(conic, dx0, dx1, dy0, dy1) <= q_max + fm::kExactQMargin)
+      mask |= 1u << w;
+  }
+  return mask;
+}
+
+template <bool kWarpCull>
 __global__ void __launch_bounds__(tune::kRasterThreads)
 rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the sorted list
+                 const uint32_t* tile_order,   // [tiles] or null
                  const uint32_t* values,       // [L] sorted Gaussian indices
                  const float2* mean2d,         // [N]
                  const float4* conic_opacity,  // [N]
                  const float4* color,          // [N]
+                 const float* q_max,           // [N] (kWarpCull only)
                  int width, int height, int tiles_x, float3 background,
                  float* out_rgb,               // [H, W, 3]
                  uint32_t* out_rgba8) {        // [H, W]
   __shared__ float2 s_mean[tune::kRasterBatch];
   __shared__ float4 s_conic_opacity[tune::kRasterBatch];
   __shared__ float4 s_color[tune::kRasterBatch];
+  __shared__ uint8_t s_mask[kWarpCull ? tune::kRasterBatch : 1];
 
-  const uint32_t tile = blockIdx.x;
+  const uint32_t tile = tile_order ? tile_order[blockIdx.x] : blockIdx.x;
   const int tx = static_cast<int>(tile % static_cast<uint32_t>(tiles_x));
   const int ty = static_cast<int>(tile / static_cast<uint32_t>(tiles_x));
   const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
+  const int warp = rank / 32;
   const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
   const bool inside = px < width && py < height;
   const float fpx = static_cast<float>(px), fpy = static_cast<float>(py);
@@ -66,13 +98,20 @@ rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the 
     const uint32_t fetch = base + static_cast<uint32_t>(rank);
     if (fetch < range.y) {  // bounds-checked prefetch
       const uint32_t g = values[fetch];
-      s_mean[rank] = mean2d[g];
-      s_conic_opacity[rank] = conic_opacity[g];
+      const float2 m = mean2d[g];
+      const float4 co = conic_opacity[g];
+      s_mean[rank] = m;
+      s_conic_opacity[rank] = co;
       s_color[rank] = color[g];
+      if constexpr (kWarpCull)
+        s_mask[rank] = static_cast<uint8_t>(warp_mask(m, co, q_max[g], static_cast<float>(tx * tune::kTileSize),
+                                                      static_cast<float>(ty * tune::kTileSize)));
     }
     __syncthreads();
     const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), range.y - base);
     for (uint32_t j = 0; j < count && !done; ++j) {
+      if constexpr (kWarpCull)
+        if (!((s_mask[j] >> warp) & 1u)) continue;  // warp-uniform: no pixel of this warp reached
       const float2 m = s_mean[j];
       const float4 co = s_conic_opacity[j];
       const float dx = m.x - fpx, dy = m.y - fpy;
@@ -108,15 +147,16 @@ rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the 
 
 }  // namespace
 
-void rasterize(const uint2* ranges, const uint32_t* sorted_values, const Projected& projected,
-               const CameraParams& cam, float3 background, float* out_rgb, uint32_t* out_rgba8,
-               cudaStream_t stream) {
+void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* sorted_values,
+               const Projected& projected, const CameraParams& cam, bool warp_cull, float3 background, float* out_rgb,
+               uint32_t* out_rgba8, cudaStream_t stream) {
   const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
   const dim3 block(tune::kTileSize, tune::kTileSize);
-  rasterize_kernel<<<tiles, block, 0, stream>>>(ranges, sorted_values, projected.mean2d,
-                                                projected.conic_opacity, projected.color,
-                                                cam.width, cam.height, cam.tiles_x, background,
-                                                out_rgb, out_rgba8);
+  auto kernel = warp_cull ? rasterize_kernel<true> : rasterize_kernel<false>;
+  kernel<<<tiles, block, 0, stream>>>(ranges, tile_order, sorted_values, projected.mean2d,
+                                      projected.conic_opacity, projected.color, projected.q_max,
+                                      cam.width, cam.height, cam.tiles_x, background, out_rgb,
+                                      out_rgba8);
   CATGS_CUDA_LAUNCHED("rasterize_kernel");
 }
 

@@ -86,10 +86,20 @@ int sort_pairs(uint64_t* keys[2], uint32_t* values[2], uint64_t entries, int key
 void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
 
+// Stage 4b (tile_ranges.cu): tile ids by decreasing number of entries (a stable radix sort of
+// 32-bit loads), so the rasterizer's blocks start on the heaviest tiles and the light ones fill
+// in behind them (longest-processing-time-first scheduling) instead of the heavy tiles of the
+// bottom rows starting last. scratch: [3 * tiles].
+std::size_t tile_order_temp_bytes(uint32_t tiles);
+void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch,
+                 uint32_t* order, void* temp, std::size_t temp_bytes, cudaStream_t stream);
+
 // Stage 5 (rasterize.cu): one block per tile, front-to-back blending; writes float RGB and packed
-// 8-bit RGBA (R | G << 8 | B << 16 | 255 << 24) in device memory.
-void rasterize(const uint2* ranges, const uint32_t* sorted_values, const Projected& projected,
-               const CameraParams& cam, float3 background, float* out_rgb, uint32_t* out_rgba8,
-               cudaStream_t stream);
+// 8-bit RGBA (R | G << 8 | B << 16 | 255 << 24) in device memory. `warp_cull` (exact pipeline
+// only: needs q_max) skips, per warp, entries whose ellipse reaches none of the warp's pixels.
+// `tile_order` [tiles]: block b rasterizes tile tile_order[b] (null: tile b).
+void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* sorted_values,
+               const Projected& projected, const CameraParams& cam, bool warp_cull, float3 background, float* out_rgb,
+               uint32_t* out_rgba8, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -2,6 +2,8 @@
 // src/cpu/tile_ranges.cpp): an entry whose tile differs from its left (right) neighbour starts
 // (ends) that tile's range. Grid-stride, 64-bit indices: the list may pass 2^31 entries (the
 // renderer refuses lists past 2^32 - 1, the limit of the 32-bit ranges).
+#include <cub/device/device_radix_sort.cuh>
+
 #include "cuda_check.h"
 #include "stages.h"
 #include "tunables.h"
@@ -26,7 +28,40 @@ tile_ranges_kernel(const uint64_t* keys,  // [L] sorted
   }
 }
 
+// Heaviest tiles first: keys = entries of each tile, values = tile ids.
+__global__ void tile_loads_kernel(const uint2* ranges,  // [tiles]
+                                  uint32_t tiles,
+                                  uint32_t* loads,      // [tiles]
+                                  uint32_t* ids) {      // [tiles]
+  const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
+  if (t >= tiles) return;
+  loads[t] = ranges[t].y - ranges[t].x;
+  ids[t] = t;
+}
+
 }  // namespace
+
+std::size_t tile_order_temp_bytes(uint32_t tiles) {
+  std::size_t bytes = 0;
+  CATGS_CUDA(cub::DeviceRadixSort::SortPairsDescending(nullptr, bytes, static_cast<uint32_t*>(nullptr),
+                                                       static_cast<uint32_t*>(nullptr),
+                                                       static_cast<uint32_t*>(nullptr),
+                                                       static_cast<uint32_t*>(nullptr), tiles));
+  return bytes;
+}
+
+void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch,
+                 uint32_t* order, void* temp, std::size_t temp_bytes, cudaStream_t stream) {
+  uint32_t* loads = scratch;
+  uint32_t* sorted_loads = scratch + tiles;
+  uint32_t* ids = scratch + 2 * static_cast<std::size_t>(tiles);
+  tile_loads_kernel<<<(tiles + 255) / 256, 256, 0, stream>>>(ranges, tiles, loads, ids);
+  CATGS_CUDA_LAUNCHED("tile_loads_kernel");
+  int bits = 1;  // a tile holds at most `entries`: sort only the bits that can be set
+  while (bits < 32 && (entries >> bits) != 0) ++bits;
+  CATGS_CUDA(cub::DeviceRadixSort::SortPairsDescending(temp, temp_bytes, loads, sorted_loads, ids,
+                                                       order, tiles, 0, bits, stream));
+}
 
 void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream) {

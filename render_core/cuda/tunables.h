@@ -36,6 +36,9 @@ inline constexpr int kBigRectTiles = 32;
 inline constexpr int kBigBlocks = 1024;
 inline constexpr int kBigThreads = 256;
 
+// Rasterize the tiles in order of decreasing load (stage 4b) rather than row-major.
+inline constexpr bool kHeavyTilesFirst = true;
+
 // Reusable buffers grow to this multiple of the size asked for, so a trace whose render list
 // creeps upwards does not reallocate every frame.
 inline constexpr double kGrowthFactor = 1.25;

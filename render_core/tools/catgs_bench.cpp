@@ -2,11 +2,12 @@
 // reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact [--frames N] [--warmup N] [--json OUT.json]
+//               --pipeline vanilla,exact[,exact-tile] [--frames N] [--warmup N] [--json OUT.json]
 //               [--snapshot-dir DIR] [--up X,Y,Z]
 //
 // --city builds DESIGN.md's city in memory from S (13 copies on a diamond grid, x10 scale; with
 // --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by --scale (default 1).
+// exact-tile is the exact pipeline without the rasterizer's per-warp ellipse test (same image).
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "real:CAMERAS.json" (a
 // real camera path moved onto the scene, scene_tiling.h), "orbit", or a catgs-trace file. Traces
 // are generated at 120 FPS; the first --warmup frames are rendered untimed, then --frames frames
@@ -40,7 +41,8 @@ namespace {
 const char* kUsage =
     "usage: catgs-bench --scene S [--city [--radius-sq 4] [--spacing 1.2] [--seed N]] [--scale F]\n"
     "                   --trace flyover|orbit|real:CAMERAS.json|FILE.trace [--width 1920]\n"
-    "                   [--height 1080] [--pipeline vanilla,exact] [--frames 600] [--warmup 30]\n"
+    "                   [--height 1080] [--pipeline vanilla,exact[,exact-tile]] [--frames 600]\n"
+    "                   [--warmup 30]\n"
     "                   [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6]\n";
 
@@ -145,10 +147,19 @@ int run(int argc, char** argv) {
   if (trace.empty()) throw std::runtime_error("empty trace");
   auto camera_at = [&](int k) { return trace[static_cast<std::size_t>(k) % trace.size()].camera; };
 
-  std::vector<catgs::Pipeline> pipelines;
+  // "exact-tile": the exact pipeline without its per-warp ellipse test in the rasterizer.
+  struct Variant {
+    std::string name;
+    catgs::Pipeline pipeline;
+    bool warp_cull;
+  };
+  std::vector<Variant> pipelines;
   {
     std::stringstream ss(args.get("--pipeline", "vanilla,exact"));
-    for (std::string name; std::getline(ss, name, ',');) pipelines.push_back(catgs::parse_pipeline(name));
+    for (std::string name; std::getline(ss, name, ',');) {
+      if (name == "exact-tile") pipelines.push_back({name, catgs::Pipeline::exact, false});
+      else pipelines.push_back({name, catgs::parse_pipeline(name), true});
+    }
   }
 
   const std::size_t used_before_scene = catgs::cuda::device_memory_used();
@@ -161,12 +172,13 @@ int run(int argc, char** argv) {
   model = catgs::GaussianModel{};  // the host copy is no longer needed
 
   std::vector<PipelineResult> results;
-  for (const catgs::Pipeline pl : pipelines) {
+  for (const Variant& variant : pipelines) {
     catgs::RenderOptions o;
-    o.pipeline = pl;
+    o.pipeline = variant.pipeline;
     catgs::cuda::CudaRenderer r(scene, o);
+    r.set_warp_culling(variant.warp_cull);
     PipelineResult res;
-    res.name = catgs::pipeline_name(pl);
+    res.name = variant.name;
     cudaEvent_t start, end;
     check(cudaEventCreate(&start), "cudaEventCreate");
     check(cudaEventCreate(&end), "cudaEventCreate");

@@ -125,6 +125,10 @@ class CudaRenderer final : public Renderer {
   std::size_t allocation_count() const;
   // Host-device synchronisations inside the last render_device() (1).
   int syncs_last_frame() const;
+  // exact pipeline: apply the ellipse test per warp (16 x 2 pixels) in the rasterizer too
+  // (default on; the image is the same either way). Off measures the tile-level test alone.
+  void set_warp_culling(bool on) { warp_culling_ = on; }
+  bool warp_culling() const { return warp_culling_; }
 
  private:
   struct State;
@@ -133,6 +137,7 @@ class CudaRenderer final : public Renderer {
   std::unique_ptr<State> state_;
   mutable FrameStats stats_;
   mutable bool stats_ready_ = true;
+  bool warp_culling_ = true;
 };
 
 // Uploads `model` to a new DeviceScene and makes a CudaRenderer over it (renderer_factory.cpp).
