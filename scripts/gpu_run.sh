@@ -160,14 +160,14 @@ if [ "$BENCH" = 1 ]; then
   echo "== bench: tumblewood_sh2 x10, real camera path (mipnerf360_bicycle) at 120 FPS"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
     --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
-    --pipeline vanilla,exact,exact-tile --frames "$FRAMES" --json "$OUT/bench_tumblewood.json"
+    --pipeline vanilla,exact,exact-warp --frames "$FRAMES" --json "$OUT/bench_tumblewood.json"
   echo "== bench: tumblewood_sh2 x10, orbit 100 deg (DESIGN.md's public-renderer table)"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 --trace orbit \
-    --width 1920 --height 1080 --pipeline vanilla,exact,exact-tile --frames "$FRAMES" \
+    --width 1920 --height 1080 --pipeline vanilla,exact,exact-warp --frames "$FRAMES" \
     --json "$OUT/bench_tumblewood_orbit.json"
   echo "== bench: city, 13 tumblewood copies (~7 M), fly-over at 120 FPS"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
-    --width 1920 --height 1080 --pipeline vanilla,exact,exact-tile --frames "$FRAMES" \
+    --width 1920 --height 1080 --pipeline vanilla,exact,exact-warp --frames "$FRAMES" \
     --json "$OUT/bench_city.json" --snapshot-dir "$OUT"
 fi
 echo "== done: status $status"

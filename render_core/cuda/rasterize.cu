@@ -19,13 +19,12 @@
 //   once all its pixels are saturated, so opaque tiles never walk the rest of their list.
 // - Shared memory: 256 x (8 + 16 + 16) bytes = 10 KiB per block, so occupancy is set by
 //   registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
-// - exact pipeline only: its ellipse-vs-tile test is applied once more at warp granularity. When
-//   a thread fetches an entry it also tests the Gaussian's opacity-aware ellipse (q <= q_max, the
-//   same fm::min_quadratic_over_rect as the tile test) against the 8 strips of 16 x 2 pixels that
-//   the block's 8 warps own, and stores an 8-bit mask. A warp skips an entry whose bit is clear:
-//   every one of its pixels would have found alpha < 1/255 and skipped it anyway, so the image is
-//   unchanged, but a Gaussian that touches a corner of a tile no longer costs all 256 threads an
-//   exp(). vanilla keeps the reference 3DGS loop (every pixel evaluates every entry).
+// - Optional, exact pipeline only (CudaRenderer::set_warp_culling, off by default): when a thread
+//   fetches an entry it also works out which of the block's 8 warps (each owns 16 x 2 pixels) lie
+//   within the vertical extent of the Gaussian's opacity-aware ellipse, and stores an 8-bit mask.
+//   A warp skips an entry whose bit is clear: each of its pixels would have found alpha < 1/255
+//   and skipped it anyway, so the image is bit-identical. Measured on H100 (catgs-bench variant
+//   exact-warp): a full per-strip ellipse test cost more than it saved, so it stays off.
 // - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
 //   later encoder can read the frame without a host copy.
 #include "cuda_check.h"
@@ -47,19 +46,20 @@ constexpr int kRowsPerWarp = 32 / tune::kTileSize;
 static_assert(kWarps <= 8, "warp masks are 8 bits");
 static_assert(32 % tune::kTileSize == 0, "a warp covers whole pixel rows of its tile");
 
-// Bit w set: the ellipse q <= q_max (+ the tile test's margin) reaches a pixel centre of warp w's
-// strip of the tile whose first pixel is (x0, y0).
-__device__ __forceinline__ uint32_t warp_mask(float2 mean, float4 co, float q_max, float x0, float y0) {
-  const glm::vec3 conic(co.x, co.y, co.z);
-  const float dx0 = x0 - mean.x, dx1 = x0 + (tune::kTileSize - 1) - mean.x;
-  uint32_t mask = 0;
-  for (int w = 0; w < kWarps; ++w) {
-    const float dy0 = y0 + static_cast<float>(w * kRowsPerWarp) - mean.y;
-    const float dy1 = dy0 + static_cast<float>(kRowsPerWarp - 1);
-    if (fm::min_quadratic_over_rect(conic, dx0, dx1, dy0, dy1) <= q_max + fm::kExactQMargin)
-      mask |= 1u << w;
-  }
-  return mask;
+// Bit w set: warp w's rows of the tile whose first pixel row is y0 meet the vertical extent of
+// the ellipse q <= q_max, |dy| <= sqrt(q_max * cov_yy) with cov_yy = A / (A C - B^2) from the
+// conic. Widened by a relative 1e-3 (and the tile test's q margin) so float rounding of the
+// inverse can only keep an entry, never drop one a pixel would have blended. Cheap on purpose
+// (one sqrt, one division): it runs once per fetched entry, ahead of the block's barrier.
+__device__ __forceinline__ uint32_t warp_mask(float2 mean, float4 co, float q_max, float y0) {
+  const float det = co.x * co.z - co.y * co.y;
+  const float cov_yy = co.x / det;
+  const float hy = sqrtf(fmaxf(0.0f, (q_max + fm::kExactQMargin) * cov_yy)) * 1.001f + 1e-3f;
+  const float lo = ceilf(mean.y - hy - y0), hi = floorf(mean.y + hy - y0);
+  if (!(lo <= hi) || hi < 0.0f || lo > static_cast<float>(tune::kTileSize - 1)) return 0u;
+  const int r0 = static_cast<int>(fmaxf(lo, 0.0f)) / kRowsPerWarp;
+  const int r1 = static_cast<int>(fminf(hi, static_cast<float>(tune::kTileSize - 1))) / kRowsPerWarp;
+  return ((2u << r1) - 1u) & ~((1u << r0) - 1u);
 }
 
 template <bool kWarpCull>
@@ -104,8 +104,7 @@ rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the 
       s_conic_opacity[rank] = co;
       s_color[rank] = color[g];
       if constexpr (kWarpCull)
-        s_mask[rank] = static_cast<uint8_t>(warp_mask(m, co, q_max[g], static_cast<float>(tx * tune::kTileSize),
-                                                      static_cast<float>(ty * tune::kTileSize)));
+        s_mask[rank] = static_cast<uint8_t>(warp_mask(m, co, q_max[g], static_cast<float>(ty * tune::kTileSize)));
     }
     __syncthreads();
     const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), range.y - base);

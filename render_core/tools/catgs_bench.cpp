@@ -2,12 +2,12 @@
 // reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-tile] [--frames N] [--warmup N] [--json OUT.json]
+//               --pipeline vanilla,exact[,exact-warp] [--frames N] [--warmup N] [--json OUT.json]
 //               [--snapshot-dir DIR] [--up X,Y,Z]
 //
 // --city builds DESIGN.md's city in memory from S (13 copies on a diamond grid, x10 scale; with
 // --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by --scale (default 1).
-// exact-tile is the exact pipeline without the rasterizer's per-warp ellipse test (same image).
+// exact-warp is the exact pipeline with the rasterizer's optional per-warp skip (same image).
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "real:CAMERAS.json" (a
 // real camera path moved onto the scene, scene_tiling.h), "orbit", or a catgs-trace file. Traces
 // are generated at 120 FPS; the first --warmup frames are rendered untimed, then --frames frames
@@ -41,7 +41,7 @@ namespace {
 const char* kUsage =
     "usage: catgs-bench --scene S [--city [--radius-sq 4] [--spacing 1.2] [--seed N]] [--scale F]\n"
     "                   --trace flyover|orbit|real:CAMERAS.json|FILE.trace [--width 1920]\n"
-    "                   [--height 1080] [--pipeline vanilla,exact[,exact-tile]] [--frames 600]\n"
+    "                   [--height 1080] [--pipeline vanilla,exact[,exact-warp]] [--frames 600]\n"
     "                   [--warmup 30]\n"
     "                   [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6]\n";
@@ -147,7 +147,7 @@ int run(int argc, char** argv) {
   if (trace.empty()) throw std::runtime_error("empty trace");
   auto camera_at = [&](int k) { return trace[static_cast<std::size_t>(k) % trace.size()].camera; };
 
-  // "exact-tile": the exact pipeline without its per-warp ellipse test in the rasterizer.
+  // "exact-warp": the exact pipeline with the rasterizer's optional per-warp skip.
   struct Variant {
     std::string name;
     catgs::Pipeline pipeline;
@@ -157,8 +157,8 @@ int run(int argc, char** argv) {
   {
     std::stringstream ss(args.get("--pipeline", "vanilla,exact"));
     for (std::string name; std::getline(ss, name, ',');) {
-      if (name == "exact-tile") pipelines.push_back({name, catgs::Pipeline::exact, false});
-      else pipelines.push_back({name, catgs::parse_pipeline(name), true});
+      if (name == "exact-warp") pipelines.push_back({name, catgs::Pipeline::exact, true});
+      else pipelines.push_back({name, catgs::parse_pipeline(name), false});
     }
   }
 
@@ -209,7 +209,7 @@ int run(int argc, char** argv) {
     res.peak_buffer_bytes = r.peak_buffer_bytes();
     res.device_used_bytes = catgs::cuda::device_memory_used() - used_before_scene;
     res.syncs = r.syncs_last_frame();
-    if (args.has("--snapshot-dir")) {
+    if (args.has("--snapshot-dir") && !variant.warp_cull) {  // exact-warp's image is exact's
       std::filesystem::create_directories(args.get("--snapshot-dir"));
       catgs::Image img;
       r.render(camera_at(warmup + frames / 2), img);
