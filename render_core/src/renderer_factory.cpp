@@ -29,9 +29,14 @@ std::unique_ptr<Renderer> make_renderer(const std::string& kind,
                                         std::shared_ptr<const GaussianModel> model,
                                         const RenderOptions& options, std::string* why) {
   auto say = [why](const std::string& s) { if (why) *why = s; };
+  auto make_cpu = [&]() -> std::unique_ptr<Renderer> {
+    if (options.pipeline == Pipeline::catgs)
+      return std::make_unique<cpu::SpeculativeRenderer>(std::move(model), options);
+    return std::make_unique<cpu::CpuRenderer>(std::move(model), options);
+  };
   if (kind == "cpu") {
     say("cpu renderer requested");
-    return std::make_unique<cpu::CpuRenderer>(std::move(model), options);
+    return make_cpu();
   }
   if (kind != "cuda" && kind != "auto")
     throw std::invalid_argument("unknown renderer '" + kind + "' (cpu, cuda or auto)");
@@ -47,7 +52,7 @@ std::unique_ptr<Renderer> make_renderer(const std::string& kind,
   if (kind == "cuda") throw std::runtime_error("cuda renderer unavailable: built without CUDA");
   say("cpu renderer (built without CUDA)");
 #endif
-  return std::make_unique<cpu::CpuRenderer>(std::move(model), options);
+  return make_cpu();
 }
 
 }  // namespace catgs

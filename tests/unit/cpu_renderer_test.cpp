@@ -61,7 +61,7 @@ TEST_P(BruteForceTest, CpuRendererMatchesPerPixelOracle) {
     m = scene(test::bundled_scene());
     cam = biker_view(*m, 200, 150, static_cast<float>(c.view));
   }
-  cpu::CpuRenderer renderer(m, {c.pipeline, glm::vec3(0.0f)});
+  cpu::CpuRenderer renderer(m, {c.pipeline, glm::vec3(0.0f), {}});
   Image fast;
   renderer.render(cam, fast);
   const Image slow = test::brute_force_render(*m, cam, c.pipeline == Pipeline::vanilla);
@@ -89,7 +89,7 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(CpuRenderer, ExactListIsShorterAndImageClose) {
   auto m = scene(test::bundled_scene());
   const Camera cam = biker_view(*m, 640, 480, 40.0f);
-  cpu::CpuRenderer vanilla(m, {Pipeline::vanilla, {}}), exact(m, {Pipeline::exact, {}});
+  cpu::CpuRenderer vanilla(m, {Pipeline::vanilla, {}, {}}), exact(m, {Pipeline::exact, {}, {}});
   Image iv, ie;
   vanilla.render(cam, iv);
   exact.render(cam, ie);
@@ -104,7 +104,7 @@ TEST(CpuRenderer, StagesKeepTheirInvariants) {
   auto m = scene(test::bundled_scene());
   const Camera cam = biker_view(*m, 320, 240, 200.0f);
   for (Pipeline p : {Pipeline::vanilla, Pipeline::exact}) {
-    cpu::CpuRenderer r(m, {p, {}});
+    cpu::CpuRenderer r(m, {p, {}, {}});
     Image img;
     r.render(cam, img);
     const auto& proj = r.projected();
@@ -138,7 +138,7 @@ TEST(CpuRenderer, StagesKeepTheirInvariants) {
 TEST(CpuRenderer, BackgroundShowsWhereNothingIs) {
   auto m = scene(test::bundled_scene());
   const Camera cam = biker_view(*m, 160, 120, 0.0f);
-  cpu::CpuRenderer r(m, {Pipeline::exact, glm::vec3(1.0f, 0.0f, 1.0f)});
+  cpu::CpuRenderer r(m, {Pipeline::exact, glm::vec3(1.0f, 0.0f, 1.0f), {}});
   Image img;
   r.render(cam, img);
   // The corner is empty space: pure background.
@@ -174,7 +174,7 @@ TEST(CpuRenderer, RejectsBadCameras) {
   Camera nan = c;
   nan.t.x = NAN;
   EXPECT_THROW(r.render(nan, img), std::invalid_argument);
-  EXPECT_THROW(cpu::CpuRenderer(m, {Pipeline::catgs, {}}), std::invalid_argument);
+  EXPECT_THROW(cpu::CpuRenderer(m, {Pipeline::catgs, {}, {}}), std::invalid_argument);
 }
 
 // catgs-render's training view of flowers_sh3 must show the flower bed on a lawn: a covered

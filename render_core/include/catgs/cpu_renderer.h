@@ -12,6 +12,7 @@
 #include <glm/glm.hpp>
 
 #include "catgs/forward_model.h"
+#include "catgs/motion_predictor.h"
 #include "catgs/renderer.h"
 
 namespace catgs::cpu {
@@ -38,6 +39,12 @@ struct ProjectedGaussians {
   std::vector<glm::vec3> color;         // [N] RGB from SH (+0.5, >= 0)
   std::vector<fm::TileRect> tile_rect;  // [N] tiles to test, [x0, x1) x [y0, y1)
   std::vector<uint32_t> tiles_touched;  // [N] render-list entries this Gaussian emits
+  // catgs key frames: the trail (forward_model.h fm::Trail) the tile test uses, pixel units.
+  std::vector<glm::vec2> trail_mean0;   // [N] projected mean at the key frame
+  std::vector<glm::vec2> trail_motion;  // [N] to the end of the window
+  std::vector<glm::vec3> trail_cov;     // [N] dominating 2D covariance
+  std::vector<glm::vec3> trail_conic;   // [N] its inverse
+  std::vector<float> q_trail;           // [N] level
   void resize(std::size_t n);
 };
 
@@ -57,8 +64,41 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline,
                 ProjectedGaussians& out);
 
+// catgs key frame, stage 1 (src/cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
+// key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
+// every camera of the path; those visible at some camera get the key frame's features (as
+// preprocess) and a trail holding their ellipse at each (fm::build_trail with `slack`), and count
+// the tiles their trail touches (fm::trail_touches_tile).
+void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
+                            float slack, ProjectedGaussians& out);
+
+// catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
+// means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M).
+float max_screen_motion(const GaussianModel& model, const Camera& a, const Camera& b, float min_depth);
+
+// catgs sub-frame (src/cpu/subframe_features.cpp; paper sec. 3.2): recomputes mean2d, conic,
+// opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there) and
+// checks each still lies inside its trail (fm::trail_contains). Returns false at the first that
+// does not: the frame must be rendered as a key frame.
+bool update_subframe_features(const GaussianModel& model, const Camera& camera,
+                              const std::vector<uint32_t>& cached, ProjectedGaussians& projected);
+
+// Task splitting (src/cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
+// order, a tile's slices consecutive and in list order. split = false: one slice per tile.
+void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
+                 std::vector<TileSlice>& slices);
+
+// Stage 5 with slices (src/cpu/rasterize_slices.cpp): each slice blends its entries into a partial
+// colour C_k and transmittance T_k per pixel (early termination within the slice if enabled); the
+// merge composes C = sum_k C_k prod_{m<k} T_m, then adds prod T * background (paper sec. 3.4).
+void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list,
+                      const std::vector<TileSlice>& slices, const TileGrid& grid,
+                      bool early_termination, glm::vec3 background, Image& out,
+                      double* merge_ms = nullptr);
+
 // Stage 2 (src/cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
-// its keys at its offset (same order as the GPU: Gaussian index, then tile row-major).
+// its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
+// the trail test, exact the ellipse test, vanilla every tile of the rectangle.
 // Throws std::length_error past 2^32 - 1 entries (values and ranges are 32-bit).
 void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
                RenderList& list);
@@ -103,6 +143,37 @@ class CpuRenderer final : public Renderer {
   ProjectedGaussians projected_;
   RenderList list_;
   TileRanges ranges_;
+  FrameStats stats_;
+};
+
+// The catgs pipeline on the CPU: speculative key frames, sub-frames from the frustum and sort
+// caches, task splitting (src/cpu/speculative_renderer.cpp). Feeds its own motion predictor with
+// the render_at() times; render() advances a clock of 1 / F_target per call.
+class SpeculativeRenderer final : public Renderer {
+ public:
+  SpeculativeRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options);
+  std::string name() const override { return "cpu"; }
+  void render(const Camera& camera, Image& out) override;
+  void render_at(const Camera& camera, double time_s, Image& out) override;
+  const FrameStats& last_stats() const override { return stats_; }
+  const RenderOptions& options() const override { return options_; }
+  void set_options(const RenderOptions& options) override;
+
+ private:
+  void key_frame(const Camera& camera);
+
+  std::shared_ptr<const GaussianModel> model_;
+  RenderOptions options_;
+  MotionPredictor predictor_;
+  ProjectedGaussians projected_;
+  RenderList list_;
+  TileRanges ranges_;
+  std::vector<TileSlice> slices_;
+  std::vector<uint32_t> cached_;  // frustum cache: Gaussians with list entries
+  Camera key_camera_;
+  int window_ = 0, subframes_done_ = 0;
+  bool group_open_ = false;
+  double clock_s_ = 0.0;
   FrameStats stats_;
 };
 

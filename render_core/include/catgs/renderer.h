@@ -11,12 +11,13 @@
 
 #include "catgs/camera.h"
 #include "catgs/gaussian_model.h"
+#include "catgs/speculation.h"
 
 namespace catgs {
 
 // vanilla: reference 3DGS (3-sigma square bounds, every touched tile).
 // exact:   opacity-aware extent + exact ellipse-vs-tile test (render list = tiles really reached).
-// catgs:   exact + speculation, caches, task splitting (paper sec. 3; not yet implemented).
+// catgs:   exact + speculation, frustum/sort caches, task splitting (paper sec. 3; CPU only so far).
 enum class Pipeline { vanilla, exact, catgs };
 
 // "vanilla" | "exact" | "catgs" -> Pipeline; throws std::invalid_argument otherwise.
@@ -26,6 +27,7 @@ const char* pipeline_name(Pipeline pipeline);
 struct RenderOptions {
   Pipeline pipeline = Pipeline::exact;
   glm::vec3 background{0.0f};  // linear RGB in [0, 1], composited behind the Gaussians
+  SpeculationParams speculation;  // catgs only
 };
 
 // An image in host memory, row-major, top row first.
@@ -46,7 +48,13 @@ struct FrameStats {
   std::size_t visible = 0;             // Gaussians that passed culling
   std::size_t render_list_length = 0;  // Gaussian-tile pairs (keys) rasterized
   double preprocess_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, rasterize_ms = 0;
+  double merge_ms = 0;  // catgs with task splitting: composing the slices
   double total_ms = 0;
+  // catgs pipeline (speculation, paper sec. 3.1-3.4); vanilla/exact frames are all key frames.
+  bool key_frame = true;       // false: a sub-frame served from the frustum and sort caches
+  int window = 0;              // W of the current group (0: no speculation)
+  std::size_t cached = 0;      // Gaussians in the frustum cache
+  std::size_t slices = 0;      // rasterization tasks after task splitting (tiles when unsplit)
 };
 
 class Renderer {
@@ -57,6 +65,12 @@ class Renderer {
   // Renders `camera` (its width x height) into `out`, reusing out's storage. Throws
   // std::invalid_argument for a camera with a non-positive or > 8192 size or non-finite values.
   virtual void render(const Camera& camera, Image& out) = 0;
+  // Renders a camera the client posed at `time_s` (seconds, client clock). The catgs pipeline
+  // feeds its motion predictor with it; the others ignore the time.
+  virtual void render_at(const Camera& camera, double time_s, Image& out) {
+    (void)time_s;
+    render(camera, out);
+  }
   // Stats of the last render().
   virtual const FrameStats& last_stats() const = 0;
   virtual const RenderOptions& options() const = 0;

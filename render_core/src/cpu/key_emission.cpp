@@ -21,7 +21,7 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
                             " entries exceeds the 32-bit range of tile ranges");
   list.keys.resize(total);
   list.values.resize(total);
-  const bool exact = pipeline != Pipeline::vanilla;
+  const bool exact = pipeline == Pipeline::exact, trail = pipeline == Pipeline::catgs;
 
   parallel_for(n, 4096, [&](std::size_t i) {
     if (projected.tiles_touched[i] == 0) return;
@@ -32,6 +32,10 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
         if (exact && !fm::ellipse_touches_tile(projected.mean2d[i], projected.conic[i],
                                                projected.q_max[i], tx, ty, grid.width,
                                                grid.height))
+          continue;
+        if (trail && !fm::trail_touches_tile(projected.trail_mean0[i], projected.trail_motion[i],
+                                             projected.trail_conic[i], projected.q_trail[i], tx,
+                                             ty, grid.width, grid.height))
           continue;
         const auto tile = static_cast<uint32_t>(ty * grid.tiles_x + tx);
         list.keys[at] = fm::render_key(tile, projected.depth[i]);

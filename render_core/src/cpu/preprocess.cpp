@@ -14,6 +14,11 @@ void ProjectedGaussians::resize(std::size_t n) {
   color.resize(n);
   tile_rect.resize(n);
   tiles_touched.resize(n);
+  trail_mean0.resize(n);
+  trail_motion.resize(n);
+  trail_cov.resize(n);
+  trail_conic.resize(n);
+  q_trail.resize(n);
 }
 
 namespace {
@@ -48,11 +53,10 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
     if (!(p_cam.z > camera.near_plane) || p_cam.z > camera.far_plane) return;  // frustum (near/far)
 
     const float opacity = fm::sigmoid(model.opacity_logits[i]);
-    float q_max = 0.0f;
-    if (exact) {
-      q_max = fm::opacity_aware_qmax(opacity);
-      if (!(q_max > 0.0f)) return;  // never reaches alpha 1/255 anywhere
-    }
+    // alpha >= 1/255 only where q <= q_max; the rasterizer visits only those pixels (all
+    // pipelines). exact also drops a Gaussian that can never reach 1/255.
+    const float q_max = fm::opacity_aware_qmax(opacity);
+    if (exact && !(q_max > 0.0f)) return;
 
     const fm::Cov3 cov3 = fm::covariance_3d(
         {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},

@@ -1,0 +1,39 @@
+// Speculation planning for the catgs pipeline (paper sec. 3.1 "Motion Adaptive Adjustment",
+// sec. 3.2, sec. 3.4; DESIGN.md 1-3).
+#pragma once
+
+#include <cstddef>
+
+namespace catgs {
+
+struct SpeculationParams {
+  int initial_window = 4;         // W_initial: sub-frames after a key frame
+  float depth_threshold = 0.4f;   // d: only Gaussians deeper than this (world units) set M
+  float tile_size = 16.0f;        // l, pixels
+  double target_fps = 120.0;      // F_target: the predicted path is sampled at k / F_target
+  float trail_slack = 0.1f;       // trails hold the sampled ellipses scaled by 1 + slack
+  bool frustum_and_sort_cache = true;  // false (--no-cache): every frame is a key frame
+  bool task_splitting = true;          // false (--no-split)
+  bool early_termination = true;       // stop a pixel when T would drop below 1e-4
+};
+
+// The motion-adaptive window (paper sec. 3.1): M is the largest per-frame screen motion (pixels)
+// of the visible Gaussians deeper than d. W = W_initial while M <= l, else floor(W_initial * l / M);
+// 0 means no speculation: render every frame in full.
+inline int motion_adaptive_window(float max_motion_px, const SpeculationParams& p) {
+  if (p.initial_window <= 0) return 0;
+  if (max_motion_px != max_motion_px) return 0;  // NaN: no trustworthy motion, no speculation
+  if (max_motion_px <= p.tile_size) return p.initial_window;
+  return static_cast<int>(static_cast<float>(p.initial_window) * p.tile_size / max_motion_px);
+}
+
+// Load-aware task splitting (paper sec. 3.4, supplementary Alg. 1): with L entries over t tiles and
+// average l = L / t, a tile holding more than 2l entries is cut into slices of about l entries, the
+// first slice taking the remainder. A slice is [begin, end) of the sorted render list.
+struct TileSlice {
+  unsigned tile;
+  unsigned begin, end;
+  unsigned index;  // k: 0 for a tile's first slice
+};
+
+}  // namespace catgs

@@ -1,0 +1,120 @@
+// The catgs pipeline on the CPU (paper sec. 3; DESIGN.md 1-3): key frames pre-process a whole
+// speculation window once (trails, frustum cache, sorted list, tile ranges, slices); sub-frames
+// recompute only per-Gaussian features of the cached set at their own pose and rasterize from the
+// key frame's list. A sub-frame whose Gaussians leave their trails becomes a key frame.
+#include <chrono>
+
+#include "catgs/cpu_renderer.h"
+
+namespace catgs::cpu {
+
+namespace {
+
+using clock = std::chrono::steady_clock;
+double ms_between(clock::time_point a, clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+Camera with_pose(const Camera& intrinsics, const TimedPose& pose) {
+  Camera c = intrinsics;
+  c.R = glm::transpose(glm::mat3_cast(pose.orientation));
+  c.t = -(c.R * pose.position);
+  return c;
+}
+
+bool same_intrinsics(const Camera& a, const Camera& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
+         a.cx == b.cx && a.cy == b.cy && a.near_plane == b.near_plane && a.far_plane == b.far_plane;
+}
+
+}  // namespace
+
+SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model,
+                                         const RenderOptions& options)
+    : model_(std::move(model)) {
+  if (!model_) throw std::invalid_argument("SpeculativeRenderer: null model");
+  set_options(options);
+}
+
+void SpeculativeRenderer::set_options(const RenderOptions& options) {
+  if (options.pipeline != Pipeline::catgs)
+    throw std::invalid_argument("SpeculativeRenderer runs the catgs pipeline only");
+  if (options.speculation.initial_window < 0 || options.speculation.initial_window > 32)
+    throw std::invalid_argument("speculation window must be in 0..32");
+  if (!(options.speculation.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
+  options_ = options;
+  group_open_ = false;
+}
+
+void SpeculativeRenderer::render(const Camera& camera, Image& out) {
+  clock_s_ += 1.0 / options_.speculation.target_fps;
+  render_at(camera, clock_s_, out);
+}
+
+void SpeculativeRenderer::key_frame(const Camera& camera) {
+  const SpeculationParams& sp = options_.speculation;
+  const auto t0 = clock::now();
+  // Plan the window from the predicted path (never from future input): M over one frame, W.
+  int window = 0;
+  if (sp.frustum_and_sort_cache && sp.initial_window > 0 && !predictor_.empty()) {
+    const double dt = 1.0 / sp.target_fps;
+    const Camera next = with_pose(camera, predictor_.predict(dt));
+    window = motion_adaptive_window(max_screen_motion(*model_, camera, next, sp.depth_threshold), sp);
+  }
+  std::vector<Camera> path{camera};
+  for (int k = 1; k <= window; ++k)
+    path.push_back(with_pose(camera, predictor_.predict(k / sp.target_fps)));
+  speculative_preprocess(*model_, path, window > 0 ? sp.trail_slack : 0.0f, projected_);
+  const auto t1 = clock::now();
+  const TileGrid grid = TileGrid::of(camera.width, camera.height);
+  emit_keys(projected_, grid, Pipeline::catgs, list_);
+  const auto t2 = clock::now();
+  sort_render_list(list_);
+  const auto t3 = clock::now();
+  identify_tile_ranges(list_, grid, ranges_);
+  plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_);
+  const auto t4 = clock::now();
+  cached_.clear();
+  for (std::size_t i = 0; i < projected_.tiles_touched.size(); ++i)
+    if (projected_.tiles_touched[i] > 0) cached_.push_back(static_cast<uint32_t>(i));
+  key_camera_ = camera;
+  window_ = window;
+  subframes_done_ = 0;
+  group_open_ = window > 0;
+  stats_.key_frame = true;
+  stats_.preprocess_ms = ms_between(t0, t1);
+  stats_.keys_ms = ms_between(t1, t2);
+  stats_.sort_ms = ms_between(t2, t3);
+  stats_.ranges_ms = ms_between(t3, t4);
+}
+
+void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& out) {
+  validate_camera(camera);
+  const auto start = clock::now();
+  predictor_.add({time_s, camera.position(), camera.orientation()});
+  stats_ = {};
+  bool sub = group_open_ && subframes_done_ < window_ && same_intrinsics(camera, key_camera_);
+  if (sub) {
+    const auto t0 = clock::now();
+    sub = update_subframe_features(*model_, camera, cached_, projected_);
+    stats_.preprocess_ms = ms_between(t0, clock::now());
+  }
+  if (sub) {
+    ++subframes_done_;
+    stats_.key_frame = false;
+  } else {
+    key_frame(camera);
+  }
+  const auto t5 = clock::now();
+  rasterize_slices(projected_, list_, slices_, TileGrid::of(camera.width, camera.height),
+                   options_.speculation.early_termination, options_.background, out, &stats_.merge_ms);
+  stats_.rasterize_ms = ms_between(t5, clock::now()) - stats_.merge_ms;
+  stats_.window = window_;
+  stats_.cached = cached_.size();
+  stats_.visible = cached_.size();
+  stats_.render_list_length = list_.keys.size();
+  stats_.slices = slices_.size();
+  stats_.total_ms = ms_between(start, clock::now());
+}
+
+}  // namespace catgs::cpu

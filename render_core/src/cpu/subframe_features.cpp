@@ -1,0 +1,46 @@
+// catgs sub-frame: per-Gaussian features of the frustum cache at the frame's own pose (paper
+// sec. 3.2), with the check that each ellipse still lies inside the trail the key frame listed.
+#include <atomic>
+#include <cmath>
+
+#include "catgs/cpu_renderer.h"
+
+namespace catgs::cpu {
+
+bool update_subframe_features(const GaussianModel& model, const Camera& camera,
+                              const std::vector<uint32_t>& cached, ProjectedGaussians& out) {
+  const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
+                               static_cast<float>(camera.height) / (2.0f * camera.fy));
+  const glm::vec3 cam_pos = camera.position();
+  const int K = model.sh_coeffs();
+  std::atomic<bool> inside{true};
+  parallel_for(cached.size(), 4096, [&](std::size_t c) {
+    const uint32_t i = cached[c];
+    const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
+    const glm::vec3 p = camera.R * mean + camera.t;
+    out.opacity[i] = 0.0f;  // culled at this pose unless shown below
+    if (!(p.z > camera.near_plane) || p.z > camera.far_plane) return;
+    const fm::Cov3 cov3 = fm::covariance_3d(
+        {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
+        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2],
+         model.rotations[4 * i + 3]});
+    const glm::vec3 cov2 = fm::covariance_2d(cov3, camera.R, p, camera.fx, camera.fy, tan_half_fov);
+    glm::vec3 conic;
+    if (!fm::conic_from_cov2d(cov2, &conic)) return;
+    const glm::vec2 mean2d(camera.fx * p.x / p.z + camera.cx - 0.5f, camera.fy * p.y / p.z + camera.cy - 0.5f);
+    // Only an ellipse that reaches a pixel of this frame must lie inside its trail.
+    const bool on_screen =
+        fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, out.q_max[i], camera.width, camera.height)) > 0;
+    if (on_screen && !fm::trail_contains(out.trail_mean0[i], out.trail_motion[i], out.trail_cov[i], out.q_trail[i],
+                            mean2d, cov2, out.q_max[i]))
+      inside.store(false, std::memory_order_relaxed);
+    out.mean2d[i] = mean2d;
+    out.conic[i] = conic;
+    out.opacity[i] = fm::sigmoid(model.opacity_logits[i]);
+    out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i],
+                                   glm::normalize(mean - cam_pos));
+  });
+  return inside.load();
+}
+
+}  // namespace catgs::cpu

@@ -1,0 +1,247 @@
+// The catgs pipeline on the CPU: window rule, task split/merge equivalence, sub-frame quality on
+// real camera paths, re-keying on abrupt motion, and the ablation switches.
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include <gtest/gtest.h>
+
+#include "catgs/cpu_renderer.h"
+#include "catgs/ply_io.h"
+#include "catgs/trace.h"
+#include "test_data.h"
+
+namespace catgs {
+namespace {
+
+std::shared_ptr<const GaussianModel> scene(const std::string& path) {
+  static std::map<std::string, std::shared_ptr<const GaussianModel>> cache;
+  auto& s = cache[path];
+  if (!s) s = std::make_shared<GaussianModel>(load_scene(path));
+  return s;
+}
+
+RenderOptions catgs_options() {
+  RenderOptions o;
+  o.pipeline = Pipeline::catgs;
+  return o;
+}
+
+// Orbit of the bundled biker at `deg_per_s`, 120 Hz.
+Trace biker_orbit(const GaussianModel& m, float deg_per_s, double seconds, int w = 200, int h = 150) {
+  GeneratorParams p;
+  p.width = w;
+  p.height = h;
+  p.duration_s = seconds;
+  const Bounds b = m.bounds();
+  return make_orbit(b, 1.2f * glm::length(b.extent()), 0.2f * glm::length(b.extent()),
+                    deg_per_s * static_cast<float>(seconds), p);
+}
+
+struct Quality {
+  double mean_psnr = 0, min_psnr = 1e9;
+  int subframes = 0, keys = 0;
+};
+
+// Renders a trace with catgs and compares every sub-frame with a full exact render of its pose.
+Quality run_trace(std::shared_ptr<const GaussianModel> m, const Trace& trace, const RenderOptions& o) {
+  auto catgs = make_renderer("cpu", m, o);
+  cpu::CpuRenderer full(m, {Pipeline::exact, o.background, {}});
+  Quality q;
+  Image a, b;
+  for (const auto& tc : trace) {
+    catgs->render_at(tc.camera, tc.time_s, a);
+    if (catgs->last_stats().key_frame) {
+      ++q.keys;
+      continue;
+    }
+    ++q.subframes;
+    full.render(tc.camera, b);
+    const double psnr = std::min(99.0, psnr_rgba8(a, b));
+    q.mean_psnr += psnr;
+    q.min_psnr = std::min(q.min_psnr, psnr);
+  }
+  if (q.subframes > 0) q.mean_psnr /= q.subframes;
+  return q;
+}
+
+TEST(MotionAdaptiveWindow, FollowsThePaperRule) {
+  SpeculationParams p;  // W_initial 4, l 16
+  EXPECT_EQ(motion_adaptive_window(0.0f, p), 4);
+  EXPECT_EQ(motion_adaptive_window(16.0f, p), 4);
+  EXPECT_EQ(motion_adaptive_window(20.0f, p), 3);   // floor(4 * 16 / 20)
+  EXPECT_EQ(motion_adaptive_window(32.0f, p), 2);
+  EXPECT_EQ(motion_adaptive_window(64.0f, p), 1);
+  EXPECT_EQ(motion_adaptive_window(65.0f, p), 0);   // one frame alone breaks the limit
+  EXPECT_EQ(motion_adaptive_window(NAN, p), 0);
+  p.initial_window = 0;
+  EXPECT_EQ(motion_adaptive_window(1.0f, p), 0);
+}
+
+// The same render list rasterized split and unsplit.
+TEST(TaskSplitting, SplitAndUnsplitAgree) {
+  auto m = scene(test::bundled_scene());
+  const Trace t = biker_orbit(*m, 10.0f, 0.0, 320, 240);
+  cpu::CpuRenderer r(m, {Pipeline::exact, {}, {}});
+  Image reference;
+  r.render(t[0].camera, reference);
+  const auto grid = cpu::TileGrid::of(320, 240);
+  std::vector<TileSlice> whole, split;
+  cpu::plan_slices(r.tile_ranges(), r.render_list().keys.size(), false, whole);
+  cpu::plan_slices(r.tile_ranges(), r.render_list().keys.size(), true, split);
+  ASSERT_EQ(whole.size(), static_cast<std::size_t>(grid.tile_count()));
+  ASSERT_GT(split.size(), whole.size() + 20) << "the view must have heavy tiles to split";
+  // Slices partition each tile's range, the first taking the remainder.
+  const std::size_t avg = r.render_list().keys.size() / static_cast<std::size_t>(grid.tile_count());
+  for (std::size_t s = 0; s < split.size(); ++s) {
+    if (split[s].index > 0) {
+      EXPECT_EQ(split[s].begin, split[s - 1].end);
+      EXPECT_EQ(split[s].end - split[s].begin, avg);
+    }
+  }
+  Image a, b, c, d;
+  cpu::rasterize_slices(r.projected(), r.render_list(), whole, grid, false, {}, a);
+  cpu::rasterize_slices(r.projected(), r.render_list(), split, grid, false, {}, b);
+  float err = 0.0f;
+  for (std::size_t k = 0; k < a.rgb.size(); ++k) err = std::max(err, std::fabs(a.rgb[k] - b.rgb[k]));
+  std::cout << "[ info ] " << split.size() - whole.size() << " extra slices; early termination off: max abs "
+            << err << "\n";
+  EXPECT_LE(err, 1e-5f);
+  cpu::rasterize_slices(r.projected(), r.render_list(), whole, grid, true, {}, c);
+  cpu::rasterize_slices(r.projected(), r.render_list(), split, grid, true, {}, d);
+  EXPECT_EQ(c.rgba8, reference.rgba8);  // unsplit with early termination is the plain rasterizer
+  std::cout << "[ info ] early termination on: split vs unsplit PSNR " << psnr_rgba8(c, d) << " dB\n";
+  EXPECT_GE(psnr_rgba8(c, d), 50.0);
+}
+
+TEST(Speculation, SubFramesMatchFullRendersOnARealPath) {
+  CATGS_REQUIRE_DATA(scene_path, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const auto keys = load_inria_cameras(cams, 160, 106);
+  const std::vector<Camera> part(keys.begin() + 1, keys.begin() + 3);
+  const Trace trace = interpolate_views(part, 120.0, 1.0);  // 121 frames of the real capture path
+  const Quality q = run_trace(scene(scene_path), trace, catgs_options());
+  std::cout << "[ info ] flowers real path: " << q.keys << " key frames, " << q.subframes
+            << " sub-frames, sub-frame PSNR mean " << q.mean_psnr << " min " << q.min_psnr << " dB\n";
+  EXPECT_GT(q.subframes, q.keys);
+  EXPECT_GE(q.mean_psnr, 45.0);
+  EXPECT_GE(q.min_psnr, 35.0);
+}
+
+TEST(Speculation, SubFramesMatchOnTheBundledScene) {
+  auto m = scene(test::bundled_scene());
+  const Quality q = run_trace(m, biker_orbit(*m, 30.0f, 0.5, 160, 120), catgs_options());
+  std::cout << "[ info ] biker orbit 30 deg/s: " << q.keys << " key frames, " << q.subframes
+            << " sub-frames, PSNR mean " << q.mean_psnr << " min " << q.min_psnr << " dB\n";
+  EXPECT_GT(q.subframes, 2 * q.keys);
+  EXPECT_GE(q.mean_psnr, 45.0);
+  EXPECT_GE(q.min_psnr, 35.0);
+}
+
+TEST(Speculation, AJumpReKeysAndShowsTheNewPose) {
+  auto m = scene(test::bundled_scene());
+  const Trace a = biker_orbit(*m, 20.0f, 0.1);
+  auto r = make_renderer("cpu", m, catgs_options());
+  Image img, full;
+  for (std::size_t i = 0; i < 5; ++i) r->render_at(a[i].camera, a[i].time_s, img);
+  ASSERT_FALSE(r->last_stats().key_frame) << "speculation should be running before the jump";
+  // Teleport to the other side mid-window.
+  const Camera jumped = biker_orbit(*m, 20.0f, 9.0).back().camera;
+  r->render_at(jumped, a[5].time_s, img);
+  EXPECT_TRUE(r->last_stats().key_frame);
+  cpu::CpuRenderer(m, {Pipeline::exact, {}, {}}).render(jumped, full);
+  EXPECT_GE(psnr_rgba8(img, full), 60.0);
+}
+
+TEST(Speculation, WindowShrinksWithSpeedAndStopsAtTheLimit) {
+  auto m = scene(test::bundled_scene());
+  const Bounds bounds = m->bounds();
+  const glm::vec3 eye = bounds.center() - 1.5f * glm::length(bounds.extent()) * glm::vec3(0.0f, 0.0f, 1.0f);
+  std::vector<int> windows;
+  // A camera panning in place: every pixel moves by about f * tan(step) per frame (f = 416 px):
+  // about 0.3, 36 and 140 pixels. The pan is centred on the scene at frame 1, the first frame
+  // with a velocity to predict from.
+  for (float step_deg : {0.04f, 5.0f, 18.0f}) {
+    GeneratorParams p;
+    p.width = 640;
+    p.height = 480;
+    p.duration_s = 3.0 / 120.0;
+    const glm::vec3 first_look =
+        eye + glm::angleAxis(glm::radians(-step_deg), glm::normalize(p.up)) * (bounds.center() - eye);
+    const Trace t = make_pan(eye, first_look, 3.0f * step_deg, p);
+    auto r = make_renderer("cpu", m, catgs_options());
+    Image img;
+    r->render_at(t[0].camera, t[0].time_s, img);
+    r->render_at(t[1].camera, t[1].time_s, img);
+    ASSERT_TRUE(r->last_stats().key_frame);
+    // The planner's rule on the motion it predicted (exact at constant speed).
+    const float M = cpu::max_screen_motion(*m, t[1].camera, t[2].camera, 0.4f);
+    EXPECT_EQ(r->last_stats().window, motion_adaptive_window(M, {})) << step_deg << " deg/frame, M " << M;
+    windows.push_back(r->last_stats().window);
+  }
+  EXPECT_EQ(windows[0], 4);
+  EXPECT_GT(windows[1], 0);
+  EXPECT_LT(windows[1], 4);
+  EXPECT_EQ(windows[2], 0);
+}
+
+TEST(Speculation, StopAndFastTurnStayCorrect) {
+  auto m = scene(test::bundled_scene());
+  Trace t = biker_orbit(*m, 40.0f, 0.15, 160, 120);
+  // Stop: hold the last pose for 0.1 s. Then a fast turn: 13 frames of a 400 deg/s orbit.
+  const std::size_t moving = t.size();
+  for (int k = 1; k <= 12; ++k) t.push_back({t[moving - 1].time_s + k / 120.0, t[moving - 1].camera});
+  const Trace fast = biker_orbit(*m, 400.0f, 0.1, 160, 120);
+  const double t0 = t.back().time_s;
+  for (std::size_t i = 0; i < fast.size(); ++i) t.push_back({t0 + static_cast<double>(i + 1) / 120.0, fast[i].camera});
+  const Quality q = run_trace(m, t, catgs_options());
+  std::cout << "[ info ] stop + fast turn: " << q.keys << " keys, " << q.subframes << " sub-frames, PSNR mean "
+            << q.mean_psnr << " min " << q.min_psnr << "\n";
+  EXPECT_GE(q.min_psnr, 35.0);
+  EXPECT_GE(q.mean_psnr, 45.0);
+}
+
+TEST(Speculation, WindowZeroAndNoCacheRenderEveryFrameInFull) {
+  auto m = scene(test::bundled_scene());
+  const Trace t = biker_orbit(*m, 10.0f, 0.1);
+  for (int variant = 0; variant < 2; ++variant) {
+    RenderOptions o = catgs_options();
+    if (variant == 0) o.speculation.initial_window = 0;
+    else o.speculation.frustum_and_sort_cache = false;
+    auto r = make_renderer("cpu", m, o);
+    cpu::CpuRenderer full(m, {Pipeline::exact, {}, {}});
+    Image a, b;
+    for (const auto& tc : t) {
+      r->render_at(tc.camera, tc.time_s, a);
+      ASSERT_TRUE(r->last_stats().key_frame);
+      EXPECT_EQ(r->last_stats().window, 0);
+      full.render(tc.camera, b);
+      // Same list as exact; only float summation order of split slices may differ.
+      ASSERT_GE(psnr_rgba8(a, b), 50.0);
+      EXPECT_EQ(r->last_stats().render_list_length, full.last_stats().render_list_length);
+    }
+  }
+}
+
+TEST(Speculation, RenderListGrowthAtWindowFour) {
+  auto m = scene(test::bundled_scene());
+  const Trace t = biker_orbit(*m, 30.0f, 0.1, 320, 240);
+  auto r = make_renderer("cpu", m, catgs_options());
+  cpu::CpuRenderer full(m, {Pipeline::exact, {}, {}});
+  Image a, b;
+  double key_list = 0, exact_list = 0;
+  for (const auto& tc : t) {
+    r->render_at(tc.camera, tc.time_s, a);
+    if (!r->last_stats().key_frame || r->last_stats().window != 4) continue;
+    full.render(tc.camera, b);
+    key_list += static_cast<double>(r->last_stats().render_list_length);
+    exact_list += static_cast<double>(full.last_stats().render_list_length);
+  }
+  ASSERT_GT(exact_list, 0.0);
+  std::cout << "[ info ] biker orbit 30 deg/s, W = 4: key-frame render list " << 100.0 * (key_list / exact_list - 1.0)
+            << "% longer than exact\n";
+  EXPECT_GE(key_list, exact_list);
+}
+
+}  // namespace
+}  // namespace catgs
