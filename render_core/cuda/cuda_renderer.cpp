@@ -271,6 +271,18 @@ const FrameStats& CudaRenderer::last_stats() const {
   return stats_;
 }
 
+std::size_t CudaRenderer::heaviest_tile_entries() const {
+  const State& s = *state_;
+  if (!tune::kHeavyTilesFirst || s.width == 0) return 0;
+  CATGS_CUDA(cudaEventSynchronize(s.events[kRasterized]));
+  const uint32_t tiles = static_cast<uint32_t>(((s.width + tune::kTileSize - 1) / tune::kTileSize) *
+                                               ((s.height + tune::kTileSize - 1) / tune::kTileSize));
+  uint32_t heaviest = 0;  // order_tiles sorted the loads (descending) into scratch[tiles ..]
+  CATGS_CUDA(cudaMemcpy(&heaviest, s.tile_scratch.as<uint32_t>() + tiles, sizeof heaviest,
+                        cudaMemcpyDeviceToHost));
+  return heaviest;
+}
+
 void CudaRenderer::render(const Camera& camera, Image& out) {
   const DeviceFrame f = render_device(camera);
   const std::size_t pixels = static_cast<std::size_t>(f.width) * f.height;

@@ -68,7 +68,7 @@ Summary summarize(std::vector<double> v) {
 
 struct PipelineResult {
   std::string name;
-  std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible;
+  std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible, heaviest;
   std::size_t peak_buffer_bytes = 0, device_used_bytes = 0, allocations_timed = 0;
   int syncs = 0;
 };
@@ -204,6 +204,7 @@ int run(int argc, char** argv) {
       res.raster.push_back(s.rasterize_ms);
       res.list.push_back(static_cast<double>(s.render_list_length));
       res.visible.push_back(static_cast<double>(s.visible));
+      res.heaviest.push_back(static_cast<double>(r.heaviest_tile_entries()));  // after timing
     }
     res.allocations_timed = r.allocation_count() - allocs_before;
     res.peak_buffer_bytes = r.peak_buffer_bytes();
@@ -225,9 +226,9 @@ int run(int argc, char** argv) {
   std::printf("\nGPU: %s\nscene: %s, %zu Gaussians; trace: %s; %dx%d; %d timed frames (after %d warm-up)\n",
               gpu.c_str(), scene->name().c_str(), scene->size(), trace_spec.c_str(), width, height,
               frames, warmup);
-  std::printf("%-8s %8s %8s %8s %8s | %7s %7s %7s %7s %7s | %12s %12s %10s | %9s %9s %5s\n",
+  std::printf("%-10s %8s %8s %8s %8s | %7s %7s %7s %7s %7s | %12s %12s %10s %9s | %9s %9s %5s\n",
               "pipeline", "mean ms", "median", "p99", "FPS", "pre", "keys", "sort", "ranges",
-              "raster", "list mean", "list max", "visible", "buf MiB", "dev MiB", "syncs");
+              "raster", "list mean", "list max", "visible", "max tile", "buf MiB", "dev MiB", "syncs");
   nlohmann::json j;
   j["gpu"] = gpu;
   j["scene"] = scene->name();
@@ -243,9 +244,10 @@ int run(int argc, char** argv) {
   for (const auto& r : results) {
     const Summary f = summarize(r.frame_ms), L = summarize(r.list);
     auto mean = [](const std::vector<double>& v) { return summarize(v).mean; };
-    std::printf("%-8s %8.3f %8.3f %8.3f %8.1f | %7.3f %7.3f %7.3f %7.3f %7.3f | %12.0f %12.0f %10.0f | %9.1f %9.1f %5d\n",
+    std::printf("%-10s %8.3f %8.3f %8.3f %8.1f | %7.3f %7.3f %7.3f %7.3f %7.3f | %12.0f %12.0f %10.0f %9.0f | %9.1f %9.1f %5d\n",
                 r.name.c_str(), f.mean, f.median, f.p99, 1000.0 / f.mean, mean(r.pre), mean(r.keys),
                 mean(r.sort), mean(r.ranges), mean(r.raster), L.mean, L.max, mean(r.visible),
+                mean(r.heaviest),
                 static_cast<double>(r.peak_buffer_bytes) / (1 << 20),
                 static_cast<double>(r.device_used_bytes) / (1 << 20), r.syncs);
     nlohmann::json p;
@@ -256,6 +258,7 @@ int run(int argc, char** argv) {
                            {"tile_ranges", mean(r.ranges)}, {"rasterize", mean(r.raster)}};
     p["render_list"] = {{"mean", L.mean}, {"median", L.median}, {"min", L.min}, {"max", L.max}};
     p["visible_mean"] = mean(r.visible);
+    p["heaviest_tile_entries"] = {{"mean", mean(r.heaviest)}, {"max", summarize(r.heaviest).max}};
     p["peak_buffer_bytes"] = r.peak_buffer_bytes;
     p["device_memory_used_bytes"] = r.device_used_bytes;
     p["scene_plus_peak_buffers_bytes"] = r.peak_buffer_bytes + scene->bytes();

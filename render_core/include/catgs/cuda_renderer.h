@@ -125,6 +125,9 @@ class CudaRenderer final : public Renderer {
   std::size_t allocation_count() const;
   // Host-device synchronisations inside the last render_device() (1).
   int syncs_last_frame() const;
+  // Entries of the last frame's heaviest tile (waits for the frame; a diagnostic copy of 4 bytes
+  // outside the frame). One block walks that tile alone, so it bounds the rasterization time.
+  std::size_t heaviest_tile_entries() const;
   // exact pipeline: let each warp of the rasterizer skip entries outside the vertical extent of
   // the Gaussian's ellipse (same image, bit for bit). Off by default: measured no faster.
   void set_warp_culling(bool on) { warp_culling_ = on; }
