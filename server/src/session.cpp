@@ -245,7 +245,9 @@ Session::JobResult Session::run_job(const Job& job) {
     const auto t_start = Clock::now();
     const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
                                             job.pose.pose.vertical_fov_deg, job.width, job.height);
-    renderer_->render(camera, image_);
+    // The client's clock drives the motion predictor of the catgs pipeline (others ignore it).
+    renderer_->render_at(camera, job.pose.client_time_ms / 1000.0, image_);
+    r.render_key_frame = renderer_->last_stats().key_frame;
     const auto t_rendered = Clock::now();
     bool idr = job.force_idr;
     if (!encoder_ || encoder_->width() != job.width || encoder_->height() != job.height) {
@@ -297,6 +299,8 @@ void Session::on_job_done(JobResult result) {
   render_ms_sum_ += result.render_ms;
   encode_ms_sum_ += result.encode_ms;
   if (result.key_frame) key_frames_++;
+  if (result.render_key_frame) render_key_frames_++;
+  else render_sub_frames_++;
   shared_.metrics.frames_total++;
   shared_.metrics.bytes_total += result.payload_bytes;
   if (result.key_frame) shared_.metrics.key_frames_total++;
@@ -337,8 +341,8 @@ void Session::send_stats() {
   s->set_render_ms_mean(render_ms_sum_ / n);
   s->set_encode_ms_mean(encode_ms_sum_ / n);
   s->set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
-  s->set_key_frames(frames_sent_);  // no speculation yet: every frame is a full render
-  s->set_sub_frames(0);
+  s->set_key_frames(render_key_frames_);
+  s->set_sub_frames(render_sub_frames_);
   send(m);
   last_stats_ = now;
   frames_since_stats_ = 0;

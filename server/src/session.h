@@ -78,7 +78,8 @@ class Session : public std::enable_shared_from_this<Session> {
   struct JobResult {
     std::string message;  // serialized ServerMessage{Frame}; empty on failure
     std::string error;
-    bool key_frame = false;
+    bool key_frame = false;         // an IDR access unit
+    bool render_key_frame = true;   // catgs: a full pre-process (false: a cached sub-frame)
     std::size_t payload_bytes = 0;
     double render_ms = 0, encode_ms = 0;
   };
@@ -115,6 +116,7 @@ class Session : public std::enable_shared_from_this<Session> {
   Clock::time_point last_stats_;
   // Stats counters (totals, and sums since the last Stats message).
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
+  std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)
   double render_ms_sum_ = 0, encode_ms_sum_ = 0;
   std::uint32_t frames_since_stats_ = 0;
   std::uint64_t bytes_since_stats_ = 0;

@@ -252,6 +252,44 @@ TEST(ServerIntegration, BikerOrbitFramesMatchCpuRender) {
   }
 }
 
+// The catgs pipeline behind the server: the client's pose clock drives speculation, sub-frames
+// are served from the caches (counted in Stats) and every decoded frame still matches the full CPU
+// render of its pose.
+TEST(ServerIntegration, CatgsPipelineServesSubFrames) {
+  ServerProcess server(server_args(kBiker, {"--pipeline", "catgs"}));
+  const int W = 320, H = 240;
+  StreamClient c;
+  c.connect(server.port());
+  const pb::Welcome w = c.hello(W, H);
+  EXPECT_EQ(w.pipeline(), "catgs");
+  H264Decoder dec;
+  cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
+  // A 120 Hz orbit at 30 deg/s, as a browser would send while the user drags slowly.
+  const Bounds b = load_model(kBiker)->bounds();
+  GeneratorParams gp;
+  gp.width = W;
+  gp.height = H;
+  gp.duration_s = 29.0 / 120.0;
+  gp.fov_deg = 50.0f;
+  const float r = 1.4f * glm::length(b.extent());
+  const Trace orbit = make_orbit(b, r, 0.2f * r, 30.0f * static_cast<float>(gp.duration_s), gp);
+  const double t0 = now_ms();
+  for (std::uint32_t i = 0; i < orbit.size(); ++i) {
+    // Poses stamped at 120 Hz on the client clock (one per frame, sent in lock step).
+    const pb::Pose pose = pose_from_camera(orbit[i].camera, i, t0 + i * 1000.0 / 120.0);
+    c.send_pose(pose);
+    auto m = wait_for(c, 20000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+    ASSERT_TRUE(m) << "no frame for pose " << i;
+    EXPECT_GE(frame_psnr(dec, ref, m->frame(), pose), 30.0) << "frame " << i;
+  }
+  auto stats = wait_for(c, 3000, [](const pb::ServerMessage& s) { return s.has_stats(); });
+  ASSERT_TRUE(stats);
+  std::cout << "[ info ] catgs: " << stats->stats().key_frames() << " key frames, "
+            << stats->stats().sub_frames() << " sub-frames\n";
+  EXPECT_EQ(stats->stats().key_frames() + stats->stats().sub_frames(), orbit.size());
+  EXPECT_GT(stats->stats().sub_frames(), stats->stats().key_frames());
+}
+
 TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
   if (!std::filesystem::exists(kFlowers) || !std::filesystem::exists(kFlowersCams))
     GTEST_SKIP() << "real data not found under " << kDataDir

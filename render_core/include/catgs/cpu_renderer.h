@@ -67,10 +67,10 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
 // catgs key frame, stage 1 (src/cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
 // every camera of the path; those visible at some camera get the key frame's features (as
-// preprocess) and a trail holding their ellipse at each (fm::build_trail with `slack`), and count
-// the tiles their trail touches (fm::trail_touches_tile).
+// preprocess) and a trail holding their ellipse at each (fm::build_trail with `slack` and
+// `margin_px`), and count the tiles their trail touches (fm::trail_touches_tile).
 void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
-                            float slack, ProjectedGaussians& out);
+                            float slack, float margin_px, ProjectedGaussians& out);
 
 // catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
 // means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M).

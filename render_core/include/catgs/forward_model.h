@@ -340,11 +340,12 @@ struct Trail {
 
 // Builds the trail that holds the Gaussian's ellipse (level q_max) at each of n >= 1 sampled
 // poses of the predicted path (means[k], covs[k]; the first is the key frame, the last the end of
-// the window), scaled by (1 + slack) so that poses between and near the samples are held too:
-// the covariance dominates every sample's, and q_trail is the least level for which
-// trail_contains() accepts every sample.
+// the window): the covariance dominates every sample's, and the level is the least for which
+// trail_contains() accepts every sample, widened so that poses between and near the samples are
+// held too: + margin_px pixels along the trail's narrowest axis (prediction error does not shrink
+// with the Gaussian), then scaled by (1 + slack).
 CATGS_HD Trail build_trail(const glm::vec2* means, const glm::vec3* covs, int n, float q_max,
-                           float slack) {
+                           float slack, float margin_px = 0.0f) {
   Trail t{means[0], means[n - 1] - means[0], covs[0], q_max};
   for (int k = 1; k < n; ++k) t.cov = dominating_cov2d(t.cov, covs[k]);
   glm::vec3 conic;
@@ -359,6 +360,10 @@ CATGS_HD Trail build_trail(const glm::vec2* means, const glm::vec3* covs, int n,
     const float off = min_quadratic_on_segment(conic, means[k] - t.mean0, means[k] - t.mean0 - t.motion);
     level = fmaxf(level, sqrtf(fmaxf(0.0f, lambda) * q_max) + sqrtf(off));
   }
+  // An offset of margin_px costs at most margin_px / sqrt(smallest eigenvalue) of the level.
+  const float mid = 0.5f * (t.cov.x + t.cov.z);
+  const float lambda_min = mid - sqrtf(fmaxf(0.0f, mid * mid - det_u));
+  if (margin_px > 0.0f && lambda_min > 0.0f) level += margin_px / sqrtf(lambda_min);
   level *= 1.0f + slack;
   t.q_trail = level * level;
   return t;

@@ -12,6 +12,7 @@ struct SpeculationParams {
   float tile_size = 16.0f;        // l, pixels
   double target_fps = 120.0;      // F_target: the predicted path is sampled at k / F_target
   float trail_slack = 0.1f;       // trails hold the sampled ellipses scaled by 1 + slack
+  float trail_margin_px = 0.0f;   // and widened by this many pixels (prediction error)
   bool frustum_and_sort_cache = true;  // false (--no-cache): every frame is a key frame
   bool task_splitting = true;          // false (--no-split)
   bool early_termination = true;       // stop a pixel when T would drop below 1e-4

@@ -40,7 +40,7 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
 }
 
 void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
-                            float slack, ProjectedGaussians& out) {
+                            float slack, float margin_px, ProjectedGaussians& out) {
   if (path.empty() || path.size() > static_cast<std::size_t>(kMaxPath))
     throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPath) + " cameras");
   const std::size_t n = model.size();
@@ -85,7 +85,7 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
     // has no depth to sort by, and a hole from it is caught by the envelope check of the
     // sub-frame that would need it only if it is cached, so it waits for the next key frame.
     if (!key_visible) return;
-    const fm::Trail trail = fm::build_trail(means, covs, visible, q_max, slack);
+    const fm::Trail trail = fm::build_trail(means, covs, visible, q_max, slack, margin_px);
     glm::vec3 conic, trail_conic;
     if (!fm::conic_from_cov2d(covs[0], &conic) || !fm::conic_from_cov2d(trail.cov, &trail_conic)) return;
     const fm::TileRect rect = fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail,

@@ -64,7 +64,8 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   std::vector<Camera> path{camera};
   for (int k = 1; k <= window; ++k)
     path.push_back(with_pose(camera, predictor_.predict(k / sp.target_fps)));
-  speculative_preprocess(*model_, path, window > 0 ? sp.trail_slack : 0.0f, projected_);
+  speculative_preprocess(*model_, path, window > 0 ? sp.trail_slack : 0.0f,
+                         window > 0 ? sp.trail_margin_px : 0.0f, projected_);
   const auto t1 = clock::now();
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
   emit_keys(projected_, grid, Pipeline::catgs, list_);
