@@ -1,15 +1,19 @@
-// catgs-bench: replays a trace through the CUDA pipelines and reports frame times (a benchmark: it
-// reports, it never fails on time).
+// catgs-bench: replays a trace through the render pipelines and reports frame times (a benchmark:
+// it reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-warp] [--frames N] [--warmup N] [--json OUT.json]
-//               [--snapshot-dir DIR] [--up X,Y,Z]
+//               --pipeline vanilla,exact[,exact-warp][,catgs] [--frames N] [--warmup N]
+//               [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
+//
+// --renderer cpu (the default in a build without CUDA) times the CPU reference with the steady
+// clock around render_at() (pose in, 8-bit image in host memory out); catgs runs there only.
 //
 // --city builds DESIGN.md's city in memory from S (13 copies on a diamond grid, x10 scale; with
 // --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by --scale (default 1).
 // exact-warp is the exact pipeline with the rasterizer's optional per-warp skip (same image).
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "real:CAMERAS.json" (a
-// real camera path moved onto the scene, scene_tiling.h), "orbit", or a catgs-trace file. Traces
+// real camera path moved onto the scene, scene_tiling.h), "cameras:CAMERAS.json" (the scene's own
+// cameras, interpolated as they are), "orbit", or a catgs-trace file. Traces
 // are generated at 120 FPS; the first --warmup frames are rendered untimed, then --frames frames
 // (default 600) are timed.
 //
@@ -26,12 +30,17 @@
 #include <iostream>
 #include <numeric>
 #include <sstream>
+#include <thread>
 
-#include <cuda_runtime.h>
 #include <nlohmann/json.hpp>
 
+#if CATGS_HAVE_CUDA
+#include <cuda_runtime.h>
+
 #include "catgs/cuda_renderer.h"
+#endif
 #include "catgs/ply_io.h"
+#include "catgs/renderer.h"
 #include "catgs/scene_tiling.h"
 #include "catgs/trace.h"
 #include "cli_args.h"
@@ -40,16 +49,18 @@ namespace {
 
 const char* kUsage =
     "usage: catgs-bench --scene S [--city [--radius-sq 4] [--spacing 1.2] [--seed N]] [--scale F]\n"
-    "                   --trace flyover|orbit|real:CAMERAS.json|FILE.trace [--width 1920]\n"
+    "                   --trace flyover|orbit|real:C.json|cameras:C.json|FILE.trace [--width 1920]\n"
     "                   [--height 1080] [--pipeline vanilla,exact[,exact-warp]] [--frames 600]\n"
     "                   [--warmup 30]\n"
     "                   [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
-    "                   [--seconds-per-view 0.5] [--distance 0.6]\n";
+    "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu]\n";
 
+#if CATGS_HAVE_CUDA
 void check(cudaError_t e, const char* what) {
   if (e != cudaSuccess)
     throw std::runtime_error(std::string(what) + ": " + cudaGetErrorName(e) + ": " + cudaGetErrorString(e));
 }
+#endif
 
 struct Summary {
   double mean = 0, median = 0, p99 = 0, min = 0, max = 0;
@@ -69,6 +80,7 @@ Summary summarize(std::vector<double> v) {
 struct PipelineResult {
   std::string name;
   std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible, heaviest;
+  std::vector<double> key_ms, sub_ms, window;  // catgs: key vs sub-frame times, W per key frame
   std::size_t peak_buffer_bytes = 0, device_used_bytes = 0, allocations_timed = 0;
   int syncs = 0;
 };
@@ -85,14 +97,25 @@ int run(int argc, char** argv) {
   const Args args(argc, argv, {"--scene", "--city!", "--radius-sq", "--spacing", "--seed", "--scale",
                                "--trace", "--width", "--height", "--pipeline", "--frames", "--warmup",
                                "--json", "--snapshot-dir", "--up", "--seconds-per-view", "--distance",
-                               "--help!"});
+                               "--renderer", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage;
     return 0;
   }
-  std::string why;
-  if (!catgs::cuda::device_usable(&why)) throw std::runtime_error("no usable CUDA device: " + why);
-  const std::string gpu = catgs::cuda::device_description();
+#if CATGS_HAVE_CUDA
+  const bool on_gpu = args.get("--renderer", "cuda") == "cuda";
+#else
+  const bool on_gpu = false;
+  if (args.get("--renderer", "cpu") != "cpu") throw std::invalid_argument("built without CUDA: --renderer cpu only");
+#endif
+  std::string gpu = "none (CPU reference, " + std::to_string(std::thread::hardware_concurrency()) + " threads)";
+#if CATGS_HAVE_CUDA
+  if (on_gpu) {
+    std::string why;
+    if (!catgs::cuda::device_usable(&why)) throw std::runtime_error("no usable CUDA device: " + why);
+    gpu = catgs::cuda::device_description();
+  }
+#endif
   const int width = args.get_int("--width", 1920), height = args.get_int("--height", 1080);
   const int frames = args.get_int("--frames", 600), warmup = args.get_int("--warmup", 30);
   const std::string trace_spec = args.require("--trace");
@@ -135,6 +158,10 @@ int run(int argc, char** argv) {
     const glm::vec3 e = rb.extent();
     const float r = 0.6f * std::max(e.x, std::max(e.y, e.z));
     trace = catgs::make_orbit(rb, r, 0.3f * r, 100.0f, g);
+  } else if (trace_spec.rfind("cameras:", 0) == 0) {
+    // The scene's own cameras (same world frame), interpolated to 120 FPS as they are.
+    trace = catgs::interpolate_views(catgs::load_inria_cameras(trace_spec.substr(8), width, height), 120.0,
+                                     args.get_double("--seconds-per-view", 0.5));
   } else if (trace_spec.rfind("real:", 0) == 0) {
     const auto keys = catgs::load_inria_cameras(trace_spec.substr(5));
     trace = catgs::fit_trace_to_scene(keys, model, up,
@@ -162,8 +189,27 @@ int run(int argc, char** argv) {
     }
   }
 
+  std::vector<PipelineResult> results;
+  auto record = [](PipelineResult& res, double ms, const catgs::FrameStats& s) {
+    res.frame_ms.push_back(ms);
+    res.pre.push_back(s.preprocess_ms);
+    res.keys.push_back(s.keys_ms);
+    res.sort.push_back(s.sort_ms);
+    res.ranges.push_back(s.ranges_ms);
+    res.raster.push_back(s.rasterize_ms);
+    res.list.push_back(static_cast<double>(s.render_list_length));
+    res.visible.push_back(static_cast<double>(s.visible));
+    (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);
+    if (s.key_frame) res.window.push_back(s.window);
+  };
+  std::string scene_name = model.name;
+  std::size_t scene_size = model.size(), scene_bytes = 0;
+  const int scene_sh = model.sh_degree;
+#if CATGS_HAVE_CUDA
+  if (on_gpu) {
   const std::size_t used_before_scene = catgs::cuda::device_memory_used();
   const auto scene = catgs::cuda::DeviceScene::upload(model);
+  scene_bytes = scene->bytes();
   std::fprintf(stderr, "GPU: %s\nscene %s: %zu Gaussians (SH %d, %.0f MiB on device), built in %.1f s; "
                "trace %s: %zu cameras, %d warm-up + %d timed frames at %dx%d\n",
                gpu.c_str(), model.name.c_str(), model.size(), model.sh_degree,
@@ -171,7 +217,6 @@ int run(int argc, char** argv) {
                trace.size(), warmup, frames, width, height);
   model = catgs::GaussianModel{};  // the host copy is no longer needed
 
-  std::vector<PipelineResult> results;
   for (const Variant& variant : pipelines) {
     catgs::RenderOptions o;
     o.pipeline = variant.pipeline;
@@ -195,15 +240,7 @@ int run(int argc, char** argv) {
       check(cudaEventSynchronize(end), "cudaEventSynchronize");
       float ms = 0;
       check(cudaEventElapsedTime(&ms, start, end), "cudaEventElapsedTime");
-      const catgs::FrameStats& s = r.last_stats();
-      res.frame_ms.push_back(ms);
-      res.pre.push_back(s.preprocess_ms);
-      res.keys.push_back(s.keys_ms);
-      res.sort.push_back(s.sort_ms);
-      res.ranges.push_back(s.ranges_ms);
-      res.raster.push_back(s.rasterize_ms);
-      res.list.push_back(static_cast<double>(s.render_list_length));
-      res.visible.push_back(static_cast<double>(s.visible));
+      record(res, ms, r.last_stats());
       res.heaviest.push_back(static_cast<double>(r.heaviest_tile_entries()));  // after timing
     }
     res.allocations_timed = r.allocation_count() - allocs_before;
@@ -221,26 +258,59 @@ int run(int argc, char** argv) {
     cudaEventDestroy(end);
     results.push_back(std::move(res));
   }
+  }
+#endif
+  if (!on_gpu) {
+    std::fprintf(stderr, "CPU reference: %s\nscene %s: %zu Gaussians (SH %d), built in %.1f s; trace %s: "
+                 "%zu cameras, %d warm-up + %d timed frames at %dx%d\n", gpu.c_str(), model.name.c_str(),
+                 model.size(), model.sh_degree, load_s, trace_spec.c_str(), trace.size(), warmup, frames,
+                 width, height);
+    const auto shared = std::make_shared<const catgs::GaussianModel>(std::move(model));
+    for (const Variant& variant : pipelines) {
+      if (variant.warp_cull) throw std::invalid_argument("exact-warp is a CUDA variant");
+      catgs::RenderOptions o;
+      o.pipeline = variant.pipeline;
+      auto r = catgs::make_renderer("cpu", shared, o);
+      PipelineResult res;
+      res.name = variant.name;
+      catgs::Image img;
+      const double dt = 1.0 / 120.0;
+      for (int k = 0; k < warmup; ++k) r->render_at(camera_at(k), k * dt, img);
+      for (int k = 0; k < frames; ++k) {
+        const auto t0 = std::chrono::steady_clock::now();
+        r->render_at(camera_at(warmup + k), (warmup + k) * dt, img);
+        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        record(res, ms, r->last_stats());
+      }
+      if (args.has("--snapshot-dir")) {
+        std::filesystem::create_directories(args.get("--snapshot-dir"));
+        catgs::write_png(img, args.get("--snapshot-dir") + "/" + scene_name + "_cpu_" + res.name + ".png");
+      }
+      results.push_back(std::move(res));
+    }
+  }
 
   // Table.
   std::printf("\nGPU: %s\nscene: %s, %zu Gaussians; trace: %s; %dx%d; %d timed frames (after %d warm-up)\n",
-              gpu.c_str(), scene->name().c_str(), scene->size(), trace_spec.c_str(), width, height,
+              gpu.c_str(), scene_name.c_str(), scene_size, trace_spec.c_str(), width, height,
               frames, warmup);
   std::printf("%-10s %8s %8s %8s %8s | %7s %7s %7s %7s %7s | %12s %12s %10s %9s | %9s %9s %5s\n",
               "pipeline", "mean ms", "median", "p99", "FPS", "pre", "keys", "sort", "ranges",
               "raster", "list mean", "list max", "visible", "max tile", "buf MiB", "dev MiB", "syncs");
   nlohmann::json j;
   j["gpu"] = gpu;
-  j["scene"] = scene->name();
-  j["gaussians"] = scene->size();
-  j["sh_degree"] = scene->sh_degree();
-  j["scene_device_bytes"] = scene->bytes();
+  j["renderer"] = on_gpu ? "cuda" : "cpu";
+  j["scene"] = scene_name;
+  j["gaussians"] = scene_size;
+  j["sh_degree"] = scene_sh;
+  j["scene_device_bytes"] = scene_bytes;
   j["trace"] = trace_spec;
   j["width"] = width;
   j["height"] = height;
   j["frames"] = frames;
   j["warmup"] = warmup;
-  j["timing"] = "CUDA events around render_device() on the renderer's stream; pose in, image in device memory out";
+  j["timing"] = on_gpu ? "CUDA events around render_device() on the renderer's stream; pose in, image in device memory out"
+                       : "steady clock around render_at(); pose in, 8-bit image in host memory out";
   for (const auto& r : results) {
     const Summary f = summarize(r.frame_ms), L = summarize(r.list);
     auto mean = [](const std::vector<double>& v) { return summarize(v).mean; };
@@ -261,7 +331,17 @@ int run(int argc, char** argv) {
     p["heaviest_tile_entries"] = {{"mean", mean(r.heaviest)}, {"max", summarize(r.heaviest).max}};
     p["peak_buffer_bytes"] = r.peak_buffer_bytes;
     p["device_memory_used_bytes"] = r.device_used_bytes;
-    p["scene_plus_peak_buffers_bytes"] = r.peak_buffer_bytes + scene->bytes();
+    p["scene_plus_peak_buffers_bytes"] = r.peak_buffer_bytes + scene_bytes;
+    if (!r.sub_ms.empty()) {  // catgs: speculation
+      const Summary k = summarize(r.key_ms), sub = summarize(r.sub_ms);
+      p["key_frames"] = {{"count", r.key_ms.size()}, {"mean_ms", k.mean}, {"median_ms", k.median}};
+      p["sub_frames"] = {{"count", r.sub_ms.size()}, {"mean_ms", sub.mean}, {"median_ms", sub.median}};
+      p["sub_over_key_cost"] = sub.mean / k.mean;
+      p["window_mean"] = summarize(r.window).mean;
+      std::printf("%-10s key frames %zu (%.3f ms mean), sub-frames %zu (%.3f ms mean, %.0f%% of a key frame), "
+                  "mean window %.2f\n", r.name.c_str(), r.key_ms.size(), k.mean, r.sub_ms.size(), sub.mean,
+                  100.0 * sub.mean / k.mean, summarize(r.window).mean);
+    }
     p["host_device_syncs_per_frame"] = r.syncs;
     p["allocations_during_timed_frames"] = r.allocations_timed;
     p["per_frame_ms"] = r.frame_ms;
