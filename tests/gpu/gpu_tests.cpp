@@ -163,7 +163,7 @@ std::shared_ptr<GaussianModel> wall_scene(std::size_t n) {
     for (int a = 0; a < 3; ++a) m->log_scales[3 * i + a] = std::log(40.0f);
     m->rotations[4 * i] = 1.0f;
     m->opacity_logits[i] = 2.0f;  // 0.88: a few layers saturate a pixel
-    for (int c = 0; c < 3; ++c) m->sh[3 * i + c] = 0.5f * std::sin(0.7f * static_cast<float>(i) + 2.0f * c);
+    for (int c = 0; c < 3; ++c) m->sh[3 * i + c] = 0.5f * std::sin(0.7f * static_cast<float>(i) + 2.0f * static_cast<float>(c));
   }
   return m;
 }
@@ -216,7 +216,7 @@ int run(int argc, char** argv) {
                           {tumble_dev, tumble, 1920, 1080}};
     int k = 0;
     for (const Step& s : steps) {
-      Row row{"grow", s.m->name, std::to_string(k++), "exact"};
+      Row row{"grow", s.m->name, std::to_string(k++), "exact", 0, 0, 0, -1, -1, false, ""};
       try {
         r.set_scene(s.dev);
         const Camera cam = orbit_views(*s.m, s.w, s.h)[1];
@@ -271,7 +271,7 @@ int run(int argc, char** argv) {
     pass();
     const std::size_t used1 = catgs::cuda::device_memory_used(), buf1 = r.buffer_bytes(),
                       alloc1 = r.allocation_count();
-    Row row{"steady", m->name, "1000f", "both"};
+    Row row{"steady", m->name, "1000f", "both", 0, 0, 0, -1, -1, false, ""};
     row.pass = used0 == used1 && buf0 == buf1 && alloc0 == alloc1 && r.syncs_last_frame() == 1;
     row.note = "device used " + std::to_string(used0 >> 20) + " -> " + std::to_string(used1 >> 20) +
                " MiB, buffers " + std::to_string(buf0) + " -> " + std::to_string(buf1) +
@@ -306,7 +306,7 @@ int run(int argc, char** argv) {
       auto wall = wall_scene(n);
       catgs::RenderOptions o;
       o.pipeline = Pipeline::vanilla;
-      Row row{"list>2^31", wall->name, "front", "vanilla"};
+      Row row{"list>2^31", wall->name, "front", "vanilla", 0, 0, 0, -1, -1, false, ""};
       try {
         auto dev = catgs::cuda::DeviceScene::upload(*wall);
         Image big, small;
@@ -336,7 +336,7 @@ int run(int argc, char** argv) {
 
       const std::size_t n2 = (std::size_t{1} << 32) / 8160 + 1000;
       auto wall2 = wall_scene(n2);
-      Row row2{"list>2^32", wall2->name, "front", "vanilla"};
+      Row row2{"list>2^32", wall2->name, "front", "vanilla", 0, 0, 0, -1, -1, false, ""};
       row2.list_ref = static_cast<long long>(n2 * 8160);
       try {
         catgs::cuda::CudaRenderer r(catgs::cuda::DeviceScene::upload(*wall2), o);
