@@ -77,7 +77,7 @@ done
 echo "${out[@]:-}"
 SHIM
   chmod +x "$CARRY/deps/bin/pkg-config"
-  for t in catgs-bench catgs-gpu-tests; do cp -f "$build/render_core/cuda/$t" "$CARRY/bin/"; done
+  cp -f "$build/render_core/catgs-bench" "$build/render_core/cuda/catgs-gpu-tests" "$CARRY/bin/"
   cp -f "$build/render_core/catgs-scene" "$CARRY/bin/"
   mkdir -p "$CARRY/bin/lib"
   cp -fL /usr/lib/x86_64-linux-gnu/libstb.so.0 "$CARRY/bin/lib/"  # the prebuilt tools link it
@@ -128,7 +128,7 @@ else
   rc=$?
   echo "== build: rc $rc in $(( $(date +%s) - t0 )) s"
   [ $rc -eq 0 ] || cp "$ROOT/build/gpu.log" "$OUT/build.log"
-  BENCH_EXE=$ROOT/build/gpu/render_core/cuda/catgs-bench TEST_EXE=$ROOT/build/gpu/render_core/cuda/catgs-gpu-tests
+  BENCH_EXE=$ROOT/build/gpu/render_core/catgs-bench TEST_EXE=$ROOT/build/gpu/render_core/cuda/catgs-gpu-tests
   if [ $rc -ne 0 ]; then
     export LD_LIBRARY_PATH=$CARRY/bin/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
     tail -40 "$ROOT/build/gpu.log"
@@ -160,15 +160,15 @@ if [ "$BENCH" = 1 ]; then
   echo "== bench: tumblewood_sh2 x10, real camera path (mipnerf360_bicycle) at 120 FPS"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
     --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
-    --pipeline vanilla,exact,exact-warp --frames "$FRAMES" --json "$OUT/bench_tumblewood.json"
+    --pipeline vanilla,exact,exact-warp --frames "$FRAMES" --json "$OUT/bench_tumblewood.json" || status=1
   echo "== bench: tumblewood_sh2 x10, orbit 100 deg (DESIGN.md's public-renderer table)"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 --trace orbit \
     --width 1920 --height 1080 --pipeline vanilla,exact,exact-warp --frames "$FRAMES" \
-    --json "$OUT/bench_tumblewood_orbit.json"
+    --json "$OUT/bench_tumblewood_orbit.json" || status=1
   echo "== bench: city, 13 tumblewood copies (~7 M), fly-over at 120 FPS"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
     --width 1920 --height 1080 --pipeline vanilla,exact,exact-warp --frames "$FRAMES" \
-    --json "$OUT/bench_city.json" --snapshot-dir "$OUT"
+    --json "$OUT/bench_city.json" --snapshot-dir "$OUT" || status=1
 fi
 echo "== done: status $status"
 exit $status
