@@ -14,12 +14,7 @@
 namespace catgs {
 namespace {
 
-std::shared_ptr<const GaussianModel> scene(const std::string& path) {
-  static std::map<std::string, std::shared_ptr<const GaussianModel>> cache;
-  auto& s = cache[path];
-  if (!s) s = std::make_shared<GaussianModel>(load_scene(path));
-  return s;
-}
+std::shared_ptr<const GaussianModel> scene(const std::string& path) { return test::cached_scene(path); }
 
 RenderOptions catgs_options() {
   RenderOptions o;

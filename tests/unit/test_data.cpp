@@ -2,6 +2,9 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <map>
+
+#include "catgs/ply_io.h"
 
 namespace fs = std::filesystem;
 
@@ -29,6 +32,13 @@ std::string temp_dir() {
   fs::remove_all(p);
   fs::create_directories(p);
   return p.string();
+}
+
+std::shared_ptr<const GaussianModel> cached_scene(const std::string& path) {
+  static std::map<std::string, std::shared_ptr<const GaussianModel>> cache;
+  auto& s = cache[path];
+  if (!s) s = std::make_shared<GaussianModel>(load_scene(path));
+  return s;
 }
 
 }  // namespace catgs::test

@@ -2,9 +2,12 @@
 // ../shared/data beside the checkout) and the bundled assets.
 #pragma once
 
+#include <memory>
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "catgs/gaussian_model.h"
 
 namespace catgs::test {
 
@@ -16,6 +19,8 @@ std::string data_file(const std::string& relative);
 std::string bundled_scene();
 // A fresh temporary folder for this test.
 std::string temp_dir();
+// The scene at `path`, loaded once per test process and shared (tests only read it).
+std::shared_ptr<const GaussianModel> cached_scene(const std::string& path);
 
 }  // namespace catgs::test
 
