@@ -81,9 +81,10 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
       }
       ++visible;
     }
-    // The key frame's depth orders the cached list: a Gaussian not in front of the key camera
-    // has no depth to sort by, and a hole from it is caught by the envelope check of the
-    // sub-frame that would need it only if it is cached, so it waits for the next key frame.
+    // The key frame's depth orders the cached list, so a Gaussian behind the key camera is left
+    // out even if a predicted pose would see it. Known gap: such a Gaussian (or one outside every
+    // predicted frustum) that a sub-frame needs is not checked there; only cached Gaussians are,
+    // and a prediction error large enough to matter makes cached ones leave their trails too.
     if (!key_visible) return;
     const fm::Trail trail = fm::build_trail(means, covs, visible, q_max, slack, margin_px);
     glm::vec3 conic, trail_conic;
