@@ -103,7 +103,9 @@ TEST(TrailTest, HoldsEveryTileAlongThePredictedPath) {
   std::cout << "[ info ] " << gaussians << " Gaussians: trail lists " << trail_tiles << " tiles, the 64 poses need "
             << needed_tiles << " (" << 100.0 * (double(trail_tiles) / double(needed_tiles) - 1.0)
             << "% extra), the key frame alone " << key_tiles << "\n";
-  EXPECT_GE(trail_tiles, needed_tiles);
+  // Tight: in this harsh random setting (fast windows included) the trails list at most 50% more
+  // tiles than the 64 poses need (conservativeness itself is asserted tile by tile above).
+  EXPECT_LT(static_cast<double>(trail_tiles), 1.5 * static_cast<double>(needed_tiles));
 }
 
 TEST(TrailTest, StillCameraTrailIsTheExactEllipse) {
