@@ -8,10 +8,11 @@
 #        (built on the build machine by `prepare`; they need nothing but the CUDA driver);
 #     2. runs the GPU tests (CUDA vs the CPU reference) -> $OUT/gpu_tests.md;
 #        --sanitize first runs the quick subset under compute-sanitizer memcheck;
-#     3. runs the benchmark at 1920x1080, vanilla and exact, over 600 frames at 120 FPS:
-#        tumblewood_sh2 (x10, a real camera path moved onto it) -> $OUT/bench_tumblewood.json,
-#        the same over DESIGN.md's orbit (100 deg) -> $OUT/bench_tumblewood_orbit.json,
-#        and the 13-copy city built in memory (fly-over) -> $OUT/bench_city.json (+ snapshots).
+#     3. runs the benchmark at 1920x1080 over 600 frames at 120 FPS: vanilla, exact, catgs and its
+#        ablations (catgs-nocache, catgs-nosplit) on tumblewood_sh2 (x10) and on the 13-copy city
+#        built in memory, over each real camera path (bench_{tumblewood,city}_PATH.json), the
+#        window table (bench_windows_{tumblewood,city}.json) and the city fly-over
+#        (bench_city_flyover.json + snapshots), all packed into $OUT/bench.tar.gz.
 #     Everything printed goes to $OUT/gpu_run.log too. Exit status: non-zero if a test failed.
 #
 # On the build machine, once (fills .carry/, git-ignored):
@@ -157,18 +158,36 @@ if [ "$TESTS" = 1 ]; then
   rc=$?; echo "== GPU tests: rc $rc in $(( $(date +%s) - t0 )) s"; [ $rc -eq 0 ] || status=1
 fi
 if [ "$BENCH" = 1 ]; then
-  echo "== bench: tumblewood_sh2 x10, real camera path (mipnerf360_bicycle) at 120 FPS"
+  B=$ROOT/build/bench  # JSON and snapshots; packed into $OUT/bench.tar.gz (the device returns 8 files)
+  rm -rf "$B"; mkdir -p "$B"
+  # Issue 4's tables: every real camera path on tumblewood_sh2 (x10) and on the ~7 M city, all
+  # pipelines and ablations side by side in one process per scene x path; the window table
+  # (W = 2, 4, 8, 16) on the bicycle path. Sub-frame quality on every 3rd frame.
+  P=vanilla,exact,catgs,catgs-nocache,catgs-nosplit
+  for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+    echo "== bench: tumblewood_sh2 x10, real camera path $path at 120 FPS"
+    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
+      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$P" \
+      --frames "$FRAMES" --quality-every 3 --json "$B/bench_tumblewood_$path.json" || status=1
+    echo "== bench: city, 13 tumblewood copies (~7 M), real camera path $path at 120 FPS"
+    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 \
+      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$P" \
+      --frames "$FRAMES" --quality-every 3 --json "$B/bench_city_$path.json" || status=1
+  done
+  echo "== bench: window sizes (W = 2, 4, 8, 16), bicycle path, tumblewood and city"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
     --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
-    --pipeline vanilla,exact,exact-warp --frames "$FRAMES" --json "$OUT/bench_tumblewood.json" || status=1
-  echo "== bench: tumblewood_sh2 x10, orbit 100 deg (DESIGN.md's public-renderer table)"
-  "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 --trace orbit \
-    --width 1920 --height 1080 --pipeline vanilla,exact,exact-warp --frames "$FRAMES" \
-    --json "$OUT/bench_tumblewood_orbit.json" || status=1
-  echo "== bench: city, 13 tumblewood copies (~7 M), fly-over at 120 FPS"
+    --pipeline exact,catgs-w2,catgs,catgs-w8,catgs-w16 --frames "$FRAMES" --quality-every 3 \
+    --json "$B/bench_windows_tumblewood.json" || status=1
+  "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 \
+    --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
+    --pipeline exact,catgs-w2,catgs,catgs-w8,catgs-w16 --frames "$FRAMES" --quality-every 3 \
+    --json "$B/bench_windows_city.json" || status=1
+  echo "== bench: city fly-over (DESIGN.md's public-renderer table)"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
-    --width 1920 --height 1080 --pipeline vanilla,exact,exact-warp --frames "$FRAMES" \
-    --json "$OUT/bench_city.json" --snapshot-dir "$OUT" || status=1
+    --width 1920 --height 1080 --pipeline vanilla,exact,catgs --frames "$FRAMES" --quality-every 3 \
+    --json "$B/bench_city_flyover.json" --snapshot-dir "$B" || status=1
 fi
+[ "$BENCH" = 1 ] && tar czf "$OUT/bench.tar.gz" -C "$ROOT/build" bench
 echo "== done: status $status"
 exit $status

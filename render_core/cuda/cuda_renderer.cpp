@@ -2,101 +2,14 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <mutex>
 #include <string>
 
 #include "catgs/cpu_renderer.h"  // validate_camera
-#include "cuda_check.h"
-#include "stages.h"
-#include "tunables.h"
+#include "renderer_state.h"
 
 namespace catgs::cuda {
-
-namespace {
-
-// A device allocation that only grows (by tune::kGrowthFactor), never per frame.
-class GrowBuffer {
- public:
-  GrowBuffer() = default;
-  GrowBuffer(const GrowBuffer&) = delete;
-  GrowBuffer& operator=(const GrowBuffer&) = delete;
-  ~GrowBuffer() { if (ptr_) cudaFree(ptr_); }
-
-  // Makes room for `bytes`; returns true when it had to reallocate (contents are then lost).
-  // cudaFree waits for in-flight work on the device, so a buffer still read by an earlier frame
-  // is never freed under it. Throws CudaError naming the size when device memory runs out.
-  bool ensure(std::size_t bytes, const char* what, std::size_t* allocations) {
-    if (bytes <= bytes_) return false;
-    const auto want = static_cast<std::size_t>(static_cast<double>(bytes) * tune::kGrowthFactor) + 256;
-    if (ptr_) CATGS_CUDA(cudaFree(ptr_));
-    ptr_ = nullptr;
-    bytes_ = 0;
-    std::size_t got = want;
-    if (cudaMalloc(&ptr_, want) != cudaSuccess) {
-      // No room for the slack: take exactly what this frame needs (huge lists near the limit).
-      (void)cudaGetLastError();
-      ptr_ = nullptr;
-      got = bytes;
-      try {
-        CATGS_CUDA(cudaMalloc(&ptr_, bytes));
-      } catch (const CudaError& e) {
-        ptr_ = nullptr;
-        throw CudaError(std::string("CUDA renderer: ") + what + " buffer of " +
-                            std::to_string(bytes) + " bytes: " + e.what(),
-                        e.code());
-      }
-    }
-    bytes_ = got;
-    ++*allocations;
-    return true;
-  }
-  template <typename T>
-  T* as() const { return static_cast<T*>(ptr_); }
-  std::size_t bytes() const { return bytes_; }
-
- private:
-  void* ptr_ = nullptr;
-  std::size_t bytes_ = 0;
-};
-
-enum Event { kStart, kPreprocessed, kKeysEmitted, kSorted, kRanged, kRasterized, kEventCount };
-
-}  // namespace
-
-struct CudaRenderer::State {
-  cudaStream_t stream = nullptr;
-  cudaEvent_t events[kEventCount] = {};
-  cudaEvent_t counts_ready = nullptr;
-  unsigned long long* host_counts = nullptr;  // pinned [2]: render list length, visible
-  std::size_t allocations = 0, peak_bytes = 0;
-  int syncs = 0;
-  int width = 0, height = 0;
-
-  // Per Gaussian.
-  GrowBuffer mean2d, conic_opacity, color, depth, q_max, rect, tiles_touched, ends, scan_temp, big;
-  // Per render-list entry (two halves each, for the radix sort's double buffer).
-  GrowBuffer keys[2], values[2], sort_temp;
-  // Per tile / pixel, and the small counters.
-  GrowBuffer ranges, tile_scratch, tile_order, order_temp, rgb, rgba8, counters;
-  const uint32_t* sorted_values = nullptr;
-
-  std::size_t bytes() const {
-    std::size_t b = 0;
-    for (const GrowBuffer* g : {&mean2d, &conic_opacity, &color, &depth, &q_max, &rect,
-                                &tiles_touched, &ends, &scan_temp, &big, &keys[0], &keys[1], &values[0],
-                                &values[1], &sort_temp, &ranges, &tile_scratch, &tile_order, &order_temp, &rgb, &rgba8, &counters})
-      b += g->bytes();
-    return b;
-  }
-  void note_peak() { peak_bytes = std::max(peak_bytes, bytes()); }
-
-  ~State() {
-    if (host_counts) cudaFreeHost(host_counts);
-    for (cudaEvent_t& e : events)
-      if (e) cudaEventDestroy(e);
-    if (counts_ready) cudaEventDestroy(counts_ready);
-    if (stream) cudaStreamDestroy(stream);
-  }
-};
 
 CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options)
     : scene_(std::move(scene)), state_(std::make_unique<State>()) {
@@ -110,13 +23,16 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   CATGS_CUDA(cudaMallocHost(&s.host_counts, 2 * sizeof(unsigned long long)));
   // [0] visible, [1..2] readback (list length, visible), [3] big-Gaussian count (low 32 bits).
   s.counters.ensure(4 * sizeof(unsigned long long), "counters", &s.allocations);
+  CATGS_CUDA(cudaEventCreateWithFlags(&s.catgs_readback, cudaEventDisableTiming));
+  CATGS_CUDA(cudaEventCreateWithFlags(&s.plan_ready, cudaEventDisableTiming));
+  CATGS_CUDA(cudaMallocHost(&s.host_catgs, 4 * sizeof(unsigned)));
+  s.catgs_counters.ensure(8 * sizeof(unsigned), "catgs counters", &s.allocations);
 }
 
 CudaRenderer::~CudaRenderer() = default;
 
 void CudaRenderer::set_options(const RenderOptions& options) {
-  if (options.pipeline == Pipeline::catgs)
-    throw std::invalid_argument("the catgs pipeline is not implemented in the CUDA renderer yet");
+  state_->planner.set_params(options.speculation);  // validates; closes the open group
   options_ = options;
 }
 
@@ -125,6 +41,7 @@ void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
   // The previous frame may still read the old scene: finish it before letting go.
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
   scene_ = std::move(scene);
+  state_->planner.set_params(options_.speculation);  // the caches index the old scene
 }
 
 CUstream_st* CudaRenderer::stream() const { return state_->stream; }
@@ -133,14 +50,7 @@ std::size_t CudaRenderer::peak_buffer_bytes() const { return state_->peak_bytes;
 std::size_t CudaRenderer::allocation_count() const { return state_->allocations; }
 int CudaRenderer::syncs_last_frame() const { return state_->syncs; }
 
-DeviceFrame CudaRenderer::render_device(const Camera& camera) {
-  cpu::validate_camera(camera);
-  State& s = *state_;
-  const DeviceScene& scene = *scene_;
-  const bool exact = options_.pipeline != Pipeline::vanilla;
-  const uint64_t n = scene.size();
-  std::size_t* allocs = &s.allocations;
-
+stages::CameraParams camera_params(const Camera& camera) {
   stages::CameraParams cam{};
   cam.R = camera.R;
   cam.t = camera.t;
@@ -157,55 +67,47 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
                                static_cast<float>(camera.height) / (2.0f * camera.fy));
   cam.tiles_x = (camera.width + tune::kTileSize - 1) / tune::kTileSize;
   cam.tiles_y = (camera.height + tune::kTileSize - 1) / tune::kTileSize;
-  const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
-  const std::size_t pixels = static_cast<std::size_t>(camera.width) * camera.height;
+  return cam;
+}
 
-  // Buffers sized by the scene and the image (grow only).
-  s.mean2d.ensure(n * sizeof(float2), "2D means", allocs);
-  s.conic_opacity.ensure(n * sizeof(float4), "conics", allocs);
-  s.color.ensure(n * sizeof(float4), "colours", allocs);
-  s.depth.ensure(n * sizeof(float), "depths", allocs);
-  s.q_max.ensure(n * sizeof(float), "q_max", allocs);
-  s.rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs);
-  s.tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs);
-  s.ends.ensure(n * sizeof(uint64_t), "emission offsets", allocs);
-  s.big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
-  s.scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);
-  s.ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
+void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels) {
+  std::size_t* allocs = &allocations;
+  mean2d.ensure(n * sizeof(float2), "2D means", allocs);
+  conic_opacity.ensure(n * sizeof(float4), "conics", allocs);
+  color.ensure(n * sizeof(float4), "colours", allocs);
+  depth.ensure(n * sizeof(float), "depths", allocs);
+  q_max.ensure(n * sizeof(float), "q_max", allocs);
+  rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs);
+  tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs);
+  ends.ensure(n * sizeof(uint64_t), "emission offsets", allocs);
+  big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
+  scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);
+  ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
   if (tune::kHeavyTilesFirst) {
-    s.tile_scratch.ensure(3 * static_cast<std::size_t>(tiles) * sizeof(uint32_t), "tile loads", allocs);
-    s.tile_order.ensure(tiles * sizeof(uint32_t), "tile order", allocs);
-    s.order_temp.ensure(stages::tile_order_temp_bytes(tiles), "tile order scratch", allocs);
+    tile_scratch.ensure(3 * static_cast<std::size_t>(tiles) * sizeof(uint32_t), "tile loads", allocs);
+    tile_order.ensure(tiles * sizeof(uint32_t), "tile order", allocs);
+    order_temp.ensure(stages::tile_order_temp_bytes(tiles), "tile order scratch", allocs);
   }
-  s.rgb.ensure(pixels * 3 * sizeof(float), "RGB image", allocs);
-  s.rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
+  rgb.ensure(pixels * 3 * sizeof(float), "RGB image", allocs);
+  rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
+}
 
-  const stages::SceneView sv{scene.means(), scene.log_scales(), scene.rotations(),
-                             scene.opacity_logits(), scene.sh(), scene.sh_degree(), n};
-  const stages::Projected proj{s.mean2d.as<float2>(),   s.conic_opacity.as<float4>(),
-                               s.color.as<float4>(),    s.depth.as<float>(),
-                               s.q_max.as<float>(),     s.rect.as<ushort4>(),
-                               s.tiles_touched.as<uint32_t>()};
-  auto* counters = s.counters.as<unsigned long long>();
-  const stages::BigList big{s.big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters + 3)};
-
-  s.syncs = 0;
-  CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
-  CATGS_CUDA(cudaMemsetAsync(counters, 0, 4 * sizeof(unsigned long long), s.stream));
-  stages::preprocess(sv, cam, exact, proj, counters, big, s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
-
-  stages::scan_tiles_touched(proj.tiles_touched, s.ends.as<uint64_t>(), n, s.scan_temp.as<void>(),
-                             s.scan_temp.bytes(), counters, counters + 1, s.stream);
-  // The one host-device sync of a frame: CUB's radix sort takes the list length from the host,
-  // and the list buffers may need to grow before emission writes into them.
-  CATGS_CUDA(cudaMemcpyAsync(s.host_counts, counters + 1, 2 * sizeof(unsigned long long),
-                             cudaMemcpyDeviceToHost, s.stream));
-  CATGS_CUDA(cudaEventRecord(s.counts_ready, s.stream));
-  CATGS_CUDA(cudaEventSynchronize(s.counts_ready));
-  ++s.syncs;
-  const uint64_t entries = s.host_counts[0];
-  const uint64_t visible = s.host_counts[1];
+uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::CameraParams& cam,
+                                                const stages::TileTests& tests, uint64_t* visible) {
+  const stages::Projected proj = projected();
+  auto* count = counters.as<unsigned long long>();
+  const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
+  stages::scan_tiles_touched(proj.tiles_touched, ends.as<uint64_t>(), n, scan_temp.as<void>(), scan_temp.bytes(),
+                             count, count + 1, stream);
+  // The host-device sync of a frame: CUB's radix sort takes the list length from the host, and
+  // the list buffers may need to grow before emission writes into them.
+  CATGS_CUDA(cudaMemcpyAsync(host_counts, count + 1, 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
+                             stream));
+  CATGS_CUDA(cudaEventRecord(counts_ready, stream));
+  CATGS_CUDA(cudaEventSynchronize(counts_ready));
+  ++syncs;
+  const uint64_t entries = host_counts[0];
+  *visible = host_counts[1];
   if (entries > std::numeric_limits<uint32_t>::max())
     throw std::length_error("CUDA renderer: render list of " + std::to_string(entries) +
                             " entries exceeds 2^32 - 1 (32-bit tile ranges); lower the resolution "
@@ -213,35 +115,75 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
 
   const int key_bits = tune::kDepthBits + tune::tile_key_bits(tiles);
   for (int h = 0; h < 2; ++h) {
-    s.keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", allocs);
-    s.values[h].ensure(entries * sizeof(uint32_t), "render-list values", allocs);
+    keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", &allocations);
+    values[h].ensure(entries * sizeof(uint32_t), "render-list values", &allocations);
   }
-  s.sort_temp.ensure(stages::sort_temp_bytes(entries, key_bits), "sort scratch", allocs);
-  s.note_peak();
+  sort_temp.ensure(stages::sort_temp_bytes(entries, key_bits), "sort scratch", &allocations);
+  note_peak();
 
-  uint64_t* keys[2] = {s.keys[0].as<uint64_t>(), s.keys[1].as<uint64_t>()};
-  uint32_t* values[2] = {s.values[0].as<uint32_t>(), s.values[1].as<uint32_t>()};
-  stages::emit_keys(proj, s.ends.as<uint64_t>(), n, cam, exact, big, keys[0], values[0], s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kKeysEmitted], s.stream));
+  uint64_t* k[2] = {keys[0].as<uint64_t>(), keys[1].as<uint64_t>()};
+  uint32_t* v[2] = {values[0].as<uint32_t>(), values[1].as<uint32_t>()};
+  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], v[0], stream);
+  CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
 
-  const int half = stages::sort_pairs(keys, values, entries, key_bits, s.sort_temp.as<void>(),
-                                      s.sort_temp.bytes(), s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kSorted], s.stream));
+  const int half = stages::sort_pairs(k, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
+  sorted_values = v[half];
+  CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
 
-  stages::tile_ranges(keys[half], entries, tiles, s.ranges.as<uint2>(), s.stream);
+  stages::tile_ranges(k[half], entries, tiles, ranges.as<uint2>(), stream);
+  return entries;
+}
+
+DeviceFrame CudaRenderer::render_device(const Camera& camera) {
+  if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, state_->planner.advance_clock());
+  return render_full(camera);
+}
+
+DeviceFrame CudaRenderer::render_device_at(const Camera& camera, double time_s) {
+  if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, time_s);
+  return render_full(camera);
+}
+
+DeviceFrame CudaRenderer::render_full(const Camera& camera) {
+  cpu::validate_camera(camera);
+  State& s = *state_;
+  const DeviceScene& scene = *scene_;
+  const bool exact = options_.pipeline != Pipeline::vanilla;
+  const uint64_t n = scene.size();
+  const stages::CameraParams cam = camera_params(camera);
+  const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
+  const std::size_t pixels = static_cast<std::size_t>(camera.width) * camera.height;
+  s.ensure_frame_buffers(n, tiles, pixels);
+  const stages::SceneView sv = scene_view(scene);
+  const stages::Projected proj = s.projected();
+  auto* counters = s.counters.as<unsigned long long>();
+  const stages::BigList big = s.big_list();
+
+  s.syncs = 0;
+  CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
+  CATGS_CUDA(cudaMemsetAsync(counters, 0, 4 * sizeof(unsigned long long), s.stream));
+  stages::preprocess(sv, cam, exact, proj, counters, big, s.stream);
+  CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
+
+  const stages::TileTests tests{exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square,
+                                proj.mean2d, proj.conic_opacity, proj.q_max, {}, cam.width, cam.height};
+  uint64_t visible = 0;
+  const uint64_t entries = s.build_render_list(n, cam, tests, &visible);
   const uint32_t* order = nullptr;
   if (tune::kHeavyTilesFirst) {
     stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(),
                         s.tile_order.as<uint32_t>(), s.order_temp.as<void>(), s.order_temp.bytes(),
                         s.stream);
     order = s.tile_order.as<uint32_t>();
+    s.heaviest = s.tile_scratch.as<uint32_t>() + tiles;  // order_tiles sorts the loads there
   }
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-  stages::rasterize(s.ranges.as<uint2>(), order, values[half], proj, cam, exact && warp_culling_, bg,
+  stages::rasterize(s.ranges.as<uint2>(), order, s.sorted_values, proj, cam, exact && warp_culling_, bg,
                     s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
+  CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
 
   s.width = camera.width;
   s.height = camera.height;
@@ -255,7 +197,7 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
 const FrameStats& CudaRenderer::last_stats() const {
   if (stats_ready_) return stats_;
   const State& s = *state_;
-  CATGS_CUDA(cudaEventSynchronize(s.events[kRasterized]));
+  CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
   auto ms = [&](Event a, Event b) {
     float t = 0.0f;
     CATGS_CUDA(cudaEventElapsedTime(&t, s.events[a], s.events[b]));
@@ -266,25 +208,30 @@ const FrameStats& CudaRenderer::last_stats() const {
   stats_.sort_ms = ms(kKeysEmitted, kSorted);
   stats_.ranges_ms = ms(kSorted, kRanged);
   stats_.rasterize_ms = ms(kRanged, kRasterized);
-  stats_.total_ms = ms(kStart, kRasterized);
+  stats_.total_ms = ms(kStart, kMerged);
+  if (options_.pipeline == Pipeline::catgs) {
+    stats_.merge_ms = ms(kRasterized, kMerged);
+    if (!s.key_frame) {  // a sub-frame records no key emission, sort or ranges
+      stats_.keys_ms = stats_.sort_ms = stats_.ranges_ms = 0.0;
+      stats_.rasterize_ms = ms(kPreprocessed, kRasterized);
+    }
+    CATGS_CUDA(cudaEventSynchronize(s.plan_ready));
+    stats_.slices = s.host_catgs[2];
+  }
   stats_ready_ = true;
   return stats_;
 }
 
 std::size_t CudaRenderer::heaviest_tile_entries() const {
   const State& s = *state_;
-  if (!tune::kHeavyTilesFirst || s.width == 0) return 0;
-  CATGS_CUDA(cudaEventSynchronize(s.events[kRasterized]));
-  const uint32_t tiles = static_cast<uint32_t>(((s.width + tune::kTileSize - 1) / tune::kTileSize) *
-                                               ((s.height + tune::kTileSize - 1) / tune::kTileSize));
-  uint32_t heaviest = 0;  // order_tiles sorted the loads (descending) into scratch[tiles ..]
-  CATGS_CUDA(cudaMemcpy(&heaviest, s.tile_scratch.as<uint32_t>() + tiles, sizeof heaviest,
-                        cudaMemcpyDeviceToHost));
+  if (!s.heaviest || s.width == 0) return 0;
+  CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
+  uint32_t heaviest = 0;
+  CATGS_CUDA(cudaMemcpy(&heaviest, s.heaviest, sizeof heaviest, cudaMemcpyDeviceToHost));
   return heaviest;
 }
 
-void CudaRenderer::render(const Camera& camera, Image& out) {
-  const DeviceFrame f = render_device(camera);
+void CudaRenderer::download(const DeviceFrame& f, Image& out) {
   const std::size_t pixels = static_cast<std::size_t>(f.width) * f.height;
   out.width = f.width;
   out.height = f.height;
@@ -298,10 +245,36 @@ void CudaRenderer::render(const Camera& camera, Image& out) {
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
 }
 
+void CudaRenderer::render(const Camera& camera, Image& out) { download(render_device(camera), out); }
+
+void CudaRenderer::render_at(const Camera& camera, double time_s, Image& out) {
+  download(render_device_at(camera, time_s), out);
+}
+
+std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model) {
+  if (!model) throw std::invalid_argument("shared_device_scene: null model");
+  // The model is held weakly too: a new model at a freed one's address is not taken for it.
+  struct Entry {
+    std::weak_ptr<const GaussianModel> model;
+    std::weak_ptr<const DeviceScene> scene;
+  };
+  static std::mutex mutex;
+  static std::map<const GaussianModel*, Entry> uploaded;
+  const std::lock_guard<std::mutex> lock(mutex);
+  for (auto it = uploaded.begin(); it != uploaded.end();)  // forget what nobody holds
+    it = it->second.model.expired() || it->second.scene.expired() ? uploaded.erase(it) : std::next(it);
+  const auto found = uploaded.find(model.get());
+  if (found != uploaded.end())
+    if (auto scene = found->second.scene.lock()) return scene;
+  auto scene = DeviceScene::upload(*model);
+  uploaded[model.get()] = {model, scene};
+  return scene;
+}
+
 std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model,
                                              const RenderOptions& options) {
   if (!model) throw std::invalid_argument("make_cuda_renderer: null model");
-  return std::make_unique<CudaRenderer>(DeviceScene::upload(*model), options);
+  return std::make_unique<CudaRenderer>(shared_device_scene(model), options);
 }
 
 }  // namespace catgs::cuda

@@ -8,6 +8,7 @@
 
 #include "cuda_check.h"
 #include "stages.h"
+#include "tile_test.cuh"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {
@@ -32,14 +33,12 @@ __global__ void gather_counts_kernel(const uint64_t* ends,           // [n]
 // One thread per Gaussian writes its run of keys. Writes are bounded by its own slot
 // [begin, end): a disagreement between counting and emitting could never spill into a neighbour.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-emit_keys_kernel(const float2* mean2d,          // [N]
-                 const float4* conic_opacity,   // [N]
+emit_keys_kernel(TileTests tests,
                  const float* depth,            // [N]
-                 const float* q_max,            // [N] (exact only)
                  const ushort4* rect,           // [N]
                  const uint32_t* tiles_touched, // [N]
                  const uint64_t* ends,          // [N] inclusive scan of tiles_touched
-                 uint64_t n, int tiles_x, int tiles_y, int width, int height, bool exact,
+                 uint64_t n, int tiles_x, int tiles_y,
                  uint64_t* keys,                // [L]
                  uint32_t* values) {            // [L]
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
@@ -49,13 +48,10 @@ emit_keys_kernel(const float2* mean2d,          // [N]
   const uint64_t end = ends[i];
   uint64_t at = end - tiles_touched[i];
   const uint32_t depth_bits = __float_as_uint(depth[i]);
-  const glm::vec2 mean(mean2d[i].x, mean2d[i].y);
-  const float4 co = conic_opacity[i];
-  const glm::vec3 conic(co.x, co.y, co.z);
-  const float qm = exact ? q_max[i] : 0.0f;
+  const GaussianTileTest hit = load_tile_test(tests, i);
   for (int ty = r.y; ty < r.w && at < end; ++ty) {
     for (int tx = r.x; tx < r.z && at < end; ++tx) {
-      if (exact && !fm::ellipse_touches_tile(mean, conic, qm, tx, ty, width, height)) continue;
+      if (!hit(tx, ty)) continue;
       const auto tile = static_cast<uint32_t>(ty * tiles_x + tx);
       keys[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
       values[at] = static_cast<uint32_t>(i);
@@ -74,15 +70,12 @@ emit_keys_kernel(const float2* mean2d,          // [N]
 // the lanes whose tile passes take consecutive slots (ballot + popc), so the order is the one the
 // per-thread loop (and the CPU reference) produces.
 __global__ void __launch_bounds__(tune::kBigThreads)
-emit_big_kernel(BigList big,
-                const float2* mean2d,          // [N]
-                const float4* conic_opacity,   // [N]
+emit_big_kernel(BigList big, TileTests tests,
                 const float* depth,            // [N]
-                const float* q_max,            // [N] (exact only)
                 const ushort4* rect,           // [N]
                 const uint32_t* tiles_touched, // [N]
                 const uint64_t* ends,          // [N]
-                int tiles_x, int tiles_y, int width, int height, bool exact,
+                int tiles_x, int tiles_y,
                 uint64_t* keys,                // [L]
                 uint32_t* values) {            // [L]
   const unsigned lane = threadIdx.x & 31u;
@@ -98,14 +91,11 @@ emit_big_kernel(BigList big,
     const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
     const uint32_t depth_bits = __float_as_uint(depth[i]);
-    const glm::vec2 mean(mean2d[i].x, mean2d[i].y);
-    const float4 co = conic_opacity[i];
-    const glm::vec3 conic(co.x, co.y, co.z);
-    const float qm = exact ? q_max[i] : 0.0f;
+    const GaussianTileTest test = load_tile_test(tests, i);
     for (int base = 0; base < area && at < end; base += 32) {
       const int t = base + static_cast<int>(lane);
       const int tx = r.x + (t % rw), ty = r.y + (t / rw);
-      const bool hit = t < area && (!exact || fm::ellipse_touches_tile(mean, conic, qm, tx, ty, width, height));
+      const bool hit = t < area && test(tx, ty);
       const unsigned hits = __ballot_sync(0xffffffffu, hit);
       const uint64_t slot = at + static_cast<uint64_t>(__popc(hits & ((1u << lane) - 1u)));
       if (hit && slot < end) {
@@ -142,17 +132,15 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 }
 
 void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               bool exact, const BigList& big, uint64_t* keys, uint32_t* values,
+               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* values,
                cudaStream_t stream) {
   if (n == 0) return;
   const uint64_t blocks = (n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-      p.mean2d, p.conic_opacity, p.depth, p.q_max, p.rect, p.tiles_touched, ends, n, cam.tiles_x,
-      cam.tiles_y, cam.width, cam.height, exact, keys, values);
+      tests, p.depth, p.rect, p.tiles_touched, ends, n, cam.tiles_x, cam.tiles_y, keys, values);
   CATGS_CUDA_LAUNCHED("emit_keys_kernel");
   emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(
-      big, p.mean2d, p.conic_opacity, p.depth, p.q_max, p.rect, p.tiles_touched, ends,
-      cam.tiles_x, cam.tiles_y, cam.width, cam.height, exact, keys, values);
+      big, tests, p.depth, p.rect, p.tiles_touched, ends, cam.tiles_x, cam.tiles_y, keys, values);
   CATGS_CUDA_LAUNCHED("emit_big_kernel");
 }
 

@@ -4,6 +4,7 @@
 // same answer here as in key emission.
 #include "cuda_check.h"
 #include "stages.h"
+#include "tile_test.cuh"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {
@@ -97,28 +98,26 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
     atomicAdd(visible, static_cast<unsigned long long>(block_visible));
 }
 
-// Exact pipeline, big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and
-// writes the count; the same fm::ellipse_touches_tile as everywhere else.
+// Big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and writes the
+// count; the same tile test as key emission (tile_test.cuh).
 __global__ void __launch_bounds__(tune::kBigThreads)
-count_big_kernel(BigList big, Projected p, int width, int height,
-                 unsigned long long* visible) {  // [1]
+count_big_kernel(BigList big, TileTests tests,
+                 const ushort4* rect,           // [N]
+                 uint32_t* tiles_touched,       // [N]
+                 unsigned long long* visible) { // [1]
   const int lane = static_cast<int>(threadIdx.x & 31u);
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
   const unsigned total = *big.count;
   unsigned long long found = 0;
   for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < total; w += warps) {
     const uint32_t i = big.index[w];
-    const ushort4 r = p.rect[i];
+    const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
-    const glm::vec2 mean(p.mean2d[i].x, p.mean2d[i].y);
-    const float4 co = p.conic_opacity[i];
-    const glm::vec3 conic(co.x, co.y, co.z);
-    const float qm = p.q_max[i];
+    const GaussianTileTest hit = load_tile_test(tests, i);
     uint32_t n = 0;
-    for (int t = lane; t < area; t += 32)
-      n += fm::ellipse_touches_tile(mean, conic, qm, r.x + t % rw, r.y + t / rw, width, height) ? 1u : 0u;
+    for (int t = lane; t < area; t += 32) n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
     n = __reduce_add_sync(0xffffffffu, n);
-    if (lane == 0) p.tiles_touched[i] = n;
+    if (lane == 0) tiles_touched[i] = n;
     found += n > 0 ? 1u : 0u;
   }
   if (lane == 0 && found > 0) atomicAdd(visible, found);
@@ -135,8 +134,15 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
       scene, cam, exact, out, visible, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
-  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, out, cam.width,
-                                                                       cam.height, visible);
+  const TileTests tests{TileTestKind::ellipse, out.mean2d, out.conic_opacity, out.q_max, {}, cam.width,
+                        cam.height};
+  count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
+}
+
+void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect,
+                     uint32_t* tiles_touched, unsigned long long* visible, cudaStream_t stream) {
+  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, rect, tiles_touched,
+                                                                       visible);
   CATGS_CUDA_LAUNCHED("count_big_kernel");
 }
 

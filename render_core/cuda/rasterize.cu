@@ -27,6 +27,7 @@
 //   exact-warp): a full per-strip ellipse test cost more than it saved, so it stays off.
 // - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
 //   later encoder can read the frame without a host copy.
+#include "blend.cuh"
 #include "cuda_check.h"
 #include "stages.h"
 #include "tunables.h"
@@ -34,12 +35,6 @@
 namespace catgs::cuda::stages {
 
 namespace {
-
-// As catgs::to_unorm8 (renderer.h): clamp to [0, 1], * 255, round half up.
-__device__ __forceinline__ uint32_t unorm8(float v) {
-  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
-  return static_cast<uint32_t>(v * 255.0f + 0.5f);
-}
 
 constexpr int kWarps = tune::kRasterThreads / 32;
 constexpr int kRowsPerWarp = 32 / tune::kTileSize;
@@ -62,86 +57,51 @@ __device__ __forceinline__ uint32_t warp_mask(float2 mean, float4 co, float q_ma
   return ((2u << r1) - 1u) & ~((1u << r0) - 1u);
 }
 
+// The optional per-warp skip (exact pipeline): fetch stores the warp mask of each entry, and a warp
+// skips the entries whose bit is clear.
+struct WarpSkip {
+  const float* q_max;  // [N]
+  uint8_t* mask;       // [kRasterBatch] shared
+  float y0;
+  int warp;
+  __device__ __forceinline__ void fetch(int rank, uint32_t g, const BlendBatch& b) const {
+    mask[rank] = static_cast<uint8_t>(warp_mask(b.mean[rank], b.conic_opacity[rank], q_max[g], y0));
+  }
+  __device__ __forceinline__ bool operator()(uint32_t j) const { return !((mask[j] >> warp) & 1u); }
+};
+
 template <bool kWarpCull>
 __global__ void __launch_bounds__(tune::kRasterThreads)
 rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the sorted list
                  const uint32_t* tile_order,   // [tiles] or null
                  const uint32_t* values,       // [L] sorted Gaussian indices
-                 const float2* mean2d,         // [N]
-                 const float4* conic_opacity,  // [N]
-                 const float4* color,          // [N]
-                 const float* q_max,           // [N] (kWarpCull only)
+                 Projected g,                  // [N] features (q_max read with kWarpCull only)
                  int width, int height, int tiles_x, float3 background,
                  float* out_rgb,               // [H, W, 3]
                  uint32_t* out_rgba8) {        // [H, W]
-  __shared__ float2 s_mean[tune::kRasterBatch];
-  __shared__ float4 s_conic_opacity[tune::kRasterBatch];
-  __shared__ float4 s_color[tune::kRasterBatch];
+  __shared__ BlendBatch batch;
   __shared__ uint8_t s_mask[kWarpCull ? tune::kRasterBatch : 1];
 
   const uint32_t tile = tile_order ? tile_order[blockIdx.x] : blockIdx.x;
   const int tx = static_cast<int>(tile % static_cast<uint32_t>(tiles_x));
   const int ty = static_cast<int>(tile / static_cast<uint32_t>(tiles_x));
   const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
-  const int warp = rank / 32;
   const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
   const bool inside = px < width && py < height;
-  const float fpx = static_cast<float>(px), fpy = static_cast<float>(py);
 
   const uint2 range = ranges[tile];
-  bool done = !inside;
-  float T = 1.0f;
-  float3 C = make_float3(0.0f, 0.0f, 0.0f);
-
-  for (uint32_t base = range.x; base < range.y; base += tune::kRasterBatch) {
-    if (__syncthreads_count(done) == tune::kRasterThreads) break;
-    const uint32_t fetch = base + static_cast<uint32_t>(rank);
-    if (fetch < range.y) {  // bounds-checked prefetch
-      const uint32_t g = values[fetch];
-      const float2 m = mean2d[g];
-      const float4 co = conic_opacity[g];
-      s_mean[rank] = m;
-      s_conic_opacity[rank] = co;
-      s_color[rank] = color[g];
-      if constexpr (kWarpCull)
-        s_mask[rank] = static_cast<uint8_t>(warp_mask(m, co, q_max[g], static_cast<float>(ty * tune::kTileSize)));
-    }
-    __syncthreads();
-    const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), range.y - base);
-    for (uint32_t j = 0; j < count && !done; ++j) {
-      if constexpr (kWarpCull)
-        if (!((s_mask[j] >> warp) & 1u)) continue;  // warp-uniform: no pixel of this warp reached
-      const float2 m = s_mean[j];
-      const float4 co = s_conic_opacity[j];
-      const float dx = m.x - fpx, dy = m.y - fpy;
-      const float power = fm::gaussian_power(glm::vec3(co.x, co.y, co.z), dx, dy);
-      if (power > 0.0f) continue;
-      const float alpha = fminf(fm::kMaxAlpha, co.w * expf(power));
-      if (alpha < fm::kMinAlpha) continue;
-      const float test_T = T * (1.0f - alpha);
-      if (test_T < fm::kMinTransmittance) {
-        done = true;
-        break;
-      }
-      const float4 c = s_color[j];
-      const float w = alpha * T;
-      C.x += c.x * w;
-      C.y += c.y * w;
-      C.z += c.z * w;
-      T = test_T;
-    }
-    __syncthreads();  // shared memory is refilled next round
+  PixelState state{make_float3(0.0f, 0.0f, 0.0f), 1.0f, !inside};
+  if constexpr (kWarpCull) {
+    const WarpSkip skip{g.q_max, s_mask, static_cast<float>(ty * tune::kTileSize), rank / 32};
+    blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py), true, batch,
+                state, skip);
+  } else {
+    blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py), true, batch,
+                state, NoSkip{});
   }
-
   if (!inside) return;
-  C.x += T * background.x;
-  C.y += T * background.y;
-  C.z += T * background.z;
-  const uint64_t p = static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px);
-  out_rgb[3 * p] = C.x;
-  out_rgb[3 * p + 1] = C.y;
-  out_rgb[3 * p + 2] = C.z;
-  out_rgba8[p] = unorm8(C.x) | (unorm8(C.y) << 8) | (unorm8(C.z) << 16) | (255u << 24);
+  write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C,
+              state.T, background, out_rgb, out_rgba8);
 }
 
 }  // namespace
@@ -152,10 +112,8 @@ void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* 
   const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
   const dim3 block(tune::kTileSize, tune::kTileSize);
   auto kernel = warp_cull ? rasterize_kernel<true> : rasterize_kernel<false>;
-  kernel<<<tiles, block, 0, stream>>>(ranges, tile_order, sorted_values, projected.mean2d,
-                                      projected.conic_opacity, projected.color, projected.q_max,
-                                      cam.width, cam.height, cam.tiles_x, background, out_rgb,
-                                      out_rgba8);
+  kernel<<<tiles, block, 0, stream>>>(ranges, tile_order, sorted_values, projected, cam.width, cam.height,
+                                      cam.tiles_x, background, out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("rasterize_kernel");
 }
 

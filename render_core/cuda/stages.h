@@ -53,6 +53,35 @@ struct BigList {
   unsigned* count;   // [1]
 };
 
+// catgs key frames: each visible Gaussian's trail (forward_model.h fm::Trail), pixel units.
+struct Trails {
+  float4* mean0_motion;  // [N] (mean0.x, mean0.y, motion.x, motion.y)
+  float4* conic_q;       // [N] (A, B, C) inverse of the trail covariance, q_trail
+  float4* cov;           // [N] (a, b, c, unused) trail covariance (sub-frame containment check)
+};
+
+// Which tile test decides render-list membership (the three pipelines' stage 2).
+enum class TileTestKind { square, ellipse, trail };
+
+// The inputs of the tile test, read per Gaussian by tile_test.cuh.
+struct TileTests {
+  TileTestKind kind;
+  const float2* mean2d;         // [N] ellipse
+  const float4* conic_opacity;  // [N] ellipse
+  const float* q_max;           // [N] ellipse
+  Trails trails;                // trail
+  int width, height;            // pixels
+};
+
+// The speculation path of a catgs key frame: the key camera, then the predicted cameras of the
+// window (paper sec. 3.1), passed by value to the kernel (33 x 108 bytes fits a launch's
+// parameter space).
+inline constexpr int kMaxPath = 33;
+struct PathParams {
+  int count;
+  CameraParams cam[kMaxPath];
+};
+
 // Stage 1 (preprocess.cu): frustum culling, EWA 2D covariance, conic, SH colour, tile bounds and
 // per-Gaussian tile counts (vanilla: 3-sigma square; exact: opacity-aware ellipse-vs-tile test).
 // Adds the number of visible Gaussians to *visible (one atomic per block). Big Gaussians are
@@ -60,6 +89,40 @@ struct BigList {
 // by a second kernel, a warp per Gaussian. `big.count` must be zero on entry.
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
                 unsigned long long* visible, const BigList& big, cudaStream_t stream);
+
+// Stage 1, big Gaussians (preprocess.cu): a warp per Gaussian of `big` counts the tiles of its
+// rectangle passing `tests` into tiles_touched, and adds the Gaussians found visible to *visible.
+void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect,
+                     uint32_t* tiles_touched, unsigned long long* visible, cudaStream_t stream);
+
+// catgs key frame, stage 1 (speculative_preprocess.cu; mirrors src/cpu/speculative_preprocess.cpp):
+// each Gaussian is projected at every camera of `path`; one visible at the key camera gets the
+// key frame's features, a trail (fm::build_trail with `slack`, `margin_px`) and the number of
+// tiles the trail touches. Big trails are counted by count_big_tiles (called here).
+void speculative_preprocess(const SceneView& scene, const PathParams& path, float slack,
+                            float margin_px, const Projected& out, const Trails& trails,
+                            unsigned long long* visible, const BigList& big, cudaStream_t stream);
+
+// catgs planner input (speculative_preprocess.cu; mirrors cpu::max_screen_motion): the largest
+// screen motion (pixels) between cameras a and b of the means visible in a deeper than
+// min_depth, as float bits into *max_bits (which must hold 0 on entry; atomicMax on the bits of
+// non-negative floats orders like the floats).
+void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b,
+                       float min_depth, unsigned* max_bits, cudaStream_t stream);
+
+// Frustum cache (subframe_features.cu; paper sec. 3.2): the indices of the Gaussians with
+// tiles_touched > 0, increasing, into cached[]; their number into *count (device).
+std::size_t select_cached_temp_bytes(uint64_t n);
+void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, unsigned* count,
+                   void* temp, std::size_t temp_bytes, cudaStream_t stream);
+
+// catgs sub-frame, stage 1 (subframe_features.cu; mirrors cpu::update_subframe_features):
+// recomputes mean2d, conic, opacity (0 when culled here) and colour of the `count` cached
+// Gaussians at `cam`, and sets *outside = 1 when an on-screen ellipse left its trail (the frame
+// must then be a key frame). *outside must hold 0 on entry.
+void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached,
+                              uint32_t count, const Projected& projected, const Trails& trails,
+                              unsigned* outside, cudaStream_t stream);
 
 // Stage 2a (key_emission.cu): inclusive scan of tiles_touched into 64-bit ends[N] (CUB), then a
 // one-thread kernel copies ends[N-1] and *visible into counts[0..1] for one 16-byte readback.
@@ -73,7 +136,8 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 // entries; slots it cannot fill get the sentinel tile id `tiles` (sorted last, ignored later).
 // Big Gaussians are emitted a warp each (ballot + popc keeps the row-major order).
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               bool exact, const BigList& big, uint64_t* keys, uint32_t* values, cudaStream_t stream);
+               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* values,
+               cudaStream_t stream);
 
 // Stage 3 (sort.cu): CUB radix sort of (key, value) pairs over the low `key_bits` bits. Sorts
 // between the two halves of each double buffer; returns which half holds the result (0 or 1).
@@ -101,5 +165,41 @@ void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t
 void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* sorted_values,
                const Projected& projected, const CameraParams& cam, bool warp_cull, float3 background, float* out_rgb,
                uint32_t* out_rgba8, cudaStream_t stream);
+
+// Task splitting (task_split.cu; paper sec. 3.4, supplementary Alg. 1; mirrors cpu::plan_slices):
+// with average load avg = max(1, L / tiles), a tile over 2 avg entries becomes load / avg slices
+// of avg entries, the first taking the remainder; otherwise (or split = false) one slice.
+// Slices are numbered tile by tile, a tile's in list order. Outputs:
+//   slice_range [capacity] [begin, end) of each slice; slots past the total get [0, 0)
+//   slice_tile  [capacity] (tile, k) of each slice; slots past the total get tile = 0xffffffff
+//   tile_plan   [tiles]    (first slice, slice count, first partial slot, 0); a tile of one slice
+//                          has no partial slots (its slice writes the image directly)
+//   totals      [2]        (slices, partial slots), device
+// capacity = slice_capacity(tiles, L): tiles + L / avg bounds the slice count.
+struct SlicePlan {
+  uint2* slice_range;
+  uint2* slice_tile;
+  uint4* tile_plan;
+  unsigned* totals;
+};
+uint64_t split_average(uint32_t tiles, uint64_t entries);
+uint64_t slice_capacity(uint32_t tiles, uint64_t entries);
+std::size_t plan_slices_temp_bytes(uint32_t tiles);
+void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, const SlicePlan& plan,
+                 uint64_t* scan_scratch, void* temp, std::size_t temp_bytes, cudaStream_t stream);
+
+// Stage 5 with slices (rasterize_slices.cu; mirrors cpu::rasterize_slices): one block per slice
+// (block b takes slice order[b], or b without an order; `blocks` may exceed the slice total: the
+// extra blocks return). A tile's only slice writes C + T * background to the image; a slice of a
+// split tile writes its partial colour and transmittance to partials [slots, 256] (C.rgb, T).
+// `early_termination`: stop a pixel before T would drop below 1e-4 within its slice.
+void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks,
+                      const uint32_t* sorted_values, const Projected& projected, const CameraParams& cam,
+                      bool early_termination, float3 background, float4* partials, float* out_rgb,
+                      uint32_t* out_rgba8, cudaStream_t stream);
+// The merge (rasterize_slices.cu): for each split tile, C = sum_k C_k prod_{m<k} T_m, then
+// + prod T * background (paper sec. 3.4).
+void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam,
+                  float3 background, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

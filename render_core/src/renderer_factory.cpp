@@ -42,12 +42,6 @@ std::unique_ptr<Renderer> make_renderer(const std::string& kind,
     throw std::invalid_argument("unknown renderer '" + kind + "' (cpu, cuda or auto)");
 #if CATGS_HAVE_CUDA
   std::string reason;
-  if (options.pipeline == Pipeline::catgs) {
-    // The CUDA core has vanilla and exact only so far: catgs runs on the CPU reference.
-    if (kind == "cuda") throw std::runtime_error("the catgs pipeline is not implemented on CUDA yet");
-    say("cpu renderer (the catgs pipeline is not implemented on CUDA yet)");
-    return make_cpu();
-  }
   if (cuda::device_usable(&reason)) {
     say("cuda renderer: " + reason);
     return cuda::make_cuda_renderer(std::move(model), options);

@@ -2,8 +2,17 @@
 // it reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-warp][,catgs] [--frames N] [--warmup N]
-//               [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
+//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-wN]] [--frames N]
+//               [--warmup N] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
+//               [--quality-every K]
+//
+// catgs variants (paper Tables 1/3 ablations and the supplementary's window table): catgs-nocache
+// (--no-cache: every frame a key frame), catgs-nosplit (--no-split), catgs-wN (W_initial = N).
+// catgs frames are posed at the trace's 120 FPS clock (render_device_at), so the motion predictor
+// sees the real timing. With --quality-every K (CUDA; default 1, 0 = off), every K-th frame of each
+// catgs variant is compared, after its timing, with a full `exact` render of the same pose by a
+// second renderer: sub-frames give the image quality (PSNR over 8-bit RGB, max abs error of the
+// float image), key frames the render-list growth (catgs key list / exact list, same pose).
 //
 // --renderer cpu (the default in a build without CUDA) times the CPU reference with the steady
 // clock around render_at() (pose in, 8-bit image in host memory out); catgs runs there only.
@@ -28,6 +37,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <numeric>
 #include <sstream>
 #include <thread>
@@ -81,6 +91,9 @@ struct PipelineResult {
   std::string name;
   std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible, heaviest;
   std::vector<double> key_ms, sub_ms, window;  // catgs: key vs sub-frame times, W per key frame
+  std::vector<double> key_stage[6], sub_stage[6];  // catgs: pre, keys, sort, ranges, raster, merge
+  std::vector<double> sub_psnr, sub_max_abs, list_growth;  // catgs vs exact, same pose (--quality-every)
+  std::size_t subframes_inf = 0;  // sub-frames identical to the full render (PSNR +inf)
   std::size_t peak_buffer_bytes = 0, device_used_bytes = 0, allocations_timed = 0;
   int syncs = 0;
 };
@@ -97,7 +110,7 @@ int run(int argc, char** argv) {
   const Args args(argc, argv, {"--scene", "--city!", "--radius-sq", "--spacing", "--seed", "--scale",
                                "--trace", "--width", "--height", "--pipeline", "--frames", "--warmup",
                                "--json", "--snapshot-dir", "--up", "--seconds-per-view", "--distance",
-                               "--renderer", "--help!"});
+                               "--renderer", "--quality-every", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage;
     return 0;
@@ -179,15 +192,22 @@ int run(int argc, char** argv) {
     std::string name;
     catgs::Pipeline pipeline;
     bool warp_cull;
+    catgs::SpeculationParams speculation;
   };
   std::vector<Variant> pipelines;
   {
     std::stringstream ss(args.get("--pipeline", "vanilla,exact"));
     for (std::string name; std::getline(ss, name, ',');) {
-      if (name == "exact-warp") pipelines.push_back({name, catgs::Pipeline::exact, true});
-      else pipelines.push_back({name, catgs::parse_pipeline(name), false});
+      Variant v{name, catgs::Pipeline::catgs, false, {}};
+      if (name == "exact-warp") v = {name, catgs::Pipeline::exact, true, {}};
+      else if (name == "catgs-nocache") v.speculation.frustum_and_sort_cache = false;
+      else if (name == "catgs-nosplit") v.speculation.task_splitting = false;
+      else if (name.rfind("catgs-w", 0) == 0) v.speculation.initial_window = std::stoi(name.substr(7));
+      else v.pipeline = catgs::parse_pipeline(name);
+      pipelines.push_back(v);
     }
   }
+  [[maybe_unused]] const int quality_every = args.get_int("--quality-every", 1);  // CUDA only
 
   std::vector<PipelineResult> results;
   auto record = [](PipelineResult& res, double ms, const catgs::FrameStats& s) {
@@ -201,6 +221,8 @@ int run(int argc, char** argv) {
     res.visible.push_back(static_cast<double>(s.visible));
     (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);
     if (s.key_frame) res.window.push_back(s.window);
+    const double stage[6] = {s.preprocess_ms, s.keys_ms, s.sort_ms, s.ranges_ms, s.rasterize_ms, s.merge_ms};
+    for (int k = 0; k < 6; ++k) (s.key_frame ? res.key_stage : res.sub_stage)[k].push_back(stage[k]);
   };
   std::string scene_name = model.name;
   std::size_t scene_size = model.size(), scene_bytes = 0;
@@ -217,9 +239,15 @@ int run(int argc, char** argv) {
                trace.size(), warmup, frames, width, height);
   model = catgs::GaussianModel{};  // the host copy is no longer needed
 
+  catgs::RenderOptions exact_options;
+  exact_options.pipeline = catgs::Pipeline::exact;
+  catgs::cuda::CudaRenderer reference(scene, exact_options);  // --quality-every's full renders
+  catgs::Image image, full;
   for (const Variant& variant : pipelines) {
     catgs::RenderOptions o;
     o.pipeline = variant.pipeline;
+    o.speculation = variant.speculation;
+    const bool catgs_variant = variant.pipeline == catgs::Pipeline::catgs;
     catgs::cuda::CudaRenderer r(scene, o);
     r.set_warp_culling(variant.warp_cull);
     PipelineResult res;
@@ -227,21 +255,46 @@ int run(int argc, char** argv) {
     cudaEvent_t start, end;
     check(cudaEventCreate(&start), "cudaEventCreate");
     check(cudaEventCreate(&end), "cudaEventCreate");
+    const double dt = 1.0 / 120.0;  // the trace's clock
     for (int k = 0; k < warmup; ++k) {
-      r.render_device(camera_at(k));
+      r.render_device_at(camera_at(k), k * dt);
       (void)r.last_stats();
     }
     const std::size_t allocs_before = r.allocation_count();
     for (int k = 0; k < frames; ++k) {
       const catgs::Camera cam = camera_at(warmup + k);
       check(cudaEventRecord(start, r.stream()), "cudaEventRecord");
-      r.render_device(cam);
+      const catgs::cuda::DeviceFrame frame = r.render_device_at(cam, (warmup + k) * dt);
       check(cudaEventRecord(end, r.stream()), "cudaEventRecord");
       check(cudaEventSynchronize(end), "cudaEventSynchronize");
       float ms = 0;
       check(cudaEventElapsedTime(&ms, start, end), "cudaEventElapsedTime");
-      record(res, ms, r.last_stats());
+      const catgs::FrameStats stats = r.last_stats();
+      record(res, ms, stats);
       res.heaviest.push_back(static_cast<double>(r.heaviest_tile_entries()));  // after timing
+      if (catgs_variant && quality_every > 0 && k % quality_every == 0) {  // after timing too
+        reference.render(cam, full);
+        if (stats.key_frame) {
+          res.list_growth.push_back(static_cast<double>(stats.render_list_length) /
+                                    std::max<double>(1.0, static_cast<double>(reference.last_stats().render_list_length)));
+        } else {
+          const std::size_t pixels = static_cast<std::size_t>(frame.width) * frame.height;
+          image.width = frame.width;
+          image.height = frame.height;
+          image.rgb.resize(pixels * 3);
+          image.rgba8.resize(pixels * 4);
+          check(cudaMemcpy(image.rgb.data(), frame.rgb, pixels * 3 * sizeof(float), cudaMemcpyDeviceToHost),
+                "cudaMemcpy");
+          check(cudaMemcpy(image.rgba8.data(), frame.rgba8, pixels * 4, cudaMemcpyDeviceToHost), "cudaMemcpy");
+          const double p = catgs::psnr_rgba8(image, full);
+          double max_abs = 0.0;
+          for (std::size_t i = 0; i < image.rgb.size(); ++i)
+            max_abs = std::max(max_abs, static_cast<double>(std::fabs(image.rgb[i] - full.rgb[i])));
+          if (std::isinf(p)) ++res.subframes_inf;
+          else res.sub_psnr.push_back(p);
+          res.sub_max_abs.push_back(max_abs);
+        }
+      }
     }
     res.allocations_timed = r.allocation_count() - allocs_before;
     res.peak_buffer_bytes = r.peak_buffer_bytes();
@@ -270,6 +323,7 @@ int run(int argc, char** argv) {
       if (variant.warp_cull) throw std::invalid_argument("exact-warp is a CUDA variant");
       catgs::RenderOptions o;
       o.pipeline = variant.pipeline;
+      o.speculation = variant.speculation;
       auto r = catgs::make_renderer("cpu", shared, o);
       PipelineResult res;
       res.name = variant.name;
@@ -332,15 +386,39 @@ int run(int argc, char** argv) {
     p["peak_buffer_bytes"] = r.peak_buffer_bytes;
     p["device_memory_used_bytes"] = r.device_used_bytes;
     p["scene_plus_peak_buffers_bytes"] = r.peak_buffer_bytes + scene_bytes;
-    if (!r.sub_ms.empty()) {  // catgs: speculation
+    if (r.name.rfind("catgs", 0) == 0) {  // catgs: speculation
       const Summary k = summarize(r.key_ms), sub = summarize(r.sub_ms);
-      p["key_frames"] = {{"count", r.key_ms.size()}, {"mean_ms", k.mean}, {"median_ms", k.median}};
-      p["sub_frames"] = {{"count", r.sub_ms.size()}, {"mean_ms", sub.mean}, {"median_ms", sub.median}};
-      p["sub_over_key_cost"] = sub.mean / k.mean;
+      auto stage_json = [&](const std::vector<double>* st) {
+        return nlohmann::json{{"preprocess", mean(st[0])}, {"keys", mean(st[1])}, {"sort", mean(st[2])},
+                              {"tile_ranges", mean(st[3])}, {"rasterize", mean(st[4])}, {"merge", mean(st[5])}};
+      };
+      p["key_frames"] = {{"count", r.key_ms.size()}, {"mean_ms", k.mean}, {"median_ms", k.median},
+                         {"stages_ms_mean", stage_json(r.key_stage)}};
+      p["sub_frames"] = {{"count", r.sub_ms.size()}, {"mean_ms", sub.mean}, {"median_ms", sub.median},
+                         {"stages_ms_mean", stage_json(r.sub_stage)}};
+      p["sub_over_key_cost"] = r.sub_ms.empty() ? 0.0 : sub.mean / k.mean;
       p["window_mean"] = summarize(r.window).mean;
+      std::map<int, int> windows;
+      for (double w : r.window) ++windows[static_cast<int>(w)];
+      for (const auto& [w, count] : windows) p["window_histogram"][std::to_string(w)] = count;
       std::printf("%-10s key frames %zu (%.3f ms mean), sub-frames %zu (%.3f ms mean, %.0f%% of a key frame), "
                   "mean window %.2f\n", r.name.c_str(), r.key_ms.size(), k.mean, r.sub_ms.size(), sub.mean,
-                  100.0 * sub.mean / k.mean, summarize(r.window).mean);
+                  r.sub_ms.empty() ? 0.0 : 100.0 * sub.mean / k.mean, summarize(r.window).mean);
+      std::printf("%-10s   key stages ms: pre %.3f keys %.3f sort %.3f ranges %.3f raster %.3f merge %.3f | "
+                  "sub stages ms: pre %.3f raster %.3f merge %.3f\n", r.name.c_str(), mean(r.key_stage[0]),
+                  mean(r.key_stage[1]), mean(r.key_stage[2]), mean(r.key_stage[3]), mean(r.key_stage[4]),
+                  mean(r.key_stage[5]), mean(r.sub_stage[0]), mean(r.sub_stage[4]), mean(r.sub_stage[5]));
+      if (!r.sub_psnr.empty() || r.subframes_inf > 0 || !r.list_growth.empty()) {
+        const Summary q = summarize(r.sub_psnr), grow = summarize(r.list_growth), e = summarize(r.sub_max_abs);
+        p["subframe_quality_vs_full_render"] = {
+            {"compared", r.sub_psnr.size() + r.subframes_inf}, {"identical", r.subframes_inf},
+            {"psnr_db_mean_finite", q.mean}, {"psnr_db_min", q.min}, {"max_abs_error", e.max}};
+        p["key_list_growth_vs_exact"] = {{"compared", r.list_growth.size()}, {"mean", grow.mean}, {"max", grow.max}};
+        std::printf("%-10s   sub-frames vs full render: %zu compared (%zu identical), PSNR mean %.2f dB "
+                    "(finite ones), min %.2f dB, max abs %.3g; key list / exact list: mean %.4f, max %.4f\n",
+                    r.name.c_str(), r.sub_psnr.size() + r.subframes_inf, r.subframes_inf, q.mean, q.min, e.max,
+                    grow.mean, grow.max);
+      }
     }
     p["host_device_syncs_per_frame"] = r.syncs;
     p["allocations_during_timed_frames"] = r.allocations_timed;
@@ -358,6 +436,17 @@ int run(int argc, char** argv) {
     const double list_ratio = summarize(v->list).mean / summarize(e->list).mean;
     std::printf("exact / vanilla: FPS x%.2f, render list %.2fx shorter\n", fps_ratio, list_ratio);
     j["exact_over_vanilla"] = {{"fps_ratio", fps_ratio}, {"render_list_ratio", list_ratio}};
+  }
+  for (const auto& r : results) {  // every catgs variant against the full-frame pipelines of this run
+    if (r.name.rfind("catgs", 0) != 0) continue;
+    const double t = summarize(r.frame_ms).mean;
+    for (const char* base : {"vanilla", "exact"}) {
+      if (const auto* b = find(base)) {
+        const double ratio = summarize(b->frame_ms).mean / t;
+        std::printf("%s / %s: FPS x%.2f\n", r.name.c_str(), base, ratio);
+        j["fps_ratios"][r.name + "_over_" + base] = ratio;
+      }
+    }
   }
   if (args.has("--json")) {
     std::ofstream out(args.get("--json"));

@@ -22,6 +22,18 @@
 //  list>2^31  a render list of more than 2^31 entries renders (or fails with a clear CudaError
 //             for lack of device memory); > 2^32 - 1 entries throws std::length_error.
 //  city26M    49 tumblewood copies (26.6 M Gaussians): CUDA == CPU on a fly-over view.
+// catgs pipeline (paper sec. 3; issue 4), over real camera paths interpolated at 120 FPS:
+//  catgs=cpu  CUDA catgs vs the CPU reference's catgs, frame by frame: the same key/sub-frame
+//             decisions on >= 95% of frames, and where they agree PSNR >= 50 dB.
+//  subframes  CUDA catgs vs a full CUDA exact render of the same pose: sub-frames mean PSNR >= 45 dB
+//             (identical frames counted as 100 dB) and min >= 35 dB; key frames >= 50 dB; some
+//             sub-frames served.
+//  split      task splitting on vs off (every frame a key frame): max abs <= 1e-5 per channel with
+//             early termination off, PSNR >= 50 dB with it on; and tiles were really split.
+//  abrupt     a jump re-keys (the frame after it is a key frame equal to the full render); a stop
+//             keeps W = W_initial; a fast turn shrinks W by the paper's rule; W = 0 renders every
+//             frame in full.
+//  steady     catgs: a second pass over the same trace allocates nothing.
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -150,6 +162,222 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model,
   }
 }
 
+// ---- catgs ----
+
+// A real camera path moved onto `m` (scene_tiling.h) at 120 FPS, at least `frames` frames.
+catgs::Trace real_trace(const GaussianModel& m, const std::string& cameras, int w, int h, std::size_t frames) {
+  auto keys = catgs::load_inria_cameras(cameras);
+  catgs::Trace t = catgs::fit_trace_to_scene(keys, m, {0.0f, -1.0f, 0.0f}, 0.6f, 120.0, 0.5, w, h);
+  if (t.size() > frames) t.resize(frames);
+  return t;
+}
+
+catgs::RenderOptions catgs_options() {
+  catgs::RenderOptions o;
+  o.pipeline = Pipeline::catgs;
+  return o;
+}
+
+// catgs=cpu: the CUDA and the CPU catgs take the same decisions and draw the same images.
+void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_ptr<GaussianModel> model,
+                  std::shared_ptr<const catgs::cuda::DeviceScene> dev, const catgs::Trace& trace) {
+  catgs::cpu::SpeculativeRenderer c(model, catgs_options());
+  catgs::cuda::CudaRenderer g(dev, catgs_options());
+  std::size_t agree = 0, subs = 0, list_equal = 0, keys = 0;
+  double min_psnr = INFINITY, max_abs = 0;
+  int max8 = 0;
+  for (const auto& tc : trace) {
+    Image a, b;
+    c.render_at(tc.camera, tc.time_s, a);
+    g.render_at(tc.camera, tc.time_s, b);
+    const auto& cs = c.last_stats();
+    const auto& gs = g.last_stats();
+    if (cs.key_frame != gs.key_frame) continue;
+    ++agree;
+    subs += gs.key_frame ? 0 : 1;
+    if (gs.key_frame) {
+      ++keys;
+      list_equal += cs.render_list_length == gs.render_list_length ? 1 : 0;
+    }
+    const Diff d = compare(a, b);
+    min_psnr = std::min(min_psnr, d.psnr);
+    max_abs = std::max(max_abs, d.max_abs);
+    max8 = std::max(max8, d.max_abs8);
+  }
+  char note[160];
+  std::snprintf(note, sizeof note, "%zu frames: decisions agree on %zu (%zu sub-frames), key lists equal %zu/%zu",
+                trace.size(), agree, subs, list_equal, keys);
+  add({"catgs=cpu", name, view, "catgs", min_psnr, max_abs, max8, -1, -1,
+       agree * 100 >= trace.size() * 95 && min_psnr >= 50.0 && subs > 0, note});
+}
+
+// subframes: CUDA catgs against the full render of every pose.
+void catgs_quality(const std::string& name, const std::string& view, std::shared_ptr<const catgs::cuda::DeviceScene> dev,
+                   const catgs::Trace& trace) {
+  catgs::RenderOptions oe;
+  oe.pipeline = Pipeline::exact;
+  catgs::cuda::CudaRenderer g(dev, catgs_options()), full(dev, oe);
+  std::vector<double> sub_psnr;
+  double key_min = INFINITY, sub_max_abs = 0, window_sum = 0, growth_max = 0;
+  int sub_max8 = 0;
+  std::size_t keys = 0;
+  for (const auto& tc : trace) {
+    Image a, b;
+    g.render_at(tc.camera, tc.time_s, a);
+    full.render(tc.camera, b);
+    const auto& gs = g.last_stats();
+    const Diff d = compare(a, b);
+    if (gs.key_frame) {
+      ++keys;
+      key_min = std::min(key_min, d.psnr);
+      window_sum += gs.window;
+      growth_max = std::max(growth_max, static_cast<double>(gs.render_list_length) /
+                                            std::max<double>(1.0, static_cast<double>(full.last_stats().render_list_length)));
+    } else {
+      sub_psnr.push_back(std::min(d.psnr, 100.0));
+      sub_max_abs = std::max(sub_max_abs, d.max_abs);
+      sub_max8 = std::max(sub_max8, d.max_abs8);
+    }
+  }
+  double mean = 0, min = INFINITY;
+  for (double v : sub_psnr) {
+    mean += v / static_cast<double>(sub_psnr.size());
+    min = std::min(min, v);
+  }
+  char note[200];
+  std::snprintf(note, sizeof note,
+                "%zu key + %zu sub-frames, mean W %.2f; sub-frames: mean %.2f dB, min %.2f dB; key frames min "
+                "%s dB; key list / exact list max %.3f",
+                keys, sub_psnr.size(), keys ? window_sum / static_cast<double>(keys) : 0.0, mean, min,
+                fmt_psnr(key_min).c_str(), growth_max);
+  add({"subframes", name, view, "catgs", mean, sub_max_abs, sub_max8, -1, -1,
+       !sub_psnr.empty() && mean >= 45.0 && min >= 35.0 && key_min >= 50.0, note});
+}
+
+// split: slices and merge change the image only by float rounding.
+void catgs_split(const std::string& name, std::shared_ptr<const catgs::cuda::DeviceScene> dev, const Camera& cam) {
+  for (bool et : {false, true}) {
+    catgs::RenderOptions on = catgs_options(), off = catgs_options();
+    on.speculation.frustum_and_sort_cache = off.speculation.frustum_and_sort_cache = false;
+    on.speculation.early_termination = off.speculation.early_termination = et;
+    off.speculation.task_splitting = false;
+    catgs::cuda::CudaRenderer a(dev, on), b(dev, off);
+    Image ia, ib;
+    a.render(cam, ia);
+    b.render(cam, ib);
+    const Diff d = compare(ia, ib);
+    const std::size_t slices = a.last_stats().slices, tiles = b.last_stats().slices;
+    char note[120];
+    std::snprintf(note, sizeof note, "early termination %s; %zu slices vs %zu tiles", et ? "on" : "off", slices, tiles);
+    add({"split", name, "orbit1", "catgs", d.psnr, d.max_abs, d.max_abs8,
+         static_cast<long long>(b.last_stats().render_list_length),
+         static_cast<long long>(a.last_stats().render_list_length),
+         slices > tiles && (et ? d.psnr >= 50.0 : d.max_abs <= 1e-5), note});
+  }
+}
+
+// abrupt: a jump, a stop, a fast turn; and W = 0.
+void catgs_abrupt(const std::string& name, const GaussianModel& m, std::shared_ptr<const catgs::cuda::DeviceScene> dev,
+                  int w, int h) {
+  catgs::GeneratorParams gp;
+  gp.width = w;
+  gp.height = h;
+  gp.rate_hz = 120.0;
+  gp.duration_s = 1.0;
+  gp.up = {0.0f, -1.0f, 0.0f};
+  const auto rb = catgs::robust_bounds(m);
+  const glm::vec3 e = rb.extent();
+  const float r = 0.6f * std::max(e.x, std::max(e.y, e.z));
+  const catgs::Trace slow = catgs::make_orbit(rb, r, 0.3f * r, 10.0f, gp);    // 10 deg/s
+  const catgs::Trace fast = catgs::make_orbit(rb, r, 0.3f * r, 720.0f, gp);   // 720 deg/s
+  catgs::RenderOptions oe;
+  oe.pipeline = Pipeline::exact;
+  catgs::cuda::CudaRenderer full(dev, oe);
+  {  // jump: 40 slow frames, then the pose of the slow orbit's far side, 180 deg away
+    catgs::cuda::CudaRenderer g(dev, catgs_options());
+    for (int k = 0; k < 40; ++k) g.render_device_at(slow[static_cast<std::size_t>(k)].camera, k / 120.0);
+    const Camera jump = fast[30].camera;  // 720 deg/s * 0.25 s: the far side of the orbit
+    Image a, b;
+    g.render_at(jump, 40 / 120.0, a);
+    full.render(jump, b);
+    const bool key = g.last_stats().key_frame;
+    const Diff d = compare(a, b);
+    add({"abrupt", name, "jump", "catgs", d.psnr, d.max_abs, d.max_abs8, -1, -1, key && d.psnr >= 50.0,
+         key ? "the frame after the jump is a key frame" : "the frame after the jump was served as a sub-frame"});
+  }
+  {  // stop: the camera holds still; W = W_initial, sub-frames equal the full render
+    catgs::cuda::CudaRenderer g(dev, catgs_options());
+    int subs = 0, w_min = 99;
+    double min_psnr = INFINITY;
+    for (int k = 0; k < 30; ++k) {
+      const Camera& cam = slow[std::min<std::size_t>(static_cast<std::size_t>(k), 10)].camera;  // stops at frame 10
+      Image a, b;
+      g.render_at(cam, k / 120.0, a);
+      if (k < 24) continue;  // the predictor's 100 ms window holds only the still poses from here
+      full.render(cam, b);
+      const auto& s = g.last_stats();
+      subs += s.key_frame ? 0 : 1;
+      if (s.key_frame) w_min = std::min(w_min, s.window);
+      min_psnr = std::min(min_psnr, compare(a, b).psnr);
+    }
+    add({"abrupt", name, "stop", "catgs", min_psnr, 0, 0, -1, -1, subs > 0 && w_min == 4 && min_psnr >= 45.0,
+         "after the stop: " + std::to_string(subs) + "/6 sub-frames, smallest W at a key frame " +
+             std::to_string(w_min)});
+  }
+  {  // fast turn: M > 16 px per frame, so W = floor(4 * 16 / M) < 4; every image stays close
+    catgs::cuda::CudaRenderer g(dev, catgs_options());
+    int w_max = 0, keys = 0;
+    double min_psnr = INFINITY;
+    for (int k = 0; k < 40; ++k) {
+      Image a, b;
+      g.render_at(fast[static_cast<std::size_t>(k)].camera, k / 120.0, a);
+      full.render(fast[static_cast<std::size_t>(k)].camera, b);
+      const auto& s = g.last_stats();
+      if (k >= 8 && s.key_frame) {
+        w_max = std::max(w_max, s.window);
+        ++keys;
+      }
+      min_psnr = std::min(min_psnr, compare(a, b).psnr);
+    }
+    add({"abrupt", name, "turn", "catgs", min_psnr, 0, 0, -1, -1, keys > 0 && w_max < 4 && min_psnr >= 35.0,
+         "720 deg/s: largest W at a key frame " + std::to_string(w_max) + " over " + std::to_string(keys) +
+             " key frames"});
+  }
+  {  // W = 0: every frame in full
+    catgs::RenderOptions o = catgs_options();
+    o.speculation.initial_window = 0;
+    catgs::cuda::CudaRenderer g(dev, o);
+    int keys = 0;
+    double min_psnr = INFINITY;
+    for (int k = 0; k < 20; ++k) {
+      Image a, b;
+      g.render_at(slow[static_cast<std::size_t>(k)].camera, k / 120.0, a);
+      full.render(slow[static_cast<std::size_t>(k)].camera, b);
+      keys += g.last_stats().key_frame ? 1 : 0;
+      min_psnr = std::min(min_psnr, compare(a, b).psnr);
+    }
+    add({"abrupt", name, "W=0", "catgs", min_psnr, 0, 0, -1, -1, keys == 20 && min_psnr >= 50.0,
+         std::to_string(keys) + "/20 key frames"});
+  }
+}
+
+// steady: a catgs trace repeated allocates nothing.
+void catgs_steady(const std::string& name, std::shared_ptr<const catgs::cuda::DeviceScene> dev,
+                  const catgs::Trace& trace) {
+  catgs::cuda::CudaRenderer g(dev, catgs_options());
+  auto pass = [&](double t0) {
+    for (const auto& tc : trace) g.render_device_at(tc.camera, t0 + tc.time_s);
+    (void)g.last_stats();
+  };
+  pass(0.0);
+  const std::size_t a0 = g.allocation_count(), b0 = g.buffer_bytes();
+  pass(100.0);
+  const std::size_t a1 = g.allocation_count(), b1 = g.buffer_bytes();
+  add({"steady", name, std::to_string(trace.size()) + "f", "catgs", 0, 0, 0, -1, -1, a0 == a1 && b0 == b1,
+       "allocations " + std::to_string(a0) + " -> " + std::to_string(a1) + ", buffers " + std::to_string(b0 >> 20) +
+           " -> " + std::to_string(b1 >> 20) + " MiB"});
+}
+
 // A scene of n huge, nearly opaque Gaussians stacked in front of the camera, each covering every
 // tile of a 1920x1080 image (vanilla emits n * 8160 entries).
 std::shared_ptr<GaussianModel> wall_scene(std::size_t n) {
@@ -238,6 +466,34 @@ int run(int argc, char** argv) {
         row.note = e.what();
       }
       add(row);
+    }
+  }
+
+  // catgs: CUDA vs CPU, sub-frame quality, split, abrupt motion, steady buffers.
+  {
+    const std::size_t frames = quick ? 48 : 240;
+    const auto biker_path = real_trace(*biker, traces + "/tandt_train.cameras.json", W, H, frames);
+    catgs_vs_cpu("biker", "tandt", biker, biker_dev, biker_path);
+    catgs_quality("biker", "tandt", biker_dev, biker_path);
+    catgs_split("biker", biker_dev, orbit_views(*biker, W, H)[1]);
+    if (!quick) {
+      auto flowers_path = catgs::interpolate_views(catgs::load_inria_cameras(traces + "/flowers_sh3.cameras.json", W, H),
+                                                   120.0, 0.5);
+      flowers_path.resize(std::min<std::size_t>(flowers_path.size(), 600));
+      catgs_vs_cpu("flowers_sh3", "own", flowers, flowers_dev,
+                   catgs::Trace(flowers_path.begin(), flowers_path.begin() + 120));
+      catgs_quality("flowers_sh3", "own", flowers_dev, flowers_path);
+      for (const char* path : {"mipnerf360_bicycle", "tandt_train", "flowers_sh3"}) {
+        const auto t = real_trace(*tumble, traces + "/" + path + ".cameras.json", W, H, 600);
+        if (std::string(path) == "mipnerf360_bicycle")
+          catgs_vs_cpu("tumblewood_sh2", path, tumble, tumble_dev, catgs::Trace(t.begin(), t.begin() + 60));
+        catgs_quality("tumblewood_sh2", path, tumble_dev, t);
+      }
+      catgs_split("tumblewood_sh2", tumble_dev, orbit_views(*tumble, W, H)[1]);
+      catgs_abrupt("tumblewood_sh2", *tumble, tumble_dev, W, H);
+      catgs_steady("tumblewood_sh2", tumble_dev, real_trace(*tumble, traces + "/tandt_train.cameras.json", W, H, 240));
+    } else {
+      catgs_abrupt("biker", *biker, biker_dev, W, H);
     }
   }
 

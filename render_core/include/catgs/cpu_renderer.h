@@ -12,7 +12,7 @@
 #include <glm/glm.hpp>
 
 #include "catgs/forward_model.h"
-#include "catgs/motion_predictor.h"
+#include "catgs/speculation_planner.h"
 #include "catgs/renderer.h"
 
 namespace catgs::cpu {
@@ -164,16 +164,12 @@ class SpeculativeRenderer final : public Renderer {
 
   std::shared_ptr<const GaussianModel> model_;
   RenderOptions options_;
-  MotionPredictor predictor_;
+  SpeculationPlanner planner_;
   ProjectedGaussians projected_;
   RenderList list_;
   TileRanges ranges_;
   std::vector<TileSlice> slices_;
   std::vector<uint32_t> cached_;  // frustum cache: Gaussians with list entries
-  Camera key_camera_;
-  int window_ = 0, subframes_done_ = 0;
-  bool group_open_ = false;
-  double clock_s_ = 0.0;
   FrameStats stats_;
 };
 

@@ -1,12 +1,20 @@
-// The CUDA render core (DESIGN.md "Render core"): the CPU reference's five stages on the GPU
-// (render_core/cuda/, one .cu per stage), vanilla and exact pipelines chosen at run time.
+// The CUDA render core (DESIGN.md "Render core"): the CPU reference's stages on the GPU
+// (render_core/cuda/, one .cu per stage), the vanilla, exact and catgs pipelines chosen at run time.
+//
+// catgs (paper sec. 3; DESIGN.md 1-3; render_core/cuda/render_catgs.cpp): the same decisions as
+// the CPU reference's cpu::SpeculativeRenderer (both use SpeculationPlanner). A key frame measures
+// M (one 4-byte readback), pre-processes the speculation window (trails), emits, sorts, ranges,
+// selects the frustum cache and plans the split tasks (the counts readback below); a sub-frame
+// recomputes the cached Gaussians' features at its pose and rasterizes the key frame's slices,
+// then reads back one flag: if an on-screen Gaussian left its trail, the frame is rendered again
+// as a key frame. Syncs: key frame 2 (1 without a window), sub-frame 1.
 //
 // Ownership: a DeviceScene holds one copy of a GaussianModel in device memory and is shared,
 // read-only, by any number of CudaRenderers (shared_ptr<const DeviceScene>). Each CudaRenderer
 // owns a CUDA stream and reusable device buffers that grow when a frame needs more (by 1.25x) and
 // are never freed between frames: a steady trace allocates nothing.
 //
-// Host-device synchronisation per frame: ONE, in render_device(): after the scan of per-Gaussian
+// Host-device synchronisation per frame (vanilla, exact): ONE, in render_device(): after the scan of per-Gaussian
 // tile counts, 16 bytes (render list length, visible count) come back to the host, because CUB's
 // radix sort takes its item count from the host and the list buffers may have to grow first.
 // render(camera, Image&) adds a second one, the download of the image to host memory.
@@ -97,18 +105,24 @@ struct DeviceFrame {
 
 class CudaRenderer final : public Renderer {
  public:
-  // Throws std::invalid_argument for a null scene or the (unimplemented) catgs pipeline,
-  // CudaError when the stream or events cannot be created.
+  // Throws std::invalid_argument for a null scene or bad speculation parameters (window outside
+  // 0..32, non-positive F_target), CudaError when the stream or events cannot be created.
   CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options);
   ~CudaRenderer() override;
 
   std::string name() const override { return "cuda"; }
   // render_device() then a download into `out` (rgb and rgba8, as the CPU renderer fills them).
   void render(const Camera& camera, Image& out) override;
+  // render_device_at() then a download into `out`.
+  void render_at(const Camera& camera, double time_s, Image& out) override;
   // Renders `camera` into this renderer's device image; one host-device sync (see above).
   // Throws std::invalid_argument for a bad camera, std::length_error for an oversized render
   // list, CudaError for CUDA failures.
+  // catgs: the renderer's own clock advances 1 / F_target a call (as render_device_at()).
   DeviceFrame render_device(const Camera& camera);
+  // As render_device(), for a camera the client posed at `time_s` (seconds, client clock): the
+  // catgs pipeline feeds its motion predictor with it; vanilla and exact ignore it.
+  DeviceFrame render_device_at(const Camera& camera, double time_s);
   // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).
   const FrameStats& last_stats() const override;
   const RenderOptions& options() const override { return options_; }
@@ -123,10 +137,11 @@ class CudaRenderer final : public Renderer {
   std::size_t peak_buffer_bytes() const;
   // Number of buffer (re)allocations since construction (a steady trace should add none).
   std::size_t allocation_count() const;
-  // Host-device synchronisations inside the last render_device() (1).
+  // Host-device synchronisations inside the last render_device() (see above).
   int syncs_last_frame() const;
-  // Entries of the last frame's heaviest tile (waits for the frame; a diagnostic copy of 4 bytes
-  // outside the frame). One block walks that tile alone, so it bounds the rasterization time.
+  // Entries of the last frame's heaviest tile (catgs: heaviest slice of the group's key frame;
+  // waits for the frame; a diagnostic copy of 4 bytes outside the frame). One block walks that
+  // tile alone, so it bounds the rasterization time.
   std::size_t heaviest_tile_entries() const;
   // exact pipeline: let each warp of the rasterizer skip entries outside the vertical extent of
   // the Gaussian's ellipse (same image, bit for bit). Off by default: measured no faster.
@@ -135,6 +150,12 @@ class CudaRenderer final : public Renderer {
 
  private:
   struct State;
+  DeviceFrame render_full(const Camera& camera);                 // vanilla, exact
+  DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
+  void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
+  bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp
+  void catgs_rasterize(const Camera& camera, uint32_t blocks);    // render_catgs.cpp
+  void download(const DeviceFrame& frame, Image& out);
   std::shared_ptr<const DeviceScene> scene_;
   RenderOptions options_;
   std::unique_ptr<State> state_;
@@ -143,7 +164,12 @@ class CudaRenderer final : public Renderer {
   bool warp_culling_ = false;
 };
 
-// Uploads `model` to a new DeviceScene and makes a CudaRenderer over it (renderer_factory.cpp).
+// The DeviceScene of `model`: uploaded on the first call, then the same one for as long as any
+// renderer holds it (a process-wide cache keyed by the model's address, thread-safe), so many
+// sessions over one scene share one copy on the GPU. Throws as DeviceScene::upload.
+std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model);
+
+// A CudaRenderer over shared_device_scene(model) (renderer_factory.cpp).
 std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model,
                                              const RenderOptions& options);
 

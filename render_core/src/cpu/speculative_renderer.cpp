@@ -15,18 +15,6 @@ double ms_between(clock::time_point a, clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
-Camera with_pose(const Camera& intrinsics, const TimedPose& pose) {
-  Camera c = intrinsics;
-  c.R = glm::transpose(glm::mat3_cast(pose.orientation));
-  c.t = -(c.R * pose.position);
-  return c;
-}
-
-bool same_intrinsics(const Camera& a, const Camera& b) {
-  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
-         a.cx == b.cx && a.cy == b.cy && a.near_plane == b.near_plane && a.far_plane == b.far_plane;
-}
-
 }  // namespace
 
 SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model,
@@ -39,32 +27,23 @@ SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> mo
 void SpeculativeRenderer::set_options(const RenderOptions& options) {
   if (options.pipeline != Pipeline::catgs)
     throw std::invalid_argument("SpeculativeRenderer runs the catgs pipeline only");
-  if (options.speculation.initial_window < 0 || options.speculation.initial_window > 32)
-    throw std::invalid_argument("speculation window must be in 0..32");
-  if (!(options.speculation.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
+  planner_.set_params(options.speculation);
   options_ = options;
-  group_open_ = false;
 }
 
 void SpeculativeRenderer::render(const Camera& camera, Image& out) {
-  clock_s_ += 1.0 / options_.speculation.target_fps;
-  render_at(camera, clock_s_, out);
+  render_at(camera, planner_.advance_clock(), out);
 }
 
 void SpeculativeRenderer::key_frame(const Camera& camera) {
   const SpeculationParams& sp = options_.speculation;
   const auto t0 = clock::now();
   // Plan the window from the predicted path (never from future input): M over one frame, W.
-  int window = 0;
-  if (sp.frustum_and_sort_cache && sp.initial_window > 0 && !predictor_.empty()) {
-    const double dt = 1.0 / sp.target_fps;
-    const Camera next = with_pose(camera, predictor_.predict(dt));
-    window = motion_adaptive_window(max_screen_motion(*model_, camera, next, sp.depth_threshold), sp);
-  }
-  std::vector<Camera> path{camera};
-  for (int k = 1; k <= window; ++k)
-    path.push_back(with_pose(camera, predictor_.predict(k / sp.target_fps)));
-  speculative_preprocess(*model_, path, window > 0 ? sp.trail_slack : 0.0f,
+  const int window = planner_.window_wanted()
+                         ? planner_.window_for(max_screen_motion(*model_, camera, planner_.next_camera(camera),
+                                                                 sp.depth_threshold))
+                         : 0;
+  speculative_preprocess(*model_, planner_.path(camera, window), window > 0 ? sp.trail_slack : 0.0f,
                          window > 0 ? sp.trail_margin_px : 0.0f, projected_);
   const auto t1 = clock::now();
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
@@ -78,10 +57,7 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   cached_.clear();
   for (std::size_t i = 0; i < projected_.tiles_touched.size(); ++i)
     if (projected_.tiles_touched[i] > 0) cached_.push_back(static_cast<uint32_t>(i));
-  key_camera_ = camera;
-  window_ = window;
-  subframes_done_ = 0;
-  group_open_ = window > 0;
+  planner_.start_group(camera, window);
   stats_.key_frame = true;
   stats_.preprocess_ms = ms_between(t0, t1);
   stats_.keys_ms = ms_between(t1, t2);
@@ -92,16 +68,15 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
 void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& out) {
   validate_camera(camera);
   const auto start = clock::now();
-  predictor_.add({time_s, camera.position(), camera.orientation()});
   stats_ = {};
-  bool sub = group_open_ && subframes_done_ < window_ && same_intrinsics(camera, key_camera_);
+  bool sub = planner_.observe(camera, time_s);
   if (sub) {
     const auto t0 = clock::now();
     sub = update_subframe_features(*model_, camera, cached_, projected_);
     stats_.preprocess_ms = ms_between(t0, clock::now());
   }
   if (sub) {
-    ++subframes_done_;
+    planner_.subframe_served();
     stats_.key_frame = false;
   } else {
     key_frame(camera);
@@ -110,7 +85,7 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
   rasterize_slices(projected_, list_, slices_, TileGrid::of(camera.width, camera.height),
                    options_.speculation.early_termination, options_.background, out, &stats_.merge_ms);
   stats_.rasterize_ms = ms_between(t5, clock::now()) - stats_.merge_ms;
-  stats_.window = window_;
+  stats_.window = planner_.window();
   stats_.cached = cached_.size();
   stats_.visible = cached_.size();
   stats_.render_list_length = list_.keys.size();

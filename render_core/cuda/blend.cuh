@@ -1,0 +1,97 @@
+// Front-to-back blending of a run [begin, end) of the sorted render list over one 16 x 16 tile by
+// one 256-thread block (thread = pixel), shared by rasterize.cu (a tile's whole range) and
+// rasterize_slices.cu (one slice of it). The design essay is at the top of rasterize.cu: rounds
+// of 256 entries fetched into shared memory (bounds-checked), a block-wide exit once every pixel
+// is done, the reference 3DGS blending rule per pixel.
+#pragma once
+
+#include "stages.h"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+// As catgs::to_unorm8 (renderer.h): clamp to [0, 1], * 255, round half up.
+__device__ __forceinline__ uint32_t unorm8(float v) {
+  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+  return static_cast<uint32_t>(v * 255.0f + 0.5f);
+}
+
+// One round's entries in shared memory.
+struct BlendBatch {
+  float2 mean[tune::kRasterBatch];
+  float4 conic_opacity[tune::kRasterBatch];
+  float4 color[tune::kRasterBatch];
+};
+
+// Pixel state: colour C and transmittance T (start at 0 and 1); done stops the pixel.
+struct PixelState {
+  float3 C;
+  float T;
+  bool done;
+};
+
+// Blends entries [begin, end) into `px` (the pixel at (fpx, fpy) of thread `rank`). With
+// early_termination a pixel stops before the Gaussian that would take T below 1e-4 (as the
+// reference 3DGS); without it, blends to the end. `skip(j)` (warp-uniform) lets a caller drop
+// batch entry j for its warp; every thread of the block must call this (barriers inside).
+template <typename Skip>
+__device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
+                                            const uint32_t* values,         // [L]
+                                            const Projected& g, int rank, float fpx, float fpy,
+                                            bool early_termination, BlendBatch& batch, PixelState& px,
+                                            Skip skip) {
+  for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
+    if (__syncthreads_count(px.done) == tune::kRasterThreads) break;
+    const uint32_t fetch = base + static_cast<uint32_t>(rank);
+    if (fetch < end) {  // bounds-checked prefetch
+      const uint32_t gi = values[fetch];
+      batch.mean[rank] = g.mean2d[gi];
+      batch.conic_opacity[rank] = g.conic_opacity[gi];
+      batch.color[rank] = g.color[gi];
+      skip.fetch(rank, gi, batch);
+    }
+    __syncthreads();
+    const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), end - base);
+    for (uint32_t j = 0; j < count && !px.done; ++j) {
+      if (skip(j)) continue;
+      const float2 m = batch.mean[j];
+      const float4 co = batch.conic_opacity[j];
+      const float power = fm::gaussian_power(glm::vec3(co.x, co.y, co.z), m.x - fpx, m.y - fpy);
+      if (power > 0.0f) continue;
+      const float alpha = fminf(fm::kMaxAlpha, co.w * expf(power));
+      if (alpha < fm::kMinAlpha) continue;
+      const float test_T = px.T * (1.0f - alpha);
+      if (early_termination && test_T < fm::kMinTransmittance) {
+        px.done = true;
+        break;
+      }
+      const float4 c = batch.color[j];
+      const float w = alpha * px.T;
+      px.C.x += c.x * w;
+      px.C.y += c.y * w;
+      px.C.z += c.z * w;
+      px.T = test_T;
+    }
+    __syncthreads();  // shared memory is refilled next round
+  }
+}
+
+// No per-warp skipping.
+struct NoSkip {
+  __device__ __forceinline__ void fetch(int, uint32_t, const BlendBatch&) const {}
+  __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
+};
+
+// Writes C + T * background as float RGB and packed RGBA8 at pixel p.
+__device__ __forceinline__ void write_pixel(uint64_t p, float3 C, float T, float3 background, float* out_rgb,
+                                            uint32_t* out_rgba8) {
+  C.x += T * background.x;
+  C.y += T * background.y;
+  C.z += T * background.z;
+  out_rgb[3 * p] = C.x;
+  out_rgb[3 * p + 1] = C.y;
+  out_rgb[3 * p + 2] = C.z;
+  out_rgba8[p] = unorm8(C.x) | (unorm8(C.y) << 8) | (unorm8(C.z) << 16) | (255u << 24);
+}
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,103 @@
+// Stage 5 with task splitting (paper sec. 3.4; mirrors src/cpu/rasterize_slices.cpp).
+//
+// Design. One 256-thread block per slice, thread = pixel, blending the slice's run of the tile's
+// list exactly as rasterize.cu blends a whole tile (blend.cuh). Blocks take slices in the order
+// the key frame computed (longest first, so the heavy slices start early and the short ones fill
+// in behind). A tile that was not split has one slice, which writes C + T * background straight
+// into the image: no partials and no merge for the common case. A split tile's slices write
+// their partial colour C_k and transmittance T_k to their partial slots (float4 per pixel,
+// 4 KiB per slot), and merge_kernel, a block per split tile, composes
+// C = sum_k C_k prod_{m<k} T_m front to back and adds prod T * background.
+#include "blend.cuh"
+#include "cuda_check.h"
+#include "stages.h"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+namespace {
+
+__global__ void __launch_bounds__(tune::kRasterThreads)
+rasterize_slices_kernel(SlicePlan plan,
+                        const uint32_t* order,   // [blocks] or null
+                        const uint32_t* values,  // [L] sorted Gaussian indices
+                        Projected g, int width, int height, int tiles_x, bool early_termination,
+                        float3 background,
+                        float4* partials,        // [slots, 256] (C.rgb, T)
+                        float* out_rgb,          // [H, W, 3]
+                        uint32_t* out_rgba8) {   // [H, W]
+  __shared__ BlendBatch batch;
+  const uint32_t s = order ? order[blockIdx.x] : blockIdx.x;
+  const uint2 tile_k = plan.slice_tile[s];
+  if (tile_k.x == 0xffffffffu) return;  // a slot past the slice total (block-uniform)
+  const uint2 range = plan.slice_range[s];
+  const uint4 tp = plan.tile_plan[tile_k.x];
+  const int tx = static_cast<int>(tile_k.x % static_cast<uint32_t>(tiles_x));
+  const int ty = static_cast<int>(tile_k.x / static_cast<uint32_t>(tiles_x));
+  const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
+  const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
+  const bool inside = px < width && py < height;
+
+  PixelState state{make_float3(0.0f, 0.0f, 0.0f), 1.0f, !inside};
+  blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
+              early_termination, batch, state, NoSkip{});
+  if (!inside) return;
+  if (tp.y == 1) {  // the tile's only slice
+    write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C,
+                state.T, background, out_rgb, out_rgba8);
+    return;
+  }
+  partials[static_cast<uint64_t>(tp.z + tile_k.y) * tune::kRasterThreads + rank] =
+      make_float4(state.C.x, state.C.y, state.C.z, state.T);
+}
+
+__global__ void __launch_bounds__(tune::kRasterThreads)
+merge_kernel(SlicePlan plan,
+             const float4* partials,  // [slots, 256]
+             int width, int height, int tiles_x, float3 background,
+             float* out_rgb,          // [H, W, 3]
+             uint32_t* out_rgba8) {   // [H, W]
+  const uint4 tp = plan.tile_plan[blockIdx.x];
+  if (tp.y <= 1) return;  // written by its only slice
+  const int tx = static_cast<int>(blockIdx.x % static_cast<uint32_t>(tiles_x));
+  const int ty = static_cast<int>(blockIdx.x / static_cast<uint32_t>(tiles_x));
+  const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
+  const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
+  if (px >= width || py >= height) return;
+  float3 C = make_float3(0.0f, 0.0f, 0.0f);
+  float T = 1.0f;
+  for (uint32_t k = 0; k < tp.y; ++k) {
+    const float4 p = partials[static_cast<uint64_t>(tp.z + k) * tune::kRasterThreads + rank];
+    C.x += T * p.x;
+    C.y += T * p.y;
+    C.z += T * p.z;
+    T *= p.w;
+  }
+  write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), C, T,
+              background, out_rgb, out_rgba8);
+}
+
+}  // namespace
+
+void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
+                      const Projected& projected, const CameraParams& cam, bool early_termination,
+                      float3 background, float4* partials, float* out_rgb, uint32_t* out_rgba8,
+                      cudaStream_t stream) {
+  if (blocks == 0) return;
+  const dim3 block(tune::kTileSize, tune::kTileSize);
+  rasterize_slices_kernel<<<blocks, block, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height,
+                                                        cam.tiles_x, early_termination, background, partials,
+                                                        out_rgb, out_rgba8);
+  CATGS_CUDA_LAUNCHED("rasterize_slices_kernel");
+}
+
+void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, float3 background,
+                  float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
+  const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
+  const dim3 block(tune::kTileSize, tune::kTileSize);
+  merge_kernel<<<tiles, block, 0, stream>>>(plan, partials, cam.width, cam.height, cam.tiles_x, background,
+                                            out_rgb, out_rgba8);
+  CATGS_CUDA_LAUNCHED("merge_kernel");
+}
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,157 @@
+// Internal to the CUDA core: the state a CudaRenderer owns (stream, events, reusable device
+// buffers), shared by cuda_renderer.cpp (vanilla, exact) and render_catgs.cpp (catgs).
+#pragma once
+
+#include <algorithm>
+#include <string>
+
+#include "catgs/speculation_planner.h"
+#include "cuda_check.h"
+#include "stages.h"
+#include "tunables.h"
+
+namespace catgs::cuda {
+
+// A device allocation that only grows (by tune::kGrowthFactor), never per frame.
+class GrowBuffer {
+ public:
+  GrowBuffer() = default;
+  GrowBuffer(const GrowBuffer&) = delete;
+  GrowBuffer& operator=(const GrowBuffer&) = delete;
+  ~GrowBuffer() { if (ptr_) cudaFree(ptr_); }
+
+  // Makes room for `bytes`; returns true when it had to reallocate (contents are then lost).
+  // cudaFree waits for in-flight work on the device, so a buffer still read by an earlier frame
+  // is never freed under it. Throws CudaError naming the size when device memory runs out.
+  bool ensure(std::size_t bytes, const char* what, std::size_t* allocations) {
+    if (bytes <= bytes_) return false;
+    const auto want = static_cast<std::size_t>(static_cast<double>(bytes) * tune::kGrowthFactor) + 256;
+    if (ptr_) CATGS_CUDA(cudaFree(ptr_));
+    ptr_ = nullptr;
+    bytes_ = 0;
+    std::size_t got = want;
+    if (cudaMalloc(&ptr_, want) != cudaSuccess) {
+      // No room for the slack: take exactly what this frame needs (huge lists near the limit).
+      (void)cudaGetLastError();
+      ptr_ = nullptr;
+      got = bytes;
+      try {
+        CATGS_CUDA(cudaMalloc(&ptr_, bytes));
+      } catch (const CudaError& e) {
+        ptr_ = nullptr;
+        throw CudaError(std::string("CUDA renderer: ") + what + " buffer of " +
+                            std::to_string(bytes) + " bytes: " + e.what(),
+                        e.code());
+      }
+    }
+    bytes_ = got;
+    ++*allocations;
+    return true;
+  }
+  template <typename T>
+  T* as() const { return static_cast<T*>(ptr_); }
+  std::size_t bytes() const { return bytes_; }
+
+ private:
+  void* ptr_ = nullptr;
+  std::size_t bytes_ = 0;
+};
+
+// Frame events: a key frame records all; a catgs sub-frame records kStart, kPreprocessed (its
+// features), kRasterized and kMerged. vanilla/exact: kMerged = kRasterized.
+enum Event { kStart, kPreprocessed, kKeysEmitted, kSorted, kRanged, kRasterized, kMerged, kEventCount };
+
+// The camera as the kernels see it.
+stages::CameraParams camera_params(const Camera& camera);
+
+// The scene as the kernels see it.
+inline stages::SceneView scene_view(const DeviceScene& scene) {
+  return {scene.means(), scene.log_scales(), scene.rotations(), scene.opacity_logits(), scene.sh(),
+          scene.sh_degree(), scene.size()};
+}
+
+struct CudaRenderer::State {
+  cudaStream_t stream = nullptr;
+  cudaEvent_t events[kEventCount] = {};
+  cudaEvent_t counts_ready = nullptr;
+  unsigned long long* host_counts = nullptr;  // pinned [2]: render list length, visible
+  std::size_t allocations = 0, peak_bytes = 0;
+  int syncs = 0;
+  int width = 0, height = 0;
+
+  // Per Gaussian.
+  GrowBuffer mean2d, conic_opacity, color, depth, q_max, rect, tiles_touched, ends, scan_temp, big;
+  // Per render-list entry (two halves each, for the radix sort's double buffer).
+  GrowBuffer keys[2], values[2], sort_temp;
+  // Per tile / pixel, and the small counters.
+  GrowBuffer ranges, tile_scratch, tile_order, order_temp, rgb, rgba8, counters;
+  const uint32_t* sorted_values = nullptr;
+  const uint32_t* heaviest = nullptr;  // device: entries of the heaviest tile (or slice)
+
+  // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian), the split plan (per slice
+  // and tile), partial slices, and its counters: [0] M bits, [1] outside flag, [2..3] slice and
+  // partial-slot totals, [4] frustum-cache size.
+  GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, cached, select_temp;
+  GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order,
+      slice_order_temp, partials, catgs_counters;
+  unsigned* host_catgs = nullptr;         // pinned [4]: M bits, outside flag, slice total, slots
+  cudaEvent_t catgs_readback = nullptr;   // M / outside flag copied to host_catgs
+  cudaEvent_t plan_ready = nullptr;       // the key frame's slice total copied to host_catgs[2]
+  SpeculationPlanner planner;
+  uint64_t key_entries = 0, key_visible = 0, key_capacity = 0;  // the open group's key frame
+  int window = 0;
+  bool key_frame = true;
+
+  // Grows the buffers every frame of `n` Gaussians at this camera's size needs.
+  void ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels);
+
+  // Stages 2-4 after pre-processing: scans tiles_touched, reads back the list length and the
+  // visible count (the frame's counts sync), grows the list buffers, emits keys with `tests`
+  // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
+  // ranges. Returns the list length. Throws std::length_error past 2^32 - 1 entries.
+  uint64_t build_render_list(uint64_t n, const stages::CameraParams& cam, const stages::TileTests& tests,
+                             uint64_t* visible);
+
+  // Views of the buffers as the stages take them.
+  stages::Projected projected() const {
+    return {mean2d.as<float2>(), conic_opacity.as<float4>(), color.as<float4>(), depth.as<float>(),
+            q_max.as<float>(),   rect.as<ushort4>(),         tiles_touched.as<uint32_t>()};
+  }
+  stages::BigList big_list() const {
+    return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + 3)};
+  }
+  stages::Trails trails() const {
+    return {trail_mean0_motion.as<float4>(), trail_conic_q.as<float4>(), trail_cov.as<float4>()};
+  }
+  stages::SlicePlan slice_plan() const {
+    return {slice_range.as<uint2>(), slice_tile.as<uint2>(), tile_plan.as<uint4>(),
+            catgs_counters.as<unsigned>() + 2};
+  }
+
+  std::size_t bytes() const {
+    std::size_t b = 0;
+    for (const GrowBuffer* g :
+         {&mean2d, &conic_opacity, &color, &depth, &q_max, &rect, &tiles_touched, &ends, &scan_temp, &big,
+          &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &ranges, &tile_scratch, &tile_order,
+          &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &cached,
+          &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
+          &slice_order, &slice_order_temp, &partials, &catgs_counters})
+      b += g->bytes();
+    return b;
+  }
+  void note_peak() { peak_bytes = std::max(peak_bytes, bytes()); }
+
+  ~State() {
+    if (host_counts) cudaFreeHost(host_counts);
+    if (host_catgs) cudaFreeHost(host_catgs);
+    if (catgs_readback) cudaEventDestroy(catgs_readback);
+    if (plan_ready) cudaEventDestroy(plan_ready);
+    for (cudaEvent_t& e : events)
+      if (e) cudaEventDestroy(e);
+    if (counts_ready) cudaEventDestroy(counts_ready);
+    if (stream) cudaStreamDestroy(stream);
+  }
+};
+
+
+}  // namespace catgs::cuda

@@ -1,0 +1,152 @@
+// catgs key frame, stage 1: pre-processing over the speculation window (paper sec. 3.1; mirrors
+// src/cpu/speculative_preprocess.cpp line for line through forward_model.h), and the planner's M.
+// Built with -fmad=false (CMakeLists.txt): the trail decides tile membership, and emission must
+// answer as counting did (and as the CPU reference does).
+#include "cuda_check.h"
+#include "stages.h"
+#include "tile_test.cuh"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+namespace {
+
+// One thread per Gaussian: project at every camera of the path, build the trail (fm::build_trail),
+// count the tiles it touches (big trails are left to count_big_tiles, a warp each). Local arrays
+// hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory.
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+speculative_preprocess_kernel(SceneView scene, PathParams path, float slack, float margin_px,
+                              Projected out, Trails trails,
+                              unsigned long long* visible,  // [1]
+                              BigList big) {
+  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  uint32_t touched = 0;
+  bool is_big = false;
+  if (i < scene.n) {
+    do {
+      const float opacity = fm::sigmoid(scene.opacity_logits[i]);
+      const float q_max = fm::opacity_aware_qmax(opacity);
+      if (!(q_max > 0.0f)) break;
+      const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
+      const fm::Cov3 cov3 = fm::covariance_3d(
+          {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
+          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
+           scene.rotations[4 * i + 3]});
+      glm::vec2 means[kMaxPath];
+      glm::vec3 covs[kMaxPath];
+      int seen = 0;
+      float key_depth = 0.0f;
+      for (int k = 0; k < path.count; ++k) {
+        const CameraParams& c = path.cam[k];
+        const glm::vec3 p = c.R * mean + c.t;
+        if (!(p.z > c.near_plane) || p.z > c.far_plane) {
+          if (k == 0) break;  // the key camera must see it (the key depth orders the list)
+          continue;
+        }
+        const glm::vec3 cov2 = fm::covariance_2d(cov3, c.R, p, c.fx, c.fy, c.tan_half_fov);
+        if (cov2.x * cov2.z - cov2.y * cov2.y <= 0.0f) {
+          if (k == 0) break;
+          continue;
+        }
+        means[seen] = glm::vec2(c.fx * p.x / p.z + c.cx - 0.5f, c.fy * p.y / p.z + c.cy - 0.5f);
+        covs[seen] = cov2;
+        if (k == 0) key_depth = p.z;
+        ++seen;
+      }
+      if (seen == 0) break;  // not visible at the key camera
+      const fm::Trail trail = fm::build_trail(means, covs, seen, q_max, slack, margin_px);
+      glm::vec3 conic, trail_conic;
+      if (!fm::conic_from_cov2d(covs[0], &conic) || !fm::conic_from_cov2d(trail.cov, &trail_conic)) break;
+      const CameraParams& key = path.cam[0];
+      const fm::TileRect rect =
+          fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail, key.width, key.height);
+      const int area = fm::tile_count(rect);
+      is_big = area > tune::kBigRectTiles;  // counted by count_big_tiles, a warp each
+      if (area > 0 && !is_big)
+        for (int ty = rect.y0; ty < rect.y1; ++ty)
+          for (int tx = rect.x0; tx < rect.x1; ++tx)
+            touched += fm::trail_touches_tile(trail.mean0, trail.motion, trail_conic, trail.q_trail, tx, ty,
+                                              key.width, key.height) ? 1u : 0u;
+      if (touched == 0 && !is_big) break;
+
+      const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
+      const glm::vec3 c = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i,
+                                          glm::normalize(mean - key.position));
+      out.mean2d[i] = make_float2(means[0].x, means[0].y);
+      out.conic_opacity[i] = make_float4(conic.x, conic.y, conic.z, opacity);
+      out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
+      out.depth[i] = key_depth;
+      out.q_max[i] = q_max;
+      out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
+                                 static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
+      trails.mean0_motion[i] = make_float4(trail.mean0.x, trail.mean0.y, trail.motion.x, trail.motion.y);
+      trails.conic_q[i] = make_float4(trail_conic.x, trail_conic.y, trail_conic.z, trail.q_trail);
+      trails.cov[i] = make_float4(trail.cov.x, trail.cov.y, trail.cov.z, 0.0f);
+    } while (false);
+    out.tiles_touched[i] = touched;
+  }
+  // Big trails join the big list (one atomic per warp holding any); the visible count takes one
+  // atomic per block; big ones are counted visible by count_big_tiles.
+  const unsigned lanes = __ballot_sync(0xffffffffu, is_big);
+  if (lanes != 0u) {
+    const int lane = static_cast<int>(threadIdx.x & 31u);
+    const int leader = __ffs(lanes) - 1;
+    unsigned base = 0;
+    if (lane == leader) base = atomicAdd(big.count, static_cast<unsigned>(__popc(lanes)));
+    base = __shfl_sync(0xffffffffu, base, leader);
+    if (is_big) big.index[base + __popc(lanes & ((1u << lane) - 1u))] = static_cast<uint32_t>(i);
+  }
+  const int block_visible = __syncthreads_count(touched > 0);
+  if (threadIdx.x == 0 && block_visible > 0)
+    atomicAdd(visible, static_cast<unsigned long long>(block_visible));
+}
+
+// M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+max_screen_motion_kernel(const float* means,  // [N, 3]
+                         uint64_t n, CameraParams a, CameraParams b, float min_depth,
+                         unsigned* max_bits) {  // [1]
+  float m = 0.0f;
+  const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
+  for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < n; i += stride) {
+    const glm::vec3 x(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+    const glm::vec3 pa = a.R * x + a.t, pb = b.R * x + b.t;
+    if (!(pa.z > min_depth) || !(pb.z > a.near_plane)) continue;
+    const glm::vec2 ua(a.fx * pa.x / pa.z + a.cx, a.fy * pa.y / pa.z + a.cy);
+    if (ua.x < 0 || ua.y < 0 || ua.x > static_cast<float>(a.width) || ua.y > static_cast<float>(a.height)) continue;
+    const glm::vec2 ub(b.fx * pb.x / pb.z + b.cx, b.fy * pb.y / pb.z + b.cy);
+    m = fmaxf(m, glm::length(ub - ua));
+  }
+  for (int off = 16; off > 0; off >>= 1) m = fmaxf(m, __shfl_xor_sync(0xffffffffu, m, off));
+  if ((threadIdx.x & 31u) == 0 && m > 0.0f) atomicMax(max_bits, __float_as_uint(m));
+}
+
+}  // namespace
+
+void speculative_preprocess(const SceneView& scene, const PathParams& path, float slack, float margin_px,
+                            const Projected& out, const Trails& trails, unsigned long long* visible,
+                            const BigList& big, cudaStream_t stream) {
+  if (path.count < 1 || path.count > kMaxPath)
+    throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPath) + " cameras");
+  if (scene.n == 0) return;
+  const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  if (blocks > 0x7fffffffull) throw std::length_error("speculative_preprocess: too many Gaussians for one grid");
+  speculative_preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
+      scene, path, slack, margin_px, out, trails, visible, big);
+  CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");
+  const TileTests tests{TileTestKind::trail, nullptr, nullptr, nullptr, trails, path.cam[0].width,
+                        path.cam[0].height};
+  count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
+}
+
+void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b, float min_depth,
+                       unsigned* max_bits, cudaStream_t stream) {
+  if (scene.n == 0) return;
+  const uint64_t want = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  const auto blocks = static_cast<unsigned>(want < 4096 ? want : 4096);
+  max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene.means, scene.n, a, b,
+                                                                          min_depth, max_bits);
+  CATGS_CUDA_LAUNCHED("max_screen_motion_kernel");
+}
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,93 @@
+// catgs sub-frames (paper sec. 3.2): the frustum cache (the Gaussians the key frame listed) and
+// their per-Gaussian features at the sub-frame's own pose, with the check that each on-screen
+// ellipse still lies inside the trail the key frame listed it by (mirrors
+// src/cpu/subframe_features.cpp). Built with -fmad=false: the containment check decides key vs
+// sub-frame, and should decide as the CPU reference does.
+#include <cub/device/device_select.cuh>
+#include <thrust/iterator/counting_iterator.h>
+
+#include "cuda_check.h"
+#include "stages.h"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+namespace {
+
+struct Listed {
+  const uint32_t* tiles_touched;  // [N]
+  __host__ __device__ bool operator()(uint32_t i) const { return tiles_touched[i] > 0; }
+};
+
+// One thread per cached Gaussian. A Gaussian culled at this pose gets opacity 0 (every pixel
+// then skips it); only an ellipse that reaches a pixel of this frame must lie inside its trail.
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+subframe_features_kernel(SceneView scene, CameraParams cam,
+                         const uint32_t* cached,  // [count]
+                         uint32_t count, Projected out, Trails trails,
+                         unsigned* outside) {     // [1]
+  const uint32_t c = blockIdx.x * blockDim.x + threadIdx.x;
+  if (c >= count) return;
+  const uint32_t i = cached[c];
+  const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
+  const glm::vec3 p = cam.R * mean + cam.t;
+  const float4 old = out.conic_opacity[i];
+  const float4 culled = make_float4(old.x, old.y, old.z, 0.0f);
+  if (!(p.z > cam.near_plane) || p.z > cam.far_plane) {
+    out.conic_opacity[i] = culled;
+    return;
+  }
+  const fm::Cov3 cov3 = fm::covariance_3d(
+      {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
+      {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
+       scene.rotations[4 * i + 3]});
+  const glm::vec3 cov2 = fm::covariance_2d(cov3, cam.R, p, cam.fx, cam.fy, cam.tan_half_fov);
+  glm::vec3 conic;
+  if (!fm::conic_from_cov2d(cov2, &conic)) {
+    out.conic_opacity[i] = culled;
+    return;
+  }
+  const glm::vec2 mean2d(cam.fx * p.x / p.z + cam.cx - 0.5f, cam.fy * p.y / p.z + cam.cy - 0.5f);
+  const float q_max = out.q_max[i];
+  const bool on_screen = fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height)) > 0;
+  if (on_screen) {
+    const float4 mm = trails.mean0_motion[i], cq = trails.conic_q[i], tc = trails.cov[i];
+    if (!fm::trail_contains(glm::vec2(mm.x, mm.y), glm::vec2(mm.z, mm.w), glm::vec3(tc.x, tc.y, tc.z), cq.w,
+                            mean2d, cov2, q_max))
+      *outside = 1u;  // any writer will do: one flag for the frame
+  }
+  const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
+  const glm::vec3 col = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i,
+                                        glm::normalize(mean - cam.position));
+  out.mean2d[i] = make_float2(mean2d.x, mean2d.y);
+  out.conic_opacity[i] = make_float4(conic.x, conic.y, conic.z, fm::sigmoid(scene.opacity_logits[i]));
+  out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
+}
+
+}  // namespace
+
+std::size_t select_cached_temp_bytes(uint64_t n) {
+  std::size_t bytes = 0;
+  CATGS_CUDA(cub::DeviceSelect::If(nullptr, bytes, thrust::counting_iterator<uint32_t>(0),
+                                   static_cast<uint32_t*>(nullptr), static_cast<unsigned*>(nullptr),
+                                   static_cast<int64_t>(n), Listed{nullptr}));
+  return bytes;
+}
+
+void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, unsigned* count, void* temp,
+                   std::size_t temp_bytes, cudaStream_t stream) {
+  CATGS_CUDA(cub::DeviceSelect::If(temp, temp_bytes, thrust::counting_iterator<uint32_t>(0), cached, count,
+                                   static_cast<int64_t>(n), Listed{tiles_touched}, stream));
+}
+
+void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached,
+                              uint32_t count, const Projected& projected, const Trails& trails,
+                              unsigned* outside, cudaStream_t stream) {
+  if (count == 0) return;
+  const unsigned blocks = (count + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  subframe_features_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, cached, count, projected,
+                                                                          trails, outside);
+  CATGS_CUDA_LAUNCHED("subframe_features_kernel");
+}
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,50 @@
+// The tile-membership test of stage 2, loaded once per Gaussian into registers and then asked
+// per tile: square (vanilla: every tile of the rectangle), ellipse (exact: fm::ellipse_touches_tile)
+// or trail (catgs key frames: fm::trail_touches_tile). The same test counts tiles in stage 1 and
+// emits keys in stage 2, so both agree (both files are built with -fmad=false).
+#pragma once
+
+#include "catgs/forward_model.h"
+#include "stages.h"
+
+namespace catgs::cuda::stages {
+
+struct GaussianTileTest {
+  TileTestKind kind;
+  glm::vec2 mean;    // ellipse: 2D mean; trail: mean0
+  glm::vec2 motion;  // trail only
+  glm::vec3 conic;   // ellipse conic, or the trail's
+  float q;           // q_max, or q_trail
+  int width, height;
+
+  __device__ __forceinline__ bool operator()(int tx, int ty) const {
+    switch (kind) {
+      case TileTestKind::ellipse:
+        return fm::ellipse_touches_tile(mean, conic, q, tx, ty, width, height);
+      case TileTestKind::trail:
+        return fm::trail_touches_tile(mean, motion, conic, q, tx, ty, width, height);
+      default:
+        return true;
+    }
+  }
+};
+
+__device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, uint64_t i) {
+  GaussianTileTest g{t.kind, {}, {}, {}, 0.0f, t.width, t.height};
+  if (t.kind == TileTestKind::ellipse) {
+    const float4 co = t.conic_opacity[i];
+    g.mean = glm::vec2(t.mean2d[i].x, t.mean2d[i].y);
+    g.conic = glm::vec3(co.x, co.y, co.z);
+    g.q = t.q_max[i];
+  } else if (t.kind == TileTestKind::trail) {
+    const float4 mm = t.trails.mean0_motion[i];
+    const float4 cq = t.trails.conic_q[i];
+    g.mean = glm::vec2(mm.x, mm.y);
+    g.motion = glm::vec2(mm.z, mm.w);
+    g.conic = glm::vec3(cq.x, cq.y, cq.z);
+    g.q = cq.w;
+  }
+  return g;
+}
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,56 @@
+#include "catgs/speculation_planner.h"
+
+#include <stdexcept>
+
+namespace catgs {
+
+namespace {
+
+bool same_intrinsics(const Camera& a, const Camera& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
+         a.cx == b.cx && a.cy == b.cy && a.near_plane == b.near_plane && a.far_plane == b.far_plane;
+}
+
+}  // namespace
+
+SpeculationPlanner::SpeculationPlanner(const SpeculationParams& params) { set_params(params); }
+
+void SpeculationPlanner::set_params(const SpeculationParams& params) {
+  if (params.initial_window < 0 || params.initial_window > 32)
+    throw std::invalid_argument("speculation window must be in 0..32");
+  if (!(params.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
+  params_ = params;
+  group_open_ = false;
+}
+
+bool SpeculationPlanner::observe(const Camera& camera, double time_s) {
+  predictor_.add({time_s, camera.position(), camera.orientation()});
+  return group_open_ && subframes_served_ < window_ && same_intrinsics(camera, key_camera_);
+}
+
+bool SpeculationPlanner::window_wanted() const {
+  return params_.frustum_and_sort_cache && params_.initial_window > 0 && !predictor_.empty();
+}
+
+Camera SpeculationPlanner::predicted_camera(const Camera& intrinsics, int frames_ahead) const {
+  const TimedPose pose = predictor_.predict(frames_ahead / params_.target_fps);
+  Camera c = intrinsics;
+  c.R = glm::transpose(glm::mat3_cast(pose.orientation));
+  c.t = -(c.R * pose.position);
+  return c;
+}
+
+std::vector<Camera> SpeculationPlanner::path(const Camera& key, int window) const {
+  std::vector<Camera> cameras{key};
+  for (int k = 1; k <= window; ++k) cameras.push_back(predicted_camera(key, k));
+  return cameras;
+}
+
+void SpeculationPlanner::start_group(const Camera& key, int window) {
+  key_camera_ = key;
+  window_ = window;
+  subframes_served_ = 0;
+  group_open_ = window > 0;
+}
+
+}  // namespace catgs
