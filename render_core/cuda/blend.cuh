@@ -33,7 +33,8 @@ struct PixelState {
 // Blends entries [begin, end) into `px` (the pixel at (fpx, fpy) of thread `rank`). With
 // early_termination a pixel stops before the Gaussian that would take T below 1e-4 (as the
 // reference 3DGS); without it, blends to the end. `skip(j)` (warp-uniform) lets a caller drop
-// batch entry j for its warp; every thread of the block must call this (barriers inside).
+// batch entry j for its warp, and `skip.stop()` (block-uniform) ends the run early; every thread
+// of the block must call this (barriers inside).
 template <typename Skip>
 __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
                                             const uint32_t* values,         // [L]
@@ -41,7 +42,7 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
                                             bool early_termination, BlendBatch& batch, PixelState& px,
                                             Skip skip) {
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
-    if (__syncthreads_count(px.done) == tune::kRasterThreads) break;
+    if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
     const uint32_t fetch = base + static_cast<uint32_t>(rank);
     if (fetch < end) {  // bounds-checked prefetch
       const uint32_t gi = values[fetch];
@@ -80,6 +81,7 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 struct NoSkip {
   __device__ __forceinline__ void fetch(int, uint32_t, const BlendBatch&) const {}
   __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
+  __device__ __forceinline__ bool stop() const { return false; }
 };
 
 // Writes C + T * background as float RGB and packed RGBA8 at pixel p.

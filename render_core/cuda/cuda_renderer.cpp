@@ -176,6 +176,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
                         s.stream);
     order = s.tile_order.as<uint32_t>();
     s.heaviest = s.tile_scratch.as<uint32_t>() + tiles;  // order_tiles sorts the loads there
+    s.heaviest_is_slice_key = false;
   }
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
@@ -228,7 +229,7 @@ std::size_t CudaRenderer::heaviest_tile_entries() const {
   CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
   uint32_t heaviest = 0;
   CATGS_CUDA(cudaMemcpy(&heaviest, s.heaviest, sizeof heaviest, cudaMemcpyDeviceToHost));
-  return heaviest;
+  return s.heaviest_is_slice_key ? 0xfffffu - (heaviest & 0xfffffu) : heaviest;
 }
 
 void CudaRenderer::download(const DeviceFrame& f, Image& out) {

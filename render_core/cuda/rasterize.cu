@@ -68,6 +68,7 @@ struct WarpSkip {
     mask[rank] = static_cast<uint8_t>(warp_mask(b.mean[rank], b.conic_opacity[rank], q_max[g], y0));
   }
   __device__ __forceinline__ bool operator()(uint32_t j) const { return !((mask[j] >> warp) & 1u); }
+  __device__ __forceinline__ bool stop() const { return false; }
 };
 
 template <bool kWarpCull>

@@ -8,6 +8,18 @@
 // their partial colour C_k and transmittance T_k to their partial slots (float4 per pixel,
 // 4 KiB per slot), and merge_kernel, a block per split tile, composes
 // C = sum_k C_k prod_{m<k} T_m front to back and adds prod T * background.
+//
+// Saturated tiles. Without splitting, a tile whose pixels all saturate stops walking its list;
+// split, its later slices would start afresh with T = 1 and blend Gaussians that are hidden. So a
+// slice k that saturates every pixel of its tile by itself (T < 1e-4 or stopped) records k in
+// saturated_from[tile] (atomicMin); slices behind it skip their work, at the start and at every
+// round of 256 entries, and the merge composes slices 0..saturated_from only. Each dropped slice
+// is weighted by prod T < 1e-4, under a third of an 8-bit level: the "higher early-termination
+// threshold for later slices" the paper allows. Slices are ordered k first (task_split.cu), so a
+// tile's first slice usually finishes before its later ones start. The result does not depend on
+// timing: saturated_from ends as the least k whose slice saturates alone, and the merge reads
+// only slices before it, which always run to their end. Without early termination nothing is
+// skipped (that mode exists to show split and unsplit agree to float rounding).
 #include "blend.cuh"
 #include "cuda_check.h"
 #include "stages.h"
@@ -16,6 +28,16 @@
 namespace catgs::cuda::stages {
 
 namespace {
+
+// Stops a slice once an earlier slice of its tile saturated it (read through volatile: another
+// block writes it during this one).
+struct SaturatedSkip {
+  const volatile unsigned* saturated_from;  // this tile's entry
+  unsigned k;
+  __device__ __forceinline__ void fetch(int, uint32_t, const BlendBatch&) const {}
+  __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
+  __device__ __forceinline__ bool stop() const { return *saturated_from < k; }
+};
 
 __global__ void __launch_bounds__(tune::kRasterThreads)
 rasterize_slices_kernel(SlicePlan plan,
@@ -39,14 +61,22 @@ rasterize_slices_kernel(SlicePlan plan,
   const bool inside = px < width && py < height;
 
   PixelState state{make_float3(0.0f, 0.0f, 0.0f), 1.0f, !inside};
-  blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
-              early_termination, batch, state, NoSkip{});
-  if (!inside) return;
   if (tp.y == 1) {  // the tile's only slice
+    blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
+                early_termination, batch, state, NoSkip{});
+    if (!inside) return;
     write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C,
                 state.T, background, out_rgb, out_rgba8);
     return;
   }
+  const SaturatedSkip skip{plan.saturated_from + tile_k.x, tile_k.y};
+  if (skip.stop()) return;  // block-uniform
+  blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
+              early_termination, batch, state, skip);
+  const bool saturated = state.done || state.T < fm::kMinTransmittance;
+  if (early_termination && __syncthreads_and(saturated) && rank == 0 && !skip.stop())
+    atomicMin(plan.saturated_from + tile_k.x, tile_k.y);
+  if (!inside) return;
   partials[static_cast<uint64_t>(tp.z + tile_k.y) * tune::kRasterThreads + rank] =
       make_float4(state.C.x, state.C.y, state.C.z, state.T);
 }
@@ -66,7 +96,8 @@ merge_kernel(SlicePlan plan,
   if (px >= width || py >= height) return;
   float3 C = make_float3(0.0f, 0.0f, 0.0f);
   float T = 1.0f;
-  for (uint32_t k = 0; k < tp.y; ++k) {
+  const uint32_t last = min(tp.y - 1, plan.saturated_from[blockIdx.x]);
+  for (uint32_t k = 0; k <= last; ++k) {
     const float4 p = partials[static_cast<uint64_t>(tp.z + k) * tune::kRasterThreads + rank];
     C.x += T * p.x;
     C.y += T * p.y;
@@ -83,6 +114,8 @@ void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blo
                       const Projected& projected, const CameraParams& cam, bool early_termination,
                       float3 background, float4* partials, float* out_rgb, uint32_t* out_rgba8,
                       cudaStream_t stream) {
+  CATGS_CUDA(cudaMemsetAsync(plan.saturated_from, 0xff,
+                             sizeof(unsigned) * static_cast<std::size_t>(cam.tiles_x * cam.tiles_y), stream));
   if (blocks == 0) return;
   const dim3 block(tune::kTileSize, tune::kTileSize);
   rasterize_slices_kernel<<<blocks, block, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height,

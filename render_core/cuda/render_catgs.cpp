@@ -4,7 +4,8 @@
 //
 // Key frame: M (max_screen_motion, one 4-byte readback) -> W -> speculative pre-processing over
 // the predicted path (trails) -> the counts readback, key emission with the trail test, sort, tile
-// ranges (build_render_list) -> frustum cache (select_cached) -> split plan and slice order ->
+// ranges (build_render_list) -> frustum cache (select_cached) -> split plan and slice order (k
+// first, then longest first) ->
 // rasterize slices -> merge. The slice total is copied back asynchronously (plan_ready) so the
 // group's sub-frames launch exactly one block per slice; the key frame itself launches
 // slice_capacity() blocks, the extra ones return at once.
@@ -108,17 +109,18 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   s.plan_temp.ensure(stages::plan_slices_temp_bytes(tiles), "split scan scratch", allocs);
   s.slice_scratch.ensure(3 * capacity * sizeof(uint32_t), "slice loads", allocs);
   s.slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
-  s.slice_order_temp.ensure(stages::tile_order_temp_bytes(static_cast<uint32_t>(capacity)), "slice order scratch",
-                            allocs);
+  s.slice_order_temp.ensure(stages::order_slices_temp_bytes(capacity), "slice order scratch", allocs);
+  s.saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs);
   s.partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
   s.note_peak();
   const stages::SlicePlan plan = s.slice_plan();
   stages::plan_slices(s.ranges.as<uint2>(), tiles, entries, sp.task_splitting, plan, s.plan_scan.as<uint64_t>(),
                       s.plan_temp.as<void>(), s.plan_temp.bytes(), s.stream);
-  stages::order_tiles(plan.slice_range, static_cast<uint32_t>(capacity), entries, s.slice_scratch.as<uint32_t>(),
-                      s.slice_order.as<uint32_t>(), s.slice_order_temp.as<void>(), s.slice_order_temp.bytes(),
-                      s.stream);
-  s.heaviest = s.slice_scratch.as<uint32_t>() + capacity;  // the sorted loads
+  stages::order_slices(plan, capacity, s.slice_scratch.as<uint32_t>(), s.slice_order.as<uint32_t>(),
+                       s.slice_order_temp.as<void>(), s.slice_order_temp.bytes(), s.stream);
+  // The first sorted key is the longest first slice, the longest slice of all (task_split.cu).
+  s.heaviest = s.slice_scratch.as<uint32_t>() + 2 * capacity;
+  s.heaviest_is_slice_key = true;
   CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
                              cudaMemcpyDeviceToHost, s.stream));
   CATGS_CUDA(cudaEventRecord(s.plan_ready, s.stream));

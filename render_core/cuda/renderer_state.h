@@ -87,13 +87,14 @@ struct CudaRenderer::State {
   GrowBuffer ranges, tile_scratch, tile_order, order_temp, rgb, rgba8, counters;
   const uint32_t* sorted_values = nullptr;
   const uint32_t* heaviest = nullptr;  // device: entries of the heaviest tile (or slice)
+  bool heaviest_is_slice_key = false;   // heaviest points at a slice sort key (order_slices)
 
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian), the split plan (per slice
   // and tile), partial slices, and its counters: [0] M bits, [1] outside flag, [2..3] slice and
   // partial-slot totals, [4] frustum-cache size.
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, cached, select_temp;
   GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order,
-      slice_order_temp, partials, catgs_counters;
+      slice_order_temp, partials, saturated_from, catgs_counters;
   unsigned* host_catgs = nullptr;         // pinned [4]: M bits, outside flag, slice total, slots
   cudaEvent_t catgs_readback = nullptr;   // M / outside flag copied to host_catgs
   cudaEvent_t plan_ready = nullptr;       // the key frame's slice total copied to host_catgs[2]
@@ -125,7 +126,7 @@ struct CudaRenderer::State {
   }
   stages::SlicePlan slice_plan() const {
     return {slice_range.as<uint2>(), slice_tile.as<uint2>(), tile_plan.as<uint4>(),
-            catgs_counters.as<unsigned>() + 2};
+            catgs_counters.as<unsigned>() + 2, saturated_from.as<unsigned>()};
   }
 
   std::size_t bytes() const {
@@ -135,7 +136,7 @@ struct CudaRenderer::State {
           &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &ranges, &tile_scratch, &tile_order,
           &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &cached,
           &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
-          &slice_order, &slice_order_temp, &partials, &catgs_counters})
+          &slice_order, &slice_order_temp, &partials, &saturated_from, &catgs_counters})
       b += g->bytes();
     return b;
   }

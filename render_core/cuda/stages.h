@@ -118,8 +118,8 @@ void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, 
 
 // catgs sub-frame, stage 1 (subframe_features.cu; mirrors cpu::update_subframe_features):
 // recomputes mean2d, conic, opacity (0 when culled here) and colour of the `count` cached
-// Gaussians at `cam`, and sets *outside = 1 when an on-screen ellipse left its trail (the frame
-// must then be a key frame). *outside must hold 0 on entry.
+// Gaussians at `cam`, and sets *outside = 1 when an on-screen ellipse reaches a tile its trail was
+// not listed in (the frame must then be a key frame). *outside must hold 0 on entry.
 void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached,
                               uint32_t count, const Projected& projected, const Trails& trails,
                               unsigned* outside, cudaStream_t stream);
@@ -176,11 +176,14 @@ void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* 
 //                          has no partial slots (its slice writes the image directly)
 //   totals      [2]        (slices, partial slots), device
 // capacity = slice_capacity(tiles, L): tiles + L / avg bounds the slice count.
+//   saturated_from [tiles] reset by rasterize_slices: the first slice of a tile that saturates
+//                          it alone (rasterize_slices.cu)
 struct SlicePlan {
   uint2* slice_range;
   uint2* slice_tile;
   uint4* tile_plan;
   unsigned* totals;
+  unsigned* saturated_from;
 };
 uint64_t split_average(uint32_t tiles, uint64_t entries);
 uint64_t slice_capacity(uint32_t tiles, uint64_t entries);
@@ -188,11 +191,20 @@ std::size_t plan_slices_temp_bytes(uint32_t tiles);
 void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, const SlicePlan& plan,
                  uint64_t* scan_scratch, void* temp, std::size_t temp_bytes, cudaStream_t stream);
 
+// The slice order (task_split.cu): slices by k, then by decreasing length (a tile's first slice
+// runs before its later ones, and the long ones start first); slots past the total last.
+// scratch: [3 * capacity].
+std::size_t order_slices_temp_bytes(uint64_t capacity);
+void order_slices(const SlicePlan& plan, uint64_t capacity, uint32_t* scratch, uint32_t* order, void* temp,
+                  std::size_t temp_bytes, cudaStream_t stream);
+
 // Stage 5 with slices (rasterize_slices.cu; mirrors cpu::rasterize_slices): one block per slice
 // (block b takes slice order[b], or b without an order; `blocks` may exceed the slice total: the
 // extra blocks return). A tile's only slice writes C + T * background to the image; a slice of a
 // split tile writes its partial colour and transmittance to partials [slots, 256] (C.rgb, T).
-// `early_termination`: stop a pixel before T would drop below 1e-4 within its slice.
+// `early_termination`: stop a pixel before T would drop below 1e-4 within its slice. Resets
+// saturated_from first; a slice behind one that saturated its tile alone is skipped (see
+// rasterize_slices.cu: the paper's higher early-termination threshold for later slices).
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks,
                       const uint32_t* sorted_values, const Projected& projected, const CameraParams& cam,
                       bool early_termination, float3 background, float4* partials, float* out_rgb,

@@ -6,6 +6,7 @@
 // split), one 64-bit exclusive scan of (slots << 32 | n) numbers slices and partial slots tile by
 // tile, and each tile writes its slices. No host round trip: the slice total stays on the device
 // (rasterize_slices launches slice_capacity() blocks at a key frame).
+#include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 
 #include "cuda_check.h"
@@ -54,7 +55,40 @@ __global__ void write_slices_kernel(const uint2* ranges,   // [tiles]
   }
 }
 
+// Sort key of a slice: k in the high bits, then the complement of its length; unused slots last.
+__global__ void slice_keys_kernel(SlicePlan plan, uint64_t capacity,
+                                  uint32_t* keys,  // [capacity]
+                                  uint32_t* ids) { // [capacity]
+  const uint64_t s = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (s >= capacity) return;
+  const uint2 tk = plan.slice_tile[s];
+  const uint2 r = plan.slice_range[s];
+  const uint32_t length = min(r.y - r.x, 0xfffffu);
+  keys[s] = tk.x == 0xffffffffu ? 0xffffffffu : (min(tk.y, 0xffeu) << 20) | (0xfffffu - length);
+  ids[s] = static_cast<uint32_t>(s);
+}
+
 }  // namespace
+
+std::size_t order_slices_temp_bytes(uint64_t capacity) {
+  std::size_t bytes = 0;
+  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(nullptr, bytes, static_cast<uint32_t*>(nullptr),
+                                             static_cast<uint32_t*>(nullptr), static_cast<uint32_t*>(nullptr),
+                                             static_cast<uint32_t*>(nullptr), static_cast<int64_t>(capacity)));
+  return bytes;
+}
+
+void order_slices(const SlicePlan& plan, uint64_t capacity, uint32_t* scratch, uint32_t* order, void* temp,
+                  std::size_t temp_bytes, cudaStream_t stream) {
+  if (capacity == 0) return;
+  uint32_t* keys = scratch;
+  uint32_t* ids = scratch + capacity;
+  uint32_t* sorted_keys = scratch + 2 * capacity;
+  slice_keys_kernel<<<static_cast<unsigned>((capacity + 255) / 256), 256, 0, stream>>>(plan, capacity, keys, ids);
+  CATGS_CUDA_LAUNCHED("slice_keys_kernel");
+  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(temp, temp_bytes, keys, sorted_keys, ids, order,
+                                             static_cast<int64_t>(capacity), 0, 32, stream));
+}
 
 uint64_t split_average(uint32_t tiles, uint64_t entries) {
   return tiles > 0 ? std::max<uint64_t>(1, entries / tiles) : 1;

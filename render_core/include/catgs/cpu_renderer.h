@@ -78,8 +78,9 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
 
 // catgs sub-frame (src/cpu/subframe_features.cpp; paper sec. 3.2): recomputes mean2d, conic,
 // opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there) and
-// checks each still lies inside its trail (fm::trail_contains). Returns false at the first that
-// does not: the frame must be rendered as a key frame.
+// checks that each on-screen ellipse reaches only tiles its trail was listed in (fm::trail_contains,
+// else the exact fm::listed_tiles_cover). Returns false when one does not: the frame must be
+// rendered as a key frame.
 bool update_subframe_features(const GaussianModel& model, const Camera& camera,
                               const std::vector<uint32_t>& cached, ProjectedGaussians& projected);
 

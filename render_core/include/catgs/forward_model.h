@@ -325,6 +325,24 @@ CATGS_HD bool trail_contains(glm::vec2 mean0, glm::vec2 motion, glm::vec3 trail_
   return sqrtf(fmaxf(0.0f, lambda) * q_max) + sqrtf(off) <= sqrtf(q_trail);
 }
 
+// The exact sub-frame check behind trail_contains(), which is only sufficient: every tile the
+// actual ellipse reaches at this pose (ellipse_touches_tile, as the exact pipeline lists it) is a
+// tile the key frame listed the Gaussian in (trail_touches_tile). A small Gaussian that strays a
+// fraction of a pixel off its predicted trail but stays within its listed tiles renders exactly
+// as a full key frame would, so it need not force one. Cost: two tile tests per reached tile;
+// callers try trail_contains() first.
+CATGS_HD bool listed_tiles_cover(glm::vec2 mean0, glm::vec2 motion, glm::vec3 trail_conic, float q_trail,
+                                 glm::vec2 mean, glm::vec3 cov, glm::vec3 conic, float q_max, int width,
+                                 int height) {
+  const TileRect r = ellipse_tile_rect(mean, cov, q_max, width, height);
+  for (int ty = r.y0; ty < r.y1; ++ty)
+    for (int tx = r.x0; tx < r.x1; ++tx)
+      if (ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) &&
+          !trail_touches_tile(mean0, motion, trail_conic, q_trail, tx, ty, width, height))
+        return false;
+  return true;
+}
+
 }  // namespace catgs::fm
 
 namespace catgs::fm {

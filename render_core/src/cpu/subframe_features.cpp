@@ -31,8 +31,11 @@ bool update_subframe_features(const GaussianModel& model, const Camera& camera,
     // Only an ellipse that reaches a pixel of this frame must lie inside its trail.
     const bool on_screen =
         fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, out.q_max[i], camera.width, camera.height)) > 0;
-    if (on_screen && !fm::trail_contains(out.trail_mean0[i], out.trail_motion[i], out.trail_cov[i], out.q_trail[i],
-                            mean2d, cov2, out.q_max[i]))
+    if (on_screen &&
+        !fm::trail_contains(out.trail_mean0[i], out.trail_motion[i], out.trail_cov[i], out.q_trail[i], mean2d, cov2,
+                            out.q_max[i]) &&
+        !fm::listed_tiles_cover(out.trail_mean0[i], out.trail_motion[i], out.trail_conic[i], out.q_trail[i], mean2d,
+                                cov2, conic, out.q_max[i], camera.width, camera.height))
       inside.store(false, std::memory_order_relaxed);
     out.mean2d[i] = mean2d;
     out.conic[i] = conic;
