@@ -9,7 +9,8 @@
 // rasterize slices -> merge. The slice total is copied back asynchronously (plan_ready) so the
 // group's sub-frames launch exactly one block per slice; the key frame itself launches
 // slice_capacity() blocks, the extra ones return at once.
-// Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag) ->
+// Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag), the
+// check that no unlisted Gaussian reaches the image (the frustum cache's blind spot) ->
 // rasterize the key frame's slices -> merge -> read the flag back. A raised flag means some
 // on-screen Gaussian left its trail: the frame is rendered again as a key frame (the work is
 // queued before the check so the GPU never idles waiting for the host; the flag is rare).
@@ -142,6 +143,8 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   stages::update_subframe_features(scene_view(*scene_), camera_params(camera), s.cached.as<uint32_t>(),
                                    static_cast<uint32_t>(s.key_visible), s.projected(), s.trails(), cc + kOutside,
                                    s.stream);
+  stages::check_unlisted(scene_view(*scene_), camera_params(camera), s.tiles_touched.as<uint32_t>(), cc + kOutside,
+                         s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
   CATGS_CUDA(cudaEventSynchronize(s.plan_ready));  // the key frame's slice total, long since copied
   catgs_rasterize(camera, s.host_catgs[kSliceTotals]);

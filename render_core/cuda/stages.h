@@ -124,6 +124,12 @@ void update_subframe_features(const SceneView& scene, const CameraParams& cam, c
                               uint32_t count, const Projected& projected, const Trails& trails,
                               unsigned* outside, cudaStream_t stream);
 
+// catgs sub-frame (subframe_features.cu; mirrors cpu::unlisted_reach_image): sets *outside = 1
+// when a Gaussian the key frame did not list (tiles_touched == 0) reaches a pixel at `cam`: it is
+// outside the frustum cache, so only a key frame can draw it.
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
+                    unsigned* outside, cudaStream_t stream);
+
 // Stage 2a (key_emission.cu): inclusive scan of tiles_touched into 64-bit ends[N] (CUB), then a
 // one-thread kernel copies ends[N-1] and *visible into counts[0..1] for one 16-byte readback.
 std::size_t scan_temp_bytes(uint64_t n);

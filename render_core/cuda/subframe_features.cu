@@ -66,7 +66,33 @@ subframe_features_kernel(SceneView scene, CameraParams cam,
   out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
 }
 
+// One thread per Gaussian (grid-stride): a Gaussian the key frame did not list that reaches a
+// pixel at this pose raises the flag (fm::unlisted_reaches_image; most return after reading
+// tiles_touched or after the cheap bound).
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+unlisted_kernel(SceneView scene, CameraParams cam,
+                const uint32_t* tiles_touched,  // [N] of the key frame
+                unsigned* outside) {            // [1]
+  const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
+  for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < scene.n; i += stride) {
+    if (tiles_touched[i] > 0) continue;
+    if (fm::unlisted_reaches_image(scene.means + 3 * i, scene.log_scales + 3 * i, scene.rotations + 4 * i,
+                                   scene.opacity_logits[i], cam.R, cam.t, cam.fx, cam.fy, cam.cx, cam.cy,
+                                   cam.near_plane, cam.far_plane, cam.tan_half_fov, cam.width, cam.height))
+      *outside = 1u;
+  }
+}
+
 }  // namespace
+
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
+                    unsigned* outside, cudaStream_t stream) {
+  if (scene.n == 0) return;
+  const uint64_t want = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  const auto blocks = static_cast<unsigned>(want < 8192 ? want : 8192);
+  unlisted_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, tiles_touched, outside);
+  CATGS_CUDA_LAUNCHED("unlisted_kernel");
+}
 
 std::size_t select_cached_temp_bytes(uint64_t n) {
   std::size_t bytes = 0;

@@ -81,8 +81,15 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
 // checks that each on-screen ellipse reaches only tiles its trail was listed in (fm::trail_contains,
 // else the exact fm::listed_tiles_cover). Returns false when one does not: the frame must be
 // rendered as a key frame.
+// Also false when unlisted_reach_image().
 bool update_subframe_features(const GaussianModel& model, const Camera& camera,
                               const std::vector<uint32_t>& cached, ProjectedGaussians& projected);
+
+// catgs sub-frame (src/cpu/subframe_features.cpp): does a Gaussian the key frame did not list
+// (tiles_touched == 0) reach a pixel at `camera` (fm::unlisted_reaches_image)? Such a Gaussian is
+// outside the frustum cache, so the sub-frame would miss it: the frame must be a key frame
+// (DESIGN.md 1: prediction error must never show as holes).
+bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, const ProjectedGaussians& projected);
 
 // Task splitting (src/cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
 // order, a tile's slices consecutive and in list order. split = false: one slice per tile.

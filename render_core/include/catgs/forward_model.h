@@ -343,6 +343,57 @@ CATGS_HD bool listed_tiles_cover(glm::vec2 mean0, glm::vec2 motion, glm::vec3 tr
   return true;
 }
 
+// Does the ellipse (2D covariance `cov`, conic, level q_max) reach a pixel centre of a width x
+// height image? Exactly when the exact pipeline would list it in some tile.
+CATGS_HD bool ellipse_reaches_image(glm::vec2 mean, glm::vec3 cov, glm::vec3 conic, float q_max, int width,
+                                    int height) {
+  const TileRect r = ellipse_tile_rect(mean, cov, q_max, width, height);
+  for (int ty = r.y0; ty < r.y1; ++ty)
+    for (int tx = r.x0; tx < r.x1; ++tx)
+      if (ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height)) return true;
+  return false;
+}
+
+// A cheap, conservative filter before the exact test above for a Gaussian at camera-space p_cam
+// whose largest axis is max_scale (world units): false only when its EWA ellipse at level q_max
+// cannot reach the image. The EWA extent along any axis is at most sqrt(q_max) * max_scale *
+// ||J||_F with J the clamped Jacobian (||J||_F^2 = (fx^2 (1 + tx^2) + fy^2 (1 + ty^2)) / z^2),
+// plus sqrt(q_max * 0.3) for the low-pass filter; +1 px for rounding.
+CATGS_HD bool may_reach_image(glm::vec3 p_cam, float max_scale, float q_max, float fx, float fy, float cx, float cy,
+                              glm::vec2 tan_half_fov, int width, int height) {
+  const float z = p_cam.z;
+  const float tx = fminf(kFrustumClamp * tan_half_fov.x, fabsf(p_cam.x / z));
+  const float ty = fminf(kFrustumClamp * tan_half_fov.y, fabsf(p_cam.y / z));
+  const float jf = sqrtf(fx * fx * (1.0f + tx * tx) + fy * fy * (1.0f + ty * ty)) / z;
+  const float r = sqrtf(q_max) * (max_scale * jf + sqrtf(kLowPass)) + 1.0f;
+  const float u = fx * p_cam.x / z + cx - 0.5f, v = fy * p_cam.y / z + cy - 0.5f;
+  return u + r >= 0.0f && u - r <= static_cast<float>(width - 1) && v + r >= 0.0f &&
+         v - r <= static_cast<float>(height - 1);
+}
+
+// A Gaussian (mean [3], log-scales [3], rotation (w, x, y, z) [4], opacity logit; world) that
+// the key frame did not list: does its ellipse reach a pixel of this camera (R, t world to
+// camera)? Cheap bound first (may_reach_image), then the exact pipeline's own test.
+CATGS_HD bool unlisted_reaches_image(const float* mean, const float* log_scale, const float* rotation,
+                                     float opacity_logit, const glm::mat3& R, glm::vec3 t, float fx, float fy,
+                                     float cx, float cy, float near_plane, float far_plane, glm::vec2 tan_half_fov,
+                                     int width, int height) {
+  const float q_max = opacity_aware_qmax(sigmoid(opacity_logit));
+  if (!(q_max > 0.0f)) return false;
+  const glm::vec3 m(mean[0], mean[1], mean[2]);
+  const glm::vec3 p = R * m + t;
+  if (!(p.z > near_plane) || p.z > far_plane) return false;
+  const float max_scale = expf(fmaxf(log_scale[0], fmaxf(log_scale[1], log_scale[2])));
+  if (!may_reach_image(p, max_scale, q_max, fx, fy, cx, cy, tan_half_fov, width, height)) return false;
+  const glm::vec3 cov2 = covariance_2d(covariance_3d({log_scale[0], log_scale[1], log_scale[2]},
+                                                     {rotation[0], rotation[1], rotation[2], rotation[3]}),
+                                       R, p, fx, fy, tan_half_fov);
+  glm::vec3 conic;
+  if (!conic_from_cov2d(cov2, &conic)) return false;
+  const glm::vec2 mean2d(fx * p.x / p.z + cx - 0.5f, fy * p.y / p.z + cy - 0.5f);
+  return ellipse_reaches_image(mean2d, cov2, conic, q_max, width, height);
+}
+
 }  // namespace catgs::fm
 
 namespace catgs::fm {

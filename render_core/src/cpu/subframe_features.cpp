@@ -1,5 +1,6 @@
 // catgs sub-frame: per-Gaussian features of the frustum cache at the frame's own pose (paper
 // sec. 3.2), with the check that each ellipse still lies inside the trail the key frame listed.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 
@@ -43,7 +44,27 @@ bool update_subframe_features(const GaussianModel& model, const Camera& camera,
     out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i],
                                    glm::normalize(mean - cam_pos));
   });
-  return inside.load();
+  if (!inside.load()) return false;
+  return !unlisted_reach_image(model, camera, out);
+}
+
+bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, const ProjectedGaussians& projected) {
+  const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
+                               static_cast<float>(camera.height) / (2.0f * camera.fy));
+  const std::size_t n = model.size();
+  std::atomic<bool> reached{false};
+  parallel_for((n + 4095) / 4096, 1, [&](std::size_t chunk) {
+    for (std::size_t i = chunk * 4096; i < std::min(n, (chunk + 1) * 4096); ++i)
+      if (projected.tiles_touched[i] == 0 && fm::unlisted_reaches_image(
+                                                 &model.means[3 * i], &model.log_scales[3 * i], &model.rotations[4 * i],
+                                                 model.opacity_logits[i], camera.R, camera.t, camera.fx, camera.fy,
+                                                 camera.cx, camera.cy, camera.near_plane, camera.far_plane,
+                                                 tan_half_fov, camera.width, camera.height)) {
+        reached.store(true, std::memory_order_relaxed);
+        return;
+      }
+  });
+  return reached.load();
 }
 
 }  // namespace catgs::cpu
