@@ -26,14 +26,18 @@ std::string av_error_text(int err) {
   return buf;
 }
 
+void check_encoder_config(const std::string& name, const EncoderConfig& config) {
+  if (config.width < 16 || config.height < 16 || config.width > 8192 || config.height > 8192 ||
+      config.width % 2 || config.height % 2)
+    throw std::invalid_argument(name + ": frame size must be even and in [16, 8192], got " +
+                                std::to_string(config.width) + "x" + std::to_string(config.height));
+  if (config.fps <= 0) throw std::invalid_argument(name + ": fps must be positive");
+}
+
 LibavEncoder::LibavEncoder(std::string name, const char* codec_name, const EncoderConfig& config,
                            const std::function<void(AVCodecContext*)>& configure)
     : name_(std::move(name)), config_(config) {
-  if (config.width < 16 || config.height < 16 || config.width > 8192 || config.height > 8192 ||
-      config.width % 2 || config.height % 2)
-    throw std::invalid_argument(name_ + ": frame size must be even and in [16, 8192], got " +
-                                std::to_string(config.width) + "x" + std::to_string(config.height));
-  if (config.fps <= 0) throw std::invalid_argument(name_ + ": fps must be positive");
+  check_encoder_config(name_, config);
   const AVCodec* codec = avcodec_find_encoder_by_name(codec_name);
   if (!codec)
     throw std::runtime_error(name_ + ": libavcodec has no " + codec_name + " encoder");

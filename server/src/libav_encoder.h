@@ -50,6 +50,10 @@ class LibavEncoder : public Encoder {
   std::int64_t pts_ = 0;
 };
 
+// Throws std::invalid_argument, starting with `name`, unless config's size is even and in
+// [16, 8192] and fps is positive.
+void check_encoder_config(const std::string& name, const EncoderConfig& config);
+
 // libavcodec's text for an AVERROR code.
 std::string av_error_text(int err);
 

@@ -23,6 +23,7 @@ namespace {
 // h264_nvenc loads these at open time; checking first turns libavcodec's terse error into a
 // reason an operator can act on.
 const EncoderConfig& require_nvenc_driver(const EncoderConfig& config) {
+  check_encoder_config("nvenc", config);  // a bad size is the caller's error, not NVENC's
   for (const char* lib : {"libcuda.so.1", "libnvidia-encode.so.1"}) {
     void* h = dlopen(lib, RTLD_LAZY | RTLD_LOCAL);
     if (!h)
