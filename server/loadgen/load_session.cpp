@@ -117,9 +117,10 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
       if (!sending && (now >= drain_end || newest_answered + 1 == static_cast<std::int64_t>(sent_at.size())))
         break;
       if (sending && cfg.rate_hz > 0) {
-        while (Clock::now() >= next_pose_at && Clock::now() < send_end) {
+        if (now >= next_pose_at) {
           send_pose();
-          next_pose_at += period;
+          // A client that fell behind (a slow decode) skips the missed slots, not bursts them.
+          next_pose_at = std::max(next_pose_at + period, now);
         }
       } else if (sending) {
         while (outstanding < cfg.depth) {

@@ -48,9 +48,11 @@ Session::Session(ConnId id, SessionShared& shared)
 Session::~Session() { shared_.metrics.connections_open--; }
 
 void Session::post_message(MessageKind kind, std::string bytes) {
-  boost::asio::post(strand_, [self = shared_from_this(), kind, bytes = std::move(bytes)] {
+  // Arrival is stamped on the transport thread (the strand may wait for a busy pool thread).
+  const auto received = Clock::now();
+  boost::asio::post(strand_, [self = shared_from_this(), kind, bytes = std::move(bytes), received] {
     try {
-      self->handle_message(kind, bytes);
+      self->handle_message(kind, bytes, received);
     } catch (const std::exception& e) {
       // Anything unexpected ends this session only.
       self->fail(pb::ERROR_INTERNAL, std::string("internal error: ") + e.what());
@@ -59,11 +61,14 @@ void Session::post_message(MessageKind kind, std::string bytes) {
 }
 
 void Session::post_sent() {
-  boost::asio::post(strand_, [self = shared_from_this()] {
+  // Stamped here, on the transport thread: the strand handler may wait for a pool thread that
+  // is busy rendering, and that wait is not send time.
+  const auto written = Clock::now();
+  boost::asio::post(strand_, [self = shared_from_this(), written] {
     if (self->in_flight_ > 0) self->in_flight_--;
     self->last_progress_ = Clock::now();
     if (!self->handed_.empty()) {  // frames are written in the order they were queued
-      self->last_send_ms_ = ms_between(self->handed_.front(), self->last_progress_);
+      self->last_send_ms_ = ms_between(self->handed_.front(), written);
       self->handed_.pop_front();
       self->shared_.metrics.send_seconds.observe(self->last_send_ms_ / 1000.0);
     }
@@ -117,7 +122,7 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   shared_.transport.close(id_, std::move(bytes), drop_queued);
 }
 
-void Session::handle_message(MessageKind kind, const std::string& bytes) {
+void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received) {
   if (state_ == State::closed) return;
   if (kind == MessageKind::text) return fail(pb::ERROR_MALFORMED, "text frames are not allowed");
   if (kind == MessageKind::oversize)
@@ -137,7 +142,7 @@ void Session::handle_message(MessageKind kind, const std::string& bytes) {
     case pb::ClientMessage::kHello:
       return fail(pb::ERROR_PROTOCOL, "second Hello");
     case pb::ClientMessage::kPose:
-      return handle_pose(msg.pose());
+      return handle_pose(msg.pose(), received);
     case pb::ClientMessage::kResize: {
       Viewport v;
       if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), v))
@@ -216,7 +221,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   arm_tick();
 }
 
-void Session::handle_pose(const pb::Pose& pose) {
+void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   CameraPose cam;
   if (auto bad = check_pose(pose, cam)) return fail(bad->code, bad->reason);
   poses_received_++;
@@ -226,7 +231,7 @@ void Session::handle_pose(const pb::Pose& pose) {
     shared_.metrics.poses_skipped_total++;
     shared_.metrics.dropped_frames_total++;
   }
-  pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), Clock::now()};
+  pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), received};
   maybe_start_render();
 }
 

@@ -68,7 +68,7 @@ class Session : public std::enable_shared_from_this<Session> {
     CameraPose pose;
     std::uint32_t sequence = 0;
     double client_time_ms = 0;
-    Clock::time_point received;
+    Clock::time_point received;  // arrival on the transport thread
   };
   struct Job {
     PendingPose pose;
@@ -87,9 +87,10 @@ class Session : public std::enable_shared_from_this<Session> {
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
   };
 
-  void handle_message(MessageKind kind, const std::string& bytes);
+  // `received`: when the transport thread handed the message over.
+  void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
   void handle_hello(const pb::Hello& hello);
-  void handle_pose(const pb::Pose& pose);
+  void handle_pose(const pb::Pose& pose, Clock::time_point received);
   void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false);
   void send(const pb::ServerMessage& message);
   void maybe_start_render();
