@@ -141,21 +141,21 @@ int main(int argc, char** argv) {
       for (int n = 1; n <= max_sessions; n = add ? n + add : 2 * n) {
         const auto results = run_sessions(n, templates);
         const RunSummary t = summarize_run(results);
-        std::string broken;
-        if (t.errors) broken = std::to_string(t.errors) + " errors";
-        else if (max_p95 > 0 && t.latency.p95 > max_p95) broken = "p95 " + std::to_string(t.latency.p95) + " ms";
-        else if (min_fps > 0 && t.fps_min < min_fps) broken = "slowest session " + std::to_string(t.fps_min) + " FPS";
-        std::printf("--- %d session(s): %s\n", n, broken.empty() ? "held" : ("broke: " + broken).c_str());
+        char broken[96] = "";
+        if (t.errors) std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
+        else if (max_p95 > 0 && t.latency.p95 > max_p95) std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
+        else if (min_fps > 0 && t.fps_min < min_fps) std::snprintf(broken, sizeof(broken), "slowest session %.1f FPS", t.fps_min);
+        std::printf("--- %d session(s): %s%s\n", n, broken[0] ? "broke: " : "held", broken);
         std::cout << format_table(results);
         nlohmann::json step_json = run_json(results);
-        step_json["held"] = broken.empty();
+        step_json["held"] = broken[0] == 0;
         step_json["broken_by"] = broken;
         report["ramp"].push_back(step_json);
-        if (!broken.empty()) break;
+        if (broken[0]) break;
         held = n;
       }
-      std::printf("ramp: largest session count that held: %d (bounds: p95 <= %s ms, min FPS >= %s)\n", held,
-                  max_p95 > 0 ? std::to_string(max_p95).c_str() : "-", min_fps > 0 ? std::to_string(min_fps).c_str() : "-");
+      std::printf("ramp: largest session count that held: %d (bounds: p95 <= %g ms, min FPS >= %g; 0 = none)\n",
+                  held, max_p95, min_fps);
       report["largest_sessions_held"] = held;
     }
     if (args.has("--json")) {
