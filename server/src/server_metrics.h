@@ -27,10 +27,12 @@ class Histogram {
  public:
   // `upper_bounds`: increasing, finite. Throws std::invalid_argument otherwise.
   explicit Histogram(std::vector<double> upper_bounds);
+  // Adds one sample (any unit; the stage histograms use seconds). Thread-safe.
   void observe(double value);
   // Writes the _bucket, _sum and _count series of `name`; `labels` is empty or `k="v",...`
   // (no braces), placed before `le`.
   void write(std::ostream& out, const std::string& name, const std::string& labels = "") const;
+  // Samples observed so far.
   std::uint64_t count() const;
 
   // Bucket bounds for stage times, seconds: 0.5 ms .. 1.024 s, doubling.
