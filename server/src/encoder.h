@@ -1,8 +1,9 @@
-// Video encoders: RGBA8 host images in, one H.264 Annex B access unit out per frame.
+// Video encoders: one H.264 Annex B access unit out per picture in, from RGBA8 host images or
+// from BT.709 limited-range I420 planes (a frame the GPU already converted: no swscale).
 //
 // An Encoder is created for one frame size and used by one thread at a time (a session's render
-// job); a size change means a new Encoder. Implementations: x264 (libavcodec libx264, CPU);
-// nvenc comes later behind the same interface.
+// job); a size change means a new Encoder. Implementations (libavcodec): `x264` (libx264, CPU)
+// and `nvenc` (h264_nvenc, fed host frames; see nvenc_encoder.h).
 #pragma once
 
 #include <cstdint>
@@ -10,12 +11,15 @@
 #include <string>
 #include <vector>
 
+#include "yuv420.h"
+
 namespace catgs::server {
 
 struct EncoderConfig {
   int width = 0, height = 0;  // pixels, even, >= 16
-  int fps = 60;               // nominal rate (time base / rate-control hint only)
+  int fps = 60;               // nominal frame rate (time base; NVENC's one-frame VBV)
   int crf = 23;               // x264 constant rate factor
+  int bitrate_kbps = 0;       // NVENC CBR target; 0: width * height * fps / 15 bits/s
   int threads = 0;            // encoder threads, 0 = the library's choice
 };
 
@@ -23,28 +27,39 @@ struct EncoderConfig {
 struct EncodedFrame {
   std::vector<std::uint8_t> data;  // H.264 Annex B: start codes, SPS/PPS in band on IDR frames
   bool key_frame = false;          // IDR
-  double convert_ms = 0;           // RGBA -> YUV 4:2:0 time
-  double encode_ms = 0;            // encoder time
+  double convert_ms = 0;           // RGBA -> YUV 4:2:0 time (0 for encode_yuv420)
+  double encode_ms = 0;            // encoder time (plane copy included)
 };
 
 class Encoder {
  public:
   virtual ~Encoder() = default;
-  // "x264", "nvenc", ...
+  // "x264" or "nvenc".
   virtual std::string name() const = 0;
   virtual int width() const = 0;
   virtual int height() const = 0;
   // Encodes one RGBA8 image (width x height, row-major, top row first, `stride_bytes` per row;
-  // colour treated as full-range sRGB/BT.709 primaries). The first frame, and any frame with
-  // `force_idr`, is an IDR. Output is signalled as BT.709 limited-range yuv420p. Throws
-  // std::runtime_error on an encoder failure.
+  // colour treated as full-range sRGB/BT.709 primaries), converted to BT.709 limited-range
+  // yuv420p on the CPU (swscale). The first frame, and any frame with `force_idr`, is an IDR.
+  // Throws std::runtime_error on an encoder failure.
   virtual EncodedFrame encode(const std::uint8_t* rgba, int stride_bytes, bool force_idr) = 0;
+  // Encodes one picture given as BT.709 limited-range I420 planes of width x height (yuv420.h);
+  // no colour conversion happens. IDR rules and errors as encode(). The planes are only read
+  // during the call.
+  virtual EncodedFrame encode_yuv420(const Yuv420Planes& planes, bool force_idr) = 0;
 };
 
-// Creates an encoder by name: "x264" or "auto" (x264 for now; `why` gets a one-line reason).
-// Throws std::invalid_argument for an unknown name or bad size, std::runtime_error when the
-// codec cannot be opened.
+// Creates an encoder by name:
+//  "x264"  libx264;
+//  "nvenc" h264_nvenc; throws std::runtime_error naming the reason when NVENC cannot be opened
+//          (no NVIDIA driver, no NVENC on the GPU: H100/H200 have none, session limit);
+//  "auto"  NVENC when a probe could open it, else x264. The probe (a 256x256 NVENC encoder)
+//          runs once per process, on the first "auto" call; its verdict is reused.
+// `why` (optional) gets a one-line reason for the choice; `fell_back` (optional) is set true when
+// "auto" chose x264 because NVENC failed, false otherwise.
+// Throws std::invalid_argument for an unknown name or a bad size, std::runtime_error when the
+// chosen codec cannot be opened.
 std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConfig& config,
-                                      std::string* why = nullptr);
+                                      std::string* why = nullptr, bool* fell_back = nullptr);
 
 }  // namespace catgs::server

@@ -52,16 +52,23 @@ int main(int argc, char** argv) {
         make_renderer(options.renderer, model, render_options, &why)->name();
     std::cout << "renderer: " << renderer_kind << " (" << why << "), pipeline "
               << pipeline_name(render_options.pipeline) << "\n";
-    // Resolve the encoder once too (a probe at a small size); sessions create this kind.
+    // Resolve the encoder once too (an encoder at a small size; "auto" probes NVENC here, once
+    // per process). Sessions ask for options.encoder again and get the same verdict.
+    ServerMetrics metrics;
     EncoderConfig probe;
-    probe.width = 64;
-    probe.height = 64;
+    probe.width = 256;
+    probe.height = 256;
     std::string enc_why;
-    const std::string encoder_kind = make_encoder(options.encoder, probe, &enc_why)->name();
+    bool fell_back = false;
+    const std::string encoder_kind =
+        make_encoder(options.encoder, probe, &enc_why, &fell_back)->name();
+    if (fell_back) metrics.encoder_fallbacks_total++;
     std::cout << "encoder: " << encoder_kind << " (" << enc_why << "), crf " << options.crf << "\n";
+    metrics.renderer = renderer_kind;
+    metrics.encoder = encoder_kind;
+    metrics.pipeline = pipeline_name(render_options.pipeline);
 
     boost::asio::io_context io;
-    ServerMetrics metrics;
     TransportOptions topts;
     topts.bind = options.bind;
     topts.port = options.port;

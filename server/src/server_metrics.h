@@ -1,44 +1,81 @@
-// Process-wide counters for /metrics (Prometheus text format). Lock-free; any thread.
+// Process-wide metrics for /metrics (Prometheus text exposition format 0.0.4). Any thread.
+//
+// Names (all times in seconds, as Prometheus expects):
+//   catgs_info{renderer,encoder,pipeline} 1          what this server runs
+//   catgs_connections, catgs_sessions                 gauges
+//   catgs_*_total                                     counters (see prometheus_text)
+//   catgs_queue_seconds        pose received -> render start
+//   catgs_render_seconds{kind="key"|"sub"}            render of a key frame / cached sub-frame
+//   catgs_convert_seconds      RGB -> YUV 4:2:0 (0 when the frame arrives as YUV)
+//   catgs_encode_seconds       encoder
+//   catgs_send_seconds         frame handed to the transport -> fully written to the socket
+//   catgs_speculation_window   W of the speculation group of each rendered frame (0: none)
 #pragma once
 
 #include <atomic>
 #include <cstdint>
-#include <sstream>
+#include <mutex>
+#include <ostream>
 #include <string>
+#include <vector>
 
 namespace catgs::server {
 
+// A Prometheus histogram: cumulative buckets with upper bounds `le`, _sum and _count. A mutex
+// keeps one exposition consistent (the +Inf bucket always equals _count).
+class Histogram {
+ public:
+  // `upper_bounds`: increasing, finite. Throws std::invalid_argument otherwise.
+  explicit Histogram(std::vector<double> upper_bounds);
+  // Adds one sample (any unit; the stage histograms use seconds). Thread-safe.
+  void observe(double value);
+  // Writes the _bucket, _sum and _count series of `name`; `labels` is empty or `k="v",...`
+  // (no braces), placed before `le`.
+  void write(std::ostream& out, const std::string& name, const std::string& labels = "") const;
+  // Samples observed so far.
+  std::uint64_t count() const;
+
+  // Bucket bounds for stage times, seconds: 0.5 ms .. 1.024 s, doubling.
+  static std::vector<double> stage_seconds();
+
+ private:
+  std::vector<double> bounds_;
+  mutable std::mutex mutex_;
+  std::vector<std::uint64_t> counts_;  // per bucket, not cumulative; last = above every bound
+  double sum_ = 0;
+  std::uint64_t count_ = 0;
+};
+
 struct ServerMetrics {
+  // What the server runs (set once at start-up, before any session).
+  std::string renderer, encoder, pipeline;
+
   std::atomic<std::int64_t> connections_open{0};  // WebSocket connections now
   std::atomic<std::int64_t> sessions_open{0};     // connections past a valid Hello, now
   std::atomic<std::uint64_t> sessions_total{0};
   std::atomic<std::uint64_t> frames_total{0};     // frames handed to the transport
-  std::atomic<std::uint64_t> key_frames_total{0};
+  std::atomic<std::uint64_t> key_frames_total{0};  // IDR access units among them
   std::atomic<std::uint64_t> bytes_total{0};      // Frame payload bytes
   std::atomic<std::uint64_t> poses_total{0};
-  std::atomic<std::uint64_t> poses_skipped_total{0};
+  std::atomic<std::uint64_t> poses_skipped_total{0};  // replaced by a newer pose (latest wins)
+  // Poses that never got a frame: skipped, or still pending / rendering when the session ended.
+  std::atomic<std::uint64_t> dropped_frames_total{0};
   std::atomic<std::uint64_t> session_errors_total{0};  // sessions ended with an Error
+  std::atomic<std::uint64_t> render_key_frames_total{0};  // full pre-process renders
+  std::atomic<std::uint64_t> render_sub_frames_total{0};  // catgs sub-frames from the caches
+  // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).
+  std::atomic<std::uint64_t> encoder_fallbacks_total{0};
+
+  Histogram queue_seconds{Histogram::stage_seconds()};
+  Histogram render_key_seconds{Histogram::stage_seconds()};
+  Histogram render_sub_seconds{Histogram::stage_seconds()};
+  Histogram convert_seconds{Histogram::stage_seconds()};
+  Histogram encode_seconds{Histogram::stage_seconds()};
+  Histogram send_seconds{Histogram::stage_seconds()};
+  Histogram speculation_window{{0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32}};
 
   // The Prometheus exposition text.
-  std::string prometheus_text() const {
-    std::ostringstream o;
-    auto put = [&o](const char* name, const char* type, const char* help, auto value) {
-      o << "# HELP " << name << ' ' << help << "\n# TYPE " << name << ' ' << type << '\n'
-        << name << ' ' << value << '\n';
-    };
-    put("catgs_connections", "gauge", "Open WebSocket connections.", connections_open.load());
-    put("catgs_sessions", "gauge", "Open sessions (after Hello).", sessions_open.load());
-    put("catgs_sessions_total", "counter", "Sessions opened.", sessions_total.load());
-    put("catgs_frames_total", "counter", "Frames sent.", frames_total.load());
-    put("catgs_key_frames_total", "counter", "IDR frames sent.", key_frames_total.load());
-    put("catgs_frame_bytes_total", "counter", "Encoded frame bytes sent.", bytes_total.load());
-    put("catgs_poses_total", "counter", "Poses received.", poses_total.load());
-    put("catgs_poses_skipped_total", "counter", "Poses replaced before rendering.",
-        poses_skipped_total.load());
-    put("catgs_session_errors_total", "counter", "Sessions ended with an Error.",
-        session_errors_total.load());
-    return o.str();
-  }
+  std::string prometheus_text() const;
 };
 
 }  // namespace catgs::server

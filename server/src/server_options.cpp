@@ -30,7 +30,7 @@ std::string server_usage() {
          "  --port N              TCP port (default 8080; 0 = any free port)\n"
          "  --bind ADDR           listen address (default 0.0.0.0)\n"
          "  --renderer K          cpu | cuda | auto (default auto)\n"
-         "  --encoder K           x264 | auto (default auto = x264 for now)\n"
+         "  --encoder K           nvenc | x264 | auto (default auto: NVENC if usable, else x264)\n"
          "  --pipeline P          vanilla | exact | catgs (default exact)\n"
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
@@ -71,8 +71,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
   }
   if (out.renderer != "cpu" && out.renderer != "cuda" && out.renderer != "auto")
     throw std::invalid_argument("--renderer must be cpu, cuda or auto");
-  if (out.encoder != "x264" && out.encoder != "auto")
-    throw std::invalid_argument("--encoder must be x264 or auto");
+  if (out.encoder != "nvenc" && out.encoder != "x264" && out.encoder != "auto")
+    throw std::invalid_argument("--encoder must be nvenc, x264 or auto");
   return true;
 }
 

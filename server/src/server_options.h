@@ -11,7 +11,7 @@ struct ServerOptions {
   int port = 8080;               // TCP port; 0 lets the kernel pick (the chosen one is logged)
   std::string bind = "0.0.0.0";  // interface address to listen on
   std::string renderer = "auto"; // "cpu" | "cuda" | "auto"
-  std::string encoder = "auto";  // "x264" | "auto" (nvenc later)
+  std::string encoder = "auto";  // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
   std::string pipeline = "exact";// "vanilla" | "exact" | "catgs"
   std::string web_root;          // folder served over HTTP at "/"
   int max_sessions = 8;          // sessions open at once; one more gets ERROR_SERVER_FULL

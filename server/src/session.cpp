@@ -48,9 +48,11 @@ Session::Session(ConnId id, SessionShared& shared)
 Session::~Session() { shared_.metrics.connections_open--; }
 
 void Session::post_message(MessageKind kind, std::string bytes) {
-  boost::asio::post(strand_, [self = shared_from_this(), kind, bytes = std::move(bytes)] {
+  // Arrival is stamped on the transport thread (the strand may wait for a busy pool thread).
+  const auto received = Clock::now();
+  boost::asio::post(strand_, [self = shared_from_this(), kind, bytes = std::move(bytes), received] {
     try {
-      self->handle_message(kind, bytes);
+      self->handle_message(kind, bytes, received);
     } catch (const std::exception& e) {
       // Anything unexpected ends this session only.
       self->fail(pb::ERROR_INTERNAL, std::string("internal error: ") + e.what());
@@ -59,9 +61,17 @@ void Session::post_message(MessageKind kind, std::string bytes) {
 }
 
 void Session::post_sent() {
-  boost::asio::post(strand_, [self = shared_from_this()] {
+  // Stamped here, on the transport thread: the strand handler may wait for a pool thread that
+  // is busy rendering, and that wait is not send time.
+  const auto written = Clock::now();
+  boost::asio::post(strand_, [self = shared_from_this(), written] {
     if (self->in_flight_ > 0) self->in_flight_--;
     self->last_progress_ = Clock::now();
+    if (!self->handed_.empty()) {  // frames are written in the order they were queued
+      self->last_send_ms_ = ms_between(self->handed_.front(), written);
+      self->handed_.pop_front();
+      self->shared_.metrics.send_seconds.observe(self->last_send_ms_ / 1000.0);
+    }
     self->maybe_start_render();
   });
 }
@@ -82,6 +92,8 @@ void Session::post_shutdown() {
 }
 
 void Session::end_open_state() {
+  if (pending_) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
+  pending_.reset();
   if (counted_open_) {
     counted_open_ = false;
     shared_.metrics.sessions_open--;
@@ -97,7 +109,6 @@ void Session::send(const pb::ServerMessage& message) {
 void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued) {
   if (state_ == State::closed) return;
   state_ = State::closed;
-  pending_.reset();
   tick_.cancel();
   end_open_state();
   shared_.metrics.session_errors_total++;
@@ -111,7 +122,7 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   shared_.transport.close(id_, std::move(bytes), drop_queued);
 }
 
-void Session::handle_message(MessageKind kind, const std::string& bytes) {
+void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received) {
   if (state_ == State::closed) return;
   if (kind == MessageKind::text) return fail(pb::ERROR_MALFORMED, "text frames are not allowed");
   if (kind == MessageKind::oversize)
@@ -131,7 +142,7 @@ void Session::handle_message(MessageKind kind, const std::string& bytes) {
     case pb::ClientMessage::kHello:
       return fail(pb::ERROR_PROTOCOL, "second Hello");
     case pb::ClientMessage::kPose:
-      return handle_pose(msg.pose());
+      return handle_pose(msg.pose(), received);
     case pb::ClientMessage::kResize: {
       Viewport v;
       if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), v))
@@ -210,7 +221,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   arm_tick();
 }
 
-void Session::handle_pose(const pb::Pose& pose) {
+void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   CameraPose cam;
   if (auto bad = check_pose(pose, cam)) return fail(bad->code, bad->reason);
   poses_received_++;
@@ -218,8 +229,9 @@ void Session::handle_pose(const pb::Pose& pose) {
   if (pending_) {
     poses_skipped_++;  // latest pose wins: the older one is never rendered
     shared_.metrics.poses_skipped_total++;
+    shared_.metrics.dropped_frames_total++;
   }
-  pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), Clock::now()};
+  pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), received};
   maybe_start_render();
 }
 
@@ -227,7 +239,7 @@ void Session::maybe_start_render() {
   if (state_ != State::open || rendering_ || !pending_ ||
       in_flight_ >= shared_.options.max_frames_in_flight)
     return;
-  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++};
+  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_};
   pending_.reset();
   force_idr_ = false;
   rendering_ = true;
@@ -248,6 +260,7 @@ Session::JobResult Session::run_job(const Job& job) {
     // The client's clock drives the motion predictor of the catgs pipeline (others ignore it).
     renderer_->render_at(camera, job.pose.client_time_ms / 1000.0, image_);
     r.render_key_frame = renderer_->last_stats().key_frame;
+    r.speculation_window = renderer_->last_stats().window;
     const auto t_rendered = Clock::now();
     bool idr = job.force_idr;
     if (!encoder_ || encoder_->width() != job.width || encoder_->height() != job.height) {
@@ -255,7 +268,10 @@ Session::JobResult Session::run_job(const Job& job) {
       cfg.width = job.width;
       cfg.height = job.height;
       cfg.crf = shared_.options.crf;
-      encoder_ = make_encoder(shared_.encoder_kind, cfg);
+      // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
+      bool fell_back = false;
+      encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
+      if (fell_back) shared_.metrics.encoder_fallbacks_total++;
       idr = true;
     }
     EncodedFrame enc = encoder_->encode(image_.rgba8.data(), job.width * 4, idr);
@@ -269,13 +285,18 @@ Session::JobResult Session::run_job(const Job& job) {
     f->set_width(static_cast<std::uint32_t>(job.width));
     f->set_height(static_cast<std::uint32_t>(job.height));
     f->set_payload(enc.data.data(), enc.data.size());
+    r.queue_ms = ms_between(job.pose.received, t_start);
     r.render_ms = ms_between(t_start, t_rendered);
+    r.convert_ms = enc.convert_ms;
     r.encode_ms = enc.encode_ms;
     pb::FrameTimings* t = f->mutable_timings();
-    t->set_queue_ms(ms_between(job.pose.received, t_start));
+    t->set_queue_ms(r.queue_ms);
     t->set_render_ms(r.render_ms);
     t->set_convert_ms(enc.convert_ms);
     t->set_encode_ms(enc.encode_ms);
+    t->set_render_key_frame(r.render_key_frame);
+    t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
+    t->set_previous_send_ms(job.previous_send_ms);
     t->set_total_ms(ms_between(job.pose.received, Clock::now()));
     m.SerializeToString(&r.message);
     r.key_frame = enc.key_frame;
@@ -289,6 +310,7 @@ Session::JobResult Session::run_job(const Job& job) {
 
 void Session::on_job_done(JobResult result) {
   rendering_ = false;
+  if (state_ != State::open || result.message.empty()) shared_.metrics.dropped_frames_total++;
   if (state_ != State::open) return;
   if (result.message.empty()) return fail(pb::ERROR_INTERNAL, "render/encode failed: " + result.error);
   if (in_flight_ == 0) last_progress_ = Clock::now();  // the slow-reader clock starts now
@@ -301,9 +323,18 @@ void Session::on_job_done(JobResult result) {
   if (result.key_frame) key_frames_++;
   if (result.render_key_frame) render_key_frames_++;
   else render_sub_frames_++;
-  shared_.metrics.frames_total++;
-  shared_.metrics.bytes_total += result.payload_bytes;
-  if (result.key_frame) shared_.metrics.key_frames_total++;
+  ServerMetrics& m = shared_.metrics;
+  m.frames_total++;
+  m.bytes_total += result.payload_bytes;
+  if (result.key_frame) m.key_frames_total++;
+  (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
+  m.queue_seconds.observe(result.queue_ms / 1000.0);
+  (result.render_key_frame ? m.render_key_seconds : m.render_sub_seconds)
+      .observe(result.render_ms / 1000.0);
+  m.convert_seconds.observe(result.convert_ms / 1000.0);
+  m.encode_seconds.observe(result.encode_ms / 1000.0);
+  m.speculation_window.observe(result.speculation_window);
+  handed_.push_back(Clock::now());
   shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
   maybe_start_render();
 }

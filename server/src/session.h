@@ -11,6 +11,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
@@ -40,7 +41,7 @@ struct SessionShared {
   Bounds framing_bounds;  // robust bounds used for the initial pose
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
-  std::string encoder_kind;   // resolved at start-up: "x264" (Welcome.encoder)
+  std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
 };
 
 class Session : public std::enable_shared_from_this<Session> {
@@ -67,26 +68,29 @@ class Session : public std::enable_shared_from_this<Session> {
     CameraPose pose;
     std::uint32_t sequence = 0;
     double client_time_ms = 0;
-    Clock::time_point received;
+    Clock::time_point received;  // arrival on the transport thread
   };
   struct Job {
     PendingPose pose;
     int width = 0, height = 0;
     bool force_idr = false;
     std::uint32_t frame_sequence = 0;
+    double previous_send_ms = 0;  // FrameTimings.previous_send_ms
   };
   struct JobResult {
     std::string message;  // serialized ServerMessage{Frame}; empty on failure
     std::string error;
     bool key_frame = false;         // an IDR access unit
     bool render_key_frame = true;   // catgs: a full pre-process (false: a cached sub-frame)
+    int speculation_window = 0;
     std::size_t payload_bytes = 0;
-    double render_ms = 0, encode_ms = 0;
+    double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
   };
 
-  void handle_message(MessageKind kind, const std::string& bytes);
+  // `received`: when the transport thread handed the message over.
+  void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
   void handle_hello(const pb::Hello& hello);
-  void handle_pose(const pb::Pose& pose);
+  void handle_pose(const pb::Pose& pose, Clock::time_point received);
   void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false);
   void send(const pb::ServerMessage& message);
   void maybe_start_render();
@@ -111,6 +115,8 @@ class Session : public std::enable_shared_from_this<Session> {
   std::optional<PendingPose> pending_;
   bool rendering_ = false;
   int in_flight_ = 0;                 // frames queued to the transport, not yet written
+  std::deque<Clock::time_point> handed_;  // when each in-flight frame went to the transport
+  double last_send_ms_ = 0;           // send time of the last frame written
   Clock::time_point last_progress_;   // last time the transport wrote one of our frames
   std::uint32_t next_frame_sequence_ = 0;
   Clock::time_point last_stats_;

@@ -1,164 +1,170 @@
-// catgs-loadgen: a headless client that streams an orbit from a running catgs-server and reports
-// pose-to-frame latency and frame rate. It reports; it does not pass or fail on time.
+// catgs-loadgen: N concurrent sessions (one thread each) replay camera traces against a running
+// catgs-server and report frames, FPS, pose-to-frame latency, bytes/s, dropped and stale frames,
+// errors and the server's stage times, as a table and optionally JSON. It reports; it does not
+// pass or fail on time, except in ramp mode, where it searches for the largest session count
+// that holds the given bounds.
 //
-//   catgs-loadgen --port 8080 --width 1280 --height 720 --seconds 10 --rate 0
-//   --rate 0: closed loop (the next pose is sent when a frame arrives, keeping --depth poses
-//   outstanding); --rate R: poses at R Hz regardless of frames (latest wins on the server).
-#include <algorithm>
-#include <chrono>
+//   catgs-loadgen --port 8080 --sessions 4 --size 1280x720 --trace orbit --seconds 10
+//   catgs-loadgen --sessions 4 --trace orbit,real:C.json --scene S.ply --size 1280x720,640x480
+//   catgs-loadgen --ramp --sessions 32 --max-p95-ms 25 --min-fps 60 --json ramp.json
 #include <cstdio>
+#include <fstream>
 #include <iostream>
+#include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
-#include "catgs/trace.h"
-#include "h264_decoder.h"
-#include "stream_client.h"
+#include <nlohmann/json.hpp>
+
+#include "catgs/ply_io.h"
+#include "cli_args.h"
+#include "load_report.h"
+#include "load_session.h"
 
 using namespace catgs;
 using namespace catgs::loadgen;
-using Clock = std::chrono::steady_clock;
 
 namespace {
 
-double now_ms() {
-  return std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count();
+const char* kUsage =
+    "usage: catgs-loadgen [options]\n"
+    "  --host H --port N        server (default 127.0.0.1:8080)\n"
+    "  --sessions N             concurrent sessions (default 1; the ramp's upper limit)\n"
+    "  --size WxH[,WxH...]      frame sizes, assigned to sessions in turn (default 1280x720)\n"
+    "  --width W --height H     same as --size WxH\n"
+    "  --trace T[,T...]         orbit | real:C.json | cameras:C.json | FILE.trace, in turn\n"
+    "                           (default orbit)\n"
+    "  --scene FILE             the server's scene, for real: traces (and a better orbit)\n"
+    "  --offset-s S             session i starts i*S seconds into its trace (default 0.37)\n"
+    "  --rate HZ                poses per second per session (default 60; 0 = closed loop)\n"
+    "  --depth D                closed loop: poses outstanding (default 1)\n"
+    "  --seconds S              how long each run sends poses (default 10)\n"
+    "  --decode 0|1             decode every frame with libavcodec (default 0)\n"
+    "  --warmup N               first N frames of a session left out of the statistics (5)\n"
+    "  --stale-ms MS            frames later than this count as stale (default 100)\n"
+    "  --token T                Hello token\n"
+    "  --json FILE              write the report (every ramp step) as JSON\n"
+    "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
+    "  --ramp-step x2|+K        session counts double (default) or grow by K\n"
+    "  --max-p95-ms MS          ramp bound: pooled p95 pose-to-frame latency\n"
+    "  --min-fps F              ramp bound: the slowest session's FPS\n";
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
 }
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const auto i = static_cast<std::size_t>(p / 100.0 * static_cast<double>(v.size() - 1) + 0.5);
-  return v[std::min(i, v.size() - 1)];
+std::pair<int, int> parse_size(const std::string& s) {
+  const auto x = s.find('x');
+  if (x == std::string::npos) throw std::invalid_argument("size '" + s + "' is not WxH");
+  return {std::stoi(s.substr(0, x)), std::stoi(s.substr(x + 1))};
+}
+
+// Runs `n` sessions at once, one thread each.
+std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConfig>& templates) {
+  std::vector<SessionResult> results(static_cast<std::size_t>(n));
+  std::vector<std::thread> threads;
+  for (int i = 0; i < n; ++i) {
+    LoadSessionConfig c = templates[static_cast<std::size_t>(i) % templates.size()];
+    c.index = i;
+    c.offset_s *= i;
+    threads.emplace_back([c, &results, i] { results[static_cast<std::size_t>(i)] = run_load_session(c); });
+  }
+  for (auto& t : threads) t.join();
+  return results;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  int port = 8080, width = 1280, height = 720, depth = 1;
-  double seconds = 10, rate = 0;
-  bool decode = false;
   try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--port") port = std::stoi(next());
-      else if (a == "--width") width = std::stoi(next());
-      else if (a == "--height") height = std::stoi(next());
-      else if (a == "--seconds") seconds = std::stod(next());
-      else if (a == "--rate") rate = std::stod(next());
-      else if (a == "--depth") depth = std::max(1, std::stoi(next()));
-      else if (a == "--decode") decode = next() == "1";
-      else throw std::invalid_argument("unknown option " + a);
+    const tools::Args args(argc, argv,
+                           {"--host", "--port", "--sessions", "--size", "--width", "--height",
+                            "--trace", "--scene", "--offset-s", "--rate", "--depth", "--seconds",
+                            "--decode", "--warmup", "--stale-ms", "--token", "--json", "--ramp!",
+                            "--ramp-step", "--max-p95-ms", "--min-fps", "--help!"});
+    if (args.has("--help")) {
+      std::cout << kUsage;
+      return 0;
     }
-  } catch (const std::exception& e) {
-    std::cerr << "catgs-loadgen: " << e.what()
-              << "\nusage: catgs-loadgen --port N --width W --height H --seconds S --rate R "
-                 "--depth D --decode 0|1\n";
-    return 2;
-  }
-  try {
-    StreamClient client;
-    client.connect(port);
-    const pb::Welcome welcome = client.hello(width, height);
-    width = static_cast<int>(welcome.width());
-    height = static_cast<int>(welcome.height());
-    Bounds b;
-    b.min = {welcome.scene_bounds().min().x(), welcome.scene_bounds().min().y(),
-             welcome.scene_bounds().min().z()};
-    b.max = {welcome.scene_bounds().max().x(), welcome.scene_bounds().max().y(),
-             welcome.scene_bounds().max().z()};
-    // An orbit at the distance of the server's initial pose.
-    const auto& ip = welcome.initial_pose().position();
-    const glm::vec3 start(static_cast<float>(ip.x()), static_cast<float>(ip.y()),
-                          static_cast<float>(ip.z()));
-    const float radius = glm::length(start - b.center());
-    GeneratorParams gp;
-    gp.duration_s = 10.0;
-    gp.rate_hz = 60.0;
-    gp.width = width;
-    gp.height = height;
-    gp.fov_deg = 60.0f;
-    const Trace orbit = make_orbit(b, radius, 0.3f * radius, 360.0f, gp);
+    LoadSessionConfig base;
+    base.host = args.get("--host", base.host);
+    base.port = args.get_int("--port", base.port);
+    base.token = args.get("--token");
+    base.offset_s = args.get_double("--offset-s", 0.37);
+    base.rate_hz = args.get_double("--rate", 60);
+    base.depth = std::max(1, args.get_int("--depth", 1));
+    base.seconds = args.get_double("--seconds", 10);
+    base.decode = args.get("--decode", "0") == "1";
+    base.warmup_frames = args.get_int("--warmup", 5);
+    base.stale_ms = args.get_double("--stale-ms", 100);
+    if (args.has("--scene")) {
+      base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
+      std::cout << "scene " << args.get("--scene") << ": " << base.scene->size() << " Gaussians\n";
+    }
+    std::vector<std::string> sizes = split(args.get("--size", "1280x720"));
+    if (args.has("--width") || args.has("--height"))
+      sizes = {std::to_string(args.get_int("--width", 1280)) + "x" + std::to_string(args.get_int("--height", 720))};
+    const std::vector<std::string> traces = split(args.get("--trace", "orbit"));
+    if (sizes.empty() || traces.empty()) throw std::invalid_argument("--size and --trace need values");
+    // One template per (size, trace) turn; session i takes template i mod count.
+    std::vector<LoadSessionConfig> templates;
+    for (std::size_t i = 0; i < std::max(sizes.size(), traces.size()); ++i) {
+      LoadSessionConfig c = base;
+      std::tie(c.width, c.height) = parse_size(sizes[i % sizes.size()]);
+      c.trace = traces[i % traces.size()];
+      templates.push_back(c);
+    }
+    const int max_sessions = std::max(1, args.get_int("--sessions", 1));
 
-    H264Decoder decoder;
-    std::vector<std::uint8_t> rgba;
-    std::vector<double> latency, render, encode, server_total;
-    std::uint32_t seq = 0;
-    std::size_t frames = 0, bytes = 0, key_frames = 0;
-    int outstanding = 0;
-    auto send_next = [&] {
-      const Camera& cam = orbit[seq % orbit.size()].camera;
-      client.send_pose(pose_from_camera(cam, seq++, now_ms()));
-    };
-    const auto t0 = Clock::now();
-    const auto end = t0 + std::chrono::duration<double>(seconds);
-    auto next_pose_at = t0;
-    const auto period = std::chrono::duration<double>(rate > 0 ? 1.0 / rate : 0.0);
-    Clock::time_point first_frame{}, last_frame{};
-    while (Clock::now() < end) {
-      if (rate > 0) {
-        while (Clock::now() >= next_pose_at) {
-          send_next();
-          next_pose_at += std::chrono::duration_cast<Clock::duration>(period);
-        }
-      } else {
-        while (outstanding < depth) {
-          send_next();
-          outstanding++;
-        }
+    nlohmann::json report;
+    report["config"] = {{"rate_hz", base.rate_hz}, {"seconds", base.seconds}, {"decode", base.decode},
+                        {"sizes", sizes}, {"traces", traces}, {"stale_ms", base.stale_ms}};
+    int exit_code = 0;
+    if (!args.has("--ramp")) {
+      const auto results = run_sessions(max_sessions, templates);
+      std::cout << format_table(results);
+      report["run"] = run_json(results);
+      for (const auto& r : results) exit_code |= r.frames == 0 ? 1 : 0;
+    } else {
+      const std::string step = args.get("--ramp-step", "x2");
+      const int add = step.rfind('+', 0) == 0 ? std::stoi(step.substr(1)) : 0;
+      if (step != "x2" && add <= 0) throw std::invalid_argument("--ramp-step must be x2 or +K");
+      const double max_p95 = args.get_double("--max-p95-ms", 0), min_fps = args.get_double("--min-fps", 0);
+      int held = 0;
+      report["ramp"] = nlohmann::json::array();
+      for (int n = 1; n <= max_sessions; n = add ? n + add : 2 * n) {
+        const auto results = run_sessions(n, templates);
+        const RunSummary t = summarize_run(results);
+        char broken[96] = "";
+        if (t.errors) std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
+        else if (max_p95 > 0 && t.latency.p95 > max_p95) std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
+        else if (min_fps > 0 && t.fps_min < min_fps) std::snprintf(broken, sizeof(broken), "slowest session %.1f FPS", t.fps_min);
+        std::printf("--- %d session(s): %s%s\n", n, broken[0] ? "broke: " : "held", broken);
+        std::cout << format_table(results);
+        nlohmann::json step_json = run_json(results);
+        step_json["held"] = broken[0] == 0;
+        step_json["broken_by"] = broken;
+        report["ramp"].push_back(step_json);
+        if (broken[0]) break;
+        held = n;
       }
-      int wait = 50;
-      if (rate > 0)
-        wait = std::max(0, static_cast<int>(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                                next_pose_at - Clock::now()).count()));
-      auto msg = client.recv(wait);
-      if (!msg) continue;
-      if (msg->has_error()) {
-        std::cerr << "server error: " << msg->error().reason() << "\n";
-        return 1;
-      }
-      if (!msg->has_frame()) continue;
-      const pb::Frame& f = msg->frame();
-      const double lat = now_ms() - f.client_time_ms();
-      if (frames == 0) first_frame = Clock::now();
-      last_frame = Clock::now();
-      frames++;
-      if (outstanding > 0) outstanding--;
-      bytes += f.payload().size();
-      if (f.key_frame()) key_frames++;
-      if (decode) {
-        int w = 0, h = 0;
-        decoder.decode(f.payload(), rgba, w, h);
-      }
-      if (frames > 5) {  // skip warm-up (first IDR, encoder start)
-        latency.push_back(lat);
-        render.push_back(f.timings().render_ms());
-        encode.push_back(f.timings().convert_ms() + f.timings().encode_ms());
-        server_total.push_back(f.timings().total_ms());
-      }
+      std::printf("ramp: largest session count that held: %d (bounds: p95 <= %g ms, min FPS >= %g; 0 = none)\n",
+                  held, max_p95, min_fps);
+      report["largest_sessions_held"] = held;
     }
-    const double span = std::chrono::duration<double>(last_frame - first_frame).count();
-    std::printf("session %s scene %s %dx%d renderer %s encoder %s pipeline %s\n",
-                welcome.session_id().c_str(), welcome.scene_name().c_str(), width, height,
-                welcome.renderer().c_str(), welcome.encoder().c_str(), welcome.pipeline().c_str());
-    std::printf("mode: %s\n", rate > 0 ? ("paced " + std::to_string(rate) + " Hz").c_str()
-                                       : ("closed loop, depth " + std::to_string(depth)).c_str());
-    std::printf("frames %zu (key %zu) in %.2f s: %.2f FPS, %.1f kB/frame\n", frames, key_frames,
-                span, frames > 1 ? static_cast<double>(frames - 1) / span : 0.0,
-                frames ? static_cast<double>(bytes) / static_cast<double>(frames) / 1000.0 : 0.0);
-    std::printf("pose->frame latency ms: p50 %.1f  p95 %.1f  max %.1f\n", percentile(latency, 50),
-                percentile(latency, 95), percentile(latency, 100));
-    std::printf("server ms: render p50 %.1f, convert+encode p50 %.1f, pose->sent p50 %.1f\n",
-                percentile(render, 50), percentile(encode, 50), percentile(server_total, 50));
-    client.ws().close();
-    return 0;
+    if (args.has("--json")) {
+      std::ofstream(args.get("--json")) << report.dump(1) << "\n";
+      std::cout << "JSON: " << args.get("--json") << "\n";
+    }
+    return exit_code;
   } catch (const std::exception& e) {
-    std::cerr << "catgs-loadgen: " << e.what() << "\n";
-    return 1;
+    std::cerr << "catgs-loadgen: " << e.what() << "\n" << kUsage;
+    return 2;
   }
 }

@@ -19,65 +19,20 @@
 #include "catgs/trace.h"
 #include "h264_decoder.h"
 #include "server_process.h"
+#include "stream_checks.h"
 #include "stream_client.h"
 
 namespace {
 
 using namespace catgs;
 using namespace catgs::loadgen;
+using namespace catgs::itest;
 using catgs::itest::http_get;
 using catgs::itest::ServerProcess;
 using Clock = std::chrono::steady_clock;
 
-const std::string kBiker = std::string(CATGS_ASSETS_DIR) + "/scenes/biker.compressed.ply";
-const std::string kDataDir = CATGS_DATA_DIR;
 const std::string kFlowers = kDataDir + "/scenes/flowers_sh3.ply";
 const std::string kFlowersCams = kDataDir + "/traces/flowers_sh3.cameras.json";
-
-// Server flags shared by the tests: CPU renderer, exact pipeline, a short slow-client timeout.
-std::vector<std::string> server_args(const std::string& scene, std::vector<std::string> extra = {}) {
-  std::vector<std::string> a = {"--scene", scene, "--renderer", "cpu", "--pipeline", "exact",
-                                "--threads", "4", "--slow-client-timeout-ms", "2000"};
-  a.insert(a.end(), extra.begin(), extra.end());
-  return a;
-}
-
-std::shared_ptr<const GaussianModel> load_model(const std::string& path) {
-  static std::mutex m;
-  static std::map<std::string, std::shared_ptr<const GaussianModel>> cache;
-  std::lock_guard<std::mutex> lock(m);
-  auto& slot = cache[path];
-  if (!slot) slot = std::make_shared<const GaussianModel>(load_scene(path));
-  return slot;
-}
-
-// An orbit around the model's bounds at a distance that shows it whole.
-Trace biker_orbit(int width, int height, int frames) {
-  const Bounds b = load_model(kBiker)->bounds();
-  GeneratorParams p;
-  p.width = width;
-  p.height = height;
-  p.rate_hz = 10.0;
-  p.duration_s = (frames - 1) / p.rate_hz;
-  p.fov_deg = 50.0f;
-  const float r = 1.4f * glm::length(b.extent());
-  return make_orbit(b, r, 0.2f * r, 120.0f, p);
-}
-
-double now_ms() {
-  return std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count();
-}
-
-// Waits for the next message satisfying `want`, skipping Stats/Pong; nullopt on timeout.
-template <class Pred>
-std::optional<pb::ServerMessage> wait_for(StreamClient& c, int timeout_ms, Pred want) {
-  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
-  while (Clock::now() < deadline) {
-    auto m = c.recv(50);
-    if (m && want(*m)) return m;
-  }
-  return std::nullopt;
-}
 
 // Reads until the server sends Error (returned) or closes; nullopt if neither in time.
 std::optional<pb::Error> expect_error(StreamClient& c, int timeout_ms = 10000) {
@@ -104,22 +59,6 @@ bool expect_closed(StreamClient& c, int timeout_ms = 5000) {
     }
   }
   return false;
-}
-
-// Decoded frame vs the CPU render of the pose it answers.
-double frame_psnr(H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose) {
-  std::vector<std::uint8_t> rgba;
-  int w = 0, h = 0;
-  if (!dec.decode(f.payload(), rgba, w, h)) return -1;
-  EXPECT_EQ(w, static_cast<int>(f.width()));
-  EXPECT_EQ(h, static_cast<int>(f.height()));
-  Image got;
-  got.width = w;
-  got.height = h;
-  got.rgba8 = std::move(rgba);
-  Image want;
-  ref.render(camera_from_pose(pose, w, h), want);
-  return psnr_rgba8(got, want);
 }
 
 // A well-behaved session streaming an orbit in the background (one pose outstanding), decoding

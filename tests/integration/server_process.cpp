@@ -95,6 +95,13 @@ std::string ServerProcess::log() const {
   return ss.str();
 }
 
+long rss_kib(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(f, line);)
+    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+  return -1;
+}
+
 int http_get(int port, const std::string& path, std::string& body, int timeout_ms) {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in a{};

@@ -20,6 +20,8 @@ class ServerProcess {
   ServerProcess& operator=(const ServerProcess&) = delete;
 
   int port() const { return port_; }
+  // The server's process id (-1 once it has exited and been reaped).
+  pid_t pid() const { return pid_; }
   // Sends SIGTERM and waits up to `timeout_ms`; returns the exit status (or -1 on timeout).
   int terminate(int timeout_ms = 10000);
   bool running();
@@ -31,6 +33,9 @@ class ServerProcess {
   int port_ = 0;
   std::string log_path_;
 };
+
+// Resident set size of process `pid` in KiB (VmRSS of /proc/PID/status); -1 when unreadable.
+long rss_kib(pid_t pid);
 
 // GET http://127.0.0.1:port/path; returns the status code and fills `body` (-1: no answer).
 int http_get(int port, const std::string& path, std::string& body, int timeout_ms = 5000);

@@ -1,0 +1,73 @@
+// catgs-loadgen's measurements and their report: what one session saw, the per-session and
+// total summaries (percentiles, rates), a human table and JSON. Pure functions; no I/O but the
+// strings they return.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+namespace catgs::loadgen {
+
+// The p-th percentile (p in [0, 100]) of `values` by linear interpolation between closest ranks
+// (NumPy's default): sorted x[0..n-1], rank r = p / 100 * (n - 1), x[floor r] + (r - floor r) *
+// (x[floor r + 1] - x[floor r]). 0 for an empty input. Throws std::invalid_argument for p
+// outside [0, 100].
+double percentile(std::vector<double> values, double p);
+
+// Server-side stage times of a session's frames, from Frame.timings (ms): sums and a count.
+struct StageSums {
+  double queue = 0, render = 0, convert = 0, encode = 0, send = 0, total = 0;
+  std::uint64_t frames = 0;          // frames summed (send: frames with previous_send_ms > 0)
+  std::uint64_t sends = 0;
+  std::uint64_t render_key = 0;      // frames whose render was a key frame (catgs: full pre-process)
+  void add(const StageSums& o);
+};
+
+// What one session saw. Filled by run_load_session (load_session.h).
+struct SessionResult {
+  int index = 0;                 // session number in the run, from 0
+  std::string trace;             // trace spec it replayed
+  int width = 0, height = 0;     // frame size the server streamed
+  std::string session_id, renderer, encoder, pipeline;  // from Welcome
+  double run_seconds = 0;        // poses were sent for this long
+  std::uint64_t poses_sent = 0;
+  std::uint64_t frames = 0;      // Frame messages received
+  std::uint64_t idr_frames = 0;  // among them, IDR access units
+  std::uint64_t decoded = 0;     // pictures the decoder produced (with --decode)
+  std::uint64_t bytes = 0;       // payload bytes received
+  std::uint64_t dropped = 0;     // poses sent that never got a frame
+  std::uint64_t stale = 0;       // frames later than the stale bound, or older than one shown
+  std::uint64_t errors = 0;      // server Error, lost connection, undecodable frame
+  std::string first_error;
+  std::vector<double> latency_ms;  // pose sent -> frame received (decoded with --decode), after warm-up
+  StageSums server;              // after warm-up
+};
+
+struct LatencySummary {
+  double p50 = 0, p95 = 0, p99 = 0, mean = 0, max = 0;
+  std::size_t samples = 0;
+};
+LatencySummary summarize_latency(const std::vector<double>& latency_ms);
+
+// Totals over sessions: frames, rates, pooled latency percentiles, stage means.
+struct RunSummary {
+  int sessions = 0;
+  std::uint64_t frames = 0, poses_sent = 0, bytes = 0, dropped = 0, stale = 0, errors = 0;
+  double fps_total = 0;          // frames / run_seconds, summed over sessions
+  double fps_min = 0;            // the slowest session's FPS
+  double bytes_per_second = 0;   // summed over sessions
+  LatencySummary latency;        // every session's samples pooled
+  StageSums server;
+};
+double session_fps(const SessionResult& s);  // frames / run_seconds (0 when it did not run)
+RunSummary summarize_run(const std::vector<SessionResult>& sessions);
+
+// A fixed-width table: one row per session and a total row, then the server stage means.
+std::string format_table(const std::vector<SessionResult>& sessions);
+// The run as JSON: {"sessions": [...], "total": {...}} with the same numbers as the table.
+nlohmann::json run_json(const std::vector<SessionResult>& sessions);
+
+}  // namespace catgs::loadgen

@@ -1,0 +1,104 @@
+#include "server_metrics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace catgs::server {
+
+Histogram::Histogram(std::vector<double> upper_bounds) : bounds_(std::move(upper_bounds)) {
+  for (std::size_t i = 0; i < bounds_.size(); ++i)
+    if (!std::isfinite(bounds_[i]) || (i > 0 && bounds_[i] <= bounds_[i - 1]))
+      throw std::invalid_argument("Histogram: bucket bounds must be finite and increasing");
+  counts_.assign(bounds_.size() + 1, 0);
+}
+
+std::vector<double> Histogram::stage_seconds() {
+  std::vector<double> b;
+  for (double s = 0.0005; s < 1.1; s *= 2) b.push_back(s);
+  return b;
+}
+
+void Histogram::observe(double value) {
+  // Bucket i holds bounds_[i - 1] < value <= bounds_[i] (Prometheus `le`).
+  const auto i = static_cast<std::size_t>(
+      std::lower_bound(bounds_.begin(), bounds_.end(), value) - bounds_.begin());
+  std::lock_guard<std::mutex> lock(mutex_);
+  counts_[i]++;
+  sum_ += value;
+  count_++;
+}
+
+std::uint64_t Histogram::count() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return count_;
+}
+
+void Histogram::write(std::ostream& out, const std::string& name, const std::string& labels) const {
+  const std::string sep = labels.empty() ? "" : labels + ",";
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::uint64_t cumulative = 0;
+  for (std::size_t i = 0; i < bounds_.size(); ++i) {
+    cumulative += counts_[i];
+    out << name << "_bucket{" << sep << "le=\"" << bounds_[i] << "\"} " << cumulative << '\n';
+  }
+  out << name << "_bucket{" << sep << "le=\"+Inf\"} " << count_ << '\n';
+  const std::string braces = labels.empty() ? "" : "{" + labels + "}";
+  out << name << "_sum" << braces << ' ' << sum_ << '\n';
+  out << name << "_count" << braces << ' ' << count_ << '\n';
+}
+
+std::string ServerMetrics::prometheus_text() const {
+  std::ostringstream o;
+  o.precision(10);
+  auto head = [&o](const char* name, const char* type, const char* help) {
+    o << "# HELP " << name << ' ' << help << "\n# TYPE " << name << ' ' << type << '\n';
+  };
+  auto put = [&](const char* name, const char* type, const char* help, auto value) {
+    head(name, type, help);
+    o << name << ' ' << value << '\n';
+  };
+  head("catgs_info", "gauge", "What this server runs (value always 1).");
+  o << "catgs_info{renderer=\"" << renderer << "\",encoder=\"" << encoder << "\",pipeline=\""
+    << pipeline << "\"} 1\n";
+  put("catgs_connections", "gauge", "Open WebSocket connections.", connections_open.load());
+  put("catgs_sessions", "gauge", "Open sessions (after Hello).", sessions_open.load());
+  put("catgs_sessions_total", "counter", "Sessions opened.", sessions_total.load());
+  put("catgs_frames_total", "counter", "Frames sent.", frames_total.load());
+  put("catgs_key_frames_total", "counter", "IDR frames sent.", key_frames_total.load());
+  put("catgs_frame_bytes_total", "counter", "Encoded frame bytes sent.", bytes_total.load());
+  put("catgs_poses_total", "counter", "Poses received.", poses_total.load());
+  put("catgs_poses_skipped_total", "counter", "Poses replaced before rendering.",
+      poses_skipped_total.load());
+  put("catgs_dropped_frames_total", "counter",
+      "Poses that never got a frame (replaced, or pending when the session ended).",
+      dropped_frames_total.load());
+  put("catgs_session_errors_total", "counter", "Sessions ended with an Error.",
+      session_errors_total.load());
+  put("catgs_encoder_fallbacks_total", "counter",
+      "Encoders opened as x264 because --encoder auto found NVENC unusable.",
+      encoder_fallbacks_total.load());
+  head("catgs_render_frames_total", "counter",
+       "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
+  o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'
+    << "catgs_render_frames_total{kind=\"sub\"} " << render_sub_frames_total.load() << '\n';
+
+  head("catgs_queue_seconds", "histogram", "Pose received -> render start.");
+  queue_seconds.write(o, "catgs_queue_seconds");
+  head("catgs_render_seconds", "histogram", "Render time by kind (key frame or sub-frame).");
+  render_key_seconds.write(o, "catgs_render_seconds", "kind=\"key\"");
+  render_sub_seconds.write(o, "catgs_render_seconds", "kind=\"sub\"");
+  head("catgs_convert_seconds", "histogram", "RGB -> YUV 4:2:0 conversion.");
+  convert_seconds.write(o, "catgs_convert_seconds");
+  head("catgs_encode_seconds", "histogram", "Encoder time per frame.");
+  encode_seconds.write(o, "catgs_encode_seconds");
+  head("catgs_send_seconds", "histogram", "Frame handed to the transport -> written to the socket.");
+  send_seconds.write(o, "catgs_send_seconds");
+  head("catgs_speculation_window", "histogram",
+       "Speculation window W of each rendered frame (0: no speculation).");
+  speculation_window.write(o, "catgs_speculation_window");
+  return o.str();
+}
+
+}  // namespace catgs::server

@@ -1,0 +1,231 @@
+// Several sessions at once (issue 5): different traces and frame sizes, all with correct frames
+// under the catgs pipeline; sessions that leave mid-stream free everything; the encoder flags;
+// catgs-loadgen against the real server.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "catgs/scene_tiling.h"
+#include "server_process.h"
+#include "stream_checks.h"
+
+namespace {
+
+using namespace catgs;
+using namespace catgs::itest;
+using loadgen::H264Decoder;
+using loadgen::pose_from_camera;
+using loadgen::StreamClient;
+using Clock = std::chrono::steady_clock;
+
+const std::string kTrainCams = kDataDir + "/traces/tandt_train.cameras.json";
+
+// One session's stream: poses stamped at 120 Hz on the client clock, sent in lock step; every
+// frame must answer its pose and decode to the CPU render of it. Returns the session's last
+// Stats; failures go to gtest (thread-safe) tagged with `name`.
+pb::Stats stream_and_check(int port, const std::string& name, const Trace& trace, int w, int h) {
+  SCOPED_TRACE(name);
+  StreamClient c;
+  c.connect(port);
+  const pb::Welcome welcome = c.hello(w, h);
+  EXPECT_EQ(welcome.pipeline(), "catgs");
+  H264Decoder dec;
+  cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
+  const double t0 = now_ms();
+  double worst = 1e9;
+  for (std::uint32_t i = 0; i < trace.size(); ++i) {
+    const pb::Pose pose = pose_from_camera(trace[i].camera, i, t0 + i * 1000.0 / 120.0);
+    c.send_pose(pose);
+    auto m = wait_for(c, 30000, [](const pb::ServerMessage& s) { return s.has_frame() || s.has_error(); });
+    if (!m || !m->has_frame()) {
+      ADD_FAILURE() << name << ": no frame for pose " << i;
+      return {};
+    }
+    EXPECT_EQ(m->frame().pose_sequence(), i);
+    EXPECT_EQ(m->frame().width(), static_cast<std::uint32_t>(w));
+    const double psnr = frame_psnr(dec, ref, m->frame(), pose);
+    EXPECT_GE(psnr, 30.0) << name << " frame " << i;
+    worst = std::min(worst, psnr);
+  }
+  auto stats = wait_for(c, 3000, [](const pb::ServerMessage& s) { return s.has_stats(); });
+  if (!stats) {
+    ADD_FAILURE() << name << ": no Stats";
+    return {};
+  }
+  std::cout << "[ info ] " << name << " " << w << "x" << h << ": " << trace.size()
+            << " frames, worst PSNR " << worst << " dB, " << stats->stats().key_frames()
+            << " key frames, " << stats->stats().sub_frames() << " sub-frames\n";
+  c.ws().close();
+  return stats->stats();
+}
+
+// Three sessions at once: a slow orbit, a real camera path (tandt_train's cameras.json moved onto
+// the scene; a fly-over without real data) and a zoom, at three frame sizes.
+TEST(MultiSession, DifferentTracesAndSizesAllGetCorrectFrames) {
+  ServerProcess server(server_args(kBiker, {"--pipeline", "catgs", "--threads", "3"}));
+  const auto model = load_model(kBiker);
+  const Bounds rb = robust_bounds(*model);
+  const float r = 1.4f * glm::length(model->bounds().extent());
+  const int kFrames = 10;
+  GeneratorParams g;
+  g.rate_hz = 120.0;
+  g.duration_s = (kFrames - 1) / g.rate_hz;
+  g.fov_deg = 50.0f;
+
+  struct Run {
+    std::string name;
+    int w, h;
+    Trace trace;
+  };
+  std::vector<Run> runs;
+  g.width = 320;
+  g.height = 240;
+  runs.push_back({"orbit", 320, 240, make_orbit(model->bounds(), r, 0.2f * r, 30.0f * static_cast<float>(g.duration_s), g)});
+  if (std::filesystem::exists(kTrainCams)) {
+    Trace real = fit_trace_to_scene(load_inria_cameras(kTrainCams), *model, estimate_up(*model), 0.6f, 120.0,
+                                    0.5, 256, 192);
+    real.resize(kFrames);
+    runs.push_back({"real path (tandt_train)", 256, 192, real});
+  } else {
+    std::cout << "[ info ] " << kTrainCams << " not found: a fly-over stands in for the real path\n";
+    g.width = 256;
+    g.height = 192;
+    runs.push_back({"fly-over", 256, 192, make_flyover(rb.center() + glm::vec3(-r, -0.5f * r, 0), rb.center() + glm::vec3(-0.9f * r, -0.5f * r, 0), 20.0f, g)});
+  }
+  g.width = 192;
+  g.height = 144;
+  runs.push_back({"zoom", 192, 144, make_zoom(model->bounds(), glm::vec3(0.3f, -0.2f, 1.0f), r, 0.95f * r, g)});
+
+  std::vector<pb::Stats> stats(runs.size());
+  std::vector<std::thread> threads;
+  for (std::size_t i = 0; i < runs.size(); ++i)
+    threads.emplace_back([&, i] { stats[i] = stream_and_check(server.port(), runs[i].name, runs[i].trace, runs[i].w, runs[i].h); });
+  for (auto& t : threads) t.join();
+
+  std::uint32_t sub = 0, frames = 0;
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    EXPECT_EQ(stats[i].key_frames() + stats[i].sub_frames(), runs[i].trace.size()) << runs[i].name;
+    sub += stats[i].sub_frames();
+    frames += stats[i].frames_sent();
+  }
+  EXPECT_GT(sub, 0u) << "the speculation path never served a sub-frame";
+  // /metrics agrees with the sessions: every frame was timed in each stage histogram.
+  std::string metrics;
+  ASSERT_EQ(http_get(server.port(), "/metrics", metrics), 200);
+  EXPECT_EQ(metric_value(metrics, "catgs_frames_total"), frames);
+  EXPECT_EQ(metric_value(metrics, "catgs_render_frames_total{kind=\"sub\"}"), sub);
+  EXPECT_EQ(metric_value(metrics, "catgs_render_seconds_count{kind=\"key\"}") +
+                metric_value(metrics, "catgs_render_seconds_count{kind=\"sub\"}"),
+            frames);
+  for (const char* h : {"catgs_queue_seconds_count", "catgs_convert_seconds_count", "catgs_encode_seconds_count",
+                        "catgs_speculation_window_count"})
+    EXPECT_EQ(metric_value(metrics, h), frames) << h;
+  EXPECT_NE(metrics.find("catgs_info{renderer=\"cpu\",encoder=\"x264\",pipeline=\"catgs\"} 1"), std::string::npos)
+      << metrics;
+}
+
+// 200 connect / Hello / pose / disconnect cycles (clean closes and abrupt drops, before and
+// after the frame arrived): afterwards no session is left and the server's memory has not grown.
+TEST(MultiSession, DisconnectsMidStreamFreeEverything) {
+  ServerProcess server(server_args(kBiker));
+  const Trace orbit = biker_orbit(96, 64, 8);
+  auto cycle = [&](int i) {
+    StreamClient c;
+    c.connect(server.port());
+    c.hello(96, 64);
+    c.send_pose(pose_from_camera(orbit[static_cast<std::size_t>(i) % orbit.size()].camera, 0, now_ms()));
+    if (i % 2 == 0) wait_for(c, 10000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+    if (i % 4 < 2) c.ws().close();
+    else c.ws().close_abrupt();  // mid-render for odd i: the frame is still being made
+  };
+  auto settle = [&] {  // until the server has noticed every close
+    std::string metrics;
+    const auto deadline = Clock::now() + std::chrono::seconds(10);
+    do {
+      http_get(server.port(), "/metrics", metrics);
+      if (metric_value(metrics, "catgs_sessions") == 0 && metric_value(metrics, "catgs_connections") == 0) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    } while (Clock::now() < deadline);
+    return metrics;
+  };
+  for (int i = 0; i < 40; ++i) cycle(i);  // warm-up: allocator pools, thread stacks, caches
+  settle();
+  const long rss_before = rss_kib(server.pid());
+  ASSERT_GT(rss_before, 0);
+  const auto t0 = Clock::now();
+  for (int i = 0; i < 200; ++i) cycle(i);
+  const std::string metrics = settle();
+  const long rss_after = rss_kib(server.pid());
+  std::cout << "[ info ] 200 cycles in " << std::chrono::duration<double>(Clock::now() - t0).count()
+            << " s; server RSS " << rss_before / 1024 << " MiB -> " << rss_after / 1024 << " MiB\n";
+  EXPECT_EQ(metric_value(metrics, "catgs_sessions"), 0) << metrics;
+  EXPECT_EQ(metric_value(metrics, "catgs_connections"), 0) << metrics;
+  EXPECT_EQ(metric_value(metrics, "catgs_sessions_total"), 240) << metrics;
+  EXPECT_EQ(metric_value(metrics, "catgs_session_errors_total"), 0) << metrics;
+  // A leaked session would keep its renderer buffers and x264 encoder (MiBs each): 200 of them
+  // would pass this bound many times over.
+  EXPECT_LT(rss_after - rss_before, 24 * 1024) << "server RSS grew by " << (rss_after - rss_before) / 1024 << " MiB";
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/healthz", body), 200);
+}
+
+// --encoder nvenc fails at start-up with the reason where there is no NVENC; --encoder auto then
+// falls back to x264, logs why and counts it.
+TEST(MultiSession, EncoderFlagsNvencAndAutoFallback) {
+  try {
+    ServerProcess nvenc(server_args(kBiker, {"--encoder", "nvenc"}));
+    std::cout << "[ info ] NVENC opened here: the fallback path is not exercised\n";
+    return;
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("catgs-server: nvenc: "), std::string::npos) << e.what();
+  }
+  ServerProcess server(server_args(kBiker, {"--encoder", "auto"}));
+  EXPECT_NE(server.log().find("encoder: x264 (auto: x264 (nvenc: "), std::string::npos) << server.log();
+  StreamClient c;
+  c.connect(server.port());
+  EXPECT_EQ(c.hello(64, 64).encoder(), "x264");
+  c.send_pose(pose_from_camera(biker_orbit(64, 64, 2)[0].camera, 0, now_ms()));
+  ASSERT_TRUE(wait_for(c, 10000, [](const pb::ServerMessage& s) { return s.has_frame(); }));
+  std::string metrics;
+  http_get(server.port(), "/metrics", metrics);
+  // The start-up probe and the session's encoder.
+  EXPECT_EQ(metric_value(metrics, "catgs_encoder_fallbacks_total"), 2) << metrics;
+}
+
+// catgs-loadgen end to end: two sessions with different traces and sizes, decoding, then a
+// two-step ramp; the JSON report holds what the table shows.
+TEST(MultiSession, LoadgenReportsAndRamps) {
+  ServerProcess server(server_args(kBiker, {"--pipeline", "catgs"}));
+  const std::string json_path = "/tmp/catgs-itest-loadgen-" + std::to_string(server.port()) + ".json";
+  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
+                           " --scene " + kBiker + " --size 160x120,128x96 --rate 20 --decode 1 --warmup 1 --json " +
+                           json_path;
+  // The second session replays a real camera path when the data is there.
+  const std::string cams = kDataDir + "/traces/flowers_sh3.cameras.json";
+  const std::string second = std::filesystem::exists(cams) ? "cameras:" + cams : "orbit";
+  ASSERT_EQ(std::system((base + " --sessions 2 --seconds 3 --trace orbit," + second + " > /dev/null").c_str()), 0);
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));
+  ASSERT_EQ(j["run"]["sessions"].size(), 2u);
+  for (const auto& s : j["run"]["sessions"]) {
+    EXPECT_GT(s["frames"].get<int>(), 0) << s.dump();
+    EXPECT_EQ(s["decoded"].get<int>(), s["frames"].get<int>()) << s.dump();
+    EXPECT_EQ(s["errors"].get<int>(), 0) << s.dump();
+    EXPECT_GT(s["latency"]["p50_ms"].get<double>(), 0.0);
+    EXPECT_LE(s["latency"]["p50_ms"].get<double>(), s["latency"]["p99_ms"].get<double>());
+  }
+  EXPECT_EQ(j["run"]["sessions"][1]["width"].get<int>(), 128);
+  EXPECT_EQ(j["run"]["sessions"][1]["trace"].get<std::string>(), second);
+  ASSERT_EQ(std::system((base + " --sessions 2 --seconds 1.5 --ramp --trace orbit > /dev/null").c_str()), 0);
+  const nlohmann::json ramp = nlohmann::json::parse(std::ifstream(json_path));
+  ASSERT_EQ(ramp["ramp"].size(), 2u) << ramp.dump();  // 1 then 2 sessions, no bound to break
+  EXPECT_EQ(ramp["largest_sessions_held"].get<int>(), 2);
+  EXPECT_EQ(ramp["ramp"][1]["total"]["sessions"].get<int>(), 2);
+  std::filesystem::remove(json_path);
+}
+
+}  // namespace

@@ -1,0 +1,72 @@
+#include "stream_checks.h"
+
+#include <gtest/gtest.h>
+
+#include <map>
+#include <mutex>
+#include <sstream>
+
+#include "catgs/ply_io.h"
+
+namespace catgs::itest {
+
+std::vector<std::string> server_args(const std::string& scene, std::vector<std::string> extra) {
+  std::vector<std::string> a = {"--scene", scene, "--renderer", "cpu", "--pipeline", "exact",
+                                "--threads", "4", "--slow-client-timeout-ms", "2000"};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return a;
+}
+
+std::shared_ptr<const GaussianModel> load_model(const std::string& path) {
+  static std::mutex m;
+  static std::map<std::string, std::shared_ptr<const GaussianModel>> cache;
+  std::lock_guard<std::mutex> lock(m);
+  auto& slot = cache[path];
+  if (!slot) slot = std::make_shared<const GaussianModel>(load_scene(path));
+  return slot;
+}
+
+Trace biker_orbit(int width, int height, int frames) {
+  const Bounds b = load_model(kBiker)->bounds();
+  GeneratorParams p;
+  p.width = width;
+  p.height = height;
+  p.rate_hz = 10.0;
+  p.duration_s = (frames - 1) / p.rate_hz;
+  p.fov_deg = 50.0f;
+  const float r = 1.4f * glm::length(b.extent());
+  return make_orbit(b, r, 0.2f * r, 120.0f, p);
+}
+
+double now_ms() {
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f,
+                  const pb::Pose& pose) {
+  std::vector<std::uint8_t> rgba;
+  int w = 0, h = 0;
+  if (!dec.decode(f.payload(), rgba, w, h)) return -1;
+  EXPECT_EQ(w, static_cast<int>(f.width()));
+  EXPECT_EQ(h, static_cast<int>(f.height()));
+  Image got;
+  got.width = w;
+  got.height = h;
+  got.rgba8 = std::move(rgba);
+  Image want;
+  ref.render(loadgen::camera_from_pose(pose, w, h), want);
+  return psnr_rgba8(got, want);
+}
+
+double metric_value(const std::string& metrics, const std::string& series) {
+  std::istringstream in(metrics);
+  for (std::string line; std::getline(in, line);)
+    if (line.size() > series.size() && line.compare(0, series.size(), series) == 0 &&
+        line[series.size()] == ' ')
+      return std::stod(line.substr(series.size() + 1));
+  return -1;
+}
+
+}  // namespace catgs::itest

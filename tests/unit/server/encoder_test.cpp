@@ -1,0 +1,174 @@
+// Encoders: the I420 entry point decodes to the same picture as the RGBA path, the reference
+// BT.709 conversion hits the standard's code values, IDR on demand, and NVENC's failure path
+// (no NVENC on this machine, or on H100/H200) with `auto` falling back to x264 and saying why.
+#include <gtest/gtest.h>
+
+#include <stdexcept>
+
+#include "catgs/camera.h"
+#include "catgs/cpu_renderer.h"
+#include "encoder.h"
+#include "h264_decoder.h"
+#include "initial_pose.h"
+#include "test_data.h"
+#include "yuv420.h"
+
+extern "C" {
+#include <libavutil/log.h>
+}
+
+namespace {
+
+// x264 prints a banner and statistics per encoder otherwise.
+const int kQuietLibav = (av_log_set_level(AV_LOG_ERROR), 0);
+
+using namespace catgs;
+using namespace catgs::server;
+
+// The bundled biker seen from the server's initial pose.
+Image biker_picture(int w, int h) {
+  auto model = test::cached_scene(test::bundled_scene());
+  const CameraPose p = initial_pose(robust_bounds(*model), 60.0f, w, h);
+  Image img;
+  cpu::CpuRenderer(model, RenderOptions{}).render(
+      Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, w, h), img);
+  return img;
+}
+
+Image decode(const EncodedFrame& f) {
+  loadgen::H264Decoder dec;
+  Image out;
+  EXPECT_TRUE(dec.decode(std::string(f.data.begin(), f.data.end()), out.rgba8, out.width, out.height));
+  return out;
+}
+
+EncoderConfig config(int w, int h) {
+  EncoderConfig c;
+  c.width = w;
+  c.height = h;
+  c.crf = 12;
+  return c;
+}
+
+TEST(Yuv420, Bt709LimitedRangeCodeValues) {
+  // 2x2 blocks of white, black, red, and a flat 50% grey, side by side.
+  const std::uint8_t colours[4][3] = {{255, 255, 255}, {0, 0, 0}, {255, 0, 0}, {128, 128, 128}};
+  std::vector<std::uint8_t> rgba(8 * 2 * 4);
+  for (int r = 0; r < 2; ++r)
+    for (int c = 0; c < 8; ++c)
+      for (int k = 0; k < 3; ++k) rgba[(r * 8 + c) * 4 + k] = colours[c / 2][k];
+  const Yuv420Image yuv = rgba_to_yuv420_bt709(rgba.data(), 8, 2, 8 * 4);
+  // BT.709-6: white (235, 128, 128), black (16, 128, 128), red (63, 102, 240).
+  const int want[4][3] = {{235, 128, 128}, {16, 128, 128}, {63, 102, 240}, {126, 128, 128}};
+  for (int b = 0; b < 4; ++b) {
+    SCOPED_TRACE(b);
+    EXPECT_EQ(yuv.y[static_cast<std::size_t>(2 * b)], want[b][0]);
+    EXPECT_EQ(yuv.y[static_cast<std::size_t>(8 + 2 * b + 1)], want[b][0]);
+    EXPECT_EQ(yuv.u[static_cast<std::size_t>(b)], want[b][1]);
+    EXPECT_EQ(yuv.v[static_cast<std::size_t>(b)], want[b][2]);
+  }
+  EXPECT_THROW(rgba_to_yuv420_bt709(rgba.data(), 7, 2, 32), std::invalid_argument);
+}
+
+TEST(Encoder, Yuv420PathDecodesLikeRgbaPath) {
+  const int W = 192, H = 128;
+  const Image src = biker_picture(W, H);
+  auto rgba_enc = make_encoder("x264", config(W, H));
+  auto yuv_enc = make_encoder("x264", config(W, H));
+  const EncodedFrame a = rgba_enc->encode(src.rgba8.data(), W * 4, false);
+  const Yuv420Image yuv = rgba_to_yuv420_bt709(src.rgba8.data(), W, H, W * 4);
+  const EncodedFrame b = yuv_enc->encode_yuv420(yuv.planes(), false);
+  EXPECT_TRUE(a.key_frame);
+  EXPECT_TRUE(b.key_frame);
+  EXPECT_EQ(b.convert_ms, 0.0);
+  const Image da = decode(a), db = decode(b);
+  ASSERT_EQ(db.width, W);
+  ASSERT_EQ(db.height, H);
+  const double between = psnr_rgba8(da, db), vs_source = psnr_rgba8(db, src);
+  std::cout << "[ info ] I420 path vs RGBA path " << between << " dB, vs source " << vs_source << " dB\n";
+  EXPECT_GE(between, 38.0);
+  EXPECT_GE(vs_source, 35.0);
+}
+
+TEST(Encoder, Yuv420PathHonoursStridesAndIdrOnDemand) {
+  const int W = 64, H = 48;
+  const Image src = biker_picture(W, H);
+  const Yuv420Image yuv = rgba_to_yuv420_bt709(src.rgba8.data(), W, H, W * 4);
+  // The same planes with padded rows (a pitched GPU copy).
+  const int ys = W + 32, cs = W / 2 + 16;
+  std::vector<std::uint8_t> y(static_cast<std::size_t>(ys * H), 0), u(static_cast<std::size_t>(cs * H / 2), 0),
+      v(static_cast<std::size_t>(cs * H / 2), 0);
+  for (int r = 0; r < H; ++r) std::copy_n(&yuv.y[static_cast<std::size_t>(r * W)], W, &y[static_cast<std::size_t>(r * ys)]);
+  for (int r = 0; r < H / 2; ++r) {
+    std::copy_n(&yuv.u[static_cast<std::size_t>(r * W / 2)], W / 2, &u[static_cast<std::size_t>(r * cs)]);
+    std::copy_n(&yuv.v[static_cast<std::size_t>(r * W / 2)], W / 2, &v[static_cast<std::size_t>(r * cs)]);
+  }
+  auto tight = make_encoder("x264", config(W, H)), pitched = make_encoder("x264", config(W, H));
+  const Yuv420Planes padded{y.data(), ys, u.data(), cs, v.data(), cs};
+  EXPECT_EQ(tight->encode_yuv420(yuv.planes(), false).data, pitched->encode_yuv420(padded, false).data);
+  EXPECT_FALSE(pitched->encode_yuv420(padded, false).key_frame);
+  EXPECT_TRUE(pitched->encode_yuv420(padded, true).key_frame);
+  EXPECT_THROW(pitched->encode_yuv420(Yuv420Planes{y.data(), W / 2, u.data(), cs, v.data(), cs}, false),
+               std::invalid_argument);
+}
+
+// Whether NVENC opens here; its error text when not.
+std::string nvenc_error() {
+  try {
+    make_encoder("nvenc", config(256, 256));
+    return "";
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+}
+
+TEST(Encoder, NvencFailsWithAReasonOrEncodes) {
+  const std::string err = nvenc_error();
+  if (err.empty()) {
+    // A GPU with NVENC: the stream must decode to the picture.
+    const Image src = biker_picture(256, 256);
+    auto e = make_encoder("nvenc", config(256, 256));
+    EXPECT_EQ(e->name(), "nvenc");
+    const EncodedFrame f = e->encode(src.rgba8.data(), 256 * 4, false);
+    EXPECT_TRUE(f.key_frame);
+    EXPECT_GE(psnr_rgba8(decode(f), src), 30.0);
+    return;
+  }
+  std::cout << "[ info ] nvenc: " << err << "\n";
+  EXPECT_EQ(err.rfind("nvenc: ", 0), 0u) << err;
+  EXPECT_GT(err.size(), 30u) << "the reason must say what failed: " << err;
+}
+
+TEST(Encoder, AutoFallsBackToX264AndSaysWhy) {
+  const std::string err = nvenc_error();
+  for (int i = 0; i < 2; ++i) {  // the second call reuses the probe's verdict
+    std::string why;
+    bool fell_back = true;
+    auto e = make_encoder("auto", config(64, 64), &why, &fell_back);
+    if (err.empty()) {
+      EXPECT_EQ(e->name(), "nvenc");
+      EXPECT_FALSE(fell_back);
+      continue;
+    }
+    EXPECT_EQ(e->name(), "x264");
+    EXPECT_TRUE(fell_back);
+    EXPECT_NE(why.find("nvenc: "), std::string::npos) << why;
+    EXPECT_EQ(why.find('\n'), std::string::npos) << "one line: " << why;
+    EXPECT_EQ(e->encode_yuv420(rgba_to_yuv420_bt709(std::vector<std::uint8_t>(64 * 64 * 4, 90).data(), 64, 64, 256)
+                                   .planes(),
+                               false)
+                  .key_frame,
+              true);
+  }
+  bool fell_back = true;
+  EXPECT_EQ(make_encoder("x264", config(64, 64), nullptr, &fell_back)->name(), "x264");
+  EXPECT_FALSE(fell_back);
+}
+
+TEST(Encoder, RejectsUnknownKindAndBadSize) {
+  EXPECT_THROW(make_encoder("vp9", config(64, 64)), std::invalid_argument);
+  EXPECT_THROW(make_encoder("x264", config(63, 64)), std::invalid_argument);
+  EXPECT_THROW(make_encoder("nvenc", config(8, 8)), std::invalid_argument);
+}
+
+}  // namespace

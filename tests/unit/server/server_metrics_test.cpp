@@ -1,0 +1,89 @@
+// /metrics: histogram buckets are cumulative with Prometheus `le` semantics, and every histogram
+// family in the exposition text is consistent (non-decreasing buckets, +Inf bucket == _count).
+#include <gtest/gtest.h>
+
+#include <map>
+#include <regex>
+#include <sstream>
+
+#include "server_metrics.h"
+
+namespace {
+
+using catgs::server::Histogram;
+using catgs::server::ServerMetrics;
+
+TEST(Histogram, CumulativeBucketsWithInclusiveUpperBounds) {
+  Histogram h({0.001, 0.01, 0.1});
+  for (double v : {0.0005, 0.001, 0.002, 0.01, 0.05, 3.0}) h.observe(v);
+  std::ostringstream o;
+  h.write(o, "x_seconds", "kind=\"key\"");
+  EXPECT_EQ(o.str(),
+            "x_seconds_bucket{kind=\"key\",le=\"0.001\"} 2\n"
+            "x_seconds_bucket{kind=\"key\",le=\"0.01\"} 4\n"
+            "x_seconds_bucket{kind=\"key\",le=\"0.1\"} 5\n"
+            "x_seconds_bucket{kind=\"key\",le=\"+Inf\"} 6\n"
+            "x_seconds_sum{kind=\"key\"} 3.0635\n"
+            "x_seconds_count{kind=\"key\"} 6\n");
+  EXPECT_EQ(h.count(), 6u);
+  EXPECT_THROW(Histogram({0.1, 0.1}), std::invalid_argument);
+  EXPECT_THROW(Histogram({0.2, 0.1}), std::invalid_argument);
+}
+
+TEST(ServerMetrics, ExpositionHasConsistentStageHistograms) {
+  ServerMetrics m;
+  m.renderer = "cpu";
+  m.encoder = "x264";
+  m.pipeline = "catgs";
+  for (int i = 0; i < 10; ++i) {
+    m.queue_seconds.observe(0.001 * i);
+    (i % 3 ? m.render_sub_seconds : m.render_key_seconds).observe(0.004 * i);
+    m.convert_seconds.observe(0.0);
+    m.encode_seconds.observe(0.007);
+    m.speculation_window.observe(i % 5);
+  }
+  m.send_seconds.observe(2.5);  // above every bucket: only +Inf
+  const std::string text = m.prometheus_text();
+  EXPECT_NE(text.find("catgs_info{renderer=\"cpu\",encoder=\"x264\",pipeline=\"catgs\"} 1\n"), std::string::npos);
+  EXPECT_NE(text.find("catgs_encoder_fallbacks_total 0\n"), std::string::npos);
+  EXPECT_NE(text.find("catgs_dropped_frames_total 0\n"), std::string::npos);
+  EXPECT_NE(text.find("catgs_render_frames_total{kind=\"sub\"} 0\n"), std::string::npos);
+
+  // series (name + labels without le) -> buckets in order, and _count.
+  std::map<std::string, std::vector<double>> buckets;
+  std::map<std::string, double> inf, count;
+  const std::regex bucket_re(R"re(^(\w+)_bucket\{(.*?),?le="([^"]+)"\} (\S+)$)re");
+  const std::regex count_re(R"re(^(\w+)_count(?:\{(.*)\})? (\S+)$)re");
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) {
+    std::smatch s;
+    if (std::regex_match(line, s, bucket_re)) {
+      const std::string key = s[1].str() + "{" + s[2].str() + "}";
+      if (s[3] == "+Inf") inf[key] = std::stod(s[4]);
+      else buckets[key].push_back(std::stod(s[4]));
+    } else if (std::regex_match(line, s, count_re)) {
+      count[s[1].str() + "{" + s[2].str() + "}"] = std::stod(s[3]);
+    }
+  }
+  const std::map<std::string, double> want = {
+      {"catgs_queue_seconds{}", 10},        {"catgs_render_seconds{kind=\"key\"}", 4},
+      {"catgs_render_seconds{kind=\"sub\"}", 6}, {"catgs_convert_seconds{}", 10},
+      {"catgs_encode_seconds{}", 10},       {"catgs_send_seconds{}", 1},
+      {"catgs_speculation_window{}", 10}};
+  for (const auto& [key, n] : want) {
+    SCOPED_TRACE(key);
+    ASSERT_TRUE(count.count(key)) << text;
+    EXPECT_EQ(count[key], n);
+    EXPECT_EQ(inf[key], n);
+    const auto& b = buckets[key];
+    ASSERT_FALSE(b.empty());
+    for (std::size_t i = 1; i < b.size(); ++i) EXPECT_LE(b[i - 1], b[i]);
+    EXPECT_LE(b.back(), n);
+  }
+  EXPECT_EQ(buckets["catgs_send_seconds{}"].back(), 0);  // 2.5 s is above the largest bound
+  EXPECT_EQ(buckets["catgs_encode_seconds{}"].front(), 0);  // 7 ms is above 0.5 ms
+  EXPECT_EQ(text.find("# TYPE catgs_render_seconds histogram"), text.rfind("# TYPE catgs_render_seconds histogram"))
+      << "one TYPE line per family";
+}
+
+}  // namespace
