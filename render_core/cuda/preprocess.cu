@@ -81,21 +81,7 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  // Big Gaussians join the big list: one atomic per warp holding any (they are few).
-  const unsigned lanes = __ballot_sync(0xffffffffu, is_big);
-  if (lanes != 0u) {
-    const int lane = static_cast<int>(threadIdx.x & 31u);
-    const int leader = __ffs(lanes) - 1;
-    unsigned base = 0;
-    if (lane == leader) base = atomicAdd(big.count, static_cast<unsigned>(__popc(lanes)));
-    base = __shfl_sync(0xffffffffu, base, leader);
-    if (is_big) big.index[base + __popc(lanes & ((1u << lane) - 1u))] = static_cast<uint32_t>(i);
-  }
-  // Visible count: one atomic per block, not per Gaussian (DESIGN.md: no contended atomics).
-  // Big exact Gaussians are counted by count_big_kernel once their tiles are known.
-  const int block_visible = __syncthreads_count(touched > 0);
-  if (threadIdx.x == 0 && block_visible > 0)
-    atomicAdd(visible, static_cast<unsigned long long>(block_visible));
+  list_big_and_count_visible(is_big, touched, i, big, visible);
 }
 
 // Big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and writes the

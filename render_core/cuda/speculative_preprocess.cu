@@ -85,20 +85,7 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, float slack, flo
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  // Big trails join the big list (one atomic per warp holding any); the visible count takes one
-  // atomic per block; big ones are counted visible by count_big_tiles.
-  const unsigned lanes = __ballot_sync(0xffffffffu, is_big);
-  if (lanes != 0u) {
-    const int lane = static_cast<int>(threadIdx.x & 31u);
-    const int leader = __ffs(lanes) - 1;
-    unsigned base = 0;
-    if (lane == leader) base = atomicAdd(big.count, static_cast<unsigned>(__popc(lanes)));
-    base = __shfl_sync(0xffffffffu, base, leader);
-    if (is_big) big.index[base + __popc(lanes & ((1u << lane) - 1u))] = static_cast<uint32_t>(i);
-  }
-  const int block_visible = __syncthreads_count(touched > 0);
-  if (threadIdx.x == 0 && block_visible > 0)
-    atomicAdd(visible, static_cast<unsigned long long>(block_visible));
+  list_big_and_count_visible(is_big, touched, i, big, visible);
 }
 
 // M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.

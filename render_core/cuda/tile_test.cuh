@@ -1,3 +1,5 @@
+// Device helpers shared by the pre-processing and key-emission kernels.
+//
 // The tile-membership test of stage 2, loaded once per Gaussian into registers and then asked
 // per tile: square (vanilla: every tile of the rectangle), ellipse (exact: fm::ellipse_touches_tile)
 // or trail (catgs key frames: fm::trail_touches_tile). The same test counts tiles in stage 1 and
@@ -45,6 +47,25 @@ __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, u
     g.q = cq.w;
   }
   return g;
+}
+
+// The end of a pre-processing kernel (full or speculative), called by every thread of the block:
+// big Gaussians join the big list (one atomic per warp holding any: they are few), and the
+// visible count takes one atomic per block, not per Gaussian (DESIGN.md: no contended atomics).
+// Big Gaussians are counted visible by count_big_tiles once their tiles are known.
+__device__ __forceinline__ void list_big_and_count_visible(bool is_big, uint32_t touched, uint64_t i,
+                                                           const BigList& big, unsigned long long* visible) {
+  const unsigned lanes = __ballot_sync(0xffffffffu, is_big);
+  if (lanes != 0u) {
+    const int lane = static_cast<int>(threadIdx.x & 31u);
+    const int leader = __ffs(lanes) - 1;
+    unsigned base = 0;
+    if (lane == leader) base = atomicAdd(big.count, static_cast<unsigned>(__popc(lanes)));
+    base = __shfl_sync(0xffffffffu, base, leader);
+    if (is_big) big.index[base + __popc(lanes & ((1u << lane) - 1u))] = static_cast<uint32_t>(i);
+  }
+  const int block_visible = __syncthreads_count(touched > 0);
+  if (threadIdx.x == 0 && block_visible > 0) atomicAdd(visible, static_cast<unsigned long long>(block_visible));
 }
 
 }  // namespace catgs::cuda::stages
