@@ -27,6 +27,8 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   CATGS_CUDA(cudaEventCreateWithFlags(&s.plan_ready, cudaEventDisableTiming));
   CATGS_CUDA(cudaMallocHost(&s.host_catgs, 4 * sizeof(unsigned)));
   s.catgs_counters.ensure(8 * sizeof(unsigned), "catgs counters", &s.allocations);
+  CATGS_CUDA(cudaEventCreate(&s.convert_start));
+  CATGS_CUDA(cudaEventCreate(&s.converted));
 }
 
 CudaRenderer::~CudaRenderer() = default;
@@ -250,6 +252,40 @@ void CudaRenderer::render(const Camera& camera, Image& out) { download(render_de
 
 void CudaRenderer::render_at(const Camera& camera, double time_s, Image& out) {
   download(render_device_at(camera, time_s), out);
+}
+
+double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
+  check_yuv420_target("render_yuv420_at", out, camera.width, camera.height);
+  const DeviceFrame f = render_device_at(camera, time_s);
+  State& s = *state_;
+  const int w = f.width, h = f.height;
+  const std::size_t y_bytes = static_cast<std::size_t>(w) * h, c_bytes = y_bytes / 4;
+  stages::Yuv420Pitched planes{};
+  if (out.memory == MemoryKind::device) {  // an NVENC hw frame: written in place
+    planes = {out.y, static_cast<size_t>(out.y_stride), out.u, static_cast<size_t>(out.u_stride),
+              out.v, static_cast<size_t>(out.v_stride)};
+  } else {  // converted here, then only the planes cross to the host
+    s.yuv.ensure(y_bytes + 2 * c_bytes, "YUV planes", &s.allocations);
+    auto* base = s.yuv.as<uint8_t>();
+    planes = {base, static_cast<size_t>(w), base + y_bytes, static_cast<size_t>(w / 2),
+              base + y_bytes + c_bytes, static_cast<size_t>(w / 2)};
+  }
+  CATGS_CUDA(cudaEventRecord(s.convert_start, s.stream));
+  stages::rgba8_to_yuv420(f.rgba8, w, h, planes, s.stream);
+  CATGS_CUDA(cudaEventRecord(s.converted, s.stream));
+  if (out.memory == MemoryKind::host) {
+    CATGS_CUDA(cudaMemcpy2DAsync(out.y, out.y_stride, planes.y, planes.y_pitch, w, h,
+                                 cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(cudaMemcpy2DAsync(out.u, out.u_stride, planes.u, planes.u_pitch, w / 2, h / 2,
+                                 cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(cudaMemcpy2DAsync(out.v, out.v_stride, planes.v, planes.v_pitch, w / 2, h / 2,
+                                 cudaMemcpyDeviceToHost, s.stream));
+  }
+  // The encoder reads the planes next, on its own stream or thread: the frame must be complete.
+  CATGS_CUDA(cudaStreamSynchronize(s.stream));
+  float ms = 0.0f;
+  CATGS_CUDA(cudaEventElapsedTime(&ms, s.convert_start, s.converted));
+  return ms;
 }
 
 std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model) {

@@ -99,6 +99,10 @@ struct CudaRenderer::State {
   cudaEvent_t catgs_readback = nullptr;   // M / outside flag copied to host_catgs
   cudaEvent_t plan_ready = nullptr;       // the key frame's slice total copied to host_catgs[2]
   SpeculationPlanner planner;
+  // render_yuv420_at (cuda_renderer.cpp): I420 planes for a host target, and the conversion's
+  // timing events.
+  GrowBuffer yuv;
+  cudaEvent_t convert_start = nullptr, converted = nullptr;
   uint64_t key_entries = 0, key_visible = 0, key_capacity = 0;  // the open group's key frame
   int window = 0;
   bool key_frame = true;
@@ -136,7 +140,7 @@ struct CudaRenderer::State {
           &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &ranges, &tile_scratch, &tile_order,
           &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &cached,
           &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
-          &slice_order, &slice_order_temp, &partials, &saturated_from, &catgs_counters})
+          &slice_order, &slice_order_temp, &partials, &saturated_from, &catgs_counters, &yuv})
       b += g->bytes();
     return b;
   }
@@ -147,6 +151,8 @@ struct CudaRenderer::State {
     if (host_catgs) cudaFreeHost(host_catgs);
     if (catgs_readback) cudaEventDestroy(catgs_readback);
     if (plan_ready) cudaEventDestroy(plan_ready);
+    if (convert_start) cudaEventDestroy(convert_start);
+    if (converted) cudaEventDestroy(converted);
     for (cudaEvent_t& e : events)
       if (e) cudaEventDestroy(e);
     if (counts_ready) cudaEventDestroy(counts_ready);

@@ -1,5 +1,7 @@
-// Video encoders: one H.264 Annex B access unit out per picture in, from RGBA8 host images or
-// from BT.709 limited-range I420 planes (a frame the GPU already converted: no swscale).
+// Video encoders: one H.264 Annex B access unit out per picture in, from RGBA8 host images, from
+// BT.709 limited-range I420 planes, or from a picture written straight into the encoder's own
+// input planes (input_target() + encode_input(): the render core's colour conversion writes
+// there, host planes for x264, CUDA device planes for NVENC with device_input: no extra copy).
 //
 // An Encoder is created for one frame size and used by one thread at a time (a session's render
 // job); a size change means a new Encoder. Implementations (libavcodec): `x264` (libx264, CPU)
@@ -11,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "yuv420.h"
+#include "catgs/yuv420.h"
 
 namespace catgs::server {
 
@@ -21,6 +23,10 @@ struct EncoderConfig {
   int crf = 23;               // x264 constant rate factor
   int bitrate_kbps = 0;       // NVENC CBR target; 0: width * height * fps / 15 bits/s
   int threads = 0;            // encoder threads, 0 = the library's choice
+  // nvenc: pictures arrive as CUDA device planes (AV_PIX_FMT_CUDA frames of a hw_frames_ctx on
+  // the CUDA primary context of device 0, sw_format yuv420p; input_target() is then device
+  // memory). x264 ignores it (its input is always host memory).
+  bool device_input = false;
 };
 
 // One encoded access unit.
@@ -47,6 +53,14 @@ class Encoder {
   // no colour conversion happens. IDR rules and errors as encode(). The planes are only read
   // during the call.
   virtual EncodedFrame encode_yuv420(const Yuv420Planes& planes, bool force_idr) = 0;
+  // The planes of the next picture (width x height I420, BT.709 limited range), to be filled
+  // completely before encode_input(): host memory for x264 and host-fed NVENC, device memory of
+  // a fresh hw frame for NVENC with device_input. Valid until the next encode_input() or
+  // input_target() call. Throws std::runtime_error when no frame can be had.
+  virtual Yuv420Target input_target() = 0;
+  // Encodes the picture written into the last input_target(). IDR rules and errors as encode();
+  // throws std::logic_error without a preceding input_target().
+  virtual EncodedFrame encode_input(bool force_idr) = 0;
 };
 
 // Creates an encoder by name:

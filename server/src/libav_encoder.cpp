@@ -6,6 +6,7 @@
 extern "C" {
 #include <libavcodec/avcodec.h>
 #include <libavutil/error.h>
+#include <libavutil/hwcontext.h>
 #include <libavutil/imgutils.h>
 #include <libswscale/swscale.h>
 }
@@ -61,13 +62,20 @@ LibavEncoder::LibavEncoder(std::string name, const char* codec_name, const Encod
   ctx_->color_primaries = AVCOL_PRI_BT709;
   ctx_->color_trc = AVCOL_TRC_BT709;
   // No AV_CODEC_FLAG_GLOBAL_HEADER: SPS/PPS then come in band before every IDR.
-  configure(ctx_);
+  try {
+    configure(ctx_);
+  } catch (...) {
+    release();
+    throw;
+  }
+  hw_frames_ = ctx_->pix_fmt == AV_PIX_FMT_CUDA;
   int err = avcodec_open2(ctx_, codec, nullptr);
   if (err < 0) {
     const std::string msg = name_ + ": cannot open " + codec_name + ": " + av_error_text(err);
     release();
     throw std::runtime_error(msg);
   }
+  if (hw_frames_) return;  // frames come from the hw_frames_ctx pool, one per picture
   frame_->format = AV_PIX_FMT_YUV420P;
   frame_->width = config.width;
   frame_->height = config.height;
@@ -91,6 +99,8 @@ void LibavEncoder::release() {
 }
 
 EncodedFrame LibavEncoder::encode(const std::uint8_t* rgba, int stride_bytes, bool force_idr) {
+  if (hw_frames_) throw std::logic_error(name_ + ": takes device pictures (input_target()) only");
+  input_ready_ = false;  // frame_ is overwritten here
   EncodedFrame out;
   const auto t0 = std::chrono::steady_clock::now();
   if (!sws_) {
@@ -118,6 +128,8 @@ EncodedFrame LibavEncoder::encode_yuv420(const Yuv420Planes& p, bool force_idr) 
     throw std::invalid_argument(name_ + ": encode_yuv420 needs three planes with strides >= " +
                                 std::to_string(config_.width) + ", " +
                                 std::to_string(config_.width / 2));
+  if (hw_frames_) throw std::logic_error(name_ + ": takes device pictures (input_target()) only");
+  input_ready_ = false;  // frame_ is overwritten here
   const auto t0 = std::chrono::steady_clock::now();
   const int err = av_frame_make_writable(frame_);
   if (err < 0) throw std::runtime_error(name_ + ": frame not writable: " + av_error_text(err));
@@ -128,6 +140,31 @@ EncodedFrame LibavEncoder::encode_yuv420(const Yuv420Planes& p, bool force_idr) 
   EncodedFrame out = encode_frame(force_idr, EncodedFrame{});
   out.encode_ms = ms_since(t0);  // the plane copy counts as encode time
   return out;
+}
+
+Yuv420Target LibavEncoder::input_target() {
+  int err = 0;
+  if (hw_frames_) {
+    // A fresh pool frame each picture: the encoder may still hold the previous one.
+    av_frame_unref(frame_);
+    err = av_hwframe_get_buffer(ctx_->hw_frames_ctx, frame_, 0);
+    if (err < 0) throw std::runtime_error(name_ + ": no hw frame: " + av_error_text(err));
+    frame_->colorspace = AVCOL_SPC_BT709;
+    frame_->color_range = AVCOL_RANGE_MPEG;
+  } else {
+    err = av_frame_make_writable(frame_);
+    if (err < 0) throw std::runtime_error(name_ + ": frame not writable: " + av_error_text(err));
+  }
+  input_ready_ = true;
+  return {config_.width, config_.height, hw_frames_ ? MemoryKind::device : MemoryKind::host,
+          frame_->data[0], frame_->linesize[0], frame_->data[1], frame_->linesize[1],
+          frame_->data[2], frame_->linesize[2]};
+}
+
+EncodedFrame LibavEncoder::encode_input(bool force_idr) {
+  if (!input_ready_) throw std::logic_error(name_ + ": encode_input() without input_target()");
+  input_ready_ = false;
+  return encode_frame(force_idr, EncodedFrame{});
 }
 
 EncodedFrame LibavEncoder::encode_frame(bool force_idr, EncodedFrame out) {

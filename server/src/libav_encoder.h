@@ -1,6 +1,7 @@
 // The part of every libavcodec H.264 encoder that does not depend on the codec: opening the
 // context with BT.709 limited-range yuv420p signalling, the RGBA -> YUV path (swscale, created
-// on first use only), the I420 plane path (a plane copy, no conversion), IDR on demand
+// on first use only), the I420 plane path (a plane copy, no conversion), the in-place path
+// (input_target(): the encoder's own frame, host or an AV_PIX_FMT_CUDA hw frame), IDR on demand
 // (pict_type I), and draining one access unit per picture (the encoders here have no delay).
 #pragma once
 
@@ -27,12 +28,16 @@ class LibavEncoder : public Encoder {
   int height() const override { return config_.height; }
   EncodedFrame encode(const std::uint8_t* rgba, int stride_bytes, bool force_idr) override;
   EncodedFrame encode_yuv420(const Yuv420Planes& planes, bool force_idr) override;
+  Yuv420Target input_target() override;
+  EncodedFrame encode_input(bool force_idr) override;
 
  protected:
   // Opens libavcodec encoder `codec_name` as `name` for config's size: sets size, yuv420p,
   // time base 1/fps, no B-frames, BT.709 limited-range colour, no global header (SPS/PPS in
   // band on every IDR), then calls `configure` for the codec's own options before
-  // avcodec_open2. Throws std::invalid_argument for a bad size (odd, < 16, > 8192) and
+  // avcodec_open2. A `configure` that sets pix_fmt AV_PIX_FMT_CUDA and a hw_frames_ctx makes
+  // the encoder take hw frames (input_target() only; encode() and encode_yuv420() then throw
+  // std::logic_error). Throws std::invalid_argument for a bad size (odd, < 16, > 8192) and
   // std::runtime_error, starting with `name`, when the codec is missing or refuses to open.
   LibavEncoder(std::string name, const char* codec_name, const EncoderConfig& config,
                const std::function<void(AVCodecContext*)>& configure);
@@ -48,6 +53,8 @@ class LibavEncoder : public Encoder {
   AVPacket* packet_ = nullptr;
   SwsContext* sws_ = nullptr;  // RGBA path only
   std::int64_t pts_ = 0;
+  bool hw_frames_ = false;    // frame_ is an AV_PIX_FMT_CUDA frame taken from hw_frames_ctx
+  bool input_ready_ = false;  // input_target() handed out frame_ and encode_input() is due
 };
 
 // Throws std::invalid_argument, starting with `name`, unless config's size is even and in

@@ -8,6 +8,8 @@
 
 extern "C" {
 #include <libavcodec/avcodec.h>
+#include <libavutil/dict.h>
+#include <libavutil/hwcontext.h>
 #include <libavutil/opt.h>
 }
 
@@ -34,6 +36,33 @@ const EncoderConfig& require_nvenc_driver(const EncoderConfig& config) {
   return config;
 }
 
+// Device input: a CUDA device context on the runtime's primary context (so the render core's
+// device pointers and the frames' are one address space) and a pool of yuv420p CUDA frames of
+// the encoder's size, attached to `ctx` before it opens. Throws std::runtime_error on failure.
+void attach_cuda_frames(AVCodecContext* ctx, const EncoderConfig& config) {
+  AVDictionary* opts = nullptr;
+  av_dict_set(&opts, "primary_ctx", "1", 0);
+  AVBufferRef* device = nullptr;
+  int err = av_hwdevice_ctx_create(&device, AV_HWDEVICE_TYPE_CUDA, "0", opts, 0);
+  av_dict_free(&opts);
+  if (err < 0) throw std::runtime_error("nvenc: cannot create a CUDA device context: " + av_error_text(err));
+  AVBufferRef* frames = av_hwframe_ctx_alloc(device);
+  av_buffer_unref(&device);  // the frames context holds its own reference
+  if (!frames) throw std::runtime_error("nvenc: out of memory for the CUDA frames context");
+  auto* fc = reinterpret_cast<AVHWFramesContext*>(frames->data);
+  fc->format = AV_PIX_FMT_CUDA;
+  fc->sw_format = AV_PIX_FMT_YUV420P;
+  fc->width = config.width;
+  fc->height = config.height;
+  err = av_hwframe_ctx_init(frames);
+  if (err < 0) {
+    av_buffer_unref(&frames);
+    throw std::runtime_error("nvenc: cannot create the CUDA frame pool: " + av_error_text(err));
+  }
+  ctx->pix_fmt = AV_PIX_FMT_CUDA;
+  ctx->hw_frames_ctx = frames;  // owned by the codec context from here
+}
+
 }  // namespace
 
 NvencEncoder::NvencEncoder(const EncoderConfig& config) try
@@ -51,6 +80,7 @@ NvencEncoder::NvencEncoder(const EncoderConfig& config) try
         av_opt_set_int(ctx->priv_data, "zerolatency", 1, 0);
         av_opt_set_int(ctx->priv_data, "delay", 0, 0);
         av_opt_set_int(ctx->priv_data, "forced-idr", 1, 0);  // pict_type I -> IDR
+        if (config.device_input) attach_cuda_frames(ctx, config);
       }) {
 } catch (const std::runtime_error& e) {
   // The driver is there but the session did not open: say the likely cause.

@@ -4,10 +4,13 @@
 // EncoderConfig::bitrate_kbps with a one-frame VBV (rc_buffer_size = bitrate / fps), Annex B with
 // SPS/PPS in band on every IDR, yuv420p BT.709 limited range signalled in the VUI.
 //
-// Feed (what exists): host frames. encode() converts RGBA on the CPU (swscale) and
-// encode_yuv420() copies host I420 planes; libavcodec then uploads them to the GPU. The
-// zero-copy path of DESIGN.md (AV_PIX_FMT_CUDA frames in a hw_frames_ctx on the render core's
-// CUDA context) is NOT built: nothing here takes device pointers yet.
+// Feed: with EncoderConfig::device_input, zero copy: the encoder opens with pix_fmt
+// AV_PIX_FMT_CUDA and a hw_frames_ctx (sw_format yuv420p) on a CUDA device context that uses
+// the primary context of device 0, the one the CUDA runtime (and so the render core) uses;
+// input_target() hands out a pool frame's device planes, which the render core's colour
+// conversion writes (CudaRenderer::render_yuv420_at), and nothing crosses to the host. Without
+// it, host frames: encode() converts RGBA on the CPU (swscale), encode_yuv420() and
+// input_target() take host I420 planes, and libavcodec uploads them.
 //
 // Availability: h264_nvenc loads libcuda and libnvidia-encode at open time. On machines without
 // an NVIDIA driver, and on GPUs without NVENC (H100, H200: error 2), opening fails.

@@ -38,6 +38,8 @@ std::string server_usage() {
          "  --threads N           worker threads (default 4)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
          "  --crf N               x264 quality, 0..51 (default 23)\n"
+         "  --encoder-threads N   threads per session's encoder, 0 = the library's choice\n"
+         "                        (default 1: sessions already run in parallel)\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
          "  --socket-send-buffer BYTES  SO_SNDBUF per WebSocket (default 524288; 0 = kernel)\n";
 }
@@ -65,6 +67,7 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else if (a == "--threads") out.threads = parse_int(a, v, 1, 256);
     else if (a == "--slow-client-timeout-ms") out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
     else if (a == "--crf") out.crf = parse_int(a, v, 0, 51);
+    else if (a == "--encoder-threads") out.encoder_threads = parse_int(a, v, 0, 64);
     else if (a == "--max-frames-in-flight") out.max_frames_in_flight = parse_int(a, v, 1, 16);
     else if (a == "--socket-send-buffer") out.socket_send_buffer = parse_int(a, v, 0, 64 << 20);
     else throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());

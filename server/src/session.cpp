@@ -257,24 +257,32 @@ Session::JobResult Session::run_job(const Job& job) {
     const auto t_start = Clock::now();
     const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
                                             job.pose.pose.vertical_fov_deg, job.width, job.height);
-    // The client's clock drives the motion predictor of the catgs pipeline (others ignore it).
-    renderer_->render_at(camera, job.pose.client_time_ms / 1000.0, image_);
-    r.render_key_frame = renderer_->last_stats().key_frame;
-    r.speculation_window = renderer_->last_stats().window;
-    const auto t_rendered = Clock::now();
     bool idr = job.force_idr;
     if (!encoder_ || encoder_->width() != job.width || encoder_->height() != job.height) {
       EncoderConfig cfg;
       cfg.width = job.width;
       cfg.height = job.height;
       cfg.crf = shared_.options.crf;
+      cfg.threads = shared_.options.encoder_threads;
+      // A GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores the flag.
+      cfg.device_input = renderer_->name() == "cuda";
       // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
       bool fell_back = false;
       encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
       if (fell_back) shared_.metrics.encoder_fallbacks_total++;
       idr = true;
     }
-    EncodedFrame enc = encoder_->encode(image_.rgba8.data(), job.width * 4, idr);
+    const auto t_render = Clock::now();  // after any encoder (re)creation
+    // The frame is rendered and colour-converted straight into the encoder's input planes: on
+    // the GPU for the CUDA core (only the YUV planes cross to the host for x264, none for NVENC),
+    // on the CPU for the CPU core. The client's clock drives the catgs motion predictor.
+    const double convert_ms =
+        renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, encoder_->input_target());
+    r.render_key_frame = renderer_->last_stats().key_frame;
+    r.speculation_window = renderer_->last_stats().window;
+    const auto t_rendered = Clock::now();
+    EncodedFrame enc = encoder_->encode_input(idr);
+    enc.convert_ms = convert_ms;
 
     pb::ServerMessage m;
     pb::Frame* f = m.mutable_frame();
@@ -286,7 +294,8 @@ Session::JobResult Session::run_job(const Job& job) {
     f->set_height(static_cast<std::uint32_t>(job.height));
     f->set_payload(enc.data.data(), enc.data.size());
     r.queue_ms = ms_between(job.pose.received, t_start);
-    r.render_ms = ms_between(t_start, t_rendered);
+    // Render time includes the plane download (GPU) but not the conversion itself.
+    r.render_ms = std::max(0.0, ms_between(t_render, t_rendered) - convert_ms);
     r.convert_ms = enc.convert_ms;
     r.encode_ms = enc.encode_ms;
     pb::FrameTimings* t = f->mutable_timings();

@@ -130,7 +130,6 @@ class Session : public std::enable_shared_from_this<Session> {
   // --- render job state (one job at a time) ---
   std::unique_ptr<Renderer> renderer_;
   std::unique_ptr<Encoder> encoder_;
-  Image image_;
 };
 
 }  // namespace catgs::server

@@ -115,6 +115,12 @@ class CudaRenderer final : public Renderer {
   void render(const Camera& camera, Image& out) override;
   // render_device_at() then a download into `out`.
   void render_at(const Camera& camera, double time_s, Image& out) override;
+  // render_device_at(), then the GPU colour conversion (yuv420_convert.cu) into `out`: a device
+  // target (current device, primary context) is written in place; for a host target the planes
+  // are converted into a device buffer and copied back (w * h * 1.5 bytes). Ends with a stream
+  // sync, so the planes are complete on return. Returns the conversion kernel's time (events).
+  // Throws std::invalid_argument for a bad target; CudaError as render_device().
+  double render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override;
   // Renders `camera` into this renderer's device image; one host-device sync (see above).
   // Throws std::invalid_argument for a bad camera, std::length_error for an oversized render
   // list, CudaError for CUDA failures.

@@ -12,12 +12,13 @@
 #include "catgs/camera.h"
 #include "catgs/gaussian_model.h"
 #include "catgs/speculation.h"
+#include "catgs/yuv420.h"
 
 namespace catgs {
 
 // vanilla: reference 3DGS (3-sigma square bounds, every touched tile).
 // exact:   opacity-aware extent + exact ellipse-vs-tile test (render list = tiles really reached).
-// catgs:   exact + speculation, frustum/sort caches, task splitting (paper sec. 3; CPU only so far).
+// catgs:   exact + speculation, frustum/sort caches, task splitting (paper sec. 3).
 enum class Pipeline { vanilla, exact, catgs };
 
 // "vanilla" | "exact" | "catgs" -> Pipeline; throws std::invalid_argument otherwise.
@@ -71,10 +72,22 @@ class Renderer {
     (void)time_s;
     render(camera, out);
   }
+  // Renders a camera posed at `time_s` (as render_at()) and writes the frame as BT.709
+  // limited-range I420 (yuv420.h) into `out`, whose size must be the camera's. Returns the
+  // milliseconds spent on the colour conversion (wall clock on the CPU, CUDA events on the GPU).
+  // This default renders into host memory and converts on the CPU (rgba_to_yuv420_bt709) into a
+  // host target. The CUDA core overrides it: the frame is converted on the GPU, a host target
+  // receives only the planes (1.5 bytes a pixel), a device target is written in place (the
+  // NVENC hw frame path). Throws std::invalid_argument for a target of another size or with bad
+  // planes, or a device target on a renderer that has no device; render errors as render().
+  virtual double render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out);
   // Stats of the last render().
   virtual const FrameStats& last_stats() const = 0;
   virtual const RenderOptions& options() const = 0;
   virtual void set_options(const RenderOptions& options) = 0;
+
+ private:
+  Image yuv_source_;  // the default render_yuv420_at()'s host frame, reused between frames
 };
 
 // Creates a renderer by name: "cpu", "cuda" or "auto" (CUDA if built and a device is usable, else

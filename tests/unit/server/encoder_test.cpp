@@ -3,6 +3,7 @@
 // (no NVENC on this machine, or on H100/H200) with `auto` falling back to x264 and saying why.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "catgs/camera.h"
@@ -11,7 +12,7 @@
 #include "h264_decoder.h"
 #include "initial_pose.h"
 #include "test_data.h"
-#include "yuv420.h"
+#include "catgs/yuv420.h"
 
 extern "C" {
 #include <libavutil/log.h>
@@ -112,6 +113,59 @@ TEST(Encoder, Yuv420PathHonoursStridesAndIdrOnDemand) {
                std::invalid_argument);
 }
 
+TEST(Yuv420, PitchedTargetHoldsTheSameCodeValuesAsPacked) {
+  const Image src = biker_picture(96, 64);
+  const Yuv420Image packed = rgba_to_yuv420_bt709(src.rgba8.data(), 96, 64, 96 * 4);
+  const int ys = 96 + 32, cs = 48 + 16;
+  std::vector<std::uint8_t> y(ys * 64, 7), u(cs * 32, 7), v(cs * 32, 7);
+  rgba_to_yuv420_bt709(src.rgba8.data(), 96, 64, 96 * 4,
+                       Yuv420Target{96, 64, MemoryKind::host, y.data(), ys, u.data(), cs, v.data(), cs});
+  for (int r = 0; r < 64; ++r) {
+    ASSERT_TRUE(std::equal(packed.y.begin() + r * 96, packed.y.begin() + (r + 1) * 96, y.begin() + r * ys)) << r;
+    EXPECT_EQ(y[r * ys + 96], 7) << "padding written at row " << r;
+  }
+  for (int r = 0; r < 32; ++r) {
+    ASSERT_TRUE(std::equal(packed.u.begin() + r * 48, packed.u.begin() + (r + 1) * 48, u.begin() + r * cs)) << r;
+    ASSERT_TRUE(std::equal(packed.v.begin() + r * 48, packed.v.begin() + (r + 1) * 48, v.begin() + r * cs)) << r;
+  }
+  Yuv420Image other;
+  EXPECT_THROW(rgba_to_yuv420_bt709(src.rgba8.data(), 96, 64, 96 * 4, other.target(64, 64)),
+               std::invalid_argument);
+  Yuv420Target device = other.target(96, 64);
+  device.memory = MemoryKind::device;
+  EXPECT_THROW(rgba_to_yuv420_bt709(src.rgba8.data(), 96, 64, 96 * 4, device), std::invalid_argument);
+}
+
+// The server's path: the renderer writes the converted frame into the encoder's own planes.
+TEST(Encoder, RenderIntoInputTargetEqualsRenderThenConvert) {
+  auto model = test::cached_scene(test::bundled_scene());
+  const CameraPose p = initial_pose(robust_bounds(*model), 60.0f, 128, 96);
+  const Camera cam = Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, 128, 96);
+  cpu::CpuRenderer renderer(model, RenderOptions{});
+  Image img;
+  renderer.render(cam, img);
+  const Yuv420Image ref = rgba_to_yuv420_bt709(img.rgba8.data(), 128, 96, 128 * 4);
+
+  auto direct = make_encoder("x264", config(128, 96));
+  auto copied = make_encoder("x264", config(128, 96));
+  EXPECT_THROW(direct->encode_input(false), std::logic_error);
+  const Yuv420Target t = direct->input_target();
+  EXPECT_EQ(t.memory, MemoryKind::host);
+  EXPECT_GE(renderer.render_yuv420_at(cam, 0.0, t), 0.0);
+  for (int r = 0; r < 96; ++r)
+    ASSERT_TRUE(std::equal(ref.y.begin() + r * 128, ref.y.begin() + (r + 1) * 128, t.y + r * t.y_stride)) << r;
+  const EncodedFrame a = direct->encode_input(false);
+  EXPECT_TRUE(a.key_frame);
+  EXPECT_EQ(a.data, copied->encode_yuv420(ref.planes(), false).data);
+  EXPECT_THROW(direct->encode_input(false), std::logic_error) << "one picture per input_target()";
+
+  Yuv420Image wrong;
+  EXPECT_THROW(renderer.render_yuv420_at(cam, 0.0, wrong.target(64, 48)), std::invalid_argument);
+  Yuv420Target device = wrong.target(128, 96);
+  device.memory = MemoryKind::device;
+  EXPECT_THROW(renderer.render_yuv420_at(cam, 0.0, device), std::invalid_argument);
+}
+
 // Whether NVENC opens here; its error text when not.
 std::string nvenc_error() {
   try {
@@ -137,6 +191,25 @@ TEST(Encoder, NvencFailsWithAReasonOrEncodes) {
   std::cout << "[ info ] nvenc: " << err << "\n";
   EXPECT_EQ(err.rfind("nvenc: ", 0), 0u) << err;
   EXPECT_GT(err.size(), 30u) << "the reason must say what failed: " << err;
+}
+
+// NVENC fed CUDA frames (device_input): hands out device planes where it opens, else fails with
+// a reason like the host-fed one.
+TEST(Encoder, NvencDeviceInputGivesDevicePlanesOrFailsWithAReason) {
+  EncoderConfig c = config(256, 256);
+  c.device_input = true;
+  try {
+    auto e = make_encoder("nvenc", c);
+    const Yuv420Target t = e->input_target();
+    EXPECT_EQ(t.memory, MemoryKind::device);
+    EXPECT_GE(t.y_stride, 256);
+    EXPECT_THROW(e->encode_yuv420(Yuv420Image{}.planes(), false), std::logic_error);
+  } catch (const std::runtime_error& e) {
+    const std::string err = e.what();
+    std::cout << "[ info ] nvenc (device input): " << err << "\n";
+    EXPECT_EQ(err.rfind("nvenc: ", 0), 0u) << err;
+    EXPECT_GT(err.size(), 30u) << err;
+  }
 }
 
 TEST(Encoder, AutoFallsBackToX264AndSaysWhy) {
