@@ -117,6 +117,10 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
                                {"stale", s.stale},
                                {"errors", s.errors},
                                {"first_error", s.first_error},
+                               {"checked", s.checked},
+                               {"check_failures", s.check_failures},
+                               {"psnr_min_db", s.psnr_min},
+                               {"psnr_mean_db", s.psnr_mean},
                                {"latency", latency_json(summarize_latency(s.latency_ms))},
                                {"server", stages_json(s.server)}});
   }
@@ -168,6 +172,15 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
                 mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends),
                 mean(g.total, g.frames), t.fps_min);
   out += line;
+  for (const SessionResult& s : sessions)
+    if (s.checked > 0) {
+      std::snprintf(line, sizeof(line),
+                    "session %d reference check: %llu frames, PSNR min %.1f dB, mean %.1f dB, %llu "
+                    "below the bar\n",
+                    s.index, static_cast<unsigned long long>(s.checked), s.psnr_min, s.psnr_mean,
+                    static_cast<unsigned long long>(s.check_failures));
+      out += line;
+    }
   for (const SessionResult& s : sessions)
     if (!s.first_error.empty()) out += "session " + std::to_string(s.index) + " error: " + s.first_error + "\n";
   return out;

@@ -43,6 +43,11 @@ struct SessionResult {
   std::uint64_t errors = 0;      // server Error, lost connection, undecodable frame
   std::string first_error;
   std::vector<double> latency_ms;  // pose sent -> frame received (decoded with --decode), after warm-up
+  // Reference check (LoadSessionConfig::check_every): decoded frames compared with the CPU
+  // reference render of their pose, PSNR in dB over RGB.
+  std::uint64_t checked = 0;
+  std::uint64_t check_failures = 0;  // checked frames below LoadSessionConfig::check_min_psnr
+  double psnr_min = 0, psnr_mean = 0;
   StageSums server;              // after warm-up
 };
 

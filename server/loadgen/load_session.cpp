@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "catgs/cpu_renderer.h"
 #include "catgs/scene_tiling.h"
 #include "h264_decoder.h"
 #include "stream_client.h"
@@ -77,6 +78,9 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
     r.errors++;
     if (r.first_error.empty()) r.first_error = what;
   };
+  const bool check = cfg.check_every > 0;
+  if (check && !cfg.scene)
+    throw std::invalid_argument("loadgen: the reference check needs the scene (--scene)");
   try {
     StreamClient client;
     client.connect(cfg.port, cfg.host);
@@ -93,6 +97,10 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
     H264Decoder decoder;
     std::vector<std::uint8_t> rgba;
     std::vector<double> sent_at;  // client time each pose was sent, by sequence
+    std::vector<pb::Pose> sent_poses;  // reference check: each pose as sent, by sequence
+    std::unique_ptr<cpu::CpuRenderer> reference;
+    if (check) reference = std::make_unique<cpu::CpuRenderer>(cfg.scene, RenderOptions{});
+    double psnr_sum = 0;
     std::int64_t newest_answered = -1;
     std::uint64_t answered = 0;   // distinct poses that got a frame
     int outstanding = 0;
@@ -103,7 +111,9 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
       const double t_s = std::chrono::duration<double>(Clock::now() - t0).count() + cfg.offset_s;
       const auto seq = static_cast<std::uint32_t>(sent_at.size());
       sent_at.push_back(now_ms());
-      client.send_pose(pose_from_camera(camera_at(trace, t_s), seq, sent_at.back()));
+      const pb::Pose pose = pose_from_camera(camera_at(trace, t_s), seq, sent_at.back());
+      if (check) sent_poses.push_back(pose);
+      client.send_pose(pose);
       r.poses_sent++;
     };
     const auto period = std::chrono::duration_cast<Clock::duration>(
@@ -144,11 +154,26 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
       r.bytes += f.payload().size();
       if (f.key_frame()) r.idr_frames++;
       if (outstanding > 0) outstanding--;
-      if (cfg.decode) {
+      if (cfg.decode || check) {
         int w = 0, h = 0;
         try {
-          if (decoder.decode(f.payload(), rgba, w, h)) r.decoded++;
+          const bool got = decoder.decode(f.payload(), rgba, w, h);
+          if (got) r.decoded++;
           if (w != r.width || h != r.height) note_error("frame decoded to " + std::to_string(w) + "x" + std::to_string(h));
+          if (got && check && r.frames % static_cast<std::uint64_t>(cfg.check_every) == 0 &&
+              f.pose_sequence() < sent_poses.size()) {
+            Image decoded_image, want;
+            decoded_image.width = w;
+            decoded_image.height = h;
+            decoded_image.rgba8 = rgba;
+            reference->render(camera_from_pose(sent_poses[f.pose_sequence()], w, h), want);
+            const double psnr = psnr_rgba8(decoded_image, want);
+            r.psnr_min = r.checked == 0 ? psnr : std::min(r.psnr_min, psnr);
+            psnr_sum += psnr;
+            r.checked++;
+            r.psnr_mean = psnr_sum / static_cast<double>(r.checked);
+            if (!(psnr >= cfg.check_min_psnr)) r.check_failures++;
+          }
         } catch (const std::exception& e) {
           note_error(std::string("decode: ") + e.what());
         }

@@ -44,9 +44,16 @@ struct LoadSessionConfig {
   int warmup_frames = 5;         // frames left out of latency and server statistics
   double stale_ms = 100;         // a frame later than this after its pose counts as stale
   double drain_ms = 1000;        // after the last pose, wait this long at most for its frame
+  // Reference check (implies decode): every check_every-th frame is compared with the CPU
+  // reference render (exact pipeline, black background) of the pose it answers, over `scene`
+  // (required). 0: off. The CPU render blocks this session's thread: latency and FPS of a
+  // checking run are not the server's.
+  int check_every = 0;
+  double check_min_psnr = 30;    // dB; frames below count in SessionResult::check_failures
 };
 
-// Runs one session. Never throws: failures are counted in SessionResult::errors (first_error
+// Runs one session. Throws std::invalid_argument for check_every > 0 without a scene. Otherwise
+// never throws: failures are counted in SessionResult::errors (first_error
 // names the first one); a session that cannot connect or is refused reports 0 frames.
 SessionResult run_load_session(const LoadSessionConfig& config);
 

@@ -42,6 +42,9 @@ const char* kUsage =
     "  --depth D                closed loop: poses outstanding (default 1)\n"
     "  --seconds S              how long each run sends poses (default 10)\n"
     "  --decode 0|1             decode every frame with libavcodec (default 0)\n"
+    "  --check-every N          decode, and compare every Nth frame with the CPU reference\n"
+    "                           render of its pose (needs --scene; slows the client down)\n"
+    "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
     "  --warmup N               first N frames of a session left out of the statistics (5)\n"
     "  --stale-ms MS            frames later than this count as stale (default 100)\n"
     "  --token T                Hello token\n"
@@ -86,7 +89,7 @@ int main(int argc, char** argv) {
     const tools::Args args(argc, argv,
                            {"--host", "--port", "--sessions", "--size", "--width", "--height",
                             "--trace", "--scene", "--offset-s", "--rate", "--depth", "--seconds",
-                            "--decode", "--warmup", "--stale-ms", "--token", "--json", "--ramp!",
+                            "--decode", "--check-every", "--check-min-psnr", "--warmup", "--stale-ms", "--token", "--json", "--ramp!",
                             "--ramp-step", "--max-p95-ms", "--min-fps", "--help!"});
     if (args.has("--help")) {
       std::cout << kUsage;
@@ -101,6 +104,10 @@ int main(int argc, char** argv) {
     base.depth = std::max(1, args.get_int("--depth", 1));
     base.seconds = args.get_double("--seconds", 10);
     base.decode = args.get("--decode", "0") == "1";
+    base.check_every = std::max(0, args.get_int("--check-every", 0));
+    base.check_min_psnr = args.get_double("--check-min-psnr", 30);
+    if (base.check_every > 0 && !args.has("--scene"))
+      throw std::invalid_argument("--check-every needs --scene (the reference renders it)");
     base.warmup_frames = args.get_int("--warmup", 5);
     base.stale_ms = args.get_double("--stale-ms", 100);
     if (args.has("--scene")) {
@@ -124,13 +131,18 @@ int main(int argc, char** argv) {
 
     nlohmann::json report;
     report["config"] = {{"rate_hz", base.rate_hz}, {"seconds", base.seconds}, {"decode", base.decode},
+                        {"check_every", base.check_every}, {"check_min_psnr", base.check_min_psnr},
                         {"sizes", sizes}, {"traces", traces}, {"stale_ms", base.stale_ms}};
     int exit_code = 0;
     if (!args.has("--ramp")) {
       const auto results = run_sessions(max_sessions, templates);
       std::cout << format_table(results);
       report["run"] = run_json(results);
-      for (const auto& r : results) exit_code |= r.frames == 0 ? 1 : 0;
+      for (const auto& r : results) {
+        exit_code |= r.frames == 0 ? 1 : 0;
+        // A reference check that found a bad frame, or checked none, fails the run.
+        if (base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) exit_code |= 1;
+      }
     } else {
       const std::string step = args.get("--ramp-step", "x2");
       const int add = step.rfind('+', 0) == 0 ? std::stoi(step.substr(1)) : 0;

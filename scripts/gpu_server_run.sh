@@ -1,0 +1,215 @@
+#!/usr/bin/env bash
+# scripts/gpu_server_run.sh: the streaming server on a GPU machine (issue 5).
+#
+# The GPU machine has no libwebsockets, FFmpeg or protobuf, so the server, catgs-loadgen and the
+# server's unit tests travel prebuilt with the shared libraries they need (their ldd closure
+# minus glibc and the C++ runtime, about 45 MB as tar.xz). That and the scenes of gpu_run.sh do
+# not fit one run's 64 MiB, hence two runs back to back on the same warm machine:
+#
+# On the build machine, once (after `cmake --preset cuda && cmake --build build/cuda`):
+#   scripts/gpu_server_run.sh prepare [BUILD_DIR]      -> .carry_srv/ (git-ignored)
+# On the GPU machine:
+#   1. carry [".carry_srv"]:  scripts/gpu_server_run.sh check
+#        unpacks everything under /tmp/catgs_srv; runs the server unit tests (NVENC's failure path
+#        with a real NVIDIA driver); starts catgs-server --renderer cuda --pipeline catgs on the
+#        bundled biker scene and runs 4 catgs-loadgen sessions (different sizes and paths) that
+#        decode every frame and compare every 4th with the CPU reference render of its pose
+#        (PSNR >= 30 dB) -> $OUT/server_check.log, $OUT/check.json
+#   2. within the machine's warm period, carry [".carry"] (scripts/gpu_run.sh prepare):
+#        scripts/gpu_server_run.sh sweep [--seconds S] [--counts "1 2 4 8 16"] [--sizes "..."]
+#        1, 2, 4, 8, 16 sessions at 1280x720 and 1920x1080 on tumblewood_sh2 (x10) and the
+#        13-copy city (~7 M), real camera paths in turn, 60 poses/s per session, x264 (auto:
+#        NVENC if the GPU has it), no client decode; CPU and GPU utilisation sampled
+#        -> $OUT/sweep.md (table), $OUT/sweep.tar.gz (every loadgen JSON), $OUT/sweep.log
+set -uo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+SRV=/tmp/catgs_srv
+
+prepare() {
+  local build=${1:-build/cuda}
+  local carry=$ROOT/.carry_srv
+  rm -rf "$carry" && mkdir -p "$carry/stage/bin" "$carry/stage/lib"
+  local bins=("$build/server/catgs-server" "$build/server/catgs-loadgen"
+              "$build/tests/unit/catgs_server_unit_tests")
+  for b in "${bins[@]}"; do
+    [ -x "$b" ] || { echo "prepare: $b missing (build $build with the server)" >&2; return 1; }
+    cp -f "$b" "$carry/stage/bin/"
+  done
+  strip "$carry"/stage/bin/* 2>/dev/null || true
+  # Every shared library they load, except glibc's and the C++ runtime (the GPU machine's newer
+  # ones serve binaries built against older ones; mixing glibc versions would not work).
+  ldd "${bins[@]}" | awk '/=> \//{print $3}' | sort -u |
+    grep -Ev '/(libc|libm|libdl|librt|libpthread|libresolv|libutil|libstdc\+\+|libgcc_s)\.so' |
+    while read -r lib; do cp -fL "$lib" "$carry/stage/lib/"; done
+  strip --strip-unneeded "$carry"/stage/lib/* 2>/dev/null || true
+  tar -C "$carry/stage" -cf - bin lib | xz -T2 -6 > "$carry/server.tar.xz"
+  rm -rf "$carry/stage"
+  mkdir -p "$carry/traces"
+  cp -f "${CATGS_DATA_DIR:-$ROOT/../shared/data}"/traces/*.cameras.json "$carry/traces/"
+  du -sh "$carry"
+}
+
+unpack() {
+  rm -rf "$SRV" && mkdir -p "$SRV" && xz -dc "$ROOT/.carry_srv/server.tar.xz" | tar -C "$SRV" -xf - || return 1
+  # The test binaries look for the bundled scene at the build machine's source path.
+  mkdir -p /work && [ -e /work/main ] || ln -sfn "$ROOT" /work/main
+}
+
+# start_server SCENE LOG ARGS...: starts catgs-server on a free port, sets SERVER_PID and PORT.
+start_server() {
+  local scene=$1 log=$2
+  shift 2
+  "$SRV/bin/catgs-server" --scene "$scene" --port 0 --renderer "${CATGS_RENDERER:-cuda}" --pipeline catgs \
+    --encoder auto --threads 48 --max-sessions 64 --web-root "$ROOT/web_client" "$@" > "$log" 2>&1 &
+  SERVER_PID=$!
+  PORT=
+  for _ in $(seq 1 600); do
+    PORT=$(sed -n 's|.*listening on http://[^:]*:\([0-9]*\)/.*|\1|p' "$log" | head -1)
+    [ -n "$PORT" ] && return 0
+    kill -0 "$SERVER_PID" 2>/dev/null || { echo "server exited:"; cat "$log"; return 1; }
+    sleep 0.2
+  done
+  echo "server did not listen in 120 s"; cat "$log"; return 1
+}
+
+stop_server() {
+  kill "$SERVER_PID" 2>/dev/null
+  wait "$SERVER_PID" 2>/dev/null
+}
+
+check() {
+  exec > >(tee "$OUT/server_check.log") 2>&1
+  echo "== gpu_server_run.sh check $(date -u +%FT%TZ)"
+  nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
+  unpack || { echo "unpack failed"; return 1; }
+  export LD_LIBRARY_PATH=$SRV/lib
+  local status=0
+  echo "== server unit tests (encoders with a real NVIDIA driver, metrics, loadgen report)"
+  "$SRV/bin/catgs_server_unit_tests" --gtest_brief=1 || status=1
+  echo "== catgs-server --renderer cuda, 4 sessions, decoded frames vs the CPU reference"
+  local scene=$ROOT/assets/scenes/biker.compressed.ply T=$ROOT/.carry_srv/traces
+  start_server "$scene" "$OUT/server_check_server.log" || return 1
+  "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions 4 --scene "$scene" \
+    --size 640x360,960x540,800x600,1280x720 \
+    --trace "orbit,real:$T/tandt_train.cameras.json,real:$T/mipnerf360_bicycle.cameras.json,real:$T/flowers_sh3.cameras.json" \
+    --rate 60 --seconds 6 --check-every 4 --check-min-psnr 30 --json "$OUT/check.json" || status=1
+  echo "== /metrics (excerpt)"
+  python3 -c "import urllib.request,sys; print(urllib.request.urlopen(sys.argv[1]).read().decode())" \
+    "http://127.0.0.1:$PORT/metrics" | grep -E "^catgs_(info|encoder_fallbacks|frames_total|render_frames_total|sessions)" | head -20
+  stop_server
+  echo "== server log (head)"; head -20 "$OUT/server_check_server.log"
+  echo "check status: $status"
+  return $status
+}
+
+sweep() {
+  local seconds=6 counts="1 2 4 8 16" sizes="1280x720 1920x1080"
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --seconds) seconds=$2; shift ;;
+      --counts) counts=$2; shift ;;
+      --sizes) sizes=$2; shift ;;
+      *) echo "sweep: unknown option $1" >&2; return 2 ;;
+    esac
+    shift
+  done
+  exec > >(tee "$OUT/sweep.log") 2>&1
+  echo "== gpu_server_run.sh sweep $(date -u +%FT%TZ)"
+  [ -x "$SRV/bin/catgs-server" ] || { echo "no $SRV: run 'check' first on this machine"; return 1; }
+  export LD_LIBRARY_PATH=$SRV/lib:$ROOT/.carry/bin/lib
+  local C=$ROOT/.carry W=/tmp/catgs_sweep
+  mkdir -p "$W/json"
+  nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$W/gpu.txt"
+  nproc | tee "$W/cores.txt"
+  echo "== scenes: tumblewood_sh2 x10 and the 13-copy city"
+  "$C/bin/catgs-scene" compact --scene "$C/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
+    --out "$W/tumblewood.compressed.ply" || return 1
+  "$C/bin/catgs-scene" tile --scene "$C/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
+    --radius-sq 4 --up 0,-1,0 --out-compressed "$W/city.compressed.ply" || return 1
+  for scene in tumblewood city; do
+    for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+      "$C/bin/catgs-scene" trace --scene "$W/$scene.compressed.ply" --cameras "$C/traces/$path.cameras.json" \
+        --out "$W/${scene}_$path.trace" --up 0,-1,0 --frames 1200 || return 1
+    done
+  done
+  local status=0
+  for scene in tumblewood city; do
+    start_server "$W/$scene.compressed.ply" "$W/server_$scene.log" || return 1
+    local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
+    for size in $sizes; do
+      for n in $counts; do
+        local tag=${scene}_${size}_$n
+        nvidia-smi --query-gpu=utilization.gpu --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
+        local smi=$!
+        local cpu0 srv0
+        cpu0=$(head -1 /proc/stat)
+        srv0=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
+        "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions "$n" --size "$size" --trace "$traces" \
+          --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" > "$W/load_$tag.txt" 2>&1 || status=1
+        local cpu1 srv1
+        cpu1=$(head -1 /proc/stat)
+        srv1=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
+        kill "$smi" 2>/dev/null; wait "$smi" 2>/dev/null
+        python3 - "$W/json/$tag.json" "$cpu0" "$cpu1" "$srv0" "$srv1" "$W/gpu_$tag.txt" "$seconds" <<'PY'
+import json, sys
+path, c0, c1, s0, s1, gpu, seconds = sys.argv[1:]
+a = [int(x) for x in c0.split()[1:]]; b = [int(x) for x in c1.split()[1:]]
+d = [y - x for x, y in zip(a, b)]
+busy = 1 - (d[3] + d[4]) / max(1, sum(d))          # idle + iowait
+u = [float(x) for x in open(gpu).read().split() if x.strip()]
+j = json.load(open(path))
+j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)) / 100.0,
+             "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u)}
+json.dump(j, open(path, "w"), indent=1)
+PY
+        tail -4 "$W/load_$tag.txt" | head -2
+        echo "-- $tag done"
+      done
+    done
+    stop_server
+  done
+  python3 - "$W" > "$OUT/sweep.md" <<'PY'
+import json, os, sys
+w = sys.argv[1]
+gpu = open(os.path.join(w, "gpu.txt")).read().strip(); cores = open(os.path.join(w, "cores.txt")).read().strip()
+rows = []
+for f in sorted(os.listdir(os.path.join(w, "json"))):
+    j = json.load(open(os.path.join(w, "json", f)))
+    scene, size, n = f[:-5].split("_")
+    t = j["run"]["total"]; srv = t["server"]; h = j["host"]
+    s0 = j["run"]["sessions"][0]
+    rows.append((scene, int(size.split("x")[1]), int(n), size, t, srv, h, s0))
+rows.sort(key=lambda r: (r[0], r[1], r[2]))
+print(f"GPU: {gpu}; {cores} cores; encoder: {rows[0][7]['encoder'] if rows else '?'}; renderer: "
+      f"{rows[0][7]['renderer'] if rows else '?'}; pipeline: {rows[0][7]['pipeline'] if rows else '?'}\n")
+print("| scene | size | sessions | FPS min | FPS mean | p50 ms | p95 ms | p99 ms | render ms | key % | "
+      "convert ms | encode ms | send ms | queue ms | dropped | errors | CPU busy | server CPU cores | GPU util |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+alone = {}
+for scene, _, n, size, t, srv, h, s0 in rows:
+    lat = t["latency"]; secs = max(1e-9, s0["seconds"])
+    if n == 1: alone[(scene, size)] = srv.get("render_ms", 0)
+    gu = h["gpu_util_mean"]
+    print(f"| {scene} | {size} | {n} | {t['fps_min']:.1f} | {t['fps_total'] / n:.1f} | {lat['p50']:.1f} | "
+          f"{lat['p95']:.1f} | {lat['p99']:.1f} | {srv.get('render_ms', 0):.2f} | {100 * srv.get('render_key_fraction', 0):.0f} | "
+          f"{srv.get('convert_ms', 0):.2f} | {srv.get('encode_ms', 0):.2f} | {srv.get('send_ms', 0):.2f} | "
+          f"{srv.get('queue_ms', 0):.2f} | {t['dropped']} | {t['errors']} | {100 * h['cpu_busy_fraction']:.0f}% | "
+          f"{h['server_cpu_seconds'] / secs:.1f} | {'%.0f%%' % gu if gu is not None else 'n/a'} |")
+print("\nRender time per frame with N sessions / alone:")
+for scene, _, n, size, t, srv, h, s0 in rows:
+    a = alone.get((scene, size))
+    if a and n > 1: print(f"- {scene} {size} x{n}: {srv.get('render_ms', 0) / a:.2f}x")
+PY
+  tar -C "$W" -czf "$OUT/sweep.tar.gz" json gpu.txt cores.txt $(cd "$W" && ls server_*.log load_*.txt)
+  cat "$OUT/sweep.md"
+  echo "sweep status: $status"
+  return $status
+}
+
+case "${1:-}" in
+  prepare) shift; prepare "$@" ;;
+  check) OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; check ;;
+  sweep) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; sweep "$@" ;;
+  *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
+esac
