@@ -169,38 +169,7 @@ PY
     done
     stop_server
   done
-  python3 - "$W" > "$OUT/sweep.md" <<'PY'
-import json, os, sys
-w = sys.argv[1]
-gpu = open(os.path.join(w, "gpu.txt")).read().strip(); cores = open(os.path.join(w, "cores.txt")).read().strip()
-rows = []
-for f in sorted(os.listdir(os.path.join(w, "json"))):
-    j = json.load(open(os.path.join(w, "json", f)))
-    scene, size, n = f[:-5].split("_")
-    t = j["run"]["total"]; srv = t["server"]; h = j["host"]
-    s0 = j["run"]["sessions"][0]
-    rows.append((scene, int(size.split("x")[1]), int(n), size, t, srv, h, s0))
-rows.sort(key=lambda r: (r[0], r[1], r[2]))
-print(f"GPU: {gpu}; {cores} cores; encoder: {rows[0][7]['encoder'] if rows else '?'}; renderer: "
-      f"{rows[0][7]['renderer'] if rows else '?'}; pipeline: {rows[0][7]['pipeline'] if rows else '?'}\n")
-print("| scene | size | sessions | FPS min | FPS mean | p50 ms | p95 ms | p99 ms | render ms | key % | "
-      "convert ms | encode ms | send ms | queue ms | dropped | errors | CPU busy | server CPU cores | GPU util |")
-print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-alone = {}
-for scene, _, n, size, t, srv, h, s0 in rows:
-    lat = t["latency"]; secs = max(1e-9, s0["seconds"])
-    if n == 1: alone[(scene, size)] = srv.get("render_ms", 0)
-    gu = h["gpu_util_mean"]
-    print(f"| {scene} | {size} | {n} | {t['fps_min']:.1f} | {t['fps_total'] / n:.1f} | {lat['p50']:.1f} | "
-          f"{lat['p95']:.1f} | {lat['p99']:.1f} | {srv.get('render_ms', 0):.2f} | {100 * srv.get('render_key_fraction', 0):.0f} | "
-          f"{srv.get('convert_ms', 0):.2f} | {srv.get('encode_ms', 0):.2f} | {srv.get('send_ms', 0):.2f} | "
-          f"{srv.get('queue_ms', 0):.2f} | {t['dropped']} | {t['errors']} | {100 * h['cpu_busy_fraction']:.0f}% | "
-          f"{h['server_cpu_seconds'] / secs:.1f} | {'%.0f%%' % gu if gu is not None else 'n/a'} |")
-print("\nRender time per frame with N sessions / alone:")
-for scene, _, n, size, t, srv, h, s0 in rows:
-    a = alone.get((scene, size))
-    if a and n > 1: print(f"- {scene} {size} x{n}: {srv.get('render_ms', 0) / a:.2f}x")
-PY
+  python3 "$ROOT/scripts/sweep_table.py" "$W" > "$OUT/sweep.md"
   tar -C "$W" -czf "$OUT/sweep.tar.gz" json gpu.txt cores.txt $(cd "$W" && ls server_*.log load_*.txt)
   cat "$OUT/sweep.md"
   echo "sweep status: $status"

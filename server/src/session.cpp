@@ -187,6 +187,9 @@ void Session::handle_hello(const pb::Hello& hello) {
   counted_open_ = true;
   shared_.metrics.sessions_total++;
   renderer_ = make_renderer(shared_.renderer_kind, shared_.model, shared_.render_options);
+  // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
+  pipelined_ = !(shared_.encoder_kind == "nvenc" && renderer_->name() == "cuda");
+  for (int i = 0; pipelined_ && i < 2; ++i) free_planes_.push_back(std::make_unique<Yuv420Image>());
   state_ = State::open;
   width_ = v.width;
   height_ = v.height;
@@ -236,89 +239,178 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
 }
 
 void Session::maybe_start_render() {
-  if (state_ != State::open || rendering_ || !pending_ ||
-      in_flight_ >= shared_.options.max_frames_in_flight)
+  // Frames admitted but not yet written: those the transport holds and the one being encoded.
+  const int admitted = in_flight_ + (encoding_ ? 1 : 0);
+  if (state_ != State::open || rendering_ || rendered_ || !pending_ ||
+      admitted >= shared_.options.max_frames_in_flight)
     return;
+  std::unique_ptr<Yuv420Image> planes;
+  if (pipelined_) {
+    if (free_planes_.empty()) return;  // both buffers busy (one rendering is excluded above)
+    planes = std::move(free_planes_.back());
+    free_planes_.pop_back();
+  }
   Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_};
   pending_.reset();
   force_idr_ = false;
   rendering_ = true;
-  boost::asio::post(shared_.io, [self = shared_from_this(), job] {
-    JobResult result = self->run_job(job);
-    boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
-      self->on_job_done(std::move(result));
+  if (!pipelined_) {
+    boost::asio::post(shared_.io, [self = shared_from_this(), job] {
+      JobResult result = self->run_render_and_encode(job);
+      boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
+        self->rendering_ = false;
+        self->on_job_done(std::move(result));
+      });
+    });
+    return;
+  }
+  boost::asio::post(shared_.io, [self = shared_from_this(), job, planes = std::move(planes)]() mutable {
+    Rendered frame = self->run_render(job, std::move(planes));
+    boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
+      self->rendering_ = false;
+      if (!frame.error.empty()) {
+        self->free_planes_.push_back(std::move(frame.planes));
+        JobResult failed;
+        failed.error = frame.error;
+        return self->on_job_done(std::move(failed));
+      }
+      self->rendered_ = std::move(frame);
+      self->maybe_start_encode();
+      self->maybe_start_render();
     });
   });
 }
 
-Session::JobResult Session::run_job(const Job& job) {
-  JobResult r;
+void Session::maybe_start_encode() {
+  if (encoding_ || !rendered_) return;
+  if (state_ != State::open) {  // nobody to send it to
+    free_planes_.push_back(std::move(rendered_->planes));
+    rendered_.reset();
+    shared_.metrics.dropped_frames_total++;
+    return;
+  }
+  encoding_ = true;
+  auto frame = std::make_shared<Rendered>(std::move(*rendered_));
+  rendered_.reset();
+  boost::asio::post(shared_.io, [self = shared_from_this(), frame] {
+    JobResult result = self->run_encode(*frame);
+    boost::asio::post(self->strand_, [self, frame, result = std::move(result)]() mutable {
+      self->encoding_ = false;
+      self->free_planes_.push_back(std::move(frame->planes));
+      self->on_job_done(std::move(result));
+      self->maybe_start_encode();
+    });
+  });
+}
+
+Session::Rendered Session::run_render(Job job, std::unique_ptr<Yuv420Image> planes) {
+  Rendered r;
+  r.job = std::move(job);
+  r.planes = std::move(planes);
   try {
     const auto t_start = Clock::now();
-    const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
-                                            job.pose.pose.vertical_fov_deg, job.width, job.height);
-    bool idr = job.force_idr;
-    if (!encoder_ || encoder_->width() != job.width || encoder_->height() != job.height) {
-      EncoderConfig cfg;
-      cfg.width = job.width;
-      cfg.height = job.height;
-      cfg.crf = shared_.options.crf;
-      cfg.threads = shared_.options.encoder_threads;
-      // A GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores the flag.
-      cfg.device_input = renderer_->name() == "cuda";
-      // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
-      bool fell_back = false;
-      encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
-      if (fell_back) shared_.metrics.encoder_fallbacks_total++;
-      idr = true;
-    }
-    const auto t_render = Clock::now();  // after any encoder (re)creation
-    // The frame is rendered and colour-converted straight into the encoder's input planes: on
-    // the GPU for the CUDA core (only the YUV planes cross to the host for x264, none for NVENC),
-    // on the CPU for the CPU core. The client's clock drives the catgs motion predictor.
-    const double convert_ms =
-        renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, encoder_->input_target());
+    const Camera camera = Camera::from_pose(r.job.pose.pose.position, r.job.pose.pose.orientation,
+                                            r.job.pose.pose.vertical_fov_deg, r.job.width, r.job.height);
+    // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: only the
+    // I420 planes cross to the host). The client's clock drives the catgs motion predictor.
+    r.convert_ms = renderer_->render_yuv420_at(camera, r.job.pose.client_time_ms / 1000.0,
+                                               r.planes->target(r.job.width, r.job.height));
     r.render_key_frame = renderer_->last_stats().key_frame;
     r.speculation_window = renderer_->last_stats().window;
-    const auto t_rendered = Clock::now();
-    EncodedFrame enc = encoder_->encode_input(idr);
-    enc.convert_ms = convert_ms;
-
-    pb::ServerMessage m;
-    pb::Frame* f = m.mutable_frame();
-    f->set_sequence(job.frame_sequence);
-    f->set_pose_sequence(job.pose.sequence);
-    f->set_client_time_ms(job.pose.client_time_ms);
-    f->set_key_frame(enc.key_frame);
-    f->set_width(static_cast<std::uint32_t>(job.width));
-    f->set_height(static_cast<std::uint32_t>(job.height));
-    f->set_payload(enc.data.data(), enc.data.size());
-    r.queue_ms = ms_between(job.pose.received, t_start);
+    r.queue_ms = ms_between(r.job.pose.received, t_start);
     // Render time includes the plane download (GPU) but not the conversion itself.
-    r.render_ms = std::max(0.0, ms_between(t_render, t_rendered) - convert_ms);
-    r.convert_ms = enc.convert_ms;
-    r.encode_ms = enc.encode_ms;
-    pb::FrameTimings* t = f->mutable_timings();
-    t->set_queue_ms(r.queue_ms);
-    t->set_render_ms(r.render_ms);
-    t->set_convert_ms(enc.convert_ms);
-    t->set_encode_ms(enc.encode_ms);
-    t->set_render_key_frame(r.render_key_frame);
-    t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
-    t->set_previous_send_ms(job.previous_send_ms);
-    t->set_total_ms(ms_between(job.pose.received, Clock::now()));
-    m.SerializeToString(&r.message);
-    r.key_frame = enc.key_frame;
-    r.payload_bytes = enc.data.size();
+    r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
   } catch (const std::exception& e) {
-    r.message.clear();
     r.error = e.what();
   }
   return r;
 }
 
+void Session::ensure_encoder(int width, int height, bool& idr) {
+  if (encoder_ && encoder_->width() == width && encoder_->height() == height) return;
+  EncoderConfig cfg;
+  cfg.width = width;
+  cfg.height = height;
+  cfg.crf = shared_.options.crf;
+  cfg.threads = shared_.options.encoder_threads;
+  // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
+  cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
+  // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
+  bool fell_back = false;
+  encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
+  if (fell_back) shared_.metrics.encoder_fallbacks_total++;
+  idr = true;
+}
+
+Session::JobResult Session::run_encode(Rendered& frame) {
+  try {
+    bool idr = frame.job.force_idr;
+    ensure_encoder(frame.job.width, frame.job.height, idr);
+    const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
+    return frame_message(frame.job, enc, frame);
+  } catch (const std::exception& e) {
+    JobResult r;
+    r.error = e.what();
+    return r;
+  }
+}
+
+Session::JobResult Session::run_render_and_encode(const Job& job) {
+  try {
+    bool idr = job.force_idr;
+    ensure_encoder(job.width, job.height, idr);
+    Rendered r;
+    const auto t_start = Clock::now();
+    const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
+                                            job.pose.pose.vertical_fov_deg, job.width, job.height);
+    // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
+    r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0,
+                                               encoder_->input_target());
+    r.render_key_frame = renderer_->last_stats().key_frame;
+    r.speculation_window = renderer_->last_stats().window;
+    r.queue_ms = ms_between(job.pose.received, t_start);
+    r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
+    return frame_message(job, encoder_->encode_input(idr), r);
+  } catch (const std::exception& e) {
+    JobResult r;
+    r.error = e.what();
+    return r;
+  }
+}
+
+Session::JobResult Session::frame_message(const Job& job, const EncodedFrame& enc, const Rendered& rendered) {
+  JobResult r;
+  pb::ServerMessage m;
+  pb::Frame* f = m.mutable_frame();
+  f->set_sequence(job.frame_sequence);
+  f->set_pose_sequence(job.pose.sequence);
+  f->set_client_time_ms(job.pose.client_time_ms);
+  f->set_key_frame(enc.key_frame);
+  f->set_width(static_cast<std::uint32_t>(job.width));
+  f->set_height(static_cast<std::uint32_t>(job.height));
+  f->set_payload(enc.data.data(), enc.data.size());
+  r.render_key_frame = rendered.render_key_frame;
+  r.speculation_window = rendered.speculation_window;
+  r.queue_ms = rendered.queue_ms;
+  r.render_ms = rendered.render_ms;
+  r.convert_ms = rendered.convert_ms;
+  r.encode_ms = enc.encode_ms;
+  pb::FrameTimings* t = f->mutable_timings();
+  t->set_queue_ms(r.queue_ms);
+  t->set_render_ms(r.render_ms);
+  t->set_convert_ms(r.convert_ms);
+  t->set_encode_ms(r.encode_ms);
+  t->set_render_key_frame(r.render_key_frame);
+  t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
+  t->set_previous_send_ms(job.previous_send_ms);
+  t->set_total_ms(ms_between(job.pose.received, Clock::now()));
+  m.SerializeToString(&r.message);
+  r.key_frame = enc.key_frame;
+  r.payload_bytes = enc.data.size();
+  return r;
+}
+
 void Session::on_job_done(JobResult result) {
-  rendering_ = false;
   if (state_ != State::open || result.message.empty()) shared_.metrics.dropped_frames_total++;
   if (state_ != State::open) return;
   if (result.message.empty()) return fail(pb::ERROR_INTERNAL, "render/encode failed: " + result.error);

@@ -2,9 +2,15 @@
 // scheduling, encoder, flow control and statistics.
 //
 // Threading: every member below "strand state" is touched only on the session's strand. Render
-// + encode run as a job on the shared io_context pool (never on the strand, so poses keep
-// arriving while a frame renders); the renderer, encoder and image are used only by that job
-// (one job at a time per session). Transport callbacks enter through the post_* functions.
+// and encode run as jobs on the shared io_context pool (never on the strand, so poses keep
+// arriving while a frame renders). Transport callbacks enter through the post_* functions.
+//
+// Frame pipeline (host-fed encoders: x264): a render job renders and colour-converts frame n + 1
+// into one of two host I420 buffers while an encode job encodes frame n from the other, so a
+// session's frame rate is bounded by the slower stage, not by their sum. At most one render job
+// and one encode job run per session; the renderer is used only by render jobs, the encoder only
+// by encode jobs. NVENC (CUDA input): one job renders straight into the encoder's hw frame and
+// encodes it (no host buffer to overlap with).
 #pragma once
 
 #include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
@@ -15,6 +21,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/steady_timer.hpp>
@@ -77,6 +84,15 @@ class Session : public std::enable_shared_from_this<Session> {
     std::uint32_t frame_sequence = 0;
     double previous_send_ms = 0;  // FrameTimings.previous_send_ms
   };
+  // A rendered frame waiting for (or in) the encode stage.
+  struct Rendered {
+    Job job;
+    std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
+    bool render_key_frame = true;
+    int speculation_window = 0;
+    double queue_ms = 0, render_ms = 0, convert_ms = 0;
+    std::string error;  // non-empty: the render failed
+  };
   struct JobResult {
     std::string message;  // serialized ServerMessage{Frame}; empty on failure
     std::string error;
@@ -94,7 +110,12 @@ class Session : public std::enable_shared_from_this<Session> {
   void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false);
   void send(const pb::ServerMessage& message);
   void maybe_start_render();
-  JobResult run_job(const Job& job);  // on the pool
+  void maybe_start_encode();
+  Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on the pool
+  JobResult run_encode(Rendered& frame);                               // on the pool
+  JobResult run_render_and_encode(const Job& job);  // on the pool (NVENC's CUDA input)
+  void ensure_encoder(int width, int height, bool& idr);  // in a job
+  JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
   void on_job_done(JobResult result);
   void arm_tick();
   void on_tick();
@@ -113,7 +134,11 @@ class Session : public std::enable_shared_from_this<Session> {
   int width_ = 0, height_ = 0;
   bool force_idr_ = true;
   std::optional<PendingPose> pending_;
-  bool rendering_ = false;
+  bool rendering_ = false;  // a render (or render-and-encode) job is running
+  bool encoding_ = false;   // an encode job is running
+  bool pipelined_ = true;   // render and encode as separate stages (false: NVENC, one job)
+  std::optional<Rendered> rendered_;                   // rendered, waiting for the encoder
+  std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
   int in_flight_ = 0;                 // frames queued to the transport, not yet written
   std::deque<Clock::time_point> handed_;  // when each in-flight frame went to the transport
   double last_send_ms_ = 0;           // send time of the last frame written
