@@ -17,6 +17,7 @@
 #        (PSNR >= 30 dB) -> $OUT/server_check.log, $OUT/check.json
 #   2. within the machine's warm period, carry [".carry"] (scripts/gpu_run.sh prepare):
 #        scripts/gpu_server_run.sh sweep [--seconds S] [--counts "1 2 4 8 16"] [--sizes "..."]
+#          [--pipeline catgs|exact|vanilla] [--city-counts "..."] [--server-arg ARG]...
 #        1, 2, 4, 8, 16 sessions at 1280x720 and 1920x1080 on tumblewood_sh2 (x10) and the
 #        13-copy city (~7 M), real camera paths in turn, 60 poses/s per session, x264 (auto:
 #        NVENC if the GPU has it), no client decode; CPU and GPU utilisation sampled
@@ -104,16 +105,21 @@ check() {
 }
 
 sweep() {
-  local seconds=6 counts="1 2 4 8 16" sizes="1280x720 1920x1080"
+  local seconds=6 counts="1 2 4 8 16" city_counts="" sizes="1280x720 1920x1080" pipeline=catgs
+  local server_args=()
   while [ $# -gt 0 ]; do
     case "$1" in
       --seconds) seconds=$2; shift ;;
       --counts) counts=$2; shift ;;
+      --city-counts) city_counts=$2; shift ;;
+      --pipeline) pipeline=$2; shift ;;
+      --server-arg) server_args+=("$2"); shift ;;
       --sizes) sizes=$2; shift ;;
       *) echo "sweep: unknown option $1" >&2; return 2 ;;
     esac
     shift
   done
+  city_counts=${city_counts:-$counts}
   exec > >(tee "$OUT/sweep.log") 2>&1
   echo "== gpu_server_run.sh sweep $(date -u +%FT%TZ)"
   [ -x "$SRV/bin/catgs-server" ] || { echo "no $SRV: run 'check' first on this machine"; return 1; }
@@ -123,6 +129,7 @@ sweep() {
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$W/gpu.txt"
   nproc | tee "$W/cores.txt"
   echo "== scenes: tumblewood_sh2 x10 and the 13-copy city"
+  if [ ! -f "$W/city_flowers_sh3.trace" ]; then  # made once per machine
   "$C/bin/catgs-scene" compact --scene "$C/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
     --out "$W/tumblewood.compressed.ply" || return 1
   "$C/bin/catgs-scene" tile --scene "$C/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
@@ -133,13 +140,17 @@ sweep() {
         --out "$W/${scene}_$path.trace" --up 0,-1,0 --frames 1200 || return 1
     done
   done
+  fi
   local status=0
   for scene in tumblewood city; do
-    start_server "$W/$scene.compressed.ply" "$W/server_$scene.log" || return 1
+    start_server "$W/$scene.compressed.ply" "$W/server_$scene-$pipeline.log" --pipeline "$pipeline" \
+      "${server_args[@]}" || return 1
+    local scene_counts=$counts
+    [ "$scene" = city ] && scene_counts=$city_counts
     local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
     for size in $sizes; do
-      for n in $counts; do
-        local tag=${scene}_${size}_$n
+      for n in $scene_counts; do
+        local tag=$scene-${pipeline}_${size}_$n
         nvidia-smi --query-gpu=utilization.gpu --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
         local smi=$!
         local cpu0 srv0

@@ -68,7 +68,9 @@ int main(int argc, char** argv) {
     metrics.encoder = encoder_kind;
     metrics.pipeline = pipeline_name(render_options.pipeline);
 
-    boost::asio::io_context io;
+    boost::asio::io_context io, render_io;
+    const int render_lanes =
+        options.render_lanes > 0 ? options.render_lanes : (renderer_kind == "cuda" ? 4 : options.threads);
     TransportOptions topts;
     topts.bind = options.bind;
     topts.port = options.port;
@@ -91,7 +93,7 @@ int main(int argc, char** argv) {
     } forward;
     transport = std::make_unique<Transport>(topts, forward);
     shared = std::unique_ptr<SessionShared>(new SessionShared{
-        io, *transport, metrics, options, model, model->bounds(), robust_bounds(*model),
+        io, render_io, *transport, metrics, options, model, model->bounds(), robust_bounds(*model),
         render_options, renderer_kind, encoder_kind});
     manager = std::make_unique<SessionManager>(*shared);
     forward.m = manager.get();
@@ -102,9 +104,11 @@ int main(int argc, char** argv) {
     auto work = boost::asio::make_work_guard(io);
     std::vector<std::thread> pool;
     for (int i = 0; i < options.threads; ++i) pool.emplace_back([&io] { io.run(); });
+    auto render_work = boost::asio::make_work_guard(render_io);
+    for (int i = 0; i < render_lanes; ++i) pool.emplace_back([&render_io] { render_io.run(); });
     std::cout << "web root: " << options.web_root << "\n"
               << "sessions: at most " << options.max_sessions << ", " << options.threads
-              << " worker threads\n"
+              << " worker threads, " << render_lanes << " render lanes\n"
               << "listening on http://127.0.0.1:" << transport->port() << "/ (WebSocket "
               << "catgs.v1 at ws://127.0.0.1:" << transport->port() << "/ws)" << std::endl;
 
@@ -119,11 +123,13 @@ int main(int argc, char** argv) {
     manager->shutdown(1500);  // sessions get ERROR_SHUTTING_DOWN while lws still runs
     transport->stop();        // destroys the lws context; remaining connections close
     work.reset();
-    // Sessions are closed, so the pool runs dry; a render job in progress finishes first.
+    render_work.reset();
+    // Sessions are closed, so the pools run dry; a render job in progress finishes first.
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
-    while (!io.stopped() && std::chrono::steady_clock::now() < deadline)
+    while ((!io.stopped() || !render_io.stopped()) && std::chrono::steady_clock::now() < deadline)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     io.stop();
+    render_io.stop();
     for (auto& t : pool) t.join();
     std::cout << "stopped: " << metrics.sessions_total.load() << " sessions, "
               << metrics.frames_total.load() << " frames, " << metrics.bytes_total.load()

@@ -35,7 +35,9 @@ std::string server_usage() {
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
          "  --token T             require Hello.token == T\n"
-         "  --threads N           worker threads (default 4)\n"
+         "  --threads N           worker threads: sessions, encoding (default 4)\n"
+         "  --render-lanes N      renders at once, served first come first served (default:\n"
+         "                        4 with the CUDA renderer, --threads with the CPU one)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
          "  --crf N               x264 quality, 0..51 (default 23)\n"
          "  --encoder-threads N   threads per session's encoder, 0 = the library's choice\n"
@@ -65,6 +67,7 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else if (a == "--max-sessions") out.max_sessions = parse_int(a, v, 1, 10000);
     else if (a == "--token") out.token = v;
     else if (a == "--threads") out.threads = parse_int(a, v, 1, 256);
+    else if (a == "--render-lanes") out.render_lanes = parse_int(a, v, 0, 256);
     else if (a == "--slow-client-timeout-ms") out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
     else if (a == "--crf") out.crf = parse_int(a, v, 0, 51);
     else if (a == "--encoder-threads") out.encoder_threads = parse_int(a, v, 0, 64);

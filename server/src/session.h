@@ -39,7 +39,12 @@ namespace catgs::server {
 
 // What all sessions share (owned by the SessionManager).
 struct SessionShared {
-  boost::asio::io_context& io;
+  boost::asio::io_context& io;         // strands, encode jobs, timers
+  // Render jobs: a FIFO served by a few dedicated "render lanes" (ServerOptions::render_lanes
+  // threads), so sessions take turns on the GPU in arrival order: a session whose frames need
+  // more host syncs (catgs key frames) cannot starve the others, and waiting renders hold no
+  // worker thread.
+  boost::asio::io_context& render_io;
   Transport& transport;
   ServerMetrics& metrics;
   const ServerOptions& options;

@@ -574,9 +574,9 @@ int run(int argc, char** argv) {
 
   // The server's frame path: GPU colour conversion == CPU reference, exact and catgs frames.
   {
-    const int w = quick ? 642 : 1918, h = quick ? 362 : 1078;  // not multiples of 16 or 32
+    const int w = 1918, h = 1078;  // 1080p-like, not a multiple of 16 or 32
     std::vector<Camera> path;
-    for (const auto& tc : real_trace(*biker, traces + "/tandt_train.cameras.json", w, h, quick ? 6 : 24))
+    for (const auto& tc : real_trace(*biker, traces + "/tandt_train.cameras.json", w, h, quick ? 4 : 24))
       path.push_back(tc.camera);
     for (Pipeline pl : {Pipeline::exact, Pipeline::catgs}) {
       catgs::RenderOptions o;
