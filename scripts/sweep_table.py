@@ -18,8 +18,8 @@ def main(w):
         rows.append((scene, int(size.split("x")[1]), int(n), size, j))
     rows.sort(key=lambda r: r[:3])
     s0 = rows[0][4]["run"]["sessions"][0] if rows else {}
-    print(f"GPU: {gpu}; {cores} cores; renderer {s0.get('renderer')}, pipeline {s0.get('pipeline')}, "
-          f"encoder {s0.get('encoder')}; 60 poses/s per session; latency = pose sent -> frame received\n")
+    print(f"GPU: {gpu}; {cores} cores; renderer {s0.get('renderer')}, encoder {s0.get('encoder')}; "
+          f"scene-PIPELINE per row; 60 poses/s per session; latency = pose sent -> frame received\n")
     print("| scene | size | sessions | FPS min | FPS mean | p50 ms | p95 ms | p99 ms | render ms | key % | "
           "convert ms | encode ms | queue ms | send ms | dropped | CPU busy | server CPU (cores) | GPU util |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
