@@ -228,4 +228,32 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
   std::filesystem::remove(json_path);
 }
 
+// The GPU script's correctness run, on the CPU: catgs-loadgen decodes the frames of 3 sessions and
+// compares every 3rd with the CPU reference render of its pose (exit 0 only if all >= 30 dB and
+// every session checked some); an impossible bar must fail the run. One render lane serves the
+// three closed-loop sessions first come first served, so none falls far behind the others.
+TEST(MultiSession, LoadgenReferenceCheckAndFairRenderLanes) {
+  ServerProcess server(server_args(kBiker, {"--pipeline", "catgs", "--render-lanes", "1", "--threads", "3"}));
+  const std::string json_path = "/tmp/catgs-itest-check-" + std::to_string(server.port()) + ".json";
+  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
+                           " --scene " + kBiker + " --size 160x120,128x96,96x96 --rate 0 --sessions 3" +
+                           " --warmup 1 --check-every 3 --json " + json_path;
+  ASSERT_EQ(std::system((base + " --seconds 3 > /dev/null").c_str()), 0);
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));
+  ASSERT_EQ(j["run"]["sessions"].size(), 3u);
+  int most = 0, fewest = 1 << 30;
+  for (const auto& s : j["run"]["sessions"]) {
+    EXPECT_GT(s["checked"].get<int>(), 0) << s.dump();
+    EXPECT_EQ(s["check_failures"].get<int>(), 0) << s.dump();
+    EXPECT_GE(s["psnr_min_db"].get<double>(), 30.0) << s.dump();
+    most = std::max(most, s["frames"].get<int>());
+    fewest = std::min(fewest, s["frames"].get<int>());
+  }
+  std::cout << "[ info ] frames per session over 3 s with one render lane: " << fewest << " to " << most << "\n";
+  EXPECT_GE(2 * fewest, most) << "a session fell behind the others";
+  EXPECT_NE(std::system((base + " --seconds 1 --check-min-psnr 200 > /dev/null").c_str()), 0)
+      << "a reference check nothing can pass must fail the run";
+  std::filesystem::remove(json_path);
+}
+
 }  // namespace
