@@ -19,6 +19,13 @@ void SpeculationPlanner::set_params(const SpeculationParams& params) {
   if (params.initial_window < 0 || params.initial_window > 32)
     throw std::invalid_argument("speculation window must be in 0..32");
   if (!(params.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
+  if (!(params.predictor_window_s > 0.0 && params.predictor_window_s <= 1.0))
+    throw std::invalid_argument("motion predictor window must be in (0, 1] s");
+  if (params.predictor_window_s != params_.predictor_window_s) {  // a new fit: history restarts
+    MotionPredictorParams mp;
+    mp.fit_window_s = params.predictor_window_s;
+    predictor_ = MotionPredictor(mp);
+  }
   params_ = params;
   group_open_ = false;
 }

@@ -2,12 +2,13 @@
 // it reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-wN]] [--frames N]
+//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-wN|-pN]] [--frames N]
 //               [--warmup N] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
 //               [--quality-every K]
 //
 // catgs variants (paper Tables 1/3 ablations and the supplementary's window table): catgs-nocache
-// (--no-cache: every frame a key frame), catgs-nosplit (--no-split), catgs-wN (W_initial = N).
+// (--no-cache: every frame a key frame), catgs-nosplit (--no-split), catgs-wN (W_initial = N),
+// catgs-pN (the motion predictor fits its velocities over the last N ms instead of 100).
 // catgs frames are posed at the trace's 120 FPS clock (render_device_at), so the motion predictor
 // sees the real timing. With --quality-every K (CUDA; default 1, 0 = off), every K-th frame of each
 // catgs variant is compared, after its timing, with a full `exact` render of the same pose by a
@@ -203,6 +204,7 @@ int run(int argc, char** argv) {
       else if (name == "catgs-nocache") v.speculation.frustum_and_sort_cache = false;
       else if (name == "catgs-nosplit") v.speculation.task_splitting = false;
       else if (name.rfind("catgs-w", 0) == 0) v.speculation.initial_window = std::stoi(name.substr(7));
+      else if (name.rfind("catgs-p", 0) == 0) v.speculation.predictor_window_s = std::stoi(name.substr(7)) / 1000.0;
       else v.pipeline = catgs::parse_pipeline(name);
       pipelines.push_back(v);
     }

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "catgs/motion_predictor.h"
+#include "catgs/speculation_planner.h"
 #include "catgs/trace.h"
 #include "test_data.h"
 
@@ -94,6 +95,33 @@ TEST(MotionPredictor, BeatsHoldingStillOnARealPath) {
   }
   std::cout << "[ info ] tandt_train 4-frame position error: predicted " << err_pred << ", held " << err_hold << "\n";
   EXPECT_LT(err_pred, 0.2 * err_hold);
+}
+
+// A camera that speeds up: the fit over a shorter window lags less behind the current velocity
+// (SpeculationParams::predictor_window_s), and the planner refuses a window outside (0, 1] s.
+TEST(MotionPredictor, AShortWindowLagsLessOnAnAcceleratingCamera) {
+  auto error_4_ahead = [](double window_s) {
+    MotionPredictorParams params;
+    params.fit_window_s = window_s;
+    MotionPredictor mp(params);
+    const float a = 4.0f;  // world units / s^2 along x
+    auto at = [a](double t) {
+      TimedPose p;
+      p.time_s = t;
+      p.position = glm::vec3(0.5f * a * static_cast<float>(t * t), 0.0f, 0.0f);
+      return p;
+    };
+    for (int i = 0; i <= 24; ++i) mp.add(at(i / 120.0));
+    return glm::distance(mp.predict(4 / 120.0).position, at(28 / 120.0).position);
+  };
+  const float long_fit = error_4_ahead(0.1), short_fit = error_4_ahead(0.017);
+  std::cout << "[ info ] 4-frame error, accelerating: 100 ms fit " << long_fit << ", 17 ms fit " << short_fit << "\n";
+  EXPECT_LT(short_fit, 0.5f * long_fit);
+  SpeculationParams bad;
+  bad.predictor_window_s = 0.0;
+  EXPECT_THROW(SpeculationPlanner{bad}, std::invalid_argument);
+  bad.predictor_window_s = 0.017;
+  EXPECT_NO_THROW(SpeculationPlanner{bad});
 }
 
 }  // namespace
