@@ -13,6 +13,8 @@
 #        built in memory, over each real camera path (bench_{tumblewood,city}_PATH.json), the
 #        window table (bench_windows_{tumblewood,city}.json) and the city fly-over
 #        (bench_city_flyover.json + snapshots), all packed into $OUT/bench.tar.gz.
+#     --predictor-bench runs only the motion predictor's fit-window ablation (catgs-pN) on the
+#     bicycle and flowers paths, tumblewood and city -> $OUT/predictor_*.json.
 #     Everything printed goes to $OUT/gpu_run.log too. Exit status: non-zero if a test failed.
 #
 # On the build machine, once (fills .carry/, git-ignored):
@@ -92,7 +94,7 @@ if [ "${1:-}" = prepare ]; then
   exit $?
 fi
 
-PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600
+PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 PREDICTOR=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --prebuilt) PREBUILT=1 ;;
@@ -101,6 +103,7 @@ while [ $# -gt 0 ]; do
     --no-bench) BENCH=0 ;;
     --sanitize) SANITIZE=1 ;;
     --frames) FRAMES=$2; shift ;;
+    --predictor-bench) PREDICTOR=1; TESTS=0; BENCH=0 ;;
     *) echo "gpu_run.sh: unknown option $1" >&2; exit 2 ;;
   esac
   shift
@@ -187,6 +190,24 @@ if [ "$BENCH" = 1 ]; then
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
     --width 1920 --height 1080 --pipeline vanilla,exact,catgs --frames "$FRAMES" --quality-every 3 \
     --json "$B/bench_city_flyover.json" --snapshot-dir "$B" || status=1
+fi
+if [ "$PREDICTOR" = 1 ]; then
+  # The motion predictor's fit window (catgs-pN: N ms; default 100): bicycle and flowers paths,
+  # tumblewood x10 and the city, JSON straight into $OUT (a run cut short still returns them).
+  for path in mipnerf360_bicycle flowers_sh3; do
+    echo "== predictor bench: tumblewood_sh2 x10, $path"
+    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
+      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 \
+      --pipeline exact,catgs,catgs-p50,catgs-p17 --frames "$FRAMES" --quality-every 3 \
+      --json "$OUT/predictor_tumblewood_$path.json" || status=1
+  done
+  for path in mipnerf360_bicycle flowers_sh3; do
+    echo "== predictor bench: city, $path"
+    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 \
+      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 \
+      --pipeline exact,catgs,catgs-p50,catgs-p17 --frames "$FRAMES" --quality-every 3 \
+      --json "$OUT/predictor_city_$path.json" || status=1
+  done
 fi
 [ "$BENCH" = 1 ] && tar czf "$OUT/bench.tar.gz" -C "$ROOT/build" bench
 echo "== done: status $status"
