@@ -1,6 +1,8 @@
 #include "server_options.h"
 
+#include <algorithm>
 #include <iostream>
+#include <thread>
 #include <stdexcept>
 
 namespace catgs::server {
@@ -35,7 +37,8 @@ std::string server_usage() {
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
          "  --token T             require Hello.token == T\n"
-         "  --threads N           worker threads: sessions, encoding (default 4)\n"
+         "  --threads N           worker threads: sessions, encoding (default 0: the number of\n"
+         "                        cores, at least 4)\n"
          "  --render-lanes N      renders at once, served first come first served (default:\n"
          "                        4 with the CUDA renderer, --threads with the CPU one)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
@@ -67,7 +70,7 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else if (a == "--web-root") out.web_root = v;
     else if (a == "--max-sessions") out.max_sessions = parse_int(a, v, 1, 10000);
     else if (a == "--token") out.token = v;
-    else if (a == "--threads") out.threads = parse_int(a, v, 1, 256);
+    else if (a == "--threads") out.threads = parse_int(a, v, 0, 256);
     else if (a == "--render-lanes") out.render_lanes = parse_int(a, v, 0, 256);
     else if (a == "--slow-client-timeout-ms") out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
     else if (a == "--crf") out.crf = parse_int(a, v, 0, 51);
@@ -76,6 +79,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else if (a == "--socket-send-buffer") out.socket_send_buffer = parse_int(a, v, 0, 64 << 20);
     else throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());
   }
+  if (out.threads == 0)  // encodes are CPU-bound: one worker per core (x264 adds its own threads)
+    out.threads = std::max(4, static_cast<int>(std::thread::hardware_concurrency()));
   if (out.renderer != "cpu" && out.renderer != "cuda" && out.renderer != "auto")
     throw std::invalid_argument("--renderer must be cpu, cuda or auto");
   if (out.encoder != "nvenc" && out.encoder != "x264" && out.encoder != "auto")

@@ -16,7 +16,7 @@ struct ServerOptions {
   std::string web_root;          // folder served over HTTP at "/"
   int max_sessions = 8;          // sessions open at once; one more gets ERROR_SERVER_FULL
   std::string token;             // when non-empty, Hello.token must equal it
-  int threads = 4;               // Boost.Asio worker threads (strands, encoding)
+  int threads = 0;               // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
   int render_lanes = 0;          // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
   int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
   int crf = 23;                  // x264 constant rate factor (lower = better quality, more bytes)
