@@ -18,7 +18,7 @@ struct SpeculationParams {
   bool early_termination = true;       // stop a pixel when T would drop below 1e-4
   // The motion predictor's fit window (MotionPredictorParams::fit_window_s), seconds: a longer
   // one averages out more input jitter, a shorter one lags less behind a changing velocity.
-  double predictor_window_s = 0.1;
+  double predictor_window_s = 0.05;
 };
 
 // The motion-adaptive window (paper sec. 3.1): M is the largest per-frame screen motion (pixels)
