@@ -98,6 +98,11 @@ int main(int argc, char** argv) {
     manager = std::make_unique<SessionManager>(*shared);
     forward.m = manager.get();
 
+    // SIGINT/SIGTERM are caught from here on (one that arrives before the wait below is kept),
+    // on a dedicated io_context so the pool keeps serving meanwhile. Registered before the
+    // "listening" line: a supervisor that stops the server right after it gets a clean shutdown.
+    boost::asio::io_context signal_io;
+    boost::asio::signal_set signals(signal_io, SIGINT, SIGTERM);
     // Listen first: a busy port then fails before any thread exists. Work posted before the
     // pool starts just waits in the io_context.
     transport->start();
@@ -112,9 +117,6 @@ int main(int argc, char** argv) {
               << "listening on http://127.0.0.1:" << transport->port() << "/ (WebSocket "
               << "catgs.v1 at ws://127.0.0.1:" << transport->port() << "/ws)" << std::endl;
 
-    // Wait for SIGINT/SIGTERM on a dedicated io_context so the pool keeps serving meanwhile.
-    boost::asio::io_context signal_io;
-    boost::asio::signal_set signals(signal_io, SIGINT, SIGTERM);
     signals.async_wait([](const boost::system::error_code&, int sig) {
       std::cout << "signal " << sig << ": shutting down" << std::endl;
     });
@@ -122,15 +124,24 @@ int main(int argc, char** argv) {
 
     manager->shutdown(1500);  // sessions get ERROR_SHUTTING_DOWN while lws still runs
     transport->stop();        // destroys the lws context; remaining connections close
-    work.reset();
-    render_work.reset();
-    // Sessions are closed, so the pools run dry; a render job in progress finishes first.
+    // Sessions are closed, so the pools run dry. Renders first: a render in progress posts its
+    // result to its session's strand on `io`, which must still be running to take it.
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
-    while ((!io.stopped() || !render_io.stopped()) && std::chrono::steady_clock::now() < deadline)
+    render_work.reset();
+    while (!render_io.stopped() && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    work.reset();
+    while (!io.stopped() && std::chrono::steady_clock::now() < deadline)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     io.stop();
     render_io.stop();
     for (auto& t : pool) t.join();
+    // Handlers left behind (past the deadline) hold sessions, whose destructors use `shared`:
+    // run them now, while it lives, instead of letting the io_contexts destroy them later.
+    io.restart();
+    render_io.restart();
+    for (int i = 0; i < 10000 && io.poll() + render_io.poll() > 0; ++i) {
+    }
     std::cout << "stopped: " << metrics.sessions_total.load() << " sessions, "
               << metrics.frames_total.load() << " frames, " << metrics.bytes_total.load()
               << " bytes" << std::endl;

@@ -3,13 +3,23 @@
 #include <dlfcn.h>
 
 #include <climits>
+#include <string>
 #include <stdexcept>
 #include <string>
 
+// hwcontext_cuda.h wants cuda.h's CUcontext and CUstream; the NVENC path loads libcuda at run
+// time (as h264_nvenc does) and needs no CUDA toolkit to build, so the two handle types are
+// declared here (the same opaque types cuda.h declares).
+#ifndef CUDA_VERSION
+#define CUDA_VERSION 11000
+typedef struct CUctx_st* CUcontext;
+typedef struct CUstream_st* CUstream;
+#endif
+
 extern "C" {
 #include <libavcodec/avcodec.h>
-#include <libavutil/dict.h>
 #include <libavutil/hwcontext.h>
+#include <libavutil/hwcontext_cuda.h>
 #include <libavutil/opt.h>
 }
 
@@ -36,16 +46,54 @@ const EncoderConfig& require_nvenc_driver(const EncoderConfig& config) {
   return config;
 }
 
-// Device input: a CUDA device context on the runtime's primary context (so the render core's
-// device pointers and the frames' are one address space) and a pool of yuv420p CUDA frames of
-// the encoder's size, attached to `ctx` before it opens. Throws std::runtime_error on failure.
+// The CUDA runtime's context: the primary context of device 0, where the render core's device
+// pointers live. Retained once per process through the driver API (libcuda, loaded at run time).
+// FFmpeg's own "primary_ctx" option cannot be used: it refuses a primary context that is already
+// active with flags other than blocking sync, and the runtime's is active with its defaults. A
+// context handed to FFmpeg as cuda_ctx is never destroyed by it.
+CUcontext runtime_primary_context() {
+  static const CUcontext context = [] {
+    void* lib = dlopen("libcuda.so.1", RTLD_LAZY | RTLD_LOCAL);  // stays loaded
+    if (!lib) throw std::runtime_error("nvenc: libcuda.so.1 cannot be loaded");
+    using InitFn = int (*)(unsigned);
+    using DeviceGetFn = int (*)(int*, int);
+    using RetainFn = int (*)(CUcontext*, int);
+    auto init = reinterpret_cast<InitFn>(dlsym(lib, "cuInit"));
+    auto device_get = reinterpret_cast<DeviceGetFn>(dlsym(lib, "cuDeviceGet"));
+    auto retain = reinterpret_cast<RetainFn>(dlsym(lib, "cuDevicePrimaryCtxRetain"));
+    if (!init || !device_get || !retain)
+      throw std::runtime_error("nvenc: libcuda.so.1 lacks cuInit/cuDeviceGet/cuDevicePrimaryCtxRetain");
+    int device = 0;
+    CUcontext ctx = nullptr;
+    int err = init(0);
+    if (err == 0) err = device_get(&device, 0);
+    if (err == 0) err = retain(&ctx, device);
+    if (err != 0)
+      throw std::runtime_error("nvenc: cannot retain the CUDA primary context of device 0 (CUresult " +
+                               std::to_string(err) + ")");
+    return ctx;
+  }();
+  return context;
+}
+
+// Device input: a CUDA device context on the runtime's context (so the render core's device
+// pointers and the frames' are one address space) and a pool of yuv420p CUDA frames of the
+// encoder's size, attached to `ctx` before it opens. Throws std::runtime_error on failure.
 void attach_cuda_frames(AVCodecContext* ctx, const EncoderConfig& config) {
-  AVDictionary* opts = nullptr;
-  av_dict_set(&opts, "primary_ctx", "1", 0);
-  AVBufferRef* device = nullptr;
-  int err = av_hwdevice_ctx_create(&device, AV_HWDEVICE_TYPE_CUDA, "0", opts, 0);
-  av_dict_free(&opts);
-  if (err < 0) throw std::runtime_error("nvenc: cannot create a CUDA device context: " + av_error_text(err));
+  AVBufferRef* device = av_hwdevice_ctx_alloc(AV_HWDEVICE_TYPE_CUDA);
+  if (!device) throw std::runtime_error("nvenc: out of memory for the CUDA device context");
+  auto* hw = reinterpret_cast<AVHWDeviceContext*>(device->data);
+  try {
+    reinterpret_cast<AVCUDADeviceContext*>(hw->hwctx)->cuda_ctx = runtime_primary_context();
+  } catch (...) {
+    av_buffer_unref(&device);
+    throw;
+  }
+  int err = av_hwdevice_ctx_init(device);
+  if (err < 0) {
+    av_buffer_unref(&device);
+    throw std::runtime_error("nvenc: cannot create a CUDA device context: " + av_error_text(err));
+  }
   AVBufferRef* frames = av_hwframe_ctx_alloc(device);
   av_buffer_unref(&device);  // the frames context holds its own reference
   if (!frames) throw std::runtime_error("nvenc: out of memory for the CUDA frames context");

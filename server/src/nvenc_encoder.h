@@ -6,7 +6,8 @@
 //
 // Feed: with EncoderConfig::device_input, zero copy: the encoder opens with pix_fmt
 // AV_PIX_FMT_CUDA and a hw_frames_ctx (sw_format yuv420p) on a CUDA device context that uses
-// the primary context of device 0, the one the CUDA runtime (and so the render core) uses;
+// the primary context of device 0, the one the CUDA runtime (and so the render core) uses
+// (retained through the driver API and handed to FFmpeg as its cuda_ctx);
 // input_target() hands out a pool frame's device planes, which the render core's colour
 // conversion writes (CudaRenderer::render_yuv420_at), and nothing crosses to the host. Without
 // it, host frames: encode() converts RGBA on the CPU (swscale), encode_yuv420() and

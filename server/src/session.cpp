@@ -299,6 +299,7 @@ void Session::maybe_start_encode() {
       self->free_planes_.push_back(std::move(frame->planes));
       self->on_job_done(std::move(result));
       self->maybe_start_encode();
+      self->maybe_start_render();  // the rendered slot may have just been freed
     });
   });
 }
