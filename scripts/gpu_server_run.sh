@@ -22,6 +22,7 @@
 #        13-copy city (~7 M), real camera paths in turn, 60 poses/s per session, x264 (auto:
 #        NVENC if the GPU has it), no client decode; CPU and GPU utilisation sampled
 #        -> $OUT/sweep.md (table), $OUT/sweep.tar.gz (every loadgen JSON), $OUT/sweep.log
+# CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD

@@ -304,23 +304,26 @@ void Session::maybe_start_encode() {
   });
 }
 
+void Session::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
+  const auto t_start = Clock::now();
+  const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
+                                          job.pose.pose.vertical_fov_deg, job.width, job.height);
+  // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
+  // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
+  r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
+  r.render_key_frame = renderer_->last_stats().key_frame;
+  r.speculation_window = renderer_->last_stats().window;
+  r.queue_ms = ms_between(job.pose.received, t_start);
+  // Render time includes the plane download (GPU) but not the conversion itself.
+  r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
+}
+
 Session::Rendered Session::run_render(Job job, std::unique_ptr<Yuv420Image> planes) {
   Rendered r;
   r.job = std::move(job);
   r.planes = std::move(planes);
   try {
-    const auto t_start = Clock::now();
-    const Camera camera = Camera::from_pose(r.job.pose.pose.position, r.job.pose.pose.orientation,
-                                            r.job.pose.pose.vertical_fov_deg, r.job.width, r.job.height);
-    // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: only the
-    // I420 planes cross to the host). The client's clock drives the catgs motion predictor.
-    r.convert_ms = renderer_->render_yuv420_at(camera, r.job.pose.client_time_ms / 1000.0,
-                                               r.planes->target(r.job.width, r.job.height));
-    r.render_key_frame = renderer_->last_stats().key_frame;
-    r.speculation_window = renderer_->last_stats().window;
-    r.queue_ms = ms_between(r.job.pose.received, t_start);
-    // Render time includes the plane download (GPU) but not the conversion itself.
-    r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
+    render_into(r.job, r.planes->target(r.job.width, r.job.height), r);
   } catch (const std::exception& e) {
     r.error = e.what();
   }
@@ -361,16 +364,8 @@ Session::JobResult Session::run_render_and_encode(const Job& job) {
     bool idr = job.force_idr;
     ensure_encoder(job.width, job.height, idr);
     Rendered r;
-    const auto t_start = Clock::now();
-    const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
-                                            job.pose.pose.vertical_fov_deg, job.width, job.height);
     // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
-    r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0,
-                                               encoder_->input_target());
-    r.render_key_frame = renderer_->last_stats().key_frame;
-    r.speculation_window = renderer_->last_stats().window;
-    r.queue_ms = ms_between(job.pose.received, t_start);
-    r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
+    render_into(job, encoder_->input_target(), r);
     return frame_message(job, encoder_->encode_input(idr), r);
   } catch (const std::exception& e) {
     JobResult r;

@@ -116,6 +116,9 @@ class Session : public std::enable_shared_from_this<Session> {
   void send(const pb::ServerMessage& message);
   void maybe_start_render();
   void maybe_start_encode();
+  // In a job: renders job's pose into `target` and fills r's render fields (timings, key frame,
+  // window). Throws what Renderer::render_yuv420_at throws.
+  void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
   Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on the pool
   JobResult run_encode(Rendered& frame);                               // on the pool
   JobResult run_render_and_encode(const Job& job);  // on the pool (NVENC's CUDA input)

@@ -19,8 +19,8 @@ struct TimedPose {
 
 struct MotionPredictorParams {
   // Velocities are fitted over the poses of the last 50 ms. Measured (tests/gpu/RESULTS.md,
-  // "Lead: the motion predictor's fit window"): on the real camera paths the 100 ms fit lagged
-  // enough to make 80% of catgs frames key frames; 50 ms cut them by 5-16% (catgs 4-13% faster)
+  // "The motion predictor's fit window"): on the real camera paths the 100 ms fit lagged enough
+  // to make 78-96% of catgs frames key frames; 50 ms cut them by 5-16% (catgs 4-13% faster)
   // and, with 60 Hz input whose stamps jitter by up to 4 ms, still predicted better than 100 ms;
   // 17 ms was faster still on clean input but worse than 100 ms under that jitter.
   double fit_window_s = 0.05;
@@ -42,6 +42,7 @@ class MotionPredictor {
   glm::vec3 linear_velocity() const { return velocity_; }
   glm::vec3 angular_velocity() const { return angular_velocity_; }
 
+  // The parameters it was built with.
   const MotionPredictorParams& params() const { return params_; }
 
   // The newest pose; time 0 and identity before any add().
