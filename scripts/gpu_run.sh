@@ -15,6 +15,9 @@
 #        (bench_city_flyover.json + snapshots), all packed into $OUT/bench.tar.gz.
 #     --predictor-bench runs only the motion predictor's fit-window ablation (catgs-pN) on the
 #     bicycle and flowers paths, tumblewood and city -> $OUT/predictor_*.json.
+#     --compare LIST (after the tests, instead of the benchmark) runs the pipelines of LIST (e.g.
+#     exact,catgs,catgs-m10,catgs-nocull) side by side on tumblewood x10 and the city over the
+#     three real paths -> $OUT/compare_{tumblewood,city}_PATH.json.
 #     Everything printed goes to $OUT/gpu_run.log too. Exit status: non-zero if a test failed.
 #
 # On the build machine, once (fills .carry/, git-ignored):
@@ -94,7 +97,7 @@ if [ "${1:-}" = prepare ]; then
   exit $?
 fi
 
-PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 PREDICTOR=0
+PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 PREDICTOR=0 COMPARE=
 while [ $# -gt 0 ]; do
   case "$1" in
     --prebuilt) PREBUILT=1 ;;
@@ -104,6 +107,7 @@ while [ $# -gt 0 ]; do
     --sanitize) SANITIZE=1 ;;
     --frames) FRAMES=$2; shift ;;
     --predictor-bench) PREDICTOR=1; TESTS=0; BENCH=0 ;;
+    --compare) COMPARE=$2; BENCH=0; shift ;;
     *) echo "gpu_run.sh: unknown option $1" >&2; exit 2 ;;
   esac
   shift
@@ -160,23 +164,28 @@ if [ "$TESTS" = 1 ]; then
   "$TEST_EXE" --scenes "$S" --traces "$T" --out "$OUT/gpu_tests.md" "${q[@]}"
   rc=$?; echo "== GPU tests: rc $rc in $(( $(date +%s) - t0 )) s"; [ $rc -eq 0 ] || status=1
 fi
+# real_paths PIPELINES PREFIX: PIPELINES side by side in one process per scene x path, on
+# tumblewood_sh2 (x10) and the ~7 M city over each real camera path at 120 FPS, sub-frame
+# quality on every 3rd frame -> PREFIX_{tumblewood,city}_PATH.json.
+real_paths() {
+  local path scene
+  for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+    for scene in tumblewood city; do
+      echo "== $(basename "$2"): $scene, real camera path $path at 120 FPS: $1"
+      local size=(--scale 10); [ $scene = city ] && size=(--city)
+      "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" "${size[@]}" --up 0,-1,0 \
+        --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$1" \
+        --frames "$FRAMES" --quality-every 3 --json "$2_${scene}_$path.json" || status=1
+    done
+  done
+}
 if [ "$BENCH" = 1 ]; then
   B=$ROOT/build/bench  # JSON and snapshots; packed into $OUT/bench.tar.gz (the device returns 8 files)
   rm -rf "$B"; mkdir -p "$B"
   # Issue 4's tables: every real camera path on tumblewood_sh2 (x10) and on the ~7 M city, all
   # pipelines and ablations side by side in one process per scene x path; the window table
   # (W = 2, 4, 8, 16) on the bicycle path. Sub-frame quality on every 3rd frame.
-  P=vanilla,exact,catgs,catgs-nocache,catgs-nosplit
-  for path in mipnerf360_bicycle tandt_train flowers_sh3; do
-    echo "== bench: tumblewood_sh2 x10, real camera path $path at 120 FPS"
-    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
-      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$P" \
-      --frames "$FRAMES" --quality-every 3 --json "$B/bench_tumblewood_$path.json" || status=1
-    echo "== bench: city, 13 tumblewood copies (~7 M), real camera path $path at 120 FPS"
-    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 \
-      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$P" \
-      --frames "$FRAMES" --quality-every 3 --json "$B/bench_city_$path.json" || status=1
-  done
+  real_paths vanilla,exact,catgs,catgs-nocache,catgs-nosplit "$B/bench"
   echo "== bench: window sizes (W = 2, 4, 8, 16), bicycle path, tumblewood and city"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
     --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
@@ -209,6 +218,7 @@ if [ "$PREDICTOR" = 1 ]; then
       --json "$OUT/predictor_city_$path.json" || status=1
   done
 fi
+[ -n "$COMPARE" ] && real_paths "$COMPARE" "$OUT/compare"
 [ "$BENCH" = 1 ] && tar czf "$OUT/bench.tar.gz" -C "$ROOT/build" bench
 echo "== done: status $status"
 exit $status

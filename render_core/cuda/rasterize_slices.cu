@@ -1,5 +1,14 @@
 // Stage 5 with task splitting (paper sec. 3.4; mirrors src/cpu/rasterize_slices.cpp).
 //
+// Abandoned sub-frames: a sub-frame whose check already found a Gaussian off its trail (the
+// `abandon` flag, set by the features and unlisted kernels queued before) is drawn again as a key
+// frame, so its slices and merge return at once instead of drawing an image nobody sees.
+//
+// Tile culling (on by default, CudaRenderer::set_tile_culling): catgs walks a key frame's trail
+// list, whose entries reach their tile somewhere along the window but not all at this pose, so
+// each round keeps only the entries whose ellipse reaches the tile now (blend_range_culled): same
+// image, less blending.
+//
 // Design. One 256-thread block per slice, thread = pixel, blending the slice's run of the tile's
 // list exactly as rasterize.cu blends a whole tile (blend.cuh). Blocks take slices in the order
 // the key frame computed (longest first, so the heavy slices start early and the short ones fill
@@ -44,11 +53,13 @@ rasterize_slices_kernel(SlicePlan plan,
                         const uint32_t* order,   // [blocks] or null
                         const uint32_t* values,  // [L] sorted Gaussian indices
                         Projected g, int width, int height, int tiles_x, bool early_termination,
-                        float3 background,
+                        bool tile_culling, float3 background,
+                        const unsigned* abandon, // [1] or null: non-zero, draw nothing
                         float4* partials,        // [slots, 256] (C.rgb, T)
                         float* out_rgb,          // [H, W, 3]
                         uint32_t* out_rgba8) {   // [H, W]
   __shared__ BlendBatch batch;
+  if (abandon && *abandon) return;  // written by an earlier kernel: the same for every thread
   const uint32_t s = order ? order[blockIdx.x] : blockIdx.x;
   const uint2 tile_k = plan.slice_tile[s];
   if (tile_k.x == 0xffffffffu) return;  // a slot past the slice total (block-uniform)
@@ -61,18 +72,28 @@ rasterize_slices_kernel(SlicePlan plan,
   const bool inside = px < width && py < height;
 
   PixelState state{make_float3(0.0f, 0.0f, 0.0f), 1.0f, !inside};
+  // Blends this slice's run, with or without the per-round tile cull (blend.cuh).
+  auto blend = [&](auto skip) {
+    if (tile_culling)
+      blend_range_culled(range.x, range.y, values, g, rank, tx, ty, width, height, static_cast<float>(px),
+                         static_cast<float>(py), early_termination, batch, state, skip);
+    else
+      blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
+                  early_termination, batch, state, skip);
+  };
   if (tp.y == 1) {  // the tile's only slice
-    blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
-                early_termination, batch, state, NoSkip{});
+    blend(NoSkip{});
     if (!inside) return;
     write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C,
                 state.T, background, out_rgb, out_rgba8);
     return;
   }
   const SaturatedSkip skip{plan.saturated_from + tile_k.x, tile_k.y};
-  if (skip.stop()) return;  // block-uniform
-  blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
-              early_termination, batch, state, skip);
+  // Another block may saturate the tile while this one reads the flag, so threads can disagree:
+  // decide together (a thread leaving alone would break the barriers and the warp ballots of
+  // blend_range_culled, which faulted with an illegal instruction on the H100).
+  if (__syncthreads_or(skip.stop())) return;
+  blend(skip);
   const bool saturated = state.done || state.T < fm::kMinTransmittance;
   if (early_termination && __syncthreads_and(saturated) && rank == 0 && !skip.stop())
     atomicMin(plan.saturated_from + tile_k.x, tile_k.y);
@@ -85,8 +106,10 @@ __global__ void __launch_bounds__(tune::kRasterThreads)
 merge_kernel(SlicePlan plan,
              const float4* partials,  // [slots, 256]
              int width, int height, int tiles_x, float3 background,
+             const unsigned* abandon, // [1] or null
              float* out_rgb,          // [H, W, 3]
              uint32_t* out_rgba8) {   // [H, W]
+  if (abandon && *abandon) return;
   const uint4 tp = plan.tile_plan[blockIdx.x];
   if (tp.y <= 1) return;  // written by its only slice
   const int tx = static_cast<int>(blockIdx.x % static_cast<uint32_t>(tiles_x));
@@ -112,24 +135,24 @@ merge_kernel(SlicePlan plan,
 
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
                       const Projected& projected, const CameraParams& cam, bool early_termination,
-                      float3 background, float4* partials, float* out_rgb, uint32_t* out_rgba8,
-                      cudaStream_t stream) {
+                      bool tile_culling, float3 background, const unsigned* abandon, float4* partials,
+                      float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
   CATGS_CUDA(cudaMemsetAsync(plan.saturated_from, 0xff,
                              sizeof(unsigned) * static_cast<std::size_t>(cam.tiles_x * cam.tiles_y), stream));
   if (blocks == 0) return;
   const dim3 block(tune::kTileSize, tune::kTileSize);
   rasterize_slices_kernel<<<blocks, block, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height,
-                                                        cam.tiles_x, early_termination, background, partials,
-                                                        out_rgb, out_rgba8);
+                                                        cam.tiles_x, early_termination, tile_culling, background,
+                                                        abandon, partials, out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("rasterize_slices_kernel");
 }
 
 void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, float3 background,
-                  float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
+                  const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
   const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
   const dim3 block(tune::kTileSize, tune::kTileSize);
   merge_kernel<<<tiles, block, 0, stream>>>(plan, partials, cam.width, cam.height, cam.tiles_x, background,
-                                            out_rgb, out_rgba8);
+                                            abandon, out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("merge_kernel");
 }
 

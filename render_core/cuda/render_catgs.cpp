@@ -12,8 +12,10 @@
 // Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag), the
 // check that no unlisted Gaussian reaches the image (the frustum cache's blind spot) ->
 // rasterize the key frame's slices -> merge -> read the flag back. A raised flag means some
-// on-screen Gaussian left its trail: the frame is rendered again as a key frame (the work is
-// queued before the check so the GPU never idles waiting for the host; the flag is rare).
+// on-screen Gaussian left its trail: the frame is rendered again as a key frame. The work is
+// queued before the check so the GPU never idles waiting for the host; the raster and merge
+// kernels read the flag themselves and return at once when it is raised (on the fast real paths
+// most key frames are such failed sub-frames, and drawing them cost ~1.5 ms on the city).
 #include <cstring>
 
 #include "catgs/cpu_renderer.h"  // validate_camera
@@ -89,8 +91,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
 
   const stages::Projected proj = s.projected();
   CATGS_CUDA(cudaMemsetAsync(counters, 0, 4 * sizeof(unsigned long long), s.stream));
-  stages::speculative_preprocess(sv, pp, window > 0 ? sp.trail_slack : 0.0f, window > 0 ? sp.trail_margin_px : 0.0f,
-                                 proj, s.trails(), counters, s.big_list(), s.stream);
+  stages::speculative_preprocess(sv, pp, trail_widening(sp, window), proj, s.trails(), counters, s.big_list(),
+                                 s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
   const stages::TileTests tests{stages::TileTestKind::trail, nullptr, nullptr, nullptr, s.trails(), cam.width,
@@ -127,7 +129,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.plan_ready, s.stream));
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
-  catgs_rasterize(camera, static_cast<uint32_t>(capacity));
+  catgs_rasterize(camera, static_cast<uint32_t>(capacity), nullptr);
   s.key_entries = entries;
   s.key_visible = visible;
   s.key_capacity = capacity;
@@ -147,7 +149,7 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
                          s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
   CATGS_CUDA(cudaEventSynchronize(s.plan_ready));  // the key frame's slice total, long since copied
-  catgs_rasterize(camera, s.host_catgs[kSliceTotals]);
+  catgs_rasterize(camera, s.host_catgs[kSliceTotals], cc + kOutside);  // nothing drawn if the check failed
   CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kOutside, cc + kOutside, sizeof(unsigned), cudaMemcpyDeviceToHost,
                              s.stream));
   CATGS_CUDA(cudaEventRecord(s.catgs_readback, s.stream));
@@ -157,16 +159,17 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   return s.host_catgs[kOutside] == 0u;
 }
 
-void CudaRenderer::catgs_rasterize(const Camera& camera, uint32_t blocks) {
+void CudaRenderer::catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon) {
   State& s = *state_;
   const stages::CameraParams cam = camera_params(camera);
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
   const stages::SlicePlan plan = s.slice_plan();
   stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), blocks, s.sorted_values, s.projected(), cam,
-                           options_.speculation.early_termination, bg, s.partials.as<float4>(), s.rgb.as<float>(),
+                           options_.speculation.early_termination, tile_culling_, bg, abandon, s.partials.as<float4>(), s.rgb.as<float>(),
                            s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-  stages::merge_slices(plan, s.partials.as<float4>(), cam, bg, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
+  stages::merge_slices(plan, s.partials.as<float4>(), cam, bg, abandon, s.rgb.as<float>(), s.rgba8.as<uint32_t>(),
+                       s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
 }
 

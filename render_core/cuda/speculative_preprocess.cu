@@ -11,11 +11,41 @@ namespace catgs::cuda::stages {
 
 namespace {
 
+// The cheap cull before any 2D covariance (mirrors path_misses_image in
+// src/cpu/speculative_preprocess.cpp): true when Gaussian i, in front of the key camera, lies
+// beyond one same image edge at every camera of the path where it is in front, by more than
+// fm::edges_beyond's bound widened as its trail would be. Its ellipse then reaches no pixel at
+// any sampled pose, nor between them (beyond an edge is a half-plane).
+__device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 mean, float q_max,
+                                  const PathParams& path, const TrailWidening& widening) {
+  const CameraParams& key = path.cam[0];
+  const glm::vec3 p0 = key.R * mean + key.t;
+  if (!(p0.z > key.near_plane) || p0.z > key.far_plane) return false;
+  const CameraParams& last = path.cam[path.count - 1];
+  const glm::vec3 pw = last.R * mean + last.t;
+  float extra = widening.margin_px + 1.0f;
+  if (pw.z > last.near_plane && pw.z <= last.far_plane) {
+    const glm::vec2 u0(key.fx * p0.x / p0.z, key.fy * p0.y / p0.z);
+    const glm::vec2 uw(last.fx * pw.x / pw.z + last.cx - key.cx, last.fy * pw.y / pw.z + last.cy - key.cy);
+    extra += widening.motion_margin * glm::length(uw - u0);
+  }
+  const float max_scale = fm::max_scale_of(scene.log_scales + 3 * i);
+  unsigned beyond = 0xfu;
+  for (int k = 0; k < path.count && beyond != 0u; ++k) {
+    const CameraParams& c = path.cam[k];
+    const glm::vec3 p = c.R * mean + c.t;
+    if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
+    beyond &= fm::edges_beyond(p, max_scale, q_max, c.fx, c.fy, c.cx, c.cy, c.tan_half_fov, c.width, c.height,
+                               1.0f + widening.slack, extra);
+  }
+  return beyond != 0u;
+}
+
 // One thread per Gaussian: project at every camera of the path, build the trail (fm::build_trail),
 // count the tiles it touches (big trails are left to count_big_tiles, a warp each). Local arrays
 // hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-speculative_preprocess_kernel(SceneView scene, PathParams path, float slack, float margin_px,
+speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening widening,
                               Projected out, Trails trails,
                               unsigned long long* visible,  // [1]
                               BigList big) {
@@ -28,6 +58,7 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, float slack, flo
       const float q_max = fm::opacity_aware_qmax(opacity);
       if (!(q_max > 0.0f)) break;
       const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
+      if (path_misses_image(scene, i, mean, q_max, path, widening)) break;
       const fm::Cov3 cov3 = fm::covariance_3d(
           {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
           {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
@@ -54,7 +85,8 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, float slack, flo
         ++seen;
       }
       if (seen == 0) break;  // not visible at the key camera
-      const fm::Trail trail = fm::build_trail(means, covs, seen, q_max, slack, margin_px);
+      const fm::Trail trail =
+          fm::build_trail(means, covs, seen, q_max, widening.slack, widening.margin_px, widening.motion_margin);
       glm::vec3 conic, trail_conic;
       if (!fm::conic_from_cov2d(covs[0], &conic) || !fm::conic_from_cov2d(trail.cov, &trail_conic)) break;
       const CameraParams& key = path.cam[0];
@@ -110,7 +142,7 @@ max_screen_motion_kernel(const float* means,  // [N, 3]
 
 }  // namespace
 
-void speculative_preprocess(const SceneView& scene, const PathParams& path, float slack, float margin_px,
+void speculative_preprocess(const SceneView& scene, const PathParams& path, const TrailWidening& widening,
                             const Projected& out, const Trails& trails, unsigned long long* visible,
                             const BigList& big, cudaStream_t stream) {
   if (path.count < 1 || path.count > kMaxPath)
@@ -119,7 +151,7 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, floa
   const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (blocks > 0x7fffffffull) throw std::length_error("speculative_preprocess: too many Gaussians for one grid");
   speculative_preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene, path, slack, margin_px, out, trails, visible, big);
+      scene, path, widening, out, trails, visible, big);
   CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");
   const TileTests tests{TileTestKind::trail, nullptr, nullptr, nullptr, trails, path.cam[0].width,
                         path.cam[0].height};

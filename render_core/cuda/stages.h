@@ -9,7 +9,11 @@
 #include <cuda_runtime.h>
 #include <glm/glm.hpp>
 
+#include "catgs/speculation.h"
+
 namespace catgs::cuda::stages {
+
+using catgs::TrailWidening;
 
 // The camera as the kernels see it (by value in kernel parameters).
 struct CameraParams {
@@ -97,11 +101,13 @@ void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* 
 
 // catgs key frame, stage 1 (speculative_preprocess.cu; mirrors src/cpu/speculative_preprocess.cpp):
 // each Gaussian is projected at every camera of `path`; one visible at the key camera gets the
-// key frame's features, a trail (fm::build_trail with `slack`, `margin_px`) and the number of
-// tiles the trail touches. Big trails are counted by count_big_tiles (called here).
-void speculative_preprocess(const SceneView& scene, const PathParams& path, float slack,
-                            float margin_px, const Projected& out, const Trails& trails,
-                            unsigned long long* visible, const BigList& big, cudaStream_t stream);
+// key frame's features, a trail (fm::build_trail, widened by `widening`) and the number of
+// tiles the trail touches. Big trails are counted by count_big_tiles (called here). A Gaussian
+// beyond one same image edge at every camera of the path is culled before any 2D covariance
+// (as cpu::speculative_preprocess).
+void speculative_preprocess(const SceneView& scene, const PathParams& path, const TrailWidening& widening,
+                            const Projected& out, const Trails& trails, unsigned long long* visible,
+                            const BigList& big, cudaStream_t stream);
 
 // catgs planner input (speculative_preprocess.cu; mirrors cpu::max_screen_motion): the largest
 // screen motion (pixels) between cameras a and b of the means visible in a deeper than
@@ -211,14 +217,19 @@ void order_slices(const SlicePlan& plan, uint64_t capacity, uint32_t* scratch, u
 // `early_termination`: stop a pixel before T would drop below 1e-4 within its slice. Resets
 // saturated_from first; a slice behind one that saturated its tile alone is skipped (see
 // rasterize_slices.cu: the paper's higher early-termination threshold for later slices).
+// `tile_culling`: each round blends only the entries whose ellipse reaches the tile at this
+// frame's features (blend_range_culled; same image, for lists built for other poses too).
+// `abandon` (device, or null): when it holds non-zero at launch, draw nothing (a sub-frame
+// that failed its check and will be drawn again as a key frame).
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks,
                       const uint32_t* sorted_values, const Projected& projected, const CameraParams& cam,
-                      bool early_termination, float3 background, float4* partials, float* out_rgb,
-                      uint32_t* out_rgba8, cudaStream_t stream);
+                      bool early_termination, bool tile_culling, float3 background, const unsigned* abandon,
+                      float4* partials, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream);
 // The merge (rasterize_slices.cu): for each split tile, C = sum_k C_k prod_{m<k} T_m, then
-// + prod T * background (paper sec. 3.4).
+// + prod T * background (paper sec. 3.4). Nothing when *abandon (if given) is non-zero.
 void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam,
-                  float3 background, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream);
+                  float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8,
+                  cudaStream_t stream);
 
 // I420 planes in device memory (pitches in bytes), written by rgba8_to_yuv420.
 struct Yuv420Pitched {

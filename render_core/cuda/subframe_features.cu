@@ -73,6 +73,8 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 unlisted_kernel(SceneView scene, CameraParams cam,
                 const uint32_t* tiles_touched,  // [N] of the key frame
                 unsigned* outside) {            // [1]
+  // Already raised by the features kernel (queued before): the frame re-keys, nothing to add.
+  if (*outside) return;
   const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
   for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < scene.n; i += stride) {
     if (tiles_touched[i] > 0) continue;

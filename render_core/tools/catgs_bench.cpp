@@ -2,13 +2,16 @@
 // it reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-wN|-pN]] [--frames N]
-//               [--warmup N] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
+//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-nocull|-wN|-pN|-mN|-aN]]
+//               [--frames N] [--warmup N] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
 //               [--quality-every K]
 //
 // catgs variants (paper Tables 1/3 ablations and the supplementary's window table): catgs-nocache
 // (--no-cache: every frame a key frame), catgs-nosplit (--no-split), catgs-wN (W_initial = N),
-// catgs-pN (the motion predictor fits its velocities over the last N ms instead of 100).
+// catgs-pN (the motion predictor fits its velocities over the last N ms instead of 50), catgs-nocull
+// (CUDA: the rasterizer blends every entry of the trail list, CudaRenderer::set_tile_culling),
+// catgs-mN (trails widened by N% of each Gaussian's screen motion over the window,
+// SpeculationParams::trail_motion_margin), catgs-aN (and by N pixels, trail_margin_px).
 // catgs frames are posed at the trace's 120 FPS clock (render_device_at), so the motion predictor
 // sees the real timing. With --quality-every K (CUDA; default 1, 0 = off), every K-th frame of each
 // catgs variant is compared, after its timing, with a full `exact` render of the same pose by a
@@ -194,6 +197,7 @@ int run(int argc, char** argv) {
     catgs::Pipeline pipeline;
     bool warp_cull;
     catgs::SpeculationParams speculation;
+    bool tile_cull = true;  // catgs-nocull: off
   };
   std::vector<Variant> pipelines;
   {
@@ -203,8 +207,11 @@ int run(int argc, char** argv) {
       if (name == "exact-warp") v = {name, catgs::Pipeline::exact, true, {}};
       else if (name == "catgs-nocache") v.speculation.frustum_and_sort_cache = false;
       else if (name == "catgs-nosplit") v.speculation.task_splitting = false;
+      else if (name == "catgs-nocull") v.tile_cull = false;
       else if (name.rfind("catgs-w", 0) == 0) v.speculation.initial_window = std::stoi(name.substr(7));
       else if (name.rfind("catgs-p", 0) == 0) v.speculation.predictor_window_s = std::stoi(name.substr(7)) / 1000.0;
+      else if (name.rfind("catgs-m", 0) == 0) v.speculation.trail_motion_margin = static_cast<float>(std::stoi(name.substr(7))) / 100.0f;
+      else if (name.rfind("catgs-a", 0) == 0) v.speculation.trail_margin_px = std::stof(name.substr(7));
       else v.pipeline = catgs::parse_pipeline(name);
       pipelines.push_back(v);
     }
@@ -252,6 +259,7 @@ int run(int argc, char** argv) {
     const bool catgs_variant = variant.pipeline == catgs::Pipeline::catgs;
     catgs::cuda::CudaRenderer r(scene, o);
     r.set_warp_culling(variant.warp_cull);
+    r.set_tile_culling(variant.tile_cull);
     PipelineResult res;
     res.name = variant.name;
     cudaEvent_t start, end;
@@ -322,7 +330,8 @@ int run(int argc, char** argv) {
                  width, height);
     const auto shared = std::make_shared<const catgs::GaussianModel>(std::move(model));
     for (const Variant& variant : pipelines) {
-      if (variant.warp_cull) throw std::invalid_argument("exact-warp is a CUDA variant");
+      if (variant.warp_cull || !variant.tile_cull)
+        throw std::invalid_argument(variant.name + " is a CUDA variant");
       catgs::RenderOptions o;
       o.pipeline = variant.pipeline;
       o.speculation = variant.speculation;

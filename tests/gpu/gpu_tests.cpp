@@ -190,16 +190,26 @@ catgs::RenderOptions catgs_options() {
 void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_ptr<GaussianModel> model,
                   std::shared_ptr<const catgs::cuda::DeviceScene> dev, const catgs::Trace& trace) {
   catgs::cpu::SpeculativeRenderer c(model, catgs_options());
-  catgs::cuda::CudaRenderer g(dev, catgs_options());
-  std::size_t agree = 0, subs = 0, list_equal = 0, keys = 0;
-  double min_psnr = INFINITY, max_abs = 0;
-  int max8 = 0;
+  catgs::cuda::CudaRenderer g(dev, catgs_options()), unculled(dev, catgs_options());
+  unculled.set_tile_culling(false);
+  std::size_t agree = 0, subs = 0, list_equal = 0, keys = 0, cull_same_decision = 0, cull_subs = 0;
+  double min_psnr = INFINITY, max_abs = 0, cull_max_abs = 0;
+  int max8 = 0, cull_max8 = 0;
   for (const auto& tc : trace) {
-    Image a, b;
+    Image a, b, u;
     c.render_at(tc.camera, tc.time_s, a);
     g.render_at(tc.camera, tc.time_s, b);
+    unculled.render_at(tc.camera, tc.time_s, u);
     const auto& cs = c.last_stats();
     const auto& gs = g.last_stats();
+    // The rasterizer's tile cull must change neither a decision nor a bit of the image.
+    if (unculled.last_stats().key_frame == gs.key_frame) {
+      ++cull_same_decision;
+      cull_subs += gs.key_frame ? 0 : 1;
+      const Diff cd = compare(b, u);
+      cull_max_abs = std::max(cull_max_abs, cd.max_abs);
+      cull_max8 = std::max(cull_max8, cd.max_abs8);
+    }
     if (cs.key_frame != gs.key_frame) continue;
     ++agree;
     subs += gs.key_frame ? 0 : 1;
@@ -217,6 +227,10 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
                 trace.size(), agree, subs, list_equal, keys);
   add({"catgs=cpu", name, view, "catgs", min_psnr, max_abs, max8, -1, -1,
        agree * 100 >= trace.size() * 95 && min_psnr >= 50.0 && subs > 0, note});
+  std::snprintf(note, sizeof note, "tile cull on vs off: %zu/%zu frames decided alike (%zu sub-frames)",
+                cull_same_decision, trace.size(), cull_subs);
+  add({"tilecull", name, view, "catgs", cull_max_abs == 0.0 ? INFINITY : 0.0, cull_max_abs, cull_max8, -1, -1,
+       cull_same_decision == trace.size() && cull_max_abs == 0.0 && cull_subs > 0, note});
 }
 
 // subframes: CUDA catgs against the full render of every pose.

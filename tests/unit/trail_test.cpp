@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "catgs/camera.h"
+#include "catgs/cpu_renderer.h"
 #include "catgs/forward_model.h"
 
 namespace catgs {
@@ -106,6 +107,107 @@ TEST(TrailTest, HoldsEveryTileAlongThePredictedPath) {
   // Tight: in this harsh random setting (fast windows included) the trails list at most 50% more
   // tiles than the 64 poses need (conservativeness itself is asserted tile by tile above).
   EXPECT_LT(static_cast<double>(trail_tiles), 1.5 * static_cast<double>(needed_tiles));
+}
+
+// The stage itself (cpu::speculative_preprocess, which the CUDA core mirrors), with its cull of
+// Gaussians beyond one image edge along the whole path and the motion-relative margin: on random
+// Gaussians around and well outside the view, every tile an ellipse touches at 64 poses along the
+// path is listed by the trail the stage built.
+TEST(TrailTest, SpeculativePreprocessListsEveryTileAlongThePath) {
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), u01(0.0f, 1.0f);
+  GaussianModel model;
+  const std::size_t n = 3000;
+  model.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    // Laterally up to 2.5x the half-width the view covers at this depth: most lie off the image.
+    const float z = 1.0f + 3.0f * u01(rng);
+    model.means[3 * i] = 2.5f * z * 0.47f * u(rng);
+    model.means[3 * i + 1] = 2.5f * z * 0.35f * u(rng);
+    model.means[3 * i + 2] = z;
+    for (int a = 0; a < 3; ++a) model.log_scales[3 * i + a] = -4.5f + 3.0f * u01(rng);
+    for (int a = 0; a < 4; ++a) model.rotations[4 * i + a] = u(rng);
+    model.opacity_logits[i] = 4.0f * u(rng);
+  }
+  std::size_t listed_gaussians = 0, off_image = 0;
+  for (int motion = 0; motion < 6; ++motion) {
+    const glm::vec3 p0(0.1f * u(rng), 0.1f * u(rng), -0.5f);
+    const glm::quat q0 = glm::normalize(glm::quat(1.0f, 0.02f * u(rng), 0.02f * u(rng), 0.02f * u(rng)));
+    const float scale = motion < 2 ? 0.01f : 0.05f;
+    const glm::vec3 p1 = p0 + scale * glm::vec3(u(rng), u(rng), u(rng));
+    const glm::quat q1 = glm::normalize(q0 * glm::quat(1.0f, scale * u(rng), scale * u(rng), scale * u(rng)));
+    std::vector<Camera> path;
+    for (int k = 0; k < 5; ++k) path.push_back(pose_between(p0, q0, p1, q1, 50.0f, 50.0f, static_cast<float>(k) / 4.0f));
+    cpu::ProjectedGaussians out;
+    const TrailWidening widening{0.1f, 0.5f, motion % 2 == 0 ? 0.0f : 0.25f};
+    cpu::speculative_preprocess(model, path, widening, out);
+    for (std::size_t i = 0; i < n; ++i) {
+      const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
+      const fm::Cov3 S = fm::covariance_3d({model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
+                                           {model.rotations[4 * i], model.rotations[4 * i + 1],
+                                            model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
+      const float q_max = fm::opacity_aware_qmax(fm::sigmoid(model.opacity_logits[i]));
+      if (!(q_max > 0.0f) || !project(path[0], mean, S).visible) continue;
+      bool reaches = false;
+      for (int k = 0; k < 64; ++k) {
+        const Projected p = project(pose_between(p0, q0, p1, q1, 50.0f, 50.0f, static_cast<float>(k) / 63.0f), mean, S);
+        glm::vec3 pc;
+        if (!p.visible || !fm::conic_from_cov2d(p.cov, &pc)) continue;
+        const fm::TileRect e = fm::ellipse_tile_rect(p.mean, p.cov, q_max, 320, 240);
+        for (int ty = e.y0; ty < e.y1; ++ty)
+          for (int tx = e.x0; tx < e.x1; ++tx) {
+            if (!fm::ellipse_touches_tile(p.mean, pc, q_max, tx, ty, 320, 240)) continue;
+            reaches = true;
+            ASSERT_GT(out.tiles_touched[i], 0u) << "window " << motion << " Gaussian " << i << " pose " << k;
+            ASSERT_TRUE(fm::trail_touches_tile(out.trail_mean0[i], out.trail_motion[i], out.trail_conic[i],
+                                               out.q_trail[i], tx, ty, 320, 240))
+                << "window " << motion << " Gaussian " << i << " pose " << k << " misses tile (" << tx << ", " << ty << ")";
+          }
+      }
+      listed_gaussians += out.tiles_touched[i] > 0 ? 1 : 0;
+      off_image += reaches ? 0 : 1;
+    }
+  }
+  std::cout << "[ info ] listed " << listed_gaussians << " Gaussian-windows; " << off_image
+            << " in front of the key camera never reach the image\n";
+  EXPECT_GT(listed_gaussians, 1000u);
+  EXPECT_GT(off_image, 1000u);  // the cull had work to do
+}
+
+// fm::edges_beyond, the bound behind that cull: which edges a Gaussian lies beyond.
+TEST(TrailTest, EdgesBeyondNamesTheEdge) {
+  const glm::vec2 tan_half(320.0f / (2.0f * 300.0f), 240.0f / (2.0f * 300.0f));
+  auto edges = [&](glm::vec3 p, float widen, float extra) {
+    return fm::edges_beyond(p, 0.01f, 9.0f, 300.0f, 300.0f, 160.0f, 120.0f, tan_half, 320, 240, widen, extra);
+  };
+  EXPECT_EQ(edges({0.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 0u);    // centre of the view
+  EXPECT_EQ(edges({-3.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 1u);   // far left
+  EXPECT_EQ(edges({3.0f, 3.0f, 2.0f}, 1.0f, 0.0f), 2u | 8u);  // far right and below
+  // Just beyond the left edge: u = -20.5 px, r = 3 * (0.01 * 230 + 0.55) + 1 ~ 9.6 px.
+  const glm::vec3 near_left(-180.0f / 150.0f, 0.0f, 2.0f);
+  EXPECT_EQ(edges(near_left, 1.0f, 0.0f), 1u);
+  EXPECT_EQ(edges(near_left, 1.0f, 15.0f), 0u);  // widened past the edge: may reach the image
+  EXPECT_EQ(edges(near_left, 3.0f, 0.0f), 0u);
+  EXPECT_TRUE(fm::may_reach_image({0.0f, 0.0f, 2.0f}, 0.01f, 9.0f, 300.0f, 300.0f, 160.0f, 120.0f, tan_half, 320, 240));
+  EXPECT_FALSE(fm::may_reach_image(near_left, 0.01f, 9.0f, 300.0f, 300.0f, 160.0f, 120.0f, tan_half, 320, 240));
+}
+
+// The motion-relative margin widens a moving Gaussian's trail and leaves a still one exact.
+TEST(TrailTest, MotionMarginGrowsWithMotion) {
+  const glm::vec3 covs[2] = {{4.0f, 0.5f, 3.0f}, {4.0f, 0.5f, 3.0f}};
+  const float q_max = fm::opacity_aware_qmax(0.8f);
+  const glm::vec2 still[2] = {{50.0f, 60.0f}, {50.0f, 60.0f}};
+  EXPECT_EQ(fm::build_trail(still, covs, 2, q_max, 0.0f, 0.0f, 0.5f).q_trail,
+            fm::build_trail(still, covs, 2, q_max, 0.0f, 0.0f, 0.0f).q_trail);
+  const glm::vec2 slow[2] = {{50.0f, 60.0f}, {54.0f, 60.0f}}, fast[2] = {{50.0f, 60.0f}, {90.0f, 60.0f}};
+  const float plain = fm::build_trail(fast, covs, 2, q_max, 0.0f).q_trail;
+  const float slow_q = fm::build_trail(slow, covs, 2, q_max, 0.0f, 0.0f, 0.25f).q_trail;
+  const float fast_q = fm::build_trail(fast, covs, 2, q_max, 0.0f, 0.0f, 0.25f).q_trail;
+  EXPECT_GT(fast_q, plain);
+  EXPECT_GT(fast_q, slow_q);
+  // 0.25 * 40 px = 10 px along the narrowest axis: the level grows by 10 / sqrt(lambda_min).
+  const float lambda_min = 3.5f - std::sqrt(0.25f + 0.25f);
+  EXPECT_NEAR(std::sqrt(fast_q) - std::sqrt(plain), 10.0f / std::sqrt(lambda_min), 1e-3f);
 }
 
 TEST(TrailTest, StillCameraTrailIsTheExactEllipse) {

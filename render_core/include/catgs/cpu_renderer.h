@@ -66,11 +66,13 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
 
 // catgs key frame, stage 1 (src/cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
-// every camera of the path; those visible at some camera get the key frame's features (as
-// preprocess) and a trail holding their ellipse at each (fm::build_trail with `slack` and
-// `margin_px`), and count the tiles their trail touches (fm::trail_touches_tile).
+// every camera of the path; those visible at the key camera get the key frame's features (as
+// preprocess) and a trail holding their ellipse at each (fm::build_trail, widened by `widening`),
+// and count the tiles their trail touches (fm::trail_touches_tile). Before any 2D covariance, a
+// Gaussian that lies beyond one same image edge at every camera of the path, by more than
+// fm::edges_beyond's bound widened as its trail would be, is culled (touches no tile).
 void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
-                            float slack, float margin_px, ProjectedGaussians& out);
+                            const TrailWidening& widening, ProjectedGaussians& out);
 
 // catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
 // means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M).

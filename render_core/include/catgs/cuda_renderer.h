@@ -153,6 +153,11 @@ class CudaRenderer final : public Renderer {
   // the Gaussian's ellipse (same image, bit for bit). Off by default: measured no faster.
   void set_warp_culling(bool on) { warp_culling_ = on; }
   bool warp_culling() const { return warp_culling_; }
+  // catgs pipeline: let the rasterizer drop, each round of 256 list entries, those whose ellipse
+  // does not reach the tile at this frame's pose (a key frame's trail list holds entries for the
+  // whole window). Same image, bit for bit. On by default; off only to measure what it saves.
+  void set_tile_culling(bool on) { tile_culling_ = on; }
+  bool tile_culling() const { return tile_culling_; }
 
  private:
   struct State;
@@ -160,7 +165,8 @@ class CudaRenderer final : public Renderer {
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp
-  void catgs_rasterize(const Camera& camera, uint32_t blocks);    // render_catgs.cpp
+  // render_catgs.cpp; abandon: device flag, draw nothing when it is set (or null).
+  void catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon);
   void download(const DeviceFrame& frame, Image& out);
   std::shared_ptr<const DeviceScene> scene_;
   RenderOptions options_;
@@ -168,6 +174,7 @@ class CudaRenderer final : public Renderer {
   mutable FrameStats stats_;
   mutable bool stats_ready_ = true;
   bool warp_culling_ = false;
+  bool tile_culling_ = true;
 };
 
 // The DeviceScene of `model`: uploaded on the first call, then the same one for as long as any

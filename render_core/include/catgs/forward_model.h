@@ -359,16 +359,31 @@ CATGS_HD bool ellipse_reaches_image(glm::vec2 mean, glm::vec3 cov, glm::vec3 con
 // cannot reach the image. The EWA extent along any axis is at most sqrt(q_max) * max_scale *
 // ||J||_F with J the clamped Jacobian (||J||_F^2 = (fx^2 (1 + tx^2) + fy^2 (1 + ty^2)) / z^2),
 // plus sqrt(q_max * 0.3) for the low-pass filter; +1 px for rounding.
-CATGS_HD bool may_reach_image(glm::vec3 p_cam, float max_scale, float q_max, float fx, float fy, float cx, float cy,
-                              glm::vec2 tan_half_fov, int width, int height) {
+//
+// edges_beyond() gives the image edges the bound lies beyond, with the radius r widened to
+// widen * r + extra_px: bit 0 left (u + r < 0), 1 right (u - r > W - 1), 2 top, 3 bottom. The
+// speculative pre-processing culls a Gaussian that lies beyond one same edge at every sample of
+// its path (path_edges_beyond below).
+CATGS_HD unsigned edges_beyond(glm::vec3 p_cam, float max_scale, float q_max, float fx, float fy, float cx, float cy,
+                               glm::vec2 tan_half_fov, int width, int height, float widen = 1.0f,
+                               float extra_px = 0.0f) {
   const float z = p_cam.z;
   const float tx = fminf(kFrustumClamp * tan_half_fov.x, fabsf(p_cam.x / z));
   const float ty = fminf(kFrustumClamp * tan_half_fov.y, fabsf(p_cam.y / z));
   const float jf = sqrtf(fx * fx * (1.0f + tx * tx) + fy * fy * (1.0f + ty * ty)) / z;
-  const float r = sqrtf(q_max) * (max_scale * jf + sqrtf(kLowPass)) + 1.0f;
+  const float r = widen * (sqrtf(q_max) * (max_scale * jf + sqrtf(kLowPass)) + 1.0f) + extra_px;
   const float u = fx * p_cam.x / z + cx - 0.5f, v = fy * p_cam.y / z + cy - 0.5f;
-  return u + r >= 0.0f && u - r <= static_cast<float>(width - 1) && v + r >= 0.0f &&
-         v - r <= static_cast<float>(height - 1);
+  return (u + r < 0.0f ? 1u : 0u) | (u - r > static_cast<float>(width - 1) ? 2u : 0u) |
+         (v + r < 0.0f ? 4u : 0u) | (v - r > static_cast<float>(height - 1) ? 8u : 0u);
+}
+CATGS_HD bool may_reach_image(glm::vec3 p_cam, float max_scale, float q_max, float fx, float fy, float cx, float cy,
+                              glm::vec2 tan_half_fov, int width, int height) {
+  return edges_beyond(p_cam, max_scale, q_max, fx, fy, cx, cy, tan_half_fov, width, height) == 0u;
+}
+
+// Largest axis of a Gaussian, world units: exp of its largest log-scale.
+CATGS_HD float max_scale_of(const float* log_scale) {
+  return expf(fmaxf(log_scale[0], fmaxf(log_scale[1], log_scale[2])));
 }
 
 // A Gaussian (mean [3], log-scales [3], rotation (w, x, y, z) [4], opacity logit; world) that
@@ -383,7 +398,7 @@ CATGS_HD bool unlisted_reaches_image(const float* mean, const float* log_scale, 
   const glm::vec3 m(mean[0], mean[1], mean[2]);
   const glm::vec3 p = R * m + t;
   if (!(p.z > near_plane) || p.z > far_plane) return false;
-  const float max_scale = expf(fmaxf(log_scale[0], fmaxf(log_scale[1], log_scale[2])));
+  const float max_scale = max_scale_of(log_scale);
   if (!may_reach_image(p, max_scale, q_max, fx, fy, cx, cy, tan_half_fov, width, height)) return false;
   const glm::vec3 cov2 = covariance_2d(covariance_3d({log_scale[0], log_scale[1], log_scale[2]},
                                                      {rotation[0], rotation[1], rotation[2], rotation[3]}),
@@ -411,11 +426,14 @@ struct Trail {
 // poses of the predicted path (means[k], covs[k]; the first is the key frame, the last the end of
 // the window): the covariance dominates every sample's, and the level is the least for which
 // trail_contains() accepts every sample, widened so that poses between and near the samples are
-// held too: + margin_px pixels along the trail's narrowest axis (prediction error does not shrink
-// with the Gaussian), then scaled by (1 + slack).
+// held too: + margin_px + motion_margin * |motion| pixels along the trail's narrowest axis
+// (prediction error does not shrink with the Gaussian, and grows with how far the prediction
+// carries it: an error in the camera's velocity moves each Gaussian in proportion to its own
+// screen motion), then scaled by (1 + slack).
 CATGS_HD Trail build_trail(const glm::vec2* means, const glm::vec3* covs, int n, float q_max,
-                           float slack, float margin_px = 0.0f) {
+                           float slack, float margin_px = 0.0f, float motion_margin = 0.0f) {
   Trail t{means[0], means[n - 1] - means[0], covs[0], q_max};
+  margin_px += motion_margin * sqrtf(t.motion.x * t.motion.x + t.motion.y * t.motion.y);
   for (int k = 1; k < n; ++k) t.cov = dominating_cov2d(t.cov, covs[k]);
   glm::vec3 conic;
   if (!conic_from_cov2d(t.cov, &conic)) return t;

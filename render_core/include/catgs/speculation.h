@@ -13,6 +13,10 @@ struct SpeculationParams {
   double target_fps = 120.0;      // F_target: the predicted path is sampled at k / F_target
   float trail_slack = 0.1f;       // trails hold the sampled ellipses scaled by 1 + slack
   float trail_margin_px = 0.0f;   // and widened by this many pixels (prediction error)
+  // and by this fraction of the Gaussian's own screen motion over the window (prediction error
+  // grows with how far the prediction carries a Gaussian; fm::build_trail). 0.1 halved the key
+  // frames on the fitted real paths (H100, tests/gpu/RESULTS.md) for a key list ~1.2-1.5x longer.
+  float trail_motion_margin = 0.1f;
   bool frustum_and_sort_cache = true;  // false (--no-cache): every frame is a key frame
   bool task_splitting = true;          // false (--no-split)
   bool early_termination = true;       // stop a pixel when T would drop below 1e-4
@@ -20,6 +24,16 @@ struct SpeculationParams {
   // one averages out more input jitter, a shorter one lags less behind a changing velocity.
   double predictor_window_s = 0.05;
 };
+
+// How a key frame widens its trails (fm::build_trail): the parameters' values with a window, none
+// without one (W = 0: the path is the key camera alone, and the trail its exact ellipse).
+struct TrailWidening {
+  float slack = 0.0f, margin_px = 0.0f, motion_margin = 0.0f;
+};
+inline TrailWidening trail_widening(const SpeculationParams& p, int window) {
+  if (window <= 0) return {};
+  return {p.trail_slack, p.trail_margin_px, p.trail_motion_margin};
+}
 
 // The motion-adaptive window (paper sec. 3.1): M is the largest per-frame screen motion (pixels)
 // of the visible Gaussians deeper than d. W = W_initial while M <= l, else floor(W_initial * l / M);

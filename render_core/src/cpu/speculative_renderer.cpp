@@ -43,8 +43,7 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
                          ? planner_.window_for(max_screen_motion(*model_, camera, planner_.next_camera(camera),
                                                                  sp.depth_threshold))
                          : 0;
-  speculative_preprocess(*model_, planner_.path(camera, window), window > 0 ? sp.trail_slack : 0.0f,
-                         window > 0 ? sp.trail_margin_px : 0.0f, projected_);
+  speculative_preprocess(*model_, planner_.path(camera, window), trail_widening(sp, window), projected_);
   const auto t1 = clock::now();
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
   emit_keys(projected_, grid, Pipeline::catgs, list_);
