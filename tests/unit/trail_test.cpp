@@ -1,5 +1,7 @@
 // Speculative pre-processing: the trail test is conservative (never misses a tile that the
 // Gaussian's ellipse touches at any of 64 poses along the predicted path) and reports how tight it is.
+#include <algorithm>
+#include <cmath>
 #include <random>
 #include <set>
 
@@ -208,6 +210,40 @@ TEST(TrailTest, MotionMarginGrowsWithMotion) {
   // 0.25 * 40 px = 10 px along the narrowest axis: the level grows by 10 / sqrt(lambda_min).
   const float lambda_min = 3.5f - std::sqrt(0.25f + 0.25f);
   EXPECT_NEAR(std::sqrt(fast_q) - std::sqrt(plain), 10.0f / std::sqrt(lambda_min), 1e-3f);
+}
+
+// fm::min_quadratic_over_swept_rect walks only the hexagon's 6 boundary segments: on random
+// conics, rectangles and sweeps it must find the minimum over all 12 candidate segments (the
+// rectangle's edges at t = 0 and t = 1 and all four corner sweeps), and 0 with the origin inside.
+TEST(TrailTest, SweptRectMinimumUsesTheBoundaryOnly) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), u01(0.0f, 1.0f);
+  int outside = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const float a = 0.01f + u01(rng), c = 0.01f + u01(rng);
+    const glm::vec3 conic(a, 0.95f * std::sqrt(a * c) * u(rng), c);  // positive definite
+    const float x0 = 40.0f * u(rng), y0 = 40.0f * u(rng);
+    const float x1 = x0 + 15.0f, y1 = y0 + 15.0f;
+    // Sweeps of every direction, axis-parallel and zero ones included.
+    glm::vec2 m(60.0f * u(rng), 60.0f * u(rng));
+    if (n % 10 == 1) m.x = 0.0f;
+    if (n % 10 == 2) m.y = 0.0f;
+    if (n % 100 == 3) m = glm::vec2(0.0f);
+    const float got = fm::min_quadratic_over_swept_rect(conic, x0, x1, y0, y1, m);
+    const glm::vec2 cs[4] = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+    float all = INFINITY;
+    for (int k = 0; k < 4; ++k) {
+      const glm::vec2 p = cs[k], q = cs[(k + 1) % 4];
+      all = std::min({all, fm::min_quadratic_on_segment(conic, p, q), fm::min_quadratic_on_segment(conic, p - m, q - m),
+                      fm::min_quadratic_on_segment(conic, p, p - m)});
+    }
+    if (got == 0.0f) continue;  // origin inside: checked below by sampling
+    ++outside;
+    ASSERT_NEAR(got, all, 1e-4f * std::max(1.0f, all)) << "case " << n;
+  }
+  EXPECT_GT(outside, 10000);
+  // Origin inside the swept shape: 0.
+  EXPECT_EQ(fm::min_quadratic_over_swept_rect({1, 0, 1}, 5, 20, -3, 12, {30, 4}), 0.0f);  // t = 0.5 holds it
 }
 
 TEST(TrailTest, StillCameraTrailIsTheExactEllipse) {

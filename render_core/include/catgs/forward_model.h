@@ -236,8 +236,13 @@ CATGS_HD float min_quadratic_on_segment(glm::vec3 conic, glm::vec2 a, glm::vec2 
 }
 
 // Minimum of the positive definite q(d) over the swept rectangle {r - t m : r in [x0,x1]x[y0,y1],
-// t in [0, 1]} (a convex polygon): zero if it holds the origin, else the least over the boundary,
-// which lies on the rectangle's edges at t = 0 and t = 1 and on the four corners' sweeps.
+// t in [0, 1]} (a convex polygon, the Minkowski sum of the rectangle and the segment 0 -> -m):
+// zero if it holds the origin, else the least over the boundary. That boundary is made of each
+// rectangle edge at t = 0 if its outward normal n has n . m >= 0 (it faces away from the sweep
+// direction -m), at t = 1 if n . m <= 0, and the sweeps of the silhouette corners, whose two
+// edges disagree in sign: a hexagon, 6 segments (both versions of an edge parallel to m, with
+// every corner between them). Segments inside the polygon could not lower the minimum of a convex
+// q whose minimum point lies outside, so they are skipped (half the work of all 12).
 CATGS_HD float min_quadratic_over_swept_rect(glm::vec3 conic, float x0, float x1, float y0, float y1,
                                              glm::vec2 m) {
   // Origin inside: some t in [0, 1] has x0 <= t mx <= x1 and y0 <= t my <= y1.
@@ -253,13 +258,17 @@ CATGS_HD float min_quadratic_over_swept_rect(glm::vec3 conic, float x0, float x1
     }
   }
   if (lo <= hi) return 0.0f;
+  // Edge k runs from corner k to corner k + 1 (bottom, right, top, left); n_k . m for its outward
+  // normal n_k ((0,-1), (1,0), (0,1), (-1,0)).
   const glm::vec2 c[4] = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+  const float facing[4] = {-m.y, m.x, m.y, -m.x};
   float best = INFINITY;
   for (int k = 0; k < 4; ++k) {
     const glm::vec2 a = c[k], b = c[(k + 1) % 4];
-    best = fminf(best, min_quadratic_on_segment(conic, a, b));          // edge at t = 0
-    best = fminf(best, min_quadratic_on_segment(conic, a - m, b - m));  // edge at t = 1
-    best = fminf(best, min_quadratic_on_segment(conic, a, a - m));      // corner sweep
+    if (facing[k] >= 0.0f) best = fminf(best, min_quadratic_on_segment(conic, a, b));          // at t = 0
+    if (facing[k] <= 0.0f) best = fminf(best, min_quadratic_on_segment(conic, a - m, b - m));  // at t = 1
+    // Corner k joins edges k - 1 and k: on the silhouette when they face opposite ways.
+    if (facing[(k + 3) % 4] * facing[k] <= 0.0f) best = fminf(best, min_quadratic_on_segment(conic, a, a - m));
   }
   return best;
 }
