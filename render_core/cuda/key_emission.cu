@@ -48,14 +48,25 @@ emit_keys_kernel(TileTests tests,
   const uint64_t end = ends[i];
   uint64_t at = end - tiles_touched[i];
   const uint32_t depth_bits = __float_as_uint(depth[i]);
-  const GaussianTileTest hit = load_tile_test(tests, i);
-  for (int ty = r.y; ty < r.w && at < end; ++ty) {
-    for (int tx = r.x; tx < r.z && at < end; ++tx) {
-      if (!hit(tx, ty)) continue;
-      const auto tile = static_cast<uint32_t>(ty * tiles_x + tx);
+  if (tests.kind == TileTestKind::trail && tests.trails.tile_mask) {
+    // The trail tests ran when the tiles were counted: emit the set bits, row-major as below.
+    const int rw = r.z - r.x;
+    for (uint32_t mask = tests.trails.tile_mask[i]; mask != 0u && at < end; mask &= mask - 1u, ++at) {
+      const int b = __ffs(static_cast<int>(mask)) - 1;
+      const auto tile = static_cast<uint32_t>((r.y + b / rw) * tiles_x + r.x + b % rw);
       keys[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
       values[at] = static_cast<uint32_t>(i);
-      ++at;
+    }
+  } else {
+    const GaussianTileTest hit = load_tile_test(tests, i);
+    for (int ty = r.y; ty < r.w && at < end; ++ty) {
+      for (int tx = r.x; tx < r.z && at < end; ++tx) {
+        if (!hit(tx, ty)) continue;
+        const auto tile = static_cast<uint32_t>(ty * tiles_x + tx);
+        keys[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
+        values[at] = static_cast<uint32_t>(i);
+        ++at;
+      }
     }
   }
   // Unfilled slots (counting said more than emission found: never expected) become sentinels.

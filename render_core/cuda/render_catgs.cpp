@@ -62,6 +62,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   s.trail_mean0_motion.ensure(n * sizeof(float4), "trail means", allocs);
   s.trail_conic_q.ensure(n * sizeof(float4), "trail conics", allocs);
   s.trail_cov.ensure(n * sizeof(float4), "trail covariances", allocs);
+  s.trail_mask.ensure(n * sizeof(uint32_t), "trail tile masks", allocs);
   s.cached.ensure(n * sizeof(uint32_t), "frustum cache", allocs);
   s.select_temp.ensure(stages::select_cached_temp_bytes(n), "frustum cache scratch", allocs);
   const stages::SceneView sv = scene_view(scene);

@@ -92,7 +92,7 @@ struct CudaRenderer::State {
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian), the split plan (per slice
   // and tile), partial slices, and its counters: [0] M bits, [1] outside flag, [2..3] slice and
   // partial-slot totals, [4] frustum-cache size.
-  GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, cached, select_temp;
+  GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp;
   GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order,
       slice_order_temp, partials, saturated_from, catgs_counters;
   unsigned* host_catgs = nullptr;         // pinned [4]: M bits, outside flag, slice total, slots
@@ -126,7 +126,8 @@ struct CudaRenderer::State {
     return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + 3)};
   }
   stages::Trails trails() const {
-    return {trail_mean0_motion.as<float4>(), trail_conic_q.as<float4>(), trail_cov.as<float4>()};
+    return {trail_mean0_motion.as<float4>(), trail_conic_q.as<float4>(), trail_cov.as<float4>(),
+            trail_mask.as<uint32_t>()};
   }
   stages::SlicePlan slice_plan() const {
     return {slice_range.as<uint2>(), slice_tile.as<uint2>(), tile_plan.as<uint4>(),
@@ -138,8 +139,8 @@ struct CudaRenderer::State {
     for (const GrowBuffer* g :
          {&mean2d, &conic_opacity, &color, &depth, &q_max, &rect, &tiles_touched, &ends, &scan_temp, &big,
           &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &ranges, &tile_scratch, &tile_order,
-          &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &cached,
-          &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
+          &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &trail_mask,
+          &cached, &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
           &slice_order, &slice_order_temp, &partials, &saturated_from, &catgs_counters, &yuv})
       b += g->bytes();
     return b;

@@ -94,11 +94,14 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
           fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail, key.width, key.height);
       const int area = fm::tile_count(rect);
       is_big = area > tune::kBigRectTiles;  // counted by count_big_tiles, a warp each
+      uint32_t mask = 0;                    // row-major bit per tile of the rectangle
       if (area > 0 && !is_big)
-        for (int ty = rect.y0; ty < rect.y1; ++ty)
-          for (int tx = rect.x0; tx < rect.x1; ++tx)
-            touched += fm::trail_touches_tile(trail.mean0, trail.motion, trail_conic, trail.q_trail, tx, ty,
-                                              key.width, key.height) ? 1u : 0u;
+        for (int ty = rect.y0, bit = 0; ty < rect.y1; ++ty)
+          for (int tx = rect.x0; tx < rect.x1; ++tx, ++bit)
+            if (fm::trail_touches_tile(trail.mean0, trail.motion, trail_conic, trail.q_trail, tx, ty, key.width,
+                                       key.height))
+              mask |= 1u << bit;
+      touched = static_cast<uint32_t>(__popc(mask));
       if (touched == 0 && !is_big) break;
 
       const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
@@ -114,6 +117,7 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
       trails.mean0_motion[i] = make_float4(trail.mean0.x, trail.mean0.y, trail.motion.x, trail.motion.y);
       trails.conic_q[i] = make_float4(trail_conic.x, trail_conic.y, trail_conic.z, trail.q_trail);
       trails.cov[i] = make_float4(trail.cov.x, trail.cov.y, trail.cov.z, 0.0f);
+      trails.tile_mask[i] = mask;
     } while (false);
     out.tiles_touched[i] = touched;
   }

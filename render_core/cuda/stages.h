@@ -62,6 +62,10 @@ struct Trails {
   float4* mean0_motion;  // [N] (mean0.x, mean0.y, motion.x, motion.y)
   float4* conic_q;       // [N] (A, B, C) inverse of the trail covariance, q_trail
   float4* cov;           // [N] (a, b, c, unused) trail covariance (sub-frame containment check)
+  // [N] Gaussians whose tile rectangle holds at most tune::kBigRectTiles tiles: bit b set when
+  // the trail touches the rectangle's b-th tile in row-major order, as counted by the speculative
+  // pre-processing, so key emission reads the answers instead of testing every tile again.
+  uint32_t* tile_mask;
 };
 
 // Which tile test decides render-list membership (the three pipelines' stage 2).

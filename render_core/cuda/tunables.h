@@ -52,6 +52,7 @@ static_assert(static_cast<uint64_t>(kMaxTilesPerSide) * kMaxTilesPerSide < (1ull
 static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0 && kBigThreads % 32 == 0,
               "blocks are whole warps");
 static_assert(kBigRectTiles >= 1, "big Gaussians have more tiles than one thread handles well");
+static_assert(kBigRectTiles <= 32, "a small Gaussian's trail tiles fit one 32-bit mask (Trails::tile_mask)");
 
 // Number of key bits the tile id needs for a grid of `tiles` tiles, sentinel id `tiles` included.
 constexpr int tile_key_bits(uint32_t tiles) {
