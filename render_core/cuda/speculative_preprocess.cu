@@ -95,12 +95,12 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
       const int area = fm::tile_count(rect);
       is_big = area > tune::kBigRectTiles;  // counted by count_big_tiles, a warp each
       uint32_t mask = 0;                    // row-major bit per tile of the rectangle
-      if (area > 0 && !is_big)
+      if (area > 0 && !is_big) {
+        const fm::TrailTileTest test = fm::make_trail_tile_test(trail.mean0, trail.motion, trail_conic, trail.q_trail);
         for (int ty = rect.y0, bit = 0; ty < rect.y1; ++ty)
           for (int tx = rect.x0; tx < rect.x1; ++tx, ++bit)
-            if (fm::trail_touches_tile(trail.mean0, trail.motion, trail_conic, trail.q_trail, tx, ty, key.width,
-                                       key.height))
-              mask |= 1u << bit;
+            if (fm::trail_touches_tile(test, tx, ty, key.width, key.height)) mask |= 1u << bit;
+      }
       touched = static_cast<uint32_t>(__popc(mask));
       if (touched == 0 && !is_big) break;
 

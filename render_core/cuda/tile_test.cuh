@@ -13,10 +13,10 @@ namespace catgs::cuda::stages {
 
 struct GaussianTileTest {
   TileTestKind kind;
-  glm::vec2 mean;    // ellipse: 2D mean; trail: mean0
-  glm::vec2 motion;  // trail only
-  glm::vec3 conic;   // ellipse conic, or the trail's
-  float q;           // q_max, or q_trail
+  glm::vec2 mean;             // ellipse: 2D mean
+  glm::vec3 conic;            // ellipse conic
+  float q;                    // q_max
+  fm::TrailTileTest trail;    // trail: its constants, worked out once per Gaussian
   int width, height;
 
   __device__ __forceinline__ bool operator()(int tx, int ty) const {
@@ -24,7 +24,7 @@ struct GaussianTileTest {
       case TileTestKind::ellipse:
         return fm::ellipse_touches_tile(mean, conic, q, tx, ty, width, height);
       case TileTestKind::trail:
-        return fm::trail_touches_tile(mean, motion, conic, q, tx, ty, width, height);
+        return fm::trail_touches_tile(trail, tx, ty, width, height);
       default:
         return true;
     }
@@ -32,7 +32,7 @@ struct GaussianTileTest {
 };
 
 __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, uint64_t i) {
-  GaussianTileTest g{t.kind, {}, {}, {}, 0.0f, t.width, t.height};
+  GaussianTileTest g{t.kind, {}, {}, 0.0f, {}, t.width, t.height};
   if (t.kind == TileTestKind::ellipse) {
     const float4 co = t.conic_opacity[i];
     g.mean = glm::vec2(t.mean2d[i].x, t.mean2d[i].y);
@@ -41,10 +41,7 @@ __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, u
   } else if (t.kind == TileTestKind::trail) {
     const float4 mm = t.trails.mean0_motion[i];
     const float4 cq = t.trails.conic_q[i];
-    g.mean = glm::vec2(mm.x, mm.y);
-    g.motion = glm::vec2(mm.z, mm.w);
-    g.conic = glm::vec3(cq.x, cq.y, cq.z);
-    g.q = cq.w;
+    g.trail = fm::make_trail_tile_test(glm::vec2(mm.x, mm.y), glm::vec2(mm.z, mm.w), glm::vec3(cq.x, cq.y, cq.z), cq.w);
   }
   return g;
 }

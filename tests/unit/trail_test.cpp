@@ -212,9 +212,10 @@ TEST(TrailTest, MotionMarginGrowsWithMotion) {
   EXPECT_NEAR(std::sqrt(fast_q) - std::sqrt(plain), 10.0f / std::sqrt(lambda_min), 1e-3f);
 }
 
-// fm::min_quadratic_over_swept_rect walks only the hexagon's 6 boundary segments: on random
-// conics, rectangles and sweeps it must find the minimum over all 12 candidate segments (the
-// rectangle's edges at t = 0 and t = 1 and all four corner sweeps), and 0 with the origin inside.
+// fm::min_quadratic_over_swept_rect walks only the hexagon's 6 boundary segments, in closed form:
+// on random conics, rectangles and sweeps it must find the minimum over all 12 candidate segments
+// (the rectangle's edges at s = 0 and s = 1 and all four corner sweeps, each minimised by
+// fm::min_quadratic_on_segment), and 0 with the origin inside.
 TEST(TrailTest, SweptRectMinimumUsesTheBoundaryOnly) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f), u01(0.0f, 1.0f);
@@ -229,7 +230,7 @@ TEST(TrailTest, SweptRectMinimumUsesTheBoundaryOnly) {
     if (n % 10 == 1) m.x = 0.0f;
     if (n % 10 == 2) m.y = 0.0f;
     if (n % 100 == 3) m = glm::vec2(0.0f);
-    const float got = fm::min_quadratic_over_swept_rect(conic, x0, x1, y0, y1, m);
+    const float got = fm::min_quadratic_over_swept_rect(fm::make_trail_tile_test({0, 0}, m, conic, 0.0f), x0, x1, y0, y1);
     const glm::vec2 cs[4] = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
     float all = INFINITY;
     for (int k = 0; k < 4; ++k) {
@@ -243,7 +244,8 @@ TEST(TrailTest, SweptRectMinimumUsesTheBoundaryOnly) {
   }
   EXPECT_GT(outside, 10000);
   // Origin inside the swept shape: 0.
-  EXPECT_EQ(fm::min_quadratic_over_swept_rect({1, 0, 1}, 5, 20, -3, 12, {30, 4}), 0.0f);  // t = 0.5 holds it
+  EXPECT_EQ(fm::min_quadratic_over_swept_rect(fm::make_trail_tile_test({0, 0}, {30, 4}, {1, 0, 1}, 0.0f), 5, 20, -3, 12),
+            0.0f);  // s = 0.5 holds it
 }
 
 TEST(TrailTest, StillCameraTrailIsTheExactEllipse) {

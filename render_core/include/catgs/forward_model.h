@@ -235,54 +235,108 @@ CATGS_HD float min_quadratic_on_segment(glm::vec3 conic, glm::vec2 a, glm::vec2 
   return conic_quadratic(conic, d.x, d.y);
 }
 
-// Minimum of the positive definite q(d) over the swept rectangle {r - t m : r in [x0,x1]x[y0,y1],
-// t in [0, 1]} (a convex polygon, the Minkowski sum of the rectangle and the segment 0 -> -m):
-// zero if it holds the origin, else the least over the boundary. That boundary is made of each
-// rectangle edge at t = 0 if its outward normal n has n . m >= 0 (it faces away from the sweep
-// direction -m), at t = 1 if n . m <= 0, and the sweeps of the silhouette corners, whose two
-// edges disagree in sign: a hexagon, 6 segments (both versions of an edge parallel to m, with
-// every corner between them). Segments inside the polygon could not lower the minimum of a convex
-// q whose minimum point lies outside, so they are skipped (half the work of all 12).
-CATGS_HD float min_quadratic_over_swept_rect(glm::vec3 conic, float x0, float x1, float y0, float y1,
-                                             glm::vec2 m) {
-  // Origin inside: some t in [0, 1] has x0 <= t mx <= x1 and y0 <= t my <= y1.
+// A trail's tile test (DESIGN.md 1) with its per-Gaussian constants worked out once: the key
+// frame asks it for every tile of the trail's rectangle, so the divisions the minimisation needs
+// are done here, not per tile. conic: the trail's inverse 2D covariance (positive definite);
+// motion: mean0 -> end of the window, pixels; q_limit = q_trail + kExactQMargin.
+struct TrailTileTest {
+  glm::vec2 mean0, motion;
+  glm::vec3 conic;
+  float q_limit;
+  float inv_a, inv_c;  // 1 / conic.x, 1 / conic.z
+  glm::vec2 cm;        // conic * motion
+  float inv_mcm;       // 1 / (motion^T conic motion); 0 for a still trail
+  glm::vec2 inv_m;     // 1 / motion per axis; 0 where the motion is 0
+};
+
+CATGS_HD TrailTileTest make_trail_tile_test(glm::vec2 mean0, glm::vec2 motion, glm::vec3 conic, float q_trail) {
+  TrailTileTest t;
+  t.mean0 = mean0;
+  t.motion = motion;
+  t.conic = conic;
+  t.q_limit = q_trail + kExactQMargin;
+  t.inv_a = 1.0f / conic.x;
+  t.inv_c = 1.0f / conic.z;
+  t.cm = glm::vec2(conic.x * motion.x + conic.y * motion.y, conic.y * motion.x + conic.z * motion.y);
+  const float mcm = motion.x * t.cm.x + motion.y * t.cm.y;
+  t.inv_mcm = mcm > 0.0f ? 1.0f / mcm : 0.0f;
+  t.inv_m = glm::vec2(motion.x != 0.0f ? 1.0f / motion.x : 0.0f, motion.y != 0.0f ? 1.0f / motion.y : 0.0f);
+  return t;
+}
+
+// Minimum of the positive definite q(d) = d^T conic d over the swept rectangle {r - s m : r in
+// [x0,x1]x[y0,y1], s in [0, 1]} (the Minkowski sum of the rectangle and the segment 0 -> -m,
+// coordinates relative to the trail's mean0): zero if it holds the origin, else the least over
+// its boundary. That boundary is each rectangle edge at s = 0 if its outward normal n has
+// n . m >= 0 (it faces away from the sweep direction -m), at s = 1 if n . m <= 0, and the sweeps
+// of the silhouette corners, whose two edges disagree in sign: a hexagon, 6 segments (both
+// versions of an edge parallel to m, with every corner between them). Segments inside the
+// polygon cannot lower the minimum of a convex q whose minimum point lies outside, so they are
+// skipped. On an axis-parallel edge the minimiser is closed-form (x = -B y / A on a horizontal
+// one, y = -B x / C on a vertical one), clamped to the edge; on a corner's sweep a - s m it is
+// s = (a^T conic m) / (m^T conic m), clamped to [0, 1].
+CATGS_HD float min_quadratic_over_swept_rect(const TrailTileTest& t, float x0, float x1, float y0, float y1) {
+  const glm::vec2 m = t.motion;
+  // Origin inside: some s in [0, 1] has x0 <= s mx <= x1 and y0 <= s my <= y1.
   float lo = 0.0f, hi = 1.0f;
-  const float r0[2] = {x0, y0}, r1[2] = {x1, y1}, mv[2] = {m.x, m.y};
+  const float r0[2] = {x0, y0}, r1[2] = {x1, y1}, mv[2] = {m.x, m.y}, inv[2] = {t.inv_m.x, t.inv_m.y};
   for (int a = 0; a < 2 && lo <= hi; ++a) {
     if (mv[a] == 0.0f) {
       if (r0[a] > 0.0f || r1[a] < 0.0f) hi = -1.0f;
     } else {
-      const float ta = r0[a] / mv[a], tb = r1[a] / mv[a];
+      const float ta = r0[a] * inv[a], tb = r1[a] * inv[a];
       lo = fmaxf(lo, fminf(ta, tb));
       hi = fminf(hi, fmaxf(ta, tb));
     }
   }
   if (lo <= hi) return 0.0f;
-  // Edge k runs from corner k to corner k + 1 (bottom, right, top, left); n_k . m for its outward
-  // normal n_k ((0,-1), (1,0), (0,1), (-1,0)).
-  const glm::vec2 c[4] = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
-  const float facing[4] = {-m.y, m.x, m.y, -m.x};
+  const glm::vec3 c = t.conic;
+  auto clampf = [](float v, float a, float b) { return fminf(b, fmaxf(a, v)); };
+  auto horizontal = [&](float y, float xa, float xb) {  // the edge {(x, y): xa <= x <= xb}
+    return conic_quadratic(c, clampf(-c.y * y * t.inv_a, xa, xb), y);
+  };
+  auto vertical = [&](float x, float ya, float yb) {
+    return conic_quadratic(c, x, clampf(-c.y * x * t.inv_c, ya, yb));
+  };
+  auto sweep = [&](float ax, float ay) {  // the corner (ax, ay) swept to (ax, ay) - m
+    const float s = clampf((ax * t.cm.x + ay * t.cm.y) * t.inv_mcm, 0.0f, 1.0f);
+    return conic_quadratic(c, ax - s * m.x, ay - s * m.y);
+  };
+  // n . m of the outward normals of the edges y = y0, x = x1, y = y1, x = x0.
+  const float bottom = -m.y, right = m.x, top = m.y, left = -m.x;
   float best = INFINITY;
-  for (int k = 0; k < 4; ++k) {
-    const glm::vec2 a = c[k], b = c[(k + 1) % 4];
-    if (facing[k] >= 0.0f) best = fminf(best, min_quadratic_on_segment(conic, a, b));          // at t = 0
-    if (facing[k] <= 0.0f) best = fminf(best, min_quadratic_on_segment(conic, a - m, b - m));  // at t = 1
-    // Corner k joins edges k - 1 and k: on the silhouette when they face opposite ways.
-    if (facing[(k + 3) % 4] * facing[k] <= 0.0f) best = fminf(best, min_quadratic_on_segment(conic, a, a - m));
-  }
+  if (bottom >= 0.0f) best = fminf(best, horizontal(y0, x0, x1));
+  if (bottom <= 0.0f) best = fminf(best, horizontal(y0 - m.y, x0 - m.x, x1 - m.x));
+  if (top >= 0.0f) best = fminf(best, horizontal(y1, x0, x1));
+  if (top <= 0.0f) best = fminf(best, horizontal(y1 - m.y, x0 - m.x, x1 - m.x));
+  if (right >= 0.0f) best = fminf(best, vertical(x1, y0, y1));
+  if (right <= 0.0f) best = fminf(best, vertical(x1 - m.x, y0 - m.y, y1 - m.y));
+  if (left >= 0.0f) best = fminf(best, vertical(x0, y0, y1));
+  if (left <= 0.0f) best = fminf(best, vertical(x0 - m.x, y0 - m.y, y1 - m.y));
+  // A corner is on the silhouette when its two edges face opposite ways.
+  if (left * bottom <= 0.0f) best = fminf(best, sweep(x0, y0));
+  if (bottom * right <= 0.0f) best = fminf(best, sweep(x1, y0));
+  if (right * top <= 0.0f) best = fminf(best, sweep(x1, y1));
+  if (top * left <= 0.0f) best = fminf(best, sweep(x0, y1));
   return best;
 }
 
-// Does tile (tx, ty) hold a pixel centre inside the trail of the ellipse (conic, q_trail) whose
-// centre moves from mean0 by `motion` (pixels)? Exact for that swept shape; conservative for a
-// Gaussian whose own ellipse along the path stays inside it (see trail_contains).
-CATGS_HD bool trail_touches_tile(glm::vec2 mean0, glm::vec2 motion, glm::vec3 conic, float q_trail,
-                                 int tx, int ty, int width, int height) {
+// Does tile (tx, ty) hold a pixel centre inside the trail: the ellipse (conic, q_trail) whose
+// centre moves from mean0 by `motion` (pixels)? Exact for that swept shape (up to
+// kExactQMargin); conservative for a Gaussian whose own ellipse along the path stays inside it
+// (see trail_contains).
+CATGS_HD bool trail_touches_tile(const TrailTileTest& t, int tx, int ty, int width, int height) {
   const float x0 = static_cast<float>(tx * kTileSize), y0 = static_cast<float>(ty * kTileSize);
   const float x1 = fminf(x0 + (kTileSize - 1), static_cast<float>(width - 1));
   const float y1 = fminf(y0 + (kTileSize - 1), static_cast<float>(height - 1));
-  return min_quadratic_over_swept_rect(conic, x0 - mean0.x, x1 - mean0.x, y0 - mean0.y,
-                                       y1 - mean0.y, motion) <= q_trail + kExactQMargin;
+  return min_quadratic_over_swept_rect(t, x0 - t.mean0.x, x1 - t.mean0.x, y0 - t.mean0.y, y1 - t.mean0.y) <=
+         t.q_limit;
+}
+
+// The same, for a caller that asks about one tile (it pays the per-Gaussian divisions each time).
+CATGS_HD bool trail_touches_tile(glm::vec2 mean0, glm::vec2 motion, glm::vec3 conic, float q_trail, int tx,
+                                 int ty, int width, int height) {
+  return trail_touches_tile(make_trail_tile_test(mean0, motion, conic, q_trail), tx, ty, width, height);
 }
 
 // Tiles of the bounding box of a trail: both end ellipses (cov = the trail's 2D covariance).

@@ -26,6 +26,10 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
   parallel_for(n, 4096, [&](std::size_t i) {
     if (projected.tiles_touched[i] == 0) return;
     const fm::TileRect r = projected.tile_rect[i];
+    const fm::TrailTileTest trail_test =
+        trail ? fm::make_trail_tile_test(projected.trail_mean0[i], projected.trail_motion[i],
+                                         projected.trail_conic[i], projected.q_trail[i])
+              : fm::TrailTileTest{};
     uint64_t at = list.offsets[i];
     for (int ty = r.y0; ty < r.y1; ++ty) {
       for (int tx = r.x0; tx < r.x1; ++tx) {
@@ -33,10 +37,7 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
                                                projected.q_max[i], tx, ty, grid.width,
                                                grid.height))
           continue;
-        if (trail && !fm::trail_touches_tile(projected.trail_mean0[i], projected.trail_motion[i],
-                                             projected.trail_conic[i], projected.q_trail[i], tx,
-                                             ty, grid.width, grid.height))
-          continue;
+        if (trail && !fm::trail_touches_tile(trail_test, tx, ty, grid.width, grid.height)) continue;
         const auto tile = static_cast<uint32_t>(ty * grid.tiles_x + tx);
         list.keys[at] = fm::render_key(tile, projected.depth[i]);
         list.values[at] = static_cast<uint32_t>(i);

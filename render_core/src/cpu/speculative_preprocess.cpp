@@ -126,11 +126,11 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
     if (!fm::conic_from_cov2d(covs[0], &conic) || !fm::conic_from_cov2d(trail.cov, &trail_conic)) return;
     const fm::TileRect rect = fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail,
                                                   key.width, key.height);
+    const fm::TrailTileTest trail_test = fm::make_trail_tile_test(trail.mean0, trail.motion, trail_conic, trail.q_trail);
     uint32_t touched = 0;
     for (int ty = rect.y0; ty < rect.y1; ++ty)
       for (int tx = rect.x0; tx < rect.x1; ++tx)
-        touched += fm::trail_touches_tile(trail.mean0, trail.motion, trail_conic, trail.q_trail, tx, ty,
-                                          key.width, key.height);
+        touched += fm::trail_touches_tile(trail_test, tx, ty, key.width, key.height) ? 1u : 0u;
     if (touched == 0) return;
     out.mean2d[i] = means[0];
     out.conic[i] = conic;
