@@ -3,10 +3,11 @@
 // same decisions from the same poses.
 //
 // Key frame: M (max_screen_motion, one 4-byte readback) -> W -> speculative pre-processing over
-// the predicted path (trails) -> the counts readback, key emission with the trail test, sort, tile
-// ranges (build_render_list) -> frustum cache (select_cached) -> split plan and slice order (k
-// first, then longest first) ->
-// rasterize slices -> merge. The slice total is copied back asynchronously (plan_ready) so the
+// the predicted path (trails, and each small trail's tile answers as a bit mask) -> the counts
+// readback, key emission from those masks (big trails: the trail test), sort, tile ranges
+// (build_render_list) -> frustum cache (select_cached) -> split plan and slice order (k first,
+// then longest first) -> rasterize slices (tile-culled: only entries whose ellipse reaches the
+// tile at this pose are blended) -> merge. The slice total is copied back asynchronously (plan_ready) so the
 // group's sub-frames launch exactly one block per slice; the key frame itself launches
 // slice_capacity() blocks, the extra ones return at once.
 // Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag), the

@@ -2,8 +2,10 @@
 //
 // The tile-membership test of stage 2, loaded once per Gaussian into registers and then asked
 // per tile: square (vanilla: every tile of the rectangle), ellipse (exact: fm::ellipse_touches_tile)
-// or trail (catgs key frames: fm::trail_touches_tile). The same test counts tiles in stage 1 and
-// emits keys in stage 2, so both agree (both files are built with -fmad=false).
+// or trail (catgs key frames: fm::trail_touches_tile, its constants made once per Gaussian by
+// fm::make_trail_tile_test). The same test counts tiles in stage 1 and emits keys in stage 2, so
+// both agree (both files are built with -fmad=false); a small trail's emission skips the test and
+// reads the answers stage 1 kept (Trails::tile_mask).
 #pragma once
 
 #include "catgs/forward_model.h"
