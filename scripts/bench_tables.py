@@ -61,7 +61,7 @@ def key_sub_table(runs):
         if scene == "windows":
             continue
         for p in run["pipelines"]:
-            if not p["pipeline"].startswith("catgs") or p["pipeline"] in ("catgs-nocache",):
+            if not p["pipeline"].startswith("catgs") or p["pipeline"] == "catgs-nocache":  # no sub-frames
                 continue
             k, s = p["key_frames"], p["sub_frames"]
             g, q = p["key_list_growth_vs_exact"], p["subframe_quality_vs_full_render"]

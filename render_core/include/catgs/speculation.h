@@ -15,7 +15,8 @@ struct SpeculationParams {
   float trail_margin_px = 0.0f;   // and widened by this many pixels (prediction error)
   // and by this fraction of the Gaussian's own screen motion over the window (prediction error
   // grows with how far the prediction carries a Gaussian; fm::build_trail). 0.1 cut the key
-  // frames on the fitted real paths by 24-56% (H100, tests/gpu/RESULTS.md) for key lists 1.1-1.6x longer.
+  // frames on the fitted bicycle and flowers paths by 24-56% (H100, tests/gpu/RESULTS.md), for key
+  // lists 1.1-1.6x longer.
   float trail_motion_margin = 0.1f;
   bool frustum_and_sort_cache = true;  // false (--no-cache): every frame is a key frame
   bool task_splitting = true;          // false (--no-split)
