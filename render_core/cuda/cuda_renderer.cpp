@@ -15,6 +15,7 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
     : scene_(std::move(scene)), state_(std::make_unique<State>()) {
   if (!scene_) throw std::invalid_argument("CudaRenderer: null scene");
   set_options(options);
+  depth_first_sort_ = options.pipeline == Pipeline::catgs;  // where it measured faster (header)
   State& s = *state_;
   CATGS_CUDA(cudaStreamCreateWithFlags(&s.stream, cudaStreamNonBlocking));
   for (cudaEvent_t& e : s.events) CATGS_CUDA(cudaEventCreate(&e));
@@ -81,7 +82,7 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   q_max.ensure(n * sizeof(float), "q_max", allocs);
   rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs);
   tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs);
-  ends.ensure(n * sizeof(uint64_t), "emission offsets", allocs);
+  ends.ensure((n + 1) * sizeof(uint64_t), "emission offsets", allocs);  // + depth_order's spare
   big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
   scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);
   ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
@@ -95,7 +96,8 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
 }
 
 uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::CameraParams& cam,
-                                                const stages::TileTests& tests, uint64_t* visible) {
+                                                const stages::TileTests& tests, bool depth_first,
+                                                uint64_t* visible) {
   const stages::Projected proj = projected();
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
@@ -115,23 +117,51 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
                             " entries exceeds 2^32 - 1 (32-bit tile ranges); lower the resolution "
                             "or split the scene");
 
-  const int key_bits = tune::kDepthBits + tune::tile_key_bits(tiles);
   for (int h = 0; h < 2; ++h) {
     keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", &allocations);
     values[h].ensure(entries * sizeof(uint32_t), "render-list values", &allocations);
   }
-  sort_temp.ensure(stages::sort_temp_bytes(entries, key_bits), "sort scratch", &allocations);
-  note_peak();
-
-  uint64_t* k[2] = {keys[0].as<uint64_t>(), keys[1].as<uint64_t>()};
   uint32_t* v[2] = {values[0].as<uint32_t>(), values[1].as<uint32_t>()};
-  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], v[0], stream);
-  CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
+  if (!depth_first) {
+    const int key_bits = tune::kDepthBits + tune::tile_key_bits(tiles);
+    sort_temp.ensure(stages::sort_temp_bytes(entries, key_bits), "sort scratch", &allocations);
+    note_peak();
+    uint64_t* k[2] = {keys[0].as<uint64_t>(), keys[1].as<uint64_t>()};
+    stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], nullptr, v[0], nullptr, 0, stream);
+    CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
+    const int half = stages::sort_pairs(k, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
+    sorted_values = v[half];
+    CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
+    stages::tile_ranges(k[half], entries, tiles, ranges.as<uint2>(), stream);
+    return entries;
+  }
 
-  const int half = stages::sort_pairs(k, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
+  // Depth-first: the visible Gaussians sorted by depth hand out the list slots (the depth sort
+  // is timed with emission), then a stable sort on the tile bits alone. The 32-bit tile keys
+  // live in the halves of the 64-bit key buffers.
+  const int tile_bits = tune::tile_key_bits(tiles);
+  for (int h = 0; h < 2; ++h) {
+    depth_index[h].ensure(n * sizeof(uint32_t), "depth order", &allocations);
+    depth_keys[h].ensure(n * sizeof(uint32_t), "depth keys", &allocations);
+  }
+  depth_count.ensure(sizeof(unsigned), "depth order count", &allocations);
+  depth_temp.ensure(stages::depth_order_temp_bytes(n), "depth order scratch", &allocations);
+  sort_temp.ensure(stages::sort_by_tile_temp_bytes(entries, tile_bits), "sort scratch", &allocations);
+  note_peak();
+  const stages::DepthOrderBuffers order{{depth_index[0].as<uint32_t>(), depth_index[1].as<uint32_t>()},
+                                        {depth_keys[0].as<uint32_t>(), depth_keys[1].as<uint32_t>()},
+                                        depth_count.as<unsigned>(),
+                                        depth_temp.as<void>(),
+                                        depth_temp.bytes()};
+  const uint32_t* by_depth =
+      stages::depth_order_ends(proj.tiles_touched, proj.depth, n, *visible, order, ends.as<uint64_t>(), stream);
+  uint32_t* k[2] = {keys[0].as<uint32_t>(), keys[1].as<uint32_t>()};
+  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), nullptr, k[0], v[0], by_depth, *visible,
+                    stream);
+  CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
+  const int half = stages::sort_pairs_by_tile(k, v, entries, tile_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
   sorted_values = v[half];
   CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
-
   stages::tile_ranges(k[half], entries, tiles, ranges.as<uint2>(), stream);
   return entries;
 }
@@ -170,7 +200,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   const stages::TileTests tests{exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square,
                                 proj.mean2d, proj.conic_opacity, proj.q_max, {}, cam.width, cam.height};
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, cam, tests, &visible);
+  const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort_, &visible);
   const uint32_t* order = nullptr;
   if (tune::kHeavyTilesFirst) {
     stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(),

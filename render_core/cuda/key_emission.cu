@@ -21,6 +21,19 @@ struct WidenToU64 {
 
 using WideCounts = thrust::transform_iterator<WidenToU64, const uint32_t*, uint64_t>;
 
+// Where a key goes: [tile | depth bits] into `wide`, or (depth-first sort, depth_order.cu) the
+// tile id alone into `tile_only` when that is not null. The choice is uniform over a launch.
+struct KeyOut {
+  uint64_t* wide;       // [L]
+  uint32_t* tile_only;  // [L] or null
+  __device__ void put(uint64_t at, uint32_t tile, uint32_t depth_bits) const {
+    if (tile_only)
+      tile_only[at] = tile;
+    else
+      wide[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
+  }
+};
+
 // counts[0] = render list length (ends[n-1]), counts[1] = visible Gaussians: one 16-byte readback.
 __global__ void gather_counts_kernel(const uint64_t* ends,           // [n]
                                      uint64_t n,
@@ -32,29 +45,34 @@ __global__ void gather_counts_kernel(const uint64_t* ends,           // [n]
 
 // One thread per Gaussian writes its run of keys. Writes are bounded by its own slot
 // [begin, end): a disagreement between counting and emitting could never spill into a neighbour.
+// Thread j takes Gaussian order[j] when an order is given (the depth-first sort: its slots follow
+// that order, so neighbouring threads write neighbouring slots), else Gaussian j.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-emit_keys_kernel(TileTests tests,
+emit_keys_kernel(const uint32_t* order,         // [n] or null
+                 TileTests tests,
                  const float* depth,            // [N]
                  const ushort4* rect,           // [N]
                  const uint32_t* tiles_touched, // [N]
                  const uint64_t* ends,          // [N] inclusive scan of tiles_touched
-                 uint64_t n, int tiles_x, int tiles_y,
-                 uint64_t* keys,                // [L]
+                 uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
+                 KeyOut keys,
                  uint32_t* values) {            // [L]
-  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n || tiles_touched[i] == 0) return;
+  const uint64_t j = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (j >= n) return;
+  const uint64_t i = order ? order[j] : j;
+  if (i >= gaussians || tiles_touched[i] == 0) return;  // (depth_order's padding index is N)
   const ushort4 r = rect[i];
   if ((r.z - r.x) * (r.w - r.y) > tune::kBigRectTiles) return;  // emit_big_kernel's
   const uint64_t end = ends[i];
   uint64_t at = end - tiles_touched[i];
-  const uint32_t depth_bits = __float_as_uint(depth[i]);
+  const uint32_t depth_bits = keys.tile_only ? 0u : __float_as_uint(depth[i]);  // tile keys need no depth
   if (tests.kind == TileTestKind::trail && tests.trails.tile_mask) {
     // The trail tests ran when the tiles were counted: emit the set bits, row-major as below.
     const int rw = r.z - r.x;
     for (uint32_t mask = tests.trails.tile_mask[i]; mask != 0u && at < end; mask &= mask - 1u, ++at) {
       const int b = __ffs(static_cast<int>(mask)) - 1;
       const auto tile = static_cast<uint32_t>((r.y + b / rw) * tiles_x + r.x + b % rw);
-      keys[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
+      keys.put(at, tile, depth_bits);
       values[at] = static_cast<uint32_t>(i);
     }
   } else {
@@ -62,17 +80,16 @@ emit_keys_kernel(TileTests tests,
     for (int ty = r.y; ty < r.w && at < end; ++ty) {
       for (int tx = r.x; tx < r.z && at < end; ++tx) {
         if (!hit(tx, ty)) continue;
-        const auto tile = static_cast<uint32_t>(ty * tiles_x + tx);
-        keys[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
+        keys.put(at, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits);
         values[at] = static_cast<uint32_t>(i);
         ++at;
       }
     }
   }
   // Unfilled slots (counting said more than emission found: never expected) become sentinels.
-  const auto sentinel = static_cast<uint64_t>(static_cast<uint32_t>(tiles_x * tiles_y)) << 32;
+  const auto sentinel = static_cast<uint32_t>(tiles_x * tiles_y);
   for (; at < end; ++at) {
-    keys[at] = sentinel | 0xffffffffull;
+    keys.put(at, sentinel, 0xffffffffu);
     values[at] = static_cast<uint32_t>(i);
   }
 }
@@ -87,12 +104,12 @@ emit_big_kernel(BigList big, TileTests tests,
                 const uint32_t* tiles_touched, // [N]
                 const uint64_t* ends,          // [N]
                 int tiles_x, int tiles_y,
-                uint64_t* keys,                // [L]
+                KeyOut keys,
                 uint32_t* values) {            // [L]
   const unsigned lane = threadIdx.x & 31u;
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
   const unsigned total = *big.count;
-  const auto sentinel = static_cast<uint64_t>(static_cast<uint32_t>(tiles_x * tiles_y)) << 32;
+  const auto sentinel = static_cast<uint32_t>(tiles_x * tiles_y);
   for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < total; w += warps) {
     const uint32_t i = big.index[w];
     const uint32_t touched = tiles_touched[i];
@@ -110,13 +127,13 @@ emit_big_kernel(BigList big, TileTests tests,
       const unsigned hits = __ballot_sync(0xffffffffu, hit);
       const uint64_t slot = at + static_cast<uint64_t>(__popc(hits & ((1u << lane) - 1u)));
       if (hit && slot < end) {
-        keys[slot] = (static_cast<uint64_t>(static_cast<uint32_t>(ty * tiles_x + tx)) << 32) | depth_bits;
+        keys.put(slot, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits);
         values[slot] = i;
       }
       at += static_cast<uint64_t>(__popc(hits));
     }
     for (uint64_t s = at + lane; s < end; s += 32) {  // never expected, as in emit_keys_kernel
-      keys[s] = sentinel | 0xffffffffull;
+      keys.put(s, sentinel, 0xffffffffu);
       values[s] = i;
     }
   }
@@ -143,12 +160,15 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 }
 
 void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* values,
-               cudaStream_t stream) {
+               const TileTests& tests, const BigList& big, uint64_t* wide_keys, uint32_t* tile_keys,
+               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream) {
   if (n == 0) return;
-  const uint64_t blocks = (n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
-  emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-      tests, p.depth, p.rect, p.tiles_touched, ends, n, cam.tiles_x, cam.tiles_y, keys, values);
+  const KeyOut keys{wide_keys, tile_keys};
+  const uint64_t walk = order ? order_count : n;
+  const uint64_t blocks = (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  if (walk > 0)
+    emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
+        order, tests, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y, keys, values);
   CATGS_CUDA_LAUNCHED("emit_keys_kernel");
   emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(
       big, tests, p.depth, p.rect, p.tiles_touched, ends, cam.tiles_x, cam.tiles_y, keys, values);

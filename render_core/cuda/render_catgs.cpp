@@ -4,8 +4,8 @@
 //
 // Key frame: M (max_screen_motion, one 4-byte readback) -> W -> speculative pre-processing over
 // the predicted path (trails, and each small trail's tile answers as a bit mask) -> the counts
-// readback, key emission from those masks (big trails: the trail test), sort, tile ranges
-// (build_render_list) -> frustum cache (select_cached) -> split plan and slice order (k first,
+// readback, key emission from those masks (big trails: the trail test), sort (depth first by
+// default), tile ranges (build_render_list) -> frustum cache (select_cached) -> split plan and slice order (k first,
 // then longest first) -> rasterize slices (tile-culled: only entries whose ellipse reaches the
 // tile at this pose are blended) -> merge. The slice total is copied back asynchronously (plan_ready) so the
 // group's sub-frames launch exactly one block per slice; the key frame itself launches
@@ -100,7 +100,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   const stages::TileTests tests{stages::TileTestKind::trail, nullptr, nullptr, nullptr, s.trails(), cam.width,
                                 cam.height};
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, cam, tests, &visible);
+  const uint64_t entries = s.build_render_list(n, cam, tests, depth_first_sort_, &visible);
 
   // Frustum cache, split plan (paper sec. 3.4) and the slice order (longest first).
   stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(), cc + kCachedCount, s.select_temp.as<void>(),

@@ -83,6 +83,9 @@ struct CudaRenderer::State {
   GrowBuffer mean2d, conic_opacity, color, depth, q_max, rect, tiles_touched, ends, scan_temp, big;
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
+  // The depth-first sort (depth_order.cu): visible Gaussians and their depth keys (two halves
+  // each), its count and scratch.
+  GrowBuffer depth_index[2], depth_keys[2], depth_count, depth_temp;
   // Per tile / pixel, and the small counters.
   GrowBuffer ranges, tile_scratch, tile_order, order_temp, rgb, rgba8, counters;
   const uint32_t* sorted_values = nullptr;
@@ -113,9 +116,10 @@ struct CudaRenderer::State {
   // Stages 2-4 after pre-processing: scans tiles_touched, reads back the list length and the
   // visible count (the frame's counts sync), grows the list buffers, emits keys with `tests`
   // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
-  // ranges. Returns the list length. Throws std::length_error past 2^32 - 1 entries.
+  // ranges. With `depth_first` the list is ordered by the depth-first sort (depth_order.cu; the
+  // same list). Returns the list length. Throws std::length_error past 2^32 - 1 entries.
   uint64_t build_render_list(uint64_t n, const stages::CameraParams& cam, const stages::TileTests& tests,
-                             uint64_t* visible);
+                             bool depth_first, uint64_t* visible);
 
   // Views of the buffers as the stages take them.
   stages::Projected projected() const {
@@ -138,7 +142,8 @@ struct CudaRenderer::State {
     std::size_t b = 0;
     for (const GrowBuffer* g :
          {&mean2d, &conic_opacity, &color, &depth, &q_max, &rect, &tiles_touched, &ends, &scan_temp, &big,
-          &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &ranges, &tile_scratch, &tile_order,
+          &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &depth_index[0], &depth_index[1],
+          &depth_keys[0], &depth_keys[1], &depth_count, &depth_temp, &ranges, &tile_scratch, &tile_order,
           &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &trail_mask,
           &cached, &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
           &slice_order, &slice_order_temp, &partials, &saturated_from, &catgs_counters, &yuv})

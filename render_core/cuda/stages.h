@@ -147,23 +147,52 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
                         std::size_t temp_bytes, const unsigned long long* visible,
                         unsigned long long* counts, cudaStream_t stream);
 
-// Stage 2b (key_emission.cu): each Gaussian writes its keys [tile | depth bits] and values (its
-// index) at [ends[i-1], ends[i]), in row-major tile order; never more than tiles_touched[i]
-// entries; slots it cannot fill get the sentinel tile id `tiles` (sorted last, ignored later).
-// Big Gaussians are emitted a warp each (ballot + popc keeps the row-major order).
+// Stage 2a' (depth_order.cu, the depth-first sort): sorts the `visible` Gaussians with
+// tiles_touched > 0 by depth (stable, so equal depths keep index order) and rewrites ends[i] of
+// each of them as the inclusive running sum of tiles_touched in that order (the others keep
+// theirs). Emission then lays each Gaussian's entries out in depth order, and a stable sort on
+// the tile alone (sort_pairs_by_tile) gives the [tile | depth] list. `visible` comes from the
+// counts readback. Returns the depth order (device, [visible] Gaussian indices; emit_keys walks
+// the Gaussians in it, so consecutive threads write consecutive slots). Buffers: index and keys [2][N], count [1], temp of depth_order_temp_bytes(N);
+// ends must hold N + 1 entries (a spare slot, see depth_order.cu).
+struct DepthOrderBuffers {
+  uint32_t* index[2];
+  uint32_t* keys[2];
+  unsigned* count;
+  void* temp;
+  std::size_t temp_bytes;
+};
+std::size_t depth_order_temp_bytes(uint64_t n);
+const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const float* depth, uint64_t n, uint64_t visible,
+                                 const DepthOrderBuffers& buffers, uint64_t* ends, cudaStream_t stream);
+
+// Stage 2b (key_emission.cu): each Gaussian writes its keys and values (its index) at
+// [ends[i] - tiles_touched[i], ends[i]), in row-major tile order; never more than
+// tiles_touched[i] entries; slots it cannot fill get the sentinel tile id `tiles` (sorted last,
+// ignored later). Big Gaussians are emitted a warp each (ballot + popc keeps the row-major
+// order). Keys go to `keys` as [tile | depth bits] (64-bit), or, when `tile_keys` is not null
+// (the depth-first sort), to `tile_keys` as the tile id alone (32-bit). `order` (or null: all N
+// in index order): the `order_count` Gaussians to walk, in that order (depth_order_ends's).
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* values,
-               cudaStream_t stream);
+               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* tile_keys,
+               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream);
 
 // Stage 3 (sort.cu): CUB radix sort of (key, value) pairs over the low `key_bits` bits. Sorts
 // between the two halves of each double buffer; returns which half holds the result (0 or 1).
+// sort_pairs_by_tile: the same on 32-bit tile keys (the depth-first sort's second pass).
 std::size_t sort_temp_bytes(uint64_t entries, int key_bits);
 int sort_pairs(uint64_t* keys[2], uint32_t* values[2], uint64_t entries, int key_bits, void* temp,
                std::size_t temp_bytes, cudaStream_t stream);
+std::size_t sort_by_tile_temp_bytes(uint64_t entries, int key_bits);
+int sort_pairs_by_tile(uint32_t* keys[2], uint32_t* values[2], uint64_t entries, int key_bits, void* temp,
+                       std::size_t temp_bytes, cudaStream_t stream);
 
 // Stage 4 (tile_ranges.cu): [start, end) of each tile in the sorted list; tiles without entries get
-// [0, 0). Sentinel entries (tile id >= tiles) are ignored.
+// [0, 0). Sentinel entries (tile id >= tiles) are ignored. Keys are [tile | depth] (64-bit) or,
+// with the depth-first sort, tile ids (32-bit).
 void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream);
+void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
 
 // Stage 4b (tile_ranges.cu): tile ids by decreasing number of entries (a stable radix sort of

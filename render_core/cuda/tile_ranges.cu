@@ -12,19 +12,22 @@ namespace catgs::cuda::stages {
 
 namespace {
 
+// The tile of a sorted key: the high half of [tile | depth], or the whole tile-only key.
+__device__ inline uint32_t tile_of(uint64_t key) { return static_cast<uint32_t>(key >> 32); }
+__device__ inline uint32_t tile_of(uint32_t key) { return key; }
+
+template <typename Key>
 __global__ void __launch_bounds__(tune::kEntryThreads)
-tile_ranges_kernel(const uint64_t* keys,  // [L] sorted
+tile_ranges_kernel(const Key* keys,       // [L] sorted
                    uint64_t entries, uint32_t tiles,
                    uint2* ranges) {       // [tiles], zeroed
   const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
   for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < entries;
        i += stride) {
-    const auto tile = static_cast<uint32_t>(keys[i] >> 32);
+    const uint32_t tile = tile_of(keys[i]);
     if (tile >= tiles) continue;  // sentinel
-    if (i == 0 || static_cast<uint32_t>(keys[i - 1] >> 32) != tile)
-      ranges[tile].x = static_cast<uint32_t>(i);
-    if (i + 1 == entries || static_cast<uint32_t>(keys[i + 1] >> 32) != tile)
-      ranges[tile].y = static_cast<uint32_t>(i + 1);
+    if (i == 0 || tile_of(keys[i - 1]) != tile) ranges[tile].x = static_cast<uint32_t>(i);
+    if (i + 1 == entries || tile_of(keys[i + 1]) != tile) ranges[tile].y = static_cast<uint32_t>(i + 1);
   }
 }
 
@@ -63,14 +66,29 @@ void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t
                                                        order, tiles, 0, bits, stream));
 }
 
-void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
-                 cudaStream_t stream) {
+namespace {
+
+template <typename Key>
+void launch_tile_ranges(const Key* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+                        cudaStream_t stream) {
   CATGS_CUDA(cudaMemsetAsync(ranges, 0, sizeof(uint2) * tiles, stream));
   if (entries == 0) return;
   const uint64_t want = (entries + tune::kEntryThreads - 1) / tune::kEntryThreads;
   const auto blocks = static_cast<unsigned>(want < tune::kMaxEntryBlocks ? want : tune::kMaxEntryBlocks);
-  tile_ranges_kernel<<<blocks, tune::kEntryThreads, 0, stream>>>(sorted_keys, entries, tiles, ranges);
+  tile_ranges_kernel<Key><<<blocks, tune::kEntryThreads, 0, stream>>>(sorted_keys, entries, tiles, ranges);
   CATGS_CUDA_LAUNCHED("tile_ranges_kernel");
+}
+
+}  // namespace
+
+void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream) {
+  launch_tile_ranges(sorted_keys, entries, tiles, ranges, stream);
+}
+
+void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream) {
+  launch_tile_ranges(sorted_tile_keys, entries, tiles, ranges, stream);
 }
 
 }  // namespace catgs::cuda::stages

@@ -21,9 +21,13 @@ void SpeculationPlanner::set_params(const SpeculationParams& params) {
   if (!(params.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
   if (!(params.predictor_window_s > 0.0 && params.predictor_window_s <= 1.0))
     throw std::invalid_argument("motion predictor window must be in (0, 1] s");
-  if (params.predictor_window_s != predictor_.params().fit_window_s) {  // a new fit: history restarts
-    MotionPredictorParams mp;
+  if (!(params.predictor_acceleration_window_s >= 0.0 && params.predictor_acceleration_window_s <= 1.0))
+    throw std::invalid_argument("motion predictor acceleration window must be in [0, 1] s");
+  if (params.predictor_window_s != predictor_.params().fit_window_s ||
+      params.predictor_acceleration_window_s != predictor_.params().acceleration_window_s) {
+    MotionPredictorParams mp;  // a new fit: history restarts
     mp.fit_window_s = params.predictor_window_s;
+    mp.acceleration_window_s = params.predictor_acceleration_window_s;
     predictor_ = MotionPredictor(mp);
   }
   params_ = params;

@@ -2,16 +2,20 @@
 // it reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-nocull|-wN|-pN|-mN|-aN]]
+//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-nocull|-wN|-pN|-qN|-mN|-aN][-tsort]][,exact-dsort]
 //               [--frames N] [--warmup N] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
 //               [--quality-every K]
 //
 // catgs variants (paper Tables 1/3 ablations and the supplementary's window table): catgs-nocache
 // (--no-cache: every frame a key frame), catgs-nosplit (--no-split), catgs-wN (W_initial = N),
-// catgs-pN (the motion predictor fits its velocities over the last N ms instead of 50), catgs-nocull
+// catgs-pN (the motion predictor fits its velocities over the last N ms instead of 50), catgs-qN
+// (its acceleration over the last N ms instead of 100; catgs-q0: constant velocity), catgs-nocull
 // (CUDA: the rasterizer blends every entry of the trail list, CudaRenderer::set_tile_culling),
 // catgs-mN (trails widened by N% of each Gaussian's screen motion over the window,
 // SpeculationParams::trail_motion_margin), catgs-aN (and by N pixels, trail_margin_px).
+// The CUDA render list's sort (CudaRenderer::set_depth_first_sort; the same list either way): a
+// catgs name ending in -tsort (catgs-tsort, catgs-w2-tsort) sorts it in one radix sort of
+// [tile | depth] keys instead of depth first; exact-dsort sorts exact's depth first.
 // catgs frames are posed at the trace's 120 FPS clock (render_device_at), so the motion predictor
 // sees the real timing. With --quality-every K (CUDA; default 1, 0 = off), every K-th frame of each
 // catgs variant is compared, after its timing, with a full `exact` render of the same pose by a
@@ -198,11 +202,20 @@ int run(int argc, char** argv) {
     bool warp_cull;
     catgs::SpeculationParams speculation;
     bool tile_cull = true;  // catgs-nocull: off
+    bool depth_first = false;  // catgs: on unless -tsort; exact: off unless -dsort
   };
   std::vector<Variant> pipelines;
   {
     std::stringstream ss(args.get("--pipeline", "vanilla,exact"));
     for (std::string name; std::getline(ss, name, ',');) {
+      const std::string full_name = name;
+      auto strip = [&name](const std::string& suffix) {
+        const bool has = name.size() > suffix.size() &&
+                         name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+        if (has) name.erase(name.size() - suffix.size());
+        return has;
+      };
+      const bool single_sort = strip("-tsort"), depth_first = strip("-dsort");
       Variant v{name, catgs::Pipeline::catgs, false, {}};
       if (name == "exact-warp") v = {name, catgs::Pipeline::exact, true, {}};
       else if (name == "catgs-nocache") v.speculation.frustum_and_sort_cache = false;
@@ -210,9 +223,13 @@ int run(int argc, char** argv) {
       else if (name == "catgs-nocull") v.tile_cull = false;
       else if (name.rfind("catgs-w", 0) == 0) v.speculation.initial_window = std::stoi(name.substr(7));
       else if (name.rfind("catgs-p", 0) == 0) v.speculation.predictor_window_s = std::stoi(name.substr(7)) / 1000.0;
+      else if (name.rfind("catgs-q", 0) == 0)
+        v.speculation.predictor_acceleration_window_s = std::stoi(name.substr(7)) / 1000.0;
       else if (name.rfind("catgs-m", 0) == 0) v.speculation.trail_motion_margin = static_cast<float>(std::stoi(name.substr(7))) / 100.0f;
       else if (name.rfind("catgs-a", 0) == 0) v.speculation.trail_margin_px = std::stof(name.substr(7));
       else v.pipeline = catgs::parse_pipeline(name);
+      v.name = full_name;
+      v.depth_first = depth_first || (v.pipeline == catgs::Pipeline::catgs && !single_sort);
       pipelines.push_back(v);
     }
   }
@@ -260,6 +277,7 @@ int run(int argc, char** argv) {
     catgs::cuda::CudaRenderer r(scene, o);
     r.set_warp_culling(variant.warp_cull);
     r.set_tile_culling(variant.tile_cull);
+    r.set_depth_first_sort(variant.depth_first);
     PipelineResult res;
     res.name = variant.name;
     cudaEvent_t start, end;
@@ -330,7 +348,7 @@ int run(int argc, char** argv) {
                  width, height);
     const auto shared = std::make_shared<const catgs::GaussianModel>(std::move(model));
     for (const Variant& variant : pipelines) {
-      if (variant.warp_cull || !variant.tile_cull)
+      if (variant.warp_cull || !variant.tile_cull || !variant.depth_first)
         throw std::invalid_argument(variant.name + " is a CUDA variant");
       catgs::RenderOptions o;
       o.pipeline = variant.pipeline;

@@ -13,6 +13,8 @@
 //             over 8-bit RGB (max abs error of the float image and of the 8-bit image reported),
 //             and the render list lengths of both.
 //  warpcull   CUDA exact with and without the rasterizer's optional per-warp skip: bit-identical.
+//  depthsort  CUDA exact and catgs with the depth-first sort and with the single [tile | depth]
+//             sort: bit-identical images, the same list lengths (and for catgs the same decisions).
 //  exact~van  CUDA exact vs CUDA vanilla: PSNR >= 40 dB and a shorter render list.
 //  grow       one renderer across scenes and sizes (small -> large -> small): every frame equals
 //             a fresh renderer's frame, and buffers grow without errors.
@@ -161,6 +163,16 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model,
            static_cast<long long>(gpu_e.last_stats().render_list_length), d.max_abs == 0.0,
            "per-warp skip on vs off"});
     }
+    {  // the depth-first sort must give the single sort's list: the same image, bit for bit
+      catgs::cuda::CudaRenderer depth_first(dev, oe);  // gpu_e sorts once ([tile | depth]; exact's default)
+      depth_first.set_depth_first_sort(true);
+      Image gt;
+      depth_first.render(views[k], gt);
+      const Diff d = compare(ge, gt);
+      const auto ls = depth_first.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;
+      add({"depthsort", name, view, "exact", d.psnr, d.max_abs, d.max_abs8, static_cast<long long>(ls),
+           static_cast<long long>(le), d.max_abs == 0.0 && ls == le, "depth-first sort vs single sort"});
+    }
     const Diff d = compare(gv, ge);
     const auto lv = gpu_v.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;
     char note[64];
@@ -190,26 +202,39 @@ catgs::RenderOptions catgs_options() {
 void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_ptr<GaussianModel> model,
                   std::shared_ptr<const catgs::cuda::DeviceScene> dev, const catgs::Trace& trace) {
   catgs::cpu::SpeculativeRenderer c(model, catgs_options());
-  catgs::cuda::CudaRenderer g(dev, catgs_options()), unculled(dev, catgs_options());
+  catgs::cuda::CudaRenderer g(dev, catgs_options()), unculled(dev, catgs_options()), single_sort(dev, catgs_options());
   unculled.set_tile_culling(false);
-  std::size_t agree = 0, subs = 0, list_equal = 0, keys = 0, cull_same_decision = 0, cull_subs = 0;
-  double min_psnr = INFINITY, max_abs = 0, cull_max_abs = 0;
-  int max8 = 0, cull_max8 = 0;
+  single_sort.set_depth_first_sort(false);
+  g.set_depth_first_sort(true);  // the default for catgs, set to say what is compared
+  // A CUDA-only switch that must change neither a decision, a list length nor a bit of the image.
+  struct SameFrames {
+    std::size_t same_decision = 0, subs = 0, same_lists = 0;
+    double max_abs = 0;
+    int max8 = 0;
+    void add(const catgs::FrameStats& want, const Image& want_image, const catgs::FrameStats& got, const Image& got_image) {
+      if (got.key_frame != want.key_frame) return;
+      ++same_decision;
+      subs += want.key_frame ? 0 : 1;
+      same_lists += got.render_list_length == want.render_list_length ? 1 : 0;
+      const Diff d = compare(want_image, got_image);
+      max_abs = std::max(max_abs, d.max_abs);
+      max8 = std::max(max8, d.max_abs8);
+    }
+    bool pass(std::size_t frames) const { return same_decision == frames && same_lists == frames && max_abs == 0.0 && subs > 0; }
+  } cull, sort;
+  std::size_t agree = 0, subs = 0, list_equal = 0, keys = 0;
+  double min_psnr = INFINITY, max_abs = 0;
+  int max8 = 0;
   for (const auto& tc : trace) {
-    Image a, b, u;
+    Image a, b, u, o;
     c.render_at(tc.camera, tc.time_s, a);
     g.render_at(tc.camera, tc.time_s, b);
     unculled.render_at(tc.camera, tc.time_s, u);
+    single_sort.render_at(tc.camera, tc.time_s, o);
     const auto& cs = c.last_stats();
     const auto& gs = g.last_stats();
-    // The rasterizer's tile cull must change neither a decision nor a bit of the image.
-    if (unculled.last_stats().key_frame == gs.key_frame) {
-      ++cull_same_decision;
-      cull_subs += gs.key_frame ? 0 : 1;
-      const Diff cd = compare(b, u);
-      cull_max_abs = std::max(cull_max_abs, cd.max_abs);
-      cull_max8 = std::max(cull_max8, cd.max_abs8);
-    }
+    cull.add(gs, b, unculled.last_stats(), u);
+    sort.add(gs, b, single_sort.last_stats(), o);
     if (cs.key_frame != gs.key_frame) continue;
     ++agree;
     subs += gs.key_frame ? 0 : 1;
@@ -228,9 +253,13 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
   add({"catgs=cpu", name, view, "catgs", min_psnr, max_abs, max8, -1, -1,
        agree * 100 >= trace.size() * 95 && min_psnr >= 50.0 && subs > 0, note});
   std::snprintf(note, sizeof note, "tile cull on vs off: %zu/%zu frames decided alike (%zu sub-frames)",
-                cull_same_decision, trace.size(), cull_subs);
-  add({"tilecull", name, view, "catgs", cull_max_abs == 0.0 ? INFINITY : 0.0, cull_max_abs, cull_max8, -1, -1,
-       cull_same_decision == trace.size() && cull_max_abs == 0.0 && cull_subs > 0, note});
+                cull.same_decision, trace.size(), cull.subs);
+  add({"tilecull", name, view, "catgs", cull.max_abs == 0.0 ? INFINITY : 0.0, cull.max_abs, cull.max8, -1, -1,
+       cull.pass(trace.size()), note});
+  std::snprintf(note, sizeof note, "depth-first vs single sort: %zu/%zu frames decided alike, %zu same lengths (%zu sub-frames)",
+                sort.same_decision, trace.size(), sort.same_lists, sort.subs);
+  add({"depthsort", name, view, "catgs", sort.max_abs == 0.0 ? INFINITY : 0.0, sort.max_abs, sort.max8, -1, -1,
+       sort.pass(trace.size()), note});
 }
 
 // subframes: CUDA catgs against the full render of every pose.

@@ -158,6 +158,15 @@ class CudaRenderer final : public Renderer {
   // whole window). Same image, bit for bit. On by default; off only to measure what it saves.
   void set_tile_culling(bool on) { tile_culling_ = on; }
   bool tile_culling() const { return tile_culling_; }
+  // exact and catgs pipelines: sort the render list depth first (the visible Gaussians by depth,
+  // then the entries stably by tile alone; cuda/depth_order.cu) instead of in one radix sort of
+  // [tile | depth] keys. The same list, entry for entry, and the same image; 2 radix passes over
+  // the list instead of 6 at 1080p, for a sort of the visible Gaussians and a gather in
+  // emission. On by default for catgs, whose key-frame trail lists are long (H100, city
+  // bicycle path: key frames 6.60 -> 5.36 ms), off for exact, whose lists are short (there it
+  // was 1-3% slower; tests/gpu/RESULTS.md). vanilla always sorts the reference way.
+  void set_depth_first_sort(bool on) { depth_first_sort_ = on; }
+  bool depth_first_sort() const { return depth_first_sort_; }
 
  private:
   struct State;
@@ -175,6 +184,7 @@ class CudaRenderer final : public Renderer {
   mutable bool stats_ready_ = true;
   bool warp_culling_ = false;
   bool tile_culling_ = true;
+  bool depth_first_sort_ = true;  // the constructor sets it by pipeline
 };
 
 // The DeviceScene of `model`: uploaded on the first call, then the same one for as long as any

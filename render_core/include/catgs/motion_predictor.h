@@ -18,13 +18,25 @@ struct TimedPose {
 };
 
 struct MotionPredictorParams {
-  // Velocities are fitted over the poses of the last 50 ms. Measured (tests/gpu/RESULTS.md,
-  // "The motion predictor's fit window"): on the real camera paths the 100 ms fit lagged enough
-  // to make 78-96% of catgs frames key frames; 50 ms cut them by 5-16% (catgs 4-13% faster)
-  // and, with 60 Hz input whose stamps jitter by up to 4 ms, still predicted better than 100 ms;
-  // 17 ms was faster still on clean input but worse than 100 ms under that jitter.
+  // The angular velocity (and, without an acceleration fit, the linear velocity) is fitted over
+  // the poses of the last 50 ms. Measured (tests/gpu/RESULTS.md, "The motion predictor's fit
+  // window"): on the real camera paths the 100 ms fit lagged enough to make 78-96% of catgs frames
+  // key frames; 50 ms cut them by 5-16% (catgs 4-13% faster) and, with 60 Hz input whose stamps
+  // jitter by up to 4 ms, still predicted better than 100 ms; 17 ms was faster still on clean
+  // input but worse than 100 ms under that jitter.
   double fit_window_s = 0.05;
-  std::size_t max_samples = 16; // and at most this many of them
+  // The position is fitted as a quadratic in time (constant acceleration) over the poses of the
+  // last `acceleration_window_s`; 0 keeps constant velocity (a line over fit_window_s). A line
+  // fitted over a window estimates the velocity of the window's middle, which lags behind an
+  // accelerating camera; the quadratic gives the velocity at the newest pose and the curvature
+  // ahead. An acceleration needs a longer baseline than a velocity to stay steady under stamp
+  // jitter, hence its own window. Measured offline (tests/gpu/RESULTS.md, "Constant
+  // acceleration"): on the fitted bicycle and flowers paths it cut the 4-frames-ahead frames
+  // whose error exceeds a trail's margin from 36-41% to 17-20% of frames at 120 Hz (25-33% with
+  // 60 Hz input whose stamps jitter by 4 ms, against 38-41%); a 50 ms quadratic was better on
+  // clean input and worse than a line under that jitter; 150 ms lagged again.
+  double acceleration_window_s = 0.1;
+  std::size_t max_samples = 32; // at most this many poses are kept
 };
 
 class MotionPredictor {
@@ -36,10 +48,13 @@ class MotionPredictor {
   // input is ignored. Returns whether the pose was used.
   bool add(const TimedPose& pose);
 
-  // Least-squares linear velocity (world units / s) of the positions in the fit window, and the
-  // world-frame angular velocity (rad / s, axis * rate) fitted through the newest orientation.
-  // Zero with fewer than two samples.
+  // Linear velocity (world units / s) at the newest pose and acceleration (world units / s^2):
+  // the least-squares quadratic through the positions of the acceleration window (at least 4
+  // poses; with fewer, or with acceleration_window_s = 0, the least-squares line through those of
+  // the fit window and zero acceleration). The world-frame angular velocity (rad / s, axis * rate)
+  // is fitted through the newest orientation over the fit window. Zero with fewer than two poses.
   glm::vec3 linear_velocity() const { return velocity_; }
+  glm::vec3 linear_acceleration() const { return acceleration_; }
   glm::vec3 angular_velocity() const { return angular_velocity_; }
 
   // The parameters it was built with.
@@ -49,7 +64,8 @@ class MotionPredictor {
   const TimedPose& latest() const { return latest_; }
   bool empty() const { return samples_.empty(); }
 
-  // Predicted pose `dt_s` seconds after the newest one (constant velocity and rotation rate).
+  // Predicted pose `dt_s` seconds after the newest one: position p + v dt + a dt^2 / 2 from the
+  // newest pose (constant acceleration), orientation at a constant rotation rate.
   TimedPose predict(double dt_s) const;
 
  private:
@@ -58,7 +74,7 @@ class MotionPredictor {
   MotionPredictorParams params_;
   std::deque<TimedPose> samples_;
   TimedPose latest_;
-  glm::vec3 velocity_{0.0f}, angular_velocity_{0.0f};
+  glm::vec3 velocity_{0.0f}, acceleration_{0.0f}, angular_velocity_{0.0f};
 };
 
 }  // namespace catgs

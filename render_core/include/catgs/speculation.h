@@ -24,6 +24,9 @@ struct SpeculationParams {
   // The motion predictor's fit window (MotionPredictorParams::fit_window_s), seconds: a longer
   // one averages out more input jitter, a shorter one lags less behind a changing velocity.
   double predictor_window_s = 0.05;
+  // The motion predictor's acceleration window (MotionPredictorParams::acceleration_window_s),
+  // seconds; 0 predicts at constant velocity.
+  double predictor_acceleration_window_s = 0.1;
 };
 
 // How a key frame widens its trails (fm::build_trail): the parameters' values with a window, none
