@@ -53,7 +53,7 @@ emit_keys_kernel(const uint32_t* order,         // [n] or null
                  const float* depth,            // [N]
                  const ushort4* rect,           // [N]
                  const uint32_t* tiles_touched, // [N]
-                 const uint64_t* ends,          // [N] inclusive scan of tiles_touched
+                 const uint64_t* ends,          // [N] end of each Gaussian's run
                  uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
                  KeyOut keys,
                  uint32_t* values) {            // [L]
