@@ -98,7 +98,6 @@ bool MotionPredictor::add(const TimedPose& in) {
   return true;
 }
 
-
 void MotionPredictor::refit() {
   velocity_ = glm::vec3(0.0f);
   acceleration_ = glm::vec3(0.0f);
