@@ -15,7 +15,6 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
     : scene_(std::move(scene)), state_(std::make_unique<State>()) {
   if (!scene_) throw std::invalid_argument("CudaRenderer: null scene");
   set_options(options);
-  depth_first_sort_ = options.pipeline == Pipeline::catgs;  // where it measured faster (header)
   State& s = *state_;
   CATGS_CUDA(cudaStreamCreateWithFlags(&s.stream, cudaStreamNonBlocking));
   for (cudaEvent_t& e : s.events) CATGS_CUDA(cudaEventCreate(&e));
@@ -200,7 +199,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   const stages::TileTests tests{exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square,
                                 proj.mean2d, proj.conic_opacity, proj.q_max, {}, cam.width, cam.height};
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort_, &visible);
+  const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
   const uint32_t* order = nullptr;
   if (tune::kHeavyTilesFirst) {
     stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(),

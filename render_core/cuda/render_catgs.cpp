@@ -100,7 +100,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   const stages::TileTests tests{stages::TileTestKind::trail, nullptr, nullptr, nullptr, s.trails(), cam.width,
                                 cam.height};
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, cam, tests, depth_first_sort_, &visible);
+  const uint64_t entries = s.build_render_list(n, cam, tests, depth_first_sort(), &visible);
 
   // Frustum cache, split plan (paper sec. 3.4) and the slice order (longest first).
   stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(), cc + kCachedCount, s.select_temp.as<void>(),

@@ -30,6 +30,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -162,11 +163,12 @@ class CudaRenderer final : public Renderer {
   // then the entries stably by tile alone; cuda/depth_order.cu) instead of in one radix sort of
   // [tile | depth] keys. The same list, entry for entry, and the same image; 2 radix passes over
   // the list instead of 6 at 1080p, for a sort of the visible Gaussians and a gather in
-  // emission. On by default for catgs, whose key-frame trail lists are long (H100, city
-  // bicycle path: key frames 6.60 -> 5.36 ms), off for exact, whose lists are short (there it
-  // was 1-3% slower; tests/gpu/RESULTS.md). vanilla always sorts the reference way.
+  // emission. Unless set, it follows the pipeline (also after set_options): on for catgs, whose
+  // key-frame trail lists are long (H100, city bicycle path: key frames 6.60 -> 5.36 ms), off for
+  // exact, whose lists are short (there it was up to 3% slower; tests/gpu/RESULTS.md). vanilla
+  // always sorts the reference way. depth_first_sort(): the choice in effect now.
   void set_depth_first_sort(bool on) { depth_first_sort_ = on; }
-  bool depth_first_sort() const { return depth_first_sort_; }
+  bool depth_first_sort() const { return depth_first_sort_.value_or(options_.pipeline == Pipeline::catgs); }
 
  private:
   struct State;
@@ -184,7 +186,7 @@ class CudaRenderer final : public Renderer {
   mutable bool stats_ready_ = true;
   bool warp_culling_ = false;
   bool tile_culling_ = true;
-  bool depth_first_sort_ = true;  // the constructor sets it by pipeline
+  std::optional<bool> depth_first_sort_;  // unset: by pipeline (depth_first_sort())
 };
 
 // The DeviceScene of `model`: uploaded on the first call, then the same one for as long as any
