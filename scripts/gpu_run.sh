@@ -17,7 +17,9 @@
 #     bicycle and flowers paths, tumblewood and city -> $OUT/predictor_*.json.
 #     --compare LIST (after the tests, instead of the benchmark) runs the pipelines of LIST (e.g.
 #     exact,catgs,catgs-m10,catgs-nocull) side by side on tumblewood x10 and the city over the
-#     three real paths -> $OUT/compare_{tumblewood,city}_PATH.json.
+#     three real paths -> compare_{tumblewood,city}_PATH.json, packed into $OUT/compare.tar.gz.
+#     --before DIR (with --compare) runs DIR/catgs-bench, an earlier build carried along (e.g.
+#     .carry/bin_before), right after each of those runs -> $OUT/compare_before_*.json.
 #     Everything printed goes to $OUT/gpu_run.log too. Exit status: non-zero if a test failed.
 #
 # On the build machine, once (fills .carry/, git-ignored):
@@ -97,7 +99,7 @@ if [ "${1:-}" = prepare ]; then
   exit $?
 fi
 
-PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 PREDICTOR=0 COMPARE=
+PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 PREDICTOR=0 COMPARE= BEFORE=
 while [ $# -gt 0 ]; do
   case "$1" in
     --prebuilt) PREBUILT=1 ;;
@@ -108,6 +110,7 @@ while [ $# -gt 0 ]; do
     --frames) FRAMES=$2; shift ;;
     --predictor-bench) PREDICTOR=1; TESTS=0; BENCH=0 ;;
     --compare) COMPARE=$2; BENCH=0; shift ;;
+    --before) BEFORE=$ROOT/$2; shift ;;
     *) echo "gpu_run.sh: unknown option $1" >&2; exit 2 ;;
   esac
   shift
@@ -176,6 +179,10 @@ real_paths() {
       "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" "${size[@]}" --up 0,-1,0 \
         --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$1" \
         --frames "$FRAMES" --quality-every 3 --json "$2_${scene}_$path.json" || status=1
+      [ -n "$BEFORE" ] || continue  # the earlier build, right after, on the same frames
+      "$BEFORE/catgs-bench" --scene "$S/tumblewood_sh2.compressed.ply" "${size[@]}" --up 0,-1,0 \
+        --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$1" \
+        --frames "$FRAMES" --quality-every 3 --json "$2_before_${scene}_$path.json" || status=1
     done
   done
 }
@@ -218,7 +225,11 @@ if [ "$PREDICTOR" = 1 ]; then
       --json "$OUT/predictor_city_$path.json" || status=1
   done
 fi
-[ -n "$COMPARE" ] && real_paths "$COMPARE" "$OUT/compare"
+if [ -n "$COMPARE" ]; then
+  real_paths "$COMPARE" "$OUT/compare"
+  # The device returns 8 files: the JSONs go back packed (a run cut short returns them loose).
+  (cd "$OUT" && tar czf compare.tar.gz compare_*.json && rm -f compare_*.json)
+fi
 [ "$BENCH" = 1 ] && tar czf "$OUT/bench.tar.gz" -C "$ROOT/build" bench
 echo "== done: status $status"
 exit $status

@@ -29,6 +29,11 @@ bool update_subframe_features(const GaussianModel& model, const Camera& camera,
     glm::vec3 conic;
     if (!fm::conic_from_cov2d(cov2, &conic)) return;
     const glm::vec2 mean2d(camera.fx * p.x / p.z + camera.cx - 0.5f, camera.fy * p.y / p.z + camera.cy - 0.5f);
+    // Reaching no pixel centre even at q_max + kExactQMargin (the widest level any raster test
+    // uses): culled, no colour (as the CUDA kernel, which is bound by its reads).
+    if (fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, out.q_max[i] + fm::kExactQMargin, camera.width,
+                                             camera.height)) == 0)
+      return;
     // Only an ellipse that reaches a pixel of this frame must lie inside its trail.
     const bool on_screen =
         fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, out.q_max[i], camera.width, camera.height)) > 0;
