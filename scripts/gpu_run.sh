@@ -19,7 +19,8 @@
 #     exact,catgs,catgs-m10,catgs-nocull) side by side on tumblewood x10 and the city over the
 #     three real paths -> compare_{tumblewood,city}_PATH.json, packed into $OUT/compare.tar.gz.
 #     --before DIR (with --compare) runs DIR/catgs-bench, an earlier build carried along (e.g.
-#     .carry/bin_before), right after each of those runs -> $OUT/compare_before_*.json.
+#     .carry/bin_before, copied from .carry/bin before the next `prepare`), right after each of
+#     those runs -> compare_before_*.json, in the same archive.
 #     Everything printed goes to $OUT/gpu_run.log too. Exit status: non-zero if a test failed.
 #
 # On the build machine, once (fills .carry/, git-ignored):
