@@ -16,12 +16,60 @@ __device__ __forceinline__ uint32_t unorm8(float v) {
   return static_cast<uint32_t>(v * 255.0f + 0.5f);
 }
 
-// One round's entries in shared memory.
+// The power below which alpha = opacity * exp(power) is surely under 1/255, so that a pixel can
+// skip an entry before its exp (most pixels of a tile lie outside most of its Gaussians' 1/255
+// ellipses): ln(1 / (255 opacity)), lowered by 1e-3. That moves exp by 0.1%, far beyond the
+// few-ulp errors of expf and logf, so this cut only skips entries that blend_entry's own test
+// (alpha < 1/255) skips: the image is the same bit for bit. Opacity 0 (a culled sub-frame
+// Gaussian) gives +inf, so every pixel skips it.
+__device__ __forceinline__ float power_cut(float opacity) { return logf(fm::kMinAlpha / opacity) - 1e-3f; }
+
+// One round's entries in shared memory: the 2D mean with power_cut(opacity) as (x, y, cut,
+// unused), the conic pre-scaled for pixel_power as (-a/2, -b, -c/2) with the opacity, the colour.
 struct BlendBatch {
-  float2 mean[tune::kRasterBatch];
-  float4 conic_opacity[tune::kRasterBatch];
+  float4 mean_cut[tune::kRasterBatch];
+  float4 power_opacity[tune::kRasterBatch];
   float4 color[tune::kRasterBatch];
 };
+
+// Writes one entry (2D mean, conic + opacity, colour) into batch slot `slot`.
+__device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, float2 mean, float4 conic_opacity,
+                                            float4 color) {
+  const float4 co = conic_opacity;
+  batch.mean_cut[slot] = make_float4(mean.x, mean.y, power_cut(co.w), 0.0f);
+  batch.power_opacity[slot] = make_float4(-0.5f * co.x, -co.y, -0.5f * co.z, co.w);
+  batch.color[slot] = color;
+}
+
+// fm::gaussian_power, -(a dx^2 + c dy^2) / 2 - b dx dy, as dx (A dx + B dy) + C dy^2 with
+// (A, B, C) = (-a/2, -b, -c/2) (k.xyz, stage_entry): 5 instructions, and written with explicit
+// fmaf so that it rounds alike wherever it is inlined. This file is built with FMA contraction,
+// which rounded the plain expression differently in blend_range and blend_range_culled once
+// power_cut was added (GPU test tilecull: 0.0014 apart), and those two must agree bit for bit.
+__device__ __forceinline__ float pixel_power(float4 k, float dx, float dy) {
+  return fmaf(dx, fmaf(k.x, dx, k.y * dy), (k.z * dy) * dy);
+}
+
+// The cull's test for one entry (blend_range_culled): fm::ellipse_touches_tile at q_max =
+// fm::opacity_aware_qmax(opacity), plus a margin for float rounding that grows with the size of
+// the quadratic's terms over the tile. kExactQMargin alone is an absolute 1e-3; where the terms
+// are large and cancel (a thin Gaussian seen along its length, far from the tile), the few-ulp
+// errors of the minimum and of a pixel's own power can pass it, and the cull would drop an entry
+// that some pixel blends at alpha just above 1/255. M = a X^2 + 2|b| X Y + c Y^2, with X and Y
+// the largest |offsets| over the tile, bounds the terms' size at every point of it; both
+// evaluations err by a few ulps (6e-8) of M, so 1e-6 M covers them.
+__device__ __forceinline__ bool entry_reaches_tile(float2 mean, float4 conic_opacity, int tx, int ty, int width,
+                                                   int height) {
+  const float4 co = conic_opacity;
+  const float x0 = static_cast<float>(tx * tune::kTileSize) - mean.x;
+  const float y0 = static_cast<float>(ty * tune::kTileSize) - mean.y;
+  const float x1 = fminf(static_cast<float>(tx * tune::kTileSize + tune::kTileSize - 1), static_cast<float>(width - 1)) - mean.x;
+  const float y1 = fminf(static_cast<float>(ty * tune::kTileSize + tune::kTileSize - 1), static_cast<float>(height - 1)) - mean.y;
+  const float X = fmaxf(fabsf(x0), fabsf(x1)), Y = fmaxf(fabsf(y0), fabsf(y1));
+  const float M = fabsf(co.x) * X * X + 2.0f * fabsf(co.y) * X * Y + fabsf(co.z) * Y * Y;
+  return fm::min_quadratic_over_rect(glm::vec3(co.x, co.y, co.z), x0, x1, y0, y1) <=
+         fm::opacity_aware_qmax(co.w) + fm::kExactQMargin + 1e-6f * M;
+}
 
 // Pixel state: colour C and transmittance T (start at 0 and 1); done stops the pixel.
 struct PixelState {
@@ -35,11 +83,11 @@ struct PixelState {
 // would take T below 1e-4, without blending it.
 __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j, float fpx, float fpy,
                                             bool early_termination, PixelState& px) {
-  const float2 m = batch.mean[j];
-  const float4 co = batch.conic_opacity[j];
-  const float power = fm::gaussian_power(glm::vec3(co.x, co.y, co.z), m.x - fpx, m.y - fpy);
-  if (power > 0.0f) return;
-  const float alpha = fminf(fm::kMaxAlpha, co.w * expf(power));
+  const float4 m = batch.mean_cut[j];
+  const float4 k = batch.power_opacity[j];
+  const float power = pixel_power(k, m.x - fpx, m.y - fpy);
+  if (power < m.z || power > 0.0f) return;  // m.z = power_cut: alpha < 1/255, exp not needed
+  const float alpha = fminf(fm::kMaxAlpha, k.w * expf(power));
   if (alpha < fm::kMinAlpha) return;
   const float test_T = px.T * (1.0f - alpha);
   if (early_termination && test_T < fm::kMinTransmittance) {
@@ -48,9 +96,9 @@ __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j,
   }
   const float4 c = batch.color[j];
   const float w = alpha * px.T;
-  px.C.x += c.x * w;
-  px.C.y += c.y * w;
-  px.C.z += c.z * w;
+  px.C.x = fmaf(c.x, w, px.C.x);  // explicit, as pixel_power
+  px.C.y = fmaf(c.y, w, px.C.y);
+  px.C.z = fmaf(c.z, w, px.C.z);
   px.T = test_T;
 }
 
@@ -70,10 +118,10 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
     const uint32_t fetch = base + static_cast<uint32_t>(rank);
     if (fetch < end) {  // bounds-checked prefetch
       const uint32_t gi = values[fetch];
-      batch.mean[rank] = g.mean2d[gi];
-      batch.conic_opacity[rank] = g.conic_opacity[gi];
-      batch.color[rank] = g.color[gi];
-      skip.fetch(rank, gi, batch);
+      const float2 m = g.mean2d[gi];
+      const float4 co = g.conic_opacity[gi];
+      stage_entry(batch, static_cast<uint32_t>(rank), m, co, g.color[gi]);
+      skip.fetch(rank, gi, m, co);
     }
     __syncthreads();
     const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), end - base);
@@ -87,14 +135,17 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 
 // As blend_range, for a list whose entries need not reach this tile at this pose (catgs: a key
 // frame's trail list, walked at the key pose or at a sub-frame's pose). Each round, the thread
-// that fetches an entry also asks the exact pipeline's own list test, fm::ellipse_touches_tile
-// (opacity-aware ellipse q <= q_max at this frame's features, widened by kExactQMargin), whether
-// it reaches tile (tx, ty), and only the entries that do are compacted into shared memory, in
-// list (depth) order. A dropped entry would have been skipped by every pixel of the tile (alpha <
+// that fetches an entry also asks the exact pipeline's own list test (entry_reaches_tile:
+// fm::ellipse_touches_tile, the opacity-aware ellipse q <= q_max at this frame's features, with
+// margins for rounding) whether it reaches tile (tx, ty), and only the entries that do are
+// compacted into shared memory, in list (depth) order. A dropped entry would have been skipped by every pixel of the tile (alpha <
 // 1/255 there), so the image is the same bit for bit; what is saved is 256 pixels' worth of
-// blending per dropped entry (a trail list holds 1.4-2.3x the exact list on real paths,
-// RESULTS.md). Culled sub-frame Gaussians (opacity 0) are dropped too. Every thread of the block
-// must call this (barriers inside); `skip.stop()` (block-uniform) ends the run early.
+// blending per dropped entry (a trail list holds 1.7-3.4x the exact list on the city's real
+// paths, RESULTS.md). Culled sub-frame Gaussians (opacity 0) are dropped too.
+// - q_max is worked out from the opacity (fm::opacity_aware_qmax, as pre-processing stores it)
+//   rather than gathered: one random 32-byte sector less per entry, out of three.
+// Every thread of the block must call this (barriers inside); `skip.stop()` (block-uniform) ends
+// the run early.
 template <typename Skip>
 __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
                                                    const uint32_t* values,  // [L]
@@ -115,8 +166,7 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
       gi = values[fetch];
       m = g.mean2d[gi];
       co = g.conic_opacity[gi];
-      keep = co.w > 0.0f && fm::ellipse_touches_tile(glm::vec2(m.x, m.y), glm::vec3(co.x, co.y, co.z),
-                                                     g.q_max[gi], tx, ty, width, height);
+      keep = co.w > 0.0f && entry_reaches_tile(m, co, tx, ty, width, height);
     }
     const uint32_t ballot = __ballot_sync(0xffffffffu, keep);
     if (lane == 0) warp_kept[warp] = static_cast<uint32_t>(__popc(ballot));
@@ -129,21 +179,17 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
     }
     if (keep) {
       slot += static_cast<uint32_t>(__popc(ballot & ((1u << lane) - 1u)));
-      batch.mean[slot] = m;
-      batch.conic_opacity[slot] = co;
-      batch.color[slot] = g.color[gi];
+      stage_entry(batch, slot, m, co, g.color[gi]);
     }
     __syncthreads();
-    for (uint32_t j = 0; j < count && !px.done; ++j) {
-      blend_entry(batch, j, fpx, fpy, early_termination, px);
-    }
+    for (uint32_t j = 0; j < count && !px.done; ++j) blend_entry(batch, j, fpx, fpy, early_termination, px);
     __syncthreads();  // shared memory (batch and warp_kept) is refilled next round
   }
 }
 
 // No per-warp skipping.
 struct NoSkip {
-  __device__ __forceinline__ void fetch(int, uint32_t, const BlendBatch&) const {}
+  __device__ __forceinline__ void fetch(int, uint32_t, float2, float4) const {}
   __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return false; }
 };

@@ -13,11 +13,13 @@
 //   say, fetches only those: DESIGN.md's FlashGS lesson).
 // - After the barrier every thread blends the round's Gaussians in depth order, skipping those
 //   with power > 0 or alpha < 1/255, and stops before the Gaussian that would take T below 1e-4
-//   (the reference 3DGS rule, as on the CPU). A second barrier protects shared memory before the
-//   next fetch.
+//   (the reference 3DGS rule, as on the CPU). A pixel whose power lies below the entry's
+//   power_cut (blend.cuh: ln(1 / (255 opacity)), less a margin) skips before the exp: most pixels
+//   of a tile lie outside most of its Gaussians' 1/255 ellipses, and the answer is the same. A
+//   second barrier protects shared memory before the next fetch.
 // - Early termination: __syncthreads_count(done) at the top of each round ends the whole block
 //   once all its pixels are saturated, so opaque tiles never walk the rest of their list.
-// - Shared memory: 256 x (8 + 16 + 16) bytes = 10 KiB per block, so occupancy is set by
+// - Shared memory: 256 x (16 + 16 + 16) bytes = 12 KiB per block, so occupancy is set by
 //   registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
 // - Optional, exact pipeline only (CudaRenderer::set_warp_culling, off by default): when a thread
 //   fetches an entry it also works out which of the block's 8 warps (each owns 16 x 2 pixels) lie
@@ -64,8 +66,8 @@ struct WarpSkip {
   uint8_t* mask;       // [kRasterBatch] shared
   float y0;
   int warp;
-  __device__ __forceinline__ void fetch(int rank, uint32_t g, const BlendBatch& b) const {
-    mask[rank] = static_cast<uint8_t>(warp_mask(b.mean[rank], b.conic_opacity[rank], q_max[g], y0));
+  __device__ __forceinline__ void fetch(int rank, uint32_t g, float2 mean, float4 conic_opacity) const {
+    mask[rank] = static_cast<uint8_t>(warp_mask(mean, conic_opacity, q_max[g], y0));
   }
   __device__ __forceinline__ bool operator()(uint32_t j) const { return !((mask[j] >> warp) & 1u); }
   __device__ __forceinline__ bool stop() const { return false; }

@@ -43,7 +43,7 @@ namespace {
 struct SaturatedSkip {
   const volatile unsigned* saturated_from;  // this tile's entry
   unsigned k;
-  __device__ __forceinline__ void fetch(int, uint32_t, const BlendBatch&) const {}
+  __device__ __forceinline__ void fetch(int, uint32_t, float2, float4) const {}
   __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return *saturated_from < k; }
 };

@@ -1,7 +1,10 @@
 // catgs key frame, stage 1: pre-processing over the speculation window (paper sec. 3.1; mirrors
 // src/cpu/speculative_preprocess.cpp line for line through forward_model.h), and the planner's M.
-// Built with -fmad=false (CMakeLists.txt): the trail decides tile membership, and emission must
-// answer as counting did (and as the CPU reference does).
+// Built with FMA contraction, unlike the other stages that decide tile membership
+// (CMakeLists.txt): emission never asks this kernel's tile test again (small trails hand it
+// their answers as bit masks, big ones are counted and emitted by key_emission.cu from the
+// stored trail), so counting and emission agree; what contraction changes is the last bits of a
+// trail against the CPU reference's, which only widens or narrows a trail by float rounding.
 #include "cuda_check.h"
 #include "stages.h"
 #include "tile_test.cuh"
@@ -44,7 +47,7 @@ __device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 
 // One thread per Gaussian: project at every camera of the path, build the trail (fm::build_trail),
 // count the tiles it touches (big trails are left to count_big_tiles, a warp each). Local arrays
 // hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory.
-__global__ void __launch_bounds__(tune::kGaussianThreads)
+__global__ void __launch_bounds__(tune::kGaussianThreads, 4)
 speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening widening,
                               Projected out, Trails trails,
                               unsigned long long* visible,  // [1]
@@ -116,7 +119,7 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
                                  static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
       trails.mean0_motion[i] = make_float4(trail.mean0.x, trail.mean0.y, trail.motion.x, trail.motion.y);
       trails.conic_q[i] = make_float4(trail_conic.x, trail_conic.y, trail_conic.z, trail.q_trail);
-      trails.cov[i] = make_float4(trail.cov.x, trail.cov.y, trail.cov.z, 0.0f);
+      trails.cov[i] = make_float4(trail.cov.x, trail.cov.y, trail.cov.z, trail.q_trail);
       trails.tile_mask[i] = mask;
     } while (false);
     out.tiles_touched[i] = touched;

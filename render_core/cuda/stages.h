@@ -61,7 +61,7 @@ struct BigList {
 struct Trails {
   float4* mean0_motion;  // [N] (mean0.x, mean0.y, motion.x, motion.y)
   float4* conic_q;       // [N] (A, B, C) inverse of the trail covariance, q_trail
-  float4* cov;           // [N] (a, b, c, unused) trail covariance (sub-frame containment check)
+  float4* cov;           // [N] (a, b, c, q_trail) trail covariance (sub-frame containment check)
   // [N] Gaussians whose tile rectangle holds at most tune::kBigRectTiles tiles: bit b set when
   // the trail touches the rectangle's b-th tile in row-major order, as counted by the speculative
   // pre-processing, so key emission reads the answers instead of testing every tile again.

@@ -65,12 +65,16 @@ subframe_features_kernel(SceneView scene, CameraParams cam,
   }
   const bool on_screen = fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height)) > 0;
   if (on_screen) {
-    const float4 mm = trails.mean0_motion[i], cq = trails.conic_q[i], tc = trails.cov[i];
+    // The trail's conic is read only when the cheap containment test fails (the kernel is bound
+    // by DRAM): q_trail rides in the covariance's spare lane.
+    const float4 mm = trails.mean0_motion[i], tc = trails.cov[i];
     const glm::vec2 mean0(mm.x, mm.y), motion(mm.z, mm.w);
-    if (!fm::trail_contains(mean0, motion, glm::vec3(tc.x, tc.y, tc.z), cq.w, mean2d, cov2, q_max) &&
-        !fm::listed_tiles_cover(mean0, motion, glm::vec3(cq.x, cq.y, cq.z), cq.w, mean2d, cov2, conic, q_max, cam.width,
-                                cam.height))
-      *outside = 1u;  // any writer will do: one flag for the frame
+    if (!fm::trail_contains(mean0, motion, glm::vec3(tc.x, tc.y, tc.z), tc.w, mean2d, cov2, q_max)) {
+      const float4 cq = trails.conic_q[i];
+      if (!fm::listed_tiles_cover(mean0, motion, glm::vec3(cq.x, cq.y, cq.z), tc.w, mean2d, cov2, conic, q_max,
+                                  cam.width, cam.height))
+        *outside = 1u;  // any writer will do: one flag for the frame
+    }
   }
   const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
   const glm::vec3 col = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i,

@@ -208,10 +208,12 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
   g.set_depth_first_sort(true);  // the default for catgs, set to say what is compared
   // A CUDA-only switch that must change neither a decision, a list length nor a bit of the image.
   struct SameFrames {
-    std::size_t same_decision = 0, subs = 0, same_lists = 0;
+    std::size_t frame = 0, same_decision = 0, subs = 0, same_lists = 0, differing = 0;
     double max_abs = 0;
     int max8 = 0;
+    std::string first;  // where the images first differ, for the note
     void add(const catgs::FrameStats& want, const Image& want_image, const catgs::FrameStats& got, const Image& got_image) {
+      const std::size_t f = frame++;
       if (got.key_frame != want.key_frame) return;
       ++same_decision;
       subs += want.key_frame ? 0 : 1;
@@ -219,6 +221,22 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
       const Diff d = compare(want_image, got_image);
       max_abs = std::max(max_abs, d.max_abs);
       max8 = std::max(max8, d.max_abs8);
+      if (d.max_abs == 0.0) return;
+      ++differing;
+      if (!first.empty()) return;
+      std::size_t pixels = 0, worst = 0;
+      for (std::size_t i = 0; i < want_image.rgb.size(); ++i) {
+        if (want_image.rgb[i] == got_image.rgb[i]) continue;
+        pixels += 1;
+        if (std::fabs(want_image.rgb[i] - got_image.rgb[i]) > std::fabs(want_image.rgb[worst] - got_image.rgb[worst]))
+          worst = i;
+      }
+      const auto p = worst / 3;
+      char b[200];
+      std::snprintf(b, sizeof b, "; first differs at frame %zu (%s): %zu values, worst at (%zu, %zu) %.6f vs %.6f", f,
+                    want.key_frame ? "key" : "sub", pixels, p % static_cast<std::size_t>(want_image.width),
+                    p / static_cast<std::size_t>(want_image.width), want_image.rgb[worst], got_image.rgb[worst]);
+      first = b;
     }
     bool pass(std::size_t frames) const { return same_decision == frames && same_lists == frames && max_abs == 0.0 && subs > 0; }
   } cull, sort;
@@ -252,14 +270,16 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
                 trace.size(), agree, subs, list_equal, keys);
   add({"catgs=cpu", name, view, "catgs", min_psnr, max_abs, max8, -1, -1,
        agree * 100 >= trace.size() * 95 && min_psnr >= 50.0 && subs > 0, note});
-  std::snprintf(note, sizeof note, "tile cull on vs off: %zu/%zu frames decided alike (%zu sub-frames)",
-                cull.same_decision, trace.size(), cull.subs);
+  char wide[400];
+  std::snprintf(wide, sizeof wide, "tile cull on vs off: %zu/%zu frames decided alike (%zu sub-frames), %zu differ%s",
+                cull.same_decision, trace.size(), cull.subs, cull.differing, cull.first.c_str());
   add({"tilecull", name, view, "catgs", cull.max_abs == 0.0 ? INFINITY : 0.0, cull.max_abs, cull.max8, -1, -1,
-       cull.pass(trace.size()), note});
-  std::snprintf(note, sizeof note, "depth-first vs single sort: %zu/%zu frames decided alike, %zu same lengths (%zu sub-frames)",
-                sort.same_decision, trace.size(), sort.same_lists, sort.subs);
+       cull.pass(trace.size()), wide});
+  std::snprintf(wide, sizeof wide,
+                "depth-first vs single sort: %zu/%zu frames decided alike, %zu same lengths (%zu sub-frames), %zu differ%s",
+                sort.same_decision, trace.size(), sort.same_lists, sort.subs, sort.differing, sort.first.c_str());
   add({"depthsort", name, view, "catgs", sort.max_abs == 0.0 ? INFINITY : 0.0, sort.max_abs, sort.max8, -1, -1,
-       sort.pass(trace.size()), note});
+       sort.pass(trace.size()), wide});
 }
 
 // subframes: CUDA catgs against the full render of every pose.
