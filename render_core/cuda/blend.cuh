@@ -42,10 +42,10 @@ __device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, fl
 }
 
 // fm::gaussian_power, -(a dx^2 + c dy^2) / 2 - b dx dy, as dx (A dx + B dy) + C dy^2 with
-// (A, B, C) = (-a/2, -b, -c/2) (k.xyz, stage_entry): 5 instructions, and written with explicit
-// fmaf so that it rounds alike wherever it is inlined. This file is built with FMA contraction,
-// which rounded the plain expression differently in blend_range and blend_range_culled once
-// power_cut was added (GPU test tilecull: 0.0014 apart), and those two must agree bit for bit.
+// (A, B, C) = (-a/2, -b, -c/2) (k.xyz, stage_entry): 5 instructions, written with explicit fmaf
+// so that it rounds alike wherever it is inlined. The rasterizers are built with FMA
+// contraction, which the compiler may apply differently in different copies, and blend_range and
+// blend_range_culled must agree bit for bit (GPU test tilecull).
 __device__ __forceinline__ float pixel_power(float4 k, float dx, float dy) {
   return fmaf(dx, fmaf(k.x, dx, k.y * dy), (k.z * dy) * dy);
 }
@@ -61,10 +61,11 @@ __device__ __forceinline__ float pixel_power(float4 k, float dx, float dy) {
 __device__ __forceinline__ bool entry_reaches_tile(float2 mean, float4 conic_opacity, int tx, int ty, int width,
                                                    int height) {
   const float4 co = conic_opacity;
-  const float x0 = static_cast<float>(tx * tune::kTileSize) - mean.x;
-  const float y0 = static_cast<float>(ty * tune::kTileSize) - mean.y;
-  const float x1 = fminf(static_cast<float>(tx * tune::kTileSize + tune::kTileSize - 1), static_cast<float>(width - 1)) - mean.x;
-  const float y1 = fminf(static_cast<float>(ty * tune::kTileSize + tune::kTileSize - 1), static_cast<float>(height - 1)) - mean.y;
+  // The tile's pixel centres inside the image, relative to the mean (as fm::ellipse_touches_tile).
+  const int px0 = tx * tune::kTileSize, py0 = ty * tune::kTileSize;
+  const float x0 = static_cast<float>(px0) - mean.x, y0 = static_cast<float>(py0) - mean.y;
+  const float x1 = static_cast<float>(min(px0 + tune::kTileSize - 1, width - 1)) - mean.x;
+  const float y1 = static_cast<float>(min(py0 + tune::kTileSize - 1, height - 1)) - mean.y;
   const float X = fmaxf(fabsf(x0), fabsf(x1)), Y = fmaxf(fabsf(y0), fabsf(y1));
   const float M = fabsf(co.x) * X * X + 2.0f * fabsf(co.y) * X * Y + fabsf(co.z) * Y * Y;
   return fm::min_quadratic_over_rect(glm::vec3(co.x, co.y, co.z), x0, x1, y0, y1) <=
@@ -138,10 +139,11 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 // that fetches an entry also asks the exact pipeline's own list test (entry_reaches_tile:
 // fm::ellipse_touches_tile, the opacity-aware ellipse q <= q_max at this frame's features, with
 // margins for rounding) whether it reaches tile (tx, ty), and only the entries that do are
-// compacted into shared memory, in list (depth) order. A dropped entry would have been skipped by every pixel of the tile (alpha <
-// 1/255 there), so the image is the same bit for bit; what is saved is 256 pixels' worth of
-// blending per dropped entry (a trail list holds 1.7-3.4x the exact list on the city's real
-// paths, RESULTS.md). Culled sub-frame Gaussians (opacity 0) are dropped too.
+// compacted into shared memory, in list (depth) order. A dropped entry would have been skipped
+// by every pixel of the tile (alpha < 1/255 there), so the image is the same bit for bit; what
+// is saved is 256 pixels' worth of blending per dropped entry (a trail list holds 1.7-3.4x the
+// exact list on the city's real paths, RESULTS.md). Culled sub-frame Gaussians (opacity 0) are
+// dropped too.
 // - q_max is worked out from the opacity (fm::opacity_aware_qmax, as pre-processing stores it)
 //   rather than gathered: one random 32-byte sector less per entry, out of three.
 // Every thread of the block must call this (barriers inside); `skip.stop()` (block-uniform) ends
