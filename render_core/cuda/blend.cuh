@@ -21,8 +21,9 @@ __device__ __forceinline__ uint32_t unorm8(float v) {
 // ellipses): ln(1 / (255 opacity)), lowered by 1e-3. That moves exp by 0.1%, far beyond the
 // few-ulp errors of expf and logf, so this cut only skips entries that blend_entry's own test
 // (alpha < 1/255) skips: the image is the same bit for bit. Opacity 0 (a culled sub-frame
-// Gaussian) gives +inf, so every pixel skips it.
-__device__ __forceinline__ float power_cut(float opacity) { return logf(fm::kMinAlpha / opacity) - 1e-3f; }
+// Gaussian) gives +inf, so every pixel skips it. Written as -ln(255 opacity), the logarithm of
+// fm::opacity_aware_qmax, so that the tile cull, which needs both, takes one logf.
+__device__ __forceinline__ float power_cut(float opacity) { return -logf(255.0f * opacity) - 1e-3f; }
 
 // One round's entries in shared memory: the 2D mean with power_cut(opacity) as (x, y, cut,
 // unused), the conic pre-scaled for pixel_power as (-a/2, -b, -c/2) with the opacity, the colour.
@@ -50,6 +51,23 @@ __device__ __forceinline__ float pixel_power(float4 k, float dx, float dy) {
   return fmaf(dx, fmaf(k.x, dx, k.y * dy), (k.z * dy) * dy);
 }
 
+// fm::min_quadratic_over_rect for the cull: the minimum of q = a dx^2 + 2b dx dy + c dy^2 over
+// dx in [x0, x1], dy in [y0, y1] (0 where the rectangle holds the mean, else the least of the
+// four edges' minima), with each edge's optimum dy = (-b / c) dx, dx = (-b / a) dy from two
+// divisions instead of four. The cull runs this once per fetched entry, and divisions are most
+// of its instructions. The optimum moves by an ulp or so, which raises the minimum only to
+// second order: far inside entry_reaches_tile's rounding margin.
+__device__ __forceinline__ float min_quadratic_over_tile(float4 conic, float x0, float x1, float y0, float y1) {
+  if (x0 <= 0.0f && 0.0f <= x1 && y0 <= 0.0f && 0.0f <= y1) return 0.0f;
+  const glm::vec3 k(conic.x, conic.y, conic.z);
+  const float sy = -conic.y / conic.z, sx = -conic.y / conic.x;
+  const float q0 = fm::conic_quadratic(k, x0, fminf(y1, fmaxf(y0, sy * x0)));  // edge dx = x0
+  const float q1 = fm::conic_quadratic(k, x1, fminf(y1, fmaxf(y0, sy * x1)));  // edge dx = x1
+  const float q2 = fm::conic_quadratic(k, fminf(x1, fmaxf(x0, sx * y0)), y0);  // edge dy = y0
+  const float q3 = fm::conic_quadratic(k, fminf(x1, fmaxf(x0, sx * y1)), y1);  // edge dy = y1
+  return fminf(fminf(q0, q1), fminf(q2, q3));
+}
+
 // The cull's test for one entry (blend_range_culled): fm::ellipse_touches_tile at q_max =
 // fm::opacity_aware_qmax(opacity), plus a margin for float rounding that grows with the size of
 // the quadratic's terms over the tile. kExactQMargin alone is an absolute 1e-3; where the terms
@@ -68,8 +86,7 @@ __device__ __forceinline__ bool entry_reaches_tile(float2 mean, float4 conic_opa
   const float y1 = static_cast<float>(min(py0 + tune::kTileSize - 1, height - 1)) - mean.y;
   const float X = fmaxf(fabsf(x0), fabsf(x1)), Y = fmaxf(fabsf(y0), fabsf(y1));
   const float M = fabsf(co.x) * X * X + 2.0f * fabsf(co.y) * X * Y + fabsf(co.z) * Y * Y;
-  return fm::min_quadratic_over_rect(glm::vec3(co.x, co.y, co.z), x0, x1, y0, y1) <=
-         fm::opacity_aware_qmax(co.w) + fm::kExactQMargin + 1e-6f * M;
+  return min_quadratic_over_tile(co, x0, x1, y0, y1) <= fm::opacity_aware_qmax(co.w) + fm::kExactQMargin + 1e-6f * M;
 }
 
 // Pixel state: colour C and transmittance T (start at 0 and 1); done stops the pixel.

@@ -18,6 +18,8 @@ SpeculationPlanner::SpeculationPlanner(const SpeculationParams& params) { set_pa
 void SpeculationPlanner::set_params(const SpeculationParams& params) {
   if (params.initial_window < 0 || params.initial_window > 32)
     throw std::invalid_argument("speculation window must be in 0..32");
+  if (params.min_window < 0 || params.min_window > 32)
+    throw std::invalid_argument("minimum speculation window must be in 0..32");
   if (!(params.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
   if (!(params.predictor_window_s > 0.0 && params.predictor_window_s <= 1.0))
     throw std::invalid_argument("motion predictor window must be in (0, 1] s");

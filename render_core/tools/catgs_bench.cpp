@@ -2,7 +2,7 @@
 // it reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-nocull|-wN|-pN|-qN|-mN|-aN][-tsort]][,exact-dsort]
+//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-nocull|-wN|-pN|-qN|-mN|-aN|-fN][-tsort]][,exact-dsort]
 //               [--frames N] [--warmup N] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
 //               [--quality-every K]
 //
@@ -12,7 +12,8 @@
 // (its acceleration over the last N ms instead of 100; catgs-q0: constant velocity), catgs-nocull
 // (CUDA: the rasterizer blends every entry of the trail list, CudaRenderer::set_tile_culling),
 // catgs-mN (trails widened by N% of each Gaussian's screen motion over the window,
-// SpeculationParams::trail_motion_margin), catgs-aN (and by N pixels, trail_margin_px).
+// SpeculationParams::trail_motion_margin), catgs-aN (and by N pixels, trail_margin_px), catgs-fN
+// (a key frame whose window comes out below N renders in full, SpeculationParams::min_window).
 // The CUDA render list's sort (CudaRenderer::set_depth_first_sort; the same list either way): a
 // catgs name ending in -tsort (catgs-tsort, catgs-w2-tsort) sorts it in one radix sort of
 // [tile | depth] keys instead of depth first; exact-dsort sorts exact's depth first.
@@ -99,6 +100,14 @@ struct PipelineResult {
   std::string name;
   std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible, heaviest;
   std::vector<double> key_ms, sub_ms, window;  // catgs: key vs sub-frame times, W per key frame
+  // catgs: key frames drawn after a rejected sub-frame, and key frames without a window (W = 0).
+  std::vector<double> rejected_ms, full_ms;
+  struct Groups {
+    std::size_t count = 0, served = 0, rejected = 0;  // groups, sub-frames served, ended by a rejection
+  };
+  std::map<int, Groups> groups;  // catgs: by W, the groups that closed during the timed frames
+  int open_window = 0;           // the open group's W (0: none), and its sub-frames so far
+  std::size_t open_served = 0;
   std::vector<double> key_stage[6], sub_stage[6];  // catgs: pre, keys, sort, ranges, raster, merge
   std::vector<double> sub_psnr, sub_max_abs, list_growth;  // catgs vs exact, same pose (--quality-every)
   std::size_t subframes_inf = 0;  // sub-frames identical to the full render (PSNR +inf)
@@ -227,6 +236,7 @@ int run(int argc, char** argv) {
         v.speculation.predictor_acceleration_window_s = std::stoi(name.substr(7)) / 1000.0;
       else if (name.rfind("catgs-m", 0) == 0) v.speculation.trail_motion_margin = static_cast<float>(std::stoi(name.substr(7))) / 100.0f;
       else if (name.rfind("catgs-a", 0) == 0) v.speculation.trail_margin_px = std::stof(name.substr(7));
+      else if (name.rfind("catgs-f", 0) == 0) v.speculation.min_window = std::stoi(name.substr(7));
       else v.pipeline = catgs::parse_pipeline(name);
       v.name = full_name;
       v.depth_first = depth_first || (v.pipeline == catgs::Pipeline::catgs && !single_sort);
@@ -246,7 +256,21 @@ int run(int argc, char** argv) {
     res.list.push_back(static_cast<double>(s.render_list_length));
     res.visible.push_back(static_cast<double>(s.visible));
     (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);
-    if (s.key_frame) res.window.push_back(s.window);
+    if (s.key_frame) {
+      res.window.push_back(s.window);
+      if (s.subframe_rejected) res.rejected_ms.push_back(ms);
+      if (s.window == 0) res.full_ms.push_back(ms);
+      if (res.open_window > 0) {  // the key frame closes the open group
+        auto& group = res.groups[res.open_window];
+        ++group.count;
+        group.served += res.open_served;
+        group.rejected += s.subframe_rejected ? 1 : 0;
+      }
+      res.open_window = s.window;
+      res.open_served = 0;
+    } else {
+      ++res.open_served;
+    }
     const double stage[6] = {s.preprocess_ms, s.keys_ms, s.sort_ms, s.ranges_ms, s.rasterize_ms, s.merge_ms};
     for (int k = 0; k < 6; ++k) (s.key_frame ? res.key_stage : res.sub_stage)[k].push_back(stage[k]);
   };
@@ -427,12 +451,26 @@ int run(int argc, char** argv) {
                          {"stages_ms_mean", stage_json(r.sub_stage)}};
       p["sub_over_key_cost"] = r.sub_ms.empty() ? 0.0 : sub.mean / k.mean;
       p["window_mean"] = summarize(r.window).mean;
+      p["rejected_subframes"] = {{"count", r.rejected_ms.size()},
+                                 {"key_frame_mean_ms", summarize(r.rejected_ms).mean}};
+      p["full_frames"] = {{"count", r.full_ms.size()}, {"mean_ms", summarize(r.full_ms).mean}};
+      for (const auto& [w, group] : r.groups)
+        p["groups_by_window"][std::to_string(w)] = {{"groups", group.count},
+                                                    {"sub_frames_served", group.served},
+                                                    {"ended_by_rejection", group.rejected}};
       std::map<int, int> windows;
       for (double w : r.window) ++windows[static_cast<int>(w)];
       for (const auto& [w, count] : windows) p["window_histogram"][std::to_string(w)] = count;
       std::printf("%-10s key frames %zu (%.3f ms mean), sub-frames %zu (%.3f ms mean, %.0f%% of a key frame), "
                   "mean window %.2f\n", r.name.c_str(), r.key_ms.size(), k.mean, r.sub_ms.size(), sub.mean,
                   r.sub_ms.empty() ? 0.0 : 100.0 * sub.mean / k.mean, summarize(r.window).mean);
+      std::printf("%-10s   %zu rejected sub-frames (their key frames %.3f ms mean); %zu full frames (W = 0, "
+                  "%.3f ms mean); groups by W (groups, sub-frames served, ended by rejection):",
+                  r.name.c_str(), r.rejected_ms.size(), summarize(r.rejected_ms).mean, r.full_ms.size(),
+                  summarize(r.full_ms).mean);
+      for (const auto& [w, group] : r.groups)
+        std::printf(" W%d %zu/%zu/%zu", w, group.count, group.served, group.rejected);
+      std::printf("\n");
       std::printf("%-10s   key stages ms: pre %.3f keys %.3f sort %.3f ranges %.3f raster %.3f merge %.3f | "
                   "sub stages ms: pre %.3f raster %.3f merge %.3f\n", r.name.c_str(), mean(r.key_stage[0]),
                   mean(r.key_stage[1]), mean(r.key_stage[2]), mean(r.key_stage[3]), mean(r.key_stage[4]),

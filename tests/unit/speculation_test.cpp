@@ -73,6 +73,22 @@ TEST(MotionAdaptiveWindow, FollowsThePaperRule) {
   EXPECT_EQ(motion_adaptive_window(1.0f, p), 0);
 }
 
+// SpeculationParams::min_window: a window below it renders in full (W = 0); the rule is otherwise
+// the paper's.
+TEST(MotionAdaptiveWindow, WindowsBelowTheMinimumRenderInFull) {
+  SpeculationParams p;
+  p.min_window = 2;
+  const SpeculationPlanner planner(p);
+  EXPECT_EQ(planner.window_for(10.0f), 4);
+  EXPECT_EQ(planner.window_for(32.0f), 2);
+  EXPECT_EQ(planner.window_for(33.0f), 0);  // floor(4 * 16 / 33) = 1 < 2
+  EXPECT_EQ(planner.window_for(64.0f), 0);
+  p.min_window = 0;
+  EXPECT_EQ(SpeculationPlanner(p).window_for(64.0f), 1);
+  p.min_window = 33;
+  EXPECT_THROW(SpeculationPlanner{p}, std::invalid_argument);
+}
+
 // The same render list rasterized split and unsplit.
 TEST(TaskSplitting, SplitAndUnsplitAgree) {
   auto m = scene(test::bundled_scene());
@@ -199,10 +215,11 @@ TEST(Speculation, StopAndFastTurnStayCorrect) {
 TEST(Speculation, WindowZeroAndNoCacheRenderEveryFrameInFull) {
   auto m = scene(test::bundled_scene());
   const Trace t = biker_orbit(*m, 10.0f, 0.1);
-  for (int variant = 0; variant < 2; ++variant) {
+  for (int variant = 0; variant < 3; ++variant) {
     RenderOptions o = catgs_options();
     if (variant == 0) o.speculation.initial_window = 0;
-    else o.speculation.frustum_and_sort_cache = false;
+    else if (variant == 1) o.speculation.frustum_and_sort_cache = false;
+    else o.speculation.min_window = o.speculation.initial_window + 1;  // no window is long enough
     auto r = make_renderer("cpu", m, o);
     cpu::CpuRenderer full(m, {Pipeline::exact, {}, {}});
     Image a, b;

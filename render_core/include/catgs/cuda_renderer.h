@@ -166,7 +166,8 @@ class CudaRenderer final : public Renderer {
   // emission. Unless set, it follows the pipeline (also after set_options): on for catgs, whose
   // key-frame trail lists are long (H100, city bicycle path: key frames 6.60 -> 5.36 ms), off for
   // exact, whose lists are short (there it was up to 3% slower; tests/gpu/RESULTS.md). vanilla
-  // always sorts the reference way. depth_first_sort(): the choice in effect now.
+  // always sorts the reference way, and so do catgs key frames without a window (W = 0), whose
+  // lists are exact's. depth_first_sort(): the choice in effect now.
   void set_depth_first_sort(bool on) { depth_first_sort_ = on; }
   bool depth_first_sort() const { return depth_first_sort_.value_or(options_.pipeline == Pipeline::catgs); }
 
@@ -176,8 +177,9 @@ class CudaRenderer final : public Renderer {
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp
-  // render_catgs.cpp; abandon: device flag, draw nothing when it is set (or null).
-  void catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon);
+  // render_catgs.cpp; abandon: device flag, draw nothing when it is set (or null); trail_list:
+  // the list is a key frame's trail list (tile-culled per pose), not an exact one.
+  void catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon, bool trail_list);
   void download(const DeviceFrame& frame, Image& out);
   std::shared_ptr<const DeviceScene> scene_;
   RenderOptions options_;

@@ -54,6 +54,9 @@ struct FrameStats {
   // catgs pipeline (speculation, paper sec. 3.1-3.4); vanilla/exact frames are all key frames.
   bool key_frame = true;       // false: a sub-frame served from the frustum and sort caches
   int window = 0;              // W of the current group (0: no speculation)
+  // A key frame first tried as a sub-frame of the open group: some on-screen Gaussian had left
+  // its trail (the prediction missed), so the frame was drawn again as a key frame.
+  bool subframe_rejected = false;
   std::size_t cached = 0;      // Gaussians in the frustum cache
   std::size_t slices = 0;      // rasterization tasks after task splitting (tiles when unsplit)
 };

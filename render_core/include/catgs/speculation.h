@@ -8,6 +8,11 @@ namespace catgs {
 
 struct SpeculationParams {
   int initial_window = 4;         // W_initial: sub-frames after a key frame
+  // The shortest window worth a speculative key frame (SpeculationPlanner::window_for): a key
+  // frame whose motion-adaptive W falls below it renders in full instead (W = 0, the exact
+  // pipeline's stages), because a group that short does not repay its key frame's longer list
+  // and path-wide pre-processing. 0 or 1: the paper's rule alone.
+  int min_window = 1;
   float depth_threshold = 0.4f;   // d: only Gaussians deeper than this (world units) set M
   float tile_size = 16.0f;        // l, pixels
   double target_fps = 120.0;      // F_target: the predicted path is sampled at k / F_target

@@ -23,7 +23,8 @@ namespace catgs {
 
 class SpeculationPlanner {
  public:
-  // Throws std::invalid_argument for a window outside 0..32 or a non-positive F_target.
+  // Throws std::invalid_argument for a window or minimum window outside 0..32 or a non-positive
+  // F_target.
   explicit SpeculationPlanner(const SpeculationParams& params = {});
 
   // New parameters (validated as above); closes the open group, keeps the motion history.
@@ -41,8 +42,12 @@ class SpeculationPlanner {
   bool window_wanted() const;
   // The predicted camera 1 / F_target after the newest pose, with `key`'s intrinsics (M's pair).
   Camera next_camera(const Camera& key) const { return predicted_camera(key, 1); }
-  // W for the largest per-frame screen motion M (pixels): motion_adaptive_window().
-  int window_for(float max_motion_px) const { return motion_adaptive_window(max_motion_px, params_); }
+  // W for the largest per-frame screen motion M (pixels): motion_adaptive_window(), or 0 where
+  // that is below SpeculationParams::min_window.
+  int window_for(float max_motion_px) const {
+    const int window = motion_adaptive_window(max_motion_px, params_);
+    return window < params_.min_window ? 0 : window;
+  }
   // The key camera followed by the W predicted cameras at k / F_target, k = 1..W.
   std::vector<Camera> path(const Camera& key, int window) const;
 

@@ -43,10 +43,16 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
                          ? planner_.window_for(max_screen_motion(*model_, camera, planner_.next_camera(camera),
                                                                  sp.depth_threshold))
                          : 0;
-  speculative_preprocess(*model_, planner_.path(camera, window), trail_widening(sp, window), projected_);
+  // Without a window the frame is rendered in full by the exact pipeline's stages (its list is
+  // the one-pose trail's, built without the trail machinery); it opens no group.
+  const Pipeline stages = window > 0 ? Pipeline::catgs : Pipeline::exact;
+  if (window > 0)
+    speculative_preprocess(*model_, planner_.path(camera, window), trail_widening(sp, window), projected_);
+  else
+    preprocess(*model_, camera, Pipeline::exact, projected_);
   const auto t1 = clock::now();
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
-  emit_keys(projected_, grid, Pipeline::catgs, list_);
+  emit_keys(projected_, grid, stages, list_);
   const auto t2 = clock::now();
   sort_render_list(list_);
   const auto t3 = clock::now();
@@ -68,8 +74,9 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
   validate_camera(camera);
   const auto start = clock::now();
   stats_ = {};
-  bool sub = planner_.observe(camera, time_s);
-  if (sub) {
+  const bool candidate = planner_.observe(camera, time_s);
+  bool sub = candidate;
+  if (candidate) {
     const auto t0 = clock::now();
     sub = update_subframe_features(*model_, camera, cached_, projected_);
     stats_.preprocess_ms = ms_between(t0, clock::now());
@@ -79,6 +86,7 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
     stats_.key_frame = false;
   } else {
     key_frame(camera);
+    stats_.subframe_rejected = candidate;
   }
   const auto t5 = clock::now();
   rasterize_slices(projected_, list_, slices_, TileGrid::of(camera.width, camera.height),
