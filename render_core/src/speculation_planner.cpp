@@ -1,5 +1,6 @@
 #include "catgs/speculation_planner.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace catgs {
@@ -20,6 +21,10 @@ void SpeculationPlanner::set_params(const SpeculationParams& params) {
     throw std::invalid_argument("speculation window must be in 0..32");
   if (params.min_window < 0 || params.min_window > 32)
     throw std::invalid_argument("minimum speculation window must be in 0..32");
+  if (params.backoff_frames < 0 || params.backoff_frames > 1000)
+    throw std::invalid_argument("speculation backoff must be in 0..1000 frames");
+  if (params.min_served < 0 || params.min_served > 32)
+    throw std::invalid_argument("sub-frames a group must serve must be in 0..32");
   if (!(params.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
   if (!(params.predictor_window_s > 0.0 && params.predictor_window_s <= 1.0))
     throw std::invalid_argument("motion predictor window must be in (0, 1] s");
@@ -34,6 +39,7 @@ void SpeculationPlanner::set_params(const SpeculationParams& params) {
   }
   params_ = params;
   group_open_ = false;
+  backoff_ = full_frames_left_ = 0;
 }
 
 bool SpeculationPlanner::observe(const Camera& camera, double time_s) {
@@ -42,7 +48,8 @@ bool SpeculationPlanner::observe(const Camera& camera, double time_s) {
 }
 
 bool SpeculationPlanner::window_wanted() const {
-  return params_.frustum_and_sort_cache && params_.initial_window > 0 && !predictor_.empty();
+  return params_.frustum_and_sort_cache && params_.initial_window > 0 && !predictor_.empty() &&
+         full_frames_left_ == 0 && !closes_poor_group();
 }
 
 Camera SpeculationPlanner::predicted_camera(const Camera& intrinsics, int frames_ahead) const {
@@ -60,6 +67,14 @@ std::vector<Camera> SpeculationPlanner::path(const Camera& key, int window) cons
 }
 
 void SpeculationPlanner::start_group(const Camera& key, int window) {
+  if (closes_poor_group()) {  // this frame is the first of the backoff's full frames
+    backoff_ = backoff_ == 0 ? params_.backoff_frames : std::min(2 * backoff_, 8 * params_.backoff_frames);
+    full_frames_left_ = backoff_ - 1;
+  } else if (group_open_) {  // the group repaid its key frame
+    backoff_ = 0;
+  } else if (full_frames_left_ > 0) {
+    --full_frames_left_;
+  }
   key_camera_ = key;
   window_ = window;
   subframes_served_ = 0;

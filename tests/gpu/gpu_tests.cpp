@@ -377,7 +377,9 @@ void catgs_abrupt(const std::string& name, const GaussianModel& m, std::shared_p
          key ? "the frame after the jump is a key frame" : "the frame after the jump was served as a sub-frame"});
   }
   {  // stop: the camera holds still; W = W_initial, sub-frames equal the full render
-    catgs::cuda::CudaRenderer g(dev, catgs_options());
+    catgs::RenderOptions o = catgs_options();
+    o.speculation.backoff_frames = 0;  // the paper's rule alone (a poor group before the stop would back off)
+    catgs::cuda::CudaRenderer g(dev, o);
     int subs = 0, w_min = 99;
     double min_psnr = INFINITY;
     for (int k = 0; k < 30; ++k) {

@@ -89,6 +89,49 @@ TEST(MotionAdaptiveWindow, WindowsBelowTheMinimumRenderInFull) {
   EXPECT_THROW(SpeculationPlanner{p}, std::invalid_argument);
 }
 
+// SpeculationParams::backoff_frames: a group that served fewer than min_served sub-frames sends
+// the next frames, the one that closes it first, to full renders (no window), doubling while
+// groups stay poor and resetting once one repays its key frame. Driven as a renderer drives the
+// planner (observe, then for a key frame window_wanted and start_group).
+TEST(SpeculationPlanner, BacksOffAfterGroupsThatDoNotRepayTheirKeyFrame) {
+  SpeculationParams p;
+  p.backoff_frames = 2;
+  p.min_served = 2;
+  SpeculationPlanner planner(p);
+  Camera cam;
+  double t = 0.0;
+  // One frame: a sub-frame when `serve` and the planner offers one, else a key frame with W = 4
+  // when a window is wanted (0 otherwise). Returns the key frame's window, or -1 for a sub-frame.
+  auto frame = [&](bool serve) {
+    const bool candidate = planner.observe(cam, t);
+    t += 1.0 / 120.0;
+    if (candidate && serve) {
+      planner.subframe_served();
+      return -1;
+    }
+    const int window = planner.window_wanted() ? 4 : 0;
+    planner.start_group(cam, window);
+    return window;
+  };
+  ASSERT_EQ(frame(true), 4);
+  ASSERT_EQ(frame(true), -1);  // one sub-frame served, then a rejection:
+  EXPECT_EQ(frame(false), 0);  // the group was poor: 2 full frames
+  EXPECT_EQ(frame(true), 0);
+  EXPECT_EQ(frame(true), 4);   // speculating again
+  EXPECT_EQ(frame(false), 0);  // rejected at once: poor again, 4 full frames
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(frame(true), 0) << k;
+  EXPECT_EQ(frame(true), 4);
+  for (int k = 0; k < 4; ++k) EXPECT_EQ(frame(true), -1) << k;  // a full group repays
+  EXPECT_EQ(frame(true), 4);   // and resets the backoff
+  EXPECT_EQ(frame(false), 0);  // poor: back to 2 full frames
+  EXPECT_EQ(frame(true), 0);
+  EXPECT_EQ(frame(true), 4);
+  p.backoff_frames = 0;  // off: every key frame may speculate
+  planner.set_params(p);
+  EXPECT_EQ(frame(false), 4);
+  EXPECT_EQ(frame(false), 4);
+}
+
 // The same render list rasterized split and unsplit.
 TEST(TaskSplitting, SplitAndUnsplitAgree) {
   auto m = scene(test::bundled_scene());
@@ -180,7 +223,11 @@ TEST(Speculation, WindowShrinksWithSpeedAndStopsAtTheLimit) {
     const glm::vec3 first_look =
         eye + glm::angleAxis(glm::radians(-step_deg), glm::normalize(p.up)) * (bounds.center() - eye);
     const Trace t = make_pan(eye, first_look, 3.0f * step_deg, p);
-    auto r = make_renderer("cpu", m, catgs_options());
+    // The paper's rule alone: frame 1 closes the group of frame 0, which predicted no motion and
+    // served nothing, and the backoff would render it in full.
+    RenderOptions o = catgs_options();
+    o.speculation.backoff_frames = 0;
+    auto r = make_renderer("cpu", m, o);
     Image img;
     r->render_at(t[0].camera, t[0].time_s, img);
     r->render_at(t[1].camera, t[1].time_s, img);

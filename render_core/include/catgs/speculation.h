@@ -13,6 +13,17 @@ struct SpeculationParams {
   // pipeline's stages), because a group that short does not repay its key frame's longer list
   // and path-wide pre-processing. 0 or 1: the paper's rule alone.
   int min_window = 1;
+  // Speculation backoff (SpeculationPlanner::start_group): a group that closes having served
+  // fewer than `min_served` sub-frames did not repay its key frame (a key frame costs ~1.6x a
+  // full frame and a sub-frame ~0.7x on the city, so a group needs about 2 sub-frames to break
+  // even), and the next `backoff_frames` frames render in full (W = 0) before speculating
+  // again; each poor group in a row doubles that, up to 8x; a group that repays resets it.
+  // 0 frames: no backoff. Measured side by side on the H100 (1080p, catgs FPS / exact FPS, backoff
+  // 0 / 2 / 4 / 8 / 16 frames): city bicycle 0.94 / 0.99 / 0.99 / 1.00 / 1.00, city flowers
+  // 0.94 / 0.98 / 0.97 / 0.98 / 0.96, city tandt_train 1.75 / 1.75 / 1.75 / 1.74 / 1.72,
+  // tumblewood x10 bicycle 0.92 / 0.93 / 0.93 / 0.94 / 0.90 (tests/gpu/RESULTS.md).
+  int backoff_frames = 2;
+  int min_served = 2;
   float depth_threshold = 0.4f;   // d: only Gaussians deeper than this (world units) set M
   float tile_size = 16.0f;        // l, pixels
   double target_fps = 120.0;      // F_target: the predicted path is sampled at k / F_target

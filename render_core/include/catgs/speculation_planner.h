@@ -38,7 +38,8 @@ class SpeculationPlanner {
   // Seconds on the renderer's own clock for frames rendered without a time: 1 / F_target a call.
   double advance_clock() { return clock_s_ += 1.0 / params_.target_fps; }
 
-  // Whether a key frame may speculate at all (caching on, W_initial > 0, a motion history).
+  // Whether a key frame may speculate at all (caching on, W_initial > 0, a motion history, no
+  // backoff under way: SpeculationParams::backoff_frames).
   bool window_wanted() const;
   // The predicted camera 1 / F_target after the newest pose, with `key`'s intrinsics (M's pair).
   Camera next_camera(const Camera& key) const { return predicted_camera(key, 1); }
@@ -51,7 +52,8 @@ class SpeculationPlanner {
   // The key camera followed by the W predicted cameras at k / F_target, k = 1..W.
   std::vector<Camera> path(const Camera& key, int window) const;
 
-  // A key frame was rendered with window W: a new group opens (W > 0) or none (W = 0).
+  // A key frame was rendered with window W: a new group opens (W > 0) or none (W = 0). The group
+  // it closes, if any, sets the backoff (SpeculationParams::backoff_frames).
   void start_group(const Camera& key, int window);
   // The candidate sub-frame passed its containment check and was served from the caches.
   void subframe_served() { ++subframes_served_; }
@@ -60,11 +62,17 @@ class SpeculationPlanner {
 
  private:
   Camera predicted_camera(const Camera& intrinsics, int frames_ahead) const;
+  // The key frame now being planned closes an open group that served fewer than min_served
+  // sub-frames, with the backoff on: it renders in full, as the first frame of the backoff.
+  bool closes_poor_group() const {
+    return params_.backoff_frames > 0 && group_open_ && subframes_served_ < params_.min_served;
+  }
 
   SpeculationParams params_;
   MotionPredictor predictor_;
   Camera key_camera_;
   int window_ = 0, subframes_served_ = 0;
+  int backoff_ = 0, full_frames_left_ = 0;  // the current backoff, and the full frames it still asks
   bool group_open_ = false;
   double clock_s_ = 0.0;
 };
