@@ -10,8 +10,9 @@
 // tile at this pose are blended) -> merge. The slice total is copied back asynchronously (plan_ready) so the
 // group's sub-frames launch exactly one block per slice; the key frame itself launches
 // slice_capacity() blocks, the extra ones return at once. A key frame without a window (W = 0:
-// the motion is too fast, SpeculationParams::min_window, or no caches) runs the exact
-// pipeline's pre-processing and list instead, then the same split plan and slices, unculled.
+// the motion is too fast, the window is below SpeculationParams::min_window, the speculation
+// backoff is under way, or the caches are off) runs the exact pipeline's pre-processing, list
+// and single sort instead, then the same split plan and slices, unculled.
 // Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag), the
 // check that no unlisted Gaussian reaches the image (the frustum cache's blind spot) ->
 // rasterize the key frame's slices -> merge -> read the flag back. A raised flag means some

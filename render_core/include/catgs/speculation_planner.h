@@ -23,8 +23,8 @@ namespace catgs {
 
 class SpeculationPlanner {
  public:
-  // Throws std::invalid_argument for a window or minimum window outside 0..32 or a non-positive
-  // F_target.
+  // Throws std::invalid_argument for a window, minimum window or min_served outside 0..32, a
+  // backoff outside 0..1000 frames, a non-positive F_target or a predictor window outside (0, 1] s.
   explicit SpeculationPlanner(const SpeculationParams& params = {});
 
   // New parameters (validated as above); closes the open group, keeps the motion history.
