@@ -121,8 +121,9 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   if (window > 0)
     stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(), cc + kCachedCount,
                           s.select_temp.as<void>(), s.select_temp.bytes(), s.stream);
-  const uint64_t capacity = stages::slice_capacity(tiles, entries);
-  const uint64_t slots = entries / stages::split_average(tiles, entries);
+  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
+  const uint64_t capacity = stages::slice_capacity(tiles, entries, min_slice);
+  const uint64_t slots = entries / stages::split_average(tiles, entries, min_slice);
   s.slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
   s.slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
   s.tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
@@ -135,7 +136,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   s.partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
   s.note_peak();
   const stages::SlicePlan plan = s.slice_plan();
-  stages::plan_slices(s.ranges.as<uint2>(), tiles, entries, sp.task_splitting, plan, s.plan_scan.as<uint64_t>(),
+  stages::plan_slices(s.ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, plan, s.plan_scan.as<uint64_t>(),
                       s.plan_temp.as<void>(), s.plan_temp.bytes(), s.stream);
   stages::order_slices(plan, capacity, s.slice_scratch.as<uint32_t>(), s.slice_order.as<uint32_t>(),
                        s.slice_order_temp.as<void>(), s.slice_order_temp.bytes(), s.stream);

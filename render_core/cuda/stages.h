@@ -221,7 +221,9 @@ void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* 
 //   tile_plan   [tiles]    (first slice, slice count, first partial slot, 0); a tile of one slice
 //                          has no partial slots (its slice writes the image directly)
 //   totals      [2]        (slices, partial slots), device
-// capacity = slice_capacity(tiles, L): tiles + L / avg bounds the slice count.
+// capacity = slice_capacity(tiles, L, min_slice): tiles + L / avg bounds the slice count, with
+// avg = split_average(tiles, L, min_slice) = max(L / tiles, 1, min_slice) the slice length
+// (SpeculationParams::min_slice_entries).
 //   saturated_from [tiles] reset by rasterize_slices: the first slice of a tile that saturates
 //                          it alone (rasterize_slices.cu)
 struct SlicePlan {
@@ -231,11 +233,12 @@ struct SlicePlan {
   unsigned* totals;
   unsigned* saturated_from;
 };
-uint64_t split_average(uint32_t tiles, uint64_t entries);
-uint64_t slice_capacity(uint32_t tiles, uint64_t entries);
+uint64_t split_average(uint32_t tiles, uint64_t entries, uint64_t min_slice);
+uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice);
 std::size_t plan_slices_temp_bytes(uint32_t tiles);
-void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, const SlicePlan& plan,
-                 uint64_t* scan_scratch, void* temp, std::size_t temp_bytes, cudaStream_t stream);
+void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, uint64_t min_slice,
+                 const SlicePlan& plan, uint64_t* scan_scratch, void* temp, std::size_t temp_bytes,
+                 cudaStream_t stream);
 
 // The slice order (task_split.cu): slices by k, then by decreasing length (a tile's first slice
 // runs before its later ones, and the long ones start first); slots past the total last.

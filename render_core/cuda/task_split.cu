@@ -90,12 +90,12 @@ void order_slices(const SlicePlan& plan, uint64_t capacity, uint32_t* scratch, u
                                              static_cast<int64_t>(capacity), 0, 32, stream));
 }
 
-uint64_t split_average(uint32_t tiles, uint64_t entries) {
-  return tiles > 0 ? std::max<uint64_t>(1, entries / tiles) : 1;
+uint64_t split_average(uint32_t tiles, uint64_t entries, uint64_t min_slice) {
+  return std::max<uint64_t>(min_slice, tiles > 0 ? std::max<uint64_t>(1, entries / tiles) : 1);
 }
 
-uint64_t slice_capacity(uint32_t tiles, uint64_t entries) {
-  return tiles + entries / split_average(tiles, entries);
+uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice) {
+  return tiles + entries / split_average(tiles, entries, min_slice);
 }
 
 std::size_t plan_slices_temp_bytes(uint32_t tiles) {
@@ -105,9 +105,10 @@ std::size_t plan_slices_temp_bytes(uint32_t tiles) {
   return bytes;
 }
 
-void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, const SlicePlan& plan,
-                 uint64_t* scan_scratch, void* temp, std::size_t temp_bytes, cudaStream_t stream) {
-  const uint64_t avg = split_average(tiles, entries), capacity = slice_capacity(tiles, entries);
+void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, uint64_t min_slice,
+                 const SlicePlan& plan, uint64_t* scan_scratch, void* temp, std::size_t temp_bytes,
+                 cudaStream_t stream) {
+  const uint64_t avg = split_average(tiles, entries, min_slice), capacity = slice_capacity(tiles, entries, min_slice);
   // Slots past the total: empty range, no tile (their blocks return).
   CATGS_CUDA(cudaMemsetAsync(plan.slice_range, 0, capacity * sizeof(uint2), stream));
   CATGS_CUDA(cudaMemsetAsync(plan.slice_tile, 0xff, capacity * sizeof(uint2), stream));

@@ -23,6 +23,7 @@ void SpeculationPlanner::set_params(const SpeculationParams& params) {
     throw std::invalid_argument("minimum speculation window must be in 0..32");
   if (params.backoff_frames < 0 || params.backoff_frames > 1000)
     throw std::invalid_argument("speculation backoff must be in 0..1000 frames");
+  if (params.min_slice_entries < 0) throw std::invalid_argument("minimum slice length must not be negative");
   if (params.min_served < 0 || params.min_served > 32)
     throw std::invalid_argument("sub-frames a group must serve must be in 0..32");
   if (!(params.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");

@@ -2,7 +2,7 @@
 // it reports, it never fails on time).
 //
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
-//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-nocull|-wN|-pN|-qN|-mN|-aN|-fN|-bN][-tsort]][,exact-dsort]
+//               --pipeline vanilla,exact[,exact-warp][,catgs[-nocache|-nosplit|-nocull|-wN|-pN|-qN|-mN|-aN|-fN|-bN|-sN][-tsort]][,exact-dsort]
 //               [--frames N] [--warmup N] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu]
 //               [--quality-every K]
 //
@@ -15,7 +15,8 @@
 // SpeculationParams::trail_motion_margin), catgs-aN (and by N pixels, trail_margin_px), catgs-fN
 // (a key frame whose window comes out below N renders in full, SpeculationParams::min_window),
 // catgs-bN (after a group that served fewer than 2 sub-frames, N frames in full,
-// SpeculationParams::backoff_frames; N = 0 turns the backoff off).
+// SpeculationParams::backoff_frames; N = 0 turns the backoff off), catgs-sN (task splitting's
+// slices at least N entries long, SpeculationParams::min_slice_entries).
 // The CUDA render list's sort (CudaRenderer::set_depth_first_sort; the same list either way): a
 // catgs name ending in -tsort (catgs-tsort, catgs-w2-tsort) sorts it in one radix sort of
 // [tile | depth] keys instead of depth first; exact-dsort sorts exact's depth first.
@@ -240,6 +241,7 @@ int run(int argc, char** argv) {
       else if (name.rfind("catgs-a", 0) == 0) v.speculation.trail_margin_px = std::stof(name.substr(7));
       else if (name.rfind("catgs-f", 0) == 0) v.speculation.min_window = std::stoi(name.substr(7));
       else if (name.rfind("catgs-b", 0) == 0) v.speculation.backoff_frames = std::stoi(name.substr(7));
+      else if (name.rfind("catgs-s", 0) == 0) v.speculation.min_slice_entries = std::stoi(name.substr(7));
       else v.pipeline = catgs::parse_pipeline(name);
       v.name = full_name;
       v.depth_first = depth_first || (v.pipeline == catgs::Pipeline::catgs && !single_sort);

@@ -330,6 +330,7 @@ void catgs_split(const std::string& name, std::shared_ptr<const catgs::cuda::Dev
   for (bool et : {false, true}) {
     catgs::RenderOptions on = catgs_options(), off = catgs_options();
     on.speculation.frustum_and_sort_cache = off.speculation.frustum_and_sort_cache = false;
+    on.speculation.min_slice_entries = 0;  // the paper's slice length: many slices to merge
     on.speculation.early_termination = off.speculation.early_termination = et;
     off.speculation.task_splitting = false;
     catgs::cuda::CudaRenderer a(dev, on), b(dev, off);

@@ -132,6 +132,26 @@ TEST(SpeculationPlanner, BacksOffAfterGroupsThatDoNotRepayTheirKeyFrame) {
   EXPECT_EQ(frame(false), 4);
 }
 
+// SpeculationParams::min_slice_entries: slices are at least that long (the first taking the
+// remainder), and only tiles over twice that split.
+TEST(TaskSplitting, SliceLengthFloor) {
+  const cpu::TileRanges ranges{{0, 100}, {100, 400}, {400, 2400}, {2400, 2410}};  // loads 100, 300, 2000, 10
+  std::vector<TileSlice> paper, floored;
+  cpu::plan_slices(ranges, 2410, true, paper);          // l = 602: only the 2000-entry tile splits, in 3
+  cpu::plan_slices(ranges, 2410, true, floored, 900);   // l = 900: it splits in 2 (1100 + 900)
+  ASSERT_EQ(paper.size(), 6u);
+  EXPECT_EQ(paper[2].end - paper[2].begin, 2000u - 2u * 602u);
+  ASSERT_EQ(floored.size(), 5u);
+  EXPECT_EQ(floored[2].begin, 400u);
+  EXPECT_EQ(floored[2].end, 1500u);
+  EXPECT_EQ(floored[3].begin, 1500u);
+  EXPECT_EQ(floored[3].end, 2400u);
+  EXPECT_EQ(floored[3].index, 1u);
+  std::vector<TileSlice> none;
+  cpu::plan_slices(ranges, 2410, true, none, 1000);     // l = 1000: 2000 is not over 2l
+  EXPECT_EQ(none.size(), 4u);
+}
+
 // The same render list rasterized split and unsplit.
 TEST(TaskSplitting, SplitAndUnsplitAgree) {
   auto m = scene(test::bundled_scene());

@@ -95,8 +95,9 @@ bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, cons
 
 // Task splitting (src/cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
 // order, a tile's slices consecutive and in list order. split = false: one slice per tile.
+// min_slice: the slice length's floor (SpeculationParams::min_slice_entries; 0: the paper's l).
 void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
-                 std::vector<TileSlice>& slices);
+                 std::vector<TileSlice>& slices, std::size_t min_slice = 0);
 
 // Stage 5 with slices (src/cpu/rasterize_slices.cpp): each slice blends its entries into a partial
 // colour C_k and transmittance T_k per pixel (early termination within the slice if enabled); the

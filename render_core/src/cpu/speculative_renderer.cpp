@@ -57,7 +57,8 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   sort_render_list(list_);
   const auto t3 = clock::now();
   identify_tile_ranges(list_, grid, ranges_);
-  plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_);
+  plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_,
+              static_cast<std::size_t>(sp.min_slice_entries));
   const auto t4 = clock::now();
   cached_.clear();
   for (std::size_t i = 0; i < projected_.tiles_touched.size(); ++i)

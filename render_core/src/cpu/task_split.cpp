@@ -5,11 +5,11 @@
 namespace catgs::cpu {
 
 void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
-                 std::vector<TileSlice>& slices) {
+                 std::vector<TileSlice>& slices, std::size_t min_slice) {
   slices.clear();
   const std::size_t tiles = ranges.size();
-  // Average load l = L / t (at least 1); a tile over 2l entries is a heavy tile.
-  const std::size_t avg = tiles > 0 ? std::max<std::size_t>(1, list_length / tiles) : 1;
+  // Slice length l = L / t (at least 1, at least min_slice); a tile over 2l entries is a heavy tile.
+  const std::size_t avg = std::max(min_slice, tiles > 0 ? std::max<std::size_t>(1, list_length / tiles) : 1);
   for (std::size_t t = 0; t < tiles; ++t) {
     const unsigned begin = ranges[t].x, end = ranges[t].y;
     const std::size_t load = end - begin;
