@@ -24,7 +24,8 @@ namespace catgs {
 class SpeculationPlanner {
  public:
   // Throws std::invalid_argument for a window, minimum window or min_served outside 0..32, a
-  // backoff outside 0..1000 frames, a non-positive F_target or a predictor window outside (0, 1] s.
+  // backoff outside 0..1000 frames, a negative min_slice_entries, a non-positive F_target or a
+  // predictor window outside (0, 1] s.
   explicit SpeculationPlanner(const SpeculationParams& params = {});
 
   // New parameters (validated as above); closes the open group, keeps the motion history.
