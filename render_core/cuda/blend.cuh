@@ -16,29 +16,19 @@ __device__ __forceinline__ uint32_t unorm8(float v) {
   return static_cast<uint32_t>(v * 255.0f + 0.5f);
 }
 
-// The power below which alpha = opacity * exp(power) is surely under 1/255, so that a pixel can
-// skip an entry before its exp (most pixels of a tile lie outside most of its Gaussians' 1/255
-// ellipses): ln(1 / (255 opacity)), lowered by 1e-3. That moves exp by 0.1%, far beyond the
-// few-ulp errors of expf and logf, so this cut only skips entries that blend_entry's own test
-// (alpha < 1/255) skips: the image is the same bit for bit. Opacity 0 (a culled sub-frame
-// Gaussian) gives +inf, so every pixel skips it. Written as -ln(255 opacity), the logarithm of
-// fm::opacity_aware_qmax, so that the tile cull, which needs both, takes one logf.
-__device__ __forceinline__ float power_cut(float opacity) { return -logf(255.0f * opacity) - 1e-3f; }
-
-// One round's entries in shared memory: the 2D mean with power_cut(opacity) as (x, y, cut,
-// unused), the conic pre-scaled for pixel_power as (-a/2, -b, -c/2) with the opacity, the colour.
+// One round's entries in shared memory: the 2D mean with the splat's power_cut as (x, y, cut,
+// unused), the conic pre-scaled for pixel_power as (-A/2, -B, -C/2) with the opacity, the colour.
 struct BlendBatch {
   float4 mean_cut[tune::kRasterBatch];
   float4 power_opacity[tune::kRasterBatch];
   float4 color[tune::kRasterBatch];
 };
 
-// Writes one entry (2D mean, conic + opacity, colour) into batch slot `slot`.
-__device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, float2 mean, float4 conic_opacity,
-                                            float4 color) {
-  const float4 co = conic_opacity;
-  batch.mean_cut[slot] = make_float4(mean.x, mean.y, power_cut(co.w), 0.0f);
-  batch.power_opacity[slot] = make_float4(-0.5f * co.x, -co.y, -0.5f * co.z, co.w);
+// Writes one entry (its splat and colour) into batch slot `slot`.
+__device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, const Splat& s, float4 color) {
+  const float4 ab = s.mean_ab, rest = s.c_opacity_q_cut;
+  batch.mean_cut[slot] = make_float4(ab.x, ab.y, rest.w, 0.0f);
+  batch.power_opacity[slot] = make_float4(-0.5f * ab.z, -ab.w, -0.5f * rest.x, rest.y);
   batch.color[slot] = color;
 }
 
@@ -68,25 +58,24 @@ __device__ __forceinline__ float min_quadratic_over_tile(float4 conic, float x0,
   return fminf(fminf(q0, q1), fminf(q2, q3));
 }
 
-// The cull's test for one entry (blend_range_culled): fm::ellipse_touches_tile at q_max =
-// fm::opacity_aware_qmax(opacity), plus a margin for float rounding that grows with the size of
-// the quadratic's terms over the tile. kExactQMargin alone is an absolute 1e-3; where the terms
-// are large and cancel (a thin Gaussian seen along its length, far from the tile), the few-ulp
-// errors of the minimum and of a pixel's own power can pass it, and the cull would drop an entry
-// that some pixel blends at alpha just above 1/255. M = a X^2 + 2|b| X Y + c Y^2, with X and Y
-// the largest |offsets| over the tile, bounds the terms' size at every point of it; both
+// The cull's test for one entry (blend_range_culled): fm::ellipse_touches_tile at the splat's
+// q_max = fm::opacity_aware_qmax(opacity), plus a margin for float rounding that grows with the
+// size of the quadratic's terms over the tile. kExactQMargin alone is an absolute 1e-3; where the
+// terms are large and cancel (a thin Gaussian seen along its length, far from the tile), the
+// few-ulp errors of the minimum and of a pixel's own power can pass it, and the cull would drop an
+// entry that some pixel blends at alpha just above 1/255. M = A X^2 + 2|B| X Y + C Y^2, with X and
+// Y the largest |offsets| over the tile, bounds the terms' size at every point of it; both
 // evaluations err by a few ulps (6e-8) of M, so 1e-6 M covers them.
-__device__ __forceinline__ bool entry_reaches_tile(float2 mean, float4 conic_opacity, int tx, int ty, int width,
-                                                   int height) {
-  const float4 co = conic_opacity;
+__device__ __forceinline__ bool entry_reaches_tile(const Splat& s, int tx, int ty, int width, int height) {
+  const float4 co = make_float4(s.mean_ab.z, s.mean_ab.w, s.c_opacity_q_cut.x, 0.0f);  // (A, B, C)
   // The tile's pixel centres inside the image, relative to the mean (as fm::ellipse_touches_tile).
   const int px0 = tx * tune::kTileSize, py0 = ty * tune::kTileSize;
-  const float x0 = static_cast<float>(px0) - mean.x, y0 = static_cast<float>(py0) - mean.y;
-  const float x1 = static_cast<float>(min(px0 + tune::kTileSize - 1, width - 1)) - mean.x;
-  const float y1 = static_cast<float>(min(py0 + tune::kTileSize - 1, height - 1)) - mean.y;
+  const float x0 = static_cast<float>(px0) - s.mean_ab.x, y0 = static_cast<float>(py0) - s.mean_ab.y;
+  const float x1 = static_cast<float>(min(px0 + tune::kTileSize - 1, width - 1)) - s.mean_ab.x;
+  const float y1 = static_cast<float>(min(py0 + tune::kTileSize - 1, height - 1)) - s.mean_ab.y;
   const float X = fmaxf(fabsf(x0), fabsf(x1)), Y = fmaxf(fabsf(y0), fabsf(y1));
   const float M = fabsf(co.x) * X * X + 2.0f * fabsf(co.y) * X * Y + fabsf(co.z) * Y * Y;
-  return min_quadratic_over_tile(co, x0, x1, y0, y1) <= fm::opacity_aware_qmax(co.w) + fm::kExactQMargin + 1e-6f * M;
+  return min_quadratic_over_tile(co, x0, x1, y0, y1) <= s.c_opacity_q_cut.z + fm::kExactQMargin + 1e-6f * M;
 }
 
 // Pixel state: colour C and transmittance T (start at 0 and 1); done stops the pixel.
@@ -136,10 +125,9 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
     const uint32_t fetch = base + static_cast<uint32_t>(rank);
     if (fetch < end) {  // bounds-checked prefetch
       const uint32_t gi = values[fetch];
-      const float2 m = g.mean2d[gi];
-      const float4 co = g.conic_opacity[gi];
-      stage_entry(batch, static_cast<uint32_t>(rank), m, co, g.color[gi]);
-      skip.fetch(rank, gi, m, co);
+      const Splat sp = g.splat[gi];
+      stage_entry(batch, static_cast<uint32_t>(rank), sp, g.color[gi]);
+      skip.fetch(rank, sp);
     }
     __syncthreads();
     const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), end - base);
@@ -161,8 +149,8 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 // is saved is 256 pixels' worth of blending per dropped entry (a trail list holds 1.7-3.4x the
 // exact list on the city's real paths, RESULTS.md). Culled sub-frame Gaussians (opacity 0) are
 // dropped too.
-// - q_max is worked out from the opacity (fm::opacity_aware_qmax, as pre-processing stores it)
-//   rather than gathered: one random 32-byte sector less per entry, out of three.
+// - The test reads only the entry's splat (one random 32-byte sector, stages.h Splat); the
+//   colour, a second sector, is gathered for the kept entries only.
 // Every thread of the block must call this (barriers inside); `skip.stop()` (block-uniform) ends
 // the run early.
 template <typename Skip>
@@ -179,13 +167,11 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
     const uint32_t fetch = base + static_cast<uint32_t>(rank);
     bool keep = false;
     uint32_t gi = 0;
-    float2 m{};
-    float4 co{};
+    Splat sp{};
     if (fetch < end) {  // bounds-checked prefetch
       gi = values[fetch];
-      m = g.mean2d[gi];
-      co = g.conic_opacity[gi];
-      keep = co.w > 0.0f && entry_reaches_tile(m, co, tx, ty, width, height);
+      sp = g.splat[gi];
+      keep = sp.c_opacity_q_cut.y > 0.0f && entry_reaches_tile(sp, tx, ty, width, height);
     }
     const uint32_t ballot = __ballot_sync(0xffffffffu, keep);
     if (lane == 0) warp_kept[warp] = static_cast<uint32_t>(__popc(ballot));
@@ -198,7 +184,7 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
     }
     if (keep) {
       slot += static_cast<uint32_t>(__popc(ballot & ((1u << lane) - 1u)));
-      stage_entry(batch, slot, m, co, g.color[gi]);
+      stage_entry(batch, slot, sp, g.color[gi]);
     }
     __syncthreads();
     for (uint32_t j = 0; j < count && !px.done; ++j) blend_entry(batch, j, fpx, fpy, early_termination, px);
@@ -208,7 +194,7 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
 
 // No per-warp skipping.
 struct NoSkip {
-  __device__ __forceinline__ void fetch(int, uint32_t, float2, float4) const {}
+  __device__ __forceinline__ void fetch(int, const Splat&) const {}
   __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return false; }
 };

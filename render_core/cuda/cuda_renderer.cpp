@@ -74,11 +74,9 @@ stages::CameraParams camera_params(const Camera& camera) {
 
 void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels) {
   std::size_t* allocs = &allocations;
-  mean2d.ensure(n * sizeof(float2), "2D means", allocs);
-  conic_opacity.ensure(n * sizeof(float4), "conics", allocs);
+  splat.ensure(n * sizeof(stages::Splat), "splats", allocs);
   color.ensure(n * sizeof(float4), "colours", allocs);
   depth.ensure(n * sizeof(float), "depths", allocs);
-  q_max.ensure(n * sizeof(float), "q_max", allocs);
   rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs);
   tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs);
   ends.ensure((n + 1) * sizeof(uint64_t), "emission offsets", allocs);  // + depth_order's spare
@@ -197,7 +195,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
   const stages::TileTests tests{exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square,
-                                proj.mean2d, proj.conic_opacity, proj.q_max, {}, cam.width, cam.height};
+                                proj.splat, {}, cam.width, cam.height};
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
   const uint32_t* order = nullptr;

@@ -3,6 +3,7 @@
 // decides culling and tile counts rounds as the CPU reference does, and so the tile test gives the
 // same answer here as in key emission.
 #include "cuda_check.h"
+#include "splat.cuh"
 #include "stages.h"
 #include "tile_test.cuh"
 #include "tunables.h"
@@ -37,11 +38,8 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
       if (!(p_cam.z > cam.near_plane) || p_cam.z > cam.far_plane) break;  // frustum (near/far)
 
       const float opacity = fm::sigmoid(scene.opacity_logits[i]);
-      float q_max = 0.0f;
-      if (exact) {
-        q_max = fm::opacity_aware_qmax(opacity);
-        if (!(q_max > 0.0f)) break;  // never reaches alpha 1/255 anywhere
-      }
+      const float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
+      if (exact && !(q_max > 0.0f)) break;  // never reaches alpha 1/255 anywhere
       const fm::Cov3 cov3 = fm::covariance_3d(
           {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
           {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
@@ -71,11 +69,9 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
       const glm::vec3 dir = glm::normalize(mean - cam.position);
       const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
       const glm::vec3 c = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i, dir);
-      out.mean2d[i] = make_float2(mean2d.x, mean2d.y);
-      out.conic_opacity[i] = make_float4(conic.x, conic.y, conic.z, opacity);
+      out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
       out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
       out.depth[i] = p_cam.z;
-      out.q_max[i] = q_max;
       out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
                                  static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
     } while (false);
@@ -120,8 +116,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
       scene, cam, exact, out, visible, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
-  const TileTests tests{TileTestKind::ellipse, out.mean2d, out.conic_opacity, out.q_max, {}, cam.width,
-                        cam.height};
+  const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};
   count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
 }
 

@@ -10,11 +10,12 @@
 //   into shared memory: one coalesced read of the value array and 256 independent gathers in
 //   flight, instead of 256 threads each re-reading the same Gaussian from global memory. Every
 //   fetch is bounds-checked against `end` (a tile holding fewer entries than a round, one or two
-//   say, fetches only those: DESIGN.md's FlashGS lesson).
+//   say, fetches only those: DESIGN.md's FlashGS lesson). Each gather reads the entry's 32-byte
+//   splat and its 16-byte colour: two sectors (stages.h Splat).
 // - After the barrier every thread blends the round's Gaussians in depth order, skipping those
 //   with power > 0 or alpha < 1/255, and stops before the Gaussian that would take T below 1e-4
 //   (the reference 3DGS rule, as on the CPU). A pixel whose power lies below the entry's
-//   power_cut (blend.cuh: ln(1 / (255 opacity)), less a margin) skips before the exp: most pixels
+//   power_cut (splat.cuh: ln(1 / (255 opacity)), less a margin) skips before the exp: most pixels
 //   of a tile lie outside most of its Gaussians' 1/255 ellipses, and the answer is the same. A
 //   second barrier protects shared memory before the next fetch.
 // - Early termination: __syncthreads_count(done) at the top of each round ends the whole block
@@ -48,11 +49,12 @@ static_assert(32 % tune::kTileSize == 0, "a warp covers whole pixel rows of its 
 // conic. Widened by a relative 1e-3 (and the tile test's q margin) so float rounding of the
 // inverse can only keep an entry, never drop one a pixel would have blended. Cheap on purpose
 // (one sqrt, one division): it runs once per fetched entry, ahead of the block's barrier.
-__device__ __forceinline__ uint32_t warp_mask(float2 mean, float4 co, float q_max, float y0) {
-  const float det = co.x * co.z - co.y * co.y;
-  const float cov_yy = co.x / det;
+__device__ __forceinline__ uint32_t warp_mask(const Splat& s, float y0) {
+  const float A = s.mean_ab.z, B = s.mean_ab.w, C = s.c_opacity_q_cut.x, q_max = s.c_opacity_q_cut.z;
+  const float det = A * C - B * B;
+  const float cov_yy = A / det;
   const float hy = sqrtf(fmaxf(0.0f, (q_max + fm::kExactQMargin) * cov_yy)) * 1.001f + 1e-3f;
-  const float lo = ceilf(mean.y - hy - y0), hi = floorf(mean.y + hy - y0);
+  const float lo = ceilf(s.mean_ab.y - hy - y0), hi = floorf(s.mean_ab.y + hy - y0);
   if (!(lo <= hi) || hi < 0.0f || lo > static_cast<float>(tune::kTileSize - 1)) return 0u;
   const int r0 = static_cast<int>(fmaxf(lo, 0.0f)) / kRowsPerWarp;
   const int r1 = static_cast<int>(fminf(hi, static_cast<float>(tune::kTileSize - 1))) / kRowsPerWarp;
@@ -62,12 +64,11 @@ __device__ __forceinline__ uint32_t warp_mask(float2 mean, float4 co, float q_ma
 // The optional per-warp skip (exact pipeline): fetch stores the warp mask of each entry, and a warp
 // skips the entries whose bit is clear.
 struct WarpSkip {
-  const float* q_max;  // [N]
   uint8_t* mask;       // [kRasterBatch] shared
   float y0;
   int warp;
-  __device__ __forceinline__ void fetch(int rank, uint32_t g, float2 mean, float4 conic_opacity) const {
-    mask[rank] = static_cast<uint8_t>(warp_mask(mean, conic_opacity, q_max[g], y0));
+  __device__ __forceinline__ void fetch(int rank, const Splat& s) const {
+    mask[rank] = static_cast<uint8_t>(warp_mask(s, y0));
   }
   __device__ __forceinline__ bool operator()(uint32_t j) const { return !((mask[j] >> warp) & 1u); }
   __device__ __forceinline__ bool stop() const { return false; }
@@ -78,7 +79,7 @@ __global__ void __launch_bounds__(tune::kRasterThreads)
 rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the sorted list
                  const uint32_t* tile_order,   // [tiles] or null
                  const uint32_t* values,       // [L] sorted Gaussian indices
-                 Projected g,                  // [N] features (q_max read with kWarpCull only)
+                 Projected g,                  // [N] features
                  int width, int height, int tiles_x, float3 background,
                  float* out_rgb,               // [H, W, 3]
                  uint32_t* out_rgba8) {        // [H, W]
@@ -95,7 +96,7 @@ rasterize_kernel(const uint2* ranges,          // [tiles] [start, end) into the 
   const uint2 range = ranges[tile];
   PixelState state{make_float3(0.0f, 0.0f, 0.0f), 1.0f, !inside};
   if constexpr (kWarpCull) {
-    const WarpSkip skip{g.q_max, s_mask, static_cast<float>(ty * tune::kTileSize), rank / 32};
+    const WarpSkip skip{s_mask, static_cast<float>(ty * tune::kTileSize), rank / 32};
     blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py), true, batch,
                 state, skip);
   } else {

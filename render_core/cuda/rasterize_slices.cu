@@ -18,17 +18,25 @@
 // 4 KiB per slot), and merge_kernel, a block per split tile, composes
 // C = sum_k C_k prod_{m<k} T_m front to back and adds prod T * background.
 //
-// Saturated tiles. Without splitting, a tile whose pixels all saturate stops walking its list;
-// split, its later slices would start afresh with T = 1 and blend Gaussians that are hidden. So a
-// slice k that saturates every pixel of its tile by itself (T < 1e-4 or stopped) records k in
-// saturated_from[tile] (atomicMin); slices behind it skip their work, at the start and at every
-// round of 256 entries, and the merge composes slices 0..saturated_from only. Each dropped slice
-// is weighted by prod T < 1e-4, under a third of an 8-bit level: the "higher early-termination
-// threshold for later slices" the paper allows. Slices are ordered k first (task_split.cu), so a
-// tile's first slice usually finishes before its later ones start. The result does not depend on
-// timing: saturated_from ends as the least k whose slice saturates alone, and the merge reads
-// only slices before it, which always run to their end. Without early termination nothing is
-// skipped (that mode exists to show split and unsplit agree to float rounding).
+// Saturated pixels and tiles. Without splitting, a pixel that saturates stops walking its tile's
+// list; split, its later slices would start afresh with T = 1 and blend Gaussians that are hidden
+// there. So with early termination a pixel's composition ends at the first slice in which it
+// stops (its partial T is stored negated) or after which prod T < 1e-4; the merge drops its later
+// slices, each weighted by prod T < 1e-4, under a third of an 8-bit level: the "higher
+// early-termination threshold for later slices" the paper allows.
+// - Per pixel: a slice, before it blends, reads the partials of its tile's earlier slices that
+//   have finished (slot_finished, set after a slice's partials are written and fenced) and
+//   marks done the pixels whose composition they already end. Those pixels blend nothing here.
+// - Per tile: a slice k that saturates every pixel of its tile (stopped, T < 1e-4, or ended
+//   before it) records k in saturated_from[tile] (atomicMin); slices behind it skip their work,
+//   at the start and at every round of 256 entries, and the merge composes slices
+//   0..saturated_from only.
+// Slices are ordered k first (task_split.cu), so a tile's first slice usually finishes before
+// its later ones start. The image does not depend on timing: where a pixel's composition ends
+// is worked out from partials that do not (a slice that did not see an earlier slice finish
+// blends the pixel in full, and the merge drops the result), and every slice the merge reads up
+// to that end runs in full at that pixel. Without early termination nothing is skipped (that mode
+// exists to show split and unsplit agree to float rounding).
 #include "blend.cuh"
 #include "cuda_check.h"
 #include "stages.h"
@@ -51,10 +59,28 @@ constexpr int kRasterMinBlocks = 8;
 struct SaturatedSkip {
   const volatile unsigned* saturated_from;  // this tile's entry
   unsigned k;
-  __device__ __forceinline__ void fetch(int, uint32_t, float2, float4) const {}
+  __device__ __forceinline__ void fetch(int, const Splat&) const {}
   __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return *saturated_from < k; }
 };
+
+// Whether the composition of the pixel of thread `rank` ends before slice k of its tile: walks
+// the tile's earlier slices in order while they have finished (slot_finished[m], read before
+// their partials, which are read from L2), with the merge's own rule and arithmetic (merge_kernel),
+// so that the two agree exactly.
+__device__ __forceinline__ bool ended_before(const unsigned* slot_finished,  // [k] this tile's slots
+                                             const float4* partials,         // [k, 256] this tile's
+                                             unsigned k, int rank) {
+  float T = 1.0f;
+  for (unsigned m = 0; m < k; ++m) {
+    if (*static_cast<const volatile unsigned*>(slot_finished + m) == 0u) return false;  // not yet known
+    __threadfence();  // the flag before the partial it guards
+    const float w = __ldcg(&partials[static_cast<uint64_t>(m) * tune::kRasterThreads + rank].w);
+    T *= fabsf(w);
+    if (w < 0.0f || T < fm::kMinTransmittance) return true;
+  }
+  return false;
+}
 
 // kTileCull: blend_range_culled (a trail list) or blend_range (an exact list), as separate
 // kernels so that each is built for its own registers: the unculled one fits 32 without spilling.
@@ -107,19 +133,29 @@ rasterize_slices_kernel(SlicePlan plan,
   // decide together (a thread leaving alone would break the barriers and the warp ballots of
   // blend_range_culled, which faulted with an illegal instruction on the H100).
   if (__syncthreads_or(skip.stop())) return;
+  const uint64_t slot = static_cast<uint64_t>(tp.z) + tile_k.y;
+  const float4* tile_partials = partials + static_cast<uint64_t>(tp.z) * tune::kRasterThreads;
+  if (early_termination && inside && tile_k.y > 0)
+    state.done = ended_before(plan.slot_finished + tp.z, tile_partials, tile_k.y, rank);
   blend(skip);
   const bool saturated = state.done || state.T < fm::kMinTransmittance;
   if (early_termination && __syncthreads_and(saturated) && rank == 0 && !skip.stop())
     atomicMin(plan.saturated_from + tile_k.x, tile_k.y);
-  if (!inside) return;
-  partials[static_cast<uint64_t>(tp.z + tile_k.y) * tune::kRasterThreads + rank] =
-      make_float4(state.C.x, state.C.y, state.C.z, state.T);
+  // A stopped pixel (done: by early termination here, or ended before this slice, whose partial
+  // the merge then never reads) ends its composition: T negated.
+  if (inside)
+    partials[slot * tune::kRasterThreads + rank] =
+        make_float4(state.C.x, state.C.y, state.C.z, state.done ? -state.T : state.T);
+  if (!early_termination) return;
+  __threadfence();  // every thread's partial before the flag (read by later slices of the tile)
+  __syncthreads();
+  if (rank == 0) atomicExch(plan.slot_finished + slot, 1u);
 }
 
 __global__ void __launch_bounds__(tune::kRasterThreads)
 merge_kernel(SlicePlan plan,
              const float4* partials,  // [slots, 256]
-             int width, int height, int tiles_x, float3 background,
+             int width, int height, int tiles_x, bool early_termination, float3 background,
              const unsigned* abandon, // [1] or null
              float* out_rgb,          // [H, W, 3]
              uint32_t* out_rgba8) {   // [H, W]
@@ -139,7 +175,9 @@ merge_kernel(SlicePlan plan,
     C.x += T * p.x;
     C.y += T * p.y;
     C.z += T * p.z;
-    T *= p.w;
+    T *= fabsf(p.w);
+    // The pixel stopped in slice k, or the slices behind weigh under 1e-4 (as ended_before).
+    if (early_termination && (p.w < 0.0f || T < fm::kMinTransmittance)) break;
   }
   write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), C, T,
               background, out_rgb, out_rgba8);
@@ -153,6 +191,7 @@ void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blo
                       float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
   CATGS_CUDA(cudaMemsetAsync(plan.saturated_from, 0xff,
                              sizeof(unsigned) * static_cast<std::size_t>(cam.tiles_x * cam.tiles_y), stream));
+  CATGS_CUDA(cudaMemsetAsync(plan.slot_finished, 0, sizeof(unsigned) * plan.slot_count, stream));
   if (blocks == 0) return;
   const dim3 block(tune::kTileSize, tune::kTileSize);
   auto* kernel = tile_culling ? rasterize_slices_kernel<true> : rasterize_slices_kernel<false>;
@@ -161,12 +200,13 @@ void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blo
   CATGS_CUDA_LAUNCHED("rasterize_slices_kernel");
 }
 
-void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, float3 background,
-                  const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
+void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, bool early_termination,
+                  float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8,
+                  cudaStream_t stream) {
   const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
   const dim3 block(tune::kTileSize, tune::kTileSize);
-  merge_kernel<<<tiles, block, 0, stream>>>(plan, partials, cam.width, cam.height, cam.tiles_x, background,
-                                            abandon, out_rgb, out_rgba8);
+  merge_kernel<<<tiles, block, 0, stream>>>(plan, partials, cam.width, cam.height, cam.tiles_x, early_termination,
+                                            background, abandon, out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("merge_kernel");
 }
 

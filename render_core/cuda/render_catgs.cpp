@@ -93,7 +93,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   }
   const stages::Projected proj = s.projected();
   CATGS_CUDA(cudaMemsetAsync(counters, 0, 4 * sizeof(unsigned long long), s.stream));
-  stages::TileTests tests{stages::TileTestKind::trail, nullptr, nullptr, nullptr, s.trails(), cam.width, cam.height};
+  stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
   if (window > 0) {
     const std::vector<Camera> path = s.planner.path(camera, window);
     stages::PathParams pp{};
@@ -106,7 +106,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
     // is the exact ellipse, so the list is the same; the path-wide kernel only costs more) and
     // opens no group. Task splitting still applies.
     stages::preprocess(sv, cam, true, proj, counters, s.big_list(), s.stream);
-    tests = {stages::TileTestKind::ellipse, proj.mean2d, proj.conic_opacity, proj.q_max, {}, cam.width, cam.height};
+    tests = {stages::TileTestKind::ellipse, proj.splat, {}, cam.width, cam.height};
   }
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
@@ -134,6 +134,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   s.slice_order_temp.ensure(stages::order_slices_temp_bytes(capacity), "slice order scratch", allocs);
   s.saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs);
   s.partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
+  s.slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs);
   s.note_peak();
   const stages::SlicePlan plan = s.slice_plan();
   stages::plan_slices(s.ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, plan, s.plan_scan.as<uint64_t>(),
@@ -188,7 +189,7 @@ void CudaRenderer::catgs_rasterize(const Camera& camera, uint32_t blocks, const 
                            options_.speculation.early_termination, tile_culling_ && trail_list, bg, abandon, s.partials.as<float4>(), s.rgb.as<float>(),
                            s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-  stages::merge_slices(plan, s.partials.as<float4>(), cam, bg, abandon, s.rgb.as<float>(), s.rgba8.as<uint32_t>(),
+  stages::merge_slices(plan, s.partials.as<float4>(), cam, options_.speculation.early_termination, bg, abandon, s.rgb.as<float>(), s.rgba8.as<uint32_t>(),
                        s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
 }

@@ -80,7 +80,7 @@ struct CudaRenderer::State {
   int width = 0, height = 0;
 
   // Per Gaussian.
-  GrowBuffer mean2d, conic_opacity, color, depth, q_max, rect, tiles_touched, ends, scan_temp, big;
+  GrowBuffer splat, color, depth, rect, tiles_touched, ends, scan_temp, big;
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // The depth-first sort (depth_order.cu): visible Gaussians and their depth keys (two halves
@@ -97,7 +97,7 @@ struct CudaRenderer::State {
   // partial-slot totals, [4] frustum-cache size.
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp;
   GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order,
-      slice_order_temp, partials, saturated_from, catgs_counters;
+      slice_order_temp, partials, saturated_from, slot_finished, catgs_counters;
   unsigned* host_catgs = nullptr;         // pinned [4]: M bits, outside flag, slice total, slots
   cudaEvent_t catgs_readback = nullptr;   // M / outside flag copied to host_catgs
   cudaEvent_t plan_ready = nullptr;       // the key frame's slice total copied to host_catgs[2]
@@ -123,8 +123,8 @@ struct CudaRenderer::State {
 
   // Views of the buffers as the stages take them.
   stages::Projected projected() const {
-    return {mean2d.as<float2>(), conic_opacity.as<float4>(), color.as<float4>(), depth.as<float>(),
-            q_max.as<float>(),   rect.as<ushort4>(),         tiles_touched.as<uint32_t>()};
+    return {splat.as<stages::Splat>(), color.as<float4>(), depth.as<float>(), rect.as<ushort4>(),
+            tiles_touched.as<uint32_t>()};
   }
   stages::BigList big_list() const {
     return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + 3)};
@@ -135,18 +135,19 @@ struct CudaRenderer::State {
   }
   stages::SlicePlan slice_plan() const {
     return {slice_range.as<uint2>(), slice_tile.as<uint2>(), tile_plan.as<uint4>(),
-            catgs_counters.as<unsigned>() + 2, saturated_from.as<unsigned>()};
+            catgs_counters.as<unsigned>() + 2, saturated_from.as<unsigned>(), slot_finished.as<unsigned>(),
+            slot_finished.bytes() / sizeof(unsigned)};
   }
 
   std::size_t bytes() const {
     std::size_t b = 0;
     for (const GrowBuffer* g :
-         {&mean2d, &conic_opacity, &color, &depth, &q_max, &rect, &tiles_touched, &ends, &scan_temp, &big,
+         {&splat, &color, &depth, &rect, &tiles_touched, &ends, &scan_temp, &big,
           &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &depth_index[0], &depth_index[1],
           &depth_keys[0], &depth_keys[1], &depth_count, &depth_temp, &ranges, &tile_scratch, &tile_order,
           &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &trail_mask,
           &cached, &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
-          &slice_order, &slice_order_temp, &partials, &saturated_from, &catgs_counters, &yuv})
+          &slice_order, &slice_order_temp, &partials, &saturated_from, &slot_finished, &catgs_counters, &yuv})
       b += g->bytes();
     return b;
   }

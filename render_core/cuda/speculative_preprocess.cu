@@ -6,6 +6,7 @@
 // stored trail), so counting and emission agree; what contraction changes is the last bits of a
 // trail against the CPU reference's, which only widens or narrows a trail by float rounding.
 #include "cuda_check.h"
+#include "splat.cuh"
 #include "stages.h"
 #include "tile_test.cuh"
 #include "tunables.h"
@@ -112,11 +113,9 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
       const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
       const glm::vec3 c = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i,
                                           glm::normalize(mean - key.position));
-      out.mean2d[i] = make_float2(means[0].x, means[0].y);
-      out.conic_opacity[i] = make_float4(conic.x, conic.y, conic.z, opacity);
+      out.splat[i] = make_splat(means[0], conic, opacity, q_max);
       out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
       out.depth[i] = key_depth;
-      out.q_max[i] = q_max;
       out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
                                  static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
       trails.mean0_motion[i] = make_float4(trail.mean0.x, trail.mean0.y, trail.motion.x, trail.motion.y);
@@ -162,7 +161,7 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
   speculative_preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
       scene, path, widening, out, trails, visible, big);
   CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");
-  const TileTests tests{TileTestKind::trail, nullptr, nullptr, nullptr, trails, path.cam[0].width,
+  const TileTests tests{TileTestKind::trail, nullptr, trails, path.cam[0].width,
                         path.cam[0].height};
   count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
 }

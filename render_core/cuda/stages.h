@@ -38,14 +38,29 @@ struct SceneView {
   uint64_t n;
 };
 
+// One Gaussian's footprint on the image at this frame: everything a rasterizer reads of a
+// render-list entry except its colour, packed in one 32-byte record (one DRAM sector, as the
+// allocation is 256-byte aligned). A rasterizer gathers each entry's record by its Gaussian index
+// (a random access), so separate mean, conic and q_max arrays cost two or three sectors per entry
+// where this costs one; the tile cull of a catgs trail list (blend.cuh) reads only this, and the
+// colour only for the entries it keeps. Written by splat.cuh make_splat.
+// - mean: pixel units (continuous image coordinates, pixel centres at integers).
+// - conic (A, B, C): the inverse 2D covariance, q = A dx^2 + 2B dx dy + C dy^2 (paper eq. 2-3).
+// - q_max = 2 ln(255 opacity) (fm::opacity_aware_qmax): alpha >= 1/255 iff q <= q_max; -inf at
+//   opacity 0 (a Gaussian culled at a sub-frame's pose).
+// - power_cut = -q_max / 2 - 1e-3: a pixel whose power -q/2 lies below it skips the entry before
+//   the exp (blend.cuh blend_entry); +inf at opacity 0, so every pixel skips it.
+struct __align__(32) Splat {
+  float4 mean_ab;          // (mean.x, mean.y, A, B)
+  float4 c_opacity_q_cut;  // (C, opacity, q_max, power_cut)
+};
+
 // Stage 1 output, one entry per Gaussian; tiles_touched == 0 marks a culled Gaussian whose other
 // fields are left unwritten.
 struct Projected {
-  float2* mean2d;             // [N] pixel units
-  float4* conic_opacity;      // [N] (A, B, C, opacity)
+  Splat* splat;               // [N] 2D mean, conic, opacity, q_max, power cut
   float4* color;              // [N] (r, g, b, unused): 16-byte loads in the rasterizer
   float* depth;               // [N] camera-space z
-  float* q_max;               // [N] exact pipeline: alpha >= 1/255 iff q <= q_max
   ushort4* rect;              // [N] tile rectangle [x0, x1) x [y0, y1)
   uint32_t* tiles_touched;    // [N] render-list entries this Gaussian emits
 };
@@ -74,9 +89,7 @@ enum class TileTestKind { square, ellipse, trail };
 // The inputs of the tile test, read per Gaussian by tile_test.cuh.
 struct TileTests {
   TileTestKind kind;
-  const float2* mean2d;         // [N] ellipse
-  const float4* conic_opacity;  // [N] ellipse
-  const float* q_max;           // [N] ellipse
+  const Splat* splat;           // [N] ellipse: mean, conic, q_max
   Trails trails;                // trail
   int width, height;            // pixels
 };
@@ -127,7 +140,7 @@ void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, 
                    void* temp, std::size_t temp_bytes, cudaStream_t stream);
 
 // catgs sub-frame, stage 1 (subframe_features.cu; mirrors cpu::update_subframe_features):
-// recomputes mean2d, conic, opacity (0 when culled here) and colour of the `count` cached
+// recomputes the splat (mean, conic, opacity: 0 when culled here) and colour of the `count` cached
 // Gaussians at `cam`, and sets *outside = 1 when an on-screen ellipse reaches a tile its trail was
 // not listed in (the frame must then be a key frame). *outside must hold 0 on entry.
 void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached,
@@ -226,12 +239,16 @@ void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* 
 // (SpeculationParams::min_slice_entries).
 //   saturated_from [tiles] reset by rasterize_slices: the first slice of a tile that saturates
 //                          it alone (rasterize_slices.cu)
+//   slot_finished  [slot_count] reset by rasterize_slices: 1 once the slice of that partial slot
+//                          has written its partials (rasterize_slices.cu)
 struct SlicePlan {
   uint2* slice_range;
   uint2* slice_tile;
   uint4* tile_plan;
   unsigned* totals;
   unsigned* saturated_from;
+  unsigned* slot_finished;
+  uint64_t slot_count;  // entries of slot_finished (at least the partial slots of any plan)
 };
 uint64_t split_average(uint32_t tiles, uint64_t entries, uint64_t min_slice);
 uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice);
@@ -251,9 +268,12 @@ void order_slices(const SlicePlan& plan, uint64_t capacity, uint32_t* scratch, u
 // (block b takes slice order[b], or b without an order; `blocks` may exceed the slice total: the
 // extra blocks return). A tile's only slice writes C + T * background to the image; a slice of a
 // split tile writes its partial colour and transmittance to partials [slots, 256] (C.rgb, T).
-// `early_termination`: stop a pixel before T would drop below 1e-4 within its slice. Resets
-// saturated_from first; a slice behind one that saturated its tile alone is skipped (see
-// rasterize_slices.cu: the paper's higher early-termination threshold for later slices).
+// `early_termination`: stop a pixel before T would drop below 1e-4 within its slice; a pixel's
+// composition ends at the first slice in which it stops or after which its transmittance is
+// below 1e-4, so a later slice skips the pixels whose earlier slices, finished before it starts,
+// already end it, and a slice behind one that saturated its tile alone is skipped entirely (see
+// rasterize_slices.cu: the paper's higher early-termination threshold for later slices). Resets
+// saturated_from and slot_finished first. A stopped pixel's partial T is stored negated.
 // `tile_culling`: each round blends only the entries whose ellipse reaches the tile at this
 // frame's features (blend_range_culled; same image, for lists built for other poses too).
 // `abandon` (device, or null): when it holds non-zero at launch, draw nothing (a sub-frame
@@ -263,8 +283,10 @@ void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blo
                       bool early_termination, bool tile_culling, float3 background, const unsigned* abandon,
                       float4* partials, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream);
 // The merge (rasterize_slices.cu): for each split tile, C = sum_k C_k prod_{m<k} T_m, then
-// + prod T * background (paper sec. 3.4). Nothing when *abandon (if given) is non-zero.
-void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam,
+// + prod T * background (paper sec. 3.4); with `early_termination`, a pixel's sum ends after the
+// first slice in which it stopped or after which prod T < 1e-4 (as cpu::rasterize_slices).
+// Nothing when *abandon (if given) is non-zero.
+void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, bool early_termination,
                   float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8,
                   cudaStream_t stream);
 

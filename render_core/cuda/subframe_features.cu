@@ -7,6 +7,7 @@
 #include <thrust/iterator/counting_iterator.h>
 
 #include "cuda_check.h"
+#include "splat.cuh"
 #include "stages.h"
 #include "tunables.h"
 
@@ -42,9 +43,9 @@ subframe_features_kernel(SceneView scene, CameraParams cam,
   const uint32_t i = cached[c];
   const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
   const glm::vec3 p = cam.R * mean + cam.t;
-  const float4 culled = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
+  const Splat culled = culled_splat();
   if (!(p.z > cam.near_plane) || p.z > cam.far_plane) {
-    out.conic_opacity[i] = culled;
+    out.splat[i] = culled;
     return;
   }
   const fm::Cov3 cov3 = fm::covariance_3d(
@@ -54,13 +55,15 @@ subframe_features_kernel(SceneView scene, CameraParams cam,
   const glm::vec3 cov2 = fm::covariance_2d(cov3, cam.R, p, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) {
-    out.conic_opacity[i] = culled;
+    out.splat[i] = culled;
     return;
   }
   const glm::vec2 mean2d(cam.fx * p.x / p.z + cam.cx - 0.5f, cam.fy * p.y / p.z + cam.cy - 0.5f);
-  const float q_max = out.q_max[i];
+  // The key frame's q_max (the opacity does not change), worked out again rather than read back.
+  const float opacity = fm::sigmoid(scene.opacity_logits[i]);
+  const float q_max = fm::opacity_aware_qmax(opacity);
   if (fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, q_max + fm::kExactQMargin, cam.width, cam.height)) == 0) {
-    out.conic_opacity[i] = culled;
+    out.splat[i] = culled;
     return;
   }
   const bool on_screen = fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height)) > 0;
@@ -79,8 +82,7 @@ subframe_features_kernel(SceneView scene, CameraParams cam,
   const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
   const glm::vec3 col = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i,
                                         glm::normalize(mean - cam.position));
-  out.mean2d[i] = make_float2(mean2d.x, mean2d.y);
-  out.conic_opacity[i] = make_float4(conic.x, conic.y, conic.z, fm::sigmoid(scene.opacity_logits[i]));
+  out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
   out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
 }
 

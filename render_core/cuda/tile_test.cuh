@@ -36,10 +36,10 @@ struct GaussianTileTest {
 __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, uint64_t i) {
   GaussianTileTest g{t.kind, {}, {}, 0.0f, {}, t.width, t.height};
   if (t.kind == TileTestKind::ellipse) {
-    const float4 co = t.conic_opacity[i];
-    g.mean = glm::vec2(t.mean2d[i].x, t.mean2d[i].y);
-    g.conic = glm::vec3(co.x, co.y, co.z);
-    g.q = t.q_max[i];
+    const Splat s = t.splat[i];
+    g.mean = glm::vec2(s.mean_ab.x, s.mean_ab.y);
+    g.conic = glm::vec3(s.mean_ab.z, s.mean_ab.w, s.c_opacity_q_cut.x);
+    g.q = s.c_opacity_q_cut.z;
   } else if (t.kind == TileTestKind::trail) {
     const float4 mm = t.trails.mean0_motion[i];
     const float4 cq = t.trails.conic_q[i];

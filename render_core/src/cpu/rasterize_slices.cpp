@@ -1,9 +1,13 @@
 // Stage 5 with task splitting (paper sec. 3.4): each slice blends its part of a tile's list into a
 // partial colour C_k and transmittance T_k per pixel; the merge composes them front to back.
-// Mirrors the GPU's one-block-per-slice kernel and merge kernel.
-#include <chrono>
-
+// Mirrors the GPU's one-block-per-slice kernel and merge kernel, including where a pixel's
+// composition ends with early termination: after the first slice in which the pixel stopped
+// (T_k stored negated) or after which prod T < 1e-4. The GPU skips the pixels and slices past
+// that end when it can; here every slice runs in full and the merge drops them, which gives the
+// same image.
 #include <algorithm>
+#include <chrono>
+#include <cmath>
 
 #include "blend_tile.h"
 
@@ -28,7 +32,10 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
     float* T = &partial_T[s * kTilePixels];
     std::fill(C, C + kTilePixels, glm::vec3(0.0f));
     std::fill(T, T + kTilePixels, 1.0f);
-    blend_tile(projected, list, slice.begin, slice.end, tx, ty, grid, early_termination, C, T);
+    bool stopped[kTilePixels] = {};
+    blend_tile(projected, list, slice.begin, slice.end, tx, ty, grid, early_termination, C, T, stopped);
+    for (int p = 0; p < kTilePixels; ++p)
+      if (stopped[p]) T[p] = -T[p];
   });
 
   const auto t0 = std::chrono::steady_clock::now();
@@ -50,7 +57,8 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
         for (std::size_t s = first_slice[tile]; s < slices.size() && slices[s].tile == tile; ++s) {
           const std::size_t at = s * kTilePixels + static_cast<std::size_t>(ly * fm::kTileSize + lx);
           C += T * partial_color[at];
-          T *= partial_T[at];
+          T *= std::fabs(partial_T[at]);
+          if (early_termination && (partial_T[at] < 0.0f || T < fm::kMinTransmittance)) break;
         }
         C += T * background;
         const std::size_t p = static_cast<std::size_t>(py) * grid.width + px;
