@@ -121,6 +121,7 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
                                             bool early_termination, BlendBatch& batch, PixelState& px,
                                             Skip skip) {
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
+    skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
     const uint32_t fetch = base + static_cast<uint32_t>(rank);
     if (fetch < end) {  // bounds-checked prefetch
@@ -163,6 +164,7 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
   __shared__ uint32_t warp_kept[kWarps];
   const int lane = rank & 31, warp = rank >> 5;
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
+    skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
     const uint32_t fetch = base + static_cast<uint32_t>(rank);
     bool keep = false;
@@ -194,6 +196,7 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
 
 // No per-warp skipping.
 struct NoSkip {
+  __device__ __forceinline__ void refresh(PixelState&) const {}
   __device__ __forceinline__ void fetch(int, const Splat&) const {}
   __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return false; }

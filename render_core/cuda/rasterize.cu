@@ -67,6 +67,7 @@ struct WarpSkip {
   uint8_t* mask;       // [kRasterBatch] shared
   float y0;
   int warp;
+  __device__ __forceinline__ void refresh(PixelState&) const {}
   __device__ __forceinline__ void fetch(int rank, const Splat& s) const {
     mask[rank] = static_cast<uint8_t>(warp_mask(s, y0));
   }

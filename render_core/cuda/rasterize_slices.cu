@@ -54,33 +54,34 @@ namespace {
 // 0.945 / 0.870 / 0.874.
 constexpr int kRasterMinBlocks = 8;
 
-// Stops a slice once an earlier slice of its tile saturated it (read through volatile: another
-// block writes it during this one).
+// A split tile's slice k: stops once an earlier slice of its tile saturated the tile (stop), and
+// marks done the pixels whose composition its finished earlier slices already end (refresh, at
+// every round of 256 entries): it walks slices 0..k-1 in order while they have finished
+// (slot_finished, read before their partials, which are read from L2), with the merge's own rule
+// and arithmetic (merge_kernel), so that the two agree exactly. `prefix` is k with early
+// termination and 0 without (no pixel ends early then).
 struct SaturatedSkip {
   const volatile unsigned* saturated_from;  // this tile's entry
   unsigned k;
+  const unsigned* slot_finished;  // [k] this tile's slots
+  const float4* partials;         // [k, 256] this tile's, at this thread's pixel
+  unsigned prefix;
+  unsigned known = 0;  // earlier slices walked
+  float T = 1.0f;      // prod of their T at this pixel
   __device__ __forceinline__ void fetch(int, const Splat&) const {}
   __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return *saturated_from < k; }
-};
-
-// Whether the composition of the pixel of thread `rank` ends before slice k of its tile: walks
-// the tile's earlier slices in order while they have finished (slot_finished[m], read before
-// their partials, which are read from L2), with the merge's own rule and arithmetic (merge_kernel),
-// so that the two agree exactly.
-__device__ __forceinline__ bool ended_before(const unsigned* slot_finished,  // [k] this tile's slots
-                                             const float4* partials,         // [k, 256] this tile's
-                                             unsigned k, int rank) {
-  float T = 1.0f;
-  for (unsigned m = 0; m < k; ++m) {
-    if (*static_cast<const volatile unsigned*>(slot_finished + m) == 0u) return false;  // not yet known
-    __threadfence();  // the flag before the partial it guards
-    const float w = __ldcg(&partials[static_cast<uint64_t>(m) * tune::kRasterThreads + rank].w);
-    T *= fabsf(w);
-    if (w < 0.0f || T < fm::kMinTransmittance) return true;
+  __device__ __forceinline__ void refresh(PixelState& px) {
+    while (!px.done && known < prefix) {
+      if (*static_cast<const volatile unsigned*>(slot_finished + known) == 0u) return;  // not yet known
+      __threadfence();  // the flag before the partial it guards
+      const float w = __ldcg(&partials[static_cast<uint64_t>(known) * tune::kRasterThreads].w);
+      T *= fabsf(w);
+      ++known;
+      if (w < 0.0f || T < fm::kMinTransmittance) px.done = true;
+    }
   }
-  return false;
-}
+};
 
 // kTileCull: blend_range_culled (a trail list) or blend_range (an exact list), as separate
 // kernels so that each is built for its own registers: the unculled one fits 32 without spilling.
@@ -128,15 +129,14 @@ rasterize_slices_kernel(SlicePlan plan,
                 state.T, background, out_rgb, out_rgba8);
     return;
   }
-  const SaturatedSkip skip{plan.saturated_from + tile_k.x, tile_k.y};
+  const SaturatedSkip skip{plan.saturated_from + tile_k.x, tile_k.y, plan.slot_finished + tp.z,
+                           partials + static_cast<uint64_t>(tp.z) * tune::kRasterThreads + rank,
+                           early_termination && inside ? tile_k.y : 0u};
   // Another block may saturate the tile while this one reads the flag, so threads can disagree:
   // decide together (a thread leaving alone would break the barriers and the warp ballots of
   // blend_range_culled, which faulted with an illegal instruction on the H100).
   if (__syncthreads_or(skip.stop())) return;
   const uint64_t slot = static_cast<uint64_t>(tp.z) + tile_k.y;
-  const float4* tile_partials = partials + static_cast<uint64_t>(tp.z) * tune::kRasterThreads;
-  if (early_termination && inside && tile_k.y > 0)
-    state.done = ended_before(plan.slot_finished + tp.z, tile_partials, tile_k.y, rank);
   blend(skip);
   const bool saturated = state.done || state.T < fm::kMinTransmittance;
   if (early_termination && __syncthreads_and(saturated) && rank == 0 && !skip.stop())

@@ -38,14 +38,16 @@ struct SpeculationParams {
   bool task_splitting = true;          // false (--no-split)
   // Task splitting's slice length: the average load l = L / t (paper sec. 3.4) or this many
   // entries, whichever is larger; a tile splits above twice that. A later slice of a tile blends
-  // Gaussians that an earlier slice has already hidden at some pixels (per-pixel early
-  // termination does not cross slices), so slices much shorter than that loss only cost: on
-  // tumblewood x10 (l ~ 150-500 entries) catgs-nosplit was 11-15% faster than splitting. 0: the
-  // paper's rule alone. Measured side by side on the H100 (1080p, catgs FPS / exact FPS, floor
-  // 0 / 1024 / 2048 / 4096 / 8192 / 16384 / no split): city tandt_train 1.75 / 1.75 / 1.87 / 2.06
-  // / 1.94 / 1.50 / 0.93; city bicycle 1.00 / 1.00 / 1.00 / 0.98 / 0.97 / 0.94 / 0.95; tumblewood
-  // x10 tandt_train 1.12 / 1.17 / 1.27 / 1.29 / - / - / 1.26 (tests/gpu/RESULTS.md).
-  int min_slice_entries = 4096;
+  // Gaussians that an earlier slice has already hidden at the pixels where the later slice
+  // started before the earlier one finished (rasterize_slices.cu ends a pixel's composition at
+  // the slice where it stops, and skips it in the slices that start after), so slices much
+  // shorter than that loss only cost. 0: the paper's rule alone. Measured side by side on the
+  // H100 (1080p, catgs FPS / exact FPS), floor 2048 / 4096, with the per-pixel ends: city
+  // flowers 1.045 / 1.022, bicycle 1.114 / 1.088, tandt_train 2.594 / 2.426, fly-over 1.207 /
+  // 1.134 (1024: 1.241); tumblewood x10 flowers 1.089 / 1.126, bicycle 0.992 / 1.063,
+  // tandt_train 1.273 / 1.294 (tests/gpu/RESULTS.md). The city is the scene this pipeline is
+  // for, so 2048.
+  int min_slice_entries = 2048;
   bool early_termination = true;       // stop a pixel when T would drop below 1e-4
   // The motion predictor's fit window (MotionPredictorParams::fit_window_s), seconds: a longer
   // one averages out more input jitter, a shorter one lags less behind a changing velocity.
