@@ -112,8 +112,9 @@ __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j,
 // Blends entries [begin, end) into `px` (the pixel at (fpx, fpy) of thread `rank`). With
 // early_termination a pixel stops before the Gaussian that would take T below 1e-4 (as the
 // reference 3DGS); without it, blends to the end. `skip(j)` (warp-uniform) lets a caller drop
-// batch entry j for its warp, and `skip.stop()` (block-uniform) ends the run early; every thread
-// of the block must call this (barriers inside).
+// batch entry j for its warp, `skip.stop()` (block-uniform) ends the run early, and
+// `skip.refresh(px)` (per thread, before each round) may mark the pixel done; every thread of
+// the block must call this (barriers inside).
 template <typename Skip>
 __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
                                             const uint32_t* values,         // [L]

@@ -176,7 +176,7 @@ merge_kernel(SlicePlan plan,
     C.y += T * p.y;
     C.z += T * p.z;
     T *= fabsf(p.w);
-    // The pixel stopped in slice k, or the slices behind weigh under 1e-4 (as ended_before).
+    // The pixel stopped in slice k, or the slices behind weigh under 1e-4 (as SaturatedSkip::refresh).
     if (early_termination && (p.w < 0.0f || T < fm::kMinTransmittance)) break;
   }
   write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), C, T,

@@ -188,6 +188,43 @@ TEST(TaskSplitting, SplitAndUnsplitAgree) {
   EXPECT_GE(psnr_rgba8(c, d), 50.0);
 }
 
+// A pixel that stops (early termination) inside a tile's first slice ends its composition there:
+// the merge does not add the later slice, so split and unsplit agree bit for bit. Three opaque
+// red Gaussians, then a green one, all covering the one 16 x 16 tile: unsplit, the pixel stops
+// before the second red (T would fall to 0.01^2, below 1e-4) and never reaches the green; split
+// after the third red, the green is a slice of its own, which the merge used to add weighted by
+// the first slice's T = 0.01.
+TEST(TaskSplitting, APixelThatStopsInASliceEndsItsComposition) {
+  cpu::ProjectedGaussians g;
+  g.resize(4);
+  for (int i = 0; i < 4; ++i) {
+    g.mean2d[i] = glm::vec2(7.5f, 7.5f);
+    g.conic[i] = glm::vec3(1e-4f, 0.0f, 1e-4f);  // wide: alpha = 0.99 (the cap) at every pixel
+    g.opacity[i] = 1.0f;
+    g.q_max[i] = fm::opacity_aware_qmax(1.0f);
+    g.color[i] = i < 3 ? glm::vec3(1.0f, 0.0f, 0.0f) : glm::vec3(0.0f, 1.0f, 0.0f);
+  }
+  cpu::RenderList list;
+  list.values = {0, 1, 2, 3};
+  list.keys = {0, 1, 2, 3};
+  const auto grid = cpu::TileGrid::of(16, 16);
+  const std::vector<TileSlice> whole{{0, 0, 4, 0}}, split{{0, 0, 3, 0}, {0, 3, 4, 1}};
+  const glm::vec3 background(0.2f, 0.3f, 0.4f);
+  Image a, b;
+  cpu::rasterize_slices(g, list, whole, grid, true, background, a);
+  cpu::rasterize_slices(g, list, split, grid, true, background, b);
+  // Unsplit: the first red, then T = 0.01 over the background.
+  EXPECT_NEAR(a.rgb[0], 0.99f + 0.01f * background.x, 1e-6f);
+  EXPECT_NEAR(a.rgb[1], 0.01f * background.y, 1e-7f);
+  EXPECT_EQ(a.rgb, b.rgb);
+  // Without early termination both blend every Gaussian: the green behind T = 0.01^3.
+  Image c, d;
+  cpu::rasterize_slices(g, list, whole, grid, false, background, c);
+  cpu::rasterize_slices(g, list, split, grid, false, background, d);
+  EXPECT_NEAR(c.rgb[1], 1e-6f * 0.99f + 1e-8f * background.y, 1e-9f);
+  EXPECT_NEAR(c.rgb[1], d.rgb[1], 1e-9f);
+}
+
 TEST(Speculation, SubFramesMatchFullRendersOnARealPath) {
   CATGS_REQUIRE_DATA(scene_path, "scenes/flowers_sh3.ply");
   CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
