@@ -102,6 +102,11 @@ void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
 // Stage 5 with slices (src/cpu/rasterize_slices.cpp): each slice blends its entries into a partial
 // colour C_k and transmittance T_k per pixel (early termination within the slice if enabled); the
 // merge composes C = sum_k C_k prod_{m<k} T_m, then adds prod T * background (paper sec. 3.4).
+// With early_termination a pixel's sum ends after the first slice in which it stopped or after
+// which prod T < 1e-4, as the CUDA merge does (its later slices weigh under 1e-4: the paper's
+// higher threshold for later slices). `slices`: [begin, end) runs of `list`, a tile's slices
+// consecutive and in list order (plan_slices); `out` becomes grid.width x grid.height (linear RGB
+// floats and RGBA8); `merge_ms`, if given, receives the merge's wall time in milliseconds.
 void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list,
                       const std::vector<TileSlice>& slices, const TileGrid& grid,
                       bool early_termination, glm::vec3 background, Image& out,
