@@ -20,10 +20,10 @@
 //   second barrier protects shared memory before the next fetch.
 // - Early termination: __syncthreads_count(done) at the top of each round ends the whole block
 //   once all its pixels are saturated, so opaque tiles never walk the rest of their list.
-// - One pixel per thread on purpose: blocks of 16 x 8 threads owning two pixels each, reading each
-//   shared-memory entry once for both, drew the same image but rasterized 1.3-1.7x slower on the
-//   city (H100, exact bicycle 0.89 -> 1.46 ms): the blend loop is bound by latency, and half the
-//   warps per SM hide less of it (tests/gpu/RESULTS.md, 2026-11-22).
+// - One pixel per thread on purpose: blocks of 16 x 8 threads owning two pixels each, reading
+//   each shared-memory entry once for both, drew the same image but rasterized 1.2-1.7x slower
+//   (H100, city exact bicycle 0.89 -> 1.46 ms; tests/gpu/RESULTS.md, 2026-11-22), likely because
+//   the blend loop is bound by latency and half the warps per SM were left to hide it.
 // - Shared memory: 256 x (16 + 16 + 16) bytes = 12 KiB per block, so occupancy is set by
 //   registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
 // - Optional, exact pipeline only (CudaRenderer::set_warp_culling, off by default): when a thread
