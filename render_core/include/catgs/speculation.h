@@ -21,7 +21,8 @@ struct SpeculationParams {
   // 0 frames: no backoff. Measured side by side on the H100 (1080p, catgs FPS / exact FPS, backoff
   // 0 / 2 / 4 / 8 / 16 frames): city bicycle 0.94 / 0.99 / 0.99 / 1.00 / 1.00, city flowers
   // 0.94 / 0.98 / 0.97 / 0.98 / 0.96, city tandt_train 1.75 / 1.75 / 1.75 / 1.74 / 1.72,
-  // tumblewood x10 bicycle 0.92 / 0.93 / 0.93 / 0.94 / 0.90 (tests/gpu/RESULTS.md).
+  // tumblewood x10 bicycle 0.92 / 0.93 / 0.93 / 0.94 / 0.90 (tests/gpu/RESULTS.md). Again on
+  // 2026-11-22 (0 / 2 frames): city bicycle 1.070 / 1.112, flowers 1.016 / 1.053.
   int backoff_frames = 2;
   int min_served = 2;
   float depth_threshold = 0.4f;   // d: only Gaussians deeper than this (world units) set M
@@ -37,16 +38,15 @@ struct SpeculationParams {
   bool frustum_and_sort_cache = true;  // false (--no-cache): every frame is a key frame
   bool task_splitting = true;          // false (--no-split)
   // Task splitting's slice length: the average load l = L / t (paper sec. 3.4) or this many
-  // entries, whichever is larger; a tile splits above twice that. A later slice of a tile blends
-  // Gaussians that an earlier slice has already hidden at the pixels where the later slice
-  // started before the earlier one finished (rasterize_slices.cu ends a pixel's composition at
-  // the slice where it stops, and skips it in the slices that start after), so slices much
-  // shorter than that loss only cost. 0: the paper's rule alone. Measured side by side on the
-  // H100 (1080p, catgs FPS / exact FPS), floor 2048 / 4096, with the per-pixel ends: city
-  // flowers 1.045 / 1.022, bicycle 1.114 / 1.088, tandt_train 2.594 / 2.426, fly-over 1.207 /
-  // 1.134 (1024: 1.241); tumblewood x10 flowers 1.089 / 1.126, bicycle 0.992 / 1.063,
-  // tandt_train 1.273 / 1.294 (tests/gpu/RESULTS.md). The city is the scene this pipeline is
-  // for, so 2048.
+  // entries, whichever is larger; a tile splits above twice that. A later slice of a tile that
+  // starts before an earlier one finishes blends, at the pixels that earlier slice will stop,
+  // Gaussians hidden there (rasterize_slices.cu ends a pixel's composition at the slice where it
+  // stops, and skips it only in slices that start after), so very short slices cost more than
+  // they balance. 0: the paper's rule alone. Measured side by side on the H100 (1080p, catgs FPS /
+  // exact FPS, floor 1024 / 2048 / 3072, 2026-11-22): city flowers 1.064 / 1.053 / 1.035,
+  // bicycle 1.117 / 1.112 / 1.099, tandt_train 2.635 / 2.612 / 2.530; tumblewood x10 flowers
+  // 1.047 / 1.101 / 1.132, bicycle 0.977 / 0.979 / 1.013, tandt_train 1.205 / 1.280 / 1.301
+  // (tests/gpu/RESULTS.md). The two scenes want opposite floors; 2048 is the compromise.
   int min_slice_entries = 2048;
   bool early_termination = true;       // stop a pixel when T would drop below 1e-4
   // The motion predictor's fit window (MotionPredictorParams::fit_window_s), seconds: a longer
