@@ -50,7 +50,7 @@ prepare() {
   cp -f "$data/scenes/flowers_sh3.ply" "$data/scenes/biker.compressed.ply" "$CARRY/scenes/"
   cp -f "$data"/traces/*.cameras.json "$CARRY/traces/"
   if [ ! -f "$CARRY/scenes/tumblewood_sh2.compressed.ply" ]; then
-    "$build/render_core/catgs-scene" compact --scene "$data/scenes/tumblewood_sh2.ply" \
+    "$build/bin/catgs-scene" compact --scene "$data/scenes/tumblewood_sh2.ply" \
       --out "$CARRY/scenes/tumblewood_sh2.compressed.ply" --check-views 4 --up 0,-1,0 || return 1
   fi
   cp -rf /usr/include/glm /usr/include/nlohmann /usr/include/stb "$CARRY/deps/include/"
@@ -86,8 +86,8 @@ done
 echo "${out[@]:-}"
 SHIM
   chmod +x "$CARRY/deps/bin/pkg-config"
-  cp -f "$build/render_core/catgs-bench" "$build/render_core/cuda/catgs-gpu-tests" "$CARRY/bin/"
-  cp -f "$build/render_core/catgs-scene" "$CARRY/bin/"
+  cp -f "$build/bin/catgs-bench" "$build/bin/catgs-gpu-tests" "$CARRY/bin/"
+  cp -f "$build/bin/catgs-scene" "$CARRY/bin/"
   mkdir -p "$CARRY/bin/lib"
   cp -fL /usr/lib/x86_64-linux-gnu/libstb.so.0 "$CARRY/bin/lib/"  # the prebuilt tools link it
   strip "$CARRY"/bin/* 2>/dev/null || true
@@ -140,7 +140,7 @@ else
   rc=$?
   echo "== build: rc $rc in $(( $(date +%s) - t0 )) s"
   [ $rc -eq 0 ] || cp "$ROOT/build/gpu.log" "$OUT/build.log"
-  BENCH_EXE=$ROOT/build/gpu/render_core/catgs-bench TEST_EXE=$ROOT/build/gpu/render_core/cuda/catgs-gpu-tests
+  BENCH_EXE=$ROOT/build/gpu/bin/catgs-bench TEST_EXE=$ROOT/build/gpu/bin/catgs-gpu-tests
   if [ $rc -ne 0 ]; then
     export LD_LIBRARY_PATH=$CARRY/bin/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
     tail -40 "$ROOT/build/gpu.log"

@@ -32,7 +32,7 @@ prepare() {
   local build=${1:-build/cuda}
   local carry=$ROOT/.carry_srv
   rm -rf "$carry" && mkdir -p "$carry/stage/bin" "$carry/stage/lib"
-  local bins=("$build/server/catgs-server" "$build/server/catgs-loadgen"
+  local bins=("$build/bin/catgs-server" "$build/bin/catgs-loadgen"
               "$build/tests/unit/catgs_server_unit_tests")
   for b in "${bins[@]}"; do
     [ -x "$b" ] || { echo "prepare: $b missing (build $build with the server)" >&2; return 1; }

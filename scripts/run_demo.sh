@@ -7,5 +7,5 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$root/scripts/install_deps.sh"
 bash "$root/scripts/setup_web.sh"
 bash "$root/scripts/build.sh"
-exec "$root/build/cpu/server/catgs-server" --scene "$root/assets/scenes/biker.compressed.ply" \
+exec "$root/build/cpu/bin/catgs-server" --scene "$root/assets/scenes/biker.compressed.ply" \
   --web-root "$root/web_client" "$@"

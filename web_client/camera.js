@@ -1,6 +1,6 @@
 // Camera maths and the orbit/pan/zoom/fly camera state. Pure (no DOM), so node can unit-test it.
 //
-// Conventions follow the wire protocol and render_core/include/catgs/camera.h: OpenCV camera axes
+// Conventions follow the wire protocol and render_core/camera/camera.h: OpenCV camera axes
 // (x right, y down, z forward); a pose's orientation is the camera-to-world unit quaternion
 // [w, x, y, z]; vectors are plain [x, y, z] arrays.
 

@@ -4,7 +4,7 @@
 
 #include <cuda_runtime.h>
 
-#include "catgs/cuda_renderer.h"
+#include "cuda/cuda_renderer.h"
 
 namespace catgs::cuda::detail {
 

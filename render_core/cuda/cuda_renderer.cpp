@@ -6,7 +6,6 @@
 #include <mutex>
 #include <string>
 
-#include "catgs/cpu_renderer.h"  // validate_camera
 #include "renderer_state.h"
 
 namespace catgs::cuda {
@@ -174,7 +173,7 @@ DeviceFrame CudaRenderer::render_device_at(const Camera& camera, double time_s) 
 }
 
 DeviceFrame CudaRenderer::render_full(const Camera& camera) {
-  cpu::validate_camera(camera);
+  validate_camera(camera);
   State& s = *state_;
   const DeviceScene& scene = *scene_;
   const bool exact = options_.pipeline != Pipeline::vanilla;

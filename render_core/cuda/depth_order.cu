@@ -1,6 +1,6 @@
 // Stage 2a' (optional, CudaRenderer::set_depth_first_sort): the depth-first order of the render
 // list. The list must end up sorted by [tile | depth], ties in Gaussian index order (sort.cu,
-// src/cpu/sort.cpp). Sorting its L entries on 64-bit keys visits 32 + tile bits (6 radix passes at
+// cpu/sort.cpp). Sorting its L entries on 64-bit keys visits 32 + tile bits (6 radix passes at
 // 1080p). Instead the V visible Gaussians are sorted by depth once (32-bit keys, V << L), each
 // Gaussian's slot in the list is handed out in that order, and the L entries are then sorted
 // stably on their tile alone (13 bits at 1080p: 2 passes). A stable sort by tile of a list in

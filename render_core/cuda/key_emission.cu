@@ -1,4 +1,4 @@
-// Stage 2: render-list key emission (mirrors src/cpu/key_emission.cpp). Offsets come from a device
+// Stage 2: render-list key emission (mirrors cpu/key_emission.cpp). Offsets come from a device
 // scan of the per-Gaussian tile counts, so no Gaussian ever touches a shared counter (DESIGN.md:
 // FlashGS's contended global atomicAdd per Gaussian is what slows it on the city). Built with
 // -fmad=false, like pre-processing, so the exact tile test here answers exactly as it did when

@@ -1,4 +1,4 @@
-// Stage 1: per-Gaussian pre-processing (mirrors src/cpu/preprocess.cpp line for line, through the
+// Stage 1: per-Gaussian pre-processing (mirrors cpu/preprocess.cpp line for line, through the
 // shared forward_model.h maths). Built with -fmad=false (CMakeLists.txt) so the arithmetic that
 // decides culling and tile counts rounds as the CPU reference does, and so the tile test gives the
 // same answer here as in key emission.

@@ -1,4 +1,4 @@
-// Stage 5: tile rasterization, front-to-back alpha blending (mirrors src/cpu/rasterize.cpp).
+// Stage 5: tile rasterization, front-to-back alpha blending (mirrors cpu/rasterize.cpp).
 //
 // Design.
 // - One 256-thread block per 16 x 16 tile, blocks taking the tiles heaviest first (tile_order); thread (x, y) of the block owns pixel

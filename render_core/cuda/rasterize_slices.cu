@@ -1,4 +1,4 @@
-// Stage 5 with task splitting (paper sec. 3.4; mirrors src/cpu/rasterize_slices.cpp).
+// Stage 5 with task splitting (paper sec. 3.4; mirrors cpu/rasterize_slices.cpp).
 //
 // Abandoned sub-frames: a sub-frame whose check already found a Gaussian off its trail (the
 // `abandon` flag, set by the features and unlisted kernels queued before) is drawn again as a key

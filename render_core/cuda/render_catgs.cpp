@@ -1,5 +1,5 @@
 // The catgs pipeline on the CUDA core (paper sec. 3; DESIGN.md 1-3): the host side of key frames
-// and sub-frames, mirroring src/cpu/speculative_renderer.cpp, with SpeculationPlanner taking the
+// and sub-frames, mirroring cpu/speculative_renderer.cpp, with SpeculationPlanner taking the
 // same decisions from the same poses.
 //
 // Key frame: M (max_screen_motion, one 4-byte readback) -> W -> speculative pre-processing over
@@ -22,7 +22,6 @@
 // most key frames are such failed sub-frames, and drawing them cost ~1.5 ms on the city).
 #include <cstring>
 
-#include "catgs/cpu_renderer.h"  // validate_camera
 #include "renderer_state.h"
 
 namespace catgs::cuda {
@@ -35,7 +34,7 @@ constexpr int kMotionBits = 0, kOutside = 1, kSliceTotals = 2, kCachedCount = 4;
 }  // namespace
 
 DeviceFrame CudaRenderer::render_catgs(const Camera& camera, double time_s) {
-  cpu::validate_camera(camera);
+  validate_camera(camera);
   State& s = *state_;
   s.syncs = 0;
   const bool candidate = s.planner.observe(camera, time_s);

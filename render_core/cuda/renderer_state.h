@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <string>
 
-#include "catgs/speculation_planner.h"
+#include "speculation/speculation_planner.h"
 #include "cuda_check.h"
 #include "stages.h"
 #include "tunables.h"

@@ -1,4 +1,4 @@
-// Stage 3: sort the render list by [tile | depth] (mirrors src/cpu/sort.cpp). CUB's radix sort is
+// Stage 3: sort the render list by [tile | depth] (mirrors cpu/sort.cpp). CUB's radix sort is
 // stable, so equal keys (one Gaussian cannot repeat a tile; equal depths in one tile can happen)
 // keep emission order, which is Gaussian index order, as the CPU reference's pair sort does.
 // Only 32 + bit_width(tiles) key bits are visited: 45 bits (6 passes of 8) at 1920x1080 instead

@@ -1,5 +1,5 @@
 // catgs key frame, stage 1: pre-processing over the speculation window (paper sec. 3.1; mirrors
-// src/cpu/speculative_preprocess.cpp line for line through forward_model.h), and the planner's M.
+// cpu/speculative_preprocess.cpp line for line through forward_model.h), and the planner's M.
 // Built with FMA contraction, unlike the other stages that decide tile membership
 // (CMakeLists.txt): emission never asks this kernel's tile test again (small trails hand it
 // their answers as bit masks, big ones are counted and emitted by key_emission.cu from the
@@ -16,7 +16,7 @@ namespace catgs::cuda::stages {
 namespace {
 
 // The cheap cull before any 2D covariance (mirrors path_misses_image in
-// src/cpu/speculative_preprocess.cpp): true when Gaussian i, in front of the key camera, lies
+// cpu/speculative_preprocess.cpp): true when Gaussian i, in front of the key camera, lies
 // beyond one same image edge at every camera of the path where it is in front, by more than
 // fm::edges_beyond's bound widened as its trail would be. Its ellipse then reaches no pixel at
 // any sampled pose, nor between them (beyond an edge is a half-plane).

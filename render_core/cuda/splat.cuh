@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "catgs/forward_model.h"
+#include "forward_model/forward_model.h"
 #include "stages.h"
 
 namespace catgs::cuda::stages {

@@ -9,7 +9,7 @@
 #include <cuda_runtime.h>
 #include <glm/glm.hpp>
 
-#include "catgs/speculation.h"
+#include "speculation/speculation_params.h"
 
 namespace catgs::cuda::stages {
 
@@ -116,7 +116,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
 void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect,
                      uint32_t* tiles_touched, unsigned long long* visible, cudaStream_t stream);
 
-// catgs key frame, stage 1 (speculative_preprocess.cu; mirrors src/cpu/speculative_preprocess.cpp):
+// catgs key frame, stage 1 (speculative_preprocess.cu; mirrors cpu/speculative_preprocess.cpp):
 // each Gaussian is projected at every camera of `path`; one visible at the key camera gets the
 // key frame's features, a trail (fm::build_trail, widened by `widening`) and the number of
 // tiles the trail touches. Big trails are counted by count_big_tiles (called here). A Gaussian

@@ -1,7 +1,7 @@
 // catgs sub-frames (paper sec. 3.2): the frustum cache (the Gaussians the key frame listed) and
 // their per-Gaussian features at the sub-frame's own pose, with the check that each on-screen
 // ellipse still lies inside the trail the key frame listed it by (mirrors
-// src/cpu/subframe_features.cpp). Built with -fmad=false: the containment check decides key vs
+// cpu/subframe_features.cpp). Built with -fmad=false: the containment check decides key vs
 // sub-frame, and should decide as the CPU reference does.
 #include <cub/device/device_select.cuh>
 #include <thrust/iterator/counting_iterator.h>

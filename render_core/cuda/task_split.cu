@@ -1,4 +1,4 @@
-// Load-aware task splitting (paper sec. 3.4, supplementary Alg. 1; mirrors src/cpu/task_split.cpp):
+// Load-aware task splitting (paper sec. 3.4, supplementary Alg. 1; mirrors cpu/task_split.cpp):
 // the plan of rasterization tasks, built once per key frame and reused by its sub-frames (the
 // sort cache holds the split tasks too).
 //

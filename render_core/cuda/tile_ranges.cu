@@ -1,5 +1,5 @@
 // Stage 4: per-tile [start, end) ranges of the sorted render list (mirrors
-// src/cpu/tile_ranges.cpp): an entry whose tile differs from its left (right) neighbour starts
+// cpu/tile_ranges.cpp): an entry whose tile differs from its left (right) neighbour starts
 // (ends) that tile's range. Grid-stride, 64-bit indices: the list may pass 2^31 entries (the
 // renderer refuses lists past 2^32 - 1, the limit of the 32-bit ranges).
 #include <cub/device/device_radix_sort.cuh>

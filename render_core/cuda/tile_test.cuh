@@ -8,7 +8,7 @@
 // reads the answers stage 1 kept (Trails::tile_mask).
 #pragma once
 
-#include "catgs/forward_model.h"
+#include "forward_model/forward_model.h"
 #include "stages.h"
 
 namespace catgs::cuda::stages {

@@ -3,7 +3,8 @@
 
 #include <cstdint>
 
-#include "catgs/forward_model.h"
+#include "camera/camera.h"
+#include "forward_model/forward_model.h"
 
 namespace catgs::cuda::tune {
 
@@ -20,7 +21,7 @@ inline constexpr int kEntryThreads = 256;
 inline constexpr unsigned kMaxEntryBlocks = 65535u * 8u;
 
 // Largest image side the renderer accepts (validate_camera) and the tile grid that follows.
-inline constexpr int kMaxImageSide = 8192;
+inline constexpr int kMaxImageSide = catgs::kMaxImageSide;
 inline constexpr int kMaxTilesPerSide = (kMaxImageSide + kTileSize - 1) / kTileSize;
 
 // Render-list keys are [tile id | 32 bits of view depth]; the tile id lives in the upper 32 bits,

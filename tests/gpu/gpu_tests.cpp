@@ -51,13 +51,15 @@
 #include <string>
 #include <vector>
 
-#include "catgs/cpu_renderer.h"
-#include "catgs/cuda_renderer.h"
-#include "catgs/ply_io.h"
-#include "catgs/scene_tiling.h"
-#include "catgs/trace.h"
-#include "catgs/yuv420.h"
-#include "cli_args.h"
+#include "common/image_io.h"
+#include "cpu/cpu_renderer.h"
+#include "cuda/cuda_renderer.h"
+#include "scene/ply_io.h"
+#include "scene/scene_bounds.h"
+#include "scene_tools/city.h"
+#include "camera/trace.h"
+#include "colour/yuv420.h"
+#include "common/cli_args.h"
 
 namespace {
 
@@ -184,7 +186,7 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model,
 
 // ---- catgs ----
 
-// A real camera path moved onto `m` (scene_tiling.h) at 120 FPS, at least `frames` frames.
+// A real camera path moved onto `m` (tools/scene_tools/city.h) at 120 FPS, at least `frames` frames.
 catgs::Trace real_trace(const GaussianModel& m, const std::string& cameras, int w, int h, std::size_t frames) {
   auto keys = catgs::load_inria_cameras(cameras);
   catgs::Trace t = catgs::fit_trace_to_scene(keys, m, {0.0f, -1.0f, 0.0f}, 0.6f, 120.0, 0.5, w, h);

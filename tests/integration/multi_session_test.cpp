@@ -10,7 +10,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "catgs/scene_tiling.h"
+#include "scene/scene_bounds.h"
+#include "scene_tools/city.h"
 #include "server_process.h"
 #include "stream_checks.h"
 

@@ -14,13 +14,13 @@
 #include <mutex>
 #include <thread>
 
-#include "catgs/cpu_renderer.h"
-#include "catgs/ply_io.h"
-#include "catgs/trace.h"
-#include "h264_decoder.h"
+#include "cpu/cpu_renderer.h"
+#include "scene/ply_io.h"
+#include "camera/trace.h"
+#include "loadgen/h264_decoder.h"
 #include "server_process.h"
 #include "stream_checks.h"
-#include "stream_client.h"
+#include "loadgen/stream_client.h"
 
 namespace {
 

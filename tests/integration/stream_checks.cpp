@@ -1,3 +1,4 @@
+#include "common/image_io.h"
 #include "stream_checks.h"
 
 #include <gtest/gtest.h>
@@ -6,7 +7,7 @@
 #include <mutex>
 #include <sstream>
 
-#include "catgs/ply_io.h"
+#include "scene/ply_io.h"
 
 namespace catgs::itest {
 

@@ -8,11 +8,11 @@
 #include <string>
 #include <vector>
 
-#include "catgs/cpu_renderer.h"
-#include "catgs/gaussian_model.h"
-#include "catgs/trace.h"
-#include "h264_decoder.h"
-#include "stream_client.h"
+#include "cpu/cpu_renderer.h"
+#include "scene/gaussian_model.h"
+#include "camera/trace.h"
+#include "loadgen/h264_decoder.h"
+#include "loadgen/stream_client.h"
 
 namespace catgs::itest {
 

@@ -3,9 +3,9 @@
 // reaches it, orders them by (view depth, index) and composites front to back.
 #pragma once
 
-#include "catgs/camera.h"
-#include "catgs/gaussian_model.h"
-#include "catgs/renderer.h"
+#include "camera/camera.h"
+#include "scene/gaussian_model.h"
+#include "renderer/renderer.h"
 
 namespace catgs::test {
 

@@ -4,8 +4,8 @@
 
 #include <gtest/gtest.h>
 
-#include "catgs/camera.h"
-#include "catgs/trace.h"
+#include "camera/camera.h"
+#include "camera/trace.h"
 #include "test_data.h"
 
 namespace catgs {

@@ -6,10 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include "common/image_io.h"
 #include "brute_force_renderer.h"
-#include "catgs/cpu_renderer.h"
-#include "catgs/ply_io.h"
-#include "catgs/trace.h"
+#include "cpu/cpu_renderer.h"
+#include "scene/ply_io.h"
+#include "camera/trace.h"
 #include "test_data.h"
 
 namespace catgs {

@@ -7,9 +7,9 @@
 
 #include <gtest/gtest.h>
 
-#include "catgs/motion_predictor.h"
-#include "catgs/speculation_planner.h"
-#include "catgs/trace.h"
+#include "speculation/motion_predictor.h"
+#include "speculation/speculation_planner.h"
+#include "camera/trace.h"
 #include "test_data.h"
 
 namespace catgs {

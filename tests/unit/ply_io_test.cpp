@@ -8,9 +8,10 @@
 
 #include <gtest/gtest.h>
 
-#include "catgs/ply_io.h"
-#include "catgs/renderer.h"
-#include "catgs/trace.h"
+#include "common/image_io.h"
+#include "scene/ply_io.h"
+#include "renderer/renderer.h"
+#include "camera/trace.h"
 #include "test_data.h"
 
 namespace catgs {

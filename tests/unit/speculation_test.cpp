@@ -6,9 +6,10 @@
 
 #include <gtest/gtest.h>
 
-#include "catgs/cpu_renderer.h"
-#include "catgs/ply_io.h"
-#include "catgs/trace.h"
+#include "common/image_io.h"
+#include "cpu/cpu_renderer.h"
+#include "scene/ply_io.h"
+#include "camera/trace.h"
 #include "test_data.h"
 
 namespace catgs {

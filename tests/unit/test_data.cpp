@@ -4,7 +4,7 @@
 #include <filesystem>
 #include <map>
 
-#include "catgs/ply_io.h"
+#include "scene/ply_io.h"
 
 namespace fs = std::filesystem;
 

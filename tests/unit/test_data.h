@@ -7,7 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include "catgs/gaussian_model.h"
+#include "scene/gaussian_model.h"
 
 namespace catgs::test {
 

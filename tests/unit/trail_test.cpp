@@ -7,9 +7,9 @@
 
 #include <gtest/gtest.h>
 
-#include "catgs/camera.h"
-#include "catgs/cpu_renderer.h"
-#include "catgs/forward_model.h"
+#include "camera/camera.h"
+#include "cpu/cpu_renderer.h"
+#include "forward_model/forward_model.h"
 
 namespace catgs {
 namespace {

@@ -6,13 +6,14 @@
 #include <algorithm>
 #include <stdexcept>
 
-#include "catgs/camera.h"
-#include "catgs/cpu_renderer.h"
-#include "encoder.h"
-#include "h264_decoder.h"
-#include "initial_pose.h"
+#include "common/image_io.h"
+#include "camera/camera.h"
+#include "cpu/cpu_renderer.h"
+#include "encode/encoder.h"
+#include "loadgen/h264_decoder.h"
+#include "session/initial_pose.h"
 #include "test_data.h"
-#include "catgs/yuv420.h"
+#include "colour/yuv420.h"
 
 extern "C" {
 #include <libavutil/log.h>
@@ -29,7 +30,7 @@ using namespace catgs::server;
 // The bundled biker seen from the server's initial pose.
 Image biker_picture(int w, int h) {
   auto model = test::cached_scene(test::bundled_scene());
-  const CameraPose p = initial_pose(robust_bounds(*model), 60.0f, w, h);
+  const CameraPose p = initial_pose(first_view_bounds(*model), 60.0f, w, h);
   Image img;
   cpu::CpuRenderer(model, RenderOptions{}).render(
       Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, w, h), img);
@@ -139,7 +140,7 @@ TEST(Yuv420, PitchedTargetHoldsTheSameCodeValuesAsPacked) {
 // The server's path: the renderer writes the converted frame into the encoder's own planes.
 TEST(Encoder, RenderIntoInputTargetEqualsRenderThenConvert) {
   auto model = test::cached_scene(test::bundled_scene());
-  const CameraPose p = initial_pose(robust_bounds(*model), 60.0f, 128, 96);
+  const CameraPose p = initial_pose(first_view_bounds(*model), 60.0f, 128, 96);
   const Camera cam = Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, 128, 96);
   cpu::CpuRenderer renderer(model, RenderOptions{});
   Image img;

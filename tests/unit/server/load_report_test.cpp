@@ -4,8 +4,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "load_report.h"
-#include "load_session.h"
+#include "loadgen/load_report.h"
+#include "loadgen/load_session.h"
 
 namespace {
 

@@ -1,0 +1,192 @@
+// The CPU reference renderer: the forward model of forward_model.h as five stages, one per file
+// under cpu/, mirroring the CUDA core stage for stage:
+//   preprocess -> emit_keys -> sort_render_list -> identify_tile_ranges -> rasterize
+// Multi-threaded over Gaussians and tiles; deterministic (the same input gives the same bits).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "forward_model/forward_model.h"
+#include "speculation/speculation_planner.h"
+#include "renderer/renderer.h"
+
+namespace catgs::cpu {
+
+// The tile grid of an image: ceil(W / 16) x ceil(H / 16) tiles, row-major tile ids.
+struct TileGrid {
+  int width = 0, height = 0;      // pixels
+  int tiles_x = 0, tiles_y = 0;   // tiles
+  static TileGrid of(int width, int height) {
+    return {width, height, (width + fm::kTileSize - 1) / fm::kTileSize,
+            (height + fm::kTileSize - 1) / fm::kTileSize};
+  }
+  int tile_count() const { return tiles_x * tiles_y; }
+};
+
+// Stage 1 output, one entry per scene Gaussian (N). A Gaussian with tiles_touched == 0 is culled
+// and its other fields are unspecified.
+struct ProjectedGaussians {
+  std::vector<glm::vec2> mean2d;        // [N] pixel units (pixel (i, j) centre at (i, j))
+  std::vector<glm::vec3> conic;         // [N] inverse 2D covariance (A, B, C), 1/px^2
+  std::vector<float> opacity;           // [N] sigmoid(logit), (0, 1)
+  std::vector<float> depth;             // [N] camera-space z, world units
+  std::vector<float> q_max;             // [N] exact pipeline: alpha >= 1/255 iff q <= q_max
+  std::vector<glm::vec3> color;         // [N] RGB from SH (+0.5, >= 0)
+  std::vector<fm::TileRect> tile_rect;  // [N] tiles to test, [x0, x1) x [y0, y1)
+  std::vector<uint32_t> tiles_touched;  // [N] render-list entries this Gaussian emits
+  // catgs key frames: the trail (forward_model.h fm::Trail) the tile test uses, pixel units.
+  std::vector<glm::vec2> trail_mean0;   // [N] projected mean at the key frame
+  std::vector<glm::vec2> trail_motion;  // [N] to the end of the window
+  std::vector<glm::vec3> trail_cov;     // [N] dominating 2D covariance
+  std::vector<glm::vec3> trail_conic;   // [N] its inverse
+  std::vector<float> q_trail;           // [N] level
+  void resize(std::size_t n);
+};
+
+// The render list: (key, value) pairs, key = [tile | depth bits], value = Gaussian index.
+struct RenderList {
+  std::vector<uint64_t> keys;    // [L]
+  std::vector<uint32_t> values;  // [L]
+  std::vector<uint64_t> offsets; // [N] exclusive prefix sum of tiles_touched (emission offsets)
+};
+
+// Tile ranges: [start, end) of each tile's entries in the sorted render list.
+using TileRanges = std::vector<glm::uvec2>;  // [tiles]
+
+// Stage 1 (cpu/preprocess.cpp): frustum culling (z < near), 3D -> 2D covariance (EWA), conic,
+// SH colour, tile bounds and the number of tiles each Gaussian reaches: vanilla counts every tile of
+// its 3-sigma square; exact counts the tiles passing fm::ellipse_touches_tile (opacity-aware).
+void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline,
+                ProjectedGaussians& out);
+
+// catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
+// key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
+// every camera of the path; those visible at the key camera get the key frame's features (as
+// preprocess) and a trail holding their ellipse at each (fm::build_trail, widened by `widening`),
+// and count the tiles their trail touches (fm::trail_touches_tile). Before any 2D covariance, a
+// Gaussian that lies beyond one same image edge at every camera of the path, by more than
+// fm::edges_beyond's bound widened as its trail would be, is culled (touches no tile).
+void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
+                            const TrailWidening& widening, ProjectedGaussians& out);
+
+// catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
+// means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M).
+float max_screen_motion(const GaussianModel& model, const Camera& a, const Camera& b, float min_depth);
+
+// catgs sub-frame (cpu/subframe_features.cpp; paper sec. 3.2): recomputes mean2d, conic,
+// opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there) and
+// checks that each on-screen ellipse reaches only tiles its trail was listed in (fm::trail_contains,
+// else the exact fm::listed_tiles_cover). Returns false when one does not: the frame must be
+// rendered as a key frame.
+// Also false when unlisted_reach_image().
+bool update_subframe_features(const GaussianModel& model, const Camera& camera,
+                              const std::vector<uint32_t>& cached, ProjectedGaussians& projected);
+
+// catgs sub-frame (cpu/subframe_features.cpp): does a Gaussian the key frame did not list
+// (tiles_touched == 0) reach a pixel at `camera` (fm::unlisted_reaches_image)? Such a Gaussian is
+// outside the frustum cache, so the sub-frame would miss it: the frame must be a key frame
+// (DESIGN.md 1: prediction error must never show as holes).
+bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, const ProjectedGaussians& projected);
+
+// Task splitting (cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
+// order, a tile's slices consecutive and in list order. split = false: one slice per tile.
+// min_slice: the slice length's floor (SpeculationParams::min_slice_entries; 0: the paper's l).
+void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
+                 std::vector<TileSlice>& slices, std::size_t min_slice = 0);
+
+// Stage 5 with slices (cpu/rasterize_slices.cpp): each slice blends its entries into a partial
+// colour C_k and transmittance T_k per pixel (early termination within the slice if enabled); the
+// merge composes C = sum_k C_k prod_{m<k} T_m, then adds prod T * background (paper sec. 3.4).
+// With early_termination a pixel's sum ends after the first slice in which it stopped or after
+// which prod T < 1e-4, as the CUDA merge does (its later slices weigh under 1e-4: the paper's
+// higher threshold for later slices). `slices`: [begin, end) runs of `list`, a tile's slices
+// consecutive and in list order (plan_slices); `out` becomes grid.width x grid.height (linear RGB
+// floats and RGBA8); `merge_ms`, if given, receives the merge's wall time in milliseconds.
+void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list,
+                      const std::vector<TileSlice>& slices, const TileGrid& grid,
+                      bool early_termination, glm::vec3 background, Image& out,
+                      double* merge_ms = nullptr);
+
+// Stage 2 (cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
+// its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
+// the trail test, exact the ellipse test, vanilla every tile of the rectangle.
+// Throws std::length_error past 2^32 - 1 entries (values and ranges are 32-bit).
+void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
+               RenderList& list);
+
+// Stage 3 (cpu/sort.cpp): sorts the list by key; equal keys keep emission order (a stable
+// radix sort on the GPU).
+void sort_render_list(RenderList& list);
+
+// Stage 4 (cpu/tile_ranges.cpp): tile ranges of a sorted list; tiles without entries get
+// [0, 0).
+void identify_tile_ranges(const RenderList& list, const TileGrid& grid, TileRanges& ranges);
+
+// Stage 5 (cpu/rasterize.cpp): front-to-back alpha blending per pixel over its tile's range
+// (paper eq. 3): alpha = min(0.99, opacity * exp(power)), skipped below 1/255, a pixel stops
+// before the Gaussian that would take T below 1e-4; C + T * background. Fills out.rgb and
+// out.rgba8 at grid size.
+void rasterize(const ProjectedGaussians& projected, const RenderList& list,
+               const TileRanges& ranges, const TileGrid& grid, glm::vec3 background, Image& out);
+
+// Runs fn(i) for i in [0, n) on all hardware threads, dynamically scheduled in chunks of `grain`.
+void parallel_for(std::size_t n, std::size_t grain, const std::function<void(std::size_t)>& fn);
+
+// The CPU Renderer: the five stages, buffers reused across frames.
+class CpuRenderer final : public Renderer {
+ public:
+  // Throws std::invalid_argument for a null model.
+  CpuRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options);
+  std::string name() const override { return "cpu"; }
+  void render(const Camera& camera, Image& out) override;
+  const FrameStats& last_stats() const override { return stats_; }
+  const RenderOptions& options() const override { return options_; }
+  void set_options(const RenderOptions& options) override;
+
+  // The intermediate state of the last frame (tests and tools).
+  const ProjectedGaussians& projected() const { return projected_; }
+  const RenderList& render_list() const { return list_; }
+  const TileRanges& tile_ranges() const { return ranges_; }
+
+ private:
+  std::shared_ptr<const GaussianModel> model_;
+  RenderOptions options_;
+  ProjectedGaussians projected_;
+  RenderList list_;
+  TileRanges ranges_;
+  FrameStats stats_;
+};
+
+// The catgs pipeline on the CPU: speculative key frames, sub-frames from the frustum and sort
+// caches, task splitting (cpu/speculative_renderer.cpp). Feeds its own motion predictor with
+// the render_at() times; render() advances a clock of 1 / F_target per call.
+class SpeculativeRenderer final : public Renderer {
+ public:
+  SpeculativeRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options);
+  std::string name() const override { return "cpu"; }
+  void render(const Camera& camera, Image& out) override;
+  void render_at(const Camera& camera, double time_s, Image& out) override;
+  const FrameStats& last_stats() const override { return stats_; }
+  const RenderOptions& options() const override { return options_; }
+  void set_options(const RenderOptions& options) override;
+
+ private:
+  void key_frame(const Camera& camera);
+
+  std::shared_ptr<const GaussianModel> model_;
+  RenderOptions options_;
+  SpeculationPlanner planner_;
+  ProjectedGaussians projected_;
+  RenderList list_;
+  TileRanges ranges_;
+  std::vector<TileSlice> slices_;
+  std::vector<uint32_t> cached_;  // frustum cache: Gaussians with list entries
+  FrameStats stats_;
+};
+
+}  // namespace catgs::cpu

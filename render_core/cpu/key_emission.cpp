@@ -1,0 +1,50 @@
+// Stage 2: render-list key emission (mirrors the CUDA scan + emit kernels).
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "cpu/cpu_renderer.h"
+
+namespace catgs::cpu {
+
+void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
+               RenderList& list) {
+  const std::size_t n = projected.tiles_touched.size();
+  list.offsets.resize(n);
+  uint64_t total = 0;
+  for (std::size_t i = 0; i < n; ++i) {  // exclusive scan
+    list.offsets[i] = total;
+    total += projected.tiles_touched[i];
+  }
+  if (total > std::numeric_limits<uint32_t>::max())
+    throw std::length_error("render list of " + std::to_string(total) +
+                            " entries exceeds the 32-bit range of tile ranges");
+  list.keys.resize(total);
+  list.values.resize(total);
+  const bool exact = pipeline == Pipeline::exact, trail = pipeline == Pipeline::catgs;
+
+  parallel_for(n, 4096, [&](std::size_t i) {
+    if (projected.tiles_touched[i] == 0) return;
+    const fm::TileRect r = projected.tile_rect[i];
+    const fm::TrailTileTest trail_test =
+        trail ? fm::make_trail_tile_test(projected.trail_mean0[i], projected.trail_motion[i],
+                                         projected.trail_conic[i], projected.q_trail[i])
+              : fm::TrailTileTest{};
+    uint64_t at = list.offsets[i];
+    for (int ty = r.y0; ty < r.y1; ++ty) {
+      for (int tx = r.x0; tx < r.x1; ++tx) {
+        if (exact && !fm::ellipse_touches_tile(projected.mean2d[i], projected.conic[i],
+                                               projected.q_max[i], tx, ty, grid.width,
+                                               grid.height))
+          continue;
+        if (trail && !fm::trail_touches_tile(trail_test, tx, ty, grid.width, grid.height)) continue;
+        const auto tile = static_cast<uint32_t>(ty * grid.tiles_x + tx);
+        list.keys[at] = fm::render_key(tile, projected.depth[i]);
+        list.values[at] = static_cast<uint32_t>(i);
+        ++at;
+      }
+    }
+  });
+}
+
+}  // namespace catgs::cpu

@@ -1,0 +1,98 @@
+// Stage 1: per-Gaussian pre-processing (mirrors the CUDA preprocess kernel).
+#include <cmath>
+
+#include "cpu/cpu_renderer.h"
+
+namespace catgs::cpu {
+
+void ProjectedGaussians::resize(std::size_t n) {
+  mean2d.resize(n);
+  conic.resize(n);
+  opacity.resize(n);
+  depth.resize(n);
+  q_max.resize(n);
+  color.resize(n);
+  tile_rect.resize(n);
+  tiles_touched.resize(n);
+  trail_mean0.resize(n);
+  trail_motion.resize(n);
+  trail_cov.resize(n);
+  trail_conic.resize(n);
+  q_trail.resize(n);
+}
+
+namespace {
+
+// Counts the tiles of `rect` that the opacity-aware ellipse reaches (exact pipeline).
+uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max,
+                           int width, int height) {
+  uint32_t n = 0;
+  for (int ty = rect.y0; ty < rect.y1; ++ty)
+    for (int tx = rect.x0; tx < rect.x1; ++tx)
+      n += fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) ? 1u : 0u;
+  return n;
+}
+
+}  // namespace
+
+void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline,
+                ProjectedGaussians& out) {
+  const std::size_t n = model.size();
+  out.resize(n);
+  const TileGrid grid = TileGrid::of(camera.width, camera.height);
+  const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
+                               static_cast<float>(camera.height) / (2.0f * camera.fy));
+  const glm::vec3 cam_pos = camera.position();
+  const int K = model.sh_coeffs();
+  const bool exact = pipeline != Pipeline::vanilla;
+
+  parallel_for(n, 4096, [&](std::size_t i) {
+    out.tiles_touched[i] = 0;
+    const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
+    const glm::vec3 p_cam = camera.R * mean + camera.t;
+    if (!(p_cam.z > camera.near_plane) || p_cam.z > camera.far_plane) return;  // frustum (near/far)
+
+    const float opacity = fm::sigmoid(model.opacity_logits[i]);
+    // alpha >= 1/255 only where q <= q_max; the rasterizer visits only those pixels (all
+    // pipelines). exact also drops a Gaussian that can never reach 1/255.
+    const float q_max = fm::opacity_aware_qmax(opacity);
+    if (exact && !(q_max > 0.0f)) return;
+
+    const fm::Cov3 cov3 = fm::covariance_3d(
+        {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
+        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2],
+         model.rotations[4 * i + 3]});
+    const glm::vec3 cov2 =
+        fm::covariance_2d(cov3, camera.R, p_cam, camera.fx, camera.fy, tan_half_fov);
+    glm::vec3 conic;
+    if (!fm::conic_from_cov2d(cov2, &conic)) return;
+
+    const glm::vec2 mean2d(camera.fx * p_cam.x / p_cam.z + camera.cx - 0.5f,
+                           camera.fy * p_cam.y / p_cam.z + camera.cy - 0.5f);
+    fm::TileRect rect;
+    uint32_t touched;
+    if (exact) {
+      rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height);
+      touched = fm::tile_count(rect) == 0
+                    ? 0u
+                    : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height);
+    } else {
+      const float radius = fm::three_sigma_radius(cov2);
+      rect = fm::square_tile_rect(mean2d, radius, grid.tiles_x, grid.tiles_y);
+      touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
+    }
+    if (touched == 0) return;
+
+    const glm::vec3 dir = glm::normalize(mean - cam_pos);
+    out.mean2d[i] = mean2d;
+    out.conic[i] = conic;
+    out.opacity[i] = opacity;
+    out.depth[i] = p_cam.z;
+    out.q_max[i] = q_max;
+    out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i], dir);
+    out.tile_rect[i] = rect;
+    out.tiles_touched[i] = touched;
+  });
+}
+
+}  // namespace catgs::cpu

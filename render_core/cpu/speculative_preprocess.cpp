@@ -1,0 +1,151 @@
+// catgs key frame, stage 1: pre-processing over the speculation window (paper sec. 3.1). Mirrors
+// preprocess.cpp, projecting each Gaussian at every camera of the predicted path and testing
+// tiles against its trail instead of its ellipse.
+#include <cmath>
+
+#include "cpu/cpu_renderer.h"
+
+namespace catgs::cpu {
+
+namespace {
+
+constexpr int kMaxPath = 33;  // key frame + up to 32 sub-frames
+
+struct CameraTerms {
+  glm::vec2 tan_half_fov;
+  glm::vec3 position;
+};
+
+// The cheap cull before any 2D covariance (mirrors path_misses_image in
+// cuda/speculative_preprocess.cu): true when Gaussian i, in front of the key camera, lies beyond
+// one same image edge at every camera of the path where it is in front, by more than
+// fm::edges_beyond's bound widened as its trail would be ((1 + slack) times, + margin_px, +
+// motion_margin times its centre's motion over the path). Its ellipse then reaches no pixel at
+// any sampled pose, nor between them (the region beyond an edge is a half-plane). A Gaussian
+// behind the key camera is not culled here (the caller drops it after projecting).
+bool path_misses_image(const GaussianModel& model, std::size_t i, glm::vec3 mean, float q_max,
+                       const std::vector<Camera>& path, const std::vector<CameraTerms>& terms,
+                       const TrailWidening& widening) {
+  const Camera& key = path.front();
+  const glm::vec3 p0 = key.R * mean + key.t;
+  if (!(p0.z > key.near_plane) || p0.z > key.far_plane) return false;
+  const Camera& last = path.back();
+  const glm::vec3 pw = last.R * mean + last.t;
+  float extra = widening.margin_px + 1.0f;
+  if (pw.z > last.near_plane && pw.z <= last.far_plane) {
+    const glm::vec2 u0(key.fx * p0.x / p0.z, key.fy * p0.y / p0.z);
+    const glm::vec2 uw(last.fx * pw.x / pw.z + last.cx - key.cx, last.fy * pw.y / pw.z + last.cy - key.cy);
+    extra += widening.motion_margin * glm::length(uw - u0);
+  }
+  const float max_scale = fm::max_scale_of(&model.log_scales[3 * i]);
+  unsigned beyond = 0xfu;
+  for (std::size_t k = 0; k < path.size() && beyond != 0u; ++k) {
+    const Camera& c = path[k];
+    const glm::vec3 p = c.R * mean + c.t;
+    if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
+    beyond &= fm::edges_beyond(p, max_scale, q_max, c.fx, c.fy, c.cx, c.cy, terms[k].tan_half_fov, c.width,
+                               c.height, 1.0f + widening.slack, extra);
+  }
+  return beyond != 0u;
+}
+
+}  // namespace
+
+float max_screen_motion(const GaussianModel& model, const Camera& a, const Camera& b, float min_depth) {
+  const std::size_t n = model.size();
+  std::vector<float> per_chunk((n + 4095) / 4096, 0.0f);
+  parallel_for(per_chunk.size(), 1, [&](std::size_t c) {
+    float m = 0.0f;
+    for (std::size_t i = c * 4096; i < std::min(n, (c + 1) * 4096); ++i) {
+      const glm::vec3 x(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
+      const glm::vec3 pa = a.R * x + a.t, pb = b.R * x + b.t;
+      if (!(pa.z > min_depth) || !(pb.z > a.near_plane)) continue;
+      const glm::vec2 ua(a.fx * pa.x / pa.z + a.cx, a.fy * pa.y / pa.z + a.cy);
+      if (ua.x < 0 || ua.y < 0 || ua.x > static_cast<float>(a.width) || ua.y > static_cast<float>(a.height)) continue;
+      const glm::vec2 ub(b.fx * pb.x / pb.z + b.cx, b.fy * pb.y / pb.z + b.cy);
+      m = std::max(m, glm::length(ub - ua));
+    }
+    per_chunk[c] = m;
+  });
+  float m = 0.0f;
+  for (float v : per_chunk) m = std::max(m, v);
+  return m;
+}
+
+void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
+                            const TrailWidening& widening, ProjectedGaussians& out) {
+  if (path.empty() || path.size() > static_cast<std::size_t>(kMaxPath))
+    throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPath) + " cameras");
+  const std::size_t n = model.size();
+  out.resize(n);
+  const Camera& key = path.front();
+  const int K = model.sh_coeffs();
+  std::vector<CameraTerms> terms(path.size());
+  for (std::size_t k = 0; k < path.size(); ++k)
+    terms[k] = {{static_cast<float>(path[k].width) / (2.0f * path[k].fx),
+                 static_cast<float>(path[k].height) / (2.0f * path[k].fy)},
+                path[k].position()};
+
+  parallel_for(n, 4096, [&](std::size_t i) {
+    out.tiles_touched[i] = 0;
+    const float opacity = fm::sigmoid(model.opacity_logits[i]);
+    const float q_max = fm::opacity_aware_qmax(opacity);
+    if (!(q_max > 0.0f)) return;
+    const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
+    if (path_misses_image(model, i, mean, q_max, path, terms, widening)) return;
+    const fm::Cov3 cov3 = fm::covariance_3d(
+        {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
+        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2],
+         model.rotations[4 * i + 3]});
+    glm::vec2 means[kMaxPath];
+    glm::vec3 covs[kMaxPath];
+    int visible = 0;
+    bool key_visible = false;
+    for (std::size_t k = 0; k < path.size(); ++k) {
+      const Camera& c = path[k];
+      const glm::vec3 p = c.R * mean + c.t;
+      if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
+      const glm::vec3 cov2 = fm::covariance_2d(cov3, c.R, p, c.fx, c.fy, terms[k].tan_half_fov);
+      if (cov2.x * cov2.z - cov2.y * cov2.y <= 0.0f) continue;
+      means[visible] = {c.fx * p.x / p.z + c.cx - 0.5f, c.fy * p.y / p.z + c.cy - 0.5f};
+      covs[visible] = cov2;
+      if (k == 0) {
+        key_visible = true;
+        out.depth[i] = p.z;
+      }
+      ++visible;
+    }
+    // The key frame's depth orders the cached list, so a Gaussian behind the key camera is left
+    // out even if a predicted pose would see it. Known gap: such a Gaussian (or one outside every
+    // predicted frustum) that a sub-frame needs is not checked there; only cached Gaussians are,
+    // and a prediction error large enough to matter makes cached ones leave their trails too.
+    if (!key_visible) return;
+    const fm::Trail trail =
+        fm::build_trail(means, covs, visible, q_max, widening.slack, widening.margin_px, widening.motion_margin);
+    glm::vec3 conic, trail_conic;
+    if (!fm::conic_from_cov2d(covs[0], &conic) || !fm::conic_from_cov2d(trail.cov, &trail_conic)) return;
+    const fm::TileRect rect = fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail,
+                                                  key.width, key.height);
+    const fm::TrailTileTest trail_test = fm::make_trail_tile_test(trail.mean0, trail.motion, trail_conic, trail.q_trail);
+    uint32_t touched = 0;
+    for (int ty = rect.y0; ty < rect.y1; ++ty)
+      for (int tx = rect.x0; tx < rect.x1; ++tx)
+        touched += fm::trail_touches_tile(trail_test, tx, ty, key.width, key.height) ? 1u : 0u;
+    if (touched == 0) return;
+    out.mean2d[i] = means[0];
+    out.conic[i] = conic;
+    out.opacity[i] = opacity;
+    out.q_max[i] = q_max;
+    out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i],
+                                   glm::normalize(mean - terms[0].position));
+    out.tile_rect[i] = rect;
+    out.tiles_touched[i] = touched;
+    out.trail_mean0[i] = trail.mean0;
+    out.trail_motion[i] = trail.motion;
+    out.trail_cov[i] = trail.cov;
+    out.trail_conic[i] = trail_conic;
+    out.q_trail[i] = trail.q_trail;
+  });
+}
+
+}  // namespace catgs::cpu

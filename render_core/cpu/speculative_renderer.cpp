@@ -1,0 +1,104 @@
+// The catgs pipeline on the CPU (paper sec. 3; DESIGN.md 1-3): key frames pre-process a whole
+// speculation window once (trails, frustum cache, sorted list, tile ranges, slices); sub-frames
+// recompute only per-Gaussian features of the cached set at their own pose and rasterize from the
+// key frame's list. A sub-frame whose Gaussians leave their trails becomes a key frame.
+#include <chrono>
+
+#include "cpu/cpu_renderer.h"
+
+namespace catgs::cpu {
+
+namespace {
+
+using clock = std::chrono::steady_clock;
+double ms_between(clock::time_point a, clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+}  // namespace
+
+SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model,
+                                         const RenderOptions& options)
+    : model_(std::move(model)) {
+  if (!model_) throw std::invalid_argument("SpeculativeRenderer: null model");
+  set_options(options);
+}
+
+void SpeculativeRenderer::set_options(const RenderOptions& options) {
+  if (options.pipeline != Pipeline::catgs)
+    throw std::invalid_argument("SpeculativeRenderer runs the catgs pipeline only");
+  planner_.set_params(options.speculation);
+  options_ = options;
+}
+
+void SpeculativeRenderer::render(const Camera& camera, Image& out) {
+  render_at(camera, planner_.advance_clock(), out);
+}
+
+void SpeculativeRenderer::key_frame(const Camera& camera) {
+  const SpeculationParams& sp = options_.speculation;
+  const auto t0 = clock::now();
+  // Plan the window from the predicted path (never from future input): M over one frame, W.
+  const int window = planner_.window_wanted()
+                         ? planner_.window_for(max_screen_motion(*model_, camera, planner_.next_camera(camera),
+                                                                 sp.depth_threshold))
+                         : 0;
+  // Without a window the frame is rendered in full by the exact pipeline's stages (its list is
+  // the one-pose trail's, built without the trail machinery); it opens no group.
+  const Pipeline stages = window > 0 ? Pipeline::catgs : Pipeline::exact;
+  if (window > 0)
+    speculative_preprocess(*model_, planner_.path(camera, window), trail_widening(sp, window), projected_);
+  else
+    preprocess(*model_, camera, Pipeline::exact, projected_);
+  const auto t1 = clock::now();
+  const TileGrid grid = TileGrid::of(camera.width, camera.height);
+  emit_keys(projected_, grid, stages, list_);
+  const auto t2 = clock::now();
+  sort_render_list(list_);
+  const auto t3 = clock::now();
+  identify_tile_ranges(list_, grid, ranges_);
+  plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_,
+              static_cast<std::size_t>(sp.min_slice_entries));
+  const auto t4 = clock::now();
+  cached_.clear();
+  for (std::size_t i = 0; i < projected_.tiles_touched.size(); ++i)
+    if (projected_.tiles_touched[i] > 0) cached_.push_back(static_cast<uint32_t>(i));
+  planner_.start_group(camera, window);
+  stats_.key_frame = true;
+  stats_.preprocess_ms = ms_between(t0, t1);
+  stats_.keys_ms = ms_between(t1, t2);
+  stats_.sort_ms = ms_between(t2, t3);
+  stats_.ranges_ms = ms_between(t3, t4);
+}
+
+void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& out) {
+  validate_camera(camera);
+  const auto start = clock::now();
+  stats_ = {};
+  const bool candidate = planner_.observe(camera, time_s);
+  bool sub = candidate;
+  if (candidate) {
+    const auto t0 = clock::now();
+    sub = update_subframe_features(*model_, camera, cached_, projected_);
+    stats_.preprocess_ms = ms_between(t0, clock::now());
+  }
+  if (sub) {
+    planner_.subframe_served();
+    stats_.key_frame = false;
+  } else {
+    key_frame(camera);
+    stats_.subframe_rejected = candidate;
+  }
+  const auto t5 = clock::now();
+  rasterize_slices(projected_, list_, slices_, TileGrid::of(camera.width, camera.height),
+                   options_.speculation.early_termination, options_.background, out, &stats_.merge_ms);
+  stats_.rasterize_ms = ms_between(t5, clock::now()) - stats_.merge_ms;
+  stats_.window = planner_.window();
+  stats_.cached = cached_.size();
+  stats_.visible = cached_.size();
+  stats_.render_list_length = list_.keys.size();
+  stats_.slices = slices_.size();
+  stats_.total_ms = ms_between(start, clock::now());
+}
+
+}  // namespace catgs::cpu

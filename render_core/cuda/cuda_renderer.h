@@ -1,0 +1,203 @@
+// The CUDA render core (DESIGN.md "Render core"): the CPU reference's stages on the GPU
+// (render_core/cuda/, one .cu per stage), the vanilla, exact and catgs pipelines chosen at run time.
+//
+// catgs (paper sec. 3; DESIGN.md 1-3; render_core/cuda/render_catgs.cpp): the same decisions as
+// the CPU reference's cpu::SpeculativeRenderer (both use SpeculationPlanner). A key frame measures
+// M (one 4-byte readback), pre-processes the speculation window (trails), emits, sorts, ranges,
+// selects the frustum cache and plans the split tasks (the counts readback below); a sub-frame
+// recomputes the cached Gaussians' features at its pose and rasterizes the key frame's slices,
+// then reads back one flag: if an on-screen Gaussian left its trail, the frame is rendered again
+// as a key frame. Syncs: key frame 2 (1 without a window), sub-frame 1.
+//
+// Ownership: a DeviceScene holds one copy of a GaussianModel in device memory and is shared,
+// read-only, by any number of CudaRenderers (shared_ptr<const DeviceScene>). Each CudaRenderer
+// owns a CUDA stream and reusable device buffers that grow when a frame needs more (by 1.25x) and
+// are never freed between frames: a steady trace allocates nothing.
+//
+// Host-device synchronisation per frame (vanilla, exact): ONE, in render_device(): after the scan of per-Gaussian
+// tile counts, 16 bytes (render list length, visible count) come back to the host, because CUB's
+// radix sort takes its item count from the host and the list buffers may have to grow first.
+// render(camera, Image&) adds a second one, the download of the image to host memory.
+// last_stats() waits for the frame's last event (the caller chooses to pay for timing).
+//
+// Errors: every CUDA call and launch is checked; failures throw CudaError naming the call, the
+// source line and the CUDA error. A render list past 2^32 - 1 entries (32-bit tile ranges and
+// Gaussian indices) throws std::length_error before any allocation; a scene past 2^32 - 1
+// Gaussians throws std::length_error at upload; running out of device memory throws CudaError
+// from the cudaMalloc that failed, with the byte count in its message.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+#include "renderer/renderer.h"
+
+struct CUstream_st;  // cudaStream_t without the CUDA headers
+
+namespace catgs::cuda {
+
+// A failed CUDA call: what() = "<call> failed at <file>:<line>: <cudaErrorName> (<code>): <text>".
+class CudaError : public std::runtime_error {
+ public:
+  CudaError(const std::string& what, int code) : std::runtime_error(what), code_(code) {}
+  int code() const { return code_; }  // the cudaError_t value
+
+ private:
+  int code_;
+};
+
+// True when a CUDA device of compute capability >= 7.0 can be used; `reason` receives the device
+// name and capability, or why not (no driver, no device, ...). Never throws.
+bool device_usable(std::string* reason);
+
+// Name, multiprocessor count and memory of the current device ("NVIDIA H100 80GB HBM3, 132 SMs,
+// 79.1 GiB"). Throws CudaError.
+std::string device_description();
+
+// Device memory in use on the current device (total - free), bytes. Throws CudaError.
+std::size_t device_memory_used();
+
+// One copy of a scene in device memory (layouts as GaussianModel). Immutable after upload.
+class DeviceScene {
+ public:
+  // Uploads `model` (validated shapes). Throws std::length_error past 2^32 - 1 Gaussians,
+  // std::invalid_argument for inconsistent arrays, CudaError when device memory runs out.
+  static std::shared_ptr<const DeviceScene> upload(const GaussianModel& model);
+  ~DeviceScene();
+  DeviceScene(const DeviceScene&) = delete;
+  DeviceScene& operator=(const DeviceScene&) = delete;
+
+  const std::string& name() const { return name_; }
+  std::size_t size() const { return n_; }
+  int sh_degree() const { return sh_degree_; }
+  std::size_t bytes() const { return bytes_; }  // device memory held
+  // Device pointers: means [N, 3], log_scales [N, 3], rotations [N, 4], opacity_logits [N],
+  // sh [N, K, 3].
+  const float* means() const { return means_; }
+  const float* log_scales() const { return log_scales_; }
+  const float* rotations() const { return rotations_; }
+  const float* opacity_logits() const { return opacity_logits_; }
+  const float* sh() const { return sh_; }
+
+ private:
+  DeviceScene() = default;
+  std::string name_;
+  std::size_t n_ = 0, bytes_ = 0;
+  int sh_degree_ = 0;
+  float* means_ = nullptr;
+  float* log_scales_ = nullptr;
+  float* rotations_ = nullptr;
+  float* opacity_logits_ = nullptr;
+  float* sh_ = nullptr;
+};
+
+// A rendered frame in device memory, valid until the renderer's next frame; ready once `stream`
+// has reached the end of the frame (work queued on `stream` after render_device() sees it).
+struct DeviceFrame {
+  int width = 0, height = 0;
+  const float* rgb = nullptr;        // [H, W, 3] unclamped composited colour
+  const uint32_t* rgba8 = nullptr;   // [H, W] R | G << 8 | B << 16 | 255 << 24
+  CUstream_st* stream = nullptr;
+};
+
+class CudaRenderer final : public Renderer {
+ public:
+  // Throws std::invalid_argument for a null scene or bad speculation parameters (window outside
+  // 0..32, non-positive F_target), CudaError when the stream or events cannot be created.
+  CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options);
+  ~CudaRenderer() override;
+
+  std::string name() const override { return "cuda"; }
+  // render_device() then a download into `out` (rgb and rgba8, as the CPU renderer fills them).
+  void render(const Camera& camera, Image& out) override;
+  // render_device_at() then a download into `out`.
+  void render_at(const Camera& camera, double time_s, Image& out) override;
+  // render_device_at(), then the GPU colour conversion (yuv420_convert.cu) into `out`: a device
+  // target (current device, primary context) is written in place; for a host target the planes
+  // are converted into a device buffer and copied back (w * h * 1.5 bytes). Ends with a stream
+  // sync, so the planes are complete on return. Returns the conversion kernel's time (events).
+  // Throws std::invalid_argument for a bad target; CudaError as render_device().
+  double render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override;
+  // Renders `camera` into this renderer's device image; one host-device sync (see above).
+  // Throws std::invalid_argument for a bad camera, std::length_error for an oversized render
+  // list, CudaError for CUDA failures.
+  // catgs: the renderer's own clock advances 1 / F_target a call (as render_device_at()).
+  DeviceFrame render_device(const Camera& camera);
+  // As render_device(), for a camera the client posed at `time_s` (seconds, client clock): the
+  // catgs pipeline feeds its motion predictor with it; vanilla and exact ignore it.
+  DeviceFrame render_device_at(const Camera& camera, double time_s);
+  // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).
+  const FrameStats& last_stats() const override;
+  const RenderOptions& options() const override { return options_; }
+  void set_options(const RenderOptions& options) override;
+  // Switches to another scene; buffers are kept and grow if it needs more.
+  void set_scene(std::shared_ptr<const DeviceScene> scene);
+  const std::shared_ptr<const DeviceScene>& scene() const { return scene_; }
+
+  CUstream_st* stream() const;
+  // Bytes of device memory this renderer's reusable buffers hold now, and the most they held.
+  std::size_t buffer_bytes() const;
+  std::size_t peak_buffer_bytes() const;
+  // Number of buffer (re)allocations since construction (a steady trace should add none).
+  std::size_t allocation_count() const;
+  // Host-device synchronisations inside the last render_device() (see above).
+  int syncs_last_frame() const;
+  // Entries of the last frame's heaviest tile (catgs: heaviest slice of the group's key frame;
+  // waits for the frame; a diagnostic copy of 4 bytes outside the frame). One block walks that
+  // tile alone, so it bounds the rasterization time.
+  std::size_t heaviest_tile_entries() const;
+  // exact pipeline: let each warp of the rasterizer skip entries outside the vertical extent of
+  // the Gaussian's ellipse (same image, bit for bit). Off by default: measured no faster.
+  void set_warp_culling(bool on) { warp_culling_ = on; }
+  bool warp_culling() const { return warp_culling_; }
+  // catgs pipeline: let the rasterizer drop, each round of 256 list entries, those whose ellipse
+  // does not reach the tile at this frame's pose (a key frame's trail list holds entries for the
+  // whole window). Same image, bit for bit. On by default; off only to measure what it saves.
+  void set_tile_culling(bool on) { tile_culling_ = on; }
+  bool tile_culling() const { return tile_culling_; }
+  // exact and catgs pipelines: sort the render list depth first (the visible Gaussians by depth,
+  // then the entries stably by tile alone; cuda/depth_order.cu) instead of in one radix sort of
+  // [tile | depth] keys. The same list, entry for entry, and the same image; 2 radix passes over
+  // the list instead of 6 at 1080p, for a sort of the visible Gaussians and a gather in
+  // emission. Unless set, it follows the pipeline (also after set_options): on for catgs, whose
+  // key-frame trail lists are long (H100, city bicycle path: key frames 6.60 -> 5.36 ms), off for
+  // exact, whose lists are short (there it was up to 3% slower; tests/gpu/RESULTS.md). vanilla
+  // always sorts the reference way, and so do catgs key frames without a window (W = 0), whose
+  // lists are exact's. depth_first_sort(): the choice in effect now.
+  void set_depth_first_sort(bool on) { depth_first_sort_ = on; }
+  bool depth_first_sort() const { return depth_first_sort_.value_or(options_.pipeline == Pipeline::catgs); }
+
+ private:
+  struct State;
+  DeviceFrame render_full(const Camera& camera);                 // vanilla, exact
+  DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
+  void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
+  bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp
+  // render_catgs.cpp; abandon: device flag, draw nothing when it is set (or null); trail_list:
+  // the list is a key frame's trail list (tile-culled per pose), not an exact one.
+  void catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon, bool trail_list);
+  void download(const DeviceFrame& frame, Image& out);
+  std::shared_ptr<const DeviceScene> scene_;
+  RenderOptions options_;
+  std::unique_ptr<State> state_;
+  mutable FrameStats stats_;
+  mutable bool stats_ready_ = true;
+  bool warp_culling_ = false;
+  bool tile_culling_ = true;
+  std::optional<bool> depth_first_sort_;  // unset: by pipeline (depth_first_sort())
+};
+
+// The DeviceScene of `model`: uploaded on the first call, then the same one for as long as any
+// renderer holds it (a process-wide cache keyed by the model's address, thread-safe), so many
+// sessions over one scene share one copy on the GPU. Throws as DeviceScene::upload.
+std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model);
+
+// A CudaRenderer over shared_device_scene(model) (renderer_factory.cpp).
+std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model,
+                                             const RenderOptions& options);
+
+}  // namespace catgs::cuda

@@ -1,0 +1,103 @@
+// The render-core interface the server and tools use; implemented by the CPU reference
+// (cpu_renderer.h) and the CUDA core.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "camera/camera.h"
+#include "scene/gaussian_model.h"
+#include "speculation/speculation_params.h"
+#include "colour/yuv420.h"
+
+namespace catgs {
+
+// vanilla: reference 3DGS (3-sigma square bounds, every touched tile).
+// exact:   opacity-aware extent + exact ellipse-vs-tile test (render list = tiles really reached).
+// catgs:   exact + speculation, frustum/sort caches, task splitting (paper sec. 3).
+enum class Pipeline { vanilla, exact, catgs };
+
+// "vanilla" | "exact" | "catgs" -> Pipeline; throws std::invalid_argument otherwise.
+Pipeline parse_pipeline(const std::string& name);
+const char* pipeline_name(Pipeline pipeline);
+
+struct RenderOptions {
+  Pipeline pipeline = Pipeline::exact;
+  glm::vec3 background{0.0f};  // linear RGB in [0, 1], composited behind the Gaussians
+  SpeculationParams speculation;  // catgs only
+};
+
+// An image in host memory, row-major, top row first.
+struct Image {
+  int width = 0, height = 0;
+  std::vector<float> rgb;      // [H, W, 3], unclamped composited colour
+  std::vector<uint8_t> rgba8;  // [H, W, 4], clamp([0,1]) * 255 rounded, alpha 255
+};
+
+// Converts a float colour to 8 bits as the forward model says: clamp to [0, 1], * 255, round.
+inline uint8_t to_unorm8(float v) {
+  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+  return static_cast<uint8_t>(v * 255.0f + 0.5f);
+}
+
+// Per-frame counters and stage times (milliseconds, wall clock on CPU, CUDA events on GPU).
+struct FrameStats {
+  std::size_t visible = 0;             // Gaussians that passed culling
+  std::size_t render_list_length = 0;  // Gaussian-tile pairs (keys) rasterized
+  double preprocess_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, rasterize_ms = 0;
+  double merge_ms = 0;  // catgs with task splitting: composing the slices
+  double total_ms = 0;
+  // catgs pipeline (speculation, paper sec. 3.1-3.4); vanilla/exact frames are all key frames.
+  bool key_frame = true;       // false: a sub-frame served from the frustum and sort caches
+  int window = 0;              // W of the current group (0: no speculation)
+  // A key frame first tried as a sub-frame of the open group: some on-screen Gaussian had left
+  // its trail (the prediction missed), so the frame was drawn again as a key frame.
+  bool subframe_rejected = false;
+  std::size_t cached = 0;      // Gaussians in the frustum cache
+  std::size_t slices = 0;      // rasterization tasks after task splitting (tiles when unsplit)
+};
+
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+  // "cpu" or "cuda".
+  virtual std::string name() const = 0;
+  // Renders `camera` (its width x height) into `out`, reusing out's storage. Throws
+  // std::invalid_argument for a camera with a non-positive or > 8192 size or non-finite values.
+  virtual void render(const Camera& camera, Image& out) = 0;
+  // Renders a camera the client posed at `time_s` (seconds, client clock). The catgs pipeline
+  // feeds its motion predictor with it; the others ignore the time.
+  virtual void render_at(const Camera& camera, double time_s, Image& out) {
+    (void)time_s;
+    render(camera, out);
+  }
+  // Renders a camera posed at `time_s` (as render_at()) and writes the frame as BT.709
+  // limited-range I420 (yuv420.h) into `out`, whose size must be the camera's. Returns the
+  // milliseconds spent on the colour conversion (wall clock on the CPU, CUDA events on the GPU).
+  // This default renders into host memory and converts on the CPU (rgba_to_yuv420_bt709) into a
+  // host target. The CUDA core overrides it: the frame is converted on the GPU, a host target
+  // receives only the planes (1.5 bytes a pixel), a device target is written in place (the
+  // NVENC hw frame path). Throws std::invalid_argument for a target of another size or with bad
+  // planes, or a device target on a renderer that has no device; render errors as render().
+  virtual double render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out);
+  // Stats of the last render().
+  virtual const FrameStats& last_stats() const = 0;
+  virtual const RenderOptions& options() const = 0;
+  virtual void set_options(const RenderOptions& options) = 0;
+
+ private:
+  Image yuv_source_;  // the default render_yuv420_at()'s host frame, reused between frames
+};
+
+// Creates a renderer by name: "cpu", "cuda" or "auto" (CUDA if built and a device is usable, else
+// CPU; `why` receives a one-line reason). The model must outlive the renderer.
+// Throws std::runtime_error when "cuda" is asked for and unavailable.
+std::unique_ptr<Renderer> make_renderer(const std::string& kind,
+                                        std::shared_ptr<const GaussianModel> model,
+                                        const RenderOptions& options, std::string* why = nullptr);
+
+}  // namespace catgs

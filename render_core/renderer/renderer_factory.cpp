@@ -1,0 +1,58 @@
+// Renderer selection by name ("cpu", "cuda", "auto").
+#include <stdexcept>
+
+#include "cpu/cpu_renderer.h"
+#include "renderer/renderer.h"
+#if CATGS_HAVE_CUDA
+#include "cuda/cuda_renderer.h"
+#endif
+
+namespace catgs {
+
+Pipeline parse_pipeline(const std::string& name) {
+  if (name == "vanilla") return Pipeline::vanilla;
+  if (name == "exact") return Pipeline::exact;
+  if (name == "catgs") return Pipeline::catgs;
+  throw std::invalid_argument("unknown pipeline '" + name + "' (vanilla, exact or catgs)");
+}
+
+const char* pipeline_name(Pipeline p) {
+  switch (p) {
+    case Pipeline::vanilla: return "vanilla";
+    case Pipeline::exact: return "exact";
+    case Pipeline::catgs: return "catgs";
+  }
+  return "?";
+}
+
+std::unique_ptr<Renderer> make_renderer(const std::string& kind,
+                                        std::shared_ptr<const GaussianModel> model,
+                                        const RenderOptions& options, std::string* why) {
+  auto say = [why](const std::string& s) { if (why) *why = s; };
+  auto make_cpu = [&]() -> std::unique_ptr<Renderer> {
+    if (options.pipeline == Pipeline::catgs)
+      return std::make_unique<cpu::SpeculativeRenderer>(std::move(model), options);
+    return std::make_unique<cpu::CpuRenderer>(std::move(model), options);
+  };
+  if (kind == "cpu") {
+    say("cpu renderer requested");
+    return make_cpu();
+  }
+  if (kind != "cuda" && kind != "auto")
+    throw std::invalid_argument("unknown renderer '" + kind + "' (cpu, cuda or auto)");
+#if CATGS_HAVE_CUDA
+  std::string reason;
+  if (cuda::device_usable(&reason)) {
+    say("cuda renderer: " + reason);
+    return cuda::make_cuda_renderer(std::move(model), options);
+  }
+  if (kind == "cuda") throw std::runtime_error("cuda renderer unavailable: " + reason);
+  say("cpu renderer (no usable CUDA device: " + reason + ")");
+#else
+  if (kind == "cuda") throw std::runtime_error("cuda renderer unavailable: built without CUDA");
+  say("cpu renderer (built without CUDA)");
+#endif
+  return make_cpu();
+}
+
+}  // namespace catgs

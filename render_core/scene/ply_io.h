@@ -1,0 +1,35 @@
+// Scene file formats: INRIA 3DGS PLY (read/write) and SuperSplat compressed PLY (read/write).
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "scene/gaussian_model.h"
+
+namespace catgs {
+
+// Reads a scene, choosing the format from the header: a file with an `element chunk` and
+// `packed_*` vertex properties is SuperSplat compressed PLY, anything else INRIA 3DGS PLY.
+//
+// INRIA 3DGS PLY: properties x y z, f_dc_0..2, f_rest_* (count decides the SH degree: 0, 9, 24 or
+// 45; channel-major f_rest[c * (K-1) + k - 1]), opacity (logit), scale_0..2 (log), rot_0..3
+// (w x y z), in any order, float or double, binary_little_endian or ascii; extra properties
+// (nx ny nz, ...) are ignored.
+// SuperSplat compressed PLY: chunks of 256 Gaussians with min/max ranges, packed 11-10-11
+// position and log-scale, 2-10-10-10 smallest-three rotation, 8-8-8-8 colour + opacity, and an
+// optional `element sh` of uint8 f_rest_* values. Opacity 255 is clamped to logit(1 - 1/512).
+//
+// Throws SceneFileError (naming `path`) when the file is missing, is not a PLY, has a malformed
+// header, lacks a property, is truncated, declares counts the file size cannot hold (checked
+// before any allocation), or holds NaN/Inf.
+GaussianModel load_scene(const std::string& path);
+
+// Writes INRIA 3DGS PLY, binary little endian, SH degree of the model. Throws SceneFileError.
+void write_inria_ply(const GaussianModel& model, const std::string& path);
+
+// Writes SuperSplat compressed PLY (lossy: see load_scene), with an `element sh` when
+// sh_degree > 0. Gaussians are written in the given order, 256 per chunk; sort them spatially
+// first (e.g. Morton order) for tight chunk ranges. Throws SceneFileError.
+void write_compressed_ply(const GaussianModel& model, const std::string& path);
+
+}  // namespace catgs

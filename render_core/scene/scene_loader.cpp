@@ -1,0 +1,196 @@
+// Scene loading: INRIA 3DGS PLY and SuperSplat compressed PLY -> GaussianModel.
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include "scene/ply_io.h"
+#include "ply_format.h"
+
+namespace catgs {
+
+namespace {
+
+constexpr float kShC0 = 0.28209479177387814f;
+
+// f_rest count -> SH degree, or -1.
+int degree_of_rest_count(int rest) {
+  for (int d = 0; d <= kMaxShDegree; ++d)
+    if (3 * (sh_coeff_count(d) - 1) == rest) return d;
+  return -1;
+}
+
+// Number of f_rest_* properties, requiring them to be f_rest_0 .. f_rest_{M-1}.
+int count_rest(const ply::Element& e, const std::string& path) {
+  int m = 0;
+  for (const auto& p : e.properties)
+    if (p.name.rfind("f_rest_", 0) == 0) ++m;
+  for (int j = 0; j < m; ++j)
+    if (e.find("f_rest_" + std::to_string(j)) < 0)
+      throw SceneFileError(path, "f_rest properties are not numbered 0.." + std::to_string(m - 1));
+  const int degree = degree_of_rest_count(m);
+  if (degree < 0)
+    throw SceneFileError(path, std::to_string(m) +
+                                   " f_rest properties match no SH degree (0, 9, 24 or 45)");
+  return m;
+}
+
+int require(const ply::Element& e, const std::string& name, const std::string& path) {
+  const int i = e.find(name);
+  if (i < 0) throw SceneFileError(path, "element '" + e.name + "' lacks property '" + name + "'");
+  return i;
+}
+
+// Stores v after checking it is finite.
+float finite(double v, const ply::Element& e, uint64_t row, int prop, const std::string& path) {
+  if (!std::isfinite(v))
+    throw SceneFileError(path, "non-finite value in element '" + e.name + "' row " +
+                                   std::to_string(row) + " property '" +
+                                   e.properties[static_cast<std::size_t>(prop)].name + "'");
+  return static_cast<float>(v);
+}
+
+void set_sh_rest(GaussianModel& m, std::size_t i, int rest_index, float v) {
+  // INRIA layout is channel-major: f_rest[c * (K - 1) + (k - 1)].
+  const int K = m.sh_coeffs();
+  const int c = rest_index / (K - 1), k = 1 + rest_index % (K - 1);
+  m.sh[(i * static_cast<std::size_t>(K) + static_cast<std::size_t>(k)) * 3 + static_cast<std::size_t>(c)] = v;
+}
+
+GaussianModel load_inria(const ply::File& f, const ply::Element& v) {
+  const std::string& path = f.path;
+  GaussianModel m;
+  const int rest = count_rest(v, path);
+  m.sh_degree = degree_of_rest_count(rest);
+  m.resize(v.count);
+  const char* names[] = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
+                         "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"};
+  int idx[14];
+  for (int k = 0; k < 14; ++k) idx[k] = require(v, names[k], path);
+  std::vector<int> rest_idx(static_cast<std::size_t>(rest));
+  for (int j = 0; j < rest; ++j) rest_idx[static_cast<std::size_t>(j)] = v.find("f_rest_" + std::to_string(j));
+  const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
+
+  for (uint64_t i = 0; i < v.count; ++i) {
+    auto get = [&](int prop) { return finite(f.value(v, i, prop), v, i, prop, path); };
+    for (int a = 0; a < 3; ++a) {
+      m.means[3 * i + a] = get(idx[a]);
+      m.sh[i * K * 3 + a] = get(idx[3 + a]);
+      m.log_scales[3 * i + a] = get(idx[7 + a]);
+    }
+    m.opacity_logits[i] = get(idx[6]);
+    for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = get(idx[10 + a]);
+    for (int j = 0; j < rest; ++j) set_sh_rest(m, i, j, get(rest_idx[static_cast<std::size_t>(j)]));
+  }
+  return m;
+}
+
+float unorm(uint32_t v, int bits) {
+  const uint32_t mask = (1u << bits) - 1u;
+  return static_cast<float>(v & mask) / static_cast<float>(mask);
+}
+
+GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk,
+                              const ply::Element& v) {
+  const std::string& path = f.path;
+  if (chunk.count != (v.count + 255) / 256)
+    throw SceneFileError(path, std::to_string(chunk.count) + " chunks cannot hold " +
+                                   std::to_string(v.count) + " Gaussians (256 per chunk)");
+  const char* range_names[] = {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
+                               "min_scale_x", "min_scale_y", "min_scale_z",
+                               "max_scale_x", "max_scale_y", "max_scale_z"};
+  int range_idx[12];
+  for (int k = 0; k < 12; ++k) range_idx[k] = require(chunk, range_names[k], path);
+  const char* color_names[] = {"min_r", "min_g", "min_b", "max_r", "max_g", "max_b"};
+  int color_idx[6];
+  bool color_ranges = true;
+  for (int k = 0; k < 6; ++k) color_ranges &= (color_idx[k] = chunk.find(color_names[k])) >= 0;
+  const int pp = require(v, "packed_position", path), pr = require(v, "packed_rotation", path),
+            ps = require(v, "packed_scale", path), pc = require(v, "packed_color", path);
+
+  const ply::Element* sh = f.element("sh");
+  int rest = 0;
+  if (sh) {
+    if (sh->count != v.count)
+      throw SceneFileError(path, "element 'sh' has " + std::to_string(sh->count) +
+                                     " rows but there are " + std::to_string(v.count) + " Gaussians");
+    rest = count_rest(*sh, path);
+  }
+  GaussianModel m;
+  m.sh_degree = degree_of_rest_count(rest);
+  m.resize(v.count);
+  const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
+
+  float r[12], cr[6] = {0, 0, 0, 1, 1, 1};
+  for (uint64_t i = 0; i < v.count; ++i) {
+    if (i % 256 == 0) {
+      const uint64_t c = i / 256;
+      for (int k = 0; k < 12; ++k) r[k] = finite(f.value(chunk, c, range_idx[k]), chunk, c, range_idx[k], path);
+      if (color_ranges)
+        for (int k = 0; k < 6; ++k) cr[k] = finite(f.value(chunk, c, color_idx[k]), chunk, c, color_idx[k], path);
+    }
+    const auto pos = static_cast<uint32_t>(f.value(v, i, pp));
+    const auto rot = static_cast<uint32_t>(f.value(v, i, pr));
+    const auto scl = static_cast<uint32_t>(f.value(v, i, ps));
+    const auto col = static_cast<uint32_t>(f.value(v, i, pc));
+    const float t_pos[3] = {unorm(pos >> 21, 11), unorm(pos >> 11, 10), unorm(pos, 11)};
+    const float t_scl[3] = {unorm(scl >> 21, 11), unorm(scl >> 11, 10), unorm(scl, 11)};
+    for (int a = 0; a < 3; ++a) {
+      m.means[3 * i + a] = r[a] + (r[3 + a] - r[a]) * t_pos[a];
+      m.log_scales[3 * i + a] = r[6 + a] + (r[9 + a] - r[6 + a]) * t_scl[a];
+      const float c01 = unorm(col >> (24 - 8 * a), 8);
+      const float colour = cr[a] + (cr[3 + a] - cr[a]) * c01;
+      m.sh[i * K * 3 + a] = (colour - 0.5f) / kShC0;
+    }
+    // Opacity 0 or 1 has an infinite logit: clamp to [1/512, 1 - 1/512].
+    const float alpha = std::fmin(std::fmax(unorm(col, 8), 1.0f / 512.0f), 1.0f - 1.0f / 512.0f);
+    m.opacity_logits[i] = -std::log(1.0f / alpha - 1.0f);
+    // Smallest-three quaternion in (x, y, z, w) order; the top 2 bits name the largest component.
+    const float norm = std::sqrt(2.0f);
+    const float a = (unorm(rot >> 20, 10) - 0.5f) * norm, b = (unorm(rot >> 10, 10) - 0.5f) * norm,
+                c = (unorm(rot, 10) - 0.5f) * norm;
+    const float big = std::sqrt(std::fmax(0.0f, 1.0f - (a * a + b * b + c * c)));
+    float xyzw[4];
+    switch (rot >> 30) {
+      case 0: xyzw[0] = big; xyzw[1] = a; xyzw[2] = b; xyzw[3] = c; break;
+      case 1: xyzw[0] = a; xyzw[1] = big; xyzw[2] = b; xyzw[3] = c; break;
+      case 2: xyzw[0] = a; xyzw[1] = b; xyzw[2] = big; xyzw[3] = c; break;
+      default: xyzw[0] = a; xyzw[1] = b; xyzw[2] = c; xyzw[3] = big; break;
+    }
+    m.rotations[4 * i] = xyzw[3];
+    for (int k = 0; k < 3; ++k) m.rotations[4 * i + 1 + k] = xyzw[k];
+    for (int j = 0; j < rest; ++j) {
+      const auto q = static_cast<uint32_t>(f.value(*sh, i, sh->find("f_rest_" + std::to_string(j))));
+      set_sh_rest(m, i, j, (static_cast<float>(q) + 0.5f) / 256.0f * 8.0f - 4.0f);
+    }
+  }
+  return m;
+}
+
+}  // namespace
+
+GaussianModel load_scene(const std::string& path) {
+  const ply::File f = ply::read_file(path);
+  const ply::Element* v = f.element("vertex");
+  if (!v) throw SceneFileError(path, "no 'vertex' element");
+  if (v->count == 0) throw SceneFileError(path, "the scene holds no Gaussians (vertex count 0)");
+  if (v->count > (1ull << 31)) throw SceneFileError(path, "more than 2^31 Gaussians");
+  const ply::Element* chunk = f.element("chunk");
+  GaussianModel m = (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v)
+                                                              : load_inria(f, *v);
+  m.name = std::filesystem::path(path).filename().string();
+  for (const char* suffix : {".compressed.ply", ".ply"}) {
+    const std::string s = suffix;
+    if (m.name.size() > s.size() && m.name.compare(m.name.size() - s.size(), s.size(), s) == 0) {
+      m.name.resize(m.name.size() - s.size());
+      break;
+    }
+  }
+  try {
+    m.validate();
+  } catch (const std::exception& e) {
+    throw SceneFileError(path, e.what());
+  }
+  return m;
+}
+
+}  // namespace catgs

@@ -1,0 +1,81 @@
+// The host-side decisions of the catgs pipeline (paper sec. 3.1 "Motion Prediction", "Motion
+// Adaptive Adjustment", sec. 3.2; DESIGN.md 1-2), shared by the CPU reference
+// (cpu::SpeculativeRenderer) and the CUDA renderer so both take the same key-frame / sub-frame
+// decisions from the same poses.
+//
+// A group is a key frame plus up to W sub-frames. Per frame, a renderer:
+//   1. observe(camera, t): feeds the motion predictor; true when the frame may be a sub-frame of
+//      the open group (the group is open, fewer than W sub-frames were served, same intrinsics);
+//   2. for a candidate sub-frame, checks every on-screen Gaussian still lies in its trail and
+//      calls subframe_served(), or renders a key frame;
+//   3. for a key frame: window_wanted() says whether to measure M at all; if so the renderer
+//      measures M between the key camera and next_camera() and asks window_for(M); it pre-processes
+//      over path(key, W) and calls start_group(key, W).
+#pragma once
+
+#include <vector>
+
+#include "camera/camera.h"
+#include "speculation/motion_predictor.h"
+#include "speculation/speculation_params.h"
+
+namespace catgs {
+
+class SpeculationPlanner {
+ public:
+  // Throws std::invalid_argument for a window, minimum window or min_served outside 0..32, a
+  // backoff outside 0..1000 frames, a negative min_slice_entries, a non-positive F_target or a
+  // predictor window outside (0, 1] s.
+  explicit SpeculationPlanner(const SpeculationParams& params = {});
+
+  // New parameters (validated as above); closes the open group, keeps the motion history.
+  void set_params(const SpeculationParams& params);
+  const SpeculationParams& params() const { return params_; }
+
+  // Adds the pose of `camera` at `time_s` (client clock, seconds) to the predictor. Returns true
+  // when this frame may be served as a sub-frame of the open group.
+  bool observe(const Camera& camera, double time_s);
+
+  // Seconds on the renderer's own clock for frames rendered without a time: 1 / F_target a call.
+  double advance_clock() { return clock_s_ += 1.0 / params_.target_fps; }
+
+  // Whether a key frame may speculate at all (caching on, W_initial > 0, a motion history, no
+  // backoff under way: SpeculationParams::backoff_frames).
+  bool window_wanted() const;
+  // The predicted camera 1 / F_target after the newest pose, with `key`'s intrinsics (M's pair).
+  Camera next_camera(const Camera& key) const { return predicted_camera(key, 1); }
+  // W for the largest per-frame screen motion M (pixels): motion_adaptive_window(), or 0 where
+  // that is below SpeculationParams::min_window.
+  int window_for(float max_motion_px) const {
+    const int window = motion_adaptive_window(max_motion_px, params_);
+    return window < params_.min_window ? 0 : window;
+  }
+  // The key camera followed by the W predicted cameras at k / F_target, k = 1..W.
+  std::vector<Camera> path(const Camera& key, int window) const;
+
+  // A key frame was rendered with window W: a new group opens (W > 0) or none (W = 0). The group
+  // it closes, if any, sets the backoff (SpeculationParams::backoff_frames).
+  void start_group(const Camera& key, int window);
+  // The candidate sub-frame passed its containment check and was served from the caches.
+  void subframe_served() { ++subframes_served_; }
+
+  int window() const { return window_; }
+
+ private:
+  Camera predicted_camera(const Camera& intrinsics, int frames_ahead) const;
+  // The key frame now being planned closes an open group that served fewer than min_served
+  // sub-frames, with the backoff on: it renders in full, as the first frame of the backoff.
+  bool closes_poor_group() const {
+    return params_.backoff_frames > 0 && group_open_ && subframes_served_ < params_.min_served;
+  }
+
+  SpeculationParams params_;
+  MotionPredictor predictor_;
+  Camera key_camera_;
+  int window_ = 0, subframes_served_ = 0;
+  int backoff_ = 0, full_frames_left_ = 0;  // the current backoff, and the full frames it still asks
+  bool group_open_ = false;
+  double clock_s_ = 0.0;
+};
+
+}  // namespace catgs

@@ -1,0 +1,79 @@
+// Video encoders: one H.264 Annex B access unit out per picture in, from RGBA8 host images, from
+// BT.709 limited-range I420 planes, or from a picture written straight into the encoder's own
+// input planes (input_target() + encode_input(): the render core's colour conversion writes
+// there, host planes for x264, CUDA device planes for NVENC with device_input: no extra copy).
+//
+// An Encoder is created for one frame size and used by one thread at a time (a session's render
+// job); a size change means a new Encoder. Implementations (libavcodec): `x264` (libx264, CPU)
+// and `nvenc` (h264_nvenc, fed host frames; see nvenc_encoder.h).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "colour/yuv420.h"
+
+namespace catgs::server {
+
+struct EncoderConfig {
+  int width = 0, height = 0;  // pixels, even, >= 16
+  int fps = 60;               // nominal frame rate (time base; NVENC's one-frame VBV)
+  int crf = 23;               // x264 constant rate factor
+  int bitrate_kbps = 0;       // NVENC CBR target; 0: width * height * fps / 15 bits/s
+  int threads = 0;            // encoder threads, 0 = the library's choice
+  // nvenc: pictures arrive as CUDA device planes (AV_PIX_FMT_CUDA frames of a hw_frames_ctx on
+  // the CUDA primary context of device 0, sw_format yuv420p; input_target() is then device
+  // memory). x264 ignores it (its input is always host memory).
+  bool device_input = false;
+};
+
+// One encoded access unit.
+struct EncodedFrame {
+  std::vector<std::uint8_t> data;  // H.264 Annex B: start codes, SPS/PPS in band on IDR frames
+  bool key_frame = false;          // IDR
+  double convert_ms = 0;           // RGBA -> YUV 4:2:0 time (0 for encode_yuv420)
+  double encode_ms = 0;            // encoder time (plane copy included)
+};
+
+class Encoder {
+ public:
+  virtual ~Encoder() = default;
+  // "x264" or "nvenc".
+  virtual std::string name() const = 0;
+  virtual int width() const = 0;
+  virtual int height() const = 0;
+  // Encodes one RGBA8 image (width x height, row-major, top row first, `stride_bytes` per row;
+  // colour treated as full-range sRGB/BT.709 primaries), converted to BT.709 limited-range
+  // yuv420p on the CPU (swscale). The first frame, and any frame with `force_idr`, is an IDR.
+  // Throws std::runtime_error on an encoder failure.
+  virtual EncodedFrame encode(const std::uint8_t* rgba, int stride_bytes, bool force_idr) = 0;
+  // Encodes one picture given as BT.709 limited-range I420 planes of width x height (yuv420.h);
+  // no colour conversion happens. IDR rules and errors as encode(). The planes are only read
+  // during the call.
+  virtual EncodedFrame encode_yuv420(const Yuv420Planes& planes, bool force_idr) = 0;
+  // The planes of the next picture (width x height I420, BT.709 limited range), to be filled
+  // completely before encode_input(): host memory for x264 and host-fed NVENC, device memory of
+  // a fresh hw frame for NVENC with device_input. Valid until the next encode_input() or
+  // input_target() call. Throws std::runtime_error when no frame can be had.
+  virtual Yuv420Target input_target() = 0;
+  // Encodes the picture written into the last input_target(). IDR rules and errors as encode();
+  // throws std::logic_error without a preceding input_target().
+  virtual EncodedFrame encode_input(bool force_idr) = 0;
+};
+
+// Creates an encoder by name:
+//  "x264"  libx264;
+//  "nvenc" h264_nvenc; throws std::runtime_error naming the reason when NVENC cannot be opened
+//          (no NVIDIA driver, no NVENC on the GPU: H100/H200 have none, session limit);
+//  "auto"  NVENC when a probe could open it, else x264. The probe (a 256x256 NVENC encoder)
+//          runs once per process, on the first "auto" call; its verdict is reused.
+// `why` (optional) gets a one-line reason for the choice; `fell_back` (optional) is set true when
+// "auto" chose x264 because NVENC failed, false otherwise.
+// Throws std::invalid_argument for an unknown name or a bad size, std::runtime_error when the
+// chosen codec cannot be opened.
+std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConfig& config,
+                                      std::string* why = nullptr, bool* fell_back = nullptr);
+
+}  // namespace catgs::server

@@ -1,0 +1,481 @@
+#include "session/session.h"
+
+#include <boost/asio/bind_executor.hpp>
+#include <boost/asio/dispatch.hpp>
+#include <boost/asio/post.hpp>
+
+#include <cstdio>
+#include <iostream>
+#include <random>
+
+#include "camera/camera.h"
+#include "session/initial_pose.h"
+
+namespace catgs::server {
+
+namespace {
+
+double ms_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+std::string random_session_id() {
+  static thread_local std::mt19937_64 rng{std::random_device{}()};
+  char buf[17];
+  std::snprintf(buf, sizeof(buf), "%016llx", static_cast<unsigned long long>(rng()));
+  return buf;
+}
+
+void set_vec3(pb::Vec3* v, const glm::vec3& x) {
+  v->set_x(x.x);
+  v->set_y(x.y);
+  v->set_z(x.z);
+}
+
+constexpr auto kTick = std::chrono::milliseconds(250);
+constexpr std::size_t kMaxQueuedMessages = 256;  // non-frame messages a non-reader may pile up
+
+}  // namespace
+
+Session::Session(ConnId id, SessionShared& shared)
+    : id_(id),
+      shared_(shared),
+      strand_(boost::asio::make_strand(shared.io)),
+      tick_(strand_) {
+  shared_.metrics.connections_open++;
+}
+
+Session::~Session() { shared_.metrics.connections_open--; }
+
+void Session::post_message(MessageKind kind, std::string bytes) {
+  // Arrival is stamped on the transport thread (the strand may wait for a busy pool thread).
+  const auto received = Clock::now();
+  boost::asio::post(strand_, [self = shared_from_this(), kind, bytes = std::move(bytes), received] {
+    try {
+      self->handle_message(kind, bytes, received);
+    } catch (const std::exception& e) {
+      // Anything unexpected ends this session only.
+      self->fail(pb::ERROR_INTERNAL, std::string("internal error: ") + e.what());
+    }
+  });
+}
+
+void Session::post_sent() {
+  // Stamped here, on the transport thread: the strand handler may wait for a pool thread that
+  // is busy rendering, and that wait is not send time.
+  const auto written = Clock::now();
+  boost::asio::post(strand_, [self = shared_from_this(), written] {
+    if (self->in_flight_ > 0) self->in_flight_--;
+    self->last_progress_ = Clock::now();
+    if (!self->handed_.empty()) {  // frames are written in the order they were queued
+      self->last_send_ms_ = ms_between(self->handed_.front(), written);
+      self->handed_.pop_front();
+      self->shared_.metrics.send_seconds.observe(self->last_send_ms_ / 1000.0);
+    }
+    self->maybe_start_render();
+  });
+}
+
+void Session::post_closed() {
+  boost::asio::post(strand_, [self = shared_from_this()] {
+    self->end_open_state();
+    self->state_ = State::closed;
+    self->pending_.reset();
+    self->tick_.cancel();
+  });
+}
+
+void Session::post_shutdown() {
+  boost::asio::post(strand_, [self = shared_from_this()] {
+    self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down");
+  });
+}
+
+void Session::end_open_state() {
+  if (pending_) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
+  pending_.reset();
+  if (counted_open_) {
+    counted_open_ = false;
+    shared_.metrics.sessions_open--;
+  }
+}
+
+void Session::send(const pb::ServerMessage& message) {
+  std::string bytes;
+  message.SerializeToString(&bytes);
+  shared_.transport.send(id_, std::move(bytes), /*counted=*/false);
+}
+
+void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued) {
+  if (state_ == State::closed) return;
+  state_ = State::closed;
+  tick_.cancel();
+  end_open_state();
+  shared_.metrics.session_errors_total++;
+  std::cerr << "[session " << id_ << (session_id_.empty() ? "" : " " + session_id_) << "] "
+            << pb::ErrorCode_Name(code) << ": " << reason << "\n";
+  pb::ServerMessage m;
+  m.mutable_error()->set_code(code);
+  m.mutable_error()->set_reason(reason);
+  std::string bytes;
+  m.SerializeToString(&bytes);
+  shared_.transport.close(id_, std::move(bytes), drop_queued);
+}
+
+void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received) {
+  if (state_ == State::closed) return;
+  if (kind == MessageKind::text) return fail(pb::ERROR_MALFORMED, "text frames are not allowed");
+  if (kind == MessageKind::oversize)
+    return fail(pb::ERROR_MALFORMED, "message larger than 64 KiB");
+  pb::ClientMessage msg;
+  if (!msg.ParseFromString(bytes))
+    return fail(pb::ERROR_MALFORMED, "message does not parse as ClientMessage");
+  if (msg.body_case() == pb::ClientMessage::BODY_NOT_SET)
+    return fail(pb::ERROR_MALFORMED, "ClientMessage without a body");
+
+  if (state_ == State::awaiting_hello) {
+    if (msg.body_case() != pb::ClientMessage::kHello)
+      return fail(pb::ERROR_PROTOCOL, "the first message must be Hello");
+    return handle_hello(msg.hello());
+  }
+  switch (msg.body_case()) {
+    case pb::ClientMessage::kHello:
+      return fail(pb::ERROR_PROTOCOL, "second Hello");
+    case pb::ClientMessage::kPose:
+      return handle_pose(msg.pose(), received);
+    case pb::ClientMessage::kResize: {
+      Viewport v;
+      if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), v))
+        return fail(bad->code, bad->reason);
+      width_ = v.width;
+      height_ = v.height;
+      force_idr_ = true;  // the encoder is rebuilt at the new size; its first frame is an IDR
+      return;
+    }
+    case pb::ClientMessage::kPing: {
+      if (!std::isfinite(msg.ping().client_time_ms()))
+        return fail(pb::ERROR_INVALID_ARGUMENT, "Ping time is NaN or Inf");
+      pb::ServerMessage m;
+      m.mutable_pong()->set_client_time_ms(msg.ping().client_time_ms());
+      m.mutable_pong()->set_server_time_ms(
+          std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count());
+      return send(m);
+    }
+    case pb::ClientMessage::kKeyFrameRequest:
+      force_idr_ = true;
+      return;
+    default:
+      return fail(pb::ERROR_MALFORMED, "unknown message");
+  }
+}
+
+void Session::handle_hello(const pb::Hello& hello) {
+  Viewport v;
+  if (auto bad = check_hello(hello, v)) return fail(bad->code, bad->reason);
+  if (!shared_.options.token.empty() && hello.token() != shared_.options.token)
+    return fail(pb::ERROR_UNAUTHORIZED, "wrong or missing token");
+  if (hello.codecs_size() > 0) {
+    bool h264 = false;
+    for (int c : hello.codecs()) h264 = h264 || c == pb::CODEC_H264;
+    if (!h264) return fail(pb::ERROR_INVALID_ARGUMENT, "client does not accept H.264");
+  }
+  if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
+    shared_.metrics.sessions_open--;
+    return fail(pb::ERROR_SERVER_FULL,
+                "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)");
+  }
+  counted_open_ = true;
+  shared_.metrics.sessions_total++;
+  renderer_ = make_renderer(shared_.renderer_kind, shared_.model, shared_.render_options);
+  // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
+  pipelined_ = !(shared_.encoder_kind == "nvenc" && renderer_->name() == "cuda");
+  for (int i = 0; pipelined_ && i < 2; ++i) free_planes_.push_back(std::make_unique<Yuv420Image>());
+  state_ = State::open;
+  width_ = v.width;
+  height_ = v.height;
+  session_id_ = random_session_id();
+
+  pb::ServerMessage m;
+  pb::Welcome* w = m.mutable_welcome();
+  w->set_session_id(session_id_);
+  w->set_scene_name(shared_.model->name);
+  set_vec3(w->mutable_scene_bounds()->mutable_min(), shared_.bounds.min);
+  set_vec3(w->mutable_scene_bounds()->mutable_max(), shared_.bounds.max);
+  const CameraPose start = initial_pose(shared_.framing_bounds, 60.0f, width_, height_);
+  pb::Pose* p = w->mutable_initial_pose();
+  p->set_sequence(0);
+  set_vec3(p->mutable_position(), start.position);
+  p->mutable_orientation()->set_w(start.orientation.w);
+  p->mutable_orientation()->set_x(start.orientation.x);
+  p->mutable_orientation()->set_y(start.orientation.y);
+  p->mutable_orientation()->set_z(start.orientation.z);
+  p->set_vertical_fov_deg(start.vertical_fov_deg);
+  w->set_codec(pb::CODEC_H264);
+  w->set_width(static_cast<std::uint32_t>(width_));
+  w->set_height(static_cast<std::uint32_t>(height_));
+  w->set_renderer(renderer_->name());
+  w->set_encoder(shared_.encoder_kind);
+  w->set_pipeline(pipeline_name(shared_.render_options.pipeline));
+  send(m);
+  std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_
+            << " client '" << hello.client_name().substr(0, 128) << "'\n";
+  last_stats_ = Clock::now();
+  last_progress_ = last_stats_;
+  arm_tick();
+}
+
+void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
+  CameraPose cam;
+  if (auto bad = check_pose(pose, cam)) return fail(bad->code, bad->reason);
+  poses_received_++;
+  shared_.metrics.poses_total++;
+  if (pending_) {
+    poses_skipped_++;  // latest pose wins: the older one is never rendered
+    shared_.metrics.poses_skipped_total++;
+    shared_.metrics.dropped_frames_total++;
+  }
+  pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), received};
+  maybe_start_render();
+}
+
+void Session::maybe_start_render() {
+  // Frames admitted but not yet written: those the transport holds and the one being encoded.
+  const int admitted = in_flight_ + (encoding_ ? 1 : 0);
+  if (state_ != State::open || rendering_ || rendered_ || !pending_ ||
+      admitted >= shared_.options.max_frames_in_flight)
+    return;
+  std::unique_ptr<Yuv420Image> planes;
+  if (pipelined_) {
+    if (free_planes_.empty()) return;  // both buffers busy (one rendering is excluded above)
+    planes = std::move(free_planes_.back());
+    free_planes_.pop_back();
+  }
+  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_};
+  pending_.reset();
+  force_idr_ = false;
+  rendering_ = true;
+  if (!pipelined_) {
+    boost::asio::post(shared_.render_io, [self = shared_from_this(), job] {
+      JobResult result = self->run_render_and_encode(job);
+      boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
+        self->rendering_ = false;
+        self->on_job_done(std::move(result));
+      });
+    });
+    return;
+  }
+  boost::asio::post(shared_.render_io, [self = shared_from_this(), job, planes = std::move(planes)]() mutable {
+    Rendered frame = self->run_render(job, std::move(planes));
+    boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
+      self->rendering_ = false;
+      if (!frame.error.empty()) {
+        self->free_planes_.push_back(std::move(frame.planes));
+        JobResult failed;
+        failed.error = frame.error;
+        return self->on_job_done(std::move(failed));
+      }
+      self->rendered_ = std::move(frame);
+      self->maybe_start_encode();
+      self->maybe_start_render();
+    });
+  });
+}
+
+void Session::maybe_start_encode() {
+  if (encoding_ || !rendered_) return;
+  if (state_ != State::open) {  // nobody to send it to
+    free_planes_.push_back(std::move(rendered_->planes));
+    rendered_.reset();
+    shared_.metrics.dropped_frames_total++;
+    return;
+  }
+  encoding_ = true;
+  auto frame = std::make_shared<Rendered>(std::move(*rendered_));
+  rendered_.reset();
+  boost::asio::post(shared_.io, [self = shared_from_this(), frame] {
+    JobResult result = self->run_encode(*frame);
+    boost::asio::post(self->strand_, [self, frame, result = std::move(result)]() mutable {
+      self->encoding_ = false;
+      self->free_planes_.push_back(std::move(frame->planes));
+      self->on_job_done(std::move(result));
+      self->maybe_start_encode();
+      self->maybe_start_render();  // the rendered slot may have just been freed
+    });
+  });
+}
+
+void Session::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
+  const auto t_start = Clock::now();
+  const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
+                                          job.pose.pose.vertical_fov_deg, job.width, job.height);
+  // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
+  // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
+  r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
+  r.render_key_frame = renderer_->last_stats().key_frame;
+  r.speculation_window = renderer_->last_stats().window;
+  r.queue_ms = ms_between(job.pose.received, t_start);
+  // Render time includes the plane download (GPU) but not the conversion itself.
+  r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
+}
+
+Session::Rendered Session::run_render(Job job, std::unique_ptr<Yuv420Image> planes) {
+  Rendered r;
+  r.job = std::move(job);
+  r.planes = std::move(planes);
+  try {
+    render_into(r.job, r.planes->target(r.job.width, r.job.height), r);
+  } catch (const std::exception& e) {
+    r.error = e.what();
+  }
+  return r;
+}
+
+void Session::ensure_encoder(int width, int height, bool& idr) {
+  if (encoder_ && encoder_->width() == width && encoder_->height() == height) return;
+  EncoderConfig cfg;
+  cfg.width = width;
+  cfg.height = height;
+  cfg.crf = shared_.options.crf;
+  cfg.threads = shared_.options.encoder_threads;
+  // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
+  cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
+  // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
+  bool fell_back = false;
+  encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
+  if (fell_back) shared_.metrics.encoder_fallbacks_total++;
+  idr = true;
+}
+
+Session::JobResult Session::run_encode(Rendered& frame) {
+  try {
+    bool idr = frame.job.force_idr;
+    ensure_encoder(frame.job.width, frame.job.height, idr);
+    const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
+    return frame_message(frame.job, enc, frame);
+  } catch (const std::exception& e) {
+    JobResult r;
+    r.error = e.what();
+    return r;
+  }
+}
+
+Session::JobResult Session::run_render_and_encode(const Job& job) {
+  try {
+    bool idr = job.force_idr;
+    ensure_encoder(job.width, job.height, idr);
+    Rendered r;
+    // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
+    render_into(job, encoder_->input_target(), r);
+    return frame_message(job, encoder_->encode_input(idr), r);
+  } catch (const std::exception& e) {
+    JobResult r;
+    r.error = e.what();
+    return r;
+  }
+}
+
+Session::JobResult Session::frame_message(const Job& job, const EncodedFrame& enc, const Rendered& rendered) {
+  JobResult r;
+  pb::ServerMessage m;
+  pb::Frame* f = m.mutable_frame();
+  f->set_sequence(job.frame_sequence);
+  f->set_pose_sequence(job.pose.sequence);
+  f->set_client_time_ms(job.pose.client_time_ms);
+  f->set_key_frame(enc.key_frame);
+  f->set_width(static_cast<std::uint32_t>(job.width));
+  f->set_height(static_cast<std::uint32_t>(job.height));
+  f->set_payload(enc.data.data(), enc.data.size());
+  r.render_key_frame = rendered.render_key_frame;
+  r.speculation_window = rendered.speculation_window;
+  r.queue_ms = rendered.queue_ms;
+  r.render_ms = rendered.render_ms;
+  r.convert_ms = rendered.convert_ms;
+  r.encode_ms = enc.encode_ms;
+  pb::FrameTimings* t = f->mutable_timings();
+  t->set_queue_ms(r.queue_ms);
+  t->set_render_ms(r.render_ms);
+  t->set_convert_ms(r.convert_ms);
+  t->set_encode_ms(r.encode_ms);
+  t->set_render_key_frame(r.render_key_frame);
+  t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
+  t->set_previous_send_ms(job.previous_send_ms);
+  t->set_total_ms(ms_between(job.pose.received, Clock::now()));
+  m.SerializeToString(&r.message);
+  r.key_frame = enc.key_frame;
+  r.payload_bytes = enc.data.size();
+  return r;
+}
+
+void Session::on_job_done(JobResult result) {
+  if (state_ != State::open || result.message.empty()) shared_.metrics.dropped_frames_total++;
+  if (state_ != State::open) return;
+  if (result.message.empty()) return fail(pb::ERROR_INTERNAL, "render/encode failed: " + result.error);
+  if (in_flight_ == 0) last_progress_ = Clock::now();  // the slow-reader clock starts now
+  in_flight_++;
+  frames_sent_++;
+  frames_since_stats_++;
+  bytes_since_stats_ += result.payload_bytes;
+  render_ms_sum_ += result.render_ms;
+  encode_ms_sum_ += result.encode_ms;
+  if (result.key_frame) key_frames_++;
+  if (result.render_key_frame) render_key_frames_++;
+  else render_sub_frames_++;
+  ServerMetrics& m = shared_.metrics;
+  m.frames_total++;
+  m.bytes_total += result.payload_bytes;
+  if (result.key_frame) m.key_frames_total++;
+  (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
+  m.queue_seconds.observe(result.queue_ms / 1000.0);
+  (result.render_key_frame ? m.render_key_seconds : m.render_sub_seconds)
+      .observe(result.render_ms / 1000.0);
+  m.convert_seconds.observe(result.convert_ms / 1000.0);
+  m.encode_seconds.observe(result.encode_ms / 1000.0);
+  m.speculation_window.observe(result.speculation_window);
+  handed_.push_back(Clock::now());
+  shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
+  maybe_start_render();
+}
+
+void Session::arm_tick() {
+  tick_.expires_after(kTick);
+  tick_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
+    if (!ec) self->on_tick();
+  });
+}
+
+void Session::on_tick() {
+  if (state_ != State::open) return;
+  const auto now = Clock::now();
+  const auto timeout = std::chrono::milliseconds(shared_.options.slow_client_timeout_ms);
+  if (in_flight_ > 0 && now - last_progress_ > timeout)
+    return fail(pb::ERROR_TOO_SLOW,
+                "frames unread for " + std::to_string(shared_.options.slow_client_timeout_ms) + " ms",
+                /*drop_queued=*/true);
+  if (shared_.transport.queued(id_) > kMaxQueuedMessages)
+    return fail(pb::ERROR_TOO_SLOW, "client does not read its messages", /*drop_queued=*/true);
+  if (now - last_stats_ >= std::chrono::seconds(1)) send_stats();
+  arm_tick();
+}
+
+void Session::send_stats() {
+  const auto now = Clock::now();
+  const double seconds = std::max(1e-3, ms_between(last_stats_, now) / 1000.0);
+  pb::ServerMessage m;
+  pb::Stats* s = m.mutable_stats();
+  s->set_frames_sent(frames_sent_);
+  s->set_poses_received(poses_received_);
+  s->set_poses_skipped(poses_skipped_);
+  const double n = frames_since_stats_ ? frames_since_stats_ : 1;
+  s->set_render_ms_mean(render_ms_sum_ / n);
+  s->set_encode_ms_mean(encode_ms_sum_ / n);
+  s->set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
+  s->set_key_frames(render_key_frames_);
+  s->set_sub_frames(render_sub_frames_);
+  send(m);
+  last_stats_ = now;
+  frames_since_stats_ = 0;
+  bytes_since_stats_ = 0;
+  render_ms_sum_ = encode_ms_sum_ = 0;
+}
+
+}  // namespace catgs::server

@@ -1,0 +1,168 @@
+// One client session (DESIGN.md "Server"): protocol state machine, latest-pose-wins render
+// scheduling, encoder, flow control and statistics.
+//
+// Threading: every member below "strand state" is touched only on the session's strand. Render
+// and encode run as jobs on the shared io_context pool (never on the strand, so poses keep
+// arriving while a frame renders). Transport callbacks enter through the post_* functions.
+//
+// Frame pipeline (host-fed encoders: x264): a render job renders and colour-converts frame n + 1
+// into one of two host I420 buffers while an encode job encodes frame n from the other, so a
+// session's frame rate is bounded by the slower stage, not by their sum. At most one render job
+// and one encode job run per session; the renderer is used only by render jobs, the encoder only
+// by encode jobs. NVENC (CUDA input): one job renders straight into the encoder's hw frame and
+// encodes it (no host buffer to overlap with).
+#pragma once
+
+#include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
+
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+
+#include "scene/gaussian_model.h"
+#include "renderer/renderer.h"
+#include "encode/encoder.h"
+#include "session/message_validation.h"
+#include "server_metrics.h"
+#include "server_options.h"
+#include "transport/transport.h"
+
+namespace catgs::server {
+
+// What all sessions share (owned by the SessionManager).
+struct SessionShared {
+  boost::asio::io_context& io;         // strands, encode jobs, timers
+  // Render jobs: a FIFO served by a few dedicated "render lanes" (ServerOptions::render_lanes
+  // threads), so sessions take turns on the GPU in arrival order: a session whose frames need
+  // more host syncs (catgs key frames) cannot starve the others, and waiting renders hold no
+  // worker thread.
+  boost::asio::io_context& render_io;
+  Transport& transport;
+  ServerMetrics& metrics;
+  const ServerOptions& options;
+  std::shared_ptr<const GaussianModel> model;
+  Bounds bounds;          // model bounds (Welcome.scene_bounds)
+  Bounds framing_bounds;  // robust bounds used for the initial pose
+  RenderOptions render_options;
+  std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
+  std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
+};
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  // A connection waiting for Hello. The session slot (options.max_sessions) is taken at Hello.
+  Session(ConnId id, SessionShared& shared);
+  ~Session();
+
+  ConnId id() const { return id_; }
+  // Transport thread -> strand: a complete incoming message.
+  void post_message(MessageKind kind, std::string bytes);
+  // Transport thread -> strand: a Frame left the queue (written to the socket layer).
+  void post_sent();
+  // Transport thread -> strand: the connection is gone.
+  void post_closed();
+  // Server stopping: send ERROR_SHUTTING_DOWN and close.
+  void post_shutdown();
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  enum class State { awaiting_hello, open, closed };
+
+  struct PendingPose {
+    CameraPose pose;
+    std::uint32_t sequence = 0;
+    double client_time_ms = 0;
+    Clock::time_point received;  // arrival on the transport thread
+  };
+  struct Job {
+    PendingPose pose;
+    int width = 0, height = 0;
+    bool force_idr = false;
+    std::uint32_t frame_sequence = 0;
+    double previous_send_ms = 0;  // FrameTimings.previous_send_ms
+  };
+  // A rendered frame waiting for (or in) the encode stage.
+  struct Rendered {
+    Job job;
+    std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
+    bool render_key_frame = true;
+    int speculation_window = 0;
+    double queue_ms = 0, render_ms = 0, convert_ms = 0;
+    std::string error;  // non-empty: the render failed
+  };
+  struct JobResult {
+    std::string message;  // serialized ServerMessage{Frame}; empty on failure
+    std::string error;
+    bool key_frame = false;         // an IDR access unit
+    bool render_key_frame = true;   // catgs: a full pre-process (false: a cached sub-frame)
+    int speculation_window = 0;
+    std::size_t payload_bytes = 0;
+    double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
+  };
+
+  // `received`: when the transport thread handed the message over.
+  void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
+  void handle_hello(const pb::Hello& hello);
+  void handle_pose(const pb::Pose& pose, Clock::time_point received);
+  void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false);
+  void send(const pb::ServerMessage& message);
+  void maybe_start_render();
+  void maybe_start_encode();
+  // In a job: renders job's pose into `target` and fills r's render fields (timings, key frame,
+  // window). Throws what Renderer::render_yuv420_at throws.
+  void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
+  Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on the pool
+  JobResult run_encode(Rendered& frame);                               // on the pool
+  JobResult run_render_and_encode(const Job& job);  // on the pool (NVENC's CUDA input)
+  void ensure_encoder(int width, int height, bool& idr);  // in a job
+  JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
+  void on_job_done(JobResult result);
+  void arm_tick();
+  void on_tick();
+  void send_stats();
+  void end_open_state();
+
+  const ConnId id_;
+  SessionShared& shared_;
+  boost::asio::strand<boost::asio::io_context::executor_type> strand_;
+  boost::asio::steady_timer tick_;
+
+  // --- strand state ---
+  State state_ = State::awaiting_hello;
+  bool counted_open_ = false;  // holds one of the server's session slots
+  std::string session_id_;
+  int width_ = 0, height_ = 0;
+  bool force_idr_ = true;
+  std::optional<PendingPose> pending_;
+  bool rendering_ = false;  // a render (or render-and-encode) job is running
+  bool encoding_ = false;   // an encode job is running
+  bool pipelined_ = true;   // render and encode as separate stages (false: NVENC, one job)
+  std::optional<Rendered> rendered_;                   // rendered, waiting for the encoder
+  std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
+  int in_flight_ = 0;                 // frames queued to the transport, not yet written
+  std::deque<Clock::time_point> handed_;  // when each in-flight frame went to the transport
+  double last_send_ms_ = 0;           // send time of the last frame written
+  Clock::time_point last_progress_;   // last time the transport wrote one of our frames
+  std::uint32_t next_frame_sequence_ = 0;
+  Clock::time_point last_stats_;
+  // Stats counters (totals, and sums since the last Stats message).
+  std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
+  std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)
+  double render_ms_sum_ = 0, encode_ms_sum_ = 0;
+  std::uint32_t frames_since_stats_ = 0;
+  std::uint64_t bytes_since_stats_ = 0;
+
+  // --- render job state (one job at a time) ---
+  std::unique_ptr<Renderer> renderer_;
+  std::unique_ptr<Encoder> encoder_;
+};
+
+}  // namespace catgs::server

@@ -1,0 +1,60 @@
+#include "session/session_manager.h"
+
+#include <chrono>
+#include <thread>
+#include <vector>
+
+namespace catgs::server {
+
+void SessionManager::on_open(ConnId id) {
+  auto session = std::make_shared<Session>(id, shared_);
+  std::lock_guard<std::mutex> lock(mutex_);
+  sessions_[id] = std::move(session);
+}
+
+std::shared_ptr<Session> SessionManager::find(ConnId id) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = sessions_.find(id);
+  return it == sessions_.end() ? nullptr : it->second;
+}
+
+void SessionManager::on_message(ConnId id, MessageKind kind, std::string bytes) {
+  if (auto s = find(id)) s->post_message(kind, std::move(bytes));
+}
+
+void SessionManager::on_sent(ConnId id) {
+  if (auto s = find(id)) s->post_sent();
+}
+
+void SessionManager::on_close(ConnId id) {
+  std::shared_ptr<Session> s;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = sessions_.find(id);
+    if (it == sessions_.end()) return;
+    s = std::move(it->second);
+    sessions_.erase(it);
+  }
+  s->post_closed();  // the session object lives until its last queued handler has run
+}
+
+std::string SessionManager::metrics_text() { return shared_.metrics.prometheus_text(); }
+
+std::size_t SessionManager::size() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return sessions_.size();
+}
+
+void SessionManager::shutdown(int wait_ms) {
+  std::vector<std::shared_ptr<Session>> all;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto& [id, s] : sessions_) all.push_back(s);
+  }
+  for (auto& s : all) s->post_shutdown();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(wait_ms);
+  while (size() > 0 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+}
+
+}  // namespace catgs::server

@@ -1,0 +1,42 @@
+// Owns the sessions: maps transport connections to Session objects, enforces nothing itself
+// (sessions do), serves /metrics and drives graceful shutdown.
+#pragma once
+
+#include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
+
+#include <memory>
+#include <mutex>
+#include <unordered_map>
+
+#include "session/session.h"
+#include "transport/transport.h"
+
+namespace catgs::server {
+
+class SessionManager final : public TransportHandler {
+ public:
+  // `shared` must outlive the manager; its transport must be this manager's transport.
+  explicit SessionManager(SessionShared& shared) : shared_(shared) {}
+
+  // TransportHandler (service thread): forward to the session's strand.
+  void on_open(ConnId id) override;
+  void on_message(ConnId id, MessageKind kind, std::string bytes) override;
+  void on_sent(ConnId id) override;
+  void on_close(ConnId id) override;
+  std::string metrics_text() override;
+
+  // Sends ERROR_SHUTTING_DOWN to every session and waits up to `wait_ms` for the connections to
+  // close (the transport must still be running). Thread-safe.
+  void shutdown(int wait_ms);
+  // Connections currently known.
+  std::size_t size() const;
+
+ private:
+  std::shared_ptr<Session> find(ConnId id) const;
+
+  SessionShared& shared_;
+  mutable std::mutex mutex_;
+  std::unordered_map<ConnId, std::shared_ptr<Session>> sessions_;
+};
+
+}  // namespace catgs::server

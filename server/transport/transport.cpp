@@ -1,0 +1,383 @@
+#include "transport/transport.h"
+
+#include <algorithm>
+#include <cstring>
+#include <stdexcept>
+
+#include <sys/socket.h>
+
+#include <libwebsockets.h>
+
+namespace catgs::server {
+
+namespace {
+
+// Per-connection memory lws allocates (zeroed, no constructors run): the same layout for the
+// WebSocket and HTTP protocols because lws may hand either kind of wsi to protocols[0].
+struct Pss {
+  ConnId id;          // WebSocket connections: our id (0 before ESTABLISHED)
+  std::string* body;  // HTTP: the response body waiting for a writable callback
+};
+
+// Outgoing WebSocket messages are written in fragments of this size: one lws_write per writable
+// callback keeps the service loop responsive with many connections and big key frames.
+constexpr std::size_t kFragmentBytes = 64 * 1024;
+
+}  // namespace
+
+// Everything lws keeps pointers to for the life of the context.
+struct Transport::Static {
+  lws_protocols protocols[3];
+  lws_protocol_vhost_options mime[6];
+  lws_http_mount mount_root, mount_healthz, mount_metrics;
+  std::string web_root;
+};
+
+Transport::Transport(TransportOptions options, TransportHandler& handler)
+    : options_(std::move(options)), handler_(handler), static_(std::make_unique<Static>()) {}
+
+Transport::~Transport() { stop(); }
+
+void Transport::start() {
+  Static& s = *static_;
+  std::memset(s.protocols, 0, sizeof(s.protocols));
+  // protocols[0] also receives WebSocket upgrades that name no subprotocol.
+  s.protocols[0].name = "catgs.v1";
+  s.protocols[0].callback = reinterpret_cast<lws_callback_function*>(&Transport::callback);
+  s.protocols[0].per_session_data_size = sizeof(Pss);
+  s.protocols[0].rx_buffer_size = 64 * 1024;
+  s.protocols[0].tx_packet_size = kFragmentBytes + 1024;
+  s.protocols[1].name = "http";
+  s.protocols[1].callback = s.protocols[0].callback;
+  s.protocols[1].per_session_data_size = sizeof(Pss);
+
+  // MIME types lws does not know (it answers 415 for unknown extensions).
+  const char* types[][2] = {{".mjs", "text/javascript"},
+                            {".js", "text/javascript"},
+                            {".proto", "text/plain"},
+                            {".json", "application/json"},
+                            {".wasm", "application/wasm"},
+                            {".md", "text/markdown; charset=utf-8"}};
+  constexpr int kTypes = static_cast<int>(sizeof(types) / sizeof(types[0]));
+  for (int i = 0; i < kTypes; ++i) {
+    std::memset(&s.mime[i], 0, sizeof(s.mime[i]));
+    s.mime[i].next = i + 1 < kTypes ? &s.mime[i + 1] : nullptr;
+    s.mime[i].name = types[i][0];
+    s.mime[i].value = types[i][1];
+  }
+
+  s.web_root = options_.web_root;
+  auto callback_mount = [](lws_http_mount& m, const char* path, const lws_http_mount* next) {
+    std::memset(&m, 0, sizeof(m));
+    m.mount_next = next;
+    m.mountpoint = path;
+    m.origin = "http";  // the protocol whose callback serves it
+    m.origin_protocol = LWSMPRO_CALLBACK;
+    m.mountpoint_len = static_cast<unsigned char>(std::strlen(path));
+  };
+  callback_mount(s.mount_metrics, "/metrics", nullptr);
+  callback_mount(s.mount_healthz, "/healthz", &s.mount_metrics);
+  std::memset(&s.mount_root, 0, sizeof(s.mount_root));
+  s.mount_root.mount_next = &s.mount_healthz;
+  s.mount_root.mountpoint = "/";
+  s.mount_root.mountpoint_len = 1;
+  s.mount_root.origin = s.web_root.c_str();
+  s.mount_root.def = "index.html";
+  s.mount_root.origin_protocol = LWSMPRO_FILE;
+  s.mount_root.extra_mimetypes = &s.mime[0];
+
+  lws_set_log_level(LLL_ERR, nullptr);
+  lws_context_creation_info info;
+  std::memset(&info, 0, sizeof(info));
+  info.port = options_.port;
+  info.iface = options_.bind.empty() ? nullptr : options_.bind.c_str();
+  info.protocols = s.protocols;
+  info.mounts = &s.mount_root;
+  info.user = this;
+  if (options_.bind.find(':') == std::string::npos) info.options |= LWS_SERVER_OPTION_DISABLE_IPV6;
+  context_ = lws_create_context(&info);
+  if (!context_)
+    throw std::runtime_error("cannot listen on " + options_.bind + ":" +
+                             std::to_string(options_.port) + " (port in use or bad address?)");
+  lws_vhost* vhost = lws_get_vhost_by_name(context_, "default");
+  port_ = vhost ? lws_get_vhost_listen_port(vhost) : options_.port;
+  stopping_ = false;
+  thread_ = std::thread([this] { service_loop(); });
+}
+
+void Transport::stop() {
+  if (!thread_.joinable()) return;
+  stopping_ = true;
+  wake();
+  thread_.join();
+}
+
+void Transport::service_loop() {
+  while (!stopping_) {
+    if (lws_service(context_, 0) < 0) break;
+  }
+  lws_context* ctx = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ctx = context_;
+    context_ = nullptr;  // wake() becomes a no-op from here on
+  }
+  // Closes every connection: CLOSED callbacks reach the handler from here.
+  lws_context_destroy(ctx);
+}
+
+void Transport::wake() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (context_) lws_cancel_service(context_);
+}
+
+void Transport::send(ConnId id, std::string bytes, bool counted) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = conns_.find(id);
+    if (it == conns_.end() || it->second.closing) return;
+    Outgoing m;
+    m.buf.resize(LWS_PRE + bytes.size());
+    std::memcpy(m.buf.data() + LWS_PRE, bytes.data(), bytes.size());
+    m.counted = counted;
+    it->second.queue.push_back(std::move(m));
+    dirty_.push_back(id);
+    if (context_) lws_cancel_service(context_);
+  }
+}
+
+void Transport::close(ConnId id, std::string final_message, bool drop_queued, int grace_ms) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = conns_.find(id);
+  if (it == conns_.end() || it->second.closing) return;
+  Conn& c = it->second;
+  if (drop_queued) {
+    // Keep a message already half written: the peer would see a broken frame otherwise.
+    while (c.queue.size() > 1 || (c.queue.size() == 1 && c.queue.front().offset == 0))
+      c.queue.pop_back();
+  }
+  if (!final_message.empty()) {
+    Outgoing m;
+    m.buf.resize(LWS_PRE + final_message.size());
+    std::memcpy(m.buf.data() + LWS_PRE, final_message.data(), final_message.size());
+    c.queue.push_back(std::move(m));
+  }
+  c.closing = true;
+  c.grace_ms = std::max(1, grace_ms);
+  dirty_.push_back(id);
+  if (context_) lws_cancel_service(context_);
+}
+
+std::size_t Transport::queued(ConnId id) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = conns_.find(id);
+  return it == conns_.end() ? 0 : it->second.queue.size();
+}
+
+int Transport::callback(lws* wsi, int reason, void* user, void* in, std::size_t len) {
+  auto* self = static_cast<Transport*>(lws_context_user(lws_get_context(wsi)));
+  switch (reason) {
+    case LWS_CALLBACK_HTTP:
+    case LWS_CALLBACK_HTTP_WRITEABLE:
+    case LWS_CALLBACK_CLOSED_HTTP:
+    case LWS_CALLBACK_HTTP_DROP_PROTOCOL:
+      return self->on_http(wsi, reason, user, in, len);
+    case LWS_CALLBACK_ESTABLISHED:
+    case LWS_CALLBACK_RECEIVE:
+    case LWS_CALLBACK_SERVER_WRITEABLE:
+    case LWS_CALLBACK_CLOSED:
+    case LWS_CALLBACK_EVENT_WAIT_CANCELLED:
+      return self->on_ws(wsi, reason, user, in, len);
+    default:
+      // Static file serving and the HTTP plumbing live in lws's default handler.
+      return lws_callback_http_dummy(wsi, static_cast<lws_callback_reasons>(reason), user, in, len);
+  }
+}
+
+int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t len) {
+  auto* pss = static_cast<Pss*>(user);
+  switch (reason) {
+    case LWS_CALLBACK_HTTP: {
+      char uri[256] = {0};
+      if (lws_hdr_copy(wsi, uri, sizeof(uri), WSI_TOKEN_GET_URI) < 0) uri[0] = 0;
+      std::string path = uri;
+      std::string body, type = "text/plain; charset=utf-8";
+      if (path.rfind("/healthz", 0) == 0) {
+        body = "ok\n";
+      } else if (path.rfind("/metrics", 0) == 0) {
+        body = handler_.metrics_text();
+        type = "text/plain; version=0.0.4; charset=utf-8";
+      } else {
+        if (lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND, nullptr)) return -1;
+        return lws_http_transaction_completed(wsi) ? -1 : 0;
+      }
+      unsigned char buf[LWS_PRE + 1024];
+      unsigned char *start = buf + LWS_PRE, *p = start, *end = buf + sizeof(buf) - 1;
+      if (lws_add_http_common_headers(wsi, HTTP_STATUS_OK, type.c_str(), body.size(), &p, end))
+        return 1;
+      if (lws_finalize_write_http_header(wsi, start, &p, end)) return 1;
+      if (!pss) return -1;
+      delete pss->body;
+      pss->body = new std::string(std::move(body));
+      lws_callback_on_writable(wsi);
+      return 0;
+    }
+    case LWS_CALLBACK_HTTP_WRITEABLE: {
+      if (!pss || !pss->body) break;
+      std::vector<unsigned char> buf(LWS_PRE + pss->body->size());
+      std::memcpy(buf.data() + LWS_PRE, pss->body->data(), pss->body->size());
+      const int n = lws_write(wsi, buf.data() + LWS_PRE, pss->body->size(), LWS_WRITE_HTTP_FINAL);
+      delete pss->body;
+      pss->body = nullptr;
+      if (n < 0) return -1;
+      return lws_http_transaction_completed(wsi) ? -1 : 0;
+    }
+    case LWS_CALLBACK_CLOSED_HTTP:
+    case LWS_CALLBACK_HTTP_DROP_PROTOCOL:
+      if (pss) {
+        delete pss->body;
+        pss->body = nullptr;
+      }
+      break;
+    default:
+      break;
+  }
+  return lws_callback_http_dummy(wsi, static_cast<lws_callback_reasons>(reason), user, in, len);
+}
+
+int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len) {
+  auto* pss = static_cast<Pss*>(user);
+  switch (reason) {
+    case LWS_CALLBACK_ESTABLISHED: {
+      ConnId id;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        id = next_id_++;
+        conns_[id].wsi = wsi;
+      }
+      pss->id = id;
+      // A bounded kernel send buffer: frames a peer does not read pile up in our queue, where
+      // the session sees them (latest pose wins, slow-reader timeout), instead of hiding in an
+      // autotuned multi-megabyte socket buffer as added latency.
+      if (options_.socket_send_buffer > 0) {
+        const int fd = static_cast<int>(lws_get_socket_fd(wsi));
+        const int size = options_.socket_send_buffer;
+        if (fd >= 0) setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &size, sizeof(size));
+      }
+      handler_.on_open(id);
+      return 0;
+    }
+    case LWS_CALLBACK_RECEIVE: {
+      if (!pss || !pss->id) return -1;
+      const bool first = lws_is_first_fragment(wsi) != 0;
+      const bool final = lws_is_final_fragment(wsi) != 0;
+      const bool binary = lws_frame_is_binary(wsi) != 0;
+      MessageKind kind = MessageKind::binary;
+      std::string message;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        auto it = conns_.find(pss->id);
+        if (it == conns_.end()) return -1;
+        Conn& c = it->second;
+        if (first && c.rx.empty() && !c.rx_oversize) c.rx_binary = binary;
+        if (!c.rx_oversize) {
+          if (c.rx.size() + len > options_.max_message_bytes) {
+            c.rx_oversize = true;  // discard the rest; report once the message ends
+            std::string().swap(c.rx);
+          } else {
+            c.rx.append(static_cast<const char*>(in), len);
+          }
+        }
+        if (!final) return 0;
+        kind = c.rx_oversize ? MessageKind::oversize
+                             : (c.rx_binary ? MessageKind::binary : MessageKind::text);
+        message.swap(c.rx);
+        c.rx_oversize = false;
+      }
+      handler_.on_message(pss->id, kind, std::move(message));
+      return 0;
+    }
+    case LWS_CALLBACK_SERVER_WRITEABLE:
+      if (!pss || !pss->id) return 0;
+      return write_some(wsi, pss->id);
+    case LWS_CALLBACK_EVENT_WAIT_CANCELLED: {
+      // Another thread queued work: ask for writable callbacks (only legal on this thread).
+      std::vector<ConnId> dirty;
+      std::vector<std::pair<lws*, int>> arm;  // connections whose close timeout starts now
+      std::vector<lws*> wake;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        dirty.swap(dirty_);
+        std::sort(dirty.begin(), dirty.end());
+        dirty.erase(std::unique(dirty.begin(), dirty.end()), dirty.end());
+        for (ConnId id : dirty) {
+          auto it = conns_.find(id);
+          if (it == conns_.end()) continue;
+          Conn& c = it->second;
+          if (c.closing && !c.close_armed) {
+            c.close_armed = true;
+            arm.emplace_back(c.wsi, (c.grace_ms + 999) / 1000);
+          }
+          wake.push_back(c.wsi);
+        }
+      }
+      for (auto& [w, secs] : arm) lws_set_timeout(w, PENDING_TIMEOUT_USER_OK, secs);
+      for (lws* w : wake) lws_callback_on_writable(w);
+      return 0;
+    }
+    case LWS_CALLBACK_CLOSED: {
+      if (!pss || !pss->id) return 0;
+      const ConnId id = pss->id;
+      pss->id = 0;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        conns_.erase(id);
+      }
+      handler_.on_close(id);
+      return 0;
+    }
+    default:
+      return 0;
+  }
+}
+
+int Transport::write_some(lws* wsi, ConnId id) {
+  bool sent_counted = false;
+  bool more = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = conns_.find(id);
+    if (it == conns_.end()) return -1;
+    Conn& c = it->second;
+    if (c.queue.empty()) {
+      if (!c.closing) return 0;
+      // Everything (including the final Error) is written: close with a normal close frame.
+      static const char kBye[] = "bye";
+      lws_close_reason(wsi, LWS_CLOSE_STATUS_NORMAL,
+                       reinterpret_cast<unsigned char*>(const_cast<char*>(kBye)), 3);
+      return -1;
+    }
+    Outgoing& m = c.queue.front();
+    const std::size_t size = m.buf.size() - LWS_PRE;
+    const std::size_t chunk = std::min(kFragmentBytes, size - m.offset);
+    const bool first = m.offset == 0;
+    const bool last = m.offset + chunk == size;
+    // lws_write needs LWS_PRE writable bytes before the data: for later fragments those are
+    // payload bytes already sent, which may be overwritten.
+    const int n = lws_write(wsi, m.buf.data() + LWS_PRE + m.offset, chunk,
+                            static_cast<lws_write_protocol>(
+                                lws_write_ws_flags(LWS_WRITE_BINARY, first, last)));
+    if (n < 0) return -1;
+    m.offset += chunk;
+    if (last) {
+      sent_counted = m.counted;
+      c.queue.pop_front();
+    }
+    more = !c.queue.empty() || c.closing;
+  }
+  if (more) lws_callback_on_writable(wsi);
+  if (sent_counted) handler_.on_sent(id);
+  return 0;
+}
+
+}  // namespace catgs::server

@@ -1,0 +1,50 @@
+// PNG I/O (stb, Debian's libstb) and image comparison.
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include <stb_image.h>
+#include <stb_image_write.h>
+
+#include "common/image_io.h"
+
+namespace catgs {
+
+double psnr_rgba8(const Image& a, const Image& b) {
+  if (a.width != b.width || a.height != b.height || a.rgba8.size() != b.rgba8.size())
+    throw std::invalid_argument("psnr: image sizes differ");
+  double se = 0.0;
+  const std::size_t pixels = a.rgba8.size() / 4;
+  for (std::size_t p = 0; p < pixels; ++p)
+    for (int c = 0; c < 3; ++c) {
+      const double d = double(a.rgba8[4 * p + c]) - double(b.rgba8[4 * p + c]);
+      se += d * d;
+    }
+  if (se == 0.0) return std::numeric_limits<double>::infinity();
+  const double mse = se / (3.0 * static_cast<double>(pixels));
+  return 10.0 * std::log10(255.0 * 255.0 / mse);
+}
+
+void write_png(const Image& image, const std::string& path) {
+  if (image.rgba8.size() != static_cast<std::size_t>(image.width) * image.height * 4)
+    throw std::runtime_error(path + ": image has no 8-bit pixels to write");
+  std::vector<uint8_t> rgb(static_cast<std::size_t>(image.width) * image.height * 3);
+  for (std::size_t p = 0; p < rgb.size() / 3; ++p)
+    for (int c = 0; c < 3; ++c) rgb[3 * p + c] = image.rgba8[4 * p + c];
+  if (!stbi_write_png(path.c_str(), image.width, image.height, 3, rgb.data(), image.width * 3))
+    throw std::runtime_error(path + ": cannot write PNG");
+}
+
+Image read_png(const std::string& path) {
+  int w = 0, h = 0, channels = 0;
+  uint8_t* data = stbi_load(path.c_str(), &w, &h, &channels, 4);
+  if (!data) throw std::runtime_error(path + ": cannot read image: " + stbi_failure_reason());
+  Image img;
+  img.width = w;
+  img.height = h;
+  img.rgba8.assign(data, data + static_cast<std::size_t>(w) * h * 4);
+  stbi_image_free(data);
+  return img;
+}
+
+}  // namespace catgs

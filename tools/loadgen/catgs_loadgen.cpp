@@ -1,0 +1,182 @@
+// catgs-loadgen: N concurrent sessions (one thread each) replay camera traces against a running
+// catgs-server and report frames, FPS, pose-to-frame latency, bytes/s, dropped and stale frames,
+// errors and the server's stage times, as a table and optionally JSON. It reports; it does not
+// pass or fail on time, except in ramp mode, where it searches for the largest session count
+// that holds the given bounds.
+//
+//   catgs-loadgen --port 8080 --sessions 4 --size 1280x720 --trace orbit --seconds 10
+//   catgs-loadgen --sessions 4 --trace orbit,real:C.json --scene S.ply --size 1280x720,640x480
+//   catgs-loadgen --ramp --sessions 32 --max-p95-ms 25 --min-fps 60 --json ramp.json
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "scene/ply_io.h"
+#include "common/cli_args.h"
+#include "loadgen/load_report.h"
+#include "loadgen/load_session.h"
+
+using namespace catgs;
+using namespace catgs::loadgen;
+
+namespace {
+
+const char* kUsage =
+    "usage: catgs-loadgen [options]\n"
+    "  --host H --port N        server (default 127.0.0.1:8080)\n"
+    "  --sessions N             concurrent sessions (default 1; the ramp's upper limit)\n"
+    "  --size WxH[,WxH...]      frame sizes, assigned to sessions in turn (default 1280x720)\n"
+    "  --width W --height H     same as --size WxH\n"
+    "  --trace T[,T...]         orbit | real:C.json | cameras:C.json | FILE.trace, in turn\n"
+    "                           (default orbit)\n"
+    "  --scene FILE             the server's scene, for real: traces (and a better orbit)\n"
+    "  --offset-s S             session i starts i*S seconds into its trace (default 0.37)\n"
+    "  --rate HZ                poses per second per session (default 60; 0 = closed loop)\n"
+    "  --depth D                closed loop: poses outstanding (default 1)\n"
+    "  --seconds S              how long each run sends poses (default 10)\n"
+    "  --decode 0|1             decode every frame with libavcodec (default 0)\n"
+    "  --check-every N          decode, and compare every Nth frame with the CPU reference\n"
+    "                           render of its pose (needs --scene; slows the client down)\n"
+    "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
+    "  --warmup N               first N frames of a session left out of the statistics (5)\n"
+    "  --stale-ms MS            frames later than this count as stale (default 100)\n"
+    "  --token T                Hello token\n"
+    "  --json FILE              write the report (every ramp step) as JSON\n"
+    "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
+    "  --ramp-step x2|+K        session counts double (default) or grow by K\n"
+    "  --max-p95-ms MS          ramp bound: pooled p95 pose-to-frame latency\n"
+    "  --min-fps F              ramp bound: the slowest session's FPS\n";
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+std::pair<int, int> parse_size(const std::string& s) {
+  const auto x = s.find('x');
+  if (x == std::string::npos) throw std::invalid_argument("size '" + s + "' is not WxH");
+  return {std::stoi(s.substr(0, x)), std::stoi(s.substr(x + 1))};
+}
+
+// Runs `n` sessions at once, one thread each.
+std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConfig>& templates) {
+  std::vector<SessionResult> results(static_cast<std::size_t>(n));
+  std::vector<std::thread> threads;
+  for (int i = 0; i < n; ++i) {
+    LoadSessionConfig c = templates[static_cast<std::size_t>(i) % templates.size()];
+    c.index = i;
+    c.offset_s *= i;
+    threads.emplace_back([c, &results, i] { results[static_cast<std::size_t>(i)] = run_load_session(c); });
+  }
+  for (auto& t : threads) t.join();
+  return results;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const tools::Args args(argc, argv,
+                           {"--host", "--port", "--sessions", "--size", "--width", "--height",
+                            "--trace", "--scene", "--offset-s", "--rate", "--depth", "--seconds",
+                            "--decode", "--check-every", "--check-min-psnr", "--warmup", "--stale-ms", "--token", "--json", "--ramp!",
+                            "--ramp-step", "--max-p95-ms", "--min-fps", "--help!"});
+    if (args.has("--help")) {
+      std::cout << kUsage;
+      return 0;
+    }
+    LoadSessionConfig base;
+    base.host = args.get("--host", base.host);
+    base.port = args.get_int("--port", base.port);
+    base.token = args.get("--token");
+    base.offset_s = args.get_double("--offset-s", 0.37);
+    base.rate_hz = args.get_double("--rate", 60);
+    base.depth = std::max(1, args.get_int("--depth", 1));
+    base.seconds = args.get_double("--seconds", 10);
+    base.decode = args.get("--decode", "0") == "1";
+    base.check_every = std::max(0, args.get_int("--check-every", 0));
+    base.check_min_psnr = args.get_double("--check-min-psnr", 30);
+    if (base.check_every > 0 && !args.has("--scene"))
+      throw std::invalid_argument("--check-every needs --scene (the reference renders it)");
+    base.warmup_frames = args.get_int("--warmup", 5);
+    base.stale_ms = args.get_double("--stale-ms", 100);
+    if (args.has("--scene")) {
+      base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
+      std::cout << "scene " << args.get("--scene") << ": " << base.scene->size() << " Gaussians\n";
+    }
+    std::vector<std::string> sizes = split(args.get("--size", "1280x720"));
+    if (args.has("--width") || args.has("--height"))
+      sizes = {std::to_string(args.get_int("--width", 1280)) + "x" + std::to_string(args.get_int("--height", 720))};
+    const std::vector<std::string> traces = split(args.get("--trace", "orbit"));
+    if (sizes.empty() || traces.empty()) throw std::invalid_argument("--size and --trace need values");
+    // One template per (size, trace) turn; session i takes template i mod count.
+    std::vector<LoadSessionConfig> templates;
+    for (std::size_t i = 0; i < std::max(sizes.size(), traces.size()); ++i) {
+      LoadSessionConfig c = base;
+      std::tie(c.width, c.height) = parse_size(sizes[i % sizes.size()]);
+      c.trace = traces[i % traces.size()];
+      templates.push_back(c);
+    }
+    const int max_sessions = std::max(1, args.get_int("--sessions", 1));
+
+    nlohmann::json report;
+    report["config"] = {{"rate_hz", base.rate_hz}, {"seconds", base.seconds}, {"decode", base.decode},
+                        {"check_every", base.check_every}, {"check_min_psnr", base.check_min_psnr},
+                        {"sizes", sizes}, {"traces", traces}, {"stale_ms", base.stale_ms}};
+    int exit_code = 0;
+    if (!args.has("--ramp")) {
+      const auto results = run_sessions(max_sessions, templates);
+      std::cout << format_table(results);
+      report["run"] = run_json(results);
+      for (const auto& r : results) {
+        exit_code |= r.frames == 0 ? 1 : 0;
+        // A reference check that found a bad frame, or checked none, fails the run.
+        if (base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) exit_code |= 1;
+      }
+    } else {
+      const std::string step = args.get("--ramp-step", "x2");
+      const int add = step.rfind('+', 0) == 0 ? std::stoi(step.substr(1)) : 0;
+      if (step != "x2" && add <= 0) throw std::invalid_argument("--ramp-step must be x2 or +K");
+      const double max_p95 = args.get_double("--max-p95-ms", 0), min_fps = args.get_double("--min-fps", 0);
+      int held = 0;
+      report["ramp"] = nlohmann::json::array();
+      for (int n = 1; n <= max_sessions; n = add ? n + add : 2 * n) {
+        const auto results = run_sessions(n, templates);
+        const RunSummary t = summarize_run(results);
+        char broken[96] = "";
+        if (t.errors) std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
+        else if (max_p95 > 0 && t.latency.p95 > max_p95) std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
+        else if (min_fps > 0 && t.fps_min < min_fps) std::snprintf(broken, sizeof(broken), "slowest session %.1f FPS", t.fps_min);
+        std::printf("--- %d session(s): %s%s\n", n, broken[0] ? "broke: " : "held", broken);
+        std::cout << format_table(results);
+        nlohmann::json step_json = run_json(results);
+        step_json["held"] = broken[0] == 0;
+        step_json["broken_by"] = broken;
+        report["ramp"].push_back(step_json);
+        if (broken[0]) break;
+        held = n;
+      }
+      std::printf("ramp: largest session count that held: %d (bounds: p95 <= %g ms, min FPS >= %g; 0 = none)\n",
+                  held, max_p95, min_fps);
+      report["largest_sessions_held"] = held;
+    }
+    if (args.has("--json")) {
+      std::ofstream(args.get("--json")) << report.dump(1) << "\n";
+      std::cout << "JSON: " << args.get("--json") << "\n";
+    }
+    return exit_code;
+  } catch (const std::exception& e) {
+    std::cerr << "catgs-loadgen: " << e.what() << "\n" << kUsage;
+    return 2;
+  }
+}

@@ -1,0 +1,74 @@
+#include "loadgen/h264_decoder.h"
+
+#include <cstring>
+#include <stdexcept>
+
+extern "C" {
+#include <libavcodec/avcodec.h>
+#include <libavutil/error.h>
+#include <libswscale/swscale.h>
+}
+
+namespace catgs::loadgen {
+
+H264Decoder::H264Decoder() {
+  const AVCodec* codec = avcodec_find_decoder(AV_CODEC_ID_H264);
+  if (!codec) throw std::runtime_error("h264 decoder not available");
+  ctx_ = avcodec_alloc_context3(codec);
+  frame_ = av_frame_alloc();
+  packet_ = av_packet_alloc();
+  if (!ctx_ || !frame_ || !packet_) throw std::runtime_error("h264 decoder: out of memory");
+  ctx_->thread_count = 1;  // frame threading would delay output by a frame per thread
+  ctx_->flags |= AV_CODEC_FLAG_LOW_DELAY;
+  if (avcodec_open2(ctx_, codec, nullptr) < 0) throw std::runtime_error("cannot open h264 decoder");
+}
+
+H264Decoder::~H264Decoder() {
+  if (sws_) sws_freeContext(sws_);
+  av_packet_free(&packet_);
+  av_frame_free(&frame_);
+  avcodec_free_context(&ctx_);
+}
+
+bool H264Decoder::decode(const std::string& au, std::vector<std::uint8_t>& rgba, int& width,
+                         int& height) {
+  if (av_new_packet(packet_, static_cast<int>(au.size())) < 0)
+    throw std::runtime_error("h264 decoder: out of memory");
+  std::memcpy(packet_->data, au.data(), au.size());
+  int err = avcodec_send_packet(ctx_, packet_);
+  av_packet_unref(packet_);
+  if (err < 0) {
+    char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
+    av_strerror(err, buf, sizeof(buf));
+    throw std::runtime_error(std::string("h264 decode: ") + buf);
+  }
+  bool got = false;
+  while (avcodec_receive_frame(ctx_, frame_) == 0) {
+    width = frame_->width;
+    height = frame_->height;
+    if (!sws_ || sws_w_ != width || sws_h_ != height) {
+      if (sws_) sws_freeContext(sws_);
+      sws_ = sws_getContext(width, height, static_cast<AVPixelFormat>(frame_->format), width,
+                            height, AV_PIX_FMT_RGBA, SWS_BILINEAR, nullptr, nullptr, nullptr);
+      if (!sws_) throw std::runtime_error("h264 decoder: no colour converter");
+      // BT.709 limited range in, full-range RGB out.
+      const int* bt709 = sws_getCoefficients(SWS_CS_ITU709);
+      sws_setColorspaceDetails(sws_, bt709, 0, bt709, 1, 0, 1 << 16, 1 << 16);
+      sws_w_ = width;
+      sws_h_ = height;
+    }
+    const std::size_t bytes = static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4;
+    // swscale's SIMD paths may write a little past the last row: give it slack, then trim
+    // (the slack stays in the vector's capacity).
+    rgba.resize(bytes + 256);
+    std::uint8_t* dst[1] = {rgba.data()};
+    const int dst_stride[1] = {width * 4};
+    sws_scale(sws_, frame_->data, frame_->linesize, 0, height, dst, dst_stride);
+    rgba.resize(bytes);
+    av_frame_unref(frame_);
+    got = true;
+  }
+  return got;
+}
+
+}  // namespace catgs::loadgen

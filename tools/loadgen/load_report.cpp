@@ -1,0 +1,189 @@
+#include "loadgen/load_report.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <numeric>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+namespace catgs::loadgen {
+
+double percentile(std::vector<double> values, double p) {
+  if (!(p >= 0.0 && p <= 100.0))
+    throw std::invalid_argument("percentile: p must be in [0, 100], got " + std::to_string(p));
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  const double rank = p / 100.0 * static_cast<double>(values.size() - 1);
+  const auto lo = static_cast<std::size_t>(std::floor(rank));
+  const std::size_t hi = std::min(lo + 1, values.size() - 1);
+  return values[lo] + (rank - static_cast<double>(lo)) * (values[hi] - values[lo]);
+}
+
+void StageSums::add(const StageSums& o) {
+  queue += o.queue;
+  render += o.render;
+  convert += o.convert;
+  encode += o.encode;
+  send += o.send;
+  total += o.total;
+  frames += o.frames;
+  sends += o.sends;
+  render_key += o.render_key;
+}
+
+LatencySummary summarize_latency(const std::vector<double>& v) {
+  LatencySummary s;
+  s.samples = v.size();
+  if (v.empty()) return s;
+  s.p50 = percentile(v, 50);
+  s.p95 = percentile(v, 95);
+  s.p99 = percentile(v, 99);
+  s.max = *std::max_element(v.begin(), v.end());
+  s.mean = std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+  return s;
+}
+
+double session_fps(const SessionResult& s) {
+  return s.run_seconds > 0 ? static_cast<double>(s.frames) / s.run_seconds : 0.0;
+}
+
+RunSummary summarize_run(const std::vector<SessionResult>& sessions) {
+  RunSummary t;
+  t.sessions = static_cast<int>(sessions.size());
+  std::vector<double> pooled;
+  for (const SessionResult& s : sessions) {
+    t.frames += s.frames;
+    t.poses_sent += s.poses_sent;
+    t.bytes += s.bytes;
+    t.dropped += s.dropped;
+    t.stale += s.stale;
+    t.errors += s.errors;
+    const double fps = session_fps(s);
+    t.fps_total += fps;
+    t.fps_min = (&s == &sessions.front()) ? fps : std::min(t.fps_min, fps);
+    if (s.run_seconds > 0) t.bytes_per_second += static_cast<double>(s.bytes) / s.run_seconds;
+    pooled.insert(pooled.end(), s.latency_ms.begin(), s.latency_ms.end());
+    t.server.add(s.server);
+  }
+  t.latency = summarize_latency(pooled);
+  return t;
+}
+
+namespace {
+
+double mean(double sum, std::uint64_t n) { return n ? sum / static_cast<double>(n) : 0.0; }
+
+nlohmann::json latency_json(const LatencySummary& l) {
+  return {{"p50_ms", l.p50}, {"p95_ms", l.p95}, {"p99_ms", l.p99},
+          {"mean_ms", l.mean}, {"max_ms", l.max}, {"samples", l.samples}};
+}
+
+nlohmann::json stages_json(const StageSums& s) {
+  return {{"queue_ms", mean(s.queue, s.frames)},
+          {"render_ms", mean(s.render, s.frames)},
+          {"convert_ms", mean(s.convert, s.frames)},
+          {"encode_ms", mean(s.encode, s.frames)},
+          {"send_ms", mean(s.send, s.sends)},
+          {"total_ms", mean(s.total, s.frames)},
+          {"render_key_fraction", s.frames ? static_cast<double>(s.render_key) / static_cast<double>(s.frames) : 0.0},
+          {"frames", s.frames}};
+}
+
+}  // namespace
+
+nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
+  nlohmann::json out;
+  out["sessions"] = nlohmann::json::array();
+  for (const SessionResult& s : sessions) {
+    out["sessions"].push_back({{"index", s.index},
+                               {"trace", s.trace},
+                               {"width", s.width},
+                               {"height", s.height},
+                               {"session_id", s.session_id},
+                               {"renderer", s.renderer},
+                               {"encoder", s.encoder},
+                               {"pipeline", s.pipeline},
+                               {"seconds", s.run_seconds},
+                               {"poses_sent", s.poses_sent},
+                               {"frames", s.frames},
+                               {"idr_frames", s.idr_frames},
+                               {"decoded", s.decoded},
+                               {"fps", session_fps(s)},
+                               {"bytes", s.bytes},
+                               {"bytes_per_second", s.run_seconds > 0 ? static_cast<double>(s.bytes) / s.run_seconds : 0.0},
+                               {"dropped", s.dropped},
+                               {"stale", s.stale},
+                               {"errors", s.errors},
+                               {"first_error", s.first_error},
+                               {"checked", s.checked},
+                               {"check_failures", s.check_failures},
+                               {"psnr_min_db", s.psnr_min},
+                               {"psnr_mean_db", s.psnr_mean},
+                               {"latency", latency_json(summarize_latency(s.latency_ms))},
+                               {"server", stages_json(s.server)}});
+  }
+  const RunSummary t = summarize_run(sessions);
+  out["total"] = {{"sessions", t.sessions},
+                  {"frames", t.frames},
+                  {"poses_sent", t.poses_sent},
+                  {"fps_total", t.fps_total},
+                  {"fps_min", t.fps_min},
+                  {"bytes_per_second", t.bytes_per_second},
+                  {"dropped", t.dropped},
+                  {"stale", t.stale},
+                  {"errors", t.errors},
+                  {"latency", latency_json(t.latency)},
+                  {"server", stages_json(t.server)}};
+  return out;
+}
+
+std::string format_table(const std::vector<SessionResult>& sessions) {
+  std::string out;
+  char line[256];
+  auto row = [&](const std::string& name, const std::string& size, std::uint64_t frames, double fps,
+                 const LatencySummary& l, double kbps, std::uint64_t dropped, std::uint64_t stale,
+                 std::uint64_t errors) {
+    std::snprintf(line, sizeof(line), "%-8s %-10s %7llu %7.1f %8.1f %8.1f %8.1f %9.0f %7llu %6llu %6llu\n",
+                  name.c_str(), size.c_str(), static_cast<unsigned long long>(frames), fps, l.p50,
+                  l.p95, l.p99, kbps, static_cast<unsigned long long>(dropped),
+                  static_cast<unsigned long long>(stale), static_cast<unsigned long long>(errors));
+    out += line;
+  };
+  std::snprintf(line, sizeof(line), "%-8s %-10s %7s %7s %8s %8s %8s %9s %7s %6s %6s\n", "session",
+                "size", "frames", "FPS", "p50 ms", "p95 ms", "p99 ms", "kbit/s", "dropped",
+                "stale", "errors");
+  out += line;
+  for (const SessionResult& s : sessions) {
+    const double kbps = s.run_seconds > 0 ? 8.0 * static_cast<double>(s.bytes) / s.run_seconds / 1000.0 : 0.0;
+    row(std::to_string(s.index), std::to_string(s.width) + "x" + std::to_string(s.height), s.frames,
+        session_fps(s), summarize_latency(s.latency_ms), kbps, s.dropped, s.stale, s.errors);
+  }
+  const RunSummary t = summarize_run(sessions);
+  row("total", "", t.frames, t.fps_total, t.latency, 8.0 * t.bytes_per_second / 1000.0, t.dropped,
+      t.stale, t.errors);
+  const StageSums& g = t.server;
+  std::snprintf(line, sizeof(line),
+                "server means (ms): queue %.2f  render %.2f (key frames %.0f%%)  convert %.2f  "
+                "encode %.2f  send %.2f  pose->handed %.2f;  slowest session %.1f FPS\n",
+                mean(g.queue, g.frames), mean(g.render, g.frames),
+                g.frames ? 100.0 * static_cast<double>(g.render_key) / static_cast<double>(g.frames) : 0.0,
+                mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends),
+                mean(g.total, g.frames), t.fps_min);
+  out += line;
+  for (const SessionResult& s : sessions)
+    if (s.checked > 0) {
+      std::snprintf(line, sizeof(line),
+                    "session %d reference check: %llu frames, PSNR min %.1f dB, mean %.1f dB, %llu "
+                    "below the bar\n",
+                    s.index, static_cast<unsigned long long>(s.checked), s.psnr_min, s.psnr_mean,
+                    static_cast<unsigned long long>(s.check_failures));
+      out += line;
+    }
+  for (const SessionResult& s : sessions)
+    if (!s.first_error.empty()) out += "session " + std::to_string(s.index) + " error: " + s.first_error + "\n";
+  return out;
+}
+
+}  // namespace catgs::loadgen

@@ -1,0 +1,60 @@
+// One catgs-loadgen session: connect, Hello, replay a camera trace as timed poses, receive (and
+// optionally decode) the frames, measure. Blocking; run one per thread.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "scene/gaussian_model.h"
+#include "camera/trace.h"
+#include "catgs_stream.pb.h"
+#include "loadgen/load_report.h"
+
+namespace catgs::loadgen {
+
+// The trace a session replays, by spec, at width x height:
+//   "orbit"          a 360 degree orbit in 10 s around the scene at the distance of Welcome's
+//                    initial pose (bounds: the scene's robust bounds with `scene`, else Welcome's)
+//   "real:C.json"    an INRIA cameras.json path moved onto the scene (fit_trace_to_scene, 0.5 s
+//                    per view); needs `scene`
+//   "cameras:C.json" the scene's own cameras, interpolated as they are (0.5 s per view)
+//   anything else    our trace file (trace.h), rescaled
+// Sampled at 120 Hz. Throws std::invalid_argument for "real:" without a scene, and what the
+// readers throw for bad files.
+Trace make_load_trace(const std::string& spec, const GaussianModel* scene,
+                      const ::catgs::stream::v1::Welcome& welcome, int width, int height);
+
+// The trace's camera at time t_s (seconds), looping: the sample at or just before
+// t_s mod duration. `trace` must not be empty.
+const Camera& camera_at(const Trace& trace, double t_s);
+
+struct LoadSessionConfig {
+  int index = 0;                 // session number (report only)
+  std::string host = "127.0.0.1";
+  int port = 8080;
+  int width = 1280, height = 720;
+  std::string token;
+  std::string trace = "orbit";   // make_load_trace spec
+  std::shared_ptr<const GaussianModel> scene;  // optional; needed by "real:" traces
+  double offset_s = 0;           // start this far into the trace
+  double rate_hz = 60;           // poses per second; 0: closed loop (`depth` poses outstanding)
+  int depth = 1;
+  double seconds = 10;           // how long poses are sent
+  bool decode = false;           // decode every frame (latency then ends at the decoded picture)
+  int warmup_frames = 5;         // frames left out of latency and server statistics
+  double stale_ms = 100;         // a frame later than this after its pose counts as stale
+  double drain_ms = 1000;        // after the last pose, wait this long at most for its frame
+  // Reference check (implies decode): every check_every-th frame is compared with the CPU
+  // reference render (exact pipeline, black background) of the pose it answers, over `scene`
+  // (required). 0: off. The CPU render blocks this session's thread: latency and FPS of a
+  // checking run are not the server's.
+  int check_every = 0;
+  double check_min_psnr = 30;    // dB; frames below count in SessionResult::check_failures
+};
+
+// Runs one session. Throws std::invalid_argument for check_every > 0 without a scene. Otherwise
+// never throws: failures are counted in SessionResult::errors (first_error
+// names the first one); a session that cannot connect or is refused reports 0 frames.
+SessionResult run_load_session(const LoadSessionConfig& config);
+
+}  // namespace catgs::loadgen

@@ -1,0 +1,86 @@
+#include "loadgen/stream_client.h"
+
+#include <chrono>
+#include <stdexcept>
+
+#include "session/message_validation.h"
+
+namespace catgs::loadgen {
+
+pb::Pose pose_from_camera(const Camera& camera, std::uint32_t sequence, double client_time_ms) {
+  pb::Pose p;
+  p.set_sequence(sequence);
+  p.set_client_time_ms(client_time_ms);
+  const glm::vec3 c = camera.position();
+  const glm::quat q = camera.orientation();
+  p.mutable_position()->set_x(c.x);
+  p.mutable_position()->set_y(c.y);
+  p.mutable_position()->set_z(c.z);
+  p.mutable_orientation()->set_w(q.w);
+  p.mutable_orientation()->set_x(q.x);
+  p.mutable_orientation()->set_y(q.y);
+  p.mutable_orientation()->set_z(q.z);
+  p.set_vertical_fov_deg(camera.vertical_fov_deg());
+  return p;
+}
+
+Camera camera_from_pose(const pb::Pose& pose, int width, int height) {
+  server::CameraPose cp;
+  if (auto bad = server::check_pose(pose, cp)) throw std::invalid_argument(bad->reason);
+  return Camera::from_pose(cp.position, cp.orientation, cp.vertical_fov_deg, width, height);
+}
+
+void StreamClient::connect(int port, const std::string& host, int timeout_ms,
+                           int receive_buffer) {
+  ws_.connect(host, port, "/ws", "catgs.v1", timeout_ms, receive_buffer);
+}
+
+void StreamClient::send(const pb::ClientMessage& message) {
+  std::string bytes;
+  message.SerializeToString(&bytes);
+  ws_.send_binary(bytes);
+}
+
+void StreamClient::send_pose(const pb::Pose& pose) {
+  pb::ClientMessage m;
+  *m.mutable_pose() = pose;
+  send(m);
+}
+
+pb::Welcome StreamClient::hello(int width, int height, const std::string& token, int timeout_ms) {
+  pb::ClientMessage m;
+  pb::Hello* h = m.mutable_hello();
+  h->set_protocol_version(1);
+  h->set_viewport_width(static_cast<std::uint32_t>(width));
+  h->set_viewport_height(static_cast<std::uint32_t>(height));
+  h->add_codecs(pb::CODEC_H264);
+  h->set_token(token);
+  h->set_client_name("catgs-loadgen");
+  send(m);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (std::chrono::steady_clock::now() < deadline) {
+    auto msg = recv(100);
+    if (!msg) continue;
+    if (msg->has_welcome()) return msg->welcome();
+    if (msg->has_error())
+      throw std::runtime_error("server refused Hello: " + pb::ErrorCode_Name(msg->error().code()) +
+                               ": " + msg->error().reason());
+  }
+  throw std::runtime_error("no Welcome within " + std::to_string(timeout_ms) + " ms");
+}
+
+std::optional<pb::ServerMessage> StreamClient::recv(int timeout_ms) {
+  std::string bytes;
+  bool binary = false;
+  const auto r = ws_.recv(bytes, binary, timeout_ms);
+  if (r == WsClient::Recv::timeout) return std::nullopt;
+  if (r == WsClient::Recv::closed) {
+    closed_ = true;
+    throw std::runtime_error("connection closed");
+  }
+  pb::ServerMessage m;
+  if (!binary || !m.ParseFromString(bytes)) throw std::runtime_error("unparsable server message");
+  return m;
+}
+
+}  // namespace catgs::loadgen
