@@ -10,8 +10,9 @@
 
 namespace catgs::cuda {
 
-CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options)
-    : scene_(std::move(scene)), state_(std::make_unique<State>()) {
+CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options,
+                           const CudaOptions& cuda_options)
+    : scene_(std::move(scene)), state_(std::make_unique<State>()), cuda_options_(cuda_options) {
   if (!scene_) throw std::invalid_argument("CudaRenderer: null scene");
   set_options(options);
   State& s = *state_;
@@ -46,10 +47,6 @@ void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
 }
 
 CUstream_st* CudaRenderer::stream() const { return state_->stream; }
-std::size_t CudaRenderer::buffer_bytes() const { return state_->bytes(); }
-std::size_t CudaRenderer::peak_buffer_bytes() const { return state_->peak_bytes; }
-std::size_t CudaRenderer::allocation_count() const { return state_->allocations; }
-int CudaRenderer::syncs_last_frame() const { return state_->syncs; }
 
 stages::CameraParams camera_params(const Camera& camera) {
   stages::CameraParams cam{};
@@ -82,11 +79,9 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
   scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);
   ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
-  if (tune::kHeavyTilesFirst) {
-    tile_scratch.ensure(3 * static_cast<std::size_t>(tiles) * sizeof(uint32_t), "tile loads", allocs);
-    tile_order.ensure(tiles * sizeof(uint32_t), "tile order", allocs);
-    order_temp.ensure(stages::tile_order_temp_bytes(tiles), "tile order scratch", allocs);
-  }
+  tile_scratch.ensure(3 * static_cast<std::size_t>(tiles) * sizeof(uint32_t), "tile loads", allocs);
+  tile_order.ensure(tiles * sizeof(uint32_t), "tile order", allocs);
+  order_temp.ensure(stages::tile_order_temp_bytes(tiles), "tile order scratch", allocs);
   rgb.ensure(pixels * 3 * sizeof(float), "RGB image", allocs);
   rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
 }
@@ -197,19 +192,15 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
                                 proj.splat, {}, cam.width, cam.height};
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
-  const uint32_t* order = nullptr;
-  if (tune::kHeavyTilesFirst) {
-    stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(),
-                        s.tile_order.as<uint32_t>(), s.order_temp.as<void>(), s.order_temp.bytes(),
-                        s.stream);
-    order = s.tile_order.as<uint32_t>();
-    s.heaviest = s.tile_scratch.as<uint32_t>() + tiles;  // order_tiles sorts the loads there
-    s.heaviest_is_slice_key = false;
-  }
+  // The heaviest tiles first (longest-processing-time-first scheduling of the raster blocks).
+  stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(),
+                      s.tile_order.as<uint32_t>(), s.order_temp.as<void>(), s.order_temp.bytes(), s.stream);
+  s.heaviest = s.tile_scratch.as<uint32_t>() + tiles;  // order_tiles sorts the loads there
+  s.heaviest_is_slice_key = false;
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-  stages::rasterize(s.ranges.as<uint2>(), order, s.sorted_values, proj, cam, exact && warp_culling_, bg,
+  stages::rasterize(s.ranges.as<uint2>(), s.tile_order.as<uint32_t>(), s.sorted_values, proj, cam, bg,
                     s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
   CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
@@ -251,13 +242,20 @@ const FrameStats& CudaRenderer::last_stats() const {
   return stats_;
 }
 
-std::size_t CudaRenderer::heaviest_tile_entries() const {
+CudaRenderer::Diagnostics CudaRenderer::diagnostics() const {
   const State& s = *state_;
-  if (!s.heaviest || s.width == 0) return 0;
-  CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
-  uint32_t heaviest = 0;
-  CATGS_CUDA(cudaMemcpy(&heaviest, s.heaviest, sizeof heaviest, cudaMemcpyDeviceToHost));
-  return s.heaviest_is_slice_key ? 0xfffffu - (heaviest & 0xfffffu) : heaviest;
+  Diagnostics d;
+  d.buffer_bytes = s.bytes();
+  d.peak_buffer_bytes = s.peak_bytes;
+  d.allocations = s.allocations;
+  d.syncs_last_frame = s.syncs;
+  if (s.heaviest && s.width > 0) {
+    CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
+    uint32_t heaviest = 0;
+    CATGS_CUDA(cudaMemcpy(&heaviest, s.heaviest, sizeof heaviest, cudaMemcpyDeviceToHost));
+    d.heaviest_tile_entries = s.heaviest_is_slice_key ? stages::slice_length_of_key(heaviest) : heaviest;
+  }
+  return d;
 }
 
 void CudaRenderer::download(const DeviceFrame& f, Image& out) {

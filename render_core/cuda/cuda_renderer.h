@@ -104,11 +104,28 @@ struct DeviceFrame {
   CUstream_st* stream = nullptr;
 };
 
+// Two implementation choices of the CUDA core that draw the same image, for the tests that show
+// they do (tests/gpu) and nothing else:
+// - depth_first_sort: sort the render list depth first (the visible Gaussians by depth, then the
+//   entries stably by tile alone; depth_order.cu) instead of one radix sort of [tile | depth]
+//   keys: the same list, entry for entry. Unset, it follows the pipeline: on for catgs, whose
+//   key-frame trail lists are long, off for exact, whose lists are short (RESULTS.md, "An
+//   earlier round: what the predictor and the depth-first sort bought"). vanilla, and catgs key
+//   frames without a window, always sort the single way.
+// - tile_culling: catgs rasterizers blend only the trail-list entries whose ellipse reaches the
+//   tile at this frame's pose (blend.cuh blend_range_culled); off blends every entry: the same
+//   image, bit for bit.
+struct CudaOptions {
+  std::optional<bool> depth_first_sort;
+  bool tile_culling = true;
+};
+
 class CudaRenderer final : public Renderer {
  public:
-  // Throws std::invalid_argument for a null scene or bad speculation parameters (window outside
-  // 0..32, non-positive F_target), CudaError when the stream or events cannot be created.
-  CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options);
+  // Throws std::invalid_argument for a null scene or speculation parameters validate() refuses
+  // (speculation_params.h), CudaError when the stream or events cannot be created.
+  CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options,
+               const CudaOptions& cuda_options = {});
   ~CudaRenderer() override;
 
   std::string name() const override { return "cuda"; }
@@ -139,37 +156,19 @@ class CudaRenderer final : public Renderer {
   const std::shared_ptr<const DeviceScene>& scene() const { return scene_; }
 
   CUstream_st* stream() const;
-  // Bytes of device memory this renderer's reusable buffers hold now, and the most they held.
-  std::size_t buffer_bytes() const;
-  std::size_t peak_buffer_bytes() const;
-  // Number of buffer (re)allocations since construction (a steady trace should add none).
-  std::size_t allocation_count() const;
-  // Host-device synchronisations inside the last render_device() (see above).
-  int syncs_last_frame() const;
-  // Entries of the last frame's heaviest tile (catgs: heaviest slice of the group's key frame;
-  // waits for the frame; a diagnostic copy of 4 bytes outside the frame). One block walks that
-  // tile alone, so it bounds the rasterization time.
-  std::size_t heaviest_tile_entries() const;
-  // exact pipeline: let each warp of the rasterizer skip entries outside the vertical extent of
-  // the Gaussian's ellipse (same image, bit for bit). Off by default: measured no faster.
-  void set_warp_culling(bool on) { warp_culling_ = on; }
-  bool warp_culling() const { return warp_culling_; }
-  // catgs pipeline: let the rasterizer drop, each round of 256 list entries, those whose ellipse
-  // does not reach the tile at this frame's pose (a key frame's trail list holds entries for the
-  // whole window). Same image, bit for bit. On by default; off only to measure what it saves.
-  void set_tile_culling(bool on) { tile_culling_ = on; }
-  bool tile_culling() const { return tile_culling_; }
-  // exact and catgs pipelines: sort the render list depth first (the visible Gaussians by depth,
-  // then the entries stably by tile alone; cuda/depth_order.cu) instead of in one radix sort of
-  // [tile | depth] keys. The same list, entry for entry, and the same image; 2 radix passes over
-  // the list instead of 6 at 1080p, for a sort of the visible Gaussians and a gather in
-  // emission. Unless set, it follows the pipeline (also after set_options): on for catgs, whose
-  // key-frame trail lists are long (H100, city bicycle path: key frames 6.60 -> 5.36 ms), off for
-  // exact, whose lists are short (there it was up to 3% slower; tests/gpu/RESULTS.md). vanilla
-  // always sorts the reference way, and so do catgs key frames without a window (W = 0), whose
-  // lists are exact's. depth_first_sort(): the choice in effect now.
-  void set_depth_first_sort(bool on) { depth_first_sort_ = on; }
-  bool depth_first_sort() const { return depth_first_sort_.value_or(options_.pipeline == Pipeline::catgs); }
+
+  // What the renderer holds and did, for benchmarks and tests. heaviest_tile_entries waits for
+  // the last frame and copies 4 bytes back (outside the frame's timing).
+  struct Diagnostics {
+    std::size_t buffer_bytes = 0;       // device memory the reusable buffers hold now
+    std::size_t peak_buffer_bytes = 0;  // the most they held
+    std::size_t allocations = 0;        // buffer (re)allocations since construction
+    int syncs_last_frame = 0;           // host-device synchronisations in the last render_device()
+    // Entries of the last frame's heaviest tile (catgs: the heaviest slice of the group's key
+    // frame). One block walks it alone, so it bounds the rasterization time.
+    std::size_t heaviest_tile_entries = 0;
+  };
+  Diagnostics diagnostics() const;
 
  private:
   struct State;
@@ -186,9 +185,10 @@ class CudaRenderer final : public Renderer {
   std::unique_ptr<State> state_;
   mutable FrameStats stats_;
   mutable bool stats_ready_ = true;
-  bool warp_culling_ = false;
-  bool tile_culling_ = true;
-  std::optional<bool> depth_first_sort_;  // unset: by pipeline (depth_first_sort())
+  CudaOptions cuda_options_;
+  bool depth_first_sort() const {
+    return cuda_options_.depth_first_sort.value_or(options_.pipeline == Pipeline::catgs);
+  }
 };
 
 // The DeviceScene of `model`: uploaded on the first call, then the same one for as long as any

@@ -10,7 +10,7 @@
 // tile at this pose are blended) -> merge. The slice total is copied back asynchronously (plan_ready) so the
 // group's sub-frames launch exactly one block per slice; the key frame itself launches
 // slice_capacity() blocks, the extra ones return at once. A key frame without a window (W = 0:
-// the motion is too fast, the window is below SpeculationParams::min_window, the speculation
+// the motion is too fast, the speculation
 // backoff is under way, or the caches are off) runs the exact pipeline's pre-processing, list
 // and single sort instead, then the same split plan and slices, unculled.
 // Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag), the
@@ -185,7 +185,7 @@ void CudaRenderer::catgs_rasterize(const Camera& camera, uint32_t blocks, const 
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
   const stages::SlicePlan plan = s.slice_plan();
   stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), blocks, s.sorted_values, s.projected(), cam,
-                           options_.speculation.early_termination, tile_culling_ && trail_list, bg, abandon, s.partials.as<float4>(), s.rgb.as<float>(),
+                           options_.speculation.early_termination, cuda_options_.tile_culling && trail_list, bg, abandon, s.partials.as<float4>(), s.rgb.as<float>(),
                            s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
   stages::merge_slices(plan, s.partials.as<float4>(), cam, options_.speculation.early_termination, bg, abandon, s.rgb.as<float>(), s.rgba8.as<uint32_t>(),

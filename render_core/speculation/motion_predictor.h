@@ -19,23 +19,16 @@ struct TimedPose {
 
 struct MotionPredictorParams {
   // The angular velocity (and, without an acceleration fit, the linear velocity) is fitted over
-  // the poses of the last 50 ms. Measured (tests/gpu/RESULTS.md, "The motion predictor's fit
-  // window"): on the real camera paths the 100 ms fit lagged enough to make 78-96% of catgs frames
-  // key frames; 50 ms cut them by 5-16% (catgs 4-13% faster) and, with 60 Hz input whose stamps
-  // jitter by up to 4 ms, still predicted better than 100 ms; 17 ms was faster still on clean
-  // input but worse than 100 ms under that jitter.
+  // the poses of the last `fit_window_s`: a longer window averages out more of the input's stamp
+  // jitter, a shorter one lags less behind a changing velocity (RESULTS.md, "The motion
+  // predictor's fit window").
   double fit_window_s = 0.05;
   // The position is fitted as a quadratic in time (constant acceleration) over the poses of the
   // last `acceleration_window_s`; 0 keeps constant velocity (a line over fit_window_s). A line
   // fitted over a window estimates the velocity of the window's middle, which lags behind an
   // accelerating camera; the quadratic gives the velocity at the newest pose and the curvature
   // ahead. An acceleration needs a longer baseline than a velocity to stay steady under stamp
-  // jitter, hence its own window. Measured offline (tests/gpu/RESULTS.md, "Constant
-  // acceleration"): on the fitted bicycle and flowers paths it cut the 4-frames-ahead frames
-  // whose error exceeds a trail's margin from 36-41% to 18-20% of frames at 120 Hz (25-33% with
-  // 60 or 120 Hz input whose stamps jitter by up to 4 ms, against 38-41%); a 50 ms quadratic was
-  // better on clean input and worse than a line under that jitter; 150 ms lagged again. On the
-  // H100 catgs got 10-23% fewer key frames on those paths, and 3-15% more FPS.
+  // jitter, hence its own window (RESULTS.md, "Constant acceleration").
   double acceleration_window_s = 0.1;
   std::size_t max_samples = 32; // at most this many poses are kept
 };

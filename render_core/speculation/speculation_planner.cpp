@@ -17,27 +17,11 @@ bool same_intrinsics(const Camera& a, const Camera& b) {
 SpeculationPlanner::SpeculationPlanner(const SpeculationParams& params) { set_params(params); }
 
 void SpeculationPlanner::set_params(const SpeculationParams& params) {
-  if (params.initial_window < 0 || params.initial_window > 32)
-    throw std::invalid_argument("speculation window must be in 0..32");
-  if (params.min_window < 0 || params.min_window > 32)
-    throw std::invalid_argument("minimum speculation window must be in 0..32");
-  if (params.backoff_frames < 0 || params.backoff_frames > 1000)
-    throw std::invalid_argument("speculation backoff must be in 0..1000 frames");
-  if (params.min_slice_entries < 0) throw std::invalid_argument("minimum slice length must not be negative");
-  if (params.min_served < 0 || params.min_served > 32)
-    throw std::invalid_argument("sub-frames a group must serve must be in 0..32");
-  if (!(params.target_fps > 0.0)) throw std::invalid_argument("target fps must be positive");
-  if (!(params.predictor_window_s > 0.0 && params.predictor_window_s <= 1.0))
-    throw std::invalid_argument("motion predictor window must be in (0, 1] s");
-  if (!(params.predictor_acceleration_window_s >= 0.0 && params.predictor_acceleration_window_s <= 1.0))
-    throw std::invalid_argument("motion predictor acceleration window must be in [0, 1] s");
-  if (params.predictor_window_s != predictor_.params().fit_window_s ||
-      params.predictor_acceleration_window_s != predictor_.params().acceleration_window_s) {
-    MotionPredictorParams mp;  // a new fit: history restarts
-    mp.fit_window_s = params.predictor_window_s;
-    mp.acceleration_window_s = params.predictor_acceleration_window_s;
-    predictor_ = MotionPredictor(mp);
-  }
+  validate(params);
+  if (params.predictor.fit_window_s != predictor_.params().fit_window_s ||
+      params.predictor.acceleration_window_s != predictor_.params().acceleration_window_s ||
+      params.predictor.max_samples != predictor_.params().max_samples)
+    predictor_ = MotionPredictor(params.predictor);  // a new fit: history restarts
   params_ = params;
   group_open_ = false;
   backoff_ = full_frames_left_ = 0;
@@ -69,7 +53,7 @@ std::vector<Camera> SpeculationPlanner::path(const Camera& key, int window) cons
 
 void SpeculationPlanner::start_group(const Camera& key, int window) {
   if (closes_poor_group()) {  // this frame is the first of the backoff's full frames
-    backoff_ = backoff_ == 0 ? params_.backoff_frames : std::min(2 * backoff_, 8 * params_.backoff_frames);
+    backoff_ = backoff_ == 0 ? params_.backoff.frames : std::min(2 * backoff_, 8 * params_.backoff.frames);
     full_frames_left_ = backoff_ - 1;
   } else if (group_open_) {  // the group repaid its key frame
     backoff_ = 0;

@@ -23,9 +23,7 @@ namespace catgs {
 
 class SpeculationPlanner {
  public:
-  // Throws std::invalid_argument for a window, minimum window or min_served outside 0..32, a
-  // backoff outside 0..1000 frames, a negative min_slice_entries, a non-positive F_target or a
-  // predictor window outside (0, 1] s.
+  // Throws std::invalid_argument for parameters validate() refuses (speculation_params.h).
   explicit SpeculationPlanner(const SpeculationParams& params = {});
 
   // New parameters (validated as above); closes the open group, keeps the motion history.
@@ -40,21 +38,17 @@ class SpeculationPlanner {
   double advance_clock() { return clock_s_ += 1.0 / params_.target_fps; }
 
   // Whether a key frame may speculate at all (caching on, W_initial > 0, a motion history, no
-  // backoff under way: SpeculationParams::backoff_frames).
+  // backoff under way: SpeculationParams::backoff).
   bool window_wanted() const;
   // The predicted camera 1 / F_target after the newest pose, with `key`'s intrinsics (M's pair).
   Camera next_camera(const Camera& key) const { return predicted_camera(key, 1); }
-  // W for the largest per-frame screen motion M (pixels): motion_adaptive_window(), or 0 where
-  // that is below SpeculationParams::min_window.
-  int window_for(float max_motion_px) const {
-    const int window = motion_adaptive_window(max_motion_px, params_);
-    return window < params_.min_window ? 0 : window;
-  }
+  // W for the largest per-frame screen motion M (pixels): motion_adaptive_window().
+  int window_for(float max_motion_px) const { return motion_adaptive_window(max_motion_px, params_); }
   // The key camera followed by the W predicted cameras at k / F_target, k = 1..W.
   std::vector<Camera> path(const Camera& key, int window) const;
 
   // A key frame was rendered with window W: a new group opens (W > 0) or none (W = 0). The group
-  // it closes, if any, sets the backoff (SpeculationParams::backoff_frames).
+  // it closes, if any, sets the backoff (SpeculationParams::backoff).
   void start_group(const Camera& key, int window);
   // The candidate sub-frame passed its containment check and was served from the caches.
   void subframe_served() { ++subframes_served_; }
@@ -66,7 +60,7 @@ class SpeculationPlanner {
   // The key frame now being planned closes an open group that served fewer than min_served
   // sub-frames, with the backoff on: it renders in full, as the first frame of the backoff.
   bool closes_poor_group() const {
-    return params_.backoff_frames > 0 && group_open_ && subframes_served_ < params_.min_served;
+    return params_.backoff.frames > 0 && group_open_ && subframes_served_ < params_.backoff.min_served;
   }
 
   SpeculationParams params_;

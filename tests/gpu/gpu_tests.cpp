@@ -381,7 +381,7 @@ void catgs_abrupt(const std::string& name, const GaussianModel& m, std::shared_p
   }
   {  // stop: the camera holds still; W = W_initial, sub-frames equal the full render
     catgs::RenderOptions o = catgs_options();
-    o.speculation.backoff_frames = 0;  // the paper's rule alone (a poor group before the stop would back off)
+    o.speculation.backoff.frames = 0;  // the paper's rule alone (a poor group before the stop would back off)
     catgs::cuda::CudaRenderer g(dev, o);
     int subs = 0, w_min = 99;
     double min_psnr = INFINITY;

@@ -114,7 +114,7 @@ float error_4_ahead_accelerating(const MotionPredictorParams& params) {
 }
 
 // At constant velocity (acceleration_window_s = 0) the fit over a shorter window lags less behind
-// the current velocity (SpeculationParams::predictor_window_s), and the planner refuses a window
+// the current velocity (SpeculationParams::predictor), and the planner refuses a window
 // outside (0, 1] s.
 TEST(MotionPredictor, AShortWindowLagsLessOnAnAcceleratingCamera) {
   MotionPredictorParams params;
@@ -126,13 +126,13 @@ TEST(MotionPredictor, AShortWindowLagsLessOnAnAcceleratingCamera) {
   std::cout << "[ info ] 4-frame error, accelerating: 100 ms fit " << long_fit << ", 17 ms fit " << short_fit << "\n";
   EXPECT_LT(short_fit, 0.5f * long_fit);
   SpeculationParams bad;
-  bad.predictor_window_s = 0.0;
+  bad.predictor.fit_window_s = 0.0;
   EXPECT_THROW(SpeculationPlanner{bad}, std::invalid_argument);
-  bad.predictor_window_s = 0.017;
+  bad.predictor.fit_window_s = 0.017;
   EXPECT_NO_THROW(SpeculationPlanner{bad});
-  bad.predictor_acceleration_window_s = -0.1;
+  bad.predictor.acceleration_window_s = -0.1;
   EXPECT_THROW(SpeculationPlanner{bad}, std::invalid_argument);
-  bad.predictor_acceleration_window_s = 0.0;
+  bad.predictor.acceleration_window_s = 0.0;
   EXPECT_NO_THROW(SpeculationPlanner{bad});
 }
 

@@ -8,6 +8,7 @@
 
 #include "common/image_io.h"
 #include "cpu/cpu_renderer.h"
+#include "speculation/settings.h"
 #include "scene/ply_io.h"
 #include "camera/trace.h"
 #include "test_data.h"
@@ -74,30 +75,36 @@ TEST(MotionAdaptiveWindow, FollowsThePaperRule) {
   EXPECT_EQ(motion_adaptive_window(1.0f, p), 0);
 }
 
-// SpeculationParams::min_window: a window below it renders in full (W = 0); the rule is otherwise
-// the paper's.
-TEST(MotionAdaptiveWindow, WindowsBelowTheMinimumRenderInFull) {
+// The settings table (speculation/settings.h): each name sets its field, switches read on/off,
+// values are checked, and the result is validated as a planner would (W_initial <= 32).
+TEST(SpeculationSettings, NamesSetFieldsAndBadInputIsRefused) {
   SpeculationParams p;
-  p.min_window = 2;
-  const SpeculationPlanner planner(p);
-  EXPECT_EQ(planner.window_for(10.0f), 4);
-  EXPECT_EQ(planner.window_for(32.0f), 2);
-  EXPECT_EQ(planner.window_for(33.0f), 0);  // floor(4 * 16 / 33) = 1 < 2
-  EXPECT_EQ(planner.window_for(64.0f), 0);
-  p.min_window = 0;
-  EXPECT_EQ(SpeculationPlanner(p).window_for(64.0f), 1);
-  p.min_window = 33;
-  EXPECT_THROW(SpeculationPlanner{p}, std::invalid_argument);
+  apply_speculation_settings(p, "window=2,backoff=0,cache=off,split=off,motion_margin=0.25,fit_ms=17,min_slice=0");
+  EXPECT_EQ(p.initial_window, 2);
+  EXPECT_EQ(p.backoff.frames, 0);
+  EXPECT_FALSE(p.frustum_and_sort_cache);
+  EXPECT_FALSE(p.task_splitting);
+  EXPECT_FLOAT_EQ(p.trail.motion_margin, 0.25f);
+  EXPECT_DOUBLE_EQ(p.predictor.fit_window_s, 0.017);
+  EXPECT_EQ(p.min_slice_entries, 0);
+  EXPECT_EQ(p.backoff.min_served, SpeculationParams{}.backoff.min_served);  // untouched
+  apply_speculation_settings(p, "");  // nothing
+  EXPECT_EQ(p.initial_window, 2);
+  for (const char* bad : {"window=33", "windw=2", "window", "window=2.5", "cache=maybe", "fit_ms=0", "=1"}) {
+    EXPECT_THROW(apply_speculation_settings(p, bad), std::invalid_argument) << bad;
+    EXPECT_EQ(p.initial_window, 2) << bad << ": a refused list changes nothing";
+  }
+  EXPECT_NE(speculation_settings_usage().find("backoff"), std::string::npos);
 }
 
-// SpeculationParams::backoff_frames: a group that served fewer than min_served sub-frames sends
+// SpeculationParams::backoff: a group that served fewer than min_served sub-frames sends
 // the next frames, the one that closes it first, to full renders (no window), doubling while
 // groups stay poor and resetting once one repays its key frame. Driven as a renderer drives the
 // planner (observe, then for a key frame window_wanted and start_group).
 TEST(SpeculationPlanner, BacksOffAfterGroupsThatDoNotRepayTheirKeyFrame) {
   SpeculationParams p;
-  p.backoff_frames = 2;
-  p.min_served = 2;
+  p.backoff.frames = 2;
+  p.backoff.min_served = 2;
   SpeculationPlanner planner(p);
   Camera cam;
   double t = 0.0;
@@ -127,7 +134,7 @@ TEST(SpeculationPlanner, BacksOffAfterGroupsThatDoNotRepayTheirKeyFrame) {
   EXPECT_EQ(frame(false), 0);  // poor: back to 2 full frames
   EXPECT_EQ(frame(true), 0);
   EXPECT_EQ(frame(true), 4);
-  p.backoff_frames = 0;  // off: every key frame may speculate
+  p.backoff.frames = 0;  // off: every key frame may speculate
   planner.set_params(p);
   EXPECT_EQ(frame(false), 4);
   EXPECT_EQ(frame(false), 4);
@@ -284,7 +291,7 @@ TEST(Speculation, WindowShrinksWithSpeedAndStopsAtTheLimit) {
     // The paper's rule alone: frame 1 closes the group of frame 0, which predicted no motion and
     // served nothing, and the backoff would render it in full.
     RenderOptions o = catgs_options();
-    o.speculation.backoff_frames = 0;
+    o.speculation.backoff.frames = 0;
     auto r = make_renderer("cpu", m, o);
     Image img;
     r->render_at(t[0].camera, t[0].time_s, img);
@@ -320,11 +327,10 @@ TEST(Speculation, StopAndFastTurnStayCorrect) {
 TEST(Speculation, WindowZeroAndNoCacheRenderEveryFrameInFull) {
   auto m = scene(test::bundled_scene());
   const Trace t = biker_orbit(*m, 10.0f, 0.1);
-  for (int variant = 0; variant < 3; ++variant) {
+  for (int variant = 0; variant < 2; ++variant) {
     RenderOptions o = catgs_options();
     if (variant == 0) o.speculation.initial_window = 0;
-    else if (variant == 1) o.speculation.frustum_and_sort_cache = false;
-    else o.speculation.min_window = o.speculation.initial_window + 1;  // no window is long enough
+    else o.speculation.frustum_and_sort_cache = false;
     auto r = make_renderer("cpu", m, o);
     cpu::CpuRenderer full(m, {Pipeline::exact, {}, {}});
     Image a, b;
