@@ -4,7 +4,7 @@
 // Runs after rasterization on the renderer's stream, so a frame that stays on the GPU never
 // crosses to the host as RGBA (DESIGN.md "Data flow of a frame"; issue 5).
 #include "cuda/cuda_check.h"
-#include "cuda/stages.h"
+#include "colour/yuv420_convert.h"
 
 namespace catgs::cuda::stages {
 

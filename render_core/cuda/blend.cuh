@@ -5,7 +5,7 @@
 // is done, the reference 3DGS blending rule per pixel.
 #pragma once
 
-#include "stages.h"
+#include "records.h"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {
@@ -111,9 +111,9 @@ __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j,
 
 // Blends entries [begin, end) into `px` (the pixel at (fpx, fpy) of thread `rank`). With
 // early_termination a pixel stops before the Gaussian that would take T below 1e-4 (as the
-// reference 3DGS); without it, blends to the end. `skip(j)` (warp-uniform) lets a caller drop
-// batch entry j for its warp, `skip.stop()` (block-uniform) ends the run early, and
-// `skip.refresh(px)` (per thread, before each round) may mark the pixel done; every thread of
+// reference 3DGS); without it, blends to the end. `skip.stop()` (block-uniform) ends the run
+// early, and `skip.refresh(px)` (per thread, before each round) may mark the pixel done
+// (rasterize_slices.cu: pixels an earlier slice already ended); every thread of
 // the block must call this (barriers inside).
 template <typename Skip>
 __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
@@ -129,14 +129,10 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
       const uint32_t gi = values[fetch];
       const Splat sp = g.splat[gi];
       stage_entry(batch, static_cast<uint32_t>(rank), sp, g.color[gi]);
-      skip.fetch(rank, sp);
     }
     __syncthreads();
     const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), end - base);
-    for (uint32_t j = 0; j < count && !px.done; ++j) {
-      if (skip(j)) continue;
-      blend_entry(batch, j, fpx, fpy, early_termination, px);
-    }
+    for (uint32_t j = 0; j < count && !px.done; ++j) blend_entry(batch, j, fpx, fpy, early_termination, px);
     __syncthreads();  // shared memory is refilled next round
   }
 }
@@ -195,11 +191,9 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
   }
 }
 
-// No per-warp skipping.
+// A whole tile's range: nothing ends it early but its own pixels.
 struct NoSkip {
   __device__ __forceinline__ void refresh(PixelState&) const {}
-  __device__ __forceinline__ void fetch(int, const Splat&) const {}
-  __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return false; }
 };
 

@@ -21,12 +21,11 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   // The readback event only orders the host; no timing needed.
   CATGS_CUDA(cudaEventCreateWithFlags(&s.counts_ready, cudaEventDisableTiming));
   CATGS_CUDA(cudaMallocHost(&s.host_counts, 2 * sizeof(unsigned long long)));
-  // [0] visible, [1..2] readback (list length, visible), [3] big-Gaussian count (low 32 bits).
-  s.counters.ensure(4 * sizeof(unsigned long long), "counters", &s.allocations);
+  s.counters.ensure(kCounterSlots * sizeof(unsigned long long), "counters", &s.allocations);
   CATGS_CUDA(cudaEventCreateWithFlags(&s.catgs_readback, cudaEventDisableTiming));
   CATGS_CUDA(cudaEventCreateWithFlags(&s.plan_ready, cudaEventDisableTiming));
-  CATGS_CUDA(cudaMallocHost(&s.host_catgs, 4 * sizeof(unsigned)));
-  s.catgs_counters.ensure(8 * sizeof(unsigned), "catgs counters", &s.allocations);
+  CATGS_CUDA(cudaMallocHost(&s.host_catgs, kHostCatgsSlots * sizeof(unsigned)));
+  s.catgs_counters.ensure(kCatgsCounterSlots * sizeof(unsigned), "catgs counters", &s.allocations);
   CATGS_CUDA(cudaEventCreate(&s.convert_start));
   CATGS_CUDA(cudaEventCreate(&s.converted));
 }
@@ -93,10 +92,10 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
   stages::scan_tiles_touched(proj.tiles_touched, ends.as<uint64_t>(), n, scan_temp.as<void>(), scan_temp.bytes(),
-                             count, count + 1, stream);
+                             count + kVisibleCount, count + kReadListLength, stream);
   // The host-device sync of a frame: CUB's radix sort takes the list length from the host, and
   // the list buffers may need to grow before emission writes into them.
-  CATGS_CUDA(cudaMemcpyAsync(host_counts, count + 1, 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
+  CATGS_CUDA(cudaMemcpyAsync(host_counts, count + kReadListLength, 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
                              stream));
   CATGS_CUDA(cudaEventRecord(counts_ready, stream));
   CATGS_CUDA(cudaEventSynchronize(counts_ready));
@@ -184,8 +183,8 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
 
   s.syncs = 0;
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
-  CATGS_CUDA(cudaMemsetAsync(counters, 0, 4 * sizeof(unsigned long long), s.stream));
-  stages::preprocess(sv, cam, exact, proj, counters, big, s.stream);
+  CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
+  stages::preprocess(sv, cam, exact, proj, counters + kVisibleCount, big, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
   const stages::TileTests tests{exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square,
@@ -236,7 +235,7 @@ const FrameStats& CudaRenderer::last_stats() const {
       stats_.rasterize_ms = ms(kPreprocessed, kRasterized);
     }
     CATGS_CUDA(cudaEventSynchronize(s.plan_ready));
-    stats_.slices = s.host_catgs[2];
+    stats_.slices = s.host_catgs[kSliceTotals];
   }
   stats_ready_ = true;
   return stats_;

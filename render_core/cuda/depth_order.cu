@@ -17,7 +17,7 @@
 #include <thrust/iterator/transform_iterator.h>
 
 #include "cuda_check.h"
-#include "stages.h"
+#include "depth_order.h"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {

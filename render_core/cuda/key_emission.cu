@@ -7,7 +7,7 @@
 #include <thrust/iterator/transform_iterator.h>
 
 #include "cuda_check.h"
-#include "stages.h"
+#include "key_emission.h"
 #include "tile_test.cuh"
 #include "tunables.h"
 

@@ -4,7 +4,7 @@
 // same answer here as in key emission.
 #include "cuda_check.h"
 #include "splat.cuh"
-#include "stages.h"
+#include "preprocess.h"
 #include "tile_test.cuh"
 #include "tunables.h"
 

@@ -39,20 +39,12 @@
 // exists to show split and unsplit agree to float rounding).
 #include "blend.cuh"
 #include "cuda_check.h"
-#include "stages.h"
+#include "rasterize_slices.h"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {
 
 namespace {
-
-// Blocks per SM the slice kernels are built for: 8 x 256 threads fill an H100 SM at 32 registers.
-// The culled kernel wants 53 (4 blocks) and spills 56 bytes at 32, which costs less than the
-// occupancy gains. Measured side by side on the H100 (city, 1080p, catgs sub-frame rasterization,
-// ms): bicycle 1.264 (both variants in one kernel, 48 registers) / 1.339 (53) / 1.203 (6 blocks,
-// 40) / 1.196 (8 blocks, 32); tandt_train 1.979 / 2.140 / 1.846 / 1.800; flowers_sh3 0.905 /
-// 0.945 / 0.870 / 0.874.
-constexpr int kRasterMinBlocks = 8;
 
 // A split tile's slice k: stops once an earlier slice of its tile saturated the tile (stop), and
 // marks done the pixels whose composition its finished earlier slices already end (refresh, at
@@ -68,8 +60,6 @@ struct SaturatedSkip {
   unsigned prefix;
   unsigned known = 0;  // earlier slices walked
   float T = 1.0f;      // prod of their T at this pixel
-  __device__ __forceinline__ void fetch(int, const Splat&) const {}
-  __device__ __forceinline__ bool operator()(uint32_t) const { return false; }
   __device__ __forceinline__ bool stop() const { return *saturated_from < k; }
   __device__ __forceinline__ void refresh(PixelState& px) {
     while (!px.done && known < prefix) {
@@ -89,7 +79,7 @@ struct SaturatedSkip {
 // sub-frames: 54% achieved occupancy, 36% of cycles with no eligible warp, against exact's 32
 // registers and 91%).
 template <bool kTileCull>
-__global__ void __launch_bounds__(tune::kRasterThreads, kRasterMinBlocks)
+__global__ void __launch_bounds__(tune::kRasterThreads, tune::kSliceRasterMinBlocks)
 rasterize_slices_kernel(SlicePlan plan,
                         const uint32_t* order,   // [blocks] or null
                         const uint32_t* values,  // [L] sorted Gaussian indices

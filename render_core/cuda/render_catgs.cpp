@@ -26,13 +26,6 @@
 
 namespace catgs::cuda {
 
-namespace {
-
-// catgs_counters slots.
-constexpr int kMotionBits = 0, kOutside = 1, kSliceTotals = 2, kCachedCount = 4;
-
-}  // namespace
-
 DeviceFrame CudaRenderer::render_catgs(const Camera& camera, double time_s) {
   validate_camera(camera);
   State& s = *state_;
@@ -55,97 +48,109 @@ DeviceFrame CudaRenderer::render_catgs(const Camera& camera, double time_s) {
   return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
 }
 
+void CudaRenderer::State::ensure_catgs_buffers(uint64_t n) {
+  std::size_t* allocs = &allocations;
+  trail_mean0_motion.ensure(n * sizeof(float4), "trail means", allocs);
+  trail_conic_q.ensure(n * sizeof(float4), "trail conics", allocs);
+  trail_cov.ensure(n * sizeof(float4), "trail covariances", allocs);
+  trail_mask.ensure(n * sizeof(uint32_t), "trail tile masks", allocs);
+  cached.ensure(n * sizeof(uint32_t), "frustum cache", allocs);
+  select_temp.ensure(stages::select_cached_temp_bytes(n), "frustum cache scratch", allocs);
+}
+
+int CudaRenderer::State::measure_window(const stages::SceneView& scene, const stages::CameraParams& key,
+                                        const stages::CameraParams& next, float depth_threshold) {
+  unsigned* cc = catgs_counters.as<unsigned>();
+  CATGS_CUDA(cudaMemsetAsync(cc + kMotionBits, 0, sizeof(unsigned), stream));
+  stages::max_screen_motion(scene, key, next, depth_threshold, cc + kMotionBits, stream);
+  CATGS_CUDA(cudaMemcpyAsync(host_catgs + kMotionBits, cc + kMotionBits, sizeof(unsigned), cudaMemcpyDeviceToHost,
+                             stream));
+  CATGS_CUDA(cudaEventRecord(catgs_readback, stream));
+  CATGS_CUDA(cudaEventSynchronize(catgs_readback));
+  ++syncs;
+  float motion = 0.0f;
+  std::memcpy(&motion, host_catgs + kMotionBits, sizeof motion);
+  return planner.window_for(motion);
+}
+
+uint64_t CudaRenderer::State::plan_key_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp) {
+  std::size_t* allocs = &allocations;
+  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
+  const uint64_t capacity = stages::slice_capacity(tiles, entries, min_slice);
+  const uint64_t slots = entries / stages::split_average(tiles, entries, min_slice);
+  slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
+  slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
+  tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
+  plan_scan.ensure(2 * static_cast<std::size_t>(tiles) * sizeof(uint64_t), "split scan", allocs);
+  plan_temp.ensure(stages::plan_slices_temp_bytes(tiles), "split scan scratch", allocs);
+  slice_scratch.ensure(3 * capacity * sizeof(uint32_t), "slice loads", allocs);
+  slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
+  slice_order_temp.ensure(stages::order_slices_temp_bytes(capacity), "slice order scratch", allocs);
+  saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs);
+  partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
+  slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs);
+  note_peak();
+  const stages::SlicePlan plan = slice_plan();
+  stages::plan_slices(ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, plan,
+                      plan_scan.as<uint64_t>(), plan_temp.as<void>(), plan_temp.bytes(), stream);
+  stages::order_slices(plan, capacity, slice_scratch.as<uint32_t>(), slice_order.as<uint32_t>(),
+                       slice_order_temp.as<void>(), slice_order_temp.bytes(), stream);
+  // The first sorted key is the longest first slice, the longest slice of all (task_split.cu).
+  heaviest = slice_scratch.as<uint32_t>() + 2 * capacity;
+  heaviest_is_slice_key = true;
+  // The group's sub-frames launch one block per slice: the totals come back while this frame
+  // rasterizes, and only a sub-frame waits for them (plan_ready).
+  unsigned* cc = catgs_counters.as<unsigned>();
+  CATGS_CUDA(cudaMemcpyAsync(host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
+                             cudaMemcpyDeviceToHost, stream));
+  CATGS_CUDA(cudaEventRecord(plan_ready, stream));
+  return capacity;
+}
+
 void CudaRenderer::catgs_key_frame(const Camera& camera) {
   State& s = *state_;
-  const DeviceScene& scene = *scene_;
   const SpeculationParams& sp = options_.speculation;
-  const uint64_t n = scene.size();
-  std::size_t* allocs = &s.allocations;
+  const uint64_t n = scene_->size();
   const stages::CameraParams cam = camera_params(camera);
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
   s.ensure_frame_buffers(n, tiles, static_cast<std::size_t>(camera.width) * camera.height);
-  s.trail_mean0_motion.ensure(n * sizeof(float4), "trail means", allocs);
-  s.trail_conic_q.ensure(n * sizeof(float4), "trail conics", allocs);
-  s.trail_cov.ensure(n * sizeof(float4), "trail covariances", allocs);
-  s.trail_mask.ensure(n * sizeof(uint32_t), "trail tile masks", allocs);
-  s.cached.ensure(n * sizeof(uint32_t), "frustum cache", allocs);
-  s.select_temp.ensure(stages::select_cached_temp_bytes(n), "frustum cache scratch", allocs);
-  const stages::SceneView sv = scene_view(scene);
-  unsigned* cc = s.catgs_counters.as<unsigned>();
-  auto* counters = s.counters.as<unsigned long long>();
+  s.ensure_catgs_buffers(n);
+  const stages::SceneView sv = scene_view(*scene_);
 
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   // The window from the predicted path (never from future input): M over one frame, then W.
-  int window = 0;
-  if (s.planner.window_wanted()) {
-    CATGS_CUDA(cudaMemsetAsync(cc + kMotionBits, 0, sizeof(unsigned), s.stream));
-    stages::max_screen_motion(sv, cam, camera_params(s.planner.next_camera(camera)), sp.depth_threshold,
-                              cc + kMotionBits, s.stream);
-    CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kMotionBits, cc + kMotionBits, sizeof(unsigned),
-                               cudaMemcpyDeviceToHost, s.stream));
-    CATGS_CUDA(cudaEventRecord(s.catgs_readback, s.stream));
-    CATGS_CUDA(cudaEventSynchronize(s.catgs_readback));
-    ++s.syncs;
-    float motion = 0.0f;
-    std::memcpy(&motion, s.host_catgs + kMotionBits, sizeof motion);
-    window = s.planner.window_for(motion);
-  }
+  const int window = s.planner.window_wanted()
+                         ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp.depth_threshold)
+                         : 0;
   const stages::Projected proj = s.projected();
-  CATGS_CUDA(cudaMemsetAsync(counters, 0, 4 * sizeof(unsigned long long), s.stream));
+  auto* counters = s.counters.as<unsigned long long>();
+  CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
   stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
   if (window > 0) {
     const std::vector<Camera> path = s.planner.path(camera, window);
     stages::PathParams pp{};
     pp.count = static_cast<int>(path.size());
     for (std::size_t k = 0; k < path.size(); ++k) pp.cam[k] = camera_params(path[k]);
-    stages::speculative_preprocess(sv, pp, trail_widening(sp, window), proj, s.trails(), counters, s.big_list(),
-                                   s.stream);
+    stages::speculative_preprocess(sv, pp, trail_widening(sp, window), proj, s.trails(), counters + kVisibleCount,
+                                   s.big_list(), s.stream);
   } else {
     // No window: the frame is rendered in full by the exact pipeline's stages (a one-pose trail
     // is the exact ellipse, so the list is the same; the path-wide kernel only costs more) and
     // opens no group. Task splitting still applies.
-    stages::preprocess(sv, cam, true, proj, counters, s.big_list(), s.stream);
+    stages::preprocess(sv, cam, true, proj, counters + kVisibleCount, s.big_list(), s.stream);
     tests = {stages::TileTestKind::ellipse, proj.splat, {}, cam.width, cam.height};
   }
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
-  // The depth-first sort pays for a trail list (1.7-3.4x the exact one on the city's real paths);
-  // an exact list sorts faster in one radix sort, as the exact pipeline does (H100, city bicycle:
-  // key emission + sort 1.20 ms depth first against 1.09 ms for exact's single sort).
+  // The depth-first sort pays for a trail list, several times the exact one; an exact list sorts
+  // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
+  // the predictor and the depth-first sort bought").
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, window > 0 && depth_first_sort(), &visible);
-
-  // Frustum cache (for the group's sub-frames), split plan (paper sec. 3.4) and the slice order
-  // (longest first).
-  if (window > 0)
-    stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(), cc + kCachedCount,
+  if (window > 0)  // the frustum cache, for the group's sub-frames
+    stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(), s.catgs_counters.as<unsigned>() + kCachedCount,
                           s.select_temp.as<void>(), s.select_temp.bytes(), s.stream);
-  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
-  const uint64_t capacity = stages::slice_capacity(tiles, entries, min_slice);
-  const uint64_t slots = entries / stages::split_average(tiles, entries, min_slice);
-  s.slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
-  s.slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
-  s.tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
-  s.plan_scan.ensure(2 * static_cast<std::size_t>(tiles) * sizeof(uint64_t), "split scan", allocs);
-  s.plan_temp.ensure(stages::plan_slices_temp_bytes(tiles), "split scan scratch", allocs);
-  s.slice_scratch.ensure(3 * capacity * sizeof(uint32_t), "slice loads", allocs);
-  s.slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
-  s.slice_order_temp.ensure(stages::order_slices_temp_bytes(capacity), "slice order scratch", allocs);
-  s.saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs);
-  s.partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
-  s.slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs);
-  s.note_peak();
-  const stages::SlicePlan plan = s.slice_plan();
-  stages::plan_slices(s.ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, plan, s.plan_scan.as<uint64_t>(),
-                      s.plan_temp.as<void>(), s.plan_temp.bytes(), s.stream);
-  stages::order_slices(plan, capacity, s.slice_scratch.as<uint32_t>(), s.slice_order.as<uint32_t>(),
-                       s.slice_order_temp.as<void>(), s.slice_order_temp.bytes(), s.stream);
-  // The first sorted key is the longest first slice, the longest slice of all (task_split.cu).
-  s.heaviest = s.slice_scratch.as<uint32_t>() + 2 * capacity;
-  s.heaviest_is_slice_key = true;
-  CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
-                             cudaMemcpyDeviceToHost, s.stream));
-  CATGS_CUDA(cudaEventRecord(s.plan_ready, s.stream));
+  const uint64_t capacity = s.plan_key_slices(tiles, entries, sp);  // paper sec. 3.4
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
   catgs_rasterize(camera, static_cast<uint32_t>(capacity), nullptr, window > 0);

@@ -57,6 +57,22 @@ class GrowBuffer {
   std::size_t bytes_ = 0;
 };
 
+// Slots of State::counters (64-bit, device): the running visible count, the frame's 16-byte
+// readback (render-list length, visible count: the one copy build_render_list syncs on) and the
+// big-Gaussian count (stages::BigList::count, its low 32 bits).
+enum CounterSlot { kVisibleCount = 0, kReadListLength = 1, kReadVisible = 2, kBigCount = 3, kCounterSlots = 4 };
+// Slots of State::catgs_counters (32-bit, device) and of its pinned host mirror host_catgs (the
+// first kHostCatgsSlots): M's float bits, the sub-frame's "outside its trail" flag, the key
+// frame's slice and partial-slot totals (stages::SlicePlan::totals) and the frustum-cache size.
+enum CatgsCounterSlot {
+  kMotionBits = 0,
+  kOutside = 1,
+  kSliceTotals = 2,  // and 3: partial slots
+  kCachedCount = 4,
+  kHostCatgsSlots = 4,
+  kCatgsCounterSlots = 8
+};
+
 // Frame events: a key frame records all; a catgs sub-frame records kStart, kPreprocessed (its
 // features), kRasterized and kMerged. vanilla/exact: kMerged = kRasterized.
 enum Event { kStart, kPreprocessed, kKeysEmitted, kSorted, kRanged, kRasterized, kMerged, kEventCount };
@@ -74,7 +90,7 @@ struct CudaRenderer::State {
   cudaStream_t stream = nullptr;
   cudaEvent_t events[kEventCount] = {};
   cudaEvent_t counts_ready = nullptr;
-  unsigned long long* host_counts = nullptr;  // pinned [2]: render list length, visible
+  unsigned long long* host_counts = nullptr;  // pinned [2]: kReadListLength, kReadVisible
   std::size_t allocations = 0, peak_bytes = 0;
   int syncs = 0;
   int width = 0, height = 0;
@@ -93,14 +109,13 @@ struct CudaRenderer::State {
   bool heaviest_is_slice_key = false;   // heaviest points at a slice sort key (order_slices)
 
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian), the split plan (per slice
-  // and tile), partial slices, and its counters: [0] M bits, [1] outside flag, [2..3] slice and
-  // partial-slot totals, [4] frustum-cache size.
+  // and tile), partial slices, and its counters (CatgsCounterSlot).
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp;
   GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order,
       slice_order_temp, partials, saturated_from, slot_finished, catgs_counters;
-  unsigned* host_catgs = nullptr;         // pinned [4]: M bits, outside flag, slice total, slots
+  unsigned* host_catgs = nullptr;         // pinned [kHostCatgsSlots]
   cudaEvent_t catgs_readback = nullptr;   // M / outside flag copied to host_catgs
-  cudaEvent_t plan_ready = nullptr;       // the key frame's slice total copied to host_catgs[2]
+  cudaEvent_t plan_ready = nullptr;       // the key frame's slice totals copied to host_catgs
   SpeculationPlanner planner;
   // render_yuv420_at (cuda_renderer.cpp): I420 planes for a host target, and the conversion's
   // timing events.
@@ -121,13 +136,22 @@ struct CudaRenderer::State {
   uint64_t build_render_list(uint64_t n, const stages::CameraParams& cam, const stages::TileTests& tests,
                              bool depth_first, uint64_t* visible);
 
+  // catgs key frames (render_catgs.cpp): grows the trail and frustum-cache buffers; measures M
+  // between the key camera and the predicted next one (one 4-byte readback) and returns the
+  // planner's W; plans the split tasks and their order for `entries` list entries and queues the
+  // copy of their totals (plan_ready), returning the slice capacity (blocks a key frame launches).
+  void ensure_catgs_buffers(uint64_t n);
+  int measure_window(const stages::SceneView& scene, const stages::CameraParams& key,
+                     const stages::CameraParams& next, float depth_threshold);
+  uint64_t plan_key_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp);
+
   // Views of the buffers as the stages take them.
   stages::Projected projected() const {
     return {splat.as<stages::Splat>(), color.as<float4>(), depth.as<float>(), rect.as<ushort4>(),
             tiles_touched.as<uint32_t>()};
   }
   stages::BigList big_list() const {
-    return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + 3)};
+    return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount)};
   }
   stages::Trails trails() const {
     return {trail_mean0_motion.as<float4>(), trail_conic_q.as<float4>(), trail_cov.as<float4>(),
@@ -135,7 +159,7 @@ struct CudaRenderer::State {
   }
   stages::SlicePlan slice_plan() const {
     return {slice_range.as<uint2>(), slice_tile.as<uint2>(), tile_plan.as<uint4>(),
-            catgs_counters.as<unsigned>() + 2, saturated_from.as<unsigned>(), slot_finished.as<unsigned>(),
+            catgs_counters.as<unsigned>() + kSliceTotals, saturated_from.as<unsigned>(), slot_finished.as<unsigned>(),
             slot_finished.bytes() / sizeof(unsigned)};
   }
 

@@ -7,7 +7,7 @@
 #include <cub/device/device_radix_sort.cuh>
 
 #include "cuda_check.h"
-#include "stages.h"
+#include "sort.h"
 
 namespace catgs::cuda::stages {
 

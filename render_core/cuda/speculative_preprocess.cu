@@ -7,7 +7,8 @@
 // trail against the CPU reference's, which only widens or narrows a trail by float rounding.
 #include "cuda_check.h"
 #include "splat.cuh"
-#include "stages.h"
+#include "preprocess.h"  // count_big_tiles
+#include "speculative_preprocess.h"
 #include "tile_test.cuh"
 #include "tunables.h"
 
@@ -50,7 +51,7 @@ __device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 
 // hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory. Held to 64
 // registers (4 blocks of 256 per SM, 20 bytes of spill): the kernel is compute-bound, and at 72
 // registers (3 blocks) it took 1.50 ms a city bicycle key frame against 1.33 ms (H100).
-__global__ void __launch_bounds__(tune::kGaussianThreads, 4)
+__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBlocks)
 speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening widening,
                               Projected out, Trails trails,
                               unsigned long long* visible,  // [1]
@@ -69,8 +70,8 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
           {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
           {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
            scene.rotations[4 * i + 3]});
-      glm::vec2 means[kMaxPath];
-      glm::vec3 covs[kMaxPath];
+      glm::vec2 means[kMaxPathCameras];
+      glm::vec3 covs[kMaxPathCameras];
       int seen = 0;
       float key_depth = 0.0f;
       for (int k = 0; k < path.count; ++k) {
@@ -153,8 +154,8 @@ max_screen_motion_kernel(const float* means,  // [N, 3]
 void speculative_preprocess(const SceneView& scene, const PathParams& path, const TrailWidening& widening,
                             const Projected& out, const Trails& trails, unsigned long long* visible,
                             const BigList& big, cudaStream_t stream) {
-  if (path.count < 1 || path.count > kMaxPath)
-    throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPath) + " cameras");
+  if (path.count < 1 || path.count > kMaxPathCameras)
+    throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPathCameras) + " cameras");
   if (scene.n == 0) return;
   const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (blocks > 0x7fffffffull) throw std::length_error("speculative_preprocess: too many Gaussians for one grid");

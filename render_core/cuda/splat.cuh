@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "forward_model/forward_model.h"
-#include "stages.h"
+#include "records.h"
 
 namespace catgs::cuda::stages {
 

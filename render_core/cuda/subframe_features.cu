@@ -8,7 +8,7 @@
 
 #include "cuda_check.h"
 #include "splat.cuh"
-#include "stages.h"
+#include "subframe_features.h"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {
@@ -27,7 +27,7 @@ struct Listed {
 // bicycle sub-frame). Only an ellipse that reaches a pixel must lie inside its trail. At most
 // 64 registers (4 blocks of 256 per SM): the cull took it to 72, and 3 blocks per SM made the
 // kernel slower than before the cull (H200, city flowers sub-frames 0.49 -> 0.56 ms).
-__global__ void __launch_bounds__(tune::kGaussianThreads, 4)
+__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeaturesMinBlocks)
 subframe_features_kernel(SceneView scene, CameraParams cam,
                          const uint32_t* cached,  // [count]
                          uint32_t count, Projected out, Trails trails,

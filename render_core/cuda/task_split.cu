@@ -10,7 +10,7 @@
 #include <cub/device/device_scan.cuh>
 
 #include "cuda_check.h"
-#include "stages.h"
+#include "task_split.h"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {
@@ -63,8 +63,7 @@ __global__ void slice_keys_kernel(SlicePlan plan, uint64_t capacity,
   if (s >= capacity) return;
   const uint2 tk = plan.slice_tile[s];
   const uint2 r = plan.slice_range[s];
-  const uint32_t length = min(r.y - r.x, 0xfffffu);
-  keys[s] = tk.x == 0xffffffffu ? 0xffffffffu : (min(tk.y, 0xffeu) << 20) | (0xfffffu - length);
+  keys[s] = tk.x == 0xffffffffu ? 0xffffffffu : slice_sort_key(tk.y, r.y - r.x);
   ids[s] = static_cast<uint32_t>(s);
 }
 

@@ -5,7 +5,7 @@
 #include <cub/device/device_radix_sort.cuh>
 
 #include "cuda_check.h"
-#include "stages.h"
+#include "tile_ranges.h"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {

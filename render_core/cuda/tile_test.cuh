@@ -9,7 +9,7 @@
 #pragma once
 
 #include "forward_model/forward_model.h"
-#include "stages.h"
+#include "records.h"
 
 namespace catgs::cuda::stages {
 

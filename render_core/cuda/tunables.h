@@ -37,8 +37,24 @@ inline constexpr int kBigRectTiles = 32;
 inline constexpr int kBigBlocks = 1024;
 inline constexpr int kBigThreads = 256;
 
-// Rasterize the tiles in order of decreasing load (stage 4b) rather than row-major.
-inline constexpr bool kHeavyTilesFirst = true;
+// Blocks per SM the slice rasterizer (rasterize_slices.cu) is built for: 8 x 256 threads fill an
+// SM at 32 registers. The tile-culled kernel wants more and spills at 32, which cost less than
+// the occupancy gained (RESULTS.md, "The round before: ... the slice rasterizer at 8 blocks per
+// SM").
+inline constexpr int kSliceRasterMinBlocks = 8;
+// Blocks per SM of the kernels that loop over a speculation path per Gaussian (the speculative
+// pre-processing) and of the sub-frame features kernel: 4 x 256 threads, so at most 64 registers.
+// Both are compute- or DRAM-bound with long per-thread state; at 72 registers (3 blocks) each was
+// slower (RESULTS.md, "Two rounds before" and "Three rounds before").
+inline constexpr int kPathKernelMinBlocks = 4;
+inline constexpr int kSubframeFeaturesMinBlocks = 4;
+
+// The slice order's sort key (task_split.cu): 12 bits of the slice's index k in its tile, then
+// 20 bits of (kSliceLengthMask - its length), so slices sort by k, then longest first. Lengths
+// saturate at the mask (a slice that long is longest-first anyway).
+inline constexpr uint32_t kSliceLengthBits = 20;
+inline constexpr uint32_t kSliceLengthMask = (1u << kSliceLengthBits) - 1u;
+inline constexpr uint32_t kSliceIndexMax = (1u << (32 - kSliceLengthBits)) - 2u;  // all ones: unused slot
 
 // Reusable buffers grow to this multiple of the size asked for, so a trace whose render list
 // creeps upwards does not reallocate every frame.
@@ -54,6 +70,10 @@ static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0 && kBigThrea
               "blocks are whole warps");
 static_assert(kBigRectTiles >= 1, "big Gaussians have more tiles than one thread handles well");
 static_assert(kBigRectTiles <= 32, "a small Gaussian's trail tiles fit one 32-bit mask (Trails::tile_mask)");
+static_assert(kSliceRasterMinBlocks * kRasterThreads <= 2048, "an SM holds at most 2048 threads");
+static_assert(kPathKernelMinBlocks * kGaussianThreads * 64 <= 65536, "64 registers a thread fit the SM's file");
+static_assert(kSliceLengthBits < 32 && kSliceIndexMax + 1u < (1u << (32 - kSliceLengthBits)),
+              "the slice index and length share one 32-bit key; all ones marks an unused slot");
 
 // Number of key bits the tile id needs for a grid of `tiles` tiles, sentinel id `tiles` included.
 constexpr int tile_key_bits(uint32_t tiles) {

@@ -1,0 +1,32 @@
+// Stage 2 of the CUDA core (key_emission.cu; mirrors cpu/key_emission.cpp).
+// Raw device pointers and an explicit stream; every launcher checks its launch (CudaError).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "records.h"
+
+namespace catgs::cuda::stages {
+
+// Stage 2a (key_emission.cu): inclusive scan of tiles_touched into 64-bit ends[N] (CUB), then a
+// one-thread kernel copies ends[N-1] and *visible into counts[0..1] for one 16-byte readback.
+std::size_t scan_temp_bytes(uint64_t n);
+void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp,
+                        std::size_t temp_bytes, const unsigned long long* visible,
+                        unsigned long long* counts, cudaStream_t stream);
+
+// Stage 2b (key_emission.cu): each Gaussian writes its keys and values (its index) at
+// [ends[i] - tiles_touched[i], ends[i]), in row-major tile order; never more than
+// tiles_touched[i] entries; slots it cannot fill get the sentinel tile id `tiles` (sorted last,
+// ignored later). Big Gaussians are emitted a warp each (ballot + popc keeps the row-major
+// order); catgs trails with tile masks a warp per 32 Gaussians of the walk, whose adjacent runs
+// the warp writes on consecutive slots (coalesced). Keys go to `keys` as [tile | depth bits]
+// (64-bit), or, when `tile_keys` is not null (the depth-first sort), to `tile_keys` as the tile
+// id alone (32-bit). `order` (or null: all N
+// in index order): the `order_count` Gaussians to walk, in that order (depth_order_ends's).
+void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
+               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* tile_keys,
+               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream);
+
+}  // namespace catgs::cuda::stages

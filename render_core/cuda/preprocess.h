@@ -1,0 +1,25 @@
+// Stage 1 of the CUDA core (preprocess.cu; mirrors cpu/preprocess.cpp).
+// Raw device pointers and an explicit stream; every launcher checks its launch (CudaError).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "records.h"
+
+namespace catgs::cuda::stages {
+
+// Stage 1 (preprocess.cu): frustum culling, EWA 2D covariance, conic, SH colour, tile bounds and
+// per-Gaussian tile counts (vanilla: 3-sigma square; exact: opacity-aware ellipse-vs-tile test).
+// Adds the number of visible Gaussians to *visible (one atomic per block). Big Gaussians are
+// appended to `big` (one atomic per warp that holds any); with `exact`, their tiles are counted
+// by a second kernel, a warp per Gaussian. `big.count` must be zero on entry.
+void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
+                unsigned long long* visible, const BigList& big, cudaStream_t stream);
+
+// Stage 1, big Gaussians (preprocess.cu): a warp per Gaussian of `big` counts the tiles of its
+// rectangle passing `tests` into tiles_touched, and adds the Gaussians found visible to *visible.
+void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect,
+                     uint32_t* tiles_touched, unsigned long long* visible, cudaStream_t stream);
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,19 @@
+// Stage 5 of the CUDA core (rasterize.cu; mirrors cpu/rasterize.cpp).
+// Raw device pointers and an explicit stream; every launcher checks its launch (CudaError).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "records.h"
+
+namespace catgs::cuda::stages {
+
+// Stage 5 (rasterize.cu): one block per tile, front-to-back blending; writes float RGB and packed
+// 8-bit RGBA (R | G << 8 | B << 16 | 255 << 24) in device memory. `tile_order` [tiles]: block b
+// rasterizes tile tile_order[b] (order_tiles: the heaviest first).
+void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* sorted_values,
+               const Projected& projected, const CameraParams& cam, float3 background, float* out_rgb,
+               uint32_t* out_rgba8, cudaStream_t stream);
+
+}  // namespace catgs::cuda::stages

@@ -1,0 +1,107 @@
+// The records the CUDA stages pass each other: the camera and the scene as the kernels see them,
+// and the per-Gaussian outputs of pre-processing (stage 1) that later stages read. Raw device
+// pointers with their shapes; the CudaRenderer owns the buffers (renderer_state.h).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include <cuda_runtime.h>
+#include <glm/glm.hpp>
+
+#include "speculation/speculation_params.h"
+#include "tunables.h"
+
+namespace catgs::cuda::stages {
+
+using catgs::TrailWidening;
+
+// The camera as the kernels see it (by value in kernel parameters).
+struct CameraParams {
+  glm::mat3 R;            // world-to-camera rotation
+  glm::vec3 t;            // world-to-camera translation
+  glm::vec3 position;     // camera centre, world
+  float fx, fy, cx, cy;   // pixels; (cx, cy) in continuous image coordinates
+  int width, height;      // pixels
+  float near_plane, far_plane;
+  glm::vec2 tan_half_fov; // (W / (2 fx), H / (2 fy))
+  int tiles_x, tiles_y;
+};
+
+// The scene in device memory (layouts of GaussianModel).
+struct SceneView {
+  const float* means;           // [N, 3]
+  const float* log_scales;      // [N, 3]
+  const float* rotations;       // [N, 4] (w, x, y, z)
+  const float* opacity_logits;  // [N]
+  const float* sh;              // [N, K, 3], K = (sh_degree + 1)^2
+  int sh_degree;
+  uint64_t n;
+};
+
+// One Gaussian's footprint on the image at this frame: everything a rasterizer reads of a
+// render-list entry except its colour, packed in one 32-byte record (one DRAM sector, as the
+// allocation is 256-byte aligned). A rasterizer gathers each entry's record by its Gaussian index
+// (a random access), so separate mean, conic and q_max arrays cost two or three sectors per entry
+// where this costs one; the tile cull of a catgs trail list (blend.cuh) reads only this, and the
+// colour only for the entries it keeps. Written by splat.cuh make_splat.
+// - mean: pixel units (continuous image coordinates, pixel centres at integers).
+// - conic (A, B, C): the inverse 2D covariance, q = A dx^2 + 2B dx dy + C dy^2 (paper eq. 2-3).
+// - q_max = 2 ln(255 opacity) (fm::opacity_aware_qmax): alpha >= 1/255 iff q <= q_max; -inf at
+//   opacity 0 (a Gaussian culled at a sub-frame's pose).
+// - power_cut = -q_max / 2 - 1e-3: a pixel whose power -q/2 lies below it skips the entry before
+//   the exp (blend.cuh blend_entry); +inf at opacity 0, so every pixel skips it.
+struct __align__(32) Splat {
+  float4 mean_ab;          // (mean.x, mean.y, A, B)
+  float4 c_opacity_q_cut;  // (C, opacity, q_max, power_cut)
+};
+
+// Stage 1 output, one entry per Gaussian; tiles_touched == 0 marks a culled Gaussian whose other
+// fields are left unwritten.
+struct Projected {
+  Splat* splat;               // [N] 2D mean, conic, opacity, q_max, power cut
+  float4* color;              // [N] (r, g, b, unused): 16-byte loads in the rasterizer
+  float* depth;               // [N] camera-space z
+  ushort4* rect;              // [N] tile rectangle [x0, x1) x [y0, y1)
+  uint32_t* tiles_touched;    // [N] render-list entries this Gaussian emits
+};
+
+// Gaussians whose candidate rectangle has more than tune::kBigRectTiles tiles, handled a warp
+// each: their indices (order arbitrary) and how many there are, both in device memory.
+struct BigList {
+  uint32_t* index;   // [N] capacity
+  unsigned* count;   // [1]
+};
+
+// catgs key frames: each visible Gaussian's trail (forward_model.h fm::Trail), pixel units.
+struct Trails {
+  float4* mean0_motion;  // [N] (mean0.x, mean0.y, motion.x, motion.y)
+  float4* conic_q;       // [N] (A, B, C) inverse of the trail covariance, q_trail
+  float4* cov;           // [N] (a, b, c, q_trail) trail covariance (sub-frame containment check)
+  // [N] Gaussians whose tile rectangle holds at most tune::kBigRectTiles tiles: bit b set when
+  // the trail touches the rectangle's b-th tile in row-major order, as counted by the speculative
+  // pre-processing, so key emission reads the answers instead of testing every tile again.
+  uint32_t* tile_mask;
+};
+
+// Which tile test decides render-list membership (the three pipelines' stage 2).
+enum class TileTestKind { square, ellipse, trail };
+
+// The inputs of the tile test, read per Gaussian by tile_test.cuh.
+struct TileTests {
+  TileTestKind kind;
+  const Splat* splat;           // [N] ellipse: mean, conic, q_max
+  Trails trails;                // trail
+  int width, height;            // pixels
+};
+
+// The speculation path of a catgs key frame: the key camera, then the predicted cameras of the
+// window (paper sec. 3.1), passed by value to the kernel (kMaxPathCameras x 108 bytes fits a
+// launch's parameter space).
+struct PathParams {
+  int count;
+  CameraParams cam[kMaxPathCameras];
+};
+static_assert(sizeof(PathParams) <= 4096, "a kernel's parameters must fit 4 KiB");
+
+}  // namespace catgs::cuda::stages

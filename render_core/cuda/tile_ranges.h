@@ -1,0 +1,28 @@
+// Stage 4 of the CUDA core (tile_ranges.cu; mirrors cpu/tile_ranges.cpp).
+// Raw device pointers and an explicit stream; every launcher checks its launch (CudaError).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "records.h"
+
+namespace catgs::cuda::stages {
+
+// Stage 4 (tile_ranges.cu): [start, end) of each tile in the sorted list; tiles without entries get
+// [0, 0). Sentinel entries (tile id >= tiles) are ignored. Keys are [tile | depth] (64-bit) or,
+// with the depth-first sort, tile ids (32-bit).
+void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream);
+void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream);
+
+// Stage 4b (tile_ranges.cu): tile ids by decreasing number of entries (a stable radix sort of
+// 32-bit loads), so the rasterizer's blocks start on the heaviest tiles and the light ones fill
+// in behind them (longest-processing-time-first scheduling) instead of the heavy tiles of the
+// bottom rows starting last. scratch: [3 * tiles].
+std::size_t tile_order_temp_bytes(uint32_t tiles);
+void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch,
+                 uint32_t* order, void* temp, std::size_t temp_bytes, cudaStream_t stream);
+
+}  // namespace catgs::cuda::stages

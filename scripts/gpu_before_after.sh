@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# scripts/gpu_before_after.sh: an earlier commit and the working tree side by side on one GPU, in
+# one device call, for changes that must not change images, render lists or speed (refactors).
+#
+# On the build machine:
+#   scripts/gpu_run.sh prepare                      # .carry/: scenes, traces, GLM and friends
+#   git archive --format=tar.gz -o .carry/before_src.tar.gz REV
+# On the GPU machine (device tool; carry [".carry"]):
+#   scripts/gpu_before_after.sh tests               # GPU tests of both builds -> $OUT/gpu_tests_{before,after}.md
+#   scripts/gpu_before_after.sh bench [FRAMES]      # catgs-bench of both, alternating per scene x path,
+#                                                   # snapshots and per-frame render lists compared
+#                                                   # -> $OUT/before_after.md, $OUT/before_after.tar.gz
+# Both builds use the same flags; the earlier tree keeps its own layout (binaries found by name).
+set -uo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD CARRY=$PWD/.carry OUT=${OUT:-$PWD/out/before_after}
+mkdir -p "$OUT"
+export PATH=/usr/local/cuda/bin:$PATH PKG_CONFIG_PATH=$CARRY/deps/lib/pkgconfig
+command -v pkg-config >/dev/null || export PATH=$PATH:$CARRY/deps/bin
+
+build() {  # build SRC_DIR LABEL: configures and builds catgs-bench and catgs-gpu-tests
+  cmake -S "$1" -B "$1/build/gpu" -G Ninja -DCMAKE_BUILD_TYPE=Release -DWITH_CUDA=ON \
+    -DCMAKE_CUDA_COMPILER=/usr/local/cuda/bin/nvcc -DCMAKE_CUDA_ARCHITECTURES=90 -DCATGS_BUILD_SERVER=OFF \
+    -DCATGS_BUILD_TESTS=OFF -DCMAKE_PREFIX_PATH="$CARRY/deps" > "$OUT/build_$2.log" 2>&1 &&
+    ninja -C "$1/build/gpu" catgs-bench catgs-gpu-tests >> "$OUT/build_$2.log" 2>&1
+}
+exe() { find "$1/build/gpu" -type f -name "$2" -perm -u+x | head -1; }
+
+BEFORE=/tmp/before_src
+rm -rf "$BEFORE" && mkdir -p "$BEFORE" && tar xzf "$CARRY/before_src.tar.gz" -C "$BEFORE" || exit 2
+build "$BEFORE" before & build "$ROOT" after & wait
+for side in before after; do
+  tail -1 "$OUT/build_$side.log"
+done
+B_BENCH=$(exe "$BEFORE" catgs-bench) A_BENCH=$(exe "$ROOT" catgs-bench)
+B_TESTS=$(exe "$BEFORE" catgs-gpu-tests) A_TESTS=$(exe "$ROOT" catgs-gpu-tests)
+[ -x "$B_BENCH" ] && [ -x "$A_BENCH" ] || { echo "build failed"; tail -30 "$OUT"/build_*.log; exit 2; }
+S=$CARRY/scenes T=$CARRY/traces
+status=0
+
+if [ "${1:-}" = tests ]; then
+  for side in before after; do
+    t=$B_TESTS; [ $side = after ] && t=$A_TESTS
+    t0=$(date +%s)
+    "$t" --scenes "$S" --traces "$T" --out "$OUT/gpu_tests_$side.md" | tail -1
+    echo "== GPU tests ($side): rc ${PIPESTATUS[0]} in $(( $(date +%s) - t0 )) s"
+  done
+  python3 "$ROOT/scripts/compare_runs.py" tests "$OUT/gpu_tests_before.md" "$OUT/gpu_tests_after.md" | tee "$OUT/tests_before_after.md"
+  exit 0
+fi
+
+FRAMES=${2:-600}
+PIPES=exact,catgs,catgs-nocache,catgs-nosplit
+J=/tmp/ba; rm -rf "$J"; mkdir -p "$J"
+for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+  for scene in tumblewood city; do
+    size=(--scale 10); [ $scene = city ] && size=(--city)
+    for side in before after; do  # alternating, on the same frames
+      b=$B_BENCH; [ $side = after ] && b=$A_BENCH
+      mkdir -p "$J/snap_${side}_${scene}_$path"
+      echo "== $side: $scene, $path"
+      "$b" --scene "$S/tumblewood_sh2.compressed.ply" "${size[@]}" --up 0,-1,0 \
+        --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$PIPES" \
+        --frames "$FRAMES" --quality-every 3 --json "$J/${side}_${scene}_$path.json" \
+        --snapshot-dir "$J/snap_${side}_${scene}_$path" > "$J/${side}_${scene}_$path.log" 2>&1 || status=1
+    done
+  done
+done
+python3 "$ROOT/scripts/compare_runs.py" bench "$J" | tee "$OUT/before_after.md"
+tar czf "$OUT/before_after.tar.gz" -C "$J" .
+exit $status
