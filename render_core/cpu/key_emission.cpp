@@ -3,6 +3,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 
 namespace catgs::cpu {

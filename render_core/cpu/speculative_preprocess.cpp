@@ -3,16 +3,15 @@
 // tiles against its trail instead of its ellipse.
 #include <cmath>
 
+#include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 
 namespace catgs::cpu {
 
 namespace {
 
-constexpr int kMaxPath = 33;  // key frame + up to 32 sub-frames
-
 struct CameraTerms {
-  glm::vec2 tan_half_fov;
+  fm::View view;
   glm::vec3 position;
 };
 
@@ -43,8 +42,7 @@ bool path_misses_image(const GaussianModel& model, std::size_t i, glm::vec3 mean
     const Camera& c = path[k];
     const glm::vec3 p = c.R * mean + c.t;
     if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
-    beyond &= fm::edges_beyond(p, max_scale, q_max, c.fx, c.fy, c.cx, c.cy, terms[k].tan_half_fov, c.width,
-                               c.height, 1.0f + widening.slack, extra);
+    beyond &= fm::edges_beyond(p, max_scale, q_max, terms[k].view, 1.0f + widening.slack, extra);
   }
   return beyond != 0u;
 }
@@ -74,17 +72,15 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
 
 void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
                             const TrailWidening& widening, ProjectedGaussians& out) {
-  if (path.empty() || path.size() > static_cast<std::size_t>(kMaxPath))
-    throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPath) + " cameras");
+  if (path.empty() || path.size() > static_cast<std::size_t>(kMaxPathCameras))
+    throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPathCameras) + " cameras");
   const std::size_t n = model.size();
   out.resize(n);
   const Camera& key = path.front();
   const int K = model.sh_coeffs();
   std::vector<CameraTerms> terms(path.size());
   for (std::size_t k = 0; k < path.size(); ++k)
-    terms[k] = {{static_cast<float>(path[k].width) / (2.0f * path[k].fx),
-                 static_cast<float>(path[k].height) / (2.0f * path[k].fy)},
-                path[k].position()};
+    terms[k] = {fm::view_of(path[k]), path[k].position()};
 
   parallel_for(n, 4096, [&](std::size_t i) {
     out.tiles_touched[i] = 0;
@@ -97,15 +93,15 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
         {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
         {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2],
          model.rotations[4 * i + 3]});
-    glm::vec2 means[kMaxPath];
-    glm::vec3 covs[kMaxPath];
+    glm::vec2 means[kMaxPathCameras];
+    glm::vec3 covs[kMaxPathCameras];
     int visible = 0;
     bool key_visible = false;
     for (std::size_t k = 0; k < path.size(); ++k) {
       const Camera& c = path[k];
       const glm::vec3 p = c.R * mean + c.t;
       if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
-      const glm::vec3 cov2 = fm::covariance_2d(cov3, c.R, p, c.fx, c.fy, terms[k].tan_half_fov);
+      const glm::vec3 cov2 = fm::covariance_2d(cov3, c.R, p, c.fx, c.fy, terms[k].view.tan_half_fov);
       if (cov2.x * cov2.z - cov2.y * cov2.y <= 0.0f) continue;
       means[visible] = {c.fx * p.x / p.z + c.cx - 0.5f, c.fy * p.y / p.z + c.cy - 0.5f};
       covs[visible] = cov2;

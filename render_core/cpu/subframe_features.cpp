@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cmath>
 
+#include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 
 namespace catgs::cpu {
@@ -54,17 +55,14 @@ bool update_subframe_features(const GaussianModel& model, const Camera& camera,
 }
 
 bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, const ProjectedGaussians& projected) {
-  const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
-                               static_cast<float>(camera.height) / (2.0f * camera.fy));
+  const fm::View view = fm::view_of(camera);
   const std::size_t n = model.size();
   std::atomic<bool> reached{false};
   parallel_for((n + 4095) / 4096, 1, [&](std::size_t chunk) {
     for (std::size_t i = chunk * 4096; i < std::min(n, (chunk + 1) * 4096); ++i)
-      if (projected.tiles_touched[i] == 0 && fm::unlisted_reaches_image(
-                                                 &model.means[3 * i], &model.log_scales[3 * i], &model.rotations[4 * i],
-                                                 model.opacity_logits[i], camera.R, camera.t, camera.fx, camera.fy,
-                                                 camera.cx, camera.cy, camera.near_plane, camera.far_plane,
-                                                 tan_half_fov, camera.width, camera.height)) {
+      if (projected.tiles_touched[i] == 0 &&
+          fm::unlisted_reaches_image(&model.means[3 * i], &model.log_scales[3 * i], &model.rotations[4 * i],
+                                     model.opacity_logits[i], view)) {
         reached.store(true, std::memory_order_relaxed);
         return;
       }

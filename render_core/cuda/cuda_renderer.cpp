@@ -49,19 +49,8 @@ CUstream_st* CudaRenderer::stream() const { return state_->stream; }
 
 stages::CameraParams camera_params(const Camera& camera) {
   stages::CameraParams cam{};
-  cam.R = camera.R;
-  cam.t = camera.t;
+  static_cast<fm::View&>(cam) = fm::view_of(camera);
   cam.position = camera.position();
-  cam.fx = camera.fx;
-  cam.fy = camera.fy;
-  cam.cx = camera.cx;
-  cam.cy = camera.cy;
-  cam.width = camera.width;
-  cam.height = camera.height;
-  cam.near_plane = camera.near_plane;
-  cam.far_plane = camera.far_plane;
-  cam.tan_half_fov = glm::vec2(static_cast<float>(camera.width) / (2.0f * camera.fx),
-                               static_cast<float>(camera.height) / (2.0f * camera.fy));
   cam.tiles_x = (camera.width + tune::kTileSize - 1) / tune::kTileSize;
   cam.tiles_y = (camera.height + tune::kTileSize - 1) / tune::kTileSize;
   return cam;

@@ -9,6 +9,7 @@
 #include <cuda_runtime.h>
 #include <glm/glm.hpp>
 
+#include "forward_model/forward_model.h"
 #include "speculation/speculation_params.h"
 #include "tunables.h"
 
@@ -17,17 +18,10 @@ namespace catgs::cuda::stages {
 using catgs::TrailWidening;
 
 // The camera as the kernels see it (by value in kernel parameters).
-struct CameraParams {
-  glm::mat3 R;            // world-to-camera rotation
-  glm::vec3 t;            // world-to-camera translation
-  glm::vec3 position;     // camera centre, world
-  float fx, fy, cx, cy;   // pixels; (cx, cy) in continuous image coordinates
-  int width, height;      // pixels
-  float near_plane, far_plane;
-  glm::vec2 tan_half_fov; // (W / (2 fx), H / (2 fy))
+struct CameraParams : fm::View {
+  glm::vec3 position;  // camera centre, world
   int tiles_x, tiles_y;
 };
-
 // The scene in device memory (layouts of GaussianModel).
 struct SceneView {
   const float* means;           // [N, 3]

@@ -5,6 +5,7 @@
 // their answers as bit masks, big ones are counted and emitted by key_emission.cu from the
 // stored trail), so counting and emission agree; what contraction changes is the last bits of a
 // trail against the CPU reference's, which only widens or narrows a trail by float rounding.
+#include "forward_model/trail.h"
 #include "cuda_check.h"
 #include "splat.cuh"
 #include "preprocess.h"  // count_big_tiles
@@ -40,8 +41,7 @@ __device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 
     const CameraParams& c = path.cam[k];
     const glm::vec3 p = c.R * mean + c.t;
     if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
-    beyond &= fm::edges_beyond(p, max_scale, q_max, c.fx, c.fy, c.cx, c.cy, c.tan_half_fov, c.width, c.height,
-                               1.0f + widening.slack, extra);
+    beyond &= fm::edges_beyond(p, max_scale, q_max, c, 1.0f + widening.slack, extra);
   }
   return beyond != 0u;
 }

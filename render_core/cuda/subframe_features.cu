@@ -6,6 +6,7 @@
 #include <cub/device/device_select.cuh>
 #include <thrust/iterator/counting_iterator.h>
 
+#include "forward_model/trail.h"
 #include "cuda_check.h"
 #include "splat.cuh"
 #include "subframe_features.h"
@@ -99,8 +100,7 @@ unlisted_kernel(SceneView scene, CameraParams cam,
   for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < scene.n; i += stride) {
     if (tiles_touched[i] > 0) continue;
     if (fm::unlisted_reaches_image(scene.means + 3 * i, scene.log_scales + 3 * i, scene.rotations + 4 * i,
-                                   scene.opacity_logits[i], cam.R, cam.t, cam.fx, cam.fy, cam.cx, cam.cy,
-                                   cam.near_plane, cam.far_plane, cam.tan_half_fov, cam.width, cam.height))
+                                   scene.opacity_logits[i], cam))
       *outside = 1u;
   }
 }

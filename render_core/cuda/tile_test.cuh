@@ -9,6 +9,7 @@
 #pragma once
 
 #include "forward_model/forward_model.h"
+#include "forward_model/trail.h"
 #include "records.h"
 
 namespace catgs::cuda::stages {

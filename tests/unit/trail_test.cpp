@@ -10,6 +10,7 @@
 #include "camera/camera.h"
 #include "cpu/cpu_renderer.h"
 #include "forward_model/forward_model.h"
+#include "forward_model/trail.h"
 
 namespace catgs {
 namespace {
@@ -179,8 +180,10 @@ TEST(TrailTest, SpeculativePreprocessListsEveryTileAlongThePath) {
 // fm::edges_beyond, the bound behind that cull: which edges a Gaussian lies beyond.
 TEST(TrailTest, EdgesBeyondNamesTheEdge) {
   const glm::vec2 tan_half(320.0f / (2.0f * 300.0f), 240.0f / (2.0f * 300.0f));
+  const fm::View view{glm::mat3(1.0f), glm::vec3(0.0f), 300.0f, 300.0f, 160.0f, 120.0f, 320, 240, 0.2f, 1000.0f,
+                      tan_half};
   auto edges = [&](glm::vec3 p, float widen, float extra) {
-    return fm::edges_beyond(p, 0.01f, 9.0f, 300.0f, 300.0f, 160.0f, 120.0f, tan_half, 320, 240, widen, extra);
+    return fm::edges_beyond(p, 0.01f, 9.0f, view, widen, extra);
   };
   EXPECT_EQ(edges({0.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 0u);    // centre of the view
   EXPECT_EQ(edges({-3.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 1u);   // far left
@@ -190,8 +193,8 @@ TEST(TrailTest, EdgesBeyondNamesTheEdge) {
   EXPECT_EQ(edges(near_left, 1.0f, 0.0f), 1u);
   EXPECT_EQ(edges(near_left, 1.0f, 15.0f), 0u);  // widened past the edge: may reach the image
   EXPECT_EQ(edges(near_left, 3.0f, 0.0f), 0u);
-  EXPECT_TRUE(fm::may_reach_image({0.0f, 0.0f, 2.0f}, 0.01f, 9.0f, 300.0f, 300.0f, 160.0f, 120.0f, tan_half, 320, 240));
-  EXPECT_FALSE(fm::may_reach_image(near_left, 0.01f, 9.0f, 300.0f, 300.0f, 160.0f, 120.0f, tan_half, 320, 240));
+  EXPECT_TRUE(fm::may_reach_image({0.0f, 0.0f, 2.0f}, 0.01f, 9.0f, view));
+  EXPECT_FALSE(fm::may_reach_image(near_left, 0.01f, 9.0f, view));
 }
 
 // The motion-relative margin widens a moving Gaussian's trail and leaves a still one exact.
