@@ -1,7 +1,7 @@
-// Video encoders: one H.264 Annex B access unit out per picture in, from RGBA8 host images, from
-// BT.709 limited-range I420 planes, or from a picture written straight into the encoder's own
-// input planes (input_target() + encode_input(): the render core's colour conversion writes
-// there, host planes for x264, CUDA device planes for NVENC with device_input: no extra copy).
+// Video encoders: one H.264 Annex B access unit out per picture in, from BT.709 limited-range
+// I420 planes, or from a picture written straight into the encoder's own input planes
+// (input_target() + encode_input(): the render core's colour conversion writes there, host
+// planes for x264, CUDA device planes for NVENC with device_input: no extra copy).
 //
 // An Encoder is created for one frame size and used by one thread at a time (a session's render
 // job); a size change means a new Encoder. Implementations (libavcodec): `x264` (libx264, CPU)
@@ -33,7 +33,6 @@ struct EncoderConfig {
 struct EncodedFrame {
   std::vector<std::uint8_t> data;  // H.264 Annex B: start codes, SPS/PPS in band on IDR frames
   bool key_frame = false;          // IDR
-  double convert_ms = 0;           // RGBA -> YUV 4:2:0 time (0 for encode_yuv420)
   double encode_ms = 0;            // encoder time (plane copy included)
 };
 
@@ -44,22 +43,20 @@ class Encoder {
   virtual std::string name() const = 0;
   virtual int width() const = 0;
   virtual int height() const = 0;
-  // Encodes one RGBA8 image (width x height, row-major, top row first, `stride_bytes` per row;
-  // colour treated as full-range sRGB/BT.709 primaries), converted to BT.709 limited-range
-  // yuv420p on the CPU (swscale). The first frame, and any frame with `force_idr`, is an IDR.
-  // Throws std::runtime_error on an encoder failure.
-  virtual EncodedFrame encode(const std::uint8_t* rgba, int stride_bytes, bool force_idr) = 0;
-  // Encodes one picture given as BT.709 limited-range I420 planes of width x height (yuv420.h);
-  // no colour conversion happens. IDR rules and errors as encode(). The planes are only read
-  // during the call.
+  // Encodes one picture given as BT.709 limited-range I420 planes of width x height (yuv420.h;
+  // an RGBA8 picture converts with rgba_to_yuv420_bt709); no colour conversion happens. The
+  // planes are only read during the call. The first frame, and any frame with `force_idr`, is an
+  // IDR. Throws std::invalid_argument for a missing plane or a stride below the row's samples,
+  // std::logic_error for an encoder fed device pictures (device_input), std::runtime_error on an
+  // encoder failure.
   virtual EncodedFrame encode_yuv420(const Yuv420Planes& planes, bool force_idr) = 0;
   // The planes of the next picture (width x height I420, BT.709 limited range), to be filled
   // completely before encode_input(): host memory for x264 and host-fed NVENC, device memory of
   // a fresh hw frame for NVENC with device_input. Valid until the next encode_input() or
   // input_target() call. Throws std::runtime_error when no frame can be had.
   virtual Yuv420Target input_target() = 0;
-  // Encodes the picture written into the last input_target(). IDR rules and errors as encode();
-  // throws std::logic_error without a preceding input_target().
+  // Encodes the picture written into the last input_target(). IDR rules and encoder failures as
+  // encode_yuv420(); throws std::logic_error without a preceding input_target().
   virtual EncodedFrame encode_input(bool force_idr) = 0;
 };
 

@@ -8,7 +8,6 @@ extern "C" {
 #include <libavutil/error.h>
 #include <libavutil/hwcontext.h>
 #include <libavutil/imgutils.h>
-#include <libswscale/swscale.h>
 }
 
 namespace catgs::server {
@@ -91,35 +90,9 @@ LibavEncoder::LibavEncoder(std::string name, const char* codec_name, const Encod
 LibavEncoder::~LibavEncoder() { release(); }
 
 void LibavEncoder::release() {
-  if (sws_) sws_freeContext(sws_);
-  sws_ = nullptr;
   av_packet_free(&packet_);
   av_frame_free(&frame_);
   avcodec_free_context(&ctx_);
-}
-
-EncodedFrame LibavEncoder::encode(const std::uint8_t* rgba, int stride_bytes, bool force_idr) {
-  if (hw_frames_) throw std::logic_error(name_ + ": takes device pictures (input_target()) only");
-  input_ready_ = false;  // frame_ is overwritten here
-  EncodedFrame out;
-  const auto t0 = std::chrono::steady_clock::now();
-  if (!sws_) {
-    sws_ = sws_getContext(config_.width, config_.height, AV_PIX_FMT_RGBA, config_.width,
-                          config_.height, AV_PIX_FMT_YUV420P, SWS_BILINEAR, nullptr, nullptr,
-                          nullptr);
-    if (!sws_) throw std::runtime_error(name_ + ": cannot create the colour converter");
-    // Full-range RGB in, BT.709 limited-range YUV out (the default would be BT.601).
-    const int* bt709 = sws_getCoefficients(SWS_CS_ITU709);
-    sws_setColorspaceDetails(sws_, bt709, /*srcRange=*/1, bt709, /*dstRange=*/0, 0, 1 << 16,
-                             1 << 16);
-  }
-  const int err = av_frame_make_writable(frame_);
-  if (err < 0) throw std::runtime_error(name_ + ": frame not writable: " + av_error_text(err));
-  const std::uint8_t* src[1] = {rgba};
-  const int src_stride[1] = {stride_bytes};
-  sws_scale(sws_, src, src_stride, 0, config_.height, frame_->data, frame_->linesize);
-  out.convert_ms = ms_since(t0);
-  return encode_frame(force_idr, std::move(out));
 }
 
 EncodedFrame LibavEncoder::encode_yuv420(const Yuv420Planes& p, bool force_idr) {

@@ -1,8 +1,8 @@
 // The part of every libavcodec H.264 encoder that does not depend on the codec: opening the
-// context with BT.709 limited-range yuv420p signalling, the RGBA -> YUV path (swscale, created
-// on first use only), the I420 plane path (a plane copy, no conversion), the in-place path
-// (input_target(): the encoder's own frame, host or an AV_PIX_FMT_CUDA hw frame), IDR on demand
-// (pict_type I), and draining one access unit per picture (the encoders here have no delay).
+// context with BT.709 limited-range yuv420p signalling, the I420 plane path (a plane copy, no
+// conversion), the in-place path (input_target(): the encoder's own frame, host or an
+// AV_PIX_FMT_CUDA hw frame), IDR on demand (pict_type I), and draining one access unit per
+// picture (the encoders here have no delay).
 #pragma once
 
 #include <functional>
@@ -13,7 +13,6 @@
 struct AVCodecContext;
 struct AVFrame;
 struct AVPacket;
-struct SwsContext;
 
 namespace catgs::server {
 
@@ -26,7 +25,6 @@ class LibavEncoder : public Encoder {
   std::string name() const override { return name_; }
   int width() const override { return config_.width; }
   int height() const override { return config_.height; }
-  EncodedFrame encode(const std::uint8_t* rgba, int stride_bytes, bool force_idr) override;
   EncodedFrame encode_yuv420(const Yuv420Planes& planes, bool force_idr) override;
   Yuv420Target input_target() override;
   EncodedFrame encode_input(bool force_idr) override;
@@ -36,7 +34,7 @@ class LibavEncoder : public Encoder {
   // time base 1/fps, no B-frames, BT.709 limited-range colour, no global header (SPS/PPS in
   // band on every IDR), then calls `configure` for the codec's own options before
   // avcodec_open2. A `configure` that sets pix_fmt AV_PIX_FMT_CUDA and a hw_frames_ctx makes
-  // the encoder take hw frames (input_target() only; encode() and encode_yuv420() then throw
+  // the encoder take hw frames (input_target() only; encode_yuv420() then throws
   // std::logic_error). Throws std::invalid_argument for a bad size (odd, < 16, > 8192) and
   // std::runtime_error, starting with `name`, when the codec is missing or refuses to open.
   LibavEncoder(std::string name, const char* codec_name, const EncoderConfig& config,
@@ -51,7 +49,6 @@ class LibavEncoder : public Encoder {
   AVCodecContext* ctx_ = nullptr;
   AVFrame* frame_ = nullptr;
   AVPacket* packet_ = nullptr;
-  SwsContext* sws_ = nullptr;  // RGBA path only
   std::int64_t pts_ = 0;
   bool hw_frames_ = false;    // frame_ is an AV_PIX_FMT_CUDA frame taken from hw_frames_ctx
   bool input_ready_ = false;  // input_target() handed out frame_ and encode_input() is due

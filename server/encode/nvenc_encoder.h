@@ -10,8 +10,8 @@
 // (retained through the driver API and handed to FFmpeg as its cuda_ctx);
 // input_target() hands out a pool frame's device planes, which the render core's colour
 // conversion writes (CudaRenderer::render_yuv420_at), and nothing crosses to the host. Without
-// it, host frames: encode() converts RGBA on the CPU (swscale), encode_yuv420() and
-// input_target() take host I420 planes, and libavcodec uploads them.
+// it, host frames: encode_yuv420() and input_target() take host I420 planes, and libavcodec
+// uploads them.
 //
 // Availability: h264_nvenc loads libcuda and libnvidia-encode at open time. On machines without
 // an NVIDIA driver, and on GPUs without NVENC (H100, H200: error 2), opening fails.

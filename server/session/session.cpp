@@ -255,7 +255,7 @@ void Session::maybe_start_render() {
   force_idr_ = false;
   rendering_ = true;
   if (!pipelined_) {
-    boost::asio::post(shared_.render_io, [self = shared_from_this(), job] {
+    shared_.renders.post([self = shared_from_this(), job] {
       JobResult result = self->run_render_and_encode(job);
       boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
         self->rendering_ = false;
@@ -264,7 +264,7 @@ void Session::maybe_start_render() {
     });
     return;
   }
-  boost::asio::post(shared_.render_io, [self = shared_from_this(), job, planes = std::move(planes)]() mutable {
+  shared_.renders.post([self = shared_from_this(), job, planes = std::move(planes)]() mutable {
     Rendered frame = self->run_render(job, std::move(planes));
     boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
       self->rendering_ = false;

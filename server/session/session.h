@@ -1,9 +1,10 @@
 // One client session (DESIGN.md "Server"): protocol state machine, latest-pose-wins render
 // scheduling, encoder, flow control and statistics.
 //
-// Threading: every member below "strand state" is touched only on the session's strand. Render
-// and encode run as jobs on the shared io_context pool (never on the strand, so poses keep
-// arriving while a frame renders). Transport callbacks enter through the post_* functions.
+// Threading: every member below "strand state" is touched only on the session's strand. Renders
+// run as jobs on the render scheduler's lanes, encodes as jobs on the worker pool (never on the
+// strand, so poses keep arriving while a frame renders). Transport callbacks enter through the
+// post_* functions.
 //
 // Frame pipeline (host-fed encoders: x264): a render job renders and colour-converts frame n + 1
 // into one of two host I420 buffers while an encode job encodes frame n from the other, so a
@@ -30,6 +31,7 @@
 #include "scene/gaussian_model.h"
 #include "renderer/renderer.h"
 #include "encode/encoder.h"
+#include "render/render_scheduler.h"
 #include "session/message_validation.h"
 #include "server_metrics.h"
 #include "server_options.h"
@@ -37,14 +39,10 @@
 
 namespace catgs::server {
 
-// What all sessions share (owned by the SessionManager).
+// What all sessions share (owned by the Server; it outlives every session).
 struct SessionShared {
-  boost::asio::io_context& io;         // strands, encode jobs, timers
-  // Render jobs: a FIFO served by a few dedicated "render lanes" (ServerOptions::render_lanes
-  // threads), so sessions take turns on the GPU in arrival order: a session whose frames need
-  // more host syncs (catgs key frames) cannot starve the others, and waiting renders hold no
-  // worker thread.
-  boost::asio::io_context& render_io;
+  boost::asio::io_context& io;  // the worker pool: strands, encode jobs, timers
+  RenderScheduler& renders;     // render jobs, first come first served (render_scheduler.h)
   Transport& transport;
   ServerMetrics& metrics;
   const ServerOptions& options;
@@ -119,9 +117,9 @@ class Session : public std::enable_shared_from_this<Session> {
   // In a job: renders job's pose into `target` and fills r's render fields (timings, key frame,
   // window). Throws what Renderer::render_yuv420_at throws.
   void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
-  Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on the pool
+  Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on a render lane
   JobResult run_encode(Rendered& frame);                               // on the pool
-  JobResult run_render_and_encode(const Job& job);  // on the pool (NVENC's CUDA input)
+  JobResult run_render_and_encode(const Job& job);  // on a render lane (NVENC's CUDA input)
   void ensure_encoder(int width, int height, bool& idr);  // in a job
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
   void on_job_done(JobResult result);

@@ -72,145 +72,203 @@ const Camera& camera_at(const Trace& trace, double t_s) {
   return (it == trace.begin() ? trace.front() : *(it - 1)).camera;
 }
 
+namespace {
+
+void note_error(SessionResult& r, const std::string& what) {
+  r.errors++;
+  if (r.first_error.empty()) r.first_error = what;
+}
+
+// Connects and says Hello; the Welcome's size and names go into `r`.
+pb::Welcome open_session(const LoadSessionConfig& cfg, StreamClient& client, SessionResult& r) {
+  client.connect(cfg.port, cfg.host);
+  const pb::Welcome welcome = client.hello(cfg.width, cfg.height, cfg.token);
+  r.width = static_cast<int>(welcome.width());
+  r.height = static_cast<int>(welcome.height());
+  r.session_id = welcome.session_id();
+  r.renderer = welcome.renderer();
+  r.encoder = welcome.encoder();
+  r.pipeline = welcome.pipeline();
+  return welcome;
+}
+
+// An open session from its first pose to its close: sends poses on the trace's clock, takes
+// the frames and measures them into `r`. Runs on the session's thread; throws what the client
+// and the decoder's set-up throw.
+class PoseLoop {
+ public:
+  PoseLoop(const LoadSessionConfig& cfg, SessionResult& r, StreamClient& client, Trace trace)
+      : cfg_(cfg), r_(r), client_(client), trace_(std::move(trace)), check_(cfg.check_every > 0) {
+    if (check_) reference_ = std::make_unique<cpu::CpuRenderer>(cfg.scene, RenderOptions{});
+    // The clock starts once everything is ready: set-up is not sending time.
+    t0_ = Clock::now();
+    send_end_ = t0_ + std::chrono::duration_cast<Clock::duration>(
+                          std::chrono::duration<double>(cfg.seconds));
+    drain_end_ = send_end_ + std::chrono::duration_cast<Clock::duration>(
+                                 std::chrono::duration<double, std::milli>(cfg.drain_ms));
+    period_ = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(cfg.rate_hz > 0 ? 1.0 / cfg.rate_hz : 0.0));
+    next_pose_at_ = t0_;
+  }
+
+  // Until the sending time is over and the last pose is answered (or drain_ms passed), or the
+  // server sends an Error. Closes the connection.
+  void run() {
+    for (;;) {
+      const auto now = Clock::now();
+      const bool sending = now < send_end_;
+      if (!sending && (now >= drain_end_ || newest_answered_ + 1 == sent()))
+        break;
+      if (sending) send_due_poses(now);
+      auto msg = client_.recv(wait_ms(sending));
+      if (!msg) continue;
+      if (msg->has_error()) {
+        note_error(r_, "server Error " + pb::ErrorCode_Name(msg->error().code()) + ": " +
+                           msg->error().reason());
+        break;
+      }
+      if (msg->has_frame()) on_frame(msg->frame());
+    }
+    r_.run_seconds = std::chrono::duration<double>(std::min(Clock::now(), send_end_) - t0_).count();
+    r_.dropped = r_.poses_sent - answered_;
+    client_.ws().close();
+  }
+
+ private:
+  std::int64_t sent() const { return static_cast<std::int64_t>(sent_at_.size()); }
+
+  void send_due_poses(Clock::time_point now) {
+    if (cfg_.rate_hz > 0) {
+      if (now < next_pose_at_) return;
+      send_pose();
+      // A client that fell behind (a slow decode) skips the missed slots, not bursts them.
+      next_pose_at_ = std::max(next_pose_at_ + period_, now);
+      return;
+    }
+    while (outstanding_ < cfg_.depth) {
+      send_pose();
+      outstanding_++;
+    }
+  }
+
+  void send_pose() {
+    const double t_s = std::chrono::duration<double>(Clock::now() - t0_).count() + cfg_.offset_s;
+    const auto seq = static_cast<std::uint32_t>(sent_at_.size());
+    sent_at_.push_back(now_ms());
+    const pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back());
+    if (check_) sent_poses_.push_back(pose);
+    client_.send_pose(pose);
+    r_.poses_sent++;
+  }
+
+  // How long recv() may wait: until the next paced pose is due, at most 20 ms.
+  int wait_ms(bool sending) const {
+    if (!(sending && cfg_.rate_hz > 0)) return 20;
+    return static_cast<int>(std::clamp<long long>(
+        std::chrono::duration_cast<std::chrono::milliseconds>(next_pose_at_ - Clock::now()).count(),
+        0, 20));
+  }
+
+  void on_frame(const pb::Frame& f) {
+    r_.frames++;
+    r_.bytes += f.payload().size();
+    if (f.key_frame()) r_.idr_frames++;
+    if (outstanding_ > 0) outstanding_--;
+    if (cfg_.decode || check_) decode_and_check(f);
+    const double latency = now_ms() - f.client_time_ms();
+    const auto seq = static_cast<std::int64_t>(f.pose_sequence());
+    if (seq >= sent()) {
+      note_error(r_, "frame for a pose never sent (" + std::to_string(seq) + ")");
+      return;
+    }
+    if (seq <= newest_answered_ || latency > cfg_.stale_ms) r_.stale++;
+    if (seq > newest_answered_) {
+      newest_answered_ = seq;
+      answered_++;
+    }
+    if (r_.frames <= static_cast<std::uint64_t>(cfg_.warmup_frames)) return;
+    r_.latency_ms.push_back(latency);
+    add_server_timings(f.timings());
+  }
+
+  void decode_and_check(const pb::Frame& f) {
+    int w = 0, h = 0;
+    try {
+      const bool got = decoder_.decode(f.payload(), rgba_, w, h);
+      if (got) r_.decoded++;
+      if (w != r_.width || h != r_.height)
+        note_error(r_, "frame decoded to " + std::to_string(w) + "x" + std::to_string(h));
+      if (got && check_ && r_.frames % static_cast<std::uint64_t>(cfg_.check_every) == 0 &&
+          f.pose_sequence() < sent_poses_.size())
+        check_against_reference(f.pose_sequence(), w, h);
+    } catch (const std::exception& e) {
+      note_error(r_, std::string("decode: ") + e.what());
+    }
+  }
+
+  // The decoded picture against the CPU reference render of the pose it answers.
+  void check_against_reference(std::uint32_t pose_sequence, int w, int h) {
+    Image decoded_image, want;
+    decoded_image.width = w;
+    decoded_image.height = h;
+    decoded_image.rgba8 = rgba_;
+    reference_->render(camera_from_pose(sent_poses_[pose_sequence], w, h), want);
+    const double psnr = psnr_rgba8(decoded_image, want);
+    r_.psnr_min = r_.checked == 0 ? psnr : std::min(r_.psnr_min, psnr);
+    psnr_sum_ += psnr;
+    r_.checked++;
+    r_.psnr_mean = psnr_sum_ / static_cast<double>(r_.checked);
+    if (!(psnr >= cfg_.check_min_psnr)) r_.check_failures++;
+  }
+
+  void add_server_timings(const pb::FrameTimings& t) {
+    r_.server.queue += t.queue_ms();
+    r_.server.render += t.render_ms();
+    r_.server.convert += t.convert_ms();
+    r_.server.encode += t.encode_ms();
+    r_.server.total += t.total_ms();
+    r_.server.frames++;
+    if (t.previous_send_ms() > 0) {
+      r_.server.send += t.previous_send_ms();
+      r_.server.sends++;
+    }
+    if (t.render_key_frame()) r_.server.render_key++;
+  }
+
+  const LoadSessionConfig& cfg_;
+  SessionResult& r_;
+  StreamClient& client_;
+  const Trace trace_;
+  const bool check_;
+  H264Decoder decoder_;
+  std::vector<std::uint8_t> rgba_;
+  std::vector<double> sent_at_;      // client time each pose was sent, by sequence
+  std::vector<pb::Pose> sent_poses_;  // reference check: each pose as sent, by sequence
+  std::unique_ptr<cpu::CpuRenderer> reference_;
+  double psnr_sum_ = 0;
+  std::int64_t newest_answered_ = -1;
+  std::uint64_t answered_ = 0;  // distinct poses that got a frame
+  int outstanding_ = 0;         // closed loop: poses not yet answered
+  Clock::time_point t0_, send_end_, drain_end_, next_pose_at_;
+  Clock::duration period_{};
+};
+
+}  // namespace
+
 SessionResult run_load_session(const LoadSessionConfig& cfg) {
   SessionResult r;
   r.index = cfg.index;
   r.trace = cfg.trace;
-  auto note_error = [&r](const std::string& what) {
-    r.errors++;
-    if (r.first_error.empty()) r.first_error = what;
-  };
-  const bool check = cfg.check_every > 0;
-  if (check && !cfg.scene)
+  if (cfg.check_every > 0 && !cfg.scene)
     throw std::invalid_argument("loadgen: the reference check needs the scene (--scene)");
   try {
     StreamClient client;
-    client.connect(cfg.port, cfg.host);
-    const pb::Welcome welcome = client.hello(cfg.width, cfg.height, cfg.token);
-    r.width = static_cast<int>(welcome.width());
-    r.height = static_cast<int>(welcome.height());
-    r.session_id = welcome.session_id();
-    r.renderer = welcome.renderer();
-    r.encoder = welcome.encoder();
-    r.pipeline = welcome.pipeline();
-    const Trace trace = make_load_trace(cfg.trace, cfg.scene.get(), welcome, r.width, r.height);
+    const pb::Welcome welcome = open_session(cfg, client, r);
+    Trace trace = make_load_trace(cfg.trace, cfg.scene.get(), welcome, r.width, r.height);
     if (trace.empty()) throw std::runtime_error("empty trace " + cfg.trace);
-
-    H264Decoder decoder;
-    std::vector<std::uint8_t> rgba;
-    std::vector<double> sent_at;  // client time each pose was sent, by sequence
-    std::vector<pb::Pose> sent_poses;  // reference check: each pose as sent, by sequence
-    std::unique_ptr<cpu::CpuRenderer> reference;
-    if (check) reference = std::make_unique<cpu::CpuRenderer>(cfg.scene, RenderOptions{});
-    double psnr_sum = 0;
-    std::int64_t newest_answered = -1;
-    std::uint64_t answered = 0;   // distinct poses that got a frame
-    int outstanding = 0;
-    const auto t0 = Clock::now();
-    const auto send_end = t0 + std::chrono::duration_cast<Clock::duration>(
-                                   std::chrono::duration<double>(cfg.seconds));
-    auto send_pose = [&] {
-      const double t_s = std::chrono::duration<double>(Clock::now() - t0).count() + cfg.offset_s;
-      const auto seq = static_cast<std::uint32_t>(sent_at.size());
-      sent_at.push_back(now_ms());
-      const pb::Pose pose = pose_from_camera(camera_at(trace, t_s), seq, sent_at.back());
-      if (check) sent_poses.push_back(pose);
-      client.send_pose(pose);
-      r.poses_sent++;
-    };
-    const auto period = std::chrono::duration_cast<Clock::duration>(
-        std::chrono::duration<double>(cfg.rate_hz > 0 ? 1.0 / cfg.rate_hz : 0.0));
-    auto next_pose_at = t0;
-    auto drain_end = send_end + std::chrono::duration_cast<Clock::duration>(
-                                    std::chrono::duration<double, std::milli>(cfg.drain_ms));
-    for (;;) {
-      const auto now = Clock::now();
-      const bool sending = now < send_end;
-      if (!sending && (now >= drain_end || newest_answered + 1 == static_cast<std::int64_t>(sent_at.size())))
-        break;
-      if (sending && cfg.rate_hz > 0) {
-        if (now >= next_pose_at) {
-          send_pose();
-          // A client that fell behind (a slow decode) skips the missed slots, not bursts them.
-          next_pose_at = std::max(next_pose_at + period, now);
-        }
-      } else if (sending) {
-        while (outstanding < cfg.depth) {
-          send_pose();
-          outstanding++;
-        }
-      }
-      int wait_ms = 20;
-      if (sending && cfg.rate_hz > 0)
-        wait_ms = static_cast<int>(std::clamp<long long>(
-            std::chrono::duration_cast<std::chrono::milliseconds>(next_pose_at - Clock::now()).count(), 0, 20));
-      auto msg = client.recv(wait_ms);
-      if (!msg) continue;
-      if (msg->has_error()) {
-        note_error("server Error " + pb::ErrorCode_Name(msg->error().code()) + ": " + msg->error().reason());
-        break;
-      }
-      if (!msg->has_frame()) continue;
-      const pb::Frame& f = msg->frame();
-      r.frames++;
-      r.bytes += f.payload().size();
-      if (f.key_frame()) r.idr_frames++;
-      if (outstanding > 0) outstanding--;
-      if (cfg.decode || check) {
-        int w = 0, h = 0;
-        try {
-          const bool got = decoder.decode(f.payload(), rgba, w, h);
-          if (got) r.decoded++;
-          if (w != r.width || h != r.height) note_error("frame decoded to " + std::to_string(w) + "x" + std::to_string(h));
-          if (got && check && r.frames % static_cast<std::uint64_t>(cfg.check_every) == 0 &&
-              f.pose_sequence() < sent_poses.size()) {
-            Image decoded_image, want;
-            decoded_image.width = w;
-            decoded_image.height = h;
-            decoded_image.rgba8 = rgba;
-            reference->render(camera_from_pose(sent_poses[f.pose_sequence()], w, h), want);
-            const double psnr = psnr_rgba8(decoded_image, want);
-            r.psnr_min = r.checked == 0 ? psnr : std::min(r.psnr_min, psnr);
-            psnr_sum += psnr;
-            r.checked++;
-            r.psnr_mean = psnr_sum / static_cast<double>(r.checked);
-            if (!(psnr >= cfg.check_min_psnr)) r.check_failures++;
-          }
-        } catch (const std::exception& e) {
-          note_error(std::string("decode: ") + e.what());
-        }
-      }
-      const double latency = now_ms() - f.client_time_ms();
-      const auto seq = static_cast<std::int64_t>(f.pose_sequence());
-      if (seq >= static_cast<std::int64_t>(sent_at.size())) {
-        note_error("frame for a pose never sent (" + std::to_string(seq) + ")");
-        continue;
-      }
-      if (seq <= newest_answered || latency > cfg.stale_ms) r.stale++;
-      if (seq > newest_answered) {
-        newest_answered = seq;
-        answered++;
-      }
-      if (r.frames <= static_cast<std::uint64_t>(cfg.warmup_frames)) continue;
-      r.latency_ms.push_back(latency);
-      const pb::FrameTimings& t = f.timings();
-      r.server.queue += t.queue_ms();
-      r.server.render += t.render_ms();
-      r.server.convert += t.convert_ms();
-      r.server.encode += t.encode_ms();
-      r.server.total += t.total_ms();
-      r.server.frames++;
-      if (t.previous_send_ms() > 0) {
-        r.server.send += t.previous_send_ms();
-        r.server.sends++;
-      }
-      if (t.render_key_frame()) r.server.render_key++;
-    }
-    r.run_seconds = std::chrono::duration<double>(std::min(Clock::now(), send_end) - t0).count();
-    r.dropped = r.poses_sent - answered;
-    client.ws().close();
+    PoseLoop(cfg, r, client, std::move(trace)).run();
   } catch (const std::exception& e) {
-    note_error(e.what());
+    note_error(r, e.what());
   }
   return r;
 }
