@@ -1,3 +1,4 @@
+#include "speculation/settings.h"
 #include "server.h"
 
 #include <csignal>
@@ -71,6 +72,7 @@ void Server::load_model() {
 
 void Server::resolve_renderer() {
   render_options_.pipeline = parse_pipeline(options_.pipeline);
+  apply_speculation_settings(render_options_.speculation, options_.speculation);
   // Resolved once so every session uses the same core, and the log says why.
   std::string why;
   renderer_kind_ = make_renderer(options_.renderer, model_, render_options_, &why)->name();

@@ -1,5 +1,7 @@
 #include "server_options.h"
 
+#include "speculation/settings.h"
+
 #include <algorithm>
 #include <iostream>
 #include <thread>
@@ -34,6 +36,7 @@ std::string server_usage() {
          "  --renderer K          cpu | cuda | auto (default auto)\n"
          "  --encoder K           nvenc | x264 | auto (default auto: NVENC if usable, else x264)\n"
          "  --pipeline P          vanilla | exact | catgs (default exact)\n"
+         "  --speculation LIST    catgs settings, e.g. window=2,backoff=0 (see below)\n"
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
          "  --token T             require Hello.token == T\n"
@@ -47,7 +50,9 @@ std::string server_usage() {
          "                        (default 2: x264's sliced threads halve a frame's encode\n"
          "                        time; more cost CPU that other sessions need)\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
-         "  --socket-send-buffer BYTES  SO_SNDBUF per WebSocket (default 524288; 0 = kernel)\n";
+         "  --socket-send-buffer BYTES  SO_SNDBUF per WebSocket (default 524288; 0 = kernel)\n"
+         "catgs settings (--speculation name=value,...):\n" +
+         speculation_settings_usage();
 }
 
 bool parse_server_options(int argc, char** argv, ServerOptions& out) {
@@ -67,6 +72,11 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else if (a == "--renderer") out.renderer = v;
     else if (a == "--encoder") out.encoder = v;
     else if (a == "--pipeline") out.pipeline = v;
+    else if (a == "--speculation") {
+      SpeculationParams check;
+      apply_speculation_settings(check, v);  // refused here, before anything starts
+      out.speculation = v;
+    }
     else if (a == "--web-root") out.web_root = v;
     else if (a == "--max-sessions") out.max_sessions = parse_int(a, v, 1, 10000);
     else if (a == "--token") out.token = v;

@@ -13,6 +13,7 @@ struct ServerOptions {
   std::string renderer = "auto"; // "cpu" | "cuda" | "auto"
   std::string encoder = "auto";  // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
   std::string pipeline = "exact";// "vanilla" | "exact" | "catgs"
+  std::string speculation;       // catgs settings, "name=value,..." (speculation/settings.h)
   std::string web_root;          // folder served over HTTP at "/"
   int max_sessions = 8;          // sessions open at once; one more gets ERROR_SERVER_FULL
   std::string token;             // when non-empty, Hello.token must equal it
