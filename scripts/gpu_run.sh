@@ -3,21 +3,26 @@
 #
 # On the GPU machine (from the repository root, .carry/ carried):
 #   scripts/gpu_run.sh [--prebuilt] [--quick] [--no-tests] [--no-bench] [--sanitize] [--frames N]
-#     1. builds the CUDA core, catgs-bench and catgs-gpu-tests (build/gpu, from the carried GLM,
-#        nlohmann-json and stb), unless --prebuilt, which runs the binaries in .carry/bin instead
-#        (built on the build machine by `prepare`; they need nothing but the CUDA driver);
-#     2. runs the GPU tests (CUDA vs the CPU reference) -> $OUT/gpu_tests.md;
-#        --sanitize first runs the quick subset under compute-sanitizer memcheck;
-#     3. runs the benchmark at 1920x1080 over 600 frames at 120 FPS: vanilla, exact, catgs and its
-#        ablations (catgs-nocache, catgs-nosplit) on tumblewood_sh2 (x10) and on the 13-copy city
-#        built in memory, over each real camera path (bench_{tumblewood,city}_PATH.json), the
-#        window table (bench_windows_{tumblewood,city}.json) and the city fly-over
+#                      [--compare LIST [--before DIR]]
+#     1. builds the CUDA core, catgs-bench, catgs-gpu-tests and catgs-scene (build/gpu/bin, from the
+#        carried GLM, nlohmann-json and stb), unless --prebuilt, which runs the binaries in
+#        .carry/bin instead (built on the build machine by `prepare`; they need nothing but the
+#        CUDA driver); a failed build falls back to those (when there) and exits non-zero;
+#     2. runs the GPU tests (CUDA vs the CPU reference) -> $OUT/gpu_tests.md (--quick: their
+#        quick subset; --no-tests: none); --sanitize first runs the quick subset under
+#        compute-sanitizer memcheck;
+#     3. runs the benchmark (--no-bench: none) at 1920x1080, catgs-bench's 30 warm-up frames then
+#        --frames N timed frames (default 600) at 120 FPS, sub-frame quality on every 3rd frame:
+#        vanilla,exact,catgs,catgs-nocache,catgs-nosplit on tumblewood_sh2 (x10) and on the 13-copy
+#        city built in memory, over each real camera path (mipnerf360_bicycle, tandt_train,
+#        flowers_sh3: bench_{tumblewood,city}_PATH.json); the window table
+#        exact,catgs-w2,catgs,catgs-w8,catgs-w16 (W = 2, 4, 8, 16) on the bicycle path
+#        (bench_windows_{tumblewood,city}.json); and vanilla,exact,catgs on the city fly-over
 #        (bench_city_flyover.json + snapshots), all packed into $OUT/bench.tar.gz.
-#     --predictor-bench runs only the motion predictor's fit-window ablation (catgs-pN) on the
-#     bicycle and flowers paths, tumblewood and city -> $OUT/predictor_*.json.
-#     --compare LIST (after the tests, instead of the benchmark) runs the pipelines of LIST (e.g.
-#     exact,catgs,catgs-m10,catgs-nocull) side by side on tumblewood x10 and the city over the
-#     three real paths -> compare_{tumblewood,city}_PATH.json, packed into $OUT/compare.tar.gz.
+#     --compare LIST (after the tests, instead of the benchmark) runs the catgs-bench variants of
+#     LIST (quoted, e.g. 'exact,catgs,catgs{motion_margin=0.2},catgs-w2{backoff=0}'; see
+#     catgs-bench --help) side by side on tumblewood x10 and the city over the three real paths
+#     -> compare_{tumblewood,city}_PATH.json, packed into $OUT/compare.tar.gz.
 #     --before DIR (with --compare) runs DIR/catgs-bench, an earlier build carried along (e.g.
 #     .carry/bin_before, copied from .carry/bin before the next `prepare`), right after each of
 #     those runs -> compare_before_*.json, in the same archive.
@@ -100,7 +105,7 @@ if [ "${1:-}" = prepare ]; then
   exit $?
 fi
 
-PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 PREDICTOR=0 COMPARE= BEFORE=
+PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 COMPARE= BEFORE=
 while [ $# -gt 0 ]; do
   case "$1" in
     --prebuilt) PREBUILT=1 ;;
@@ -109,7 +114,6 @@ while [ $# -gt 0 ]; do
     --no-bench) BENCH=0 ;;
     --sanitize) SANITIZE=1 ;;
     --frames) FRAMES=$2; shift ;;
-    --predictor-bench) PREDICTOR=1; TESTS=0; BENCH=0 ;;
     --compare) COMPARE=$2; BENCH=0; shift ;;
     --before) BEFORE=$ROOT/$2; shift ;;
     *) echo "gpu_run.sh: unknown option $1" >&2; exit 2 ;;
@@ -207,24 +211,6 @@ if [ "$BENCH" = 1 ]; then
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
     --width 1920 --height 1080 --pipeline vanilla,exact,catgs --frames "$FRAMES" --quality-every 3 \
     --json "$B/bench_city_flyover.json" --snapshot-dir "$B" || status=1
-fi
-if [ "$PREDICTOR" = 1 ]; then
-  # The motion predictor's fit window (catgs-pN: N ms; default 100): bicycle and flowers paths,
-  # tumblewood x10 and the city, JSON straight into $OUT (a run cut short still returns them).
-  for path in mipnerf360_bicycle flowers_sh3; do
-    echo "== predictor bench: tumblewood_sh2 x10, $path"
-    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --scale 10 --up 0,-1,0 \
-      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 \
-      --pipeline exact,catgs,catgs-p50,catgs-p17 --frames "$FRAMES" --quality-every 3 \
-      --json "$OUT/predictor_tumblewood_$path.json" || status=1
-  done
-  for path in mipnerf360_bicycle flowers_sh3; do
-    echo "== predictor bench: city, $path"
-    "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 \
-      --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 \
-      --pipeline exact,catgs,catgs-p50,catgs-p17 --frames "$FRAMES" --quality-every 3 \
-      --json "$OUT/predictor_city_$path.json" || status=1
-  done
 fi
 if [ -n "$COMPARE" ]; then
   real_paths "$COMPARE" "$OUT/compare"

@@ -1,0 +1,228 @@
+#include "bench/timing_loop.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+#if CATGS_HAVE_CUDA
+#include <cuda_runtime.h>
+
+#include "cuda/cuda_renderer.h"
+#endif
+#include "common/image_io.h"
+
+namespace catgs::bench {
+
+namespace {
+
+RenderOptions options_of(const Variant& variant) {
+  RenderOptions o;
+  o.pipeline = variant.pipeline;
+  o.speculation = variant.speculation;
+  return o;
+}
+
+PipelineResult result_of(const Variant& variant) {
+  PipelineResult res;
+  res.name = variant.name;
+  res.pipeline = variant.pipeline;
+  return res;
+}
+
+// DIR/FILE_NAME.png, creating DIR.
+void write_snapshot(const Image& image, const std::string& dir, const std::string& file_name) {
+  std::filesystem::create_directories(dir);
+  write_png(image, dir + "/" + file_name + ".png");
+}
+
+// A key frame: the group it closes (by that group's W), and the group it opens.
+void record_key_frame(PipelineResult& res, double ms, const FrameStats& s) {
+  res.window.push_back(s.window);
+  if (s.subframe_rejected) res.rejected_ms.push_back(ms);
+  if (s.window == 0) res.full_ms.push_back(ms);
+  if (res.open_window > 0) {  // the key frame closes the open group
+    auto& group = res.groups[res.open_window];
+    ++group.count;
+    group.served += res.open_served;
+    group.rejected += s.subframe_rejected ? 1 : 0;
+  }
+  res.open_window = s.window;
+  res.open_served = 0;
+}
+
+PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& model, const Variant& variant,
+                                const TimingPlan& plan) {
+  auto r = make_renderer("cpu", model, options_of(variant));
+  PipelineResult res = result_of(variant);
+  Image img;
+  for (int k = 0; k < plan.warmup; ++k) r->render_at(plan.camera_at(k), TimingPlan::time_at(k), img);
+  for (int k = 0; k < plan.frames; ++k) {
+    const int frame = plan.warmup + k;
+    const auto t0 = std::chrono::steady_clock::now();
+    r->render_at(plan.camera_at(frame), TimingPlan::time_at(frame), img);
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    record_frame(res, ms, r->last_stats());
+  }
+  if (!plan.snapshot_dir.empty()) write_snapshot(img, plan.snapshot_dir, model->name + "_cpu_" + res.name);
+  return res;
+}
+
+}  // namespace
+
+void record_frame(PipelineResult& res, double ms, const FrameStats& s) {
+  res.frame_ms.push_back(ms);
+  res.pre.push_back(s.preprocess_ms);
+  res.keys.push_back(s.keys_ms);
+  res.sort.push_back(s.sort_ms);
+  res.ranges.push_back(s.ranges_ms);
+  res.raster.push_back(s.rasterize_ms);
+  res.list.push_back(static_cast<double>(s.render_list_length));
+  res.visible.push_back(static_cast<double>(s.visible));
+  (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);
+  if (s.key_frame) record_key_frame(res, ms, s);
+  else ++res.open_served;
+  const double stage[6] = {s.preprocess_ms, s.keys_ms, s.sort_ms, s.ranges_ms, s.rasterize_ms, s.merge_ms};
+  for (int k = 0; k < 6; ++k) (s.key_frame ? res.key_stage : res.sub_stage)[k].push_back(stage[k]);
+}
+
+std::vector<PipelineResult> time_on_cpu(const std::shared_ptr<const GaussianModel>& model,
+                                        const std::vector<Variant>& variants, const TimingPlan& plan) {
+  std::vector<PipelineResult> results;
+  for (const Variant& variant : variants) results.push_back(time_cpu_variant(model, variant, plan));
+  return results;
+}
+
+#if CATGS_HAVE_CUDA
+namespace {
+
+void check(cudaError_t e, const char* what) {
+  if (e != cudaSuccess)
+    throw std::runtime_error(std::string(what) + ": " + cudaGetErrorName(e) + ": " + cudaGetErrorString(e));
+}
+
+// Two CUDA events around the work queued on a stream between start() and stop().
+class EventTimer {
+ public:
+  EventTimer() {
+    check(cudaEventCreate(&start_), "cudaEventCreate");
+    check(cudaEventCreate(&end_), "cudaEventCreate");
+  }
+  ~EventTimer() {
+    cudaEventDestroy(start_);
+    cudaEventDestroy(end_);
+  }
+  EventTimer(const EventTimer&) = delete;
+  EventTimer& operator=(const EventTimer&) = delete;
+
+  void start(cudaStream_t stream) { check(cudaEventRecord(start_, stream), "cudaEventRecord"); }
+  // Waits for the end event; milliseconds since start().
+  float stop(cudaStream_t stream) {
+    check(cudaEventRecord(end_, stream), "cudaEventRecord");
+    check(cudaEventSynchronize(end_), "cudaEventSynchronize");
+    float ms = 0;
+    check(cudaEventElapsedTime(&ms, start_, end_), "cudaEventElapsedTime");
+    return ms;
+  }
+
+ private:
+  cudaEvent_t start_ = nullptr, end_ = nullptr;
+};
+
+RenderOptions exact_options() {
+  RenderOptions o;
+  o.pipeline = Pipeline::exact;
+  return o;
+}
+
+// --quality-every: a timed catgs frame against a full exact render of the same pose by a second
+// renderer. A sub-frame gives the image quality (PSNR over 8-bit RGB, max abs error of the float
+// image), a key frame the render-list growth (catgs key list / exact list).
+class QualityCheck {
+ public:
+  explicit QualityCheck(const std::shared_ptr<const cuda::DeviceScene>& scene)
+      : reference_(scene, exact_options()) {}
+
+  void compare(PipelineResult& res, const FrameStats& stats, const cuda::DeviceFrame& frame,
+               const Camera& camera) {
+    reference_.render(camera, full_);
+    if (stats.key_frame) {
+      res.list_growth.push_back(static_cast<double>(stats.render_list_length) /
+                                std::max<double>(1.0, static_cast<double>(reference_.last_stats().render_list_length)));
+      return;
+    }
+    download(frame);
+    const double p = psnr_rgba8(image_, full_);
+    double max_abs = 0.0;
+    for (std::size_t i = 0; i < image_.rgb.size(); ++i)
+      max_abs = std::max(max_abs, static_cast<double>(std::fabs(image_.rgb[i] - full_.rgb[i])));
+    if (std::isinf(p)) ++res.subframes_inf;
+    else res.sub_psnr.push_back(p);
+    res.sub_max_abs.push_back(max_abs);
+  }
+
+ private:
+  void download(const cuda::DeviceFrame& frame) {
+    const std::size_t pixels = static_cast<std::size_t>(frame.width) * frame.height;
+    image_.width = frame.width;
+    image_.height = frame.height;
+    image_.rgb.resize(pixels * 3);
+    image_.rgba8.resize(pixels * 4);
+    check(cudaMemcpy(image_.rgb.data(), frame.rgb, pixels * 3 * sizeof(float), cudaMemcpyDeviceToHost),
+          "cudaMemcpy");
+    check(cudaMemcpy(image_.rgba8.data(), frame.rgba8, pixels * 4, cudaMemcpyDeviceToHost), "cudaMemcpy");
+  }
+
+  cuda::CudaRenderer reference_;
+  Image image_, full_;
+};
+
+PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>& scene, const Variant& variant,
+                                 const TimingPlan& plan, QualityCheck& quality, std::size_t used_before_scene) {
+  cuda::CudaRenderer r(scene, options_of(variant));
+  PipelineResult res = result_of(variant);
+  EventTimer timer;
+  for (int k = 0; k < plan.warmup; ++k) {
+    r.render_device_at(plan.camera_at(k), TimingPlan::time_at(k));
+    (void)r.last_stats();
+  }
+  const bool compare = variant.pipeline == Pipeline::catgs && plan.quality_every > 0;
+  const std::size_t allocs_before = r.diagnostics().allocations;
+  for (int k = 0; k < plan.frames; ++k) {
+    const Camera cam = plan.camera_at(plan.warmup + k);
+    timer.start(r.stream());
+    const cuda::DeviceFrame frame = r.render_device_at(cam, TimingPlan::time_at(plan.warmup + k));
+    const float ms = timer.stop(r.stream());
+    const FrameStats stats = r.last_stats();
+    record_frame(res, ms, stats);
+    res.heaviest.push_back(static_cast<double>(r.diagnostics().heaviest_tile_entries));  // after timing
+    if (compare && k % plan.quality_every == 0) quality.compare(res, stats, frame, cam);  // after timing too
+  }
+  const cuda::CudaRenderer::Diagnostics d = r.diagnostics();
+  res.allocations_timed = d.allocations - allocs_before;
+  res.peak_buffer_bytes = d.peak_buffer_bytes;
+  res.device_used_bytes = cuda::device_memory_used() - used_before_scene;
+  res.syncs = d.syncs_last_frame;
+  if (!plan.snapshot_dir.empty()) {
+    Image img;
+    r.render(plan.camera_at(plan.warmup + plan.frames / 2), img);
+    write_snapshot(img, plan.snapshot_dir, scene->name() + "_" + res.name);
+  }
+  return res;
+}
+
+}  // namespace
+
+std::vector<PipelineResult> time_on_cuda(const std::shared_ptr<const cuda::DeviceScene>& scene,
+                                         const std::vector<Variant>& variants, const TimingPlan& plan,
+                                         std::size_t used_before_scene) {
+  QualityCheck quality(scene);
+  std::vector<PipelineResult> results;
+  for (const Variant& variant : variants)
+    results.push_back(time_cuda_variant(scene, variant, plan, quality, used_before_scene));
+  return results;
+}
+#endif
+
+}  // namespace catgs::bench

@@ -1,0 +1,74 @@
+// catgs-bench's timing loop: each variant renders the same trace frames, one variant after the
+// other, in this process. CUDA: CUDA events on the renderer's stream around render_device_at()
+// (pose in, image in device memory out), and optionally each K-th catgs frame compared, after its
+// timing, with a full exact render of the same pose. CPU reference: the steady clock around
+// render_at() (pose in, 8-bit image in host memory out).
+#pragma once
+
+#include <cstddef>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bench/variants.h"
+#include "camera/trace.h"
+#include "renderer/renderer.h"
+
+namespace catgs::cuda {
+class DeviceScene;
+}
+
+namespace catgs::bench {
+
+// One variant's timed frames: per-frame records, and for catgs the key / sub-frame split.
+struct PipelineResult {
+  std::string name;  // the variant as written
+  Pipeline pipeline = Pipeline::exact;
+  std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible, heaviest;
+  std::vector<double> key_ms, sub_ms, window;  // catgs: key vs sub-frame times, W per key frame
+  // catgs: key frames drawn after a rejected sub-frame, and key frames without a window (W = 0).
+  std::vector<double> rejected_ms, full_ms;
+  struct Groups {
+    std::size_t count = 0, served = 0, rejected = 0;  // groups, sub-frames served, ended by a rejection
+  };
+  std::map<int, Groups> groups;  // catgs: by W, the groups that closed during the timed frames
+  int open_window = 0;           // the open group's W (0: none), and its sub-frames so far
+  std::size_t open_served = 0;
+  std::vector<double> key_stage[6], sub_stage[6];  // catgs: pre, keys, sort, ranges, raster, merge
+  std::vector<double> sub_psnr, sub_max_abs, list_growth;  // catgs vs exact, same pose (--quality-every)
+  std::size_t subframes_inf = 0;  // sub-frames identical to the full render (PSNR +inf)
+  std::size_t peak_buffer_bytes = 0, device_used_bytes = 0, allocations_timed = 0;  // CUDA
+  int syncs = 0;                                                                    // CUDA
+};
+
+// Appends one timed frame (its time, stage times and counters); a key frame closes the open group
+// and opens the next one.
+void record_frame(PipelineResult& result, double ms, const FrameStats& stats);
+
+// The frames every variant renders: `warmup` untimed, then `frames` timed, frame k being the
+// trace's camera k (cycled) posed at k / 120 s, the trace's clock.
+struct TimingPlan {
+  const Trace* trace = nullptr;
+  int warmup = 30, frames = 600;
+  int quality_every = 1;     // CUDA: compare every K-th timed catgs frame with exact (0: never)
+  std::string snapshot_dir;  // not empty: a PNG per variant there
+  Camera camera_at(int k) const { return (*trace)[static_cast<std::size_t>(k) % trace->size()].camera; }
+  static double time_at(int k) { return k * (1.0 / 120.0); }
+};
+
+// The CPU reference over `model`; a snapshot is the last timed frame
+// (DIR/SCENE_cpu_VARIANT.png).
+std::vector<PipelineResult> time_on_cpu(const std::shared_ptr<const GaussianModel>& model,
+                                        const std::vector<Variant>& variants, const TimingPlan& plan);
+
+#if CATGS_HAVE_CUDA
+// The CUDA core over `scene`, one CudaRenderer per variant; device_used_bytes counts from
+// `used_before_scene` (device memory in use before the scene was uploaded). A snapshot is the
+// middle timed pose rendered again after timing (DIR/SCENE_VARIANT.png).
+std::vector<PipelineResult> time_on_cuda(const std::shared_ptr<const cuda::DeviceScene>& scene,
+                                         const std::vector<Variant>& variants, const TimingPlan& plan,
+                                         std::size_t used_before_scene);
+#endif
+
+}  // namespace catgs::bench
