@@ -6,7 +6,7 @@ set -euo pipefail
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 packages=(
-  build-essential cmake ninja-build pkg-config git
+  build-essential cmake ninja-build pkg-config git clang-format
   libboost-dev libwebsockets-dev
   libavcodec-dev libavutil-dev libswscale-dev libx264-dev
   libprotobuf-dev protobuf-compiler

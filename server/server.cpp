@@ -66,8 +66,7 @@ void Server::load_model() {
   const auto t0 = std::chrono::steady_clock::now();
   model_ = std::make_shared<const GaussianModel>(load_scene(options_.scene));
   std::cout << "scene: " << options_.scene << " (" << model_->name << "), " << model_->size()
-            << " Gaussians, SH degree " << model_->sh_degree << ", loaded in " << ms_since(t0)
-            << " ms\n";
+            << " Gaussians, SH degree " << model_->sh_degree << ", loaded in " << ms_since(t0) << " ms\n";
 }
 
 void Server::resolve_renderer() {
@@ -98,9 +97,9 @@ void Server::resolve_encoder() {
 
 void Server::build_sessions() {
   transport_ = std::make_unique<Transport>(transport_options(options_), to_manager_);
-  shared_ = std::unique_ptr<SessionShared>(new SessionShared{
-      io_, renders_, *transport_, metrics_, options_, model_, model_->bounds(),
-      first_view_bounds(*model_), render_options_, renderer_kind_, encoder_kind_});
+  shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *transport_, metrics_, options_, model_,
+                                                             model_->bounds(), first_view_bounds(*model_),
+                                                             render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
   to_manager_.manager = manager_.get();
 }
@@ -115,14 +114,13 @@ void Server::catch_signals() {
 void Server::start_pools() {
   work_.emplace(io_.get_executor());
   for (int i = 0; i < options_.threads; ++i) workers_.emplace_back([this] { io_.run(); });
-  renders_.start(
-      RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads));
+  renders_.start(RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads));
 }
 
 void Server::print_listening() const {
   std::cout << "web root: " << options_.web_root << "\n"
-            << "sessions: at most " << options_.max_sessions << ", " << options_.threads
-            << " worker threads, " << renders_.lanes() << " render lanes\n"
+            << "sessions: at most " << options_.max_sessions << ", " << options_.threads << " worker threads, "
+            << renders_.lanes() << " render lanes\n"
             << "listening on http://127.0.0.1:" << transport_->port() << "/ (WebSocket "
             << "catgs.v1 at ws://127.0.0.1:" << transport_->port() << "/ws)" << std::endl;
 }
@@ -163,14 +161,12 @@ void Server::run_leftovers() {
   // Handlers left behind (past the deadline) hold sessions, whose destructors use shared_: run
   // them now, while it lives, instead of letting the io_contexts destroy them later.
   io_.restart();
-  for (int i = 0; i < 10000 && io_.poll() + renders_.poll() > 0; ++i) {
-  }
+  for (int i = 0; i < 10000 && io_.poll() + renders_.poll() > 0; ++i) {}
 }
 
 void Server::print_totals() const {
-  std::cout << "stopped: " << metrics_.sessions_total.load() << " sessions, "
-            << metrics_.frames_total.load() << " frames, " << metrics_.bytes_total.load()
-            << " bytes" << std::endl;
+  std::cout << "stopped: " << metrics_.sessions_total.load() << " sessions, " << metrics_.frames_total.load()
+            << " frames, " << metrics_.bytes_total.load() << " bytes" << std::endl;
 }
 
 }  // namespace catgs::server

@@ -22,8 +22,7 @@ std::vector<double> Histogram::stage_seconds() {
 
 void Histogram::observe(double value) {
   // Bucket i holds bounds_[i - 1] < value <= bounds_[i] (Prometheus `le`).
-  const auto i = static_cast<std::size_t>(
-      std::lower_bound(bounds_.begin(), bounds_.end(), value) - bounds_.begin());
+  const auto i = static_cast<std::size_t>(std::lower_bound(bounds_.begin(), bounds_.end(), value) - bounds_.begin());
   std::lock_guard<std::mutex> lock(mutex_);
   counts_[i]++;
   sum_ += value;
@@ -60,8 +59,7 @@ std::string ServerMetrics::prometheus_text() const {
     o << name << ' ' << value << '\n';
   };
   head("catgs_info", "gauge", "What this server runs (value always 1).");
-  o << "catgs_info{renderer=\"" << renderer << "\",encoder=\"" << encoder << "\",pipeline=\""
-    << pipeline << "\"} 1\n";
+  o << "catgs_info{renderer=\"" << renderer << "\",encoder=\"" << encoder << "\",pipeline=\"" << pipeline << "\"} 1\n";
   put("catgs_connections", "gauge", "Open WebSocket connections.", connections_open.load());
   put("catgs_sessions", "gauge", "Open sessions (after Hello).", sessions_open.load());
   put("catgs_sessions_total", "counter", "Sessions opened.", sessions_total.load());
@@ -69,16 +67,12 @@ std::string ServerMetrics::prometheus_text() const {
   put("catgs_key_frames_total", "counter", "IDR frames sent.", key_frames_total.load());
   put("catgs_frame_bytes_total", "counter", "Encoded frame bytes sent.", bytes_total.load());
   put("catgs_poses_total", "counter", "Poses received.", poses_total.load());
-  put("catgs_poses_skipped_total", "counter", "Poses replaced before rendering.",
-      poses_skipped_total.load());
+  put("catgs_poses_skipped_total", "counter", "Poses replaced before rendering.", poses_skipped_total.load());
   put("catgs_dropped_frames_total", "counter",
-      "Poses that never got a frame (replaced, or pending when the session ended).",
-      dropped_frames_total.load());
-  put("catgs_session_errors_total", "counter", "Sessions ended with an Error.",
-      session_errors_total.load());
+      "Poses that never got a frame (replaced, or pending when the session ended).", dropped_frames_total.load());
+  put("catgs_session_errors_total", "counter", "Sessions ended with an Error.", session_errors_total.load());
   put("catgs_encoder_fallbacks_total", "counter",
-      "Encoders opened as x264 because --encoder auto found NVENC unusable.",
-      encoder_fallbacks_total.load());
+      "Encoders opened as x264 because --encoder auto found NVENC unusable.", encoder_fallbacks_total.load());
   head("catgs_render_frames_total", "counter",
        "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
   o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'
@@ -95,8 +89,7 @@ std::string ServerMetrics::prometheus_text() const {
   encode_seconds.write(o, "catgs_encode_seconds");
   head("catgs_send_seconds", "histogram", "Frame handed to the transport -> written to the socket.");
   send_seconds.write(o, "catgs_send_seconds");
-  head("catgs_speculation_window", "histogram",
-       "Speculation window W of each rendered frame (0: no speculation).");
+  head("catgs_speculation_window", "histogram", "Speculation window W of each rendered frame (0: no speculation).");
   speculation_window.write(o, "catgs_speculation_window");
   return o.str();
 }

@@ -53,14 +53,14 @@ struct ServerMetrics {
   std::atomic<std::int64_t> connections_open{0};  // WebSocket connections now
   std::atomic<std::int64_t> sessions_open{0};     // connections past a valid Hello, now
   std::atomic<std::uint64_t> sessions_total{0};
-  std::atomic<std::uint64_t> frames_total{0};     // frames handed to the transport
+  std::atomic<std::uint64_t> frames_total{0};      // frames handed to the transport
   std::atomic<std::uint64_t> key_frames_total{0};  // IDR access units among them
-  std::atomic<std::uint64_t> bytes_total{0};      // Frame payload bytes
+  std::atomic<std::uint64_t> bytes_total{0};       // Frame payload bytes
   std::atomic<std::uint64_t> poses_total{0};
   std::atomic<std::uint64_t> poses_skipped_total{0};  // replaced by a newer pose (latest wins)
   // Poses that never got a frame: skipped, or still pending / rendering when the session ended.
   std::atomic<std::uint64_t> dropped_frames_total{0};
-  std::atomic<std::uint64_t> session_errors_total{0};  // sessions ended with an Error
+  std::atomic<std::uint64_t> session_errors_total{0};     // sessions ended with an Error
   std::atomic<std::uint64_t> render_key_frames_total{0};  // full pre-process renders
   std::atomic<std::uint64_t> render_sub_frames_total{0};  // catgs sub-frames from the caches
   // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).

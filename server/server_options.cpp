@@ -21,8 +21,8 @@ int parse_int(const std::string& name, const std::string& v, int lo, int hi) {
   }
   if (used != v.size()) throw std::invalid_argument(name + " needs an integer, got '" + v + "'");
   if (x < lo || x > hi)
-    throw std::invalid_argument(name + " must be in [" + std::to_string(lo) + ", " +
-                                std::to_string(hi) + "], got " + v);
+    throw std::invalid_argument(name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                                v);
   return x;
 }
 
@@ -66,28 +66,44 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     }
     if (i + 1 >= argc) throw std::invalid_argument("option " + a + " needs a value");
     const std::string v = argv[++i];
-    if (a == "--scene") out.scene = v;
-    else if (a == "--port") out.port = parse_int(a, v, 0, 65535);
-    else if (a == "--bind") out.bind = v;
-    else if (a == "--renderer") out.renderer = v;
-    else if (a == "--encoder") out.encoder = v;
-    else if (a == "--pipeline") out.pipeline = v;
+    if (a == "--scene")
+      out.scene = v;
+    else if (a == "--port")
+      out.port = parse_int(a, v, 0, 65535);
+    else if (a == "--bind")
+      out.bind = v;
+    else if (a == "--renderer")
+      out.renderer = v;
+    else if (a == "--encoder")
+      out.encoder = v;
+    else if (a == "--pipeline")
+      out.pipeline = v;
     else if (a == "--speculation") {
       SpeculationParams check;
       apply_speculation_settings(check, v);  // refused here, before anything starts
       out.speculation = v;
-    }
-    else if (a == "--web-root") out.web_root = v;
-    else if (a == "--max-sessions") out.max_sessions = parse_int(a, v, 1, 10000);
-    else if (a == "--token") out.token = v;
-    else if (a == "--threads") out.threads = parse_int(a, v, 0, 256);
-    else if (a == "--render-lanes") out.render_lanes = parse_int(a, v, 0, 256);
-    else if (a == "--slow-client-timeout-ms") out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
-    else if (a == "--crf") out.crf = parse_int(a, v, 0, 51);
-    else if (a == "--encoder-threads") out.encoder_threads = parse_int(a, v, 0, 64);
-    else if (a == "--max-frames-in-flight") out.max_frames_in_flight = parse_int(a, v, 1, 16);
-    else if (a == "--socket-send-buffer") out.socket_send_buffer = parse_int(a, v, 0, 64 << 20);
-    else throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());
+    } else if (a == "--web-root")
+      out.web_root = v;
+    else if (a == "--max-sessions")
+      out.max_sessions = parse_int(a, v, 1, 10000);
+    else if (a == "--token")
+      out.token = v;
+    else if (a == "--threads")
+      out.threads = parse_int(a, v, 0, 256);
+    else if (a == "--render-lanes")
+      out.render_lanes = parse_int(a, v, 0, 256);
+    else if (a == "--slow-client-timeout-ms")
+      out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
+    else if (a == "--crf")
+      out.crf = parse_int(a, v, 0, 51);
+    else if (a == "--encoder-threads")
+      out.encoder_threads = parse_int(a, v, 0, 64);
+    else if (a == "--max-frames-in-flight")
+      out.max_frames_in_flight = parse_int(a, v, 1, 16);
+    else if (a == "--socket-send-buffer")
+      out.socket_send_buffer = parse_int(a, v, 0, 64 << 20);
+    else
+      throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());
   }
   if (out.threads == 0)  // encodes are CPU-bound: one worker per core (x264 adds its own threads)
     out.threads = std::max(4, static_cast<int>(std::thread::hardware_concurrency()));

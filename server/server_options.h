@@ -7,22 +7,22 @@ namespace catgs::server {
 
 // Everything the server is configured with. Defaults match `catgs-server` with no arguments.
 struct ServerOptions {
-  std::string scene;             // scene file (INRIA or compressed PLY)
-  int port = 8080;               // TCP port; 0 lets the kernel pick (the chosen one is logged)
-  std::string bind = "0.0.0.0";  // interface address to listen on
-  std::string renderer = "auto"; // "cpu" | "cuda" | "auto"
-  std::string encoder = "auto";  // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
-  std::string pipeline = "exact";// "vanilla" | "exact" | "catgs"
-  std::string speculation;       // catgs settings, "name=value,..." (speculation/settings.h)
-  std::string web_root;          // folder served over HTTP at "/"
-  int max_sessions = 8;          // sessions open at once; one more gets ERROR_SERVER_FULL
-  std::string token;             // when non-empty, Hello.token must equal it
-  int threads = 0;               // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
-  int render_lanes = 0;          // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
-  int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
-  int crf = 23;                  // x264 constant rate factor (lower = better quality, more bytes)
-  int encoder_threads = 2;       // per session's encoder; 0 = the library's choice
-  int max_frames_in_flight = 2;  // frames queued to the transport but not yet written
+  std::string scene;                    // scene file (INRIA or compressed PLY)
+  int port = 8080;                      // TCP port; 0 lets the kernel pick (the chosen one is logged)
+  std::string bind = "0.0.0.0";         // interface address to listen on
+  std::string renderer = "auto";        // "cpu" | "cuda" | "auto"
+  std::string encoder = "auto";         // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
+  std::string pipeline = "exact";       // "vanilla" | "exact" | "catgs"
+  std::string speculation;              // catgs settings, "name=value,..." (speculation/settings.h)
+  std::string web_root;                 // folder served over HTTP at "/"
+  int max_sessions = 8;                 // sessions open at once; one more gets ERROR_SERVER_FULL
+  std::string token;                    // when non-empty, Hello.token must equal it
+  int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
+  int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
+  int slow_client_timeout_ms = 10000;   // frames unwritten this long -> ERROR_TOO_SLOW
+  int crf = 23;                         // x264 constant rate factor (lower = better quality, more bytes)
+  int encoder_threads = 2;              // per session's encoder; 0 = the library's choice
+  int max_frames_in_flight = 2;         // frames queued to the transport but not yet written
   int socket_send_buffer = 512 * 1024;  // SO_SNDBUF of WebSocket sockets, bytes (0 = kernel's)
 };
 

@@ -24,9 +24,9 @@ const char* kUsage =
 
 int run(int argc, char** argv) {
   using catgs::tools::Args;
-  const Args args(argc, argv, {"--scene", "--cameras", "--view", "--all!", "--fps", "--trace",
-                               "--width", "--height", "--pipeline", "--renderer", "--background",
-                               "--out", "--out-dir", "--every", "--help!"});
+  const Args args(argc, argv,
+                  {"--scene", "--cameras", "--view", "--all!", "--fps", "--trace", "--width", "--height", "--pipeline",
+                   "--renderer", "--background", "--out", "--out-dir", "--every", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage;
     return 0;
@@ -42,8 +42,8 @@ int run(int argc, char** argv) {
   }
   std::string why;
   auto renderer = catgs::make_renderer(args.get("--renderer", "cpu"), model, options, &why);
-  std::cerr << "scene " << model->name << ": " << model->size() << " Gaussians, SH degree "
-            << model->sh_degree << "; " << why << "\n";
+  std::cerr << "scene " << model->name << ": " << model->size() << " Gaussians, SH degree " << model->sh_degree << "; "
+            << why << "\n";
   const int width = args.get_int("--width", 0), height = args.get_int("--height", 0);
 
   catgs::Trace trace;
@@ -58,8 +58,7 @@ int run(int argc, char** argv) {
     } else {
       const int k = args.get_int("--view", 0);
       if (k < 0 || k >= static_cast<int>(cams.size()))
-        throw std::invalid_argument("--view " + std::to_string(k) + " outside 0.." +
-                                    std::to_string(cams.size() - 1));
+        throw std::invalid_argument("--view " + std::to_string(k) + " outside 0.." + std::to_string(cams.size() - 1));
       trace.push_back({0.0, cams[static_cast<std::size_t>(k)]});
     }
   }
@@ -69,8 +68,8 @@ int run(int argc, char** argv) {
     renderer->render(trace.front().camera, image);
     catgs::write_png(image, args.get("--out"));
     const auto& s = renderer->last_stats();
-    std::cerr << "wrote " << args.get("--out") << " (" << image.width << "x" << image.height
-              << ", " << s.total_ms << " ms, render list " << s.render_list_length << ")\n";
+    std::cerr << "wrote " << args.get("--out") << " (" << image.width << "x" << image.height << ", " << s.total_ms
+              << " ms, render list " << s.render_list_length << ")\n";
     return 0;
   }
   const std::string dir = args.require("--out-dir");

@@ -48,9 +48,7 @@ glm::vec3 parse_vec3(const std::string& s) {
   return v;
 }
 
-void print_vec(const char* what, glm::vec3 v) {
-  std::printf("%-16s (%.4g, %.4g, %.4g)\n", what, v.x, v.y, v.z);
-}
+void print_vec(const char* what, glm::vec3 v) { std::printf("%-16s (%.4g, %.4g, %.4g)\n", what, v.x, v.y, v.z); }
 
 int info(const catgs::tools::Args& args) {
   const auto m = catgs::load_scene(args.require("--scene"));
@@ -108,8 +106,8 @@ int compact(const catgs::tools::Args& args) {
     sum += p;
     std::printf("view %d: PSNR(compact vs original) = %.2f dB\n", v, p);
   }
-  std::printf("mean PSNR(compact vs original) = %.2f dB over %d views at %dx%d\n", sum / views, views,
-              g.width, g.height);
+  std::printf("mean PSNR(compact vs original) = %.2f dB over %d views at %dx%d\n", sum / views, views, g.width,
+              g.height);
   return 0;
 }
 
@@ -124,18 +122,16 @@ int tile(const catgs::tools::Args& args) {
   p.rotate_sh = !args.has("--no-sh-rotation");
   catgs::CityLayout layout;
   const auto city = catgs::tile_scene(base, p, &layout);
-  std::printf("city %s: %zu copies x %zu = %zu Gaussians; extent %.4g, spacing %.4g\n",
-              city.name.c_str(), layout.cells.size(), layout.gaussians_per_copy, city.size(),
-              layout.extent, layout.spacing);
+  std::printf("city %s: %zu copies x %zu = %zu Gaussians; extent %.4g, spacing %.4g\n", city.name.c_str(),
+              layout.cells.size(), layout.gaussians_per_copy, city.size(), layout.extent, layout.spacing);
   print_vec("up", layout.up);
   print_vec("centre", layout.centre);
   for (std::size_t c = 0; c < layout.cells.size(); ++c)
-    std::printf("  copy %2zu cell (%+d, %+d) yaw %6.1f deg\n", c, layout.cells[c].x,
-                layout.cells[c].y, layout.yaw_deg[c]);
+    std::printf("  copy %2zu cell (%+d, %+d) yaw %6.1f deg\n", c, layout.cells[c].x, layout.cells[c].y,
+                layout.yaw_deg[c]);
   if (args.has("--out")) catgs::write_inria_ply(city, args.get("--out"));
   if (args.has("--out-compressed"))
-    catgs::write_compressed_ply(catgs::permuted(city, catgs::morton_order(city)),
-                                args.get("--out-compressed"));
+    catgs::write_compressed_ply(catgs::permuted(city, catgs::morton_order(city)), args.get("--out-compressed"));
   if (args.has("--flyover-out")) {
     catgs::GeneratorParams g;
     g.width = args.get_int("--width", 1920);
@@ -148,8 +144,7 @@ int tile(const catgs::tools::Args& args) {
     f.pitch_deg = static_cast<float>(args.get_double("--pitch", f.pitch_deg));
     const auto trace = catgs::make_city_flyover(layout, f, g);
     catgs::write_trace(trace, args.get("--flyover-out"));
-    std::printf("wrote %s: %zu cameras at %.0f Hz\n", args.get("--flyover-out").c_str(),
-                trace.size(), g.rate_hz);
+    std::printf("wrote %s: %zu cameras at %.0f Hz\n", args.get("--flyover-out").c_str(), trace.size(), g.rate_hz);
   }
   return 0;
 }
@@ -160,10 +155,8 @@ int trace(const catgs::tools::Args& args) {
   if (scale != 1.0f) catgs::scale_scene(scene, scale);
   const glm::vec3 up = args.has("--up") ? parse_vec3(args.get("--up")) : catgs::estimate_up(scene);
   const auto keys = catgs::load_inria_cameras(args.require("--cameras"));
-  auto t = catgs::fit_trace_to_scene(keys, scene, up,
-                                     static_cast<float>(args.get_double("--distance", 0.6)),
-                                     args.get_double("--rate", 120.0),
-                                     args.get_double("--seconds-per-view", 0.5),
+  auto t = catgs::fit_trace_to_scene(keys, scene, up, static_cast<float>(args.get_double("--distance", 0.6)),
+                                     args.get_double("--rate", 120.0), args.get_double("--seconds-per-view", 0.5),
                                      args.get_int("--width", 1920), args.get_int("--height", 1080));
   const int frames = args.get_int("--frames", 0);
   if (frames > 0 && static_cast<std::size_t>(frames) < t.size()) t.resize(static_cast<std::size_t>(frames));
@@ -178,12 +171,12 @@ int run(int argc, char** argv) {
     return argc < 2 ? 1 : 0;
   }
   const std::string cmd = argv[1];
-  const catgs::tools::Args args(argc - 1, argv + 1,
-                                {"--scene", "--out", "--out-compressed", "--no-write!", "--check-views",
-                                 "--width", "--height", "--radius-sq", "--spacing", "--scale",
-                                 "--seed", "--up", "--no-sh-rotation!", "--flyover-out", "--frames",
-                                 "--rate", "--fov", "--altitude", "--pitch", "--cameras",
-                                 "--seconds-per-view", "--distance", "--png-prefix"});
+  const catgs::tools::Args args(
+      argc - 1, argv + 1,
+      {"--scene",           "--out",         "--out-compressed",   "--no-write!", "--check-views", "--width",
+       "--height",          "--radius-sq",   "--spacing",          "--scale",     "--seed",        "--up",
+       "--no-sh-rotation!", "--flyover-out", "--frames",           "--rate",      "--fov",         "--altitude",
+       "--pitch",           "--cameras",     "--seconds-per-view", "--distance",  "--png-prefix"});
   if (cmd == "info") return info(args);
   if (cmd == "compact") return compact(args);
   if (cmd == "tile") return tile(args);

@@ -16,11 +16,11 @@ float Camera::vertical_fov_deg() const {
   return glm::degrees(2.0f * std::atan(static_cast<float>(height) / (2.0f * fy)));
 }
 
-Camera Camera::from_pose(const glm::vec3& position, const glm::quat& camera_to_world,
-                         float vertical_fov_deg, int width, int height) {
+Camera Camera::from_pose(const glm::vec3& position, const glm::quat& camera_to_world, float vertical_fov_deg, int width,
+                         int height) {
   if (!std::isfinite(position.x) || !std::isfinite(position.y) || !std::isfinite(position.z) ||
-      !std::isfinite(camera_to_world.w) || !std::isfinite(camera_to_world.x) ||
-      !std::isfinite(camera_to_world.y) || !std::isfinite(camera_to_world.z))
+      !std::isfinite(camera_to_world.w) || !std::isfinite(camera_to_world.x) || !std::isfinite(camera_to_world.y) ||
+      !std::isfinite(camera_to_world.z))
     throw std::invalid_argument("camera pose has non-finite values");
   const float len = glm::length(camera_to_world);
   if (!(len > 1e-6f)) throw std::invalid_argument("camera orientation is a zero quaternion");
@@ -57,15 +57,14 @@ Camera Camera::rescaled(int new_width, int new_height) const {
 void validate_camera(const Camera& c) {
   auto bad = [](const std::string& what) { throw std::invalid_argument("camera: " + what); };
   if (c.width < 1 || c.height < 1 || c.width > kMaxImageSide || c.height > kMaxImageSide)
-    bad("size " + std::to_string(c.width) + "x" + std::to_string(c.height) +
-        " outside [1, " + std::to_string(kMaxImageSide) + "]");
+    bad("size " + std::to_string(c.width) + "x" + std::to_string(c.height) + " outside [1, " +
+        std::to_string(kMaxImageSide) + "]");
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j)
       if (!std::isfinite(c.R[i][j])) bad("non-finite rotation");
-  if (!std::isfinite(c.t.x) || !std::isfinite(c.t.y) || !std::isfinite(c.t.z))
-    bad("non-finite translation");
-  if (!(c.fx > 0.0f) || !(c.fy > 0.0f) || !std::isfinite(c.fx) || !std::isfinite(c.fy) ||
-      !std::isfinite(c.cx) || !std::isfinite(c.cy))
+  if (!std::isfinite(c.t.x) || !std::isfinite(c.t.y) || !std::isfinite(c.t.z)) bad("non-finite translation");
+  if (!(c.fx > 0.0f) || !(c.fy > 0.0f) || !std::isfinite(c.fx) || !std::isfinite(c.fy) || !std::isfinite(c.cx) ||
+      !std::isfinite(c.cy))
     bad("bad intrinsics");
   if (!(c.near_plane > 0.0f) || !(c.far_plane > c.near_plane)) bad("bad near/far planes");
 }

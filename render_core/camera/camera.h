@@ -7,18 +7,18 @@
 
 namespace catgs {
 
-inline constexpr float kDefaultNear = 0.2f;   // reference 3DGS near plane
+inline constexpr float kDefaultNear = 0.2f;  // reference 3DGS near plane
 inline constexpr float kDefaultFar = 1000.0f;
-inline constexpr int kMaxImageSide = 8192;   // the largest image side a renderer draws, pixels
+inline constexpr int kMaxImageSide = 8192;  // the largest image side a renderer draws, pixels
 
 // A camera. World-to-camera: x_cam = R * x_world + t. Intrinsics in pixels of the output image;
 // (cx, cy) is in continuous image coordinates where pixel (i, j) covers [i, i+1) x [j, j+1)
 // (so the image centre is (width / 2, height / 2)).
 struct Camera {
-  glm::mat3 R{1.0f};  // world-to-camera rotation
-  glm::vec3 t{0.0f};  // world-to-camera translation
-  float fx = 1.0f, fy = 1.0f, cx = 0.0f, cy = 0.0f;  // pixels
-  int width = 0, height = 0;                           // pixels
+  glm::mat3 R{1.0f};                                         // world-to-camera rotation
+  glm::vec3 t{0.0f};                                         // world-to-camera translation
+  float fx = 1.0f, fy = 1.0f, cx = 0.0f, cy = 0.0f;          // pixels
+  int width = 0, height = 0;                                 // pixels
   float near_plane = kDefaultNear, far_plane = kDefaultFar;  // camera-space z, world units
 
   // Camera centre in world coordinates (-R^T t).
@@ -31,8 +31,8 @@ struct Camera {
   // Builds a camera from its centre (world), camera-to-world rotation, full vertical field of view
   // in degrees and image size; square pixels, principal point at the image centre.
   // Throws std::invalid_argument for non-finite input, fov outside (0, 180) or a size < 1.
-  static Camera from_pose(const glm::vec3& position, const glm::quat& camera_to_world,
-                          float vertical_fov_deg, int width, int height);
+  static Camera from_pose(const glm::vec3& position, const glm::quat& camera_to_world, float vertical_fov_deg,
+                          int width, int height);
 
   // The same view for another image size: scales fx, cx by width ratio and fy, cy by height ratio.
   Camera rescaled(int new_width, int new_height) const;

@@ -20,8 +20,7 @@ std::vector<Camera> load_inria_cameras(const std::string& path, int width, int h
   } catch (const std::exception& e) {
     throw std::runtime_error(path + ": malformed JSON: " + e.what());
   }
-  if (!doc.is_array() || doc.empty())
-    throw std::runtime_error(path + ": expected a non-empty JSON list of cameras");
+  if (!doc.is_array() || doc.empty()) throw std::runtime_error(path + ": expected a non-empty JSON list of cameras");
   std::vector<Camera> cams;
   for (std::size_t k = 0; k < doc.size(); ++k) {
     const auto& j = doc[k];
@@ -37,8 +36,7 @@ std::vector<Camera> load_inria_cameras(const std::string& path, int width, int h
         pos[r] = j.at("position").at(r).get<float>();
         for (int col = 0; col < 3; ++col) c2w[col][r] = j.at("rotation").at(r).at(col).get<float>();
       }
-      if (c.width < 1 || c.height < 1 || !(c.fx > 0) || !(c.fy > 0) || !std::isfinite(c.fx) ||
-          !std::isfinite(c.fy))
+      if (c.width < 1 || c.height < 1 || !(c.fx > 0) || !(c.fy > 0) || !std::isfinite(c.fx) || !std::isfinite(c.fy))
         throw std::runtime_error("bad size or focal length");
       for (int r = 0; r < 3; ++r) {
         if (!std::isfinite(pos[r])) throw std::runtime_error("non-finite position");
@@ -151,8 +149,7 @@ Trace interpolate_views(const std::vector<Camera>& keys, double rate_hz, double 
   return trace;
 }
 
-Trace make_orbit(const Bounds& bounds, float radius, float height_offset, float degrees,
-                 const GeneratorParams& p) {
+Trace make_orbit(const Bounds& bounds, float radius, float height_offset, float degrees, const GeneratorParams& p) {
   glm::vec3 a, b;
   plane_basis(p.up, &a, &b);
   const glm::vec3 c = bounds.center(), up = glm::normalize(p.up);
@@ -163,8 +160,7 @@ Trace make_orbit(const Bounds& bounds, float radius, float height_offset, float 
   });
 }
 
-Trace make_pan(const glm::vec3& eye, const glm::vec3& look_at, float degrees,
-               const GeneratorParams& p) {
+Trace make_pan(const glm::vec3& eye, const glm::vec3& look_at, float degrees, const GeneratorParams& p) {
   const glm::vec3 up = glm::normalize(p.up);
   const glm::quat start = look_rotation(eye, look_at, up);
   return generate(p, [&](float s) {
@@ -172,8 +168,7 @@ Trace make_pan(const glm::vec3& eye, const glm::vec3& look_at, float degrees,
   });
 }
 
-Trace make_zoom(const Bounds& bounds, const glm::vec3& direction, float from, float to,
-                const GeneratorParams& p) {
+Trace make_zoom(const Bounds& bounds, const glm::vec3& direction, float from, float to, const GeneratorParams& p) {
   const glm::vec3 c = bounds.center(), d = glm::normalize(direction);
   return generate(p, [&](float s) {
     const glm::vec3 eye = c + (from + (to - from) * s) * d;
@@ -181,8 +176,7 @@ Trace make_zoom(const Bounds& bounds, const glm::vec3& direction, float from, fl
   });
 }
 
-Trace make_flyover(const glm::vec3& start, const glm::vec3& end, float pitch_deg,
-                   const GeneratorParams& p) {
+Trace make_flyover(const glm::vec3& start, const glm::vec3& end, float pitch_deg, const GeneratorParams& p) {
   const glm::vec3 up = glm::normalize(p.up);
   glm::vec3 fwd = end - start;
   fwd -= glm::dot(fwd, up) * up;
@@ -205,8 +199,8 @@ void write_trace(const Trace& trace, const std::string& path) {
     const glm::vec3 p = tc.camera.position();
     const glm::quat q = tc.camera.orientation();
     const Camera& c = tc.camera;
-    std::snprintf(line, sizeof line, "%.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %d %d\n",
-                  tc.time_s, p.x, p.y, p.z, q.w, q.x, q.y, q.z, c.fx, c.fy, c.cx, c.cy, c.width, c.height);
+    std::snprintf(line, sizeof line, "%.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %d %d\n", tc.time_s,
+                  p.x, p.y, p.z, q.w, q.x, q.y, q.z, c.fx, c.fy, c.cx, c.cy, c.width, c.height);
     out << line;
   }
   if (!out) throw std::runtime_error(path + ": write failed");
@@ -245,15 +239,19 @@ Trace read_trace(const std::string& path) {
     std::string extra;
     if (!ls || (ls >> extra)) fail("expected 14 fields");
     Camera c;
-    c.fx = v[7]; c.fy = v[8]; c.cx = v[9]; c.cy = v[10];
+    c.fx = v[7];
+    c.fy = v[8];
+    c.cx = v[9];
+    c.cy = v[10];
     c.width = w;
     c.height = h;
     if (!std::isfinite(t) || w < 1 || h < 1 || !(c.fx > 0) || !(c.fy > 0)) fail("bad time, size or intrinsics");
     if (!trace.empty() && t < trace.back().time_s) fail("time goes backwards");
     try {
-      trace.push_back({t, camera_at({v[0], v[1], v[2]},
-                                    Camera::from_pose({v[0], v[1], v[2]}, {v[3], v[4], v[5], v[6]},
-                                                      60.0f, w, h).orientation(), c)});
+      trace.push_back(
+          {t,
+           camera_at({v[0], v[1], v[2]},
+                     Camera::from_pose({v[0], v[1], v[2]}, {v[3], v[4], v[5], v[6]}, 60.0f, w, h).orientation(), c)});
     } catch (const std::invalid_argument& e) {
       fail(e.what());
     }

@@ -41,17 +41,13 @@ struct GeneratorParams {
   glm::vec3 up{0.0f, -1.0f, 0.0f};  // world up (3DGS captures are commonly y-down)
 };
 // Orbit: circle of radius `radius` around the centre at `height_offset` along up, `degrees` swept.
-Trace make_orbit(const Bounds& bounds, float radius, float height_offset, float degrees,
-                 const GeneratorParams& params);
+Trace make_orbit(const Bounds& bounds, float radius, float height_offset, float degrees, const GeneratorParams& params);
 // Pan: camera at `eye` turns its yaw by `degrees` about up.
-Trace make_pan(const glm::vec3& eye, const glm::vec3& look_at, float degrees,
-               const GeneratorParams& params);
+Trace make_pan(const glm::vec3& eye, const glm::vec3& look_at, float degrees, const GeneratorParams& params);
 // Zoom: camera moves from distance `from` to `to` along the line to the centre.
-Trace make_zoom(const Bounds& bounds, const glm::vec3& direction, float from, float to,
-                const GeneratorParams& params);
+Trace make_zoom(const Bounds& bounds, const glm::vec3& direction, float from, float to, const GeneratorParams& params);
 // Fly-over: straight line from `start` to `end` at constant height, pitched down `pitch_deg`.
-Trace make_flyover(const glm::vec3& start, const glm::vec3& end, float pitch_deg,
-                   const GeneratorParams& params);
+Trace make_flyover(const glm::vec3& start, const glm::vec3& end, float pitch_deg, const GeneratorParams& params);
 
 // Our trace file (text, one camera per line; '#' starts a comment):
 //   catgs-trace 1

@@ -14,9 +14,7 @@ namespace {
 constexpr double kKr = 0.2126, kKb = 0.0722, kKg = 1.0 - kKr - kKb;
 constexpr double kCbScale = 2.0 * (1.0 - kKb), kCrScale = 2.0 * (1.0 - kKr);
 
-std::uint8_t to_byte(double x) {
-  return static_cast<std::uint8_t>(std::clamp(std::lround(x), 0L, 255L));
-}
+std::uint8_t to_byte(double x) { return static_cast<std::uint8_t>(std::clamp(std::lround(x), 0L, 255L)); }
 
 std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
@@ -40,12 +38,11 @@ void check_yuv420_target(const char* who, const Yuv420Target& t, int width, int 
     throw std::invalid_argument(w + ": target is " + size_text(t.width, t.height) + ", picture is " +
                                 size_text(width, height));
   if (!t.y || !t.u || !t.v || t.y_stride < width || t.u_stride < width / 2 || t.v_stride < width / 2)
-    throw std::invalid_argument(w + ": target needs three planes with strides >= " +
-                                std::to_string(width) + ", " + std::to_string(width / 2));
+    throw std::invalid_argument(w + ": target needs three planes with strides >= " + std::to_string(width) + ", " +
+                                std::to_string(width / 2));
 }
 
-void rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int stride_bytes,
-                          const Yuv420Target& out) {
+void rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int stride_bytes, const Yuv420Target& out) {
   check_yuv420_target("rgba_to_yuv420_bt709", out, width, height);
   if (out.memory != MemoryKind::host)
     throw std::invalid_argument("rgba_to_yuv420_bt709: the CPU conversion needs a host target");
@@ -73,8 +70,7 @@ void rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int s
   }
 }
 
-Yuv420Image rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height,
-                                 int stride_bytes) {
+Yuv420Image rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int stride_bytes) {
   if (width <= 0 || height <= 0 || width % 2 || height % 2)
     throw std::invalid_argument("rgba_to_yuv420_bt709: size must be even and positive, got " +
                                 size_text(width, height));

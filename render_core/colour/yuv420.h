@@ -46,9 +46,7 @@ struct Yuv420Target {
 struct Yuv420Image {
   int width = 0, height = 0;
   std::vector<std::uint8_t> y, u, v;
-  Yuv420Planes planes() const {
-    return {y.data(), width, u.data(), width / 2, v.data(), width / 2};
-  }
+  Yuv420Planes planes() const { return {y.data(), width, u.data(), width / 2, v.data(), width / 2}; }
   // Sizes the planes for width x height and returns them as a host target.
   Yuv420Target target(int w, int h);
 };
@@ -59,12 +57,10 @@ struct Yuv420Image {
 // and (R - Y) / 1.5748 on the 2x2 mean of R, G, B (ITU-R BT.709-6 table 3; R, G, B in [0, 1]),
 // in double precision, rounded to nearest (halves away from zero). Throws std::invalid_argument
 // for an odd or non-positive size, a device target or a target of another size.
-void rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int stride_bytes,
-                          const Yuv420Target& out);
+void rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int stride_bytes, const Yuv420Target& out);
 
 // The same into a new tightly packed image.
-Yuv420Image rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height,
-                                 int stride_bytes);
+Yuv420Image rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int stride_bytes);
 
 // Checks a target for a width x height picture: even positive size, matching target size,
 // non-null planes, strides >= width (Y) and width / 2 (U, V). Throws std::invalid_argument

@@ -19,8 +19,7 @@ __device__ uint8_t to_byte(double x) {
 }
 
 // One thread per 2x2 block: four Y samples and one Cb, Cr pair.
-__global__ void rgba8_to_yuv420_kernel(const uint32_t* __restrict__ rgba8, int width, int height,
-                                       Yuv420Pitched out) {
+__global__ void rgba8_to_yuv420_kernel(const uint32_t* __restrict__ rgba8, int width, int height, Yuv420Pitched out) {
   const int bx = blockIdx.x * blockDim.x + threadIdx.x;
   const int by = blockIdx.y * blockDim.y + threadIdx.y;
   const int c = 2 * bx, r = 2 * by;
@@ -30,8 +29,7 @@ __global__ void rgba8_to_yuv420_kernel(const uint32_t* __restrict__ rgba8, int w
     uint8_t* y_row = out.y + static_cast<size_t>(r + dr) * out.y_pitch;
     for (int dc = 0; dc < 2; ++dc) {
       const uint32_t p = rgba8[static_cast<size_t>(r + dr) * width + c + dc];
-      const double R = (p & 0xffu) / 255.0, G = ((p >> 8) & 0xffu) / 255.0,
-                   B = ((p >> 16) & 0xffu) / 255.0;
+      const double R = (p & 0xffu) / 255.0, G = ((p >> 8) & 0xffu) / 255.0, B = ((p >> 16) & 0xffu) / 255.0;
       y_row[c + dc] = to_byte(16.0 + 219.0 * (kKr * R + kKg * G + kKb * B));
       sum[0] += R;
       sum[1] += G;
@@ -46,8 +44,7 @@ __global__ void rgba8_to_yuv420_kernel(const uint32_t* __restrict__ rgba8, int w
 
 }  // namespace
 
-void rgba8_to_yuv420(const uint32_t* rgba8, int width, int height, const Yuv420Pitched& out,
-                     cudaStream_t stream) {
+void rgba8_to_yuv420(const uint32_t* rgba8, int width, int height, const Yuv420Pitched& out, cudaStream_t stream) {
   const dim3 block(32, 8);
   const dim3 grid((width / 2 + block.x - 1) / block.x, (height / 2 + block.y - 1) / block.y);
   rgba8_to_yuv420_kernel<<<grid, block, 0, stream>>>(rgba8, width, height, out);

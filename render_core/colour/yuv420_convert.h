@@ -22,7 +22,6 @@ struct Yuv420Pitched {
 // After stage 5 (yuv420_convert.cu; mirrors rgba_to_yuv420_bt709 of catgs/yuv420.h): the packed
 // RGBA8 image [height, width] -> BT.709 limited-range I420 (Y per pixel, Cb/Cr from each 2x2
 // mean). width and height must be even. One thread per 2x2 block.
-void rgba8_to_yuv420(const uint32_t* rgba8, int width, int height, const Yuv420Pitched& out,
-                     cudaStream_t stream);
+void rgba8_to_yuv420(const uint32_t* rgba8, int width, int height, const Yuv420Pitched& out, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -4,9 +4,8 @@
 
 namespace catgs::cpu {
 
-void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uint32_t begin,
-                uint32_t end, int tx, int ty, const TileGrid& grid, bool early_termination,
-                glm::vec3* C, float* T, bool* stopped) {
+void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uint32_t begin, uint32_t end, int tx,
+                int ty, const TileGrid& grid, bool early_termination, glm::vec3* C, float* T, bool* stopped) {
   const int x0 = tx * fm::kTileSize, y0 = ty * fm::kTileSize;
   const int x1 = std::min(x0 + fm::kTileSize, grid.width) - 1;
   const int y1 = std::min(y0 + fm::kTileSize, grid.height) - 1;

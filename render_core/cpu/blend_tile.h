@@ -15,8 +15,7 @@ inline constexpr int kTilePixels = fm::kTileSize * fm::kTileSize;
 // alpha < 1/255 and the reference would skip it too, so the image is bit-identical.
 // `stopped` (null, or [16 * 16] set to false by the caller): true where a pixel stopped by early
 // termination (rasterize_slices: its composition ends with this slice).
-void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uint32_t begin,
-                uint32_t end, int tx, int ty, const TileGrid& grid, bool early_termination,
-                glm::vec3* C, float* T, bool* stopped = nullptr);
+void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uint32_t begin, uint32_t end, int tx,
+                int ty, const TileGrid& grid, bool early_termination, glm::vec3* C, float* T, bool* stopped = nullptr);
 
 }  // namespace catgs::cpu

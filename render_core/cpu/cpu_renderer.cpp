@@ -15,8 +15,7 @@ void parallel_for(std::size_t n, std::size_t grain, const std::function<void(std
   if (n == 0) return;
   grain = std::max<std::size_t>(grain, 1);
   const std::size_t chunks = (n + grain - 1) / grain;
-  const std::size_t workers =
-      std::min<std::size_t>(chunks, std::max(1u, std::thread::hardware_concurrency()));
+  const std::size_t workers = std::min<std::size_t>(chunks, std::max(1u, std::thread::hardware_concurrency()));
   std::atomic<std::size_t> next{0};
   auto work = [&] {
     for (std::size_t c; (c = next.fetch_add(1)) < chunks;)
@@ -62,9 +61,8 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   const auto t5 = clock::now();
 
   stats_ = {};
-  stats_.visible = static_cast<std::size_t>(
-      std::count_if(projected_.tiles_touched.begin(), projected_.tiles_touched.end(),
-                    [](uint32_t n) { return n > 0; }));
+  stats_.visible = static_cast<std::size_t>(std::count_if(
+      projected_.tiles_touched.begin(), projected_.tiles_touched.end(), [](uint32_t n) { return n > 0; }));
   stats_.render_list_length = list_.keys.size();
   stats_.preprocess_ms = ms(t0, t1);
   stats_.keys_ms = ms(t1, t2);

@@ -19,11 +19,10 @@ namespace catgs::cpu {
 
 // The tile grid of an image: ceil(W / 16) x ceil(H / 16) tiles, row-major tile ids.
 struct TileGrid {
-  int width = 0, height = 0;      // pixels
-  int tiles_x = 0, tiles_y = 0;   // tiles
+  int width = 0, height = 0;     // pixels
+  int tiles_x = 0, tiles_y = 0;  // tiles
   static TileGrid of(int width, int height) {
-    return {width, height, (width + fm::kTileSize - 1) / fm::kTileSize,
-            (height + fm::kTileSize - 1) / fm::kTileSize};
+    return {width, height, (width + fm::kTileSize - 1) / fm::kTileSize, (height + fm::kTileSize - 1) / fm::kTileSize};
   }
   int tile_count() const { return tiles_x * tiles_y; }
 };
@@ -50,9 +49,9 @@ struct ProjectedGaussians {
 
 // The render list: (key, value) pairs, key = [tile | depth bits], value = Gaussian index.
 struct RenderList {
-  std::vector<uint64_t> keys;    // [L]
-  std::vector<uint32_t> values;  // [L]
-  std::vector<uint64_t> offsets; // [N] exclusive prefix sum of tiles_touched (emission offsets)
+  std::vector<uint64_t> keys;     // [L]
+  std::vector<uint32_t> values;   // [L]
+  std::vector<uint64_t> offsets;  // [N] exclusive prefix sum of tiles_touched (emission offsets)
 };
 
 // Tile ranges: [start, end) of each tile's entries in the sorted render list.
@@ -61,8 +60,7 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // Stage 1 (cpu/preprocess.cpp): frustum culling (z < near), 3D -> 2D covariance (EWA), conic,
 // SH colour, tile bounds and the number of tiles each Gaussian reaches: vanilla counts every tile of
 // its 3-sigma square; exact counts the tiles passing fm::ellipse_touches_tile (opacity-aware).
-void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline,
-                ProjectedGaussians& out);
+void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline, ProjectedGaussians& out);
 
 // catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
@@ -71,8 +69,8 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
 // and count the tiles their trail touches (fm::trail_touches_tile). Before any 2D covariance, a
 // Gaussian that lies beyond one same image edge at every camera of the path, by more than
 // fm::edges_beyond's bound widened as its trail would be, is culled (touches no tile).
-void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
-                            const TrailWidening& widening, ProjectedGaussians& out);
+void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path, const TrailWidening& widening,
+                            ProjectedGaussians& out);
 
 // catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
 // means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M).
@@ -84,8 +82,8 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
 // else the exact fm::listed_tiles_cover). Returns false when one does not: the frame must be
 // rendered as a key frame.
 // Also false when unlisted_reach_image().
-bool update_subframe_features(const GaussianModel& model, const Camera& camera,
-                              const std::vector<uint32_t>& cached, ProjectedGaussians& projected);
+bool update_subframe_features(const GaussianModel& model, const Camera& camera, const std::vector<uint32_t>& cached,
+                              ProjectedGaussians& projected);
 
 // catgs sub-frame (cpu/subframe_features.cpp): does a Gaussian the key frame did not list
 // (tiles_touched == 0) reach a pixel at `camera` (fm::unlisted_reaches_image)? Such a Gaussian is
@@ -96,8 +94,8 @@ bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, cons
 // Task splitting (cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
 // order, a tile's slices consecutive and in list order. split = false: one slice per tile.
 // min_slice: the slice length's floor (SpeculationParams::min_slice_entries; 0: the paper's l).
-void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
-                 std::vector<TileSlice>& slices, std::size_t min_slice = 0);
+void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split, std::vector<TileSlice>& slices,
+                 std::size_t min_slice = 0);
 
 // Stage 5 with slices (cpu/rasterize_slices.cpp): each slice blends its entries into a partial
 // colour C_k and transmittance T_k per pixel (early termination within the slice if enabled); the
@@ -107,17 +105,15 @@ void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
 // higher threshold for later slices). `slices`: [begin, end) runs of `list`, a tile's slices
 // consecutive and in list order (plan_slices); `out` becomes grid.width x grid.height (linear RGB
 // floats and RGBA8); `merge_ms`, if given, receives the merge's wall time in milliseconds.
-void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list,
-                      const std::vector<TileSlice>& slices, const TileGrid& grid,
-                      bool early_termination, glm::vec3 background, Image& out,
+void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
+                      const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out,
                       double* merge_ms = nullptr);
 
 // Stage 2 (cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
 // its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
 // the trail test, exact the ellipse test, vanilla every tile of the rectangle.
 // Throws std::length_error past 2^32 - 1 entries (values and ranges are 32-bit).
-void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
-               RenderList& list);
+void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline, RenderList& list);
 
 // Stage 3 (cpu/sort.cpp): sorts the list by key; equal keys keep emission order (a stable
 // radix sort on the GPU).
@@ -131,8 +127,8 @@ void identify_tile_ranges(const RenderList& list, const TileGrid& grid, TileRang
 // (paper eq. 3): alpha = min(0.99, opacity * exp(power)), skipped below 1/255, a pixel stops
 // before the Gaussian that would take T below 1e-4; C + T * background. Fills out.rgb and
 // out.rgba8 at grid size.
-void rasterize(const ProjectedGaussians& projected, const RenderList& list,
-               const TileRanges& ranges, const TileGrid& grid, glm::vec3 background, Image& out);
+void rasterize(const ProjectedGaussians& projected, const RenderList& list, const TileRanges& ranges,
+               const TileGrid& grid, glm::vec3 background, Image& out);
 
 // Runs fn(i) for i in [0, n) on all hardware threads, dynamically scheduled in chunks of `grain`.
 void parallel_for(std::size_t n, std::size_t grain, const std::function<void(std::size_t)>& fn);

@@ -8,8 +8,7 @@
 
 namespace catgs::cpu {
 
-void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
-               RenderList& list) {
+void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline, RenderList& list) {
   const std::size_t n = projected.tiles_touched.size();
   list.offsets.resize(n);
   uint64_t total = 0;
@@ -28,15 +27,14 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
     if (projected.tiles_touched[i] == 0) return;
     const fm::TileRect r = projected.tile_rect[i];
     const fm::TrailTileTest trail_test =
-        trail ? fm::make_trail_tile_test(projected.trail_mean0[i], projected.trail_motion[i],
-                                         projected.trail_conic[i], projected.q_trail[i])
+        trail ? fm::make_trail_tile_test(projected.trail_mean0[i], projected.trail_motion[i], projected.trail_conic[i],
+                                         projected.q_trail[i])
               : fm::TrailTileTest{};
     uint64_t at = list.offsets[i];
     for (int ty = r.y0; ty < r.y1; ++ty) {
       for (int tx = r.x0; tx < r.x1; ++tx) {
-        if (exact && !fm::ellipse_touches_tile(projected.mean2d[i], projected.conic[i],
-                                               projected.q_max[i], tx, ty, grid.width,
-                                               grid.height))
+        if (exact && !fm::ellipse_touches_tile(projected.mean2d[i], projected.conic[i], projected.q_max[i], tx, ty,
+                                               grid.width, grid.height))
           continue;
         if (trail && !fm::trail_touches_tile(trail_test, tx, ty, grid.width, grid.height)) continue;
         const auto tile = static_cast<uint32_t>(ty * grid.tiles_x + tx);

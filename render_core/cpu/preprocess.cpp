@@ -24,8 +24,8 @@ void ProjectedGaussians::resize(std::size_t n) {
 namespace {
 
 // Counts the tiles of `rect` that the opacity-aware ellipse reaches (exact pipeline).
-uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max,
-                           int width, int height) {
+uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max, int width,
+                           int height) {
   uint32_t n = 0;
   for (int ty = rect.y0; ty < rect.y1; ++ty)
     for (int tx = rect.x0; tx < rect.x1; ++tx)
@@ -35,8 +35,7 @@ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 c
 
 }  // namespace
 
-void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline,
-                ProjectedGaussians& out) {
+void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline, ProjectedGaussians& out) {
   const std::size_t n = model.size();
   out.resize(n);
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
@@ -60,10 +59,8 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
 
     const fm::Cov3 cov3 = fm::covariance_3d(
         {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
-        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2],
-         model.rotations[4 * i + 3]});
-    const glm::vec3 cov2 =
-        fm::covariance_2d(cov3, camera.R, p_cam, camera.fx, camera.fy, tan_half_fov);
+        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
+    const glm::vec3 cov2 = fm::covariance_2d(cov3, camera.R, p_cam, camera.fx, camera.fy, tan_half_fov);
     glm::vec3 conic;
     if (!fm::conic_from_cov2d(cov2, &conic)) return;
 
@@ -73,9 +70,8 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
     uint32_t touched;
     if (exact) {
       rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height);
-      touched = fm::tile_count(rect) == 0
-                    ? 0u
-                    : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height);
+      touched =
+          fm::tile_count(rect) == 0 ? 0u : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height);
     } else {
       const float radius = fm::three_sigma_radius(cov2);
       rect = fm::square_tile_rect(mean2d, radius, grid.tiles_x, grid.tiles_y);

@@ -6,8 +6,8 @@
 
 namespace catgs::cpu {
 
-void rasterize(const ProjectedGaussians& projected, const RenderList& list,
-               const TileRanges& ranges, const TileGrid& grid, glm::vec3 background, Image& out) {
+void rasterize(const ProjectedGaussians& projected, const RenderList& list, const TileRanges& ranges,
+               const TileGrid& grid, glm::vec3 background, Image& out) {
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;

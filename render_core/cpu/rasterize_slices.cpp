@@ -13,9 +13,9 @@
 
 namespace catgs::cpu {
 
-void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list,
-                      const std::vector<TileSlice>& slices, const TileGrid& grid,
-                      bool early_termination, glm::vec3 background, Image& out, double* merge_ms) {
+void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
+                      const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out,
+                      double* merge_ms) {
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
@@ -70,8 +70,7 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
       }
     }
   });
-  if (merge_ms)
-    *merge_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  if (merge_ms) *merge_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 }  // namespace catgs::cpu

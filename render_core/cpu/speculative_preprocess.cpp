@@ -70,8 +70,8 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
   return m;
 }
 
-void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path,
-                            const TrailWidening& widening, ProjectedGaussians& out) {
+void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path, const TrailWidening& widening,
+                            ProjectedGaussians& out) {
   if (path.empty() || path.size() > static_cast<std::size_t>(kMaxPathCameras))
     throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPathCameras) + " cameras");
   const std::size_t n = model.size();
@@ -79,8 +79,7 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
   const Camera& key = path.front();
   const int K = model.sh_coeffs();
   std::vector<CameraTerms> terms(path.size());
-  for (std::size_t k = 0; k < path.size(); ++k)
-    terms[k] = {fm::view_of(path[k]), path[k].position()};
+  for (std::size_t k = 0; k < path.size(); ++k) terms[k] = {fm::view_of(path[k]), path[k].position()};
 
   parallel_for(n, 4096, [&](std::size_t i) {
     out.tiles_touched[i] = 0;
@@ -91,8 +90,7 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
     if (path_misses_image(model, i, mean, q_max, path, terms, widening)) return;
     const fm::Cov3 cov3 = fm::covariance_3d(
         {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
-        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2],
-         model.rotations[4 * i + 3]});
+        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
     glm::vec2 means[kMaxPathCameras];
     glm::vec3 covs[kMaxPathCameras];
     int visible = 0;
@@ -120,9 +118,10 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
         fm::build_trail(means, covs, visible, q_max, widening.slack, widening.margin_px, widening.motion_margin);
     glm::vec3 conic, trail_conic;
     if (!fm::conic_from_cov2d(covs[0], &conic) || !fm::conic_from_cov2d(trail.cov, &trail_conic)) return;
-    const fm::TileRect rect = fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail,
-                                                  key.width, key.height);
-    const fm::TrailTileTest trail_test = fm::make_trail_tile_test(trail.mean0, trail.motion, trail_conic, trail.q_trail);
+    const fm::TileRect rect =
+        fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail, key.width, key.height);
+    const fm::TrailTileTest trail_test =
+        fm::make_trail_tile_test(trail.mean0, trail.motion, trail_conic, trail.q_trail);
     uint32_t touched = 0;
     for (int ty = rect.y0; ty < rect.y1; ++ty)
       for (int tx = rect.x0; tx < rect.x1; ++tx)

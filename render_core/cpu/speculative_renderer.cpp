@@ -17,8 +17,7 @@ double ms_between(clock::time_point a, clock::time_point b) {
 
 }  // namespace
 
-SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model,
-                                         const RenderOptions& options)
+SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options)
     : model_(std::move(model)) {
   if (!model_) throw std::invalid_argument("SpeculativeRenderer: null model");
   set_options(options);
@@ -31,18 +30,16 @@ void SpeculativeRenderer::set_options(const RenderOptions& options) {
   options_ = options;
 }
 
-void SpeculativeRenderer::render(const Camera& camera, Image& out) {
-  render_at(camera, planner_.advance_clock(), out);
-}
+void SpeculativeRenderer::render(const Camera& camera, Image& out) { render_at(camera, planner_.advance_clock(), out); }
 
 void SpeculativeRenderer::key_frame(const Camera& camera) {
   const SpeculationParams& sp = options_.speculation;
   const auto t0 = clock::now();
   // Plan the window from the predicted path (never from future input): M over one frame, W.
-  const int window = planner_.window_wanted()
-                         ? planner_.window_for(max_screen_motion(*model_, camera, planner_.next_camera(camera),
-                                                                 sp.depth_threshold))
-                         : 0;
+  const int window =
+      planner_.window_wanted()
+          ? planner_.window_for(max_screen_motion(*model_, camera, planner_.next_camera(camera), sp.depth_threshold))
+          : 0;
   // Without a window the frame is rendered in full by the exact pipeline's stages (its list is
   // the one-pose trail's, built without the trail machinery); it opens no group.
   const Pipeline stages = window > 0 ? Pipeline::catgs : Pipeline::exact;
@@ -57,8 +54,7 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   sort_render_list(list_);
   const auto t3 = clock::now();
   identify_tile_ranges(list_, grid, ranges_);
-  plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_,
-              static_cast<std::size_t>(sp.min_slice_entries));
+  plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_, static_cast<std::size_t>(sp.min_slice_entries));
   const auto t4 = clock::now();
   cached_.clear();
   for (std::size_t i = 0; i < projected_.tiles_touched.size(); ++i)

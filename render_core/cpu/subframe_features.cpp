@@ -9,8 +9,8 @@
 
 namespace catgs::cpu {
 
-bool update_subframe_features(const GaussianModel& model, const Camera& camera,
-                              const std::vector<uint32_t>& cached, ProjectedGaussians& out) {
+bool update_subframe_features(const GaussianModel& model, const Camera& camera, const std::vector<uint32_t>& cached,
+                              ProjectedGaussians& out) {
   const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
                                static_cast<float>(camera.height) / (2.0f * camera.fy));
   const glm::vec3 cam_pos = camera.position();
@@ -24,16 +24,15 @@ bool update_subframe_features(const GaussianModel& model, const Camera& camera,
     if (!(p.z > camera.near_plane) || p.z > camera.far_plane) return;
     const fm::Cov3 cov3 = fm::covariance_3d(
         {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
-        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2],
-         model.rotations[4 * i + 3]});
+        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
     const glm::vec3 cov2 = fm::covariance_2d(cov3, camera.R, p, camera.fx, camera.fy, tan_half_fov);
     glm::vec3 conic;
     if (!fm::conic_from_cov2d(cov2, &conic)) return;
     const glm::vec2 mean2d(camera.fx * p.x / p.z + camera.cx - 0.5f, camera.fy * p.y / p.z + camera.cy - 0.5f);
     // Reaching no pixel centre even at q_max + kExactQMargin (the widest level any raster test
     // uses): culled, no colour (as the CUDA kernel, which is bound by its reads).
-    if (fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, out.q_max[i] + fm::kExactQMargin, camera.width,
-                                             camera.height)) == 0)
+    if (fm::tile_count(
+            fm::ellipse_tile_rect(mean2d, cov2, out.q_max[i] + fm::kExactQMargin, camera.width, camera.height)) == 0)
       return;
     // Only an ellipse that reaches a pixel of this frame must lie inside its trail.
     const bool on_screen =

@@ -4,8 +4,8 @@
 
 namespace catgs::cpu {
 
-void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split,
-                 std::vector<TileSlice>& slices, std::size_t min_slice) {
+void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split, std::vector<TileSlice>& slices,
+                 std::size_t min_slice) {
   slices.clear();
   const std::size_t tiles = ranges.size();
   // Slice length l = L / t (at least 1, at least min_slice); a tile over 2l entries is a heavy tile.

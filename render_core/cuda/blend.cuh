@@ -117,10 +117,9 @@ __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j,
 // the block must call this (barriers inside).
 template <typename Skip>
 __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
-                                            const uint32_t* values,         // [L]
-                                            const Projected& g, int rank, float fpx, float fpy,
-                                            bool early_termination, BlendBatch& batch, PixelState& px,
-                                            Skip skip) {
+                                            const uint32_t* values,  // [L]
+                                            const Projected& g, int rank, float fpx, float fpy, bool early_termination,
+                                            BlendBatch& batch, PixelState& px, Skip skip) {
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
     skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
@@ -144,8 +143,8 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 // margins for rounding) whether it reaches tile (tx, ty), and only the entries that do are
 // compacted into shared memory, in list (depth) order. A dropped entry would have been skipped
 // by every pixel of the tile (alpha < 1/255 there), so the image is the same bit for bit; what
-// is saved is 256 pixels' worth of blending per dropped entry (a trail list holds 1.7-3.4x the
-// exact list on the city's real paths, RESULTS.md). Culled sub-frame Gaussians (opacity 0) are
+// is saved is 256 pixels' worth of blending per dropped entry (a trail list holds several times
+// the exact list on the city's real paths: RESULTS.md, "Where the tuned defaults come from"). Culled sub-frame Gaussians (opacity 0) are
 // dropped too.
 // - The test reads only the entry's splat (one random 32-byte sector, stages.h Splat); the
 //   colour, a second sector, is gathered for the kept entries only.
@@ -154,9 +153,9 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 template <typename Skip>
 __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
                                                    const uint32_t* values,  // [L]
-                                                   const Projected& g, int rank, int tx, int ty, int width,
-                                                   int height, float fpx, float fpy, bool early_termination,
-                                                   BlendBatch& batch, PixelState& px, Skip skip) {
+                                                   const Projected& g, int rank, int tx, int ty, int width, int height,
+                                                   float fpx, float fpy, bool early_termination, BlendBatch& batch,
+                                                   PixelState& px, Skip skip) {
   constexpr int kWarps = tune::kRasterThreads / 32;
   __shared__ uint32_t warp_kept[kWarps];
   const int lane = rank & 31, warp = rank >> 5;

@@ -75,8 +75,7 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
 }
 
 uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::CameraParams& cam,
-                                                const stages::TileTests& tests, bool depth_first,
-                                                uint64_t* visible) {
+                                                const stages::TileTests& tests, bool depth_first, uint64_t* visible) {
   const stages::Projected proj = projected();
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
@@ -84,8 +83,8 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
                              count + kVisibleCount, count + kReadListLength, stream);
   // The host-device sync of a frame: CUB's radix sort takes the list length from the host, and
   // the list buffers may need to grow before emission writes into them.
-  CATGS_CUDA(cudaMemcpyAsync(host_counts, count + kReadListLength, 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost,
-                             stream));
+  CATGS_CUDA(cudaMemcpyAsync(host_counts, count + kReadListLength, 2 * sizeof(unsigned long long),
+                             cudaMemcpyDeviceToHost, stream));
   CATGS_CUDA(cudaEventRecord(counts_ready, stream));
   CATGS_CUDA(cudaEventSynchronize(counts_ready));
   ++syncs;
@@ -138,7 +137,8 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), nullptr, k[0], v[0], by_depth, *visible,
                     stream);
   CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
-  const int half = stages::sort_pairs_by_tile(k, v, entries, tile_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
+  const int half =
+      stages::sort_pairs_by_tile(k, v, entries, tile_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
   sorted_values = v[half];
   CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
   stages::tile_ranges(k[half], entries, tiles, ranges.as<uint2>(), stream);
@@ -176,13 +176,13 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   stages::preprocess(sv, cam, exact, proj, counters + kVisibleCount, big, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
-  const stages::TileTests tests{exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square,
-                                proj.splat, {}, cam.width, cam.height};
+  const stages::TileTests tests{
+      exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square, proj.splat, {}, cam.width, cam.height};
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
   // The heaviest tiles first (longest-processing-time-first scheduling of the raster blocks).
-  stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(),
-                      s.tile_order.as<uint32_t>(), s.order_temp.as<void>(), s.order_temp.bytes(), s.stream);
+  stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(), s.tile_order.as<uint32_t>(),
+                      s.order_temp.as<void>(), s.order_temp.bytes(), s.stream);
   s.heaviest = s.tile_scratch.as<uint32_t>() + tiles;  // order_tiles sorts the loads there
   s.heaviest_is_slice_key = false;
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
@@ -253,10 +253,9 @@ void CudaRenderer::download(const DeviceFrame& f, Image& out) {
   out.rgb.resize(pixels * 3);
   out.rgba8.resize(pixels * 4);
   // Packed R | G << 8 | B << 16 | A << 24 is bytes R, G, B, A in memory (little endian).
-  CATGS_CUDA(cudaMemcpyAsync(out.rgb.data(), f.rgb, pixels * 3 * sizeof(float),
-                             cudaMemcpyDeviceToHost, state_->stream));
-  CATGS_CUDA(cudaMemcpyAsync(out.rgba8.data(), f.rgba8, pixels * 4, cudaMemcpyDeviceToHost,
-                             state_->stream));
+  CATGS_CUDA(
+      cudaMemcpyAsync(out.rgb.data(), f.rgb, pixels * 3 * sizeof(float), cudaMemcpyDeviceToHost, state_->stream));
+  CATGS_CUDA(cudaMemcpyAsync(out.rgba8.data(), f.rgba8, pixels * 4, cudaMemcpyDeviceToHost, state_->stream));
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
 }
 
@@ -279,19 +278,23 @@ double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const
   } else {  // converted here, then only the planes cross to the host
     s.yuv.ensure(y_bytes + 2 * c_bytes, "YUV planes", &s.allocations);
     auto* base = s.yuv.as<uint8_t>();
-    planes = {base, static_cast<size_t>(w), base + y_bytes, static_cast<size_t>(w / 2),
-              base + y_bytes + c_bytes, static_cast<size_t>(w / 2)};
+    planes = {base,
+              static_cast<size_t>(w),
+              base + y_bytes,
+              static_cast<size_t>(w / 2),
+              base + y_bytes + c_bytes,
+              static_cast<size_t>(w / 2)};
   }
   CATGS_CUDA(cudaEventRecord(s.convert_start, s.stream));
   stages::rgba8_to_yuv420(f.rgba8, w, h, planes, s.stream);
   CATGS_CUDA(cudaEventRecord(s.converted, s.stream));
   if (out.memory == MemoryKind::host) {
-    CATGS_CUDA(cudaMemcpy2DAsync(out.y, out.y_stride, planes.y, planes.y_pitch, w, h,
-                                 cudaMemcpyDeviceToHost, s.stream));
-    CATGS_CUDA(cudaMemcpy2DAsync(out.u, out.u_stride, planes.u, planes.u_pitch, w / 2, h / 2,
-                                 cudaMemcpyDeviceToHost, s.stream));
-    CATGS_CUDA(cudaMemcpy2DAsync(out.v, out.v_stride, planes.v, planes.v_pitch, w / 2, h / 2,
-                                 cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(
+        cudaMemcpy2DAsync(out.y, out.y_stride, planes.y, planes.y_pitch, w, h, cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(cudaMemcpy2DAsync(out.u, out.u_stride, planes.u, planes.u_pitch, w / 2, h / 2, cudaMemcpyDeviceToHost,
+                                 s.stream));
+    CATGS_CUDA(cudaMemcpy2DAsync(out.v, out.v_stride, planes.v, planes.v_pitch, w / 2, h / 2, cudaMemcpyDeviceToHost,
+                                 s.stream));
   }
   // The encoder reads the planes next, on its own stream or thread: the frame must be complete.
   CATGS_CUDA(cudaStreamSynchronize(s.stream));
@@ -320,8 +323,7 @@ std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<con
   return scene;
 }
 
-std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model,
-                                             const RenderOptions& options) {
+std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options) {
   if (!model) throw std::invalid_argument("make_cuda_renderer: null model");
   return std::make_unique<CudaRenderer>(shared_device_scene(model), options);
 }

@@ -99,8 +99,8 @@ class DeviceScene {
 // has reached the end of the frame (work queued on `stream` after render_device() sees it).
 struct DeviceFrame {
   int width = 0, height = 0;
-  const float* rgb = nullptr;        // [H, W, 3] unclamped composited colour
-  const uint32_t* rgba8 = nullptr;   // [H, W] R | G << 8 | B << 16 | 255 << 24
+  const float* rgb = nullptr;       // [H, W, 3] unclamped composited colour
+  const uint32_t* rgba8 = nullptr;  // [H, W] R | G << 8 | B << 16 | 255 << 24
   CUstream_st* stream = nullptr;
 };
 
@@ -172,7 +172,7 @@ class CudaRenderer final : public Renderer {
 
  private:
   struct State;
-  DeviceFrame render_full(const Camera& camera);                 // vanilla, exact
+  DeviceFrame render_full(const Camera& camera);                  // vanilla, exact
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp
@@ -197,7 +197,6 @@ class CudaRenderer final : public Renderer {
 std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model);
 
 // A CudaRenderer over shared_device_scene(model) (renderer_factory.cpp).
-std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model,
-                                             const RenderOptions& options);
+std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options);
 
 }  // namespace catgs::cuda

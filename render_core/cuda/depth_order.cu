@@ -6,7 +6,8 @@
 // stably on their tile alone (13 bits at 1080p: 2 passes). A stable sort by tile of a list in
 // (depth, index) order is the [tile | depth] order with index ties: the same list, entry for
 // entry, as the single sort (GPU test row `depthsort`). It pays where lists are long: a catgs key
-// frame's trail list is 2-3.5x the exact list (tests/gpu/RESULTS.md).
+// frame's trail list is several times the exact list (RESULTS.md, "Where the tuned defaults come
+// from": the depth-first sort).
 #include <algorithm>
 
 #include <cub/device/device_radix_sort.cuh>
@@ -43,12 +44,12 @@ using EndsByGaussian = thrust::permutation_iterator<uint64_t*, const uint32_t*>;
 // selected count are the same number; should they ever differ, the slots past the selection
 // become padding (index n, last in depth order, no tiles, its end written to the spare ends[n]).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-gather_depth_keys_kernel(uint32_t* visible_index,  // [V]
-                         const unsigned* count,    // [1] selected
-                         uint32_t visible,         // V
-                         const float* depth,       // [N]
-                         uint32_t n,
-                         uint32_t* keys) {         // [V]
+    gather_depth_keys_kernel(uint32_t* visible_index,  // [V]
+                             const unsigned* count,    // [1] selected
+                             uint32_t visible,         // V
+                             const float* depth,       // [N]
+                             uint32_t n,
+                             uint32_t* keys) {  // [V]
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= visible) return;
   if (j < *count) {
@@ -79,25 +80,22 @@ const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const float* dep
                                  const DepthOrderBuffers& b, uint64_t* ends, cudaStream_t stream) {
   if (visible == 0) return b.index[0];
   std::size_t temp_bytes = b.temp_bytes;  // CUB takes it by reference
-  CATGS_CUDA(cub::DeviceSelect::If(b.temp, temp_bytes, thrust::counting_iterator<uint32_t>(0),
-                                   b.index[0], b.count, static_cast<int64_t>(n), IsVisible{tiles_touched},
-                                   stream));
+  CATGS_CUDA(cub::DeviceSelect::If(b.temp, temp_bytes, thrust::counting_iterator<uint32_t>(0), b.index[0], b.count,
+                                   static_cast<int64_t>(n), IsVisible{tiles_touched}, stream));
   const auto blocks = static_cast<unsigned>((visible + tune::kGaussianThreads - 1) / tune::kGaussianThreads);
   gather_depth_keys_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(
       b.index[0], b.count, static_cast<uint32_t>(visible), depth, static_cast<uint32_t>(n), b.keys[0]);
   CATGS_CUDA_LAUNCHED("gather_depth_keys_kernel");
   // Stable: equal depths keep index order, as the single [tile | depth] sort keeps them.
   cub::DoubleBuffer<uint32_t> k(b.keys[0], b.keys[1]), v(b.index[0], b.index[1]);
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(b.temp, temp_bytes, k, v, static_cast<int64_t>(visible), 0,
-                                             32, stream));
+  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(b.temp, temp_bytes, k, v, static_cast<int64_t>(visible), 0, 32, stream));
   // Each Gaussian's end slot: the running sum of the tile counts in depth order, written back
   // at the Gaussian's own index (what emit_keys reads). Invisible Gaussians keep theirs: they
   // emit nothing.
   const uint32_t* order = v.Current();
   CountsInDepthOrder in(order, TouchedOf{tiles_touched, n});
   EndsByGaussian out(ends, order);
-  CATGS_CUDA(cub::DeviceScan::InclusiveSum(b.temp, temp_bytes, in, out, static_cast<int64_t>(visible),
-                                           stream));
+  CATGS_CUDA(cub::DeviceScan::InclusiveSum(b.temp, temp_bytes, in, out, static_cast<int64_t>(visible), stream));
   return order;
 }
 

@@ -14,9 +14,8 @@ void throw_cuda_error(cudaError_t err, const char* call, const char* file, int l
   const char* base = file;
   for (const char* p = file; *p; ++p)
     if (*p == '/') base = p + 1;
-  throw CudaError(std::string(call) + " failed at " + base + ":" + std::to_string(line) + ": " +
-                      cudaGetErrorName(err) + " (" + std::to_string(static_cast<int>(err)) +
-                      "): " + cudaGetErrorString(err),
+  throw CudaError(std::string(call) + " failed at " + base + ":" + std::to_string(line) + ": " + cudaGetErrorName(err) +
+                      " (" + std::to_string(static_cast<int>(err)) + "): " + cudaGetErrorString(err),
                   static_cast<int>(err));
 }
 
@@ -28,7 +27,9 @@ __global__ void probe_kernel() {}
 }  // namespace
 
 bool device_usable(std::string* reason) {
-  auto say = [reason](const std::string& s) { if (reason) *reason = s; };
+  auto say = [reason](const std::string& s) {
+    if (reason) *reason = s;
+  };
   int count = 0;
   cudaError_t err = cudaGetDeviceCount(&count);
   if (err != cudaSuccess) {
@@ -42,16 +43,15 @@ bool device_usable(std::string* reason) {
   }
   int device = 0;
   cudaDeviceProp prop{};
-  if ((err = cudaGetDevice(&device)) != cudaSuccess ||
-      (err = cudaGetDeviceProperties(&prop, device)) != cudaSuccess) {
+  if ((err = cudaGetDevice(&device)) != cudaSuccess || (err = cudaGetDeviceProperties(&prop, device)) != cudaSuccess) {
     (void)cudaGetLastError();
     say(std::string("device query: ") + cudaGetErrorString(err));
     return false;
   }
   cudaFuncAttributes attr{};
   err = cudaFuncGetAttributes(&attr, probe_kernel);
-  const std::string who = std::string(prop.name) + " (sm_" + std::to_string(prop.major) +
-                          std::to_string(prop.minor) + ")";
+  const std::string who =
+      std::string(prop.name) + " (sm_" + std::to_string(prop.major) + std::to_string(prop.minor) + ")";
   if (err != cudaSuccess) {
     (void)cudaGetLastError();
     say(who + ": this build has no code for it: " + cudaGetErrorString(err));
@@ -67,9 +67,8 @@ std::string device_description() {
   CATGS_CUDA(cudaGetDevice(&device));
   CATGS_CUDA(cudaGetDeviceProperties(&prop, device));
   char buf[256];
-  std::snprintf(buf, sizeof buf, "%s, sm_%d%d, %d SMs, %.1f GiB, L2 %.0f MiB", prop.name,
-                prop.major, prop.minor, prop.multiProcessorCount,
-                static_cast<double>(prop.totalGlobalMem) / (1024.0 * 1024.0 * 1024.0),
+  std::snprintf(buf, sizeof buf, "%s, sm_%d%d, %d SMs, %.1f GiB, L2 %.0f MiB", prop.name, prop.major, prop.minor,
+                prop.multiProcessorCount, static_cast<double>(prop.totalGlobalMem) / (1024.0 * 1024.0 * 1024.0),
                 static_cast<double>(prop.l2CacheSize) / (1024.0 * 1024.0));
   return buf;
 }

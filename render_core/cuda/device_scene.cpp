@@ -15,8 +15,7 @@ float* upload_array(const std::vector<float>& host, std::size_t* bytes_total, co
   try {
     CATGS_CUDA(cudaMalloc(&d, bytes));
   } catch (const CudaError& e) {
-    throw CudaError(std::string("scene upload: ") + what + " needs " + std::to_string(bytes) +
-                        " bytes: " + e.what(),
+    throw CudaError(std::string("scene upload: ") + what + " needs " + std::to_string(bytes) + " bytes: " + e.what(),
                     e.code());
   }
   try {
@@ -38,10 +37,9 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
                             " Gaussians; the CUDA core indexes them with 32 bits (max 2^32 - 1)");
   const std::size_t K = static_cast<std::size_t>(model.sh_coeffs());
   if (model.sh_degree < 0 || model.sh_degree > kMaxShDegree || model.means.size() != 3 * n ||
-      model.log_scales.size() != 3 * n || model.rotations.size() != 4 * n ||
-      model.sh.size() != n * K * 3)
-    throw std::invalid_argument("scene '" + model.name + "': array sizes disagree with " +
-                                std::to_string(n) + " Gaussians");
+      model.log_scales.size() != 3 * n || model.rotations.size() != 4 * n || model.sh.size() != n * K * 3)
+    throw std::invalid_argument("scene '" + model.name + "': array sizes disagree with " + std::to_string(n) +
+                                " Gaussians");
   std::shared_ptr<DeviceScene> s(new DeviceScene());
   s->name_ = model.name;
   s->n_ = n;

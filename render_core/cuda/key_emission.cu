@@ -35,7 +35,7 @@ struct KeyOut {
 };
 
 // counts[0] = render list length (ends[n-1]), counts[1] = visible Gaussians: one 16-byte readback.
-__global__ void gather_counts_kernel(const uint64_t* ends,           // [n]
+__global__ void gather_counts_kernel(const uint64_t* ends,  // [n]
                                      uint64_t n,
                                      const unsigned long long* visible,  // [1]
                                      unsigned long long* counts) {       // [2]
@@ -48,15 +48,14 @@ __global__ void gather_counts_kernel(const uint64_t* ends,           // [n]
 // its own slot [begin, end): a disagreement between counting and emitting could never spill into
 // a neighbour. Thread j takes Gaussian order[j] when an order is given, else Gaussian j.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-emit_keys_kernel(const uint32_t* order,         // [n] or null
-                 TileTests tests,
-                 const float* depth,            // [N]
-                 const ushort4* rect,           // [N]
-                 const uint32_t* tiles_touched, // [N]
-                 const uint64_t* ends,          // [N] end of each Gaussian's run
-                 uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
-                 KeyOut keys,
-                 uint32_t* values) {            // [L]
+    emit_keys_kernel(const uint32_t* __restrict__ order,  // [n] or null
+                     TileTests tests,
+                     const float* __restrict__ depth,             // [N]
+                     const ushort4* __restrict__ rect,            // [N]
+                     const uint32_t* __restrict__ tiles_touched,  // [N]
+                     const uint64_t* __restrict__ ends,           // [N] end of each Gaussian's run
+                     uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
+                     uint32_t* __restrict__ values) {  // [L]
   const uint64_t j = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (j >= n) return;
   const uint64_t i = order ? order[j] : j;
@@ -101,22 +100,21 @@ __device__ __forceinline__ int nth_set_bit(uint32_t mask, uint32_t r) {
 // counted), a warp per 32 consecutive Gaussians of the walk. Their runs are adjacent in the list
 // (ends is the running sum in walk order), so the warp writes its whole span with its lanes on
 // consecutive slots: each store is one coalesced line. A thread per Gaussian writing its own run
-// made every store touch 32 scattered sectors (ncu, city bicycle key frame: emit_keys_kernel at
-// 91% of L1/L2 throughput and 21% of DRAM, 0.5-0.8 ms). Slot s belongs to the last lane whose
+// made every store touch 32 scattered sectors (ncu: RESULTS.md, "Where the tuned defaults come
+// from": coalesced key emission). Slot s belongs to the last lane whose
 // run starts at or before s (a binary search over the lanes' run starts by shuffles); its rank
 // r = s - start picks the r-th set bit of that lane's mask, i.e. the r-th listed tile in
 // row-major order, as a per-Gaussian loop writes them. Big Gaussians' slots are left to
 // emit_big_kernel. Every thread of a warp must reach the shuffles: no early return.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-emit_mask_keys_kernel(const uint32_t* order,          // [n] or null
-                      const uint32_t* tile_mask,      // [N]
-                      const float* depth,             // [N]
-                      const ushort4* rect,            // [N]
-                      const uint32_t* tiles_touched,  // [N]
-                      const uint64_t* ends,           // [N]
-                      uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
-                      KeyOut keys,
-                      uint32_t* values) {             // [L]
+    emit_mask_keys_kernel(const uint32_t* __restrict__ order,          // [n] or null
+                          const uint32_t* __restrict__ tile_mask,      // [N]
+                          const float* __restrict__ depth,             // [N]
+                          const ushort4* __restrict__ rect,            // [N]
+                          const uint32_t* __restrict__ tiles_touched,  // [N]
+                          const uint64_t* __restrict__ ends,           // [N]
+                          uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
+                          uint32_t* __restrict__ values) {  // [L]
   constexpr unsigned kAll = 0xffffffffu;
   const uint64_t j = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   const auto lane = static_cast<int>(threadIdx.x & 31u);
@@ -179,15 +177,13 @@ emit_mask_keys_kernel(const uint32_t* order,          // [n] or null
 // Big Gaussians, a warp each: the rectangle is walked 32 tiles at a time in row-major order;
 // the lanes whose tile passes take consecutive slots (ballot + popc), so the order is the one the
 // per-thread loop (and the CPU reference) produces.
-__global__ void __launch_bounds__(tune::kBigThreads)
-emit_big_kernel(BigList big, TileTests tests,
-                const float* depth,            // [N]
-                const ushort4* rect,           // [N]
-                const uint32_t* tiles_touched, // [N]
-                const uint64_t* ends,          // [N]
-                int tiles_x, int tiles_y,
-                KeyOut keys,
-                uint32_t* values) {            // [L]
+__global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big, TileTests tests,
+                                                                     const float* __restrict__ depth,             // [N]
+                                                                     const ushort4* __restrict__ rect,            // [N]
+                                                                     const uint32_t* __restrict__ tiles_touched,  // [N]
+                                                                     const uint64_t* __restrict__ ends,           // [N]
+                                                                     int tiles_x, int tiles_y, KeyOut keys,
+                                                                     uint32_t* __restrict__ values) {  // [L]
   const unsigned lane = threadIdx.x & 31u;
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
   const unsigned total = *big.count;
@@ -230,9 +226,8 @@ std::size_t scan_temp_bytes(uint64_t n) {
   return bytes;
 }
 
-void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp,
-                        std::size_t temp_bytes, const unsigned long long* visible,
-                        unsigned long long* counts, cudaStream_t stream) {
+void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp, std::size_t temp_bytes,
+                        const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream) {
   if (n > 0) {
     WideCounts in(tiles_touched, WidenToU64{});
     CATGS_CUDA(cub::DeviceScan::InclusiveSum(temp, temp_bytes, in, ends, n, stream));
@@ -241,25 +236,25 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
   CATGS_CUDA_LAUNCHED("gather_counts_kernel");
 }
 
-void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               const TileTests& tests, const BigList& big, uint64_t* wide_keys, uint32_t* tile_keys,
-               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream) {
+void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam, const TileTests& tests,
+               const BigList& big, uint64_t* wide_keys, uint32_t* tile_keys, uint32_t* values, const uint32_t* order,
+               uint64_t order_count, cudaStream_t stream) {
   if (n == 0) return;
   const KeyOut keys{wide_keys, tile_keys};
   const uint64_t walk = order ? order_count : n;
   const uint64_t blocks = (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (walk > 0 && tests.kind == TileTestKind::trail && tests.trails.tile_mask) {
     emit_mask_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-        order, tests.trails.tile_mask, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y,
-        keys, values);
+        order, tests.trails.tile_mask, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y, keys,
+        values);
     CATGS_CUDA_LAUNCHED("emit_mask_keys_kernel");
   } else if (walk > 0) {
     emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
         order, tests, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y, keys, values);
     CATGS_CUDA_LAUNCHED("emit_keys_kernel");
   }
-  emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(
-      big, tests, p.depth, p.rect, p.tiles_touched, ends, cam.tiles_x, cam.tiles_y, keys, values);
+  emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, p.depth, p.rect, p.tiles_touched,
+                                                                      ends, cam.tiles_x, cam.tiles_y, keys, values);
   CATGS_CUDA_LAUNCHED("emit_big_kernel");
 }
 

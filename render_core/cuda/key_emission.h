@@ -12,9 +12,8 @@ namespace catgs::cuda::stages {
 // Stage 2a (key_emission.cu): inclusive scan of tiles_touched into 64-bit ends[N] (CUB), then a
 // one-thread kernel copies ends[N-1] and *visible into counts[0..1] for one 16-byte readback.
 std::size_t scan_temp_bytes(uint64_t n);
-void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp,
-                        std::size_t temp_bytes, const unsigned long long* visible,
-                        unsigned long long* counts, cudaStream_t stream);
+void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp, std::size_t temp_bytes,
+                        const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream);
 
 // Stage 2b (key_emission.cu): each Gaussian writes its keys and values (its index) at
 // [ends[i] - tiles_touched[i], ends[i]), in row-major tile order; never more than
@@ -26,7 +25,7 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 // id alone (32-bit). `order` (or null: all N
 // in index order): the `order_count` Gaussians to walk, in that order (depth_order_ends's).
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* tile_keys,
-               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream);
+               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* tile_keys, uint32_t* values,
+               const uint32_t* order, uint64_t order_count, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

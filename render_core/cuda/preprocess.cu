@@ -13,8 +13,8 @@ namespace catgs::cuda::stages {
 namespace {
 
 // Tiles of `rect` the opacity-aware ellipse reaches (exact pipeline); as count_exact_tiles on CPU.
-__device__ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic,
-                                      float q_max, int width, int height) {
+__device__ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max, int width,
+                                      int height) {
   uint32_t n = 0;
   for (int ty = rect.y0; ty < rect.y1; ++ty)
     for (int tx = rect.x0; tx < rect.x1; ++tx)
@@ -25,9 +25,9 @@ __device__ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, 
 // One thread per Gaussian. Reads the scene once (SH only for visible Gaussians), writes the
 // projected features of visible ones and tiles_touched of all.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
-                  unsigned long long* visible,  // [1] running count of visible Gaussians
-                  BigList big) {
+    preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
+                      unsigned long long* visible,  // [1] running count of visible Gaussians
+                      BigList big) {
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   uint32_t touched = 0;
   bool is_big = false;
@@ -39,25 +39,21 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
 
       const float opacity = fm::sigmoid(scene.opacity_logits[i]);
       const float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
-      if (exact && !(q_max > 0.0f)) break;  // never reaches alpha 1/255 anywhere
+      if (exact && !(q_max > 0.0f)) break;                  // never reaches alpha 1/255 anywhere
       const fm::Cov3 cov3 = fm::covariance_3d(
           {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
-          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
-           scene.rotations[4 * i + 3]});
+          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});
       const glm::vec3 cov2 = fm::covariance_2d(cov3, cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
       glm::vec3 conic;
       if (!fm::conic_from_cov2d(cov2, &conic)) break;
 
-      const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f,
-                             cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
+      const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f, cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
       fm::TileRect rect;
       if (exact) {
         rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height);
         const int area = fm::tile_count(rect);
         is_big = area > tune::kBigRectTiles;  // counted by count_big_kernel, a warp each
-        touched = area == 0 || is_big
-                      ? 0u
-                      : count_exact_tiles(rect, mean2d, conic, q_max, cam.width, cam.height);
+        touched = area == 0 || is_big ? 0u : count_exact_tiles(rect, mean2d, conic, q_max, cam.width, cam.height);
       } else {
         const float radius = fm::three_sigma_radius(cov2);
         rect = fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y);
@@ -82,11 +78,10 @@ preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
 
 // Big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and writes the
 // count; the same tile test as key emission (tile_test.cuh).
-__global__ void __launch_bounds__(tune::kBigThreads)
-count_big_kernel(BigList big, TileTests tests,
-                 const ushort4* rect,           // [N]
-                 uint32_t* tiles_touched,       // [N]
-                 unsigned long long* visible) { // [1]
+__global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList big, TileTests tests,
+                                                                      const ushort4* rect,            // [N]
+                                                                      uint32_t* tiles_touched,        // [N]
+                                                                      unsigned long long* visible) {  // [1]
   const int lane = static_cast<int>(threadIdx.x & 31u);
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
   const unsigned total = *big.count;
@@ -112,18 +107,17 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   if (scene.n == 0) return;
   const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
-  preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene, cam, exact, out, visible, big);
+  preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(scene, cam, exact, out,
+                                                                                          visible, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};
   count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
 }
 
-void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect,
-                     uint32_t* tiles_touched, unsigned long long* visible, cudaStream_t stream) {
-  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, rect, tiles_touched,
-                                                                       visible);
+void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect, uint32_t* tiles_touched,
+                     unsigned long long* visible, cudaStream_t stream) {
+  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, rect, tiles_touched, visible);
   CATGS_CUDA_LAUNCHED("count_big_kernel");
 }
 

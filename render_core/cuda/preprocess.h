@@ -19,7 +19,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
 
 // Stage 1, big Gaussians (preprocess.cu): a warp per Gaussian of `big` counts the tiles of its
 // rectangle passing `tests` into tiles_touched, and adds the Gaussians found visible to *visible.
-void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect,
-                     uint32_t* tiles_touched, unsigned long long* visible, cudaStream_t stream);
+void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect, uint32_t* tiles_touched,
+                     unsigned long long* visible, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

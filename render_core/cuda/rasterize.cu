@@ -38,13 +38,13 @@ namespace catgs::cuda::stages {
 namespace {
 
 __global__ void __launch_bounds__(tune::kRasterThreads)
-rasterize_kernel(const uint2* __restrict__ ranges,         // [tiles] [start, end) into the sorted list
-                 const uint32_t* __restrict__ tile_order,  // [tiles]
-                 const uint32_t* __restrict__ values,      // [L] sorted Gaussian indices
-                 Projected g,                              // [N] features
-                 int width, int height, int tiles_x, float3 background,
-                 float* __restrict__ out_rgb,              // [H, W, 3]
-                 uint32_t* __restrict__ out_rgba8) {       // [H, W]
+    rasterize_kernel(const uint2* __restrict__ ranges,         // [tiles] [start, end) into the sorted list
+                     const uint32_t* __restrict__ tile_order,  // [tiles]
+                     const uint32_t* __restrict__ values,      // [L] sorted Gaussian indices
+                     Projected g,                              // [N] features
+                     int width, int height, int tiles_x, float3 background,
+                     float* __restrict__ out_rgb,         // [H, W, 3]
+                     uint32_t* __restrict__ out_rgba8) {  // [H, W]
   __shared__ BlendBatch batch;
 
   const uint32_t tile = tile_order[blockIdx.x];
@@ -59,8 +59,8 @@ rasterize_kernel(const uint2* __restrict__ ranges,         // [tiles] [start, en
   blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py), true, batch, state,
               NoSkip{});
   if (!inside) return;
-  write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C,
-              state.T, background, out_rgb, out_rgba8);
+  write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C, state.T,
+              background, out_rgb, out_rgba8);
 }
 
 }  // namespace

@@ -80,15 +80,14 @@ struct SaturatedSkip {
 // registers and 91%).
 template <bool kTileCull>
 __global__ void __launch_bounds__(tune::kRasterThreads, tune::kSliceRasterMinBlocks)
-rasterize_slices_kernel(SlicePlan plan,
-                        const uint32_t* order,   // [blocks] or null
-                        const uint32_t* values,  // [L] sorted Gaussian indices
-                        Projected g, int width, int height, int tiles_x, bool early_termination,
-                        float3 background,
-                        const unsigned* abandon, // [1] or null: non-zero, draw nothing
-                        float4* partials,        // [slots, 256] (C.rgb, T)
-                        float* out_rgb,          // [H, W, 3]
-                        uint32_t* out_rgba8) {   // [H, W]
+    rasterize_slices_kernel(SlicePlan plan,
+                            const uint32_t* order,   // [blocks] or null
+                            const uint32_t* values,  // [L] sorted Gaussian indices
+                            Projected g, int width, int height, int tiles_x, bool early_termination, float3 background,
+                            const unsigned* abandon,  // [1] or null: non-zero, draw nothing
+                            float4* partials,         // [slots, 256] (C.rgb, T)
+                            float* out_rgb,           // [H, W, 3]
+                            uint32_t* out_rgba8) {    // [H, W]
   __shared__ BlendBatch batch;
   if (abandon && *abandon) return;  // written by an earlier kernel: the same for every thread
   const uint32_t s = order ? order[blockIdx.x] : blockIdx.x;
@@ -109,14 +108,14 @@ rasterize_slices_kernel(SlicePlan plan,
       blend_range_culled(range.x, range.y, values, g, rank, tx, ty, width, height, static_cast<float>(px),
                          static_cast<float>(py), early_termination, batch, state, skip);
     else
-      blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py),
-                  early_termination, batch, state, skip);
+      blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py), early_termination,
+                  batch, state, skip);
   };
   if (tp.y == 1) {  // the tile's only slice
     blend(NoSkip{});
     if (!inside) return;
-    write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C,
-                state.T, background, out_rgb, out_rgba8);
+    write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C, state.T,
+                background, out_rgb, out_rgba8);
     return;
   }
   const SaturatedSkip skip{plan.saturated_from + tile_k.x, tile_k.y, plan.slot_finished + tp.z,
@@ -143,12 +142,12 @@ rasterize_slices_kernel(SlicePlan plan,
 }
 
 __global__ void __launch_bounds__(tune::kRasterThreads)
-merge_kernel(SlicePlan plan,
-             const float4* partials,  // [slots, 256]
-             int width, int height, int tiles_x, bool early_termination, float3 background,
-             const unsigned* abandon, // [1] or null
-             float* out_rgb,          // [H, W, 3]
-             uint32_t* out_rgba8) {   // [H, W]
+    merge_kernel(SlicePlan plan,
+                 const float4* __restrict__ partials,  // [slots, 256]
+                 int width, int height, int tiles_x, bool early_termination, float3 background,
+                 const unsigned* abandon,             // [1] or null
+                 float* __restrict__ out_rgb,         // [H, W, 3]
+                 uint32_t* __restrict__ out_rgba8) {  // [H, W]
   if (abandon && *abandon) return;
   const uint4 tp = plan.tile_plan[blockIdx.x];
   if (tp.y <= 1) return;  // written by its only slice
@@ -169,16 +168,16 @@ merge_kernel(SlicePlan plan,
     // The pixel stopped in slice k, or the slices behind weigh under 1e-4 (as SaturatedSkip::refresh).
     if (early_termination && (p.w < 0.0f || T < fm::kMinTransmittance)) break;
   }
-  write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), C, T,
-              background, out_rgb, out_rgba8);
+  write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), C, T, background,
+              out_rgb, out_rgba8);
 }
 
 }  // namespace
 
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
-                      const Projected& projected, const CameraParams& cam, bool early_termination,
-                      bool tile_culling, float3 background, const unsigned* abandon, float4* partials,
-                      float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
+                      const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,
+                      float3 background, const unsigned* abandon, float4* partials, float* out_rgb, uint32_t* out_rgba8,
+                      cudaStream_t stream) {
   CATGS_CUDA(cudaMemsetAsync(plan.saturated_from, 0xff,
                              sizeof(unsigned) * static_cast<std::size_t>(cam.tiles_x * cam.tiles_y), stream));
   CATGS_CUDA(cudaMemsetAsync(plan.slot_finished, 0, sizeof(unsigned) * plan.slot_count, stream));

@@ -23,16 +23,15 @@ namespace catgs::cuda::stages {
 // frame's features (blend_range_culled; same image, for lists built for other poses too).
 // `abandon` (device, or null): when it holds non-zero at launch, draw nothing (a sub-frame
 // that failed its check and will be drawn again as a key frame).
-void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks,
-                      const uint32_t* sorted_values, const Projected& projected, const CameraParams& cam,
-                      bool early_termination, bool tile_culling, float3 background, const unsigned* abandon,
-                      float4* partials, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream);
+void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
+                      const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,
+                      float3 background, const unsigned* abandon, float4* partials, float* out_rgb, uint32_t* out_rgba8,
+                      cudaStream_t stream);
 // The merge (rasterize_slices.cu): for each split tile, C = sum_k C_k prod_{m<k} T_m, then
 // + prod T * background (paper sec. 3.4); with `early_termination`, a pixel's sum ends after the
 // first slice in which it stopped or after which prod T < 1e-4 (as cpu::rasterize_slices).
 // Nothing when *abandon (if given) is non-zero.
 void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, bool early_termination,
-                  float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8,
-                  cudaStream_t stream);
+                  float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -53,18 +53,18 @@ struct __align__(32) Splat {
 // Stage 1 output, one entry per Gaussian; tiles_touched == 0 marks a culled Gaussian whose other
 // fields are left unwritten.
 struct Projected {
-  Splat* splat;               // [N] 2D mean, conic, opacity, q_max, power cut
-  float4* color;              // [N] (r, g, b, unused): 16-byte loads in the rasterizer
-  float* depth;               // [N] camera-space z
-  ushort4* rect;              // [N] tile rectangle [x0, x1) x [y0, y1)
-  uint32_t* tiles_touched;    // [N] render-list entries this Gaussian emits
+  Splat* splat;             // [N] 2D mean, conic, opacity, q_max, power cut
+  float4* color;            // [N] (r, g, b, unused): 16-byte loads in the rasterizer
+  float* depth;             // [N] camera-space z
+  ushort4* rect;            // [N] tile rectangle [x0, x1) x [y0, y1)
+  uint32_t* tiles_touched;  // [N] render-list entries this Gaussian emits
 };
 
 // Gaussians whose candidate rectangle has more than tune::kBigRectTiles tiles, handled a warp
 // each: their indices (order arbitrary) and how many there are, both in device memory.
 struct BigList {
-  uint32_t* index;   // [N] capacity
-  unsigned* count;   // [1]
+  uint32_t* index;  // [N] capacity
+  unsigned* count;  // [1]
 };
 
 // catgs key frames: each visible Gaussian's trail (forward_model.h fm::Trail), pixel units.
@@ -84,9 +84,9 @@ enum class TileTestKind { square, ellipse, trail };
 // The inputs of the tile test, read per Gaussian by tile_test.cuh.
 struct TileTests {
   TileTestKind kind;
-  const Splat* splat;           // [N] ellipse: mean, conic, q_max
-  Trails trails;                // trail
-  int width, height;            // pixels
+  const Splat* splat;  // [N] ellipse: mean, conic, q_max
+  Trails trails;       // trail
+  int width, height;   // pixels
 };
 
 // The speculation path of a catgs key frame: the key camera, then the predicted cameras of the

@@ -19,7 +19,7 @@
 // on-screen Gaussian left its trail: the frame is rendered again as a key frame. The work is
 // queued before the check so the GPU never idles waiting for the host; the raster and merge
 // kernels read the flag themselves and return at once when it is raised (on the fast real paths
-// most key frames are such failed sub-frames, and drawing them cost ~1.5 ms on the city).
+// most key frames are such failed sub-frames, and drawing them was a large share of their time).
 #include <cstring>
 
 #include "renderer_state.h"
@@ -63,8 +63,8 @@ int CudaRenderer::State::measure_window(const stages::SceneView& scene, const st
   unsigned* cc = catgs_counters.as<unsigned>();
   CATGS_CUDA(cudaMemsetAsync(cc + kMotionBits, 0, sizeof(unsigned), stream));
   stages::max_screen_motion(scene, key, next, depth_threshold, cc + kMotionBits, stream);
-  CATGS_CUDA(cudaMemcpyAsync(host_catgs + kMotionBits, cc + kMotionBits, sizeof(unsigned), cudaMemcpyDeviceToHost,
-                             stream));
+  CATGS_CUDA(
+      cudaMemcpyAsync(host_catgs + kMotionBits, cc + kMotionBits, sizeof(unsigned), cudaMemcpyDeviceToHost, stream));
   CATGS_CUDA(cudaEventRecord(catgs_readback, stream));
   CATGS_CUDA(cudaEventSynchronize(catgs_readback));
   ++syncs;
@@ -91,8 +91,8 @@ uint64_t CudaRenderer::State::plan_key_slices(uint32_t tiles, uint64_t entries, 
   slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs);
   note_peak();
   const stages::SlicePlan plan = slice_plan();
-  stages::plan_slices(ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, plan,
-                      plan_scan.as<uint64_t>(), plan_temp.as<void>(), plan_temp.bytes(), stream);
+  stages::plan_slices(ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, plan, plan_scan.as<uint64_t>(),
+                      plan_temp.as<void>(), plan_temp.bytes(), stream);
   stages::order_slices(plan, capacity, slice_scratch.as<uint32_t>(), slice_order.as<uint32_t>(),
                        slice_order_temp.as<void>(), slice_order_temp.bytes(), stream);
   // The first sorted key is the longest first slice, the longest slice of all (task_split.cu).
@@ -101,8 +101,8 @@ uint64_t CudaRenderer::State::plan_key_slices(uint32_t tiles, uint64_t entries, 
   // The group's sub-frames launch one block per slice: the totals come back while this frame
   // rasterizes, and only a sub-frame waits for them (plan_ready).
   unsigned* cc = catgs_counters.as<unsigned>();
-  CATGS_CUDA(cudaMemcpyAsync(host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
-                             cudaMemcpyDeviceToHost, stream));
+  CATGS_CUDA(cudaMemcpyAsync(host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned), cudaMemcpyDeviceToHost,
+                             stream));
   CATGS_CUDA(cudaEventRecord(plan_ready, stream));
   return capacity;
 }
@@ -148,8 +148,9 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, window > 0 && depth_first_sort(), &visible);
   if (window > 0)  // the frustum cache, for the group's sub-frames
-    stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(), s.catgs_counters.as<unsigned>() + kCachedCount,
-                          s.select_temp.as<void>(), s.select_temp.bytes(), s.stream);
+    stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(),
+                          s.catgs_counters.as<unsigned>() + kCachedCount, s.select_temp.as<void>(),
+                          s.select_temp.bytes(), s.stream);
   const uint64_t capacity = s.plan_key_slices(tiles, entries, sp);  // paper sec. 3.4
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
@@ -175,8 +176,8 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   CATGS_CUDA(cudaEventSynchronize(s.plan_ready));  // the key frame's slice total, long since copied
   // Nothing is drawn if the check failed.
   catgs_rasterize(camera, s.host_catgs[kSliceTotals], cc + kOutside, true);
-  CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kOutside, cc + kOutside, sizeof(unsigned), cudaMemcpyDeviceToHost,
-                             s.stream));
+  CATGS_CUDA(
+      cudaMemcpyAsync(s.host_catgs + kOutside, cc + kOutside, sizeof(unsigned), cudaMemcpyDeviceToHost, s.stream));
   CATGS_CUDA(cudaEventRecord(s.catgs_readback, s.stream));
   CATGS_CUDA(cudaEventSynchronize(s.catgs_readback));
   ++s.syncs;
@@ -190,11 +191,11 @@ void CudaRenderer::catgs_rasterize(const Camera& camera, uint32_t blocks, const 
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
   const stages::SlicePlan plan = s.slice_plan();
   stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), blocks, s.sorted_values, s.projected(), cam,
-                           options_.speculation.early_termination, cuda_options_.tile_culling && trail_list, bg, abandon, s.partials.as<float4>(), s.rgb.as<float>(),
-                           s.rgba8.as<uint32_t>(), s.stream);
+                           options_.speculation.early_termination, cuda_options_.tile_culling && trail_list, bg,
+                           abandon, s.partials.as<float4>(), s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-  stages::merge_slices(plan, s.partials.as<float4>(), cam, options_.speculation.early_termination, bg, abandon, s.rgb.as<float>(), s.rgba8.as<uint32_t>(),
-                       s.stream);
+  stages::merge_slices(plan, s.partials.as<float4>(), cam, options_.speculation.early_termination, bg, abandon,
+                       s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
 }
 

@@ -18,7 +18,9 @@ class GrowBuffer {
   GrowBuffer() = default;
   GrowBuffer(const GrowBuffer&) = delete;
   GrowBuffer& operator=(const GrowBuffer&) = delete;
-  ~GrowBuffer() { if (ptr_) cudaFree(ptr_); }
+  ~GrowBuffer() {
+    if (ptr_) cudaFree(ptr_);
+  }
 
   // Makes room for `bytes`; returns true when it had to reallocate (contents are then lost).
   // cudaFree waits for in-flight work on the device, so a buffer still read by an earlier frame
@@ -39,9 +41,9 @@ class GrowBuffer {
         CATGS_CUDA(cudaMalloc(&ptr_, bytes));
       } catch (const CudaError& e) {
         ptr_ = nullptr;
-        throw CudaError(std::string("CUDA renderer: ") + what + " buffer of " +
-                            std::to_string(bytes) + " bytes: " + e.what(),
-                        e.code());
+        throw CudaError(
+            std::string("CUDA renderer: ") + what + " buffer of " + std::to_string(bytes) + " bytes: " + e.what(),
+            e.code());
       }
     }
     bytes_ = got;
@@ -49,7 +51,9 @@ class GrowBuffer {
     return true;
   }
   template <typename T>
-  T* as() const { return static_cast<T*>(ptr_); }
+  T* as() const {
+    return static_cast<T*>(ptr_);
+  }
   std::size_t bytes() const { return bytes_; }
 
  private:
@@ -82,8 +86,8 @@ stages::CameraParams camera_params(const Camera& camera);
 
 // The scene as the kernels see it.
 inline stages::SceneView scene_view(const DeviceScene& scene) {
-  return {scene.means(), scene.log_scales(), scene.rotations(), scene.opacity_logits(), scene.sh(),
-          scene.sh_degree(), scene.size()};
+  return {scene.means(), scene.log_scales(), scene.rotations(), scene.opacity_logits(),
+          scene.sh(),    scene.sh_degree(),  scene.size()};
 }
 
 struct CudaRenderer::State {
@@ -106,16 +110,16 @@ struct CudaRenderer::State {
   GrowBuffer ranges, tile_scratch, tile_order, order_temp, rgb, rgba8, counters;
   const uint32_t* sorted_values = nullptr;
   const uint32_t* heaviest = nullptr;  // device: entries of the heaviest tile (or slice)
-  bool heaviest_is_slice_key = false;   // heaviest points at a slice sort key (order_slices)
+  bool heaviest_is_slice_key = false;  // heaviest points at a slice sort key (order_slices)
 
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian), the split plan (per slice
   // and tile), partial slices, and its counters (CatgsCounterSlot).
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp;
-  GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order,
-      slice_order_temp, partials, saturated_from, slot_finished, catgs_counters;
-  unsigned* host_catgs = nullptr;         // pinned [kHostCatgsSlots]
-  cudaEvent_t catgs_readback = nullptr;   // M / outside flag copied to host_catgs
-  cudaEvent_t plan_ready = nullptr;       // the key frame's slice totals copied to host_catgs
+  GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order, slice_order_temp,
+      partials, saturated_from, slot_finished, catgs_counters;
+  unsigned* host_catgs = nullptr;        // pinned [kHostCatgsSlots]
+  cudaEvent_t catgs_readback = nullptr;  // M / outside flag copied to host_catgs
+  cudaEvent_t plan_ready = nullptr;      // the key frame's slice totals copied to host_catgs
   SpeculationPlanner planner;
   // render_yuv420_at (cuda_renderer.cpp): I420 planes for a host target, and the conversion's
   // timing events.
@@ -141,8 +145,8 @@ struct CudaRenderer::State {
   // planner's W; plans the split tasks and their order for `entries` list entries and queues the
   // copy of their totals (plan_ready), returning the slice capacity (blocks a key frame launches).
   void ensure_catgs_buffers(uint64_t n);
-  int measure_window(const stages::SceneView& scene, const stages::CameraParams& key,
-                     const stages::CameraParams& next, float depth_threshold);
+  int measure_window(const stages::SceneView& scene, const stages::CameraParams& key, const stages::CameraParams& next,
+                     float depth_threshold);
   uint64_t plan_key_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp);
 
   // Views of the buffers as the stages take them.
@@ -158,20 +162,62 @@ struct CudaRenderer::State {
             trail_mask.as<uint32_t>()};
   }
   stages::SlicePlan slice_plan() const {
-    return {slice_range.as<uint2>(), slice_tile.as<uint2>(), tile_plan.as<uint4>(),
-            catgs_counters.as<unsigned>() + kSliceTotals, saturated_from.as<unsigned>(), slot_finished.as<unsigned>(),
+    return {slice_range.as<uint2>(),
+            slice_tile.as<uint2>(),
+            tile_plan.as<uint4>(),
+            catgs_counters.as<unsigned>() + kSliceTotals,
+            saturated_from.as<unsigned>(),
+            slot_finished.as<unsigned>(),
             slot_finished.bytes() / sizeof(unsigned)};
   }
 
   std::size_t bytes() const {
     std::size_t b = 0;
-    for (const GrowBuffer* g :
-         {&splat, &color, &depth, &rect, &tiles_touched, &ends, &scan_temp, &big,
-          &keys[0], &keys[1], &values[0], &values[1], &sort_temp, &depth_index[0], &depth_index[1],
-          &depth_keys[0], &depth_keys[1], &depth_count, &depth_temp, &ranges, &tile_scratch, &tile_order,
-          &order_temp, &rgb, &rgba8, &counters, &trail_mean0_motion, &trail_conic_q, &trail_cov, &trail_mask,
-          &cached, &select_temp, &slice_range, &slice_tile, &tile_plan, &plan_scan, &plan_temp, &slice_scratch,
-          &slice_order, &slice_order_temp, &partials, &saturated_from, &slot_finished, &catgs_counters, &yuv})
+    for (const GrowBuffer* g : {&splat,
+                                &color,
+                                &depth,
+                                &rect,
+                                &tiles_touched,
+                                &ends,
+                                &scan_temp,
+                                &big,
+                                &keys[0],
+                                &keys[1],
+                                &values[0],
+                                &values[1],
+                                &sort_temp,
+                                &depth_index[0],
+                                &depth_index[1],
+                                &depth_keys[0],
+                                &depth_keys[1],
+                                &depth_count,
+                                &depth_temp,
+                                &ranges,
+                                &tile_scratch,
+                                &tile_order,
+                                &order_temp,
+                                &rgb,
+                                &rgba8,
+                                &counters,
+                                &trail_mean0_motion,
+                                &trail_conic_q,
+                                &trail_cov,
+                                &trail_mask,
+                                &cached,
+                                &select_temp,
+                                &slice_range,
+                                &slice_tile,
+                                &tile_plan,
+                                &plan_scan,
+                                &plan_temp,
+                                &slice_scratch,
+                                &slice_order,
+                                &slice_order_temp,
+                                &partials,
+                                &saturated_from,
+                                &slot_finished,
+                                &catgs_counters,
+                                &yuv})
       b += g->bytes();
     return b;
   }
@@ -190,6 +236,5 @@ struct CudaRenderer::State {
     if (stream) cudaStreamDestroy(stream);
   }
 };
-
 
 }  // namespace catgs::cuda

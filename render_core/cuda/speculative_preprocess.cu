@@ -50,12 +50,12 @@ __device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 
 // count the tiles it touches (big trails are left to count_big_tiles, a warp each). Local arrays
 // hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory. Held to 64
 // registers (4 blocks of 256 per SM, 20 bytes of spill): the kernel is compute-bound, and at 72
-// registers (3 blocks) it took 1.50 ms a city bicycle key frame against 1.33 ms (H100).
+// registers (3 blocks) it was slower (tunables.h kPathKernelMinBlocks).
 __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBlocks)
-speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening widening,
-                              Projected out, Trails trails,
-                              unsigned long long* visible,  // [1]
-                              BigList big) {
+    speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening widening, Projected out,
+                                  Trails trails,
+                                  unsigned long long* visible,  // [1]
+                                  BigList big) {
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   uint32_t touched = 0;
   bool is_big = false;
@@ -68,8 +68,7 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
       if (path_misses_image(scene, i, mean, q_max, path, widening)) break;
       const fm::Cov3 cov3 = fm::covariance_3d(
           {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
-          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
-           scene.rotations[4 * i + 3]});
+          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});
       glm::vec2 means[kMaxPathCameras];
       glm::vec3 covs[kMaxPathCameras];
       int seen = 0;
@@ -131,9 +130,9 @@ speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening wi
 
 // M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-max_screen_motion_kernel(const float* means,  // [N, 3]
-                         uint64_t n, CameraParams a, CameraParams b, float min_depth,
-                         unsigned* max_bits) {  // [1]
+    max_screen_motion_kernel(const float* means,  // [N, 3]
+                             uint64_t n, CameraParams a, CameraParams b, float min_depth,
+                             unsigned* max_bits) {  // [1]
   float m = 0.0f;
   const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
   for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < n; i += stride) {
@@ -152,8 +151,8 @@ max_screen_motion_kernel(const float* means,  // [N, 3]
 }  // namespace
 
 void speculative_preprocess(const SceneView& scene, const PathParams& path, const TrailWidening& widening,
-                            const Projected& out, const Trails& trails, unsigned long long* visible,
-                            const BigList& big, cudaStream_t stream) {
+                            const Projected& out, const Trails& trails, unsigned long long* visible, const BigList& big,
+                            cudaStream_t stream) {
   if (path.count < 1 || path.count > kMaxPathCameras)
     throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPathCameras) + " cameras");
   if (scene.n == 0) return;
@@ -162,8 +161,7 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
   speculative_preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
       scene, path, widening, out, trails, visible, big);
   CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");
-  const TileTests tests{TileTestKind::trail, nullptr, trails, path.cam[0].width,
-                        path.cam[0].height};
+  const TileTests tests{TileTestKind::trail, nullptr, trails, path.cam[0].width, path.cam[0].height};
   count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
 }
 
@@ -172,8 +170,8 @@ void max_screen_motion(const SceneView& scene, const CameraParams& a, const Came
   if (scene.n == 0) return;
   const uint64_t want = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   const auto blocks = static_cast<unsigned>(want < 4096 ? want : 4096);
-  max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene.means, scene.n, a, b,
-                                                                          min_depth, max_bits);
+  max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene.means, scene.n, a, b, min_depth,
+                                                                          max_bits);
   CATGS_CUDA_LAUNCHED("max_screen_motion_kernel");
 }
 

@@ -16,14 +16,14 @@ namespace catgs::cuda::stages {
 // beyond one same image edge at every camera of the path is culled before any 2D covariance
 // (as cpu::speculative_preprocess).
 void speculative_preprocess(const SceneView& scene, const PathParams& path, const TrailWidening& widening,
-                            const Projected& out, const Trails& trails, unsigned long long* visible,
-                            const BigList& big, cudaStream_t stream);
+                            const Projected& out, const Trails& trails, unsigned long long* visible, const BigList& big,
+                            cudaStream_t stream);
 
 // catgs planner input (speculative_preprocess.cu; mirrors cpu::max_screen_motion): the largest
 // screen motion (pixels) between cameras a and b of the means visible in a deeper than
 // min_depth, as float bits into *max_bits (which must hold 0 on entry; atomicMax on the bits of
 // non-negative floats orders like the floats).
-void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b,
-                       float min_depth, unsigned* max_bits, cudaStream_t stream);
+void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b, float min_depth,
+                       unsigned* max_bits, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

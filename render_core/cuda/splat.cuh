@@ -18,8 +18,7 @@ namespace catgs::cuda::stages {
 // Halving is exact in float, so this is the value the rasterizers worked out per fetched entry
 // before it was stored here (-logf(255 opacity) - 1e-3), with one logf per Gaussian instead.
 __device__ __forceinline__ Splat make_splat(glm::vec2 mean, glm::vec3 conic, float opacity, float q_max) {
-  return {make_float4(mean.x, mean.y, conic.x, conic.y),
-          make_float4(conic.z, opacity, q_max, -0.5f * q_max - 1e-3f)};
+  return {make_float4(mean.x, mean.y, conic.x, conic.y), make_float4(conic.z, opacity, q_max, -0.5f * q_max - 1e-3f)};
 }
 
 // A Gaussian culled at a sub-frame's pose: opacity 0, q_max -inf (no quadratic is below it) and

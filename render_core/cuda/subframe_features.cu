@@ -27,19 +27,19 @@ struct Listed {
 // skips its colour and trail reads (the kernel is bound by DRAM: ncu, 2.7 TB/s on a city
 // bicycle sub-frame). Only an ellipse that reaches a pixel must lie inside its trail. At most
 // 64 registers (4 blocks of 256 per SM): the cull took it to 72, and 3 blocks per SM made the
-// kernel slower than before the cull (H200, city flowers sub-frames 0.49 -> 0.56 ms).
+// kernel slower than before the cull (tunables.h kSubframeFeaturesMinBlocks).
 __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeaturesMinBlocks)
-subframe_features_kernel(SceneView scene, CameraParams cam,
-                         const uint32_t* cached,  // [count]
-                         uint32_t count, Projected out, Trails trails,
-                         unsigned* outside) {     // [1]
+    subframe_features_kernel(SceneView scene, CameraParams cam,
+                             const uint32_t* cached,  // [count]
+                             uint32_t count, Projected out, Trails trails,
+                             unsigned* outside) {  // [1]
   const uint32_t c = blockIdx.x * blockDim.x + threadIdx.x;
   if (c >= count) return;
   // Once some Gaussian has left its trail the frame is drawn again as a key frame, which
   // recomputes every feature: the blocks that start after that have nothing useful to do. Read
   // through volatile (other blocks of this kernel write it); no barrier or warp collective
-  // follows, so threads may disagree. On the city's bicycle path half the sub-frame attempts fail,
-  // and their features cost 0.69 ms each (ncu, RESULTS.md).
+  // follows, so threads may disagree. On the fast real paths many sub-frame attempts fail (RESULTS.md,
+  // "Where a speculative key frame's time goes").
   if (*static_cast<volatile unsigned*>(outside) != 0u) return;
   const uint32_t i = cached[c];
   const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
@@ -51,8 +51,7 @@ subframe_features_kernel(SceneView scene, CameraParams cam,
   }
   const fm::Cov3 cov3 = fm::covariance_3d(
       {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
-      {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2],
-       scene.rotations[4 * i + 3]});
+      {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});
   const glm::vec3 cov2 = fm::covariance_2d(cov3, cam.R, p, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) {
@@ -91,9 +90,9 @@ subframe_features_kernel(SceneView scene, CameraParams cam,
 // pixel at this pose raises the flag (fm::unlisted_reaches_image; most return after reading
 // tiles_touched or after the cheap bound).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-unlisted_kernel(SceneView scene, CameraParams cam,
-                const uint32_t* tiles_touched,  // [N] of the key frame
-                unsigned* outside) {            // [1]
+    unlisted_kernel(SceneView scene, CameraParams cam,
+                    const uint32_t* tiles_touched,  // [N] of the key frame
+                    unsigned* outside) {            // [1]
   // Already raised by the features kernel (queued before): the frame re-keys, nothing to add.
   if (*outside) return;
   const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
@@ -107,8 +106,8 @@ unlisted_kernel(SceneView scene, CameraParams cam,
 
 }  // namespace
 
-void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
-                    unsigned* outside, cudaStream_t stream) {
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched, unsigned* outside,
+                    cudaStream_t stream) {
   if (scene.n == 0) return;
   const uint64_t want = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   const auto blocks = static_cast<unsigned>(want < 8192 ? want : 8192);
@@ -130,13 +129,13 @@ void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, 
                                    static_cast<int64_t>(n), Listed{tiles_touched}, stream));
 }
 
-void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached,
-                              uint32_t count, const Projected& projected, const Trails& trails,
-                              unsigned* outside, cudaStream_t stream) {
+void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached, uint32_t count,
+                              const Projected& projected, const Trails& trails, unsigned* outside,
+                              cudaStream_t stream) {
   if (count == 0) return;
   const unsigned blocks = (count + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
-  subframe_features_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, cached, count, projected,
-                                                                          trails, outside);
+  subframe_features_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, cached, count, projected, trails,
+                                                                          outside);
   CATGS_CUDA_LAUNCHED("subframe_features_kernel");
 }
 

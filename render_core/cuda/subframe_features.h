@@ -12,21 +12,20 @@ namespace catgs::cuda::stages {
 // Frustum cache (subframe_features.cu; paper sec. 3.2): the indices of the Gaussians with
 // tiles_touched > 0, increasing, into cached[]; their number into *count (device).
 std::size_t select_cached_temp_bytes(uint64_t n);
-void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, unsigned* count,
-                   void* temp, std::size_t temp_bytes, cudaStream_t stream);
+void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, unsigned* count, void* temp,
+                   std::size_t temp_bytes, cudaStream_t stream);
 
 // catgs sub-frame, stage 1 (subframe_features.cu; mirrors cpu::update_subframe_features):
 // recomputes the splat (mean, conic, opacity: 0 when culled here) and colour of the `count` cached
 // Gaussians at `cam`, and sets *outside = 1 when an on-screen ellipse reaches a tile its trail was
 // not listed in (the frame must then be a key frame). *outside must hold 0 on entry.
-void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached,
-                              uint32_t count, const Projected& projected, const Trails& trails,
-                              unsigned* outside, cudaStream_t stream);
+void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached, uint32_t count,
+                              const Projected& projected, const Trails& trails, unsigned* outside, cudaStream_t stream);
 
 // catgs sub-frame (subframe_features.cu; mirrors cpu::unlisted_reach_image): sets *outside = 1
 // when a Gaussian the key frame did not list (tiles_touched == 0) reaches a pixel at `cam`: it is
 // outside the frustum cache, so only a key frame can draw it.
-void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
-                    unsigned* outside, cudaStream_t stream);
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched, unsigned* outside,
+                    cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

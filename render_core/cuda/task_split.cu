@@ -21,18 +21,18 @@ __device__ __forceinline__ uint32_t slice_count(uint32_t load, uint64_t avg, boo
   return (!split || load <= 2 * avg) ? 1u : static_cast<uint32_t>(load / avg);
 }
 
-__global__ void count_slices_kernel(const uint2* ranges,  // [tiles]
+__global__ void count_slices_kernel(const uint2* __restrict__ ranges,  // [tiles]
                                     uint32_t tiles, uint64_t avg, bool split,
-                                    uint64_t* packed) {   // [tiles] (slots << 32 | slices)
+                                    uint64_t* __restrict__ packed) {  // [tiles] (slots << 32 | slices)
   const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   if (t >= tiles) return;
   const uint32_t n = slice_count(ranges[t].y - ranges[t].x, avg, split);
   packed[t] = (static_cast<uint64_t>(n > 1 ? n : 0u) << 32) | n;
 }
 
-__global__ void write_slices_kernel(const uint2* ranges,   // [tiles]
+__global__ void write_slices_kernel(const uint2* ranges,  // [tiles]
                                     uint32_t tiles, uint64_t avg, bool split,
-                                    const uint64_t* first, // [tiles] exclusive scan of packed
+                                    const uint64_t* first,  // [tiles] exclusive scan of packed
                                     SlicePlan plan) {
   const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   if (t >= tiles) return;
@@ -57,8 +57,8 @@ __global__ void write_slices_kernel(const uint2* ranges,   // [tiles]
 
 // Sort key of a slice: k in the high bits, then the complement of its length; unused slots last.
 __global__ void slice_keys_kernel(SlicePlan plan, uint64_t capacity,
-                                  uint32_t* keys,  // [capacity]
-                                  uint32_t* ids) { // [capacity]
+                                  uint32_t* keys,   // [capacity]
+                                  uint32_t* ids) {  // [capacity]
   const uint64_t s = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (s >= capacity) return;
   const uint2 tk = plan.slice_tile[s];

@@ -18,12 +18,11 @@ __device__ inline uint32_t tile_of(uint32_t key) { return key; }
 
 template <typename Key>
 __global__ void __launch_bounds__(tune::kEntryThreads)
-tile_ranges_kernel(const Key* keys,       // [L] sorted
-                   uint64_t entries, uint32_t tiles,
-                   uint2* ranges) {       // [tiles], zeroed
+    tile_ranges_kernel(const Key* __restrict__ keys,  // [L] sorted
+                       uint64_t entries, uint32_t tiles,
+                       uint2* __restrict__ ranges) {  // [tiles], zeroed
   const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
-  for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < entries;
-       i += stride) {
+  for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < entries; i += stride) {
     const uint32_t tile = tile_of(keys[i]);
     if (tile >= tiles) continue;  // sentinel
     if (i == 0 || tile_of(keys[i - 1]) != tile) ranges[tile].x = static_cast<uint32_t>(i);
@@ -32,10 +31,10 @@ tile_ranges_kernel(const Key* keys,       // [L] sorted
 }
 
 // Heaviest tiles first: keys = entries of each tile, values = tile ids.
-__global__ void tile_loads_kernel(const uint2* ranges,  // [tiles]
+__global__ void tile_loads_kernel(const uint2* __restrict__ ranges,  // [tiles]
                                   uint32_t tiles,
-                                  uint32_t* loads,      // [tiles]
-                                  uint32_t* ids) {      // [tiles]
+                                  uint32_t* __restrict__ loads,  // [tiles]
+                                  uint32_t* __restrict__ ids) {  // [tiles]
   const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
   if (t >= tiles) return;
   loads[t] = ranges[t].y - ranges[t].x;
@@ -47,14 +46,13 @@ __global__ void tile_loads_kernel(const uint2* ranges,  // [tiles]
 std::size_t tile_order_temp_bytes(uint32_t tiles) {
   std::size_t bytes = 0;
   CATGS_CUDA(cub::DeviceRadixSort::SortPairsDescending(nullptr, bytes, static_cast<uint32_t*>(nullptr),
-                                                       static_cast<uint32_t*>(nullptr),
-                                                       static_cast<uint32_t*>(nullptr),
+                                                       static_cast<uint32_t*>(nullptr), static_cast<uint32_t*>(nullptr),
                                                        static_cast<uint32_t*>(nullptr), tiles));
   return bytes;
 }
 
-void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch,
-                 uint32_t* order, void* temp, std::size_t temp_bytes, cudaStream_t stream) {
+void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch, uint32_t* order, void* temp,
+                 std::size_t temp_bytes, cudaStream_t stream) {
   uint32_t* loads = scratch;
   uint32_t* sorted_loads = scratch + tiles;
   uint32_t* ids = scratch + 2 * static_cast<std::size_t>(tiles);
@@ -62,15 +60,14 @@ void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t
   CATGS_CUDA_LAUNCHED("tile_loads_kernel");
   int bits = 1;  // a tile holds at most `entries`: sort only the bits that can be set
   while (bits < 32 && (entries >> bits) != 0) ++bits;
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairsDescending(temp, temp_bytes, loads, sorted_loads, ids,
-                                                       order, tiles, 0, bits, stream));
+  CATGS_CUDA(cub::DeviceRadixSort::SortPairsDescending(temp, temp_bytes, loads, sorted_loads, ids, order, tiles, 0,
+                                                       bits, stream));
 }
 
 namespace {
 
 template <typename Key>
-void launch_tile_ranges(const Key* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
-                        cudaStream_t stream) {
+void launch_tile_ranges(const Key* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges, cudaStream_t stream) {
   CATGS_CUDA(cudaMemsetAsync(ranges, 0, sizeof(uint2) * tiles, stream));
   if (entries == 0) return;
   const uint64_t want = (entries + tune::kEntryThreads - 1) / tune::kEntryThreads;
@@ -81,8 +78,7 @@ void launch_tile_ranges(const Key* sorted_keys, uint64_t entries, uint32_t tiles
 
 }  // namespace
 
-void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
-                 cudaStream_t stream) {
+void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges, cudaStream_t stream) {
   launch_tile_ranges(sorted_keys, entries, tiles, ranges, stream);
 }
 

@@ -12,8 +12,7 @@ namespace catgs::cuda::stages {
 // Stage 4 (tile_ranges.cu): [start, end) of each tile in the sorted list; tiles without entries get
 // [0, 0). Sentinel entries (tile id >= tiles) are ignored. Keys are [tile | depth] (64-bit) or,
 // with the depth-first sort, tile ids (32-bit).
-void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
-                 cudaStream_t stream);
+void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges, cudaStream_t stream);
 void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
 
@@ -22,7 +21,7 @@ void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t ti
 // in behind them (longest-processing-time-first scheduling) instead of the heavy tiles of the
 // bottom rows starting last. scratch: [3 * tiles].
 std::size_t tile_order_temp_bytes(uint32_t tiles);
-void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch,
-                 uint32_t* order, void* temp, std::size_t temp_bytes, cudaStream_t stream);
+void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch, uint32_t* order, void* temp,
+                 std::size_t temp_bytes, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

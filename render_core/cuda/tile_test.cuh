@@ -16,10 +16,10 @@ namespace catgs::cuda::stages {
 
 struct GaussianTileTest {
   TileTestKind kind;
-  glm::vec2 mean;             // ellipse: 2D mean
-  glm::vec3 conic;            // ellipse conic
-  float q;                    // q_max
-  fm::TrailTileTest trail;    // trail: its constants, worked out once per Gaussian
+  glm::vec2 mean;           // ellipse: 2D mean
+  glm::vec3 conic;          // ellipse conic
+  float q;                  // q_max
+  fm::TrailTileTest trail;  // trail: its constants, worked out once per Gaussian
   int width, height;
 
   __device__ __forceinline__ bool operator()(int tx, int ty) const {

@@ -66,8 +66,7 @@ static_assert(kRasterThreads % 32 == 0, "rasterizer blocks are whole warps");
 static_assert(kMaxTilesPerSide <= 65535, "tile rectangles are stored as ushort4");
 static_assert(static_cast<uint64_t>(kMaxTilesPerSide) * kMaxTilesPerSide < (1ull << 32),
               "tile ids (and the sentinel) must fit the 32 key bits above the depth");
-static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0 && kBigThreads % 32 == 0,
-              "blocks are whole warps");
+static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0 && kBigThreads % 32 == 0, "blocks are whole warps");
 static_assert(kBigRectTiles >= 1, "big Gaussians have more tiles than one thread handles well");
 static_assert(kBigRectTiles <= 32, "a small Gaussian's trail tiles fit one 32-bit mask (Trails::tile_mask)");
 static_assert(kSliceRasterMinBlocks * kRasterThreads <= 2048, "an SM holds at most 2048 threads");

@@ -23,12 +23,12 @@
 
 namespace catgs::fm {
 
-inline constexpr int kTileSize = 16;                  // tiles of 16 x 16 pixels
-inline constexpr float kMinAlpha = 1.0f / 255.0f;     // alpha below this is skipped
-inline constexpr float kMaxAlpha = 0.99f;             // alpha is clamped to this
-inline constexpr float kMinTransmittance = 1e-4f;     // a pixel stops before T would drop below
-inline constexpr float kLowPass = 0.3f;               // px^2 added to the 2D covariance diagonal
-inline constexpr float kFrustumClamp = 1.3f;          // Jacobian clamped to 1.3x the fov
+inline constexpr int kTileSize = 16;               // tiles of 16 x 16 pixels
+inline constexpr float kMinAlpha = 1.0f / 255.0f;  // alpha below this is skipped
+inline constexpr float kMaxAlpha = 0.99f;          // alpha is clamped to this
+inline constexpr float kMinTransmittance = 1e-4f;  // a pixel stops before T would drop below
+inline constexpr float kLowPass = 0.3f;            // px^2 added to the 2D covariance diagonal
+inline constexpr float kFrustumClamp = 1.3f;       // Jacobian clamped to 1.3x the fov
 // The exact tile test includes tiles whose best pixel has q slightly above the alpha threshold, so
 // float rounding in exp() can never drop a pixel the rasterizer would blend.
 inline constexpr float kExactQMargin = 1e-3f;
@@ -52,14 +52,16 @@ CATGS_HD glm::mat3 quat_to_mat(glm::vec4 q) {
   q = n > 0.0f ? q / n : glm::vec4(1.0f, 0.0f, 0.0f, 0.0f);
   const float w = q.x, x = q.y, y = q.z, z = q.w;
   // glm::mat3(c0, c1, c2) takes columns.
-  return glm::mat3(1.f - 2.f * (y * y + z * z), 2.f * (x * y + w * z), 2.f * (x * z - w * y),
-                   2.f * (x * y - w * z), 1.f - 2.f * (x * x + z * z), 2.f * (y * z + w * x),
-                   2.f * (x * z + w * y), 2.f * (y * z - w * x), 1.f - 2.f * (x * x + y * y));
+  return glm::mat3(1.f - 2.f * (y * y + z * z), 2.f * (x * y + w * z), 2.f * (x * z - w * y), 2.f * (x * y - w * z),
+                   1.f - 2.f * (x * x + z * z), 2.f * (y * z + w * x), 2.f * (x * z + w * y), 2.f * (y * z - w * x),
+                   1.f - 2.f * (x * x + y * y));
 }
 
 // World 3D covariance Sigma = R S S^T R^T from log-scales and a (w, x, y, z) quaternion;
 // returned as its 6 unique entries (xx, xy, xz, yy, yz, zz).
-struct Cov3 { float xx, xy, xz, yy, yz, zz; };
+struct Cov3 {
+  float xx, xy, xz, yy, yz, zz;
+};
 CATGS_HD Cov3 covariance_3d(glm::vec3 log_scale, glm::vec4 rotation_wxyz) {
   const glm::mat3 R = quat_to_mat(rotation_wxyz);
   const glm::vec3 s(expf(log_scale.x), expf(log_scale.y), expf(log_scale.z));
@@ -75,8 +77,8 @@ CATGS_HD Cov3 covariance_3d(glm::vec3 log_scale, glm::vec4 rotation_wxyz) {
 // camera-space `p_cam`, by EWA: J W Sigma W^T J^T with W the world-to-camera rotation and the
 // perspective Jacobian J evaluated at the mean clamped to 1.3x the field of view; +0.3 px^2 on the
 // diagonal (low-pass filter). tan_half_fov = (W / (2 fx), H / (2 fy)).
-CATGS_HD glm::vec3 covariance_2d(const Cov3& S, const glm::mat3& W, glm::vec3 p_cam, float fx,
-                                 float fy, glm::vec2 tan_half_fov) {
+CATGS_HD glm::vec3 covariance_2d(const Cov3& S, const glm::mat3& W, glm::vec3 p_cam, float fx, float fy,
+                                 glm::vec2 tan_half_fov) {
   const float lim_x = kFrustumClamp * tan_half_fov.x;
   const float lim_y = kFrustumClamp * tan_half_fov.y;
   const float z = p_cam.z;
@@ -124,10 +126,10 @@ CATGS_HD float three_sigma_radius(glm::vec3 cov) {
 }
 
 // Tile rectangle [min, max) in tile units (x0, y0, x1, y1), clamped to the grid.
-struct TileRect { int x0, y0, x1, y1; };
-CATGS_HD int tile_count(const TileRect& r) {
-  return (r.x1 > r.x0 && r.y1 > r.y0) ? (r.x1 - r.x0) * (r.y1 - r.y0) : 0;
-}
+struct TileRect {
+  int x0, y0, x1, y1;
+};
+CATGS_HD int tile_count(const TileRect& r) { return (r.x1 > r.x0 && r.y1 > r.y0) ? (r.x1 - r.x0) * (r.y1 - r.y0) : 0; }
 
 // vanilla: the reference 3DGS getRect over a square of half-size `radius` around `mean`.
 CATGS_HD TileRect square_tile_rect(glm::vec2 mean, float radius, int grid_w, int grid_h) {
@@ -144,15 +146,14 @@ CATGS_HD float opacity_aware_qmax(float opacity) { return 2.0f * logf(255.0f * o
 
 // exact: tiles holding pixel centres inside the ellipse q <= q_max (bounding box half-widths
 // sqrt(q_max * cov_xx), sqrt(q_max * cov_yy)), clamped to the grid.
-CATGS_HD TileRect ellipse_tile_rect(glm::vec2 mean, glm::vec3 cov, float q_max, int width,
-                                    int height) {
+CATGS_HD TileRect ellipse_tile_rect(glm::vec2 mean, glm::vec3 cov, float q_max, int width, int height) {
   const float hx = sqrtf(q_max * cov.x), hy = sqrtf(q_max * cov.z);
   const float px0 = fmaxf(0.0f, ceilf(mean.x - hx)), py0 = fmaxf(0.0f, ceilf(mean.y - hy));
   const float px1 = fminf(static_cast<float>(width - 1), floorf(mean.x + hx));
   const float py1 = fminf(static_cast<float>(height - 1), floorf(mean.y + hy));
   if (px1 < px0 || py1 < py0) return {0, 0, 0, 0};
-  return {static_cast<int>(px0) / kTileSize, static_cast<int>(py0) / kTileSize,
-          static_cast<int>(px1) / kTileSize + 1, static_cast<int>(py1) / kTileSize + 1};
+  return {static_cast<int>(px0) / kTileSize, static_cast<int>(py0) / kTileSize, static_cast<int>(px1) / kTileSize + 1,
+          static_cast<int>(py1) / kTileSize + 1};
 }
 
 // Minimum of the positive definite q(d) over the rectangle dx in [x0, x1], dy in [y0, y1]
@@ -173,14 +174,13 @@ CATGS_HD float min_quadratic_over_rect(glm::vec3 conic, float x0, float x1, floa
 
 // exact: does tile (tx, ty) hold a pixel centre with q <= q_max? Pixel centres of the tile that lie
 // inside the image span [tx*16, min(tx*16+15, W-1)] x [ty*16, min(ty*16+15, H-1)].
-CATGS_HD bool ellipse_touches_tile(glm::vec2 mean, glm::vec3 conic, float q_max, int tx, int ty,
-                                   int width, int height) {
+CATGS_HD bool ellipse_touches_tile(glm::vec2 mean, glm::vec3 conic, float q_max, int tx, int ty, int width,
+                                   int height) {
   const float x0 = static_cast<float>(tx * kTileSize);
   const float y0 = static_cast<float>(ty * kTileSize);
   const float x1 = fminf(x0 + (kTileSize - 1), static_cast<float>(width - 1));
   const float y1 = fminf(y0 + (kTileSize - 1), static_cast<float>(height - 1));
-  return min_quadratic_over_rect(conic, x0 - mean.x, x1 - mean.x, y0 - mean.y, y1 - mean.y) <=
-         q_max + kExactQMargin;
+  return min_quadratic_over_rect(conic, x0 - mean.x, x1 - mean.x, y0 - mean.y, y1 - mean.y) <= q_max + kExactQMargin;
 }
 
 // View-dependent colour from SH of degree <= 3 at unit direction `dir` (camera centre -> mean),
@@ -197,15 +197,13 @@ CATGS_HD glm::vec3 sh_to_color(int degree, const float* sh, glm::vec3 dir) {
     if (degree > 1) {
       const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
       result = result + 1.0925484305920792f * xy * c(4) + -1.0925484305920792f * yz * c(5) +
-               0.31539156525252005f * (2.0f * zz - xx - yy) * c(6) +
-               -1.0925484305920792f * xz * c(7) + 0.5462742152960396f * (xx - yy) * c(8);
+               0.31539156525252005f * (2.0f * zz - xx - yy) * c(6) + -1.0925484305920792f * xz * c(7) +
+               0.5462742152960396f * (xx - yy) * c(8);
       if (degree > 2) {
-        result = result + -0.5900435899266435f * y * (3.0f * xx - yy) * c(9) +
-                 2.890611442640554f * xy * z * c(10) +
+        result = result + -0.5900435899266435f * y * (3.0f * xx - yy) * c(9) + 2.890611442640554f * xy * z * c(10) +
                  -0.4570457994644658f * y * (4.0f * zz - xx - yy) * c(11) +
                  0.3731763325901154f * z * (2.0f * zz - 3.0f * xx - 3.0f * yy) * c(12) +
-                 -0.4570457994644658f * x * (4.0f * zz - xx - yy) * c(13) +
-                 1.445305721320277f * z * (xx - yy) * c(14) +
+                 -0.4570457994644658f * x * (4.0f * zz - xx - yy) * c(13) + 1.445305721320277f * z * (xx - yy) * c(14) +
                  -0.5900435899266435f * x * (xx - 3.0f * yy) * c(15);
       }
     }
@@ -235,7 +233,16 @@ CATGS_HD uint64_t render_key(uint32_t tile, float depth) {
 
 // The View of a Camera (host only: Camera's helpers are not device code).
 inline View view_of(const Camera& c) {
-  return {c.R, c.t, c.fx, c.fy, c.cx, c.cy, c.width, c.height, c.near_plane, c.far_plane,
+  return {c.R,
+          c.t,
+          c.fx,
+          c.fy,
+          c.cx,
+          c.cy,
+          c.width,
+          c.height,
+          c.near_plane,
+          c.far_plane,
           glm::vec2(static_cast<float>(c.width) / (2.0f * c.fx), static_cast<float>(c.height) / (2.0f * c.fy))};
 }
 
@@ -272,8 +279,8 @@ CATGS_HD unsigned edges_beyond(glm::vec3 p_cam, float max_scale, float q_max, co
   const float jf = sqrtf(v.fx * v.fx * (1.0f + tx * tx) + v.fy * v.fy * (1.0f + ty * ty)) / z;
   const float r = widen * (sqrtf(q_max) * (max_scale * jf + sqrtf(kLowPass)) + 1.0f) + extra_px;
   const float u = v.fx * p_cam.x / z + v.cx - 0.5f, w = v.fy * p_cam.y / z + v.cy - 0.5f;
-  return (u + r < 0.0f ? 1u : 0u) | (u - r > static_cast<float>(v.width - 1) ? 2u : 0u) |
-         (w + r < 0.0f ? 4u : 0u) | (w - r > static_cast<float>(v.height - 1) ? 8u : 0u);
+  return (u + r < 0.0f ? 1u : 0u) | (u - r > static_cast<float>(v.width - 1) ? 2u : 0u) | (w + r < 0.0f ? 4u : 0u) |
+         (w - r > static_cast<float>(v.height - 1) ? 8u : 0u);
 }
 CATGS_HD bool may_reach_image(glm::vec3 p_cam, float max_scale, float q_max, const View& v) {
   return edges_beyond(p_cam, max_scale, q_max, v) == 0u;
@@ -296,9 +303,9 @@ CATGS_HD bool unlisted_reaches_image(const float* mean, const float* log_scale, 
   if (!(p.z > v.near_plane) || p.z > v.far_plane) return false;
   const float max_scale = max_scale_of(log_scale);
   if (!may_reach_image(p, max_scale, q_max, v)) return false;
-  const glm::vec3 cov2 = covariance_2d(covariance_3d({log_scale[0], log_scale[1], log_scale[2]},
-                                                     {rotation[0], rotation[1], rotation[2], rotation[3]}),
-                                       v.R, p, v.fx, v.fy, v.tan_half_fov);
+  const glm::vec3 cov2 = covariance_2d(
+      covariance_3d({log_scale[0], log_scale[1], log_scale[2]}, {rotation[0], rotation[1], rotation[2], rotation[3]}),
+      v.R, p, v.fx, v.fy, v.tan_half_fov);
   glm::vec3 conic;
   if (!conic_from_cov2d(cov2, &conic)) return false;
   const glm::vec2 mean2d(v.fx * p.x / p.z + v.cx - 0.5f, v.fy * p.y / p.z + v.cy - 0.5f);

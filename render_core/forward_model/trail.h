@@ -112,19 +112,18 @@ CATGS_HD bool trail_touches_tile(const TrailTileTest& t, int tx, int ty, int wid
   const float x0 = static_cast<float>(tx * kTileSize), y0 = static_cast<float>(ty * kTileSize);
   const float x1 = fminf(x0 + (kTileSize - 1), static_cast<float>(width - 1));
   const float y1 = fminf(y0 + (kTileSize - 1), static_cast<float>(height - 1));
-  return min_quadratic_over_swept_rect(t, x0 - t.mean0.x, x1 - t.mean0.x, y0 - t.mean0.y, y1 - t.mean0.y) <=
-         t.q_limit;
+  return min_quadratic_over_swept_rect(t, x0 - t.mean0.x, x1 - t.mean0.x, y0 - t.mean0.y, y1 - t.mean0.y) <= t.q_limit;
 }
 
 // The same, for a caller that asks about one tile (it pays the per-Gaussian divisions each time).
-CATGS_HD bool trail_touches_tile(glm::vec2 mean0, glm::vec2 motion, glm::vec3 conic, float q_trail, int tx,
-                                 int ty, int width, int height) {
+CATGS_HD bool trail_touches_tile(glm::vec2 mean0, glm::vec2 motion, glm::vec3 conic, float q_trail, int tx, int ty,
+                                 int width, int height) {
   return trail_touches_tile(make_trail_tile_test(mean0, motion, conic, q_trail), tx, ty, width, height);
 }
 
 // Tiles of the bounding box of a trail: both end ellipses (cov = the trail's 2D covariance).
-CATGS_HD TileRect trail_tile_rect(glm::vec2 mean0, glm::vec2 motion, glm::vec3 cov, float q_trail,
-                                  int width, int height) {
+CATGS_HD TileRect trail_tile_rect(glm::vec2 mean0, glm::vec2 motion, glm::vec3 cov, float q_trail, int width,
+                                  int height) {
   // The box of the swept shape: both end ellipses' boxes and all between (either end may lie
   // off screen while the path crosses it).
   const float hx = sqrtf(q_trail * cov.x), hy = sqrtf(q_trail * cov.z);
@@ -134,8 +133,8 @@ CATGS_HD TileRect trail_tile_rect(glm::vec2 mean0, glm::vec2 motion, glm::vec3 c
   const float px1 = fminf(static_cast<float>(width - 1), floorf(hi.x));
   const float py1 = fminf(static_cast<float>(height - 1), floorf(hi.y));
   if (px1 < px0 || py1 < py0) return {0, 0, 0, 0};
-  return {static_cast<int>(px0) / kTileSize, static_cast<int>(py0) / kTileSize,
-          static_cast<int>(px1) / kTileSize + 1, static_cast<int>(py1) / kTileSize + 1};
+  return {static_cast<int>(px0) / kTileSize, static_cast<int>(py0) / kTileSize, static_cast<int>(px1) / kTileSize + 1,
+          static_cast<int>(py1) / kTileSize + 1};
 }
 
 // A 2D covariance that dominates both a and b (U - a and U - b positive semidefinite): a plus the
@@ -159,8 +158,8 @@ CATGS_HD glm::vec3 dominating_cov2d(glm::vec3 a, glm::vec3 b) {
 // offset of `mean` from the nearest point of the path in the trail_cov metric,
 //   sqrt(lambda * q_max) + sqrt(delta^T trail_cov^-1 delta) <= sqrt(q_trail)
 // is sufficient (support functions, Cauchy-Schwarz). False: render this frame as a key frame.
-CATGS_HD bool trail_contains(glm::vec2 mean0, glm::vec2 motion, glm::vec3 trail_cov, float q_trail,
-                             glm::vec2 mean, glm::vec3 cov, float q_max) {
+CATGS_HD bool trail_contains(glm::vec2 mean0, glm::vec2 motion, glm::vec3 trail_cov, float q_trail, glm::vec2 mean,
+                             glm::vec3 cov, float q_max) {
   glm::vec3 trail_conic;
   if (!conic_from_cov2d(trail_cov, &trail_conic)) return false;
   const float det_u = trail_cov.x * trail_cov.z - trail_cov.y * trail_cov.y;
@@ -178,8 +177,7 @@ CATGS_HD bool trail_contains(glm::vec2 mean0, glm::vec2 motion, glm::vec3 trail_
 // as a full key frame would, so it need not force one. Cost: two tile tests per reached tile;
 // callers try trail_contains() first.
 CATGS_HD bool listed_tiles_cover(glm::vec2 mean0, glm::vec2 motion, glm::vec3 trail_conic, float q_trail,
-                                 glm::vec2 mean, glm::vec3 cov, glm::vec3 conic, float q_max, int width,
-                                 int height) {
+                                 glm::vec2 mean, glm::vec3 cov, glm::vec3 conic, float q_max, int width, int height) {
   const TileRect r = ellipse_tile_rect(mean, cov, q_max, width, height);
   for (int ty = r.y0; ty < r.y1; ++ty)
     for (int tx = r.x0; tx < r.x1; ++tx)
@@ -210,8 +208,8 @@ struct Trail {
 // (prediction error does not shrink with the Gaussian, and grows with how far the prediction
 // carries it: an error in the camera's velocity moves each Gaussian in proportion to its own
 // screen motion), then scaled by (1 + slack).
-CATGS_HD Trail build_trail(const glm::vec2* means, const glm::vec3* covs, int n, float q_max,
-                           float slack, float margin_px = 0.0f, float motion_margin = 0.0f) {
+CATGS_HD Trail build_trail(const glm::vec2* means, const glm::vec3* covs, int n, float q_max, float slack,
+                           float margin_px = 0.0f, float motion_margin = 0.0f) {
   Trail t{means[0], means[n - 1] - means[0], covs[0], q_max};
   margin_px += motion_margin * sqrtf(t.motion.x * t.motion.x + t.motion.y * t.motion.y);
   for (int k = 1; k < n; ++k) t.cov = dominating_cov2d(t.cov, covs[k]);

@@ -27,7 +27,7 @@ const char* pipeline_name(Pipeline pipeline);
 
 struct RenderOptions {
   Pipeline pipeline = Pipeline::exact;
-  glm::vec3 background{0.0f};  // linear RGB in [0, 1], composited behind the Gaussians
+  glm::vec3 background{0.0f};     // linear RGB in [0, 1], composited behind the Gaussians
   SpeculationParams speculation;  // catgs only
 };
 
@@ -52,13 +52,13 @@ struct FrameStats {
   double merge_ms = 0;  // catgs with task splitting: composing the slices
   double total_ms = 0;
   // catgs pipeline (speculation, paper sec. 3.1-3.4); vanilla/exact frames are all key frames.
-  bool key_frame = true;       // false: a sub-frame served from the frustum and sort caches
-  int window = 0;              // W of the current group (0: no speculation)
+  bool key_frame = true;  // false: a sub-frame served from the frustum and sort caches
+  int window = 0;         // W of the current group (0: no speculation)
   // A key frame first tried as a sub-frame of the open group: some on-screen Gaussian had left
   // its trail (the prediction missed), so the frame was drawn again as a key frame.
   bool subframe_rejected = false;
-  std::size_t cached = 0;      // Gaussians in the frustum cache
-  std::size_t slices = 0;      // rasterization tasks after task splitting (tiles when unsplit)
+  std::size_t cached = 0;  // Gaussians in the frustum cache
+  std::size_t slices = 0;  // rasterization tasks after task splitting (tiles when unsplit)
 };
 
 class Renderer {
@@ -96,8 +96,7 @@ class Renderer {
 // Creates a renderer by name: "cpu", "cuda" or "auto" (CUDA if built and a device is usable, else
 // CPU; `why` receives a one-line reason). The model must outlive the renderer.
 // Throws std::runtime_error when "cuda" is asked for and unavailable.
-std::unique_ptr<Renderer> make_renderer(const std::string& kind,
-                                        std::shared_ptr<const GaussianModel> model,
+std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr<const GaussianModel> model,
                                         const RenderOptions& options, std::string* why = nullptr);
 
 }  // namespace catgs

@@ -18,17 +18,21 @@ Pipeline parse_pipeline(const std::string& name) {
 
 const char* pipeline_name(Pipeline p) {
   switch (p) {
-    case Pipeline::vanilla: return "vanilla";
-    case Pipeline::exact: return "exact";
-    case Pipeline::catgs: return "catgs";
+    case Pipeline::vanilla:
+      return "vanilla";
+    case Pipeline::exact:
+      return "exact";
+    case Pipeline::catgs:
+      return "catgs";
   }
   return "?";
 }
 
-std::unique_ptr<Renderer> make_renderer(const std::string& kind,
-                                        std::shared_ptr<const GaussianModel> model,
+std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr<const GaussianModel> model,
                                         const RenderOptions& options, std::string* why) {
-  auto say = [why](const std::string& s) { if (why) *why = s; };
+  auto say = [why](const std::string& s) {
+    if (why) *why = s;
+  };
   auto make_cpu = [&]() -> std::unique_ptr<Renderer> {
     if (options.pipeline == Pipeline::catgs)
       return std::make_unique<cpu::SpeculativeRenderer>(std::move(model), options);

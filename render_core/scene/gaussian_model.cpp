@@ -34,8 +34,7 @@ void GaussianModel::validate() const {
   auto check = [](const std::vector<float>& v, std::size_t stride, const char* what) {
     for (std::size_t k = 0; k < v.size(); ++k)
       if (!std::isfinite(v[k]))
-        throw std::runtime_error(std::string("non-finite ") + what + " of Gaussian " +
-                                 std::to_string(k / stride));
+        throw std::runtime_error(std::string("non-finite ") + what + " of Gaussian " + std::to_string(k / stride));
   };
   check(means, 3, "mean");
   check(log_scales, 3, "log-scale");

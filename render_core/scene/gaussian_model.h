@@ -55,8 +55,7 @@ struct GaussianModel {
 // Thrown for any unreadable or malformed scene file; what() names the file and the problem.
 class SceneFileError : public std::runtime_error {
  public:
-  SceneFileError(const std::string& path, const std::string& problem)
-      : std::runtime_error(path + ": " + problem) {}
+  SceneFileError(const std::string& path, const std::string& problem) : std::runtime_error(path + ": " + problem) {}
 };
 
 }  // namespace catgs

@@ -15,24 +15,41 @@ constexpr std::size_t kMaxHeaderBytes = 1 << 20;
 }
 
 bool parse_type(const std::string& n, Type* t) {
-  if (n == "char" || n == "int8") *t = Type::i8;
-  else if (n == "uchar" || n == "uint8") *t = Type::u8;
-  else if (n == "short" || n == "int16") *t = Type::i16;
-  else if (n == "ushort" || n == "uint16") *t = Type::u16;
-  else if (n == "int" || n == "int32") *t = Type::i32;
-  else if (n == "uint" || n == "uint32") *t = Type::u32;
-  else if (n == "float" || n == "float32") *t = Type::f32;
-  else if (n == "double" || n == "float64") *t = Type::f64;
-  else return false;
+  if (n == "char" || n == "int8")
+    *t = Type::i8;
+  else if (n == "uchar" || n == "uint8")
+    *t = Type::u8;
+  else if (n == "short" || n == "int16")
+    *t = Type::i16;
+  else if (n == "ushort" || n == "uint16")
+    *t = Type::u16;
+  else if (n == "int" || n == "int32")
+    *t = Type::i32;
+  else if (n == "uint" || n == "uint32")
+    *t = Type::u32;
+  else if (n == "float" || n == "float32")
+    *t = Type::f32;
+  else if (n == "double" || n == "float64")
+    *t = Type::f64;
+  else
+    return false;
   return true;
 }
 
 int type_size(Type t) {
   switch (t) {
-    case Type::i8: case Type::u8: return 1;
-    case Type::i16: case Type::u16: return 2;
-    case Type::i32: case Type::u32: case Type::f32: return 4;
-    case Type::f64: return 8;
+    case Type::i8:
+    case Type::u8:
+      return 1;
+    case Type::i16:
+    case Type::u16:
+      return 2;
+    case Type::i32:
+    case Type::u32:
+    case Type::f32:
+      return 4;
+    case Type::f64:
+      return 8;
   }
   return 0;
 }
@@ -53,16 +70,27 @@ double File::value(const Element& e, uint64_t row, int property) const {
   if (ascii) return e.ascii_rows[row * e.properties.size() + static_cast<std::size_t>(property)];
   const Property& p = e.properties[static_cast<std::size_t>(property)];
   const uint8_t* at = bytes.data() + e.data_offset + row * e.row_size + p.offset;
-  auto load = [at](auto v) { std::memcpy(&v, at, sizeof v); return static_cast<double>(v); };
+  auto load = [at](auto v) {
+    std::memcpy(&v, at, sizeof v);
+    return static_cast<double>(v);
+  };
   switch (p.type) {
-    case Type::i8: return load(int8_t{});
-    case Type::u8: return load(uint8_t{});
-    case Type::i16: return load(int16_t{});
-    case Type::u16: return load(uint16_t{});
-    case Type::i32: return load(int32_t{});
-    case Type::u32: return load(uint32_t{});
-    case Type::f32: return load(float{});
-    case Type::f64: return load(double{});
+    case Type::i8:
+      return load(int8_t{});
+    case Type::u8:
+      return load(uint8_t{});
+    case Type::i16:
+      return load(int16_t{});
+    case Type::u16:
+      return load(uint16_t{});
+    case Type::i32:
+      return load(int32_t{});
+    case Type::u32:
+      return load(uint32_t{});
+    case Type::f32:
+      return load(float{});
+    case Type::f64:
+      return load(double{});
   }
   return 0.0;
 }
@@ -85,7 +113,10 @@ File read_file(const std::string& path) {
     while (header.size() < kMaxHeaderBytes && std::getline(in, line)) {
       header += line + "\n";
       if (!line.empty() && line.back() == '\r') line.pop_back();
-      if (line == "end_header") { ended = true; break; }
+      if (line == "end_header") {
+        ended = true;
+        break;
+      }
     }
     if (header.rfind("ply", 0) != 0) fail("not a PLY file (no 'ply' magic line)");
     if (!ended) fail("PLY header has no end_header line");
@@ -103,15 +134,16 @@ File read_file(const std::string& path) {
     std::string word;
     ls >> word;
     const std::string where = "header line " + std::to_string(line_no) + " '" + line + "'";
-    if (word == "ply" || word == "comment" || word == "obj_info" || word == "end_header" ||
-        word.empty())
-      continue;
+    if (word == "ply" || word == "comment" || word == "obj_info" || word == "end_header" || word.empty()) continue;
     if (word == "format") {
       std::string fmt;
       ls >> fmt;
-      if (fmt == "binary_little_endian") f.ascii = false;
-      else if (fmt == "ascii") f.ascii = true;
-      else fail("unsupported PLY format '" + fmt + "' (binary_little_endian or ascii only)");
+      if (fmt == "binary_little_endian")
+        f.ascii = false;
+      else if (fmt == "ascii")
+        f.ascii = true;
+      else
+        fail("unsupported PLY format '" + fmt + "' (binary_little_endian or ascii only)");
       have_format = true;
     } else if (word == "element") {
       Element e;
@@ -149,25 +181,22 @@ File read_file(const std::string& path) {
     for (auto& e : f.elements) {
       if (e.row_size == 0 && e.count > 0) fail("element '" + e.name + "' has no properties");
       if (e.row_size > 0 && e.count > (file_size - at) / e.row_size)
-        fail("truncated: element '" + e.name + "' declares " + std::to_string(e.count) +
-             " rows of " + std::to_string(e.row_size) + " bytes but only " +
-             std::to_string(file_size - at) + " bytes remain");
+        fail("truncated: element '" + e.name + "' declares " + std::to_string(e.count) + " rows of " +
+             std::to_string(e.row_size) + " bytes but only " + std::to_string(file_size - at) + " bytes remain");
       e.data_offset = at;
       at += e.count * e.row_size;
     }
-    if (at != file_size)
-      fail(std::to_string(file_size - at) + " bytes after the last element (wrong counts?)");
+    if (at != file_size) fail(std::to_string(file_size - at) + " bytes after the last element (wrong counts?)");
     f.bytes.resize(file_size);
     in.seekg(0);
-    if (!in.read(reinterpret_cast<char*>(f.bytes.data()), static_cast<std::streamsize>(file_size)))
-      fail("read error");
+    if (!in.read(reinterpret_cast<char*>(f.bytes.data()), static_cast<std::streamsize>(file_size))) fail("read error");
   } else {
     uint64_t values = 0;
     for (const auto& e : f.elements) values += e.count * e.properties.size();
     // Each ascii value takes at least two bytes (a digit and a separator).
     if (values > body / 2 + 1)
-      fail("truncated: header declares " + std::to_string(values) + " values but the body has " +
-           std::to_string(body) + " bytes");
+      fail("truncated: header declares " + std::to_string(values) + " values but the body has " + std::to_string(body) +
+           " bytes");
     in.clear();
     in.seekg(static_cast<std::streamoff>(body_offset));
     std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -181,8 +210,8 @@ File read_file(const std::string& path) {
           double v = 0;
           const auto res = std::from_chars(p, end, v);
           if (res.ec != std::errc())
-            fail("truncated or malformed ascii value at element '" + e.name + "' row " +
-                 std::to_string(r) + " property '" + e.properties[k].name + "'");
+            fail("truncated or malformed ascii value at element '" + e.name + "' row " + std::to_string(r) +
+                 " property '" + e.properties[k].name + "'");
           e.ascii_rows[r * e.properties.size() + k] = v;
           p = res.ptr;
         }

@@ -39,8 +39,7 @@ uint32_t quantize(float t, int bits) {
 
 float normalized(float v, float lo, float hi) { return hi > lo ? (v - lo) / (hi - lo) : 0.0f; }
 
-void finish(std::ofstream& out, const std::string& header, const std::string& body,
-            const std::string& path) {
+void finish(std::ofstream& out, const std::string& header, const std::string& body, const std::string& path) {
   out.write(header.data(), static_cast<std::streamsize>(header.size()));
   out.write(body.data(), static_cast<std::streamsize>(body.size()));
   if (!out) throw SceneFileError(path, "write failed");
@@ -82,9 +81,9 @@ void write_compressed_ply(const GaussianModel& m, const std::string& path) {
   std::ostringstream h;
   h << "ply\nformat binary_little_endian 1.0\ncomment written by catgs (SuperSplat compressed PLY)\n"
     << "element chunk " << chunks << "\n";
-  for (const char* p : {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x",
-                        "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z",
-                        "min_r", "min_g", "min_b", "max_r", "max_g", "max_b"})
+  for (const char* p :
+       {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x", "min_scale_y", "min_scale_z",
+        "max_scale_x", "max_scale_y", "max_scale_z", "min_r", "min_g", "min_b", "max_r", "max_g", "max_b"})
     h << "property float " << p << "\n";
   h << "element vertex " << n << "\n";
   for (const char* p : {"packed_position", "packed_rotation", "packed_scale", "packed_color"})
@@ -104,8 +103,7 @@ void write_compressed_ply(const GaussianModel& m, const std::string& path) {
     std::fill(hi, hi + 9, -INFINITY);
     for (std::size_t i = begin; i < end; ++i)
       for (int a = 0; a < 3; ++a) {
-        const float v[3] = {m.means[3 * i + a], std::clamp(m.log_scales[3 * i + a], -20.0f, 20.0f),
-                            colour(i, a)};
+        const float v[3] = {m.means[3 * i + a], std::clamp(m.log_scales[3 * i + a], -20.0f, 20.0f), colour(i, a)};
         for (int g = 0; g < 3; ++g) {
           lo[3 * g + a] = std::min(lo[3 * g + a], v[g]);
           hi[3 * g + a] = std::max(hi[3 * g + a], v[g]);
@@ -119,14 +117,13 @@ void write_compressed_ply(const GaussianModel& m, const std::string& path) {
       uint32_t bits[3][3];  // position, scale, colour quantized
       for (int a = 0; a < 3; ++a) {
         bits[0][a] = quantize(normalized(m.means[3 * i + a], lo[a], hi[a]), a == 1 ? 10 : 11);
-        bits[1][a] = quantize(normalized(std::clamp(m.log_scales[3 * i + a], -20.0f, 20.0f),
-                                         lo[3 + a], hi[3 + a]), a == 1 ? 10 : 11);
+        bits[1][a] = quantize(normalized(std::clamp(m.log_scales[3 * i + a], -20.0f, 20.0f), lo[3 + a], hi[3 + a]),
+                              a == 1 ? 10 : 11);
         bits[2][a] = quantize(normalized(colour(i, a), lo[6 + a], hi[6 + a]), 8);
       }
       put(vertex_body, (bits[0][0] << 21) | (bits[0][1] << 11) | bits[0][2]);
       // Rotation: (x, y, z, w), drop the largest |component| (made positive), keep three.
-      float q[4] = {m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3],
-                    m.rotations[4 * i]};
+      float q[4] = {m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3], m.rotations[4 * i]};
       const float len = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
       int largest = 0;
       for (int k = 0; k < 4; ++k) {

@@ -91,8 +91,7 @@ glm::vec3 estimate_up(const GaussianModel& model) {
   for (std::size_t i = 0; i < model.size(); ++i)
     if (inside(i))
       for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b)
-          C[a][b] += (model.means[3 * i + a] - mean[a]) * (model.means[3 * i + b] - mean[b]);
+        for (int b = 0; b < 3; ++b) C[a][b] += (model.means[3 * i + a] - mean[a]) * (model.means[3 * i + b] - mean[b]);
   double V[3][3], w[3];
   jacobi_eigen(C, V, w);
   int k = 0;

@@ -29,8 +29,7 @@ int count_rest(const ply::Element& e, const std::string& path) {
       throw SceneFileError(path, "f_rest properties are not numbered 0.." + std::to_string(m - 1));
   const int degree = degree_of_rest_count(m);
   if (degree < 0)
-    throw SceneFileError(path, std::to_string(m) +
-                                   " f_rest properties match no SH degree (0, 9, 24 or 45)");
+    throw SceneFileError(path, std::to_string(m) + " f_rest properties match no SH degree (0, 9, 24 or 45)");
   return m;
 }
 
@@ -43,9 +42,8 @@ int require(const ply::Element& e, const std::string& name, const std::string& p
 // Stores v after checking it is finite.
 float finite(double v, const ply::Element& e, uint64_t row, int prop, const std::string& path) {
   if (!std::isfinite(v))
-    throw SceneFileError(path, "non-finite value in element '" + e.name + "' row " +
-                                   std::to_string(row) + " property '" +
-                                   e.properties[static_cast<std::size_t>(prop)].name + "'");
+    throw SceneFileError(path, "non-finite value in element '" + e.name + "' row " + std::to_string(row) +
+                                   " property '" + e.properties[static_cast<std::size_t>(prop)].name + "'");
   return static_cast<float>(v);
 }
 
@@ -62,8 +60,8 @@ GaussianModel load_inria(const ply::File& f, const ply::Element& v) {
   const int rest = count_rest(v, path);
   m.sh_degree = degree_of_rest_count(rest);
   m.resize(v.count);
-  const char* names[] = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
-                         "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"};
+  const char* names[] = {"x",       "y",       "z",       "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+                         "scale_0", "scale_1", "scale_2", "rot_0",  "rot_1",  "rot_2",  "rot_3"};
   int idx[14];
   for (int k = 0; k < 14; ++k) idx[k] = require(v, names[k], path);
   std::vector<int> rest_idx(static_cast<std::size_t>(rest));
@@ -89,15 +87,14 @@ float unorm(uint32_t v, int bits) {
   return static_cast<float>(v & mask) / static_cast<float>(mask);
 }
 
-GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk,
-                              const ply::Element& v) {
+GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, const ply::Element& v) {
   const std::string& path = f.path;
   if (chunk.count != (v.count + 255) / 256)
-    throw SceneFileError(path, std::to_string(chunk.count) + " chunks cannot hold " +
-                                   std::to_string(v.count) + " Gaussians (256 per chunk)");
-  const char* range_names[] = {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
-                               "min_scale_x", "min_scale_y", "min_scale_z",
-                               "max_scale_x", "max_scale_y", "max_scale_z"};
+    throw SceneFileError(path, std::to_string(chunk.count) + " chunks cannot hold " + std::to_string(v.count) +
+                                   " Gaussians (256 per chunk)");
+  const char* range_names[] = {"min_x",       "min_y",       "min_z",       "max_x",
+                               "max_y",       "max_z",       "min_scale_x", "min_scale_y",
+                               "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z"};
   int range_idx[12];
   for (int k = 0; k < 12; ++k) range_idx[k] = require(chunk, range_names[k], path);
   const char* color_names[] = {"min_r", "min_g", "min_b", "max_r", "max_g", "max_b"};
@@ -111,8 +108,8 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk,
   int rest = 0;
   if (sh) {
     if (sh->count != v.count)
-      throw SceneFileError(path, "element 'sh' has " + std::to_string(sh->count) +
-                                     " rows but there are " + std::to_string(v.count) + " Gaussians");
+      throw SceneFileError(path, "element 'sh' has " + std::to_string(sh->count) + " rows but there are " +
+                                     std::to_string(v.count) + " Gaussians");
     rest = count_rest(*sh, path);
   }
   GaussianModel m;
@@ -151,10 +148,30 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk,
     const float big = std::sqrt(std::fmax(0.0f, 1.0f - (a * a + b * b + c * c)));
     float xyzw[4];
     switch (rot >> 30) {
-      case 0: xyzw[0] = big; xyzw[1] = a; xyzw[2] = b; xyzw[3] = c; break;
-      case 1: xyzw[0] = a; xyzw[1] = big; xyzw[2] = b; xyzw[3] = c; break;
-      case 2: xyzw[0] = a; xyzw[1] = b; xyzw[2] = big; xyzw[3] = c; break;
-      default: xyzw[0] = a; xyzw[1] = b; xyzw[2] = c; xyzw[3] = big; break;
+      case 0:
+        xyzw[0] = big;
+        xyzw[1] = a;
+        xyzw[2] = b;
+        xyzw[3] = c;
+        break;
+      case 1:
+        xyzw[0] = a;
+        xyzw[1] = big;
+        xyzw[2] = b;
+        xyzw[3] = c;
+        break;
+      case 2:
+        xyzw[0] = a;
+        xyzw[1] = b;
+        xyzw[2] = big;
+        xyzw[3] = c;
+        break;
+      default:
+        xyzw[0] = a;
+        xyzw[1] = b;
+        xyzw[2] = c;
+        xyzw[3] = big;
+        break;
     }
     m.rotations[4 * i] = xyzw[3];
     for (int k = 0; k < 3; ++k) m.rotations[4 * i + 1 + k] = xyzw[k];
@@ -175,8 +192,7 @@ GaussianModel load_scene(const std::string& path) {
   if (v->count == 0) throw SceneFileError(path, "the scene holds no Gaussians (vertex count 0)");
   if (v->count > (1ull << 31)) throw SceneFileError(path, "more than 2^31 Gaussians");
   const ply::Element* chunk = f.element("chunk");
-  GaussianModel m = (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v)
-                                                              : load_inria(f, *v);
+  GaussianModel m = (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v) : load_inria(f, *v);
   m.name = std::filesystem::path(path).filename().string();
   for (const char* suffix : {".compressed.ply", ".ply"}) {
     const std::string s = suffix;

@@ -10,9 +10,8 @@ namespace {
 
 bool finite(const TimedPose& p) {
   return std::isfinite(p.time_s) && std::isfinite(p.position.x) && std::isfinite(p.position.y) &&
-         std::isfinite(p.position.z) && std::isfinite(p.orientation.w) &&
-         std::isfinite(p.orientation.x) && std::isfinite(p.orientation.y) &&
-         std::isfinite(p.orientation.z) && glm::length(p.orientation) > 1e-6f;
+         std::isfinite(p.position.z) && std::isfinite(p.orientation.w) && std::isfinite(p.orientation.x) &&
+         std::isfinite(p.orientation.y) && std::isfinite(p.orientation.z) && glm::length(p.orientation) > 1e-6f;
 }
 
 // Rotation vector (axis * angle, radians) of a unit quaternion, angle in [0, pi].
@@ -29,8 +28,6 @@ glm::quat exp_map(glm::vec3 r) {
   if (angle < 1e-8f) return glm::normalize(glm::quat(1.0f, 0.5f * r.x, 0.5f * r.y, 0.5f * r.z));
   return glm::angleAxis(angle, r / angle);
 }
-
-
 
 // Least-squares line through (t, position) over `poses`: its slope (averages out jitter).
 glm::vec3 fit_line(const std::vector<const TimedPose*>& poses) {
@@ -86,7 +83,7 @@ bool MotionPredictor::add(const TimedPose& in) {
   TimedPose pose = in;
   pose.orientation = glm::normalize(pose.orientation);
   if (!samples_.empty()) {
-    if (pose.time_s < samples_.back().time_s) return false;  // out of order
+    if (pose.time_s < samples_.back().time_s) return false;          // out of order
     if (pose.time_s == samples_.back().time_s) samples_.pop_back();  // same stamp: newest wins
   }
   samples_.push_back(pose);

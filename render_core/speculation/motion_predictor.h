@@ -12,9 +12,9 @@
 namespace catgs {
 
 struct TimedPose {
-  double time_s = 0.0;               // client clock, seconds
-  glm::vec3 position{0.0f};          // camera centre, world units
-  glm::quat orientation{1, 0, 0, 0}; // camera-to-world rotation (OpenCV axes)
+  double time_s = 0.0;                // client clock, seconds
+  glm::vec3 position{0.0f};           // camera centre, world units
+  glm::quat orientation{1, 0, 0, 0};  // camera-to-world rotation (OpenCV axes)
 };
 
 struct MotionPredictorParams {
@@ -30,7 +30,7 @@ struct MotionPredictorParams {
   // ahead. An acceleration needs a longer baseline than a velocity to stay steady under stamp
   // jitter, hence its own window (RESULTS.md, "Constant acceleration").
   double acceleration_window_s = 0.1;
-  std::size_t max_samples = 32; // at most this many poses are kept
+  std::size_t max_samples = 32;  // at most this many poses are kept
 };
 
 class MotionPredictor {

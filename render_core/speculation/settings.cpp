@@ -1,5 +1,6 @@
 #include "speculation/settings.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <sstream>
 #include <stdexcept>
@@ -17,7 +18,7 @@ double parse_number(const std::string& value) {
 
 int parse_int(const std::string& value) {
   const double v = parse_number(value);
-  if (v != static_cast<double>(static_cast<int>(v))) throw std::invalid_argument("not an integer");
+  if (!(v >= -1e9 && v <= 1e9) || v != std::floor(v)) throw std::invalid_argument("not an integer in range");
   return static_cast<int>(v);
 }
 
@@ -42,8 +43,7 @@ const std::vector<SpeculationSetting>& speculation_settings() {
   using V = const std::string&;
   static const std::vector<SpeculationSetting> table = {
       {"window", "W_initial, sub-frames after a key frame (0..32; 0: no speculation)",
-       [](P& p, V v) { p.initial_window = parse_int(v); },
-       [](const P& p) { return std::to_string(p.initial_window); }},
+       [](P& p, V v) { p.initial_window = parse_int(v); }, [](const P& p) { return std::to_string(p.initial_window); }},
       {"depth", "d, world units: only Gaussians deeper than this set the motion M",
        [](P& p, V v) { p.depth_threshold = static_cast<float>(parse_number(v)); },
        [](const P& p) { return number(p.depth_threshold); }},
@@ -51,8 +51,7 @@ const std::vector<SpeculationSetting>& speculation_settings() {
        [](P& p, V v) { p.tile_size = static_cast<float>(parse_number(v)); },
        [](const P& p) { return number(p.tile_size); }},
       {"fps", "F_target: the predicted path is sampled at k / F_target",
-       [](P& p, V v) { p.target_fps = parse_number(v); },
-       [](const P& p) { return number(p.target_fps); }},
+       [](P& p, V v) { p.target_fps = parse_number(v); }, [](const P& p) { return number(p.target_fps); }},
       {"cache", "on/off: the frustum and sort caches (off: every frame a key frame)",
        [](P& p, V v) { p.frustum_and_sort_cache = parse_switch(v); },
        [](const P& p) { return onoff(p.frustum_and_sort_cache); }},
@@ -68,8 +67,7 @@ const std::vector<SpeculationSetting>& speculation_settings() {
        [](P& p, V v) { p.trail.motion_margin = static_cast<float>(parse_number(v)); },
        [](const P& p) { return number(p.trail.motion_margin); }},
       {"backoff", "frames rendered in full after a group that did not repay (0: no backoff)",
-       [](P& p, V v) { p.backoff.frames = parse_int(v); },
-       [](const P& p) { return std::to_string(p.backoff.frames); }},
+       [](P& p, V v) { p.backoff.frames = parse_int(v); }, [](const P& p) { return std::to_string(p.backoff.frames); }},
       {"min_served", "sub-frames a group must serve to repay its key frame",
        [](P& p, V v) { p.backoff.min_served = parse_int(v); },
        [](const P& p) { return std::to_string(p.backoff.min_served); }},
@@ -83,8 +81,7 @@ const std::vector<SpeculationSetting>& speculation_settings() {
        [](P& p, V v) { p.predictor.acceleration_window_s = parse_number(v) / 1000.0; },
        [](const P& p) { return number(p.predictor.acceleration_window_s * 1000.0); }},
       {"early_stop", "on/off: stop a pixel when T would drop below 1e-4",
-       [](P& p, V v) { p.early_termination = parse_switch(v); },
-       [](const P& p) { return onoff(p.early_termination); }},
+       [](P& p, V v) { p.early_termination = parse_switch(v); }, [](const P& p) { return onoff(p.early_termination); }},
   };
   return table;
 }

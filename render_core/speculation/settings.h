@@ -12,8 +12,8 @@
 namespace catgs {
 
 struct SpeculationSetting {
-  const char* name;  // as written on a command line
-  const char* help;  // the field it sets, its unit and its range
+  const char* name;                                                    // as written on a command line
+  const char* help;                                                    // the field it sets, its unit and its range
   void (*apply)(SpeculationParams& params, const std::string& value);  // throws on a bad value
   std::string (*show)(const SpeculationParams& params);                // the value, as written
 };

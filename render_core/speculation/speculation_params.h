@@ -19,8 +19,8 @@ inline constexpr int kMaxPathCameras = kMaxWindow + 1;
 // How far a key frame widens each Gaussian's trail beyond the ellipses it sampled on the
 // predicted path (fm::build_trail), for prediction error.
 struct TrailMargins {
-  float slack = 0.1f;          // the level scaled by 1 + slack
-  float margin_px = 0.0f;      // plus this many pixels
+  float slack = 0.1f;      // the level scaled by 1 + slack
+  float margin_px = 0.0f;  // plus this many pixels
   // plus this fraction of the Gaussian's own screen motion over the window: an error in the
   // camera's velocity moves each Gaussian in proportion to its own motion (RESULTS.md, "Trail
   // margins").

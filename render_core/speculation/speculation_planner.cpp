@@ -8,8 +8,8 @@ namespace catgs {
 namespace {
 
 bool same_intrinsics(const Camera& a, const Camera& b) {
-  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
-         a.cx == b.cx && a.cy == b.cy && a.near_plane == b.near_plane && a.far_plane == b.far_plane;
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy &&
+         a.near_plane == b.near_plane && a.far_plane == b.far_plane;
 }
 
 }  // namespace

@@ -70,7 +70,7 @@ class Encoder {
 // "auto" chose x264 because NVENC failed, false otherwise.
 // Throws std::invalid_argument for an unknown name or a bad size, std::runtime_error when the
 // chosen codec cannot be opened.
-std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConfig& config,
-                                      std::string* why = nullptr, bool* fell_back = nullptr);
+std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConfig& config, std::string* why = nullptr,
+                                      bool* fell_back = nullptr);
 
 }  // namespace catgs::server

@@ -33,8 +33,8 @@ const NvencProbe& nvenc_probe() {
 
 }  // namespace
 
-std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConfig& config,
-                                      std::string* why, bool* fell_back) {
+std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConfig& config, std::string* why,
+                                      bool* fell_back) {
   if (fell_back) *fell_back = false;
   if (kind == "x264") {
     if (why) *why = "x264 requested";

@@ -27,8 +27,8 @@ std::string av_error_text(int err) {
 }
 
 void check_encoder_config(const std::string& name, const EncoderConfig& config) {
-  if (config.width < 16 || config.height < 16 || config.width > 8192 || config.height > 8192 ||
-      config.width % 2 || config.height % 2)
+  if (config.width < 16 || config.height < 16 || config.width > 8192 || config.height > 8192 || config.width % 2 ||
+      config.height % 2)
     throw std::invalid_argument(name + ": frame size must be even and in [16, 8192], got " +
                                 std::to_string(config.width) + "x" + std::to_string(config.height));
   if (config.fps <= 0) throw std::invalid_argument(name + ": fps must be positive");
@@ -39,8 +39,7 @@ LibavEncoder::LibavEncoder(std::string name, const char* codec_name, const Encod
     : name_(std::move(name)), config_(config) {
   check_encoder_config(name_, config);
   const AVCodec* codec = avcodec_find_encoder_by_name(codec_name);
-  if (!codec)
-    throw std::runtime_error(name_ + ": libavcodec has no " + codec_name + " encoder");
+  if (!codec) throw std::runtime_error(name_ + ": libavcodec has no " + codec_name + " encoder");
   ctx_ = avcodec_alloc_context3(codec);
   frame_ = av_frame_alloc();
   packet_ = av_packet_alloc();
@@ -99,8 +98,7 @@ EncodedFrame LibavEncoder::encode_yuv420(const Yuv420Planes& p, bool force_idr) 
   if (!p.y || !p.u || !p.v || p.y_stride < config_.width || p.u_stride < config_.width / 2 ||
       p.v_stride < config_.width / 2)
     throw std::invalid_argument(name_ + ": encode_yuv420 needs three planes with strides >= " +
-                                std::to_string(config_.width) + ", " +
-                                std::to_string(config_.width / 2));
+                                std::to_string(config_.width) + ", " + std::to_string(config_.width / 2));
   if (hw_frames_) throw std::logic_error(name_ + ": takes device pictures (input_target()) only");
   input_ready_ = false;  // frame_ is overwritten here
   const auto t0 = std::chrono::steady_clock::now();
@@ -129,9 +127,9 @@ Yuv420Target LibavEncoder::input_target() {
     if (err < 0) throw std::runtime_error(name_ + ": frame not writable: " + av_error_text(err));
   }
   input_ready_ = true;
-  return {config_.width, config_.height, hw_frames_ ? MemoryKind::device : MemoryKind::host,
-          frame_->data[0], frame_->linesize[0], frame_->data[1], frame_->linesize[1],
-          frame_->data[2], frame_->linesize[2]};
+  return {config_.width,       config_.height,      hw_frames_ ? MemoryKind::device : MemoryKind::host,
+          frame_->data[0],     frame_->linesize[0], frame_->data[1],
+          frame_->linesize[1], frame_->data[2],     frame_->linesize[2]};
 }
 
 EncodedFrame LibavEncoder::encode_input(bool force_idr) {

@@ -134,8 +134,9 @@ NvencEncoder::NvencEncoder(const EncoderConfig& config) try
   // The driver is there but the session did not open: say the likely cause.
   const std::string what = e.what();
   if (what.find("cannot open") == std::string::npos) throw;
-  throw std::runtime_error(what + " (the GPU may have no NVENC, e.g. H100/H200, or its "
-                                  "encoder sessions are all in use)");
+  throw std::runtime_error(what +
+                           " (the GPU may have no NVENC, e.g. H100/H200, or its "
+                           "encoder sessions are all in use)");
 }
 
 }  // namespace catgs::server

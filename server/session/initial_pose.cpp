@@ -20,8 +20,8 @@ CameraPose initial_pose(const Bounds& bounds, float fov_deg, int width, int heig
   const glm::vec3 centre = bounds.center();
   const float radius = std::max(0.5f * glm::length(bounds.extent()), 1e-3f);
   const float vfov = glm::radians(fov_deg);
-  const float hfov = 2.0f * std::atan(std::tan(vfov / 2.0f) * static_cast<float>(width) /
-                                      static_cast<float>(std::max(height, 1)));
+  const float hfov =
+      2.0f * std::atan(std::tan(vfov / 2.0f) * static_cast<float>(width) / static_cast<float>(std::max(height, 1)));
   const float half = 0.5f * std::min(vfov, hfov);
   const float distance = radius / std::sin(half);
   // In front (-z) and raised by ~17 degrees towards world up (-y).
@@ -29,9 +29,9 @@ CameraPose initial_pose(const Bounds& bounds, float fov_deg, int width, int heig
   CameraPose pose;
   pose.position = centre + distance * offset_dir;
   const glm::vec3 forward = glm::normalize(centre - pose.position);   // camera +z
-  const glm::vec3 down(0.0f, 1.0f, 0.0f);                              // world down
+  const glm::vec3 down(0.0f, 1.0f, 0.0f);                             // world down
   const glm::vec3 right = glm::normalize(glm::cross(down, forward));  // camera +x
-  const glm::vec3 cam_down = glm::cross(forward, right);               // camera +y
+  const glm::vec3 cam_down = glm::cross(forward, right);              // camera +y
   pose.orientation = glm::normalize(glm::quat_cast(glm::mat3(right, cam_down, forward)));
   pose.vertical_fov_deg = fov_deg;
   return pose;

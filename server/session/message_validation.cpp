@@ -8,8 +8,7 @@ std::optional<Violation> check_viewport(std::uint32_t width, std::uint32_t heigh
   auto ok = [](std::uint32_t v) { return v >= kMinViewport && v <= kMaxViewport; };
   if (!ok(width) || !ok(height))
     return Violation{pb::ERROR_INVALID_ARGUMENT,
-                     "viewport " + std::to_string(width) + "x" + std::to_string(height) +
-                         " outside 16..4096"};
+                     "viewport " + std::to_string(width) + "x" + std::to_string(height) + " outside 16..4096"};
   // H.264 4:2:0 needs even sizes.
   out.width = static_cast<int>(width & ~1u);
   out.height = static_cast<int>(height & ~1u);
@@ -19,8 +18,7 @@ std::optional<Violation> check_viewport(std::uint32_t width, std::uint32_t heigh
 std::optional<Violation> check_hello(const pb::Hello& hello, Viewport& out) {
   if (hello.protocol_version() != 1)
     return Violation{pb::ERROR_PROTOCOL,
-                     "unsupported protocol_version " + std::to_string(hello.protocol_version()) +
-                         " (server speaks 1)"};
+                     "unsupported protocol_version " + std::to_string(hello.protocol_version()) + " (server speaks 1)"};
   return check_viewport(hello.viewport_width(), hello.viewport_height(), out);
 }
 
@@ -29,8 +27,8 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
     return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose needs position and orientation"};
   const auto& p = pose.position();
   const auto& q = pose.orientation();
-  const double values[] = {p.x(), p.y(), p.z(), q.w(), q.x(), q.y(), q.z(),
-                           pose.vertical_fov_deg(), pose.client_time_ms()};
+  const double values[] = {
+      p.x(), p.y(), p.z(), q.w(), q.x(), q.y(), q.z(), pose.vertical_fov_deg(), pose.client_time_ms()};
   for (double v : values)
     if (!std::isfinite(v)) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose has NaN or Inf"};
   // Positions beyond float range would turn into Inf in the renderer.
@@ -40,10 +38,8 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
   if (!(norm > 1e-6)) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose orientation is a zero quaternion"};
   if (!(pose.vertical_fov_deg() > kMinFovDeg && pose.vertical_fov_deg() < kMaxFovDeg))
     return Violation{pb::ERROR_INVALID_ARGUMENT,
-                     "vertical_fov_deg " + std::to_string(pose.vertical_fov_deg()) +
-                         " outside (1, 170)"};
-  out.position = glm::vec3(static_cast<float>(p.x()), static_cast<float>(p.y()),
-                           static_cast<float>(p.z()));
+                     "vertical_fov_deg " + std::to_string(pose.vertical_fov_deg()) + " outside (1, 170)"};
+  out.position = glm::vec3(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
   out.orientation = glm::quat(static_cast<float>(q.w() / norm), static_cast<float>(q.x() / norm),
                               static_cast<float>(q.y() / norm), static_cast<float>(q.z() / norm));
   out.vertical_fov_deg = static_cast<float>(pose.vertical_fov_deg());

@@ -38,10 +38,7 @@ constexpr std::size_t kMaxQueuedMessages = 256;  // non-frame messages a non-rea
 }  // namespace
 
 Session::Session(ConnId id, SessionShared& shared)
-    : id_(id),
-      shared_(shared),
-      strand_(boost::asio::make_strand(shared.io)),
-      tick_(strand_) {
+    : id_(id), shared_(shared), strand_(boost::asio::make_strand(shared.io)), tick_(strand_) {
   shared_.metrics.connections_open++;
 }
 
@@ -86,9 +83,8 @@ void Session::post_closed() {
 }
 
 void Session::post_shutdown() {
-  boost::asio::post(strand_, [self = shared_from_this()] {
-    self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down");
-  });
+  boost::asio::post(strand_,
+                    [self = shared_from_this()] { self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down"); });
 }
 
 void Session::end_open_state() {
@@ -112,8 +108,8 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   tick_.cancel();
   end_open_state();
   shared_.metrics.session_errors_total++;
-  std::cerr << "[session " << id_ << (session_id_.empty() ? "" : " " + session_id_) << "] "
-            << pb::ErrorCode_Name(code) << ": " << reason << "\n";
+  std::cerr << "[session " << id_ << (session_id_.empty() ? "" : " " + session_id_) << "] " << pb::ErrorCode_Name(code)
+            << ": " << reason << "\n";
   pb::ServerMessage m;
   m.mutable_error()->set_code(code);
   m.mutable_error()->set_reason(reason);
@@ -125,11 +121,9 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
 void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received) {
   if (state_ == State::closed) return;
   if (kind == MessageKind::text) return fail(pb::ERROR_MALFORMED, "text frames are not allowed");
-  if (kind == MessageKind::oversize)
-    return fail(pb::ERROR_MALFORMED, "message larger than 64 KiB");
+  if (kind == MessageKind::oversize) return fail(pb::ERROR_MALFORMED, "message larger than 64 KiB");
   pb::ClientMessage msg;
-  if (!msg.ParseFromString(bytes))
-    return fail(pb::ERROR_MALFORMED, "message does not parse as ClientMessage");
+  if (!msg.ParseFromString(bytes)) return fail(pb::ERROR_MALFORMED, "message does not parse as ClientMessage");
   if (msg.body_case() == pb::ClientMessage::BODY_NOT_SET)
     return fail(pb::ERROR_MALFORMED, "ClientMessage without a body");
 
@@ -181,8 +175,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   }
   if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
     shared_.metrics.sessions_open--;
-    return fail(pb::ERROR_SERVER_FULL,
-                "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)");
+    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)");
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
@@ -217,8 +210,8 @@ void Session::handle_hello(const pb::Hello& hello) {
   w->set_encoder(shared_.encoder_kind);
   w->set_pipeline(pipeline_name(shared_.render_options.pipeline));
   send(m);
-  std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_
-            << " client '" << hello.client_name().substr(0, 128) << "'\n";
+  std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_ << " client '"
+            << hello.client_name().substr(0, 128) << "'\n";
   last_stats_ = Clock::now();
   last_progress_ = last_stats_;
   arm_tick();
@@ -241,8 +234,7 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
 void Session::maybe_start_render() {
   // Frames admitted but not yet written: those the transport holds and the one being encoded.
   const int admitted = in_flight_ + (encoding_ ? 1 : 0);
-  if (state_ != State::open || rendering_ || rendered_ || !pending_ ||
-      admitted >= shared_.options.max_frames_in_flight)
+  if (state_ != State::open || rendering_ || rendered_ || !pending_ || admitted >= shared_.options.max_frames_in_flight)
     return;
   std::unique_ptr<Yuv420Image> planes;
   if (pipelined_) {
@@ -418,16 +410,17 @@ void Session::on_job_done(JobResult result) {
   render_ms_sum_ += result.render_ms;
   encode_ms_sum_ += result.encode_ms;
   if (result.key_frame) key_frames_++;
-  if (result.render_key_frame) render_key_frames_++;
-  else render_sub_frames_++;
+  if (result.render_key_frame)
+    render_key_frames_++;
+  else
+    render_sub_frames_++;
   ServerMetrics& m = shared_.metrics;
   m.frames_total++;
   m.bytes_total += result.payload_bytes;
   if (result.key_frame) m.key_frames_total++;
   (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
   m.queue_seconds.observe(result.queue_ms / 1000.0);
-  (result.render_key_frame ? m.render_key_seconds : m.render_sub_seconds)
-      .observe(result.render_ms / 1000.0);
+  (result.render_key_frame ? m.render_key_seconds : m.render_sub_seconds).observe(result.render_ms / 1000.0);
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   m.speculation_window.observe(result.speculation_window);

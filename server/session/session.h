@@ -99,8 +99,8 @@ class Session : public std::enable_shared_from_this<Session> {
   struct JobResult {
     std::string message;  // serialized ServerMessage{Frame}; empty on failure
     std::string error;
-    bool key_frame = false;         // an IDR access unit
-    bool render_key_frame = true;   // catgs: a full pre-process (false: a cached sub-frame)
+    bool key_frame = false;        // an IDR access unit
+    bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
     int speculation_window = 0;
     std::size_t payload_bytes = 0;
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
@@ -118,9 +118,9 @@ class Session : public std::enable_shared_from_this<Session> {
   // window). Throws what Renderer::render_yuv420_at throws.
   void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
   Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on a render lane
-  JobResult run_encode(Rendered& frame);                               // on the pool
-  JobResult run_render_and_encode(const Job& job);  // on a render lane (NVENC's CUDA input)
-  void ensure_encoder(int width, int height, bool& idr);  // in a job
+  JobResult run_encode(Rendered& frame);                              // on the pool
+  JobResult run_render_and_encode(const Job& job);                    // on a render lane (NVENC's CUDA input)
+  void ensure_encoder(int width, int height, bool& idr);              // in a job
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
   void on_job_done(JobResult result);
   void arm_tick();
@@ -140,15 +140,15 @@ class Session : public std::enable_shared_from_this<Session> {
   int width_ = 0, height_ = 0;
   bool force_idr_ = true;
   std::optional<PendingPose> pending_;
-  bool rendering_ = false;  // a render (or render-and-encode) job is running
-  bool encoding_ = false;   // an encode job is running
-  bool pipelined_ = true;   // render and encode as separate stages (false: NVENC, one job)
-  std::optional<Rendered> rendered_;                   // rendered, waiting for the encoder
+  bool rendering_ = false;            // a render (or render-and-encode) job is running
+  bool encoding_ = false;             // an encode job is running
+  bool pipelined_ = true;             // render and encode as separate stages (false: NVENC, one job)
+  std::optional<Rendered> rendered_;  // rendered, waiting for the encoder
   std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
-  int in_flight_ = 0;                 // frames queued to the transport, not yet written
-  std::deque<Clock::time_point> handed_;  // when each in-flight frame went to the transport
-  double last_send_ms_ = 0;           // send time of the last frame written
-  Clock::time_point last_progress_;   // last time the transport wrote one of our frames
+  int in_flight_ = 0;                                      // frames queued to the transport, not yet written
+  std::deque<Clock::time_point> handed_;                   // when each in-flight frame went to the transport
+  double last_send_ms_ = 0;                                // send time of the last frame written
+  Clock::time_point last_progress_;                        // last time the transport wrote one of our frames
   std::uint32_t next_frame_sequence_ = 0;
   Clock::time_point last_stats_;
   // Stats counters (totals, and sums since the last Stats message).

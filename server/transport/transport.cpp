@@ -52,12 +52,9 @@ void Transport::start() {
   s.protocols[1].per_session_data_size = sizeof(Pss);
 
   // MIME types lws does not know (it answers 415 for unknown extensions).
-  const char* types[][2] = {{".mjs", "text/javascript"},
-                            {".js", "text/javascript"},
-                            {".proto", "text/plain"},
-                            {".json", "application/json"},
-                            {".wasm", "application/wasm"},
-                            {".md", "text/markdown; charset=utf-8"}};
+  const char* types[][2] = {{".mjs", "text/javascript"},   {".js", "text/javascript"},
+                            {".proto", "text/plain"},      {".json", "application/json"},
+                            {".wasm", "application/wasm"}, {".md", "text/markdown; charset=utf-8"}};
   constexpr int kTypes = static_cast<int>(sizeof(types) / sizeof(types[0]));
   for (int i = 0; i < kTypes; ++i) {
     std::memset(&s.mime[i], 0, sizeof(s.mime[i]));
@@ -97,8 +94,8 @@ void Transport::start() {
   if (options_.bind.find(':') == std::string::npos) info.options |= LWS_SERVER_OPTION_DISABLE_IPV6;
   context_ = lws_create_context(&info);
   if (!context_)
-    throw std::runtime_error("cannot listen on " + options_.bind + ":" +
-                             std::to_string(options_.port) + " (port in use or bad address?)");
+    throw std::runtime_error("cannot listen on " + options_.bind + ":" + std::to_string(options_.port) +
+                             " (port in use or bad address?)");
   lws_vhost* vhost = lws_get_vhost_by_name(context_, "default");
   port_ = vhost ? lws_get_vhost_listen_port(vhost) : options_.port;
   stopping_ = false;
@@ -153,8 +150,7 @@ void Transport::close(ConnId id, std::string final_message, bool drop_queued, in
   Conn& c = it->second;
   if (drop_queued) {
     // Keep a message already half written: the peer would see a broken frame otherwise.
-    while (c.queue.size() > 1 || (c.queue.size() == 1 && c.queue.front().offset == 0))
-      c.queue.pop_back();
+    while (c.queue.size() > 1 || (c.queue.size() == 1 && c.queue.front().offset == 0)) c.queue.pop_back();
   }
   if (!final_message.empty()) {
     Outgoing m;
@@ -213,8 +209,7 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
       }
       unsigned char buf[LWS_PRE + 1024];
       unsigned char *start = buf + LWS_PRE, *p = start, *end = buf + sizeof(buf) - 1;
-      if (lws_add_http_common_headers(wsi, HTTP_STATUS_OK, type.c_str(), body.size(), &p, end))
-        return 1;
+      if (lws_add_http_common_headers(wsi, HTTP_STATUS_OK, type.c_str(), body.size(), &p, end)) return 1;
       if (lws_finalize_write_http_header(wsi, start, &p, end)) return 1;
       if (!pss) return -1;
       delete pss->body;
@@ -289,8 +284,7 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
           }
         }
         if (!final) return 0;
-        kind = c.rx_oversize ? MessageKind::oversize
-                             : (c.rx_binary ? MessageKind::binary : MessageKind::text);
+        kind = c.rx_oversize ? MessageKind::oversize : (c.rx_binary ? MessageKind::binary : MessageKind::text);
         message.swap(c.rx);
         c.rx_oversize = false;
       }
@@ -353,8 +347,7 @@ int Transport::write_some(lws* wsi, ConnId id) {
       if (!c.closing) return 0;
       // Everything (including the final Error) is written: close with a normal close frame.
       static const char kBye[] = "bye";
-      lws_close_reason(wsi, LWS_CLOSE_STATUS_NORMAL,
-                       reinterpret_cast<unsigned char*>(const_cast<char*>(kBye)), 3);
+      lws_close_reason(wsi, LWS_CLOSE_STATUS_NORMAL, reinterpret_cast<unsigned char*>(const_cast<char*>(kBye)), 3);
       return -1;
     }
     Outgoing& m = c.queue.front();
@@ -365,8 +358,7 @@ int Transport::write_some(lws* wsi, ConnId id) {
     // lws_write needs LWS_PRE writable bytes before the data: for later fragments those are
     // payload bytes already sent, which may be overwritten.
     const int n = lws_write(wsi, m.buf.data() + LWS_PRE + m.offset, chunk,
-                            static_cast<lws_write_protocol>(
-                                lws_write_ws_flags(LWS_WRITE_BINARY, first, last)));
+                            static_cast<lws_write_protocol>(lws_write_ws_flags(LWS_WRITE_BINARY, first, last)));
     if (n < 0) return -1;
     m.offset += chunk;
     if (last) {

@@ -93,12 +93,12 @@ class Transport {
   struct Conn {
     lws* wsi = nullptr;
     std::deque<Outgoing> queue;
-    bool closing = false;       // no more sends accepted
-    bool close_armed = false;   // the service thread has set the close timeout
+    bool closing = false;      // no more sends accepted
+    bool close_armed = false;  // the service thread has set the close timeout
     int grace_ms = 2000;
-    std::string rx;             // message being reassembled
+    std::string rx;  // message being reassembled
     bool rx_oversize = false;
-    bool rx_binary = true;      // opcode of the message's first fragment
+    bool rx_binary = true;  // opcode of the message's first fragment
   };
 
   static int callback(lws* wsi, int reason, void* user, void* in, std::size_t len);

@@ -100,9 +100,9 @@ std::string fmt_psnr(double p) {
 }
 
 void add(Row r) {
-  std::printf("%-10s %-16s %-7s %-8s %8s %10.3g %4d %12lld %12lld  %s %s\n", r.test.c_str(),
-              r.scene.c_str(), r.view.c_str(), r.pipeline.c_str(), fmt_psnr(r.psnr).c_str(),
-              r.max_abs, r.max_abs8, r.list_ref, r.list_gpu, r.pass ? "PASS" : "FAIL", r.note.c_str());
+  std::printf("%-10s %-16s %-7s %-8s %8s %10.3g %4d %12lld %12lld  %s %s\n", r.test.c_str(), r.scene.c_str(),
+              r.view.c_str(), r.pipeline.c_str(), fmt_psnr(r.psnr).c_str(), r.max_abs, r.max_abs8, r.list_ref,
+              r.list_gpu, r.pass ? "PASS" : "FAIL", r.note.c_str());
   std::fflush(stdout);
   g_rows.push_back(std::move(r));
 }
@@ -130,8 +130,8 @@ std::vector<Camera> orbit_views(const GaussianModel& m, int w, int h) {
 }
 
 // CUDA vs CPU for both pipelines over `views`, plus exact-vs-vanilla on the GPU.
-void equality(const std::string& name, std::shared_ptr<GaussianModel> model,
-              const std::vector<Camera>& views, std::shared_ptr<const catgs::cuda::DeviceScene> dev) {
+void equality(const std::string& name, std::shared_ptr<GaussianModel> model, const std::vector<Camera>& views,
+              std::shared_ptr<const catgs::cuda::DeviceScene> dev) {
   catgs::RenderOptions ov, oe;
   ov.pipeline = Pipeline::vanilla;
   oe.pipeline = Pipeline::exact;
@@ -151,8 +151,8 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model,
       const auto& gs = e ? gpu_e.last_stats() : gpu_v.last_stats();
       const Diff d = compare(c, g);
       add({"equal", name, view, e ? "exact" : "vanilla", d.psnr, d.max_abs, d.max_abs8,
-           static_cast<long long>(cs.render_list_length), static_cast<long long>(gs.render_list_length),
-           d.psnr >= 50.0, ""});
+           static_cast<long long>(cs.render_list_length), static_cast<long long>(gs.render_list_length), d.psnr >= 50.0,
+           ""});
     }
     {  // the depth-first sort must give the single sort's list: the same image, bit for bit
       catgs::cuda::CudaOptions depth_first_sort;  // gpu_e sorts once ([tile | depth]; exact's default)
@@ -168,7 +168,8 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model,
     const Diff d = compare(gv, ge);
     const auto lv = gpu_v.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;
     char note[64];
-    std::snprintf(note, sizeof note, "list x%.2f shorter", static_cast<double>(lv) / std::max<double>(1.0, static_cast<double>(le)));
+    std::snprintf(note, sizeof note, "list x%.2f shorter",
+                  static_cast<double>(lv) / std::max<double>(1.0, static_cast<double>(le)));
     add({"exact~van", name, view, "ex/van", d.psnr, d.max_abs, d.max_abs8, static_cast<long long>(lv),
          static_cast<long long>(le), d.psnr >= 40.0 && le < lv, note});
   }
@@ -206,7 +207,8 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
     double max_abs = 0;
     int max8 = 0;
     std::string first;  // where the images first differ, for the note
-    void add(const catgs::FrameStats& want, const Image& want_image, const catgs::FrameStats& got, const Image& got_image) {
+    void add(const catgs::FrameStats& want, const Image& want_image, const catgs::FrameStats& got,
+             const Image& got_image) {
       const std::size_t f = frame++;
       if (got.key_frame != want.key_frame) return;
       ++same_decision;
@@ -232,7 +234,9 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
                     p / static_cast<std::size_t>(want_image.width), want_image.rgb[worst], got_image.rgb[worst]);
       first = b;
     }
-    bool pass(std::size_t frames) const { return same_decision == frames && same_lists == frames && max_abs == 0.0 && subs > 0; }
+    bool pass(std::size_t frames) const {
+      return same_decision == frames && same_lists == frames && max_abs == 0.0 && subs > 0;
+    }
   } cull, sort;
   std::size_t agree = 0, subs = 0, list_equal = 0, keys = 0;
   double min_psnr = INFINITY, max_abs = 0;
@@ -269,16 +273,17 @@ void catgs_vs_cpu(const std::string& name, const std::string& view, std::shared_
                 cull.same_decision, trace.size(), cull.subs, cull.differing, cull.first.c_str());
   add({"tilecull", name, view, "catgs", cull.max_abs == 0.0 ? INFINITY : 0.0, cull.max_abs, cull.max8, -1, -1,
        cull.pass(trace.size()), wide});
-  std::snprintf(wide, sizeof wide,
-                "depth-first vs single sort: %zu/%zu frames decided alike, %zu same lengths (%zu sub-frames), %zu differ%s",
-                sort.same_decision, trace.size(), sort.same_lists, sort.subs, sort.differing, sort.first.c_str());
+  std::snprintf(
+      wide, sizeof wide,
+      "depth-first vs single sort: %zu/%zu frames decided alike, %zu same lengths (%zu sub-frames), %zu differ%s",
+      sort.same_decision, trace.size(), sort.same_lists, sort.subs, sort.differing, sort.first.c_str());
   add({"depthsort", name, view, "catgs", sort.max_abs == 0.0 ? INFINITY : 0.0, sort.max_abs, sort.max8, -1, -1,
        sort.pass(trace.size()), wide});
 }
 
 // subframes: CUDA catgs against the full render of every pose.
-void catgs_quality(const std::string& name, const std::string& view, std::shared_ptr<const catgs::cuda::DeviceScene> dev,
-                   const catgs::Trace& trace) {
+void catgs_quality(const std::string& name, const std::string& view,
+                   std::shared_ptr<const catgs::cuda::DeviceScene> dev, const catgs::Trace& trace) {
   catgs::RenderOptions oe;
   oe.pipeline = Pipeline::exact;
   catgs::cuda::CudaRenderer g(dev, catgs_options()), full(dev, oe);
@@ -296,8 +301,9 @@ void catgs_quality(const std::string& name, const std::string& view, std::shared
       ++keys;
       key_min = std::min(key_min, d.psnr);
       window_sum += gs.window;
-      growth_max = std::max(growth_max, static_cast<double>(gs.render_list_length) /
-                                            std::max<double>(1.0, static_cast<double>(full.last_stats().render_list_length)));
+      growth_max =
+          std::max(growth_max, static_cast<double>(gs.render_list_length) /
+                                   std::max<double>(1.0, static_cast<double>(full.last_stats().render_list_length)));
     } else {
       sub_psnr.push_back(std::min(d.psnr, 100.0));
       sub_max_abs = std::max(sub_max_abs, d.max_abs);
@@ -354,8 +360,8 @@ void catgs_abrupt(const std::string& name, const GaussianModel& m, std::shared_p
   const auto rb = catgs::robust_bounds(m);
   const glm::vec3 e = rb.extent();
   const float r = 0.6f * std::max(e.x, std::max(e.y, e.z));
-  const catgs::Trace slow = catgs::make_orbit(rb, r, 0.3f * r, 10.0f, gp);    // 10 deg/s
-  const catgs::Trace fast = catgs::make_orbit(rb, r, 0.3f * r, 720.0f, gp);   // 720 deg/s
+  const catgs::Trace slow = catgs::make_orbit(rb, r, 0.3f * r, 10.0f, gp);   // 10 deg/s
+  const catgs::Trace fast = catgs::make_orbit(rb, r, 0.3f * r, 720.0f, gp);  // 720 deg/s
   catgs::RenderOptions oe;
   oe.pipeline = Pipeline::exact;
   catgs::cuda::CudaRenderer full(dev, oe);
@@ -465,7 +471,8 @@ std::shared_ptr<GaussianModel> wall_scene(std::size_t n) {
     for (int a = 0; a < 3; ++a) m->log_scales[3 * i + a] = std::log(40.0f);
     m->rotations[4 * i] = 1.0f;
     m->opacity_logits[i] = 2.0f;  // 0.88: a few layers saturate a pixel
-    for (int c = 0; c < 3; ++c) m->sh[3 * i + c] = 0.5f * std::sin(0.7f * static_cast<float>(i) + 2.0f * static_cast<float>(c));
+    for (int c = 0; c < 3; ++c)
+      m->sh[3 * i + c] = 0.5f * std::sin(0.7f * static_cast<float>(i) + 2.0f * static_cast<float>(c));
   }
   return m;
 }
@@ -479,7 +486,8 @@ void diff_plane(const std::uint8_t* got, int got_stride, const std::vector<std::
                 PlaneDiff& d) {
   for (int r = 0; r < h; ++r)
     for (int c = 0; c < w; ++c) {
-      const int e = std::abs(int(got[static_cast<std::size_t>(r) * got_stride + c]) - int(want[static_cast<std::size_t>(r) * w + c]));
+      const int e = std::abs(int(got[static_cast<std::size_t>(r) * got_stride + c]) -
+                             int(want[static_cast<std::size_t>(r) * w + c]));
       d.mismatched += e != 0;
       d.max_diff = std::max(d.max_diff, e);
     }
@@ -505,11 +513,18 @@ void yuv420_check(const std::string& name, const std::string& view, catgs::cuda:
     reference.render_at(cams[i], t, img);
     const catgs::Yuv420Image want = catgs::rgba_to_yuv420_bt709(img.rgba8.data(), w, h, w * 4);
     const bool to_device = i % 2 == 1;  // alternate the two targets over the frames
-    catgs::Yuv420Target target{w, h, catgs::MemoryKind::host, y.data(), w + pad, u.data(), w / 2 + pad,
+    catgs::Yuv420Target target{w,        h,          catgs::MemoryKind::host, y.data(), w + pad, u.data(), w / 2 + pad,
                                v.data(), w / 2 + pad};
     if (to_device)  // Y rows, then Cb rows, then Cr rows, all at the allocation's pitch
-      target = {w, h, catgs::MemoryKind::device, dev, int(pitch), dev + pitch * h, int(pitch),
-                dev + pitch * h + pitch * h / 2, int(pitch)};
+      target = {w,
+                h,
+                catgs::MemoryKind::device,
+                dev,
+                int(pitch),
+                dev + pitch * h,
+                int(pitch),
+                dev + pitch * h + pitch * h / 2,
+                int(pitch)};
     convert_ms += converted.render_yuv420_at(cams[i], t, target);
     PlaneDiff& d = to_device ? device : host;
     if (to_device) {
@@ -525,15 +540,14 @@ void yuv420_check(const std::string& name, const std::string& view, catgs::cuda:
   }
   cudaFree(dev);
   char note[160];
-  std::snprintf(note, sizeof note, "%zu frames %dx%d; code values differing: host %lld, device %lld; conversion %.3f ms/frame",
+  std::snprintf(note, sizeof note,
+                "%zu frames %dx%d; code values differing: host %lld, device %lld; conversion %.3f ms/frame",
                 cams.size(), w, h, host.mismatched, device.mismatched, convert_ms / static_cast<double>(cams.size()));
   add({"yuv420", name, view, catgs::pipeline_name(converted.options().pipeline), 0, 0,
        std::max(host.max_diff, device.max_diff), -1, -1, host.mismatched == 0 && device.mismatched == 0, note});
 }
 
-Camera front_camera(int w, int h) {
-  return Camera::from_pose({0.0f, 0.0f, 0.0f}, glm::quat(1, 0, 0, 0), 60.0f, w, h);
-}
+Camera front_camera(int w, int h) { return Camera::from_pose({0.0f, 0.0f, 0.0f}, glm::quat(1, 0, 0, 0), 60.0f, w, h); }
 
 // The scenes every group of checks below uses (flowers and tumblewood only without --quick).
 struct Scenes {
@@ -572,9 +586,15 @@ void grow_checks(const Scenes& sc) {
   const auto& tumble_dev = sc.tumble_dev;
   catgs::RenderOptions o;
   catgs::cuda::CudaRenderer r(biker_dev, o);
-  struct Step { std::shared_ptr<const catgs::cuda::DeviceScene> dev; std::shared_ptr<GaussianModel> m; int w, h; };
-  const Step steps[] = {{biker_dev, biker, 640, 360}, {tumble_dev, tumble, 1920, 1080},
-                        {flowers_dev, flowers, 1280, 720}, {biker_dev, biker, 640, 360},
+  struct Step {
+    std::shared_ptr<const catgs::cuda::DeviceScene> dev;
+    std::shared_ptr<GaussianModel> m;
+    int w, h;
+  };
+  const Step steps[] = {{biker_dev, biker, 640, 360},
+                        {tumble_dev, tumble, 1920, 1080},
+                        {flowers_dev, flowers, 1280, 720},
+                        {biker_dev, biker, 640, 360},
                         {tumble_dev, tumble, 1920, 1080}};
   int k = 0;
   for (const Step& s : steps) {
@@ -621,8 +641,8 @@ void catgs_checks(const Scenes& sc) {
   catgs_quality("biker", "tandt", biker_dev, biker_path);
   catgs_split("biker", biker_dev, orbit_views(*biker, W, H)[1]);
   if (!quick) {
-    auto flowers_path = catgs::interpolate_views(catgs::load_inria_cameras(traces + "/flowers_sh3.cameras.json", W, H),
-                                                 120.0, 0.5);
+    auto flowers_path =
+        catgs::interpolate_views(catgs::load_inria_cameras(traces + "/flowers_sh3.cameras.json", W, H), 120.0, 0.5);
     flowers_path.resize(std::min<std::size_t>(flowers_path.size(), 600));
     catgs_vs_cpu("flowers_sh3", "own", flowers, flowers_dev,
                  catgs::Trace(flowers_path.begin(), flowers_path.begin() + 120));
@@ -695,10 +715,9 @@ void steady_checks(const Scenes& sc) {
                     alloc1 = r.diagnostics().allocations;
   Row row{"steady", m->name, "1000f", "both", 0, 0, 0, -1, -1, false, ""};
   row.pass = used0 == used1 && buf0 == buf1 && alloc0 == alloc1 && r.diagnostics().syncs_last_frame == 1;
-  row.note = "device used " + std::to_string(used0 >> 20) + " -> " + std::to_string(used1 >> 20) +
-             " MiB, buffers " + std::to_string(buf0) + " -> " + std::to_string(buf1) +
-             " B, allocations " + std::to_string(alloc0) + " -> " + std::to_string(alloc1) +
-             ", syncs/frame " + std::to_string(r.diagnostics().syncs_last_frame);
+  row.note = "device used " + std::to_string(used0 >> 20) + " -> " + std::to_string(used1 >> 20) + " MiB, buffers " +
+             std::to_string(buf0) + " -> " + std::to_string(buf1) + " B, allocations " + std::to_string(alloc0) +
+             " -> " + std::to_string(alloc1) + ", syncs/frame " + std::to_string(r.diagnostics().syncs_last_frame);
   add(row);
 }
 
@@ -718,8 +737,7 @@ void tile_bits_checks(const Scenes& sc) {
     const Diff d = compare(a, b);
     add({"tiles18", "biker", "8192x4608", catgs::pipeline_name(p), d.psnr, d.max_abs, d.max_abs8,
          static_cast<long long>(c.last_stats().render_list_length),
-         static_cast<long long>(g.last_stats().render_list_length), d.psnr >= 50.0,
-         "147456 tiles, 18 tile bits"});
+         static_cast<long long>(g.last_stats().render_list_length), d.psnr >= 50.0, "147456 tiles, 18 tile bits"});
   }
 }
 
@@ -805,8 +823,7 @@ void city_checks(const Scenes& sc) {
     add({"city", city->name, "fly1", catgs::pipeline_name(pl), d.psnr, d.max_abs, d.max_abs8,
          static_cast<long long>(c.last_stats().render_list_length),
          static_cast<long long>(r.last_stats().render_list_length), d.psnr >= 50.0,
-         std::to_string(city->size()) + " Gaussians, " + std::to_string(dev->bytes() >> 20) +
-             " MiB on device"});
+         std::to_string(city->size()) + " Gaussians, " + std::to_string(dev->bytes() >> 20) + " MiB on device"});
   }
 }
 
@@ -814,19 +831,21 @@ void city_checks(const Scenes& sc) {
 int report(const std::string& gpu, const std::string& out) {
   int failed = 0;
   std::ostringstream md;
-  md << "GPU: " << gpu << "\n\n| test | scene | view | pipeline | PSNR dB | max abs err (float) | max abs err (8-bit) | "
+  md << "GPU: " << gpu
+     << "\n\n| test | scene | view | pipeline | PSNR dB | max abs err (float) | max abs err (8-bit) | "
         "render list (ref) | render list (GPU) | result | note |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const Row& r : g_rows) {
     failed += r.pass ? 0 : 1;
     char err[32];
     std::snprintf(err, sizeof err, "%.3g", r.max_abs);
-    md << "| " << r.test << " | " << r.scene << " | " << r.view << " | " << r.pipeline << " | "
-       << fmt_psnr(r.psnr) << " | " << err << " | " << r.max_abs8 << " | " << r.list_ref << " | "
-       << r.list_gpu << " | " << (r.pass ? "PASS" : "FAIL") << " | " << r.note << " |\n";
+    md << "| " << r.test << " | " << r.scene << " | " << r.view << " | " << r.pipeline << " | " << fmt_psnr(r.psnr)
+       << " | " << err << " | " << r.max_abs8 << " | " << r.list_ref << " | " << r.list_gpu << " | "
+       << (r.pass ? "PASS" : "FAIL") << " | " << r.note << " |\n";
   }
   md << "\n" << (g_rows.size() - static_cast<std::size_t>(failed)) << " passed, " << failed << " failed\n";
   if (!out.empty()) std::ofstream(out) << md.str();
-  std::printf("%zu checks: %zu passed, %d failed\n", g_rows.size(), g_rows.size() - static_cast<std::size_t>(failed), failed);
+  std::printf("%zu checks: %zu passed, %d failed\n", g_rows.size(), g_rows.size() - static_cast<std::size_t>(failed),
+              failed);
   return failed;
 }
 
@@ -845,8 +864,8 @@ int run(int argc, char** argv) {
   sc.W = sc.quick ? 640 : 1280;
   sc.H = sc.quick ? 360 : 720;
   std::printf("GPU: %s\n", gpu.c_str());
-  std::printf("%-10s %-16s %-7s %-8s %8s %10s %4s %12s %12s  %s\n", "test", "scene", "view", "pipeline",
-              "PSNR dB", "max|err|", "8bit", "list (ref)", "list (gpu)", "result");
+  std::printf("%-10s %-16s %-7s %-8s %8s %10s %4s %12s %12s  %s\n", "test", "scene", "view", "pipeline", "PSNR dB",
+              "max|err|", "8bit", "list (ref)", "list (gpu)", "result");
   equality_checks(sc);
   if (!sc.quick) grow_checks(sc);
   catgs_checks(sc);

@@ -58,9 +58,9 @@ pb::Stats stream_and_check(int port, const std::string& name, const Trace& trace
     ADD_FAILURE() << name << ": no Stats";
     return {};
   }
-  std::cout << "[ info ] " << name << " " << w << "x" << h << ": " << trace.size()
-            << " frames, worst PSNR " << worst << " dB, " << stats->stats().key_frames()
-            << " key frames, " << stats->stats().sub_frames() << " sub-frames\n";
+  std::cout << "[ info ] " << name << " " << w << "x" << h << ": " << trace.size() << " frames, worst PSNR " << worst
+            << " dB, " << stats->stats().key_frames() << " key frames, " << stats->stats().sub_frames()
+            << " sub-frames\n";
   c.ws().close();
   return stats->stats();
 }
@@ -86,17 +86,20 @@ TEST(MultiSession, DifferentTracesAndSizesAllGetCorrectFrames) {
   std::vector<Run> runs;
   g.width = 320;
   g.height = 240;
-  runs.push_back({"orbit", 320, 240, make_orbit(model->bounds(), r, 0.2f * r, 30.0f * static_cast<float>(g.duration_s), g)});
+  runs.push_back(
+      {"orbit", 320, 240, make_orbit(model->bounds(), r, 0.2f * r, 30.0f * static_cast<float>(g.duration_s), g)});
   if (std::filesystem::exists(kTrainCams)) {
-    Trace real = fit_trace_to_scene(load_inria_cameras(kTrainCams), *model, estimate_up(*model), 0.6f, 120.0,
-                                    0.5, 256, 192);
+    Trace real =
+        fit_trace_to_scene(load_inria_cameras(kTrainCams), *model, estimate_up(*model), 0.6f, 120.0, 0.5, 256, 192);
     real.resize(kFrames);
     runs.push_back({"real path (tandt_train)", 256, 192, real});
   } else {
     std::cout << "[ info ] " << kTrainCams << " not found: a fly-over stands in for the real path\n";
     g.width = 256;
     g.height = 192;
-    runs.push_back({"fly-over", 256, 192, make_flyover(rb.center() + glm::vec3(-r, -0.5f * r, 0), rb.center() + glm::vec3(-0.9f * r, -0.5f * r, 0), 20.0f, g)});
+    runs.push_back({"fly-over", 256, 192,
+                    make_flyover(rb.center() + glm::vec3(-r, -0.5f * r, 0),
+                                 rb.center() + glm::vec3(-0.9f * r, -0.5f * r, 0), 20.0f, g)});
   }
   g.width = 192;
   g.height = 144;
@@ -105,7 +108,8 @@ TEST(MultiSession, DifferentTracesAndSizesAllGetCorrectFrames) {
   std::vector<pb::Stats> stats(runs.size());
   std::vector<std::thread> threads;
   for (std::size_t i = 0; i < runs.size(); ++i)
-    threads.emplace_back([&, i] { stats[i] = stream_and_check(server.port(), runs[i].name, runs[i].trace, runs[i].w, runs[i].h); });
+    threads.emplace_back(
+        [&, i] { stats[i] = stream_and_check(server.port(), runs[i].name, runs[i].trace, runs[i].w, runs[i].h); });
   for (auto& t : threads) t.join();
 
   std::uint32_t sub = 0, frames = 0;
@@ -141,8 +145,10 @@ TEST(MultiSession, DisconnectsMidStreamFreeEverything) {
     c.hello(96, 64);
     c.send_pose(pose_from_camera(orbit[static_cast<std::size_t>(i) % orbit.size()].camera, 0, now_ms()));
     if (i % 2 == 0) wait_for(c, 10000, [](const pb::ServerMessage& s) { return s.has_frame(); });
-    if (i % 4 < 2) c.ws().close();
-    else c.ws().close_abrupt();  // mid-render for odd i: the frame is still being made
+    if (i % 4 < 2)
+      c.ws().close();
+    else
+      c.ws().close_abrupt();  // mid-render for odd i: the frame is still being made
   };
   auto settle = [&] {  // until the server has noticed every close
     std::string metrics;
@@ -203,9 +209,8 @@ TEST(MultiSession, EncoderFlagsNvencAndAutoFallback) {
 TEST(MultiSession, LoadgenReportsAndRamps) {
   ServerProcess server(server_args(kBiker, {"--pipeline", "catgs"}));
   const std::string json_path = "/tmp/catgs-itest-loadgen-" + std::to_string(server.port()) + ".json";
-  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
-                           " --scene " + kBiker + " --size 160x120,128x96 --rate 20 --decode 1 --warmup 1 --json " +
-                           json_path;
+  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
+                           kBiker + " --size 160x120,128x96 --rate 20 --decode 1 --warmup 1 --json " + json_path;
   // The second session replays a real camera path when the data is there.
   const std::string cams = kDataDir + "/traces/flowers_sh3.cameras.json";
   const std::string second = std::filesystem::exists(cams) ? "cameras:" + cams : "orbit";
@@ -236,8 +241,8 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
 TEST(MultiSession, LoadgenReferenceCheckAndFairRenderLanes) {
   ServerProcess server(server_args(kBiker, {"--pipeline", "catgs", "--render-lanes", "1", "--threads", "3"}));
   const std::string json_path = "/tmp/catgs-itest-check-" + std::to_string(server.port()) + ".json";
-  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
-                           " --scene " + kBiker + " --size 160x120,128x96,96x96 --rate 0 --sessions 3" +
+  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
+                           kBiker + " --size 160x120,128x96,96x96 --rate 0 --sessions 3" +
                            " --warmup 1 --check-every 3 --json " + json_path;
   ASSERT_EQ(std::system((base + " --seconds 3 > /dev/null").c_str()), 0);
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));

@@ -186,8 +186,7 @@ TEST(ServerIntegration, BikerOrbitFramesMatchCpuRender) {
     EXPECT_GE(f.timings().total_ms(), f.timings().render_ms());
     const double psnr = frame_psnr(dec, ref, f, pose);
     EXPECT_GE(psnr, 30.0) << "frame " << i;
-    std::cout << "[ info ] biker frame " << i << ": " << f.payload().size() << " bytes, PSNR "
-              << psnr << " dB\n";
+    std::cout << "[ info ] biker frame " << i << ": " << f.payload().size() << " bytes, PSNR " << psnr << " dB\n";
   }
 }
 
@@ -223,16 +222,15 @@ TEST(ServerIntegration, CatgsPipelineServesSubFrames) {
   }
   auto stats = wait_for(c, 3000, [](const pb::ServerMessage& s) { return s.has_stats(); });
   ASSERT_TRUE(stats);
-  std::cout << "[ info ] catgs: " << stats->stats().key_frames() << " key frames, "
-            << stats->stats().sub_frames() << " sub-frames\n";
+  std::cout << "[ info ] catgs: " << stats->stats().key_frames() << " key frames, " << stats->stats().sub_frames()
+            << " sub-frames\n";
   EXPECT_EQ(stats->stats().key_frames() + stats->stats().sub_frames(), orbit.size());
   EXPECT_GT(stats->stats().sub_frames(), stats->stats().key_frames());
 }
 
 TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
   if (!std::filesystem::exists(kFlowers) || !std::filesystem::exists(kFlowersCams))
-    GTEST_SKIP() << "real data not found under " << kDataDir
-                 << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
+    GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
   // An outdoor scene full of fine detail: x264's default crf 23 lands just under 30 dB here, so
   // this stream uses crf 18 (the server's --crf quality knob).
   ServerProcess server(server_args(kFlowers, {"--crf", "18"}));
@@ -253,8 +251,8 @@ TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
     EXPECT_EQ(m->frame().pose_sequence(), i);
     const double psnr = frame_psnr(dec, ref, m->frame(), pose);
     EXPECT_GE(psnr, 30.0) << "frame " << i;
-    std::cout << "[ info ] flowers frame " << i << ": " << m->frame().payload().size()
-              << " bytes, PSNR " << psnr << " dB\n";
+    std::cout << "[ info ] flowers frame " << i << ": " << m->frame().payload().size() << " bytes, PSNR " << psnr
+              << " dB\n";
   }
 }
 
@@ -433,8 +431,7 @@ TEST(ServerIntegration, PoseFloodRendersOnlyLatest) {
   c.connect(server.port());
   c.hello(160, 120);
   const Trace orbit = biker_orbit(160, 120, 50);
-  for (std::uint32_t i = 0; i < 1000; ++i)
-    c.send_pose(pose_from_camera(orbit[i % orbit.size()].camera, i, now_ms()));
+  for (std::uint32_t i = 0; i < 1000; ++i) c.send_pose(pose_from_camera(orbit[i % orbit.size()].camera, i, now_ms()));
   int frames = 0;
   bool got_last = false;
   const auto deadline = Clock::now() + std::chrono::seconds(30);
@@ -515,8 +512,7 @@ TEST(ServerIntegration, NonReaderAndAbruptDisconnects) {
     c.connect(server.port());
     if (i % 3 != 2) c.hello(160, 120);
     if (i % 3 == 0) {
-      for (std::uint32_t s = 0; s < 5; ++s)
-        c.send_pose(pose_from_camera(orbit[s].camera, s, now_ms()));
+      for (std::uint32_t s = 0; s < 5; ++s) c.send_pose(pose_from_camera(orbit[s].camera, s, now_ms()));
       if (i == 3) c.recv(2000);  // sometimes after a frame arrived
     }
     c.ws().close_abrupt();

@@ -12,8 +12,9 @@
 namespace catgs::itest {
 
 std::vector<std::string> server_args(const std::string& scene, std::vector<std::string> extra) {
-  std::vector<std::string> a = {"--scene", scene, "--renderer", "cpu", "--pipeline", "exact",
-                                "--threads", "4", "--slow-client-timeout-ms", "2000"};
+  std::vector<std::string> a = {
+      "--scene", scene, "--renderer", "cpu", "--pipeline", "exact", "--threads", "4", "--slow-client-timeout-ms",
+      "2000"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }
@@ -40,13 +41,10 @@ Trace biker_orbit(int width, int height, int frames) {
 }
 
 double now_ms() {
-  return std::chrono::duration<double, std::milli>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f,
-                  const pb::Pose& pose) {
+double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose) {
   std::vector<std::uint8_t> rgba;
   int w = 0, h = 0;
   if (!dec.decode(f.payload(), rgba, w, h)) return -1;
@@ -64,8 +62,7 @@ double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Fr
 double metric_value(const std::string& metrics, const std::string& series) {
   std::istringstream in(metrics);
   for (std::string line; std::getline(in, line);)
-    if (line.size() > series.size() && line.compare(0, series.size(), series) == 0 &&
-        line[series.size()] == ' ')
+    if (line.size() > series.size() && line.compare(0, series.size(), series) == 0 && line[series.size()] == ' ')
       return std::stod(line.substr(series.size() + 1));
   return -1;
 }

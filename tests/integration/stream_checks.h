@@ -47,8 +47,7 @@ std::optional<pb::ServerMessage> wait_for(loadgen::StreamClient& c, int timeout_
 
 // PSNR (dB) of frame `f` decoded by `dec` against `ref`'s render of `pose`; -1 when the decoder
 // gave no picture. Adds a failure when the decoded size differs from the Frame's.
-double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f,
-                  const pb::Pose& pose);
+double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose);
 
 // Value of the first sample of `series` (e.g. `catgs_sessions` or `x{kind="sub"}`) in the
 // Prometheus text `metrics`; -1 when absent.

@@ -97,7 +97,7 @@ TEST(BenchVariants, UnknownNamesAreRefusedWithTheSyntax) {
                                  "catgs-w", "catgs-wx", "catgs-w-2", "Catgs", "catgs ", "fast"}) {
     const std::string message = error_of("exact," + name);
     EXPECT_TRUE(contains(message, "'" + name + "'")) << name << ": " << message;
-    EXPECT_TRUE(contains(message, "catgs-wN")) << name << ": " << message;  // the syntax
+    EXPECT_TRUE(contains(message, "catgs-wN")) << name << ": " << message;       // the syntax
     EXPECT_TRUE(contains(message, "motion_margin")) << name << ": " << message;  // the settings
   }
 }
@@ -123,8 +123,8 @@ TEST(BenchVariants, MalformedListsAreRefused) {
 
 TEST(BenchVariants, TheSyntaxListsPresetsAndEverySetting) {
   const std::string syntax = variant_syntax();
-  for (const char* part : {"catgs-nocache = catgs{cache=off}", "catgs-nosplit = catgs{split=off}",
-                           "catgs-wN", "window", "backoff", "split", "cache", "fit_ms", "accel_ms"})
+  for (const char* part : {"catgs-nocache = catgs{cache=off}", "catgs-nosplit = catgs{split=off}", "catgs-wN", "window",
+                           "backoff", "split", "cache", "fit_ms", "accel_ms"})
     EXPECT_TRUE(contains(syntax, part)) << part;
 }
 

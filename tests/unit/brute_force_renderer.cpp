@@ -62,8 +62,7 @@ Image brute_force_render(const GaussianModel& m, const Camera& cam, bool vanilla
     double sigma[3][3] = {};
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c)
-        for (int k = 0; k < 3; ++k)
-          sigma[r][c] += rot[r][k] * rot[c][k] * std::exp(2.0 * m.log_scales[3 * i + k]);
+        for (int k = 0; k < 3; ++k) sigma[r][c] += rot[r][k] * rot[c][k] * std::exp(2.0 * m.log_scales[3 * i + k]);
     // Jacobian at the mean clamped to 1.3x the half field of view.
     const double limx = 1.3 * W / (2.0 * cam.fx), limy = 1.3 * H / (2.0 * cam.fy);
     const double jx = std::clamp(p.x / p.z, -limx, limx) * p.z, jy = std::clamp(p.y / p.z, -limy, limy) * p.z;
@@ -113,7 +112,10 @@ Image brute_force_render(const GaussianModel& m, const Camera& cam, bool vanilla
     sh_basis(glm::normalize(mean - eye), basis);
     dvec3 c(0.0);
     for (int k = 0; k < K; ++k)
-      for (int ch = 0; ch < 3; ++ch) c[ch] += basis[k] * m.sh[(i * static_cast<std::size_t>(K) + static_cast<std::size_t>(k)) * 3 + static_cast<std::size_t>(ch)];
+      for (int ch = 0; ch < 3; ++ch)
+        c[ch] +=
+            basis[k] *
+            m.sh[(i * static_cast<std::size_t>(K) + static_cast<std::size_t>(k)) * 3 + static_cast<std::size_t>(ch)];
     s.color = glm::max(c + 0.5, dvec3(0.0));
     splats.push_back(s);
     index.push_back(i);
@@ -130,7 +132,8 @@ Image brute_force_render(const GaussianModel& m, const Camera& cam, bool vanilla
   for (std::size_t k : order) {
     const Splat& s = splats[k];
     for (int py = s.y0; py <= s.y1; ++py)
-      for (int px = s.x0; px <= s.x1; ++px) lists[static_cast<std::size_t>(py) * W + px].push_back(static_cast<uint32_t>(k));
+      for (int px = s.x0; px <= s.x1; ++px)
+        lists[static_cast<std::size_t>(py) * W + px].push_back(static_cast<uint32_t>(k));
   }
   Image img;
   img.width = W;

@@ -76,7 +76,8 @@ TEST(InriaCameras, MalformedFilesNameTheProblem) {
   };
   std::ofstream(dir + "/broken.json") << "[{\"id\": 0,";
   expect_error(dir + "/broken.json", "malformed JSON");
-  std::ofstream(dir + "/nofx.json") << R"([{"id":0,"width":4,"height":4,"position":[0,0,0],"rotation":[[1,0,0],[0,1,0],[0,0,1]],"fy":2}])";
+  std::ofstream(dir + "/nofx.json")
+      << R"([{"id":0,"width":4,"height":4,"position":[0,0,0],"rotation":[[1,0,0],[0,1,0],[0,0,1]],"fy":2}])";
   expect_error(dir + "/nofx.json", "camera entry 0");
   expect_error(dir + "/missing.json", "cannot open");
 }

@@ -63,24 +63,24 @@ TEST_P(BruteForceTest, CpuRendererMatchesPerPixelOracle) {
   const Image slow = test::brute_force_render(*m, cam, c.pipeline == Pipeline::vanilla);
   const double psnr = psnr_rgba8(fast, slow);
   const float err = max_abs_error(fast, slow);
-  std::cout << "[ info ] " << c.name << ": PSNR " << psnr << " dB, max abs error " << err
-            << ", render list " << renderer.last_stats().render_list_length << "\n";
+  std::cout << "[ info ] " << c.name << ": PSNR " << psnr << " dB, max abs error " << err << ", render list "
+            << renderer.last_stats().render_list_length << "\n";
   EXPECT_GE(psnr, 50.0);
   // Guard against an all-black pair passing: the view must show the scene.
   std::size_t lit = 0;
-  for (std::size_t p = 0; p < fast.rgba8.size(); p += 4) lit += fast.rgba8[p] + fast.rgba8[p + 1] + fast.rgba8[p + 2] > 30;
+  for (std::size_t p = 0; p < fast.rgba8.size(); p += 4)
+    lit += fast.rgba8[p] + fast.rgba8[p + 1] + fast.rgba8[p + 2] > 30;
   EXPECT_GT(lit, fast.rgba8.size() / 4 / 20);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    RealScenes, BruteForceTest,
-    ::testing::Values(Case{"flowers_view0_vanilla", true, 0, Pipeline::vanilla},
-                      Case{"flowers_view0_exact", true, 0, Pipeline::exact},
-                      Case{"flowers_view90_exact", true, 90, Pipeline::exact},
-                      Case{"biker_0deg_vanilla", false, 0, Pipeline::vanilla},
-                      Case{"biker_0deg_exact", false, 0, Pipeline::exact},
-                      Case{"biker_130deg_exact", false, 130, Pipeline::exact}),
-    [](const auto& param_info) { return std::string(param_info.param.name); });
+INSTANTIATE_TEST_SUITE_P(RealScenes, BruteForceTest,
+                         ::testing::Values(Case{"flowers_view0_vanilla", true, 0, Pipeline::vanilla},
+                                           Case{"flowers_view0_exact", true, 0, Pipeline::exact},
+                                           Case{"flowers_view90_exact", true, 90, Pipeline::exact},
+                                           Case{"biker_0deg_vanilla", false, 0, Pipeline::vanilla},
+                                           Case{"biker_0deg_exact", false, 0, Pipeline::exact},
+                                           Case{"biker_130deg_exact", false, 130, Pipeline::exact}),
+                         [](const auto& param_info) { return std::string(param_info.param.name); });
 
 TEST(CpuRenderer, ExactListIsShorterAndImageClose) {
   auto m = scene(test::bundled_scene());
@@ -122,8 +122,8 @@ TEST(CpuRenderer, StagesKeepTheirInvariants) {
         const int tx = tile % grid.tiles_x, ty = tile / grid.tiles_x;
         ASSERT_TRUE(tx >= rect.x0 && tx < rect.x1 && ty >= rect.y0 && ty < rect.y1);
         if (p == Pipeline::exact) {
-          ASSERT_TRUE(fm::ellipse_touches_tile(proj.mean2d[g], proj.conic[g], proj.q_max[g], tx, ty,
-                                               cam.width, cam.height));
+          ASSERT_TRUE(
+              fm::ellipse_touches_tile(proj.mean2d[g], proj.conic[g], proj.q_max[g], tx, ty, cam.width, cam.height));
         }
       }
     }

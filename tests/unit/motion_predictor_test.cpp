@@ -193,7 +193,8 @@ TEST(MotionPredictor, AccelerationBeatsConstantVelocityOnARealPath) {
     err_quadratic += glm::distance(quadratic.predict(dt).position, trace[i + 4].camera.position());
     err_linear += glm::distance(linear.predict(dt).position, trace[i + 4].camera.position());
   }
-  std::cout << "[ info ] bicycle 4-frame position error: quadratic " << err_quadratic << ", line " << err_linear << "\n";
+  std::cout << "[ info ] bicycle 4-frame position error: quadratic " << err_quadratic << ", line " << err_linear
+            << "\n";
   EXPECT_LT(err_quadratic, 0.8 * err_linear);
 }
 

@@ -70,16 +70,15 @@ TEST_P(RealSceneTest, LoadsWithHeaderCountAndShDegree) {
   EXPECT_LT(b.min.y, b.max.y);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Scenes, RealSceneTest,
-    ::testing::Values(SceneFacts{"biker.compressed.ply", 152746, 0},
-                      SceneFacts{"guitar.compressed.ply", 90854, 0},
-                      SceneFacts{"flowers_sh3.ply", 38347, 3},
-                      SceneFacts{"tumblewood_sh2.ply", 542104, 2}),
-    [](const auto& param_info) {
-      std::string n = param_info.param.file;
-      return n.substr(0, n.find('.'));
-    });
+INSTANTIATE_TEST_SUITE_P(Scenes, RealSceneTest,
+                         ::testing::Values(SceneFacts{"biker.compressed.ply", 152746, 0},
+                                           SceneFacts{"guitar.compressed.ply", 90854, 0},
+                                           SceneFacts{"flowers_sh3.ply", 38347, 3},
+                                           SceneFacts{"tumblewood_sh2.ply", 542104, 2}),
+                         [](const auto& param_info) {
+                           std::string n = param_info.param.file;
+                           return n.substr(0, n.find('.'));
+                         });
 
 TEST(SceneLoader, BundledBikerLoadsWithoutSharedData) {
   const GaussianModel m = load_scene(test::bundled_scene());
@@ -116,8 +115,8 @@ TEST(SceneLoader, AsciiInAnyPropertyOrder) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
   const GaussianModel a = load_scene(path);
   const std::size_t n = 200;
-  std::vector<std::string> props = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-                                    "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"};
+  std::vector<std::string> props = {"x",       "y",       "z",       "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+                                    "scale_0", "scale_1", "scale_2", "rot_0",  "rot_1",  "rot_2",  "rot_3"};
   for (int j = 0; j < 45; ++j) props.push_back("f_rest_" + std::to_string(j));
   std::shuffle(props.begin(), props.end(), std::mt19937(7));
   auto value = [&](std::size_t i, const std::string& p) -> double {
@@ -245,14 +244,16 @@ TEST_F(CorruptSceneTest, UnsupportedFormat) {
 
 TEST_F(CorruptSceneTest, InriaMissingProperty) {
   if (!have_flowers()) GTEST_SKIP() << "real data scenes/flowers_sh3.ply not found under CATGS_DATA_DIR";
-  expect_scene_error(save("noopacity.ply", replace_in_header(flowers_, "property float opacity", "property float opacitz")),
-                     "lacks property 'opacity'");
+  expect_scene_error(
+      save("noopacity.ply", replace_in_header(flowers_, "property float opacity", "property float opacitz")),
+      "lacks property 'opacity'");
 }
 
 TEST_F(CorruptSceneTest, InriaWrongShCount) {
   if (!have_flowers()) GTEST_SKIP() << "real data scenes/flowers_sh3.ply not found under CATGS_DATA_DIR";
-  expect_scene_error(save("rest.ply", replace_in_header(flowers_, "property float f_rest_44", "property float g_rest_44")),
-                     "match no SH degree");
+  expect_scene_error(
+      save("rest.ply", replace_in_header(flowers_, "property float f_rest_44", "property float g_rest_44")),
+      "match no SH degree");
 }
 
 TEST_F(CorruptSceneTest, InriaNonFiniteValue) {

@@ -66,10 +66,10 @@ TEST(MotionAdaptiveWindow, FollowsThePaperRule) {
   SpeculationParams p;  // W_initial 4, l 16
   EXPECT_EQ(motion_adaptive_window(0.0f, p), 4);
   EXPECT_EQ(motion_adaptive_window(16.0f, p), 4);
-  EXPECT_EQ(motion_adaptive_window(20.0f, p), 3);   // floor(4 * 16 / 20)
+  EXPECT_EQ(motion_adaptive_window(20.0f, p), 3);  // floor(4 * 16 / 20)
   EXPECT_EQ(motion_adaptive_window(32.0f, p), 2);
   EXPECT_EQ(motion_adaptive_window(64.0f, p), 1);
-  EXPECT_EQ(motion_adaptive_window(65.0f, p), 0);   // one frame alone breaks the limit
+  EXPECT_EQ(motion_adaptive_window(65.0f, p), 0);  // one frame alone breaks the limit
   EXPECT_EQ(motion_adaptive_window(NAN, p), 0);
   p.initial_window = 0;
   EXPECT_EQ(motion_adaptive_window(1.0f, p), 0);
@@ -88,7 +88,7 @@ TEST(SpeculationSettings, NamesSetFieldsAndBadInputIsRefused) {
   EXPECT_DOUBLE_EQ(p.predictor.fit_window_s, 0.017);
   EXPECT_EQ(p.min_slice_entries, 0);
   EXPECT_EQ(p.backoff.min_served, SpeculationParams{}.backoff.min_served);  // untouched
-  apply_speculation_settings(p, "");  // nothing
+  apply_speculation_settings(p, "");                                        // nothing
   EXPECT_EQ(p.initial_window, 2);
   for (const char* bad : {"window=33", "windw=2", "window", "window=2.5", "cache=maybe", "fit_ms=0", "=1"}) {
     EXPECT_THROW(apply_speculation_settings(p, bad), std::invalid_argument) << bad;
@@ -130,8 +130,8 @@ TEST(SpeculationPlanner, BacksOffAfterGroupsThatDoNotRepayTheirKeyFrame) {
   for (int k = 0; k < 3; ++k) EXPECT_EQ(frame(true), 0) << k;
   EXPECT_EQ(frame(true), 4);
   for (int k = 0; k < 4; ++k) EXPECT_EQ(frame(true), -1) << k;  // a full group repays
-  EXPECT_EQ(frame(true), 4);   // and resets the backoff
-  EXPECT_EQ(frame(false), 0);  // poor: back to 2 full frames
+  EXPECT_EQ(frame(true), 4);                                    // and resets the backoff
+  EXPECT_EQ(frame(false), 0);                                   // poor: back to 2 full frames
   EXPECT_EQ(frame(true), 0);
   EXPECT_EQ(frame(true), 4);
   p.backoff.frames = 0;  // off: every key frame may speculate
@@ -145,8 +145,8 @@ TEST(SpeculationPlanner, BacksOffAfterGroupsThatDoNotRepayTheirKeyFrame) {
 TEST(TaskSplitting, SliceLengthFloor) {
   const cpu::TileRanges ranges{{0, 100}, {100, 400}, {400, 2400}, {2400, 2410}};  // loads 100, 300, 2000, 10
   std::vector<TileSlice> paper, floored;
-  cpu::plan_slices(ranges, 2410, true, paper);          // l = 602: only the 2000-entry tile splits, in 3
-  cpu::plan_slices(ranges, 2410, true, floored, 900);   // l = 900: it splits in 2 (1100 + 900)
+  cpu::plan_slices(ranges, 2410, true, paper);         // l = 602: only the 2000-entry tile splits, in 3
+  cpu::plan_slices(ranges, 2410, true, floored, 900);  // l = 900: it splits in 2 (1100 + 900)
   ASSERT_EQ(paper.size(), 6u);
   EXPECT_EQ(paper[2].end - paper[2].begin, 2000u - 2u * 602u);
   ASSERT_EQ(floored.size(), 5u);
@@ -156,7 +156,7 @@ TEST(TaskSplitting, SliceLengthFloor) {
   EXPECT_EQ(floored[3].end, 2400u);
   EXPECT_EQ(floored[3].index, 1u);
   std::vector<TileSlice> none;
-  cpu::plan_slices(ranges, 2410, true, none, 1000);     // l = 1000: 2000 is not over 2l
+  cpu::plan_slices(ranges, 2410, true, none, 1000);  // l = 1000: 2000 is not over 2l
   EXPECT_EQ(none.size(), 4u);
 }
 
@@ -186,8 +186,8 @@ TEST(TaskSplitting, SplitAndUnsplitAgree) {
   cpu::rasterize_slices(r.projected(), r.render_list(), split, grid, false, {}, b);
   float err = 0.0f;
   for (std::size_t k = 0; k < a.rgb.size(); ++k) err = std::max(err, std::fabs(a.rgb[k] - b.rgb[k]));
-  std::cout << "[ info ] " << split.size() - whole.size() << " extra slices; early termination off: max abs "
-            << err << "\n";
+  std::cout << "[ info ] " << split.size() - whole.size() << " extra slices; early termination off: max abs " << err
+            << "\n";
   EXPECT_LE(err, 1e-5f);
   cpu::rasterize_slices(r.projected(), r.render_list(), whole, grid, true, {}, c);
   cpu::rasterize_slices(r.projected(), r.render_list(), split, grid, true, {}, d);
@@ -329,8 +329,10 @@ TEST(Speculation, WindowZeroAndNoCacheRenderEveryFrameInFull) {
   const Trace t = biker_orbit(*m, 10.0f, 0.1);
   for (int variant = 0; variant < 2; ++variant) {
     RenderOptions o = catgs_options();
-    if (variant == 0) o.speculation.initial_window = 0;
-    else o.speculation.frustum_and_sort_cache = false;
+    if (variant == 0)
+      o.speculation.initial_window = 0;
+    else
+      o.speculation.frustum_and_sort_cache = false;
     auto r = make_renderer("cpu", m, o);
     cpu::CpuRenderer full(m, {Pipeline::exact, {}, {}});
     Image a, b;

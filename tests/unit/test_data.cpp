@@ -27,8 +27,8 @@ std::string bundled_scene() { return std::string(CATGS_ASSETS_DIR) + "/scenes/bi
 
 std::string temp_dir() {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  const fs::path p = fs::temp_directory_path() / "catgs_tests" /
-                     (std::string(info->test_suite_name()) + "." + info->name());
+  const fs::path p =
+      fs::temp_directory_path() / "catgs_tests" / (std::string(info->test_suite_name()) + "." + info->name());
   fs::remove_all(p);
   fs::create_directories(p);
   return p.string();

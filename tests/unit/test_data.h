@@ -25,8 +25,8 @@ std::shared_ptr<const GaussianModel> cached_scene(const std::string& path);
 }  // namespace catgs::test
 
 // Skips the test with a visible reason when a real-data file is missing.
-#define CATGS_REQUIRE_DATA(var, relative)                                                    \
-  const std::string var = ::catgs::test::data_file(relative);                               \
-  if (var.empty())                                                                           \
-    GTEST_SKIP() << "real data '" << (relative) << "' not found under CATGS_DATA_DIR ("      \
-                 << ::catgs::test::data_dir() << "); set CATGS_DATA_DIR to ../shared/data"
+#define CATGS_REQUIRE_DATA(var, relative)                                                                          \
+  const std::string var = ::catgs::test::data_file(relative);                                                      \
+  if (var.empty())                                                                                                 \
+  GTEST_SKIP() << "real data '" << (relative) << "' not found under CATGS_DATA_DIR (" << ::catgs::test::data_dir() \
+               << "); set CATGS_DATA_DIR to ../shared/data"

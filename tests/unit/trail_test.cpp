@@ -30,8 +30,8 @@ Projected project(const Camera& c, glm::vec3 mean, const fm::Cov3& S) {
           fm::covariance_2d(S, c.R, p, c.fx, c.fy, tan_half)};
 }
 
-Camera pose_between(const glm::vec3& p0, const glm::quat& q0, const glm::vec3& p1, const glm::quat& q1,
-                    float fov0, float fov1, float s) {
+Camera pose_between(const glm::vec3& p0, const glm::quat& q0, const glm::vec3& p1, const glm::quat& q1, float fov0,
+                    float fov1, float s) {
   return Camera::from_pose(p0 + s * (p1 - p0), glm::slerp(q0, q1, s), fov0 + s * (fov1 - fov0), 320, 240);
 }
 
@@ -90,8 +90,8 @@ TEST(TrailTest, HoldsEveryTileAlongThePredictedPath) {
           for (int tx = e.x0; tx < e.x1; ++tx)
             if (fm::ellipse_touches_tile(p.mean, pc, q_max, tx, ty, 320, 240)) {
               needed.insert(ty * 20 + tx);
-              ASSERT_TRUE(listed.count(ty * 20 + tx))
-                  << "window " << motion << " Gaussian " << g << " pose " << k << " misses tile (" << tx << ", " << ty << ")";
+              ASSERT_TRUE(listed.count(ty * 20 + tx)) << "window " << motion << " Gaussian " << g << " pose " << k
+                                                      << " misses tile (" << tx << ", " << ty << ")";
               if (k == 0) ++key_tiles;
             }
         // The sub-frame check accepts every pose the trail was built for.
@@ -140,15 +140,16 @@ TEST(TrailTest, SpeculativePreprocessListsEveryTileAlongThePath) {
     const glm::vec3 p1 = p0 + scale * glm::vec3(u(rng), u(rng), u(rng));
     const glm::quat q1 = glm::normalize(q0 * glm::quat(1.0f, scale * u(rng), scale * u(rng), scale * u(rng)));
     std::vector<Camera> path;
-    for (int k = 0; k < 5; ++k) path.push_back(pose_between(p0, q0, p1, q1, 50.0f, 50.0f, static_cast<float>(k) / 4.0f));
+    for (int k = 0; k < 5; ++k)
+      path.push_back(pose_between(p0, q0, p1, q1, 50.0f, 50.0f, static_cast<float>(k) / 4.0f));
     cpu::ProjectedGaussians out;
     const TrailWidening widening{0.1f, 0.5f, motion % 2 == 0 ? 0.0f : 0.25f};
     cpu::speculative_preprocess(model, path, widening, out);
     for (std::size_t i = 0; i < n; ++i) {
       const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
-      const fm::Cov3 S = fm::covariance_3d({model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
-                                           {model.rotations[4 * i], model.rotations[4 * i + 1],
-                                            model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
+      const fm::Cov3 S = fm::covariance_3d(
+          {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
+          {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
       const float q_max = fm::opacity_aware_qmax(fm::sigmoid(model.opacity_logits[i]));
       if (!(q_max > 0.0f) || !project(path[0], mean, S).visible) continue;
       bool reaches = false;
@@ -164,7 +165,8 @@ TEST(TrailTest, SpeculativePreprocessListsEveryTileAlongThePath) {
             ASSERT_GT(out.tiles_touched[i], 0u) << "window " << motion << " Gaussian " << i << " pose " << k;
             ASSERT_TRUE(fm::trail_touches_tile(out.trail_mean0[i], out.trail_motion[i], out.trail_conic[i],
                                                out.q_trail[i], tx, ty, 320, 240))
-                << "window " << motion << " Gaussian " << i << " pose " << k << " misses tile (" << tx << ", " << ty << ")";
+                << "window " << motion << " Gaussian " << i << " pose " << k << " misses tile (" << tx << ", " << ty
+                << ")";
           }
       }
       listed_gaussians += out.tiles_touched[i] > 0 ? 1 : 0;
@@ -180,13 +182,13 @@ TEST(TrailTest, SpeculativePreprocessListsEveryTileAlongThePath) {
 // fm::edges_beyond, the bound behind that cull: which edges a Gaussian lies beyond.
 TEST(TrailTest, EdgesBeyondNamesTheEdge) {
   const glm::vec2 tan_half(320.0f / (2.0f * 300.0f), 240.0f / (2.0f * 300.0f));
-  const fm::View view{glm::mat3(1.0f), glm::vec3(0.0f), 300.0f, 300.0f, 160.0f, 120.0f, 320, 240, 0.2f, 1000.0f,
-                      tan_half};
+  const fm::View view{glm::mat3(1.0f), glm::vec3(0.0f), 300.0f, 300.0f, 160.0f, 120.0f, 320, 240, 0.2f,
+                      1000.0f,         tan_half};
   auto edges = [&](glm::vec3 p, float widen, float extra) {
     return fm::edges_beyond(p, 0.01f, 9.0f, view, widen, extra);
   };
-  EXPECT_EQ(edges({0.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 0u);    // centre of the view
-  EXPECT_EQ(edges({-3.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 1u);   // far left
+  EXPECT_EQ(edges({0.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 0u);       // centre of the view
+  EXPECT_EQ(edges({-3.0f, 0.0f, 2.0f}, 1.0f, 0.0f), 1u);      // far left
   EXPECT_EQ(edges({3.0f, 3.0f, 2.0f}, 1.0f, 0.0f), 2u | 8u);  // far right and below
   // Just beyond the left edge: u = -20.5 px, r = 3 * (0.01 * 230 + 0.55) + 1 ~ 9.6 px.
   const glm::vec3 near_left(-180.0f / 150.0f, 0.0f, 2.0f);
@@ -233,7 +235,8 @@ TEST(TrailTest, SweptRectMinimumUsesTheBoundaryOnly) {
     if (n % 10 == 1) m.x = 0.0f;
     if (n % 10 == 2) m.y = 0.0f;
     if (n % 100 == 3) m = glm::vec2(0.0f);
-    const float got = fm::min_quadratic_over_swept_rect(fm::make_trail_tile_test({0, 0}, m, conic, 0.0f), x0, x1, y0, y1);
+    const float got =
+        fm::min_quadratic_over_swept_rect(fm::make_trail_tile_test({0, 0}, m, conic, 0.0f), x0, x1, y0, y1);
     const glm::vec2 cs[4] = {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
     float all = INFINITY;
     for (int k = 0; k < 4; ++k) {
@@ -247,8 +250,9 @@ TEST(TrailTest, SweptRectMinimumUsesTheBoundaryOnly) {
   }
   EXPECT_GT(outside, 10000);
   // Origin inside the swept shape: 0.
-  EXPECT_EQ(fm::min_quadratic_over_swept_rect(fm::make_trail_tile_test({0, 0}, {30, 4}, {1, 0, 1}, 0.0f), 5, 20, -3, 12),
-            0.0f);  // s = 0.5 holds it
+  EXPECT_EQ(
+      fm::min_quadratic_over_swept_rect(fm::make_trail_tile_test({0, 0}, {30, 4}, {1, 0, 1}, 0.0f), 5, 20, -3, 12),
+      0.0f);  // s = 0.5 holds it
 }
 
 TEST(TrailTest, StillCameraTrailIsTheExactEllipse) {

@@ -138,9 +138,8 @@ catgs::Trace make_bench_trace(const Args& args, const BenchScene& s, int width, 
                                      args.get_double("--seconds-per-view", 0.5));
   } else if (spec.rfind("real:", 0) == 0) {
     const auto keys = catgs::load_inria_cameras(spec.substr(5));
-    trace = catgs::fit_trace_to_scene(keys, s.model, s.up,
-                                      static_cast<float>(args.get_double("--distance", 0.6)), 120.0,
-                                      args.get_double("--seconds-per-view", 0.5), width, height);
+    trace = catgs::fit_trace_to_scene(keys, s.model, s.up, static_cast<float>(args.get_double("--distance", 0.6)),
+                                      120.0, args.get_double("--seconds-per-view", 0.5), width, height);
   } else {
     trace = catgs::read_trace(spec);
     for (auto& tc : trace) tc.camera = tc.camera.rescaled(width, height);
@@ -164,36 +163,39 @@ bool use_cuda(const Args& args) {
 }
 
 #if CATGS_HAVE_CUDA
-std::vector<PipelineResult> run_on_cuda(BenchScene& s, const std::vector<Variant>& variants,
-                                        const TimingPlan& plan, BenchContext& c) {
+std::vector<PipelineResult> run_on_cuda(BenchScene& s, const std::vector<Variant>& variants, const TimingPlan& plan,
+                                        BenchContext& c) {
   const std::size_t used_before_scene = catgs::cuda::device_memory_used();
   const auto scene = catgs::cuda::DeviceScene::upload(s.model);
   c.scene_device_bytes = scene->bytes();
-  std::fprintf(stderr, "GPU: %s\nscene %s: %zu Gaussians (SH %d, %.0f MiB on device), built in %.1f s; "
+  std::fprintf(stderr,
+               "GPU: %s\nscene %s: %zu Gaussians (SH %d, %.0f MiB on device), built in %.1f s; "
                "trace %s: %zu cameras, %d warm-up + %d timed frames at %dx%d\n",
                c.gpu.c_str(), c.scene.c_str(), c.gaussians, c.sh_degree,
-               static_cast<double>(scene->bytes()) / (1 << 20), s.load_s, c.trace.c_str(),
-               plan.trace->size(), c.warmup, c.frames, c.width, c.height);
+               static_cast<double>(scene->bytes()) / (1 << 20), s.load_s, c.trace.c_str(), plan.trace->size(), c.warmup,
+               c.frames, c.width, c.height);
   s.model = catgs::GaussianModel{};  // the host copy is no longer needed
   return catgs::bench::time_on_cuda(scene, variants, plan, used_before_scene);
 }
 #endif
 
-std::vector<PipelineResult> run_on_cpu(BenchScene& s, const std::vector<Variant>& variants,
-                                       const TimingPlan& plan, const BenchContext& c) {
-  std::fprintf(stderr, "CPU reference: %s\nscene %s: %zu Gaussians (SH %d), built in %.1f s; trace %s: "
-               "%zu cameras, %d warm-up + %d timed frames at %dx%d\n", c.gpu.c_str(), c.scene.c_str(),
-               c.gaussians, c.sh_degree, s.load_s, c.trace.c_str(), plan.trace->size(), c.warmup, c.frames,
-               c.width, c.height);
+std::vector<PipelineResult> run_on_cpu(BenchScene& s, const std::vector<Variant>& variants, const TimingPlan& plan,
+                                       const BenchContext& c) {
+  std::fprintf(stderr,
+               "CPU reference: %s\nscene %s: %zu Gaussians (SH %d), built in %.1f s; trace %s: "
+               "%zu cameras, %d warm-up + %d timed frames at %dx%d\n",
+               c.gpu.c_str(), c.scene.c_str(), c.gaussians, c.sh_degree, s.load_s, c.trace.c_str(), plan.trace->size(),
+               c.warmup, c.frames, c.width, c.height);
   const auto shared = std::make_shared<const catgs::GaussianModel>(std::move(s.model));
   return catgs::bench::time_on_cpu(shared, variants, plan);
 }
 
 int run(int argc, char** argv) {
-  const Args args(argc, argv, {"--scene", "--city!", "--radius-sq", "--spacing", "--seed", "--scale",
-                               "--trace", "--width", "--height", "--pipeline", "--frames", "--warmup",
-                               "--json", "--snapshot-dir", "--up", "--seconds-per-view", "--distance",
-                               "--renderer", "--quality-every", "--help!"});
+  const Args args(argc, argv,
+                  {"--scene",         "--city!",        "--radius-sq", "--spacing",          "--seed",     "--scale",
+                   "--trace",         "--width",        "--height",    "--pipeline",         "--frames",   "--warmup",
+                   "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance", "--renderer",
+                   "--quality-every", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;

@@ -81,8 +81,10 @@ void record_frame(PipelineResult& res, double ms, const FrameStats& s) {
   res.list.push_back(static_cast<double>(s.render_list_length));
   res.visible.push_back(static_cast<double>(s.visible));
   (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);
-  if (s.key_frame) record_key_frame(res, ms, s);
-  else ++res.open_served;
+  if (s.key_frame)
+    record_key_frame(res, ms, s);
+  else
+    ++res.open_served;
   const double stage[6] = {s.preprocess_ms, s.keys_ms, s.sort_ms, s.ranges_ms, s.rasterize_ms, s.merge_ms};
   for (int k = 0; k < 6; ++k) (s.key_frame ? res.key_stage : res.sub_stage)[k].push_back(stage[k]);
 }
@@ -141,11 +143,9 @@ RenderOptions exact_options() {
 // image), a key frame the render-list growth (catgs key list / exact list).
 class QualityCheck {
  public:
-  explicit QualityCheck(const std::shared_ptr<const cuda::DeviceScene>& scene)
-      : reference_(scene, exact_options()) {}
+  explicit QualityCheck(const std::shared_ptr<const cuda::DeviceScene>& scene) : reference_(scene, exact_options()) {}
 
-  void compare(PipelineResult& res, const FrameStats& stats, const cuda::DeviceFrame& frame,
-               const Camera& camera) {
+  void compare(PipelineResult& res, const FrameStats& stats, const cuda::DeviceFrame& frame, const Camera& camera) {
     reference_.render(camera, full_);
     if (stats.key_frame) {
       res.list_growth.push_back(static_cast<double>(stats.render_list_length) /
@@ -157,8 +157,10 @@ class QualityCheck {
     double max_abs = 0.0;
     for (std::size_t i = 0; i < image_.rgb.size(); ++i)
       max_abs = std::max(max_abs, static_cast<double>(std::fabs(image_.rgb[i] - full_.rgb[i])));
-    if (std::isinf(p)) ++res.subframes_inf;
-    else res.sub_psnr.push_back(p);
+    if (std::isinf(p))
+      ++res.subframes_inf;
+    else
+      res.sub_psnr.push_back(p);
     res.sub_max_abs.push_back(max_abs);
   }
 
@@ -169,8 +171,7 @@ class QualityCheck {
     image_.height = frame.height;
     image_.rgb.resize(pixels * 3);
     image_.rgba8.resize(pixels * 4);
-    check(cudaMemcpy(image_.rgb.data(), frame.rgb, pixels * 3 * sizeof(float), cudaMemcpyDeviceToHost),
-          "cudaMemcpy");
+    check(cudaMemcpy(image_.rgb.data(), frame.rgb, pixels * 3 * sizeof(float), cudaMemcpyDeviceToHost), "cudaMemcpy");
     check(cudaMemcpy(image_.rgba8.data(), frame.rgba8, pixels * 4, cudaMemcpyDeviceToHost), "cudaMemcpy");
   }
 
@@ -196,7 +197,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
     const float ms = timer.stop(r.stream());
     const FrameStats stats = r.last_stats();
     record_frame(res, ms, stats);
-    res.heaviest.push_back(static_cast<double>(r.diagnostics().heaviest_tile_entries));  // after timing
+    res.heaviest.push_back(static_cast<double>(r.diagnostics().heaviest_tile_entries));   // after timing
     if (compare && k % plan.quality_every == 0) quality.compare(res, stats, frame, cam);  // after timing too
   }
   const cuda::CudaRenderer::Diagnostics d = r.diagnostics();

@@ -35,9 +35,9 @@ struct PipelineResult {
   std::map<int, Groups> groups;  // catgs: by W, the groups that closed during the timed frames
   int open_window = 0;           // the open group's W (0: none), and its sub-frames so far
   std::size_t open_served = 0;
-  std::vector<double> key_stage[6], sub_stage[6];  // catgs: pre, keys, sort, ranges, raster, merge
+  std::vector<double> key_stage[6], sub_stage[6];          // catgs: pre, keys, sort, ranges, raster, merge
   std::vector<double> sub_psnr, sub_max_abs, list_growth;  // catgs vs exact, same pose (--quality-every)
-  std::size_t subframes_inf = 0;  // sub-frames identical to the full render (PSNR +inf)
+  std::size_t subframes_inf = 0;                           // sub-frames identical to the full render (PSNR +inf)
   std::size_t peak_buffer_bytes = 0, device_used_bytes = 0, allocations_timed = 0;  // CUDA
   int syncs = 0;                                                                    // CUDA
 };

@@ -21,9 +21,7 @@ std::invalid_argument bad_variant(const std::string& text, const std::string& wh
   return std::invalid_argument("pipeline variant '" + text + "': " + why);
 }
 
-bool all_digits(const std::string& s) {
-  return !s.empty() && s.find_first_not_of("0123456789") == std::string::npos;
-}
+bool all_digits(const std::string& s) { return !s.empty() && s.find_first_not_of("0123456789") == std::string::npos; }
 
 // The pipeline and the preset settings of a name without braces; false for an unknown name.
 bool expand_name(const std::string& name, Pipeline& pipeline, std::string& settings) {

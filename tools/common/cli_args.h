@@ -35,9 +35,7 @@ class Args {
     if (!has(name)) throw std::invalid_argument("missing required option " + name);
     return get(name);
   }
-  int get_int(const std::string& name, int fallback) const {
-    return has(name) ? std::stoi(get(name)) : fallback;
-  }
+  int get_int(const std::string& name, int fallback) const { return has(name) ? std::stoi(get(name)) : fallback; }
   double get_double(const std::string& name, double fallback) const {
     return has(name) ? std::stod(get(name)) : fallback;
   }

@@ -87,10 +87,10 @@ std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConf
 int main(int argc, char** argv) {
   try {
     const tools::Args args(argc, argv,
-                           {"--host", "--port", "--sessions", "--size", "--width", "--height",
-                            "--trace", "--scene", "--offset-s", "--rate", "--depth", "--seconds",
-                            "--decode", "--check-every", "--check-min-psnr", "--warmup", "--stale-ms", "--token", "--json", "--ramp!",
-                            "--ramp-step", "--max-p95-ms", "--min-fps", "--help!"});
+                           {"--host",   "--port",        "--sessions",       "--size",       "--width",    "--height",
+                            "--trace",  "--scene",       "--offset-s",       "--rate",       "--depth",    "--seconds",
+                            "--decode", "--check-every", "--check-min-psnr", "--warmup",     "--stale-ms", "--token",
+                            "--json",   "--ramp!",       "--ramp-step",      "--max-p95-ms", "--min-fps",  "--help!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -130,9 +130,14 @@ int main(int argc, char** argv) {
     const int max_sessions = std::max(1, args.get_int("--sessions", 1));
 
     nlohmann::json report;
-    report["config"] = {{"rate_hz", base.rate_hz}, {"seconds", base.seconds}, {"decode", base.decode},
-                        {"check_every", base.check_every}, {"check_min_psnr", base.check_min_psnr},
-                        {"sizes", sizes}, {"traces", traces}, {"stale_ms", base.stale_ms}};
+    report["config"] = {{"rate_hz", base.rate_hz},
+                        {"seconds", base.seconds},
+                        {"decode", base.decode},
+                        {"check_every", base.check_every},
+                        {"check_min_psnr", base.check_min_psnr},
+                        {"sizes", sizes},
+                        {"traces", traces},
+                        {"stale_ms", base.stale_ms}};
     int exit_code = 0;
     if (!args.has("--ramp")) {
       const auto results = run_sessions(max_sessions, templates);
@@ -154,9 +159,12 @@ int main(int argc, char** argv) {
         const auto results = run_sessions(n, templates);
         const RunSummary t = summarize_run(results);
         char broken[96] = "";
-        if (t.errors) std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
-        else if (max_p95 > 0 && t.latency.p95 > max_p95) std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
-        else if (min_fps > 0 && t.fps_min < min_fps) std::snprintf(broken, sizeof(broken), "slowest session %.1f FPS", t.fps_min);
+        if (t.errors)
+          std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
+        else if (max_p95 > 0 && t.latency.p95 > max_p95)
+          std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
+        else if (min_fps > 0 && t.fps_min < min_fps)
+          std::snprintf(broken, sizeof(broken), "slowest session %.1f FPS", t.fps_min);
         std::printf("--- %d session(s): %s%s\n", n, broken[0] ? "broke: " : "held", broken);
         std::cout << format_table(results);
         nlohmann::json step_json = run_json(results);
@@ -166,8 +174,8 @@ int main(int argc, char** argv) {
         if (broken[0]) break;
         held = n;
       }
-      std::printf("ramp: largest session count that held: %d (bounds: p95 <= %g ms, min FPS >= %g; 0 = none)\n",
-                  held, max_p95, min_fps);
+      std::printf("ramp: largest session count that held: %d (bounds: p95 <= %g ms, min FPS >= %g; 0 = none)\n", held,
+                  max_p95, min_fps);
       report["largest_sessions_held"] = held;
     }
     if (args.has("--json")) {

@@ -30,10 +30,8 @@ H264Decoder::~H264Decoder() {
   avcodec_free_context(&ctx_);
 }
 
-bool H264Decoder::decode(const std::string& au, std::vector<std::uint8_t>& rgba, int& width,
-                         int& height) {
-  if (av_new_packet(packet_, static_cast<int>(au.size())) < 0)
-    throw std::runtime_error("h264 decoder: out of memory");
+bool H264Decoder::decode(const std::string& au, std::vector<std::uint8_t>& rgba, int& width, int& height) {
+  if (av_new_packet(packet_, static_cast<int>(au.size())) < 0) throw std::runtime_error("h264 decoder: out of memory");
   std::memcpy(packet_->data, au.data(), au.size());
   int err = avcodec_send_packet(ctx_, packet_);
   av_packet_unref(packet_);
@@ -48,8 +46,8 @@ bool H264Decoder::decode(const std::string& au, std::vector<std::uint8_t>& rgba,
     height = frame_->height;
     if (!sws_ || sws_w_ != width || sws_h_ != height) {
       if (sws_) sws_freeContext(sws_);
-      sws_ = sws_getContext(width, height, static_cast<AVPixelFormat>(frame_->format), width,
-                            height, AV_PIX_FMT_RGBA, SWS_BILINEAR, nullptr, nullptr, nullptr);
+      sws_ = sws_getContext(width, height, static_cast<AVPixelFormat>(frame_->format), width, height, AV_PIX_FMT_RGBA,
+                            SWS_BILINEAR, nullptr, nullptr, nullptr);
       if (!sws_) throw std::runtime_error("h264 decoder: no colour converter");
       // BT.709 limited range in, full-range RGB out.
       const int* bt709 = sws_getCoefficients(SWS_CS_ITU709);

@@ -25,8 +25,7 @@ class H264Decoder {
   // Decodes one access unit. Returns true with `rgba` (width*height*4, row-major, top row
   // first) filled when a picture came out; false when the decoder produced none (e.g. P-frames
   // before the first IDR). Throws std::runtime_error for corrupt data.
-  bool decode(const std::string& access_unit, std::vector<std::uint8_t>& rgba, int& width,
-              int& height);
+  bool decode(const std::string& access_unit, std::vector<std::uint8_t>& rgba, int& width, int& height);
 
  private:
   AVCodecContext* ctx_ = nullptr;

@@ -76,7 +76,7 @@ namespace {
 double mean(double sum, std::uint64_t n) { return n ? sum / static_cast<double>(n) : 0.0; }
 
 nlohmann::json latency_json(const LatencySummary& l) {
-  return {{"p50_ms", l.p50}, {"p95_ms", l.p95}, {"p99_ms", l.p99},
+  return {{"p50_ms", l.p50},   {"p95_ms", l.p95}, {"p99_ms", l.p99},
           {"mean_ms", l.mean}, {"max_ms", l.max}, {"samples", l.samples}};
 }
 
@@ -97,32 +97,33 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
   nlohmann::json out;
   out["sessions"] = nlohmann::json::array();
   for (const SessionResult& s : sessions) {
-    out["sessions"].push_back({{"index", s.index},
-                               {"trace", s.trace},
-                               {"width", s.width},
-                               {"height", s.height},
-                               {"session_id", s.session_id},
-                               {"renderer", s.renderer},
-                               {"encoder", s.encoder},
-                               {"pipeline", s.pipeline},
-                               {"seconds", s.run_seconds},
-                               {"poses_sent", s.poses_sent},
-                               {"frames", s.frames},
-                               {"idr_frames", s.idr_frames},
-                               {"decoded", s.decoded},
-                               {"fps", session_fps(s)},
-                               {"bytes", s.bytes},
-                               {"bytes_per_second", s.run_seconds > 0 ? static_cast<double>(s.bytes) / s.run_seconds : 0.0},
-                               {"dropped", s.dropped},
-                               {"stale", s.stale},
-                               {"errors", s.errors},
-                               {"first_error", s.first_error},
-                               {"checked", s.checked},
-                               {"check_failures", s.check_failures},
-                               {"psnr_min_db", s.psnr_min},
-                               {"psnr_mean_db", s.psnr_mean},
-                               {"latency", latency_json(summarize_latency(s.latency_ms))},
-                               {"server", stages_json(s.server)}});
+    out["sessions"].push_back(
+        {{"index", s.index},
+         {"trace", s.trace},
+         {"width", s.width},
+         {"height", s.height},
+         {"session_id", s.session_id},
+         {"renderer", s.renderer},
+         {"encoder", s.encoder},
+         {"pipeline", s.pipeline},
+         {"seconds", s.run_seconds},
+         {"poses_sent", s.poses_sent},
+         {"frames", s.frames},
+         {"idr_frames", s.idr_frames},
+         {"decoded", s.decoded},
+         {"fps", session_fps(s)},
+         {"bytes", s.bytes},
+         {"bytes_per_second", s.run_seconds > 0 ? static_cast<double>(s.bytes) / s.run_seconds : 0.0},
+         {"dropped", s.dropped},
+         {"stale", s.stale},
+         {"errors", s.errors},
+         {"first_error", s.first_error},
+         {"checked", s.checked},
+         {"check_failures", s.check_failures},
+         {"psnr_min_db", s.psnr_min},
+         {"psnr_mean_db", s.psnr_mean},
+         {"latency", latency_json(summarize_latency(s.latency_ms))},
+         {"server", stages_json(s.server)}});
   }
   const RunSummary t = summarize_run(sessions);
   out["total"] = {{"sessions", t.sessions},
@@ -146,31 +147,29 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
                  const LatencySummary& l, double kbps, std::uint64_t dropped, std::uint64_t stale,
                  std::uint64_t errors) {
     std::snprintf(line, sizeof(line), "%-8s %-10s %7llu %7.1f %8.1f %8.1f %8.1f %9.0f %7llu %6llu %6llu\n",
-                  name.c_str(), size.c_str(), static_cast<unsigned long long>(frames), fps, l.p50,
-                  l.p95, l.p99, kbps, static_cast<unsigned long long>(dropped),
-                  static_cast<unsigned long long>(stale), static_cast<unsigned long long>(errors));
+                  name.c_str(), size.c_str(), static_cast<unsigned long long>(frames), fps, l.p50, l.p95, l.p99, kbps,
+                  static_cast<unsigned long long>(dropped), static_cast<unsigned long long>(stale),
+                  static_cast<unsigned long long>(errors));
     out += line;
   };
-  std::snprintf(line, sizeof(line), "%-8s %-10s %7s %7s %8s %8s %8s %9s %7s %6s %6s\n", "session",
-                "size", "frames", "FPS", "p50 ms", "p95 ms", "p99 ms", "kbit/s", "dropped",
-                "stale", "errors");
+  std::snprintf(line, sizeof(line), "%-8s %-10s %7s %7s %8s %8s %8s %9s %7s %6s %6s\n", "session", "size", "frames",
+                "FPS", "p50 ms", "p95 ms", "p99 ms", "kbit/s", "dropped", "stale", "errors");
   out += line;
   for (const SessionResult& s : sessions) {
     const double kbps = s.run_seconds > 0 ? 8.0 * static_cast<double>(s.bytes) / s.run_seconds / 1000.0 : 0.0;
-    row(std::to_string(s.index), std::to_string(s.width) + "x" + std::to_string(s.height), s.frames,
-        session_fps(s), summarize_latency(s.latency_ms), kbps, s.dropped, s.stale, s.errors);
+    row(std::to_string(s.index), std::to_string(s.width) + "x" + std::to_string(s.height), s.frames, session_fps(s),
+        summarize_latency(s.latency_ms), kbps, s.dropped, s.stale, s.errors);
   }
   const RunSummary t = summarize_run(sessions);
-  row("total", "", t.frames, t.fps_total, t.latency, 8.0 * t.bytes_per_second / 1000.0, t.dropped,
-      t.stale, t.errors);
+  row("total", "", t.frames, t.fps_total, t.latency, 8.0 * t.bytes_per_second / 1000.0, t.dropped, t.stale, t.errors);
   const StageSums& g = t.server;
   std::snprintf(line, sizeof(line),
                 "server means (ms): queue %.2f  render %.2f (key frames %.0f%%)  convert %.2f  "
                 "encode %.2f  send %.2f  pose->handed %.2f;  slowest session %.1f FPS\n",
                 mean(g.queue, g.frames), mean(g.render, g.frames),
                 g.frames ? 100.0 * static_cast<double>(g.render_key) / static_cast<double>(g.frames) : 0.0,
-                mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends),
-                mean(g.total, g.frames), t.fps_min);
+                mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends), mean(g.total, g.frames),
+                t.fps_min);
   out += line;
   for (const SessionResult& s : sessions)
     if (s.checked > 0) {

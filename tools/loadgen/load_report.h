@@ -20,19 +20,19 @@ double percentile(std::vector<double> values, double p);
 // Server-side stage times of a session's frames, from Frame.timings (ms): sums and a count.
 struct StageSums {
   double queue = 0, render = 0, convert = 0, encode = 0, send = 0, total = 0;
-  std::uint64_t frames = 0;          // frames summed (send: frames with previous_send_ms > 0)
+  std::uint64_t frames = 0;  // frames summed (send: frames with previous_send_ms > 0)
   std::uint64_t sends = 0;
-  std::uint64_t render_key = 0;      // frames whose render was a key frame (catgs: full pre-process)
+  std::uint64_t render_key = 0;  // frames whose render was a key frame (catgs: full pre-process)
   void add(const StageSums& o);
 };
 
 // What one session saw. Filled by run_load_session (load_session.h).
 struct SessionResult {
-  int index = 0;                 // session number in the run, from 0
-  std::string trace;             // trace spec it replayed
-  int width = 0, height = 0;     // frame size the server streamed
+  int index = 0;                                        // session number in the run, from 0
+  std::string trace;                                    // trace spec it replayed
+  int width = 0, height = 0;                            // frame size the server streamed
   std::string session_id, renderer, encoder, pipeline;  // from Welcome
-  double run_seconds = 0;        // poses were sent for this long
+  double run_seconds = 0;                               // poses were sent for this long
   std::uint64_t poses_sent = 0;
   std::uint64_t frames = 0;      // Frame messages received
   std::uint64_t idr_frames = 0;  // among them, IDR access units
@@ -48,7 +48,7 @@ struct SessionResult {
   std::uint64_t checked = 0;
   std::uint64_t check_failures = 0;  // checked frames below LoadSessionConfig::check_min_psnr
   double psnr_min = 0, psnr_mean = 0;
-  StageSums server;              // after warm-up
+  StageSums server;  // after warm-up
 };
 
 struct LatencySummary {
@@ -61,10 +61,10 @@ LatencySummary summarize_latency(const std::vector<double>& latency_ms);
 struct RunSummary {
   int sessions = 0;
   std::uint64_t frames = 0, poses_sent = 0, bytes = 0, dropped = 0, stale = 0, errors = 0;
-  double fps_total = 0;          // frames / run_seconds, summed over sessions
-  double fps_min = 0;            // the slowest session's FPS
-  double bytes_per_second = 0;   // summed over sessions
-  LatencySummary latency;        // every session's samples pooled
+  double fps_total = 0;         // frames / run_seconds, summed over sessions
+  double fps_min = 0;           // the slowest session's FPS
+  double bytes_per_second = 0;  // summed over sessions
+  LatencySummary latency;       // every session's samples pooled
   StageSums server;
 };
 double session_fps(const SessionResult& s);  // frames / run_seconds (0 when it did not run)

@@ -18,9 +18,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double now_ms() {
-  return std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count();
-}
+double now_ms() { return std::chrono::duration<double, std::milli>(Clock::now().time_since_epoch()).count(); }
 
 glm::vec3 to_vec3(const pb::Vec3& v) {
   return {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
@@ -31,8 +29,8 @@ constexpr double kSecondsPerView = 0.5;
 
 }  // namespace
 
-Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const pb::Welcome& welcome,
-                      int width, int height) {
+Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const pb::Welcome& welcome, int width,
+                      int height) {
   if (spec == "orbit") {
     Bounds b;
     b.min = to_vec3(welcome.scene_bounds().min());
@@ -50,12 +48,11 @@ Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const
   }
   if (spec.rfind("real:", 0) == 0) {
     if (!scene) throw std::invalid_argument("trace " + spec + " needs --scene (the path is fitted onto it)");
-    return fit_trace_to_scene(load_inria_cameras(spec.substr(5)), *scene, estimate_up(*scene), 0.6f,
-                              kTraceRateHz, kSecondsPerView, width, height);
+    return fit_trace_to_scene(load_inria_cameras(spec.substr(5)), *scene, estimate_up(*scene), 0.6f, kTraceRateHz,
+                              kSecondsPerView, width, height);
   }
   if (spec.rfind("cameras:", 0) == 0)
-    return interpolate_views(load_inria_cameras(spec.substr(8), width, height), kTraceRateHz,
-                             kSecondsPerView);
+    return interpolate_views(load_inria_cameras(spec.substr(8), width, height), kTraceRateHz, kSecondsPerView);
   Trace t = read_trace(spec);
   for (auto& tc : t) tc.camera = tc.camera.rescaled(width, height);
   return t;
@@ -67,8 +64,8 @@ const Camera& camera_at(const Trace& trace, double t_s) {
   double t = start;
   if (duration > 0) t += std::fmod(std::max(0.0, t_s), duration);
   // The last sample at or before t.
-  auto it = std::upper_bound(trace.begin(), trace.end(), t,
-                             [](double x, const TimedCamera& c) { return x < c.time_s; });
+  auto it =
+      std::upper_bound(trace.begin(), trace.end(), t, [](double x, const TimedCamera& c) { return x < c.time_s; });
   return (it == trace.begin() ? trace.front() : *(it - 1)).camera;
 }
 
@@ -102,10 +99,9 @@ class PoseLoop {
     if (check_) reference_ = std::make_unique<cpu::CpuRenderer>(cfg.scene, RenderOptions{});
     // The clock starts once everything is ready: set-up is not sending time.
     t0_ = Clock::now();
-    send_end_ = t0_ + std::chrono::duration_cast<Clock::duration>(
-                          std::chrono::duration<double>(cfg.seconds));
-    drain_end_ = send_end_ + std::chrono::duration_cast<Clock::duration>(
-                                 std::chrono::duration<double, std::milli>(cfg.drain_ms));
+    send_end_ = t0_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(cfg.seconds));
+    drain_end_ = send_end_ +
+                 std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(cfg.drain_ms));
     period_ = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(cfg.rate_hz > 0 ? 1.0 / cfg.rate_hz : 0.0));
     next_pose_at_ = t0_;
@@ -117,14 +113,12 @@ class PoseLoop {
     for (;;) {
       const auto now = Clock::now();
       const bool sending = now < send_end_;
-      if (!sending && (now >= drain_end_ || newest_answered_ + 1 == sent()))
-        break;
+      if (!sending && (now >= drain_end_ || newest_answered_ + 1 == sent())) break;
       if (sending) send_due_poses(now);
       auto msg = client_.recv(wait_ms(sending));
       if (!msg) continue;
       if (msg->has_error()) {
-        note_error(r_, "server Error " + pb::ErrorCode_Name(msg->error().code()) + ": " +
-                           msg->error().reason());
+        note_error(r_, "server Error " + pb::ErrorCode_Name(msg->error().code()) + ": " + msg->error().reason());
         break;
       }
       if (msg->has_frame()) on_frame(msg->frame());
@@ -165,8 +159,7 @@ class PoseLoop {
   int wait_ms(bool sending) const {
     if (!(sending && cfg_.rate_hz > 0)) return 20;
     return static_cast<int>(std::clamp<long long>(
-        std::chrono::duration_cast<std::chrono::milliseconds>(next_pose_at_ - Clock::now()).count(),
-        0, 20));
+        std::chrono::duration_cast<std::chrono::milliseconds>(next_pose_at_ - Clock::now()).count(), 0, 20));
   }
 
   void on_frame(const pb::Frame& f) {
@@ -242,7 +235,7 @@ class PoseLoop {
   const bool check_;
   H264Decoder decoder_;
   std::vector<std::uint8_t> rgba_;
-  std::vector<double> sent_at_;      // client time each pose was sent, by sequence
+  std::vector<double> sent_at_;       // client time each pose was sent, by sequence
   std::vector<pb::Pose> sent_poses_;  // reference check: each pose as sent, by sequence
   std::unique_ptr<cpu::CpuRenderer> reference_;
   double psnr_sum_ = 0;

@@ -21,35 +21,35 @@ namespace catgs::loadgen {
 //   anything else    our trace file (trace.h), rescaled
 // Sampled at 120 Hz. Throws std::invalid_argument for "real:" without a scene, and what the
 // readers throw for bad files.
-Trace make_load_trace(const std::string& spec, const GaussianModel* scene,
-                      const ::catgs::stream::v1::Welcome& welcome, int width, int height);
+Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const ::catgs::stream::v1::Welcome& welcome,
+                      int width, int height);
 
 // The trace's camera at time t_s (seconds), looping: the sample at or just before
 // t_s mod duration. `trace` must not be empty.
 const Camera& camera_at(const Trace& trace, double t_s);
 
 struct LoadSessionConfig {
-  int index = 0;                 // session number (report only)
+  int index = 0;  // session number (report only)
   std::string host = "127.0.0.1";
   int port = 8080;
   int width = 1280, height = 720;
   std::string token;
-  std::string trace = "orbit";   // make_load_trace spec
+  std::string trace = "orbit";                 // make_load_trace spec
   std::shared_ptr<const GaussianModel> scene;  // optional; needed by "real:" traces
-  double offset_s = 0;           // start this far into the trace
-  double rate_hz = 60;           // poses per second; 0: closed loop (`depth` poses outstanding)
+  double offset_s = 0;                         // start this far into the trace
+  double rate_hz = 60;                         // poses per second; 0: closed loop (`depth` poses outstanding)
   int depth = 1;
-  double seconds = 10;           // how long poses are sent
-  bool decode = false;           // decode every frame (latency then ends at the decoded picture)
-  int warmup_frames = 5;         // frames left out of latency and server statistics
-  double stale_ms = 100;         // a frame later than this after its pose counts as stale
-  double drain_ms = 1000;        // after the last pose, wait this long at most for its frame
+  double seconds = 10;     // how long poses are sent
+  bool decode = false;     // decode every frame (latency then ends at the decoded picture)
+  int warmup_frames = 5;   // frames left out of latency and server statistics
+  double stale_ms = 100;   // a frame later than this after its pose counts as stale
+  double drain_ms = 1000;  // after the last pose, wait this long at most for its frame
   // Reference check (implies decode): every check_every-th frame is compared with the CPU
   // reference render (exact pipeline, black background) of the pose it answers, over `scene`
   // (required). 0: off. The CPU render blocks this session's thread: latency and FPS of a
   // checking run are not the server's.
   int check_every = 0;
-  double check_min_psnr = 30;    // dB; frames below count in SessionResult::check_failures
+  double check_min_psnr = 30;  // dB; frames below count in SessionResult::check_failures
 };
 
 // Runs one session. Throws std::invalid_argument for check_every > 0 without a scene. Otherwise

@@ -25,8 +25,7 @@ class StreamClient {
  public:
   // Connects to ws://host:port/ws with subprotocol catgs.v1. Throws std::runtime_error.
   // `receive_buffer` > 0: SO_RCVBUF before connecting (see WsClient::connect).
-  void connect(int port, const std::string& host = "127.0.0.1", int timeout_ms = 5000,
-               int receive_buffer = 0);
+  void connect(int port, const std::string& host = "127.0.0.1", int timeout_ms = 5000, int receive_buffer = 0);
   // Sends Hello and waits for Welcome. Throws std::runtime_error naming the Error if the server
   // refuses, or on timeout.
   pb::Welcome hello(int width, int height, const std::string& token = "", int timeout_ms = 10000);

@@ -31,8 +31,8 @@ WsClient::~WsClient() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-void WsClient::connect(const std::string& host, int port, const std::string& path,
-                       const std::string& protocol, int timeout_ms, int receive_buffer) {
+void WsClient::connect(const std::string& host, int port, const std::string& path, const std::string& protocol,
+                       int timeout_ms, int receive_buffer) {
   addrinfo hints{};
   hints.ai_family = AF_INET;
   hints.ai_socktype = SOCK_STREAM;
@@ -40,8 +40,7 @@ void WsClient::connect(const std::string& host, int port, const std::string& pat
   if (getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &res) != 0 || !res)
     throw std::runtime_error("ws: cannot resolve " + host);
   fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd_ >= 0 && receive_buffer > 0)
-    setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &receive_buffer, sizeof(receive_buffer));
+  if (fd_ >= 0 && receive_buffer > 0) setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &receive_buffer, sizeof(receive_buffer));
   const int rc = ::connect(fd_, res->ai_addr, res->ai_addrlen);
   freeaddrinfo(res);
   if (fd_ < 0 || rc != 0) {
@@ -133,8 +132,7 @@ bool WsClient::parse_frame(bool& fin, int& opcode, std::string& payload) {
   std::size_t len = b1 & 0x7f, pos = 2;
   if (len == 126) {
     if (rx_.size() < 4) return false;
-    len = (static_cast<std::size_t>(static_cast<unsigned char>(rx_[2])) << 8) |
-          static_cast<unsigned char>(rx_[3]);
+    len = (static_cast<std::size_t>(static_cast<unsigned char>(rx_[2])) << 8) | static_cast<unsigned char>(rx_[3]);
     pos = 4;
   } else if (len == 127) {
     if (rx_.size() < 10) return false;
@@ -166,7 +164,7 @@ WsClient::Recv WsClient::recv(std::string& payload, bool& binary, int timeout_ms
     std::string data;
     while (parse_frame(fin, opcode, data)) {
       if (opcode == 0x8) return Recv::closed;  // close frame
-      if (opcode == 0x9) {                      // ping -> pong
+      if (opcode == 0x9) {                     // ping -> pong
         send_frame(0xA, data);
         continue;
       }
@@ -201,8 +199,7 @@ void WsClient::close() {
   if (fd_ < 0) return;
   try {
     send_frame(0x8, std::string("\x03\xe8", 2));  // 1000 normal closure
-  } catch (const std::exception&) {
-  }
+  } catch (const std::exception&) {}
   ::close(fd_);
   fd_ = -1;
 }

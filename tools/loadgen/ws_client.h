@@ -20,8 +20,8 @@ class WsClient {
   // asking for subprotocol `protocol` (empty: none). Throws std::runtime_error on failure or
   // when the server does not answer 101 within `timeout_ms`.
   // `receive_buffer` > 0 sets SO_RCVBUF before connecting (a small TCP window: a slow reader).
-  void connect(const std::string& host, int port, const std::string& path,
-               const std::string& protocol, int timeout_ms = 5000, int receive_buffer = 0);
+  void connect(const std::string& host, int port, const std::string& path, const std::string& protocol,
+               int timeout_ms = 5000, int receive_buffer = 0);
   bool connected() const { return fd_ >= 0; }
 
   // Sends one complete binary / text message (a single masked frame). Throws on socket errors.
@@ -47,8 +47,8 @@ class WsClient {
   bool parse_frame(bool& fin, int& opcode, std::string& payload);
 
   int fd_ = -1;
-  std::string rx_;           // bytes received, not yet parsed
-  std::string message_;      // fragments of the message being reassembled
+  std::string rx_;       // bytes received, not yet parsed
+  std::string message_;  // fragments of the message being reassembled
   int message_opcode_ = 0;
   std::uint32_t mask_state_ = 0x9e3779b9u;
 };

@@ -31,8 +31,7 @@ glm::quat arc(glm::vec3 a, glm::vec3 b) {
 }  // namespace
 
 void scale_scene(GaussianModel& model, float s) {
-  if (!(s > 0.0f) || !std::isfinite(s))
-    throw std::invalid_argument("scale_scene: scale must be positive and finite");
+  if (!(s > 0.0f) || !std::isfinite(s)) throw std::invalid_argument("scale_scene: scale must be positive and finite");
   const float log_s = std::log(s);
   for (float& v : model.means) v *= s;
   for (float& v : model.log_scales) v += log_s;
@@ -90,8 +89,8 @@ GaussianModel tile_scene(const GaussianModel& base_in, const CityParams& p, City
   cpu::parallel_for(copies * chunks_per_copy, 1, [&](std::size_t task) {
     const std::size_t c = task / chunks_per_copy;
     const std::size_t begin = (task % chunks_per_copy) * kChunk, end = std::min(n, begin + kChunk);
-    const glm::vec3 offset = L.spacing * (static_cast<float>(L.cells[c].x) * L.axis_a +
-                                          static_cast<float>(L.cells[c].y) * L.axis_b);
+    const glm::vec3 offset =
+        L.spacing * (static_cast<float>(L.cells[c].x) * L.axis_a + static_cast<float>(L.cells[c].y) * L.axis_b);
     for (std::size_t i = begin; i < end; ++i) {
       const std::size_t o = c * n + i;
       const glm::vec3 m(base.means[3 * i], base.means[3 * i + 1], base.means[3 * i + 2]);
@@ -102,7 +101,7 @@ GaussianModel tile_scene(const GaussianModel& base_in, const CityParams& p, City
       }
       const glm::quat q(base.rotations[4 * i], base.rotations[4 * i + 1], base.rotations[4 * i + 2],
                         base.rotations[4 * i + 3]);  // (w, x, y, z)
-      const glm::quat q2 = Q[c] * q;  // the Gaussian's frame turns with the copy
+      const glm::quat q2 = Q[c] * q;                 // the Gaussian's frame turns with the copy
       city.rotations[4 * o] = q2.w;
       city.rotations[4 * o + 1] = q2.x;
       city.rotations[4 * o + 2] = q2.y;
@@ -127,8 +126,7 @@ Trace make_city_flyover(const CityLayout& L, const FlyoverParams& f, const Gener
 }
 
 Trace fit_trace_to_scene(const std::vector<Camera>& keys, const GaussianModel& scene, glm::vec3 up,
-                         float distance_extents, double rate_hz, double seconds_per_view,
-                         int width, int height) {
+                         float distance_extents, double rate_hz, double seconds_per_view, int width, int height) {
   if (keys.size() < 2) throw std::invalid_argument("fit_trace_to_scene: needs at least 2 views");
   up = glm::normalize(up);
   // The point the path looks at: least squares closest point to all optical axes.

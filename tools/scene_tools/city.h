@@ -23,42 +23,40 @@ void scale_scene(GaussianModel& model, float s);
 // whole scaled by `scale`.
 struct CityParams {
   int radius_sq = 4;
-  float spacing = 1.2f;       // x the horizontal extent of one (scaled) copy
-  float scale = 10.0f;        // applied to the base scene first
-  uint64_t seed = 20261121;   // yaws
-  bool rotate_sh = true;      // rotate view-dependent colour with the yaw
-  glm::vec3 up{0.0f};         // zero: estimate_up(base)
+  float spacing = 1.2f;      // x the horizontal extent of one (scaled) copy
+  float scale = 10.0f;       // applied to the base scene first
+  uint64_t seed = 20261121;  // yaws
+  bool rotate_sh = true;     // rotate view-dependent colour with the yaw
+  glm::vec3 up{0.0f};        // zero: estimate_up(base)
 };
 
 // What tile_scene built: where the copies are, for trace generators.
 struct CityLayout {
-  glm::vec3 up{0.0f, -1.0f, 0.0f};  // unit world up
-  glm::vec3 centre{0.0f};           // centre of the middle copy's robust bounds (after scale)
-  float extent = 0.0f;              // horizontal extent of one copy (robust, after scale)
-  float height = 0.0f;              // vertical extent of one copy (robust, after scale)
-  float spacing = 0.0f;             // distance between neighbouring cells, world units
+  glm::vec3 up{0.0f, -1.0f, 0.0f};       // unit world up
+  glm::vec3 centre{0.0f};                // centre of the middle copy's robust bounds (after scale)
+  float extent = 0.0f;                   // horizontal extent of one copy (robust, after scale)
+  float height = 0.0f;                   // vertical extent of one copy (robust, after scale)
+  float spacing = 0.0f;                  // distance between neighbouring cells, world units
   glm::vec3 axis_a{0.0f}, axis_b{0.0f};  // horizontal grid axes (unit)
-  std::vector<glm::ivec2> cells;    // (i, j) of each copy
-  std::vector<float> yaw_deg;       // per copy
+  std::vector<glm::ivec2> cells;         // (i, j) of each copy
+  std::vector<float> yaw_deg;            // per copy
   std::size_t gaussians_per_copy = 0;
 };
 
 // Builds the city (copies in cell order, Gaussians of a copy contiguous). Throws
 // std::invalid_argument for bad parameters, std::length_error past 2^32 - 1 Gaussians.
-GaussianModel tile_scene(const GaussianModel& base, const CityParams& params,
-                         CityLayout* layout = nullptr);
+GaussianModel tile_scene(const GaussianModel& base, const CityParams& params, CityLayout* layout = nullptr);
 
 // Fly-over of a city (a UAV): a straight line across the grid along axis_a, `altitude` extents
 // above the centre, looking forward and pitched down `pitch_deg`, starting `start_cells` before
 // the middle copy and ending `end_cells` after it.
 struct FlyoverParams {
-  float altitude = 0.75f;     // x extent, above the centre
+  float altitude = 0.75f;  // x extent, above the centre
   float pitch_deg = 24.0f;
   float start_cells = -1.5f, end_cells = 1.5f;  // along axis_a, in cells
   float lateral_cells = 0.0f;                   // offset along axis_b, in cells
 };
-Trace make_city_flyover(const CityLayout& layout, const FlyoverParams& flyover,
-                        const GeneratorParams& params);
+Trace make_city_flyover(const CityLayout& layout, const FlyoverParams& flyover, const GeneratorParams& params);
 
 // A real camera path (INRIA cameras.json key views) moved onto a scene: positions are mapped by
 // a similarity (rotation taking the path's mean camera up onto `up`, scale and translation taking
@@ -68,7 +66,6 @@ Trace make_city_flyover(const CityLayout& layout, const FlyoverParams& flyover,
 // resized to width x height (vertical field of view kept). Throws std::invalid_argument for fewer
 // than 2 views.
 Trace fit_trace_to_scene(const std::vector<Camera>& keys, const GaussianModel& scene, glm::vec3 up,
-                         float distance_extents, double rate_hz, double seconds_per_view,
-                         int width, int height);
+                         float distance_extents, double rate_hz, double seconds_per_view, int width, int height);
 
 }  // namespace catgs

@@ -20,7 +20,9 @@ void sh_band(int l, const double d[3], double* out) {
   const double xx = x * x, yy = y * y, zz = z * z;
   switch (l) {
     case 1:
-      out[0] = -C1 * y; out[1] = C1 * z; out[2] = -C1 * x;
+      out[0] = -C1 * y;
+      out[1] = C1 * z;
+      out[2] = -C1 * x;
       break;
     case 2:
       out[0] = 1.0925484305920792 * x * y;

@@ -15,7 +15,7 @@ void rotate_sh(int degree, float* sh, const glm::mat3& R);
 // Per-band rotation matrices of rotate_sh for one rotation: reuse them for many Gaussians.
 struct ShRotation {
   int degree = 0;
-  double band[4][7][7] = {};  // band[l] is (2l+1) x (2l+1), row m' col m: c'_m' = sum_m M c_m
+  double band[4][7][7] = {};    // band[l] is (2l+1) x (2l+1), row m' col m: c'_m' = sum_m M c_m
   void apply(float* sh) const;  // sh [K, 3]
 };
 ShRotation make_sh_rotation(int degree, const glm::mat3& R);

@@ -33,8 +33,8 @@ Image biker_picture(int w, int h) {
   auto model = test::cached_scene(test::bundled_scene());
   const CameraPose p = initial_pose(first_view_bounds(*model), 60.0f, w, h);
   Image img;
-  cpu::CpuRenderer(model, RenderOptions{}).render(
-      Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, w, h), img);
+  cpu::CpuRenderer(model, RenderOptions{})
+      .render(Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, w, h), img);
   return img;
 }
 
@@ -75,8 +75,7 @@ TEST(Yuv420, Bt709LimitedRangeCodeValues) {
 
 // An RGBA8 picture, converted on the host, encoded from its I420 planes.
 EncodedFrame encode_rgba(Encoder& encoder, const Image& picture, bool force_idr) {
-  const Yuv420Image yuv =
-      rgba_to_yuv420_bt709(picture.rgba8.data(), picture.width, picture.height, picture.width * 4);
+  const Yuv420Image yuv = rgba_to_yuv420_bt709(picture.rgba8.data(), picture.width, picture.height, picture.width * 4);
   return encoder.encode_yuv420(yuv.planes(), force_idr);
 }
 
@@ -102,7 +101,8 @@ TEST(Encoder, Yuv420PathHonoursStridesAndIdrOnDemand) {
   const int ys = W + 32, cs = W / 2 + 16;
   std::vector<std::uint8_t> y(static_cast<std::size_t>(ys * H), 0), u(static_cast<std::size_t>(cs * H / 2), 0),
       v(static_cast<std::size_t>(cs * H / 2), 0);
-  for (int r = 0; r < H; ++r) std::copy_n(&yuv.y[static_cast<std::size_t>(r * W)], W, &y[static_cast<std::size_t>(r * ys)]);
+  for (int r = 0; r < H; ++r)
+    std::copy_n(&yuv.y[static_cast<std::size_t>(r * W)], W, &y[static_cast<std::size_t>(r * ys)]);
   for (int r = 0; r < H / 2; ++r) {
     std::copy_n(&yuv.u[static_cast<std::size_t>(r * W / 2)], W / 2, &u[static_cast<std::size_t>(r * cs)]);
     std::copy_n(&yuv.v[static_cast<std::size_t>(r * W / 2)], W / 2, &v[static_cast<std::size_t>(r * cs)]);
@@ -132,8 +132,7 @@ TEST(Yuv420, PitchedTargetHoldsTheSameCodeValuesAsPacked) {
     ASSERT_TRUE(std::equal(packed.v.begin() + r * 48, packed.v.begin() + (r + 1) * 48, v.begin() + r * cs)) << r;
   }
   Yuv420Image other;
-  EXPECT_THROW(rgba_to_yuv420_bt709(src.rgba8.data(), 96, 64, 96 * 4, other.target(64, 64)),
-               std::invalid_argument);
+  EXPECT_THROW(rgba_to_yuv420_bt709(src.rgba8.data(), 96, 64, 96 * 4, other.target(64, 64)), std::invalid_argument);
   Yuv420Target device = other.target(96, 64);
   device.memory = MemoryKind::device;
   EXPECT_THROW(rgba_to_yuv420_bt709(src.rgba8.data(), 96, 64, 96 * 4, device), std::invalid_argument);
@@ -230,9 +229,8 @@ TEST(Encoder, AutoFallsBackToX264AndSaysWhy) {
     EXPECT_TRUE(fell_back);
     EXPECT_NE(why.find("nvenc: "), std::string::npos) << why;
     EXPECT_EQ(why.find('\n'), std::string::npos) << "one line: " << why;
-    EXPECT_EQ(e->encode_yuv420(rgba_to_yuv420_bt709(std::vector<std::uint8_t>(64 * 64 * 4, 90).data(), 64, 64, 256)
-                                   .planes(),
-                               false)
+    EXPECT_EQ(e->encode_yuv420(
+                   rgba_to_yuv420_bt709(std::vector<std::uint8_t>(64 * 64 * 4, 90).data(), 64, 64, 256).planes(), false)
                   .key_frame,
               true);
   }

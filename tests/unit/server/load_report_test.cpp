@@ -45,8 +45,7 @@ SessionResult session(int index, std::uint64_t frames, double seconds, std::vect
 }
 
 TEST(LoadReport, TotalsPoolSessions) {
-  const std::vector<SessionResult> run = {session(0, 100, 2.0, {10, 20, 30}),
-                                          session(1, 30, 1.0, {40, 50})};
+  const std::vector<SessionResult> run = {session(0, 100, 2.0, {10, 20, 30}), session(1, 30, 1.0, {40, 50})};
   const RunSummary t = summarize_run(run);
   EXPECT_EQ(t.sessions, 2);
   EXPECT_EQ(t.frames, 130u);
@@ -82,7 +81,7 @@ TEST(LoadReport, TracePlaybackLoopsOnTheTraceClock) {
   EXPECT_EQ(camera_at(t, 0.0).position().x, 0.0f);
   EXPECT_EQ(camera_at(t, 0.6).position().x, 1.0f);
   EXPECT_EQ(camera_at(t, 0.99).position().x, 1.0f);
-  EXPECT_EQ(camera_at(t, 1.2).position().x, 0.0f);   // 1.2 mod 1.0 = 0.2
+  EXPECT_EQ(camera_at(t, 1.2).position().x, 0.0f);  // 1.2 mod 1.0 = 0.2
   EXPECT_EQ(camera_at(t, 1.55).position().x, 1.0f);
   EXPECT_EQ(camera_at(Trace(t.begin(), t.begin() + 1), 7.0).position().x, 0.0f);
 }

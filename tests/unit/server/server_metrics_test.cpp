@@ -59,17 +59,21 @@ TEST(ServerMetrics, ExpositionHasConsistentStageHistograms) {
     std::smatch s;
     if (std::regex_match(line, s, bucket_re)) {
       const std::string key = s[1].str() + "{" + s[2].str() + "}";
-      if (s[3] == "+Inf") inf[key] = std::stod(s[4]);
-      else buckets[key].push_back(std::stod(s[4]));
+      if (s[3] == "+Inf")
+        inf[key] = std::stod(s[4]);
+      else
+        buckets[key].push_back(std::stod(s[4]));
     } else if (std::regex_match(line, s, count_re)) {
       count[s[1].str() + "{" + s[2].str() + "}"] = std::stod(s[3]);
     }
   }
-  const std::map<std::string, double> want = {
-      {"catgs_queue_seconds{}", 10},        {"catgs_render_seconds{kind=\"key\"}", 4},
-      {"catgs_render_seconds{kind=\"sub\"}", 6}, {"catgs_convert_seconds{}", 10},
-      {"catgs_encode_seconds{}", 10},       {"catgs_send_seconds{}", 1},
-      {"catgs_speculation_window{}", 10}};
+  const std::map<std::string, double> want = {{"catgs_queue_seconds{}", 10},
+                                              {"catgs_render_seconds{kind=\"key\"}", 4},
+                                              {"catgs_render_seconds{kind=\"sub\"}", 6},
+                                              {"catgs_convert_seconds{}", 10},
+                                              {"catgs_encode_seconds{}", 10},
+                                              {"catgs_send_seconds{}", 1},
+                                              {"catgs_speculation_window{}", 10}};
   for (const auto& [key, n] : want) {
     SCOPED_TRACE(key);
     ASSERT_TRUE(count.count(key)) << text;
@@ -80,7 +84,7 @@ TEST(ServerMetrics, ExpositionHasConsistentStageHistograms) {
     for (std::size_t i = 1; i < b.size(); ++i) EXPECT_LE(b[i - 1], b[i]);
     EXPECT_LE(b.back(), n);
   }
-  EXPECT_EQ(buckets["catgs_send_seconds{}"].back(), 0);  // 2.5 s is above the largest bound
+  EXPECT_EQ(buckets["catgs_send_seconds{}"].back(), 0);     // 2.5 s is above the largest bound
   EXPECT_EQ(buckets["catgs_encode_seconds{}"].front(), 0);  // 7 ms is above 0.5 ms
   EXPECT_EQ(text.find("# TYPE catgs_render_seconds histogram"), text.rfind("# TYPE catgs_render_seconds histogram"))
       << "one TYPE line per family";
