@@ -7,6 +7,7 @@
 #   git archive --format=tar.gz -o .carry/before_src.tar.gz REV
 # On the GPU machine (device tool; carry [".carry"]):
 #   scripts/gpu_before_after.sh tests               # GPU tests of both builds -> $OUT/gpu_tests_{before,after}.md
+#                                                   # (TEST_ARGS=--skip-large: without the 8192-px, 2^31 and city rows)
 #   scripts/gpu_before_after.sh bench [FRAMES]      # catgs-bench of both, alternating per scene x path,
 #                                                   # snapshots and per-frame render lists compared
 #                                                   # -> $OUT/before_after.md, $OUT/before_after.tar.gz
@@ -42,7 +43,7 @@ if [ "${1:-}" = tests ]; then
   for side in before after; do
     t=$B_TESTS; [ $side = after ] && t=$A_TESTS
     t0=$(date +%s)
-    "$t" --scenes "$S" --traces "$T" --out "$OUT/gpu_tests_$side.md" | tail -1
+    "$t" --scenes "$S" --traces "$T" --out "$OUT/gpu_tests_$side.md" ${TEST_ARGS:-} | tail -1
     echo "== GPU tests ($side): rc ${PIPESTATUS[0]} in $(( $(date +%s) - t0 )) s"
   done
   python3 "$ROOT/scripts/compare_runs.py" tests "$OUT/gpu_tests_before.md" "$OUT/gpu_tests_after.md" | tee "$OUT/tests_before_after.md"
