@@ -8,7 +8,7 @@
 # On the GPU machine (device tool; carry [".carry"]):
 #   scripts/gpu_before_after.sh tests               # GPU tests of both builds -> $OUT/gpu_tests_{before,after}.md
 #                                                   # (TEST_ARGS=--skip-large: without the 8192-px, 2^31 and city rows)
-#   scripts/gpu_before_after.sh bench [FRAMES]      # catgs-bench of both, alternating per scene x path,
+#   scripts/gpu_before_after.sh bench [FRAMES]      # catgs-bench of both (PIPES=...), alternating per scene x path,
 #                                                   # snapshots and per-frame render lists compared
 #                                                   # -> $OUT/before_after.md, $OUT/before_after.tar.gz
 # Both builds use the same flags; the earlier tree keeps its own layout (binaries found by name).
@@ -27,8 +27,10 @@ build() {  # build SRC_DIR LABEL: configures and builds catgs-bench and catgs-gp
 }
 exe() { find "$1/build/gpu" -type f -name "$2" -perm -u+x | head -1; }
 
-BEFORE=/tmp/before_src
-rm -rf "$BEFORE" && mkdir -p "$BEFORE" && tar xzf "$CARRY/before_src.tar.gz" -C "$BEFORE" || exit 2
+BEFORE=/tmp/before_src  # kept while the machine stays warm: a second call rebuilds nothing
+if [ ! -d "$BEFORE/build/gpu" ]; then
+  mkdir -p "$BEFORE" && tar xzf "$CARRY/before_src.tar.gz" -C "$BEFORE" || exit 2
+fi
 build "$BEFORE" before & build "$ROOT" after & wait
 for side in before after; do
   tail -1 "$OUT/build_$side.log"
@@ -51,7 +53,7 @@ if [ "${1:-}" = tests ]; then
 fi
 
 FRAMES=${2:-600}
-PIPES=exact,catgs,catgs-nocache,catgs-nosplit
+PIPES=${PIPES:-exact,catgs,catgs-nocache,catgs-nosplit}
 J=/tmp/ba; rm -rf "$J"; mkdir -p "$J"
 for path in mipnerf360_bicycle tandt_train flowers_sh3; do
   for scene in tumblewood city; do
