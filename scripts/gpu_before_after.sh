@@ -58,7 +58,7 @@ J=/tmp/ba; rm -rf "$J"; mkdir -p "$J"
 for path in mipnerf360_bicycle tandt_train flowers_sh3; do
   for scene in tumblewood city; do
     size=(--scale 10); [ $scene = city ] && size=(--city)
-    for side in before after; do  # alternating, on the same frames
+    for side in ${ORDER:-before after}; do  # alternating, on the same frames (ORDER="after before" swaps)
       b=$B_BENCH; [ $side = after ] && b=$A_BENCH
       mkdir -p "$J/snap_${side}_${scene}_$path"
       echo "== $side: $scene, $path"
