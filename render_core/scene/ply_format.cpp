@@ -95,34 +95,57 @@ double File::value(const Element& e, uint64_t row, int property) const {
   return 0.0;
 }
 
-File read_file(const std::string& path) {
-  auto fail = [&](const std::string& problem) -> void { throw SceneFileError(path, problem); };
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail("cannot open file");
-  in.seekg(0, std::ios::end);
-  const auto file_size = static_cast<uint64_t>(in.tellg());
-  in.seekg(0);
+namespace {
 
-  File f;
-  f.path = path;
-  // Header: lines up to and including "end_header\n".
-  std::string header;
-  {
-    std::string line;
-    bool ended = false;
-    while (header.size() < kMaxHeaderBytes && std::getline(in, line)) {
-      header += line + "\n";
-      if (!line.empty() && line.back() == '\r') line.pop_back();
-      if (line == "end_header") {
-        ended = true;
-        break;
-      }
+[[noreturn]] void fail(const std::string& path, const std::string& problem) { throw SceneFileError(path, problem); }
+
+// The header's text: lines up to and including "end_header\n" (at most kMaxHeaderBytes).
+std::string read_header_text(std::istream& in, const std::string& path) {
+  std::string header, line;
+  bool ended = false;
+  while (header.size() < kMaxHeaderBytes && std::getline(in, line)) {
+    header += line + "\n";
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line == "end_header") {
+      ended = true;
+      break;
     }
-    if (header.rfind("ply", 0) != 0) fail("not a PLY file (no 'ply' magic line)");
-    if (!ended) fail("PLY header has no end_header line");
   }
-  const uint64_t body_offset = header.size();
+  if (header.rfind("ply", 0) != 0) fail(path, "not a PLY file (no 'ply' magic line)");
+  if (!ended) fail(path, "PLY header has no end_header line");
+  return header;
+}
 
+// One "element NAME COUNT" or "property TYPE NAME" line into `f`.
+void parse_element(std::istringstream& ls, const std::string& where, File& f) {
+  Element e;
+  std::string count;
+  ls >> e.name >> count;
+  uint64_t n = 0;
+  const auto res = std::from_chars(count.data(), count.data() + count.size(), n);
+  if (e.name.empty() || res.ec != std::errc() || res.ptr != count.data() + count.size())
+    fail(f.path, "malformed element count in " + where);
+  e.count = n;
+  f.elements.push_back(std::move(e));
+}
+
+void parse_property(std::istringstream& ls, const std::string& where, File& f) {
+  if (f.elements.empty()) fail(f.path, "property before any element in " + where);
+  std::string type, name;
+  ls >> type >> name;
+  if (type == "list") fail(f.path, "list properties are not supported (" + where + ")");
+  Property p;
+  p.name = name;
+  if (name.empty() || !parse_type(type, &p.type)) fail(f.path, "bad property in " + where);
+  Element& e = f.elements.back();
+  if (e.find(name) >= 0) fail(f.path, "duplicate property '" + name + "' in element " + e.name);
+  p.offset = e.row_size;
+  e.row_size += static_cast<std::size_t>(type_size(p.type));
+  e.properties.push_back(p);
+}
+
+// The header's format, elements and properties into `f`.
+void parse_header(const std::string& header, File& f) {
   std::istringstream hs(header);
   std::string line;
   bool have_format = false;
@@ -143,81 +166,87 @@ File read_file(const std::string& path) {
       else if (fmt == "ascii")
         f.ascii = true;
       else
-        fail("unsupported PLY format '" + fmt + "' (binary_little_endian or ascii only)");
+        fail(f.path, "unsupported PLY format '" + fmt + "' (binary_little_endian or ascii only)");
       have_format = true;
     } else if (word == "element") {
-      Element e;
-      std::string count;
-      ls >> e.name >> count;
-      uint64_t n = 0;
-      const auto res = std::from_chars(count.data(), count.data() + count.size(), n);
-      if (e.name.empty() || res.ec != std::errc() || res.ptr != count.data() + count.size())
-        fail("malformed element count in " + where);
-      e.count = n;
-      f.elements.push_back(std::move(e));
+      parse_element(ls, where, f);
     } else if (word == "property") {
-      if (f.elements.empty()) fail("property before any element in " + where);
-      std::string type, name;
-      ls >> type >> name;
-      if (type == "list") fail("list properties are not supported (" + where + ")");
-      Property p;
-      p.name = name;
-      if (name.empty() || !parse_type(type, &p.type)) fail("bad property in " + where);
-      Element& e = f.elements.back();
-      if (e.find(name) >= 0) fail("duplicate property '" + name + "' in element " + e.name);
-      p.offset = e.row_size;
-      e.row_size += static_cast<std::size_t>(type_size(p.type));
-      e.properties.push_back(p);
+      parse_property(ls, where, f);
     } else {
-      fail("unknown header keyword in " + where);
+      fail(f.path, "unknown header keyword in " + where);
     }
   }
-  if (!have_format) fail("PLY header has no format line");
+  if (!have_format) fail(f.path, "PLY header has no format line");
+}
 
-  const uint64_t body = file_size - body_offset;
-  if (!f.ascii) {
-    // Check sizes against the file before allocating anything a header count could inflate.
-    uint64_t at = body_offset;
-    for (auto& e : f.elements) {
-      if (e.row_size == 0 && e.count > 0) fail("element '" + e.name + "' has no properties");
-      if (e.row_size > 0 && e.count > (file_size - at) / e.row_size)
-        fail("truncated: element '" + e.name + "' declares " + std::to_string(e.count) + " rows of " +
-             std::to_string(e.row_size) + " bytes but only " + std::to_string(file_size - at) + " bytes remain");
-      e.data_offset = at;
-      at += e.count * e.row_size;
-    }
-    if (at != file_size) fail(std::to_string(file_size - at) + " bytes after the last element (wrong counts?)");
-    f.bytes.resize(file_size);
-    in.seekg(0);
-    if (!in.read(reinterpret_cast<char*>(f.bytes.data()), static_cast<std::streamsize>(file_size))) fail("read error");
-  } else {
-    uint64_t values = 0;
-    for (const auto& e : f.elements) values += e.count * e.properties.size();
-    // Each ascii value takes at least two bytes (a digit and a separator).
-    if (values > body / 2 + 1)
-      fail("truncated: header declares " + std::to_string(values) + " values but the body has " + std::to_string(body) +
-           " bytes");
-    in.clear();
-    in.seekg(static_cast<std::streamoff>(body_offset));
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const char* p = text.data();
-    const char* end = p + text.size();
-    for (auto& e : f.elements) {
-      e.ascii_rows.resize(e.count * e.properties.size());
-      for (uint64_t r = 0; r < e.count; ++r) {
-        for (std::size_t k = 0; k < e.properties.size(); ++k) {
-          while (p < end && (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r')) ++p;
-          double v = 0;
-          const auto res = std::from_chars(p, end, v);
-          if (res.ec != std::errc())
-            fail("truncated or malformed ascii value at element '" + e.name + "' row " + std::to_string(r) +
-                 " property '" + e.properties[k].name + "'");
-          e.ascii_rows[r * e.properties.size() + k] = v;
-          p = res.ptr;
-        }
+// A binary body: sizes checked against the file before allocating anything a header count could
+// inflate, then the whole file kept in f.bytes.
+void read_binary_body(std::istream& in, uint64_t file_size, uint64_t body_offset, File& f) {
+  uint64_t at = body_offset;
+  for (auto& e : f.elements) {
+    if (e.row_size == 0 && e.count > 0) fail(f.path, "element '" + e.name + "' has no properties");
+    if (e.row_size > 0 && e.count > (file_size - at) / e.row_size)
+      fail(f.path, "truncated: element '" + e.name + "' declares " + std::to_string(e.count) + " rows of " +
+                       std::to_string(e.row_size) + " bytes but only " + std::to_string(file_size - at) +
+                       " bytes remain");
+    e.data_offset = at;
+    at += e.count * e.row_size;
+  }
+  if (at != file_size) fail(f.path, std::to_string(file_size - at) + " bytes after the last element (wrong counts?)");
+  f.bytes.resize(file_size);
+  in.seekg(0);
+  if (!in.read(reinterpret_cast<char*>(f.bytes.data()), static_cast<std::streamsize>(file_size)))
+    fail(f.path, "read error");
+}
+
+// An ascii body: every value parsed into the elements' ascii_rows.
+void read_ascii_body(std::istream& in, uint64_t body_offset, uint64_t body, File& f) {
+  uint64_t values = 0;
+  for (const auto& e : f.elements) values += e.count * e.properties.size();
+  // Each ascii value takes at least two bytes (a digit and a separator).
+  if (values > body / 2 + 1)
+    fail(f.path, "truncated: header declares " + std::to_string(values) + " values but the body has " +
+                     std::to_string(body) + " bytes");
+  in.clear();
+  in.seekg(static_cast<std::streamoff>(body_offset));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const char* p = text.data();
+  const char* end = p + text.size();
+  for (auto& e : f.elements) {
+    e.ascii_rows.resize(e.count * e.properties.size());
+    for (uint64_t r = 0; r < e.count; ++r) {
+      for (std::size_t k = 0; k < e.properties.size(); ++k) {
+        while (p < end && (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r')) ++p;
+        double v = 0;
+        const auto res = std::from_chars(p, end, v);
+        if (res.ec != std::errc())
+          fail(f.path, "truncated or malformed ascii value at element '" + e.name + "' row " + std::to_string(r) +
+                           " property '" + e.properties[k].name + "'");
+        e.ascii_rows[r * e.properties.size() + k] = v;
+        p = res.ptr;
       }
     }
   }
+}
+
+}  // namespace
+
+File read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open file");
+  in.seekg(0, std::ios::end);
+  const auto file_size = static_cast<uint64_t>(in.tellg());
+  in.seekg(0);
+
+  File f;
+  f.path = path;
+  const std::string header = read_header_text(in, path);
+  const uint64_t body_offset = header.size();
+  parse_header(header, f);
+  if (f.ascii)
+    read_ascii_body(in, body_offset, file_size - body_offset, f);
+  else
+    read_binary_body(in, file_size, body_offset, f);
   return f;
 }
 

@@ -87,6 +87,9 @@ float unorm(uint32_t v, int bits) {
   return static_cast<float>(v & mask) / static_cast<float>(mask);
 }
 
+// Longer than the rest on purpose: one pass over the vertices decodes every packed property of a
+// Gaussian next to the chunk ranges it is dequantised with, in the order SuperSplat's writer packs
+// them, so the format can be read against its source line by line.
 GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, const ply::Element& v) {
   const std::string& path = f.path;
   if (chunk.count != (v.count + 255) / 256)

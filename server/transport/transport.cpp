@@ -240,6 +240,8 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
   return lws_callback_http_dummy(wsi, static_cast<lws_callback_reasons>(reason), user, in, len);
 }
 
+// Longer than the rest on purpose: libwebsockets drives a connection through one callback with a
+// reason code, and this switch is that state machine in one place (one short case per reason).
 int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len) {
   auto* pss = static_cast<Pss*>(user);
   switch (reason) {

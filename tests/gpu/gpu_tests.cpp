@@ -578,24 +578,18 @@ void equality_checks(Scenes& sc) {
 
 // 3: one renderer across scenes of different size and images of different size.
 void grow_checks(const Scenes& sc) {
-  const auto& biker = sc.biker;
-  const auto& biker_dev = sc.biker_dev;
-  const auto& flowers = sc.flowers;
-  const auto& flowers_dev = sc.flowers_dev;
-  const auto& tumble = sc.tumble;
-  const auto& tumble_dev = sc.tumble_dev;
   catgs::RenderOptions o;
-  catgs::cuda::CudaRenderer r(biker_dev, o);
+  catgs::cuda::CudaRenderer r(sc.biker_dev, o);
   struct Step {
     std::shared_ptr<const catgs::cuda::DeviceScene> dev;
     std::shared_ptr<GaussianModel> m;
     int w, h;
   };
-  const Step steps[] = {{biker_dev, biker, 640, 360},
-                        {tumble_dev, tumble, 1920, 1080},
-                        {flowers_dev, flowers, 1280, 720},
-                        {biker_dev, biker, 640, 360},
-                        {tumble_dev, tumble, 1920, 1080}};
+  const Step steps[] = {{sc.biker_dev, sc.biker, 640, 360},
+                        {sc.tumble_dev, sc.tumble, 1920, 1080},
+                        {sc.flowers_dev, sc.flowers, 1280, 720},
+                        {sc.biker_dev, sc.biker, 640, 360},
+                        {sc.tumble_dev, sc.tumble, 1920, 1080}};
   int k = 0;
   for (const Step& s : steps) {
     Row row{"grow", s.m->name, std::to_string(k++), "exact", 0, 0, 0, -1, -1, false, ""};
@@ -625,69 +619,54 @@ void grow_checks(const Scenes& sc) {
 
 // catgs: CUDA vs CPU, sub-frame quality, split, abrupt motion, steady buffers.
 void catgs_checks(const Scenes& sc) {
-  const int W = sc.W;
-  const int H = sc.H;
-  const bool quick = sc.quick;
-  const std::string& traces = sc.traces;
-  const auto& biker = sc.biker;
-  const auto& biker_dev = sc.biker_dev;
-  const auto& flowers = sc.flowers;
-  const auto& flowers_dev = sc.flowers_dev;
-  const auto& tumble = sc.tumble;
-  const auto& tumble_dev = sc.tumble_dev;
-  const std::size_t frames = quick ? 48 : 240;
-  const auto biker_path = real_trace(*biker, traces + "/tandt_train.cameras.json", W, H, frames);
-  catgs_vs_cpu("biker", "tandt", biker, biker_dev, biker_path);
-  catgs_quality("biker", "tandt", biker_dev, biker_path);
-  catgs_split("biker", biker_dev, orbit_views(*biker, W, H)[1]);
-  if (!quick) {
+  const int W = sc.W, H = sc.H;
+  const std::size_t frames = sc.quick ? 48 : 240;
+  const auto biker_path = real_trace(*sc.biker, sc.traces + "/tandt_train.cameras.json", W, H, frames);
+  catgs_vs_cpu("sc.biker", "tandt", sc.biker, sc.biker_dev, biker_path);
+  catgs_quality("sc.biker", "tandt", sc.biker_dev, biker_path);
+  catgs_split("sc.biker", sc.biker_dev, orbit_views(*sc.biker, W, H)[1]);
+  if (!sc.quick) {
     auto flowers_path =
-        catgs::interpolate_views(catgs::load_inria_cameras(traces + "/flowers_sh3.cameras.json", W, H), 120.0, 0.5);
+        catgs::interpolate_views(catgs::load_inria_cameras(sc.traces + "/flowers_sh3.cameras.json", W, H), 120.0, 0.5);
     flowers_path.resize(std::min<std::size_t>(flowers_path.size(), 600));
-    catgs_vs_cpu("flowers_sh3", "own", flowers, flowers_dev,
+    catgs_vs_cpu("flowers_sh3", "own", sc.flowers, sc.flowers_dev,
                  catgs::Trace(flowers_path.begin(), flowers_path.begin() + 120));
-    catgs_quality("flowers_sh3", "own", flowers_dev, flowers_path);
+    catgs_quality("flowers_sh3", "own", sc.flowers_dev, flowers_path);
     for (const char* path : {"mipnerf360_bicycle", "tandt_train", "flowers_sh3"}) {
-      const auto t = real_trace(*tumble, traces + "/" + path + ".cameras.json", W, H, 600);
+      const auto t = real_trace(*sc.tumble, sc.traces + "/" + path + ".cameras.json", W, H, 600);
       if (std::string(path) == "mipnerf360_bicycle")
-        catgs_vs_cpu("tumblewood_sh2", path, tumble, tumble_dev, catgs::Trace(t.begin(), t.begin() + 60));
-      catgs_quality("tumblewood_sh2", path, tumble_dev, t);
+        catgs_vs_cpu("tumblewood_sh2", path, sc.tumble, sc.tumble_dev, catgs::Trace(t.begin(), t.begin() + 60));
+      catgs_quality("tumblewood_sh2", path, sc.tumble_dev, t);
     }
-    catgs_split("tumblewood_sh2", tumble_dev, orbit_views(*tumble, W, H)[1]);
-    catgs_abrupt("tumblewood_sh2", *tumble, tumble_dev, W, H);
-    catgs_steady("tumblewood_sh2", tumble_dev, real_trace(*tumble, traces + "/tandt_train.cameras.json", W, H, 240));
+    catgs_split("tumblewood_sh2", sc.tumble_dev, orbit_views(*sc.tumble, W, H)[1]);
+    catgs_abrupt("tumblewood_sh2", *sc.tumble, sc.tumble_dev, W, H);
+    catgs_steady("tumblewood_sh2", sc.tumble_dev,
+                 real_trace(*sc.tumble, sc.traces + "/tandt_train.cameras.json", W, H, 240));
   } else {
-    catgs_abrupt("biker", *biker, biker_dev, W, H);
+    catgs_abrupt("sc.biker", *sc.biker, sc.biker_dev, W, H);
   }
 }
 
 // The server's frame path: GPU colour conversion == CPU reference, exact and catgs frames.
 void yuv420_checks(const Scenes& sc) {
-  const bool quick = sc.quick;
-  const std::string& traces = sc.traces;
-  const auto& biker = sc.biker;
-  const auto& biker_dev = sc.biker_dev;
   const int w = 1918, h = 1078;  // 1080p-like, not a multiple of 16 or 32
   std::vector<Camera> path;
-  for (const auto& tc : real_trace(*biker, traces + "/tandt_train.cameras.json", w, h, quick ? 4 : 24))
+  for (const auto& tc : real_trace(*sc.biker, sc.traces + "/tandt_train.cameras.json", w, h, sc.quick ? 4 : 24))
     path.push_back(tc.camera);
   for (Pipeline pl : {Pipeline::exact, Pipeline::catgs}) {
     catgs::RenderOptions o;
     o.pipeline = pl;
-    catgs::cuda::CudaRenderer reference(biker_dev, o), converted(biker_dev, o);
-    yuv420_check("biker", "tandt", reference, converted, path);
+    catgs::cuda::CudaRenderer reference(sc.biker_dev, o), converted(sc.biker_dev, o);
+    yuv420_check("sc.biker", "tandt", reference, converted, path);
   }
 }
 
 // 4: 1000 frames in a row without growth of device memory (not under compute-sanitizer, whose
 // own allocations move the device's memory in use: --quick skips it).
 void steady_checks(const Scenes& sc) {
-  const int W = sc.W;
-  const int H = sc.H;
-  const auto& tumble = sc.tumble;
-  const auto& tumble_dev = sc.tumble_dev;
-  auto& m = tumble;
-  auto& dev = tumble_dev;
+  const int W = sc.W, H = sc.H;
+  auto& m = sc.tumble;
+  auto& dev = sc.tumble_dev;
   catgs::GeneratorParams g;
   g.width = W;
   g.height = H;
@@ -723,19 +702,17 @@ void steady_checks(const Scenes& sc) {
 
 // 5: more tiles than 16 key bits.
 void tile_bits_checks(const Scenes& sc) {
-  const auto& biker = sc.biker;
-  const auto& biker_dev = sc.biker_dev;
-  const Camera cam = orbit_views(*biker, 8192, 4608)[0];
+  const Camera cam = orbit_views(*sc.biker, 8192, 4608)[0];
   for (Pipeline p : {Pipeline::vanilla, Pipeline::exact}) {
     catgs::RenderOptions o;
     o.pipeline = p;
-    catgs::cpu::CpuRenderer c(biker, o);
-    catgs::cuda::CudaRenderer g(biker_dev, o);
+    catgs::cpu::CpuRenderer c(sc.biker, o);
+    catgs::cuda::CudaRenderer g(sc.biker_dev, o);
     Image a, b;
     c.render(cam, a);
     g.render(cam, b);
     const Diff d = compare(a, b);
-    add({"tiles18", "biker", "8192x4608", catgs::pipeline_name(p), d.psnr, d.max_abs, d.max_abs8,
+    add({"tiles18", "sc.biker", "8192x4608", catgs::pipeline_name(p), d.psnr, d.max_abs, d.max_abs8,
          static_cast<long long>(c.last_stats().render_list_length),
          static_cast<long long>(g.last_stats().render_list_length), d.psnr >= 50.0, "147456 tiles, 18 tile bits"});
   }
@@ -795,14 +772,12 @@ void list_limit_checks() {
 
 // 7: tens of millions of Gaussians (49 copies), CUDA == CPU on a fly-over view.
 void city_checks(const Scenes& sc) {
-  const int W = sc.W;
-  const int H = sc.H;
-  const std::string& dir = sc.dir;
+  const int W = sc.W, H = sc.H;
   catgs::CityParams p;
   p.radius_sq = 16;  // 49 cells
   p.up = {0.0f, -1.0f, 0.0f};
   catgs::CityLayout layout;
-  auto base = catgs::load_scene(dir + "/tumblewood_sh2.compressed.ply");
+  auto base = catgs::load_scene(sc.dir + "/tumblewood_sh2.compressed.ply");
   auto city = std::make_shared<GaussianModel>(catgs::tile_scene(base, p, &layout));
   catgs::GeneratorParams g;
   g.width = W;

@@ -82,6 +82,78 @@ std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConf
   return results;
 }
 
+// The settings every session shares, from the command line.
+LoadSessionConfig base_config(const tools::Args& args) {
+  LoadSessionConfig base;
+  base.host = args.get("--host", base.host);
+  base.port = args.get_int("--port", base.port);
+  base.token = args.get("--token");
+  base.offset_s = args.get_double("--offset-s", 0.37);
+  base.rate_hz = args.get_double("--rate", 60);
+  base.depth = std::max(1, args.get_int("--depth", 1));
+  base.seconds = args.get_double("--seconds", 10);
+  base.decode = args.get("--decode", "0") == "1";
+  base.check_every = std::max(0, args.get_int("--check-every", 0));
+  base.check_min_psnr = args.get_double("--check-min-psnr", 30);
+  if (base.check_every > 0 && !args.has("--scene"))
+    throw std::invalid_argument("--check-every needs --scene (the reference renders it)");
+  base.warmup_frames = args.get_int("--warmup", 5);
+  base.stale_ms = args.get_double("--stale-ms", 100);
+  if (args.has("--scene")) {
+    base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
+    std::cout << "scene " << args.get("--scene") << ": " << base.scene->size() << " Gaussians\n";
+  }
+  return base;
+}
+
+// One run of `sessions` sessions; returns the exit code's bits (no frames, or a failed check).
+int run_once(int max_sessions, const std::vector<LoadSessionConfig>& templates, const LoadSessionConfig& base,
+             nlohmann::json& report) {
+  int exit_code = 0;
+  const auto results = run_sessions(max_sessions, templates);
+  std::cout << format_table(results);
+  report["run"] = run_json(results);
+  for (const auto& r : results) {
+    exit_code |= r.frames == 0 ? 1 : 0;
+    // A reference check that found a bad frame, or checked none, fails the run.
+    if (base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) exit_code |= 1;
+  }
+  return exit_code;
+}
+
+// --ramp: 1, 2, 4, ... (or +K) sessions until one step breaks the bounds.
+void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadSessionConfig>& templates,
+              nlohmann::json& report) {
+  const std::string step = args.get("--ramp-step", "x2");
+  const int add = step.rfind('+', 0) == 0 ? std::stoi(step.substr(1)) : 0;
+  if (step != "x2" && add <= 0) throw std::invalid_argument("--ramp-step must be x2 or +K");
+  const double max_p95 = args.get_double("--max-p95-ms", 0), min_fps = args.get_double("--min-fps", 0);
+  int held = 0;
+  report["ramp"] = nlohmann::json::array();
+  for (int n = 1; n <= max_sessions; n = add ? n + add : 2 * n) {
+    const auto results = run_sessions(n, templates);
+    const RunSummary t = summarize_run(results);
+    char broken[96] = "";
+    if (t.errors)
+      std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
+    else if (max_p95 > 0 && t.latency.p95 > max_p95)
+      std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
+    else if (min_fps > 0 && t.fps_min < min_fps)
+      std::snprintf(broken, sizeof(broken), "slowest session %.1f FPS", t.fps_min);
+    std::printf("--- %d session(s): %s%s\n", n, broken[0] ? "broke: " : "held", broken);
+    std::cout << format_table(results);
+    nlohmann::json step_json = run_json(results);
+    step_json["held"] = broken[0] == 0;
+    step_json["broken_by"] = broken;
+    report["ramp"].push_back(step_json);
+    if (broken[0]) break;
+    held = n;
+  }
+  std::printf("ramp: largest session count that held: %d (bounds: p95 <= %g ms, min FPS >= %g; 0 = none)\n", held,
+              max_p95, min_fps);
+  report["largest_sessions_held"] = held;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -95,25 +167,7 @@ int main(int argc, char** argv) {
       std::cout << kUsage;
       return 0;
     }
-    LoadSessionConfig base;
-    base.host = args.get("--host", base.host);
-    base.port = args.get_int("--port", base.port);
-    base.token = args.get("--token");
-    base.offset_s = args.get_double("--offset-s", 0.37);
-    base.rate_hz = args.get_double("--rate", 60);
-    base.depth = std::max(1, args.get_int("--depth", 1));
-    base.seconds = args.get_double("--seconds", 10);
-    base.decode = args.get("--decode", "0") == "1";
-    base.check_every = std::max(0, args.get_int("--check-every", 0));
-    base.check_min_psnr = args.get_double("--check-min-psnr", 30);
-    if (base.check_every > 0 && !args.has("--scene"))
-      throw std::invalid_argument("--check-every needs --scene (the reference renders it)");
-    base.warmup_frames = args.get_int("--warmup", 5);
-    base.stale_ms = args.get_double("--stale-ms", 100);
-    if (args.has("--scene")) {
-      base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
-      std::cout << "scene " << args.get("--scene") << ": " << base.scene->size() << " Gaussians\n";
-    }
+    const LoadSessionConfig base = base_config(args);
     std::vector<std::string> sizes = split(args.get("--size", "1280x720"));
     if (args.has("--width") || args.has("--height"))
       sizes = {std::to_string(args.get_int("--width", 1280)) + "x" + std::to_string(args.get_int("--height", 720))};
@@ -140,43 +194,9 @@ int main(int argc, char** argv) {
                         {"stale_ms", base.stale_ms}};
     int exit_code = 0;
     if (!args.has("--ramp")) {
-      const auto results = run_sessions(max_sessions, templates);
-      std::cout << format_table(results);
-      report["run"] = run_json(results);
-      for (const auto& r : results) {
-        exit_code |= r.frames == 0 ? 1 : 0;
-        // A reference check that found a bad frame, or checked none, fails the run.
-        if (base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) exit_code |= 1;
-      }
+      exit_code = run_once(max_sessions, templates, base, report);
     } else {
-      const std::string step = args.get("--ramp-step", "x2");
-      const int add = step.rfind('+', 0) == 0 ? std::stoi(step.substr(1)) : 0;
-      if (step != "x2" && add <= 0) throw std::invalid_argument("--ramp-step must be x2 or +K");
-      const double max_p95 = args.get_double("--max-p95-ms", 0), min_fps = args.get_double("--min-fps", 0);
-      int held = 0;
-      report["ramp"] = nlohmann::json::array();
-      for (int n = 1; n <= max_sessions; n = add ? n + add : 2 * n) {
-        const auto results = run_sessions(n, templates);
-        const RunSummary t = summarize_run(results);
-        char broken[96] = "";
-        if (t.errors)
-          std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
-        else if (max_p95 > 0 && t.latency.p95 > max_p95)
-          std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
-        else if (min_fps > 0 && t.fps_min < min_fps)
-          std::snprintf(broken, sizeof(broken), "slowest session %.1f FPS", t.fps_min);
-        std::printf("--- %d session(s): %s%s\n", n, broken[0] ? "broke: " : "held", broken);
-        std::cout << format_table(results);
-        nlohmann::json step_json = run_json(results);
-        step_json["held"] = broken[0] == 0;
-        step_json["broken_by"] = broken;
-        report["ramp"].push_back(step_json);
-        if (broken[0]) break;
-        held = n;
-      }
-      std::printf("ramp: largest session count that held: %d (bounds: p95 <= %g ms, min FPS >= %g; 0 = none)\n", held,
-                  max_p95, min_fps);
-      report["largest_sessions_held"] = held;
+      run_ramp(args, max_sessions, templates, report);
     }
     if (args.has("--json")) {
       std::ofstream(args.get("--json")) << report.dump(1) << "\n";
