@@ -110,9 +110,9 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
       ++visible;
     }
     // The key frame's depth orders the cached list, so a Gaussian behind the key camera is left
-    // out even if a predicted pose would see it. Known gap: such a Gaussian (or one outside every
-    // predicted frustum) that a sub-frame needs is not checked there; only cached Gaussians are,
-    // and a prediction error large enough to matter makes cached ones leave their trails too.
+    // out even if a predicted pose would see it. A sub-frame that such a Gaussian (or one outside
+    // every predicted frustum) would reach is turned into a key frame by unlisted_reach_image
+    // (subframe_features.cpp), so it never shows as a hole.
     if (!key_visible) return;
     const fm::Trail trail =
         fm::build_trail(means, covs, visible, q_max, widening.slack, widening.margin_px, widening.motion_margin);
