@@ -12,7 +12,8 @@ namespace {
 double parse_number(const std::string& value) {
   char* end = nullptr;
   const double v = std::strtod(value.c_str(), &end);
-  if (value.empty() || end != value.c_str() + value.size()) throw std::invalid_argument("not a number");
+  if (value.empty() || end != value.c_str() + value.size() || !std::isfinite(v))
+    throw std::invalid_argument("not a finite number");
   return v;
 }
 

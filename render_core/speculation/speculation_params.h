@@ -66,9 +66,9 @@ struct SpeculationParams {
 };
 
 // Checks the parameters a planner accepts: a window in 0..kMaxWindow, a backoff in 0..1000
-// frames, min_served in 0..kMaxWindow, a non-negative slice floor, a positive F_target, a fit
-// window in (0, 1] s and an acceleration window in [0, 1] s. Throws std::invalid_argument naming
-// the parameter.
+// frames, min_served in 0..kMaxWindow, a non-negative slice floor, a finite positive F_target and
+// l, a finite d >= 0, finite trail margins >= 0, a fit window in (0, 1] s and an acceleration
+// window in [0, 1] s. Throws std::invalid_argument naming the parameter.
 void validate(const SpeculationParams& params);
 
 // How a key frame widens its trails (fm::build_trail): the margins with a window, none without

@@ -90,7 +90,8 @@ TEST(SpeculationSettings, NamesSetFieldsAndBadInputIsRefused) {
   EXPECT_EQ(p.backoff.min_served, SpeculationParams{}.backoff.min_served);  // untouched
   apply_speculation_settings(p, "");                                        // nothing
   EXPECT_EQ(p.initial_window, 2);
-  for (const char* bad : {"window=33", "windw=2", "window", "window=2.5", "cache=maybe", "fit_ms=0", "=1"}) {
+  for (const char* bad : {"window=33", "windw=2", "window", "window=2.5", "window=1e11", "cache=maybe", "fit_ms=0",
+                          "=1", "tile=0", "slack=-1", "depth=nan", "fps=inf"}) {
     EXPECT_THROW(apply_speculation_settings(p, bad), std::invalid_argument) << bad;
     EXPECT_EQ(p.initial_window, 2) << bad << ": a refused list changes nothing";
   }
