@@ -10,6 +10,7 @@
 #                                                   # (TEST_ARGS=--skip-large: without the 8192-px, 2^31 and city rows)
 #   scripts/gpu_before_after.sh bench [FRAMES]      # catgs-bench of both (PIPES=...), alternating per scene x path,
 #                                                   # snapshots and per-frame render lists compared
+#                                                   # (PATHS=...: the real paths and the city's flyover)
 #                                                   # -> $OUT/before_after.md, $OUT/before_after.tar.gz
 # Both builds use the same flags; the earlier tree keeps its own layout (binaries found by name).
 set -uo pipefail
@@ -55,15 +56,17 @@ fi
 FRAMES=${2:-600}
 PIPES=${PIPES:-exact,catgs,catgs-nocache,catgs-nosplit}
 J=/tmp/ba; rm -rf "$J"; mkdir -p "$J"
-for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+for path in ${PATHS:-mipnerf360_bicycle tandt_train flowers_sh3 flyover}; do
   for scene in tumblewood city; do
     size=(--scale 10); [ $scene = city ] && size=(--city)
+    trace=real:$T/$path.cameras.json; [ $path = flyover ] && trace=flyover
+    [ $path = flyover ] && [ $scene != city ] && continue  # the fly-over is the city's
     for side in ${ORDER:-before after}; do  # alternating, on the same frames (ORDER="after before" swaps)
       b=$B_BENCH; [ $side = after ] && b=$A_BENCH
       mkdir -p "$J/snap_${side}_${scene}_$path"
       echo "== $side: $scene, $path"
       "$b" --scene "$S/tumblewood_sh2.compressed.ply" "${size[@]}" --up 0,-1,0 \
-        --trace "real:$T/$path.cameras.json" --width 1920 --height 1080 --pipeline "$PIPES" \
+        --trace "$trace" --width 1920 --height 1080 --pipeline "$PIPES" \
         --frames "$FRAMES" --quality-every 3 --json "$J/${side}_${scene}_$path.json" \
         --snapshot-dir "$J/snap_${side}_${scene}_$path" > "$J/${side}_${scene}_$path.log" 2>&1 || status=1
     done

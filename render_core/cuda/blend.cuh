@@ -1,8 +1,9 @@
 // Front-to-back blending of a run [begin, end) of the sorted render list over one 16 x 16 tile by
 // one 256-thread block (thread = pixel), shared by rasterize.cu (a tile's whole range) and
 // rasterize_slices.cu (one slice of it). The design essay is at the top of rasterize.cu: rounds
-// of 256 entries fetched into shared memory (bounds-checked), a block-wide exit once every pixel
-// is done, the reference 3DGS blending rule per pixel.
+// of 256 entries fetched into shared memory (bounds-checked), each warp blending only the
+// entries that reach its 8 x 4 sub-tile, a block-wide exit once every pixel is done, the
+// reference 3DGS blending rule per pixel.
 #pragma once
 
 #include "records.h"
@@ -17,19 +18,78 @@ __device__ __forceinline__ uint32_t unorm8(float v) {
 }
 
 // One round's entries in shared memory: the 2D mean with the splat's power_cut as (x, y, cut,
-// unused), the conic pre-scaled for pixel_power as (-A/2, -B, -C/2) with the opacity, the colour.
+// unused), the conic pre-scaled for pixel_power as (-A/2, -B, -C/2) with the opacity, the colour,
+// and the sub-tiles the entry reaches (bit w: warp w's, subtile_mask).
 struct BlendBatch {
   float4 mean_cut[tune::kRasterBatch];
   float4 power_opacity[tune::kRasterBatch];
   float4 color[tune::kRasterBatch];
+  uint32_t subtiles[tune::kRasterBatch];
 };
 
-// Writes one entry (its splat and colour) into batch slot `slot`.
-__device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, const Splat& s, float4 color) {
+// The pixel that thread `rank` of a rasterizer block owns, as an offset from its tile's corner:
+// warp w takes the 8 x 4 sub-tile at column w % 2, row w / 2 (tunables.h kSubTileW), lane l the
+// pixel (l % 8, l / 8) in it. Every rasterizer kernel and the merge use this one mapping (the
+// partial slots of a split tile are indexed by rank).
+__device__ __forceinline__ int2 pixel_in_tile(int rank) {
+  const int warp = rank >> 5, lane = rank & 31;
+  return make_int2((warp & 1) * tune::kSubTileW + (lane & 7), (warp >> 1) * tune::kSubTileH + (lane >> 3));
+}
+
+// Where the thread's pixel is: its tile's corner, its rank in the block and its pixel centre.
+struct TilePixel {
+  int x0, y0;      // the tile's top-left pixel
+  int rank;        // thread index in the block
+  float fpx, fpy;  // this thread's pixel (x0, y0) + pixel_in_tile(rank)
+};
+
+__device__ __forceinline__ TilePixel tile_pixel(int tx, int ty, int rank) {
+  const int x0 = tx * tune::kTileSize, y0 = ty * tune::kTileSize;
+  const int2 o = pixel_in_tile(rank);
+  return {x0, y0, rank, static_cast<float>(x0 + o.x), static_cast<float>(y0 + o.y)};
+}
+
+// The sub-tiles of the tile at (x0, y0) that a splat's 1/255 ellipse q <= q_max can reach, as a
+// bit per warp (bit 2 row + column). The test is the ellipse's bounding box against each
+// sub-tile's pixel centres: half-widths sqrt(q Sigma_xx), sqrt(q Sigma_yy) with Sigma the 2D
+// covariance, the conic's inverse (Sigma_xx = C / det, Sigma_yy = A / det, det = AC - B^2 worked
+// out in double, as it cancels for thin Gaussians). Widened so that no pixel the box misses could
+// pass blend_entry's own tests: q_max + 4e-3 (blend_entry skips q > q_max + 2e-3 before its exp,
+// and alpha < 1/255 after it), x 1.001 (q's few-ulp rounding, relative to its terms) and + 0.02
+// px (the pixel offset's rounding). A warp skips an entry only where every one of its pixels
+// would skip it, so the image is the same bit for bit. Culled splats (q_max -inf) reach nothing;
+// a splat whose box is not finite reaches every sub-tile (blend_entry decides, as before).
+__device__ __forceinline__ uint32_t subtile_mask(const Splat& s, int x0, int y0) {
+  constexpr uint32_t kAll = (1u << (tune::kSubTilesX * tune::kSubTilesY)) - 1u;
+  const float A = s.mean_ab.z, B = s.mean_ab.w, C = s.c_opacity_q_cut.x;
+  const float q = s.c_opacity_q_cut.z + 4e-3f;
+  if (!(q > 0.0f)) return 0u;
+  const auto det = static_cast<float>(static_cast<double>(A) * C - static_cast<double>(B) * B);
+  const float ex = sqrtf(q * C / det) * 1.001f + 0.02f, ey = sqrtf(q * A / det) * 1.001f + 0.02f;
+  if (!(ex < INFINITY && ey < INFINITY)) return kAll;  // NaN or inf: no box
+  const float lx = s.mean_ab.x - static_cast<float>(x0), ly = s.mean_ab.y - static_cast<float>(y0);
+  uint32_t cols = 0;
+  for (int c = 0; c < tune::kSubTilesX; ++c) {
+    const auto lo = static_cast<float>(c * tune::kSubTileW), hi = lo + static_cast<float>(tune::kSubTileW - 1);
+    cols |= (lx - ex <= hi && lx + ex >= lo) ? 1u << c : 0u;
+  }
+  uint32_t mask = 0;
+  for (int r = 0; r < tune::kSubTilesY; ++r) {
+    const auto lo = static_cast<float>(r * tune::kSubTileH), hi = lo + static_cast<float>(tune::kSubTileH - 1);
+    mask |= (ly - ey <= hi && ly + ey >= lo) ? cols << (tune::kSubTilesX * r) : 0u;
+  }
+  return mask;
+}
+
+// Writes one entry (its splat, colour and sub-tile mask for the tile at (x0, y0)) into batch
+// slot `slot`.
+__device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, const Splat& s, float4 color, int x0,
+                                            int y0) {
   const float4 ab = s.mean_ab, rest = s.c_opacity_q_cut;
   batch.mean_cut[slot] = make_float4(ab.x, ab.y, rest.w, 0.0f);
   batch.power_opacity[slot] = make_float4(-0.5f * ab.z, -ab.w, -0.5f * rest.x, rest.y);
   batch.color[slot] = color;
+  batch.subtiles[slot] = subtile_mask(s, x0, y0);
 }
 
 // fm::gaussian_power, -(a dx^2 + c dy^2) / 2 - b dx dy, as dx (A dx + B dy) + C dy^2 with
@@ -109,7 +169,29 @@ __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j,
   px.T = test_T;
 }
 
-// Blends entries [begin, end) into `px` (the pixel at (fpx, fpy) of thread `rank`). With
+// Blends a round's `count` staged entries, in list order, into the pixel at (fpx, fpy) of warp
+// `warp`: the warp walks only the entries whose sub-tile mask holds its bit, 32 at a time by a
+// ballot and its set bits (warp-uniform loops), so an entry that misses the sub-tile costs its
+// warp nothing; a warp whose pixels are all done leaves. Skipped entries are ones every pixel of
+// the sub-tile would skip (subtile_mask), so the pixel blends what a walk of every entry blends.
+__device__ __forceinline__ void blend_batch(const BlendBatch& batch, uint32_t count, const TilePixel& at,
+                                            bool early_termination, PixelState& px) {
+  constexpr unsigned kAll = 0xffffffffu;
+  const uint32_t bit = 1u << (at.rank >> 5);
+  const auto lane = static_cast<uint32_t>(at.rank & 31);
+  for (uint32_t base = 0; base < count; base += 32) {
+    if (__all_sync(kAll, px.done)) return;
+    const uint32_t j = base + lane;
+    uint32_t hits = __ballot_sync(kAll, j < count && (batch.subtiles[j] & bit) != 0u);
+    while (hits != 0u) {
+      const uint32_t e = base + static_cast<uint32_t>(__ffs(hits) - 1);
+      hits &= hits - 1u;
+      if (!px.done) blend_entry(batch, e, at.fpx, at.fpy, early_termination, px);
+    }
+  }
+}
+
+// Blends entries [begin, end) into `px` (the pixel of thread at.rank). With
 // early_termination a pixel stops before the Gaussian that would take T below 1e-4 (as the
 // reference 3DGS); without it, blends to the end. `skip.stop()` (block-uniform) ends the run
 // early, and `skip.refresh(px)` (per thread, before each round) may mark the pixel done
@@ -118,20 +200,19 @@ __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j,
 template <typename Skip>
 __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
                                             const uint32_t* values,  // [L]
-                                            const Projected& g, int rank, float fpx, float fpy, bool early_termination,
+                                            const Projected& g, const TilePixel& at, bool early_termination,
                                             BlendBatch& batch, PixelState& px, Skip skip) {
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
     skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
-    const uint32_t fetch = base + static_cast<uint32_t>(rank);
+    const uint32_t fetch = base + static_cast<uint32_t>(at.rank);
     if (fetch < end) {  // bounds-checked prefetch
       const uint32_t gi = values[fetch];
       const Splat sp = g.splat[gi];
-      stage_entry(batch, static_cast<uint32_t>(rank), sp, g.color[gi]);
+      stage_entry(batch, static_cast<uint32_t>(at.rank), sp, g.color[gi], at.x0, at.y0);
     }
     __syncthreads();
-    const uint32_t count = min(static_cast<uint32_t>(tune::kRasterBatch), end - base);
-    for (uint32_t j = 0; j < count && !px.done; ++j) blend_entry(batch, j, fpx, fpy, early_termination, px);
+    blend_batch(batch, min(static_cast<uint32_t>(tune::kRasterBatch), end - base), at, early_termination, px);
     __syncthreads();  // shared memory is refilled next round
   }
 }
@@ -153,16 +234,16 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 template <typename Skip>
 __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
                                                    const uint32_t* values,  // [L]
-                                                   const Projected& g, int rank, int tx, int ty, int width, int height,
-                                                   float fpx, float fpy, bool early_termination, BlendBatch& batch,
+                                                   const Projected& g, int tx, int ty, int width, int height,
+                                                   const TilePixel& at, bool early_termination, BlendBatch& batch,
                                                    PixelState& px, Skip skip) {
   constexpr int kWarps = tune::kRasterThreads / 32;
   __shared__ uint32_t warp_kept[kWarps];
-  const int lane = rank & 31, warp = rank >> 5;
+  const int lane = at.rank & 31, warp = at.rank >> 5;
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
     skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
-    const uint32_t fetch = base + static_cast<uint32_t>(rank);
+    const uint32_t fetch = base + static_cast<uint32_t>(at.rank);
     bool keep = false;
     uint32_t gi = 0;
     Splat sp{};
@@ -182,10 +263,10 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
     }
     if (keep) {
       slot += static_cast<uint32_t>(__popc(ballot & ((1u << lane) - 1u)));
-      stage_entry(batch, slot, sp, g.color[gi]);
+      stage_entry(batch, slot, sp, g.color[gi], at.x0, at.y0);
     }
     __syncthreads();
-    for (uint32_t j = 0; j < count && !px.done; ++j) blend_entry(batch, j, fpx, fpy, early_termination, px);
+    blend_batch(batch, count, at, early_termination, px);
     __syncthreads();  // shared memory (batch and warp_kept) is refilled next round
   }
 }

@@ -1,8 +1,9 @@
 // Stage 5: tile rasterization, front-to-back alpha blending (mirrors cpu/rasterize.cpp).
 //
 // Design.
-// - One 256-thread block per 16 x 16 tile, blocks taking the tiles heaviest first (tile_order, stage 4b); thread (x, y) of the block owns pixel
-//   (16 tx + x, 16 ty + y) and keeps its colour C and transmittance T in registers. Threads whose
+// - One 256-thread block per 16 x 16 tile, blocks taking the tiles heaviest first (tile_order,
+//   stage 4b); each warp owns an 8 x 4 sub-tile (blend.cuh pixel_in_tile), each thread one pixel
+//   of it, and keeps its colour C and transmittance T in registers. Threads whose
 //   pixel lies outside the image (right and bottom border tiles) start "done" but stay in the
 //   block: they still fetch Gaussians for the others and take part in every barrier.
 // - The tile's range [start, end) of the sorted render list is walked in rounds of 256 entries.
@@ -12,6 +13,11 @@
 //   fetch is bounds-checked against `end` (a tile holding fewer entries than a round, one or two
 //   say, fetches only those: DESIGN.md's FlashGS lesson). Each gather reads the entry's 32-byte
 //   splat and its 16-byte colour: two sectors (stages.h Splat).
+// - When it stages an entry, the fetching thread also works out which sub-tiles the entry's
+//   ellipse can reach (its bounding box: blend.cuh subtile_mask), and each warp then walks only
+//   the round's entries that reach its sub-tile (a ballot over the masks, then its set bits).
+//   Small Gaussians reach a few of a tile's 8 sub-tiles, so most warps skip most entries at no
+//   cost, where before every pixel evaluated every entry (RESULTS.md, issue 19).
 // - After the barrier every thread blends the round's Gaussians in depth order, skipping those
 //   with power > 0 or alpha < 1/255, and stops before the Gaussian that would take T below 1e-4
 //   (the reference 3DGS rule, as on the CPU). A pixel whose power lies below the entry's
@@ -24,7 +30,7 @@
 //   each shared-memory entry once for both, drew the same image but rasterized slower, likely
 //   because the blend loop is bound by latency and half the warps per SM were left to hide it
 //   (RESULTS.md, "This round (2026-11-22)": two pixels per thread tried and dropped).
-// - Shared memory: 256 x (16 + 16 + 16) bytes = 12 KiB per block, so occupancy is set by
+// - Shared memory: 256 x (16 + 16 + 16 + 4) bytes = 13 KiB per block, so occupancy is set by
 //   registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
 // - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
 //   later encoder can read the frame without a host copy.
@@ -37,7 +43,7 @@ namespace catgs::cuda::stages {
 
 namespace {
 
-__global__ void __launch_bounds__(tune::kRasterThreads)
+__global__ void __launch_bounds__(tune::kRasterThreads, tune::kSliceRasterMinBlocks)
     rasterize_kernel(const uint2* __restrict__ ranges,         // [tiles] [start, end) into the sorted list
                      const uint32_t* __restrict__ tile_order,  // [tiles]
                      const uint32_t* __restrict__ values,      // [L] sorted Gaussian indices
@@ -50,14 +56,13 @@ __global__ void __launch_bounds__(tune::kRasterThreads)
   const uint32_t tile = tile_order[blockIdx.x];
   const int tx = static_cast<int>(tile % static_cast<uint32_t>(tiles_x));
   const int ty = static_cast<int>(tile / static_cast<uint32_t>(tiles_x));
-  const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
-  const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
+  const TilePixel at = tile_pixel(tx, ty, static_cast<int>(threadIdx.x));
+  const int px = static_cast<int>(at.fpx), py = static_cast<int>(at.fpy);
   const bool inside = px < width && py < height;
 
   const uint2 range = ranges[tile];
   PixelState state{make_float3(0.0f, 0.0f, 0.0f), 1.0f, !inside};
-  blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py), true, batch, state,
-              NoSkip{});
+  blend_range(range.x, range.y, values, g, at, true, batch, state, NoSkip{});
   if (!inside) return;
   write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C, state.T,
               background, out_rgb, out_rgba8);
@@ -69,9 +74,8 @@ void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* 
                const Projected& projected, const CameraParams& cam, float3 background, float* out_rgb,
                uint32_t* out_rgba8, cudaStream_t stream) {
   const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
-  const dim3 block(tune::kTileSize, tune::kTileSize);
-  rasterize_kernel<<<tiles, block, 0, stream>>>(ranges, tile_order, sorted_values, projected, cam.width, cam.height,
-                                                cam.tiles_x, background, out_rgb, out_rgba8);
+  rasterize_kernel<<<tiles, tune::kRasterThreads, 0, stream>>>(ranges, tile_order, sorted_values, projected, cam.width,
+                                                               cam.height, cam.tiles_x, background, out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("rasterize_kernel");
 }
 

@@ -97,19 +97,18 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kSliceRasterMinBlo
   const uint4 tp = plan.tile_plan[tile_k.x];
   const int tx = static_cast<int>(tile_k.x % static_cast<uint32_t>(tiles_x));
   const int ty = static_cast<int>(tile_k.x / static_cast<uint32_t>(tiles_x));
-  const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
-  const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
+  const TilePixel at = tile_pixel(tx, ty, static_cast<int>(threadIdx.x));
+  const int rank = at.rank;
+  const int px = static_cast<int>(at.fpx), py = static_cast<int>(at.fpy);
   const bool inside = px < width && py < height;
 
   PixelState state{make_float3(0.0f, 0.0f, 0.0f), 1.0f, !inside};
   // Blends this slice's run, with or without the per-round tile cull (blend.cuh).
   auto blend = [&](auto skip) {
     if constexpr (kTileCull)
-      blend_range_culled(range.x, range.y, values, g, rank, tx, ty, width, height, static_cast<float>(px),
-                         static_cast<float>(py), early_termination, batch, state, skip);
+      blend_range_culled(range.x, range.y, values, g, tx, ty, width, height, at, early_termination, batch, state, skip);
     else
-      blend_range(range.x, range.y, values, g, rank, static_cast<float>(px), static_cast<float>(py), early_termination,
-                  batch, state, skip);
+      blend_range(range.x, range.y, values, g, at, early_termination, batch, state, skip);
   };
   if (tp.y == 1) {  // the tile's only slice
     blend(NoSkip{});
@@ -153,8 +152,9 @@ __global__ void __launch_bounds__(tune::kRasterThreads)
   if (tp.y <= 1) return;  // written by its only slice
   const int tx = static_cast<int>(blockIdx.x % static_cast<uint32_t>(tiles_x));
   const int ty = static_cast<int>(blockIdx.x / static_cast<uint32_t>(tiles_x));
-  const int rank = threadIdx.y * tune::kTileSize + threadIdx.x;
-  const int px = tx * tune::kTileSize + threadIdx.x, py = ty * tune::kTileSize + threadIdx.y;
+  const int rank = static_cast<int>(threadIdx.x);
+  const int2 o = pixel_in_tile(rank);  // the slices' pixel for this rank
+  const int px = tx * tune::kTileSize + o.x, py = ty * tune::kTileSize + o.y;
   if (px >= width || py >= height) return;
   float3 C = make_float3(0.0f, 0.0f, 0.0f);
   float T = 1.0f;
@@ -182,10 +182,10 @@ void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blo
                              sizeof(unsigned) * static_cast<std::size_t>(cam.tiles_x * cam.tiles_y), stream));
   CATGS_CUDA(cudaMemsetAsync(plan.slot_finished, 0, sizeof(unsigned) * plan.slot_count, stream));
   if (blocks == 0) return;
-  const dim3 block(tune::kTileSize, tune::kTileSize);
   auto* kernel = tile_culling ? rasterize_slices_kernel<true> : rasterize_slices_kernel<false>;
-  kernel<<<blocks, block, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height, cam.tiles_x,
-                                       early_termination, background, abandon, partials, out_rgb, out_rgba8);
+  kernel<<<blocks, tune::kRasterThreads, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height,
+                                                      cam.tiles_x, early_termination, background, abandon, partials,
+                                                      out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("rasterize_slices_kernel");
 }
 
@@ -193,9 +193,8 @@ void merge_slices(const SlicePlan& plan, const float4* partials, const CameraPar
                   float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8,
                   cudaStream_t stream) {
   const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
-  const dim3 block(tune::kTileSize, tune::kTileSize);
-  merge_kernel<<<tiles, block, 0, stream>>>(plan, partials, cam.width, cam.height, cam.tiles_x, early_termination,
-                                            background, abandon, out_rgb, out_rgba8);
+  merge_kernel<<<tiles, tune::kRasterThreads, 0, stream>>>(plan, partials, cam.width, cam.height, cam.tiles_x,
+                                                           early_termination, background, abandon, out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("merge_kernel");
 }
 

@@ -13,6 +13,13 @@ inline constexpr int kTileSize = fm::kTileSize;
 inline constexpr int kRasterThreads = kTileSize * kTileSize;
 // Gaussians fetched into shared memory per round of the rasterizer (one per thread).
 inline constexpr int kRasterBatch = kRasterThreads;
+// Each warp of a rasterizer block owns one 8 x 4 sub-tile of the tile (blend.cuh pixel_in_tile):
+// 2 columns x 4 rows of sub-tiles, warp w at column w % 2, row w / 2. A warp blends only the
+// entries whose ellipse's bounding box reaches its sub-tile (blend.cuh subtile_mask).
+inline constexpr int kSubTileW = 8;
+inline constexpr int kSubTileH = 4;
+inline constexpr int kSubTilesX = kTileSize / kSubTileW;
+inline constexpr int kSubTilesY = kTileSize / kSubTileH;
 
 // Threads per block of the per-Gaussian (pre-processing, key emission) and per-entry kernels.
 inline constexpr int kGaussianThreads = 256;
@@ -63,6 +70,9 @@ inline constexpr double kGrowthFactor = 1.25;
 static_assert(kRasterThreads == 256, "rasterizer assumes 16 x 16 tiles and 256-thread blocks");
 static_assert(kRasterBatch == kRasterThreads, "each thread fetches exactly one Gaussian per round");
 static_assert(kRasterThreads % 32 == 0, "rasterizer blocks are whole warps");
+static_assert(kSubTileW * kSubTileH == 32 && kSubTilesX * kSubTilesY * 32 == kRasterThreads,
+              "one sub-tile per warp, covering the tile");
+static_assert(kSubTilesX == 2 && kSubTileW == 8, "pixel_in_tile maps lanes and warps with shifts and masks");
 static_assert(kMaxTilesPerSide <= 65535, "tile rectangles are stored as ushort4");
 static_assert(static_cast<uint64_t>(kMaxTilesPerSide) * kMaxTilesPerSide < (1ull << 32),
               "tile ids (and the sentinel) must fit the 32 key bits above the depth");
