@@ -20,7 +20,7 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   for (cudaEvent_t& e : s.events) CATGS_CUDA(cudaEventCreate(&e));
   // The readback event only orders the host; no timing needed.
   CATGS_CUDA(cudaEventCreateWithFlags(&s.counts_ready, cudaEventDisableTiming));
-  CATGS_CUDA(cudaMallocHost(&s.host_counts, 2 * sizeof(unsigned long long)));
+  CATGS_CUDA(cudaMallocHost(&s.host_counts, kReadSlots * sizeof(unsigned long long)));
   s.counters.ensure(kCounterSlots * sizeof(unsigned long long), "counters", &s.allocations);
   CATGS_CUDA(cudaEventCreateWithFlags(&s.catgs_readback, cudaEventDisableTiming));
   CATGS_CUDA(cudaEventCreateWithFlags(&s.plan_ready, cudaEventDisableTiming));
@@ -83,13 +83,18 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
                              count + kVisibleCount, count + kReadListLength, stream);
   // The host-device sync of a frame: CUB's radix sort takes the list length from the host, and
   // the list buffers may need to grow before emission writes into them.
-  CATGS_CUDA(cudaMemcpyAsync(host_counts, count + kReadListLength, 2 * sizeof(unsigned long long),
+  CATGS_CUDA(cudaMemcpyAsync(host_counts, count + kReadListLength, kReadSlots * sizeof(unsigned long long),
                              cudaMemcpyDeviceToHost, stream));
   CATGS_CUDA(cudaEventRecord(counts_ready, stream));
   CATGS_CUDA(cudaEventSynchronize(counts_ready));
   ++syncs;
   const uint64_t entries = host_counts[0];
   *visible = host_counts[1];
+  // The listed depths' range, where pre-processing recorded one (preprocess; the speculative
+  // pre-processing does not: its lists sort depth first, or with plain keys).
+  const stages::DepthKeyPacking packing =
+      stages::depth_key_packing(~static_cast<uint32_t>(host_counts[kReadDepthLowComplement - kReadListLength]),
+                                static_cast<uint32_t>(host_counts[kReadDepthHigh - kReadListLength]));
   if (entries > std::numeric_limits<uint32_t>::max())
     throw std::length_error("CUDA renderer: render list of " + std::to_string(entries) +
                             " entries exceeds 2^32 - 1 (32-bit tile ranges); lower the resolution "
@@ -101,16 +106,17 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   }
   uint32_t* v[2] = {values[0].as<uint32_t>(), values[1].as<uint32_t>()};
   if (!depth_first) {
-    const int key_bits = tune::kDepthBits + tune::tile_key_bits(tiles);
+    const int key_bits = packing.bits + tune::tile_key_bits(tiles);
     sort_temp.ensure(stages::sort_temp_bytes(entries, key_bits), "sort scratch", &allocations);
     note_peak();
     uint64_t* k[2] = {keys[0].as<uint64_t>(), keys[1].as<uint64_t>()};
-    stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], nullptr, v[0], nullptr, 0, stream);
+    stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], packing, nullptr, v[0], nullptr, 0,
+                      stream);
     CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
     const int half = stages::sort_pairs(k, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
     sorted_values = v[half];
     CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
-    stages::tile_ranges(k[half], entries, tiles, ranges.as<uint2>(), stream);
+    stages::tile_ranges(k[half], packing, entries, tiles, ranges.as<uint2>(), stream);
     return entries;
   }
 
@@ -134,7 +140,7 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   const uint32_t* by_depth =
       stages::depth_order_ends(proj.tiles_touched, proj.depth, n, *visible, order, ends.as<uint64_t>(), stream);
   uint32_t* k[2] = {keys[0].as<uint32_t>(), keys[1].as<uint32_t>()};
-  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), nullptr, k[0], v[0], by_depth, *visible,
+  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), nullptr, {}, k[0], v[0], by_depth, *visible,
                     stream);
   CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
   const int half =
@@ -173,7 +179,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   s.syncs = 0;
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-  stages::preprocess(sv, cam, exact, proj, counters + kVisibleCount, big, s.stream);
+  stages::preprocess(sv, cam, exact, proj, counters + kVisibleCount, counters + kReadDepthLowComplement, big, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
   const stages::TileTests tests{

@@ -21,16 +21,18 @@ struct WidenToU64 {
 
 using WideCounts = thrust::transform_iterator<WidenToU64, const uint32_t*, uint64_t>;
 
-// Where a key goes: [tile | depth bits] into `wide`, or (depth-first sort, depth_order.cu) the
-// tile id alone into `tile_only` when that is not null. The choice is uniform over a launch.
+// Where a key goes: [tile | depth bits], packed (DepthKeyPacking), into `wide`, or (depth-first
+// sort, depth_order.cu) the tile id alone into `tile_only` when that is not null. The choice is
+// uniform over a launch.
 struct KeyOut {
   uint64_t* wide;       // [L]
   uint32_t* tile_only;  // [L] or null
+  DepthKeyPacking packing;
   __device__ void put(uint64_t at, uint32_t tile, uint32_t depth_bits) const {
     if (tile_only)
       tile_only[at] = tile;
     else
-      wide[at] = (static_cast<uint64_t>(tile) << 32) | depth_bits;
+      wide[at] = packing.key(tile, depth_bits);
   }
 };
 
@@ -237,10 +239,10 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 }
 
 void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam, const TileTests& tests,
-               const BigList& big, uint64_t* wide_keys, uint32_t* tile_keys, uint32_t* values, const uint32_t* order,
-               uint64_t order_count, cudaStream_t stream) {
+               const BigList& big, uint64_t* wide_keys, DepthKeyPacking packing, uint32_t* tile_keys, uint32_t* values,
+               const uint32_t* order, uint64_t order_count, cudaStream_t stream) {
   if (n == 0) return;
-  const KeyOut keys{wide_keys, tile_keys};
+  const KeyOut keys{wide_keys, tile_keys, packing};
   const uint64_t walk = order ? order_count : n;
   const uint64_t blocks = (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (walk > 0 && tests.kind == TileTestKind::trail && tests.trails.tile_mask) {

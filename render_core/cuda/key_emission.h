@@ -21,11 +21,11 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 // ignored later). Big Gaussians are emitted a warp each (ballot + popc keeps the row-major
 // order); catgs trails with tile masks a warp per 32 Gaussians of the walk, whose adjacent runs
 // the warp writes on consecutive slots (coalesced). Keys go to `keys` as [tile | depth bits]
-// (64-bit), or, when `tile_keys` is not null (the depth-first sort), to `tile_keys` as the tile
+// (64-bit, packed as `packing` says), or, when `tile_keys` is not null (the depth-first sort), to `tile_keys` as the tile
 // id alone (32-bit). `order` (or null: all N
 // in index order): the `order_count` Gaussians to walk, in that order (depth_order_ends's).
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               const TileTests& tests, const BigList& big, uint64_t* keys, uint32_t* tile_keys, uint32_t* values,
-               const uint32_t* order, uint64_t order_count, cudaStream_t stream);
+               const TileTests& tests, const BigList& big, uint64_t* keys, DepthKeyPacking packing, uint32_t* tile_keys,
+               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -22,15 +22,44 @@ __device__ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, 
   return n;
 }
 
+// The block's listed Gaussians' depth range into depth_range[0] (complemented float bits of the
+// nearest) and depth_range[1] (float bits of the farthest), both running maxima from zero:
+// positive floats order as their bit patterns. One read, and an atomic only where the block
+// widens the range, so the two shared words see few atomics (most blocks lie inside the range
+// found by earlier ones, or hold no listed Gaussian).
+__device__ void record_depth_range(bool listed, float depth, unsigned long long* depth_range) {
+  __shared__ unsigned warp_low[tune::kGaussianThreads / 32], warp_high[tune::kGaussianThreads / 32];
+  const unsigned bits = __float_as_uint(depth);
+  const unsigned low = __reduce_max_sync(0xffffffffu, listed ? ~bits : 0u);
+  const unsigned high = __reduce_max_sync(0xffffffffu, listed ? bits : 0u);
+  const unsigned warp = threadIdx.x / 32u;
+  if ((threadIdx.x & 31u) == 0u) {
+    warp_low[warp] = low;
+    warp_high[warp] = high;
+  }
+  __syncthreads();
+  if (threadIdx.x != 0) return;
+  unsigned block_low = 0, block_high = 0;
+  for (unsigned w = 0; w < blockDim.x / 32u; ++w) {
+    block_low = max(block_low, warp_low[w]);
+    block_high = max(block_high, warp_high[w]);
+  }
+  const volatile unsigned long long* seen = depth_range;
+  if (block_low > seen[0]) atomicMax(depth_range, static_cast<unsigned long long>(block_low));
+  if (block_high > seen[1]) atomicMax(depth_range + 1, static_cast<unsigned long long>(block_high));
+}
+
 // One thread per Gaussian. Reads the scene once (SH only for visible Gaussians), writes the
 // projected features of visible ones and tiles_touched of all.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
-                      unsigned long long* visible,  // [1] running count of visible Gaussians
+                      unsigned long long* visible,      // [1] running count of visible Gaussians
+                      unsigned long long* depth_range,  // [2] listed depths (record_depth_range)
                       BigList big) {
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   uint32_t touched = 0;
   bool is_big = false;
+  float depth = 0.0f;
   if (i < scene.n) {
     do {
       const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
@@ -68,12 +97,14 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
       out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
       out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
       out.depth[i] = p_cam.z;
+      depth = p_cam.z;
       out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
                                  static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
     } while (false);
     out.tiles_touched[i] = touched;
   }
   list_big_and_count_visible(is_big, touched, i, big, visible);
+  record_depth_range(touched > 0 || is_big, depth, depth_range);
 }
 
 // Big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and writes the
@@ -103,12 +134,12 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
 }  // namespace
 
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
-                unsigned long long* visible, const BigList& big, cudaStream_t stream) {
+                unsigned long long* visible, unsigned long long* depth_range, const BigList& big, cudaStream_t stream) {
   if (scene.n == 0) return;
   const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
   preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(scene, cam, exact, out,
-                                                                                          visible, big);
+                                                                                          visible, depth_range, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};

@@ -137,7 +137,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
     // No window: the frame is rendered in full by the exact pipeline's stages (a one-pose trail
     // is the exact ellipse, so the list is the same; the path-wide kernel only costs more) and
     // opens no group. Task splitting still applies.
-    stages::preprocess(sv, cam, true, proj, counters + kVisibleCount, s.big_list(), s.stream);
+    stages::preprocess(sv, cam, true, proj, counters + kVisibleCount, counters + kReadDepthLowComplement, s.big_list(),
+                       s.stream);
     tests = {stages::TileTestKind::ellipse, proj.splat, {}, cam.width, cam.height};
   }
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));

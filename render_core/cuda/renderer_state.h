@@ -61,10 +61,21 @@ class GrowBuffer {
   std::size_t bytes_ = 0;
 };
 
-// Slots of State::counters (64-bit, device): the running visible count, the frame's 16-byte
-// readback (render-list length, visible count: the one copy build_render_list syncs on) and the
-// big-Gaussian count (stages::BigList::count, its low 32 bits).
-enum CounterSlot { kVisibleCount = 0, kReadListLength = 1, kReadVisible = 2, kBigCount = 3, kCounterSlots = 4 };
+// Slots of State::counters (64-bit, device): the running visible count, the frame's 32-byte
+// readback (render-list length, visible count, and the listed Gaussians' depth range as float
+// bits, the low end complemented so that both ends are running maxima from zero: the one copy
+// build_render_list syncs on) and the big-Gaussian count (stages::BigList::count, its low 32
+// bits).
+enum CounterSlot {
+  kVisibleCount = 0,
+  kReadListLength = 1,
+  kReadVisible = 2,
+  kReadDepthLowComplement = 3,
+  kReadDepthHigh = 4,
+  kReadSlots = 4,
+  kBigCount = 5,
+  kCounterSlots = 6
+};
 // Slots of State::catgs_counters (32-bit, device) and of its pinned host mirror host_catgs (the
 // first kHostCatgsSlots): M's float bits, the sub-frame's "outside its trail" flag, the key
 // frame's slice and partial-slot totals (stages::SlicePlan::totals) and the frustum-cache size.
@@ -94,7 +105,7 @@ struct CudaRenderer::State {
   cudaStream_t stream = nullptr;
   cudaEvent_t events[kEventCount] = {};
   cudaEvent_t counts_ready = nullptr;
-  unsigned long long* host_counts = nullptr;  // pinned [2]: kReadListLength, kReadVisible
+  unsigned long long* host_counts = nullptr;  // pinned [kReadSlots]: from kReadListLength on
   std::size_t allocations = 0, peak_bytes = 0;
   int syncs = 0;
   int width = 0, height = 0;

@@ -1,8 +1,8 @@
 // Stage 3: sort the render list by [tile | depth] (mirrors cpu/sort.cpp). CUB's radix sort is
 // stable, so equal keys (one Gaussian cannot repeat a tile; equal depths in one tile can happen)
 // keep emission order, which is Gaussian index order, as the CPU reference's pair sort does.
-// Only 32 + bit_width(tiles) key bits are visited: 45 bits (6 passes of 8) at 1920x1080 instead
-// of 64 (8 passes). With the depth-first sort (depth_order.cu) the list arrives in depth order
+// Only the key's bits are visited: bit_width(tiles) + the packed depth's (records.h
+// DepthKeyPacking; 32 for the plain key: 45 bits, 6 passes of 8, at 1920x1080, instead of 64). With the depth-first sort (depth_order.cu) the list arrives in depth order
 // and only its bit_width(tiles) tile bits are sorted (2 passes at 1080p).
 #include <cub/device/device_radix_sort.cuh>
 

@@ -12,14 +12,20 @@ namespace catgs::cuda::stages {
 
 namespace {
 
-// The tile of a sorted key: the high half of [tile | depth], or the whole tile-only key.
-__device__ inline uint32_t tile_of(uint64_t key) { return static_cast<uint32_t>(key >> 32); }
-__device__ inline uint32_t tile_of(uint32_t key) { return key; }
+// The tile of a sorted key: the part above the packed depth of [tile | depth], or the whole
+// tile-only key.
+struct PackedTile {
+  DepthKeyPacking packing;
+  __device__ uint32_t operator()(uint64_t key) const { return packing.tile_of(key); }
+};
+struct WholeTile {
+  __device__ uint32_t operator()(uint32_t key) const { return key; }
+};
 
-template <typename Key>
+template <typename Key, typename TileOf>
 __global__ void __launch_bounds__(tune::kEntryThreads)
     tile_ranges_kernel(const Key* __restrict__ keys,  // [L] sorted
-                       uint64_t entries, uint32_t tiles,
+                       uint64_t entries, uint32_t tiles, TileOf tile_of,
                        uint2* __restrict__ ranges) {  // [tiles], zeroed
   const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
   for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < entries; i += stride) {
@@ -66,25 +72,27 @@ void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t
 
 namespace {
 
-template <typename Key>
-void launch_tile_ranges(const Key* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges, cudaStream_t stream) {
+template <typename Key, typename TileOf>
+void launch_tile_ranges(const Key* sorted_keys, uint64_t entries, uint32_t tiles, TileOf tile_of, uint2* ranges,
+                        cudaStream_t stream) {
   CATGS_CUDA(cudaMemsetAsync(ranges, 0, sizeof(uint2) * tiles, stream));
   if (entries == 0) return;
   const uint64_t want = (entries + tune::kEntryThreads - 1) / tune::kEntryThreads;
   const auto blocks = static_cast<unsigned>(want < tune::kMaxEntryBlocks ? want : tune::kMaxEntryBlocks);
-  tile_ranges_kernel<Key><<<blocks, tune::kEntryThreads, 0, stream>>>(sorted_keys, entries, tiles, ranges);
+  tile_ranges_kernel<<<blocks, tune::kEntryThreads, 0, stream>>>(sorted_keys, entries, tiles, tile_of, ranges);
   CATGS_CUDA_LAUNCHED("tile_ranges_kernel");
 }
 
 }  // namespace
 
-void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges, cudaStream_t stream) {
-  launch_tile_ranges(sorted_keys, entries, tiles, ranges, stream);
+void tile_ranges(const uint64_t* sorted_keys, DepthKeyPacking packing, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream) {
+  launch_tile_ranges(sorted_keys, entries, tiles, PackedTile{packing}, ranges, stream);
 }
 
 void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream) {
-  launch_tile_ranges(sorted_tile_keys, entries, tiles, ranges, stream);
+  launch_tile_ranges(sorted_tile_keys, entries, tiles, WholeTile{}, ranges, stream);
 }
 
 }  // namespace catgs::cuda::stages

@@ -10,9 +10,10 @@
 namespace catgs::cuda::stages {
 
 // Stage 4 (tile_ranges.cu): [start, end) of each tile in the sorted list; tiles without entries get
-// [0, 0). Sentinel entries (tile id >= tiles) are ignored. Keys are [tile | depth] (64-bit) or,
-// with the depth-first sort, tile ids (32-bit).
-void tile_ranges(const uint64_t* sorted_keys, uint64_t entries, uint32_t tiles, uint2* ranges, cudaStream_t stream);
+// [0, 0). Sentinel entries (tile id >= tiles) are ignored. Keys are [tile | depth] (64-bit, packed
+// as `packing` says) or, with the depth-first sort, tile ids (32-bit).
+void tile_ranges(const uint64_t* sorted_keys, DepthKeyPacking packing, uint64_t entries, uint32_t tiles, uint2* ranges,
+                 cudaStream_t stream);
 void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
 

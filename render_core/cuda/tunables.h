@@ -31,8 +31,9 @@ inline constexpr unsigned kMaxEntryBlocks = 65535u * 8u;
 inline constexpr int kMaxImageSide = catgs::kMaxImageSide;
 inline constexpr int kMaxTilesPerSide = (kMaxImageSide + kTileSize - 1) / kTileSize;
 
-// Render-list keys are [tile id | 32 bits of view depth]; the tile id lives in the upper 32 bits,
-// so the sort only visits 32 + bit_width(tiles) bits (sentinel tile id `tiles` included).
+// Render-list keys are [tile id | view depth bits]: the plain key holds all 32 bits of the depth,
+// the packed one (records.h DepthKeyPacking) only what the frame's depth range needs, and the sort
+// visits those + bit_width(tiles) bits (sentinel tile id `tiles` included).
 inline constexpr int kDepthBits = 32;
 
 // A Gaussian whose candidate tile rectangle holds more than this many tiles is "big": its tiles

@@ -44,6 +44,8 @@
 #include <cuda_runtime.h>
 
 #include <cmath>
+#include <cstring>
+#include <random>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -54,6 +56,7 @@
 #include "common/image_io.h"
 #include "cpu/cpu_renderer.h"
 #include "cuda/cuda_renderer.h"
+#include "cuda/records.h"
 #include "scene/ply_io.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
@@ -559,6 +562,35 @@ struct Scenes {
 };
 
 // 1-2: CUDA == CPU and exact ~ vanilla, per scene.
+// The packed render-list key (records.h DepthKeyPacking) against the plain [tile | depth bits]
+// order: for random pairs of (tile, positive depth) inside a frame's depth range, the packed keys
+// compare as the plain ones do (the sort's order and ties). Depth ranges from a sliver to the
+// whole float range; depths drawn near the range's ends as often as inside it.
+void packing_checks() {
+  std::mt19937 rng(19);
+  long long wrong = 0, pairs = 0;
+  for (const auto& [near, far] : std::vector<std::pair<float, float>>{
+           {1.0f, 1.0000001f}, {0.2f, 3.0f}, {0.01f, 100.0f}, {0.5f, 40.0f}, {1e-6f, 3e38f}}) {
+    uint32_t lo, hi;
+    std::memcpy(&lo, &near, 4);
+    std::memcpy(&hi, &far, 4);
+    const catgs::cuda::stages::DepthKeyPacking p = catgs::cuda::stages::depth_key_packing(lo, hi);
+    std::uniform_int_distribution<uint32_t> depth(lo, hi), tile(0, 8160), edge(0, 3);
+    auto draw = [&] {
+      const uint32_t e = edge(rng);
+      return e == 0 ? lo : e == 1 ? hi : depth(rng);
+    };
+    for (int k = 0; k < 200000; ++k, ++pairs) {
+      const uint32_t ta = tile(rng), tb = edge(rng) ? ta : tile(rng), da = draw(), db = draw();
+      const uint64_t plain_a = (uint64_t{ta} << 32) | da, plain_b = (uint64_t{tb} << 32) | db;
+      const uint64_t ka = p.key(ta, da), kb = p.key(tb, db);
+      wrong += (plain_a < plain_b) != (ka < kb) || (plain_a == plain_b) != (ka == kb) || p.tile_of(ka) != ta ? 1 : 0;
+    }
+  }
+  add({"keypack", "-", "random", "exact", 0.0, 0.0, 0, pairs, pairs - wrong, wrong == 0,
+       "packed [tile | depth - base] keys order as [tile | depth] (pairs compared / agreeing)"});
+}
+
 void equality_checks(Scenes& sc) {
   sc.biker = load(sc.dir + "/biker.compressed.ply", 1.0f);
   sc.biker_dev = catgs::cuda::DeviceScene::upload(*sc.biker);
@@ -841,6 +873,7 @@ int run(int argc, char** argv) {
   std::printf("GPU: %s\n", gpu.c_str());
   std::printf("%-10s %-16s %-7s %-8s %8s %10s %4s %12s %12s  %s\n", "test", "scene", "view", "pipeline", "PSNR dB",
               "max|err|", "8bit", "list (ref)", "list (gpu)", "result");
+  packing_checks();
   equality_checks(sc);
   if (!sc.quick) grow_checks(sc);
   catgs_checks(sc);
