@@ -63,6 +63,7 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   depth.ensure(n * sizeof(float), "depths", allocs);
   rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs);
   tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs);
+  tile_mask.ensure(n * sizeof(uint32_t), "tile masks", allocs);
   ends.ensure((n + 1) * sizeof(uint64_t), "emission offsets", allocs);  // + depth_order's spare
   big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
   scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);

@@ -45,8 +45,9 @@ __global__ void gather_counts_kernel(const uint64_t* ends,  // [n]
   counts[1] = *visible;
 }
 
-// One thread per Gaussian writes its run of keys, testing each tile of its rectangle (exact and
-// vanilla lists; catgs trails with tile masks go to emit_mask_keys_kernel). Writes are bounded by
+// One thread per Gaussian writes its run of keys, testing each tile of its rectangle (vanilla
+// lists, and any list counted without masks; exact lists and catgs trails with tile masks go to
+// emit_mask_keys_kernel). Writes are bounded by
 // its own slot [begin, end): a disagreement between counting and emitting could never spill into
 // a neighbour. Thread j takes Gaussian order[j] when an order is given, else Gaussian j.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
@@ -98,8 +99,9 @@ __device__ __forceinline__ int nth_set_bit(uint32_t mask, uint32_t r) {
   return pos;
 }
 
-// Small catgs trails (tests.trails.tile_mask: the trail test's answers, kept when the tiles were
-// counted), a warp per 32 consecutive Gaussians of the walk. Their runs are adjacent in the list
+// Small catgs trails and exact ellipses (tests.trails.tile_mask, Projected::tile_mask: the tile
+// test's answers, kept when the tiles were counted), a warp per 32 consecutive Gaussians of the
+// walk. Their runs are adjacent in the list
 // (ends is the running sum in walk order), so the warp writes its whole span with its lanes on
 // consecutive slots: each store is one coalesced line. A thread per Gaussian writing its own run
 // made every store touch 32 scattered sectors (ncu: RESULTS.md, "Where the tuned defaults come
@@ -245,10 +247,13 @@ void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const Camer
   const KeyOut keys{wide_keys, tile_keys, packing};
   const uint64_t walk = order ? order_count : n;
   const uint64_t blocks = (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
-  if (walk > 0 && tests.kind == TileTestKind::trail && tests.trails.tile_mask) {
+  // The small Gaussians' tile answers, where the counting kept them (trails; exact ellipses).
+  const uint32_t* mask = tests.kind == TileTestKind::trail     ? tests.trails.tile_mask
+                         : tests.kind == TileTestKind::ellipse ? p.tile_mask
+                                                               : nullptr;
+  if (walk > 0 && mask) {
     emit_mask_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-        order, tests.trails.tile_mask, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y, keys,
-        values);
+        order, mask, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y, keys, values);
     CATGS_CUDA_LAUNCHED("emit_mask_keys_kernel");
   } else if (walk > 0) {
     emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(

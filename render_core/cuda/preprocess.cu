@@ -12,14 +12,15 @@ namespace catgs::cuda::stages {
 
 namespace {
 
-// Tiles of `rect` the opacity-aware ellipse reaches (exact pipeline); as count_exact_tiles on CPU.
-__device__ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max, int width,
-                                      int height) {
-  uint32_t n = 0;
+// Tiles of `rect` (at most 32) the opacity-aware ellipse reaches (exact pipeline), bit b for the
+// rectangle's b-th tile in row-major order; their number is count_exact_tiles's on the CPU.
+__device__ uint32_t exact_tile_mask(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max, int width,
+                                    int height) {
+  uint32_t mask = 0, bit = 1;
   for (int ty = rect.y0; ty < rect.y1; ++ty)
-    for (int tx = rect.x0; tx < rect.x1; ++tx)
-      n += fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) ? 1u : 0u;
-  return n;
+    for (int tx = rect.x0; tx < rect.x1; ++tx, bit <<= 1)
+      mask |= fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) ? bit : 0u;
+  return mask;
 }
 
 // The block's listed Gaussians' depth range into depth_range[0] (complemented float bits of the
@@ -82,7 +83,10 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
         rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height);
         const int area = fm::tile_count(rect);
         is_big = area > tune::kBigRectTiles;  // counted by count_big_kernel, a warp each
-        touched = area == 0 || is_big ? 0u : count_exact_tiles(rect, mean2d, conic, q_max, cam.width, cam.height);
+        const uint32_t mask =
+            area == 0 || is_big ? 0u : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height);
+        touched = static_cast<uint32_t>(__popc(mask));
+        if (touched > 0) out.tile_mask[i] = mask;
       } else {
         const float radius = fm::three_sigma_radius(cov2);
         rect = fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y);

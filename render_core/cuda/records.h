@@ -58,6 +58,10 @@ struct Projected {
   float* depth;             // [N] camera-space z
   ushort4* rect;            // [N] tile rectangle [x0, x1) x [y0, y1)
   uint32_t* tiles_touched;  // [N] render-list entries this Gaussian emits
+  // [N] exact pre-processing, Gaussians whose rectangle holds at most tune::kBigRectTiles tiles:
+  // bit b set when the ellipse reaches the rectangle's b-th tile in row-major order, as counted,
+  // so key emission reads the answers instead of testing every tile again (as Trails::tile_mask).
+  uint32_t* tile_mask;
 };
 
 // How a 64-bit render-list key holds its depth: [tile | depth bits - base], the depth part `bits`

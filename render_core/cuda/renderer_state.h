@@ -111,7 +111,7 @@ struct CudaRenderer::State {
   int width = 0, height = 0;
 
   // Per Gaussian.
-  GrowBuffer splat, color, depth, rect, tiles_touched, ends, scan_temp, big;
+  GrowBuffer splat, color, depth, rect, tiles_touched, tile_mask, ends, scan_temp, big;
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // The depth-first sort (depth_order.cu): visible Gaussians and their depth keys (two halves
@@ -162,8 +162,8 @@ struct CudaRenderer::State {
 
   // Views of the buffers as the stages take them.
   stages::Projected projected() const {
-    return {splat.as<stages::Splat>(), color.as<float4>(), depth.as<float>(), rect.as<ushort4>(),
-            tiles_touched.as<uint32_t>()};
+    return {splat.as<stages::Splat>(), color.as<float4>(),           depth.as<float>(),
+            rect.as<ushort4>(),        tiles_touched.as<uint32_t>(), tile_mask.as<uint32_t>()};
   }
   stages::BigList big_list() const {
     return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount)};
@@ -189,6 +189,7 @@ struct CudaRenderer::State {
                                 &depth,
                                 &rect,
                                 &tiles_touched,
+                                &tile_mask,
                                 &ends,
                                 &scan_temp,
                                 &big,
