@@ -43,7 +43,7 @@ namespace catgs::cuda::stages {
 
 namespace {
 
-__global__ void __launch_bounds__(tune::kRasterThreads, tune::kSliceRasterMinBlocks)
+__global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
     rasterize_kernel(const uint2* __restrict__ ranges,         // [tiles] [start, end) into the sorted list
                      const uint32_t* __restrict__ tile_order,  // [tiles]
                      const uint32_t* __restrict__ values,      // [L] sorted Gaussian indices

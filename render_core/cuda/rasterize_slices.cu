@@ -79,7 +79,7 @@ struct SaturatedSkip {
 // sub-frames: 54% achieved occupancy, 36% of cycles with no eligible warp, against exact's 32
 // registers and 91%).
 template <bool kTileCull>
-__global__ void __launch_bounds__(tune::kRasterThreads, tune::kSliceRasterMinBlocks)
+__global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
     rasterize_slices_kernel(SlicePlan plan,
                             const uint32_t* order,   // [blocks] or null
                             const uint32_t* values,  // [L] sorted Gaussian indices

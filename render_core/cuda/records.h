@@ -69,7 +69,7 @@ struct Projected {
 // increase with the value; when they all lie in [base, base + 2^bits), the packed key orders as
 // [tile | 32 depth bits] does (the same list, the same ties), and the radix sort visits
 // tile_bits + bits key bits instead of tile_bits + 32: at 1080p, 5 passes of 8 bits instead of 6
-// wherever the depths span under 2^27 patterns (a factor of about 2^4 in depth). bits = 32 and
+// wherever the depths span under 2^27 patterns (16 binades: a factor of 2^16 in depth). bits = 32 and
 // base = 0 is the plain key. Built from the frame's depth range (depth_key_packing).
 struct DepthKeyPacking {
   uint32_t base = 0;

@@ -45,11 +45,12 @@ inline constexpr int kBigRectTiles = 32;
 inline constexpr int kBigBlocks = 1024;
 inline constexpr int kBigThreads = 256;
 
-// Blocks per SM the slice rasterizer (rasterize_slices.cu) is built for: 8 x 256 threads fill an
-// SM at 32 registers. The tile-culled kernel wants more and spills at 32, which cost less than
-// the occupancy gained (RESULTS.md, "The round before: ... the slice rasterizer at 8 blocks per
-// SM").
-inline constexpr int kSliceRasterMinBlocks = 8;
+// Blocks per SM the rasterizers (rasterize.cu, rasterize_slices.cu) are built for: 8 x 256
+// threads fill an SM at 32 registers. The tile-culled slice kernel wants more and spills at 32,
+// which cost less than the occupancy gained (RESULTS.md, "The round before: ... the slice
+// rasterizer at 8 blocks per SM"); the sub-tile walk (blend.cuh) made every rasterizer want a few
+// more (RESULTS.md, "Issue 19").
+inline constexpr int kRasterMinBlocks = 8;
 // Blocks per SM of the kernels that loop over a speculation path per Gaussian (the speculative
 // pre-processing) and of the sub-frame features kernel: 4 x 256 threads, so at most 64 registers.
 // Both are compute- or DRAM-bound with long per-thread state; at 72 registers (3 blocks) each was
@@ -80,7 +81,7 @@ static_assert(static_cast<uint64_t>(kMaxTilesPerSide) * kMaxTilesPerSide < (1ull
 static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0 && kBigThreads % 32 == 0, "blocks are whole warps");
 static_assert(kBigRectTiles >= 1, "big Gaussians have more tiles than one thread handles well");
 static_assert(kBigRectTiles <= 32, "a small Gaussian's trail tiles fit one 32-bit mask (Trails::tile_mask)");
-static_assert(kSliceRasterMinBlocks * kRasterThreads <= 2048, "an SM holds at most 2048 threads");
+static_assert(kRasterMinBlocks * kRasterThreads <= 2048, "an SM holds at most 2048 threads");
 static_assert(kPathKernelMinBlocks * kGaussianThreads * 64 <= 65536, "64 registers a thread fit the SM's file");
 static_assert(kSliceLengthBits < 32 && kSliceIndexMax + 1u < (1u << (32 - kSliceLengthBits)),
               "the slice index and length share one 32-bit key; all ones marks an unused slot");
