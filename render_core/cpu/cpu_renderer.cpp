@@ -32,6 +32,7 @@ void parallel_for(std::size_t n, std::size_t grain, const std::function<void(std
 CpuRenderer::CpuRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options)
     : model_(std::move(model)) {
   if (!model_) throw std::invalid_argument("CpuRenderer: null model");
+  chunks_ = fm::chunk_bounds(*model_);
   set_options(options);
 }
 
@@ -49,7 +50,7 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   };
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
   const auto t0 = clock::now();
-  preprocess(*model_, camera, options_.pipeline, projected_);
+  preprocess(*model_, chunks_, camera, options_.pipeline, projected_);
   const auto t1 = clock::now();
   emit_keys(projected_, grid, options_.pipeline, list_);
   const auto t2 = clock::now();

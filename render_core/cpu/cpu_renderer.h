@@ -11,6 +11,7 @@
 
 #include <glm/glm.hpp>
 
+#include "forward_model/chunk_bounds.h"
 #include "forward_model/forward_model.h"
 #include "speculation/speculation_planner.h"
 #include "renderer/renderer.h"
@@ -60,7 +61,10 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // Stage 1 (cpu/preprocess.cpp): frustum culling (z < near), 3D -> 2D covariance (EWA), conic,
 // SH colour, tile bounds and the number of tiles each Gaussian reaches: vanilla counts every tile of
 // its 3-sigma square; exact counts the tiles passing fm::ellipse_touches_tile (opacity-aware).
-void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline, ProjectedGaussians& out);
+// exact first skips whole chunks that cannot reach the image (`chunks`: fm::chunk_bounds(model),
+// forward_model/chunk_bounds.h); the result is the same with or without that step.
+void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
+                Pipeline pipeline, ProjectedGaussians& out);
 
 // catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
@@ -82,14 +86,16 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
 // else the exact fm::listed_tiles_cover). Returns false when one does not: the frame must be
 // rendered as a key frame.
 // Also false when unlisted_reach_image().
-bool update_subframe_features(const GaussianModel& model, const Camera& camera, const std::vector<uint32_t>& cached,
-                              ProjectedGaussians& projected);
+bool update_subframe_features(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
+                              const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& projected);
 
 // catgs sub-frame (cpu/subframe_features.cpp): does a Gaussian the key frame did not list
 // (tiles_touched == 0) reach a pixel at `camera` (fm::unlisted_reaches_image)? Such a Gaussian is
 // outside the frustum cache, so the sub-frame would miss it: the frame must be a key frame
-// (DESIGN.md 1: prediction error must never show as holes).
-bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, const ProjectedGaussians& projected);
+// (DESIGN.md 1: prediction error must never show as holes). Chunks outside the view
+// (fm::chunk_outside_view over `chunks`, fm::chunk_bounds(model)) hold none and are skipped.
+bool unlisted_reach_image(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
+                          const ProjectedGaussians& projected);
 
 // Task splitting (cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
 // order, a tile's slices consecutive and in list order. split = false: one slice per tile.
@@ -151,6 +157,7 @@ class CpuRenderer final : public Renderer {
 
  private:
   std::shared_ptr<const GaussianModel> model_;
+  std::vector<fm::ChunkBounds> chunks_;  // of model_, for chunk culling
   RenderOptions options_;
   ProjectedGaussians projected_;
   RenderList list_;
@@ -175,6 +182,7 @@ class SpeculativeRenderer final : public Renderer {
   void key_frame(const Camera& camera);
 
   std::shared_ptr<const GaussianModel> model_;
+  std::vector<fm::ChunkBounds> chunks_;  // of model_, for chunk culling
   RenderOptions options_;
   SpeculationPlanner planner_;
   ProjectedGaussians projected_;

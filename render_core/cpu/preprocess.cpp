@@ -1,5 +1,7 @@
 // Stage 1: per-Gaussian pre-processing (mirrors the CUDA preprocess kernel).
+#include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "cpu/cpu_renderer.h"
 
@@ -35,7 +37,8 @@ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 c
 
 }  // namespace
 
-void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipeline, ProjectedGaussians& out) {
+void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
+                Pipeline pipeline, ProjectedGaussians& out) {
   const std::size_t n = model.size();
   out.resize(n);
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
@@ -45,7 +48,10 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
   const int K = model.sh_coeffs();
   const bool exact = pipeline != Pipeline::vanilla;
 
-  parallel_for(n, 4096, [&](std::size_t i) {
+  if (chunks.size() != fm::chunk_count(n)) throw std::invalid_argument("preprocess: chunk bounds of another scene");
+  const fm::View view = fm::view_of(camera);
+
+  auto gaussian = [&](std::size_t i) {
     out.tiles_touched[i] = 0;
     const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
     const glm::vec3 p_cam = camera.R * mean + camera.t;
@@ -88,6 +94,18 @@ void preprocess(const GaussianModel& model, const Camera& camera, Pipeline pipel
     out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i], dir);
     out.tile_rect[i] = rect;
     out.tiles_touched[i] = touched;
+  };
+  // A chunk at a time, as the CUDA kernel takes a chunk per block; exact skips the chunks that
+  // cannot reach the image (their Gaussians keep tiles_touched = 0).
+  parallel_for(chunks.size(), 16, [&](std::size_t c) {
+    const std::size_t begin = c * fm::kChunkSize, end = std::min(n, begin + fm::kChunkSize);
+    const bool outside = exact && fm::chunk_outside_view(chunks[c], view);
+    for (std::size_t i = begin; i < end; ++i) {
+      if (outside)
+        out.tiles_touched[i] = 0;
+      else
+        gaussian(i);
+    }
   });
 }
 

@@ -20,6 +20,7 @@ double ms_between(clock::time_point a, clock::time_point b) {
 SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options)
     : model_(std::move(model)) {
   if (!model_) throw std::invalid_argument("SpeculativeRenderer: null model");
+  chunks_ = fm::chunk_bounds(*model_);
   set_options(options);
 }
 
@@ -46,7 +47,7 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   if (window > 0)
     speculative_preprocess(*model_, planner_.path(camera, window), trail_widening(sp, window), projected_);
   else
-    preprocess(*model_, camera, Pipeline::exact, projected_);
+    preprocess(*model_, chunks_, camera, Pipeline::exact, projected_);
   const auto t1 = clock::now();
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
   emit_keys(projected_, grid, stages, list_);
@@ -75,7 +76,7 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
   bool sub = candidate;
   if (candidate) {
     const auto t0 = clock::now();
-    sub = update_subframe_features(*model_, camera, cached_, projected_);
+    sub = update_subframe_features(*model_, chunks_, camera, cached_, projected_);
     stats_.preprocess_ms = ms_between(t0, clock::now());
   }
   if (sub) {

@@ -3,14 +3,15 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <stdexcept>
 
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 
 namespace catgs::cpu {
 
-bool update_subframe_features(const GaussianModel& model, const Camera& camera, const std::vector<uint32_t>& cached,
-                              ProjectedGaussians& out) {
+bool update_subframe_features(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
+                              const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& out) {
   const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
                                static_cast<float>(camera.height) / (2.0f * camera.fy));
   const glm::vec3 cam_pos = camera.position();
@@ -50,15 +51,19 @@ bool update_subframe_features(const GaussianModel& model, const Camera& camera, 
                                    glm::normalize(mean - cam_pos));
   });
   if (!inside.load()) return false;
-  return !unlisted_reach_image(model, camera, out);
+  return !unlisted_reach_image(model, chunks, camera, out);
 }
 
-bool unlisted_reach_image(const GaussianModel& model, const Camera& camera, const ProjectedGaussians& projected) {
+bool unlisted_reach_image(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
+                          const ProjectedGaussians& projected) {
   const fm::View view = fm::view_of(camera);
   const std::size_t n = model.size();
+  if (chunks.size() != fm::chunk_count(n))
+    throw std::invalid_argument("unlisted_reach_image: chunk bounds of another scene");
   std::atomic<bool> reached{false};
-  parallel_for((n + 4095) / 4096, 1, [&](std::size_t chunk) {
-    for (std::size_t i = chunk * 4096; i < std::min(n, (chunk + 1) * 4096); ++i)
+  parallel_for(chunks.size(), 16, [&](std::size_t c) {
+    if (reached.load(std::memory_order_relaxed) || fm::chunk_outside_view(chunks[c], view)) return;
+    for (std::size_t i = c * fm::kChunkSize; i < std::min(n, (c + 1) * fm::kChunkSize); ++i)
       if (projected.tiles_touched[i] == 0 &&
           fm::unlisted_reaches_image(&model.means[3 * i], &model.log_scales[3 * i], &model.rotations[4 * i],
                                      model.opacity_logits[i], view)) {

@@ -66,11 +66,13 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   tile_mask.ensure(n * sizeof(uint32_t), "tile masks", allocs);
   ends.ensure((n + 1) * sizeof(uint64_t), "emission offsets", allocs);  // + depth_order's spare
   big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
-  scan_temp.ensure(stages::scan_temp_bytes(n), "scan scratch", allocs);
+  const std::size_t chunks = fm::chunk_count(n);
+  chunk_total.ensure(chunks * sizeof(uint32_t), "chunk entry counts", allocs);
+  chunk_start.ensure(chunks * sizeof(uint64_t), "chunk starts", allocs);
+  scan_temp.ensure(stages::scan_temp_bytes(chunks), "scan scratch", allocs);
   ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
-  tile_scratch.ensure(3 * static_cast<std::size_t>(tiles) * sizeof(uint32_t), "tile loads", allocs);
+  heaviest_tile.ensure(sizeof(uint32_t), "heaviest tile", allocs);
   tile_order.ensure(tiles * sizeof(uint32_t), "tile order", allocs);
-  order_temp.ensure(stages::tile_order_temp_bytes(tiles), "tile order scratch", allocs);
   rgb.ensure(pixels * 3 * sizeof(float), "RGB image", allocs);
   rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
 }
@@ -80,8 +82,8 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   const stages::Projected proj = projected();
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
-  stages::scan_tiles_touched(proj.tiles_touched, ends.as<uint64_t>(), n, scan_temp.as<void>(), scan_temp.bytes(),
-                             count + kVisibleCount, count + kReadListLength, stream);
+  stages::scan_chunks(proj, n, chunk_start.as<uint64_t>(), scan_temp.as<void>(), scan_temp.bytes(),
+                      count + kVisibleCount, count + kReadListLength, stream);
   // The host-device sync of a frame: CUB's radix sort takes the list length from the host, and
   // the list buffers may need to grow before emission writes into them.
   CATGS_CUDA(cudaMemcpyAsync(host_counts, count + kReadListLength, kReadSlots * sizeof(unsigned long long),
@@ -89,6 +91,9 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   CATGS_CUDA(cudaEventRecord(counts_ready, stream));
   CATGS_CUDA(cudaEventSynchronize(counts_ready));
   ++syncs;
+  // While the host reads the counts: each listed Gaussian's end in the list, where emission in
+  // index order needs it (the depth-first order works its own out).
+  if (!depth_first) stages::gaussian_ends(proj, n, chunk_start.as<uint64_t>(), ends.as<uint64_t>(), stream);
   const uint64_t entries = host_counts[0];
   *visible = host_counts[1];
   // The listed depths' range, where pre-processing recorded one (preprocess; the speculative
@@ -188,9 +193,9 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
   // The heaviest tiles first (longest-processing-time-first scheduling of the raster blocks).
-  stages::order_tiles(s.ranges.as<uint2>(), tiles, entries, s.tile_scratch.as<uint32_t>(), s.tile_order.as<uint32_t>(),
-                      s.order_temp.as<void>(), s.order_temp.bytes(), s.stream);
-  s.heaviest = s.tile_scratch.as<uint32_t>() + tiles;  // order_tiles sorts the loads there
+  stages::order_tiles(s.ranges.as<uint2>(), tiles, s.tile_order.as<uint32_t>(), s.heaviest_tile.as<uint32_t>(),
+                      s.stream);
+  s.heaviest = s.heaviest_tile.as<uint32_t>();
   s.heaviest_is_slice_key = false;
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 

@@ -34,6 +34,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "forward_model/chunk_bounds.h"
 #include "renderer/renderer.h"
 
 struct CUstream_st;  // cudaStream_t without the CUDA headers
@@ -82,6 +83,8 @@ class DeviceScene {
   const float* rotations() const { return rotations_; }
   const float* opacity_logits() const { return opacity_logits_; }
   const float* sh() const { return sh_; }
+  // [fm::chunk_count(N)] the bound of each run of fm::kChunkSize Gaussians (chunk culling).
+  const fm::ChunkBounds* chunks() const { return chunks_; }
 
  private:
   DeviceScene() = default;
@@ -93,6 +96,7 @@ class DeviceScene {
   float* rotations_ = nullptr;
   float* opacity_logits_ = nullptr;
   float* sh_ = nullptr;
+  fm::ChunkBounds* chunks_ = nullptr;
 };
 
 // A rendered frame in device memory, valid until the renderer's next frame; ready once `stream`

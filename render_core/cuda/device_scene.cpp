@@ -8,10 +8,11 @@ namespace catgs::cuda {
 
 namespace {
 
-float* upload_array(const std::vector<float>& host, std::size_t* bytes_total, const char* what) {
+template <typename T>
+T* upload_array(const std::vector<T>& host, std::size_t* bytes_total, const char* what) {
   if (host.empty()) return nullptr;
-  const std::size_t bytes = host.size() * sizeof(float);
-  float* d = nullptr;
+  const std::size_t bytes = host.size() * sizeof(T);
+  T* d = nullptr;
   try {
     CATGS_CUDA(cudaMalloc(&d, bytes));
   } catch (const CudaError& e) {
@@ -50,6 +51,7 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
   s->rotations_ = upload_array(model.rotations, &s->bytes_, "rotations");
   s->opacity_logits_ = upload_array(model.opacity_logits, &s->bytes_, "opacities");
   s->sh_ = upload_array(model.sh, &s->bytes_, "SH coefficients");
+  s->chunks_ = upload_array(fm::chunk_bounds(model), &s->bytes_, "chunk bounds");
   return s;
 }
 
@@ -57,6 +59,7 @@ DeviceScene::~DeviceScene() {
   // Destructors must not throw: errors here (a dead context at exit) are ignored.
   for (float* p : {means_, log_scales_, rotations_, opacity_logits_, sh_})
     if (p) cudaFree(p);
+  if (chunks_) cudaFree(chunks_);
 }
 
 }  // namespace catgs::cuda

@@ -1,8 +1,10 @@
 // Stage 2: render-list key emission (mirrors cpu/key_emission.cpp). Offsets come from a device
-// scan of the per-Gaussian tile counts, so no Gaussian ever touches a shared counter (DESIGN.md:
+// scan of the chunks' entry counts and a block scan within each chunk, so no Gaussian ever
+// touches a shared counter (DESIGN.md:
 // FlashGS's contended global atomicAdd per Gaussian is what slows it on the city). Built with
 // -fmad=false, like pre-processing, so the exact tile test here answers exactly as it did when
 // the tiles were counted.
+#include <cub/block/block_scan.cuh>
 #include <cub/device/device_scan.cuh>
 #include <thrust/iterator/transform_iterator.h>
 
@@ -21,6 +23,8 @@ struct WidenToU64 {
 
 using WideCounts = thrust::transform_iterator<WidenToU64, const uint32_t*, uint64_t>;
 
+static_assert(tune::kGaussianThreads == fm::kChunkSize, "a block of the per-Gaussian kernels is a chunk");
+
 // Where a key goes: [tile | depth bits], packed (DepthKeyPacking), into `wide`, or (depth-first
 // sort, depth_order.cu) the tile id alone into `tile_only` when that is not null. The choice is
 // uniform over a launch.
@@ -36,13 +40,34 @@ struct KeyOut {
   }
 };
 
-// counts[0] = render list length (ends[n-1]), counts[1] = visible Gaussians: one 16-byte readback.
-__global__ void gather_counts_kernel(const uint64_t* ends,  // [n]
-                                     uint64_t n,
+// counts[0] = render list length (the last chunk's start + its entries), counts[1] = visible
+// Gaussians: one 16-byte readback.
+__global__ void gather_counts_kernel(const uint64_t* chunk_start,  // [chunks]
+                                     const uint32_t* chunk_total,  // [chunks]
+                                     uint64_t chunks,
                                      const unsigned long long* visible,  // [1]
                                      unsigned long long* counts) {       // [2]
-  counts[0] = n > 0 ? ends[n - 1] : 0ull;
+  counts[0] = chunks > 0 ? chunk_start[chunks - 1] + chunk_total[chunks - 1] : 0ull;
   counts[1] = *visible;
+}
+
+// A block per chunk: each Gaussian's end in the list, its chunk's start + the inclusive sum of
+// tiles_touched over the chunk up to it. A chunk without entries (culled, or nothing listed)
+// is left alone: emission skips it too.
+__global__ void __launch_bounds__(fm::kChunkSize)
+    gaussian_ends_kernel(const uint32_t* __restrict__ tiles_touched,  // [N]
+                         const uint32_t* __restrict__ chunk_total,    // [chunks]
+                         const uint64_t* __restrict__ chunk_start,    // [chunks]
+                         uint64_t n,
+                         uint64_t* __restrict__ ends) {  // [N]
+  using Scan = cub::BlockScan<uint32_t, fm::kChunkSize>;
+  __shared__ typename Scan::TempStorage scratch;
+  if (chunk_total[blockIdx.x] == 0u) return;  // block-uniform
+  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * fm::kChunkSize + threadIdx.x;
+  const uint32_t touched = i < n ? tiles_touched[i] : 0u;
+  uint32_t upto = 0;
+  Scan(scratch).InclusiveSum(touched, upto);
+  if (i < n) ends[i] = chunk_start[blockIdx.x] + upto;
 }
 
 // One thread per Gaussian writes its run of keys, testing each tile of its rectangle (vanilla
@@ -57,8 +82,10 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
                      const ushort4* __restrict__ rect,            // [N]
                      const uint32_t* __restrict__ tiles_touched,  // [N]
                      const uint64_t* __restrict__ ends,           // [N] end of each Gaussian's run
+                     const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
                      uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
-                     uint32_t* __restrict__ values) {  // [L]
+                     uint32_t* __restrict__ values) {   // [L]
+  if (!order && chunk_total[blockIdx.x] == 0u) return;  // a chunk without entries (block-uniform)
   const uint64_t j = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (j >= n) return;
   const uint64_t i = order ? order[j] : j;
@@ -117,9 +144,11 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
                           const ushort4* __restrict__ rect,            // [N]
                           const uint32_t* __restrict__ tiles_touched,  // [N]
                           const uint64_t* __restrict__ ends,           // [N]
+                          const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
                           uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
                           uint32_t* __restrict__ values) {  // [L]
   constexpr unsigned kAll = 0xffffffffu;
+  if (!order && chunk_total[blockIdx.x] == 0u) return;  // a chunk without entries (block-uniform)
   const uint64_t j = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   const auto lane = static_cast<int>(threadIdx.x & 31u);
   // This lane's run [start, end). Lanes past the walk (or the depth order's padding) get a run
@@ -223,21 +252,31 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
 
 }  // namespace
 
-std::size_t scan_temp_bytes(uint64_t n) {
+std::size_t scan_temp_bytes(uint64_t chunks) {
   std::size_t bytes = 0;
   WideCounts in(nullptr, WidenToU64{});
-  CATGS_CUDA(cub::DeviceScan::InclusiveSum(nullptr, bytes, in, static_cast<uint64_t*>(nullptr), n));
+  CATGS_CUDA(cub::DeviceScan::ExclusiveSum(nullptr, bytes, in, static_cast<uint64_t*>(nullptr), chunks));
   return bytes;
 }
 
-void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp, std::size_t temp_bytes,
-                        const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream) {
-  if (n > 0) {
-    WideCounts in(tiles_touched, WidenToU64{});
-    CATGS_CUDA(cub::DeviceScan::InclusiveSum(temp, temp_bytes, in, ends, n, stream));
+void scan_chunks(const Projected& p, uint64_t n, uint64_t* chunk_start, void* temp, std::size_t temp_bytes,
+                 const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream) {
+  const uint64_t chunks = fm::chunk_count(n);
+  if (chunks > 0) {
+    WideCounts in(p.chunk_total, WidenToU64{});
+    CATGS_CUDA(cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, chunk_start, chunks, stream));
   }
-  gather_counts_kernel<<<1, 1, 0, stream>>>(ends, n, visible, counts);
+  gather_counts_kernel<<<1, 1, 0, stream>>>(chunk_start, p.chunk_total, chunks, visible, counts);
   CATGS_CUDA_LAUNCHED("gather_counts_kernel");
+}
+
+void gaussian_ends(const Projected& p, uint64_t n, const uint64_t* chunk_start, uint64_t* ends, cudaStream_t stream) {
+  const uint64_t chunks = fm::chunk_count(n);
+  if (chunks == 0) return;
+  if (chunks > 0x7fffffffull) throw std::length_error("gaussian_ends: too many chunks for one grid");
+  gaussian_ends_kernel<<<static_cast<unsigned>(chunks), fm::kChunkSize, 0, stream>>>(p.tiles_touched, p.chunk_total,
+                                                                                     chunk_start, n, ends);
+  CATGS_CUDA_LAUNCHED("gaussian_ends_kernel");
 }
 
 void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam, const TileTests& tests,
@@ -253,11 +292,13 @@ void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const Camer
                                                                : nullptr;
   if (walk > 0 && mask) {
     emit_mask_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-        order, mask, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y, keys, values);
+        order, mask, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, walk, n, cam.tiles_x, cam.tiles_y, keys,
+        values);
     CATGS_CUDA_LAUNCHED("emit_mask_keys_kernel");
   } else if (walk > 0) {
     emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-        order, tests, p.depth, p.rect, p.tiles_touched, ends, walk, n, cam.tiles_x, cam.tiles_y, keys, values);
+        order, tests, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, walk, n, cam.tiles_x, cam.tiles_y, keys,
+        values);
     CATGS_CUDA_LAUNCHED("emit_keys_kernel");
   }
   emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, p.depth, p.rect, p.tiles_touched,

@@ -9,11 +9,17 @@
 
 namespace catgs::cuda::stages {
 
-// Stage 2a (key_emission.cu): inclusive scan of tiles_touched into 64-bit ends[N] (CUB), then a
-// one-thread kernel copies ends[N-1] and *visible into counts[0..1] for one 16-byte readback.
-std::size_t scan_temp_bytes(uint64_t n);
-void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t n, void* temp, std::size_t temp_bytes,
-                        const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream);
+// Stage 2a (key_emission.cu): exclusive scan of the chunks' entry counts (Projected::chunk_total)
+// into 64-bit chunk_start[chunk_count(n)] (CUB), then a one-thread kernel copies the list length
+// and *visible into counts[0..1] for one 16-byte readback.
+std::size_t scan_temp_bytes(uint64_t chunks);
+void scan_chunks(const Projected& projected, uint64_t n, uint64_t* chunk_start, void* temp, std::size_t temp_bytes,
+                 const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream);
+// Stage 2a' (key_emission.cu): ends[i], the end of Gaussian i's run in the list in index order
+// (its chunk's start + the inclusive sum of tiles_touched within the chunk), a block per chunk;
+// left unwritten in chunks without entries, which emission in index order skips.
+void gaussian_ends(const Projected& projected, uint64_t n, const uint64_t* chunk_start, uint64_t* ends,
+                   cudaStream_t stream);
 
 // Stage 2b (key_emission.cu): each Gaussian writes its keys and values (its index) at
 // [ends[i] - tiles_touched[i], ends[i]), in row-major tile order; never more than
@@ -23,7 +29,8 @@ void scan_tiles_touched(const uint32_t* tiles_touched, uint64_t* ends, uint64_t 
 // the warp writes on consecutive slots (coalesced). Keys go to `keys` as [tile | depth bits]
 // (64-bit, packed as `packing` says), or, when `tile_keys` is not null (the depth-first sort), to `tile_keys` as the tile
 // id alone (32-bit). `order` (or null: all N
-// in index order): the `order_count` Gaussians to walk, in that order (depth_order_ends's).
+// in index order, skipping chunks without entries): the `order_count` Gaussians to walk, in that
+// order (depth_order_ends's).
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
                const TileTests& tests, const BigList& big, uint64_t* keys, DepthKeyPacking packing, uint32_t* tile_keys,
                uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream);

@@ -50,14 +50,25 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
   if (block_high > seen[1]) atomicMax(depth_range + 1, static_cast<unsigned long long>(block_high));
 }
 
-// One thread per Gaussian. Reads the scene once (SH only for visible Gaussians), writes the
-// projected features of visible ones and tiles_touched of all.
+// One thread per Gaussian, a block per chunk. exact first tests the block's chunk against the
+// view (fm::chunk_outside_view): a chunk that cannot reach the image writes tiles_touched = 0
+// and a chunk total of 0 and reads nothing else. Otherwise each thread reads its Gaussian once
+// (SH only for visible Gaussians) and writes the projected features of visible ones and
+// tiles_touched of all.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
                       unsigned long long* visible,      // [1] running count of visible Gaussians
                       unsigned long long* depth_range,  // [2] listed depths (record_depth_range)
                       BigList big) {
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  __shared__ bool outside;
+  if (threadIdx.x == 0) outside = exact && fm::chunk_outside_view(scene.chunks[blockIdx.x], cam);
+  __syncthreads();
+  if (outside) {  // block-uniform
+    if (i < scene.n) out.tiles_touched[i] = 0;
+    if (threadIdx.x == 0) out.chunk_total[blockIdx.x] = 0;
+    return;
+  }
   uint32_t touched = 0;
   bool is_big = false;
   float depth = 0.0f;
@@ -107,7 +118,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, touched, i, big, visible);
+  list_big_and_count_visible(is_big, touched, i, big, visible, out.chunk_total);
   record_depth_range(touched > 0 || is_big, depth, depth_range);
 }
 
@@ -116,6 +127,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList big, TileTests tests,
                                                                       const ushort4* rect,            // [N]
                                                                       uint32_t* tiles_touched,        // [N]
+                                                                      uint32_t* chunk_total,          // [chunks]
                                                                       unsigned long long* visible) {  // [1]
   const int lane = static_cast<int>(threadIdx.x & 31u);
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
@@ -130,6 +142,7 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
     for (int t = lane; t < area; t += 32) n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
     n = __reduce_add_sync(0xffffffffu, n);
     if (lane == 0) tiles_touched[i] = n;
+    if (lane == 0 && n > 0) atomicAdd(chunk_total + i / fm::kChunkSize, n);
     found += n > 0 ? 1u : 0u;
   }
   if (lane == 0 && found > 0) atomicAdd(visible, found);
@@ -147,12 +160,13 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};
-  count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
+  count_big_tiles(big, tests, out.rect, out.tiles_touched, out.chunk_total, visible, stream);
 }
 
 void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect, uint32_t* tiles_touched,
-                     unsigned long long* visible, cudaStream_t stream) {
-  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, rect, tiles_touched, visible);
+                     uint32_t* chunk_total, unsigned long long* visible, cudaStream_t stream) {
+  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, rect, tiles_touched, chunk_total,
+                                                                       visible);
   CATGS_CUDA_LAUNCHED("count_big_kernel");
 }
 

@@ -9,6 +9,7 @@
 #include <cuda_runtime.h>
 #include <glm/glm.hpp>
 
+#include "forward_model/chunk_bounds.h"
 #include "forward_model/forward_model.h"
 #include "speculation/speculation_params.h"
 #include "tunables.h"
@@ -31,6 +32,7 @@ struct SceneView {
   const float* sh;              // [N, K, 3], K = (sh_degree + 1)^2
   int sh_degree;
   uint64_t n;
+  const fm::ChunkBounds* chunks;  // [chunk_count(N)] (forward_model/chunk_bounds.h)
 };
 
 // One Gaussian's footprint on the image at this frame: everything a rasterizer reads of a
@@ -50,8 +52,8 @@ struct __align__(32) Splat {
   float4 c_opacity_q_cut;  // (C, opacity, q_max, power_cut)
 };
 
-// Stage 1 output, one entry per Gaussian; tiles_touched == 0 marks a culled Gaussian whose other
-// fields are left unwritten.
+// Stage 1 output, one entry per Gaussian (and one per chunk of fm::kChunkSize Gaussians);
+// tiles_touched == 0 marks a culled Gaussian whose other fields are left unwritten.
 struct Projected {
   Splat* splat;             // [N] 2D mean, conic, opacity, q_max, power cut
   float4* color;            // [N] (r, g, b, unused): 16-byte loads in the rasterizer
@@ -62,6 +64,10 @@ struct Projected {
   // bit b set when the ellipse reaches the rectangle's b-th tile in row-major order, as counted,
   // so key emission reads the answers instead of testing every tile again (as Trails::tile_mask).
   uint32_t* tile_mask;
+  // [chunk_count(N)] the sum of tiles_touched over each chunk (its render-list entries): the
+  // list scan runs over chunks, and later stages skip a chunk with none (a culled one) without
+  // reading its Gaussians.
+  uint32_t* chunk_total;
 };
 
 // How a 64-bit render-list key holds its depth: [tile | depth bits - base], the depth part `bits`

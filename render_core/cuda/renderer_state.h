@@ -98,7 +98,7 @@ stages::CameraParams camera_params(const Camera& camera);
 // The scene as the kernels see it.
 inline stages::SceneView scene_view(const DeviceScene& scene) {
   return {scene.means(), scene.log_scales(), scene.rotations(), scene.opacity_logits(),
-          scene.sh(),    scene.sh_degree(),  scene.size()};
+          scene.sh(),    scene.sh_degree(),  scene.size(),      scene.chunks()};
 }
 
 struct CudaRenderer::State {
@@ -112,13 +112,15 @@ struct CudaRenderer::State {
 
   // Per Gaussian.
   GrowBuffer splat, color, depth, rect, tiles_touched, tile_mask, ends, scan_temp, big;
+  // Per chunk of fm::kChunkSize Gaussians: render-list entries, and where the chunk's start.
+  GrowBuffer chunk_total, chunk_start;
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // The depth-first sort (depth_order.cu): visible Gaussians and their depth keys (two halves
   // each), its count and scratch.
   GrowBuffer depth_index[2], depth_keys[2], depth_count, depth_temp;
   // Per tile / pixel, and the small counters.
-  GrowBuffer ranges, tile_scratch, tile_order, order_temp, rgb, rgba8, counters;
+  GrowBuffer ranges, heaviest_tile, tile_order, rgb, rgba8, counters;
   const uint32_t* sorted_values = nullptr;
   const uint32_t* heaviest = nullptr;  // device: entries of the heaviest tile (or slice)
   bool heaviest_is_slice_key = false;  // heaviest points at a slice sort key (order_slices)
@@ -143,7 +145,7 @@ struct CudaRenderer::State {
   // Grows the buffers every frame of `n` Gaussians at this camera's size needs.
   void ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels);
 
-  // Stages 2-4 after pre-processing: scans tiles_touched, reads back the list length and the
+  // Stages 2-4 after pre-processing: scans the chunks' entry counts, reads back the list length and the
   // visible count (the frame's counts sync), grows the list buffers, emits keys with `tests`
   // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
   // ranges. With `depth_first` the list is ordered by the depth-first sort (depth_order.cu; the
@@ -162,8 +164,8 @@ struct CudaRenderer::State {
 
   // Views of the buffers as the stages take them.
   stages::Projected projected() const {
-    return {splat.as<stages::Splat>(), color.as<float4>(),           depth.as<float>(),
-            rect.as<ushort4>(),        tiles_touched.as<uint32_t>(), tile_mask.as<uint32_t>()};
+    return {splat.as<stages::Splat>(),    color.as<float4>(),       depth.as<float>(),         rect.as<ushort4>(),
+            tiles_touched.as<uint32_t>(), tile_mask.as<uint32_t>(), chunk_total.as<uint32_t>()};
   }
   stages::BigList big_list() const {
     return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount)};
@@ -190,6 +192,8 @@ struct CudaRenderer::State {
                                 &rect,
                                 &tiles_touched,
                                 &tile_mask,
+                                &chunk_total,
+                                &chunk_start,
                                 &ends,
                                 &scan_temp,
                                 &big,
@@ -205,9 +209,8 @@ struct CudaRenderer::State {
                                 &depth_count,
                                 &depth_temp,
                                 &ranges,
-                                &tile_scratch,
+                                &heaviest_tile,
                                 &tile_order,
-                                &order_temp,
                                 &rgb,
                                 &rgba8,
                                 &counters,

@@ -125,7 +125,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, touched, i, big, visible);
+  list_big_and_count_visible(is_big, touched, i, big, visible, out.chunk_total);
 }
 
 // M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.
@@ -162,7 +162,7 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
       scene, path, widening, out, trails, visible, big);
   CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");
   const TileTests tests{TileTestKind::trail, nullptr, trails, path.cam[0].width, path.cam[0].height};
-  count_big_tiles(big, tests, out.rect, out.tiles_touched, visible, stream);
+  count_big_tiles(big, tests, out.rect, out.tiles_touched, out.chunk_total, visible, stream);
 }
 
 void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b, float min_depth,

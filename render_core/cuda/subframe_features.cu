@@ -86,21 +86,29 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
   out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
 }
 
-// One thread per Gaussian (grid-stride): a Gaussian the key frame did not list that reaches a
-// pixel at this pose raises the flag (fm::unlisted_reaches_image; most return after reading
-// tiles_touched or after the cheap bound).
+// A warp per chunk (grid-stride over chunks): a Gaussian the key frame did not list that reaches
+// a pixel at this pose raises the flag (fm::unlisted_reaches_image; most return after reading
+// tiles_touched or after the cheap bound). A chunk outside the view at this pose
+// (fm::chunk_outside_view, every lane works it out: no shared memory, no barrier) holds no such
+// Gaussian and is skipped without reading its Gaussians.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     unlisted_kernel(SceneView scene, CameraParams cam,
                     const uint32_t* tiles_touched,  // [N] of the key frame
                     unsigned* outside) {            // [1]
   // Already raised by the features kernel (queued before): the frame re-keys, nothing to add.
   if (*outside) return;
-  const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
-  for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < scene.n; i += stride) {
-    if (tiles_touched[i] > 0) continue;
-    if (fm::unlisted_reaches_image(scene.means + 3 * i, scene.log_scales + 3 * i, scene.rotations + 4 * i,
-                                   scene.opacity_logits[i], cam))
-      *outside = 1u;
+  const uint64_t chunks = fm::chunk_count(scene.n);
+  const uint64_t warps = static_cast<uint64_t>(gridDim.x) * (blockDim.x / 32u);
+  const uint64_t lane = threadIdx.x & 31u;
+  for (uint64_t c = (static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32u; c < chunks; c += warps) {
+    if (fm::chunk_outside_view(scene.chunks[c], cam)) continue;  // warp-uniform
+    const uint64_t end = min(scene.n, (c + 1) * fm::kChunkSize);
+    for (uint64_t i = c * fm::kChunkSize + lane; i < end; i += 32) {
+      if (tiles_touched[i] > 0) continue;
+      if (fm::unlisted_reaches_image(scene.means + 3 * i, scene.log_scales + 3 * i, scene.rotations + 4 * i,
+                                     scene.opacity_logits[i], cam))
+        *outside = 1u;
+    }
   }
 }
 
@@ -109,7 +117,8 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched, unsigned* outside,
                     cudaStream_t stream) {
   if (scene.n == 0) return;
-  const uint64_t want = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  const uint64_t warps_per_block = tune::kGaussianThreads / 32;
+  const uint64_t want = (fm::chunk_count(scene.n) + warps_per_block - 1) / warps_per_block;
   const auto blocks = static_cast<unsigned>(want < 8192 ? want : 8192);
   unlisted_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, tiles_touched, outside);
   CATGS_CUDA_LAUNCHED("unlisted_kernel");

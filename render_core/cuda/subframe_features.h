@@ -24,7 +24,8 @@ void update_subframe_features(const SceneView& scene, const CameraParams& cam, c
 
 // catgs sub-frame (subframe_features.cu; mirrors cpu::unlisted_reach_image): sets *outside = 1
 // when a Gaussian the key frame did not list (tiles_touched == 0) reaches a pixel at `cam`: it is
-// outside the frustum cache, so only a key frame can draw it.
+// outside the frustum cache, so only a key frame can draw it. Chunks outside the view at `cam`
+// (fm::chunk_outside_view) are skipped whole.
 void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched, unsigned* outside,
                     cudaStream_t stream);
 

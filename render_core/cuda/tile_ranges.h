@@ -17,12 +17,11 @@ void tile_ranges(const uint64_t* sorted_keys, DepthKeyPacking packing, uint64_t 
 void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
 
-// Stage 4b (tile_ranges.cu): tile ids by decreasing number of entries (a stable radix sort of
-// 32-bit loads), so the rasterizer's blocks start on the heaviest tiles and the light ones fill
-// in behind them (longest-processing-time-first scheduling) instead of the heavy tiles of the
-// bottom rows starting last. scratch: [3 * tiles].
-std::size_t tile_order_temp_bytes(uint32_t tiles);
-void order_tiles(const uint2* ranges, uint32_t tiles, uint64_t entries, uint32_t* scratch, uint32_t* order, void* temp,
-                 std::size_t temp_bytes, cudaStream_t stream);
+// Stage 4b (tile_ranges.cu): tile ids by decreasing number of entries, to within a quarter of an
+// octave (one block: a histogram of the loads' leading bits, then a scatter), so the
+// rasterizer's blocks start on the heaviest tiles and the light ones fill in behind them
+// (longest-processing-time-first scheduling) instead of the heavy tiles of the bottom rows
+// starting last. Writes the heaviest tile's entries to *heaviest.
+void order_tiles(const uint2* ranges, uint32_t tiles, uint32_t* order, uint32_t* heaviest, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

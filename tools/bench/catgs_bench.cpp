@@ -24,7 +24,9 @@
 //
 // --city builds DESIGN.md's city in memory from S (13 copies on a diamond grid, x10 scale; with
 // --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by --scale (default 1).
-// T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "real:CAMERAS.json" (a
+// T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "centre" (a slow pass
+// over the city's middle copy, 0.4 extents up, pitched down 70 deg: only the centre copies are in
+// view, however many the city has), "real:CAMERAS.json" (a
 // real camera path moved onto the scene, tools/scene_tools/city.h), "cameras:CAMERAS.json" (the scene's own
 // cameras, interpolated as they are), "orbit", or a catgs-trace file. Traces
 // are generated at 120 FPS; the first --warmup frames (default 30) are rendered untimed, then
@@ -67,7 +69,8 @@ using catgs::tools::Args;
 
 const char* kUsage =
     "usage: catgs-bench --scene S [--city [--radius-sq 4] [--spacing 1.2] [--seed N]] [--scale F]\n"
-    "                   --trace flyover|orbit|real:C.json|cameras:C.json|FILE.trace [--width 1920]\n"
+    "                   --trace flyover|centre|orbit|real:C.json|cameras:C.json|FILE.trace\n"
+    "                   [--width 1920]\n"
     "                   [--height 1080] [--pipeline V[,V...]] [--frames 600] [--warmup 30]\n"
     "                   [--quality-every 1] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu] [--help]\n"
@@ -127,6 +130,14 @@ catgs::Trace make_bench_trace(const Args& args, const BenchScene& s, int width, 
   if (spec == "flyover") {
     if (!s.city) throw std::invalid_argument("--trace flyover needs --city");
     trace = catgs::make_city_flyover(s.layout, catgs::FlyoverParams{}, g);
+  } else if (spec == "centre") {
+    if (!s.city) throw std::invalid_argument("--trace centre needs --city");
+    catgs::FlyoverParams centre;
+    centre.altitude = 0.4f;
+    centre.pitch_deg = 70.0f;
+    centre.start_cells = -0.25f;
+    centre.end_cells = 0.25f;
+    trace = catgs::make_city_flyover(s.layout, centre, g);
   } else if (spec == "orbit") {
     const auto rb = catgs::robust_bounds(s.model);
     const glm::vec3 e = rb.extent();

@@ -1,0 +1,136 @@
+// Chunk culling (forward_model/chunk_bounds.h): a culled chunk holds no Gaussian the exact
+// pipeline would list, so pre-processing with and without it gives the same tiles; checked on
+// real scenes from inside and outside, and against the per-Gaussian decision on random chunks
+// that straddle the image's edges and the near plane.
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "camera/trace.h"
+#include "cpu/cpu_renderer.h"
+#include "forward_model/chunk_bounds.h"
+#include "test_data.h"
+
+namespace catgs {
+namespace {
+
+// Bounds that never cull (NaN boxes): pre-processing Gaussian by Gaussian.
+std::vector<fm::ChunkBounds> never_cull(std::size_t n) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  return std::vector<fm::ChunkBounds>(fm::chunk_count(n), fm::ChunkBounds{glm::vec3(nan), nan, glm::vec3(nan), nan});
+}
+
+// Views of `m`: an orbit outside it looking in, and poses inside it looking outwards.
+std::vector<Camera> views_of(const GaussianModel& m, int width, int height) {
+  GeneratorParams p;
+  p.width = width;
+  p.height = height;
+  p.duration_s = 1.0;
+  p.rate_hz = 8.0;
+  const Bounds b = m.bounds();
+  std::vector<Camera> views;
+  for (const auto& tc : make_orbit(b, 0.6f * glm::length(b.extent()), 0.1f * glm::length(b.extent()), 360.0f, p))
+    views.push_back(tc.camera);
+  const glm::vec3 centre = 0.5f * (b.min + b.max);
+  for (int k = 0; k < 6; ++k) {
+    const float yaw = glm::radians(60.0f * static_cast<float>(k));
+    const glm::quat q = glm::angleAxis(yaw, glm::vec3(0.0f, 1.0f, 0.0f));
+    views.push_back(Camera::from_pose(centre, q, 50.0f, width, height));
+  }
+  return views;
+}
+
+struct Counts {
+  std::size_t culled = 0, chunks = 0;
+};
+
+// Pre-processes `m` at every view with and without chunk culling and expects the same tile
+// counts; returns how many chunks the views culled.
+Counts expect_same_tiles(const GaussianModel& m) {
+  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(m), none = never_cull(m.size());
+  Counts c;
+  for (const Camera& cam : views_of(m, 320, 180)) {
+    cpu::ProjectedGaussians culled, full;
+    cpu::preprocess(m, chunks, cam, Pipeline::exact, culled);
+    cpu::preprocess(m, none, cam, Pipeline::exact, full);
+    EXPECT_EQ(culled.tiles_touched, full.tiles_touched);
+    const fm::View v = fm::view_of(cam);
+    for (const fm::ChunkBounds& b : chunks) c.culled += fm::chunk_outside_view(b, v) ? 1 : 0;
+    c.chunks += chunks.size();
+  }
+  return c;
+}
+
+TEST(ChunkCulling, SameTilesOnTheBundledScene) {
+  const Counts c = expect_same_tiles(*test::cached_scene(test::bundled_scene()));
+  EXPECT_GT(c.culled, c.chunks / 10) << "the views should leave a good share of the chunks outside";
+}
+
+TEST(ChunkCulling, SameTilesOnFlowers) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const Counts c = expect_same_tiles(*test::cached_scene(path));
+  EXPECT_GT(c.culled, 0u);
+}
+
+// Random chunks around the view's edges, the near plane and the far plane: whenever the chunk
+// test culls, every Gaussian drawn inside the chunk's bound is culled Gaussian by Gaussian.
+TEST(ChunkCulling, NeverCullsAListedGaussian) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  const Camera cam = Camera::from_pose(glm::vec3(0.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 160, 90);
+  const fm::View v = fm::view_of(cam);
+  GaussianModel m;
+  m.sh_degree = 0;
+  const std::size_t per_chunk = 64;
+  std::size_t culled_chunks = 0, checked = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    // A box centred near the frustum's side planes at depth 0.05..20, up to 1 unit wide.
+    const float z = 0.05f + 20.0f * u01(rng) * u01(rng);
+    const float side = (u01(rng) < 0.5f ? -1.0f : 1.0f) * (0.5f + u01(rng)) * v.tan_half_fov.x * z;
+    const glm::vec3 centre(u01(rng) < 0.5f ? side : 0.3f * side, u01(rng) < 0.5f ? side * 0.56f : 0.0f, z);
+    const glm::vec3 half = glm::vec3(u01(rng), u01(rng), u01(rng)) * (u01(rng) < 0.5f ? 0.05f : 1.0f);
+    const float log_scale = std::log(0.001f + 0.2f * u01(rng) * u01(rng));
+    m.resize(per_chunk);
+    for (std::size_t i = 0; i < per_chunk; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        m.means[3 * i + a] = centre[a] + half[a] * (2.0f * u01(rng) - 1.0f);
+        m.log_scales[3 * i + a] = log_scale - 2.0f * u01(rng);
+      }
+      glm::vec4 q(u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f);
+      q /= glm::length(q);
+      for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = q[a];
+      m.opacity_logits[i] = 8.0f * u01(rng) - 2.0f;
+    }
+    const std::vector<fm::ChunkBounds> b = fm::chunk_bounds(m);
+    ASSERT_EQ(b.size(), 1u);
+    if (!fm::chunk_outside_view(b[0], v)) continue;
+    ++culled_chunks;
+    cpu::ProjectedGaussians full;
+    cpu::preprocess(m, never_cull(per_chunk), cam, Pipeline::exact, full);
+    for (std::size_t i = 0; i < per_chunk; ++i, ++checked)
+      ASSERT_EQ(full.tiles_touched[i], 0u) << "trial " << trial << ": chunk culled, Gaussian " << i << " lists tiles";
+  }
+  EXPECT_GT(culled_chunks, 300u) << "too few culled chunks to say much";
+  EXPECT_GT(checked, 0u);
+}
+
+TEST(ChunkCulling, NonFiniteBoundsNeverCull) {
+  const Camera cam = Camera::from_pose(glm::vec3(0.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 160, 90);
+  const fm::View v = fm::view_of(cam);
+  // Behind the camera, so finite bounds would cull it.
+  fm::ChunkBounds b{glm::vec3(-1.0f, -1.0f, -5.0f), 0.1f, glm::vec3(1.0f, 1.0f, -4.0f), 10.0f};
+  EXPECT_TRUE(fm::chunk_outside_view(b, v));
+  for (float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    fm::ChunkBounds c = b;
+    c.lo.x = bad;
+    EXPECT_FALSE(fm::chunk_outside_view(c, v));
+    c = b;
+    c.max_scale = bad;
+    EXPECT_FALSE(fm::chunk_outside_view(c, v));
+  }
+}
+
+}  // namespace
+}  // namespace catgs
