@@ -79,7 +79,8 @@ void write_compressed_ply(const GaussianModel& m, const std::string& path) {
   const int rest = 3 * (m.sh_coeffs() - 1);
   const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
   std::ostringstream h;
-  h << "ply\nformat binary_little_endian 1.0\ncomment written by catgs (SuperSplat compressed PLY, rotations in packRot order)\n"
+  h << "ply\nformat binary_little_endian 1.0\ncomment written by catgs (SuperSplat compressed PLY, rotations in "
+       "packRot order)\n"
     << "element chunk " << chunks << "\n";
   for (const char* p :
        {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x", "min_scale_y", "min_scale_z",
