@@ -6,6 +6,9 @@
 
 #include "scene/ply_io.h"
 #include "ply_format.h"
+#include "scene/format_detect.h"
+#include "scene/splat_file.h"
+#include "scene/spz_file.h"
 
 namespace catgs {
 
@@ -178,18 +181,33 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, con
   return m;
 }
 
-}  // namespace
-
-GaussianModel load_scene(const std::string& path) {
+GaussianModel load_ply(const std::string& path) {
   const ply::File f = ply::read_file(path);
   const ply::Element* v = f.element("vertex");
   if (!v) throw SceneFileError(path, "no 'vertex' element");
   if (v->count == 0) throw SceneFileError(path, "the scene holds no Gaussians (vertex count 0)");
   if (v->count > (1ull << 31)) throw SceneFileError(path, "more than 2^31 Gaussians");
   const ply::Element* chunk = f.element("chunk");
-  GaussianModel m = (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v) : load_inria(f, *v);
+  return (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v) : load_inria(f, *v);
+}
+
+}  // namespace
+
+GaussianModel load_scene(const std::string& path) {
+  GaussianModel m;
+  switch (detect_scene_format(path)) {
+    case SceneFormat::spz:
+      m = read_spz(path);
+      break;
+    case SceneFormat::splat:
+      m = read_splat(path);
+      break;
+    case SceneFormat::ply:
+      m = load_ply(path);
+      break;
+  }
   m.name = std::filesystem::path(path).filename().string();
-  for (const char* suffix : {".compressed.ply", ".ply"}) {
+  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat"}) {
     const std::string s = suffix;
     if (m.name.size() > s.size() && m.name.compare(m.name.size() - s.size(), s.size(), s) == 0) {
       m.name.resize(m.name.size() - s.size());

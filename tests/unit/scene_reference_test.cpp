@@ -2,9 +2,16 @@
 // reader on a file must render as splat-transform's decode of the same file does (>= 50 dB, CPU
 // renderer, same pose), and splat-transform must read what our writers write. A round trip through
 // our own reader and writer would pass with a wrong layout on both sides, so none is used here.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
 #include <gtest/gtest.h>
 
 #include "scene/ply_io.h"
+#include "scene/spz_file.h"
 #include "splat_transform.h"
 #include "test_data.h"
 
@@ -34,6 +41,29 @@ double psnr_against_reference_decode(const std::string& file, const std::string&
   return test::min_render_psnr(ours, reference, test::comparison_views(reference, cameras));
 }
 
+struct OurWriterCheck {
+  double same = 0;   // splat-transform's decode of our file vs our reader on it
+  double lossy = 0;  // splat-transform's decode of our file vs the original
+};
+
+// Writes flowers_sh3 with `write` to `ours`, has splat-transform decode it, and compares renders.
+template <typename Write>
+OurWriterCheck check_our_writer(const std::string& flowers, const std::string& cams, const std::string& ours,
+                                Write write) {
+  const GaussianModel original = load_scene(flowers);
+  write(original, ours);
+  const std::string decoded = ours + ".decoded.ply";
+  const std::string err = test::splat_transform(ours, decoded);
+  EXPECT_TRUE(err.empty()) << err;
+  if (!err.empty()) return {};
+  const GaussianModel reference = load_scene(decoded);
+  EXPECT_EQ(reference.size(), original.size());
+  EXPECT_EQ(reference.sh_degree, original.sh_degree);
+  if (reference.size() != original.size()) return {};
+  const auto views = test::comparison_views(original, cams);
+  return {test::min_render_psnr(load_scene(ours), reference, views), test::min_render_psnr(original, reference, views)};
+}
+
 TEST(SplatTransformReference, CompressedPlyWrittenBySplatTransform) {
   CATGS_REQUIRE_SPLAT_TRANSFORM();
   CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
@@ -59,18 +89,92 @@ TEST(SplatTransformReference, ReadsOurCompressedPly) {
   CATGS_REQUIRE_SPLAT_TRANSFORM();
   CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
   CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
-  const std::string dir = test::temp_dir(), ours = dir + "/ours.compressed.ply", decoded = dir + "/decoded.ply";
-  const GaussianModel original = load_scene(flowers);
-  write_compressed_ply(original, ours);
-  CONVERT(ours, decoded);
-  const GaussianModel reference = load_scene(decoded);
-  const auto views = test::comparison_views(original, cams);
-  const double same = test::min_render_psnr(load_scene(ours), reference, views);
-  const double lossy = test::min_render_psnr(original, reference, views);
-  std::cout << "[ info ] our compressed PLY of flowers_sh3: splat-transform's decode vs ours " << same
-            << " dB, vs the original " << lossy << " dB\n";
-  EXPECT_GE(same, kSameDecodeDb);
-  EXPECT_GE(lossy, 30.0);
+  const auto r = check_our_writer(flowers, cams, test::temp_dir() + "/ours.compressed.ply",
+                                  [](const GaussianModel& m, const std::string& p) { write_compressed_ply(m, p); });
+  std::cout << "[ info ] our compressed PLY of flowers_sh3: splat-transform's decode vs ours " << r.same
+            << " dB, vs the original " << r.lossy << " dB\n";
+  EXPECT_GE(r.same, kSameDecodeDb);
+  EXPECT_GE(r.lossy, 30.0);
+}
+
+// .spz written by splat-transform, i.e. by Niantic's own writer (@adobe/spz, the WASM build of
+// nianticlabs/spz): version 4 (zstd streams, its default) and version 3 (gzip).
+class SpzVersionTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(SpzVersionTest, WrittenBySplatTransform) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const std::string dir = test::temp_dir(), file = dir + "/flowers.spz";
+  const std::string err = test::splat_transform(flowers, file, "--spz-version " + std::to_string(GetParam()));
+  ASSERT_TRUE(err.empty()) << err;
+  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  std::cout << "[ info ] flowers_sh3 -> splat-transform .spz v" << GetParam() << ": ours vs its decode " << psnr
+            << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+// Our .spz writer: splat-transform (Niantic's reader) decodes it as our reader does, and the copy
+// stays close to the original.
+TEST_P(SpzVersionTest, SplatTransformReadsOurs) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const auto r =
+      check_our_writer(flowers, cams, test::temp_dir() + "/ours.spz",
+                       [this](const GaussianModel& m, const std::string& p) { write_spz(m, p, GetParam()); });
+  std::cout << "[ info ] our .spz v" << GetParam() << " of flowers_sh3: splat-transform's decode vs ours " << r.same
+            << " dB, vs the original " << r.lossy << " dB\n";
+  EXPECT_GE(r.same, kSameDecodeDb);
+  EXPECT_GE(r.lossy, 30.0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Versions, SpzVersionTest, ::testing::Values(4, 3),
+                         [](const auto& p) { return "v" + std::to_string(p.param); });
+
+// A .splat file as antimatter15's convert.py writes one (32-byte records; see splat_file.h).
+void write_splat_like_convert_py(const GaussianModel& m, const std::string& path) {
+  std::ofstream out(path, std::ios::binary);
+  const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
+  auto u8 = [](double v) { return static_cast<char>(static_cast<uint8_t>(std::clamp(v, 0.0, 255.0))); };
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    char rec[32];
+    for (int a = 0; a < 3; ++a) {
+      const float p = m.means[3 * i + a], s = std::exp(m.log_scales[3 * i + a]);
+      std::memcpy(rec + 4 * a, &p, 4);
+      std::memcpy(rec + 12 + 4 * a, &s, 4);
+      rec[24 + a] = u8((0.5 + 0.28209479177387814 * m.sh[i * K * 3 + a]) * 255.0);
+    }
+    rec[27] = u8(255.0 / (1.0 + std::exp(-m.opacity_logits[i])));
+    double len = 0;
+    for (int k = 0; k < 4; ++k) len += m.rotations[4 * i + k] * m.rotations[4 * i + k];
+    for (int k = 0; k < 4; ++k) rec[28 + k] = u8(m.rotations[4 * i + k] / std::sqrt(len) * 128.0 + 128.0);
+    out.write(rec, 32);
+  }
+}
+
+TEST(SplatTransformReference, SplatRecordsDecodedAsSplatTransformDoes) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const std::string dir = test::temp_dir(), file = dir + "/flowers.splat";
+  write_splat_like_convert_py(load_scene(flowers), file);
+  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  std::cout << "[ info ] flowers_sh3 as .splat: ours vs splat-transform's decode " << psnr << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+// The format comes from the content: an .spz saved under a .ply name still loads as .spz.
+TEST(SplatTransformReference, FormatDetectedByContent) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  const std::string dir = test::temp_dir(), spz = dir + "/flowers.spz", misnamed = dir + "/really_spz.ply";
+  CONVERT(flowers, spz);
+  std::filesystem::copy_file(spz, misnamed);
+  const GaussianModel a = load_scene(spz), b = load_scene(misnamed);
+  EXPECT_EQ(b.size(), a.size());
+  EXPECT_EQ(b.means, a.means);
+  EXPECT_EQ(b.name, "really_spz");
 }
 
 }  // namespace
