@@ -54,7 +54,8 @@ prepare() {
   mkdir -p "$CARRY"/{scenes,traces,bin,deps/include,deps/lib/pkgconfig,deps/share/cmake,deps/bin}
   cp -f "$data/scenes/flowers_sh3.ply" "$data/scenes/biker.compressed.ply" "$CARRY/scenes/"
   cp -f "$data"/traces/*.cameras.json "$CARRY/traces/"
-  if [ ! -f "$CARRY/scenes/tumblewood_sh2.compressed.ply" ]; then
+  # Copies from before the rotation-order fix (issue 18) lack the writer's "packRot order" comment.
+  if ! head -c 4096 "$CARRY/scenes/tumblewood_sh2.compressed.ply" 2>/dev/null | grep -aq "packRot order"; then
     "$build/bin/catgs-scene" compact --scene "$data/scenes/tumblewood_sh2.ply" \
       --out "$CARRY/scenes/tumblewood_sh2.compressed.ply" --check-views 4 --up 0,-1,0 || return 1
   fi

@@ -11,6 +11,7 @@ packages=(
   libavcodec-dev libavutil-dev libswscale-dev libx264-dev
   libprotobuf-dev protobuf-compiler
   libglm-dev libgtest-dev nlohmann-json3-dev libstb-dev
+  zlib1g-dev libzstd-dev
   nodejs npm chromium
 )
 missing=()

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Sets up the browser client and its test tooling (no network at page run time):
-#  1. npm ci in tests/e2e (playwright-core, pngjs, protobufjs; versions pinned by package-lock.json),
+#  1. npm ci in tests/e2e (playwright-core, pngjs, protobufjs, and @playcanvas/splat-transform 2.7.1,
+#     the scene formats' reference in the unit tests; versions pinned by package-lock.json),
 #  2. vendors protobufjs's browser build into web_client/vendor/ (BSD-3-Clause, licence copied along),
 #  3. copies proto/catgs_stream.proto into web_client/ (the page loads the schema at run time) and
 #     writes its JSON descriptor beside it (a fallback for static servers that refuse .proto).

@@ -4,6 +4,9 @@
 //   catgs-scene compact --scene S --out O.compressed.ply [--check-views N] [--width W --height H]
 //       Morton-sorts the Gaussians, writes SuperSplat compressed PLY, reads it back and (with
 //       --check-views) prints the PSNR of CPU renders of the copy against the original.
+//   catgs-scene convert --scene S --out O.(ply|compressed.ply|spz) [--spz-version 3|4]
+//       Reads any scene format (ply_io.h) and writes INRIA PLY, SuperSplat compressed PLY (Morton
+//       order) or .spz (version 4 by default) by the output's extension.
 //   catgs-scene tile    --scene S (--out city.ply | --out-compressed city.compressed.ply)
 //                       [--radius-sq 4] [--spacing 1.2] [--scale 10] [--seed N] [--up X,Y,Z]
 //                       [--no-sh-rotation] [--flyover-out F.trace] [--frames 600] [--rate 120]
@@ -19,6 +22,7 @@
 
 #include "common/image_io.h"
 #include "scene/ply_io.h"
+#include "scene/spz_file.h"
 #include "renderer/renderer.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
@@ -33,6 +37,7 @@ const char* kUsage =
     "usage: catgs-scene info --scene S\n"
     "       catgs-scene compact --scene S --out O.compressed.ply [--check-views N] [--width W --height H]\n"
     "                   [--scale 10] [--up X,Y,Z] [--png-prefix P]\n"
+    "       catgs-scene convert --scene S --out O.(ply|compressed.ply|spz) [--spz-version 3|4]\n"
     "       catgs-scene tile --scene S (--out F.ply | --out-compressed F.compressed.ply | --no-write)\n"
     "                   [--radius-sq 4] [--spacing 1.2] [--scale 10] [--seed N] [--up X,Y,Z]\n"
     "                   [--no-sh-rotation] [--flyover-out F.trace] [--frames 600] [--rate 120]\n"
@@ -111,6 +116,25 @@ int compact(const catgs::tools::Args& args) {
   return 0;
 }
 
+bool ends_with(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+int convert(const catgs::tools::Args& args) {
+  const std::string out = args.require("--out");
+  const auto m = catgs::load_scene(args.require("--scene"));
+  if (ends_with(out, ".compressed.ply"))
+    catgs::write_compressed_ply(catgs::permuted(m, catgs::morton_order(m)), out);
+  else if (ends_with(out, ".spz"))
+    catgs::write_spz(m, out, args.get_int("--spz-version", 4));
+  else if (ends_with(out, ".ply"))
+    catgs::write_inria_ply(m, out);
+  else
+    throw std::invalid_argument("--out must end in .ply, .compressed.ply or .spz: '" + out + "'");
+  std::printf("wrote %s: %zu Gaussians, SH degree %d\n", out.c_str(), m.size(), m.sh_degree);
+  return 0;
+}
+
 int tile(const catgs::tools::Args& args) {
   const auto base = catgs::load_scene(args.require("--scene"));
   catgs::CityParams p;
@@ -176,9 +200,10 @@ int run(int argc, char** argv) {
       {"--scene",           "--out",         "--out-compressed",   "--no-write!", "--check-views", "--width",
        "--height",          "--radius-sq",   "--spacing",          "--scale",     "--seed",        "--up",
        "--no-sh-rotation!", "--flyover-out", "--frames",           "--rate",      "--fov",         "--altitude",
-       "--pitch",           "--cameras",     "--seconds-per-view", "--distance",  "--png-prefix"});
+       "--pitch",           "--cameras",     "--seconds-per-view", "--distance",  "--png-prefix",  "--spz-version"});
   if (cmd == "info") return info(args);
   if (cmd == "compact") return compact(args);
+  if (cmd == "convert") return convert(args);
   if (cmd == "tile") return tile(args);
   if (cmd == "trace") return trace(args);
   throw std::invalid_argument("unknown command '" + cmd + "'");

@@ -23,6 +23,11 @@ struct Bounds {
   glm::vec3 extent() const { return max - min; }
 };
 
+// Opacity logits of +-inf (alpha exactly 1 or 0, as converters such as splat-transform write them)
+// are stored as +-kOpacityLogitLimit: in float, sigmoid(20) is 1.0f and sigmoid(-20) (2e-9) is far
+// below the 1/255 alpha a rasterizer draws.
+inline constexpr float kOpacityLogitLimit = 20.0f;
+
 // A scene of 3D Gaussians. All arrays are float32, world units, one row per Gaussian:
 //   means          [N, 3]  centre (x, y, z)
 //   log_scales     [N, 3]  log of the standard deviations along the Gaussian's local axes

@@ -16,12 +16,16 @@ namespace catgs {
 // (w x y z), in any order, float or double, binary_little_endian or ascii; extra properties
 // (nx ny nz, ...) are ignored.
 // SuperSplat compressed PLY: chunks of 256 Gaussians with min/max ranges, packed 11-10-11
-// position and log-scale, 2-10-10-10 smallest-three rotation, 8-8-8-8 colour + opacity, and an
-// optional `element sh` of uint8 f_rest_* values. Opacity 255 is clamped to logit(1 - 1/512).
+// position and log-scale, 2-10-10-10 smallest-three rotation over (rot_0..rot_3) = (w, x, y, z)
+// (top 2 bits: index of the largest; the other three in index order, each * sqrt(2)), 8-8-8-8
+// colour + opacity, and an optional `element sh` of uint8 f_rest_* values (q -> (q + 0.5) / 32 - 4,
+// 0 -> -4, 255 -> 4). Source: playcanvas/supersplat src/splat-serialize.ts and splat-transform
+// 2.7.1's compressed PLY reader; the tests compare against splat-transform's decode.
+// Opacity logits of +-inf (INRIA) or alpha 0 / 255 (compressed) clamp to +-kOpacityLogitLimit.
 //
 // Throws SceneFileError (naming `path`) when the file is missing, is not a PLY, has a malformed
 // header, lacks a property, is truncated, declares counts the file size cannot hold (checked
-// before any allocation), or holds NaN/Inf.
+// before any allocation), or holds NaN (or an infinite value other than an opacity logit).
 GaussianModel load_scene(const std::string& path);
 
 // Writes INRIA 3DGS PLY, binary little endian, SH degree of the model. Throws SceneFileError.

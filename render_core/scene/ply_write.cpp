@@ -79,7 +79,8 @@ void write_compressed_ply(const GaussianModel& m, const std::string& path) {
   const int rest = 3 * (m.sh_coeffs() - 1);
   const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
   std::ostringstream h;
-  h << "ply\nformat binary_little_endian 1.0\ncomment written by catgs (SuperSplat compressed PLY)\n"
+  h << "ply\nformat binary_little_endian 1.0\ncomment written by catgs (SuperSplat compressed PLY, rotations in "
+       "packRot order)\n"
     << "element chunk " << chunks << "\n";
   for (const char* p :
        {"min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x", "min_scale_y", "min_scale_z",
@@ -122,12 +123,16 @@ void write_compressed_ply(const GaussianModel& m, const std::string& path) {
         bits[2][a] = quantize(normalized(colour(i, a), lo[6 + a], hi[6 + a]), 8);
       }
       put(vertex_body, (bits[0][0] << 21) | (bits[0][1] << 11) | bits[0][2]);
-      // Rotation: (x, y, z, w), drop the largest |component| (made positive), keep three.
-      float q[4] = {m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3], m.rotations[4 * i]};
-      const float len = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+      // Rotation: smallest-three over (rot_0..rot_3) = INRIA (w, x, y, z), SuperSplat's packRot
+      // order (the reader's comment has the layout); the largest |component| is dropped, made
+      // positive by flipping the whole quaternion (q and -q are the same rotation).
+      float q[4];
+      float len2 = 0;
+      for (int k = 0; k < 4; ++k) len2 += m.rotations[4 * i + k] * m.rotations[4 * i + k];
+      const float len = std::sqrt(len2);
       int largest = 0;
       for (int k = 0; k < 4; ++k) {
-        q[k] = len > 0 ? q[k] / len : (k == 3 ? 1.0f : 0.0f);
+        q[k] = len > 0 ? m.rotations[4 * i + k] / len : (k == 0 ? 1.0f : 0.0f);
         if (std::fabs(q[k]) > std::fabs(q[largest])) largest = k;
       }
       const float sign = q[largest] < 0 ? -1.0f : 1.0f;

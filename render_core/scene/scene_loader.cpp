@@ -1,10 +1,14 @@
 // Scene loading: INRIA 3DGS PLY and SuperSplat compressed PLY -> GaussianModel.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <string>
 
 #include "scene/ply_io.h"
 #include "ply_format.h"
+#include "scene/format_detect.h"
+#include "scene/splat_file.h"
+#include "scene/spz_file.h"
 
 namespace catgs {
 
@@ -47,6 +51,12 @@ float finite(double v, const ply::Element& e, uint64_t row, int prop, const std:
   return static_cast<float>(v);
 }
 
+// An opacity logit: +-inf (alpha 1 or 0) clamps to +-kOpacityLogitLimit; NaN fails as finite() does.
+float opacity_logit(double v, const ply::Element& e, uint64_t row, int prop, const std::string& path) {
+  if (std::isinf(v)) return v > 0 ? kOpacityLogitLimit : -kOpacityLogitLimit;
+  return finite(v, e, row, prop, path);
+}
+
 void set_sh_rest(GaussianModel& m, std::size_t i, int rest_index, float v) {
   // INRIA layout is channel-major: f_rest[c * (K - 1) + (k - 1)].
   const int K = m.sh_coeffs();
@@ -75,7 +85,7 @@ GaussianModel load_inria(const ply::File& f, const ply::Element& v) {
       m.sh[i * K * 3 + a] = get(idx[3 + a]);
       m.log_scales[3 * i + a] = get(idx[7 + a]);
     }
-    m.opacity_logits[i] = get(idx[6]);
+    m.opacity_logits[i] = opacity_logit(f.value(v, i, idx[6]), v, i, idx[6], path);
     for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = get(idx[10 + a]);
     for (int j = 0; j < rest; ++j) set_sh_rest(m, i, j, get(rest_idx[static_cast<std::size_t>(j)]));
   }
@@ -141,63 +151,63 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, con
       const float colour = cr[a] + (cr[3 + a] - cr[a]) * c01;
       m.sh[i * K * 3 + a] = (colour - 0.5f) / kShC0;
     }
-    // Opacity 0 or 1 has an infinite logit: clamp to [1/512, 1 - 1/512].
-    const float alpha = std::fmin(std::fmax(unorm(col, 8), 1.0f / 512.0f), 1.0f - 1.0f / 512.0f);
-    m.opacity_logits[i] = -std::log(1.0f / alpha - 1.0f);
-    // Smallest-three quaternion in (x, y, z, w) order; the top 2 bits name the largest component.
+    // Opacity 0 or 1 has an infinite logit: clamped as the INRIA reader clamps one.
+    const float alpha = unorm(col, 8);
+    m.opacity_logits[i] = alpha <= 0.0f ? -kOpacityLogitLimit
+                          : alpha >= 1.0f
+                              ? kOpacityLogitLimit
+                              : std::clamp(-std::log(1.0f / alpha - 1.0f), -kOpacityLogitLimit, kOpacityLogitLimit);
+    // Smallest-three quaternion over (rot_0..rot_3) = INRIA (w, x, y, z), as SuperSplat's
+    // packRot(rot_0, rot_1, rot_2, rot_3) writes it and PlayCanvas's engine reads it: the top 2
+    // bits index the largest component, the other three follow in index order, 10 bits each,
+    // scaled by sqrt(2) (each lies in [-1/sqrt(2), 1/sqrt(2)]).
     const float norm = std::sqrt(2.0f);
-    const float a = (unorm(rot >> 20, 10) - 0.5f) * norm, b = (unorm(rot >> 10, 10) - 0.5f) * norm,
-                c = (unorm(rot, 10) - 0.5f) * norm;
-    const float big = std::sqrt(std::fmax(0.0f, 1.0f - (a * a + b * b + c * c)));
-    float xyzw[4];
-    switch (rot >> 30) {
-      case 0:
-        xyzw[0] = big;
-        xyzw[1] = a;
-        xyzw[2] = b;
-        xyzw[3] = c;
-        break;
-      case 1:
-        xyzw[0] = a;
-        xyzw[1] = big;
-        xyzw[2] = b;
-        xyzw[3] = c;
-        break;
-      case 2:
-        xyzw[0] = a;
-        xyzw[1] = b;
-        xyzw[2] = big;
-        xyzw[3] = c;
-        break;
-      default:
-        xyzw[0] = a;
-        xyzw[1] = b;
-        xyzw[2] = c;
-        xyzw[3] = big;
-        break;
-    }
-    m.rotations[4 * i] = xyzw[3];
-    for (int k = 0; k < 3; ++k) m.rotations[4 * i + 1 + k] = xyzw[k];
+    const float small[3] = {(unorm(rot >> 20, 10) - 0.5f) * norm, (unorm(rot >> 10, 10) - 0.5f) * norm,
+                            (unorm(rot, 10) - 0.5f) * norm};
+    const unsigned largest = rot >> 30;
+    float* quat = &m.rotations[4 * i];
+    quat[largest] =
+        std::sqrt(std::fmax(0.0f, 1.0f - (small[0] * small[0] + small[1] * small[1] + small[2] * small[2])));
+    for (unsigned k = 0, s = 0; k < 4; ++k)
+      if (k != largest) quat[k] = small[s++];
     for (int j = 0; j < rest; ++j) {
       const auto q = static_cast<uint32_t>(f.value(*sh, i, sh->find("f_rest_" + std::to_string(j))));
-      set_sh_rest(m, i, j, (static_cast<float>(q) + 0.5f) / 256.0f * 8.0f - 4.0f);
+      // Bucket centres, except that 0 and 255 decode to the range ends -4 and 4 (as splat-transform
+      // and PlayCanvas's engine read them).
+      const float t = q == 0 ? 0.0f : q == 255 ? 1.0f : (static_cast<float>(q) + 0.5f) / 256.0f;
+      set_sh_rest(m, i, j, t * 8.0f - 4.0f);
     }
   }
   return m;
 }
 
-}  // namespace
-
-GaussianModel load_scene(const std::string& path) {
+GaussianModel load_ply(const std::string& path) {
   const ply::File f = ply::read_file(path);
   const ply::Element* v = f.element("vertex");
   if (!v) throw SceneFileError(path, "no 'vertex' element");
   if (v->count == 0) throw SceneFileError(path, "the scene holds no Gaussians (vertex count 0)");
   if (v->count > (1ull << 31)) throw SceneFileError(path, "more than 2^31 Gaussians");
   const ply::Element* chunk = f.element("chunk");
-  GaussianModel m = (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v) : load_inria(f, *v);
+  return (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v) : load_inria(f, *v);
+}
+
+}  // namespace
+
+GaussianModel load_scene(const std::string& path) {
+  GaussianModel m;
+  switch (detect_scene_format(path)) {
+    case SceneFormat::spz:
+      m = read_spz(path);
+      break;
+    case SceneFormat::splat:
+      m = read_splat(path);
+      break;
+    case SceneFormat::ply:
+      m = load_ply(path);
+      break;
+  }
   m.name = std::filesystem::path(path).filename().string();
-  for (const char* suffix : {".compressed.ply", ".ply"}) {
+  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat"}) {
     const std::string s = suffix;
     if (m.name.size() > s.size() && m.name.compare(m.name.size() - s.size(), s.size(), s) == 0) {
       m.name.resize(m.name.size() - s.size());

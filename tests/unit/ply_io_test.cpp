@@ -266,6 +266,23 @@ TEST_F(CorruptSceneTest, InriaNonFiniteValue) {
   }
 }
 
+// Converters write alpha 0 / 1 as -inf / +inf logits: they clamp; NaN still fails, named.
+TEST_F(CorruptSceneTest, InriaInfiniteOpacityClampsNaNFails) {
+  if (!have_flowers()) GTEST_SKIP() << "real data scenes/flowers_sh3.ply not found under CATGS_DATA_DIR";
+  const std::size_t body = flowers_.find("end_header\n") + 11, opacity = 4 * 54, row = 62 * 4;
+  std::string b = flowers_;
+  const float inf = std::numeric_limits<float>::infinity(), minus_inf = -inf;
+  std::memcpy(&b[body + row * 1000 + opacity], &inf, 4);
+  std::memcpy(&b[body + row * 1001 + opacity], &minus_inf, 4);
+  const GaussianModel m = load_scene(save("inf.ply", b));
+  EXPECT_EQ(m.opacity_logits[1000], kOpacityLogitLimit);
+  EXPECT_EQ(m.opacity_logits[1001], -kOpacityLogitLimit);
+  EXPECT_EQ(m.opacity_logits[1002], test::cached_scene(flowers_path_)->opacity_logits[1002]);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::memcpy(&b[body + row * 1002 + opacity], &nan, 4);
+  expect_scene_error(save("nan.ply", b), "non-finite value in element 'vertex' row 1002 property 'opacity'");
+}
+
 TEST_F(CorruptSceneTest, InriaTruncatedAscii) {
   const std::string text =
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"

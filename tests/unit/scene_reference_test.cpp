@@ -1,0 +1,181 @@
+// Scene formats against an independent implementation, PlayCanvas's splat-transform 2.7.1: our
+// reader on a file must render as splat-transform's decode of the same file does (>= 50 dB, CPU
+// renderer, same pose), and splat-transform must read what our writers write. A round trip through
+// our own reader and writer would pass with a wrong layout on both sides, so none is used here.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "scene/ply_io.h"
+#include "scene/spz_file.h"
+#include "splat_transform.h"
+#include "test_data.h"
+
+namespace catgs {
+namespace {
+
+constexpr double kSameDecodeDb = 50.0;
+
+// Converts `in` with splat-transform to `out`, failing the test with the command on error.
+#define CONVERT(in, out)                                        \
+  do {                                                          \
+    const std::string err = test::splat_transform((in), (out)); \
+    ASSERT_TRUE(err.empty()) << err;                            \
+  } while (0)
+
+// Our reader on `file` against our INRIA reader on splat-transform's decode of it.
+double psnr_against_reference_decode(const std::string& file, const std::string& dir, const std::string& cameras = "") {
+  const std::string decoded = dir + "/reference_decode.ply";
+  const std::string err = test::splat_transform(file, decoded);
+  EXPECT_TRUE(err.empty()) << err;
+  if (!err.empty()) return 0.0;
+  const GaussianModel ours = load_scene(file);
+  const GaussianModel reference = load_scene(decoded);
+  EXPECT_EQ(ours.size(), reference.size());
+  EXPECT_EQ(ours.sh_degree, reference.sh_degree);
+  if (ours.size() != reference.size()) return 0.0;
+  return test::min_render_psnr(ours, reference, test::comparison_views(reference, cameras));
+}
+
+struct OurWriterCheck {
+  double same = 0;   // splat-transform's decode of our file vs our reader on it
+  double lossy = 0;  // splat-transform's decode of our file vs the original
+};
+
+// Writes flowers_sh3 with `write` to `ours`, has splat-transform decode it, and compares renders.
+template <typename Write>
+OurWriterCheck check_our_writer(const std::string& flowers, const std::string& cams, const std::string& ours,
+                                Write write) {
+  const GaussianModel original = load_scene(flowers);
+  write(original, ours);
+  const std::string decoded = ours + ".decoded.ply";
+  const std::string err = test::splat_transform(ours, decoded);
+  EXPECT_TRUE(err.empty()) << err;
+  if (!err.empty()) return {};
+  const GaussianModel reference = load_scene(decoded);
+  EXPECT_EQ(reference.size(), original.size());
+  EXPECT_EQ(reference.sh_degree, original.sh_degree);
+  if (reference.size() != original.size()) return {};
+  const auto views = test::comparison_views(original, cams);
+  return {test::min_render_psnr(load_scene(ours), reference, views), test::min_render_psnr(original, reference, views)};
+}
+
+TEST(SplatTransformReference, CompressedPlyWrittenBySplatTransform) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const std::string dir = test::temp_dir(), file = dir + "/flowers.compressed.ply";
+  CONVERT(flowers, file);
+  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  std::cout << "[ info ] flowers_sh3 -> splat-transform compressed PLY: ours vs its decode " << psnr << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+// The bundled scene was written by SuperSplat 2.7.1: it must look as PlayCanvas's tools show it.
+TEST(SplatTransformReference, BundledBikerWrittenBySuperSplat) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  const double psnr = psnr_against_reference_decode(test::bundled_scene(), test::temp_dir());
+  std::cout << "[ info ] biker.compressed.ply (SuperSplat): ours vs splat-transform's decode " << psnr << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+// splat-transform reads our compressed PLY as our reader does, and the copy stays close to the
+// original (lossy: 8-11 bit quantisation).
+TEST(SplatTransformReference, ReadsOurCompressedPly) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const auto r = check_our_writer(flowers, cams, test::temp_dir() + "/ours.compressed.ply",
+                                  [](const GaussianModel& m, const std::string& p) { write_compressed_ply(m, p); });
+  std::cout << "[ info ] our compressed PLY of flowers_sh3: splat-transform's decode vs ours " << r.same
+            << " dB, vs the original " << r.lossy << " dB\n";
+  EXPECT_GE(r.same, kSameDecodeDb);
+  EXPECT_GE(r.lossy, 30.0);
+}
+
+// .spz written by splat-transform, i.e. by Niantic's own writer (@adobe/spz, the WASM build of
+// nianticlabs/spz): version 4 (zstd streams, its default) and version 3 (gzip).
+class SpzVersionTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(SpzVersionTest, WrittenBySplatTransform) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const std::string dir = test::temp_dir(), file = dir + "/flowers.spz";
+  const std::string err = test::splat_transform(flowers, file, "--spz-version " + std::to_string(GetParam()));
+  ASSERT_TRUE(err.empty()) << err;
+  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  std::cout << "[ info ] flowers_sh3 -> splat-transform .spz v" << GetParam() << ": ours vs its decode " << psnr
+            << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+// Our .spz writer: splat-transform (Niantic's reader) decodes it as our reader does, and the copy
+// stays close to the original.
+TEST_P(SpzVersionTest, SplatTransformReadsOurs) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const auto r =
+      check_our_writer(flowers, cams, test::temp_dir() + "/ours.spz",
+                       [this](const GaussianModel& m, const std::string& p) { write_spz(m, p, GetParam()); });
+  std::cout << "[ info ] our .spz v" << GetParam() << " of flowers_sh3: splat-transform's decode vs ours " << r.same
+            << " dB, vs the original " << r.lossy << " dB\n";
+  EXPECT_GE(r.same, kSameDecodeDb);
+  EXPECT_GE(r.lossy, 30.0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Versions, SpzVersionTest, ::testing::Values(4, 3),
+                         [](const auto& p) { return "v" + std::to_string(p.param); });
+
+// A .splat file as antimatter15's convert.py writes one (32-byte records; see splat_file.h).
+void write_splat_like_convert_py(const GaussianModel& m, const std::string& path) {
+  std::ofstream out(path, std::ios::binary);
+  const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
+  auto u8 = [](double v) { return static_cast<char>(static_cast<uint8_t>(std::clamp(v, 0.0, 255.0))); };
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    char rec[32];
+    for (int a = 0; a < 3; ++a) {
+      const float p = m.means[3 * i + a], s = std::exp(m.log_scales[3 * i + a]);
+      std::memcpy(rec + 4 * a, &p, 4);
+      std::memcpy(rec + 12 + 4 * a, &s, 4);
+      rec[24 + a] = u8((0.5 + 0.28209479177387814 * m.sh[i * K * 3 + a]) * 255.0);
+    }
+    rec[27] = u8(255.0 / (1.0 + std::exp(-m.opacity_logits[i])));
+    double len = 0;
+    for (int k = 0; k < 4; ++k) len += m.rotations[4 * i + k] * m.rotations[4 * i + k];
+    for (int k = 0; k < 4; ++k) rec[28 + k] = u8(m.rotations[4 * i + k] / std::sqrt(len) * 128.0 + 128.0);
+    out.write(rec, 32);
+  }
+}
+
+TEST(SplatTransformReference, SplatRecordsDecodedAsSplatTransformDoes) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const std::string dir = test::temp_dir(), file = dir + "/flowers.splat";
+  write_splat_like_convert_py(load_scene(flowers), file);
+  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  std::cout << "[ info ] flowers_sh3 as .splat: ours vs splat-transform's decode " << psnr << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+// The format comes from the content: an .spz saved under a .ply name still loads as .spz.
+TEST(SplatTransformReference, FormatDetectedByContent) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  const std::string dir = test::temp_dir(), spz = dir + "/flowers.spz", misnamed = dir + "/really_spz.ply";
+  CONVERT(flowers, spz);
+  std::filesystem::copy_file(spz, misnamed);
+  const GaussianModel a = load_scene(spz), b = load_scene(misnamed);
+  EXPECT_EQ(b.size(), a.size());
+  EXPECT_EQ(b.means, a.means);
+  EXPECT_EQ(b.name, "really_spz");
+}
+
+}  // namespace
+}  // namespace catgs
