@@ -25,6 +25,7 @@ std::uint64_t RenderListBudget::max_entries(int width, int height, std::uint64_t
       static_cast<std::uint64_t>((width + 15) / 16) * static_cast<std::uint64_t>((height + 15) / 16);
   std::uint64_t entries =
       max_entries_per_tile > UINT64_MAX / std::max<std::uint64_t>(tiles, 1) ? UINT64_MAX : max_entries_per_tile * tiles;
+  entries = std::max(entries, min_entries);
   entries = std::min(entries, max_bytes / std::max<std::uint64_t>(bytes_per_entry, 1));
   return std::min<std::uint64_t>(entries, 0xffffffffull);  // 32-bit tile ranges and values
 }

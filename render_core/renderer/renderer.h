@@ -29,13 +29,16 @@ const char* pipeline_name(Pipeline pipeline);
 // The per-frame render-list budget (issue 22): a scene of giant Gaussians lists every one of them
 // in every tile (20 k Gaussians of log-scale 5 made 163 M entries, 4.5 GB and 18 s a 1080p frame),
 // so the list a frame may build is bounded by the viewport, and refused before it is allocated.
-// Rule: entries <= min(max_entries_per_tile x tiles, max_bytes / bytes per entry, 2^32 - 1), with
-// tiles = ceil(W / 16) x ceil(H / 16) and the core's bytes per entry (CPU: 28, the key, the value
-// and the sort's pair). Defaults: 16384 entries a tile (about 14x the largest list of the real
-// scenes' catgs key frames at 1080p, 134 M entries at 1080p) and 4 GiB.
+// Rule: entries <= min(max(max_entries_per_tile x tiles, min_entries), max_bytes / bytes per entry,
+// 2^32 - 1), with tiles = ceil(W / 16) x ceil(H / 16) and the core's bytes per entry (CPU: 28, the
+// key, the value and the sort's pair). Defaults: 16384 entries a tile (134 M entries at 1080p:
+// 1.6x the 7 M city's largest default catgs key-frame list there, 83.5 M in tests/gpu/RESULTS.md),
+// at least 16 M entries (a whole scene in a thumbnail lists every Gaussian in its few tiles) and
+// 4 GiB.
 struct RenderListBudget {
   std::uint64_t max_entries_per_tile = 16384;
   std::uint64_t max_bytes = 4ull << 30;
+  std::uint64_t min_entries = 1ull << 24;
 
   // The most entries a width x height frame may list with `bytes_per_entry` bytes an entry.
   std::uint64_t max_entries(int width, int height, std::uint64_t bytes_per_entry) const;

@@ -47,7 +47,9 @@ TEST(RenderListBudget, RuleFollowsTheViewport) {
   EXPECT_EQ(b.max_entries(1281, 720, 28), b.max_entries_per_tile * 81 * 45);
   // 3840x2160: the bytes cap binds before the per-tile one.
   EXPECT_EQ(b.max_entries(3840, 2160, 28), b.max_bytes / 28);
-  const RenderListBudget tight{1, 1ull << 40};
+  // Small frames may list min_entries (a whole scene seen in a thumbnail).
+  EXPECT_EQ(b.max_entries(64, 48, 28), b.min_entries);
+  const RenderListBudget tight{1, 1ull << 40, 0};
   EXPECT_EQ(tight.max_entries(16, 16, 28), 1u);
   EXPECT_NO_THROW(tight.check(1, 16, 16, 28));
   EXPECT_THROW(tight.check(2, 16, 16, 28), RenderBudgetError);
