@@ -114,7 +114,8 @@ void Server::catch_signals() {
 void Server::start_pools() {
   work_.emplace(io_.get_executor());
   for (int i = 0; i < options_.threads; ++i) workers_.emplace_back([this] { io_.run(); });
-  renders_.start(RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads));
+  renders_.start(RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads),
+                 options_.max_pixels_in_flight);
 }
 
 void Server::print_listening() const {

@@ -26,6 +26,14 @@ int parse_int(const std::string& name, const std::string& v, int lo, int hi) {
   return x;
 }
 
+// "WxH" with each side in [16, 4096] (the protocol's viewport range).
+void parse_size(const std::string& name, const std::string& v, int& width, int& height) {
+  const auto x = v.find('x');
+  if (x == std::string::npos) throw std::invalid_argument(name + " needs WxH, got '" + v + "'");
+  width = parse_int(name + " width", v.substr(0, x), 16, 4096);
+  height = parse_int(name + " height", v.substr(x + 1), 16, 4096);
+}
+
 }  // namespace
 
 std::string server_usage() {
@@ -51,6 +59,11 @@ std::string server_usage() {
          "                        time; more cost CPU that other sessions need)\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
          "  --socket-send-buffer BYTES  SO_SNDBUF per WebSocket (default 524288; 0 = kernel)\n"
+         "  --max-viewport WxH    largest viewport a client may ask for (default 3840x2160; a\n"
+         "                        viewport fits when its pixels are at most W x H and its longer\n"
+         "                        side at most max(W, H)); larger Hello/Resize: INVALID_ARGUMENT\n"
+         "  --max-pixels-in-flight N    pixels of all renders running at once, server-wide\n"
+         "                        (default 0: two frames of --max-viewport); sessions take turns\n"
          "catgs settings (--speculation name=value,...):\n" +
          speculation_settings_usage();
 }
@@ -102,11 +115,16 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.max_frames_in_flight = parse_int(a, v, 1, 16);
     else if (a == "--socket-send-buffer")
       out.socket_send_buffer = parse_int(a, v, 0, 64 << 20);
+    else if (a == "--max-viewport")
+      parse_size(a, v, out.max_viewport_width, out.max_viewport_height);
+    else if (a == "--max-pixels-in-flight")
+      out.max_pixels_in_flight = parse_int(a, v, 0, 1 << 30);
     else
       throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());
   }
   if (out.threads == 0)  // encodes are CPU-bound: one worker per core (x264 adds its own threads)
     out.threads = std::max(4, static_cast<int>(std::thread::hardware_concurrency()));
+  if (out.max_pixels_in_flight == 0) out.max_pixels_in_flight = 2LL * out.max_viewport_width * out.max_viewport_height;
   if (out.renderer != "cpu" && out.renderer != "cuda" && out.renderer != "auto")
     throw std::invalid_argument("--renderer must be cpu, cuda or auto");
   if (out.encoder != "nvenc" && out.encoder != "x264" && out.encoder != "auto")

@@ -24,6 +24,11 @@ struct ServerOptions {
   int encoder_threads = 2;              // per session's encoder; 0 = the library's choice
   int max_frames_in_flight = 2;         // frames queued to the transport but not yet written
   int socket_send_buffer = 512 * 1024;  // SO_SNDBUF of WebSocket sockets, bytes (0 = kernel's)
+  int max_viewport_width = 3840;        // --max-viewport WxH: larger Hello/Resize -> ERROR_INVALID_ARGUMENT
+  int max_viewport_height = 2160;       //   (pixel count and longer side; message_validation.h)
+  // Pixels of the renders running at once, server-wide (render_scheduler.h); 0 = two frames of
+  // the largest viewport.
+  long long max_pixels_in_flight = 0;
 };
 
 // Parses argv (`--name value` pairs, `--help`). Fills defaults for scene and web_root from the

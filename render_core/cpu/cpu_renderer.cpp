@@ -52,7 +52,7 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   const auto t0 = clock::now();
   preprocess(*model_, chunks_, camera, options_.pipeline, projected_);
   const auto t1 = clock::now();
-  emit_keys(projected_, grid, options_.pipeline, list_);
+  emit_keys(projected_, grid, options_.pipeline, options_.list_budget, list_);
   const auto t2 = clock::now();
   sort_render_list(list_);
   const auto t3 = clock::now();

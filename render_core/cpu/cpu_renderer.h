@@ -118,8 +118,14 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
 // Stage 2 (cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
 // its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
 // the trail test, exact the ellipse test, vanilla every tile of the rectangle.
-// Throws std::length_error past 2^32 - 1 entries (values and ranges are 32-bit).
-void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline, RenderList& list);
+// Throws RenderBudgetError past `budget` (renderer.h, with kBytesPerListEntry) and
+// std::length_error past 2^32 - 1 entries (values and ranges are 32-bit), before allocating.
+void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
+               const RenderListBudget& budget, RenderList& list);
+
+// Host bytes a render-list entry takes: its key (8) and value (4), and the sort's (key, value)
+// pair (16 with padding).
+inline constexpr std::uint64_t kBytesPerListEntry = 28;
 
 // Stage 3 (cpu/sort.cpp): sorts the list by key; equal keys keep emission order (a stable
 // radix sort on the GPU).

@@ -8,7 +8,8 @@
 
 namespace catgs::cpu {
 
-void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline, RenderList& list) {
+void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
+               const RenderListBudget& budget, RenderList& list) {
   const std::size_t n = projected.tiles_touched.size();
   list.offsets.resize(n);
   uint64_t total = 0;
@@ -16,6 +17,8 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
     list.offsets[i] = total;
     total += projected.tiles_touched[i];
   }
+  // Before the list is allocated: the budget bounds what a pathological scene can make us take.
+  budget.check(total, grid.width, grid.height, kBytesPerListEntry);
   if (total > std::numeric_limits<uint32_t>::max())
     throw std::length_error("render list of " + std::to_string(total) +
                             " entries exceeds the 32-bit range of tile ranges");

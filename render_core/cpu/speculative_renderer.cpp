@@ -50,7 +50,7 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
     preprocess(*model_, chunks_, camera, Pipeline::exact, projected_);
   const auto t1 = clock::now();
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
-  emit_keys(projected_, grid, stages, list_);
+  emit_keys(projected_, grid, stages, options_.list_budget, list_);
   const auto t2 = clock::now();
   sort_render_list(list_);
   const auto t3 = clock::now();

@@ -101,6 +101,10 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   const stages::DepthKeyPacking packing =
       stages::depth_key_packing(~static_cast<uint32_t>(host_counts[kReadDepthLowComplement - kReadListLength]),
                                 static_cast<uint32_t>(host_counts[kReadDepthHigh - kReadListLength]));
+  // Where the CUDA core would mirror the CPU core's RenderOptions::list_budget (renderer.h; issue
+  // 22): a check of `entries` here, before the buffers below grow, with 24 bytes an entry (two key
+  // and two value buffers). Not enabled yet: the catgs benchmarks' wide windows list up to 722 M
+  // entries at 1080p on purpose (tests/gpu/RESULTS.md), so the GPU needs its own defaults.
   if (entries > std::numeric_limits<uint32_t>::max())
     throw std::length_error("CUDA renderer: render list of " + std::to_string(entries) +
                             " entries exceeds 2^32 - 1 (32-bit tile ranges); lower the resolution "

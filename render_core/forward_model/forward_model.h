@@ -97,10 +97,12 @@ CATGS_HD glm::vec3 covariance_2d(const Cov3& S, const glm::mat3& W, glm::vec3 p_
 }
 
 // Conic = inverse of the 2D covariance, (A, B, C) with q(d) = A dx^2 + 2 B dx dy + C dy^2.
-// Returns false when the covariance is singular.
+// Returns false when the covariance is singular or not finite (a Gaussian whose scale overflows
+// float: there is no ellipse to draw, and its NaN conic would reach the blend).
 CATGS_HD bool conic_from_cov2d(glm::vec3 cov, glm::vec3* conic) {
   const float det = cov.x * cov.z - cov.y * cov.y;
-  if (det == 0.0f) return false;
+  // det - det is 0 for every finite det and NaN for Inf or NaN (no isfinite needed on the device).
+  if (det == 0.0f || !(det - det == 0.0f)) return false;
   const float inv = 1.0f / det;
   *conic = glm::vec3(cov.z * inv, -cov.y * inv, cov.x * inv);
   return true;
@@ -131,13 +133,22 @@ struct TileRect {
 };
 CATGS_HD int tile_count(const TileRect& r) { return (r.x1 > r.x0 && r.y1 > r.y0) ? (r.x1 - r.x0) * (r.y1 - r.y0) : 0; }
 
-// vanilla: the reference 3DGS getRect over a square of half-size `radius` around `mean`.
+// A tile coordinate clamped to [0, hi] in float before the conversion: a float outside int's range
+// (an infinite radius, a mean far off screen) would make static_cast<int> undefined. NaN gives 0.
+// Truncation toward zero, as the reference's int conversion, for every value inside the range.
+CATGS_HD int clamp_tile_coord(float v, int hi) {
+  if (!(v > 0.0f)) return 0;
+  if (v >= static_cast<float>(hi)) return hi;
+  return static_cast<int>(v);
+}
+
+// vanilla: the reference 3DGS getRect over a square of half-size `radius` around `mean`. An
+// infinite radius covers the grid; a NaN mean or radius gives an empty rectangle.
 CATGS_HD TileRect square_tile_rect(glm::vec2 mean, float radius, int grid_w, int grid_h) {
-  auto clampi = [](int v, int hi) { return v < 0 ? 0 : (v > hi ? hi : v); };
-  return {clampi(static_cast<int>((mean.x - radius) / kTileSize), grid_w),
-          clampi(static_cast<int>((mean.y - radius) / kTileSize), grid_h),
-          clampi(static_cast<int>((mean.x + radius + kTileSize - 1) / kTileSize), grid_w),
-          clampi(static_cast<int>((mean.y + radius + kTileSize - 1) / kTileSize), grid_h)};
+  return {clamp_tile_coord((mean.x - radius) / kTileSize, grid_w),
+          clamp_tile_coord((mean.y - radius) / kTileSize, grid_h),
+          clamp_tile_coord((mean.x + radius + kTileSize - 1) / kTileSize, grid_w),
+          clamp_tile_coord((mean.y + radius + kTileSize - 1) / kTileSize, grid_h)};
 }
 
 // exact: q_max such that opacity * exp(-q / 2) >= 1/255 <=> q <= q_max = 2 ln(255 opacity).

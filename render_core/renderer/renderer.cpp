@@ -1,5 +1,8 @@
 // Renderer's default colour-converted render: host frame, CPU conversion (yuv420.h).
+#include <algorithm>
 #include <chrono>
+#include <cstdint>
+#include <string>
 #include <stdexcept>
 
 #include "renderer/renderer.h"
@@ -14,6 +17,27 @@ double Renderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv
   const auto t0 = std::chrono::steady_clock::now();
   rgba_to_yuv420_bt709(yuv_source_.rgba8.data(), yuv_source_.width, yuv_source_.height, yuv_source_.width * 4, out);
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::uint64_t RenderListBudget::max_entries(int width, int height, std::uint64_t bytes_per_entry) const {
+  // Tile counts come from validated cameras (sides <= kMaxImageSide): the products fit 64 bits.
+  const std::uint64_t tiles =
+      static_cast<std::uint64_t>((width + 15) / 16) * static_cast<std::uint64_t>((height + 15) / 16);
+  std::uint64_t entries =
+      max_entries_per_tile > UINT64_MAX / std::max<std::uint64_t>(tiles, 1) ? UINT64_MAX : max_entries_per_tile * tiles;
+  entries = std::max(entries, min_entries);
+  entries = std::min(entries, max_bytes / std::max<std::uint64_t>(bytes_per_entry, 1));
+  return std::min<std::uint64_t>(entries, 0xffffffffull);  // 32-bit tile ranges and values
+}
+
+void RenderListBudget::check(std::uint64_t entries, int width, int height, std::uint64_t bytes_per_entry) const {
+  const std::uint64_t limit = max_entries(width, height, bytes_per_entry);
+  if (entries <= limit) return;
+  throw RenderBudgetError(
+      "render list of " + std::to_string(entries) + " entries (" + std::to_string(entries * bytes_per_entry >> 20) +
+      " MiB) exceeds the render-list budget of " + std::to_string(limit) + " entries for a " + std::to_string(width) +
+      "x" + std::to_string(height) + " frame (" + std::to_string(max_entries_per_tile) + " a tile, at most " +
+      std::to_string(max_bytes >> 20) + " MiB): the scene has Gaussians that cover much of the screen");
 }
 
 }  // namespace catgs

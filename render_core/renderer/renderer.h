@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -25,10 +26,38 @@ enum class Pipeline { vanilla, exact, catgs };
 Pipeline parse_pipeline(const std::string& name);
 const char* pipeline_name(Pipeline pipeline);
 
+// The per-frame render-list budget (issue 22): a scene of giant Gaussians lists every one of them
+// in every tile (20 k Gaussians of log-scale 5 made 163 M entries, 4.5 GB and 18 s a 1080p frame),
+// so the list a frame may build is bounded by the viewport, and refused before it is allocated.
+// Rule: entries <= min(max(max_entries_per_tile x tiles, min_entries), max_bytes / bytes per entry,
+// 2^32 - 1), with tiles = ceil(W / 16) x ceil(H / 16) and the core's bytes per entry (CPU: 28, the
+// key, the value and the sort's pair). Defaults: 16384 entries a tile (134 M entries at 1080p:
+// 1.6x the 7 M city's largest default catgs key-frame list there, 83.5 M in tests/gpu/RESULTS.md),
+// at least 16 M entries (a whole scene in a thumbnail lists every Gaussian in its few tiles) and
+// 4 GiB.
+struct RenderListBudget {
+  std::uint64_t max_entries_per_tile = 16384;
+  std::uint64_t max_bytes = 4ull << 30;
+  std::uint64_t min_entries = 1ull << 24;
+
+  // The most entries a width x height frame may list with `bytes_per_entry` bytes an entry.
+  std::uint64_t max_entries(int width, int height, std::uint64_t bytes_per_entry) const;
+  // Throws RenderBudgetError when `entries` exceeds max_entries(...); the message names the
+  // entries, the bytes they would take, the budget and the rule.
+  void check(std::uint64_t entries, int width, int height, std::uint64_t bytes_per_entry) const;
+};
+
+// A frame whose render list would exceed the budget (a std::length_error, as the 2^32 limit).
+class RenderBudgetError : public std::length_error {
+ public:
+  using std::length_error::length_error;
+};
+
 struct RenderOptions {
   Pipeline pipeline = Pipeline::exact;
   glm::vec3 background{0.0f};     // linear RGB in [0, 1], composited behind the Gaussians
   SpeculationParams speculation;  // catgs only
+  RenderListBudget list_budget;   // enforced by the CPU core before the list is allocated
 };
 
 // An image in host memory, row-major, top row first.

@@ -12,7 +12,12 @@ namespace catgs::ply {
 
 namespace {
 constexpr std::size_t kMaxHeaderBytes = 1 << 20;
-}
+
+// a * b and a + b, or false when the result would not fit 64 bits (a header's counts are
+// attacker-controlled: a wrapped product would size a buffer smaller than the rows written to it).
+bool checked_mul(uint64_t a, uint64_t b, uint64_t* out) { return !__builtin_mul_overflow(a, b, out); }
+bool checked_add(uint64_t a, uint64_t b, uint64_t* out) { return !__builtin_add_overflow(a, b, out); }
+}  // namespace
 
 bool parse_type(const std::string& n, Type* t) {
   if (n == "char" || n == "int8")
@@ -104,6 +109,12 @@ std::string read_header_text(std::istream& in, const std::string& path) {
   std::string header, line;
   bool ended = false;
   while (header.size() < kMaxHeaderBytes && std::getline(in, line)) {
+    // getline stops at the end of the file too: a last line without '\n' would make the header
+    // one byte longer than the file, and the body offset would point past its end.
+    if (in.eof()) {
+      if (line == "end_header" || line == "end_header\r") fail(path, "no newline after end_header");
+      break;
+    }
     header += line + "\n";
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line == "end_header") {
@@ -125,6 +136,7 @@ void parse_element(std::istringstream& ls, const std::string& where, File& f) {
   const auto res = std::from_chars(count.data(), count.data() + count.size(), n);
   if (e.name.empty() || res.ec != std::errc() || res.ptr != count.data() + count.size())
     fail(f.path, "malformed element count in " + where);
+  if (f.element(e.name)) fail(f.path, "duplicate element '" + e.name + "' in " + where);
   e.count = n;
   f.elements.push_back(std::move(e));
 }
@@ -182,6 +194,7 @@ void parse_header(const std::string& header, File& f) {
 // A binary body: sizes checked against the file before allocating anything a header count could
 // inflate, then the whole file kept in f.bytes.
 void read_binary_body(std::istream& in, uint64_t file_size, uint64_t body_offset, File& f) {
+  // Invariant: at <= file_size, so file_size - at never wraps.
   uint64_t at = body_offset;
   for (auto& e : f.elements) {
     if (e.row_size == 0 && e.count > 0) fail(f.path, "element '" + e.name + "' has no properties");
@@ -202,7 +215,14 @@ void read_binary_body(std::istream& in, uint64_t file_size, uint64_t body_offset
 // An ascii body: every value parsed into the elements' ascii_rows.
 void read_ascii_body(std::istream& in, uint64_t body_offset, uint64_t body, File& f) {
   uint64_t values = 0;
-  for (const auto& e : f.elements) values += e.count * e.properties.size();
+  for (const auto& e : f.elements) {
+    // Rows without values would make the row loop below run `count` times over nothing.
+    if (e.properties.empty() && e.count > 0) fail(f.path, "element '" + e.name + "' has no properties");
+    uint64_t element_values = 0;
+    if (!checked_mul(e.count, e.properties.size(), &element_values) || !checked_add(values, element_values, &values))
+      fail(f.path, "element '" + e.name + "' declares " + std::to_string(e.count) + " rows of " +
+                       std::to_string(e.properties.size()) + " values: more than 2^64 values");
+  }
   // Each ascii value takes at least two bytes (a digit and a separator).
   if (values > body / 2 + 1)
     fail(f.path, "truncated: header declares " + std::to_string(values) + " values but the body has " +
@@ -242,6 +262,7 @@ File read_file(const std::string& path) {
   f.path = path;
   const std::string header = read_header_text(in, path);
   const uint64_t body_offset = header.size();
+  if (body_offset > file_size) fail(path, "header runs past the end of the file");
   parse_header(header, f);
   if (f.ascii)
     read_ascii_body(in, body_offset, file_size - body_offset, f);

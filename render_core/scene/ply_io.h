@@ -24,8 +24,11 @@ namespace catgs {
 // Opacity logits of +-inf (INRIA) or alpha 0 / 255 (compressed) clamp to +-kOpacityLogitLimit.
 //
 // Throws SceneFileError (naming `path`) when the file is missing, is not a PLY, has a malformed
-// header, lacks a property, is truncated, declares counts the file size cannot hold (checked
-// before any allocation), or holds NaN (or an infinite value other than an opacity logit).
+// header (no newline after end_header, a duplicate element), lacks a property, is truncated,
+// declares counts the file size cannot hold or whose count x size overflows 64 bits (checked
+// before any allocation), has an element with rows but no properties, declares packed_* other
+// than uint32 or compressed f_rest_* other than uint8, or holds NaN, an infinite value other
+// than an opacity logit, or values beyond float range.
 GaussianModel load_scene(const std::string& path);
 
 // Writes INRIA 3DGS PLY, binary little endian, SH degree of the model. Throws SceneFileError.

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <string>
 
 #include "scene/ply_io.h"
@@ -43,11 +44,13 @@ int require(const ply::Element& e, const std::string& name, const std::string& p
   return i;
 }
 
-// Stores v after checking it is finite.
+// Stores v after checking it is finite and within float range (a double past it would make the
+// conversion undefined).
 float finite(double v, const ply::Element& e, uint64_t row, int prop, const std::string& path) {
-  if (!std::isfinite(v))
-    throw SceneFileError(path, "non-finite value in element '" + e.name + "' row " + std::to_string(row) +
-                                   " property '" + e.properties[static_cast<std::size_t>(prop)].name + "'");
+  const std::string where = " in element '" + e.name + "' row " + std::to_string(row) + " property '" +
+                            e.properties[static_cast<std::size_t>(prop)].name + "'";
+  if (!std::isfinite(v)) throw SceneFileError(path, "non-finite value" + where);
+  if (std::fabs(v) > std::numeric_limits<float>::max()) throw SceneFileError(path, "value outside float range" + where);
   return static_cast<float>(v);
 }
 
@@ -55,6 +58,14 @@ float finite(double v, const ply::Element& e, uint64_t row, int prop, const std:
 float opacity_logit(double v, const ply::Element& e, uint64_t row, int prop, const std::string& path) {
   if (std::isinf(v)) return v > 0 ? kOpacityLogitLimit : -kOpacityLogitLimit;
   return finite(v, e, row, prop, path);
+}
+
+// Requires property `index` of `e` to have type `type`: the compressed format's packed fields
+// are bit fields, and reading another type as them would convert out-of-range values.
+void require_type(const ply::Element& e, int index, ply::Type type, const char* type_name, const std::string& path) {
+  const ply::Property& p = e.properties[static_cast<std::size_t>(index)];
+  if (p.type != type)
+    throw SceneFileError(path, "property '" + p.name + "' of element '" + e.name + "' must be " + type_name);
 }
 
 void set_sh_rest(GaussianModel& m, std::size_t i, int rest_index, float v) {
@@ -116,6 +127,7 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, con
   for (int k = 0; k < 6; ++k) color_ranges &= (color_idx[k] = chunk.find(color_names[k])) >= 0;
   const int pp = require(v, "packed_position", path), pr = require(v, "packed_rotation", path),
             ps = require(v, "packed_scale", path), pc = require(v, "packed_color", path);
+  for (const int packed : {pp, pr, ps, pc}) require_type(v, packed, ply::Type::u32, "uint32", path);
 
   const ply::Element* sh = f.element("sh");
   int rest = 0;
@@ -124,6 +136,8 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, con
       throw SceneFileError(path, "element 'sh' has " + std::to_string(sh->count) + " rows but there are " +
                                      std::to_string(v.count) + " Gaussians");
     rest = count_rest(*sh, path);
+    for (int j = 0; j < rest; ++j)
+      require_type(*sh, sh->find("f_rest_" + std::to_string(j)), ply::Type::u8, "uint8", path);
   }
   GaussianModel m;
   m.sh_degree = degree_of_rest_count(rest);

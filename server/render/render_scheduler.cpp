@@ -1,5 +1,7 @@
 #include "render/render_scheduler.h"
 
+#include <iostream>
+
 namespace catgs::server {
 
 RenderScheduler::~RenderScheduler() {
@@ -11,30 +13,114 @@ int RenderScheduler::default_lanes(int requested, const std::string& renderer_ki
   return renderer_kind == "cuda" ? 4 : threads;
 }
 
-void RenderScheduler::start(int lanes) {
-  // The guard keeps the lanes running while the FIFO is momentarily empty.
-  work_.emplace(io_.get_executor());
-  for (int i = 0; i < lanes; ++i) lanes_.emplace_back([this] { io_.run(); });
+void RenderScheduler::start(int lanes, std::int64_t max_pixels_in_flight) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = false;
+    max_pixels_in_flight_ = max_pixels_in_flight;
+  }
+  for (int i = 0; i < lanes; ++i) lanes_.emplace_back([this] { lane_loop(); });
+}
+
+void RenderScheduler::enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto& q = queues_[owner];
+    if (q.empty()) turn_.push_back(owner);  // joins the round at its end
+    q.push_back(Entry{pixels, std::move(task)});
+    ++queued_;
+  }
+  changed_.notify_all();  // drain() waits on the same condition: a lane must be among the woken
+}
+
+bool RenderScheduler::take_next(Entry& out) {
+  if (turn_.empty()) return false;
+  const Owner owner = turn_.front();
+  auto it = queues_.find(owner);
+  const std::int64_t pixels = it->second.front().pixels;
+  // The cap: room for this job, or nothing else running (a job over the cap runs alone).
+  if (running_ > 0 && pixels_in_flight_ + pixels > max_pixels_in_flight_) return false;
+  out = std::move(it->second.front());
+  it->second.pop_front();
+  turn_.pop_front();
+  if (it->second.empty())
+    queues_.erase(it);
+  else
+    turn_.push_back(owner);  // one job per owner per round
+  --queued_;
+  ++running_;
+  pixels_in_flight_ += pixels;
+  return true;
+}
+
+void RenderScheduler::run_task(Entry& e) {
+  try {
+    e.task->run();
+  } catch (const std::exception& ex) {
+    std::cerr << "render lane: a job threw: " << ex.what() << "\n";
+  } catch (...) {
+    std::cerr << "render lane: a job threw\n";
+  }
+  e.task.reset();  // the job's captures (a session, its buffers) go before the lane waits again
+}
+
+void RenderScheduler::lane_loop() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  for (;;) {
+    Entry e;
+    changed_.wait(lock, [&] { return stopping_ || take_next(e); });
+    if (!e.task) return;  // stopping
+    lock.unlock();
+    run_task(e);
+    lock.lock();
+    --running_;
+    pixels_in_flight_ -= e.pixels;
+    // Room freed: any lane may now start the next owner's job; drain() may be waiting too.
+    changed_.notify_all();
+  }
+}
+
+std::size_t RenderScheduler::queued() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return queued_;
+}
+
+std::int64_t RenderScheduler::pixels_in_flight() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return pixels_in_flight_;
 }
 
 bool RenderScheduler::drain(std::chrono::steady_clock::time_point deadline) {
-  // Without the guard, run() returns in every lane once the queue is empty: stopped() then
-  // says the FIFO ran dry.
-  work_.reset();
-  while (!io_.stopped() && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  return io_.stopped();
+  std::unique_lock<std::mutex> lock(mutex_);
+  return changed_.wait_until(lock, deadline, [&] { return queued_ == 0 && running_ == 0; });
 }
 
 void RenderScheduler::stop() {
-  work_.reset();
-  io_.stop();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  changed_.notify_all();
   for (auto& t : lanes_) t.join();
   lanes_.clear();
-  // Ready for poll(): a stopped io_context runs nothing until restarted.
-  io_.restart();
 }
 
-std::size_t RenderScheduler::poll() { return io_.poll(); }
+std::size_t RenderScheduler::poll() {
+  std::size_t ran = 0;
+  for (;;) {
+    Entry e;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!take_next(e)) return ran;
+    }
+    run_task(e);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      --running_;
+      pixels_in_flight_ -= e.pixels;
+    }
+    ++ran;
+  }
+}
 
 }  // namespace catgs::server

@@ -1,11 +1,19 @@
-// The render scheduler: the FIFO of render lanes every session's renders share (DESIGN.md
-// "Server").
+// The render scheduler: the render lanes every session's renders share, taken by sessions in turn
+// (DESIGN.md "Server").
 //
-// Sessions post their render jobs here; a fixed number of "render lanes" (threads) take them
-// first come first served. A FIFO rather than the worker pool: sessions take turns on the GPU in
-// arrival order, so a session whose frames need more host syncs (catgs key frames) cannot starve
-// the others, and a render waiting for its turn holds no worker thread (strands, encodes and
-// timers keep running on the pool meanwhile).
+// Sessions post their render jobs here under their own key (the connection id); a fixed number of
+// "render lanes" (threads) run them. Fairness is per session, not per request: the lanes serve
+// the sessions with queued jobs in rounds, one job per session per round (a session re-enters at
+// the back of the round after each job), so a session that posts many or large jobs cannot push
+// the others' frames back by more than one of its jobs. A render waiting for its turn holds no
+// worker thread (strands, encodes and timers keep running on the pool meanwhile).
+//
+// Pixels in flight: each job declares its pixel count (width x height). A job starts only while
+// the pixels of the jobs running plus its own stay within the server-wide cap
+// (--max-pixels-in-flight), so memory that scales with frame size (render lists, image buffers)
+// stays bounded however many large-frame sessions connect; a job larger than the cap still runs,
+// alone. The next session in turn waits for room rather than being overtaken by smaller jobs, so
+// a large frame cannot starve.
 //
 // Lane count (default_lanes): --render-lanes when given; otherwise 4 with the CUDA renderer (a
 // few renders in flight share one GPU) and --threads with the CPU renderer (a CPU render is CPU
@@ -15,23 +23,25 @@
 // poll() belong to the thread that owns the server (start-up and shutdown), in that order.
 #pragma once
 
-#include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
-
-#include <boost/asio/executor_work_guard.hpp>
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/post.hpp>
-
 #include <chrono>
+#include <condition_variable>
 #include <cstddef>
-#include <optional>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace catgs::server {
 
 class RenderScheduler {
  public:
+  using Owner = std::uint64_t;  // whose job: a session's connection id
+
   RenderScheduler() = default;
   // Stops and joins lanes still running (a server that never reached its orderly shutdown); jobs
   // still queued are destroyed without running.
@@ -43,20 +53,26 @@ class RenderScheduler {
   // `renderer_kind` ("cpu" or "cuda") and the worker count `threads`.
   static int default_lanes(int requested, const std::string& renderer_kind, int threads);
 
-  // Starts `lanes` (>= 1) lane threads. Jobs posted before start() wait in the FIFO.
-  void start(int lanes);
+  // Starts `lanes` (>= 1) lane threads with a cap of `max_pixels_in_flight` (> 0) pixels rendering
+  // at once. Jobs posted before start() wait in their queues.
+  void start(int lanes, std::int64_t max_pixels_in_flight);
   // Lanes started.
   int lanes() const { return static_cast<int>(lanes_.size()); }
 
-  // Thread-safe. Queues `job` (a void() callable) behind every job posted before it; a lane runs
-  // it. A job must not throw (an exception would end its lane's thread and the process).
+  // Thread-safe. Queues `job` (a void() callable, move-only allowed) of `pixels` pixels behind
+  // `owner`'s earlier jobs; a lane runs it in `owner`'s turn. A job must not throw (a throw is
+  // logged and the job counts as done).
   template <class Job>
-  void post(Job&& job) {
-    boost::asio::post(io_, std::forward<Job>(job));
+  void post(Owner owner, std::int64_t pixels, Job&& job) {
+    enqueue(owner, pixels, std::make_unique<Task<std::decay_t<Job>>>(std::forward<Job>(job)));
   }
 
+  // Thread-safe: jobs queued (not running) and pixels of the jobs running, for metrics and tests.
+  std::size_t queued() const;
+  std::int64_t pixels_in_flight() const;
+
   // Shutdown, step 1: no more work is expected (sessions are closed); waits until the lanes
-  // have run every queued job or `deadline` passes. Returns true when the FIFO ran dry.
+  // have run every queued job or `deadline` passes. Returns true when the queues ran dry.
   bool drain(std::chrono::steady_clock::time_point deadline);
   // Step 2: stops the lanes (a job in progress finishes; queued ones stay queued) and joins them.
   void stop();
@@ -65,8 +81,37 @@ class RenderScheduler {
   std::size_t poll();
 
  private:
-  boost::asio::io_context io_;
-  std::optional<boost::asio::executor_work_guard<boost::asio::io_context::executor_type>> work_;
+  struct TaskBase {
+    virtual ~TaskBase() = default;
+    virtual void run() = 0;
+  };
+  template <class F>
+  struct Task final : TaskBase {
+    explicit Task(F&& f) : fn(std::move(f)) {}
+    explicit Task(const F& f) : fn(f) {}
+    void run() override { fn(); }
+    F fn;
+  };
+  struct Entry {
+    std::int64_t pixels = 0;
+    std::unique_ptr<TaskBase> task;
+  };
+
+  void enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
+  void lane_loop();
+  // Under mutex_: the next owner's next job when it may start now (nullopt-like empty Entry).
+  bool take_next(Entry& out);
+  static void run_task(Entry& e);
+
+  mutable std::mutex mutex_;
+  std::condition_variable changed_;
+  std::map<Owner, std::deque<Entry>> queues_;  // owners with queued jobs
+  std::deque<Owner> turn_;                     // those owners, in the order they are served
+  std::size_t queued_ = 0;
+  int running_ = 0;
+  std::int64_t pixels_in_flight_ = 0;
+  std::int64_t max_pixels_in_flight_ = 0;
+  bool stopping_ = false;
   std::vector<std::thread> lanes_;
 };
 

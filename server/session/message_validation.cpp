@@ -1,25 +1,33 @@
 #include "session/message_validation.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace catgs::server {
 
-std::optional<Violation> check_viewport(std::uint32_t width, std::uint32_t height, Viewport& out) {
+std::optional<Violation> check_viewport(std::uint32_t width, std::uint32_t height, const ViewportLimit& limit,
+                                        Viewport& out) {
   auto ok = [](std::uint32_t v) { return v >= kMinViewport && v <= kMaxViewport; };
-  if (!ok(width) || !ok(height))
-    return Violation{pb::ERROR_INVALID_ARGUMENT,
-                     "viewport " + std::to_string(width) + "x" + std::to_string(height) + " outside 16..4096"};
+  const std::string size = "viewport " + std::to_string(width) + "x" + std::to_string(height);
+  if (!ok(width) || !ok(height)) return Violation{pb::ERROR_INVALID_ARGUMENT, size + " outside 16..4096"};
+  // Both sides are at most 4096 here: the products fit 64 bits.
+  const std::uint64_t pixels = std::uint64_t{width} * height;
+  const std::uint64_t max_pixels = static_cast<std::uint64_t>(limit.width) * static_cast<std::uint64_t>(limit.height);
+  const std::uint32_t max_side = static_cast<std::uint32_t>(std::max(limit.width, limit.height));
+  if (pixels > max_pixels || std::max(width, height) > max_side)
+    return Violation{pb::ERROR_INVALID_ARGUMENT, size + " larger than the server's --max-viewport " +
+                                                     std::to_string(limit.width) + "x" + std::to_string(limit.height)};
   // H.264 4:2:0 needs even sizes.
   out.width = static_cast<int>(width & ~1u);
   out.height = static_cast<int>(height & ~1u);
   return std::nullopt;
 }
 
-std::optional<Violation> check_hello(const pb::Hello& hello, Viewport& out) {
+std::optional<Violation> check_hello(const pb::Hello& hello, const ViewportLimit& limit, Viewport& out) {
   if (hello.protocol_version() != 1)
     return Violation{pb::ERROR_PROTOCOL,
                      "unsupported protocol_version " + std::to_string(hello.protocol_version()) + " (server speaks 1)"};
-  return check_viewport(hello.viewport_width(), hello.viewport_height(), out);
+  return check_viewport(hello.viewport_width(), hello.viewport_height(), limit, out);
 }
 
 std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
@@ -33,7 +41,11 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
     if (!std::isfinite(v)) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose has NaN or Inf"};
   // Positions beyond float range would turn into Inf in the renderer.
   for (double v : {p.x(), p.y(), p.z()})
-    if (std::fabs(v) > 1e30) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose position too large"};
+    if (std::fabs(v) > kMaxPoseComponent) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose position too large"};
+  // A component past 1e154 would overflow the squared norm to Inf and normalise to zero.
+  for (double v : {q.w(), q.x(), q.y(), q.z()})
+    if (std::fabs(v) > kMaxPoseComponent)
+      return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose orientation component beyond 1e30"};
   const double norm = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
   if (!(norm > 1e-6)) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose orientation is a zero quaternion"};
   if (!(pose.vertical_fov_deg() > kMinFovDeg && pose.vertical_fov_deg() < kMaxFovDeg))

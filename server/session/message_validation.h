@@ -15,8 +15,9 @@ namespace pb = ::catgs::stream::v1;
 
 inline constexpr int kMinViewport = 16;
 inline constexpr int kMaxViewport = 4096;
-inline constexpr double kMinFovDeg = 1.0;    // exclusive
-inline constexpr double kMaxFovDeg = 170.0;  // exclusive
+inline constexpr double kMinFovDeg = 1.0;          // exclusive
+inline constexpr double kMaxFovDeg = 170.0;        // exclusive
+inline constexpr double kMaxPoseComponent = 1e30;  // |position| and |quaternion| components
 
 // A protocol violation: the code and reason sent to the client in Error.
 struct Violation {
@@ -29,12 +30,20 @@ struct Viewport {
   int width = 0, height = 0;
 };
 
-// Validates a viewport (each side in [16, 4096]) and rounds odd sizes down to even.
-// Returns the violation (ERROR_INVALID_ARGUMENT) for an out-of-range size.
-std::optional<Violation> check_viewport(std::uint32_t width, std::uint32_t height, Viewport& out);
+// The server's largest viewport (--max-viewport WxH, default 3840x2160): a viewport fits when its
+// pixel count is at most width x height and its longer side at most the longer of the two, so
+// the same limit admits portrait and landscape clients.
+struct ViewportLimit {
+  int width = 3840, height = 2160;
+};
+
+// Validates a viewport (each side in [16, 4096], within `limit`) and rounds odd sizes down to
+// even. Returns the violation (ERROR_INVALID_ARGUMENT) for an out-of-range size.
+std::optional<Violation> check_viewport(std::uint32_t width, std::uint32_t height, const ViewportLimit& limit,
+                                        Viewport& out);
 
 // Validates Hello: protocol_version 1 (else ERROR_PROTOCOL) and the viewport.
-std::optional<Violation> check_hello(const pb::Hello& hello, Viewport& out);
+std::optional<Violation> check_hello(const pb::Hello& hello, const ViewportLimit& limit, Viewport& out);
 
 // A pose ready for the renderer (world units; camera-to-world rotation, OpenCV axes).
 struct CameraPose {
@@ -43,8 +52,10 @@ struct CameraPose {
   float vertical_fov_deg = 60.0f;
 };
 
-// Validates Pose: position and orientation present, every number finite, quaternion not zero
-// (it is normalised), fov in (1, 170) degrees. ERROR_INVALID_ARGUMENT otherwise.
+// Validates Pose: position and orientation present, every number finite, position components
+// and quaternion components within +-1e30 (so neither float conversion nor the squared norm
+// overflows), quaternion not zero (it is normalised), fov in (1, 170) degrees.
+// ERROR_INVALID_ARGUMENT otherwise.
 std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out);
 
 }  // namespace catgs::server

@@ -74,6 +74,7 @@ void Session::post_sent() {
 }
 
 void Session::post_closed() {
+  gone_ = true;  // now, not on the strand: a render job about to start can be skipped at once
   boost::asio::post(strand_, [self = shared_from_this()] {
     self->end_open_state();
     self->state_ = State::closed;
@@ -85,6 +86,10 @@ void Session::post_closed() {
 void Session::post_shutdown() {
   boost::asio::post(strand_,
                     [self = shared_from_this()] { self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down"); });
+}
+
+ViewportLimit Session::viewport_limit() const {
+  return {shared_.options.max_viewport_width, shared_.options.max_viewport_height};
 }
 
 void Session::end_open_state() {
@@ -105,6 +110,7 @@ void Session::send(const pb::ServerMessage& message) {
 void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued) {
   if (state_ == State::closed) return;
   state_ = State::closed;
+  gone_ = true;
   tick_.cancel();
   end_open_state();
   shared_.metrics.session_errors_total++;
@@ -139,7 +145,7 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
       return handle_pose(msg.pose(), received);
     case pb::ClientMessage::kResize: {
       Viewport v;
-      if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), v))
+      if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), viewport_limit(), v))
         return fail(bad->code, bad->reason);
       width_ = v.width;
       height_ = v.height;
@@ -165,7 +171,7 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
 
 void Session::handle_hello(const pb::Hello& hello) {
   Viewport v;
-  if (auto bad = check_hello(hello, v)) return fail(bad->code, bad->reason);
+  if (auto bad = check_hello(hello, viewport_limit(), v)) return fail(bad->code, bad->reason);
   if (!shared_.options.token.empty() && hello.token() != shared_.options.token)
     return fail(pb::ERROR_UNAUTHORIZED, "wrong or missing token");
   if (hello.codecs_size() > 0) {
@@ -246,8 +252,9 @@ void Session::maybe_start_render() {
   pending_.reset();
   force_idr_ = false;
   rendering_ = true;
+  const std::int64_t pixels = static_cast<std::int64_t>(job.width) * job.height;
   if (!pipelined_) {
-    shared_.renders.post([self = shared_from_this(), job] {
+    shared_.renders.post(id_, pixels, [self = shared_from_this(), job] {
       JobResult result = self->run_render_and_encode(job);
       boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
         self->rendering_ = false;
@@ -256,7 +263,7 @@ void Session::maybe_start_render() {
     });
     return;
   }
-  shared_.renders.post([self = shared_from_this(), job, planes = std::move(planes)]() mutable {
+  shared_.renders.post(id_, pixels, [self = shared_from_this(), job, planes = std::move(planes)]() mutable {
     Rendered frame = self->run_render(job, std::move(planes));
     boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
       self->rendering_ = false;
@@ -314,6 +321,10 @@ Session::Rendered Session::run_render(Job job, std::unique_ptr<Yuv420Image> plan
   Rendered r;
   r.job = std::move(job);
   r.planes = std::move(planes);
+  if (gone_) {  // nobody to send it to: the lane moves on to the next session at once
+    r.error = "session gone";
+    return r;
+  }
   try {
     render_into(r.job, r.planes->target(r.job.width, r.job.height), r);
   } catch (const std::exception& e) {
@@ -352,6 +363,11 @@ Session::JobResult Session::run_encode(Rendered& frame) {
 }
 
 Session::JobResult Session::run_render_and_encode(const Job& job) {
+  if (gone_) {
+    JobResult r;
+    r.error = "session gone";
+    return r;
+  }
   try {
     bool idr = job.force_idr;
     ensure_encoder(job.width, job.height, idr);

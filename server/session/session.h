@@ -16,6 +16,7 @@
 
 #include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -42,7 +43,7 @@ namespace catgs::server {
 // What all sessions share (owned by the Server; it outlives every session).
 struct SessionShared {
   boost::asio::io_context& io;  // the worker pool: strands, encode jobs, timers
-  RenderScheduler& renders;     // render jobs, first come first served (render_scheduler.h)
+  RenderScheduler& renders;     // render jobs, sessions in turn (render_scheduler.h)
   Transport& transport;
   ServerMetrics& metrics;
   const ServerOptions& options;
@@ -127,11 +128,16 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_tick();
   void send_stats();
   void end_open_state();
+  ViewportLimit viewport_limit() const;  // --max-viewport
 
   const ConnId id_;
   SessionShared& shared_;
   boost::asio::strand<boost::asio::io_context::executor_type> strand_;
   boost::asio::steady_timer tick_;
+
+  // Set when the connection is gone or the session failed (any thread): render jobs still queued
+  // for this session are skipped rather than rendered for nobody.
+  std::atomic<bool> gone_{false};
 
   // --- strand state ---
   State state_ = State::awaiting_hello;

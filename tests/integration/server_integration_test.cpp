@@ -4,6 +4,7 @@
 // session that must keep receiving valid frames.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -76,6 +77,16 @@ class GoodClient {
     if (thread_.joinable()) thread_.join();
   }
   int frames() const { return frames_.load(); }
+  // The longest wait between two frames (or since the last one) since reset_gaps(), ms.
+  double max_gap_ms() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return std::max(max_gap_ms_, std::chrono::duration<double, std::milli>(Clock::now() - last_frame_).count());
+  }
+  void reset_gaps() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    max_gap_ms_ = 0;
+    last_frame_ = Clock::now();
+  }
   std::string error() {
     std::lock_guard<std::mutex> lock(mutex_);
     return error_;
@@ -114,6 +125,12 @@ class GoodClient {
         if (!dec.decode(m->frame().payload(), rgba, w, h) || w != width_ || h != height_)
           throw std::runtime_error("good client: frame did not decode to the viewport size");
         if (m->frame().pose_sequence() + 1 == seq) outstanding = false;
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          const auto now = Clock::now();
+          max_gap_ms_ = std::max(max_gap_ms_, std::chrono::duration<double, std::milli>(now - last_frame_).count());
+          last_frame_ = now;
+        }
         frames_++;
       }
       client_.ws().close();
@@ -130,6 +147,8 @@ class GoodClient {
   std::atomic<int> frames_{0};
   std::mutex mutex_;
   std::string error_;
+  Clock::time_point last_frame_ = Clock::now();
+  double max_gap_ms_ = 0;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -388,6 +407,25 @@ TEST(ServerIntegration, BadInputEndsOnlyThatSession) {
          c.send_pose(p);
        },
        pb::ERROR_INVALID_ARGUMENT},
+      {"huge quaternion", true,
+       [&](StreamClient& c) {
+         pb::Pose p = pose(0);
+         p.mutable_orientation()->set_w(1e200);  // its square overflows: it normalised to zero
+         p.mutable_orientation()->set_x(0);
+         p.mutable_orientation()->set_y(0);
+         p.mutable_orientation()->set_z(0);
+         c.send_pose(p);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
+      {"viewport over --max-viewport", false,
+       [](StreamClient& c) {
+         pb::ClientMessage m;
+         m.mutable_hello()->set_protocol_version(1);
+         m.mutable_hello()->set_viewport_width(4096);
+         m.mutable_hello()->set_viewport_height(4096);
+         c.send(m);
+       },
+       pb::ERROR_INVALID_ARGUMENT},
       {"fov 170", true,
        [&](StreamClient& c) {
          pb::Pose p = pose(0);
@@ -418,6 +456,58 @@ TEST(ServerIntegration, BadInputEndsOnlyThatSession) {
   EXPECT_TRUE(good.wait_frames(2)) << good.error();
   std::string body;
   EXPECT_EQ(http_get(server.port(), "/healthz", body), 200);
+  good.stop();
+  EXPECT_EQ(good.error(), "");
+}
+
+// Finding 5 (remote stall): hostile clients that each ask for the largest frame the server allows
+// and disconnect at once used to queue renders nobody would receive, in one FIFO ahead of a
+// healthy session's frames (27.8 s without frames for 20 such connections). Their renders must be
+// skipped, and the sessions still connected take turns, so the healthy session's frame gaps stay
+// bounded; a viewport over --max-viewport is refused at Hello.
+TEST(ServerIntegration, HostileLargeFramesDoNotStallOthers) {
+  ServerProcess server(server_args(kBiker, {"--max-sessions", "64"}));  // a session cap does not help
+  GoodClient good(server.port());
+  ASSERT_TRUE(good.wait_frames(3)) << good.error();
+  good.reset_gaps();
+  const Trace orbit = biker_orbit(3840, 2160, 4);
+  const auto attack_start = Clock::now();
+  for (int round = 0; round < 3; ++round) {
+    std::vector<std::unique_ptr<StreamClient>> hostile;
+    for (int i = 0; i < 20; ++i) {
+      auto c = std::make_unique<StreamClient>();
+      c->connect(server.port());
+      c->hello(3840, 2160);
+      c->send_pose(pose_from_camera(orbit[static_cast<std::size_t>(i) % orbit.size()].camera, 0, now_ms()));
+      hostile.push_back(std::move(c));
+    }
+    for (auto& c : hostile) c->ws().close_abrupt();
+  }
+  const double attack_ms = std::chrono::duration<double, std::milli>(Clock::now() - attack_start).count();
+  ASSERT_TRUE(good.wait_frames(10, 60000)) << good.error();
+  const double gap = good.max_gap_ms();
+  std::cout << "[ info ] 60 hostile 3840x2160 Hello+Pose+reset connections over " << attack_ms
+            << " ms; the healthy session's longest frame gap: " << gap << " ms\n";
+  // One 4K CPU render may be in progress when the attack starts (a hostile session still
+  // connected is served in its turn); nothing like the backlog of every hostile render.
+  EXPECT_LT(gap, 5000.0) << "healthy session stalled";
+  std::string metrics;
+  http_get(server.port(), "/metrics", metrics);
+  std::cout << "[ info ] frames dropped (hostile renders skipped or discarded): "
+            << metric_value(metrics, "catgs_dropped_frames_total") << "; server RSS " << rss_kib(server.pid()) / 1024
+            << " MiB\n";
+
+  StreamClient too_big;
+  too_big.connect(server.port());
+  pb::ClientMessage m;
+  m.mutable_hello()->set_protocol_version(1);
+  m.mutable_hello()->set_viewport_width(3842);
+  m.mutable_hello()->set_viewport_height(2160);
+  too_big.send(m);
+  auto err = expect_error(too_big);
+  ASSERT_TRUE(err);
+  EXPECT_EQ(err->code(), pb::ERROR_INVALID_ARGUMENT) << err->reason();
+  EXPECT_TRUE(good.wait_frames(2)) << good.error();
   good.stop();
   EXPECT_EQ(good.error(), "");
 }

@@ -12,39 +12,16 @@
 #include "scene/ply_io.h"
 #include "renderer/renderer.h"
 #include "camera/trace.h"
+#include "scene_files.h"
 #include "test_data.h"
 
 namespace catgs {
 namespace {
 
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
-}
-
-// Replaces the first occurrence of `from` in the header of `bytes`.
-std::string replace_in_header(std::string bytes, const std::string& from, const std::string& to) {
-  const auto end = bytes.find("end_header");
-  const auto at = bytes.find(from);
-  EXPECT_TRUE(at != std::string::npos && at < end) << "header lacks '" << from << "'";
-  return bytes.replace(at, from.size(), to);
-}
-
-// Expects load_scene(path) to throw SceneFileError whose message names the file and `problem`.
-void expect_scene_error(const std::string& path, const std::string& problem) {
-  try {
-    load_scene(path);
-    ADD_FAILURE() << "loading " << path << " should fail with '" << problem << "'";
-  } catch (const SceneFileError& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(path), std::string::npos) << what;
-    EXPECT_NE(what.find(problem), std::string::npos) << what;
-  }
-}
+using test::expect_scene_error;
+using test::read_bytes;
+using test::replace_in_header;
+using test::write_bytes;
 
 struct SceneFacts {
   const char* file;
