@@ -38,7 +38,8 @@
 #                                                            SuperSplat compressed; the 85 MB
 #                                                            original does not fit)
 #   .carry/traces/*.cameras.json                    0.3 MB
-#   .carry/deps/{include,share/cmake,lib}           ~7 MB   GLM, nlohmann-json, stb + libstb.a,
+#   .carry/deps/{include,share/cmake,lib}           ~8 MB   GLM, nlohmann-json, stb + libstb.a, zlib and
+#                                                            zstd (static, for .spz),
 #                                                            a pkg-config shim for stb
 #   .carry/bin/{catgs-bench,catgs-gpu-tests,catgs-scene}  prebuilt x86-64 (glibc 2.36), static
 #                                                            cudart; bin/lib/libstb.so.0
@@ -62,6 +63,9 @@ prepare() {
   cp -rf /usr/include/glm /usr/include/nlohmann /usr/include/stb "$CARRY/deps/include/"
   cp -rf /usr/share/cmake/glm /usr/share/cmake/nlohmann_json "$CARRY/deps/share/cmake/"
   cp -f /usr/lib/x86_64-linux-gnu/libstb.a "$CARRY/deps/lib/"
+  # .spz's codecs (render_core links them): static zlib and zstd with their headers.
+  cp -f /usr/lib/x86_64-linux-gnu/libz.a /usr/lib/x86_64-linux-gnu/libzstd.a "$CARRY/deps/lib/"
+  cp -f /usr/include/zlib.h /usr/include/zconf.h /usr/include/zstd.h /usr/include/zstd_errors.h "$CARRY/deps/include/"
   cat > "$CARRY/deps/lib/pkgconfig/stb.pc" <<'PC'
 prefix=${pcfiledir}/../..
 libdir=${prefix}/lib
@@ -75,16 +79,21 @@ PC
   # The GPU machine may lack pkg-config: a shim that answers CMake's FindPkgConfig for stb.
   cat > "$CARRY/deps/bin/pkg-config" <<'SHIM'
 #!/usr/bin/env bash
+# Answers CMake's FindPkgConfig for the carried stb, zlib and libzstd (static, in ../lib).
 d=$(cd "$(dirname "$0")/.." && pwd)
-out=()
+mods=() out=()
+for a in "$@"; do case "$a" in --*) ;; *) mods+=("$a") ;; esac; done
+lib() { case "$1" in stb) echo -lstb ;; zlib) echo -lz ;; libzstd) echo -lzstd ;; esac; }
+inc() { case "$1" in stb) echo "-I$d/include/stb" ;; *) echo "-I$d/include" ;; esac; }
 for a in "$@"; do
   case "$a" in
     --version) echo 0.29.2; exit 0 ;;
     --modversion) echo 0.0; exit 0 ;;
-    --cflags|--cflags-only-I) out+=("-I$d/include/stb") ;;
-    --libs) out+=("-L$d/lib" "-lstb") ;;
+    --exists|--print-errors|--short-errors) ;;
+    --cflags|--cflags-only-I) for m in "${mods[@]}"; do out+=("$(inc "$m")"); done ;;
+    --libs) out+=("-L$d/lib"); for m in "${mods[@]}"; do out+=("$(lib "$m")"); done ;;
     --libs-only-L) out+=("-L$d/lib") ;;
-    --libs-only-l) out+=("-lstb") ;;
+    --libs-only-l) for m in "${mods[@]}"; do out+=("$(lib "$m")"); done ;;
     --variable=prefix) echo "$d"; exit 0 ;;
     --variable=*) echo ""; exit 0 ;;
   esac
