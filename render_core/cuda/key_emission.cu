@@ -24,6 +24,8 @@ struct WidenToU64 {
 using WideCounts = thrust::transform_iterator<WidenToU64, const uint32_t*, uint64_t>;
 
 static_assert(tune::kGaussianThreads == fm::kChunkSize, "a block of the per-Gaussian kernels is a chunk");
+static_assert(static_cast<uint64_t>(fm::kChunkSize) * tune::kMaxTilesPerSide * tune::kMaxTilesPerSide < (1ull << 32),
+              "a chunk's entry count (each Gaussian lists at most every tile once) fits Projected::chunk_total");
 
 // Where a key goes: [tile | depth bits], packed (DepthKeyPacking), into `wide`, or (depth-first
 // sort, depth_order.cu) the tile id alone into `tile_only` when that is not null. The choice is

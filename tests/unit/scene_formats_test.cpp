@@ -3,38 +3,25 @@
 // splat-transform in scene_reference_test.cpp.)
 #include <cmath>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 #include <limits>
 
 #include <gtest/gtest.h>
 
 #include "scene/ply_io.h"
 #include "scene/spz_file.h"
+#include "scene_files.h"
 #include "test_data.h"
 
 namespace catgs {
 namespace {
 
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+using test::expect_scene_error;
+using test::read_bytes;
 
+// Writes `bytes` to `path` and returns the path (scene_files.h).
 std::string save(const std::string& path, const std::string& bytes) {
-  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+  test::write_bytes(path, bytes);
   return path;
-}
-
-void expect_error(const std::string& path, const std::string& problem) {
-  try {
-    load_scene(path);
-    ADD_FAILURE() << "loading " << path << " should fail with '" << problem << "'";
-  } catch (const SceneFileError& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(path), std::string::npos) << what;
-    EXPECT_NE(what.find(problem), std::string::npos) << what;
-  }
 }
 
 class DamagedSpzTest : public ::testing::TestWithParam<int> {
@@ -48,14 +35,14 @@ class DamagedSpzTest : public ::testing::TestWithParam<int> {
 };
 
 TEST_P(DamagedSpzTest, TruncatedFails) {
-  expect_error(save(dir_ + "/cut.spz", good_.substr(0, good_.size() / 2)),
-               GetParam() == 4 ? "truncated" : "corrupt or truncated gzip");
+  expect_scene_error(save(dir_ + "/cut.spz", good_.substr(0, good_.size() / 2)),
+                     GetParam() == 4 ? "truncated" : "corrupt or truncated gzip");
 }
 
 TEST_P(DamagedSpzTest, GarbledStreamFails) {
   std::string b = good_;
   for (std::size_t i = b.size() / 2; i < b.size() / 2 + 64; ++i) b[i] = static_cast<char>(b[i] ^ 0x5a);
-  expect_error(save(dir_ + "/garbled.spz", b), GetParam() == 4 ? "corrupt zstd" : "gzip");
+  expect_scene_error(save(dir_ + "/garbled.spz", b), GetParam() == 4 ? "corrupt zstd" : "gzip");
 }
 
 INSTANTIATE_TEST_SUITE_P(Versions, DamagedSpzTest, ::testing::Values(4, 3),
@@ -67,7 +54,7 @@ TEST(DamagedSpz, HugeDeclaredCountDoesNotAllocate) {
   std::string b = read_bytes(dir + "/biker.spz");
   const uint32_t huge = 0xfffffff0u;
   std::memcpy(&b[8], &huge, 4);
-  expect_error(save(dir + "/huge.spz", b), "x the file size once decompressed");
+  expect_scene_error(save(dir + "/huge.spz", b), "x the file size once decompressed");
 }
 
 TEST(DamagedSpz, UnsupportedVersionAndDegree) {
@@ -75,10 +62,10 @@ TEST(DamagedSpz, UnsupportedVersionAndDegree) {
   write_spz(*test::cached_scene(test::bundled_scene()), dir + "/biker.spz", 4);
   std::string b = read_bytes(dir + "/biker.spz");
   b[4] = 9;
-  expect_error(save(dir + "/v9.spz", b), "unsupported .spz version 9");
+  expect_scene_error(save(dir + "/v9.spz", b), "unsupported .spz version 9");
   b[4] = 4;
   b[12] = 4;
-  expect_error(save(dir + "/deg4.spz", b), "SH degree 4 is not supported");
+  expect_scene_error(save(dir + "/deg4.spz", b), "SH degree 4 is not supported");
 }
 
 std::string splat_record(float x) {
@@ -97,10 +84,10 @@ TEST(DamagedSplat, WholeRecordsOnlyAndNaNNamed) {
   EXPECT_EQ(ok.size(), 2u);
   EXPECT_FLOAT_EQ(ok.means[3], 2.0f);
   EXPECT_NEAR(ok.log_scales[0], std::log(0.1f), 1e-6);
-  expect_error(save(dir + "/odd.splat", splat_record(1) + "x"), "not a multiple of 32-byte records");
-  expect_error(save(dir + "/empty.splat", ""), "empty .splat file");
-  expect_error(save(dir + "/nan.splat", splat_record(1) + splat_record(std::numeric_limits<float>::quiet_NaN())),
-               "non-finite position x in record 1");
+  expect_scene_error(save(dir + "/odd.splat", splat_record(1) + "x"), "not a multiple of 32-byte records");
+  expect_scene_error(save(dir + "/empty.splat", ""), "empty .splat file");
+  expect_scene_error(save(dir + "/nan.splat", splat_record(1) + splat_record(std::numeric_limits<float>::quiet_NaN())),
+                     "non-finite position x in record 1");
 }
 
 }  // namespace
