@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "cpu/cpu_renderer.h"
+#include "forward_model/sh_storage.h"
 
 namespace catgs::cpu {
 
@@ -91,7 +92,8 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
     out.opacity[i] = opacity;
     out.depth[i] = p_cam.z;
     out.q_max[i] = q_max;
-    out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i], dir);
+    out.color[i] =
+        fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]}, dir);
     out.tile_rect[i] = rect;
     out.tiles_touched[i] = touched;
   };

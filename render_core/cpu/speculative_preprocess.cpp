@@ -5,6 +5,7 @@
 
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
+#include "forward_model/sh_storage.h"
 
 namespace catgs::cpu {
 
@@ -131,8 +132,9 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
     out.conic[i] = conic;
     out.opacity[i] = opacity;
     out.q_max[i] = q_max;
-    out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i],
-                                   glm::normalize(mean - terms[0].position));
+    out.color[i] =
+        fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]},
+                             glm::normalize(mean - terms[0].position));
     out.tile_rect[i] = rect;
     out.tiles_touched[i] = touched;
     out.trail_mean0[i] = trail.mean0;

@@ -7,6 +7,7 @@
 
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
+#include "forward_model/sh_storage.h"
 
 namespace catgs::cpu {
 
@@ -47,8 +48,9 @@ bool update_subframe_features(const GaussianModel& model, const std::vector<fm::
     out.mean2d[i] = mean2d;
     out.conic[i] = conic;
     out.opacity[i] = fm::sigmoid(model.opacity_logits[i]);
-    out.color[i] = fm::sh_to_color(model.sh_degree, &model.sh[static_cast<std::size_t>(K) * 3 * i],
-                                   glm::normalize(mean - cam_pos));
+    out.color[i] =
+        fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]},
+                             glm::normalize(mean - cam_pos));
   });
   if (!inside.load()) return false;
   return !unlisted_reach_image(model, chunks, camera, out);

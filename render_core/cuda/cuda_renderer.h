@@ -76,13 +76,13 @@ class DeviceScene {
   std::size_t size() const { return n_; }
   int sh_degree() const { return sh_degree_; }
   std::size_t bytes() const { return bytes_; }  // device memory held
-  // Device pointers: means [N, 3], log_scales [N, 3], rotations [N, 4], opacity_logits [N],
-  // sh [N, K, 3].
+  // Device pointers: means [N, 3], log_scales [N, 3], rotations [N, 4], opacity_logits [N] as
+  // floats; sh [N, K, 3] as IEEE binary16 bits, rounded on upload (forward_model/sh_storage.h).
   const float* means() const { return means_; }
   const float* log_scales() const { return log_scales_; }
   const float* rotations() const { return rotations_; }
   const float* opacity_logits() const { return opacity_logits_; }
-  const float* sh() const { return sh_; }
+  const uint16_t* sh() const { return sh_; }
   // [fm::chunk_count(N)] the bound of each run of fm::kChunkSize Gaussians (chunk culling).
   const fm::ChunkBounds* chunks() const { return chunks_; }
 
@@ -95,7 +95,7 @@ class DeviceScene {
   float* log_scales_ = nullptr;
   float* rotations_ = nullptr;
   float* opacity_logits_ = nullptr;
-  float* sh_ = nullptr;
+  uint16_t* sh_ = nullptr;
   fm::ChunkBounds* chunks_ = nullptr;
 };
 

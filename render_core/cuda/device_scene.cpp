@@ -3,6 +3,7 @@
 #include <string>
 
 #include "cuda_check.h"
+#include "forward_model/sh_storage.h"
 
 namespace catgs::cuda {
 
@@ -50,15 +51,20 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
   s->log_scales_ = upload_array(model.log_scales, &s->bytes_, "log-scales");
   s->rotations_ = upload_array(model.rotations, &s->bytes_, "rotations");
   s->opacity_logits_ = upload_array(model.opacity_logits, &s->bytes_, "opacities");
-  s->sh_ = upload_array(model.sh, &s->bytes_, "SH coefficients");
+  // SH in half precision (sh_storage.h): rounded here, on the host, by the same function the CPU
+  // reference rounds with, so both cores read the same coefficients.
+  std::vector<uint16_t> sh_half(model.sh.size());
+  for (std::size_t k = 0; k < sh_half.size(); ++k) sh_half[k] = fm::half_bits(model.sh[k]);
+  s->sh_ = upload_array(sh_half, &s->bytes_, "SH coefficients");
   s->chunks_ = upload_array(fm::chunk_bounds(model), &s->bytes_, "chunk bounds");
   return s;
 }
 
 DeviceScene::~DeviceScene() {
   // Destructors must not throw: errors here (a dead context at exit) are ignored.
-  for (float* p : {means_, log_scales_, rotations_, opacity_logits_, sh_})
+  for (float* p : {means_, log_scales_, rotations_, opacity_logits_})
     if (p) cudaFree(p);
+  if (sh_) cudaFree(sh_);
   if (chunks_) cudaFree(chunks_);
 }
 

@@ -107,8 +107,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
       if (touched == 0 && !is_big) break;
 
       const glm::vec3 dir = glm::normalize(mean - cam.position);
-      const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
-      const glm::vec3 c = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i, dir);
+      const glm::vec3 c = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), dir);
       out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
       out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
       out.depth[i] = p_cam.z;

@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 
+#include <cuda_fp16.h>
 #include <cuda_runtime.h>
 #include <glm/glm.hpp>
 
@@ -29,7 +30,7 @@ struct SceneView {
   const float* log_scales;      // [N, 3]
   const float* rotations;       // [N, 4] (w, x, y, z)
   const float* opacity_logits;  // [N]
-  const float* sh;              // [N, K, 3], K = (sh_degree + 1)^2
+  const __half* sh;             // [N, K, 3], K = (sh_degree + 1)^2, binary16 (forward_model/sh_storage.h)
   int sh_degree;
   uint64_t n;
   const fm::ChunkBounds* chunks;  // [chunk_count(N)] (forward_model/chunk_bounds.h)

@@ -97,8 +97,14 @@ stages::CameraParams camera_params(const Camera& camera);
 
 // The scene as the kernels see it.
 inline stages::SceneView scene_view(const DeviceScene& scene) {
-  return {scene.means(), scene.log_scales(), scene.rotations(), scene.opacity_logits(),
-          scene.sh(),    scene.sh_degree(),  scene.size(),      scene.chunks()};
+  return {scene.means(),
+          scene.log_scales(),
+          scene.rotations(),
+          scene.opacity_logits(),
+          reinterpret_cast<const __half*>(scene.sh()),
+          scene.sh_degree(),
+          scene.size(),
+          scene.chunks()};
 }
 
 struct CudaRenderer::State {

@@ -110,9 +110,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
       touched = static_cast<uint32_t>(__popc(mask));
       if (touched == 0 && !is_big) break;
 
-      const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
-      const glm::vec3 c = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i,
-                                          glm::normalize(mean - key.position));
+      const glm::vec3 c = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), glm::normalize(mean - key.position));
       out.splat[i] = make_splat(means[0], conic, opacity, q_max);
       out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
       out.depth[i] = key_depth;

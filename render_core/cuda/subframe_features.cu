@@ -79,9 +79,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
         *outside = 1u;  // any writer will do: one flag for the frame
     }
   }
-  const int K = (scene.sh_degree + 1) * (scene.sh_degree + 1);
-  const glm::vec3 col = fm::sh_to_color(scene.sh_degree, scene.sh + static_cast<uint64_t>(K) * 3 * i,
-                                        glm::normalize(mean - cam.position));
+  const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), glm::normalize(mean - cam.position));
   out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
   out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
 }

@@ -195,12 +195,14 @@ CATGS_HD bool ellipse_touches_tile(glm::vec2 mean, glm::vec3 conic, float q_max,
 }
 
 // View-dependent colour from SH of degree <= 3 at unit direction `dir` (camera centre -> mean),
-// + 0.5, clamped at 0 (reference 3DGS computeColorFromSH). `sh` points to K * 3 floats
-// (coefficient-major) of one Gaussian.
-CATGS_HD glm::vec3 sh_to_color(int degree, const float* sh, glm::vec3 dir) {
+// + 0.5, clamped at 0 (reference 3DGS computeColorFromSH). `coeff(j)` returns coefficient j of one
+// Gaussian's K x 3 (coefficient-major) array as a float: the cores read SH stored in half
+// precision (sh_storage.h), the float overload below reads floats.
+template <class Coeffs>
+CATGS_HD glm::vec3 sh_to_color_from(int degree, const Coeffs& coeff, glm::vec3 dir) {
   constexpr float C0 = 0.28209479177387814f;
   constexpr float C1 = 0.4886025119029199f;
-  auto c = [sh](int k) { return glm::vec3(sh[3 * k], sh[3 * k + 1], sh[3 * k + 2]); };
+  auto c = [&coeff](int k) { return glm::vec3(coeff(3 * k), coeff(3 * k + 1), coeff(3 * k + 2)); };
   glm::vec3 result = C0 * c(0);
   if (degree > 0) {
     const float x = dir.x, y = dir.y, z = dir.z;
@@ -221,6 +223,12 @@ CATGS_HD glm::vec3 sh_to_color(int degree, const float* sh, glm::vec3 dir) {
   }
   result += 0.5f;
   return glm::max(result, glm::vec3(0.0f));
+}
+
+// sh_to_color_from over K * 3 floats at `sh` (full precision: tools and oracles).
+CATGS_HD glm::vec3 sh_to_color(int degree, const float* sh, glm::vec3 dir) {
+  return sh_to_color_from(
+      degree, [sh](int j) { return sh[j]; }, dir);
 }
 
 CATGS_HD float sigmoid(float x) { return 1.0f / (1.0f + expf(-x)); }

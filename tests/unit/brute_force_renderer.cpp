@@ -10,6 +10,15 @@ namespace {
 using dvec3 = glm::dvec3;
 using dmat3 = glm::dmat3;
 
+struct Splat {
+  double mx, my, depth, opacity;
+  double ca, cb, cc;  // conic
+  dvec3 color;
+  int x0, x1, y0, y1;  // pixels it may reach (inclusive)
+};
+
+}  // namespace
+
 // Real SH basis (the sign convention of the reference 3DGS), degree <= 3, at unit direction d.
 void sh_basis(dvec3 d, double* y) {
   const double x = d.x, yy = d.y, z = d.z;
@@ -30,15 +39,6 @@ void sh_basis(dvec3 d, double* y) {
   y[14] = 1.445305721320277 * z * (x * x - yy * yy);
   y[15] = -0.5900435899266435 * x * (x * x - 3 * yy * yy);
 }
-
-struct Splat {
-  double mx, my, depth, opacity;
-  double ca, cb, cc;  // conic
-  dvec3 color;
-  int x0, x1, y0, y1;  // pixels it may reach (inclusive)
-};
-
-}  // namespace
 
 Image brute_force_render(const GaussianModel& m, const Camera& cam, bool vanilla, glm::vec3 background) {
   const int W = cam.width, H = cam.height;

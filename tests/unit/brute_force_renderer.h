@@ -9,6 +9,10 @@
 
 namespace catgs::test {
 
+// Real SH basis Y_0..Y_15 (the sign convention of the reference 3DGS), degree <= 3, at unit
+// direction d, in double precision.
+void sh_basis(glm::dvec3 d, double* y);
+
 // vanilla = true: a Gaussian reaches a pixel only if the pixel's 16x16 tile lies in the tile
 // rectangle of its 3-sigma square (reference 3DGS); false (exact): wherever alpha >= 1/255.
 // Returns an image with rgb and rgba8 filled.
