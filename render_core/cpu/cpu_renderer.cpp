@@ -54,7 +54,7 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   const auto t1 = clock::now();
   emit_keys(projected_, grid, options_.pipeline, options_.list_budget, list_);
   const auto t2 = clock::now();
-  sort_render_list(list_);
+  sort_render_list(list_, single_sort_packing_of(list_, grid));
   const auto t3 = clock::now();
   identify_tile_ranges(list_, grid, ranges_);
   const auto t4 = clock::now();

@@ -13,6 +13,7 @@
 
 #include "forward_model/chunk_bounds.h"
 #include "forward_model/forward_model.h"
+#include "forward_model/key_packing.h"
 #include "speculation/speculation_planner.h"
 #include "renderer/renderer.h"
 
@@ -50,9 +51,10 @@ struct ProjectedGaussians {
 
 // The render list: (key, value) pairs, key = [tile | depth bits], value = Gaussian index.
 struct RenderList {
-  std::vector<uint64_t> keys;     // [L]
+  std::vector<uint64_t> keys;     // [L] made as `packing` says: emission writes plain keys, the sort re-keys
   std::vector<uint32_t> values;   // [L]
   std::vector<uint64_t> offsets;  // [N] exclusive prefix sum of tiles_touched (emission offsets)
+  fm::DepthKeyPacking packing = fm::plain_key_packing();  // forward_model/key_packing.h
 };
 
 // Tile ranges: [start, end) of each tile's entries in the sorted render list.
@@ -127,9 +129,15 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
 // pair (16 with padding).
 inline constexpr std::uint64_t kBytesPerListEntry = 28;
 
-// Stage 3 (cpu/sort.cpp): sorts the list by key; equal keys keep emission order (a stable
-// radix sort on the GPU).
-void sort_render_list(RenderList& list);
+// Stage 3 (cpu/sort.cpp): re-keys the list's plain keys as `packing` says and sorts it by key;
+// equal keys keep emission order (a stable radix sort on the GPU). Sets list.packing.
+void sort_render_list(RenderList& list, const fm::DepthKeyPacking& packing);
+
+// The single sort's key for a list of plain keys on `grid` (fm::single_sort_packing over the
+// depth range of its entries), as the CUDA core works it out from pre-processing: exact and
+// vanilla frames sort with it; catgs key frames with the plain key (the GPU sorts them depth
+// first).
+fm::DepthKeyPacking single_sort_packing_of(const RenderList& list, const TileGrid& grid);
 
 // Stage 4 (cpu/tile_ranges.cpp): tile ranges of a sorted list; tiles without entries get
 // [0, 0).

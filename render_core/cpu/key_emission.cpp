@@ -23,6 +23,7 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
     throw std::length_error("render list of " + std::to_string(total) +
                             " entries exceeds the 32-bit range of tile ranges");
   list.keys.resize(total);
+  list.packing = fm::plain_key_packing();
   list.values.resize(total);
   const bool exact = pipeline == Pipeline::exact, trail = pipeline == Pipeline::catgs;
 

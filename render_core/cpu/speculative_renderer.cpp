@@ -52,7 +52,7 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
   emit_keys(projected_, grid, stages, options_.list_budget, list_);
   const auto t2 = clock::now();
-  sort_render_list(list_);
+  sort_render_list(list_, window > 0 ? fm::plain_key_packing() : single_sort_packing_of(list_, grid));
   const auto t3 = clock::now();
   identify_tile_ranges(list_, grid, ranges_);
   plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_, static_cast<std::size_t>(sp.min_slice_entries));

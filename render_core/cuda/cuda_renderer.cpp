@@ -96,11 +96,12 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   if (!depth_first) stages::gaussian_ends(proj, n, chunk_start.as<uint64_t>(), ends.as<uint64_t>(), stream);
   const uint64_t entries = host_counts[0];
   *visible = host_counts[1];
-  // The listed depths' range, where pre-processing recorded one (preprocess; the speculative
-  // pre-processing does not: its lists sort depth first, or with plain keys).
+  // The single sort's key (forward_model/key_packing.h): 32-bit [tile | quantised depth] over the
+  // listed depths' range, where pre-processing recorded one (preprocess; the speculative
+  // pre-processing does not: its lists sort depth first, or with plain keys) and it fits.
   const stages::DepthKeyPacking packing =
-      stages::depth_key_packing(~static_cast<uint32_t>(host_counts[kReadDepthLowComplement - kReadListLength]),
-                                static_cast<uint32_t>(host_counts[kReadDepthHigh - kReadListLength]));
+      fm::single_sort_packing(~static_cast<uint32_t>(host_counts[kReadDepthLowComplement - kReadListLength]),
+                              static_cast<uint32_t>(host_counts[kReadDepthHigh - kReadListLength]), tiles);
   // Where the CUDA core would mirror the CPU core's RenderOptions::list_budget (renderer.h; issue
   // 22): a check of `entries` here, before the buffers below grow, with 24 bytes an entry (two key
   // and two value buffers). Not enabled yet: the catgs benchmarks' wide windows list up to 722 M
@@ -116,31 +117,41 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   }
   uint32_t* v[2] = {values[0].as<uint32_t>(), values[1].as<uint32_t>()};
   if (!depth_first) {
-    const int key_bits = packing.bits + tune::tile_key_bits(tiles);
-    sort_temp.ensure(stages::sort_temp_bytes(entries, key_bits), "sort scratch", &allocations);
+    // Keys of either width live in the 64-bit key buffers.
+    const int key_bits = packing.bits + fm::tile_key_bits(tiles);
+    const bool narrow = fm::is_narrow(packing);
+    sort_temp.ensure(
+        narrow ? stages::sort_narrow_temp_bytes(entries, key_bits) : stages::sort_temp_bytes(entries, key_bits),
+        "sort scratch", &allocations);
     note_peak();
     uint64_t* k[2] = {keys[0].as<uint64_t>(), keys[1].as<uint64_t>()};
-    stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], packing, nullptr, v[0], nullptr, 0,
-                      stream);
+    uint32_t* k32[2] = {keys[0].as<uint32_t>(), keys[1].as<uint32_t>()};
+    stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], narrow ? k32[0] : nullptr, packing,
+                      v[0], nullptr, 0, stream);
     CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
-    const int half = stages::sort_pairs(k, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
+    const int half =
+        narrow ? stages::sort_pairs_narrow(k32, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream)
+               : stages::sort_pairs(k, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
     sorted_values = v[half];
     CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
-    stages::tile_ranges(k[half], packing, entries, tiles, ranges.as<uint2>(), stream);
+    if (narrow)
+      stages::tile_ranges(k32[half], packing, entries, tiles, ranges.as<uint2>(), stream);
+    else
+      stages::tile_ranges(k[half], packing, entries, tiles, ranges.as<uint2>(), stream);
     return entries;
   }
 
   // Depth-first: the visible Gaussians sorted by depth hand out the list slots (the depth sort
   // is timed with emission), then a stable sort on the tile bits alone. The 32-bit tile keys
   // live in the halves of the 64-bit key buffers.
-  const int tile_bits = tune::tile_key_bits(tiles);
+  const int tile_bits = fm::tile_key_bits(tiles);
   for (int h = 0; h < 2; ++h) {
     depth_index[h].ensure(n * sizeof(uint32_t), "depth order", &allocations);
     depth_keys[h].ensure(n * sizeof(uint32_t), "depth keys", &allocations);
   }
   depth_count.ensure(sizeof(unsigned), "depth order count", &allocations);
   depth_temp.ensure(stages::depth_order_temp_bytes(n), "depth order scratch", &allocations);
-  sort_temp.ensure(stages::sort_by_tile_temp_bytes(entries, tile_bits), "sort scratch", &allocations);
+  sort_temp.ensure(stages::sort_narrow_temp_bytes(entries, tile_bits), "sort scratch", &allocations);
   note_peak();
   const stages::DepthOrderBuffers order{{depth_index[0].as<uint32_t>(), depth_index[1].as<uint32_t>()},
                                         {depth_keys[0].as<uint32_t>(), depth_keys[1].as<uint32_t>()},
@@ -150,14 +161,13 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   const uint32_t* by_depth =
       stages::depth_order_ends(proj.tiles_touched, proj.depth, n, *visible, order, ends.as<uint64_t>(), stream);
   uint32_t* k[2] = {keys[0].as<uint32_t>(), keys[1].as<uint32_t>()};
-  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), nullptr, {}, k[0], v[0], by_depth, *visible,
-                    stream);
+  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), nullptr, k[0], fm::tile_only_packing(), v[0],
+                    by_depth, *visible, stream);
   CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
-  const int half =
-      stages::sort_pairs_by_tile(k, v, entries, tile_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
+  const int half = stages::sort_pairs_narrow(k, v, entries, tile_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
   sorted_values = v[half];
   CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
-  stages::tile_ranges(k[half], entries, tiles, ranges.as<uint2>(), stream);
+  stages::tile_ranges(k[half], fm::tile_only_packing(), entries, tiles, ranges.as<uint2>(), stream);
   return entries;
 }
 

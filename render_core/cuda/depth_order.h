@@ -13,7 +13,7 @@ namespace catgs::cuda::stages {
 // tiles_touched > 0 by depth (stable, so equal depths keep index order) and rewrites ends[i] of
 // each of them as the inclusive running sum of tiles_touched in that order (the others keep
 // theirs). Emission then lays each Gaussian's entries out in depth order, and a stable sort on
-// the tile alone (sort_pairs_by_tile) gives the [tile | depth] list. `visible` comes from the
+// the tile alone (sort_pairs_narrow) gives the [tile | depth] list. `visible` comes from the
 // counts readback. Returns the depth order (device, [visible] Gaussian indices; emit_keys walks
 // the Gaussians in it, so consecutive threads write consecutive slots). Buffers: index and keys [2][N], count [1], temp of depth_order_temp_bytes(N);
 // ends must hold N + 1 entries (a spare slot, see depth_order.cu).

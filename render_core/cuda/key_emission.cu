@@ -27,18 +27,20 @@ static_assert(tune::kGaussianThreads == fm::kChunkSize, "a block of the per-Gaus
 static_assert(static_cast<uint64_t>(fm::kChunkSize) * tune::kMaxTilesPerSide * tune::kMaxTilesPerSide < (1ull << 32),
               "a chunk's entry count (each Gaussian lists at most every tile once) fits Projected::chunk_total");
 
-// Where a key goes: [tile | depth bits], packed (DepthKeyPacking), into `wide`, or (depth-first
-// sort, depth_order.cu) the tile id alone into `tile_only` when that is not null. The choice is
-// uniform over a launch.
+// Where a key goes (forward_model/key_packing.h): the 64-bit key into `wide`, or the 32-bit one
+// into `narrow` when that is not null (the single sort's [tile | quantised depth], or the tile id
+// alone for the depth-first sort's second pass). The choice is uniform over a launch.
 struct KeyOut {
-  uint64_t* wide;       // [L]
-  uint32_t* tile_only;  // [L] or null
+  uint64_t* wide;    // [L]
+  uint32_t* narrow;  // [L] or null
   DepthKeyPacking packing;
+  // Tile-only keys (the depth-first sort's) read no depth.
+  __device__ bool needs_depth() const { return packing.bits > 0; }
   __device__ void put(uint64_t at, uint32_t tile, uint32_t depth_bits) const {
-    if (tile_only)
-      tile_only[at] = tile;
+    if (narrow)
+      narrow[at] = packing.key32(tile, depth_bits);
     else
-      wide[at] = packing.key(tile, depth_bits);
+      wide[at] = packing.key64(tile, depth_bits);
   }
 };
 
@@ -96,7 +98,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   if ((r.z - r.x) * (r.w - r.y) > tune::kBigRectTiles) return;  // emit_big_kernel's
   const uint64_t end = ends[i];
   uint64_t at = end - tiles_touched[i];
-  const uint32_t depth_bits = keys.tile_only ? 0u : __float_as_uint(depth[i]);  // tile keys need no depth
+  const uint32_t depth_bits = keys.needs_depth() ? __float_as_uint(depth[i]) : 0u;
   const GaussianTileTest hit = load_tile_test(tests, i);
   for (int ty = r.y; ty < r.w && at < end; ++ty) {
     for (int tx = r.x; tx < r.z && at < end; ++tx) {
@@ -172,7 +174,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
         small = width * (r.w - r.y) <= tune::kBigRectTiles;
         corner = static_cast<uint32_t>(r.x) | (static_cast<uint32_t>(r.y) << 16);
         if (small) mask = tile_mask[i];
-        if (small && !keys.tile_only) depth_bits = __float_as_uint(depth[i]);
+        if (small && keys.needs_depth()) depth_bits = __float_as_uint(depth[i]);
       }
     }
   }
@@ -282,10 +284,10 @@ void gaussian_ends(const Projected& p, uint64_t n, const uint64_t* chunk_start, 
 }
 
 void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam, const TileTests& tests,
-               const BigList& big, uint64_t* wide_keys, DepthKeyPacking packing, uint32_t* tile_keys, uint32_t* values,
-               const uint32_t* order, uint64_t order_count, cudaStream_t stream) {
+               const BigList& big, uint64_t* wide_keys, uint32_t* narrow_keys, DepthKeyPacking packing,
+               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream) {
   if (n == 0) return;
-  const KeyOut keys{wide_keys, tile_keys, packing};
+  const KeyOut keys{wide_keys, narrow_keys, packing};
   const uint64_t walk = order ? order_count : n;
   const uint64_t blocks = (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   // The small Gaussians' tile answers, where the counting kept them (trails; exact ellipses).

@@ -26,13 +26,14 @@ void gaussian_ends(const Projected& projected, uint64_t n, const uint64_t* chunk
 // tiles_touched[i] entries; slots it cannot fill get the sentinel tile id `tiles` (sorted last,
 // ignored later). Big Gaussians are emitted a warp each (ballot + popc keeps the row-major
 // order); catgs trails with tile masks a warp per 32 Gaussians of the walk, whose adjacent runs
-// the warp writes on consecutive slots (coalesced). Keys go to `keys` as [tile | depth bits]
-// (64-bit, packed as `packing` says), or, when `tile_keys` is not null (the depth-first sort), to `tile_keys` as the tile
-// id alone (32-bit). `order` (or null: all N
-// in index order, skipping chunks without entries): the `order_count` Gaussians to walk, in that
-// order (depth_order_ends's).
+// the warp writes on consecutive slots (coalesced). Keys are made as `packing` says
+// (forward_model/key_packing.h): 64-bit into `wide_keys`, or, when `narrow_keys` is not null,
+// 32-bit into it (the single sort's [tile | quantised depth]; the tile id alone for the
+// depth-first sort). `order` (or null: all N in index order, skipping chunks without entries):
+// the `order_count` Gaussians to walk, in that order (depth_order_ends's).
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               const TileTests& tests, const BigList& big, uint64_t* keys, DepthKeyPacking packing, uint32_t* tile_keys,
-               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream);
+               const TileTests& tests, const BigList& big, uint64_t* wide_keys, uint32_t* narrow_keys,
+               DepthKeyPacking packing, uint32_t* values, const uint32_t* order, uint64_t order_count,
+               cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -118,16 +118,21 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     out.tiles_touched[i] = touched;
   }
   list_big_and_count_visible(is_big, touched, i, big, visible, out.chunk_total);
-  record_depth_range(touched > 0 || is_big, depth, depth_range);
+  // Big Gaussians' depths count where count_big_kernel finds them entries: the range is over
+  // the Gaussians with entries, as the CPU reference's sort works it out from its list.
+  record_depth_range(touched > 0, depth, depth_range);
 }
 
 // Big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and writes the
-// count; the same tile test as key emission (tile_test.cuh).
+// count; the same tile test as key emission (tile_test.cuh). A Gaussian with entries widens
+// depth_range (when not null) as record_depth_range does.
 __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList big, TileTests tests,
-                                                                      const ushort4* rect,            // [N]
-                                                                      uint32_t* tiles_touched,        // [N]
-                                                                      uint32_t* chunk_total,          // [chunks]
-                                                                      unsigned long long* visible) {  // [1]
+                                                                      const ushort4* rect,                // [N]
+                                                                      const float* depth,                 // [N]
+                                                                      uint32_t* tiles_touched,            // [N]
+                                                                      uint32_t* chunk_total,              // [chunks]
+                                                                      unsigned long long* visible,        // [1]
+                                                                      unsigned long long* depth_range) {  // [2] or null
   const int lane = static_cast<int>(threadIdx.x & 31u);
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
   const unsigned total = *big.count;
@@ -141,7 +146,14 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
     for (int t = lane; t < area; t += 32) n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
     n = __reduce_add_sync(0xffffffffu, n);
     if (lane == 0) tiles_touched[i] = n;
-    if (lane == 0 && n > 0) atomicAdd(chunk_total + i / fm::kChunkSize, n);
+    if (lane == 0 && n > 0) {
+      atomicAdd(chunk_total + i / fm::kChunkSize, n);
+      if (depth_range) {
+        const unsigned bits = __float_as_uint(depth[i]);
+        atomicMax(depth_range, static_cast<unsigned long long>(~bits));
+        atomicMax(depth_range + 1, static_cast<unsigned long long>(bits));
+      }
+    }
     found += n > 0 ? 1u : 0u;
   }
   if (lane == 0 && found > 0) atomicAdd(visible, found);
@@ -159,13 +171,13 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};
-  count_big_tiles(big, tests, out.rect, out.tiles_touched, out.chunk_total, visible, stream);
+  count_big_tiles(big, tests, out, visible, depth_range, stream);
 }
 
-void count_big_tiles(const BigList& big, const TileTests& tests, const ushort4* rect, uint32_t* tiles_touched,
-                     uint32_t* chunk_total, unsigned long long* visible, cudaStream_t stream) {
-  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, rect, tiles_touched, chunk_total,
-                                                                       visible);
+void count_big_tiles(const BigList& big, const TileTests& tests, const Projected& out, unsigned long long* visible,
+                     unsigned long long* depth_range, cudaStream_t stream) {
+  count_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(
+      big, tests, out.rect, out.depth, out.tiles_touched, out.chunk_total, visible, depth_range);
   CATGS_CUDA_LAUNCHED("count_big_kernel");
 }
 

@@ -12,6 +12,7 @@
 
 #include "forward_model/chunk_bounds.h"
 #include "forward_model/forward_model.h"
+#include "forward_model/key_packing.h"
 #include "speculation/speculation_params.h"
 #include "tunables.h"
 
@@ -71,34 +72,9 @@ struct Projected {
   uint32_t* chunk_total;
 };
 
-// How a 64-bit render-list key holds its depth: [tile | depth bits - base], the depth part `bits`
-// wide. The view depths of a frame's listed Gaussians are positive floats, whose bit patterns
-// increase with the value; when they all lie in [base, base + 2^bits), the packed key orders as
-// [tile | 32 depth bits] does (the same list, the same ties), and the radix sort visits
-// tile_bits + bits key bits instead of tile_bits + 32: at 1080p, 5 passes of 8 bits instead of 6
-// wherever the depths span under 2^27 patterns (16 binades: a factor of 2^16 in depth). bits = 32 and
-// base = 0 is the plain key. Built from the frame's depth range (depth_key_packing).
-struct DepthKeyPacking {
-  uint32_t base = 0;
-  int bits = tune::kDepthBits;
-  __host__ __device__ uint32_t depth_mask() const { return bits >= 32 ? 0xffffffffu : (1u << bits) - 1u; }
-  // Depths outside the range clamp to its ends (only the sentinel's 0xffffffff does, by design).
-  __host__ __device__ uint64_t key(uint32_t tile, uint32_t depth_bits) const {
-    uint32_t rel = depth_bits >= base ? depth_bits - base : 0u;
-    rel = rel < depth_mask() ? rel : depth_mask();
-    return (static_cast<uint64_t>(tile) << bits) | rel;
-  }
-  __host__ __device__ uint32_t tile_of(uint64_t key) const { return static_cast<uint32_t>(key >> bits); }
-};
-
-// The packing for depth bit patterns in [low, high]; low > high (nothing recorded) gives the
-// plain key.
-inline DepthKeyPacking depth_key_packing(uint32_t low, uint32_t high) {
-  if (low > high) return {};
-  int bits = 0;
-  while (bits < tune::kDepthBits && ((high - low) >> bits) != 0u) ++bits;
-  return {low, bits};
-}
+// Render-list sort keys (forward_model/key_packing.h): 64-bit plain [tile | depth bits], or the
+// 32-bit [tile | quantised depth] of the single sort.
+using fm::DepthKeyPacking;
 
 // Gaussians whose candidate rectangle has more than tune::kBigRectTiles tiles, handled a warp
 // each: their indices (order arbitrary) and how many there are, both in device memory.

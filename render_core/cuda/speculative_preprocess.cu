@@ -160,7 +160,7 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
       scene, path, widening, out, trails, visible, big);
   CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");
   const TileTests tests{TileTestKind::trail, nullptr, trails, path.cam[0].width, path.cam[0].height};
-  count_big_tiles(big, tests, out.rect, out.tiles_touched, out.chunk_total, visible, stream);
+  count_big_tiles(big, tests, out, visible, nullptr, stream);
 }
 
 void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b, float min_depth,

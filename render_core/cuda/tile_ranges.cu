@@ -10,14 +10,12 @@ namespace catgs::cuda::stages {
 
 namespace {
 
-// The tile of a sorted key: the part above the packed depth of [tile | depth], or the whole
-// tile-only key.
-struct PackedTile {
+// The tile of a sorted key: the part above its depth (forward_model/key_packing.h), for 64-bit
+// and 32-bit keys.
+struct TileOfKey {
   DepthKeyPacking packing;
   __device__ uint32_t operator()(uint64_t key) const { return packing.tile_of(key); }
-};
-struct WholeTile {
-  __device__ uint32_t operator()(uint32_t key) const { return key; }
+  __device__ uint32_t operator()(uint32_t key) const { return packing.tile_of32(key); }
 };
 
 template <typename Key, typename TileOf>
@@ -105,12 +103,12 @@ void launch_tile_ranges(const Key* sorted_keys, uint64_t entries, uint32_t tiles
 
 void tile_ranges(const uint64_t* sorted_keys, DepthKeyPacking packing, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream) {
-  launch_tile_ranges(sorted_keys, entries, tiles, PackedTile{packing}, ranges, stream);
+  launch_tile_ranges(sorted_keys, entries, tiles, TileOfKey{packing}, ranges, stream);
 }
 
-void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+void tile_ranges(const uint32_t* sorted_keys, DepthKeyPacking packing, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream) {
-  launch_tile_ranges(sorted_tile_keys, entries, tiles, WholeTile{}, ranges, stream);
+  launch_tile_ranges(sorted_keys, entries, tiles, TileOfKey{packing}, ranges, stream);
 }
 
 }  // namespace catgs::cuda::stages

@@ -10,11 +10,11 @@
 namespace catgs::cuda::stages {
 
 // Stage 4 (tile_ranges.cu): [start, end) of each tile in the sorted list; tiles without entries get
-// [0, 0). Sentinel entries (tile id >= tiles) are ignored. Keys are [tile | depth] (64-bit, packed
-// as `packing` says) or, with the depth-first sort, tile ids (32-bit).
+// [0, 0). Sentinel entries (tile id >= tiles) are ignored. Keys are 64-bit or 32-bit, made as
+// `packing` says (forward_model/key_packing.h).
 void tile_ranges(const uint64_t* sorted_keys, DepthKeyPacking packing, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
-void tile_ranges(const uint32_t* sorted_tile_keys, uint64_t entries, uint32_t tiles, uint2* ranges,
+void tile_ranges(const uint32_t* sorted_keys, DepthKeyPacking packing, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
 
 // Stage 4b (tile_ranges.cu): tile ids by decreasing number of entries, to within a quarter of an

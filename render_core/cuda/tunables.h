@@ -31,11 +31,6 @@ inline constexpr unsigned kMaxEntryBlocks = 65535u * 8u;
 inline constexpr int kMaxImageSide = catgs::kMaxImageSide;
 inline constexpr int kMaxTilesPerSide = (kMaxImageSide + kTileSize - 1) / kTileSize;
 
-// Render-list keys are [tile id | view depth bits]: the plain key holds all 32 bits of the depth,
-// the packed one (records.h DepthKeyPacking) only what the frame's depth range needs, and the sort
-// visits those + bit_width(tiles) bits (sentinel tile id `tiles` included).
-inline constexpr int kDepthBits = 32;
-
 // A Gaussian whose candidate tile rectangle holds more than this many tiles is "big": its tiles
 // are counted (exact) and its keys emitted by a whole warp, 32 tiles at a time, instead of by one
 // thread in a serial loop. A few huge near Gaussians would otherwise hold their warps (and the
@@ -85,14 +80,5 @@ static_assert(kRasterMinBlocks * kRasterThreads <= 2048, "an SM holds at most 20
 static_assert(kPathKernelMinBlocks * kGaussianThreads * 64 <= 65536, "64 registers a thread fit the SM's file");
 static_assert(kSliceLengthBits < 32 && kSliceIndexMax + 1u < (1u << (32 - kSliceLengthBits)),
               "the slice index and length share one 32-bit key; all ones marks an unused slot");
-
-// Number of key bits the tile id needs for a grid of `tiles` tiles, sentinel id `tiles` included.
-constexpr int tile_key_bits(uint32_t tiles) {
-  int bits = 0;
-  while (bits < 32 && (tiles >> bits) != 0u) ++bits;
-  return bits;
-}
-static_assert(tile_key_bits(8160) == 13, "1920x1080 has 120 x 68 tiles");
-static_assert(tile_key_bits(65535) == 16 && tile_key_bits(65536) == 17, "sentinel needs a bit");
 
 }  // namespace catgs::cuda::tune

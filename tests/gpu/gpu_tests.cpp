@@ -13,8 +13,10 @@
 //             over 8-bit RGB (max abs error of the float image and of the 8-bit image reported),
 //             and the render list lengths of both.
 //  warpcull   CUDA exact with and without the rasterizer's optional per-warp skip: bit-identical.
-//  depthsort  CUDA exact and catgs with the depth-first sort and with the single [tile | depth]
-//             sort: bit-identical images, the same list lengths (and for catgs the same decisions).
+//  depthsort  CUDA exact and catgs with the depth-first sort and with the single sort: the same
+//             list lengths; exact >= 60 dB (the single sort's 32-bit key quantises the depth,
+//             forward_model/key_packing.h); catgs bit-identical (its key frames sort plain keys)
+//             with the same decisions.
 //  exact~van  CUDA exact vs CUDA vanilla: PSNR >= 40 dB and a shorter render list.
 //  grow       one renderer across scenes and sizes (small -> large -> small): every frame equals
 //             a fresh renderer's frame, and buffers grow without errors.
@@ -157,8 +159,10 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model, con
            static_cast<long long>(cs.render_list_length), static_cast<long long>(gs.render_list_length), d.psnr >= 50.0,
            ""});
     }
-    {  // the depth-first sort must give the single sort's list: the same image, bit for bit
-      catgs::cuda::CudaOptions depth_first_sort;  // gpu_e sorts once ([tile | depth]; exact's default)
+    {  // the depth-first sort orders by the full depth, the single sort by the 32-bit key's
+       // quantised depth (forward_model/key_packing.h): the same entries, and ties of depths
+       // within 3e-5 of each other in index order instead of depth order
+      catgs::cuda::CudaOptions depth_first_sort;  // gpu_e sorts once (exact's default)
       depth_first_sort.depth_first_sort = true;
       catgs::cuda::CudaRenderer depth_first(dev, oe, depth_first_sort);
       Image gt;
@@ -166,7 +170,7 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model, con
       const Diff d = compare(ge, gt);
       const auto ls = depth_first.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;
       add({"depthsort", name, view, "exact", d.psnr, d.max_abs, d.max_abs8, static_cast<long long>(ls),
-           static_cast<long long>(le), d.max_abs == 0.0 && ls == le, "depth-first sort vs single sort"});
+           static_cast<long long>(le), d.psnr >= 60.0 && ls == le, "depth-first sort vs single (32-bit key) sort"});
     }
     const Diff d = compare(gv, ge);
     const auto lv = gpu_v.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;
@@ -562,35 +566,6 @@ struct Scenes {
 };
 
 // 1-2: CUDA == CPU and exact ~ vanilla, per scene.
-// The packed render-list key (records.h DepthKeyPacking) against the plain [tile | depth bits]
-// order: for random pairs of (tile, positive depth) inside a frame's depth range, the packed keys
-// compare as the plain ones do (the sort's order and ties). Depth ranges from a sliver to the
-// whole float range; depths drawn near the range's ends as often as inside it.
-void packing_checks() {
-  std::mt19937 rng(19);
-  long long wrong = 0, pairs = 0;
-  for (const auto& [near, far] : std::vector<std::pair<float, float>>{
-           {1.0f, 1.0000001f}, {0.2f, 3.0f}, {0.01f, 100.0f}, {0.5f, 40.0f}, {1e-6f, 3e38f}}) {
-    uint32_t lo, hi;
-    std::memcpy(&lo, &near, 4);
-    std::memcpy(&hi, &far, 4);
-    const catgs::cuda::stages::DepthKeyPacking p = catgs::cuda::stages::depth_key_packing(lo, hi);
-    std::uniform_int_distribution<uint32_t> depth(lo, hi), tile(0, 8160), edge(0, 3);
-    auto draw = [&] {
-      const uint32_t e = edge(rng);
-      return e == 0 ? lo : e == 1 ? hi : depth(rng);
-    };
-    for (int k = 0; k < 200000; ++k, ++pairs) {
-      const uint32_t ta = tile(rng), tb = edge(rng) ? ta : tile(rng), da = draw(), db = draw();
-      const uint64_t plain_a = (uint64_t{ta} << 32) | da, plain_b = (uint64_t{tb} << 32) | db;
-      const uint64_t ka = p.key(ta, da), kb = p.key(tb, db);
-      wrong += (plain_a < plain_b) != (ka < kb) || (plain_a == plain_b) != (ka == kb) || p.tile_of(ka) != ta ? 1 : 0;
-    }
-  }
-  add({"keypack", "-", "random", "exact", 0.0, 0.0, 0, pairs, pairs - wrong, wrong == 0,
-       "packed [tile | depth - base] keys order as [tile | depth] (pairs compared / agreeing)"});
-}
-
 void equality_checks(Scenes& sc) {
   sc.biker = load(sc.dir + "/biker.compressed.ply", 1.0f);
   sc.biker_dev = catgs::cuda::DeviceScene::upload(*sc.biker);
@@ -873,7 +848,6 @@ int run(int argc, char** argv) {
   std::printf("GPU: %s\n", gpu.c_str());
   std::printf("%-10s %-16s %-7s %-8s %8s %10s %4s %12s %12s  %s\n", "test", "scene", "view", "pipeline", "PSNR dB",
               "max|err|", "8bit", "list (ref)", "list (gpu)", "result");
-  packing_checks();
   equality_checks(sc);
   if (!sc.quick) grow_checks(sc);
   catgs_checks(sc);

@@ -116,7 +116,7 @@ TEST(CpuRenderer, StagesKeepTheirInvariants) {
       const glm::uvec2 rg = ranges[static_cast<std::size_t>(tile)];
       covered += rg.y - rg.x;
       for (uint32_t k = rg.x; k < rg.y; ++k) {
-        ASSERT_EQ(list.keys[k] >> 32, static_cast<uint64_t>(tile));
+        ASSERT_EQ(list.packing.tile_of(list.keys[k]), static_cast<uint32_t>(tile));
         const uint32_t g = list.values[k];
         const fm::TileRect rect = proj.tile_rect[g];
         const int tx = tile % grid.tiles_x, ty = tile / grid.tiles_x;
