@@ -211,9 +211,11 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   }
 }
 
-// Big Gaussians, a warp each: the rectangle is walked 32 tiles at a time in row-major order;
-// the lanes whose tile passes take consecutive slots (ballot + popc), so the order is the one the
-// per-thread loop (and the CPU reference) produces.
+// Big Gaussians (preprocess.cu count_big_kernel's two passes): a warp per Gaussian of at most
+// tune::kHugeRectTiles tiles, then a block per huge one. Either walks the rectangle in row-major
+// order, a round of 32 (or kBigThreads) tiles at a time, and the threads whose tile passes take
+// consecutive slots (ballot + popc, and across a block's warps their counts' prefix), so the
+// order is the one the per-thread loop (and the CPU reference) produces.
 __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big, TileTests tests,
                                                                      const float* __restrict__ depth,             // [N]
                                                                      const ushort4* __restrict__ rect,            // [N]
@@ -221,18 +223,20 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
                                                                      const uint64_t* __restrict__ ends,           // [N]
                                                                      int tiles_x, int tiles_y, KeyOut keys,
                                                                      uint32_t* __restrict__ values) {  // [L]
-  const unsigned lane = threadIdx.x & 31u;
+  constexpr int kWarps = tune::kBigThreads / 32;
+  __shared__ uint32_t warp_hits[kWarps];
+  const unsigned lane = threadIdx.x & 31u, warp = threadIdx.x / 32u;
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
   const unsigned total = *big.count;
   const auto sentinel = static_cast<uint32_t>(tiles_x * tiles_y);
   for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < total; w += warps) {
     const uint32_t i = big.index[w];
     const uint32_t touched = tiles_touched[i];
-    if (touched == 0) continue;  // warp-uniform
-    const uint64_t end = ends[i];
-    uint64_t at = end - touched;
     const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
+    if (touched == 0 || area > tune::kHugeRectTiles) continue;  // warp-uniform
+    const uint64_t end = ends[i];
+    uint64_t at = end - touched;
     const uint32_t depth_bits = __float_as_uint(depth[i]);
     const GaussianTileTest test = load_tile_test(tests, i);
     for (int base = 0; base < area && at < end; base += 32) {
@@ -248,6 +252,41 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
       at += static_cast<uint64_t>(__popc(hits));
     }
     for (uint64_t s = at + lane; s < end; s += 32) {  // never expected, as in emit_keys_kernel
+      keys.put(s, sentinel, 0xffffffffu);
+      values[s] = i;
+    }
+  }
+  for (unsigned w = blockIdx.x; w < total; w += gridDim.x) {
+    const uint32_t i = big.index[w];
+    const uint32_t touched = tiles_touched[i];
+    const ushort4 r = rect[i];
+    const int rw = r.z - r.x, area = rw * (r.w - r.y);
+    if (touched == 0 || area <= tune::kHugeRectTiles) continue;  // block-uniform
+    const uint64_t end = ends[i];
+    uint64_t at = end - touched;  // the same in every thread: advanced by the block's total
+    const uint32_t depth_bits = __float_as_uint(depth[i]);
+    const GaussianTileTest test = load_tile_test(tests, i);
+    for (int base = 0; base < area && at < end; base += static_cast<int>(blockDim.x)) {
+      const int t = base + static_cast<int>(threadIdx.x);
+      const int tx = r.x + (t % rw), ty = r.y + (t / rw);
+      const bool hit = t < area && test(tx, ty);
+      const unsigned hits = __ballot_sync(0xffffffffu, hit);
+      if (lane == 0) warp_hits[warp] = static_cast<uint32_t>(__popc(hits));
+      __syncthreads();
+      uint64_t before = 0, round = 0;  // hits of the warps before this one, and of the block
+      for (unsigned k = 0; k < kWarps; ++k) {
+        before += k < warp ? warp_hits[k] : 0u;
+        round += warp_hits[k];
+      }
+      const uint64_t slot = at + before + static_cast<uint64_t>(__popc(hits & ((1u << lane) - 1u)));
+      if (hit && slot < end) {
+        keys.put(slot, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits);
+        values[slot] = i;
+      }
+      at += round;
+      __syncthreads();  // warp_hits is rewritten next round
+    }
+    for (uint64_t s = at + threadIdx.x; s < end; s += blockDim.x) {  // never expected
       keys.put(s, sentinel, 0xffffffffu);
       values[s] = i;
     }

@@ -2,6 +2,8 @@
 // shared forward_model.h maths). Built with -fmad=false (CMakeLists.txt) so the arithmetic that
 // decides culling and tile counts rounds as the CPU reference does, and so the tile test gives the
 // same answer here as in key emission.
+#include <cub/block/block_reduce.cuh>
+
 #include "cuda_check.h"
 #include "splat.cuh"
 #include "preprocess.h"
@@ -123,9 +125,24 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   record_depth_range(touched > 0, depth, depth_range);
 }
 
-// Big Gaussians: a warp per Gaussian tests its rectangle 32 tiles at a time and writes the
-// count; the same tile test as key emission (tile_test.cuh). A Gaussian with entries widens
-// depth_range (when not null) as record_depth_range does.
+// Record of a big Gaussian's count (one thread): its tiles_touched, its chunk's total and, where
+// it has entries and depth_range is not null, the depth range as record_depth_range keeps it.
+__device__ void record_big_count(uint32_t i, uint32_t n, const float* depth, uint32_t* tiles_touched,
+                                 uint32_t* chunk_total, unsigned long long* depth_range) {
+  tiles_touched[i] = n;
+  if (n == 0) return;
+  atomicAdd(chunk_total + i / fm::kChunkSize, n);
+  if (depth_range) {
+    const unsigned bits = __float_as_uint(depth[i]);
+    atomicMax(depth_range, static_cast<unsigned long long>(~bits));
+    atomicMax(depth_range + 1, static_cast<unsigned long long>(bits));
+  }
+}
+
+// Big Gaussians, the same tile test as key emission (tile_test.cuh), in two passes of one
+// launch: a warp per Gaussian of at most tune::kHugeRectTiles tiles (32 tiles a round), then a
+// block per huge one (kBigThreads tiles a round). Blocks start the second pass as they finish the
+// first; the passes share no data.
 __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList big, TileTests tests,
                                                                       const ushort4* rect,                // [N]
                                                                       const float* depth,                 // [N]
@@ -133,6 +150,8 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
                                                                       uint32_t* chunk_total,              // [chunks]
                                                                       unsigned long long* visible,        // [1]
                                                                       unsigned long long* depth_range) {  // [2] or null
+  using BlockSum = cub::BlockReduce<uint32_t, tune::kBigThreads>;
+  __shared__ typename BlockSum::TempStorage sum_temp;
   const int lane = static_cast<int>(threadIdx.x & 31u);
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
   const unsigned total = *big.count;
@@ -141,20 +160,29 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
     const uint32_t i = big.index[w];
     const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
+    if (area > tune::kHugeRectTiles) continue;  // the block pass's (warp-uniform)
     const GaussianTileTest hit = load_tile_test(tests, i);
     uint32_t n = 0;
     for (int t = lane; t < area; t += 32) n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
     n = __reduce_add_sync(0xffffffffu, n);
-    if (lane == 0) tiles_touched[i] = n;
-    if (lane == 0 && n > 0) {
-      atomicAdd(chunk_total + i / fm::kChunkSize, n);
-      if (depth_range) {
-        const unsigned bits = __float_as_uint(depth[i]);
-        atomicMax(depth_range, static_cast<unsigned long long>(~bits));
-        atomicMax(depth_range + 1, static_cast<unsigned long long>(bits));
-      }
-    }
+    if (lane == 0) record_big_count(i, n, depth, tiles_touched, chunk_total, depth_range);
     found += n > 0 ? 1u : 0u;
+  }
+  for (unsigned w = blockIdx.x; w < total; w += gridDim.x) {
+    const uint32_t i = big.index[w];
+    const ushort4 r = rect[i];
+    const int rw = r.z - r.x, area = rw * (r.w - r.y);
+    if (area <= tune::kHugeRectTiles) continue;  // the warp pass's (block-uniform)
+    const GaussianTileTest hit = load_tile_test(tests, i);
+    uint32_t n = 0;
+    for (int t = static_cast<int>(threadIdx.x); t < area; t += static_cast<int>(blockDim.x))
+      n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
+    n = BlockSum(sum_temp).Sum(n);  // valid in thread 0
+    if (threadIdx.x == 0) {
+      record_big_count(i, n, depth, tiles_touched, chunk_total, depth_range);
+      found += n > 0 ? 1u : 0u;
+    }
+    __syncthreads();  // sum_temp is reused
   }
   if (lane == 0 && found > 0) atomicAdd(visible, found);
 }

@@ -36,9 +36,15 @@ inline constexpr int kMaxTilesPerSide = (kMaxImageSide + kTileSize - 1) / kTileS
 // thread in a serial loop. A few huge near Gaussians would otherwise hold their warps (and the
 // kernel's tail) for thousands of iterations.
 inline constexpr int kBigRectTiles = 32;
-// Grid of the warp-per-big-Gaussian kernels (they loop over a device-side count).
+// Grid of the big-Gaussian kernels (they loop over a device-side count).
 inline constexpr int kBigBlocks = 1024;
 inline constexpr int kBigThreads = 256;
+// A big Gaussian whose rectangle holds more than this many tiles is "huge": the big-Gaussian
+// kernels hand it a whole block (kBigThreads tiles a round) after their warp-per-Gaussian pass,
+// in the same launch, instead of a warp: a near Gaussian that spans thousands of tiles held its
+// warp for hundreds of rounds while the rest of the GPU idled (ncu: 25-30% of warps active, SM
+// throughput 10%; RESULTS.md, "Issue 19, third round").
+inline constexpr int kHugeRectTiles = kBigThreads;
 
 // Blocks per SM the rasterizers (rasterize.cu, rasterize_slices.cu) are built for: 8 x 256
 // threads fill an SM at 32 registers. The tile-culled slice kernel wants more and spills at 32,
