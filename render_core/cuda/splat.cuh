@@ -13,7 +13,7 @@ namespace catgs::cuda::stages {
 // whose q_max = fm::opacity_aware_qmax(opacity) the caller has worked out (every caller needs it
 // for its own tests). power_cut = -q_max / 2 - 1e-3 = ln(1 / (255 opacity)) - 1e-3: the power
 // below which alpha = opacity exp(power) is surely under 1/255. The 1e-3 moves exp by 0.1%, far
-// beyond the few-ulp errors of expf and logf, so the rasterizers' cut skips only entries that
+// beyond the few-ulp errors of logf and of the rasterizers' __expf (under 10 ulps there), so the rasterizers' cut skips only entries that
 // their own alpha < 1/255 test skips (blend.cuh blend_entry): the image is the same bit for bit.
 // Halving is exact in float, so this is the value the rasterizers worked out per fetched entry
 // before it was stored here (-logf(255 opacity) - 1e-3), with one logf per Gaussian instead.
