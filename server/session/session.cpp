@@ -107,7 +107,7 @@ void Session::send(const pb::ServerMessage& message) {
   shared_.transport.send(id_, std::move(bytes), /*counted=*/false);
 }
 
-void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued) {
+void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued, std::uint32_t retry_after_ms) {
   if (state_ == State::closed) return;
   state_ = State::closed;
   gone_ = true;
@@ -119,6 +119,7 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   pb::ServerMessage m;
   m.mutable_error()->set_code(code);
   m.mutable_error()->set_reason(reason);
+  m.mutable_error()->set_retry_after_ms(retry_after_ms);
   std::string bytes;
   m.SerializeToString(&bytes);
   shared_.transport.close(id_, std::move(bytes), drop_queued);
@@ -181,7 +182,10 @@ void Session::handle_hello(const pb::Hello& hello) {
   }
   if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
     shared_.metrics.sessions_open--;
-    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)");
+    // A hint, not a promise: a page that waits this long (or a fresh connection that the Service
+    // sends to another replica) is likely to get in.
+    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)",
+                false, static_cast<std::uint32_t>(shared_.options.full_retry_ms));
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;

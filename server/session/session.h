@@ -111,7 +111,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
   void handle_hello(const pb::Hello& hello);
   void handle_pose(const pb::Pose& pose, Clock::time_point received);
-  void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false);
+  // `retry_after_ms`: Error.retry_after_ms, the client's reconnect hint (0: none).
+  void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false, std::uint32_t retry_after_ms = 0);
   void send(const pb::ServerMessage& message);
   void maybe_start_render();
   void maybe_start_encode();

@@ -349,6 +349,58 @@ try {
     await shot(page, 'paths_panel');
     await page.close();
   }
+
+  // 12. A phone: 390x844 CSS pixels at DPR 3 with touch. The stream is capped (886x1920, not
+  //     1170x2532), nothing on screen is cut off, and the hint speaks of fingers.
+  {
+    await context.close();
+    context = null;
+    const phoneProfile = mkdtempSync(path.join(os.tmpdir(), 'catgs-mock-phone-'));
+    const phone = await chromium.launchPersistentContext(phoneProfile, {
+      executablePath: CHROMIUM,
+      headless: true,
+      args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+        '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+      viewport: { width: 390, height: 844 },
+      deviceScaleFactor: 3,
+      isMobile: true,
+      hasTouch: true,
+    });
+    try {
+      const page = await openPage(`${base}/?stats=1`, phone);
+      check(await moveUntil(page, (c) => c.framesDecoded >= 3), 'phone: streams');
+      const v = await page.evaluate(() => window.catgs.viewport);
+      const hello = hellos('/ws').at(-1).msg;
+      check(v.width === 886 && v.height === 1920 && hello.viewport_width === 886 && hello.viewport_height === 1920,
+        `phone: Hello asks for 886x1920 at DPR 3 (${hello.viewport_width}x${hello.viewport_height})`);
+      await page.evaluate(() => window.catgs.importText('x.trace', 'junk')); // a long message too
+      await page.tap('#btn-help');
+      const boxes = await page.evaluate(() => [...document.querySelectorAll('.overlay:not([hidden])')].map((el) => {
+        const r = el.getBoundingClientRect();
+        return { id: el.id, left: r.left, top: r.top, right: r.right, bottom: r.bottom, sw: el.scrollWidth, cw: el.clientWidth };
+      }));
+      const clipped = boxes.filter((b) => b.left < 0 || b.top < 0 || b.right > 390 || b.bottom > 844 || b.sw > b.cw + 1);
+      check(boxes.length >= 4 && clipped.length === 0, `phone: no overlay cut off (${JSON.stringify(clipped.length ? clipped : boxes.map((b) => b.id))})`);
+      const hint = await page.evaluate(() => document.getElementById('hint').textContent);
+      check(/finger/.test(hint) && !/wheel|WASD/.test(hint), `phone: touch hint (${hint})`);
+      await shot(page, 'phone_dpr3_help');
+      await page.tap('#btn-help');
+      // One finger drags through CDP touch events: the camera orbits.
+      const before = await page.evaluate(() => window.catgs.lastPoseSent.sequence);
+      const cdp = await phone.newCDPSession(page);
+      const touch = (type, x, y) => cdp.send('Input.dispatchTouchEvent', { type, touchPoints: type === 'touchEnd' ? [] : [{ x, y }] });
+      await touch('touchStart', 200, 500);
+      for (let i = 1; i <= 5; i++) await touch('touchMove', 200 + i * 10, 500);
+      await touch('touchEnd');
+      await sleep(300);
+      check((await page.evaluate(() => window.catgs.lastPoseSent.sequence)) > before, 'phone: a one-finger drag moves the camera');
+      await shot(page, 'phone_dpr3');
+      await page.close();
+    } finally {
+      await phone.close();
+      rmSync(phoneProfile, { recursive: true, force: true });
+    }
+  }
 } catch (e) {
   failures.push(String(e.stack || e));
   console.error(e);

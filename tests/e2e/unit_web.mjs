@@ -379,6 +379,7 @@ test('the page\'s tour matches the core\'s interpolate_views (catgs-scene interp
       const dq = Math.min(...[1, -1].map((s) => Math.hypot(...p.orientation.map((v, i) => v - s * c.orientation[i]))));
       worst = Math.max(worst, Math.hypot(...p.position.map((v, i) => v - c.position[i])), dq, Math.abs(p.fovDeg - c.fovDeg) / 100);
     }
+    console.log(`# tour vs catgs-scene interpolate: largest difference ${worst.toExponential(2)}`);
     // float32 in the core: agreement to about 1e-6 of the scene's size.
     assert.ok(worst < 2e-5, `largest difference ${worst}`);
     // Negative control: plain linear interpolation between the keys is far off mid-segment, so

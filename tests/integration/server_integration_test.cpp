@@ -653,7 +653,7 @@ TEST(ServerIntegration, StalledFrameReaderTimesOut) {
 }
 
 TEST(ServerIntegration, SessionLimitAndToken) {
-  ServerProcess server(server_args(kBiker, {"--max-sessions", "1", "--token", "s3cret"}));
+  ServerProcess server(server_args(kBiker, {"--max-sessions", "1", "--token", "s3cret", "--full-retry-ms", "1234"}));
   StreamClient wrong;
   wrong.connect(server.port());
   EXPECT_THROW(wrong.hello(64, 64, "nope"), std::runtime_error);
@@ -666,8 +666,9 @@ TEST(ServerIntegration, SessionLimitAndToken) {
   try {
     second.hello(64, 64, "s3cret");
     ADD_FAILURE() << "second session accepted past --max-sessions 1";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("ERROR_SERVER_FULL"), std::string::npos) << e.what();
+  } catch (const loadgen::Refused& e) {
+    EXPECT_EQ(e.error().code(), pb::ERROR_SERVER_FULL) << e.what();
+    EXPECT_EQ(e.error().retry_after_ms(), 1234u) << "the reconnect hint (--full-retry-ms)";
   }
   // The slot frees when the first session leaves.
   first.ws().close();

@@ -110,6 +110,7 @@ class PoseLoop {
   // Until the sending time is over and the last pose is answered (or drain_ms passed), or the
   // server sends an Error. Closes the connection.
   void run() {
+    Progress* progress = cfg_.progress;
     for (;;) {
       const auto now = Clock::now();
       const bool sending = now < send_end_;
@@ -121,10 +122,18 @@ class PoseLoop {
         note_error(r_, "server Error " + pb::ErrorCode_Name(msg->error().code()) + ": " + msg->error().reason());
         break;
       }
-      if (msg->has_frame()) on_frame(msg->frame());
+      if (msg->has_frame()) {
+        on_frame(msg->frame());
+        if (progress) progress->frames++;
+      }
+      if (msg->has_stats()) r_.server_skipped = msg->stats().poses_skipped();
     }
     r_.run_seconds = std::chrono::duration<double>(std::min(Clock::now(), send_end_) - t0_).count();
-    r_.dropped = r_.poses_sent - answered_;
+    // Poses up to the newest answered one that got no frame were replaced by a newer pose (latest
+    // wins); those after it were never answered at all.
+    const auto reached = static_cast<std::uint64_t>(newest_answered_ + 1);
+    r_.skipped = reached - answered_;
+    r_.dropped = r_.poses_sent - reached;
     client_.ws().close();
   }
 
@@ -153,6 +162,7 @@ class PoseLoop {
     if (check_) sent_poses_.push_back(pose);
     client_.send_pose(pose);
     r_.poses_sent++;
+    if (cfg_.progress) cfg_.progress->poses++;
   }
 
   // How long recv() may wait: until the next paced pose is due, at most 20 ms.
@@ -254,14 +264,27 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
   r.trace = cfg.trace;
   if (cfg.check_every > 0 && !cfg.scene)
     throw std::invalid_argument("loadgen: the reference check needs the scene (--scene)");
+  Progress* progress = cfg.progress;
+  bool open = false;
   try {
     StreamClient client;
     const pb::Welcome welcome = open_session(cfg, client, r);
+    open = true;
+    if (progress) progress->open++;
     Trace trace = make_load_trace(cfg.trace, cfg.scene.get(), welcome, r.width, r.height);
     if (trace.empty()) throw std::runtime_error("empty trace " + cfg.trace);
     PoseLoop(cfg, r, client, std::move(trace)).run();
+  } catch (const Refused& e) {
+    r.refused = true;
+    r.refusal = pb::ErrorCode_Name(e.error().code()) + ": " + e.error().reason();
   } catch (const std::exception& e) {
     note_error(r, e.what());
+  }
+  if (progress) {
+    if (open) progress->open--;
+    if (r.refused) progress->refused++;
+    if (r.errors > 0) progress->failed++;
+    progress->finished++;
   }
   return r;
 }
