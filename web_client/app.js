@@ -562,6 +562,10 @@ function wireUi() {
   window.addEventListener('keydown', onKey);
   // Touching the view takes it back from a playing path or tour.
   canvas.addEventListener('pointerdown', stopPlayback);
+  // The hint has done its job once the view was moved (the help panel keeps the details).
+  const hideHint = () => ($('hint').hidden = true);
+  canvas.addEventListener('pointerdown', hideHint, { once: true });
+  canvas.addEventListener('wheel', hideHint, { once: true, passive: true });
   pathsStatus();
 }
 
