@@ -19,8 +19,9 @@ const canvas = $('view');
 const ctx = canvas.getContext('2d', { alpha: false });
 const params = new URLSearchParams(location.search);
 const overlay = new Overlay($('stats'), $('messages'), { showStats: params.get('stats') === '1' });
-// ?scale=0.5 renders at half the device resolution (cheaper on a CPU renderer or a slow link).
-const renderScale = Math.min(Math.max(Number(params.get('scale')) || 1, 0.1), 4);
+// ?scale=0.5 renders at half the device resolution (cheaper on a CPU renderer or a slow link);
+// the quality menu changes it.
+let renderScale = Math.min(Math.max(Number(params.get('scale')) || 1, 0.1), 4);
 // The stream is capped (default 1920x1080, either orientation) whatever the device pixel ratio:
 // a phone at DPR 3 would otherwise ask for 1170x2532. ?max=WxH moves the cap.
 const maxSize = parseMaxSize(params.get('max'));
@@ -52,6 +53,7 @@ const state = {
   playback: null, // { kind: 'path' | 'tour', at(t), duration, t0 }
   urlVersion: -1,
   urlSettleAt: 0,
+  maxBitrateKbps: 0, // the quality menu's ceiling (0: the server's default); sent as Quality
 };
 
 function viewportSize() {
@@ -194,13 +196,19 @@ function onWelcome(w) {
     state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
     state.camera.sceneName = w.scene_name;
     if (linkView && linkView.pose && !state.linkApplied) {
-      const p = linkView.pose;
-      state.camera.setPose(p.position, p.orientation, p.fovDeg ?? state.camera.fovDeg);
       state.linkApplied = true;
+      const p = linkView.pose;
+      if (linkView.scene && linkView.scene !== w.scene_name) {
+        notice(`this link shows a view of "${linkView.scene}"; this server shows "${w.scene_name}": starting from its view`, 'warn', 6000);
+      } else {
+        state.camera.setPose(p.position, p.orientation, p.fovDeg ?? state.camera.fovDeg);
+      }
     }
     state.urlVersion = state.camera.version;
   }
   setStatus('first-view');
+  // A chosen quality outlives reconnects; the default is never sent (older servers lack Quality).
+  if (state.maxBitrateKbps > 0) send(state.protocol.encodeQuality(state.maxBitrateKbps));
   sendPose();
 }
 
@@ -279,6 +287,7 @@ function onResize() {
   const v = viewportSize();
   if (state.viewport && v.width === state.viewport.width && v.height === state.viewport.height) return;
   state.viewport = v;
+  qualityStatus();
   if (state.sessionOpen && send(state.protocol.encodeResize(v.width, v.height))) resendPose();
 }
 
@@ -304,7 +313,7 @@ function resetView() {
 }
 
 function shareUrl() {
-  return state.camera ? viewUrl(location.href, state.camera.pose()) : null;
+  return state.camera ? viewUrl(location.href, state.camera.pose(), state.camera.sceneName) : null;
 }
 
 async function copyLink() {
@@ -332,7 +341,7 @@ function syncUrl(now) {
     return;
   }
   if (now < state.urlSettleAt) return;
-  history.replaceState(null, '', viewUrl(location.href, cam.pose()));
+  history.replaceState(null, '', viewUrl(location.href, cam.pose(), cam.sceneName));
   state.urlVersion = cam.version;
 }
 
@@ -346,11 +355,31 @@ function toggleFullscreen() {
   return el.requestFullscreen().catch((e) => notice(`fullscreen refused: ${e.message}`, 'warn'));
 }
 
+// ---- quality menu ----
+
+function setRenderScale(scale) {
+  renderScale = scale;
+  onResize();
+  qualityStatus();
+}
+
+function setMaxBitrate(kbps) {
+  state.maxBitrateKbps = kbps;
+  // The encoder restarts with it (an IDR follows); the current pose again makes that frame.
+  if (state.sessionOpen && send(state.protocol.encodeQuality(kbps))) resendPose();
+  qualityStatus();
+}
+
+function qualityStatus() {
+  const v = state.viewport;
+  $('quality-status').textContent = v ? `stream ${v.width}x${v.height}` : '';
+}
+
 function togglePanel(id, buttonId, show) {
   const panel = $(id);
   const open = show ?? panel.hidden;
-  // One panel at a time: both sit under the toolbar.
-  for (const [p, b] of [['paths', 'btn-paths'], ['helppanel', 'btn-help']]) {
+  // One panel at a time: they all sit under the toolbar.
+  for (const [p, b] of [['paths', 'btn-paths'], ['helppanel', 'btn-help'], ['quality', 'btn-quality']]) {
     $(p).hidden = p === id ? !open : true;
     $(b).setAttribute('aria-expanded', String(p === id && open));
   }
@@ -543,6 +572,14 @@ function wireUi() {
   $('btn-fullscreen').addEventListener('click', toggleFullscreen);
   $('btn-help').addEventListener('click', () => togglePanel('helppanel', 'btn-help'));
   $('btn-paths').addEventListener('click', () => togglePanel('paths', 'btn-paths'));
+  $('btn-quality').addEventListener('click', () => togglePanel('quality', 'btn-quality'));
+  const scaleSelect = $('quality-scale');
+  if (![...scaleSelect.options].some((o) => Number(o.value) === renderScale)) {
+    scaleSelect.add(new Option(`${Math.round(renderScale * 100)}% (?scale)`, String(renderScale)), 0);
+  }
+  scaleSelect.value = String(renderScale);
+  scaleSelect.addEventListener('change', () => setRenderScale(Number(scaleSelect.value)));
+  $('quality-bitrate').addEventListener('change', (e) => setMaxBitrate(Number(e.target.value)));
   $('btn-record').addEventListener('click', toggleRecording);
   $('btn-play-path').addEventListener('click', () => play('path'));
   $('btn-add-waypoint').addEventListener('click', addWaypoint);
@@ -634,6 +671,8 @@ function installTestHook() {
     exportCameras,
     exportTrace,
     importText,
+    setRenderScale,
+    setMaxBitrate,
   };
 }
 
@@ -643,6 +682,7 @@ async function main() {
   state.viewport = viewportSize();
   canvas.width = state.viewport.width;
   canvas.height = state.viewport.height;
+  qualityStatus();
   if (!hasWebCodecs()) {
     state.status = 'unsupported';
     overlay.showMessage('state', 'This browser cannot decode H.264 with WebCodecs (VideoDecoder is missing). Use a recent Chromium, Edge or Chrome over https or localhost.');

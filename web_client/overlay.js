@@ -11,6 +11,11 @@ export class Overlay {
     this.showStats = showStats;
     this.statsEl.hidden = !showStats;
     this.messages = new Map(); // id -> { text, level, actions }
+    this._resetMeasurements();
+  }
+
+  // Everything measured on a session (nothing of it may outlive the session).
+  _resetMeasurements() {
     this.info = null;
     this.lastDrawMs = null;
     this.intervalMs = null;
@@ -35,16 +40,7 @@ export class Overlay {
 
   // The session ended: nothing measured on it stays on screen.
   clearSession() {
-    this.info = null;
-    this.lastDrawMs = null;
-    this.intervalMs = null;
-    this.latencyMs = null;
-    this.frameSize = null;
-    this.rttMs = null;
-    this.serverStats = null;
-    this.serverIdle = false;
-    this.prevFramesSent = null;
-    this.codec = null;
+    this._resetMeasurements();
     this.render();
   }
 

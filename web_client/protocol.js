@@ -87,6 +87,10 @@ export function makeProtocol(root) {
       return encode({ key_frame_request: {} });
     },
 
+    encodeQuality(maxBitrateKbps) {
+      return encode({ quality: { max_bitrate_kbps: maxBitrateKbps } });
+    },
+
     // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | null, msg }
     decodeServer(bytes) {
       const m = ServerMessage.decode(bytes);

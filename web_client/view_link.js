@@ -1,21 +1,24 @@
-// A view in the page's address: ?pos=x,y,z&rot=w,x,y,z&fov=deg (world units, camera-to-world
-// quaternion in OpenCV axes, vertical field of view), the same numbers a Pose carries. Pure (no
-// DOM), so node unit-tests it.
+// A view in the page's address: ?scene=name&pos=x,y,z&rot=w,x,y,z&fov=deg (the Welcome's scene
+// name, world units, camera-to-world quaternion in OpenCV axes, vertical field of view), the same
+// numbers a Pose carries: a pose means something only in its scene's world. Pure (no DOM), so
+// node unit-tests it.
 
 import { qnorm } from './camera.js';
 
 // Parameters a shared link must not carry: the access token is the sender's, not the view's.
 const PRIVATE_PARAMS = ['token'];
-const VIEW_PARAMS = ['pos', 'rot', 'fov'];
+const VIEW_PARAMS = ['scene', 'pos', 'rot', 'fov'];
 
 // 7 significant digits: below a float32's resolution, which is what the renderer uses.
 const fmt = (v) => String(Number(v.toPrecision(7)));
 
-// The page URL `href` with the view `pose` written in (other parameters kept, the token
-// dropped).
-export function viewUrl(href, pose) {
+// The page URL `href` with the view `pose` of scene `scene` written in (other parameters kept,
+// the token dropped).
+export function viewUrl(href, pose, scene = '') {
   const u = new URL(href);
   for (const k of PRIVATE_PARAMS) u.searchParams.delete(k);
+  if (scene) u.searchParams.set('scene', scene);
+  else u.searchParams.delete('scene');
   u.searchParams.set('pos', pose.position.map(fmt).join(','));
   u.searchParams.set('rot', qnorm(pose.orientation).map(fmt).join(','));
   u.searchParams.set('fov', fmt(pose.fovDeg));
@@ -30,10 +33,10 @@ export function withoutView(href) {
   return u.toString();
 }
 
-// The view in `search` (a URLSearchParams): null when the link has none, else { pose } or
-// { error } saying which parameter is bad.
+// The view in `search` (a URLSearchParams): null when the link has none, else { pose, scene }
+// (scene '' when the link names none) or { error } saying which parameter is bad.
 export function parseView(params) {
-  if (!VIEW_PARAMS.some((k) => params.has(k))) return null;
+  if (!['pos', 'rot', 'fov'].some((k) => params.has(k))) return null;
   const nums = (k, n) => {
     const s = params.get(k);
     if (s === null) return null;
@@ -46,5 +49,5 @@ export function parseView(params) {
   if (!position) return { error: 'pos must be 3 numbers x,y,z' };
   if (!rot || Math.hypot(...rot) < 1e-6) return { error: 'rot must be a non-zero quaternion w,x,y,z' };
   if (fov === undefined || (fov && !(fov[0] > 1 && fov[0] < 170))) return { error: 'fov must be degrees in (1, 170)' };
-  return { pose: { position, orientation: qnorm(rot), fovDeg: fov ? fov[0] : null } };
+  return { pose: { position, orientation: qnorm(rot), fovDeg: fov ? fov[0] : null }, scene: params.get('scene') || '' };
 }

@@ -58,4 +58,13 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
   return std::nullopt;
 }
 
+std::optional<Violation> check_quality(const pb::Quality& quality) {
+  const std::uint32_t b = quality.max_bitrate_kbps();
+  if (b != 0 && (b < kMinBitrateKbps || b > kMaxBitrateKbps))
+    return Violation{pb::ERROR_INVALID_ARGUMENT, "Quality.max_bitrate_kbps " + std::to_string(b) + " outside 0 or " +
+                                                     std::to_string(kMinBitrateKbps) + ".." +
+                                                     std::to_string(kMaxBitrateKbps)};
+  return std::nullopt;
+}
+
 }  // namespace catgs::server

@@ -58,4 +58,11 @@ struct CameraPose {
 // ERROR_INVALID_ARGUMENT otherwise.
 std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out);
 
+inline constexpr std::uint32_t kMinBitrateKbps = 100;
+inline constexpr std::uint32_t kMaxBitrateKbps = 100000;
+
+// Validates Quality: max_bitrate_kbps 0 (the server's default) or in [100, 100000] kbit/s.
+// ERROR_INVALID_ARGUMENT otherwise.
+std::optional<Violation> check_quality(const pb::Quality& quality);
+
 }  // namespace catgs::server

@@ -165,6 +165,11 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
     case pb::ClientMessage::kKeyFrameRequest:
       force_idr_ = true;
       return;
+    case pb::ClientMessage::kQuality:
+      if (auto bad = check_quality(msg.quality())) return fail(bad->code, bad->reason);
+      max_bitrate_kbps_ = static_cast<int>(msg.quality().max_bitrate_kbps());
+      force_idr_ = true;  // the encoder is rebuilt with it; its first frame is an IDR
+      return;
     default:
       return fail(pb::ERROR_MALFORMED, "unknown message");
   }
@@ -252,7 +257,7 @@ void Session::maybe_start_render() {
     planes = std::move(free_planes_.back());
     free_planes_.pop_back();
   }
-  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_};
+  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_, max_bitrate_kbps_};
   pending_.reset();
   force_idr_ = false;
   rendering_ = true;
@@ -337,18 +342,22 @@ Session::Rendered Session::run_render(Job job, std::unique_ptr<Yuv420Image> plan
   return r;
 }
 
-void Session::ensure_encoder(int width, int height, bool& idr) {
-  if (encoder_ && encoder_->width() == width && encoder_->height() == height) return;
+void Session::ensure_encoder(const Job& job, bool& idr) {
+  if (encoder_ && encoder_->width() == job.width && encoder_->height() == job.height &&
+      encoder_bitrate_kbps_ == job.max_bitrate_kbps)
+    return;
   EncoderConfig cfg;
-  cfg.width = width;
-  cfg.height = height;
+  cfg.width = job.width;
+  cfg.height = job.height;
   cfg.crf = shared_.options.crf;
+  cfg.bitrate_kbps = job.max_bitrate_kbps;
   cfg.threads = shared_.options.encoder_threads;
   // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
   cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
   // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
   bool fell_back = false;
   encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
+  encoder_bitrate_kbps_ = job.max_bitrate_kbps;
   if (fell_back) shared_.metrics.encoder_fallbacks_total++;
   idr = true;
 }
@@ -356,7 +365,7 @@ void Session::ensure_encoder(int width, int height, bool& idr) {
 Session::JobResult Session::run_encode(Rendered& frame) {
   try {
     bool idr = frame.job.force_idr;
-    ensure_encoder(frame.job.width, frame.job.height, idr);
+    ensure_encoder(frame.job, idr);
     const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
     return frame_message(frame.job, enc, frame);
   } catch (const std::exception& e) {
@@ -374,7 +383,7 @@ Session::JobResult Session::run_render_and_encode(const Job& job) {
   }
   try {
     bool idr = job.force_idr;
-    ensure_encoder(job.width, job.height, idr);
+    ensure_encoder(job, idr);
     Rendered r;
     // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
     render_into(job, encoder_->input_target(), r);

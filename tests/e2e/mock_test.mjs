@@ -81,15 +81,17 @@ async function openPage(url, ctx = context) {
   return page;
 }
 
+// Headless Debian Chromium (TOOLCHAIN.md's flags) with a profile in `dir` and `options` on top.
+const launch = (dir, options) => chromium.launchPersistentContext(dir, {
+  executablePath: CHROMIUM,
+  headless: true,
+  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+    '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+  ...options,
+});
+
 try {
-  context = await chromium.launchPersistentContext(profile, {
-    executablePath: CHROMIUM,
-    headless: true,
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-      '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-    viewport: { width: 320, height: 240 },
-    deviceScaleFactor: 1,
-  });
+  context = await launch(profile, { viewport: { width: 320, height: 240 }, deviceScaleFactor: 1 });
 
   // 1. Normal session.
   {
@@ -269,7 +271,7 @@ try {
     await sleep(200);
     const moved = await page.evaluate(() => window.catgs.lastPoseSent);
     const copied = await page.evaluate(() => location.href);
-    check(!copied.includes('token='), `link: the copied link leaves the token out (${copied})`);
+    check(!copied.includes('token=') && new URL(copied).searchParams.get('scene') === 'mock', `link: the copied link names the scene, leaves the token out (${copied})`);
     const page2 = await openPage(copied);
     await page2.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
     await sleep(300);
@@ -278,6 +280,14 @@ try {
       near([first2.orientation.w, first2.orientation.x, first2.orientation.y, first2.orientation.z], moved.orientation, 1e-5),
     'link: "copy link" then opening it shows the same view');
     await page2.close();
+    // A link to a view of another scene: said so, and the server's own start view instead.
+    const page3 = await openPage(`${base}/?scene=garden&${q}`);
+    await page3.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    await sleep(300);
+    const first3 = posesOf(hellos('/ws').at(-1).session)[0];
+    check(!!first3 && first3.position.z === -4 && /view of "garden"; this server shows "mock"/.test(await messageText(page3)),
+      'link: a view of another scene is not applied, and the page says why');
+    await page3.close();
     // Reset (key R and the button): back to the Welcome's initial pose.
     for (const how of ['key', 'button']) {
       await page.evaluate(() => window.catgs.setPose([1, 1, 1], [1, 0, 0, 0], 70));
@@ -350,22 +360,34 @@ try {
     await page.close();
   }
 
+  // 11b. Quality menu: resolution scale sends Resize, a bitrate ceiling sends Quality (and the
+  //      current pose again, which the rebuilt encoder answers with an IDR).
+  {
+    const page = await openPage(`${base}/`);
+    await page.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    const session = hellos('/ws').at(-1).session;
+    await page.click('#btn-quality');
+    await page.selectOption('#quality-scale', '0.5');
+    await page.selectOption('#quality-bitrate', '2000');
+    await sleep(400);
+    const mine = mock.received.filter((r) => r.session === session);
+    const rz = mine.filter((r) => r.body === 'resize').at(-1);
+    const q = mine.filter((r) => r.body === 'quality').at(-1);
+    check(!!rz && rz.msg.viewport_width === 160 && rz.msg.viewport_height === 120, `quality: 50% resolution sends Resize 160x120 (${JSON.stringify(rz && rz.msg)})`);
+    check(!!q && q.msg.max_bitrate_kbps === 2000, `quality: 2 Mbit/s sends Quality (${JSON.stringify(q && q.msg)})`);
+    const after = mine.indexOf(q);
+    check(mine.slice(after + 1).some((r) => r.body === 'pose'), 'quality: the current pose follows, for the rebuilt encoder\'s first frame');
+    check((await page.evaluate(() => document.getElementById('quality-status').textContent)) === 'stream 160x120', 'quality: the panel shows the stream size');
+    await page.close();
+  }
+
   // 12. A phone: 390x844 CSS pixels at DPR 3 with touch. The stream is capped (886x1920, not
   //     1170x2532), nothing on screen is cut off, and the hint speaks of fingers.
   {
     await context.close();
     context = null;
     const phoneProfile = mkdtempSync(path.join(os.tmpdir(), 'catgs-mock-phone-'));
-    const phone = await chromium.launchPersistentContext(phoneProfile, {
-      executablePath: CHROMIUM,
-      headless: true,
-      args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-        '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-      viewport: { width: 390, height: 844 },
-      deviceScaleFactor: 3,
-      isMobile: true,
-      hasTouch: true,
-    });
+    const phone = await launch(phoneProfile, { viewport: { width: 390, height: 844 }, deviceScaleFactor: 3, isMobile: true, hasTouch: true });
     try {
       const page = await openPage(`${base}/?stats=1`, phone);
       check(await moveUntil(page, (c) => c.framesDecoded >= 3), 'phone: streams');

@@ -276,20 +276,24 @@ test('stream cap: 1920x1080 either way round, aspect kept, even; ?max moves it',
 
 test('view links: pose round trip, token left out, bad values named', () => {
   const q = cam.qnorm([0.3, -0.5, 0.7, 0.2]);
-  const url = link.viewUrl('http://h:8/?token=secret&scale=0.5#x', { position: [1.5, -2.25, 1e-3], orientation: q, fovDeg: 47.5 });
+  const url = link.viewUrl('http://h:8/?token=secret&scale=0.5#x', { position: [1.5, -2.25, 1e-3], orientation: q, fovDeg: 47.5 }, 'garden');
   const u = new URL(url);
+  assert.equal(u.searchParams.get('scene'), 'garden');
   assert.equal(u.searchParams.get('token'), null);
   assert.equal(u.searchParams.get('scale'), '0.5');
   const v = link.parseView(u.searchParams);
   close(v.pose.position, [1.5, -2.25, 1e-3], 1e-12);
   close(v.pose.orientation, q, 1e-6);
   assert.equal(v.pose.fovDeg, 47.5);
+  assert.equal(v.scene, 'garden');
+  assert.equal(link.parseView(new URLSearchParams('pos=1,2,3&rot=1,0,0,0')).scene, '');
   assert.equal(link.parseView(new URLSearchParams('scale=2')), null);
   assert.match(link.parseView(new URLSearchParams('pos=1,2&rot=1,0,0,0')).error, /pos/);
   assert.match(link.parseView(new URLSearchParams('pos=1,2,3&rot=0,0,0,0')).error, /rot/);
   assert.match(link.parseView(new URLSearchParams('pos=1,2,3&rot=1,0,0,0&fov=200')).error, /fov/);
   assert.match(link.parseView(new URLSearchParams('pos=1,2,3')).error, /rot/);
   assert.equal(link.withoutView(url).includes('pos='), false);
+  assert.equal(link.withoutView(url).includes('scene='), false);
 });
 
 const randomPose = (i) => ({

@@ -81,4 +81,19 @@ TEST(MessageValidation, HelloUsesTheLimit) {
   EXPECT_EQ(bad->code, pb::ERROR_INVALID_ARGUMENT);
 }
 
+TEST(MessageValidation, QualityBitrateRange) {
+  pb::Quality q;
+  for (std::uint32_t ok : {0u, 100u, 5000u, 100000u}) {
+    q.set_max_bitrate_kbps(ok);
+    EXPECT_FALSE(check_quality(q).has_value()) << ok;
+  }
+  for (std::uint32_t bad : {1u, 99u, 100001u, 4000000000u}) {
+    q.set_max_bitrate_kbps(bad);
+    const auto v = check_quality(q);
+    ASSERT_TRUE(v.has_value()) << bad;
+    EXPECT_EQ(v->code, pb::ERROR_INVALID_ARGUMENT);
+    EXPECT_NE(v->reason.find(std::to_string(bad)), std::string::npos) << v->reason;
+  }
+}
+
 }  // namespace
