@@ -383,6 +383,8 @@ function togglePanel(id, buttonId, show) {
     $(p).hidden = p === id ? !open : true;
     $(b).setAttribute('aria-expanded', String(p === id && open));
   }
+  // Below the toolbar, which wraps to two rows on a narrow window.
+  if (open) panel.style.top = `${Math.ceil($('toolbar').getBoundingClientRect().bottom) + 4}px`;
   if (!open) canvas.focus();
   return open;
 }
