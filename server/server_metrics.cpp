@@ -91,6 +91,9 @@ std::string ServerMetrics::prometheus_text() const {
   send_seconds.write(o, "catgs_send_seconds");
   head("catgs_speculation_window", "histogram", "Speculation window W of each rendered frame (0: no speculation).");
   speculation_window.write(o, "catgs_speculation_window");
+  head("catgs_pose_to_frame_seconds", "histogram",
+       "End to end, as clients report it (Pose.shown_latency_ms): pose sent -> its frame shown.");
+  pose_to_frame_seconds.write(o, "catgs_pose_to_frame_seconds");
   return o.str();
 }
 

@@ -10,6 +10,8 @@
 //   catgs_encode_seconds       encoder
 //   catgs_send_seconds         frame handed to the transport -> fully written to the socket
 //   catgs_speculation_window   W of the speculation group of each rendered frame (0: none)
+//   catgs_pose_to_frame_seconds  end to end, client-reported (Pose.shown_latency_ms): pose sent ->
+//                              its frame shown, on the client's clock
 #pragma once
 
 #include <atomic>
@@ -73,6 +75,7 @@ struct ServerMetrics {
   Histogram encode_seconds{Histogram::stage_seconds()};
   Histogram send_seconds{Histogram::stage_seconds()};
   Histogram speculation_window{{0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32}};
+  Histogram pose_to_frame_seconds{Histogram::stage_seconds()};
 
   // The Prometheus exposition text.
   std::string prometheus_text() const;

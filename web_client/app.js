@@ -54,6 +54,7 @@ const state = {
   urlVersion: -1,
   urlSettleAt: 0,
   maxBitrateKbps: 0, // the quality menu's ceiling (0: the server's default); sent as Quality
+  unreportedLatencyMs: 0, // the newest shown frame's pose-to-frame latency, for the next Pose
 };
 
 function viewportSize() {
@@ -75,7 +76,10 @@ function sendPose() {
   const pose = cam.pose();
   const sequence = ++state.poseSequence;
   const clientTimeMs = performance.now();
-  if (!send(state.protocol.encodePose({ sequence, clientTimeMs, ...pose }))) return null;
+  // The newest shown frame's latency rides along to the server's /metrics (end to end).
+  const shownLatencyMs = state.unreportedLatencyMs;
+  if (!send(state.protocol.encodePose({ sequence, clientTimeMs, shownLatencyMs, ...pose }))) return null;
+  state.unreportedLatencyMs = 0;
   state.sentVersion = cam.version;
   state.lastPoseSent = { sequence, clientTimeMs, position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg };
   return sequence;
@@ -228,6 +232,7 @@ function drawFrame(frame, meta) {
     state.sessionFrames++;
     if (state.status === 'first-view') setStatus('streaming');
     const latency = meta ? now - meta.clientTimeMs : NaN;
+    if (latency >= 0 && latency <= 3.6e6) state.unreportedLatencyMs = latency;
     state.lastFrame = {
       poseSequence: meta ? meta.poseSequence : -1,
       sequence: meta ? meta.sequence : -1,

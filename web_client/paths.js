@@ -39,15 +39,22 @@ export class PathRecorder {
   constructor() {
     this.samples = []; // { t (s from the first sample), position, orientation, fovDeg }
     this.t0 = null;
+    this.lastSeenT = 0; // the time of the latest add(), changed or not
   }
 
-  // Adds the pose at page time nowMs unless it equals the previous sample (a still camera adds
-  // nothing: playback holds the last pose until the next one anyway).
+  // Adds the pose at page time nowMs unless it equals the previous sample: a still camera adds
+  // nothing but, when it moves again, the pose it held until the previous call, so playback
+  // (which interpolates between samples) holds still and then moves as recorded, rather than
+  // gliding across the pause.
   add(nowMs, pose) {
     if (this.t0 === null) this.t0 = nowMs;
+    const t = (nowMs - this.t0) / 1000;
     const last = this.samples[this.samples.length - 1];
+    const seen = this.lastSeenT;
+    this.lastSeenT = t;
     if (last && samePose(last, pose)) return false;
-    this.samples.push({ t: (nowMs - this.t0) / 1000, ...clonePose(pose) });
+    if (last && seen > last.t) this.samples.push({ t: seen, ...clonePose(last) });
+    this.samples.push({ t, ...clonePose(pose) });
     return true;
   }
 

@@ -63,7 +63,7 @@ export function makeProtocol(root) {
       });
     },
 
-    encodePose({ sequence, clientTimeMs, position, orientation, fovDeg }) {
+    encodePose({ sequence, clientTimeMs, position, orientation, fovDeg, shownLatencyMs = 0 }) {
       return encode({
         pose: {
           sequence,
@@ -71,6 +71,7 @@ export function makeProtocol(root) {
           position: vec3(position),
           orientation: quat(orientation),
           vertical_fov_deg: fovDeg,
+          shown_latency_ms: shownLatencyMs,
         },
       });
     },

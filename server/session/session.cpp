@@ -237,6 +237,8 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   if (auto bad = check_pose(pose, cam)) return fail(bad->code, bad->reason);
   poses_received_++;
   shared_.metrics.poses_total++;
+  // The client's own end-to-end measurement of an earlier frame (0: nothing new).
+  if (pose.shown_latency_ms() > 0) shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
   if (pending_) {
     poses_skipped_++;  // latest pose wins: the older one is never rendered
     shared_.metrics.poses_skipped_total++;

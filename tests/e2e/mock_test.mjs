@@ -104,6 +104,10 @@ try {
     check(poses.length >= 10 && poses.every((p, i) => p.sequence === i + 1), 'normal: pose sequences count 1, 2, 3, ...');
     check(poses.every((p, i) => i === 0 || p.client_time_ms >= poses[i - 1].client_time_ms), 'normal: client_time_ms is monotonic');
     check(poses[0].vertical_fov_deg === 50 && poses[0].orientation.w === 1, 'normal: first pose is the Welcome initial pose');
+    // Pose.shown_latency_ms: nothing before the first frame, then the newest frame's latency.
+    const reported = poses.map((p) => p.shown_latency_ms || 0);
+    check(reported[0] === 0 && reported.filter((v) => v > 0 && v < 5000).length >= poses.length / 2,
+      `normal: poses report the shown frames' latency (${reported.slice(0, 6).map((v) => v.toFixed(0)).join(', ')}, ...)`);
     const s = await page.evaluate(() => ({ lf: window.catgs.lastFrame, text: window.catgs.overlayText(), errs: window.catgs.decoderErrors }));
     check(s.lf.width === 160 && s.lf.height === 120, 'normal: frame size 160x120');
     check(/FPS (\d*[1-9]\d*(\.\d)?|0\.[1-9])/.test(s.text) && /latency \d+ ms/.test(s.text) && s.text.includes('renderer cpu (exact)') &&

@@ -336,6 +336,14 @@ test('trace file: round trip; a recording resampled every 0.5 s keeps its ends',
   assert.deepEqual(r.map((s) => Number(s.t.toFixed(6))), [0, 0.5, 1, 1.5, 2]);
   close(r[2].position, rec.samples[10].position, 1e-12);
   assert.throws(() => paths.fromTraceFile('catgs-trace 1\n0 1 2 3\n'), /line 2: expected 14 fields/);
+  // A pause, then a jump: playback holds the old pose until the last moment it was seen, then jumps.
+  const pause = new paths.PathRecorder();
+  pause.add(0, randomPose(0));
+  pause.add(1000, randomPose(0));
+  pause.add(2000, randomPose(0));
+  pause.add(2016, randomPose(5));
+  assert.deepEqual(pause.samples.map((s) => s.t), [0, 2, 2.016]);
+  close(paths.poseAtTime(pause.samples, 1.5).position, randomPose(0).position, 1e-12);
   assert.throws(() => paths.fromTraceFile('hello'), /catgs-trace 1/);
 });
 

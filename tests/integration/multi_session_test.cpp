@@ -228,6 +228,20 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
     EXPECT_LE(s["latency"]["p50_ms"].get<double>(), s["latency"]["p99_ms"].get<double>());
   }
   EXPECT_EQ(j["run"]["sessions"][1]["width"].get<int>(), 128);
+  // Each pose carries the latency of the newest frame before it (Pose.shown_latency_ms); the
+  // server's end-to-end histogram must agree with what the client measured (the same samples but
+  // for the warm-up and the last frame of each session).
+  std::string metrics;
+  http_get(server.port(), "/metrics", metrics);
+  const double e2e_count = metric_value(metrics, "catgs_pose_to_frame_seconds_count");
+  const double e2e_mean_ms = 1000.0 * metric_value(metrics, "catgs_pose_to_frame_seconds_sum") / e2e_count;
+  const double client_mean_ms = j["run"]["total"]["latency"]["mean_ms"].get<double>();
+  const double client_frames = j["run"]["total"]["frames"].get<double>();
+  std::cout << "[ info ] end to end: /metrics " << e2e_count << " samples, mean " << e2e_mean_ms
+            << " ms; catgs-loadgen " << client_frames << " frames, mean " << client_mean_ms << " ms\n";
+  EXPECT_GE(e2e_count, 0.5 * client_frames);
+  EXPECT_LE(e2e_count, client_frames);
+  EXPECT_NEAR(e2e_mean_ms, client_mean_ms, 0.35 * client_mean_ms + 2.0);
   EXPECT_EQ(j["run"]["sessions"][1]["trace"].get<std::string>(), second);
   ASSERT_EQ(std::system((base + " --sessions 2 --seconds 1.5 --ramp --trace orbit > /dev/null").c_str()), 0);
   const nlohmann::json ramp = nlohmann::json::parse(std::ifstream(json_path));

@@ -11,6 +11,7 @@
 #include "scene_tools/city.h"
 #include "loadgen/h264_decoder.h"
 #include "loadgen/stream_client.h"
+#include "session/message_validation.h"
 
 namespace catgs::loadgen {
 
@@ -158,7 +159,10 @@ class PoseLoop {
     const double t_s = std::chrono::duration<double>(Clock::now() - t0_).count() + cfg_.offset_s;
     const auto seq = static_cast<std::uint32_t>(sent_at_.size());
     sent_at_.push_back(now_ms());
-    const pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back());
+    pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back());
+    // As the web viewer does: the newest frame's latency rides on the next pose to /metrics.
+    pose.set_shown_latency_ms(unreported_latency_ms_);
+    unreported_latency_ms_ = 0;
     if (check_) sent_poses_.push_back(pose);
     client_.send_pose(pose);
     r_.poses_sent++;
@@ -179,6 +183,7 @@ class PoseLoop {
     if (outstanding_ > 0) outstanding_--;
     if (cfg_.decode || check_) decode_and_check(f);
     const double latency = now_ms() - f.client_time_ms();
+    unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
     const auto seq = static_cast<std::int64_t>(f.pose_sequence());
     if (seq >= sent()) {
       note_error(r_, "frame for a pose never sent (" + std::to_string(seq) + ")");
@@ -249,6 +254,7 @@ class PoseLoop {
   std::vector<pb::Pose> sent_poses_;  // reference check: each pose as sent, by sequence
   std::unique_ptr<cpu::CpuRenderer> reference_;
   double psnr_sum_ = 0;
+  double unreported_latency_ms_ = 0;  // the newest frame's latency, for the next Pose
   std::int64_t newest_answered_ = -1;
   std::uint64_t answered_ = 0;  // distinct poses that got a frame
   int outstanding_ = 0;         // closed loop: poses not yet answered

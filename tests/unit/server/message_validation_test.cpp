@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "session/message_validation.h"
 
@@ -93,6 +94,21 @@ TEST(MessageValidation, QualityBitrateRange) {
     ASSERT_TRUE(v.has_value()) << bad;
     EXPECT_EQ(v->code, pb::ERROR_INVALID_ARGUMENT);
     EXPECT_NE(v->reason.find(std::to_string(bad)), std::string::npos) << v->reason;
+  }
+}
+
+TEST(MessageValidation, ShownLatencyIsFiniteAndBounded) {
+  CameraPose out;
+  pb::Pose p = pose_with_orientation(1, 0, 0, 0);
+  for (double ok : {0.0, 16.7, 3.6e6}) {
+    p.set_shown_latency_ms(ok);
+    EXPECT_FALSE(check_pose(p, out).has_value()) << ok;
+  }
+  for (double bad : {-1.0, 3.6e6 + 1, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    p.set_shown_latency_ms(bad);
+    const auto v = check_pose(p, out);
+    ASSERT_TRUE(v.has_value()) << bad;
+    EXPECT_EQ(v->code, pb::ERROR_INVALID_ARGUMENT);
   }
 }
 
