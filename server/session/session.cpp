@@ -496,6 +496,8 @@ void Session::send_stats() {
   s->set_key_frames(render_key_frames_);
   s->set_sub_frames(render_sub_frames_);
   send(m);
+  // A still camera sends no poses and gets no frames: an idle interval has no frame rate to add.
+  if (frames_since_stats_ > 0) shared_.metrics.session_fps.observe(frames_since_stats_ / seconds);
   last_stats_ = now;
   frames_since_stats_ = 0;
   bytes_since_stats_ = 0;

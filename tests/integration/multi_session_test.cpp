@@ -242,6 +242,15 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
   EXPECT_GE(e2e_count, 0.5 * client_frames);
   EXPECT_LE(e2e_count, client_frames);
   EXPECT_NEAR(e2e_mean_ms, client_mean_ms, 0.35 * client_mean_ms + 2.0);
+  // Per-session frame rate: the server's per-interval rates average what the client counted
+  // (whatever the CPU manages of the 20 poses a second asked for).
+  const double fps_count = metric_value(metrics, "catgs_session_fps_count");
+  const double fps_mean = metric_value(metrics, "catgs_session_fps_sum") / fps_count;
+  const double client_fps = j["run"]["total"]["fps_total"].get<double>() / 2.0;
+  std::cout << "[ info ] per-session FPS: /metrics " << fps_count << " intervals, mean " << fps_mean
+            << "; catgs-loadgen mean " << client_fps << "\n";
+  EXPECT_GE(fps_count, 2);
+  EXPECT_NEAR(fps_mean, client_fps, 0.3 * client_fps);
   EXPECT_EQ(j["run"]["sessions"][1]["trace"].get<std::string>(), second);
   ASSERT_EQ(std::system((base + " --sessions 2 --seconds 1.5 --ramp --trace orbit > /dev/null").c_str()), 0);
   const nlohmann::json ramp = nlohmann::json::parse(std::ifstream(json_path));
