@@ -91,6 +91,11 @@ std::string ServerMetrics::prometheus_text() const {
   send_seconds.write(o, "catgs_send_seconds");
   head("catgs_speculation_window", "histogram", "Speculation window W of each rendered frame (0: no speculation).");
   speculation_window.write(o, "catgs_speculation_window");
+  head("catgs_pose_to_frame_seconds", "histogram",
+       "End to end, as clients report it (Pose.shown_latency_ms): pose sent -> its frame shown.");
+  pose_to_frame_seconds.write(o, "catgs_pose_to_frame_seconds");
+  head("catgs_session_fps", "histogram", "Frames per second of each session over each Stats interval with frames.");
+  session_fps.write(o, "catgs_session_fps");
   return o.str();
 }
 

@@ -10,6 +10,10 @@
 //   catgs_encode_seconds       encoder
 //   catgs_send_seconds         frame handed to the transport -> fully written to the socket
 //   catgs_speculation_window   W of the speculation group of each rendered frame (0: none)
+//   catgs_pose_to_frame_seconds  end to end, client-reported (Pose.shown_latency_ms): pose sent ->
+//                              its frame shown, on the client's clock
+//   catgs_session_fps          each session's frame rate over each Stats interval (about 1 s)
+//                              that had frames (a histogram: no per-session label to grow)
 #pragma once
 
 #include <atomic>
@@ -73,6 +77,8 @@ struct ServerMetrics {
   Histogram encode_seconds{Histogram::stage_seconds()};
   Histogram send_seconds{Histogram::stage_seconds()};
   Histogram speculation_window{{0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32}};
+  Histogram pose_to_frame_seconds{Histogram::stage_seconds()};
+  Histogram session_fps{{1, 5, 10, 15, 20, 25, 30, 45, 60, 90, 120, 240}};
 
   // The Prometheus exposition text.
   std::string prometheus_text() const;

@@ -47,6 +47,7 @@ std::string server_usage() {
          "  --speculation LIST    catgs settings, e.g. window=2,backoff=0 (see below)\n"
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
+         "  --full-retry-ms N     reconnect hint sent with ERROR_SERVER_FULL (default 3000)\n"
          "  --token T             require Hello.token == T\n"
          "  --threads N           worker threads: sessions, encoding (default 0: the number of\n"
          "                        cores, at least 4)\n"
@@ -99,6 +100,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.web_root = v;
     else if (a == "--max-sessions")
       out.max_sessions = parse_int(a, v, 1, 10000);
+    else if (a == "--full-retry-ms")
+      out.full_retry_ms = parse_int(a, v, 0, 3600000);
     else if (a == "--token")
       out.token = v;
     else if (a == "--threads")

@@ -16,6 +16,7 @@ struct ServerOptions {
   std::string speculation;              // catgs settings, "name=value,..." (speculation/settings.h)
   std::string web_root;                 // folder served over HTTP at "/"
   int max_sessions = 8;                 // sessions open at once; one more gets ERROR_SERVER_FULL
+  int full_retry_ms = 3000;             // Error.retry_after_ms sent with ERROR_SERVER_FULL
   std::string token;                    // when non-empty, Hello.token must equal it
   int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
   int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU

@@ -16,6 +16,11 @@
 //                       [--rate 120] [--seconds-per-view 0.5] [--distance 0.6] [--frames N]
 //                       [--width 1920 --height 1080]
 //       A real camera path moved onto the scene (fit_trace_to_scene), 120 FPS.
+//   catgs-scene interpolate --cameras C.json --out T.trace [--rate 120] [--seconds-per-view 0.5]
+//                       [--width W --height H]
+//       The cameras as they are, interpolated (interpolate_views): what catgs-loadgen and
+//       catgs-bench replay for `cameras:C.json`, as a trace file (the web viewer's tour test
+//       compares its own Catmull-Rom + slerp with it).
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -189,6 +194,16 @@ int trace(const catgs::tools::Args& args) {
   return 0;
 }
 
+int interpolate(const catgs::tools::Args& args) {
+  const auto keys =
+      catgs::load_inria_cameras(args.require("--cameras"), args.get_int("--width", 0), args.get_int("--height", 0));
+  const auto t =
+      catgs::interpolate_views(keys, args.get_double("--rate", 120.0), args.get_double("--seconds-per-view", 0.5));
+  catgs::write_trace(t, args.require("--out"));
+  std::printf("wrote %s: %zu cameras\n", args.get("--out").c_str(), t.size());
+  return 0;
+}
+
 int run(int argc, char** argv) {
   if (argc < 2 || std::string(argv[1]) == "--help") {
     std::cout << kUsage;
@@ -206,6 +221,7 @@ int run(int argc, char** argv) {
   if (cmd == "convert") return convert(args);
   if (cmd == "tile") return tile(args);
   if (cmd == "trace") return trace(args);
+  if (cmd == "interpolate") return interpolate(args);
   throw std::invalid_argument("unknown command '" + cmd + "'");
 }
 

@@ -2,18 +2,31 @@
 // and draws them. Wiring only; the pieces live in the modules imported below.
 
 import { OrbitCamera } from './camera.js';
-import { Connection, defaultWebSocketUrl } from './connection.js';
+import { Connection, defaultWebSocketUrl, ERROR_SERVER_FULL, ERROR_SHUTTING_DOWN, ERROR_UNAUTHORIZED } from './connection.js';
 import { Controls } from './controls.js';
 import { StreamDecoder, hasWebCodecs } from './decoder.js';
 import { Overlay } from './overlay.js';
+import {
+  LOADGEN_SECONDS_PER_VIEW, PathRecorder, fromInriaCameras, fromTraceFile, poseAtTime, resample, toInriaCameras,
+  toTraceFile, tourDuration, tourPoseAt,
+} from './paths.js';
 import { loadProtocol } from './protocol.js';
+import { capViewport, parseMaxSize } from './viewport.js';
+import { parseView, viewUrl, withoutView } from './view_link.js';
 
-const canvas = document.getElementById('view');
+const $ = (id) => document.getElementById(id);
+const canvas = $('view');
 const ctx = canvas.getContext('2d', { alpha: false });
-const overlay = new Overlay(document.getElementById('stats'), document.getElementById('messages'));
 const params = new URLSearchParams(location.search);
-// ?scale=0.5 renders at half the device resolution (cheaper on a CPU renderer or a slow link).
-const renderScale = Math.min(Math.max(Number(params.get('scale')) || 1, 0.1), 4);
+const overlay = new Overlay($('stats'), $('messages'), { showStats: params.get('stats') === '1' });
+// ?scale=0.5 renders at half the device resolution (cheaper on a CPU renderer or a slow link);
+// the quality menu changes it.
+let renderScale = Math.min(Math.max(Number(params.get('scale')) || 1, 0.1), 4);
+// The stream is capped (default 1920x1080, either orientation) whatever the device pixel ratio:
+// a phone at DPR 3 would otherwise ask for 1170x2532. ?max=WxH moves the cap.
+const maxSize = parseMaxSize(params.get('max'));
+const linkView = parseView(params);
+const isTouch = (navigator.maxTouchPoints || 0) > 0 || matchMedia('(pointer: coarse)').matches;
 
 const state = {
   protocol: null,
@@ -26,19 +39,28 @@ const state = {
   poseSequence: 0,
   sentVersion: -1,
   framesDecoded: 0,
-  framesDropped: 0,
+  sessionFrames: 0,
   lastFrame: null,
   lastPoseSent: null,
   reconnectAt: 0,
   status: 'starting',
+  closeInfo: null, // the last onClose argument while not connected
+  serverError: null, // the Error of the current connection, if any
+  token: params.get('token') || sessionStorage.getItem('catgs.token') || '',
+  recorder: null, // PathRecorder while recording
+  recording: null, // the last finished recording (samples)
+  waypoints: [],
+  playback: null, // { kind: 'path' | 'tour', at(t), duration, t0 }
+  urlVersion: -1,
+  urlSettleAt: 0,
+  maxBitrateKbps: 0, // the quality menu's ceiling (0: the server's default); sent as Quality
+  unreportedLatencyMs: 0, // the newest shown frame's pose-to-frame latency, for the next Pose
 };
 
-// Viewport in device pixels, even (the encoder needs 4:2:0 chroma) and within the protocol's
-// 16..4096 range.
 function viewportSize() {
   const dpr = (window.devicePixelRatio || 1) * renderScale;
-  const even = (v) => Math.min(4096, Math.max(16, Math.floor((v * dpr) / 2) * 2));
-  return { width: even(canvas.clientWidth || window.innerWidth), height: even(canvas.clientHeight || window.innerHeight) };
+  const css = { width: canvas.clientWidth || window.innerWidth, height: canvas.clientHeight || window.innerHeight };
+  return capViewport(css.width * dpr, css.height * dpr, maxSize);
 }
 
 function send(bytes) {
@@ -54,7 +76,10 @@ function sendPose() {
   const pose = cam.pose();
   const sequence = ++state.poseSequence;
   const clientTimeMs = performance.now();
-  if (!send(state.protocol.encodePose({ sequence, clientTimeMs, ...pose }))) return null;
+  // The newest shown frame's latency rides along to the server's /metrics (end to end).
+  const shownLatencyMs = state.unreportedLatencyMs;
+  if (!send(state.protocol.encodePose({ sequence, clientTimeMs, shownLatencyMs, ...pose }))) return null;
+  state.unreportedLatencyMs = 0;
   state.sentVersion = cam.version;
   state.lastPoseSent = { sequence, clientTimeMs, position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg };
   return sequence;
@@ -73,26 +98,122 @@ function requestKeyFrame() {
   return resendPose();
 }
 
+// ---- connection state, in words ----
+
+const ERROR_WORDS = {
+  1: 'the server could not read a message from this page',
+  2: 'the page and the server do not speak the same protocol version',
+  3: 'the server rejected a request from this page',
+  6: 'the server failed to render or encode',
+  8: 'the connection was too slow for the stream',
+};
+
+const retryButton = [{ id: 'retry', label: 'retry now', onClick: () => state.connection && state.connection.retryNow() }];
+let tokenForm = null;
+
+function makeTokenForm() {
+  const form = document.createElement('form');
+  const input = document.createElement('input');
+  input.type = 'password';
+  input.name = 'token';
+  input.id = 'token-input';
+  input.placeholder = 'access token';
+  input.autocomplete = 'current-password';
+  input.setAttribute('aria-label', 'access token');
+  const button = document.createElement('button');
+  button.type = 'submit';
+  button.textContent = 'connect';
+  form.append(input, button);
+  form.addEventListener('submit', (e) => {
+    e.preventDefault();
+    state.token = input.value.trim();
+    // This tab only: the token is the user's, not the link's (shared links leave it out).
+    sessionStorage.setItem('catgs.token', state.token);
+    input.value = '';
+    setStatus('connecting');
+    state.connection.restart();
+  });
+  return form;
+}
+
+function setStatus(status) {
+  state.status = status;
+  updateStateMessage();
+}
+
+// The one message that says where the connection stands; refreshed by the loop for countdowns.
+function updateStateMessage() {
+  const secs = () => Math.max(0, Math.ceil((state.reconnectAt - performance.now()) / 1000));
+  const when = () => (secs() > 0 ? `in ${secs()} s` : 'now');
+  switch (state.status) {
+    case 'connecting':
+    case 'handshake':
+      overlay.showMessage('state', 'connecting to the server…', 'info');
+      break;
+    case 'first-view':
+      overlay.showMessage('state', 'rendering the first view…', 'info');
+      break;
+    case 'streaming':
+      overlay.clearMessage('state');
+      break;
+    case 'unreachable':
+      overlay.showMessage('state', `cannot reach the server, retrying ${when()}`, 'error', retryButton);
+      break;
+    case 'server-full':
+      overlay.showMessage('state', `server full, retrying ${when()}`, 'warn', retryButton);
+      break;
+    case 'restarting':
+      overlay.showMessage('state', `server restarting, reconnecting ${when()}`, 'warn', retryButton);
+      break;
+    case 'needs-token':
+      tokenForm = tokenForm || makeTokenForm();
+      overlay.showMessage('state', state.token ? 'wrong token: enter the access token' : 'this server needs an access token',
+        'error', tokenForm);
+      break;
+    case 'refused': {
+      const e = state.closeInfo && state.closeInfo.error;
+      overlay.showMessage('state', `the server refused this page: ${(e && e.reason) || 'protocol error'} (reload the page)`, 'error');
+      break;
+    }
+    case 'disconnected': {
+      const e = state.closeInfo && state.closeInfo.error;
+      const why = e ? `${ERROR_WORDS[e.code] || 'the server ended the session'}${e.reason ? ` (${e.reason})` : ''}; ` : 'disconnected, ';
+      overlay.showMessage('state', `${why}reconnecting ${when()}`, e ? 'error' : 'warn', retryButton);
+      break;
+    }
+    default:
+      break;
+  }
+}
+
 function onWelcome(w) {
   state.welcome = w;
   state.sessionOpen = true;
+  state.sessionFrames = 0;
+  state.closeInfo = null;
   state.poseSequence = 0; // the initial pose is sequence 0; ours count from 1
   state.connection.markHealthy();
   state.decoder.reset();
-  overlay.clearMessage('connection');
-  overlay.clearMessage('server', 8000);
-  overlay.setSession(w, state.protocol.codecName(w.codec));
+  overlay.setSession(w);
   // Keep the user's view across a reconnect to the same scene; start fresh otherwise.
   if (!state.camera || state.camera.sceneName !== w.scene_name) {
     state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
     state.camera.sceneName = w.scene_name;
+    if (linkView && linkView.pose && !state.linkApplied) {
+      state.linkApplied = true;
+      const p = linkView.pose;
+      if (linkView.scene && linkView.scene !== w.scene_name) {
+        notice(`this link shows a view of "${linkView.scene}"; this server shows "${w.scene_name}": starting from its view`, 'warn', 6000);
+      } else {
+        state.camera.setPose(p.position, p.orientation, p.fovDeg ?? state.camera.fovDeg);
+      }
+    }
+    state.urlVersion = state.camera.version;
   }
-  state.status = 'streaming';
+  setStatus('first-view');
+  // A chosen quality outlives reconnects; the default is never sent (older servers lack Quality).
+  if (state.maxBitrateKbps > 0) send(state.protocol.encodeQuality(state.maxBitrateKbps));
   sendPose();
-}
-
-function onFrame(f) {
-  state.decoder.decode(f);
 }
 
 function drawFrame(frame, meta) {
@@ -108,7 +229,10 @@ function drawFrame(frame, meta) {
     ctx.drawImage(frame, 0, 0, w, h);
     const now = performance.now();
     state.framesDecoded++;
+    state.sessionFrames++;
+    if (state.status === 'first-view') setStatus('streaming');
     const latency = meta ? now - meta.clientTimeMs : NaN;
+    if (latency >= 0 && latency <= 3.6e6) state.unreportedLatencyMs = latency;
     state.lastFrame = {
       poseSequence: meta ? meta.poseSequence : -1,
       sequence: meta ? meta.sequence : -1,
@@ -123,20 +247,21 @@ function drawFrame(frame, meta) {
   }
 }
 
-function onClose({ code, reason, retryInMs }) {
+function onClose(info) {
+  const { code, reason, retryInMs, error, permanent, reached } = info;
   state.sessionOpen = false;
-  state.status = 'disconnected';
+  state.closeInfo = info;
   state.decoder.reset();
   overlay.clearSession();
-  state.reconnectAt = performance.now() + retryInMs;
-  updateReconnectMessage();
-  console.info(`catgs: connection closed (${code}${reason ? `: ${reason}` : ''}), retry in ${retryInMs} ms`);
-}
-
-function updateReconnectMessage() {
-  if (state.status !== 'disconnected') return;
-  const s = Math.max(0, Math.ceil((state.reconnectAt - performance.now()) / 1000));
-  overlay.showMessage('connection', s > 0 ? `disconnected, reconnecting in ${s} s` : 'disconnected, reconnecting now', 'warn');
+  state.reconnectAt = performance.now() + (retryInMs || 0);
+  let status = 'disconnected';
+  if (permanent) status = error && error.code === ERROR_UNAUTHORIZED ? 'needs-token' : 'refused';
+  else if (error && error.code === ERROR_SERVER_FULL) status = 'server-full';
+  else if (error && error.code === ERROR_SHUTTING_DOWN) status = 'restarting';
+  else if (!reached) status = 'unreachable';
+  setStatus(status);
+  console.info(`catgs: connection closed (${code}${reason ? `: ${reason}` : ''})` +
+    (permanent ? ', not retrying' : `, retry in ${retryInMs} ms`));
 }
 
 function onMessage(kind, msg) {
@@ -145,17 +270,16 @@ function onMessage(kind, msg) {
       onWelcome(msg);
       break;
     case 'frame':
-      if (state.sessionOpen) onFrame(msg);
+      if (state.sessionOpen) state.decoder.decode(msg);
       break;
     case 'stats':
       overlay.setServerStats(msg);
       break;
-    case 'error': {
-      const name = state.protocol.errorCodeName(msg.code);
-      overlay.showMessage('server', `server error ${name} (${msg.code}): ${msg.reason || 'no reason given'}`);
-      console.warn(`catgs: server error ${name}: ${msg.reason}`);
+    case 'error':
+      // Shown when the connection closes, with what happens next (onClose).
+      console.warn(`catgs: server error ${state.protocol.errorCodeName(msg.code)}: ${msg.reason}` +
+        (msg.retry_after_ms ? ` (retry after ${msg.retry_after_ms} ms)` : ''));
       break;
-    }
     case 'pong':
       overlay.setRtt(performance.now() - msg.client_time_ms);
       break;
@@ -168,27 +292,325 @@ function onResize() {
   const v = viewportSize();
   if (state.viewport && v.width === state.viewport.width && v.height === state.viewport.height) return;
   state.viewport = v;
+  qualityStatus();
   if (state.sessionOpen && send(state.protocol.encodeResize(v.width, v.height))) resendPose();
 }
 
-// One step of the loop: apply held keys, send the pose if the camera moved, refresh the overlay.
+// ---- view controls: reset, link, fullscreen, help ----
+
+function notice(text, level = 'info', ms = 2500) {
+  overlay.showMessage('notice', text, level);
+  clearTimeout(notice.timer);
+  notice.timer = setTimeout(() => overlay.clearMessage('notice'), ms);
+}
+
+function resetView() {
+  const w = state.welcome;
+  if (!w) return;
+  stopPlayback();
+  const name = state.camera ? state.camera.sceneName : w.scene_name;
+  const version = state.camera ? state.camera.version + 1 : 0;
+  state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  state.camera.sceneName = name;
+  state.camera.version = version; // a new version: the loop sends it
+  history.replaceState(null, '', withoutView(location.href));
+  state.urlVersion = state.camera.version;
+}
+
+function shareUrl() {
+  return state.camera ? viewUrl(location.href, state.camera.pose(), state.camera.sceneName) : null;
+}
+
+async function copyLink() {
+  const url = shareUrl();
+  if (!url) return null;
+  history.replaceState(null, '', url);
+  state.urlVersion = state.camera.version;
+  try {
+    await navigator.clipboard.writeText(url);
+    notice('link to this view copied');
+  } catch (_) {
+    // No clipboard permission (or no secure context): the address bar holds the link now.
+    notice('copy the link from the address bar');
+  }
+  return url;
+}
+
+// The address bar follows the view once the camera rests, so a plain copy of it shares the view.
+function syncUrl(now) {
+  const cam = state.camera;
+  if (!cam || state.playback || cam.version === state.urlVersion) return;
+  if (cam.version !== state.urlPending) {
+    state.urlPending = cam.version;
+    state.urlSettleAt = now + 600;
+    return;
+  }
+  if (now < state.urlSettleAt) return;
+  history.replaceState(null, '', viewUrl(location.href, cam.pose(), cam.sceneName));
+  state.urlVersion = cam.version;
+}
+
+function toggleFullscreen() {
+  if (document.fullscreenElement) return document.exitFullscreen().catch(() => {});
+  const el = document.documentElement;
+  if (!el.requestFullscreen) {
+    notice('this browser has no fullscreen mode here', 'warn');
+    return Promise.resolve();
+  }
+  return el.requestFullscreen().catch((e) => notice(`fullscreen refused: ${e.message}`, 'warn'));
+}
+
+// ---- quality menu ----
+
+function setRenderScale(scale) {
+  renderScale = scale;
+  onResize();
+  qualityStatus();
+}
+
+function setMaxBitrate(kbps) {
+  state.maxBitrateKbps = kbps;
+  // The encoder restarts with it (an IDR follows); the current pose again makes that frame.
+  if (state.sessionOpen && send(state.protocol.encodeQuality(kbps))) resendPose();
+  qualityStatus();
+}
+
+function qualityStatus() {
+  const v = state.viewport;
+  $('quality-status').textContent = v ? `stream ${v.width}x${v.height}` : '';
+}
+
+function togglePanel(id, buttonId, show) {
+  const panel = $(id);
+  const open = show ?? panel.hidden;
+  // One panel at a time: they all sit under the toolbar.
+  for (const [p, b] of [['paths', 'btn-paths'], ['helppanel', 'btn-help'], ['quality', 'btn-quality']]) {
+    $(p).hidden = p === id ? !open : true;
+    $(b).setAttribute('aria-expanded', String(p === id && open));
+  }
+  // Below the toolbar, which wraps to two rows on a narrow window.
+  if (open) panel.style.top = `${Math.ceil($('toolbar').getBoundingClientRect().bottom) + 4}px`;
+  if (!open) canvas.focus();
+  return open;
+}
+
+// ---- camera paths ----
+
+function pathsStatus() {
+  const rec = state.recorder
+    ? `recording ${state.recorder.duration.toFixed(1)} s`
+    : state.recording
+      ? `path ${state.recording[state.recording.length - 1].t.toFixed(1)} s, ${state.recording.length} poses`
+      : 'no path recorded';
+  const play = state.playback ? ` · playing ${state.playback.kind}` : '';
+  $('paths-status').textContent = `${rec} · ${state.waypoints.length} waypoint${state.waypoints.length === 1 ? '' : 's'}${play}`;
+  $('btn-record').textContent = state.recorder ? 'Stop' : 'Record';
+  $('btn-record').setAttribute('aria-pressed', String(!!state.recorder));
+}
+
+function toggleRecording() {
+  if (state.recorder) {
+    const r = state.recorder;
+    state.recorder = null;
+    if (r.samples.length) state.recording = r.samples;
+  } else if (state.camera) {
+    stopPlayback();
+    state.recorder = new PathRecorder();
+    state.recorder.add(performance.now(), state.camera.pose());
+  }
+  pathsStatus();
+}
+
+function play(kind) {
+  if (!state.camera) return false;
+  if (state.recorder) toggleRecording();
+  let playback = null;
+  if (kind === 'path' && state.recording && state.recording.length) {
+    const s = state.recording;
+    playback = { kind, duration: s[s.length - 1].t, at: (t) => poseAtTime(s, t) };
+  } else if (kind === 'tour' && state.waypoints.length >= 2) {
+    const keys = state.waypoints.slice();
+    playback = { kind, duration: tourDuration(keys), at: (t) => tourPoseAt(keys, t) };
+  }
+  if (!playback) {
+    notice(kind === 'tour' ? 'add at least 2 views for a tour' : 'record a path first', 'warn');
+    return false;
+  }
+  playback.t0 = performance.now();
+  state.playback = playback;
+  pathsStatus();
+  return true;
+}
+
+function stopPlayback() {
+  if (!state.playback) return;
+  state.playback = null;
+  pathsStatus();
+}
+
+function addWaypoint() {
+  if (!state.camera) return 0;
+  state.waypoints.push(state.camera.pose());
+  pathsStatus();
+  return state.waypoints.length;
+}
+
+function exportCameras(which) {
+  const v = state.viewport;
+  let poses;
+  if (which === 'tour') poses = state.waypoints;
+  // One view per LOADGEN_SECONDS_PER_VIEW: catgs-loadgen's cameras: replays it at recorded speed.
+  else poses = state.recording ? resample(state.recording, LOADGEN_SECONDS_PER_VIEW) : [];
+  if (poses.length < 2) return null; // the core's interpolation needs 2 views
+  return JSON.stringify(toInriaCameras(poses, v.width, v.height, which === 'tour' ? 'tour' : 'path'), null, 1) + '\n';
+}
+
+function exportTrace() {
+  const v = state.viewport;
+  return state.recording ? toTraceFile(state.recording, v.width, v.height) : null;
+}
+
+function download(name, text) {
+  if (!text) {
+    notice(name.endsWith('.trace') || name.startsWith('path') ? 'record a path first' : 'add at least 2 views first', 'warn');
+    return;
+  }
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(new Blob([text], { type: name.endsWith('.json') ? 'application/json' : 'text/plain' }));
+  a.download = name;
+  a.click();
+  setTimeout(() => URL.revokeObjectURL(a.href), 1000);
+}
+
+// cameras.json holds sparse views: they become tour waypoints; a trace is a timed path.
+function importText(name, text) {
+  try {
+    if (/^\s*\[/.test(text)) {
+      state.waypoints = fromInriaCameras(text);
+      notice(`${name}: ${state.waypoints.length} views as tour waypoints`);
+    } else {
+      state.recording = fromTraceFile(text);
+      notice(`${name}: path of ${state.recording.length} poses`);
+    }
+    pathsStatus();
+    return true;
+  } catch (e) {
+    notice(`${name}: ${e.message}`, 'error', 5000);
+    return false;
+  }
+}
+
+// ---- loop ----
+
+// One step of the loop: playback or held keys, send the pose if the camera moved, record it,
+// refresh the overlay.
 let lastStepMs = performance.now();
 let lastOverlayMs = 0;
 function step(now) {
   const dt = (now - lastStepMs) / 1000;
   lastStepMs = now;
-  state.controls.update(dt);
-  if (state.camera && state.camera.version !== state.sentVersion) sendPose();
+  const cam = state.camera;
+  if (state.playback && cam) {
+    const t = (now - state.playback.t0) / 1000;
+    const p = state.playback.at(Math.min(t, state.playback.duration));
+    cam.setPose(p.position, p.orientation, p.fovDeg);
+    if (t >= state.playback.duration) stopPlayback();
+  } else {
+    state.controls.update(dt);
+  }
+  if (cam && cam.version !== state.sentVersion) sendPose();
+  if (state.recorder && cam) state.recorder.add(now, cam.pose());
   if (now - lastOverlayMs > 250) {
     lastOverlayMs = now;
     overlay.render(now);
-    updateReconnectMessage();
+    updateStateMessage();
+    syncUrl(now);
+    if (state.recorder) pathsStatus();
   }
 }
 
 function loop(now) {
   step(now);
   requestAnimationFrame(loop);
+}
+
+function onKey(e) {
+  const t = e.target;
+  if (t && (t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.isContentEditable)) return;
+  if (e.ctrlKey || e.metaKey || e.altKey) return;
+  switch (e.key) {
+    case 'r':
+    case 'R':
+      resetView();
+      break;
+    case 'f':
+    case 'F':
+      toggleFullscreen();
+      break;
+    case 'c':
+    case 'C':
+      copyLink();
+      break;
+    case 'p':
+    case 'P':
+      togglePanel('paths', 'btn-paths');
+      break;
+    case 'h':
+    case 'H':
+    case '?':
+      togglePanel('helppanel', 'btn-help');
+      break;
+    case 'Escape':
+      stopPlayback();
+      togglePanel('paths', 'btn-paths', false);
+      break;
+    default:
+      return;
+  }
+  e.preventDefault();
+}
+
+function wireUi() {
+  $('hint').textContent = isTouch
+    ? '1 finger: orbit · 2 fingers: zoom, pan · ? help'
+    : 'drag: orbit · right-drag: pan · wheel: zoom · WASD: fly · H: help';
+  $('btn-reset').addEventListener('click', resetView);
+  $('btn-link').addEventListener('click', copyLink);
+  $('btn-fullscreen').addEventListener('click', toggleFullscreen);
+  $('btn-help').addEventListener('click', () => togglePanel('helppanel', 'btn-help'));
+  $('btn-paths').addEventListener('click', () => togglePanel('paths', 'btn-paths'));
+  $('btn-quality').addEventListener('click', () => togglePanel('quality', 'btn-quality'));
+  const scaleSelect = $('quality-scale');
+  if (![...scaleSelect.options].some((o) => Number(o.value) === renderScale)) {
+    scaleSelect.add(new Option(`${Math.round(renderScale * 100)}% (?scale)`, String(renderScale)), 0);
+  }
+  scaleSelect.value = String(renderScale);
+  scaleSelect.addEventListener('change', () => setRenderScale(Number(scaleSelect.value)));
+  $('quality-bitrate').addEventListener('change', (e) => setMaxBitrate(Number(e.target.value)));
+  $('btn-record').addEventListener('click', toggleRecording);
+  $('btn-play-path').addEventListener('click', () => play('path'));
+  $('btn-add-waypoint').addEventListener('click', addWaypoint);
+  $('btn-play-tour').addEventListener('click', () => play('tour'));
+  $('btn-clear-tour').addEventListener('click', () => {
+    state.waypoints = [];
+    pathsStatus();
+  });
+  $('btn-export-cameras').addEventListener('click', () => download('path_cameras.json', exportCameras('path')));
+  $('btn-export-trace').addEventListener('click', () => download('path.trace', exportTrace()));
+  $('btn-export-tour').addEventListener('click', () => download('tour_cameras.json', exportCameras('tour')));
+  $('import-file').addEventListener('change', async (e) => {
+    const f = e.target.files && e.target.files[0];
+    if (f) importText(f.name, await f.text());
+    e.target.value = '';
+  });
+  window.addEventListener('keydown', onKey);
+  // Touching the view takes it back from a playing path or tour.
+  canvas.addEventListener('pointerdown', stopPlayback);
+  // The hint has done its job once the view was moved (the help panel keeps the details).
+  const hideHint = () => ($('hint').hidden = true);
+  canvas.addEventListener('pointerdown', hideHint, { once: true });
+  canvas.addEventListener('wheel', hideHint, { once: true, passive: true });
+  pathsStatus();
 }
 
 function installTestHook() {
@@ -241,25 +663,45 @@ function installTestHook() {
     snapshot() {
       return canvas.toDataURL('image/png');
     },
+    shareUrl,
+    resetView,
+    // Camera paths: the same actions as the Paths panel, files returned as text.
+    toggleRecording,
+    get recording() {
+      return state.recording ? state.recording.map((s) => ({ ...s })) : null;
+    },
+    addWaypoint,
+    play,
+    get playing() {
+      return state.playback ? state.playback.kind : null;
+    },
+    exportCameras,
+    exportTrace,
+    importText,
+    setRenderScale,
+    setMaxBitrate,
   };
 }
 
 async function main() {
   installTestHook();
+  wireUi();
   state.viewport = viewportSize();
   canvas.width = state.viewport.width;
   canvas.height = state.viewport.height;
+  qualityStatus();
   if (!hasWebCodecs()) {
     state.status = 'unsupported';
-    overlay.showMessage('webcodecs', 'This browser cannot decode H.264 with WebCodecs (VideoDecoder is missing). Use a recent Chromium, Edge or Chrome over https or localhost.');
+    overlay.showMessage('state', 'This browser cannot decode H.264 with WebCodecs (VideoDecoder is missing). Use a recent Chromium, Edge or Chrome over https or localhost.');
     overlay.render();
     return;
   }
+  if (linkView && linkView.error) notice(`the view in this link was ignored: ${linkView.error}`, 'warn', 6000);
   try {
     state.protocol = await loadProtocol(globalThis.protobuf);
   } catch (e) {
     state.status = 'error';
-    overlay.showMessage('protocol', `cannot start: ${e.message}`);
+    overlay.showMessage('state', `cannot start: ${e.message}`);
     overlay.render();
     return;
   }
@@ -275,10 +717,10 @@ async function main() {
   state.controls = new Controls(canvas, () => state.camera);
   state.connection = new Connection(defaultWebSocketUrl(location), state.protocol, {
     onOpen: () => {
-      state.status = 'handshake';
+      setStatus('handshake');
       onResize(); // the window may have changed while disconnected
       const v = state.viewport;
-      send(state.protocol.encodeHello({ width: v.width, height: v.height, token: params.get('token') || '' }));
+      send(state.protocol.encodeHello({ width: v.width, height: v.height, token: state.token }));
     },
     onMessage,
     onClose,
@@ -297,7 +739,7 @@ async function main() {
     const now = performance.now();
     if (now - lastStepMs > 250) step(now);
   }, 100);
-  state.status = 'connecting';
+  setStatus('connecting');
   state.connection.connect();
   requestAnimationFrame(loop);
 }

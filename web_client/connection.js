@@ -1,5 +1,6 @@
 // The WebSocket to the server: binary frames, one protobuf message each (subprotocol catgs.v1),
-// and automatic reconnection with exponential backoff.
+// and automatic reconnection: exponential backoff, or the server's Error.retry_after_ms hint;
+// no retry at all after a permanent error (a wrong token cannot get better by waiting).
 
 export const SUBPROTOCOL = 'catgs.v1';
 
@@ -16,9 +17,36 @@ export function backoffMs(attempt) {
   return Math.min(1000 * 2 ** attempt, 10000);
 }
 
+// ErrorCode values (proto/catgs_stream.proto) the reconnect logic cares about.
+export const ERROR_PROTOCOL = 2;
+export const ERROR_UNAUTHORIZED = 4;
+export const ERROR_SERVER_FULL = 5;
+export const ERROR_SHUTTING_DOWN = 7;
+
+// What to do after the server ended a session with `error` ({code, retry_after_ms}; null when
+// the connection just dropped). `welcomed`: this connection had a session.
+//   { permanent: true }           stop: the same Hello would be refused again
+//   { delayMs }                   reconnect after the server's hint
+//   { delayMs: null }             reconnect with the usual backoff
+export function retryPolicy(error, welcomed) {
+  if (!error) return { permanent: false, delayMs: null };
+  if (error.code === ERROR_UNAUTHORIZED) return { permanent: true };
+  // A refused Hello (unknown protocol version) is refused again: a page and server that do not
+  // match need a reload, not a loop.
+  if (error.code === ERROR_PROTOCOL && !welcomed) return { permanent: true };
+  const hint = Number(error.retry_after_ms) || 0;
+  if (hint > 0 && (error.code === ERROR_SERVER_FULL || error.code === ERROR_SHUTTING_DOWN)) {
+    // Bounded so a bad hint neither floods the server nor parks the page for an hour.
+    return { permanent: false, delayMs: Math.min(Math.max(hint, 250), 60000) };
+  }
+  return { permanent: false, delayMs: null };
+}
+
 export class Connection {
-  // handlers: onOpen(), onMessage(kind, msg), onClose({code, reason, retryInMs}),
+  // handlers: onOpen(), onMessage(kind, msg),
+  //           onClose({code, reason, retryInMs, error, permanent, reached}),
   //           onProtocolError(error)
+  // `reached`: some WebSocket to this server ever opened (else the server was never reachable).
   constructor(url, protocol, handlers) {
     this.url = url;
     this.protocol = protocol;
@@ -28,6 +56,9 @@ export class Connection {
     this.retryTimer = null;
     this.stopped = false;
     this.healthySince = 0;
+    this.reached = false;
+    this.lastError = null; // the server's Error on the current connection
+    this.welcomed = false;
   }
 
   get isOpen() {
@@ -35,10 +66,12 @@ export class Connection {
   }
 
   connect() {
-    if (this.stopped) return;
     clearTimeout(this.retryTimer);
     this.retryTimer = null;
+    if (this.stopped) return;
     let ws;
+    this.lastError = null;
+    this.welcomed = false;
     try {
       ws = new WebSocket(this.url, SUBPROTOCOL);
     } catch (e) {
@@ -48,8 +81,12 @@ export class Connection {
     }
     ws.binaryType = 'arraybuffer';
     this.ws = ws;
-    ws.onopen = () => this.handlers.onOpen();
+    ws.onopen = () => {
+      this.reached = true;
+      this.handlers.onOpen();
+    };
     ws.onmessage = (ev) => {
+      if (this.ws !== ws) return;
       if (typeof ev.data === 'string') {
         // The protocol has binary frames only; ignore text rather than drop the session.
         this.handlers.onProtocolError(new Error('unexpected text frame from the server'));
@@ -62,6 +99,8 @@ export class Connection {
         this.handlers.onProtocolError(e);
         return;
       }
+      if (decoded.kind === 'error') this.lastError = decoded.msg;
+      if (decoded.kind === 'welcome') this.welcomed = true;
       if (decoded.kind) this.handlers.onMessage(decoded.kind, decoded.msg);
     };
     ws.onclose = (ev) => {
@@ -83,9 +122,35 @@ export class Connection {
     if (this.stopped) return;
     if (this.healthySince && Date.now() - this.healthySince > 5000) this.attempt = 0;
     this.healthySince = 0;
-    const retryInMs = backoffMs(this.attempt++);
+    const error = this.lastError;
+    const policy = retryPolicy(error, this.welcomed);
+    const base = { code, reason, error, reached: this.reached };
+    if (policy.permanent) {
+      this.stopped = true;
+      this.handlers.onClose({ ...base, retryInMs: null, permanent: true });
+      return;
+    }
+    const retryInMs = policy.delayMs ?? backoffMs(this.attempt++);
     this.retryTimer = setTimeout(() => this.connect(), retryInMs);
-    this.handlers.onClose({ code, reason, retryInMs });
+    this.handlers.onClose({ ...base, retryInMs, permanent: false });
+  }
+
+  // Skips the wait before the next attempt ("retry now").
+  retryNow() {
+    if (this.ws) return;
+    this.connect();
+  }
+
+  // Starts again after a permanent error (e.g. with a new token), backoff from the start.
+  restart() {
+    this.stopped = false;
+    this.attempt = 0;
+    if (this.ws) {
+      const ws = this.ws;
+      this.ws = null;
+      ws.close(1000, 'client restarting');
+    }
+    this.connect();
   }
 
   // Sends encoded bytes; false when not connected (the caller will resend state on reconnect).

@@ -1,10 +1,21 @@
-// Stats overlay (FPS, pose-to-frame latency, frame size, renderer/encoder) and status messages.
+// What the page says: the developer stats (?stats=1), the connection state in plain words (with
+// its action buttons or the token field), and short notices (decoder trouble, "link copied").
+// Nothing shown is older than what it describes: a dropped session clears the stats, an idle
+// server interval says idle instead of "render 0.0 ms".
 
 export class Overlay {
-  constructor(statsEl, messagesEl) {
+  // els: { stats, messages } elements; showStats: the developer stats are visible (?stats=1).
+  constructor(statsEl, messagesEl, { showStats = false } = {}) {
     this.statsEl = statsEl;
     this.messagesEl = messagesEl;
-    this.messages = new Map(); // id -> { text, level }
+    this.showStats = showStats;
+    this.statsEl.hidden = !showStats;
+    this.messages = new Map(); // id -> { text, level, actions }
+    this._resetMeasurements();
+  }
+
+  // Everything measured on a session (nothing of it may outlive the session).
+  _resetMeasurements() {
     this.info = null;
     this.lastDrawMs = null;
     this.intervalMs = null;
@@ -12,25 +23,24 @@ export class Overlay {
     this.frameSize = null;
     this.rttMs = null;
     this.serverStats = null;
+    this.serverIdle = false;
+    this.prevFramesSent = null;
     this.codec = null;
   }
 
-  setSession(welcome, codecName) {
+  setSession(welcome) {
     this.info = {
       scene: welcome.scene_name || '?',
       renderer: welcome.renderer || '?',
       encoder: welcome.encoder || '?',
       pipeline: welcome.pipeline || '',
-      codec: codecName,
     };
     this.render();
   }
 
+  // The session ended: nothing measured on it stays on screen.
   clearSession() {
-    this.info = null;
-    this.lastDrawMs = null;
-    this.intervalMs = null;
-    this.latencyMs = null;
+    this._resetMeasurements();
     this.render();
   }
 
@@ -54,79 +64,98 @@ export class Overlay {
     this.rttMs = ms;
   }
 
+  // Stats cover the last interval (about a second); with no frame in it the means are 0, which
+  // is "nothing rendered", not "rendered in 0 ms".
   setServerStats(stats) {
+    const sent = stats.frames_sent || 0;
+    this.serverIdle = this.prevFramesSent !== null && sent === this.prevFramesSent;
+    this.prevFramesSent = sent;
     this.serverStats = stats;
   }
 
+  // The stream is idle when no frame came for a while (the camera is still): no rate to show.
+  idle(nowMs) {
+    return this.lastDrawMs === null || nowMs - this.lastDrawMs > Math.max(3000, 3 * (this.intervalMs || 0));
+  }
+
   fps(nowMs) {
-    if (this.lastDrawMs === null || this.intervalMs === null || !(this.intervalMs > 0)) return 0;
-    // No frame for a while (stream idle: the camera is still): say 0 rather than a stale rate.
-    if (nowMs - this.lastDrawMs > Math.max(3000, 3 * this.intervalMs)) return 0;
+    if (this.idle(nowMs) || this.intervalMs === null || !(this.intervalMs > 0)) return null;
     return 1000 / this.intervalMs;
   }
 
-  showMessage(id, text, level = 'error') {
-    this.messages.set(id, { text, level, shownAt: performance.now() });
+  // level: 'error' | 'warn' | 'info'; actions: [{ label, onClick }] buttons, or an element to
+  // append (the token form).
+  showMessage(id, text, level = 'error', actions = []) {
+    const prev = this.messages.get(id);
+    // Re-rendering the same text every tick would steal focus from the token field.
+    if (prev && prev.text === text && prev.level === level && prev.actions === actions) return;
+    this.messages.set(id, { text, level, actions });
     this.renderMessages();
   }
 
-  // minAgeMs keeps a message up at least that long (a server error followed by a quick
-  // reconnect must still be readable).
-  clearMessage(id, minAgeMs = 0) {
-    const m = this.messages.get(id);
-    if (!m) return;
-    const wait = m.shownAt + minAgeMs - performance.now();
-    if (wait > 0) {
-      setTimeout(() => {
-        if (this.messages.get(id) === m) this.clearMessage(id);
-      }, wait);
-      return;
-    }
-    this.messages.delete(id);
+  clearMessage(id) {
+    if (!this.messages.delete(id)) return;
     this.renderMessages();
   }
 
   // Everything the overlay shows, as text (for the test hook and logs).
   text() {
     const msgs = [...this.messages.values()].map((m) => m.text);
-    return [this.statsEl.textContent, ...msgs].join('\n');
+    return [this.showStats ? this.statsEl.textContent : '', ...msgs].filter(Boolean).join('\n');
   }
 
   render(nowMs = performance.now()) {
+    if (!this.showStats) return;
     const lines = [];
-    lines.push(
-      `FPS ${fmtFps(this.fps(nowMs))}  latency ${this.latencyMs === null ? '-' : `${Math.round(this.latencyMs)} ms`}` +
-        `  frame ${this.frameSize || '-'}`,
-    );
-    if (this.info) {
-      const pipeline = this.info.pipeline ? ` (${this.info.pipeline})` : '';
-      lines.push(`renderer ${this.info.renderer}${pipeline}  encoder ${this.info.encoder}  ${this.codec || this.info.codec}`);
-      lines.push(`scene ${this.info.scene}${this.rttMs === null ? '' : `  rtt ${Math.round(this.rttMs)} ms`}`);
-    } else {
+    if (!this.info) {
       lines.push('not connected');
-    }
-    const s = this.serverStats;
-    if (s) {
+    } else {
+      const fps = this.fps(nowMs);
+      const idle = fps === null;
       lines.push(
-        `server: render ${num(s.render_ms_mean)} ms  encode ${num(s.encode_ms_mean)} ms` +
-          `  ${num((s.bytes_per_second * 8) / 1e6)} Mbit/s  skipped ${s.poses_skipped || 0}`,
+        `FPS ${idle ? 'idle' : fmtFps(fps)}  latency ${this.latencyMs === null ? '-' : `${Math.round(this.latencyMs)} ms`}`,
       );
+      lines.push(`frame ${this.frameSize || '-'}  ${this.codec || 'H.264'}`);
+      const pipeline = this.info.pipeline ? ` (${this.info.pipeline})` : '';
+      lines.push(`renderer ${this.info.renderer}${pipeline}  encoder ${this.info.encoder}`);
+      lines.push(`scene ${this.info.scene}${this.rttMs === null ? '' : `  rtt ${Math.round(this.rttMs)} ms`}`);
+      const s = this.serverStats;
+      if (s && this.serverIdle) {
+        lines.push('server: idle (no frame in the last second)');
+      } else if (s) {
+        lines.push(`server: render ${num(s.render_ms_mean)} ms  encode ${num(s.encode_ms_mean)} ms`);
+        lines.push(`  ${num((s.bytes_per_second * 8) / 1e6)} Mbit/s  skipped ${s.poses_skipped || 0}`);
+      }
     }
     this.statsEl.textContent = lines.join('\n');
   }
 
   renderMessages() {
     this.messagesEl.replaceChildren();
-    for (const [id, { text, level }] of this.messages) {
+    for (const [id, { text, level, actions }] of this.messages) {
       const div = document.createElement('div');
       div.className = `msg ${level}`;
       div.dataset.id = id;
-      div.textContent = text;
+      const span = document.createElement('span');
+      span.textContent = text;
+      div.appendChild(span);
+      if (actions instanceof Node) {
+        div.appendChild(actions);
+      } else {
+        for (const a of actions) {
+          const b = document.createElement('button');
+          b.type = 'button';
+          b.textContent = a.label;
+          b.dataset.action = a.id || a.label;
+          b.addEventListener('click', a.onClick);
+          div.appendChild(b);
+        }
+      }
       this.messagesEl.appendChild(div);
     }
     this.messagesEl.hidden = this.messages.size === 0;
   }
 }
 
-const fmtFps = (v) => (v >= 10 || v === 0 ? v.toFixed(0) : v.toFixed(1));
+const fmtFps = (v) => (v >= 10 ? v.toFixed(0) : v.toFixed(1));
 const num = (v) => (Number.isFinite(v) ? v.toFixed(1) : '-');

@@ -63,7 +63,7 @@ export function makeProtocol(root) {
       });
     },
 
-    encodePose({ sequence, clientTimeMs, position, orientation, fovDeg }) {
+    encodePose({ sequence, clientTimeMs, position, orientation, fovDeg, shownLatencyMs = 0 }) {
       return encode({
         pose: {
           sequence,
@@ -71,6 +71,7 @@ export function makeProtocol(root) {
           position: vec3(position),
           orientation: quat(orientation),
           vertical_fov_deg: fovDeg,
+          shown_latency_ms: shownLatencyMs,
         },
       });
     },
@@ -85,6 +86,10 @@ export function makeProtocol(root) {
 
     encodeKeyFrameRequest() {
       return encode({ key_frame_request: {} });
+    },
+
+    encodeQuality(maxBitrateKbps) {
+      return encode({ quality: { max_bitrate_kbps: maxBitrateKbps } });
     },
 
     // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | null, msg }

@@ -21,7 +21,8 @@ struct EncoderConfig {
   int width = 0, height = 0;  // pixels, even, >= 16
   int fps = 60;               // nominal frame rate (time base; NVENC's one-frame VBV)
   int crf = 23;               // x264 constant rate factor
-  int bitrate_kbps = 0;       // NVENC CBR target; 0: width * height * fps / 15 bits/s
+  int bitrate_kbps = 0;       // NVENC CBR target; 0: width * height * fps / 15 bits/s. x264: a
+                              // ceiling (capped CRF, VBV of a quarter second); 0: CRF alone
   int threads = 0;            // encoder threads, 0 = the library's choice
   // nvenc: pictures arrive as CUDA device planes (AV_PIX_FMT_CUDA frames of a hw_frames_ctx on
   // the CUDA primary context of device 0, sw_format yuv420p; input_target() is then device

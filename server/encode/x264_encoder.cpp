@@ -1,5 +1,7 @@
 #include "encode/x264_encoder.h"
 
+#include <cstdint>
+
 extern "C" {
 #include <libavcodec/avcodec.h>
 #include <libavutil/opt.h>
@@ -14,6 +16,12 @@ X264Encoder::X264Encoder(const EncoderConfig& config)
         av_opt_set(ctx->priv_data, "tune", "zerolatency", 0);
         av_opt_set_double(ctx->priv_data, "crf", config.crf, 0);
         av_opt_set_int(ctx->priv_data, "forced-idr", 1, 0);  // pict_type I -> IDR, not just I
+        if (config.bitrate_kbps > 0) {
+          // Capped CRF: quality as --crf asks while the stream fits, the VBV lowers it when not.
+          // A quarter second of buffer keeps the cap tight without a frame-sized VBV's blur.
+          ctx->rc_max_rate = static_cast<std::int64_t>(config.bitrate_kbps) * 1000;
+          ctx->rc_buffer_size = static_cast<int>(ctx->rc_max_rate / 4);
+        }
       }) {}
 
 }  // namespace catgs::server

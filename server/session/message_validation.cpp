@@ -35,8 +35,16 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
     return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose needs position and orientation"};
   const auto& p = pose.position();
   const auto& q = pose.orientation();
-  const double values[] = {
-      p.x(), p.y(), p.z(), q.w(), q.x(), q.y(), q.z(), pose.vertical_fov_deg(), pose.client_time_ms()};
+  const double values[] = {p.x(),
+                           p.y(),
+                           p.z(),
+                           q.w(),
+                           q.x(),
+                           q.y(),
+                           q.z(),
+                           pose.vertical_fov_deg(),
+                           pose.client_time_ms(),
+                           pose.shown_latency_ms()};
   for (double v : values)
     if (!std::isfinite(v)) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose has NaN or Inf"};
   // Positions beyond float range would turn into Inf in the renderer.
@@ -51,10 +59,22 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
   if (!(pose.vertical_fov_deg() > kMinFovDeg && pose.vertical_fov_deg() < kMaxFovDeg))
     return Violation{pb::ERROR_INVALID_ARGUMENT,
                      "vertical_fov_deg " + std::to_string(pose.vertical_fov_deg()) + " outside (1, 170)"};
+  if (!(pose.shown_latency_ms() >= 0 && pose.shown_latency_ms() <= kMaxShownLatencyMs))
+    return Violation{pb::ERROR_INVALID_ARGUMENT,
+                     "shown_latency_ms " + std::to_string(pose.shown_latency_ms()) + " outside 0..3600000"};
   out.position = glm::vec3(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
   out.orientation = glm::quat(static_cast<float>(q.w() / norm), static_cast<float>(q.x() / norm),
                               static_cast<float>(q.y() / norm), static_cast<float>(q.z() / norm));
   out.vertical_fov_deg = static_cast<float>(pose.vertical_fov_deg());
+  return std::nullopt;
+}
+
+std::optional<Violation> check_quality(const pb::Quality& quality) {
+  const std::uint32_t b = quality.max_bitrate_kbps();
+  if (b != 0 && (b < kMinBitrateKbps || b > kMaxBitrateKbps))
+    return Violation{pb::ERROR_INVALID_ARGUMENT, "Quality.max_bitrate_kbps " + std::to_string(b) + " outside 0 or " +
+                                                     std::to_string(kMinBitrateKbps) + ".." +
+                                                     std::to_string(kMaxBitrateKbps)};
   return std::nullopt;
 }
 

@@ -15,9 +15,10 @@ namespace pb = ::catgs::stream::v1;
 
 inline constexpr int kMinViewport = 16;
 inline constexpr int kMaxViewport = 4096;
-inline constexpr double kMinFovDeg = 1.0;          // exclusive
-inline constexpr double kMaxFovDeg = 170.0;        // exclusive
-inline constexpr double kMaxPoseComponent = 1e30;  // |position| and |quaternion| components
+inline constexpr double kMinFovDeg = 1.0;            // exclusive
+inline constexpr double kMaxFovDeg = 170.0;          // exclusive
+inline constexpr double kMaxPoseComponent = 1e30;    // |position| and |quaternion| components
+inline constexpr double kMaxShownLatencyMs = 3.6e6;  // Pose.shown_latency_ms: an hour
 
 // A protocol violation: the code and reason sent to the client in Error.
 struct Violation {
@@ -54,8 +55,16 @@ struct CameraPose {
 
 // Validates Pose: position and orientation present, every number finite, position components
 // and quaternion components within +-1e30 (so neither float conversion nor the squared norm
-// overflows), quaternion not zero (it is normalised), fov in (1, 170) degrees.
+// overflows), quaternion not zero (it is normalised), fov in (1, 170) degrees, shown_latency_ms
+// in [0, 3600000].
 // ERROR_INVALID_ARGUMENT otherwise.
 std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out);
+
+inline constexpr std::uint32_t kMinBitrateKbps = 100;
+inline constexpr std::uint32_t kMaxBitrateKbps = 100000;
+
+// Validates Quality: max_bitrate_kbps 0 (the server's default) or in [100, 100000] kbit/s.
+// ERROR_INVALID_ARGUMENT otherwise.
+std::optional<Violation> check_quality(const pb::Quality& quality);
 
 }  // namespace catgs::server

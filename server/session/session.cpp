@@ -107,7 +107,7 @@ void Session::send(const pb::ServerMessage& message) {
   shared_.transport.send(id_, std::move(bytes), /*counted=*/false);
 }
 
-void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued) {
+void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued, std::uint32_t retry_after_ms) {
   if (state_ == State::closed) return;
   state_ = State::closed;
   gone_ = true;
@@ -119,6 +119,7 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   pb::ServerMessage m;
   m.mutable_error()->set_code(code);
   m.mutable_error()->set_reason(reason);
+  m.mutable_error()->set_retry_after_ms(retry_after_ms);
   std::string bytes;
   m.SerializeToString(&bytes);
   shared_.transport.close(id_, std::move(bytes), drop_queued);
@@ -164,6 +165,11 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
     case pb::ClientMessage::kKeyFrameRequest:
       force_idr_ = true;
       return;
+    case pb::ClientMessage::kQuality:
+      if (auto bad = check_quality(msg.quality())) return fail(bad->code, bad->reason);
+      max_bitrate_kbps_ = static_cast<int>(msg.quality().max_bitrate_kbps());
+      force_idr_ = true;  // the encoder is rebuilt with it; its first frame is an IDR
+      return;
     default:
       return fail(pb::ERROR_MALFORMED, "unknown message");
   }
@@ -181,7 +187,10 @@ void Session::handle_hello(const pb::Hello& hello) {
   }
   if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
     shared_.metrics.sessions_open--;
-    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)");
+    // A hint, not a promise: a page that waits this long (or a fresh connection that the Service
+    // sends to another replica) is likely to get in.
+    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)",
+                false, static_cast<std::uint32_t>(shared_.options.full_retry_ms));
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
@@ -228,6 +237,8 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   if (auto bad = check_pose(pose, cam)) return fail(bad->code, bad->reason);
   poses_received_++;
   shared_.metrics.poses_total++;
+  // The client's own end-to-end measurement of an earlier frame (0: nothing new).
+  if (pose.shown_latency_ms() > 0) shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
   if (pending_) {
     poses_skipped_++;  // latest pose wins: the older one is never rendered
     shared_.metrics.poses_skipped_total++;
@@ -248,7 +259,7 @@ void Session::maybe_start_render() {
     planes = std::move(free_planes_.back());
     free_planes_.pop_back();
   }
-  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_};
+  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_, max_bitrate_kbps_};
   pending_.reset();
   force_idr_ = false;
   rendering_ = true;
@@ -333,18 +344,22 @@ Session::Rendered Session::run_render(Job job, std::unique_ptr<Yuv420Image> plan
   return r;
 }
 
-void Session::ensure_encoder(int width, int height, bool& idr) {
-  if (encoder_ && encoder_->width() == width && encoder_->height() == height) return;
+void Session::ensure_encoder(const Job& job, bool& idr) {
+  if (encoder_ && encoder_->width() == job.width && encoder_->height() == job.height &&
+      encoder_bitrate_kbps_ == job.max_bitrate_kbps)
+    return;
   EncoderConfig cfg;
-  cfg.width = width;
-  cfg.height = height;
+  cfg.width = job.width;
+  cfg.height = job.height;
   cfg.crf = shared_.options.crf;
+  cfg.bitrate_kbps = job.max_bitrate_kbps;
   cfg.threads = shared_.options.encoder_threads;
   // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
   cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
   // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
   bool fell_back = false;
   encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
+  encoder_bitrate_kbps_ = job.max_bitrate_kbps;
   if (fell_back) shared_.metrics.encoder_fallbacks_total++;
   idr = true;
 }
@@ -352,7 +367,7 @@ void Session::ensure_encoder(int width, int height, bool& idr) {
 Session::JobResult Session::run_encode(Rendered& frame) {
   try {
     bool idr = frame.job.force_idr;
-    ensure_encoder(frame.job.width, frame.job.height, idr);
+    ensure_encoder(frame.job, idr);
     const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
     return frame_message(frame.job, enc, frame);
   } catch (const std::exception& e) {
@@ -370,7 +385,7 @@ Session::JobResult Session::run_render_and_encode(const Job& job) {
   }
   try {
     bool idr = job.force_idr;
-    ensure_encoder(job.width, job.height, idr);
+    ensure_encoder(job, idr);
     Rendered r;
     // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
     render_into(job, encoder_->input_target(), r);
@@ -481,6 +496,8 @@ void Session::send_stats() {
   s->set_key_frames(render_key_frames_);
   s->set_sub_frames(render_sub_frames_);
   send(m);
+  // A still camera sends no poses and gets no frames: an idle interval has no frame rate to add.
+  if (frames_since_stats_ > 0) shared_.metrics.session_fps.observe(frames_since_stats_ / seconds);
   last_stats_ = now;
   frames_since_stats_ = 0;
   bytes_since_stats_ = 0;

@@ -87,6 +87,7 @@ class Session : public std::enable_shared_from_this<Session> {
     bool force_idr = false;
     std::uint32_t frame_sequence = 0;
     double previous_send_ms = 0;  // FrameTimings.previous_send_ms
+    int max_bitrate_kbps = 0;     // Quality.max_bitrate_kbps (0: the server's default)
   };
   // A rendered frame waiting for (or in) the encode stage.
   struct Rendered {
@@ -111,7 +112,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
   void handle_hello(const pb::Hello& hello);
   void handle_pose(const pb::Pose& pose, Clock::time_point received);
-  void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false);
+  // `retry_after_ms`: Error.retry_after_ms, the client's reconnect hint (0: none).
+  void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false, std::uint32_t retry_after_ms = 0);
   void send(const pb::ServerMessage& message);
   void maybe_start_render();
   void maybe_start_encode();
@@ -121,7 +123,7 @@ class Session : public std::enable_shared_from_this<Session> {
   Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on a render lane
   JobResult run_encode(Rendered& frame);                              // on the pool
   JobResult run_render_and_encode(const Job& job);                    // on a render lane (NVENC's CUDA input)
-  void ensure_encoder(int width, int height, bool& idr);              // in a job
+  void ensure_encoder(const Job& job, bool& idr);                     // in a job
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
   void on_job_done(JobResult result);
   void arm_tick();
@@ -144,6 +146,7 @@ class Session : public std::enable_shared_from_this<Session> {
   bool counted_open_ = false;  // holds one of the server's session slots
   std::string session_id_;
   int width_ = 0, height_ = 0;
+  int max_bitrate_kbps_ = 0;  // the client's Quality
   bool force_idr_ = true;
   std::optional<PendingPose> pending_;
   bool rendering_ = false;            // a render (or render-and-encode) job is running
@@ -167,6 +170,7 @@ class Session : public std::enable_shared_from_this<Session> {
   // --- render job state (one job at a time) ---
   std::unique_ptr<Renderer> renderer_;
   std::unique_ptr<Encoder> encoder_;
+  int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with (touched in jobs only)
 };
 
 }  // namespace catgs::server

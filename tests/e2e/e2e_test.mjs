@@ -1,11 +1,16 @@
 // End-to-end test: the real catgs-server (CPU renderer, bundled biker scene) serves web_client/;
 // headless Debian Chromium (driven by playwright-core) loads the page, streams, decodes H.264 with
 // WebCodecs; the canvas at a fixed pose must match catgs-render's CPU image of that pose
-// (PSNR >= 25 dB: the stream is lossy H.264, the reference is exact).
+// (PSNR >= 25 dB: the stream is lossy H.264, the reference is exact). Then the viewer's features
+// against the real server: a shared link shows its view (compared with catgs-render of that
+// pose), a recorded path exported as cameras.json replays through catgs-loadgen (and its first
+// view, read back by catgs-render, is the pose the page sent), and a second server with --token
+// and --max-sessions 1 gives the token prompt and the full-server retry.
 //
-// usage: node e2e_test.mjs --server PATH/catgs-server --render PATH/catgs-render [--repo ROOT]
+// usage: node e2e_test.mjs --server PATH/catgs-server --render PATH/catgs-render
+//                          [--loadgen PATH/catgs-loadgen] [--repo ROOT]
 //                          [--out DIR] [--min-psnr 25] [--frames 30]
-// (or CATGS_SERVER / CATGS_RENDER / CATGS_E2E_OUT in the environment)
+// (or CATGS_SERVER / CATGS_RENDER / CATGS_LOADGEN / CATGS_E2E_OUT in the environment)
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / binaries; the reason is printed).
 import { spawn, spawnSync } from 'node:child_process';
 import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
@@ -32,6 +37,7 @@ const args = parseArgs(process.argv.slice(2));
 const repo = path.resolve(args.repo || process.env.CATGS_REPO || path.join(here, '../..'));
 const serverBin = args.server || process.env.CATGS_SERVER;
 const renderBin = args.render || process.env.CATGS_RENDER;
+const loadgenBin = args.loadgen || process.env.CATGS_LOADGEN || '';
 const outDir = path.resolve(args.out || process.env.CATGS_E2E_OUT || mkdtempSync(path.join(os.tmpdir(), 'catgs-e2e-out-')));
 const minPsnr = Number(args['min-psnr'] || 25);
 const minFrames = Number(args.frames || 30);
@@ -134,17 +140,18 @@ let context = null;
 const profileDir = mkdtempSync(path.join(os.tmpdir(), 'catgs-e2e-chromium-'));
 const pageLog = [];
 
-async function run() {
-  mkdirSync(outDir, { recursive: true });
+const servers = [];
+// Starts catgs-server on a free port with `extra` arguments; resolves once it serves HTTP.
+async function startServer(extra = []) {
   const port = await freePort();
-  const serverArgs = ['--scene', scene, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot];
+  const serverArgs = ['--scene', scene, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot, ...extra];
   log(`starting ${serverBin} ${serverArgs.join(' ')}`);
-  server = spawn(serverBin, serverArgs, { stdio: ['ignore', 'pipe', 'pipe'] });
-  server.stdout.on('data', (d) => (serverLog += d));
-  server.stderr.on('data', (d) => (serverLog += d));
+  const proc = spawn(serverBin, serverArgs, { stdio: ['ignore', 'pipe', 'pipe'] });
+  servers.push(proc);
+  proc.stdout.on('data', (d) => (serverLog += d));
+  proc.stderr.on('data', (d) => (serverLog += d));
   let serverExit = null;
-  server.on('exit', (code, sig) => (serverExit = `exited with ${code ?? sig}`));
-
+  proc.on('exit', (code, sig) => (serverExit = `exited with ${code ?? sig}`));
   const base = `http://127.0.0.1:${port}`;
   await waitFor('the server to answer HTTP', async () => {
     if (serverExit) throw new Error(`catgs-server ${serverExit} before serving`);
@@ -156,6 +163,14 @@ async function run() {
     }
   }, 60000, 200);
   log(`server up on ${base}`);
+  return { proc, port, base };
+}
+
+async function run() {
+  mkdirSync(outDir, { recursive: true });
+  const first = await startServer();
+  server = first.proc;
+  const { port, base } = first;
 
   context = await chromium.launchPersistentContext(profileDir, {
     executablePath: CHROMIUM,
@@ -175,7 +190,7 @@ async function run() {
     if (!u.startsWith(base) && !u.startsWith(`ws://127.0.0.1:${port}`) && !u.startsWith('data:')) foreign.push(u);
   });
 
-  await page.goto(`${base}/`);
+  await page.goto(`${base}/?stats=1`);
   await page.waitForFunction(() => window.catgs && window.catgs.connected, null, { timeout: 30000 });
   const welcome = await page.evaluate(() => window.catgs.welcome);
   log(`welcome: scene=${welcome.scene_name} renderer=${welcome.renderer} encoder=${welcome.encoder} ` +
@@ -271,6 +286,89 @@ async function run() {
   const last = await page.evaluate(() => window.catgs.lastPoseSent);
   check(last && last.sequence === shot.frame.poseSequence, 'lastPoseSent reports the fixed pose');
   log(`frames decoded: ${await page.evaluate(() => window.catgs.framesDecoded)}`);
+
+  // ---- A shared link shows its view: a new page opened with the shifted pose in its address
+  // must match catgs-render's image of that pose (and not the unshifted one).
+  const shifted = p0.map((v, k) => v + 0.02 * scale * right[k]);
+  const linkPage = await context.newPage();
+  linkPage.on('console', (m) => pageLog.push(`link console.${m.type()}: ${m.text()}`));
+  await linkPage.goto(`${base}/?pos=${shifted.join(',')}&rot=${q0.join(',')}&fov=${fov0}`);
+  await linkPage.waitForFunction(() => window.catgs && window.catgs.connected, null, { timeout: 30000 });
+  const linkSeq = await linkPage.evaluate(() => window.catgs.requestKeyFrame());
+  await linkPage.waitForFunction((s) => window.catgs.lastFrame && window.catgs.lastFrame.poseSequence >= s && window.catgs.lastFrame.keyFrame,
+    linkSeq, { timeout: 30000 });
+  const linkPng = PNG.sync.read(Buffer.from((await linkPage.evaluate(() => window.catgs.snapshot())).split(',')[1], 'base64'));
+  writeFileSync(path.join(outDir, 'link_view.png'), PNG.sync.write(linkPng));
+  const linkVsShifted = psnrRgb(linkPng, PNG.sync.read(readFileSync(shiftedPath)));
+  const linkVsStart = psnrRgb(linkPng, reference);
+  log(`shared link view: PSNR vs catgs-render of the link's pose ${linkVsShifted.toFixed(2)} dB, vs the start view ${linkVsStart.toFixed(2)} dB`);
+  check(linkVsShifted >= minPsnr && linkVsShifted > linkVsStart + 3, 'a shared link opens on its view (matches its pose\'s render, not the start view)');
+  const shared = await linkPage.evaluate(() => window.catgs.shareUrl());
+  check(new URL(shared).searchParams.get('pos').split(',').every((v, k) => Math.abs(Number(v) - shifted[k]) <= 1e-6 * scale),
+    `the page's own link carries the same position (${shared})`);
+  await linkPage.close();
+
+  // ---- A recorded path exported as cameras.json replays through catgs-loadgen. The recording
+  // starts at the fixed pose: the file's view 0, read by the core's reader in catgs-render, must
+  // render the same image as that pose's trace.
+  await page.evaluate(([p, q, f]) => window.catgs.setPose(p, q, f), [p0, q0, fov0]);
+  await page.evaluate(() => window.catgs.toggleRecording());
+  for (let k = 1; k <= 12; k++) {
+    await page.evaluate(([p, q, f, d]) => window.catgs.setPose([p[0] + d, p[1], p[2] + d], q, f), [p0, q0, fov0, 0.004 * scale * k]);
+    await sleep(100);
+  }
+  await page.evaluate(() => window.catgs.toggleRecording());
+  const camerasJson = await page.evaluate(() => window.catgs.exportCameras('path'));
+  const camerasPath = path.join(outDir, 'recorded_cameras.json');
+  writeFileSync(camerasPath, camerasJson || '');
+  const views = JSON.parse(camerasJson || '[]');
+  check(views.length >= 3, `the recording (1.2 s) exports as ${views.length} cameras.json views (one per 0.5 s)`);
+  const view0 = path.join(outDir, 'recorded_view0.png');
+  const rv = spawnSync(renderBin, ['--scene', scene, '--cameras', camerasPath, '--view', '0', '--out', view0, '--renderer', 'cpu'], { encoding: 'utf8' });
+  check(rv.status === 0, `catgs-render reads the exported cameras.json (${rv.status}: ${rv.stderr.trim().split('\n').pop()})`);
+  if (rv.status === 0) {
+    const same = psnrRgb(PNG.sync.read(readFileSync(view0)), reference);
+    log(`cameras.json view 0 (catgs-render) vs the fixed pose's render: ${same.toFixed(2)} dB`);
+    check(same >= 40, 'view 0 of the exported cameras.json is the pose the page sent (>= 40 dB against its render)');
+  }
+  if (loadgenBin && existsSync(loadgenBin)) {
+    const jsonOut = path.join(outDir, 'recorded_loadgen.json');
+    const lg = spawnSync(loadgenBin, ['--port', String(port), '--scene', scene, '--trace', `cameras:${camerasPath}`, '--size', '160x120',
+      '--seconds', '2', '--rate', '10', '--check-every', '2', '--warmup', '1', '--progress', '0', '--json', jsonOut], { encoding: 'utf8' });
+    log(`catgs-loadgen on the recorded path:\n${lg.stdout.replace(/^/gm, '    ')}`);
+    check(lg.status === 0, `catgs-loadgen replays the recorded cameras.json (exit ${lg.status}${lg.stderr ? `: ${lg.stderr.trim()}` : ''})`);
+    if (lg.status === 0) {
+      const r = JSON.parse(readFileSync(jsonOut, 'utf8')).run.sessions[0];
+      check(r.frames > 5 && r.checked > 0 && r.check_failures === 0, `... its frames match the CPU reference (${r.frames} frames, ${r.checked} checked, min ${r.psnr_min_db} dB)`);
+    }
+  } else {
+    log('catgs-loadgen not given: the replay of the recorded path is not checked');
+  }
+  await page.close();
+
+  // ---- A server with a token and one session: the token prompt, then the full-server retry,
+  // then streaming once the first viewer leaves, with nothing stale on screen.
+  const guarded = await startServer(['--token', 's3cret', '--max-sessions', '1', '--full-retry-ms', '1500']);
+  const holder = await context.newPage();
+  await holder.goto(`${guarded.base}/?token=s3cret`);
+  await holder.waitForFunction(() => window.catgs && window.catgs.connected, null, { timeout: 30000 });
+  const visitor = await context.newPage();
+  visitor.on('console', (m) => pageLog.push(`visitor console.${m.type()}: ${m.text()}`));
+  await visitor.goto(`${guarded.base}/`);
+  const msg = () => visitor.evaluate(() => document.getElementById('messages').textContent);
+  const seen = (what, re) => waitFor(what, async () => re.test(await msg()), 15000).then(() => true, () => false);
+  check(await seen('the token prompt', /needs an access token/) && await visitor.isVisible('#token-input'), 'no token: the page asks for one');
+  await visitor.fill('#token-input', 's3cret');
+  await visitor.press('#token-input', 'Enter');
+  check(await seen('"server full"', /server full, retrying in \d s/), 'the right token on a full server: "server full, retrying in N s"');
+  await visitor.screenshot({ path: path.join(outDir, 'server_full.png') });
+  await holder.close();
+  await waitFor('the visitor to stream', () => visitor.evaluate(() => window.catgs.framesDecoded > 0), 30000);
+  await sleep(500);
+  const after = await visitor.evaluate(() => window.catgs.overlayText());
+  check(after === '', `once in, nothing stale on screen (${JSON.stringify(after)})`);
+  await visitor.screenshot({ path: path.join(outDir, 'visitor_streaming.png') });
+  await visitor.close();
 }
 
 let code = 0;
@@ -282,10 +380,11 @@ try {
   code = 1;
 } finally {
   if (context) await context.close().catch(() => {});
-  if (server && server.exitCode === null) {
-    server.kill('SIGTERM');
-    const killer = setTimeout(() => server.kill('SIGKILL'), 5000);
-    await new Promise((r) => server.once('exit', r));
+  for (const proc of servers) {
+    if (proc.exitCode !== null || proc.signalCode !== null) continue;
+    proc.kill('SIGTERM');
+    const killer = setTimeout(() => proc.kill('SIGKILL'), 5000);
+    await new Promise((r) => proc.once('exit', r));
     clearTimeout(killer);
   }
   rmSync(profileDir, { recursive: true, force: true });

@@ -4,8 +4,13 @@
 // Pose with the next access unit of a canned H.264 fixture (fixtures/stream_160x120.bin).
 //
 // The WebSocket path picks the scenario: /ws normal; /ws-error sends Error(TOO_SLOW) after 5
-// frames and closes; /ws-garbage sends an undecodable "key frame" as the 4th frame. Under
-// /noproto/ the page is served but .proto answers 415 (as libwebsockets does without a MIME type).
+// frames and closes; /ws-garbage sends an undecodable "key frame" as the 4th frame; /ws-token
+// wants Hello.token "sesame" (else Error(UNAUTHORIZED)); /ws-full refuses the first two Hellos
+// with Error(SERVER_FULL, retry_after_ms 2500); /ws-restart sends Error(SHUTTING_DOWN,
+// retry_after_ms 1200) after 5 frames; /ws-noframes welcomes but never sends a frame. Every
+// session gets Stats once a second (frames_sent cumulative, means 0 when nothing was rendered, as
+// the server does). Under /noproto/ the page is served but .proto answers 415 (as libwebsockets
+// does without a MIME type).
 import crypto from 'node:crypto';
 import fs from 'node:fs';
 import http from 'node:http';
@@ -80,6 +85,7 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
   const frames = loadFixture();
   const received = []; // { session, path, body, msg } for the test to inspect
   let sessions = 0;
+  let fullRefusals = 0;
 
   const server = http.createServer((req, res) => {
     let p = decodeURIComponent(new URL(req.url, 'http://x').pathname);
@@ -114,7 +120,14 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
     const state = { buf: Buffer.alloc(0) };
     let next = 0;
     let sent = 0;
+    let sentAtStats = 0;
     const send = (body) => sock.write(wsFrame(2, SM.encode(SM.fromObject(body)).finish()));
+    const fail = (code, reason, retryAfterMs = 0) => {
+      send({ error: { code, reason, retry_after_ms: retryAfterMs } });
+      sock.end(wsFrame(8, Buffer.alloc(0)));
+    };
+    let statsTimer = null;
+    sock.on('close', () => clearInterval(statsTimer));
     sock.on('error', () => {});
     sock.on('data', (d) => {
       state.buf = Buffer.concat([state.buf, d]);
@@ -125,8 +138,19 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
         }
         if (op !== 2) continue;
         const msg = CM.toObject(CM.decode(payload), { oneofs: true });
-        received.push({ session, path: scenario, body: msg.body, msg: msg[msg.body] });
+        received.push({ session, path: scenario, body: msg.body, msg: msg[msg.body], at: Date.now() });
         if (msg.body === 'hello') {
+          if (scenario === '/ws-token' && msg.hello.token !== 'sesame') return fail(4, 'wrong or missing token');
+          if (scenario === '/ws-full' && fullRefusals < 2) {
+            fullRefusals++;
+            return fail(5, 'server full (1 sessions)', 2500);
+          }
+          statsTimer = setInterval(() => {
+            const rendered = sent > sentAtStats;
+            sentAtStats = sent;
+            send({ stats: { frames_sent: sent, poses_received: sent, render_ms_mean: rendered ? 12.5 : 0,
+              encode_ms_mean: rendered ? 3.5 : 0, bytes_per_second: rendered ? 250000 : 0 } });
+          }, 1000);
           send({ welcome: {
             session_id: `mock-${session}`, scene_name: 'mock', renderer: 'cpu', encoder: 'x264', pipeline: 'exact',
             codec: 1, width: 160, height: 120,
@@ -136,6 +160,7 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
         } else if (msg.body === 'key_frame_request') {
           next = 0; // the fixture's first access unit is its IDR
         } else if (msg.body === 'pose') {
+          if (scenario === '/ws-noframes') continue;
           let fr = frames[next];
           next = (next + 1) % frames.length;
           if (scenario === '/ws-garbage' && sent === 3) {
@@ -144,10 +169,8 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
           }
           send({ frame: { sequence: sent++, pose_sequence: msg.pose.sequence, client_time_ms: msg.pose.client_time_ms,
             key_frame: fr.key, width: 160, height: 120, payload: fr.data } });
-          if (scenario === '/ws-error' && sent === 5) {
-            send({ error: { code: 8, reason: 'mock: too slow' } });
-            sock.end(wsFrame(8, Buffer.alloc(0)));
-          }
+          if (scenario === '/ws-error' && sent === 5) return fail(8, 'mock: too slow');
+          if (scenario === '/ws-restart' && sent === 5) return fail(7, 'server shutting down', 1200);
         }
       }
     });

@@ -1,6 +1,8 @@
 // Browser test of the page's own behaviour against mock_server.mjs (no catgs-server needed):
 // handshake and Hello fields, pose flow, WebCodecs decoding, overlay, the JSON schema fallback,
-// server Error display + reconnect message + reconnect, decoder error recovery, Resize.
+// server Error display + reconnect message + reconnect, decoder error recovery, Resize; the
+// viewer's states (first view, unreachable, wrong token, server full, restarting), stale stats,
+// reset, shared view links, help, fullscreen, camera paths and tours, and a phone at DPR 3.
 // usage: node mock_test.mjs     Exit codes: 0 pass, 1 fail, 77 skipped (reason printed).
 import { existsSync, mkdtempSync, rmSync } from 'node:fs';
 import { createRequire } from 'node:module';
@@ -24,6 +26,20 @@ const { chromium } = require('playwright-core');
 const { startMockServer } = await import('./mock_server.mjs');
 
 const log = (...m) => console.log('[mock]', ...m);
+const shotsDir = process.env.CATGS_MOCK_SHOTS || '';
+const shot = async (page, name) => {
+  if (shotsDir) await page.screenshot({ path: path.join(shotsDir, `${name}.png`) });
+};
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+const messageText = (page) => page.evaluate(() => document.getElementById('messages').textContent);
+async function waitText(page, re, timeoutMs = 8000) {
+  const end = Date.now() + timeoutMs;
+  while (Date.now() < end) {
+    if (re.test(await messageText(page))) return true;
+    await sleep(100);
+  }
+  return false;
+}
 const failures = [];
 const check = (ok, what) => {
   log(`${ok ? 'ok  ' : 'FAIL'} ${what}`);
@@ -51,47 +67,64 @@ async function moveUntil(page, fn, arg, timeoutMs = 15000) {
   return false;
 }
 
-async function openPage(url) {
-  const page = await context.newPage();
+async function waitFor(fn, timeoutMs) {
+  const end = Date.now() + timeoutMs;
+  while (Date.now() < end && !fn()) await sleep(50);
+  return fn();
+}
+
+async function openPage(url, ctx = context) {
+  const page = await ctx.newPage();
   page.on('console', (m) => pageLog.push(`${url} console.${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => pageLog.push(`${url} pageerror: ${e.message}`));
   await page.goto(url);
   return page;
 }
 
+// Headless Debian Chromium (TOOLCHAIN.md's flags) with a profile in `dir` and `options` on top.
+const launch = (dir, options) => chromium.launchPersistentContext(dir, {
+  executablePath: CHROMIUM,
+  headless: true,
+  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+    '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+  ...options,
+});
+
 try {
-  context = await chromium.launchPersistentContext(profile, {
-    executablePath: CHROMIUM,
-    headless: true,
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-      '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-    viewport: { width: 160, height: 120 },
-    deviceScaleFactor: 1,
-  });
+  context = await launch(profile, { viewport: { width: 320, height: 240 }, deviceScaleFactor: 1 });
 
   // 1. Normal session.
   {
-    const page = await openPage(`${base}/`);
+    const page = await openPage(`${base}/?stats=1`);
     check(await moveUntil(page, (c) => c.framesDecoded >= 10), 'normal: 10 frames decoded');
     const hello = mock.received.find((r) => r.body === 'hello');
-    check(!!hello && hello.msg.protocol_version === 1 && hello.msg.viewport_width === 160 && hello.msg.viewport_height === 120 &&
+    check(!!hello && hello.msg.protocol_version === 1 && hello.msg.viewport_width === 320 && hello.msg.viewport_height === 240 &&
       JSON.stringify(hello.msg.codecs) === '[1]', `normal: Hello ${JSON.stringify(hello && hello.msg)}`);
     const poses = mock.received.filter((r) => r.session === hello.session && r.body === 'pose').map((r) => r.msg);
     check(poses.length >= 10 && poses.every((p, i) => p.sequence === i + 1), 'normal: pose sequences count 1, 2, 3, ...');
     check(poses.every((p, i) => i === 0 || p.client_time_ms >= poses[i - 1].client_time_ms), 'normal: client_time_ms is monotonic');
     check(poses[0].vertical_fov_deg === 50 && poses[0].orientation.w === 1, 'normal: first pose is the Welcome initial pose');
+    // Pose.shown_latency_ms: nothing before the first frame, then the newest frame's latency.
+    const reported = poses.map((p) => p.shown_latency_ms || 0);
+    check(reported[0] === 0 && reported.filter((v) => v > 0 && v < 5000).length >= poses.length / 2,
+      `normal: poses report the shown frames' latency (${reported.slice(0, 6).map((v) => v.toFixed(0)).join(', ')}, ...)`);
     const s = await page.evaluate(() => ({ lf: window.catgs.lastFrame, text: window.catgs.overlayText(), errs: window.catgs.decoderErrors }));
     check(s.lf.width === 160 && s.lf.height === 120, 'normal: frame size 160x120');
     check(/FPS (\d*[1-9]\d*(\.\d)?|0\.[1-9])/.test(s.text) && /latency \d+ ms/.test(s.text) && s.text.includes('renderer cpu (exact)') &&
       s.text.includes('encoder x264') && s.text.includes('avc1.42'), `normal: overlay ${JSON.stringify(s.text)}`);
+    check(await waitText(page, /^$/, 2000), 'normal: no state message while streaming');
+    // The camera rests: the server's next Stats covers an interval without frames.
+    await sleep(4200);
+    const idle = await page.evaluate(() => window.catgs.overlayText());
+    check(/server: idle/.test(idle) && !/render 0\.0 ms/.test(idle) && /FPS idle/.test(idle), `idle: no made-up numbers (${JSON.stringify(idle)})`);
     check(s.errs === 0, 'normal: no decoder errors');
 
     // Input: a mouse drag orbits (orientation changes, distance to the target is kept), the wheel
     // zooms, a held W flies forward; each goes out as Poses through the animation-frame loop.
     const before = await page.evaluate(() => window.catgs.lastPoseSent);
-    await page.mouse.move(80, 60);
+    await page.mouse.move(160, 120);
     await page.mouse.down();
-    await page.mouse.move(110, 70, { steps: 5 });
+    await page.mouse.move(190, 130, { steps: 5 });
     await page.mouse.up();
     await page.waitForTimeout(200);
     const afterDrag = await page.evaluate(() => window.catgs.lastPoseSent);
@@ -113,11 +146,11 @@ try {
     check(afterFly.sequence > afterWheel.sequence + 2 && dist(afterFly.position) < dist(afterWheel.position), 'input: W flies forward, a pose per frame');
 
     // Resize: the page sends Resize with the new size in device pixels (even).
-    await page.setViewportSize({ width: 201, height: 151 });
+    await page.setViewportSize({ width: 401, height: 301 });
     const gotResize = await moveUntil(page, () => true, null, 100) &&
       (await new Promise((r) => setTimeout(r, 600)), mock.received.some((m) => m.body === 'resize'));
     const rz = mock.received.find((m) => m.body === 'resize');
-    check(gotResize && rz.msg.viewport_width === 200 && rz.msg.viewport_height === 150, `resize: ${JSON.stringify(rz && rz.msg)}`);
+    check(gotResize && rz.msg.viewport_width === 400 && rz.msg.viewport_height === 300, `resize: ${JSON.stringify(rz && rz.msg)}`);
     await page.close();
   }
 
@@ -130,11 +163,12 @@ try {
 
   // 3. Server Error: shown with code and reason, then "reconnecting in N s", then a new session.
   {
-    const page = await openPage(`${base}/?ws=ws://127.0.0.1:${mock.port}/ws-error`);
-    const sawError = await moveUntil(page, (c) => /server error ERROR_TOO_SLOW \(8\): mock: too slow/.test(c.overlayText()));
-    check(sawError, 'error: overlay shows the server error code and reason');
+    const page = await openPage(`${base}/?stats=1&ws=ws://127.0.0.1:${mock.port}/ws-error`);
+    const sawError = await moveUntil(page, (c) => /too slow for the stream \(mock: too slow\); reconnecting (in \d+ s|now)/.test(c.overlayText()));
+    check(sawError, 'error: the message says why in words, the reason and the reconnect countdown');
     const text = await page.evaluate(() => window.catgs.overlayText());
-    check(/disconnected, reconnecting (in \d+ s|now)/.test(text), `error: overlay shows the reconnect countdown (${JSON.stringify(text)})`);
+    check(!/ERROR_|CODEC_/.test(text), `error: no enum names (${JSON.stringify(text)})`);
+    check(/not connected/.test(text) && !/FPS|server:|latency \d/.test(text), `error: no stale stats once disconnected (${JSON.stringify(text)})`);
     const helloCount = () => mock.received.filter((r) => r.path === '/ws-error' && r.body === 'hello').length;
     check(await moveUntil(page, (c, n) => c.connected && n >= 0, 0, 8000) && helloCount() >= 2, 'error: reconnected with a new Hello');
     await page.close();
@@ -146,6 +180,252 @@ try {
     check(await moveUntil(page, (c) => c.decoderErrors >= 1 && c.framesDecoded >= 10), 'garbage: decoder error seen and decoding goes on (10 frames)');
     check(mock.received.some((r) => r.path === '/ws-garbage' && r.body === 'key_frame_request'), 'garbage: the page asked for a key frame');
     await page.close();
+  }
+
+  const wsUrl = (p) => `ws://127.0.0.1:${mock.port}${p}`;
+  const hellos = (p) => mock.received.filter((r) => r.path === p && r.body === 'hello');
+  const posesOf = (session) => mock.received.filter((r) => r.session === session && r.body === 'pose').map((r) => r.msg);
+
+  // 5. Before the first frame: a readable state, the codec in words, no enum names.
+  {
+    const page = await openPage(`${base}/?stats=1&ws=${wsUrl('/ws-noframes')}`);
+    check(await waitText(page, /rendering the first view/), 'first view: "rendering the first view" after Welcome');
+    const t = await page.evaluate(() => window.catgs.overlayText());
+    check(/H\.264/.test(t) && !/CODEC_/.test(t), `first view: codec shown as H.264, no enum name (${JSON.stringify(t)})`);
+    await page.close();
+  }
+
+  // 6. A server that was never reached says so (not "disconnected"); retry now tries at once.
+  {
+    const page = await openPage(`${base}/?ws=ws://127.0.0.1:9/ws`);
+    check(await waitText(page, /cannot reach the server, retrying (in \d+ s|now)/), 'unreachable: "cannot reach the server"');
+    check(!/disconnected/.test(await messageText(page)), 'unreachable: not "disconnected"');
+    await page.close();
+  }
+
+  // 7. Token: no retry loop; the page asks, a wrong token says so, the right one connects.
+  {
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws-token')}`);
+    check(await waitText(page, /this server needs an access token/), 'token: asks for a token');
+    await sleep(3000);
+    check(hellos('/ws-token').length === 1, `token: no retries after UNAUTHORIZED (${hellos('/ws-token').length} Hellos in 3 s)`);
+    await page.fill('#token-input', 'wrong');
+    await page.click('#messages button[type=submit]');
+    check(await waitText(page, /wrong token/), 'token: a wrong token is named as such');
+    await shot(page, 'token_prompt');
+    await page.fill('#token-input', 'sesame');
+    await page.keyboard.press('Enter');
+    check(await moveUntil(page, (c) => c.framesDecoded >= 3), 'token: the right token streams');
+    const h = hellos('/ws-token');
+    check(h.length === 3 && h[2].msg.token === 'sesame', `token: Hello.token carries it (${h.map((x) => x.msg.token).join(',')})`);
+    check(await waitText(page, /^$/, 2000), 'token: no message left once streaming');
+    await page.close();
+  }
+
+  // 8. Server full with retry_after_ms 2500: countdown, retry at the hint, retry now, and no red
+  //    text left over the live picture afterwards.
+  {
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws-full')}`);
+    check(await waitText(page, /server full, retrying in [1-3] s/), 'full: "server full, retrying in N s"');
+    await shot(page, 'server_full');
+    await waitFor(() => hellos('/ws-full').length >= 2, 6000);
+    const [h1, h2] = hellos('/ws-full');
+    const gap = h2 ? h2.at - h1.at : -1;
+    check(gap >= 2300 && gap < 4500, `full: the second try waits for the 2.5 s hint (${gap} ms; backoff would be 1 s)`);
+    check(await waitText(page, /server full/), 'full: refused again, still counting down');
+    await page.click('#messages button[data-action=retry]');
+    await waitFor(() => hellos('/ws-full').length >= 3, 2000);
+    const h3 = hellos('/ws-full')[2];
+    check(!!h3 && h3.at - h2.at < 2000, `full: "retry now" tries at once (${h3 ? h3.at - h2.at : '-'} ms after the last try)`);
+    check(await moveUntil(page, (c) => c.framesDecoded >= 3), 'full: streams once there is room');
+    await sleep(300);
+    const t = await page.evaluate(() => window.catgs.overlayText());
+    check(t === '', `full: nothing left on screen (${JSON.stringify(t)})`);
+    await page.close();
+  }
+
+  // 9. Server restarting (SHUTTING_DOWN, retry_after_ms 1200): says so, comes back on its own.
+  {
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws-restart')}`);
+    check(await moveUntil(page, (c) => /server restarting, reconnecting/.test(c.overlayText())), 'restart: "server restarting, reconnecting"');
+    check(await moveUntil(page, (c, n) => c.connected && n, true, 5000) && hellos('/ws-restart').length >= 2, 'restart: reconnected after the hint');
+    await page.close();
+  }
+
+  // 10. Reset, shared links, help, fullscreen.
+  {
+    const target = { position: [0.25, -0.5, -3], orientation: [0.9800666, 0.1986693, 0, 0], fov: 40 };
+    const q = `pos=${target.position.join(',')}&rot=${target.orientation.join(',')}&fov=${target.fov}`;
+    const page = await openPage(`${base}/?token=abc&${q}`);
+    await page.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    await sleep(300);
+    const session = hellos('/ws').at(-1).session;
+    const first = posesOf(session)[0];
+    const near = (a, b, eps = 1e-6) => a.every((v, i) => Math.abs(v - b[i]) <= eps);
+    check(!!first && near([first.position.x, first.position.y, first.position.z], target.position) &&
+      near([first.orientation.w, first.orientation.x, first.orientation.y, first.orientation.z], target.orientation) &&
+      Math.abs(first.vertical_fov_deg - target.fov) < 1e-9, `link: the server's first pose is the link's view (${JSON.stringify(first)})`);
+    // Move, copy the link, open it: the new page's first pose is the moved view.
+    await page.mouse.move(160, 120);
+    await page.mouse.down();
+    await page.mouse.move(200, 100, { steps: 4 });
+    await page.mouse.up();
+    await sleep(200);
+    await page.click('#btn-link');
+    await sleep(200);
+    const moved = await page.evaluate(() => window.catgs.lastPoseSent);
+    const copied = await page.evaluate(() => location.href);
+    check(!copied.includes('token=') && new URL(copied).searchParams.get('scene') === 'mock', `link: the copied link names the scene, leaves the token out (${copied})`);
+    const page2 = await openPage(copied);
+    await page2.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    await sleep(300);
+    const first2 = posesOf(hellos('/ws').at(-1).session)[0];
+    check(!!first2 && near([first2.position.x, first2.position.y, first2.position.z], moved.position, 1e-5) &&
+      near([first2.orientation.w, first2.orientation.x, first2.orientation.y, first2.orientation.z], moved.orientation, 1e-5),
+    'link: "copy link" then opening it shows the same view');
+    await page2.close();
+    // A link to a view of another scene: said so, and the server's own start view instead.
+    const page3 = await openPage(`${base}/?scene=garden&${q}`);
+    await page3.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    await sleep(300);
+    const first3 = posesOf(hellos('/ws').at(-1).session)[0];
+    check(!!first3 && first3.position.z === -4 && /view of "garden"; this server shows "mock"/.test(await messageText(page3)),
+      'link: a view of another scene is not applied, and the page says why');
+    await page3.close();
+    // Reset (key R and the button): back to the Welcome's initial pose.
+    for (const how of ['key', 'button']) {
+      await page.evaluate(() => window.catgs.setPose([1, 1, 1], [1, 0, 0, 0], 70));
+      if (how === 'key') await page.keyboard.press('r');
+      else await page.click('#btn-reset');
+      await sleep(200);
+      const p = await page.evaluate(() => window.catgs.lastPoseSent);
+      check(near(p.position, [0, 0, -4]) && near(p.orientation, [1, 0, 0, 0]) && p.fovDeg === 50, `reset (${how}): the initial view is sent (${JSON.stringify(p)})`);
+    }
+    check(!(await page.evaluate(() => location.search)).includes('pos='), 'reset: the view leaves the address');
+    await page.keyboard.press('h');
+    const help = await page.evaluate(() => ({ shown: !document.getElementById('helppanel').hidden, text: document.getElementById('helppanel').textContent }));
+    check(help.shown && /Shift/.test(help.text) && /two fingers/.test(help.text) && /stats=1/.test(help.text), 'help: H opens the panel (keys, mouse, touch, Shift, ?stats=1)');
+    await shot(page, 'help');
+    await page.keyboard.press('h');
+    await page.click('#btn-fullscreen');
+    check(await page.waitForFunction(() => !!document.fullscreenElement, null, { timeout: 3000 }).then(() => true, () => false),
+      `fullscreen: the button enters fullscreen (${await messageText(page)})`);
+    await page.keyboard.press('f');
+    check(await page.waitForFunction(() => !document.fullscreenElement, null, { timeout: 3000 }).then(() => true, () => false), 'fullscreen: F leaves it');
+    check(!/FPS/.test(await page.evaluate(() => window.catgs.overlayText())) && await page.evaluate(() => document.getElementById('stats').hidden),
+      'stats: hidden without ?stats=1');
+    await page.close();
+  }
+
+  // 11. Camera paths: record through the panel, play back, export/import; a tour through 3 views.
+  {
+    const page = await openPage(`${base}/`);
+    await page.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    await page.keyboard.press('p');
+    await page.click('#btn-record');
+    for (let i = 1; i <= 10; i++) {
+      await page.evaluate((x) => window.catgs.setPose([x, 0, -4], [1, 0, 0, 0], 50), i * 0.1);
+      await sleep(60);
+    }
+    await page.click('#btn-record');
+    const rec = await page.evaluate(() => window.catgs.recording);
+    check(rec && rec.length >= 10 && Math.abs(rec.at(-1).position[0] - 1) < 1e-9, `paths: recorded ${rec && rec.length} poses ending at x = 1`);
+    const trace = await page.evaluate(() => window.catgs.exportTrace());
+    check(/^catgs-trace 1\n/.test(trace) && trace.trim().split('\n').length === rec.length + 2, 'paths: exported as a catgs-trace, one line per pose');
+    const camsJson = JSON.parse(await page.evaluate(() => window.catgs.exportCameras('path')));
+    check(camsJson.length >= 2 && camsJson.every((c) => c.width === 320 && c.height === 240 && c.rotation.length === 3), `paths: exported as cameras.json (${camsJson.length} views)`);
+    await page.evaluate(() => window.catgs.setPose([0, 0, -4], [1, 0, 0, 0], 50));
+    await page.click('#btn-play-path');
+    await page.waitForFunction(() => window.catgs.playing === null, null, { timeout: 5000 });
+    const end = await page.evaluate(() => window.catgs.lastPoseSent);
+    check(Math.abs(end.position[0] - 1) < 1e-9, `paths: playback ends on the recorded last pose (x = ${end.position[0]})`);
+    // Tour: three waypoints; while it plays the page sends poses between them, and ends on the last.
+    const keys = [[0, 0, -4], [1, 0, -3], [2, 0, -4]];
+    for (const k of keys) {
+      await page.evaluate((p) => window.catgs.setPose(p, [1, 0, 0, 0], 50), k);
+      await page.click('#btn-add-waypoint');
+    }
+    const firstSeq = (await page.evaluate(() => window.catgs.lastPoseSent)).sequence;
+    await page.click('#btn-play-tour');
+    check(await page.evaluate(() => window.catgs.playing) === 'tour', 'tour: playing');
+    await page.waitForFunction(() => window.catgs.playing === null, null, { timeout: 8000 });
+    const s = hellos('/ws').at(-1).session;
+    const tourPoses = posesOf(s).filter((p) => p.sequence > firstSeq);
+    const last = tourPoses.at(-1);
+    check(tourPoses.length > 20 && Math.abs(last.position.x - 2) < 1e-9 && Math.abs(last.position.z + 4) < 1e-9,
+      `tour: ${tourPoses.length} poses sent, ending at the last waypoint`);
+    check(tourPoses.some((p) => Math.abs(p.position.z + 3) < 0.02 && Math.abs(p.position.x - 1) < 0.02), 'tour: passes through the middle waypoint');
+    // Import: the exported cameras.json comes back as waypoints; a bad file is named.
+    const ok = await page.evaluate((t) => window.catgs.importText('c.json', t), JSON.stringify(camsJson));
+    check(ok && (await page.evaluate(() => document.getElementById('paths-status').textContent)).includes(`${camsJson.length} waypoints`), 'import: cameras.json becomes waypoints');
+    const bad = await page.evaluate(() => window.catgs.importText('bad.trace', 'catgs-trace 1\n1 2 3\n'));
+    check(!bad && /bad\.trace: trace line 2: expected 14 fields/.test(await messageText(page)), 'import: a bad file is named with its line');
+    await shot(page, 'paths_panel');
+    await page.close();
+  }
+
+  // 11b. Quality menu: resolution scale sends Resize, a bitrate ceiling sends Quality (and the
+  //      current pose again, which the rebuilt encoder answers with an IDR).
+  {
+    const page = await openPage(`${base}/`);
+    await page.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    const session = hellos('/ws').at(-1).session;
+    await page.click('#btn-quality');
+    await page.selectOption('#quality-scale', '0.5');
+    await page.selectOption('#quality-bitrate', '2000');
+    await sleep(400);
+    const mine = mock.received.filter((r) => r.session === session);
+    const rz = mine.filter((r) => r.body === 'resize').at(-1);
+    const q = mine.filter((r) => r.body === 'quality').at(-1);
+    check(!!rz && rz.msg.viewport_width === 160 && rz.msg.viewport_height === 120, `quality: 50% resolution sends Resize 160x120 (${JSON.stringify(rz && rz.msg)})`);
+    check(!!q && q.msg.max_bitrate_kbps === 2000, `quality: 2 Mbit/s sends Quality (${JSON.stringify(q && q.msg)})`);
+    const after = mine.indexOf(q);
+    check(mine.slice(after + 1).some((r) => r.body === 'pose'), 'quality: the current pose follows, for the rebuilt encoder\'s first frame');
+    check((await page.evaluate(() => document.getElementById('quality-status').textContent)) === 'stream 160x120', 'quality: the panel shows the stream size');
+    await page.close();
+  }
+
+  // 12. A phone: 390x844 CSS pixels at DPR 3 with touch. The stream is capped (886x1920, not
+  //     1170x2532), nothing on screen is cut off, and the hint speaks of fingers.
+  {
+    await context.close();
+    context = null;
+    const phoneProfile = mkdtempSync(path.join(os.tmpdir(), 'catgs-mock-phone-'));
+    const phone = await launch(phoneProfile, { viewport: { width: 390, height: 844 }, deviceScaleFactor: 3, isMobile: true, hasTouch: true });
+    try {
+      const page = await openPage(`${base}/?stats=1`, phone);
+      check(await moveUntil(page, (c) => c.framesDecoded >= 3), 'phone: streams');
+      const v = await page.evaluate(() => window.catgs.viewport);
+      const hello = hellos('/ws').at(-1).msg;
+      check(v.width === 886 && v.height === 1920 && hello.viewport_width === 886 && hello.viewport_height === 1920,
+        `phone: Hello asks for 886x1920 at DPR 3 (${hello.viewport_width}x${hello.viewport_height})`);
+      await page.evaluate(() => window.catgs.importText('x.trace', 'junk')); // a long message too
+      await page.tap('#btn-help');
+      const boxes = await page.evaluate(() => [...document.querySelectorAll('.overlay:not([hidden])')].map((el) => {
+        const r = el.getBoundingClientRect();
+        return { id: el.id, left: r.left, top: r.top, right: r.right, bottom: r.bottom, sw: el.scrollWidth, cw: el.clientWidth };
+      }));
+      const clipped = boxes.filter((b) => b.left < 0 || b.top < 0 || b.right > 390 || b.bottom > 844 || b.sw > b.cw + 1);
+      check(boxes.length >= 4 && clipped.length === 0, `phone: no overlay cut off (${JSON.stringify(clipped.length ? clipped : boxes.map((b) => b.id))})`);
+      const hint = await page.evaluate(() => document.getElementById('hint').textContent);
+      check(/finger/.test(hint) && !/wheel|WASD/.test(hint), `phone: touch hint (${hint})`);
+      await shot(page, 'phone_dpr3_help');
+      await page.tap('#btn-help');
+      // One finger drags through CDP touch events: the camera orbits.
+      const before = await page.evaluate(() => window.catgs.lastPoseSent.sequence);
+      const cdp = await phone.newCDPSession(page);
+      const touch = (type, x, y) => cdp.send('Input.dispatchTouchEvent', { type, touchPoints: type === 'touchEnd' ? [] : [{ x, y }] });
+      await touch('touchStart', 200, 500);
+      for (let i = 1; i <= 5; i++) await touch('touchMove', 200 + i * 10, 500);
+      await touch('touchEnd');
+      await sleep(300);
+      check((await page.evaluate(() => window.catgs.lastPoseSent.sequence)) > before, 'phone: a one-finger drag moves the camera');
+      await shot(page, 'phone_dpr3');
+      await page.close();
+    } finally {
+      await phone.close();
+      rmSync(phoneProfile, { recursive: true, force: true });
+    }
   }
 } catch (e) {
   failures.push(String(e.stack || e));

@@ -242,3 +242,164 @@ test('reconnect backoff grows and is capped; the socket URL sits beside the page
   assert.equal(conn.defaultWebSocketUrl({ protocol: 'https:', host: 'x.org', search: '' }), 'wss://x.org/ws');
   assert.equal(conn.defaultWebSocketUrl({ protocol: 'http:', host: 'h', search: '?ws=ws://o:1/s' }), 'ws://o:1/s');
 });
+
+// ---- viewer features: reconnect policy, stream cap, view links, camera paths ----
+
+const vp = await imp('viewport.js');
+const link = await imp('view_link.js');
+const paths = await imp('paths.js');
+
+test('retry policy: a wrong token stops; SERVER_FULL / SHUTTING_DOWN follow the hint; drops back off', () => {
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_UNAUTHORIZED, retry_after_ms: 5000 }, false), { permanent: true });
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_SERVER_FULL, retry_after_ms: 3000 }, false), { permanent: false, delayMs: 3000 });
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_SHUTTING_DOWN, retry_after_ms: 1 }, true), { permanent: false, delayMs: 250 });
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_SERVER_FULL, retry_after_ms: 9e6 }, false).delayMs, 60000);
+  // No hint: the usual backoff. A refused Hello (protocol) is permanent, a later protocol error not.
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_SERVER_FULL, retry_after_ms: 0 }, false), { permanent: false, delayMs: null });
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_PROTOCOL }, false), { permanent: true });
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_PROTOCOL }, true), { permanent: false, delayMs: null });
+  assert.deepEqual(conn.retryPolicy({ code: 8, retry_after_ms: 100 }, true), { permanent: false, delayMs: null });
+  assert.deepEqual(conn.retryPolicy(null, true), { permanent: false, delayMs: null });
+});
+
+test('stream cap: 1920x1080 either way round, aspect kept, even; ?max moves it', () => {
+  assert.deepEqual(vp.capViewport(1170, 2532), { width: 886, height: 1920 }); // 390x844 at DPR 3
+  assert.deepEqual(vp.capViewport(2560, 1440), { width: 1920, height: 1080 });
+  assert.deepEqual(vp.capViewport(1280, 720), { width: 1280, height: 720 });
+  assert.deepEqual(vp.capViewport(3840, 1200), { width: 1920, height: 600 });
+  assert.deepEqual(vp.capViewport(481, 361), { width: 480, height: 360 });
+  assert.deepEqual(vp.parseMaxSize('2560x1440'), { long: 2560, short: 1440 });
+  assert.deepEqual(vp.parseMaxSize('720x1280'), { long: 1280, short: 720 });
+  assert.deepEqual(vp.parseMaxSize('junk'), vp.DEFAULT_MAX);
+  assert.deepEqual(vp.capViewport(2560, 1440, vp.parseMaxSize('640x360')), { width: 640, height: 360 });
+});
+
+test('view links: pose round trip, token left out, bad values named', () => {
+  const q = cam.qnorm([0.3, -0.5, 0.7, 0.2]);
+  const url = link.viewUrl('http://h:8/?token=secret&scale=0.5#x', { position: [1.5, -2.25, 1e-3], orientation: q, fovDeg: 47.5 }, 'garden');
+  const u = new URL(url);
+  assert.equal(u.searchParams.get('scene'), 'garden');
+  assert.equal(u.searchParams.get('token'), null);
+  assert.equal(u.searchParams.get('scale'), '0.5');
+  const v = link.parseView(u.searchParams);
+  close(v.pose.position, [1.5, -2.25, 1e-3], 1e-12);
+  close(v.pose.orientation, q, 1e-6);
+  assert.equal(v.pose.fovDeg, 47.5);
+  assert.equal(v.scene, 'garden');
+  assert.equal(link.parseView(new URLSearchParams('pos=1,2,3&rot=1,0,0,0')).scene, '');
+  assert.equal(link.parseView(new URLSearchParams('scale=2')), null);
+  assert.match(link.parseView(new URLSearchParams('pos=1,2&rot=1,0,0,0')).error, /pos/);
+  assert.match(link.parseView(new URLSearchParams('pos=1,2,3&rot=0,0,0,0')).error, /rot/);
+  assert.match(link.parseView(new URLSearchParams('pos=1,2,3&rot=1,0,0,0&fov=200')).error, /fov/);
+  assert.match(link.parseView(new URLSearchParams('pos=1,2,3')).error, /rot/);
+  assert.equal(link.withoutView(url).includes('pos='), false);
+  assert.equal(link.withoutView(url).includes('scene='), false);
+});
+
+const randomPose = (i) => ({
+  position: [Math.sin(i) * 3, Math.cos(i * 1.3), i * 0.4],
+  orientation: cam.qnorm(cam.qmul(cam.qfromAxisAngle([0, 1, 0], 0.4 * i), cam.qfromAxisAngle([1, 0.2, 0], 0.1 * i))),
+  fovDeg: 50 + i,
+});
+
+test('cameras.json: rotation rows are camera-to-world, fx/fy from the fov; round trip', () => {
+  const poses = [0, 1, 2].map(randomPose);
+  const json = paths.toInriaCameras(poses, 640, 480);
+  assert.equal(json.length, 3);
+  const p = poses[1];
+  // Column 2 of the rotation is the camera's forward axis in the world, as the C++ reader takes it.
+  close([json[1].rotation[0][2], json[1].rotation[1][2], json[1].rotation[2][2]], cam.cameraForward(p.orientation), 1e-12);
+  close([json[1].fy], [cam.intrinsicsFor(p.fovDeg, 640, 480).fy], 1e-9);
+  assert.equal(json[1].width, 640);
+  const back = paths.fromInriaCameras(JSON.stringify(json));
+  back.forEach((b, i) => {
+    close(b.position, poses[i].position, 1e-12);
+    close(b.orientation, poses[i].orientation, 1e-9);
+    close([b.fovDeg], [poses[i].fovDeg], 1e-9);
+  });
+  assert.throws(() => paths.fromInriaCameras('[{"height": 4, "fy": 1, "position": [1, 2], "rotation": []}]'), /entry 0: bad position/);
+  assert.throws(() => paths.fromInriaCameras('{'), /malformed JSON/);
+});
+
+test('trace file: round trip; a recording resampled every 0.5 s keeps its ends', () => {
+  const rec = new paths.PathRecorder();
+  for (let i = 0; i <= 20; i++) rec.add(1000 + i * 100, randomPose(i * 0.1));
+  assert.equal(rec.add(3000, randomPose(2)), false, 'a still camera adds no sample');
+  const text = paths.toTraceFile(rec.samples, 320, 240);
+  assert.match(text, /^catgs-trace 1\n/);
+  const back = paths.fromTraceFile(text);
+  assert.equal(back.length, 21);
+  close([back[20].t], [2.0], 1e-9);
+  close(back[7].position, rec.samples[7].position, 1e-7);
+  close([back[7].fovDeg], [rec.samples[7].fovDeg], 1e-5);
+  const r = paths.resample(rec.samples, 0.5);
+  assert.deepEqual(r.map((s) => Number(s.t.toFixed(6))), [0, 0.5, 1, 1.5, 2]);
+  close(r[2].position, rec.samples[10].position, 1e-12);
+  assert.throws(() => paths.fromTraceFile('catgs-trace 1\n0 1 2 3\n'), /line 2: expected 14 fields/);
+  // A pause, then a jump: playback holds the old pose until the last moment it was seen, then jumps.
+  const pause = new paths.PathRecorder();
+  pause.add(0, randomPose(0));
+  pause.add(1000, randomPose(0));
+  pause.add(2000, randomPose(0));
+  pause.add(2016, randomPose(5));
+  assert.deepEqual(pause.samples.map((s) => s.t), [0, 2, 2.016]);
+  close(paths.poseAtTime(pause.samples, 1.5).position, randomPose(0).position, 1e-12);
+  assert.throws(() => paths.fromTraceFile('hello'), /catgs-trace 1/);
+});
+
+test('tour interpolation: passes through the waypoints, straight on a line, slerp is glm\'s', () => {
+  const keys = [0, 1, 2, 3].map(randomPose);
+  for (let k = 0; k < keys.length; k++) {
+    const p = paths.tourPoseAt(keys, k * 2);
+    close(p.position, keys[k].position, 1e-9);
+    close(p.orientation, keys[k].orientation, 1e-9);
+    close([p.fovDeg], [keys[k].fovDeg], 1e-9);
+  }
+  // Evenly spaced collinear points: centripetal Catmull-Rom stays on the line, evenly.
+  const line = [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]];
+  close(paths.centripetalCatmullRom(...line, 0.25), [1.25, 0, 0], 1e-12);
+  // slerp takes the short arc, and at a = 0.5 is the half-angle rotation.
+  const a = cam.qfromAxisAngle([0, 0, 1], 0.2);
+  const b = cam.qfromAxisAngle([0, 0, 1], 1.0).map((v) => -v);
+  close(cam.qnorm(paths.slerp(a, b, 0.5)), cam.qfromAxisAngle([0, 0, 1], 0.6), 1e-12);
+});
+
+// The core's own interpolation (catgs-scene interpolate = interpolate_views) of a tour exported
+// as cameras.json, against the page's: the same poses along the way.
+const sceneTool = (() => {
+  const i = process.argv.indexOf('--scene-tool');
+  return i > 0 ? process.argv[i + 1] : process.env.CATGS_SCENE_TOOL;
+})();
+test('the page\'s tour matches the core\'s interpolate_views (catgs-scene interpolate)', { skip: !sceneTool && 'no --scene-tool' }, async () => {
+  const { spawnSync } = await import('node:child_process');
+  const { mkdtempSync, writeFileSync, rmSync } = await import('node:fs');
+  const os = await import('node:os');
+  const dir = mkdtempSync(path.join(os.tmpdir(), 'catgs-tour-'));
+  try {
+    const keys = [0, 1, 2, 3, 4].map(randomPose);
+    const camsPath = path.join(dir, 'tour.json');
+    const tracePath = path.join(dir, 'tour.trace');
+    writeFileSync(camsPath, JSON.stringify(paths.toInriaCameras(keys, 640, 480)));
+    const r = spawnSync(sceneTool, ['interpolate', '--cameras', camsPath, '--out', tracePath, '--rate', '8',
+      '--seconds-per-view', String(paths.TOUR_SECONDS_PER_VIEW)], { encoding: 'utf8' });
+    assert.equal(r.status, 0, r.stderr);
+    const core = paths.fromTraceFile(readFileSync(tracePath, 'utf8'));
+    assert.equal(core.length, 4 * 2 * 8 + 1);
+    let worst = 0;
+    for (const c of core) {
+      const p = paths.tourPoseAt(keys, c.t);
+      const dq = Math.min(...[1, -1].map((s) => Math.hypot(...p.orientation.map((v, i) => v - s * c.orientation[i]))));
+      worst = Math.max(worst, Math.hypot(...p.position.map((v, i) => v - c.position[i])), dq, Math.abs(p.fovDeg - c.fovDeg) / 100);
+    }
+    console.log(`# tour vs catgs-scene interpolate: largest difference ${worst.toExponential(2)}`);
+    // float32 in the core: agreement to about 1e-6 of the scene's size.
+    assert.ok(worst < 2e-5, `largest difference ${worst}`);
+    // Negative control: plain linear interpolation between the keys is far off mid-segment, so
+    // the bound above tells the formulas apart.
+    const mid = core[12]; // u = 0.5 of segment 1
+    const lin = keys[1].position.map((v, i) => (v + keys[2].position[i]) / 2);
+    assert.ok(Math.hypot(...lin.map((v, i) => v - mid.position[i])) > 1e-3);
+  } finally {
+    rmSync(dir, { recursive: true, force: true });
+  }
+});

@@ -3,8 +3,11 @@
 // catgs-loadgen against the real server.
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <mutex>
 #include <thread>
 
@@ -225,6 +228,29 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
     EXPECT_LE(s["latency"]["p50_ms"].get<double>(), s["latency"]["p99_ms"].get<double>());
   }
   EXPECT_EQ(j["run"]["sessions"][1]["width"].get<int>(), 128);
+  // Each pose carries the latency of the newest frame before it (Pose.shown_latency_ms); the
+  // server's end-to-end histogram must agree with what the client measured (the same samples but
+  // for the warm-up and the last frame of each session).
+  std::string metrics;
+  http_get(server.port(), "/metrics", metrics);
+  const double e2e_count = metric_value(metrics, "catgs_pose_to_frame_seconds_count");
+  const double e2e_mean_ms = 1000.0 * metric_value(metrics, "catgs_pose_to_frame_seconds_sum") / e2e_count;
+  const double client_mean_ms = j["run"]["total"]["latency"]["mean_ms"].get<double>();
+  const double client_frames = j["run"]["total"]["frames"].get<double>();
+  std::cout << "[ info ] end to end: /metrics " << e2e_count << " samples, mean " << e2e_mean_ms
+            << " ms; catgs-loadgen " << client_frames << " frames, mean " << client_mean_ms << " ms\n";
+  EXPECT_GE(e2e_count, 0.5 * client_frames);
+  EXPECT_LE(e2e_count, client_frames);
+  EXPECT_NEAR(e2e_mean_ms, client_mean_ms, 0.35 * client_mean_ms + 2.0);
+  // Per-session frame rate: the server's per-interval rates average what the client counted
+  // (whatever the CPU manages of the 20 poses a second asked for).
+  const double fps_count = metric_value(metrics, "catgs_session_fps_count");
+  const double fps_mean = metric_value(metrics, "catgs_session_fps_sum") / fps_count;
+  const double client_fps = j["run"]["total"]["fps_total"].get<double>() / 2.0;
+  std::cout << "[ info ] per-session FPS: /metrics " << fps_count << " intervals, mean " << fps_mean
+            << "; catgs-loadgen mean " << client_fps << "\n";
+  EXPECT_GE(fps_count, 2);
+  EXPECT_NEAR(fps_mean, client_fps, 0.3 * client_fps);
   EXPECT_EQ(j["run"]["sessions"][1]["trace"].get<std::string>(), second);
   ASSERT_EQ(std::system((base + " --sessions 2 --seconds 1.5 --ramp --trace orbit > /dev/null").c_str()), 0);
   const nlohmann::json ramp = nlohmann::json::parse(std::ifstream(json_path));
@@ -232,6 +258,54 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
   EXPECT_EQ(ramp["largest_sessions_held"].get<int>(), 2);
   EXPECT_EQ(ramp["ramp"][1]["total"]["sessions"].get<int>(), 2);
   std::filesystem::remove(json_path);
+}
+
+// catgs-loadgen against a full server: one session streams, the other is refused. The refused
+// one is reported as refused (status, refusal, no numbers), the run exits 3 (refused, nothing
+// failed), no PSNR is claimed for unchecked frames, and the progress line shows on stderr while
+// it runs. Poses sent faster than the CPU renders are skipped (latest pose wins), not dropped.
+TEST(MultiSession, LoadgenReportsRefusedSessionsSkipsAndProgress) {
+  ServerProcess server(server_args(kBiker, {"--max-sessions", "1", "--threads", "2"}));
+  const std::string stem = "/tmp/catgs-itest-refused-" + std::to_string(server.port());
+  const std::string cmd = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
+                          " --sessions 2 --offset-s 0 --size 320x240 --rate 400 --seconds 3 --progress 0.5 --json " +
+                          stem + ".json > " + stem + ".out 2> " + stem + ".err";
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 3) << "refused sessions must not exit 0";
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(stem + ".json"));
+  std::stringstream out, err;
+  out << std::ifstream(stem + ".out").rdbuf();
+  err << std::ifstream(stem + ".err").rdbuf();
+  int ok = 0, refused = 0;
+  for (const auto& s : j["run"]["sessions"]) {
+    if (s["status"] == "refused") {
+      refused++;
+      EXPECT_NE(s["refusal"].get<std::string>().find("ERROR_SERVER_FULL"), std::string::npos) << s.dump();
+      EXPECT_EQ(s["frames"].get<int>(), 0);
+      continue;
+    }
+    ok++;
+    EXPECT_EQ(s["status"], "ok") << s.dump();
+    EXPECT_GT(s["frames"].get<int>(), 10) << s.dump();
+    EXPECT_TRUE(s["psnr_mean_db"].is_null()) << "nothing was checked: " << s.dump();
+    // 400 poses a second against a CPU render of tens of ms: most poses are replaced by newer
+    // ones; the newest is always rendered, so none is lost.
+    const int sent = s["poses_sent"].get<int>(), frames = s["frames"].get<int>();
+    const int skipped = s["skipped"].get<int>(), dropped = s["dropped"].get<int>();
+    EXPECT_GT(skipped, frames) << s.dump();
+    EXPECT_EQ(dropped, 0) << s.dump();
+    // Each frame answers a different pose (in order, none twice): every pose is accounted for once.
+    EXPECT_EQ(skipped + dropped + frames, sent) << s.dump();
+    EXPECT_GT(s["server_skipped"].get<int>(), 0) << s.dump();
+  }
+  EXPECT_EQ(ok, 1);
+  EXPECT_EQ(refused, 1);
+  EXPECT_EQ(j["run"]["total"]["refused"].get<int>(), 1);
+  EXPECT_NE(out.str().find("refused by the server: ERROR_SERVER_FULL"), std::string::npos) << out.str();
+  EXPECT_EQ(out.str().find("0x0"), std::string::npos) << out.str();
+  EXPECT_NE(err.str().find("sessions: 1 open, 1 refused, 0 failed"), std::string::npos) << err.str();
+  for (const char* ext : {".json", ".out", ".err"}) std::filesystem::remove(stem + ext);
 }
 
 // The GPU script's correctness run, on the CPU: catgs-loadgen decodes the frames of 3 sessions and

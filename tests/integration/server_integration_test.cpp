@@ -325,6 +325,59 @@ TEST(ServerIntegration, ResizeKeyFrameRequestPingAndStats) {
   EXPECT_EQ(stats->stats().poses_received(), 4u);
 }
 
+// Quality (the page's quality menu): a bitrate ceiling rebuilds the encoder (the next frame is an
+// IDR) and the P-frames of a moving camera shrink to fit it; 0 lifts it; an absurd value ends the
+// session with ERROR_INVALID_ARGUMENT.
+TEST(ServerIntegration, QualityCapsTheBitrate) {
+  ServerProcess server(server_args(kBiker, {"--crf", "18"}));
+  StreamClient c;
+  c.connect(server.port());
+  c.hello(320, 240);
+  const Trace orbit = biker_orbit(320, 240, 90);
+  std::uint32_t seq = 0;
+  // Mean payload bytes of the P-frames among the next `n` frames; `first_key` gets whether the
+  // first of them was an IDR.
+  auto mean_p_bytes = [&](int n, bool* first_key) {
+    double bytes = 0;
+    int count = 0;
+    for (int i = 0; i < n; ++i, ++seq) {
+      c.send_pose(pose_from_camera(orbit[seq % orbit.size()].camera, seq, now_ms()));
+      auto m = wait_for(c, 20000, [](const pb::ServerMessage& s) { return s.has_frame() || s.has_error(); });
+      if (!m || !m->has_frame()) {
+        ADD_FAILURE() << "no frame for pose " << seq;
+        return 0.0;
+      }
+      if (i == 0 && first_key) *first_key = m->frame().key_frame();
+      if (m->frame().key_frame()) continue;
+      bytes += static_cast<double>(m->frame().payload().size());
+      count++;
+    }
+    return count ? bytes / count : 0.0;
+  };
+  auto quality = [&](std::uint32_t kbps) {
+    pb::ClientMessage q;
+    q.mutable_quality()->set_max_bitrate_kbps(kbps);
+    c.send(q);
+  };
+  const double free_bytes = mean_p_bytes(25, nullptr);
+  quality(100);
+  bool key = false;
+  const double capped_bytes = mean_p_bytes(25, &key);
+  EXPECT_TRUE(key) << "the encoder is rebuilt: its first frame is an IDR";
+  quality(0);
+  const double again_bytes = mean_p_bytes(25, &key);
+  EXPECT_TRUE(key);
+  std::cout << "[ info ] P-frame bytes at CRF 18: " << free_bytes << "; capped at 100 kbit/s: " << capped_bytes
+            << "; cap lifted: " << again_bytes << "\n";
+  EXPECT_LT(capped_bytes, 0.5 * free_bytes);
+  EXPECT_GT(again_bytes, 2.0 * capped_bytes);
+
+  quality(50);  // below the protocol's 100 kbit/s
+  auto e = expect_error(c);
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->code(), pb::ERROR_INVALID_ARGUMENT) << e->reason();
+}
+
 // Each bad input ends only its own session with the right Error; the good session streams on.
 TEST(ServerIntegration, BadInputEndsOnlyThatSession) {
   ServerProcess server(server_args(kBiker));
@@ -653,7 +706,7 @@ TEST(ServerIntegration, StalledFrameReaderTimesOut) {
 }
 
 TEST(ServerIntegration, SessionLimitAndToken) {
-  ServerProcess server(server_args(kBiker, {"--max-sessions", "1", "--token", "s3cret"}));
+  ServerProcess server(server_args(kBiker, {"--max-sessions", "1", "--token", "s3cret", "--full-retry-ms", "1234"}));
   StreamClient wrong;
   wrong.connect(server.port());
   EXPECT_THROW(wrong.hello(64, 64, "nope"), std::runtime_error);
@@ -666,8 +719,9 @@ TEST(ServerIntegration, SessionLimitAndToken) {
   try {
     second.hello(64, 64, "s3cret");
     ADD_FAILURE() << "second session accepted past --max-sessions 1";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("ERROR_SERVER_FULL"), std::string::npos) << e.what();
+  } catch (const loadgen::Refused& e) {
+    EXPECT_EQ(e.error().code(), pb::ERROR_SERVER_FULL) << e.what();
+    EXPECT_EQ(e.error().retry_after_ms(), 1234u) << "the reconnect hint (--full-retry-ms)";
   }
   // The slot frees when the first session leaves.
   first.ws().close();

@@ -1,12 +1,14 @@
 // catgs-loadgen: N concurrent sessions (one thread each) replay camera traces against a running
 // catgs-server and report frames, FPS, pose-to-frame latency, bytes/s, dropped and stale frames,
-// errors and the server's stage times, as a table and optionally JSON. It reports; it does not
-// pass or fail on time, except in ramp mode, where it searches for the largest session count
-// that holds the given bounds.
+// errors and the server's stage times, as a table and optionally JSON, with a progress line on
+// stderr while it runs. It does not pass or fail on time, except in ramp mode, where it searches
+// for the largest session count that holds the given bounds; it fails (exit 1) when a session
+// failed or a reference check did, and says so with exit 3 when the server refused sessions.
 //
 //   catgs-loadgen --port 8080 --sessions 4 --size 1280x720 --trace orbit --seconds 10
 //   catgs-loadgen --sessions 4 --trace orbit,real:C.json --scene S.ply --size 1280x720,640x480
 //   catgs-loadgen --ramp --sessions 32 --max-p95-ms 25 --min-fps 60 --json ramp.json
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -52,7 +54,11 @@ const char* kUsage =
     "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
     "  --ramp-step x2|+K        session counts double (default) or grow by K\n"
     "  --max-p95-ms MS          ramp bound: pooled p95 pose-to-frame latency\n"
-    "  --min-fps F              ramp bound: the slowest session's FPS\n";
+    "  --min-fps F              ramp bound: the slowest session's FPS\n"
+    "  --progress S             a progress line on stderr every S seconds (default 1; 0: none)\n"
+    "exit status: 0 every session streamed; 1 a session failed (no connection, lost connection,\n"
+    "server Error, no frame, bad reference check); 3 the server refused sessions (none failed);\n"
+    "2 bad arguments. A ramp exits 0 when it ran (its bound breaking is its answer).\n";
 
 std::vector<std::string> split(const std::string& s) {
   std::vector<std::string> out;
@@ -68,15 +74,49 @@ std::pair<int, int> parse_size(const std::string& s) {
   return {std::stoi(s.substr(0, x)), std::stoi(s.substr(x + 1))};
 }
 
-// Runs `n` sessions at once, one thread each.
-std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConfig>& templates) {
+// "[3.0 s] sessions 4 open, 1 refused, 0 failed; frames 180 (59.8/s), poses 360"
+std::string progress_line(const Progress& p, int sessions, double elapsed_s, double seconds,
+                          std::uint64_t frames_before, double interval_s) {
+  char line[256];
+  const std::uint64_t frames = p.frames.load();
+  std::snprintf(line, sizeof(line),
+                "[%.1f/%.1f s] sessions: %d open, %d refused, %d failed, %d of %d done; frames %llu (%.1f/s), "
+                "poses %llu\n",
+                elapsed_s, seconds, p.open.load(), p.refused.load(), p.failed.load(), p.finished.load(), sessions,
+                static_cast<unsigned long long>(frames),
+                interval_s > 0 ? static_cast<double>(frames - frames_before) / interval_s : 0.0,
+                static_cast<unsigned long long>(p.poses.load()));
+  return line;
+}
+
+// Runs `n` sessions at once, one thread each; prints a progress line every `progress_s` seconds
+// (0: none) while they run.
+std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConfig>& templates, double progress_s = 0) {
   std::vector<SessionResult> results(static_cast<std::size_t>(n));
   std::vector<std::thread> threads;
+  Progress progress;
   for (int i = 0; i < n; ++i) {
     LoadSessionConfig c = templates[static_cast<std::size_t>(i) % templates.size()];
     c.index = i;
     c.offset_s *= i;
+    c.progress = &progress;
     threads.emplace_back([c, &results, i] { results[static_cast<std::size_t>(i)] = run_load_session(c); });
+  }
+  if (progress_s > 0) {
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    auto last = start;
+    std::uint64_t frames_before = 0;
+    while (progress.finished.load() < n) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      const auto now = Clock::now();
+      const double since = std::chrono::duration<double>(now - last).count();
+      if (since < progress_s) continue;
+      std::cerr << progress_line(progress, n, std::chrono::duration<double>(now - start).count(),
+                                 templates.front().seconds, frames_before, since);
+      frames_before = progress.frames.load();
+      last = now;
+    }
   }
   for (auto& t : threads) t.join();
   return results;
@@ -99,6 +139,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
     throw std::invalid_argument("--check-every needs --scene (the reference renders it)");
   base.warmup_frames = args.get_int("--warmup", 5);
   base.stale_ms = args.get_double("--stale-ms", 100);
+  if (args.get_double("--progress", 1) < 0) throw std::invalid_argument("--progress must be >= 0 seconds");
   if (args.has("--scene")) {
     base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
     std::cout << "scene " << args.get("--scene") << ": " << base.scene->size() << " Gaussians\n";
@@ -106,24 +147,38 @@ LoadSessionConfig base_config(const tools::Args& args) {
   return base;
 }
 
-// One run of `sessions` sessions; returns the exit code's bits (no frames, or a failed check).
+// The exit status of a run (see kUsage): 1 when a session failed or a reference check did, else
+// 3 when the server refused sessions, else 0.
+int run_exit_code(const std::vector<SessionResult>& results, const LoadSessionConfig& base) {
+  bool failed = false, refused = false;
+  for (const auto& r : results) {
+    refused = refused || r.refused;
+    if (r.refused) continue;
+    failed = failed || session_status(r) == "failed";
+    // A reference check that found a bad frame, or checked none, fails the run.
+    if (base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) failed = true;
+  }
+  return failed ? 1 : refused ? 3 : 0;
+}
+
+// One run of `sessions` sessions; returns its exit status.
 int run_once(int max_sessions, const std::vector<LoadSessionConfig>& templates, const LoadSessionConfig& base,
-             nlohmann::json& report) {
-  int exit_code = 0;
-  const auto results = run_sessions(max_sessions, templates);
+             double progress_s, nlohmann::json& report) {
+  const auto results = run_sessions(max_sessions, templates, progress_s);
   std::cout << format_table(results);
   report["run"] = run_json(results);
-  for (const auto& r : results) {
-    exit_code |= r.frames == 0 ? 1 : 0;
-    // A reference check that found a bad frame, or checked none, fails the run.
-    if (base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) exit_code |= 1;
+  const int code = run_exit_code(results, base);
+  if (code != 0) {
+    const RunSummary t = summarize_run(results);
+    std::cerr << "catgs-loadgen: " << t.failed << " of " << t.sessions << " sessions failed, " << t.refused
+              << " refused by the server (exit " << code << ")\n";
   }
-  return exit_code;
+  return code;
 }
 
 // --ramp: 1, 2, 4, ... (or +K) sessions until one step breaks the bounds.
 void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadSessionConfig>& templates,
-              nlohmann::json& report) {
+              double progress_s, nlohmann::json& report) {
   const std::string step = args.get("--ramp-step", "x2");
   const int add = step.rfind('+', 0) == 0 ? std::stoi(step.substr(1)) : 0;
   if (step != "x2" && add <= 0) throw std::invalid_argument("--ramp-step must be x2 or +K");
@@ -131,10 +186,12 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
   int held = 0;
   report["ramp"] = nlohmann::json::array();
   for (int n = 1; n <= max_sessions; n = add ? n + add : 2 * n) {
-    const auto results = run_sessions(n, templates);
+    const auto results = run_sessions(n, templates, progress_s);
     const RunSummary t = summarize_run(results);
     char broken[96] = "";
-    if (t.errors)
+    if (t.refused)
+      std::snprintf(broken, sizeof(broken), "%d sessions refused", t.refused);
+    else if (t.errors)
       std::snprintf(broken, sizeof(broken), "%llu errors", static_cast<unsigned long long>(t.errors));
     else if (max_p95 > 0 && t.latency.p95 > max_p95)
       std::snprintf(broken, sizeof(broken), "p95 %.1f ms", t.latency.p95);
@@ -158,11 +215,12 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
 
 int main(int argc, char** argv) {
   try {
-    const tools::Args args(argc, argv,
-                           {"--host",   "--port",        "--sessions",       "--size",       "--width",    "--height",
-                            "--trace",  "--scene",       "--offset-s",       "--rate",       "--depth",    "--seconds",
-                            "--decode", "--check-every", "--check-min-psnr", "--warmup",     "--stale-ms", "--token",
-                            "--json",   "--ramp!",       "--ramp-step",      "--max-p95-ms", "--min-fps",  "--help!"});
+    const tools::Args args(
+        argc, argv,
+        {"--host",           "--port",     "--sessions", "--size",  "--width",   "--height", "--trace",
+         "--scene",          "--offset-s", "--rate",     "--depth", "--seconds", "--decode", "--check-every",
+         "--check-min-psnr", "--warmup",   "--stale-ms", "--token", "--json",    "--ramp!",  "--ramp-step",
+         "--max-p95-ms",     "--min-fps",  "--progress", "--help!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -193,10 +251,11 @@ int main(int argc, char** argv) {
                         {"traces", traces},
                         {"stale_ms", base.stale_ms}};
     int exit_code = 0;
+    const double progress_s = args.get_double("--progress", 1);
     if (!args.has("--ramp")) {
-      exit_code = run_once(max_sessions, templates, base, report);
+      exit_code = run_once(max_sessions, templates, base, progress_s, report);
     } else {
-      run_ramp(args, max_sessions, templates, report);
+      run_ramp(args, max_sessions, templates, progress_s, report);
     }
     if (args.has("--json")) {
       std::ofstream(args.get("--json")) << report.dump(1) << "\n";

@@ -49,20 +49,34 @@ double session_fps(const SessionResult& s) {
   return s.run_seconds > 0 ? static_cast<double>(s.frames) / s.run_seconds : 0.0;
 }
 
+std::string session_status(const SessionResult& s) {
+  if (s.refused) return "refused";
+  return s.errors > 0 || s.frames == 0 ? "failed" : "ok";
+}
+
 RunSummary summarize_run(const std::vector<SessionResult>& sessions) {
   RunSummary t;
   t.sessions = static_cast<int>(sessions.size());
   std::vector<double> pooled;
+  bool first_ran = true;
   for (const SessionResult& s : sessions) {
+    const std::string status = session_status(s);
+    t.refused += status == "refused";
+    t.failed += status == "failed";
     t.frames += s.frames;
     t.poses_sent += s.poses_sent;
     t.bytes += s.bytes;
+    t.skipped += s.skipped;
     t.dropped += s.dropped;
     t.stale += s.stale;
     t.errors += s.errors;
     const double fps = session_fps(s);
     t.fps_total += fps;
-    t.fps_min = (&s == &sessions.front()) ? fps : std::min(t.fps_min, fps);
+    // A refused session did not run: it has no speed to be the slowest with.
+    if (!s.refused) {
+      t.fps_min = first_ran ? fps : std::min(t.fps_min, fps);
+      first_ran = false;
+    }
     if (s.run_seconds > 0) t.bytes_per_second += static_cast<double>(s.bytes) / s.run_seconds;
     pooled.insert(pooled.end(), s.latency_ms.begin(), s.latency_ms.end());
     t.server.add(s.server);
@@ -79,6 +93,9 @@ nlohmann::json latency_json(const LatencySummary& l) {
   return {{"p50_ms", l.p50},   {"p95_ms", l.p95}, {"p99_ms", l.p99},
           {"mean_ms", l.mean}, {"max_ms", l.max}, {"samples", l.samples}};
 }
+
+// A mean that was never measured is null, not 0.0 dB.
+nlohmann::json measured(double v, std::uint64_t n) { return n ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
 nlohmann::json stages_json(const StageSums& s) {
   return {{"queue_ms", mean(s.queue, s.frames)},
@@ -99,6 +116,8 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
   for (const SessionResult& s : sessions) {
     out["sessions"].push_back(
         {{"index", s.index},
+         {"status", session_status(s)},
+         {"refusal", s.refusal},
          {"trace", s.trace},
          {"width", s.width},
          {"height", s.height},
@@ -114,24 +133,29 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"fps", session_fps(s)},
          {"bytes", s.bytes},
          {"bytes_per_second", s.run_seconds > 0 ? static_cast<double>(s.bytes) / s.run_seconds : 0.0},
+         {"skipped", s.skipped},
          {"dropped", s.dropped},
+         {"server_skipped", s.server_skipped},
          {"stale", s.stale},
          {"errors", s.errors},
          {"first_error", s.first_error},
          {"checked", s.checked},
          {"check_failures", s.check_failures},
-         {"psnr_min_db", s.psnr_min},
-         {"psnr_mean_db", s.psnr_mean},
+         {"psnr_min_db", measured(s.psnr_min, s.checked)},
+         {"psnr_mean_db", measured(s.psnr_mean, s.checked)},
          {"latency", latency_json(summarize_latency(s.latency_ms))},
          {"server", stages_json(s.server)}});
   }
   const RunSummary t = summarize_run(sessions);
   out["total"] = {{"sessions", t.sessions},
+                  {"refused", t.refused},
+                  {"failed", t.failed},
                   {"frames", t.frames},
                   {"poses_sent", t.poses_sent},
                   {"fps_total", t.fps_total},
                   {"fps_min", t.fps_min},
                   {"bytes_per_second", t.bytes_per_second},
+                  {"skipped", t.skipped},
                   {"dropped", t.dropped},
                   {"stale", t.stale},
                   {"errors", t.errors},
@@ -143,25 +167,38 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
 std::string format_table(const std::vector<SessionResult>& sessions) {
   std::string out;
   char line[256];
+  const auto u = [](std::uint64_t v) { return static_cast<unsigned long long>(v); };
   auto row = [&](const std::string& name, const std::string& size, std::uint64_t frames, double fps,
-                 const LatencySummary& l, double kbps, std::uint64_t dropped, std::uint64_t stale,
-                 std::uint64_t errors) {
-    std::snprintf(line, sizeof(line), "%-8s %-10s %7llu %7.1f %8.1f %8.1f %8.1f %9.0f %7llu %6llu %6llu\n",
-                  name.c_str(), size.c_str(), static_cast<unsigned long long>(frames), fps, l.p50, l.p95, l.p99, kbps,
-                  static_cast<unsigned long long>(dropped), static_cast<unsigned long long>(stale),
-                  static_cast<unsigned long long>(errors));
+                 const LatencySummary& l, double kbps, std::uint64_t skipped, std::uint64_t dropped,
+                 std::uint64_t stale, std::uint64_t errors) {
+    std::snprintf(line, sizeof(line), "%-8s %-10s %7llu %7.1f %8.1f %8.1f %8.1f %9.0f %7llu %7llu %6llu %6llu\n",
+                  name.c_str(), size.c_str(), u(frames), fps, l.p50, l.p95, l.p99, kbps, u(skipped), u(dropped),
+                  u(stale), u(errors));
     out += line;
   };
-  std::snprintf(line, sizeof(line), "%-8s %-10s %7s %7s %8s %8s %8s %9s %7s %6s %6s\n", "session", "size", "frames",
-                "FPS", "p50 ms", "p95 ms", "p99 ms", "kbit/s", "dropped", "stale", "errors");
+  std::snprintf(line, sizeof(line), "%-8s %-10s %7s %7s %8s %8s %8s %9s %7s %7s %6s %6s\n", "session", "size", "frames",
+                "FPS", "p50 ms", "p95 ms", "p99 ms", "kbit/s", "skipped", "dropped", "stale", "errors");
   out += line;
   for (const SessionResult& s : sessions) {
+    if (s.refused) {
+      // No session ran: numbers would read as a session that measured zeros.
+      std::snprintf(line, sizeof(line), "%-8s refused by the server: %s\n", std::to_string(s.index).c_str(),
+                    s.refusal.c_str());
+      out += line;
+      continue;
+    }
     const double kbps = s.run_seconds > 0 ? 8.0 * static_cast<double>(s.bytes) / s.run_seconds / 1000.0 : 0.0;
     row(std::to_string(s.index), std::to_string(s.width) + "x" + std::to_string(s.height), s.frames, session_fps(s),
-        summarize_latency(s.latency_ms), kbps, s.dropped, s.stale, s.errors);
+        summarize_latency(s.latency_ms), kbps, s.skipped, s.dropped, s.stale, s.errors);
   }
   const RunSummary t = summarize_run(sessions);
-  row("total", "", t.frames, t.fps_total, t.latency, 8.0 * t.bytes_per_second / 1000.0, t.dropped, t.stale, t.errors);
+  row("total", "", t.frames, t.fps_total, t.latency, 8.0 * t.bytes_per_second / 1000.0, t.skipped, t.dropped, t.stale,
+      t.errors);
+  if (t.refused || t.failed) {
+    std::snprintf(line, sizeof(line), "sessions: %d ran cleanly, %d refused, %d failed\n",
+                  t.sessions - t.refused - t.failed, t.refused, t.failed);
+    out += line;
+  }
   const StageSums& g = t.server;
   std::snprintf(line, sizeof(line),
                 "server means (ms): queue %.2f  render %.2f (key frames %.0f%%)  convert %.2f  "
@@ -181,7 +218,8 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
       out += line;
     }
   for (const SessionResult& s : sessions)
-    if (!s.first_error.empty()) out += "session " + std::to_string(s.index) + " error: " + s.first_error + "\n";
+    if (!s.refused && !s.first_error.empty())
+      out += "session " + std::to_string(s.index) + " error: " + s.first_error + "\n";
   return out;
 }
 

@@ -38,17 +38,26 @@ struct SessionResult {
   std::uint64_t idr_frames = 0;  // among them, IDR access units
   std::uint64_t decoded = 0;     // pictures the decoder produced (with --decode)
   std::uint64_t bytes = 0;       // payload bytes received
-  std::uint64_t dropped = 0;     // poses sent that never got a frame
-  std::uint64_t stale = 0;       // frames later than the stale bound, or older than one shown
-  std::uint64_t errors = 0;      // server Error, lost connection, undecodable frame
+  // Poses sent that got no frame, in two kinds: `skipped`, replaced by a newer pose that did get
+  // one (latest pose wins: the server's Stats.poses_skipped, by design); `dropped`, lost: no
+  // newer pose was answered either (the session ended or the server stopped answering).
+  std::uint64_t skipped = 0;
+  std::uint64_t dropped = 0;
+  std::uint64_t server_skipped = 0;  // Stats.poses_skipped in the server's last Stats (a cross-check)
+  std::uint64_t stale = 0;           // frames later than the stale bound, or older than one shown
+  std::uint64_t errors = 0;          // server Error, lost connection, undecodable frame
   std::string first_error;
+  // The server refused the Hello (Error instead of Welcome): no session ran. `refusal` names the
+  // ErrorCode and reason.
+  bool refused = false;
+  std::string refusal;
   std::vector<double> latency_ms;  // pose sent -> frame received (decoded with --decode), after warm-up
   // Reference check (LoadSessionConfig::check_every): decoded frames compared with the CPU
   // reference render of their pose, PSNR in dB over RGB.
   std::uint64_t checked = 0;
-  std::uint64_t check_failures = 0;  // checked frames below LoadSessionConfig::check_min_psnr
-  double psnr_min = 0, psnr_mean = 0;
-  StageSums server;  // after warm-up
+  std::uint64_t check_failures = 0;    // checked frames below LoadSessionConfig::check_min_psnr
+  double psnr_min = 0, psnr_mean = 0;  // meaningful only when checked > 0 (JSON: null otherwise)
+  StageSums server;                    // after warm-up
 };
 
 struct LatencySummary {
@@ -60,17 +69,22 @@ LatencySummary summarize_latency(const std::vector<double>& latency_ms);
 // Totals over sessions: frames, rates, pooled latency percentiles, stage means.
 struct RunSummary {
   int sessions = 0;
-  std::uint64_t frames = 0, poses_sent = 0, bytes = 0, dropped = 0, stale = 0, errors = 0;
+  int refused = 0;  // sessions the server refused (not counted in fps_min)
+  int failed = 0;   // sessions that ran (or tried to) and saw errors
+  std::uint64_t frames = 0, poses_sent = 0, bytes = 0, skipped = 0, dropped = 0, stale = 0, errors = 0;
   double fps_total = 0;         // frames / run_seconds, summed over sessions
-  double fps_min = 0;           // the slowest session's FPS
+  double fps_min = 0;           // the slowest session's FPS, among those not refused
   double bytes_per_second = 0;  // summed over sessions
   LatencySummary latency;       // every session's samples pooled
   StageSums server;
 };
 double session_fps(const SessionResult& s);  // frames / run_seconds (0 when it did not run)
+// "ok", "refused" (the server said no to Hello) or "failed" (errors, or no frame at all).
+std::string session_status(const SessionResult& s);
 RunSummary summarize_run(const std::vector<SessionResult>& sessions);
 
-// A fixed-width table: one row per session and a total row, then the server stage means.
+// A fixed-width table: one row per session (a refused one says so instead of numbers) and a total
+// row, then the server stage means.
 std::string format_table(const std::vector<SessionResult>& sessions);
 // The run as JSON: {"sessions": [...], "total": {...}} with the same numbers as the table.
 nlohmann::json run_json(const std::vector<SessionResult>& sessions);

@@ -11,6 +11,7 @@
 #include "scene_tools/city.h"
 #include "loadgen/h264_decoder.h"
 #include "loadgen/stream_client.h"
+#include "session/message_validation.h"
 
 namespace catgs::loadgen {
 
@@ -110,6 +111,7 @@ class PoseLoop {
   // Until the sending time is over and the last pose is answered (or drain_ms passed), or the
   // server sends an Error. Closes the connection.
   void run() {
+    Progress* progress = cfg_.progress;
     for (;;) {
       const auto now = Clock::now();
       const bool sending = now < send_end_;
@@ -121,10 +123,18 @@ class PoseLoop {
         note_error(r_, "server Error " + pb::ErrorCode_Name(msg->error().code()) + ": " + msg->error().reason());
         break;
       }
-      if (msg->has_frame()) on_frame(msg->frame());
+      if (msg->has_frame()) {
+        on_frame(msg->frame());
+        if (progress) progress->frames++;
+      }
+      if (msg->has_stats()) r_.server_skipped = msg->stats().poses_skipped();
     }
     r_.run_seconds = std::chrono::duration<double>(std::min(Clock::now(), send_end_) - t0_).count();
-    r_.dropped = r_.poses_sent - answered_;
+    // Poses up to the newest answered one that got no frame were replaced by a newer pose (latest
+    // wins); those after it were never answered at all.
+    const auto reached = static_cast<std::uint64_t>(newest_answered_ + 1);
+    r_.skipped = reached - answered_;
+    r_.dropped = r_.poses_sent - reached;
     client_.ws().close();
   }
 
@@ -149,10 +159,14 @@ class PoseLoop {
     const double t_s = std::chrono::duration<double>(Clock::now() - t0_).count() + cfg_.offset_s;
     const auto seq = static_cast<std::uint32_t>(sent_at_.size());
     sent_at_.push_back(now_ms());
-    const pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back());
+    pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back());
+    // As the web viewer does: the newest frame's latency rides on the next pose to /metrics.
+    pose.set_shown_latency_ms(unreported_latency_ms_);
+    unreported_latency_ms_ = 0;
     if (check_) sent_poses_.push_back(pose);
     client_.send_pose(pose);
     r_.poses_sent++;
+    if (cfg_.progress) cfg_.progress->poses++;
   }
 
   // How long recv() may wait: until the next paced pose is due, at most 20 ms.
@@ -169,6 +183,7 @@ class PoseLoop {
     if (outstanding_ > 0) outstanding_--;
     if (cfg_.decode || check_) decode_and_check(f);
     const double latency = now_ms() - f.client_time_ms();
+    unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
     const auto seq = static_cast<std::int64_t>(f.pose_sequence());
     if (seq >= sent()) {
       note_error(r_, "frame for a pose never sent (" + std::to_string(seq) + ")");
@@ -239,6 +254,7 @@ class PoseLoop {
   std::vector<pb::Pose> sent_poses_;  // reference check: each pose as sent, by sequence
   std::unique_ptr<cpu::CpuRenderer> reference_;
   double psnr_sum_ = 0;
+  double unreported_latency_ms_ = 0;  // the newest frame's latency, for the next Pose
   std::int64_t newest_answered_ = -1;
   std::uint64_t answered_ = 0;  // distinct poses that got a frame
   int outstanding_ = 0;         // closed loop: poses not yet answered
@@ -254,14 +270,27 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
   r.trace = cfg.trace;
   if (cfg.check_every > 0 && !cfg.scene)
     throw std::invalid_argument("loadgen: the reference check needs the scene (--scene)");
+  Progress* progress = cfg.progress;
+  bool open = false;
   try {
     StreamClient client;
     const pb::Welcome welcome = open_session(cfg, client, r);
+    open = true;
+    if (progress) progress->open++;
     Trace trace = make_load_trace(cfg.trace, cfg.scene.get(), welcome, r.width, r.height);
     if (trace.empty()) throw std::runtime_error("empty trace " + cfg.trace);
     PoseLoop(cfg, r, client, std::move(trace)).run();
+  } catch (const Refused& e) {
+    r.refused = true;
+    r.refusal = pb::ErrorCode_Name(e.error().code()) + ": " + e.error().reason();
   } catch (const std::exception& e) {
     note_error(r, e.what());
+  }
+  if (progress) {
+    if (open) progress->open--;
+    if (r.refused) progress->refused++;
+    if (r.errors > 0) progress->failed++;
+    progress->finished++;
   }
   return r;
 }

@@ -2,6 +2,8 @@
 // optionally decode) the frames, measure. Blocking; run one per thread.
 #pragma once
 
+#include <atomic>
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -28,6 +30,16 @@ Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const
 // t_s mod duration. `trace` must not be empty.
 const Camera& camera_at(const Trace& trace, double t_s);
 
+// Counters every session of a run updates as it goes, for the progress line.
+struct Progress {
+  std::atomic<int> open{0};      // sessions with a Welcome, not yet ended
+  std::atomic<int> refused{0};   // Hello answered with Error
+  std::atomic<int> failed{0};    // ended with errors (cannot connect, lost connection, server Error)
+  std::atomic<int> finished{0};  // sessions whose thread is done, however they ended
+  std::atomic<std::uint64_t> frames{0};
+  std::atomic<std::uint64_t> poses{0};
+};
+
 struct LoadSessionConfig {
   int index = 0;  // session number (report only)
   std::string host = "127.0.0.1";
@@ -49,12 +61,13 @@ struct LoadSessionConfig {
   // (required). 0: off. The CPU render blocks this session's thread: latency and FPS of a
   // checking run are not the server's.
   int check_every = 0;
-  double check_min_psnr = 30;  // dB; frames below count in SessionResult::check_failures
+  double check_min_psnr = 30;    // dB; frames below count in SessionResult::check_failures
+  Progress* progress = nullptr;  // optional; outlives the session
 };
 
 // Runs one session. Throws std::invalid_argument for check_every > 0 without a scene. Otherwise
-// never throws: failures are counted in SessionResult::errors (first_error
-// names the first one); a session that cannot connect or is refused reports 0 frames.
+// never throws: a refused Hello sets SessionResult::refused (and `refusal`); other failures are
+// counted in SessionResult::errors (first_error names the first one).
 SessionResult run_load_session(const LoadSessionConfig& config);
 
 }  // namespace catgs::loadgen

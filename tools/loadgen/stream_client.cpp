@@ -30,6 +30,10 @@ Camera camera_from_pose(const pb::Pose& pose, int width, int height) {
   return Camera::from_pose(cp.position, cp.orientation, cp.vertical_fov_deg, width, height);
 }
 
+Refused::Refused(pb::Error error)
+    : std::runtime_error("server refused Hello: " + pb::ErrorCode_Name(error.code()) + ": " + error.reason()),
+      error_(std::move(error)) {}
+
 void StreamClient::connect(int port, const std::string& host, int timeout_ms, int receive_buffer) {
   ws_.connect(host, port, "/ws", "catgs.v1", timeout_ms, receive_buffer);
 }
@@ -61,9 +65,7 @@ pb::Welcome StreamClient::hello(int width, int height, const std::string& token,
     auto msg = recv(100);
     if (!msg) continue;
     if (msg->has_welcome()) return msg->welcome();
-    if (msg->has_error())
-      throw std::runtime_error("server refused Hello: " + pb::ErrorCode_Name(msg->error().code()) + ": " +
-                               msg->error().reason());
+    if (msg->has_error()) throw Refused(msg->error());
   }
   throw std::runtime_error("no Welcome within " + std::to_string(timeout_ms) + " ms");
 }

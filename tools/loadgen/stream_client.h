@@ -3,6 +3,7 @@
 #pragma once
 
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 #include "camera/camera.h"
@@ -21,13 +22,24 @@ pb::Pose pose_from_camera(const Camera& camera, std::uint32_t sequence, double c
 // server would reject.
 Camera camera_from_pose(const pb::Pose& pose, int width, int height);
 
+// The server answered Hello with Error: the session was refused (SERVER_FULL, UNAUTHORIZED,
+// SHUTTING_DOWN, ...). `error` is the server's message, retry_after_ms included.
+class Refused : public std::runtime_error {
+ public:
+  explicit Refused(pb::Error error);
+  const pb::Error& error() const { return error_; }
+
+ private:
+  pb::Error error_;
+};
+
 class StreamClient {
  public:
   // Connects to ws://host:port/ws with subprotocol catgs.v1. Throws std::runtime_error.
   // `receive_buffer` > 0: SO_RCVBUF before connecting (see WsClient::connect).
   void connect(int port, const std::string& host = "127.0.0.1", int timeout_ms = 5000, int receive_buffer = 0);
-  // Sends Hello and waits for Welcome. Throws std::runtime_error naming the Error if the server
-  // refuses, or on timeout.
+  // Sends Hello and waits for Welcome. Throws Refused (a std::runtime_error naming the Error) if
+  // the server refuses, std::runtime_error on timeout.
   pb::Welcome hello(int width, int height, const std::string& token = "", int timeout_ms = 10000);
   // Sends one ClientMessage.
   void send(const pb::ClientMessage& message);

@@ -72,6 +72,57 @@ TEST(LoadReport, TotalsPoolSessions) {
   EXPECT_NE(table.find("80.0"), std::string::npos) << table;  // total FPS
 }
 
+// A refused session is reported as refused: no "0x0 ... 0.0" row, no part in the slowest FPS,
+// no PSNR that was never measured; skips (latest pose wins) and real drops stay apart.
+TEST(LoadReport, RefusedSessionsSkipsAndUnmeasuredPsnr) {
+  std::vector<SessionResult> run = {session(0, 100, 2.0, {10, 20}), session(1, 0, 0.0, {})};
+  run[0].skipped = 7;
+  run[0].dropped = 2;
+  run[1].refused = true;
+  run[1].refusal = "ERROR_SERVER_FULL: server full (1 sessions)";
+  run[1].width = run[1].height = 0;
+  run[1].poses_sent = run[1].dropped = 0;
+  EXPECT_EQ(session_status(run[0]), "ok");
+  EXPECT_EQ(session_status(run[1]), "refused");
+  const RunSummary t = summarize_run(run);
+  EXPECT_EQ(t.refused, 1);
+  EXPECT_EQ(t.failed, 0);
+  EXPECT_DOUBLE_EQ(t.fps_min, 50.0);  // not 0: the refused session did not run
+  EXPECT_EQ(t.skipped, 7u);
+  EXPECT_EQ(t.dropped, 2u);
+
+  const std::string table = format_table(run);
+  EXPECT_NE(table.find("1        refused by the server: ERROR_SERVER_FULL: server full (1 sessions)"),
+            std::string::npos)
+      << table;
+  EXPECT_EQ(table.find("0x0"), std::string::npos) << table;
+  EXPECT_NE(table.find("skipped dropped"), std::string::npos) << table;
+  EXPECT_NE(table.find("1 ran cleanly, 1 refused, 0 failed"), std::string::npos) << table;
+
+  nlohmann::json j = run_json(run);
+  EXPECT_EQ(j["sessions"][1]["status"], "refused");
+  EXPECT_EQ(j["sessions"][1]["refusal"], run[1].refusal);
+  EXPECT_EQ(j["sessions"][0]["skipped"].get<int>(), 7);
+  EXPECT_EQ(j["sessions"][0]["dropped"].get<int>(), 2);
+  EXPECT_EQ(j["total"]["refused"].get<int>(), 1);
+  EXPECT_TRUE(j["sessions"][0]["psnr_mean_db"].is_null()) << "no frame was checked";
+  EXPECT_TRUE(j["sessions"][0]["psnr_min_db"].is_null());
+
+  run[0].checked = 3;
+  run[0].psnr_min = 31.5;
+  run[0].psnr_mean = 33.25;
+  j = run_json(run);
+  EXPECT_DOUBLE_EQ(j["sessions"][0]["psnr_mean_db"].get<double>(), 33.25);
+  EXPECT_DOUBLE_EQ(j["sessions"][0]["psnr_min_db"].get<double>(), 31.5);
+
+  // A session that ran without a frame, or with errors, failed.
+  SessionResult none = session(2, 0, 1.0, {});
+  EXPECT_EQ(session_status(none), "failed");
+  SessionResult lost = session(3, 10, 1.0, {});
+  lost.errors = 1;
+  EXPECT_EQ(session_status(lost), "failed");
+}
+
 TEST(LoadReport, TracePlaybackLoopsOnTheTraceClock) {
   Trace t(3);
   for (std::size_t i = 0; i < t.size(); ++i) {

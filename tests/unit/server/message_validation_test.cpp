@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "session/message_validation.h"
 
@@ -79,6 +80,36 @@ TEST(MessageValidation, HelloUsesTheLimit) {
   const auto bad = check_hello(hello, ViewportLimit{1280, 720}, v);
   ASSERT_TRUE(bad.has_value());
   EXPECT_EQ(bad->code, pb::ERROR_INVALID_ARGUMENT);
+}
+
+TEST(MessageValidation, QualityBitrateRange) {
+  pb::Quality q;
+  for (std::uint32_t ok : {0u, 100u, 5000u, 100000u}) {
+    q.set_max_bitrate_kbps(ok);
+    EXPECT_FALSE(check_quality(q).has_value()) << ok;
+  }
+  for (std::uint32_t bad : {1u, 99u, 100001u, 4000000000u}) {
+    q.set_max_bitrate_kbps(bad);
+    const auto v = check_quality(q);
+    ASSERT_TRUE(v.has_value()) << bad;
+    EXPECT_EQ(v->code, pb::ERROR_INVALID_ARGUMENT);
+    EXPECT_NE(v->reason.find(std::to_string(bad)), std::string::npos) << v->reason;
+  }
+}
+
+TEST(MessageValidation, ShownLatencyIsFiniteAndBounded) {
+  CameraPose out;
+  pb::Pose p = pose_with_orientation(1, 0, 0, 0);
+  for (double ok : {0.0, 16.7, 3.6e6}) {
+    p.set_shown_latency_ms(ok);
+    EXPECT_FALSE(check_pose(p, out).has_value()) << ok;
+  }
+  for (double bad : {-1.0, 3.6e6 + 1, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    p.set_shown_latency_ms(bad);
+    const auto v = check_pose(p, out);
+    ASSERT_TRUE(v.has_value()) << bad;
+    EXPECT_EQ(v->code, pb::ERROR_INVALID_ARGUMENT);
+  }
 }
 
 }  // namespace

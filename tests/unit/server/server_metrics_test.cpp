@@ -43,6 +43,9 @@ TEST(ServerMetrics, ExpositionHasConsistentStageHistograms) {
     m.speculation_window.observe(i % 5);
   }
   m.send_seconds.observe(2.5);  // above every bucket: only +Inf
+  m.session_fps.observe(59.5);
+  m.pose_to_frame_seconds.observe(0.04);
+  m.pose_to_frame_seconds.observe(0.06);
   const std::string text = m.prometheus_text();
   EXPECT_NE(text.find("catgs_info{renderer=\"cpu\",encoder=\"x264\",pipeline=\"catgs\"} 1\n"), std::string::npos);
   EXPECT_NE(text.find("catgs_encoder_fallbacks_total 0\n"), std::string::npos);
@@ -73,7 +76,9 @@ TEST(ServerMetrics, ExpositionHasConsistentStageHistograms) {
                                               {"catgs_convert_seconds{}", 10},
                                               {"catgs_encode_seconds{}", 10},
                                               {"catgs_send_seconds{}", 1},
-                                              {"catgs_speculation_window{}", 10}};
+                                              {"catgs_speculation_window{}", 10},
+                                              {"catgs_pose_to_frame_seconds{}", 2},
+                                              {"catgs_session_fps{}", 1}};
   for (const auto& [key, n] : want) {
     SCOPED_TRACE(key);
     ASSERT_TRUE(count.count(key)) << text;
@@ -84,7 +89,11 @@ TEST(ServerMetrics, ExpositionHasConsistentStageHistograms) {
     for (std::size_t i = 1; i < b.size(); ++i) EXPECT_LE(b[i - 1], b[i]);
     EXPECT_LE(b.back(), n);
   }
-  EXPECT_EQ(buckets["catgs_send_seconds{}"].back(), 0);     // 2.5 s is above the largest bound
+  EXPECT_EQ(buckets["catgs_send_seconds{}"].back(), 0);  // 2.5 s is above the largest bound
+  EXPECT_NE(text.find("catgs_pose_to_frame_seconds_sum 0.1\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("catgs_session_fps_bucket{le=\"45\"} 0\ncatgs_session_fps_bucket{le=\"60\"} 1\n"),
+            std::string::npos)
+      << text;
   EXPECT_EQ(buckets["catgs_encode_seconds{}"].front(), 0);  // 7 ms is above 0.5 ms
   EXPECT_EQ(text.find("# TYPE catgs_render_seconds histogram"), text.rfind("# TYPE catgs_render_seconds histogram"))
       << "one TYPE line per family";
