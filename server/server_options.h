@@ -29,6 +29,11 @@ struct ServerOptions {
   // Pixels of the renders running at once, server-wide (render_scheduler.h); 0 = two frames of
   // the largest viewport.
   long long max_pixels_in_flight = 0;
+  // SIGTERM: seconds live sessions may keep streaming before they are told ERROR_SHUTTING_DOWN
+  // (server.h "Drain"); 0 ends them at once.
+  int drain_timeout_s = 30;
+  // --probe URL: GET the URL, exit 0 on a 2xx answer, 1 otherwise (probe.h), and do nothing else.
+  std::string probe_url;
 };
 
 // Parses argv (`--name value` pairs, `--help`). Fills defaults for scene and web_root from the

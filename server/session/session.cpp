@@ -26,6 +26,12 @@ std::string random_session_id() {
   return buf;
 }
 
+// base .. 2 x base ms, uniformly (see kServerFullRetryMs).
+std::uint32_t jittered(std::uint32_t base) {
+  static thread_local std::mt19937 rng{std::random_device{}()};
+  return base + std::uniform_int_distribution<std::uint32_t>(0, base)(rng);
+}
+
 void set_vec3(pb::Vec3* v, const glm::vec3& x) {
   v->set_x(x.x);
   v->set_y(x.y);
@@ -84,8 +90,9 @@ void Session::post_closed() {
 }
 
 void Session::post_shutdown() {
-  boost::asio::post(strand_,
-                    [self = shared_from_this()] { self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down"); });
+  boost::asio::post(strand_, [self = shared_from_this()] {
+    self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down", false, jittered(kShuttingDownRetryMs));
+  });
 }
 
 ViewportLimit Session::viewport_limit() const {
@@ -107,7 +114,7 @@ void Session::send(const pb::ServerMessage& message) {
   shared_.transport.send(id_, std::move(bytes), /*counted=*/false);
 }
 
-void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued) {
+void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queued, std::uint32_t retry_after_ms) {
   if (state_ == State::closed) return;
   state_ = State::closed;
   gone_ = true;
@@ -119,6 +126,7 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   pb::ServerMessage m;
   m.mutable_error()->set_code(code);
   m.mutable_error()->set_reason(reason);
+  m.mutable_error()->set_retry_after_ms(retry_after_ms);
   std::string bytes;
   m.SerializeToString(&bytes);
   shared_.transport.close(id_, std::move(bytes), drop_queued);
@@ -179,9 +187,12 @@ void Session::handle_hello(const pb::Hello& hello) {
     for (int c : hello.codecs()) h264 = h264 || c == pb::CODEC_H264;
     if (!h264) return fail(pb::ERROR_INVALID_ARGUMENT, "client does not accept H.264");
   }
+  if (shared_.draining)
+    return fail(pb::ERROR_SHUTTING_DOWN, "server draining: connect again", false, jittered(kShuttingDownRetryMs));
   if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
     shared_.metrics.sessions_open--;
-    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)");
+    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)",
+                false, jittered(kServerFullRetryMs));
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
