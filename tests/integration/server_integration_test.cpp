@@ -688,8 +688,9 @@ TEST(ServerIntegration, SessionLimitAndToken) {
   EXPECT_TRUE(admitted) << last_error;
 }
 
+// --drain-timeout-s 0: SIGTERM ends sessions at once (readiness_drain_test.cpp covers the drain).
 TEST(ServerIntegration, GracefulShutdownSendsShuttingDown) {
-  ServerProcess server(server_args(kBiker));
+  ServerProcess server(server_args(kBiker, {"--drain-timeout-s", "0"}));
   StreamClient c;
   c.connect(server.port());
   c.hello(64, 64);
@@ -699,6 +700,7 @@ TEST(ServerIntegration, GracefulShutdownSendsShuttingDown) {
   stopper.join();
   ASSERT_TRUE(err);
   EXPECT_EQ(err->code(), pb::ERROR_SHUTTING_DOWN);
+  EXPECT_GT(err->retry_after_ms(), 0u) << "SHUTTING_DOWN carries a reconnect hint";
   EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 8.0);
 }
 
