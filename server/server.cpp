@@ -51,7 +51,9 @@ void Server::ToManager::on_close(ConnId id) {
 }
 std::string Server::ToManager::metrics_text() {
   if (auto* m = manager.load()) return m->metrics_text();
-  return metrics->prometheus_text();
+  // Loading: catgs_info's labels are still being written on the main thread. An empty
+  // exposition is valid; the manager's release store publishes them once they are set.
+  return "";
 }
 int Server::ToManager::readiness(std::string& body) {
   if (auto* m = manager.load()) return m->readiness(body);
@@ -62,7 +64,6 @@ int Server::ToManager::readiness(std::string& body) {
 Server::Server(const ServerOptions& options) : options_(options) {
   transport_ = std::make_unique<Transport>(transport_options(options_), to_manager_);
   to_manager_.transport = transport_.get();
-  to_manager_.metrics = &metrics_;
 }
 
 // After a normal run() there is nothing left to stop; this is for a run() that threw. The

@@ -74,7 +74,6 @@ class Server {
   struct ToManager final : TransportHandler {
     std::atomic<SessionManager*> manager{nullptr};
     Transport* transport = nullptr;
-    ServerMetrics* metrics = nullptr;
     void on_open(ConnId id) override;
     void on_message(ConnId id, MessageKind kind, std::string bytes) override;
     void on_sent(ConnId id) override;

@@ -8,15 +8,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <mutex>
 #include <optional>
 #include <thread>
 
 #include "camera/trace.h"
+#include "good_client.h"
 #include "loadgen/stream_client.h"
 #include "server_process.h"
 #include "stream_checks.h"
@@ -53,93 +52,6 @@ std::optional<pb::Error> hello_error(StreamClient& c, int timeout_ms = 5000) {
   if (!reply || !reply->has_error()) return std::nullopt;
   return reply->error();
 }
-
-// One session streaming an orbit in closed loop (one pose outstanding) on its own thread; keeps
-// the time of every frame and the Error that ended it.
-class StreamingSession {
- public:
-  explicit StreamingSession(int port) {
-    client_.connect(port);
-    client_.hello(96, 64);
-    thread_ = std::thread([this] { run(); });
-  }
-  ~StreamingSession() { stop(); }
-  void stop() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-  }
-  int frames() const { return frames_.load(); }
-  bool wait_frames(int n, int timeout_ms = 20000) const {
-    const int target = frames() + n;
-    const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (Clock::now() < deadline && frames() < target && !ended_)
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    return frames() >= target;
-  }
-  // Waits for the session to end (Error or close); false on timeout.
-  bool wait_end(int timeout_ms) const {
-    const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (Clock::now() < deadline && !ended_) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    return ended_;
-  }
-  std::optional<pb::Error> error() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return error_;
-  }
-  Clock::time_point last_frame() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return last_frame_;
-  }
-  Clock::time_point ended_at() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return ended_at_;
-  }
-  void close() {
-    stop();
-    client_.ws().close();
-  }
-
- private:
-  void run() {
-    const Trace orbit = biker_orbit(96, 64, 24);
-    std::uint32_t seq = 0;
-    bool outstanding = false;
-    try {
-      while (!stop_) {
-        if (!outstanding) {
-          client_.send_pose(pose_from_camera(orbit[seq % orbit.size()].camera, seq, now_ms()));
-          seq++;
-          outstanding = true;
-        }
-        auto m = client_.recv(50);
-        if (!m) continue;
-        std::lock_guard<std::mutex> lock(mutex_);
-        if (m->has_error()) {
-          error_ = m->error();
-          break;
-        }
-        if (!m->has_frame()) continue;
-        if (m->frame().pose_sequence() + 1 == seq) outstanding = false;
-        last_frame_ = Clock::now();
-        frames_++;
-      }
-    } catch (const std::exception&) {
-      // closed by the server without an Error: error_ stays empty
-    }
-    if (stop_) return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    ended_at_ = Clock::now();
-    ended_ = true;
-  }
-
-  StreamClient client_;
-  std::thread thread_;
-  std::atomic<bool> stop_{false}, ended_{false};
-  std::atomic<int> frames_{0};
-  std::mutex mutex_;
-  std::optional<pb::Error> error_;
-  Clock::time_point last_frame_{}, ended_at_{};
-};
 
 // The scene is a FIFO: the server blocks opening it, so the loading phase lasts until this test
 // ends it, with no timing assumption.
@@ -204,7 +116,7 @@ TEST(ReadinessDrain, ReadyzIs503WhileSessionsAreAtTheLimit) {
 TEST(ReadinessDrain, SigtermDrainsLiveSessionsUntilTheTimeout) {
   constexpr double kDrainS = 3;
   ServerProcess server(server_args(kBiker, {"--drain-timeout-s", "3"}));
-  StreamingSession live(server.port());
+  GoodClient live(server.port(), 96, 64);
   ASSERT_TRUE(live.wait_frames(3)) << server.log();
 
   const auto t_term = Clock::now();
@@ -228,8 +140,8 @@ TEST(ReadinessDrain, SigtermDrainsLiveSessionsUntilTheTimeout) {
   // ...and is told SHUTTING_DOWN, with a retry hint, when the drain times out.
   ASSERT_TRUE(live.wait_end(static_cast<int>(kDrainS * 1000) + 5000)) << server.log();
   const double ended_s = std::chrono::duration<double>(live.ended_at() - t_term).count();
-  const double last_frame_s = std::chrono::duration<double>(live.last_frame() - t_term).count();
-  auto err = live.error();
+  const double last_frame_s = std::chrono::duration<double>(live.last_frame_at() - t_term).count();
+  auto err = live.server_error();
   ASSERT_TRUE(err) << "closed without an Error\n" << server.log();
   EXPECT_EQ(err->code(), pb::ERROR_SHUTTING_DOWN);
   EXPECT_GE(err->retry_after_ms(), 500u);
@@ -250,7 +162,7 @@ TEST(ReadinessDrain, SigtermDrainsLiveSessionsUntilTheTimeout) {
 
 TEST(ReadinessDrain, DrainEndsWhenTheLastSessionLeaves) {
   ServerProcess server(server_args(kBiker, {"--drain-timeout-s", "60"}));
-  StreamingSession live(server.port());
+  GoodClient live(server.port(), 96, 64);
   ASSERT_TRUE(live.wait_frames(2)) << server.log();
   const auto t_term = Clock::now();
   server.signal(SIGTERM);
@@ -258,7 +170,7 @@ TEST(ReadinessDrain, DrainEndsWhenTheLastSessionLeaves) {
   ASSERT_TRUE(readyz_becomes(server.port(), 503, body)) << server.log();
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   EXPECT_TRUE(server.running()) << "exited with a session still open\n" << server.log();
-  live.close();  // the user leaves: nothing left to wait for
+  live.stop();  // the user leaves: nothing left to wait for
   const int code = server.wait_exit(10000);
   EXPECT_EQ(code, 0) << server.log();
   EXPECT_LT(seconds_since(t_term), 5.0) << "waited for the 60 s timeout with no session left\n" << server.log();
@@ -267,7 +179,7 @@ TEST(ReadinessDrain, DrainEndsWhenTheLastSessionLeaves) {
 
 TEST(ReadinessDrain, SecondSignalEndsTheDrainAtOnce) {
   ServerProcess server(server_args(kBiker, {"--drain-timeout-s", "60"}));
-  StreamingSession live(server.port());
+  GoodClient live(server.port(), 96, 64);
   ASSERT_TRUE(live.wait_frames(2)) << server.log();
   server.signal(SIGTERM);
   std::string body;
@@ -275,7 +187,7 @@ TEST(ReadinessDrain, SecondSignalEndsTheDrainAtOnce) {
   const auto t_int = Clock::now();
   server.signal(SIGINT);
   ASSERT_TRUE(live.wait_end(5000)) << server.log();
-  auto err = live.error();
+  auto err = live.server_error();
   ASSERT_TRUE(err) << server.log();
   EXPECT_EQ(err->code(), pb::ERROR_SHUTTING_DOWN);
   EXPECT_EQ(server.wait_exit(10000), 0) << server.log();
