@@ -76,7 +76,7 @@ start_server() {
 }
 
 stop_server() {
-  kill "$SERVER_PID" 2>/dev/null
+  kill -INT "$SERVER_PID" 2>/dev/null  # SIGINT stops at once; SIGTERM would drain open sessions
   wait "$SERVER_PID" 2>/dev/null
 }
 

@@ -17,6 +17,8 @@ if ! command -v npm >/dev/null; then
 fi
 # protobufjs's postinstall only checks optional CLI deps; nothing here needs install scripts.
 (cd "$e2e" && npm ci --no-audit --no-fund --ignore-scripts)
+# The Kubernetes manifests' offline schema check (tests/deploy, pinned by its package-lock.json).
+(cd "$root/tests/deploy" && npm ci --no-audit --no-fund --ignore-scripts)
 
 mkdir -p "$web/vendor"
 cp "$e2e/node_modules/protobufjs/dist/protobuf.min.js" "$web/vendor/protobuf.min.js"

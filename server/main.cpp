@@ -1,6 +1,6 @@
 // catgs-server: the CaT-GS Stream remote-rendering server (DESIGN.md "Server"). Exit codes: 0
 // after a clean shutdown (or --help), 2 for bad options, 1 for any other error (a scene, codec
-// or port that cannot be had).
+// or port that cannot be had). `--probe URL` only probes: 0 for a 2xx answer, 1 otherwise.
 #include <iostream>
 
 extern "C" {
@@ -9,6 +9,26 @@ extern "C" {
 
 #include "server.h"
 #include "server_options.h"
+#include "transport/probe.h"
+
+namespace {
+
+// Within Docker's default HEALTHCHECK timeout (30 s) and Kubernetes' exec probes' (1 s default,
+// set higher in deploy/k8s): a probe answers well inside it or reports the server unhealthy.
+constexpr int kProbeTimeoutMs = 3000;
+
+int run_probe(const std::string& url) {
+  std::string error;
+  const int status = catgs::server::probe_http(url, kProbeTimeoutMs, &error);
+  if (status < 0) {
+    std::cerr << "catgs-server --probe " << url << ": no answer (" << error << ")\n";
+    return 1;
+  }
+  std::cout << url << " " << status << "\n";
+  return status >= 200 && status < 300 ? 0 : 1;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace catgs::server;
@@ -18,6 +38,14 @@ int main(int argc, char** argv) {
   } catch (const std::exception& e) {
     std::cerr << "catgs-server: " << e.what() << "\n";
     return 2;
+  }
+  if (!options.probe_url.empty()) {
+    try {
+      return run_probe(options.probe_url);
+    } catch (const std::exception& e) {
+      std::cerr << "catgs-server: " << e.what() << "\n";
+      return 2;
+    }
   }
   av_log_set_level(AV_LOG_ERROR);  // x264 prints a banner per encoder otherwise
   try {

@@ -5,6 +5,7 @@
 #include <iostream>
 
 #include "encode/encoder.h"
+#include "session/message_validation.h"
 #include "scene/ply_io.h"
 #include "session/initial_pose.h"
 
@@ -27,19 +28,42 @@ TransportOptions transport_options(const ServerOptions& options) {
 
 }  // namespace
 
-void Server::ToManager::on_open(ConnId id) { manager->on_open(id); }
-void Server::ToManager::on_message(ConnId id, MessageKind kind, std::string bytes) {
-  manager->on_message(id, kind, std::move(bytes));
+// Connections opened while loading are refused here and never reach the manager: their later
+// callbacks find no session (SessionManager ignores unknown ids).
+void Server::ToManager::on_open(ConnId id) {
+  if (auto* m = manager.load()) return m->on_open(id);
+  pb::ServerMessage refusal;
+  refusal.mutable_error()->set_code(pb::ERROR_SERVER_FULL);
+  refusal.mutable_error()->set_reason("server starting: the scene is loading");
+  refusal.mutable_error()->set_retry_after_ms(kServerFullRetryMs);
+  std::string bytes;
+  refusal.SerializeToString(&bytes);
+  transport->close(id, std::move(bytes), /*drop_queued=*/true);
 }
-void Server::ToManager::on_sent(ConnId id) { manager->on_sent(id); }
-void Server::ToManager::on_close(ConnId id) { manager->on_close(id); }
-std::string Server::ToManager::metrics_text() { return manager->metrics_text(); }
+void Server::ToManager::on_message(ConnId id, MessageKind kind, std::string bytes) {
+  if (auto* m = manager.load()) m->on_message(id, kind, std::move(bytes));
+}
+void Server::ToManager::on_sent(ConnId id) {
+  if (auto* m = manager.load()) m->on_sent(id);
+}
+void Server::ToManager::on_close(ConnId id) {
+  if (auto* m = manager.load()) m->on_close(id);
+}
+std::string Server::ToManager::metrics_text() {
+  if (auto* m = manager.load()) return m->metrics_text();
+  // Loading: catgs_info's labels are still being written on the main thread. An empty
+  // exposition is valid; the manager's release store publishes them once they are set.
+  return "";
+}
+int Server::ToManager::readiness(std::string& body) {
+  if (auto* m = manager.load()) return m->readiness(body);
+  body = "loading\n";
+  return 503;
+}
 
 Server::Server(const ServerOptions& options) : options_(options) {
-  load_model();
-  resolve_renderer();
-  resolve_encoder();
-  build_sessions();
+  transport_ = std::make_unique<Transport>(transport_options(options_), to_manager_);
+  to_manager_.transport = transport_.get();
 }
 
 // After a normal run() there is nothing left to stop; this is for a run() that threw. The
@@ -51,12 +75,19 @@ Server::~Server() {
 
 int Server::run() {
   catch_signals();
-  // Listen first: a busy port then fails before any thread exists. Work posted before the
-  // pools start just waits in their io_contexts.
+  // Listen first: a busy port then fails before any thread exists, and probes get answers
+  // (/healthz 200, /readyz 503) while a large scene loads. Work posted before the pools start
+  // just waits in their io_contexts.
   transport_->start();
+  std::cout << "probes on http://127.0.0.1:" << transport_->port() << "/ (/healthz, /readyz: loading)" << std::endl;
+  load_model();
+  resolve_renderer();
+  resolve_encoder();
+  build_sessions();
   start_pools();
+  to_manager_.manager = manager_.get();  // sessions are admitted from here on (/readyz 200)
   print_listening();
-  wait_for_signal();
+  if (wait_for_signal() == SIGTERM) drain();
   shut_down();
   print_totals();
   return 0;
@@ -96,12 +127,10 @@ void Server::resolve_encoder() {
 }
 
 void Server::build_sessions() {
-  transport_ = std::make_unique<Transport>(transport_options(options_), to_manager_);
   shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *transport_, metrics_, options_, model_,
                                                              model_->bounds(), first_view_bounds(*model_),
                                                              render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
-  to_manager_.manager = manager_.get();
 }
 
 void Server::catch_signals() {
@@ -126,11 +155,33 @@ void Server::print_listening() const {
             << "catgs.v1 at ws://127.0.0.1:" << transport_->port() << "/ws)" << std::endl;
 }
 
-void Server::wait_for_signal() {
-  signals_->async_wait([](const boost::system::error_code&, int sig) {
-    std::cout << "signal " << sig << ": shutting down" << std::endl;
+int Server::wait_for_signal() {
+  signals_->async_wait([this](const boost::system::error_code& ec, int sig) {
+    if (!ec) last_signal_ = sig;
   });
   signal_io_.run();
+  const int sig = last_signal_;
+  std::cout << "signal " << sig << (sig == SIGTERM ? ": draining" : ": shutting down") << std::endl;
+  return sig;
+}
+
+void Server::drain() {
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto deadline = t0 + std::chrono::seconds(options_.drain_timeout_s);
+  manager_->start_draining();
+  std::cout << "drain: " << manager_->open_sessions() << " sessions may stream for up to " << options_.drain_timeout_s
+            << " s; new sessions are refused, /readyz answers 503" << std::endl;
+  // Another signal (SIGINT, or SIGTERM again) ends the drain early.
+  last_signal_ = 0;
+  signal_io_.restart();
+  signals_->async_wait([this](const boost::system::error_code& ec, int sig) {
+    if (!ec) last_signal_ = sig;
+  });
+  while (manager_->open_sessions() > 0 && std::chrono::steady_clock::now() < deadline && last_signal_ == 0)
+    signal_io_.run_for(std::chrono::milliseconds(50));
+  const char* why = last_signal_ ? "signal" : manager_->open_sessions() > 0 ? "timeout" : "no sessions left";
+  std::cout << "drain ended (" << why << ") after " << ms_since(t0) << " ms, " << manager_->open_sessions()
+            << " sessions left" << std::endl;
 }
 
 void Server::shut_down() {

@@ -5,6 +5,20 @@
 // Threads: the constructor and run() belong to one thread (main's). run() starts the lws service
 // thread (Transport), ServerOptions::threads workers on one io_context (session strands, encode
 // jobs, timers) and the render lanes (RenderScheduler), and blocks until SIGINT or SIGTERM.
+//
+// Phases, as /readyz reports them (capacity-aware routing: a load balancer sends new users only
+// to pods that answer 200; /healthz stays 200 throughout, so liveness never kills a loading or
+// draining server):
+//   loading   HTTP listens first, then the scene loads and the renderer and encoder are resolved:
+//             /readyz 503 "loading"; a WebSocket gets ERROR_SERVER_FULL with a retry hint.
+//   serving   /readyz 200, or 503 "full" while --max-sessions sessions are open.
+//   draining  SIGTERM: /readyz 503 "draining", every new Hello gets ERROR_SHUTTING_DOWN, live
+//             sessions keep streaming until they leave or --drain-timeout-s passes. Live sessions
+//             are told ERROR_SHUTTING_DOWN (with retry_after_ms) at the drain's end, not its
+//             start: an Error ends a session (protocol), and telling them at the start would cut
+//             every user off at once, which is what the drain exists to avoid.
+//   stopping  the rest get ERROR_SHUTTING_DOWN, the transport and the pools stop, exit code 0.
+// SIGINT (an operator's Ctrl-C) or a second SIGTERM skips the rest of the drain.
 #pragma once
 
 #include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
@@ -13,6 +27,7 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/signal_set.hpp>
 
+#include <atomic>
 #include <chrono>
 #include <memory>
 #include <optional>
@@ -33,33 +48,38 @@ namespace catgs::server {
 
 class Server {
  public:
-  // Loads options.scene, then resolves the renderer and the encoder once (an "auto" choice and
-  // the NVENC probe happen here), printing the scene, renderer and encoder lines on stdout.
-  // Nothing listens and no thread starts yet. `options` must outlive the server. Throws what
-  // load_scene, make_renderer and make_encoder throw (std::runtime_error for a file or codec
-  // that cannot be opened, std::invalid_argument for an unknown name).
+  // Nothing loads, listens or starts yet. `options` must outlive the server.
   explicit Server(const ServerOptions& options);
   // Stops the threads that run() left running (it threw after they started).
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
 
-  // Listens, starts the pools, prints the "listening on" line, blocks until SIGINT or SIGTERM,
-  // then shuts down: sessions get ERROR_SHUTTING_DOWN, the transport stops, the render lanes
-  // drain, then the worker pool; prints the totals. Returns the process exit code (0). Throws
-  // std::runtime_error when the port cannot be bound (before any thread starts). Call once.
+  // Listens (printing "probes on http://ADDR:PORT/"), loads options.scene, then resolves the
+  // renderer and the encoder once (an "auto" choice and the NVENC probe happen here), printing
+  // the scene, renderer and encoder lines; starts the pools, prints the "listening on" line
+  // (from here sessions are admitted), blocks until SIGINT or SIGTERM, drains (see above), then
+  // shuts down: remaining sessions get ERROR_SHUTTING_DOWN, the transport stops, the render
+  // lanes drain, then the worker pool; prints the totals. Returns the process exit code (0).
+  // Throws std::runtime_error when the port cannot be bound (before any thread starts), and
+  // what load_scene, make_renderer and make_encoder throw (std::runtime_error for a file, GPU or
+  // codec that cannot be had, std::invalid_argument for an unknown name). Call once.
   int run();
 
  private:
   // Transport callbacks (service thread) to the session manager, which is built after the
   // transport because the sessions' shared state names the transport.
+  // Until the manager exists (the loading phase) it answers for it: /readyz 503, WebSockets
+  // refused with a retry hint.
   struct ToManager final : TransportHandler {
-    SessionManager* manager = nullptr;
+    std::atomic<SessionManager*> manager{nullptr};
+    Transport* transport = nullptr;
     void on_open(ConnId id) override;
     void on_message(ConnId id, MessageKind kind, std::string bytes) override;
     void on_sent(ConnId id) override;
     void on_close(ConnId id) override;
     std::string metrics_text() override;
+    int readiness(std::string& body) override;
   };
   using Deadline = std::chrono::steady_clock::time_point;
 
@@ -71,8 +91,11 @@ class Server {
   void catch_signals();
   void start_pools();
   void print_listening() const;
-  // Blocks until SIGINT or SIGTERM.
-  void wait_for_signal();
+  // Blocks until SIGINT or SIGTERM; returns the signal.
+  int wait_for_signal();
+  // SIGTERM: not ready, no new sessions, live ones go on until they leave, the timeout passes
+  // or another signal comes.
+  void drain();
   // Shutdown, in this order.
   void shut_down();
   void drain_workers(Deadline deadline);
@@ -99,6 +122,7 @@ class Server {
   // Signals are waited for on their own io_context so the pool keeps serving meanwhile.
   boost::asio::io_context signal_io_;
   std::optional<boost::asio::signal_set> signals_;
+  int last_signal_ = 0;  // set by the signal handler (on this thread, in signal_io_)
 };
 
 }  // namespace catgs::server

@@ -47,7 +47,7 @@ std::string server_usage() {
          "  --speculation LIST    catgs settings, e.g. window=2,backoff=0 (see below)\n"
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
-         "  --full-retry-ms N     reconnect hint sent with ERROR_SERVER_FULL (default 3000)\n"
+         "  --full-retry-ms N     reconnect hint sent with ERROR_SERVER_FULL: N .. 2N ms, drawn (default 2000)\n"
          "  --token T             require Hello.token == T\n"
          "  --threads N           worker threads: sessions, encoding (default 0: the number of\n"
          "                        cores, at least 4)\n"
@@ -65,6 +65,11 @@ std::string server_usage() {
          "                        side at most max(W, H)); larger Hello/Resize: INVALID_ARGUMENT\n"
          "  --max-pixels-in-flight N    pixels of all renders running at once, server-wide\n"
          "                        (default 0: two frames of --max-viewport); sessions take turns\n"
+         "  --drain-timeout-s N   on SIGTERM, let live sessions stream up to N s before they get\n"
+         "                        ERROR_SHUTTING_DOWN (default 30; /readyz answers 503 meanwhile,\n"
+         "                        new sessions are refused); SIGINT or a second SIGTERM stops at once\n"
+         "  --probe URL           GET http://HOST:PORT/PATH, exit 0 on 2xx, else 1 (a container\n"
+         "                        HEALTHCHECK without curl or a shell); starts no server\n"
          "catgs settings (--speculation name=value,...):\n" +
          speculation_settings_usage();
 }
@@ -122,6 +127,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       parse_size(a, v, out.max_viewport_width, out.max_viewport_height);
     else if (a == "--max-pixels-in-flight")
       out.max_pixels_in_flight = parse_int(a, v, 0, 1 << 30);
+    else if (a == "--drain-timeout-s")
+      out.drain_timeout_s = parse_int(a, v, 0, 3600);
+    else if (a == "--probe")
+      out.probe_url = v;
     else
       throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());
   }

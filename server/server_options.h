@@ -16,7 +16,7 @@ struct ServerOptions {
   std::string speculation;              // catgs settings, "name=value,..." (speculation/settings.h)
   std::string web_root;                 // folder served over HTTP at "/"
   int max_sessions = 8;                 // sessions open at once; one more gets ERROR_SERVER_FULL
-  int full_retry_ms = 3000;             // Error.retry_after_ms sent with ERROR_SERVER_FULL
+  int full_retry_ms = 2000;             // ERROR_SERVER_FULL's retry_after_ms: this .. 2x this (session.h kServerFullRetryMs)
   std::string token;                    // when non-empty, Hello.token must equal it
   int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
   int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
@@ -30,6 +30,11 @@ struct ServerOptions {
   // Pixels of the renders running at once, server-wide (render_scheduler.h); 0 = two frames of
   // the largest viewport.
   long long max_pixels_in_flight = 0;
+  // SIGTERM: seconds live sessions may keep streaming before they are told ERROR_SHUTTING_DOWN
+  // (server.h "Drain"); 0 ends them at once.
+  int drain_timeout_s = 30;
+  // --probe URL: GET the URL, exit 0 on a 2xx answer, 1 otherwise (probe.h), and do nothing else.
+  std::string probe_url;
 };
 
 // Parses argv (`--name value` pairs, `--help`). Fills defaults for scene and web_root from the

@@ -26,6 +26,12 @@ std::string random_session_id() {
   return buf;
 }
 
+// base .. 2 x base ms, uniformly (see kServerFullRetryMs in session.h).
+std::uint32_t jittered(std::uint32_t base) {
+  static thread_local std::mt19937 rng{std::random_device{}()};
+  return base + std::uniform_int_distribution<std::uint32_t>(0, base)(rng);
+}
+
 void set_vec3(pb::Vec3* v, const glm::vec3& x) {
   v->set_x(x.x);
   v->set_y(x.y);
@@ -84,8 +90,9 @@ void Session::post_closed() {
 }
 
 void Session::post_shutdown() {
-  boost::asio::post(strand_,
-                    [self = shared_from_this()] { self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down"); });
+  boost::asio::post(strand_, [self = shared_from_this()] {
+    self->fail(pb::ERROR_SHUTTING_DOWN, "server shutting down", false, jittered(kShuttingDownRetryMs));
+  });
 }
 
 ViewportLimit Session::viewport_limit() const {
@@ -185,12 +192,14 @@ void Session::handle_hello(const pb::Hello& hello) {
     for (int c : hello.codecs()) h264 = h264 || c == pb::CODEC_H264;
     if (!h264) return fail(pb::ERROR_INVALID_ARGUMENT, "client does not accept H.264");
   }
+  if (shared_.draining)
+    return fail(pb::ERROR_SHUTTING_DOWN, "server draining: connect again", false, jittered(kShuttingDownRetryMs));
   if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
     shared_.metrics.sessions_open--;
     // A hint, not a promise: a page that waits this long (or a fresh connection that the Service
     // sends to another replica) is likely to get in.
     return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)",
-                false, static_cast<std::uint32_t>(shared_.options.full_retry_ms));
+                false, jittered(static_cast<std::uint32_t>(shared_.options.full_retry_ms)));
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;

@@ -53,7 +53,17 @@ struct SessionShared {
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
   std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
+  // Set by the server when SIGTERM starts the drain: a Hello now gets ERROR_SHUTTING_DOWN.
+  std::atomic<bool> draining{false};
 };
+
+// Error.retry_after_ms hints, ms. Each Error carries base .. 2 x base, drawn uniformly, so the
+// sessions a drain ends at once do not all reconnect in the same instant.
+// SERVER_FULL: a full pod turns not-ready (/readyz) within a readiness period (2 s in deploy/k8s),
+// after which the Service sends the reconnect elsewhere.
+constexpr std::uint32_t kServerFullRetryMs = 2000;
+// SHUTTING_DOWN: a draining pod is already out of the Service's endpoints; come back soon.
+constexpr std::uint32_t kShuttingDownRetryMs = 500;
 
 class Session : public std::enable_shared_from_this<Session> {
  public:
@@ -68,7 +78,7 @@ class Session : public std::enable_shared_from_this<Session> {
   void post_sent();
   // Transport thread -> strand: the connection is gone.
   void post_closed();
-  // Server stopping: send ERROR_SHUTTING_DOWN and close.
+  // Server stopping (the drain's end): send ERROR_SHUTTING_DOWN with a retry hint and close.
   void post_shutdown();
 
  private:
@@ -112,7 +122,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
   void handle_hello(const pb::Hello& hello);
   void handle_pose(const pb::Pose& pose, Clock::time_point received);
-  // `retry_after_ms`: Error.retry_after_ms, the client's reconnect hint (0: none).
+  // Ends the session with Error{code, reason, retry_after_ms} (the last message) and closes;
+  // retry_after_ms is the client's reconnect hint (0: none).
   void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false, std::uint32_t retry_after_ms = 0);
   void send(const pb::ServerMessage& message);
   void maybe_start_render();

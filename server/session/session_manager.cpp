@@ -40,6 +40,25 @@ void SessionManager::on_close(ConnId id) {
 
 std::string SessionManager::metrics_text() { return shared_.metrics.prometheus_text(); }
 
+int SessionManager::readiness(std::string& body) {
+  const std::int64_t open = open_sessions();
+  const int limit = shared_.options.max_sessions;
+  if (shared_.draining) {
+    body = "draining (" + std::to_string(open) + " sessions left)\n";
+    return 503;
+  }
+  if (open >= limit) {
+    body = "full (" + std::to_string(open) + "/" + std::to_string(limit) + " sessions)\n";
+    return 503;
+  }
+  body = "ready (" + std::to_string(open) + "/" + std::to_string(limit) + " sessions)\n";
+  return 200;
+}
+
+void SessionManager::start_draining() { shared_.draining = true; }
+
+std::int64_t SessionManager::open_sessions() const { return shared_.metrics.sessions_open.load(); }
+
 std::size_t SessionManager::size() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return sessions_.size();

@@ -1,5 +1,5 @@
 // Owns the sessions: maps transport connections to Session objects, enforces nothing itself
-// (sessions do), serves /metrics and drives graceful shutdown.
+// (sessions do), serves /metrics and /readyz and drives the drain and the shutdown.
 #pragma once
 
 #include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
@@ -24,8 +24,17 @@ class SessionManager final : public TransportHandler {
   void on_sent(ConnId id) override;
   void on_close(ConnId id) override;
   std::string metrics_text() override;
+  // 503 "draining" after start_draining(), 503 "full" while --max-sessions sessions are open,
+  // else 200 "ready".
+  int readiness(std::string& body) override;
 
-  // Sends ERROR_SHUTTING_DOWN to every session and waits up to `wait_ms` for the connections to
+  // The drain begins: /readyz turns 503 and every Hello from now on gets ERROR_SHUTTING_DOWN.
+  // Live sessions go on. Thread-safe.
+  void start_draining();
+  // Sessions past Hello now (connections still awaiting Hello are not counted).
+  std::int64_t open_sessions() const;
+
+  // Sends ERROR_SHUTTING_DOWN to every connection and waits up to `wait_ms` for the connections to
   // close (the transport must still be running). Thread-safe.
   void shutdown(int wait_ms);
   // Connections currently known.

@@ -29,7 +29,7 @@ constexpr std::size_t kFragmentBytes = 64 * 1024;
 struct Transport::Static {
   lws_protocols protocols[3];
   lws_protocol_vhost_options mime[6];
-  lws_http_mount mount_root, mount_healthz, mount_metrics;
+  lws_http_mount mount_root, mount_healthz, mount_readyz, mount_metrics;
   std::string web_root;
 };
 
@@ -73,7 +73,8 @@ void Transport::start() {
     m.mountpoint_len = static_cast<unsigned char>(std::strlen(path));
   };
   callback_mount(s.mount_metrics, "/metrics", nullptr);
-  callback_mount(s.mount_healthz, "/healthz", &s.mount_metrics);
+  callback_mount(s.mount_readyz, "/readyz", &s.mount_metrics);
+  callback_mount(s.mount_healthz, "/healthz", &s.mount_readyz);
   std::memset(&s.mount_root, 0, sizeof(s.mount_root));
   s.mount_root.mount_next = &s.mount_healthz;
   s.mount_root.mountpoint = "/";
@@ -198,8 +199,11 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
       if (lws_hdr_copy(wsi, uri, sizeof(uri), WSI_TOKEN_GET_URI) < 0) uri[0] = 0;
       std::string path = uri;
       std::string body, type = "text/plain; charset=utf-8";
+      unsigned status = HTTP_STATUS_OK;
       if (path.rfind("/healthz", 0) == 0) {
         body = "ok\n";
+      } else if (path.rfind("/readyz", 0) == 0) {
+        status = static_cast<unsigned>(handler_.readiness(body));
       } else if (path.rfind("/metrics", 0) == 0) {
         body = handler_.metrics_text();
         type = "text/plain; version=0.0.4; charset=utf-8";
@@ -209,7 +213,7 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
       }
       unsigned char buf[LWS_PRE + 1024];
       unsigned char *start = buf + LWS_PRE, *p = start, *end = buf + sizeof(buf) - 1;
-      if (lws_add_http_common_headers(wsi, HTTP_STATUS_OK, type.c_str(), body.size(), &p, end)) return 1;
+      if (lws_add_http_common_headers(wsi, status, type.c_str(), body.size(), &p, end)) return 1;
       if (lws_finalize_write_http_header(wsi, start, &p, end)) return 1;
       if (!pss) return -1;
       delete pss->body;

@@ -7,7 +7,9 @@
 // loop. Handler callbacks run on the service thread and must return quickly (post work away).
 //
 // HTTP: "/" serves the web root (static files, extra MIME types for .mjs/.proto/.js/.json/.wasm),
-// "/healthz" answers 200 "ok", "/metrics" answers Handler::metrics_text() (Prometheus text).
+// "/healthz" answers 200 "ok" whenever the process serves HTTP (liveness), "/readyz" answers
+// Handler::readiness() (200, or 503 while the server cannot take a new session: routing),
+// "/metrics" answers Handler::metrics_text() (Prometheus text).
 // WebSocket: subprotocol "catgs.v1" (or none) on any path.
 #pragma once
 
@@ -47,6 +49,9 @@ class TransportHandler {
   virtual void on_close(ConnId id) = 0;
   // Body of GET /metrics (Prometheus text format).
   virtual std::string metrics_text() = 0;
+  // GET /readyz: the HTTP status (200 when a new session would be admitted, else 503) with a
+  // one-line reason in `body`.
+  virtual int readiness(std::string& body) = 0;
 };
 
 struct TransportOptions {

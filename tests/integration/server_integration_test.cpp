@@ -19,6 +19,7 @@
 #include "scene/ply_io.h"
 #include "camera/trace.h"
 #include "loadgen/h264_decoder.h"
+#include "good_client.h"
 #include "server_process.h"
 #include "stream_checks.h"
 #include "loadgen/stream_client.h"
@@ -61,95 +62,6 @@ bool expect_closed(StreamClient& c, int timeout_ms = 5000) {
   }
   return false;
 }
-
-// A well-behaved session streaming an orbit in the background (one pose outstanding), decoding
-// every frame. Records any failure.
-class GoodClient {
- public:
-  GoodClient(int port, int width = 160, int height = 120) : width_(width), height_(height) {
-    client_.connect(port);
-    client_.hello(width, height);
-    thread_ = std::thread([this] { run(); });
-  }
-  ~GoodClient() { stop(); }
-  void stop() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-  }
-  int frames() const { return frames_.load(); }
-  // The longest wait between two frames (or since the last one) since reset_gaps(), ms.
-  double max_gap_ms() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return std::max(max_gap_ms_, std::chrono::duration<double, std::milli>(Clock::now() - last_frame_).count());
-  }
-  void reset_gaps() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    max_gap_ms_ = 0;
-    last_frame_ = Clock::now();
-  }
-  std::string error() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return error_;
-  }
-  // Waits until `n` more frames arrived; false on timeout.
-  bool wait_frames(int n, int timeout_ms = 30000) {
-    const int target = frames() + n;
-    const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (Clock::now() < deadline) {
-      if (frames() >= target) return true;
-      if (!error().empty()) return false;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return false;
-  }
-
- private:
-  void run() {
-    try {
-      const Trace orbit = biker_orbit(width_, height_, 24);
-      H264Decoder dec;
-      std::vector<std::uint8_t> rgba;
-      std::uint32_t seq = 0;
-      bool outstanding = false;
-      while (!stop_) {
-        if (!outstanding) {
-          client_.send_pose(pose_from_camera(orbit[seq % orbit.size()].camera, seq, now_ms()));
-          seq++;
-          outstanding = true;
-        }
-        auto m = client_.recv(50);
-        if (!m) continue;
-        if (m->has_error()) throw std::runtime_error("good client got Error: " + m->error().reason());
-        if (!m->has_frame()) continue;
-        int w = 0, h = 0;
-        if (!dec.decode(m->frame().payload(), rgba, w, h) || w != width_ || h != height_)
-          throw std::runtime_error("good client: frame did not decode to the viewport size");
-        if (m->frame().pose_sequence() + 1 == seq) outstanding = false;
-        {
-          std::lock_guard<std::mutex> lock(mutex_);
-          const auto now = Clock::now();
-          max_gap_ms_ = std::max(max_gap_ms_, std::chrono::duration<double, std::milli>(now - last_frame_).count());
-          last_frame_ = now;
-        }
-        frames_++;
-      }
-      client_.ws().close();
-    } catch (const std::exception& e) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      error_ = e.what();
-    }
-  }
-
-  int width_, height_;
-  StreamClient client_;
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<int> frames_{0};
-  std::mutex mutex_;
-  std::string error_;
-  Clock::time_point last_frame_ = Clock::now();
-  double max_gap_ms_ = 0;
-};
 
 // ---------------------------------------------------------------------------------------------
 
@@ -742,8 +654,9 @@ TEST(ServerIntegration, SessionLimitAndToken) {
   EXPECT_TRUE(admitted) << last_error;
 }
 
+// --drain-timeout-s 0: SIGTERM ends sessions at once (readiness_drain_test.cpp covers the drain).
 TEST(ServerIntegration, GracefulShutdownSendsShuttingDown) {
-  ServerProcess server(server_args(kBiker));
+  ServerProcess server(server_args(kBiker, {"--drain-timeout-s", "0"}));
   StreamClient c;
   c.connect(server.port());
   c.hello(64, 64);
@@ -753,6 +666,7 @@ TEST(ServerIntegration, GracefulShutdownSendsShuttingDown) {
   stopper.join();
   ASSERT_TRUE(err);
   EXPECT_EQ(err->code(), pb::ERROR_SHUTTING_DOWN);
+  EXPECT_GT(err->retry_after_ms(), 0u) << "SHUTTING_DOWN carries a reconnect hint";
   EXPECT_LT(std::chrono::duration<double>(Clock::now() - t0).count(), 8.0);
 }
 

@@ -21,7 +21,7 @@ namespace catgs::itest {
 
 using Clock = std::chrono::steady_clock;
 
-ServerProcess::ServerProcess(const std::vector<std::string>& args, int timeout_ms) {
+ServerProcess::ServerProcess(const std::vector<std::string>& args, int timeout_ms, Until until) {
   char tmpl[] = "/tmp/catgs-itest-server-XXXXXX";
   const int log_fd = mkstemp(tmpl);
   if (log_fd < 0) throw std::runtime_error("mkstemp failed");
@@ -40,7 +40,8 @@ ServerProcess::ServerProcess(const std::vector<std::string>& args, int timeout_m
     _exit(127);
   }
   close(log_fd);
-  const std::regex re("listening on http://127\\.0\\.0\\.1:([0-9]+)/");
+  const std::regex re(std::string(until == Until::serving ? "listening" : "probes") +
+                      " on http://127\\.0\\.0\\.1:([0-9]+)/");
   const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
   while (Clock::now() < deadline) {
     std::smatch m;
@@ -68,6 +69,7 @@ bool ServerProcess::running() {
   int status = 0;
   if (waitpid(pid_, &status, WNOHANG) == pid_) {
     pid_ = -1;
+    exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
     return false;
   }
   return true;
@@ -76,13 +78,17 @@ bool ServerProcess::running() {
 int ServerProcess::terminate(int timeout_ms) {
   if (pid_ <= 0) return 0;
   kill(pid_, SIGTERM);
+  return wait_exit(timeout_ms);
+}
+
+void ServerProcess::signal(int sig) {
+  if (pid_ > 0) kill(pid_, sig);
+}
+
+int ServerProcess::wait_exit(int timeout_ms) {
   const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
   while (Clock::now() < deadline) {
-    int status = 0;
-    if (waitpid(pid_, &status, WNOHANG) == pid_) {
-      pid_ = -1;
-      return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-    }
+    if (!running()) return exit_code_;
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   return -1;

@@ -10,10 +10,15 @@ namespace catgs::itest {
 
 class ServerProcess {
  public:
+  // Which start-up line the constructor waits for.
+  enum class Until {
+    serving,  // "listening on http://127.0.0.1:PORT/": the scene is loaded, sessions are admitted
+    probes,   // "probes on http://127.0.0.1:PORT/": HTTP answers, the scene may still be loading
+  };
   // Starts CATGS_SERVER_BIN with `args` plus --port 0 (the kernel picks a free port) and waits
-  // for its "listening on http://127.0.0.1:PORT/" line. stdout+stderr go to a temp log file.
-  // Throws std::runtime_error when it exits or does not listen within `timeout_ms`.
-  explicit ServerProcess(const std::vector<std::string>& args, int timeout_ms = 20000);
+  // for the `until` line. stdout+stderr go to a temp log file.
+  // Throws std::runtime_error when it exits or does not print the line within `timeout_ms`.
+  explicit ServerProcess(const std::vector<std::string>& args, int timeout_ms = 20000, Until until = Until::serving);
   // SIGTERM, then SIGKILL after 5 s.
   ~ServerProcess();
   ServerProcess(const ServerProcess&) = delete;
@@ -24,12 +29,18 @@ class ServerProcess {
   pid_t pid() const { return pid_; }
   // Sends SIGTERM and waits up to `timeout_ms`; returns the exit status (or -1 on timeout).
   int terminate(int timeout_ms = 10000);
+  // Sends `sig` (no wait).
+  void signal(int sig);
+  // Waits up to `timeout_ms` for the process to exit; returns its exit code (128 + signal for a
+  // signal death; also when it had already exited), or -1 on timeout.
+  int wait_exit(int timeout_ms);
   bool running();
   // The server's output so far.
   std::string log() const;
 
  private:
   pid_t pid_ = -1;
+  int exit_code_ = -1;  // once reaped
   int port_ = 0;
   std::string log_path_;
 };

@@ -12,9 +12,19 @@
 namespace catgs::itest {
 
 std::vector<std::string> server_args(const std::string& scene, std::vector<std::string> extra) {
-  std::vector<std::string> a = {
-      "--scene", scene, "--renderer", "cpu", "--pipeline", "exact", "--threads", "4", "--slow-client-timeout-ms",
-      "2000"};
+  // A short drain: a test that ends with a session still open must not wait the default 30 s.
+  std::vector<std::string> a = {"--scene",
+                                scene,
+                                "--renderer",
+                                "cpu",
+                                "--pipeline",
+                                "exact",
+                                "--threads",
+                                "4",
+                                "--slow-client-timeout-ms",
+                                "2000",
+                                "--drain-timeout-s",
+                                "3"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }

@@ -21,8 +21,8 @@ namespace pb = ::catgs::stream::v1;
 inline const std::string kBiker = std::string(CATGS_ASSETS_DIR) + "/scenes/biker.compressed.ply";
 inline const std::string kDataDir = CATGS_DATA_DIR;
 
-// Server flags shared by the tests: CPU renderer, exact pipeline, a short slow-client timeout,
-// then `extra` (later flags win).
+// Server flags shared by the tests: CPU renderer, exact pipeline, a short slow-client timeout, a
+// 3 s drain, then `extra` (later flags win).
 std::vector<std::string> server_args(const std::string& scene, std::vector<std::string> extra = {});
 
 // The scene at `path`, loaded once per test process.
