@@ -125,7 +125,7 @@ sleep 0.5
 check "/readyz 503 draining after SIGTERM" grep -q '^draining' <<<"$(curl -sS "$base/readyz")"
 "$loadgen" --port "$port" --sessions 1 --size 320x240 --seconds 1 --json "$work/late.json" >"$work/late.txt" 2>&1 || true
 check "a new session is refused with ERROR_SHUTTING_DOWN" \
-  grep -q ERROR_SHUTTING_DOWN <<<"$(json "$work/late.json" 'd["run"]["sessions"][0]["first_error"]' 2>/dev/null)"
+  grep -q ERROR_SHUTTING_DOWN <<<"$(json "$work/late.json" 'd["run"]["sessions"][0]["refusal"]' 2>/dev/null)"
 sleep 2
 frames_mid=$(metric catgs_frames_total || echo 0)
 echo "container_test: frames_total $frames_at_term at SIGTERM, $frames_mid 2.5 s into the drain"
