@@ -7,19 +7,19 @@ namespace catgs::server {
 
 // Everything the server is configured with. Defaults match `catgs-server` with no arguments.
 struct ServerOptions {
-  std::string scene;                    // scene file (INRIA or compressed PLY)
-  int port = 8080;                      // TCP port; 0 lets the kernel pick (the chosen one is logged)
-  std::string bind = "0.0.0.0";         // interface address to listen on
-  std::string renderer = "auto";        // "cpu" | "cuda" | "auto"
-  std::string encoder = "auto";         // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
-  std::string pipeline = "exact";       // "vanilla" | "exact" | "catgs"
-  std::string speculation;              // catgs settings, "name=value,..." (speculation/settings.h)
-  std::string web_root;                 // folder served over HTTP at "/"
-  int max_sessions = 8;                 // sessions open at once; one more gets ERROR_SERVER_FULL
-  int full_retry_ms = 2000;             // ERROR_SERVER_FULL's retry_after_ms: this .. 2x this (session.h kServerFullRetryMs)
-  std::string token;                    // when non-empty, Hello.token must equal it
-  int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
-  int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
+  std::string scene;               // scene file (INRIA or compressed PLY)
+  int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
+  std::string bind = "0.0.0.0";    // interface address to listen on
+  std::string renderer = "auto";   // "cpu" | "cuda" | "auto"
+  std::string encoder = "auto";    // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
+  std::string pipeline = "exact";  // "vanilla" | "exact" | "catgs"
+  std::string speculation;         // catgs settings, "name=value,..." (speculation/settings.h)
+  std::string web_root;            // folder served over HTTP at "/"
+  int max_sessions = 8;            // sessions open at once; one more gets ERROR_SERVER_FULL
+  int full_retry_ms = 2000;        // ERROR_SERVER_FULL's retry_after_ms: this .. 2x this (session.h kServerFullRetryMs)
+  std::string token;               // when non-empty, Hello.token must equal it
+  int threads = 0;                 // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
+  int render_lanes = 0;            // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
   int slow_client_timeout_ms = 10000;   // frames unwritten this long -> ERROR_TOO_SLOW
   int crf = 23;                         // x264 constant rate factor (lower = better quality, more bytes)
   int encoder_threads = 2;              // per session's encoder; 0 = the library's choice

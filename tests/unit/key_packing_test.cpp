@@ -42,7 +42,8 @@ TEST(KeyPacking, NarrowKeysNeverInvertThePlainOrder) {
     };
     for (int k = 0; k < 200000; ++k, ++pairs) {
       const uint32_t ta = tile(rng), tb = edge(rng) ? ta : tile(rng), da = draw();
-      const uint32_t db = edge(rng) == 0 ? std::min<uint32_t>(hi, da + static_cast<uint32_t>(rng() & 511u)) : draw();  // near neighbours too
+      const uint32_t db = edge(rng) == 0 ? std::min<uint32_t>(hi, da + static_cast<uint32_t>(rng() & 511u))
+                                         : draw();  // near neighbours too
       const uint64_t plain_a = (uint64_t{ta} << 32) | da, plain_b = (uint64_t{tb} << 32) | db;
       const uint32_t ka = p.key32(ta, da), kb = p.key32(tb, db);
       ASSERT_EQ(p.tile_of32(ka), ta);
