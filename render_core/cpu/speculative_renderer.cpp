@@ -87,14 +87,8 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
     stats_.subframe_rejected = candidate;
   }
   const auto t5 = clock::now();
-  const TileGrid grid = TileGrid::of(camera.width, camera.height);
-  if (!sub && planner_.window() == 0 && options_.speculation.early_termination)
-    // A key frame without a window opens no group: it is an exact frame to the end (one pass per
-    // tile, no slices to merge), as the CUDA core draws it (render_catgs.cpp).
-    rasterize(projected_, list_, ranges_, grid, options_.background, out);
-  else
-    rasterize_slices(projected_, list_, slices_, grid, options_.speculation.early_termination, options_.background, out,
-                     &stats_.merge_ms);
+  rasterize_slices(projected_, list_, slices_, TileGrid::of(camera.width, camera.height),
+                   options_.speculation.early_termination, options_.background, out, &stats_.merge_ms);
   stats_.rasterize_ms = ms_between(t5, clock::now()) - stats_.merge_ms;
   stats_.window = planner_.window();
   stats_.cached = cached_.size();

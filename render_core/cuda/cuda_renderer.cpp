@@ -181,24 +181,6 @@ DeviceFrame CudaRenderer::render_device_at(const Camera& camera, double time_s) 
   return render_full(camera);
 }
 
-void CudaRenderer::rasterize_full(const Camera& camera) {
-  State& s = *state_;
-  const stages::CameraParams cam = camera_params(camera);
-  const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
-  // The heaviest tiles first (longest-processing-time-first scheduling of the raster blocks).
-  stages::order_tiles(s.ranges.as<uint2>(), tiles, s.tile_order.as<uint32_t>(), s.heaviest_tile.as<uint32_t>(),
-                      s.stream);
-  s.heaviest = s.heaviest_tile.as<uint32_t>();
-  s.heaviest_is_slice_key = false;
-  CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
-
-  const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-  stages::rasterize(s.ranges.as<uint2>(), s.tile_order.as<uint32_t>(), s.sorted_values, s.projected(), cam, bg,
-                    s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-  CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
-}
-
 DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   validate_camera(camera);
   State& s = *state_;
@@ -224,7 +206,18 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
       exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square, proj.splat, {}, cam.width, cam.height};
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
-  rasterize_full(camera);
+  // The heaviest tiles first (longest-processing-time-first scheduling of the raster blocks).
+  stages::order_tiles(s.ranges.as<uint2>(), tiles, s.tile_order.as<uint32_t>(), s.heaviest_tile.as<uint32_t>(),
+                      s.stream);
+  s.heaviest = s.heaviest_tile.as<uint32_t>();
+  s.heaviest_is_slice_key = false;
+  CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
+
+  const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
+  stages::rasterize(s.ranges.as<uint2>(), s.tile_order.as<uint32_t>(), s.sorted_values, proj, cam, bg,
+                    s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
+  CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
+  CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
 
   s.width = camera.width;
   s.height = camera.height;

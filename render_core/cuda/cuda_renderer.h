@@ -183,9 +183,6 @@ class CudaRenderer final : public Renderer {
   // render_catgs.cpp; abandon: device flag, draw nothing when it is set (or null); trail_list:
   // the list is a key frame's trail list (tile-culled per pose), not an exact one.
   void catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon, bool trail_list);
-  // The exact pipeline's last stages over the built list: tile order, then one block per tile
-  // (render_full; catgs frames without a window).
-  void rasterize_full(const Camera& camera);
   void download(const DeviceFrame& frame, Image& out);
   std::shared_ptr<const DeviceScene> scene_;
   RenderOptions options_;

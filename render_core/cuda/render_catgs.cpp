@@ -11,9 +11,8 @@
 // group's sub-frames launch exactly one block per slice; the key frame itself launches
 // slice_capacity() blocks, the extra ones return at once. A key frame without a window (W = 0:
 // the motion is too fast, the speculation
-// backoff is under way, or the caches are off) is an exact frame: the exact pipeline's
-// pre-processing, list, single sort and rasterizer (with early termination; without it, the split
-// plan and slices, unculled).
+// backoff is under way, or the caches are off) runs the exact pipeline's pre-processing, list
+// and single sort instead, then the same split plan and slices, unculled.
 // Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag), the
 // check that no unlisted Gaussian reaches the image (the frustum cache's blind spot) ->
 // rasterize the key frame's slices -> merge -> read the flag back. A raised flag means some
@@ -149,17 +148,6 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   // the predictor and the depth-first sort bought").
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, window > 0 && depth_first_sort(), &visible);
-  if (window == 0 && sp.early_termination) {
-    // No group follows a frame without a window, so nothing needs its split plan: it is an exact
-    // frame to the end (one block per tile, no merge), as the CPU reference draws it.
-    rasterize_full(camera);
-    s.key_entries = entries;
-    s.key_visible = visible;
-    s.key_capacity = 0;
-    s.key_frame = true;
-    s.planner.start_group(camera, 0);
-    return;
-  }
   if (window > 0)  // the frustum cache, for the group's sub-frames
     stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(),
                           s.catgs_counters.as<unsigned>() + kCachedCount, s.select_temp.as<void>(),
