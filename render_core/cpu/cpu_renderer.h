@@ -49,7 +49,8 @@ struct ProjectedGaussians {
   void resize(std::size_t n);
 };
 
-// The render list: (key, value) pairs, key = [tile | depth bits], value = Gaussian index.
+// The render list: (key, value) pairs, key = [tile | depth] as `packing` makes it
+// (forward_model/key_packing.h), value = Gaussian index.
 struct RenderList {
   std::vector<uint64_t> keys;     // [L] made as `packing` says: emission writes plain keys, the sort re-keys
   std::vector<uint32_t> values;   // [L]

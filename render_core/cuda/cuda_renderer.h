@@ -108,11 +108,13 @@ struct DeviceFrame {
   CUstream_st* stream = nullptr;
 };
 
-// Two implementation choices of the CUDA core that draw the same image, for the tests that show
-// they do (tests/gpu) and nothing else:
+// Two implementation choices of the CUDA core, for the tests that compare them (tests/gpu) and
+// nothing else:
 // - depth_first_sort: sort the render list depth first (the visible Gaussians by depth, then the
-//   entries stably by tile alone; depth_order.cu) instead of one radix sort of [tile | depth]
-//   keys: the same list, entry for entry. Unset, it follows the pipeline: on for catgs, whose
+//   entries stably by tile alone; depth_order.cu) instead of one radix sort: the same list,
+//   entry for entry, as a single sort on plain [tile | depth] keys (catgs key frames); exact
+//   lists' single sort uses the 32-bit key (forward_model/key_packing.h), which orders depths
+//   within its quantum by index instead, so the two differ there (>= 60 dB). Unset, it follows the pipeline: on for catgs, whose
 //   key-frame trail lists are long, off for exact, whose lists are short (RESULTS.md, "An
 //   earlier round: what the predictor and the depth-first sort bought"). vanilla, and catgs key
 //   frames without a window, always sort the single way.

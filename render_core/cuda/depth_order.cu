@@ -1,11 +1,12 @@
 // Stage 2a' (optional, CudaRenderer::set_depth_first_sort): the depth-first order of the render
-// list. The list must end up sorted by [tile | depth], ties in Gaussian index order (sort.cu,
-// cpu/sort.cpp). Sorting its L entries on 64-bit keys visits 32 + tile bits (6 radix passes at
-// 1080p). Instead the V visible Gaussians are sorted by depth once (32-bit keys, V << L), each
+// list. The list must end up sorted by the plain [tile | depth] key, ties in Gaussian index order
+// (forward_model/key_packing.h, cpu/sort.cpp). Sorting its L entries on 64-bit keys visits 32 +
+// tile bits (6 radix passes at 1080p). Instead the V visible Gaussians are sorted by depth once (32-bit keys, V << L), each
 // Gaussian's slot in the list is handed out in that order, and the L entries are then sorted
 // stably on their tile alone (13 bits at 1080p: 2 passes). A stable sort by tile of a list in
-// (depth, index) order is the [tile | depth] order with index ties: the same list, entry for
-// entry, as the single sort (GPU test row `depthsort`). It pays where lists are long: a catgs key
+// (depth, index) order is the plain [tile | depth] order with index ties: the same list, entry
+// for entry, as a single sort on plain keys (catgs key frames; GPU test row `depthsort`). The
+// exact pipeline's single sort uses the 32-bit key, which ties depths within its quantum. It pays where lists are long: a catgs key
 // frame's trail list is several times the exact list (RESULTS.md, "Where the tuned defaults come
 // from": the depth-first sort).
 #include <algorithm>

@@ -42,8 +42,8 @@ inline constexpr int kBigThreads = 256;
 // A big Gaussian whose rectangle holds more than this many tiles is "huge": the big-Gaussian
 // kernels hand it a whole block (kBigThreads tiles a round) after their warp-per-Gaussian pass,
 // in the same launch, instead of a warp: a near Gaussian that spans thousands of tiles held its
-// warp for hundreds of rounds while the rest of the GPU idled (ncu: 25-30% of warps active, SM
-// throughput 10%; RESULTS.md, "Issue 19, third round").
+// warp for hundreds of rounds while the rest of the GPU idled (RESULTS.md, "Issue 19, third
+// round": the ncu figures).
 inline constexpr int kHugeRectTiles = kBigThreads;
 
 // Blocks per SM the rasterizers (rasterize.cu, rasterize_slices.cu) are built for: 8 x 256
