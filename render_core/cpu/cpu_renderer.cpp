@@ -58,7 +58,13 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   const auto t3 = clock::now();
   identify_tile_ranges(list_, grid, ranges_);
   const auto t4 = clock::now();
-  rasterize(projected_, list_, ranges_, grid, options_.background, out);
+  if (options_.pipeline == Pipeline::exact) {  // task splitting, as the CUDA core (renderer.h)
+    const SpeculationParams& sp = options_.speculation;
+    plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_, static_cast<std::size_t>(sp.min_slice_entries));
+    rasterize_slices(projected_, list_, slices_, grid, true, options_.background, out);
+  } else {
+    rasterize(projected_, list_, ranges_, grid, options_.background, out);
+  }
   const auto t5 = clock::now();
 
   stats_ = {};

@@ -177,6 +177,7 @@ class CpuRenderer final : public Renderer {
   ProjectedGaussians projected_;
   RenderList list_;
   TileRanges ranges_;
+  std::vector<TileSlice> slices_;  // exact: the split plan
   FrameStats stats_;
 };
 

@@ -171,6 +171,30 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   return entries;
 }
 
+uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp) {
+  std::size_t* allocs = &allocations;
+  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
+  const uint64_t capacity = stages::slice_capacity(tiles, entries, min_slice);
+  const uint64_t slots = entries / stages::split_average(tiles, entries, min_slice);
+  slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
+  slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
+  tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
+  slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
+  partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
+  // The rasterizer's per-tile state starts as task_split.h says, once; its kernels keep it so.
+  if (saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs))
+    CATGS_CUDA(cudaMemsetAsync(saturated_from.as<void>(), 0xff, saturated_from.bytes(), stream));
+  if (slices_done.ensure(tiles * sizeof(unsigned), "finished slices per tile", allocs))
+    CATGS_CUDA(cudaMemsetAsync(slices_done.as<void>(), 0, slices_done.bytes(), stream));
+  if (slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs))
+    CATGS_CUDA(cudaMemsetAsync(slot_finished.as<void>(), 0, slot_finished.bytes(), stream));
+  note_peak();
+  stages::plan_slices(ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, slice_plan(),
+                      slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream);
+  heaviest = heaviest_tile.as<uint32_t>();  // the longest slice
+  return capacity;
+}
+
 DeviceFrame CudaRenderer::render_device(const Camera& camera) {
   if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, state_->planner.advance_clock());
   return render_full(camera);
@@ -206,18 +230,31 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
       exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square, proj.splat, {}, cam.width, cam.height};
   uint64_t visible = 0;
   const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
-  // The heaviest tiles first (longest-processing-time-first scheduling of the raster blocks).
-  stages::order_tiles(s.ranges.as<uint2>(), tiles, s.tile_order.as<uint32_t>(), s.heaviest_tile.as<uint32_t>(),
-                      s.stream);
-  s.heaviest = s.heaviest_tile.as<uint32_t>();
-  s.heaviest_is_slice_key = false;
-  CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
-
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-  stages::rasterize(s.ranges.as<uint2>(), s.tile_order.as<uint32_t>(), s.sorted_values, proj, cam, bg,
-                    s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-  CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
+  if (exact) {
+    // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the
+    // average load is rasterized as slices by several blocks and merged, so a few heavy tiles do
+    // not hold the frame's tail (city tandt_train: rasterization 1.48 -> 0.58 ms, RESULTS.md).
+    const uint64_t capacity = s.plan_frame_slices(tiles, entries, options_.speculation);
+    CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
+    const stages::SlicePlan plan = s.slice_plan();
+    stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values, proj,
+                             cam, true, false, bg, nullptr, s.partials.as<float4>(), s.rgb.as<float>(),
+                             s.rgba8.as<uint32_t>(), s.stream);
+    CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
+    CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));  // merged by the slices themselves
+  } else {
+    // vanilla, the reference 3DGS: a block per tile, the heaviest tiles first
+    // (longest-processing-time-first scheduling of the raster blocks).
+    stages::order_tiles(s.ranges.as<uint2>(), tiles, s.tile_order.as<uint32_t>(), s.heaviest_tile.as<uint32_t>(),
+                        s.stream);
+    s.heaviest = s.heaviest_tile.as<uint32_t>();
+    CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
+    stages::rasterize(s.ranges.as<uint2>(), s.tile_order.as<uint32_t>(), s.sorted_values, proj, cam, bg,
+                      s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
+    CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
+    CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
+  }
 
   s.width = camera.width;
   s.height = camera.height;
@@ -244,7 +281,6 @@ const FrameStats& CudaRenderer::last_stats() const {
   stats_.rasterize_ms = ms(kRanged, kRasterized);
   stats_.total_ms = ms(kStart, kMerged);
   if (options_.pipeline == Pipeline::catgs) {
-    stats_.merge_ms = ms(kRasterized, kMerged);
     if (!s.key_frame) {  // a sub-frame records no key emission, sort or ranges
       stats_.keys_ms = stats_.sort_ms = stats_.ranges_ms = 0.0;
       stats_.rasterize_ms = ms(kPreprocessed, kRasterized);
@@ -267,7 +303,7 @@ CudaRenderer::Diagnostics CudaRenderer::diagnostics() const {
     CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
     uint32_t heaviest = 0;
     CATGS_CUDA(cudaMemcpy(&heaviest, s.heaviest, sizeof heaviest, cudaMemcpyDeviceToHost));
-    d.heaviest_tile_entries = s.heaviest_is_slice_key ? stages::slice_length_of_key(heaviest) : heaviest;
+    d.heaviest_tile_entries = heaviest;
   }
   return d;
 }

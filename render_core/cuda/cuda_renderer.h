@@ -170,8 +170,9 @@ class CudaRenderer final : public Renderer {
     std::size_t peak_buffer_bytes = 0;  // the most they held
     std::size_t allocations = 0;        // buffer (re)allocations since construction
     int syncs_last_frame = 0;           // host-device synchronisations in the last render_device()
-    // Entries of the last frame's heaviest tile (catgs: the heaviest slice of the group's key
-    // frame). One block walks it alone, so it bounds the rasterization time.
+    // Entries of the last frame's longest slice (exact and catgs: of a split plan, where a heavy
+    // tile is several slices; catgs sub-frames: their key frame's; vanilla: its heaviest tile).
+    // One block walks it alone, so it bounds the rasterization time.
     std::size_t heaviest_tile_entries = 0;
   };
   Diagnostics diagnostics() const;

@@ -11,12 +11,16 @@
 //
 // Design. One 256-thread block per slice, thread = pixel, blending the slice's run of the tile's
 // list exactly as rasterize.cu blends a whole tile (blend.cuh). Blocks take slices in the order
-// the key frame computed (longest first, so the heavy slices start early and the short ones fill
-// in behind). A tile that was not split has one slice, which writes C + T * background straight
-// into the image: no partials and no merge for the common case. A split tile's slices write
-// their partial colour C_k and transmittance T_k to their partial slots (float4 per pixel,
-// 4 KiB per slot), and merge_kernel, a block per split tile, composes
-// C = sum_k C_k prod_{m<k} T_m front to back and adds prod T * background.
+// the frame's plan computed (task_split.cu: first slices longest first, so the heavy ones start
+// early and the short ones fill in behind, then the later slices of split tiles, by their index
+// in the tile). A tile that was not split has one slice, which writes C + T * background
+// straight into the image: no partials and no merge for the common case. A split tile's slices
+// write their partial colour C_k and transmittance T_k to their partial slots (float4 per pixel,
+// 4 KiB per slot), and the last of them to finish (a count per tile, slices_done) composes
+// C = sum_k C_k prod_{m<k} T_m front to back and adds prod T * background (merge_pixel): no
+// merge launch, which cost a block per tile of the image every frame. That block then leaves the
+// tile's state (slices_done, saturated_from, slot_finished) as it found it, so the next frame
+// over the same plan needs no memsets.
 //
 // Saturated pixels and tiles. Without splitting, a pixel that saturates stops walking its tile's
 // list; split, its later slices would start afresh with T = 1 and blend Gaussians that are hidden
@@ -31,8 +35,8 @@
 //   before it) records k in saturated_from[tile] (atomicMin); slices behind it skip their work,
 //   at the start and at every round of 256 entries, and the merge composes slices
 //   0..saturated_from only.
-// Slices are ordered k first (task_split.cu), so a tile's first slice usually finishes before
-// its later ones start. The image does not depend on timing: where a pixel's composition ends
+// A tile's later slices come after every first slice (task_split.cu), so its first slice usually
+// finishes before its later ones start. The image does not depend on timing: where a pixel's composition ends
 // is worked out from partials that do not (a slice that did not see an earlier slice finish
 // blends the pixel in full, and the merge drops the result), and every slice the merge reads up
 // to that end runs in full at that pixel. Without early termination nothing is skipped (that mode
@@ -50,7 +54,7 @@ namespace {
 // marks done the pixels whose composition its finished earlier slices already end (refresh, at
 // every round of 256 entries): it walks slices 0..k-1 in order while they have finished
 // (slot_finished, read before their partials, which are read from L2), with the merge's own rule
-// and arithmetic (merge_kernel), so that the two agree exactly. `prefix` is k with early
+// and arithmetic (merge_pixel), so that the two agree exactly. `prefix` is k with early
 // termination and 0 without (no pixel ends early then).
 struct SaturatedSkip {
   const volatile unsigned* saturated_from;  // this tile's entry
@@ -73,6 +77,28 @@ struct SaturatedSkip {
   }
 };
 
+// A split tile's composition at one pixel (its rank, at image index p): C = sum_k C_k
+// prod_{m<k} T_m front to back over slices 0..saturated_from, then + prod T * background (paper
+// sec. 3.4); with early termination the sum ends after the first slice in which the pixel stopped
+// or after which prod T < 1e-4 (as SaturatedSkip::refresh and cpu::rasterize_slices). Partials
+// and saturated_from were written by other blocks: read from L2.
+__device__ __forceinline__ void merge_pixel(const SlicePlan& plan, uint32_t tile, uint4 tp, const float4* partials,
+                                            bool early_termination, int rank, float3 background, uint64_t p,
+                                            float* out_rgb, uint32_t* out_rgba8) {
+  float3 C = make_float3(0.0f, 0.0f, 0.0f);
+  float T = 1.0f;
+  const uint32_t last = min(tp.y - 1, __ldcg(plan.saturated_from + tile));
+  for (uint32_t k = 0; k <= last; ++k) {
+    const float4 q = __ldcg(&partials[static_cast<uint64_t>(tp.z + k) * tune::kRasterThreads + rank]);
+    C.x += T * q.x;
+    C.y += T * q.y;
+    C.z += T * q.z;
+    T *= fabsf(q.w);
+    if (early_termination && (q.w < 0.0f || T < fm::kMinTransmittance)) break;
+  }
+  write_pixel(p, C, T, background, out_rgb, out_rgba8);
+}
+
 // kTileCull: blend_range_culled (a trail list) or blend_range (an exact list), as separate
 // kernels so that each is built for its own registers: the unculled one fits 32 without spilling.
 // Together they took 48, which capped the culled kernel at 5 blocks per SM (ncu, city bicycle
@@ -91,8 +117,8 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
   __shared__ BlendBatch batch;
   if (abandon && *abandon) return;  // written by an earlier kernel: the same for every thread
   const uint32_t s = order ? order[blockIdx.x] : blockIdx.x;
+  if (s == kNoSlice) return;  // a block past the slice total (block-uniform)
   const uint2 tile_k = plan.slice_tile[s];
-  if (tile_k.x == 0xffffffffu) return;  // a slot past the slice total (block-uniform)
   const uint2 range = plan.slice_range[s];
   const uint4 tp = plan.tile_plan[tile_k.x];
   const int tx = static_cast<int>(tile_k.x % static_cast<uint32_t>(tiles_x));
@@ -123,53 +149,42 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
   // Another block may saturate the tile while this one reads the flag, so threads can disagree:
   // decide together (a thread leaving alone would break the barriers and the warp ballots of
   // blend_range_culled, which faulted with an illegal instruction on the H100).
-  if (__syncthreads_or(skip.stop())) return;
-  const uint64_t slot = static_cast<uint64_t>(tp.z) + tile_k.y;
-  blend(skip);
-  const bool saturated = state.done || state.T < fm::kMinTransmittance;
-  if (early_termination && __syncthreads_and(saturated) && rank == 0 && !skip.stop())
-    atomicMin(plan.saturated_from + tile_k.x, tile_k.y);
-  // A stopped pixel (done: by early termination here, or ended before this slice, whose partial
-  // the merge then never reads) ends its composition: T negated.
-  if (inside)
-    partials[slot * tune::kRasterThreads + rank] =
-        make_float4(state.C.x, state.C.y, state.C.z, state.done ? -state.T : state.T);
-  if (!early_termination) return;
-  __threadfence();  // every thread's partial before the flag (read by later slices of the tile)
-  __syncthreads();
-  if (rank == 0) atomicExch(plan.slot_finished + slot, 1u);
-}
-
-__global__ void __launch_bounds__(tune::kRasterThreads)
-    merge_kernel(SlicePlan plan,
-                 const float4* __restrict__ partials,  // [slots, 256]
-                 int width, int height, int tiles_x, bool early_termination, float3 background,
-                 const unsigned* abandon,             // [1] or null
-                 float* __restrict__ out_rgb,         // [H, W, 3]
-                 uint32_t* __restrict__ out_rgba8) {  // [H, W]
-  if (abandon && *abandon) return;
-  const uint4 tp = plan.tile_plan[blockIdx.x];
-  if (tp.y <= 1) return;  // written by its only slice
-  const int tx = static_cast<int>(blockIdx.x % static_cast<uint32_t>(tiles_x));
-  const int ty = static_cast<int>(blockIdx.x / static_cast<uint32_t>(tiles_x));
-  const int rank = static_cast<int>(threadIdx.x);
-  const int2 o = pixel_in_tile(rank);  // the slices' pixel for this rank
-  const int px = tx * tune::kTileSize + o.x, py = ty * tune::kTileSize + o.y;
-  if (px >= width || py >= height) return;
-  float3 C = make_float3(0.0f, 0.0f, 0.0f);
-  float T = 1.0f;
-  const uint32_t last = min(tp.y - 1, plan.saturated_from[blockIdx.x]);
-  for (uint32_t k = 0; k <= last; ++k) {
-    const float4 p = partials[static_cast<uint64_t>(tp.z + k) * tune::kRasterThreads + rank];
-    C.x += T * p.x;
-    C.y += T * p.y;
-    C.z += T * p.z;
-    T *= fabsf(p.w);
-    // The pixel stopped in slice k, or the slices behind weigh under 1e-4 (as SaturatedSkip::refresh).
-    if (early_termination && (p.w < 0.0f || T < fm::kMinTransmittance)) break;
+  if (!__syncthreads_or(skip.stop())) {
+    const uint64_t slot = static_cast<uint64_t>(tp.z) + tile_k.y;
+    blend(skip);
+    const bool saturated = state.done || state.T < fm::kMinTransmittance;
+    if (early_termination && __syncthreads_and(saturated) && rank == 0 && !skip.stop())
+      atomicMin(plan.saturated_from + tile_k.x, tile_k.y);
+    // A stopped pixel (done: by early termination here, or ended before this slice, whose
+    // partial the merge then never reads) ends its composition: T negated.
+    if (inside)
+      partials[slot * tune::kRasterThreads + rank] =
+          make_float4(state.C.x, state.C.y, state.C.z, state.done ? -state.T : state.T);
+    if (early_termination) {
+      __threadfence();  // every thread's partial before the flag (read by later slices of the tile)
+      __syncthreads();
+      if (rank == 0) atomicExch(plan.slot_finished + slot, 1u);
+    }
   }
-  write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), C, T, background,
-              out_rgb, out_rgba8);
+  // The tile's last slice to finish (skipped ones count) composes the tile and leaves its state
+  // as the plan found it, for the next frame over the same plan (a catgs sub-frame).
+  __shared__ bool last;
+  __threadfence();  // this slice's partials before its count
+  __syncthreads();
+  if (rank == 0) last = atomicAdd(plan.slices_done + tile_k.x, 1u) == tp.y - 1;
+  __syncthreads();
+  if (!last) return;
+  __threadfence();  // the other slices' partials after their counts
+  if (inside)
+    merge_pixel(plan, tile_k.x, tp, partials, early_termination, rank, background,
+                static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), out_rgb,
+                out_rgba8);
+  __syncthreads();  // saturated_from read by every pixel's merge
+  for (uint32_t k = static_cast<uint32_t>(rank); k < tp.y; k += tune::kRasterThreads) plan.slot_finished[tp.z + k] = 0u;
+  if (rank == 0) {
+    plan.saturated_from[tile_k.x] = 0xffffffffu;
+    plan.slices_done[tile_k.x] = 0u;
+  }
 }
 
 }  // namespace
@@ -178,24 +193,12 @@ void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blo
                       const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,
                       float3 background, const unsigned* abandon, float4* partials, float* out_rgb, uint32_t* out_rgba8,
                       cudaStream_t stream) {
-  CATGS_CUDA(cudaMemsetAsync(plan.saturated_from, 0xff,
-                             sizeof(unsigned) * static_cast<std::size_t>(cam.tiles_x * cam.tiles_y), stream));
-  CATGS_CUDA(cudaMemsetAsync(plan.slot_finished, 0, sizeof(unsigned) * plan.slot_count, stream));
   if (blocks == 0) return;
   auto* kernel = tile_culling ? rasterize_slices_kernel<true> : rasterize_slices_kernel<false>;
   kernel<<<blocks, tune::kRasterThreads, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height,
                                                       cam.tiles_x, early_termination, background, abandon, partials,
                                                       out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("rasterize_slices_kernel");
-}
-
-void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, bool early_termination,
-                  float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8,
-                  cudaStream_t stream) {
-  const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
-  merge_kernel<<<tiles, tune::kRasterThreads, 0, stream>>>(plan, partials, cam.width, cam.height, cam.tiles_x,
-                                                           early_termination, background, abandon, out_rgb, out_rgba8);
-  CATGS_CUDA_LAUNCHED("merge_kernel");
 }
 
 }  // namespace catgs::cuda::stages

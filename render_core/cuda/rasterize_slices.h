@@ -10,15 +10,19 @@
 namespace catgs::cuda::stages {
 
 // Stage 5 with slices (rasterize_slices.cu; mirrors cpu::rasterize_slices): one block per slice
-// (block b takes slice order[b], or b without an order; `blocks` may exceed the slice total: the
-// extra blocks return). A tile's only slice writes C + T * background to the image; a slice of a
+// (block b takes slice order[b] (plan_slices), where kNoSlice returns at once, or slice b
+// without an order, where `blocks` must not exceed the slice total). A tile's only slice writes C + T * background to the image; a slice of a
 // split tile writes its partial colour and transmittance to partials [slots, 256] (C.rgb, T).
 // `early_termination`: stop a pixel before T would drop below 1e-4 within its slice; a pixel's
 // composition ends at the first slice in which it stops or after which its transmittance is
 // below 1e-4, so a later slice skips the pixels whose earlier slices, finished before it starts,
 // already end it, and a slice behind one that saturated its tile alone is skipped entirely (see
-// rasterize_slices.cu: the paper's higher early-termination threshold for later slices). Resets
-// saturated_from and slot_finished first. A stopped pixel's partial T is stored negated.
+// rasterize_slices.cu: the paper's higher early-termination threshold for later slices). A
+// stopped pixel's partial T is stored negated. The last slice of a split tile to finish merges
+// it: C = sum_k C_k prod_{m<k} T_m, then + prod T * background (paper sec. 3.4), the sum ending
+// after the first slice in which the pixel stopped or after which prod T < 1e-4 (as
+// cpu::rasterize_slices). The plan's per-tile state (saturated_from all ones, slices_done and
+// slot_finished zero) must hold at launch, and holds again when the kernel ends.
 // `tile_culling`: each round blends only the entries whose ellipse reaches the tile at this
 // frame's features (blend_range_culled; same image, for lists built for other poses too).
 // `abandon` (device, or null): when it holds non-zero at launch, draw nothing (a sub-frame
@@ -27,11 +31,4 @@ void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blo
                       const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,
                       float3 background, const unsigned* abandon, float4* partials, float* out_rgb, uint32_t* out_rgba8,
                       cudaStream_t stream);
-// The merge (rasterize_slices.cu): for each split tile, C = sum_k C_k prod_{m<k} T_m, then
-// + prod T * background (paper sec. 3.4); with `early_termination`, a pixel's sum ends after the
-// first slice in which it stopped or after which prod T < 1e-4 (as cpu::rasterize_slices).
-// Nothing when *abandon (if given) is non-zero.
-void merge_slices(const SlicePlan& plan, const float4* partials, const CameraParams& cam, bool early_termination,
-                  float3 background, const unsigned* abandon, float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream);
-
 }  // namespace catgs::cuda::stages

@@ -5,20 +5,20 @@
 // Key frame: M (max_screen_motion, one 4-byte readback) -> W -> speculative pre-processing over
 // the predicted path (trails, and each small trail's tile answers as a bit mask) -> the counts
 // readback, key emission from those masks (big trails: the trail test), sort (depth first by
-// default), tile ranges (build_render_list) -> frustum cache (select_cached) -> split plan and slice order (k first,
-// then longest first) -> rasterize slices (tile-culled: only entries whose ellipse reaches the
-// tile at this pose are blended) -> merge. The slice total is copied back asynchronously (plan_ready) so the
-// group's sub-frames launch exactly one block per slice; the key frame itself launches
-// slice_capacity() blocks, the extra ones return at once. A key frame without a window (W = 0:
-// the motion is too fast, the speculation
-// backoff is under way, or the caches are off) runs the exact pipeline's pre-processing, list
-// and single sort instead, then the same split plan and slices, unculled.
+// default), tile ranges (build_render_list) -> frustum cache (select_cached) -> split plan and
+// slice order (plan_frame_slices) -> rasterize slices (tile-culled: only entries whose ellipse
+// reaches the tile at this pose are blended; the last slice of a split tile merges it). The slice total is copied back
+// asynchronously (plan_ready) so the group's sub-frames launch exactly one block per slice; the
+// key frame itself launches slice_capacity() blocks, the extra ones return at once. A key frame
+// without a window (W = 0: the motion is too fast, the speculation backoff is under way, or the
+// caches are off) is an exact frame: the exact pipeline's pre-processing, list, single sort,
+// split plan and slices, unculled.
 // Sub-frame: features of the cached Gaussians at this pose (and the trail containment flag), the
 // check that no unlisted Gaussian reaches the image (the frustum cache's blind spot) ->
-// rasterize the key frame's slices -> merge -> read the flag back. A raised flag means some
+// rasterize the key frame's slices (which merge the split tiles) -> read the flag back. A raised flag means some
 // on-screen Gaussian left its trail: the frame is rendered again as a key frame. The work is
-// queued before the check so the GPU never idles waiting for the host; the raster and merge
-// kernels read the flag themselves and return at once when it is raised (on the fast real paths
+// queued before the check so the GPU never idles waiting for the host; the rasterizer reads
+// the flag itself and return at once when it is raised (on the fast real paths
 // most key frames are such failed sub-frames, and drawing them was a large share of their time).
 #include <cstring>
 
@@ -73,40 +73,6 @@ int CudaRenderer::State::measure_window(const stages::SceneView& scene, const st
   return planner.window_for(motion);
 }
 
-uint64_t CudaRenderer::State::plan_key_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp) {
-  std::size_t* allocs = &allocations;
-  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
-  const uint64_t capacity = stages::slice_capacity(tiles, entries, min_slice);
-  const uint64_t slots = entries / stages::split_average(tiles, entries, min_slice);
-  slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
-  slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
-  tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
-  plan_scan.ensure(2 * static_cast<std::size_t>(tiles) * sizeof(uint64_t), "split scan", allocs);
-  plan_temp.ensure(stages::plan_slices_temp_bytes(tiles), "split scan scratch", allocs);
-  slice_scratch.ensure(3 * capacity * sizeof(uint32_t), "slice loads", allocs);
-  slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
-  slice_order_temp.ensure(stages::order_slices_temp_bytes(capacity), "slice order scratch", allocs);
-  saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs);
-  partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
-  slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs);
-  note_peak();
-  const stages::SlicePlan plan = slice_plan();
-  stages::plan_slices(ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, plan, plan_scan.as<uint64_t>(),
-                      plan_temp.as<void>(), plan_temp.bytes(), stream);
-  stages::order_slices(plan, capacity, slice_scratch.as<uint32_t>(), slice_order.as<uint32_t>(),
-                       slice_order_temp.as<void>(), slice_order_temp.bytes(), stream);
-  // The first sorted key is the longest first slice, the longest slice of all (task_split.cu).
-  heaviest = slice_scratch.as<uint32_t>() + 2 * capacity;
-  heaviest_is_slice_key = true;
-  // The group's sub-frames launch one block per slice: the totals come back while this frame
-  // rasterizes, and only a sub-frame waits for them (plan_ready).
-  unsigned* cc = catgs_counters.as<unsigned>();
-  CATGS_CUDA(cudaMemcpyAsync(host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned), cudaMemcpyDeviceToHost,
-                             stream));
-  CATGS_CUDA(cudaEventRecord(plan_ready, stream));
-  return capacity;
-}
-
 void CudaRenderer::catgs_key_frame(const Camera& camera) {
   State& s = *state_;
   const SpeculationParams& sp = options_.speculation;
@@ -152,7 +118,13 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
     stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(),
                           s.catgs_counters.as<unsigned>() + kCachedCount, s.select_temp.as<void>(),
                           s.select_temp.bytes(), s.stream);
-  const uint64_t capacity = s.plan_key_slices(tiles, entries, sp);  // paper sec. 3.4
+  const uint64_t capacity = s.plan_frame_slices(tiles, entries, sp);  // paper sec. 3.4
+  // The group's sub-frames launch one block per slice: the totals come back while this frame
+  // rasterizes, and only a sub-frame waits for them (plan_ready).
+  unsigned* cc = s.catgs_counters.as<unsigned>();
+  CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
+                             cudaMemcpyDeviceToHost, s.stream));
+  CATGS_CUDA(cudaEventRecord(s.plan_ready, s.stream));
   CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
   catgs_rasterize(camera, static_cast<uint32_t>(capacity), nullptr, window > 0);
@@ -195,9 +167,7 @@ void CudaRenderer::catgs_rasterize(const Camera& camera, uint32_t blocks, const 
                            options_.speculation.early_termination, cuda_options_.tile_culling && trail_list, bg,
                            abandon, s.partials.as<float4>(), s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-  stages::merge_slices(plan, s.partials.as<float4>(), cam, options_.speculation.early_termination, bg, abandon,
-                       s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
+  CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));  // merged by the slices themselves
 }
 
 }  // namespace catgs::cuda

@@ -129,13 +129,13 @@ struct CudaRenderer::State {
   GrowBuffer ranges, heaviest_tile, tile_order, rgb, rgba8, counters;
   const uint32_t* sorted_values = nullptr;
   const uint32_t* heaviest = nullptr;  // device: entries of the heaviest tile (or slice)
-  bool heaviest_is_slice_key = false;  // heaviest points at a slice sort key (order_slices)
 
-  // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian), the split plan (per slice
-  // and tile), partial slices, and its counters (CatgsCounterSlot).
-  GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp;
-  GrowBuffer slice_range, slice_tile, tile_plan, plan_scan, plan_temp, slice_scratch, slice_order, slice_order_temp,
-      partials, saturated_from, slot_finished, catgs_counters;
+  // The split plan of exact frames and catgs key frames (per slice and tile: plan_frame_slices),
+  // and the partial slices of split tiles.
+  GrowBuffer slice_range, slice_tile, tile_plan, slice_order, partials, saturated_from, slices_done, slot_finished;
+  // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian) and its counters
+  // (CatgsCounterSlot; the plan's totals among them).
+  GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp, catgs_counters;
   unsigned* host_catgs = nullptr;        // pinned [kHostCatgsSlots]
   cudaEvent_t catgs_readback = nullptr;  // M / outside flag copied to host_catgs
   cudaEvent_t plan_ready = nullptr;      // the key frame's slice totals copied to host_catgs
@@ -159,14 +159,17 @@ struct CudaRenderer::State {
   uint64_t build_render_list(uint64_t n, const stages::CameraParams& cam, const stages::TileTests& tests,
                              bool depth_first, uint64_t* visible);
 
+  // Plans the split tasks of a frame of `entries` list entries and their order (task_split.cu,
+  // paper sec. 3.4; after the tile ranges) and returns the slice capacity, the blocks the frame's
+  // rasterize_slices launches (cuda_renderer.cpp).
+  uint64_t plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp);
+
   // catgs key frames (render_catgs.cpp): grows the trail and frustum-cache buffers; measures M
   // between the key camera and the predicted next one (one 4-byte readback) and returns the
-  // planner's W; plans the split tasks and their order for `entries` list entries and queues the
-  // copy of their totals (plan_ready), returning the slice capacity (blocks a key frame launches).
+  // planner's W.
   void ensure_catgs_buffers(uint64_t n);
   int measure_window(const stages::SceneView& scene, const stages::CameraParams& key, const stages::CameraParams& next,
                      float depth_threshold);
-  uint64_t plan_key_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp);
 
   // Views of the buffers as the stages take them.
   stages::Projected projected() const {
@@ -181,13 +184,10 @@ struct CudaRenderer::State {
             trail_mask.as<uint32_t>()};
   }
   stages::SlicePlan slice_plan() const {
-    return {slice_range.as<uint2>(),
-            slice_tile.as<uint2>(),
-            tile_plan.as<uint4>(),
-            catgs_counters.as<unsigned>() + kSliceTotals,
-            saturated_from.as<unsigned>(),
-            slot_finished.as<unsigned>(),
-            slot_finished.bytes() / sizeof(unsigned)};
+    return {slice_range.as<uint2>(),       slice_tile.as<uint2>(),
+            tile_plan.as<uint4>(),         catgs_counters.as<unsigned>() + kSliceTotals,
+            saturated_from.as<unsigned>(), slices_done.as<unsigned>(),
+            slot_finished.as<unsigned>()};
   }
 
   std::size_t bytes() const {
@@ -229,13 +229,10 @@ struct CudaRenderer::State {
                                 &slice_range,
                                 &slice_tile,
                                 &tile_plan,
-                                &plan_scan,
-                                &plan_temp,
-                                &slice_scratch,
                                 &slice_order,
-                                &slice_order_temp,
                                 &partials,
                                 &saturated_from,
+                                &slices_done,
                                 &slot_finished,
                                 &catgs_counters,
                                 &yuv})

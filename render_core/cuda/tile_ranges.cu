@@ -3,6 +3,7 @@
 // (ends) that tile's range. Grid-stride, 64-bit indices: the list may pass 2^31 entries (the
 // renderer refuses lists past 2^32 - 1, the limit of the 32-bit ranges).
 #include "cuda_check.h"
+#include "load_bucket.cuh"
 #include "tile_ranges.h"
 #include "tunables.h"
 
@@ -32,23 +33,11 @@ __global__ void __launch_bounds__(tune::kEntryThreads)
   }
 }
 
-// Heaviest tiles first, to within a quarter of an octave: tile t's load L = ranges[t].y -
-// ranges[t].x goes to bucket 4 floor(log2 L) + (the two bits of L below its leading one) + 1
-// (bucket 0: empty tiles), and the buckets are laid out from the highest down. Within a bucket
-// the order is whatever the shared-memory atomics give: the image does not depend on the order
-// of the tiles, only the kernel's tail does, and a tile at most 1.19x lighter than the one
-// before it costs nothing there. One block does it all (a 1080p frame has 8160 tiles): a
-// histogram in shared memory, a scan of its 129 counts, then a scatter; it replaced a CUB radix
-// sort of the loads whose launches cost more than the sort (RESULTS.md, "Issue 19, second round").
-constexpr int kLoadBuckets = 4 * 32 + 1;
+// Heaviest tiles first, to within a quarter of an octave (load_bucket.cuh). Within a bucket the
+// order is whatever the shared-memory atomics give: the image does not depend on the order of the
+// tiles, only the kernel's tail does. One block does it all (a 1080p frame has 8160 tiles): a
+// histogram in shared memory, a scan of its counts, then a scatter.
 constexpr int kOrderThreads = 1024;
-
-__device__ __forceinline__ int load_bucket(uint32_t load) {
-  if (load == 0u) return 0;
-  const int octave = 31 - __clz(load);  // floor(log2 load)
-  const uint32_t quarter = octave >= 2 ? (load >> (octave - 2)) & 3u : (load << (2 - octave)) & 3u;
-  return 4 * octave + static_cast<int>(quarter) + 1;
-}
 
 __global__ void __launch_bounds__(kOrderThreads) order_tiles_kernel(const uint2* __restrict__ ranges,  // [tiles]
                                                                     uint32_t tiles,
@@ -64,12 +53,8 @@ __global__ void __launch_bounds__(kOrderThreads) order_tiles_kernel(const uint2*
     atomicMax(&most, load);
   }
   __syncthreads();
-  if (threadIdx.x == 0) {  // 129 counts: a serial scan from the heaviest bucket down
-    unsigned at = 0;
-    for (int b = kLoadBuckets - 1; b >= 0; --b) {
-      next[b] = at;
-      at += count[b];
-    }
+  if (threadIdx.x == 0) {
+    buckets_from_heaviest(count, next);
     *heaviest = most;
   }
   __syncthreads();

@@ -59,13 +59,6 @@ inline constexpr int kRasterMinBlocks = 8;
 inline constexpr int kPathKernelMinBlocks = 4;
 inline constexpr int kSubframeFeaturesMinBlocks = 4;
 
-// The slice order's sort key (task_split.cu): 12 bits of the slice's index k in its tile, then
-// 20 bits of (kSliceLengthMask - its length), so slices sort by k, then longest first. Lengths
-// saturate at the mask (a slice that long is longest-first anyway).
-inline constexpr uint32_t kSliceLengthBits = 20;
-inline constexpr uint32_t kSliceLengthMask = (1u << kSliceLengthBits) - 1u;
-inline constexpr uint32_t kSliceIndexMax = (1u << (32 - kSliceLengthBits)) - 2u;  // all ones: unused slot
-
 // Reusable buffers grow to this multiple of the size asked for, so a trace whose render list
 // creeps upwards does not reallocate every frame.
 inline constexpr double kGrowthFactor = 1.25;
@@ -84,7 +77,5 @@ static_assert(kBigRectTiles >= 1, "big Gaussians have more tiles than one thread
 static_assert(kBigRectTiles <= 32, "a small Gaussian's trail tiles fit one 32-bit mask (Trails::tile_mask)");
 static_assert(kRasterMinBlocks * kRasterThreads <= 2048, "an SM holds at most 2048 threads");
 static_assert(kPathKernelMinBlocks * kGaussianThreads * 64 <= 65536, "64 registers a thread fit the SM's file");
-static_assert(kSliceLengthBits < 32 && kSliceIndexMax + 1u < (1u << (32 - kSliceLengthBits)),
-              "the slice index and length share one 32-bit key; all ones marks an unused slot");
 
 }  // namespace catgs::cuda::tune

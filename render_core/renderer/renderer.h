@@ -17,9 +17,15 @@
 
 namespace catgs {
 
-// vanilla: reference 3DGS (3-sigma square bounds, every touched tile).
-// exact:   opacity-aware extent + exact ellipse-vs-tile test (render list = tiles really reached).
-// catgs:   exact + speculation, frustum/sort caches, task splitting (paper sec. 3).
+// vanilla: reference 3DGS (3-sigma square bounds, every touched tile, a tile's list blended whole).
+// exact:   opacity-aware extent + exact ellipse-vs-tile test (render list = tiles really reached)
+//          + load-aware task splitting (paper sec. 3.4): a tile of over twice the average load is
+//          blended as slices and merged. Where a pixel's transmittance drops below 1e-4 inside a
+//          later slice, that slice's Gaussians behind the stop still count, each weighted by less
+//          than 1e-4 (the paper's higher termination threshold for later slices; RESULTS.md
+//          measures it against the unsplit image). SpeculationParams::task_splitting = false
+//          blends every tile whole.
+// catgs:   exact + speculation, frustum/sort caches (paper sec. 3).
 enum class Pipeline { vanilla, exact, catgs };
 
 // "vanilla" | "exact" | "catgs" -> Pipeline; throws std::invalid_argument otherwise.
@@ -56,7 +62,7 @@ class RenderBudgetError : public std::length_error {
 struct RenderOptions {
   Pipeline pipeline = Pipeline::exact;
   glm::vec3 background{0.0f};     // linear RGB in [0, 1], composited behind the Gaussians
-  SpeculationParams speculation;  // catgs only
+  SpeculationParams speculation;  // catgs; exact frames take task_splitting and min_slice_entries
   RenderListBudget list_budget;   // enforced by the CPU core before the list is allocated
 };
 

@@ -17,6 +17,9 @@
 //             list lengths; exact >= 60 dB (the single sort's 32-bit key quantises the depth,
 //             forward_model/key_packing.h); catgs bit-identical (its key frames sort plain keys)
 //             with the same decisions.
+//  exactsplit CUDA exact with heavy tiles split into slices of the paper's length (min_slice 0)
+//             vs CUDA exact with every tile blended whole: PSNR >= 50 dB (renderer.h: the later
+//             slices' termination rule), and tiles were really split.
 //  exact~van  CUDA exact vs CUDA vanilla: PSNR >= 40 dB and a shorter render list.
 //  grow       one renderer across scenes and sizes (small -> large -> small): every frame equals
 //             a fresh renderer's frame, and buffers grow without errors.
@@ -171,6 +174,27 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model, con
       const auto ls = depth_first.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;
       add({"depthsort", name, view, "exact", d.psnr, d.max_abs, d.max_abs8, static_cast<long long>(ls),
            static_cast<long long>(le), d.psnr >= 60.0 && ls == le, "depth-first sort vs single (32-bit key) sort"});
+    }
+    {  // exact splits heavy tiles into slices (renderer.h): pixels whose transmittance drops below
+       // 1e-4 inside a later slice keep that slice's Gaussians behind the stop. At the paper's
+       // slice length (min_slice 0) most tiles of these views split; at the default floor of 2048
+       // few do at 1280x720.
+      catgs::RenderOptions whole = oe, fine = oe;
+      whole.speculation.task_splitting = false;
+      fine.speculation.min_slice_entries = 0;
+      catgs::cuda::CudaRenderer unsplit(dev, whole), split(dev, fine);
+      Image gw, gs;
+      unsplit.render(views[k], gw);
+      split.render(views[k], gs);
+      const Diff d = compare(gw, gs);
+      // The longest slice is shorter than the heaviest tile only where tiles were split.
+      const std::size_t longest = split.diagnostics().heaviest_tile_entries;
+      const std::size_t heaviest = unsplit.diagnostics().heaviest_tile_entries;
+      add({"exactsplit", name, view, "exact", d.psnr, d.max_abs, d.max_abs8,
+           static_cast<long long>(unsplit.last_stats().render_list_length),
+           static_cast<long long>(split.last_stats().render_list_length), d.psnr >= 50.0 && longest < heaviest,
+           "slices of the paper's length vs every tile whole: longest slice " + std::to_string(longest) +
+               ", heaviest tile " + std::to_string(heaviest)});
     }
     const Diff d = compare(gv, ge);
     const auto lv = gpu_v.last_stats().render_list_length, le = gpu_e.last_stats().render_list_length;

@@ -165,7 +165,9 @@ TEST(TaskSplitting, SliceLengthFloor) {
 TEST(TaskSplitting, SplitAndUnsplitAgree) {
   auto m = scene(test::bundled_scene());
   const Trace t = biker_orbit(*m, 10.0f, 0.0, 320, 240);
-  cpu::CpuRenderer r(m, {Pipeline::exact, {}, {}});
+  RenderOptions unsplit{Pipeline::exact, {}, {}};
+  unsplit.speculation.task_splitting = false;  // exact frames split heavy tiles by default
+  cpu::CpuRenderer r(m, unsplit);
   Image reference;
   r.render(t[0].camera, reference);
   const auto grid = cpu::TileGrid::of(320, 240);
