@@ -31,10 +31,11 @@ struct TrailMargins {
 // than `min_served` sub-frames did not repay its speculative key frame, so the next `frames`
 // frames render in full (W = 0) before speculating again; each poor group in a row doubles that,
 // up to 8x; a group that repays resets it. frames = 0: no backoff. (RESULTS.md, "Speculation
-// backoff": about 2 sub-frames repay a key frame on the city.)
+// backoff" and "Issue 19, fourth round": 4 and 4 were faster than 2 and 2 on five of the six
+// real-path rows and equal on the sixth, once frames without a window cost what exact frames do.)
 struct SpeculationBackoff {
-  int frames = 2;
-  int min_served = 2;
+  int frames = 4;
+  int min_served = 4;
 };
 
 struct SpeculationParams {
