@@ -47,13 +47,7 @@ glm::dvec3 eigenvector_for(const glm::dmat3& a, double lambda) {
   return glm::dot(best, best) > 0.0 ? glm::normalize(best) : glm::dvec3(0.0, -1.0, 0.0);
 }
 
-float median(std::vector<float> v) {
-  if (v.empty()) return 0.0f;
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
-
+// The q-quantile of v (the element at rank q (n - 1), rounded down). v must not be empty.
 float percentile(std::vector<float> v, double q) {
   const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(v.size() - 1));
   std::nth_element(v.begin(), v.begin() + k, v.end());
@@ -97,7 +91,8 @@ glm::vec3 fallback_centre(const std::vector<Camera>& cameras) {
   if (glm::length(mean_dir) < 1e-6f) return mean_pos;  // looking every way: the middle
   std::vector<float> spread;
   for (const Camera& c : cameras) spread.push_back(glm::distance(c.position(), mean_pos));
-  const float reach = median(spread) > 0.0f ? median(spread) : 1.0f;
+  const float median_spread = percentile(std::move(spread), 0.5);
+  const float reach = median_spread > 0.0f ? median_spread : 1.0f;
   return mean_pos + reach * glm::normalize(mean_dir);
 }
 
@@ -114,7 +109,7 @@ glm::vec3 density_mode(const GaussianModel& m) {
   for (int a = 0; a < 3; ++a) {
     std::vector<float> v(m.size());
     for (std::size_t i = 0; i < m.size(); ++i) v[i] = m.means[3 * i + a];
-    c[a] = median(std::move(v));
+    c[a] = percentile(std::move(v), 0.5);
   }
   for (int iteration = 0; iteration < 50; ++iteration) {
     const std::vector<float> d = distances_from(m, c);
@@ -135,7 +130,8 @@ glm::vec3 density_mode(const GaussianModel& m) {
   return c;
 }
 
-// dense_content's radius: grow by percentiles while the density inside stays >= 1/10 the core's.
+// dense_content's radius: grow by percentiles until the next 5% of the Gaussians lie in a sparse
+// shell (they need a ball 1.5 times as large) or the density inside falls below 1/100 the core's.
 float content_radius(std::vector<float> d, double* share) {
   std::sort(d.begin(), d.end());
   auto at = [&](double q) {
@@ -143,36 +139,47 @@ float content_radius(std::vector<float> d, double* share) {
   };
   const double core_density = 0.25 / std::pow(at(0.25), 3.0);
   double q = 0.25;
-  for (int step = 26; step <= 98; ++step) {
-    const double next = step / 100.0;
-    if (next / std::pow(at(next), 3.0) < 0.1 * core_density) break;
+  while (q < 0.975) {
+    if (at(std::min(q + 0.05, 0.98)) > 1.5f * at(q)) break;
+    const double next = q + 0.01;
+    if (next / std::pow(at(next), 3.0) < 0.01 * core_density) break;
     q = next;
   }
   *share = q;
   return at(q);
 }
 
+// Mean and covariance of the means within `radius` (distances `d`) and how many there are.
+struct BallMoments {
+  glm::dvec3 mean{0.0};
+  glm::dmat3 covariance{0.0};
+  std::size_t count = 0;
+};
+
+BallMoments ball_moments(const GaussianModel& m, const std::vector<float>& d, float radius) {
+  BallMoments b;
+  for (std::size_t i = 0; i < m.size(); ++i)
+    if (d[i] <= radius) {
+      b.mean += glm::dvec3(mean_at(m, i));
+      ++b.count;
+    }
+  if (b.count == 0) return b;
+  b.mean /= static_cast<double>(b.count);
+  for (std::size_t i = 0; i < m.size(); ++i)
+    if (d[i] <= radius) {
+      const glm::dvec3 e = glm::dvec3(mean_at(m, i)) - b.mean;
+      b.covariance += glm::outerProduct(e, e);
+    }
+  return b;
+}
+
 // dense_content's up: the smallest principal axis of a layer near the y axis, else -y.
-glm::vec3 content_up(const GaussianModel& m, const std::vector<float>& d, float radius, bool* from_content) {
-  glm::dvec3 mu(0.0);
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < m.size(); ++i)
-    if (d[i] <= radius) {
-      mu += glm::dvec3(mean_at(m, i));
-      ++n;
-    }
+glm::vec3 content_up(const BallMoments& ball, bool* from_content) {
   *from_content = false;
-  if (n < 10) return kMinusY;
-  mu /= static_cast<double>(n);
-  glm::dmat3 cov(0.0);
-  for (std::size_t i = 0; i < m.size(); ++i)
-    if (d[i] <= radius) {
-      const glm::dvec3 e = glm::dvec3(mean_at(m, i)) - mu;
-      cov += glm::outerProduct(e, e);
-    }
-  const glm::dvec3 eig = symmetric_eigenvalues(cov);
+  if (ball.count < 10) return kMinusY;
+  const glm::dvec3 eig = symmetric_eigenvalues(ball.covariance);
   if (!(eig[0] <= 0.5 * eig[1])) return kMinusY;  // not a layer: no vertical axis stands out
-  glm::vec3 axis(eigenvector_for(cov, eig[0]));
+  glm::vec3 axis(eigenvector_for(ball.covariance, eig[0]));
   if (glm::dot(axis, kMinusY) < 0.0f) axis = -axis;
   if (glm::dot(axis, kMinusY) < std::cos(glm::radians(45.0f))) return kMinusY;
   *from_content = true;
@@ -235,7 +242,7 @@ SceneFrame frame_from_cameras(const std::vector<Camera>& cameras, const std::str
   f.orbit_centre = axes_meet ? *meet : fallback_centre(cameras);
   std::vector<float> reach;
   for (const Camera& c : cameras) reach.push_back(glm::distance(c.position(), f.orbit_centre));
-  f.scene_scale = std::max(median(reach), 1e-6f);
+  f.scene_scale = std::max(percentile(std::move(reach), 0.5), 1e-6f);
 
   std::size_t best = 0;
   float best_cos = -2.0f;
@@ -254,7 +261,8 @@ SceneFrame frame_from_cameras(const std::vector<Camera>& cameras, const std::str
   view.vertical_fov_deg = std::clamp(cameras[best].vertical_fov_deg(), 20.0f, 100.0f);
   f.training_view = view;
   f.content_radius = f.scene_scale * std::tan(glm::radians(view.vertical_fov_deg / 2.0f));
-  f.source = "cameras " + file + ", camera " + std::to_string(best) + " of " + std::to_string(cameras.size()) +
+  f.source = "cameras " + file + ", camera " + std::to_string(best) + " (file order, from 0) of " +
+             std::to_string(cameras.size()) +
              (axes_meet ? ", orbit centre where the optical axes meet"
                         : ", orbit centre ahead of the cameras (their axes do not meet in front of them)");
   return f;
@@ -263,10 +271,12 @@ SceneFrame frame_from_cameras(const std::vector<Camera>& cameras, const std::str
 DenseContent dense_content(const GaussianModel& model) {
   if (model.size() == 0) throw std::logic_error("dense content of an empty Gaussian model");
   DenseContent c;
-  c.centre = density_mode(model);
-  const std::vector<float> d = distances_from(model, c.centre);
+  c.mode = density_mode(model);
+  const std::vector<float> d = distances_from(model, c.mode);
   c.radius = content_radius(d, &c.share);
-  c.up = content_up(model, d, c.radius, &c.up_from_content);
+  const BallMoments ball = ball_moments(model, d, c.radius);
+  c.centre = ball.count > 0 ? glm::vec3(ball.mean) : c.mode;
+  c.up = content_up(ball_moments(model, d, 1.5f * c.radius), &c.up_from_content);
   return c;
 }
 
@@ -278,7 +288,7 @@ SceneFrame frame_from_content(const GaussianModel& model) {
   f.content_radius = c.radius;
   std::vector<glm::vec3> inside;
   for (std::size_t i = 0; i < model.size(); ++i)
-    if (glm::distance(mean_at(model, i), c.centre) <= c.radius) inside.push_back(mean_at(model, i));
+    if (glm::distance(mean_at(model, i), c.mode) <= c.radius) inside.push_back(mean_at(model, i));
   const std::size_t stride = inside.size() / kMaxFramedPoints + 1;
   for (std::size_t i = 0; i < inside.size(); i += stride) f.content_points.push_back(inside[i]);
   f.scene_scale = glm::distance(first_view_pose(f, 16, 9).position, f.orbit_centre);
