@@ -102,6 +102,22 @@ bool in_front_of_most(const std::vector<Camera>& cameras, glm::vec3 p) {
   return 2 * in_front > cameras.size();
 }
 
+// The camera whose optical axis points most directly at `centre` (the first of equals).
+std::size_t most_central_camera(const std::vector<Camera>& cameras, glm::vec3 centre) {
+  std::size_t best = 0;
+  float best_cos = -2.0f;
+  for (std::size_t k = 0; k < cameras.size(); ++k) {
+    const glm::vec3 to_centre = centre - cameras[k].position();
+    const float cos_angle =
+        glm::length(to_centre) > 0.0f ? glm::dot(glm::normalize(to_centre), camera_forward(cameras[k])) : 1.0f;
+    if (cos_angle > best_cos) {
+      best_cos = cos_angle;
+      best = k;
+    }
+  }
+  return best;
+}
+
 // The mean-shift density mode (dense_content's header): the opacity-weighted mean of the nearest
 // quarter of the Gaussians, repeated from the median until it stops moving.
 glm::vec3 density_mode(const GaussianModel& m) {
@@ -244,17 +260,7 @@ SceneFrame frame_from_cameras(const std::vector<Camera>& cameras, const std::str
   for (const Camera& c : cameras) reach.push_back(glm::distance(c.position(), f.orbit_centre));
   f.scene_scale = std::max(percentile(std::move(reach), 0.5), 1e-6f);
 
-  std::size_t best = 0;
-  float best_cos = -2.0f;
-  for (std::size_t k = 0; k < cameras.size(); ++k) {
-    const glm::vec3 to_centre = f.orbit_centre - cameras[k].position();
-    const float cos_angle =
-        glm::length(to_centre) > 0.0f ? glm::dot(glm::normalize(to_centre), camera_forward(cameras[k])) : 1.0f;
-    if (cos_angle > best_cos) {
-      best_cos = cos_angle;
-      best = k;
-    }
-  }
+  const std::size_t best = most_central_camera(cameras, f.orbit_centre);
   CameraPose view;
   view.position = cameras[best].position();
   view.orientation = cameras[best].orientation();
