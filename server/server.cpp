@@ -7,7 +7,7 @@
 #include "encode/encoder.h"
 #include "session/message_validation.h"
 #include "scene/ply_io.h"
-#include "session/initial_pose.h"
+#include "session/first_view.h"
 
 namespace catgs::server {
 
@@ -98,6 +98,8 @@ void Server::load_model() {
   model_ = std::make_shared<const GaussianModel>(load_scene(options_.scene));
   std::cout << "scene: " << options_.scene << " (" << model_->name << "), " << model_->size()
             << " Gaussians, SH degree " << model_->sh_degree << ", loaded in " << ms_since(t0) << " ms\n";
+  // A bad --cameras file stops the start here; a bad discovered one only warns.
+  frame_ = choose_scene_frame(*model_, options_.scene, options_.cameras, std::cout);
 }
 
 void Server::resolve_renderer() {
@@ -128,8 +130,8 @@ void Server::resolve_encoder() {
 
 void Server::build_sessions() {
   shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *transport_, metrics_, options_, model_,
-                                                             model_->bounds(), first_view_bounds(*model_),
-                                                             render_options_, renderer_kind_, encoder_kind_});
+                                                             model_->bounds(), frame_, render_options_, renderer_kind_,
+                                                             encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
 }
 

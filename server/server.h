@@ -40,6 +40,7 @@
 #include "scene/gaussian_model.h"
 #include "server_metrics.h"
 #include "server_options.h"
+#include "session/first_view.h"
 #include "session/session.h"
 #include "session/session_manager.h"
 #include "transport/transport.h"
@@ -106,6 +107,7 @@ class Server {
   const ServerOptions& options_;
   ServerMetrics metrics_;
   std::shared_ptr<const GaussianModel> model_;
+  SceneFrame frame_;  // first view, orbit centre, up, scale (load_model)
   RenderOptions render_options_;
   std::string renderer_kind_;  // "cpu" or "cuda"
   std::string encoder_kind_;   // "x264" or "nvenc"

@@ -39,6 +39,10 @@ void parse_size(const std::string& name, const std::string& v, int& width, int& 
 std::string server_usage() {
   return "usage: catgs-server [options]\n"
          "  --scene FILE          scene PLY (default: assets/scenes/biker.compressed.ply)\n"
+         "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
+         "                        orbit centre, up and speeds come from them (default: a\n"
+         "                        cameras.json beside the scene or in its INRIA model folder, else\n"
+         "                        the scene's dense content)\n"
          "  --port N              TCP port (default 8080; 0 = any free port)\n"
          "  --bind ADDR           listen address (default 0.0.0.0)\n"
          "  --renderer K          cpu | cuda | auto (default auto)\n"
@@ -87,6 +91,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     const std::string v = argv[++i];
     if (a == "--scene")
       out.scene = v;
+    else if (a == "--cameras")
+      out.cameras = v;
     else if (a == "--port")
       out.port = parse_int(a, v, 0, 65535);
     else if (a == "--bind")

@@ -8,6 +8,7 @@ namespace catgs::server {
 // Everything the server is configured with. Defaults match `catgs-server` with no arguments.
 struct ServerOptions {
   std::string scene;               // scene file (INRIA or compressed PLY)
+  std::string cameras;             // INRIA cameras.json of the scene's training views; "" = look beside it
   int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
   std::string bind = "0.0.0.0";    // interface address to listen on
   std::string renderer = "auto";   // "cpu" | "cuda" | "auto"

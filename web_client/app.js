@@ -197,7 +197,7 @@ function onWelcome(w) {
   overlay.setSession(w);
   // Keep the user's view across a reconnect to the same scene; start fresh otherwise.
   if (!state.camera || state.camera.sceneName !== w.scene_name) {
-    state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+    state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds, w);
     state.camera.sceneName = w.scene_name;
     if (linkView && linkView.pose && !state.linkApplied) {
       state.linkApplied = true;
@@ -310,7 +310,7 @@ function resetView() {
   stopPlayback();
   const name = state.camera ? state.camera.sceneName : w.scene_name;
   const version = state.camera ? state.camera.version + 1 : 0;
-  state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds, w);
   state.camera.sceneName = name;
   state.camera.version = version; // a new version: the loop sends it
   history.replaceState(null, '', withoutView(location.href));

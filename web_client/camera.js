@@ -115,13 +115,19 @@ export class OrbitCamera {
     this.rotateSpeed = 0.005; // radians per CSS pixel of drag
   }
 
-  // Start as the server suggests: its initial pose; orbit around the bounds' centre; up is the
-  // initial camera's -y axis (3DGS scenes are usually y-down, so world +y is not up).
-  static fromWelcome(initialPose, bounds) {
+  // Start as the server suggests: its initial pose, and the frame of Welcome's orbit_centre, up
+  // and scene_scale (`frame`: any object with those fields, such as the Welcome itself): orbit
+  // around the centre with up vertical; speeds scale with the scene scale (a typical viewing
+  // distance). Servers without those fields (scene_scale 0): orbit around the bounds' centre, up
+  // the initial camera's -y axis (3DGS scenes are usually y-down, so world +y is not up), scale
+  // the bounds' diagonal.
+  static fromWelcome(initialPose, bounds, frame) {
     const position = vec3Of(initialPose && initialPose.position, [0, 0, 0]);
     const orientation = qnorm(quatOf(initialPose && initialPose.orientation));
     let fovDeg = initialPose && initialPose.vertical_fov_deg;
     if (!(fovDeg > 1 && fovDeg < 170)) fovDeg = 60;
+    const fromFrame = frameOf(frame);
+    if (fromFrame) return new OrbitCamera({ position, orientation, fovDeg, ...fromFrame });
     const up = vscale(cameraDown(orientation), -1);
     let target = null;
     let sceneScale = 0;
@@ -245,6 +251,15 @@ function vec3Of(v, fallback) {
   if (!v) return fallback;
   const a = [Number(v.x || 0), Number(v.y || 0), Number(v.z || 0)];
   return a.every(Number.isFinite) ? a : fallback;
+}
+
+// Welcome's orbit_centre, up and scene_scale as {target, up, sceneScale}, or null when the
+// server sent none (older servers) or they are unusable (no positive finite scale, zero up).
+function frameOf(frame) {
+  if (!frame || !(Number(frame.scene_scale) > 0) || !Number.isFinite(Number(frame.scene_scale))) return null;
+  const up = vec3Of(frame.up, null);
+  if (!up || !(vlen(up) > 0)) return null;
+  return { target: vec3Of(frame.orbit_centre, [0, 0, 0]), up, sceneScale: Number(frame.scene_scale) };
 }
 
 function quatOf(q) {

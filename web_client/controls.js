@@ -2,7 +2,7 @@
 //   drag: orbit around the target; right-drag or shift-drag: pan; wheel: zoom;
 //   one finger: orbit; two fingers: pinch zoom + pan;
 //   WASD / arrow keys: fly (W/S/Up/Down forward/back, A/D/Left/Right strafe), E/Q up/down,
-//   Shift flies faster.
+//   Shift flies faster. Up (E/Q, and the axis orbits turn about) is Welcome.up.
 
 const FLY_KEYS = new Set(['KeyW', 'KeyA', 'KeyS', 'KeyD', 'KeyQ', 'KeyE', 'ArrowUp', 'ArrowDown', 'ArrowLeft', 'ArrowRight']);
 
@@ -97,7 +97,9 @@ export class Controls {
     const forward = k('KeyW') + k('ArrowUp') - k('KeyS') - k('ArrowDown');
     const right = k('KeyD') + k('ArrowRight') - k('KeyA') - k('ArrowLeft');
     const up = k('KeyE') - k('KeyQ');
-    // A quarter of the scene's size per second crosses a room-sized capture in a few seconds.
+    // A quarter of the scene scale (Welcome.scene_scale: a typical viewing distance, such as the
+    // training cameras' distance from the orbit centre) per second: the subject is reached in
+    // about 4 s, or 1 s with Shift.
     const speed = cam.sceneScale * 0.25 * (this.shiftHeld ? 4 : 1);
     cam.fly(Math.min(dt, 0.1), Math.sign(forward), Math.sign(right), Math.sign(up), speed);
   }

@@ -9,7 +9,7 @@
 #include <random>
 
 #include "camera/camera.h"
-#include "session/initial_pose.h"
+#include "session/first_view.h"
 
 namespace catgs::server {
 
@@ -218,7 +218,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   w->set_scene_name(shared_.model->name);
   set_vec3(w->mutable_scene_bounds()->mutable_min(), shared_.bounds.min);
   set_vec3(w->mutable_scene_bounds()->mutable_max(), shared_.bounds.max);
-  const CameraPose start = initial_pose(shared_.framing_bounds, 60.0f, width_, height_);
+  const CameraPose start = first_view_pose(shared_.frame, width_, height_);
   pb::Pose* p = w->mutable_initial_pose();
   p->set_sequence(0);
   set_vec3(p->mutable_position(), start.position);
@@ -227,6 +227,9 @@ void Session::handle_hello(const pb::Hello& hello) {
   p->mutable_orientation()->set_y(start.orientation.y);
   p->mutable_orientation()->set_z(start.orientation.z);
   p->set_vertical_fov_deg(start.vertical_fov_deg);
+  set_vec3(w->mutable_orbit_centre(), shared_.frame.orbit_centre);
+  set_vec3(w->mutable_up(), shared_.frame.up);
+  w->set_scene_scale(shared_.frame.scene_scale);
   w->set_codec(pb::CODEC_H264);
   w->set_width(static_cast<std::uint32_t>(width_));
   w->set_height(static_cast<std::uint32_t>(height_));

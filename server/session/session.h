@@ -34,6 +34,7 @@
 #include "encode/encoder.h"
 #include "render/render_scheduler.h"
 #include "session/message_validation.h"
+#include "session/first_view.h"
 #include "server_metrics.h"
 #include "server_options.h"
 #include "transport/transport.h"
@@ -48,8 +49,8 @@ struct SessionShared {
   ServerMetrics& metrics;
   const ServerOptions& options;
   std::shared_ptr<const GaussianModel> model;
-  Bounds bounds;          // model bounds (Welcome.scene_bounds)
-  Bounds framing_bounds;  // robust bounds used for the initial pose
+  Bounds bounds;     // model bounds (Welcome.scene_bounds)
+  SceneFrame frame;  // the first view and the frame to navigate in (Welcome)
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
   std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)

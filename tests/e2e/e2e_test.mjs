@@ -196,6 +196,8 @@ async function run() {
   log(`welcome: scene=${welcome.scene_name} renderer=${welcome.renderer} encoder=${welcome.encoder} ` +
     `pipeline=${welcome.pipeline} ${welcome.width}x${welcome.height}`);
   check(welcome.renderer === 'cpu', `Welcome.renderer is cpu (${welcome.renderer})`);
+  check(welcome.scene_scale > 0 && welcome.up && Math.abs(Math.hypot(welcome.up.x, welcome.up.y, welcome.up.z) - 1) < 1e-5,
+    `Welcome carries the frame to navigate in (scale ${welcome.scene_scale}, up ${JSON.stringify(welcome.up)})`);
   const viewport = await page.evaluate(() => window.catgs.viewport);
   check(viewport.width === VIEW.width && viewport.height === VIEW.height, `Hello viewport ${viewport.width}x${viewport.height}`);
 

@@ -156,6 +156,8 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
             codec: 1, width: 160, height: 120,
             scene_bounds: { min: { x: -1, y: -1, z: -1 }, max: { x: 1, y: 1, z: 1 } },
             initial_pose: { position: { x: 0, y: 0, z: -4 }, orientation: { w: 1 }, vertical_fov_deg: 50 },
+            // Not the bounds' centre: the page must orbit around this one.
+            orbit_centre: { x: 0, y: 0, z: 1 }, up: { x: 0, y: -1, z: 0 }, scene_scale: 5,
           } });
         } else if (msg.body === 'key_frame_request') {
           next = 0; // the fixture's first access unit is its IDR

@@ -128,8 +128,9 @@ try {
     await page.mouse.up();
     await page.waitForTimeout(200);
     const afterDrag = await page.evaluate(() => window.catgs.lastPoseSent);
-    // The target sits 4 units ahead of the last setPose camera: (x, 0, 0) with x tiny.
-    const target = [before.position[0], 0, 0];
+    // The target sits 5 units ahead of the last setPose camera, as far as the Welcome's orbit
+    // centre from its initial pose (setPose keeps the distance): (x, 0, 1) with x tiny.
+    const target = [before.position[0], 0, 1];
     const dist = (p) => Math.hypot(p[0] - target[0], p[1] - target[1], p[2] - target[2]);
     check(afterDrag.sequence > before.sequence && afterDrag.orientation[0] < 0.9999 &&
       Math.abs(dist(afterDrag.position) - dist(before.position)) < 1e-6,
@@ -302,6 +303,21 @@ try {
       check(near(p.position, [0, 0, -4]) && near(p.orientation, [1, 0, 0, 0]) && p.fovDeg === 50, `reset (${how}): the initial view is sent (${JSON.stringify(p)})`);
     }
     check(!(await page.evaluate(() => location.search)).includes('pos='), 'reset: the view leaves the address');
+    // After a reset the page orbits around the Welcome's orbit centre (0, 0, 1), not the bounds'
+    // centre (0, 0, 0), about its up, keeping the horizon level.
+    {
+      await page.mouse.move(160, 120);
+      await page.mouse.down();
+      await page.mouse.move(220, 120, { steps: 5 });
+      await page.mouse.up();
+      await sleep(200);
+      const p = await page.evaluate(() => window.catgs.lastPoseSent);
+      const from = (c) => Math.hypot(p.position[0] - c[0], p.position[1] - c[1], p.position[2] - c[2]);
+      const [w, x, y, z] = p.orientation;
+      const rightY = 2 * (x * y + w * z); // y of the camera's x axis (rotated [1, 0, 0])
+      check(Math.abs(from([0, 0, 1]) - 5) < 1e-6 && Math.abs(from([0, 0, 0]) - 4) > 0.01 && Math.abs(rightY) < 1e-9,
+        `orbit: around the Welcome's orbit centre about its up (${JSON.stringify(p)})`);
+    }
     await page.keyboard.press('h');
     const help = await page.evaluate(() => ({ shown: !document.getElementById('helppanel').hidden, text: document.getElementById('helppanel').textContent }));
     check(help.shown && /Shift/.test(help.text) && /two fingers/.test(help.text) && /stats=1/.test(help.text), 'help: H opens the panel (keys, mouse, touch, Shift, ?stats=1)');

@@ -75,6 +75,32 @@ test('fromWelcome: initial pose, bounds centre target, up from the camera -y axi
   assert.equal(d.fovDeg, 60);
 });
 
+test('fromWelcome: the Welcome frame gives the orbit centre, up and scale', () => {
+  // A camera pitched 17 degrees down at the centre, like the server's content view; the world's
+  // up is -y, not the camera's -y axis.
+  const w = { ...welcome(), orbit_centre: { x: 0.5, y: 0, z: 0 }, up: { x: 0, y: -2, z: 0 }, scene_scale: 4 };
+  const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds, w);
+  close(c.position, [0, -1, -5]);
+  close(c.target, [0.5, 0, 0]);
+  close(c.up, [0, -1, 0]);
+  assert.equal(c.sceneScale, 4);
+  // Orbiting keeps the distance to the orbit centre and the horizon level (with the camera's -y
+  // as up, as before, every drag rolled the horizon of a pitched first view).
+  const d0 = cam.vlen(cam.vsub(c.position, c.target));
+  for (let i = 0; i < 10; i++) c.orbit(40, 0);
+  close([cam.vlen(cam.vsub(c.position, c.target))], [d0], 1e-9);
+  close([cam.vdot(cam.cameraRight(c.orientation), [0, -1, 0])], [0], 1e-9);
+  const legacy = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  for (let i = 0; i < 10; i++) legacy.orbit(40, 0);
+  assert.ok(Math.abs(cam.vdot(cam.cameraRight(legacy.orientation), [0, -1, 0])) > 0.05, 'the old up rolled');
+  // Fields an older server leaves out, or unusable ones: the bounds as before.
+  for (const frame of [{}, { scene_scale: 0 }, { scene_scale: 3, up: { x: 0, y: 0, z: 0 } }, { scene_scale: NaN, up: { y: -1 } }]) {
+    const o = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds, frame);
+    close(o.target, [0, 0, 0]);
+    close([o.sceneScale], [Math.sqrt(12)]);
+  }
+});
+
 test('orbit: drag right moves the camera left around the target at a fixed distance', () => {
   const w = welcome();
   const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
@@ -233,6 +259,15 @@ test('server messages decode (the .proto and its JSON descriptor agree)', () => 
     assert.equal(w.msg.renderer, 'cpu');
     assert.equal(w.msg.initial_pose.vertical_fov_deg, 60);
     assert.equal(p.codecName(w.msg.codec), 'CODEC_H264');
+    // Decoded Welcomes, with the frame and without (an older server): what the page starts from.
+    const framed = p.decodeServer(p.encodeServer({ welcome: { initial_pose: { vertical_fov_deg: 60 },
+      orbit_centre: { x: 1, y: 2, z: 3 }, up: { x: 0, y: -1, z: 0 }, scene_scale: 2.5 } })).msg;
+    assert.equal(framed.scene_scale, 2.5);
+    const c = cam.OrbitCamera.fromWelcome(framed.initial_pose, framed.scene_bounds, framed);
+    close(c.target, [1, 2, 3]);
+    close(c.up, [0, -1, 0]);
+    assert.equal(c.sceneScale, 2.5);
+    assert.equal(cam.OrbitCamera.fromWelcome(w.msg.initial_pose, w.msg.scene_bounds, w.msg).sceneScale, 2);
   }
 });
 

@@ -89,6 +89,9 @@ TEST(ServerIntegration, BikerOrbitFramesMatchCpuRender) {
   EXPECT_EQ(w.renderer(), "cpu");
   EXPECT_EQ(w.pipeline(), "exact");
   EXPECT_FALSE(w.session_id().empty());
+  // The frame to navigate in (first_view.h): a unit up and a positive scale.
+  EXPECT_GT(w.scene_scale(), 0.0);
+  EXPECT_NEAR(std::hypot(w.up().x(), w.up().y(), w.up().z()), 1.0, 1e-5);
 
   H264Decoder dec;
   cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});

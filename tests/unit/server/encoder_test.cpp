@@ -12,7 +12,7 @@
 #include "cpu/cpu_renderer.h"
 #include "encode/encoder.h"
 #include "loadgen/h264_decoder.h"
-#include "session/initial_pose.h"
+#include "session/first_view.h"
 #include "test_data.h"
 #include "colour/yuv420.h"
 
@@ -28,10 +28,10 @@ const int kQuietLibav = (av_log_set_level(AV_LOG_ERROR), 0);
 using namespace catgs;
 using namespace catgs::server;
 
-// The bundled biker seen from the server's initial pose.
+// The bundled biker seen from the server's first view.
 Image biker_picture(int w, int h) {
   auto model = test::cached_scene(test::bundled_scene());
-  const CameraPose p = initial_pose(first_view_bounds(*model), 60.0f, w, h);
+  const CameraPose p = first_view_pose(frame_from_content(*model), w, h);
   Image img;
   cpu::CpuRenderer(model, RenderOptions{})
       .render(Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, w, h), img);
@@ -141,7 +141,7 @@ TEST(Yuv420, PitchedTargetHoldsTheSameCodeValuesAsPacked) {
 // The server's path: the renderer writes the converted frame into the encoder's own planes.
 TEST(Encoder, RenderIntoInputTargetEqualsRenderThenConvert) {
   auto model = test::cached_scene(test::bundled_scene());
-  const CameraPose p = initial_pose(first_view_bounds(*model), 60.0f, 128, 96);
+  const CameraPose p = first_view_pose(frame_from_content(*model), 128, 96);
   const Camera cam = Camera::from_pose(p.position, p.orientation, p.vertical_fov_deg, 128, 96);
   cpu::CpuRenderer renderer(model, RenderOptions{});
   Image img;
