@@ -110,6 +110,19 @@ void Server::resolve_renderer() {
   renderer_kind_ = make_renderer(options_.renderer, model_, render_options_, &why)->name();
   std::cout << "renderer: " << renderer_kind_ << " (" << why << "), pipeline "
             << pipeline_name(render_options_.pipeline) << "\n";
+  resolve_gpus();
+}
+
+void Server::resolve_gpus() {
+  std::vector<int> devices;
+  if (renderer_kind_ == "cuda") devices = parse_gpus(options_.gpus, cuda_device_count());
+  gpus_ = std::make_unique<GpuAssignment>(devices);
+  for (int d : devices) {  // one copy of the scene per GPU, uploaded before the first session
+    const auto t0 = std::chrono::steady_clock::now();
+    resident_.push_back(make_renderer("cuda", model_, render_options_, nullptr, d));
+    std::cout << "gpu " << d << ": scene uploaded in " << ms_since(t0) << " ms\n";
+  }
+  metrics_.set_gpus(devices, [g = gpus_.get()] { return g->sessions(); });
 }
 
 void Server::resolve_encoder() {
@@ -129,9 +142,9 @@ void Server::resolve_encoder() {
 }
 
 void Server::build_sessions() {
-  shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *transport_, metrics_, options_, model_,
-                                                             model_->bounds(), frame_, render_options_, renderer_kind_,
-                                                             encoder_kind_});
+  shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, options_,
+                                                             model_, model_->bounds(), frame_, render_options_,
+                                                             renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
 }
 
@@ -145,14 +158,18 @@ void Server::catch_signals() {
 void Server::start_pools() {
   work_.emplace(io_.get_executor());
   for (int i = 0; i < options_.threads; ++i) workers_.emplace_back([this] { io_.run(); });
-  renders_.start(RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads),
-                 options_.max_pixels_in_flight);
+  int lanes = RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads);
+  if (options_.render_lanes == 0 && !gpus_->devices().empty())  // the CUDA default is per GPU
+    lanes *= static_cast<int>(gpus_->devices().size());
+  renders_.start(lanes, options_.max_pixels_in_flight);
 }
 
 void Server::print_listening() const {
   std::cout << "web root: " << options_.web_root << "\n"
             << "sessions: at most " << options_.max_sessions << ", " << options_.threads << " worker threads, "
-            << renders_.lanes() << " render lanes\n"
+            << renders_.lanes() << " render lanes"
+            << (gpus_->devices().empty() ? std::string() : ", " + std::to_string(gpus_->devices().size()) + " GPU(s)")
+            << "\n"
             << "listening on http://127.0.0.1:" << transport_->port() << "/ (WebSocket "
             << "catgs.v1 at ws://127.0.0.1:" << transport_->port() << "/ws)" << std::endl;
 }

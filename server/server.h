@@ -87,6 +87,8 @@ class Server {
   // Start-up, in this order.
   void load_model();
   void resolve_renderer();
+  // --gpus: the GPUs of the CUDA renderer and a resident scene copy on each (none on the CPU).
+  void resolve_gpus();
   void resolve_encoder();
   void build_sessions();
   void catch_signals();
@@ -111,6 +113,11 @@ class Server {
   RenderOptions render_options_;
   std::string renderer_kind_;  // "cpu" or "cuda"
   std::string encoder_kind_;   // "x264" or "nvenc"
+  // The GPUs sessions render on (--gpus; none with the CPU renderer), and a renderer per GPU held
+  // for the server's life so each GPU keeps its copy of the scene between sessions. Declared
+  // before io_: sessions, which io_'s handlers may hold to the end, use both.
+  std::unique_ptr<GpuAssignment> gpus_;
+  std::vector<std::unique_ptr<Renderer>> resident_;
   // Declared before everything that holds sessions: strands and timers live in it, and queued
   // handlers hold sessions, so it must outlive them.
   boost::asio::io_context io_;

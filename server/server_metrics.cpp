@@ -96,7 +96,29 @@ std::string ServerMetrics::prometheus_text() const {
   pose_to_frame_seconds.write(o, "catgs_pose_to_frame_seconds");
   head("catgs_session_fps", "histogram", "Frames per second of each session over each Stats interval with frames.");
   session_fps.write(o, "catgs_session_fps");
+  if (!gpu_devices_.empty()) {
+    const std::vector<std::int64_t> sessions = gpu_sessions_ ? gpu_sessions_() : std::vector<std::int64_t>{};
+    head("catgs_gpu_sessions", "gauge", "Open sessions rendering on each GPU (--gpus).");
+    for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+      o << "catgs_gpu_sessions{gpu=\"" << gpu_devices_[k] << "\"} " << (k < sessions.size() ? sessions[k] : 0) << '\n';
+    head("catgs_gpu_render_seconds", "histogram", "Render time per frame on each GPU (--gpus).");
+    for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+      gpu_render_seconds_[k]->write(o, "catgs_gpu_render_seconds", "gpu=\"" + std::to_string(gpu_devices_[k]) + "\"");
+  }
   return o.str();
+}
+
+void ServerMetrics::set_gpus(std::vector<int> devices, std::function<std::vector<std::int64_t>()> sessions) {
+  gpu_devices_ = std::move(devices);
+  gpu_sessions_ = std::move(sessions);
+  gpu_render_seconds_.clear();
+  for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+    gpu_render_seconds_.push_back(std::make_unique<Histogram>(Histogram::stage_seconds()));
+}
+
+void ServerMetrics::observe_gpu_render(int device, double seconds) {
+  for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+    if (gpu_devices_[k] == device) return gpu_render_seconds_[k]->observe(seconds);
 }
 
 }  // namespace catgs::server

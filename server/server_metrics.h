@@ -14,9 +14,13 @@
 //                              its frame shown, on the client's clock
 //   catgs_session_fps          each session's frame rate over each Stats interval (about 1 s)
 //                              that had frames (a histogram: no per-session label to grow)
+//   catgs_gpu_sessions{gpu}, catgs_gpu_render_seconds{gpu}   per GPU of --gpus (CUDA renderer):
+//                              sessions rendering there, and their render times
 #pragma once
 
 #include <atomic>
+#include <functional>
+#include <memory>
 #include <cstdint>
 #include <mutex>
 #include <ostream>
@@ -80,8 +84,19 @@ struct ServerMetrics {
   Histogram pose_to_frame_seconds{Histogram::stage_seconds()};
   Histogram session_fps{{1, 5, 10, 15, 20, 25, 30, 45, 60, 90, 120, 240}};
 
+  // Per GPU (set once at start-up, before any session, by set_gpus): the CUDA devices, their
+  // session counts (GpuAssignment::sessions, read at exposition) and render times.
+  void set_gpus(std::vector<int> devices, std::function<std::vector<std::int64_t>()> sessions);
+  // Adds a render time on `device` (one of set_gpus' devices; others are ignored). Thread-safe.
+  void observe_gpu_render(int device, double seconds);
+
   // The Prometheus exposition text.
   std::string prometheus_text() const;
+
+ private:
+  std::vector<int> gpu_devices_;
+  std::function<std::vector<std::int64_t>()> gpu_sessions_;
+  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;  // by index in gpu_devices_
 };
 
 }  // namespace catgs::server

@@ -46,6 +46,9 @@ std::string server_usage() {
          "  --port N              TCP port (default 8080; 0 = any free port)\n"
          "  --bind ADDR           listen address (default 0.0.0.0)\n"
          "  --renderer K          cpu | cuda | auto (default auto)\n"
+         "  --gpus LIST           CUDA renderer: the GPUs sessions spread over, all or device\n"
+         "                        numbers such as 0,1 (default all): one scene copy and 4 render\n"
+         "                        lanes per GPU, each session on the GPU with the fewest sessions\n"
          "  --encoder K           nvenc | x264 | auto (default auto: NVENC if usable, else x264)\n"
          "  --pipeline P          vanilla | exact | catgs (default exact)\n"
          "  --speculation LIST    catgs settings, e.g. window=2,backoff=0 (see below)\n"
@@ -55,8 +58,8 @@ std::string server_usage() {
          "  --token T             require Hello.token == T\n"
          "  --threads N           worker threads: sessions, encoding (default 0: the number of\n"
          "                        cores, at least 4)\n"
-         "  --render-lanes N      renders at once, served first come first served (default:\n"
-         "                        4 with the CUDA renderer, --threads with the CPU one)\n"
+         "  --render-lanes N      renders at once, sessions in turn (default: 4 per GPU with the\n"
+         "                        CUDA renderer, --threads with the CPU one)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
          "  --crf N               x264 quality, 0..51 (default 23)\n"
          "  --encoder-threads N   threads per session's encoder, 0 = the library's choice\n"
@@ -99,6 +102,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.bind = v;
     else if (a == "--renderer")
       out.renderer = v;
+    else if (a == "--gpus")
+      out.gpus = v;
     else if (a == "--encoder")
       out.encoder = v;
     else if (a == "--pipeline")

@@ -15,6 +15,7 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
     : scene_(std::move(scene)), state_(std::make_unique<State>()), cuda_options_(cuda_options) {
   if (!scene_) throw std::invalid_argument("CudaRenderer: null scene");
   set_options(options);
+  const DeviceGuard on(scene_->device());  // the stream, events and buffers live there
   State& s = *state_;
   CATGS_CUDA(cudaStreamCreateWithFlags(&s.stream, cudaStreamNonBlocking));
   for (cudaEvent_t& e : s.events) CATGS_CUDA(cudaEventCreate(&e));
@@ -30,7 +31,13 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   CATGS_CUDA(cudaEventCreate(&s.converted));
 }
 
-CudaRenderer::~CudaRenderer() = default;
+CudaRenderer::~CudaRenderer() {
+  try {
+    const DeviceGuard on(scene_->device());
+    state_.reset();
+  } catch (...) {  // destructors must not throw; the buffers are freed on whatever device is current
+  }
+}
 
 void CudaRenderer::set_options(const RenderOptions& options) {
   state_->planner.set_params(options.speculation);  // validates; closes the open group
@@ -39,6 +46,10 @@ void CudaRenderer::set_options(const RenderOptions& options) {
 
 void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
   if (!scene) throw std::invalid_argument("CudaRenderer::set_scene: null scene");
+  if (scene->device() != scene_->device())
+    throw std::invalid_argument("CudaRenderer::set_scene: the scene is on device " + std::to_string(scene->device()) +
+                                ", this renderer's buffers on device " + std::to_string(scene_->device()));
+  const DeviceGuard on(scene_->device());
   // The previous frame may still read the old scene: finish it before letting go.
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
   scene_ = std::move(scene);
@@ -196,11 +207,13 @@ uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries
 }
 
 DeviceFrame CudaRenderer::render_device(const Camera& camera) {
+  const DeviceGuard on(scene_->device());
   if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, state_->planner.advance_clock());
   return render_full(camera);
 }
 
 DeviceFrame CudaRenderer::render_device_at(const Camera& camera, double time_s) {
+  const DeviceGuard on(scene_->device());
   if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, time_s);
   return render_full(camera);
 }
@@ -267,6 +280,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
 
 const FrameStats& CudaRenderer::last_stats() const {
   if (stats_ready_) return stats_;
+  const DeviceGuard on(scene_->device());
   const State& s = *state_;
   CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
   auto ms = [&](Event a, Event b) {
@@ -293,6 +307,7 @@ const FrameStats& CudaRenderer::last_stats() const {
 }
 
 CudaRenderer::Diagnostics CudaRenderer::diagnostics() const {
+  const DeviceGuard on(scene_->device());
   const State& s = *state_;
   Diagnostics d;
   d.buffer_bytes = s.bytes();
@@ -321,14 +336,19 @@ void CudaRenderer::download(const DeviceFrame& f, Image& out) {
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
 }
 
-void CudaRenderer::render(const Camera& camera, Image& out) { download(render_device(camera), out); }
+void CudaRenderer::render(const Camera& camera, Image& out) {
+  const DeviceGuard on(scene_->device());
+  download(render_device(camera), out);
+}
 
 void CudaRenderer::render_at(const Camera& camera, double time_s, Image& out) {
+  const DeviceGuard on(scene_->device());
   download(render_device_at(camera, time_s), out);
 }
 
 double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
   check_yuv420_target("render_yuv420_at", out, camera.width, camera.height);
+  const DeviceGuard on(scene_->device());
   const DeviceFrame f = render_device_at(camera, time_s);
   State& s = *state_;
   const int w = f.width, h = f.height;
@@ -365,7 +385,7 @@ double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const
   return ms;
 }
 
-std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model) {
+std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model, int device) {
   if (!model) throw std::invalid_argument("shared_device_scene: null model");
   // The model is held weakly too: a new model at a freed one's address is not taken for it.
   struct Entry {
@@ -373,21 +393,22 @@ std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<con
     std::weak_ptr<const DeviceScene> scene;
   };
   static std::mutex mutex;
-  static std::map<const GaussianModel*, Entry> uploaded;
+  static std::map<std::pair<const GaussianModel*, int>, Entry> uploaded;
   const std::lock_guard<std::mutex> lock(mutex);
   for (auto it = uploaded.begin(); it != uploaded.end();)  // forget what nobody holds
     it = it->second.model.expired() || it->second.scene.expired() ? uploaded.erase(it) : std::next(it);
-  const auto found = uploaded.find(model.get());
+  const auto found = uploaded.find({model.get(), device});
   if (found != uploaded.end())
     if (auto scene = found->second.scene.lock()) return scene;
-  auto scene = DeviceScene::upload(*model);
-  uploaded[model.get()] = {model, scene};
+  auto scene = DeviceScene::upload(*model, device);
+  uploaded[{model.get(), device}] = {model, scene};
   return scene;
 }
 
-std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options) {
+std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options,
+                                             int device) {
   if (!model) throw std::invalid_argument("make_cuda_renderer: null model");
-  return std::make_unique<CudaRenderer>(shared_device_scene(model), options);
+  return std::make_unique<CudaRenderer>(shared_device_scene(model, device), options);
 }
 
 }  // namespace catgs::cuda

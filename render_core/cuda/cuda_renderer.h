@@ -62,12 +62,33 @@ std::string device_description();
 // Device memory in use on the current device (total - free), bytes. Throws CudaError.
 std::size_t device_memory_used();
 
+// CUDA devices visible to this process (CUDA_VISIBLE_DEVICES applies), 0 when there is no
+// driver or device. Never throws.
+int device_count();
+
+// Makes `device` the calling thread's current CUDA device for the guard's lifetime, and restores
+// the previous one after. Every CudaRenderer and DeviceScene call that touches the GPU holds one,
+// so a thread may drive renderers on several devices (the server's render lanes do). Throws
+// CudaError for a device that does not exist.
+class DeviceGuard {
+ public:
+  explicit DeviceGuard(int device);
+  ~DeviceGuard();
+  DeviceGuard(const DeviceGuard&) = delete;
+  DeviceGuard& operator=(const DeviceGuard&) = delete;
+
+ private:
+  int previous_ = 0;
+  bool changed_ = false;
+};
+
 // One copy of a scene in device memory (layouts as GaussianModel). Immutable after upload.
 class DeviceScene {
  public:
-  // Uploads `model` (validated shapes). Throws std::length_error past 2^32 - 1 Gaussians,
-  // std::invalid_argument for inconsistent arrays, CudaError when device memory runs out.
-  static std::shared_ptr<const DeviceScene> upload(const GaussianModel& model);
+  // Uploads `model` (validated shapes) to CUDA device `device`. Throws std::length_error past
+  // 2^32 - 1 Gaussians, std::invalid_argument for inconsistent arrays, CudaError when device
+  // memory runs out or the device does not exist.
+  static std::shared_ptr<const DeviceScene> upload(const GaussianModel& model, int device = 0);
   ~DeviceScene();
   DeviceScene(const DeviceScene&) = delete;
   DeviceScene& operator=(const DeviceScene&) = delete;
@@ -76,6 +97,7 @@ class DeviceScene {
   std::size_t size() const { return n_; }
   int sh_degree() const { return sh_degree_; }
   std::size_t bytes() const { return bytes_; }  // device memory held
+  int device() const { return device_; }        // the CUDA device it lives on
   // Device pointers: means [N, 3], log_scales [N, 3], rotations [N, 4], opacity_logits [N] as
   // floats; sh [N, K, 3] as IEEE binary16 bits, rounded on upload (forward_model/sh_storage.h).
   const float* means() const { return means_; }
@@ -90,7 +112,7 @@ class DeviceScene {
   DeviceScene() = default;
   std::string name_;
   std::size_t n_ = 0, bytes_ = 0;
-  int sh_degree_ = 0;
+  int sh_degree_ = 0, device_ = 0;
   float* means_ = nullptr;
   float* log_scales_ = nullptr;
   float* rotations_ = nullptr;
@@ -128,6 +150,8 @@ struct CudaOptions {
 
 class CudaRenderer final : public Renderer {
  public:
+  // Renders on its scene's device (DeviceScene::device): every call below makes that device
+  // current for its duration (DeviceGuard), whatever the calling thread's device was.
   // Throws std::invalid_argument for a null scene or speculation parameters validate() refuses
   // (speculation_params.h), CudaError when the stream or events cannot be created.
   CudaRenderer(std::shared_ptr<const DeviceScene> scene, const RenderOptions& options,
@@ -198,12 +222,15 @@ class CudaRenderer final : public Renderer {
   }
 };
 
-// The DeviceScene of `model`: uploaded on the first call, then the same one for as long as any
-// renderer holds it (a process-wide cache keyed by the model's address, thread-safe), so many
-// sessions over one scene share one copy on the GPU. Throws as DeviceScene::upload.
-std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model);
+// The DeviceScene of `model` on `device`: uploaded on the first call, then the same one for as
+// long as any renderer holds it (a process-wide cache keyed by the model's address and the
+// device, thread-safe), so many sessions over one scene share one copy per GPU. Throws as
+// DeviceScene::upload.
+std::shared_ptr<const DeviceScene> shared_device_scene(const std::shared_ptr<const GaussianModel>& model,
+                                                       int device = 0);
 
-// A CudaRenderer over shared_device_scene(model) (renderer_factory.cpp).
-std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options);
+// A CudaRenderer over shared_device_scene(model, device) (renderer_factory.cpp).
+std::unique_ptr<Renderer> make_cuda_renderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options,
+                                             int device = 0);
 
 }  // namespace catgs::cuda

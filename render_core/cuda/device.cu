@@ -73,6 +73,27 @@ std::string device_description() {
   return buf;
 }
 
+int device_count() {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return 0;
+  }
+  return count;
+}
+
+DeviceGuard::DeviceGuard(int device) {
+  CATGS_CUDA(cudaGetDevice(&previous_));
+  if (device != previous_) {
+    CATGS_CUDA(cudaSetDevice(device));
+    changed_ = true;
+  }
+}
+
+DeviceGuard::~DeviceGuard() {
+  if (changed_) (void)cudaSetDevice(previous_);  // destructors must not throw
+}
+
 std::size_t device_memory_used() {
   std::size_t free_bytes = 0, total = 0;
   CATGS_CUDA(cudaMemGetInfo(&free_bytes, &total));

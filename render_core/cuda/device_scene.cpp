@@ -32,7 +32,7 @@ T* upload_array(const std::vector<T>& host, std::size_t* bytes_total, const char
 
 }  // namespace
 
-std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& model) {
+std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& model, int device) {
   const std::size_t n = model.size();
   if (n > std::numeric_limits<uint32_t>::max())
     throw std::length_error("scene '" + model.name + "' has " + std::to_string(n) +
@@ -42,7 +42,9 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
       model.log_scales.size() != 3 * n || model.rotations.size() != 4 * n || model.sh.size() != n * K * 3)
     throw std::invalid_argument("scene '" + model.name + "': array sizes disagree with " + std::to_string(n) +
                                 " Gaussians");
+  const DeviceGuard on(device);
   std::shared_ptr<DeviceScene> s(new DeviceScene());
+  s->device_ = device;
   s->name_ = model.name;
   s->n_ = n;
   s->sh_degree_ = model.sh_degree;
@@ -62,10 +64,14 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
 
 DeviceScene::~DeviceScene() {
   // Destructors must not throw: errors here (a dead context at exit) are ignored.
+  int previous = 0;
+  const bool switched =
+      cudaGetDevice(&previous) == cudaSuccess && previous != device_ && cudaSetDevice(device_) == cudaSuccess;
   for (float* p : {means_, log_scales_, rotations_, opacity_logits_})
     if (p) cudaFree(p);
   if (sh_) cudaFree(sh_);
   if (chunks_) cudaFree(chunks_);
+  if (switched) (void)cudaSetDevice(previous);
 }
 
 }  // namespace catgs::cuda

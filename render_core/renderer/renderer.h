@@ -129,9 +129,14 @@ class Renderer {
 };
 
 // Creates a renderer by name: "cpu", "cuda" or "auto" (CUDA if built and a device is usable, else
-// CPU; `why` receives a one-line reason). The model must outlive the renderer.
-// Throws std::runtime_error when "cuda" is asked for and unavailable.
+// CPU; `why` receives a one-line reason). The model must outlive the renderer. A CUDA renderer
+// renders on CUDA device `gpu` (the server spreads sessions over its GPUs); the CPU renderer
+// ignores it. Throws std::runtime_error when "cuda" is asked for and unavailable.
 std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr<const GaussianModel> model,
-                                        const RenderOptions& options, std::string* why = nullptr);
+                                        const RenderOptions& options, std::string* why = nullptr, int gpu = 0);
+
+// CUDA devices this process sees (CUDA_VISIBLE_DEVICES applies); 0 when built without CUDA or
+// without a driver or device. Never throws.
+int cuda_device_count();
 
 }  // namespace catgs

@@ -29,7 +29,7 @@ const char* pipeline_name(Pipeline p) {
 }
 
 std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr<const GaussianModel> model,
-                                        const RenderOptions& options, std::string* why) {
+                                        const RenderOptions& options, std::string* why, int gpu) {
   auto say = [why](const std::string& s) {
     if (why) *why = s;
   };
@@ -48,15 +48,24 @@ std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr
   std::string reason;
   if (cuda::device_usable(&reason)) {
     say("cuda renderer: " + reason);
-    return cuda::make_cuda_renderer(std::move(model), options);
+    return cuda::make_cuda_renderer(std::move(model), options, gpu);
   }
   if (kind == "cuda") throw std::runtime_error("cuda renderer unavailable: " + reason);
   say("cpu renderer (no usable CUDA device: " + reason + ")");
 #else
   if (kind == "cuda") throw std::runtime_error("cuda renderer unavailable: built without CUDA");
   say("cpu renderer (built without CUDA)");
+  (void)gpu;
 #endif
   return make_cpu();
+}
+
+int cuda_device_count() {
+#if CATGS_HAVE_CUDA
+  return cuda::device_count();
+#else
+  return 0;
+#endif
 }
 
 }  // namespace catgs

@@ -25,9 +25,10 @@ struct EncoderConfig {
                               // ceiling (capped CRF, VBV of a quarter second); 0: CRF alone
   int threads = 0;            // encoder threads, 0 = the library's choice
   // nvenc: pictures arrive as CUDA device planes (AV_PIX_FMT_CUDA frames of a hw_frames_ctx on
-  // the CUDA primary context of device 0, sw_format yuv420p; input_target() is then device
-  // memory). x264 ignores it (its input is always host memory).
+  // the CUDA primary context of device `cuda_device`, sw_format yuv420p; input_target() is then
+  // device memory). x264 ignores both (its input is always host memory).
   bool device_input = false;
+  int cuda_device = 0;  // the session's GPU (--gpus): where its renderer writes the planes
 };
 
 // One encoded access unit.

@@ -3,6 +3,8 @@
 #include <dlfcn.h>
 
 #include <climits>
+#include <map>
+#include <mutex>
 #include <string>
 #include <stdexcept>
 #include <string>
@@ -46,34 +48,44 @@ const EncoderConfig& require_nvenc_driver(const EncoderConfig& config) {
   return config;
 }
 
-// The CUDA runtime's context: the primary context of device 0, where the render core's device
-// pointers live. Retained once per process through the driver API (libcuda, loaded at run time).
-// FFmpeg's own "primary_ctx" option cannot be used: it refuses a primary context that is already
-// active with flags other than blocking sync, and the runtime's is active with its defaults. A
-// context handed to FFmpeg as cuda_ctx is never destroyed by it.
-CUcontext runtime_primary_context() {
-  static const CUcontext context = [] {
+// The CUDA runtime's context on `device`: that device's primary context, where the render
+// core's device pointers live (the render core renders a session on its GPU: --gpus). Retained
+// once per device and process through the driver API (libcuda, loaded at run time). FFmpeg's own
+// "primary_ctx" option cannot be used: it refuses a primary context that is already active with
+// flags other than blocking sync, and the runtime's is active with its defaults. A context
+// handed to FFmpeg as cuda_ctx is never destroyed by it.
+CUcontext runtime_primary_context(int device) {
+  using InitFn = int (*)(unsigned);
+  using DeviceGetFn = int (*)(int*, int);
+  using RetainFn = int (*)(CUcontext*, int);
+  struct Driver {
+    InitFn init;
+    DeviceGetFn device_get;
+    RetainFn retain;
+  };
+  static const Driver driver = [] {
     void* lib = dlopen("libcuda.so.1", RTLD_LAZY | RTLD_LOCAL);  // stays loaded
     if (!lib) throw std::runtime_error("nvenc: libcuda.so.1 cannot be loaded");
-    using InitFn = int (*)(unsigned);
-    using DeviceGetFn = int (*)(int*, int);
-    using RetainFn = int (*)(CUcontext*, int);
-    auto init = reinterpret_cast<InitFn>(dlsym(lib, "cuInit"));
-    auto device_get = reinterpret_cast<DeviceGetFn>(dlsym(lib, "cuDeviceGet"));
-    auto retain = reinterpret_cast<RetainFn>(dlsym(lib, "cuDevicePrimaryCtxRetain"));
-    if (!init || !device_get || !retain)
+    Driver d{reinterpret_cast<InitFn>(dlsym(lib, "cuInit")), reinterpret_cast<DeviceGetFn>(dlsym(lib, "cuDeviceGet")),
+             reinterpret_cast<RetainFn>(dlsym(lib, "cuDevicePrimaryCtxRetain"))};
+    if (!d.init || !d.device_get || !d.retain)
       throw std::runtime_error("nvenc: libcuda.so.1 lacks cuInit/cuDeviceGet/cuDevicePrimaryCtxRetain");
-    int device = 0;
-    CUcontext ctx = nullptr;
-    int err = init(0);
-    if (err == 0) err = device_get(&device, 0);
-    if (err == 0) err = retain(&ctx, device);
-    if (err != 0)
-      throw std::runtime_error("nvenc: cannot retain the CUDA primary context of device 0 (CUresult " +
-                               std::to_string(err) + ")");
-    return ctx;
+    return d;
   }();
-  return context;
+  static std::mutex mutex;
+  static std::map<int, CUcontext> retained;
+  const std::lock_guard<std::mutex> lock(mutex);
+  if (const auto it = retained.find(device); it != retained.end()) return it->second;
+  int handle = 0;
+  CUcontext ctx = nullptr;
+  int err = driver.init(0);
+  if (err == 0) err = driver.device_get(&handle, device);
+  if (err == 0) err = driver.retain(&ctx, handle);
+  if (err != 0)
+    throw std::runtime_error("nvenc: cannot retain the CUDA primary context of device " + std::to_string(device) +
+                             " (CUresult " + std::to_string(err) + ")");
+  retained[device] = ctx;
+  return ctx;
 }
 
 // Device input: a CUDA device context on the runtime's context (so the render core's device
@@ -84,7 +96,7 @@ void attach_cuda_frames(AVCodecContext* ctx, const EncoderConfig& config) {
   if (!device) throw std::runtime_error("nvenc: out of memory for the CUDA device context");
   auto* hw = reinterpret_cast<AVHWDeviceContext*>(device->data);
   try {
-    reinterpret_cast<AVCUDADeviceContext*>(hw->hwctx)->cuda_ctx = runtime_primary_context();
+    reinterpret_cast<AVCUDADeviceContext*>(hw->hwctx)->cuda_ctx = runtime_primary_context(config.cuda_device);
   } catch (...) {
     av_buffer_unref(&device);
     throw;

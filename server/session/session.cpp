@@ -4,6 +4,7 @@
 #include <boost/asio/dispatch.hpp>
 #include <boost/asio/post.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <random>
@@ -48,7 +49,10 @@ Session::Session(ConnId id, SessionShared& shared)
   shared_.metrics.connections_open++;
 }
 
-Session::~Session() { shared_.metrics.connections_open--; }
+Session::~Session() {
+  shared_.metrics.connections_open--;
+  if (gpu_ >= 0) shared_.gpus.release(gpu_);
+}
 
 void Session::post_message(MessageKind kind, std::string bytes) {
   // Arrival is stamped on the transport thread (the strand may wait for a busy pool thread).
@@ -203,7 +207,8 @@ void Session::handle_hello(const pb::Hello& hello) {
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
-  renderer_ = make_renderer(shared_.renderer_kind, shared_.model, shared_.render_options);
+  if (shared_.renderer_kind == "cuda") gpu_ = shared_.gpus.acquire();  // the least busy GPU
+  renderer_ = make_renderer(shared_.renderer_kind, shared_.model, shared_.render_options, nullptr, std::max(gpu_, 0));
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
   pipelined_ = !(shared_.encoder_kind == "nvenc" && renderer_->name() == "cuda");
   for (int i = 0; pipelined_ && i < 2; ++i) free_planes_.push_back(std::make_unique<Yuv420Image>());
@@ -368,6 +373,7 @@ void Session::ensure_encoder(const Job& job, bool& idr) {
   cfg.threads = shared_.options.encoder_threads;
   // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
   cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
+  cfg.cuda_device = std::max(gpu_, 0);
   // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
   bool fell_back = false;
   encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
@@ -464,6 +470,7 @@ void Session::on_job_done(JobResult result) {
   (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
   m.queue_seconds.observe(result.queue_ms / 1000.0);
   (result.render_key_frame ? m.render_key_seconds : m.render_sub_seconds).observe(result.render_ms / 1000.0);
+  if (gpu_ >= 0) m.observe_gpu_render(gpu_, result.render_ms / 1000.0);
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   m.speculation_window.observe(result.speculation_window);

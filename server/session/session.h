@@ -32,6 +32,7 @@
 #include "scene/gaussian_model.h"
 #include "renderer/renderer.h"
 #include "encode/encoder.h"
+#include "render/gpu_assignment.h"
 #include "render/render_scheduler.h"
 #include "session/message_validation.h"
 #include "session/first_view.h"
@@ -45,6 +46,7 @@ namespace catgs::server {
 struct SessionShared {
   boost::asio::io_context& io;  // the worker pool: strands, encode jobs, timers
   RenderScheduler& renders;     // render jobs, sessions in turn (render_scheduler.h)
+  GpuAssignment& gpus;          // which GPU a session renders on (CUDA renderer; gpu_assignment.h)
   Transport& transport;
   ServerMetrics& metrics;
   const ServerOptions& options;
@@ -181,6 +183,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
   // --- render job state (one job at a time) ---
   std::unique_ptr<Renderer> renderer_;
+  int gpu_ = -1;  // the CUDA device renderer_ renders on (shared_.gpus), -1: none (CPU renderer)
   std::unique_ptr<Encoder> encoder_;
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with (touched in jobs only)
 };
