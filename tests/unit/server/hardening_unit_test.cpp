@@ -1,0 +1,132 @@
+// Issue 22 (hardening), the pure pieces: token buckets and --rate-limits, the Origin policy, and
+// access tokens (file format, roles, the constant-time compare).
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+
+#include "session/access_tokens.h"
+#include "session/rate_limit.h"
+#include "transport/origin_policy.h"
+
+namespace {
+
+using namespace catgs::server;
+using Clock = std::chrono::steady_clock;
+
+TEST(RateLimit, BucketAllowsTheBurstThenTheRate) {
+  const auto t0 = Clock::now();
+  TokenBucket b(RateSpec{2, 3}, t0);
+  EXPECT_TRUE(b.take(t0));
+  EXPECT_TRUE(b.take(t0));
+  EXPECT_TRUE(b.take(t0));
+  EXPECT_FALSE(b.take(t0)) << "past the burst";
+  EXPECT_EQ(b.wait_ms(t0), 500u) << "one token at 2 a second";
+  EXPECT_FALSE(b.take(t0 + std::chrono::milliseconds(400)));
+  EXPECT_TRUE(b.take(t0 + std::chrono::milliseconds(600)));
+  // Refill stops at the burst however long it was idle.
+  const auto later = t0 + std::chrono::hours(1);
+  EXPECT_TRUE(b.full(later));
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(b.take(later));
+  EXPECT_FALSE(b.take(later));
+}
+
+TEST(RateLimit, OffMeansNoLimit) {
+  const auto t0 = Clock::now();
+  TokenBucket b(RateSpec{}, t0);
+  for (int i = 0; i < 1000; ++i) ASSERT_TRUE(b.take(t0));
+  EXPECT_EQ(b.wait_ms(t0), 0u);
+}
+
+TEST(RateLimit, ParsesTheFlag) {
+  RateLimitSettings s;
+  apply_rate_limits(s, "ping=2/4,hello=off,key_frame=0.5/1");
+  EXPECT_EQ(s.ping.per_second, 2);
+  EXPECT_EQ(s.ping.burst, 4);
+  EXPECT_FALSE(s.hello.enabled());
+  EXPECT_EQ(s.key_frame.per_second, 0.5);
+  EXPECT_EQ(s.resize.per_second, RateLimitSettings{}.resize.per_second) << "untouched";
+  for (const char* bad : {"ping=2", "ping=x/4", "ping=2/0.5", "nope=1/1", "ping", "ping=-1/3", "ping=1/3x"})
+    EXPECT_THROW(apply_rate_limits(s, bad), std::invalid_argument) << bad;
+}
+
+TEST(RateLimit, PeerLimiterKeepsAddressesApart) {
+  RateLimitSettings s;
+  s.hello = {0.001, 2};
+  s.auth = {0.001, 1};
+  PeerLimiter p(s);
+  std::uint32_t retry = 0;
+  EXPECT_TRUE(p.take_hello("10.0.0.1", retry));
+  EXPECT_TRUE(p.take_hello("10.0.0.1", retry));
+  EXPECT_FALSE(p.take_hello("10.0.0.1", retry));
+  EXPECT_GT(retry, 0u);
+  EXPECT_TRUE(p.take_hello("10.0.0.2", retry)) << "another address has its own bucket";
+  EXPECT_TRUE(p.may_try_token("10.0.0.1", retry));
+  EXPECT_TRUE(p.may_try_token("10.0.0.1", retry)) << "asking takes nothing";
+  p.token_failed("10.0.0.1");
+  EXPECT_FALSE(p.may_try_token("10.0.0.1", retry));
+  EXPECT_TRUE(p.may_try_token("10.0.0.2", retry));
+}
+
+TEST(OriginPolicy, OwnOriginLocalhostListedAndNoOrigin) {
+  const OriginPolicy p(parse_origins("https://App.example/, http://b.example:8080"));
+  EXPECT_TRUE(p.allows("", "stream.example")) << "no Origin: not a browser";
+  EXPECT_TRUE(p.allows("https://stream.example", "stream.example"));
+  EXPECT_TRUE(p.allows("http://stream.example:8080", "Stream.Example:8080"));
+  EXPECT_FALSE(p.allows("http://stream.example:9090", "stream.example:8080")) << "another port";
+  EXPECT_TRUE(p.allows("http://localhost:5173", "stream.example"));
+  EXPECT_TRUE(p.allows("http://127.0.0.1", "stream.example"));
+  EXPECT_TRUE(p.allows("http://[::1]:3000", "stream.example"));
+  EXPECT_TRUE(p.allows("https://app.example", "stream.example"));
+  EXPECT_TRUE(p.allows("http://b.example:8080", "stream.example"));
+  EXPECT_FALSE(p.allows("http://b.example", "stream.example")) << "listed with a port";
+  EXPECT_FALSE(p.allows("https://evil.example", "stream.example"));
+  EXPECT_FALSE(p.allows("https://localhost.evil.example", "stream.example"));
+  EXPECT_FALSE(p.allows("null", "stream.example"));
+  EXPECT_FALSE(p.allows("file://", "stream.example"));
+  EXPECT_FALSE(p.allows("https://user@stream.example", "stream.example"));
+  EXPECT_TRUE(OriginPolicy(parse_origins("*")).allows("https://evil.example", "stream.example"));
+  EXPECT_THROW(parse_origins("app.example"), std::invalid_argument);
+  EXPECT_THROW(parse_origins("ftp://app.example"), std::invalid_argument);
+  EXPECT_THROW(parse_origins("https://app.example/path"), std::invalid_argument);
+}
+
+TEST(AccessTokens, ConstantTimeEqual) {
+  EXPECT_TRUE(constant_time_equal("s3cret", "s3cret"));
+  EXPECT_FALSE(constant_time_equal("s3cres", "s3cret"));
+  EXPECT_FALSE(constant_time_equal("s3cret", "s3cret2"));
+  EXPECT_FALSE(constant_time_equal("s3cret2", "s3cret"));
+  EXPECT_FALSE(constant_time_equal("s3crets3cret", "s3cret")) << "a repeat of the secret";
+  EXPECT_FALSE(constant_time_equal("", "s3cret"));
+  EXPECT_TRUE(constant_time_equal("", ""));
+}
+
+TEST(AccessTokens, FileRolesAndRefusals) {
+  char path[] = "/tmp/catgs-unit-tokens-XXXXXX";
+  const int fd = mkstemp(path);
+  ASSERT_GE(fd, 0);
+  close(fd);
+  auto write = [&](const char* text) { std::ofstream(path, std::ios::trunc) << text; };
+  write("# comment\n\nviewer v1\nadmin a1\r\nbare\n");
+  AccessTokens t;
+  t.add_file(path);
+  EXPECT_EQ(t.size(), 3u);
+  EXPECT_EQ(t.role_of("v1"), Role::viewer);
+  EXPECT_EQ(t.role_of("a1"), Role::admin);
+  EXPECT_EQ(t.role_of("bare"), Role::admin) << "a bare token does everything, as --token did";
+  EXPECT_EQ(t.role_of("v"), Role::none);
+  EXPECT_EQ(t.role_of(""), Role::none);
+  for (const char* bad : {"guest tok\n", "viewer a b\n", "# only a comment\n"}) {
+    write(bad);
+    AccessTokens u;
+    EXPECT_THROW(u.add_file(path), std::invalid_argument) << bad;
+  }
+  std::remove(path);
+  AccessTokens u;
+  EXPECT_THROW(u.add_file(path), std::invalid_argument) << "missing file";
+  EXPECT_THROW(u.add("", Role::viewer), std::invalid_argument);
+}
+
+}  // namespace
