@@ -277,6 +277,7 @@ function onMessage(kind, msg) {
       break;
     case 'stats':
       overlay.setServerStats(msg);
+      keepAlive(); // message events still run when a hidden tab's timers are throttled
       break;
     case 'error':
       // Shown when the connection closes, with what happens next (onClose).
@@ -289,6 +290,18 @@ function onMessage(kind, msg) {
     default:
       break;
   }
+}
+
+// A Ping every 2 s at most: the round-trip time for the overlay, and proof of life for the
+// server, which ends a session silent for --silent-timeout-ms (60 s by default). Called from a
+// timer and from each Stats message (about one a second), because browsers throttle a hidden
+// tab's timers to once a minute after a while.
+let lastPingMs = -Infinity;
+function keepAlive() {
+  const now = performance.now();
+  if (!state.sessionOpen || now - lastPingMs < 1900) return;
+  lastPingMs = now;
+  send(state.protocol.encodePing(now));
 }
 
 function onResize() {
@@ -734,9 +747,7 @@ async function main() {
     clearTimeout(resizeTimer);
     resizeTimer = setTimeout(onResize, 150); // one Resize per gesture, not one per pixel
   });
-  setInterval(() => {
-    if (state.sessionOpen) send(state.protocol.encodePing(performance.now()));
-  }, 2000);
+  setInterval(keepAlive, 2000);
   // requestAnimationFrame stops in hidden tabs; a slow timer keeps poses and the overlay going.
   setInterval(() => {
     const now = performance.now();
