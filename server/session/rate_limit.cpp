@@ -127,22 +127,21 @@ void PeerLimiter::prune(Clock::time_point now) {
     it = it->second.hello.full(now) && it->second.auth.full(now) ? entries_.erase(it) : std::next(it);
 }
 
-bool PeerLimiter::take_hello(const std::string& address, std::uint32_t& retry_ms) {
+bool PeerLimiter::ask(const std::string& address, TokenBucket Entry::*which, bool take, std::uint32_t& retry_ms) {
   const auto now = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
-  Entry& e = entry(address, now);
-  if (e.hello.take(now)) return true;
-  retry_ms = e.hello.wait_ms(now);
+  TokenBucket& bucket = entry(address, now).*which;
+  if (take ? bucket.take(now) : bucket.has(now)) return true;
+  retry_ms = bucket.wait_ms(now);
   return false;
 }
 
+bool PeerLimiter::take_hello(const std::string& address, std::uint32_t& retry_ms) {
+  return ask(address, &Entry::hello, /*take=*/true, retry_ms);
+}
+
 bool PeerLimiter::may_try_token(const std::string& address, std::uint32_t& retry_ms) {
-  const auto now = Clock::now();
-  std::lock_guard<std::mutex> lock(mutex_);
-  Entry& e = entry(address, now);
-  if (e.auth.has(now)) return true;
-  retry_ms = e.auth.wait_ms(now);
-  return false;
+  return ask(address, &Entry::auth, /*take=*/false, retry_ms);
 }
 
 void PeerLimiter::token_failed(const std::string& address) {

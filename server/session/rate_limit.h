@@ -83,7 +83,9 @@ class PeerLimiter {
     TokenBucket hello, auth;
   };
   Entry& entry(const std::string& address, Clock::time_point now);  // mutex held
-  void prune(Clock::time_point now);                                // mutex held
+  // Takes (or only checks for) a token of `address`'s bucket `which`; retry_ms when there is none.
+  bool ask(const std::string& address, TokenBucket Entry::*which, bool take, std::uint32_t& retry_ms);
+  void prune(Clock::time_point now);  // mutex held
 
   const RateLimitSettings settings_;
   mutable std::mutex mutex_;
