@@ -63,11 +63,17 @@ Session::Session(ConnId id, SessionShared& shared)
 // An open socket that never says Hello would otherwise hold its descriptor and a --max-pre-hello
 // slot for ever (issue 22: 2000 idle sockets stayed open).
 void Session::start() {
-  hello_timer_.expires_after(std::chrono::milliseconds(shared_.options.hello_timeout_ms));
-  hello_timer_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
-    if (ec || self->state_ != State::awaiting_hello) return;
-    self->shared_.metrics.count(ServerMetrics::Timeout::hello);
-    self->fail(pb::ERROR_TIMEOUT, "no Hello within " + std::to_string(self->shared_.options.hello_timeout_ms) + " ms");
+  // Armed on the strand like every other use of the timer; posted before any message of this
+  // connection can be, so a Hello always finds it armed.
+  boost::asio::post(strand_, [self = shared_from_this()] {
+    if (self->state_ != State::awaiting_hello) return;
+    self->hello_timer_.expires_after(std::chrono::milliseconds(self->shared_.options.hello_timeout_ms));
+    self->hello_timer_.async_wait([self](const boost::system::error_code& ec) {
+      if (ec || self->state_ != State::awaiting_hello) return;
+      self->shared_.metrics.count(ServerMetrics::Timeout::hello);
+      self->fail(pb::ERROR_TIMEOUT,
+                 "no Hello within " + std::to_string(self->shared_.options.hello_timeout_ms) + " ms");
+    });
   });
 }
 
