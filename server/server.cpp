@@ -26,6 +26,7 @@ TransportOptions transport_options(const ServerOptions& options) {
   t.origins = OriginPolicy(options.allowed_origins);
   t.max_per_ip = options.max_connections_per_ip;
   t.max_pre_hello = options.max_pre_hello;
+  t.proxies = TrustedProxies::parse(options.trusted_proxies);
   return t;
 }
 

@@ -2,6 +2,7 @@
 
 #include "speculation/settings.h"
 #include "transport/origin_policy.h"
+#include "transport/trusted_proxies.h"
 
 #include <algorithm>
 #include <iostream>
@@ -64,6 +65,9 @@ std::string server_usage() {
          "  --max-connections-per-ip N  WebSocket connections from one address (default 128;\n"
          "                        0 = no cap; behind a proxy every client has the proxy's address)\n"
          "  --max-pre-hello N     connections that have not said Hello yet (default 256; 0 = no cap)\n"
+         "  --trusted-proxies LIST  addresses / CIDR ranges of reverse proxies (an Ingress) whose\n"
+         "                        X-Forwarded-For names the client for the per-address limits\n"
+         "                        (default none: the header is ignored, clients can forge it)\n"
          "  --rate-limits LIST    name=RATE/BURST,... (per second / burst; see below)\n"
          "  --threads N           worker threads: sessions, encoding (default 0: the number of\n"
          "                        cores, at least 4)\n"
@@ -137,7 +141,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.max_connections_per_ip = parse_int(a, v, 0, 100000);
     else if (a == "--max-pre-hello")
       out.max_pre_hello = parse_int(a, v, 0, 100000);
-    else if (a == "--rate-limits")
+    else if (a == "--trusted-proxies") {
+      TrustedProxies::parse(v);  // refused here, before anything starts
+      out.trusted_proxies = v;
+    } else if (a == "--rate-limits")
       apply_rate_limits(out.rate_limits, v);
     else if (a == "--threads")
       out.threads = parse_int(a, v, 0, 256);

@@ -37,6 +37,9 @@ struct ServerOptions {
   // Hello yet (0: no cap). Refused at the upgrade (429 / 503).
   int max_connections_per_ip = 128;
   int max_pre_hello = 256;
+  // --trusted-proxies: reverse proxies whose X-Forwarded-For names the client for the
+  // per-address caps and limits (empty: the TCP peer is the client).
+  std::string trusted_proxies;
   RateLimitSettings rate_limits;        // --rate-limits
   int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
   int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU

@@ -236,7 +236,9 @@ std::string Transport::peer(ConnId id) const {
 // HTTP answer the client can read, and no WebSocket (or session) is ever created for it.
 int Transport::on_upgrade(lws* wsi, const char* upgrade) {
   if (!upgrade || std::strcmp(upgrade, "websocket") != 0) return 0;
-  const std::string peer = peer_of(wsi);
+  const std::string peer = client_address(options_.proxies, peer_of(wsi), header(wsi, WSI_TOKEN_X_FORWARDED_FOR));
+  upgrading_wsi_ = wsi;
+  upgrading_client_ = peer;
   auto refuse = [&](Refusal why, unsigned status, const std::string& detail, lws_token_indexes extra = WSI_TOKEN_COUNT,
                     const std::string& extra_value = "") {
     handler_.on_refused(why, peer, detail);
@@ -367,7 +369,8 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
   switch (reason) {
     case LWS_CALLBACK_ESTABLISHED: {
       ConnId id;
-      const std::string peer = peer_of(wsi);
+      const std::string peer = upgrading_wsi_ == wsi ? upgrading_client_ : peer_of(wsi);
+      upgrading_wsi_ = nullptr;
       {
         // Counted here, checked in on_upgrade: the handshake between the two runs in one go on
         // this thread, so no other upgrade can slip in between.

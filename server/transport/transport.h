@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "transport/origin_policy.h"
+#include "transport/trusted_proxies.h"
 
 struct lws;
 struct lws_context;
@@ -91,6 +92,7 @@ struct TransportOptions {
   OriginPolicy origins;                       // pages allowed to open a WebSocket
   int max_per_ip = 128;                       // WebSocket connections per client address; 0 = no cap
   int max_pre_hello = 256;                    // connections that have not said Hello; 0 = no cap
+  TrustedProxies proxies;                     // whose X-Forwarded-For names the client (peer())
 };
 
 class Transport {
@@ -121,7 +123,8 @@ class Transport {
   std::size_t queued(ConnId id) const;
   // Thread-safe. The connection said a valid Hello: it no longer counts against max_pre_hello.
   void said_hello(ConnId id);
-  // Thread-safe. The client's address ("" for unknown ids).
+  // Thread-safe. The client's address ("" for unknown ids): the TCP peer, or behind a trusted
+  // proxy the address its X-Forwarded-For names (trusted_proxies.h).
   std::string peer(ConnId id) const;
 
  private:
@@ -167,6 +170,10 @@ class Transport {
   std::vector<ConnId> dirty_;                    // connections with new work for the service thread
   std::unordered_map<std::string, int> per_ip_;  // open WebSocket connections per address
   int pre_hello_ = 0;                            // open connections that have not said Hello
+  // The client address on_upgrade worked out, for the ESTABLISHED callback that follows it on
+  // this thread (the headers may be gone by then). Service thread only.
+  lws* upgrading_wsi_ = nullptr;
+  std::string upgrading_client_;
   ConnId next_id_ = 1;
 
   // Storage lws points into (must outlive the context).

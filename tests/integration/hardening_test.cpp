@@ -211,6 +211,22 @@ TEST(Hardening, PreHelloAndPerAddressCaps) {
   EXPECT_GE(metric_value(m, "catgs_refused_upgrades_total{reason=\"per_ip\"}"), 1.0);
 }
 
+// Behind a trusted proxy the caps count the address X-Forwarded-For names; from anyone else the
+// header is ignored (a client could name any address).
+TEST(Hardening, ForwardedForOnlyFromTrustedProxies) {
+  auto run = [](bool trusted) {
+    std::vector<std::string> extra = {"--max-connections-per-ip", "1"};
+    if (trusted) extra.insert(extra.end(), {"--trusted-proxies", "127.0.0.0/8"});
+    ServerProcess server(server_args(kBiker, extra));
+    StreamClient held;  // a session from "127.0.0.1" itself
+    held.connect(server.port());
+    held.hello(64, 64);
+    return upgrade_status(server.port(), "X-Forwarded-For: 198.51.100.7\r\n");
+  };
+  EXPECT_EQ(run(false), 429) << "an untrusted peer's X-Forwarded-For must not lift its cap";
+  EXPECT_EQ(run(true), 101) << "a trusted proxy's client is another address";
+}
+
 // Floods of Pings, KeyFrameRequests, Resizes and Quality messages end only the flooding session
 // (ERROR_RATE_LIMITED, counted); a session within the limits keeps its frames.
 TEST(Hardening, PerSessionRateLimits) {

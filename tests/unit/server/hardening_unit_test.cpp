@@ -10,6 +10,7 @@
 #include "session/access_tokens.h"
 #include "session/rate_limit.h"
 #include "transport/origin_policy.h"
+#include "transport/trusted_proxies.h"
 
 namespace {
 
@@ -100,6 +101,29 @@ TEST(OriginPolicy, OwnOriginLocalhostListedAndNoOrigin) {
   EXPECT_THROW(parse_origins("app.example"), std::invalid_argument);
   EXPECT_THROW(parse_origins("ftp://app.example"), std::invalid_argument);
   EXPECT_THROW(parse_origins("https://app.example/path"), std::invalid_argument);
+}
+
+TEST(TrustedProxies, RangesAndTheForwardedClient) {
+  const TrustedProxies p = TrustedProxies::parse("10.0.0.0/8, 192.168.1.7,fd00::/8");
+  EXPECT_TRUE(p.contains("10.200.3.4"));
+  EXPECT_FALSE(p.contains("11.0.0.1"));
+  EXPECT_TRUE(p.contains("192.168.1.7"));
+  EXPECT_FALSE(p.contains("192.168.1.8"));
+  EXPECT_TRUE(p.contains("fd12::1"));
+  EXPECT_FALSE(p.contains("fe80::1"));
+  EXPECT_FALSE(p.contains("not-an-address"));
+  EXPECT_TRUE(TrustedProxies::parse("172.16.0.0/12").contains("172.31.255.255"));
+  EXPECT_FALSE(TrustedProxies::parse("172.16.0.0/12").contains("172.32.0.0"));
+  // Only a trusted peer's header counts, and only its right-most entry that is not one of ours.
+  EXPECT_EQ(client_address(p, "203.0.113.9", "198.51.100.1"), "203.0.113.9") << "an untrusted peer";
+  EXPECT_EQ(client_address(p, "10.0.0.5", ""), "10.0.0.5") << "no header";
+  EXPECT_EQ(client_address(p, "10.0.0.5", "198.51.100.1"), "198.51.100.1");
+  EXPECT_EQ(client_address(p, "10.0.0.5", "1.2.3.4, 198.51.100.1, 10.0.0.9"), "198.51.100.1")
+      << "the client wrote 1.2.3.4 itself";
+  EXPECT_EQ(client_address(p, "10.0.0.5", "garbage"), "10.0.0.5");
+  EXPECT_TRUE(TrustedProxies::parse("").empty());
+  for (const char* bad : {"10.0.0.0/33", "host.example", "10.0.0.0/", "10.0.0.0/x", "::/129"})
+    EXPECT_THROW(TrustedProxies::parse(bad), std::invalid_argument) << bad;
 }
 
 TEST(AccessTokens, ConstantTimeEqual) {
