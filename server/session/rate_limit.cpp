@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iomanip>
 #include <sstream>
 #include <stdexcept>
 
@@ -71,13 +72,26 @@ std::string describe(const RateSpec& spec) {
 }
 
 std::string rate_limits_usage() {
-  return "  hello=20/100     Hellos per client address: per second / burst\n"
-         "  auth=1/10        failed token attempts per client address\n"
-         "  ping=5/20        Pings per session\n"
-         "  key_frame=5/20   KeyFrameRequests per session\n"
-         "  resize=4/10      Resizes per session\n"
-         "  quality=4/10     Quality messages per session\n"
-         "  (name=off turns one off; beyond a limit: ERROR_RATE_LIMITED and a close)\n";
+  // Written from the defaults themselves, so the help cannot drift from them.
+  const RateLimitSettings d;
+  struct Row {
+    const char* name;
+    const RateSpec& spec;
+    const char* what;
+  };
+  const Row rows[] = {
+      {"hello", d.hello, "Hellos per client address"}, {"auth", d.auth, "failed token attempts per client address"},
+      {"ping", d.ping, "Pings per session"},           {"key_frame", d.key_frame, "KeyFrameRequests per session"},
+      {"resize", d.resize, "Resizes per session"},     {"quality", d.quality, "Quality messages per session"}};
+  std::ostringstream o;
+  for (const Row& r : rows) {
+    std::ostringstream spec;
+    spec << r.name << '=' << r.spec.per_second << '/' << r.spec.burst;
+    o << "  " << std::left << std::setw(17) << spec.str() << r.what << '\n';
+  }
+  o << "  (RATE a second, BURST at once; name=off turns one off; beyond a limit: ERROR_RATE_LIMITED\n"
+       "  and a close)\n";
+  return o.str();
 }
 
 void TokenBucket::refill(Clock::time_point now) {
