@@ -1,6 +1,7 @@
 // catgs-server: the CaT-GS Stream remote-rendering server (DESIGN.md "Server"). Exit codes: 0
 // after a clean shutdown (or --help), 2 for bad options, 1 for any other error (a scene, codec
 // or port that cannot be had). `--probe URL` only probes: 0 for a 2xx answer, 1 otherwise.
+#include <cstdlib>
 #include <iostream>
 
 extern "C" {
@@ -35,6 +36,9 @@ int main(int argc, char** argv) {
   ServerOptions options;
   try {
     if (!parse_server_options(argc, argv, options)) return 0;
+    // From the environment rather than the command line: /proc/PID/environ is readable by this
+    // user and root only, /proc/PID/cmdline by everyone.
+    resolve_access_tokens(options, std::getenv("CATGS_TOKEN"), std::cerr);
   } catch (const std::exception& e) {
     std::cerr << "catgs-server: " << e.what() << "\n";
     return 2;

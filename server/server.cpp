@@ -23,6 +23,10 @@ TransportOptions transport_options(const ServerOptions& options) {
   t.port = options.port;
   t.web_root = options.web_root;
   t.socket_send_buffer = options.socket_send_buffer;
+  t.origins = OriginPolicy(options.allowed_origins);
+  t.max_per_ip = options.max_connections_per_ip;
+  t.max_pre_hello = options.max_pre_hello;
+  t.proxies = TrustedProxies::parse(options.trusted_proxies);
   return t;
 }
 
@@ -55,6 +59,13 @@ std::string Server::ToManager::metrics_text() {
   // exposition is valid; the manager's release store publishes them once they are set.
   return "";
 }
+int Server::ToManager::metrics_access(const std::string& authorization) {
+  if (auto* m = manager.load()) return m->metrics_access(authorization);
+  return metrics_access_status(options->tokens, authorization, *metrics);
+}
+void Server::ToManager::on_refused(Refusal why, const std::string& peer, const std::string& detail) {
+  count_refusal(*metrics, why, peer, detail);
+}
 int Server::ToManager::readiness(std::string& body) {
   if (auto* m = manager.load()) return m->readiness(body);
   body = "loading\n";
@@ -64,6 +75,8 @@ int Server::ToManager::readiness(std::string& body) {
 Server::Server(const ServerOptions& options) : options_(options) {
   transport_ = std::make_unique<Transport>(transport_options(options_), to_manager_);
   to_manager_.transport = transport_.get();
+  to_manager_.options = &options_;
+  to_manager_.metrics = &metrics_;
 }
 
 // After a normal run() there is nothing left to stop; this is for a run() that threw. The

@@ -75,12 +75,16 @@ class Server {
   struct ToManager final : TransportHandler {
     std::atomic<SessionManager*> manager{nullptr};
     Transport* transport = nullptr;
+    const ServerOptions* options = nullptr;
+    ServerMetrics* metrics = nullptr;
     void on_open(ConnId id) override;
     void on_message(ConnId id, MessageKind kind, std::string bytes) override;
     void on_sent(ConnId id) override;
     void on_close(ConnId id) override;
     std::string metrics_text() override;
     int readiness(std::string& body) override;
+    int metrics_access(const std::string& authorization) override;
+    void on_refused(Refusal why, const std::string& peer, const std::string& detail) override;
   };
   using Deadline = std::chrono::steady_clock::time_point;
 

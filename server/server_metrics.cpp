@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <sstream>
 #include <stdexcept>
 
@@ -77,6 +78,25 @@ std::string ServerMetrics::prometheus_text() const {
        "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
   o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'
     << "catgs_render_frames_total{kind=\"sub\"} " << render_sub_frames_total.load() << '\n';
+
+  auto labelled = [&](const char* name, const char* help, const char* label, const auto& counters,
+                      std::initializer_list<const char*> values) {
+    head(name, "counter", help);
+    std::size_t i = 0;
+    for (const char* v : values) o << name << '{' << label << "=\"" << v << "\"} " << counters[i++].load() << '\n';
+  };
+  labelled("catgs_refused_upgrades_total",
+           "WebSocket upgrades refused before the handshake: version (not 13), origin (not allowed), per_ip "
+           "(--max-connections-per-ip), pre_hello (--max-pre-hello).",
+           "reason", refused_upgrades_total, {"version", "origin", "per_ip", "pre_hello"});
+  labelled("catgs_timeouts_total",
+           "Connections closed for silence: hello (no Hello in --hello-timeout-ms), silent (no message in "
+           "--silent-timeout-ms).",
+           "kind", timeouts_total, {"hello", "silent"});
+  labelled("catgs_rate_limited_total", "Hellos refused and sessions ended for going past a --rate-limits limit.",
+           "kind", rate_limited_total, {"hello", "auth", "ping", "key_frame", "resize", "quality"});
+  labelled("catgs_unauthorized_total", "Wrong or missing tokens: in a Hello, or for /metrics.", "what",
+           unauthorized_total, {"hello", "metrics"});
 
   head("catgs_queue_seconds", "histogram", "Pose received -> render start.");
   queue_seconds.write(o, "catgs_queue_seconds");

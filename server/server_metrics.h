@@ -16,6 +16,10 @@
 //                              that had frames (a histogram: no per-session label to grow)
 //   catgs_gpu_sessions{gpu}, catgs_gpu_render_seconds{gpu}   per GPU of --gpus (CUDA renderer):
 //                              sessions rendering there, and their render times
+//   catgs_refused_upgrades_total{reason}  WebSocket upgrades refused before the handshake
+//   catgs_timeouts_total{kind}            connections closed for silence: no Hello, or a silent session
+//   catgs_rate_limited_total{kind}        sessions ended (or Hellos refused) for going past a rate limit
+//   catgs_unauthorized_total{what}        wrong or missing tokens: Hello, /metrics
 #pragma once
 
 #include <atomic>
@@ -73,6 +77,18 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> render_sub_frames_total{0};  // catgs sub-frames from the caches
   // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).
   std::atomic<std::uint64_t> encoder_fallbacks_total{0};
+
+  // Hardening (issue 22). Each array is indexed by the enum named beside it.
+  std::atomic<std::uint64_t> refused_upgrades_total[4]{};  // transport.h Refusal
+  enum class Timeout { hello, silent };
+  std::atomic<std::uint64_t> timeouts_total[2]{};
+  enum class Limit { hello, auth, ping, key_frame, resize, quality };
+  std::atomic<std::uint64_t> rate_limited_total[6]{};
+  enum class Unauthorized { hello, metrics };
+  std::atomic<std::uint64_t> unauthorized_total[2]{};
+  void count(Timeout t) { timeouts_total[static_cast<int>(t)]++; }
+  void count(Limit l) { rate_limited_total[static_cast<int>(l)]++; }
+  void count(Unauthorized u) { unauthorized_total[static_cast<int>(u)]++; }
 
   Histogram queue_seconds{Histogram::stage_seconds()};
   Histogram render_key_seconds{Histogram::stage_seconds()};

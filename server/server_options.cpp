@@ -1,6 +1,8 @@
 #include "server_options.h"
 
 #include "speculation/settings.h"
+#include "transport/origin_policy.h"
+#include "transport/trusted_proxies.h"
 
 #include <algorithm>
 #include <iostream>
@@ -55,7 +57,25 @@ std::string server_usage() {
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
          "  --full-retry-ms N     reconnect hint sent with ERROR_SERVER_FULL: N .. 2N ms, drawn (default 2000)\n"
-         "  --token T             require Hello.token == T\n"
+         "  --token-file FILE     access tokens, one a line: '[viewer|admin] TOKEN' (a bare TOKEN\n"
+         "                        is admin). With tokens, Hello needs one and GET /metrics needs an\n"
+         "                        admin one (Authorization: Bearer TOKEN); /healthz, /readyz stay open.\n"
+         "                        The CATGS_TOKEN environment variable adds an admin token\n"
+         "  --token T             an admin token on the command line (deprecated: every user of\n"
+         "                        the host can read it in /proc; use --token-file or CATGS_TOKEN)\n"
+         "  --allowed-origins LIST  origins besides the page's own and localhost whose pages may\n"
+         "                        open a WebSocket, e.g. https://app.example,http://b.example:8080\n"
+         "                        ('*': any). Upgrades without Origin (not a browser) are allowed\n"
+         "  --hello-timeout-ms N  close a WebSocket that sends no Hello in N ms (default 10000)\n"
+         "  --silent-timeout-ms N end a session that sends nothing for N ms (default 60000; the\n"
+         "                        page pings every 2 s)\n"
+         "  --max-connections-per-ip N  WebSocket connections from one address (default 128;\n"
+         "                        0 = no cap; behind a proxy every client has the proxy's address)\n"
+         "  --max-pre-hello N     connections that have not said Hello yet (default 256; 0 = no cap)\n"
+         "  --trusted-proxies LIST  addresses / CIDR ranges of reverse proxies (an Ingress) whose\n"
+         "                        X-Forwarded-For names the client for the per-address limits\n"
+         "                        (default none: the header is ignored, clients can forge it)\n"
+         "  --rate-limits LIST    name=RATE/BURST,... (per second / burst; see below)\n"
          "  --threads N           worker threads: sessions, encoding (default 0: the number of\n"
          "                        cores, at least 4)\n"
          "  --render-lanes N      renders at once, sessions in turn (default: 4 per GPU with the\n"
@@ -77,8 +97,8 @@ std::string server_usage() {
          "                        new sessions are refused); SIGINT or a second SIGTERM stops at once\n"
          "  --probe URL           GET http://HOST:PORT/PATH, exit 0 on 2xx, else 1 (a container\n"
          "                        HEALTHCHECK without curl or a shell); starts no server\n"
-         "catgs settings (--speculation name=value,...):\n" +
-         speculation_settings_usage();
+         "rate limits (--rate-limits name=RATE/BURST,...; defaults shown):\n" +
+         rate_limits_usage() + "catgs settings (--speculation name=value,...):\n" + speculation_settings_usage();
 }
 
 bool parse_server_options(int argc, char** argv, ServerOptions& out) {
@@ -120,6 +140,23 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.full_retry_ms = parse_int(a, v, 0, 3600000);
     else if (a == "--token")
       out.token = v;
+    else if (a == "--token-file")
+      out.token_file = v;
+    else if (a == "--allowed-origins")
+      out.allowed_origins = parse_origins(v);
+    else if (a == "--hello-timeout-ms")
+      out.hello_timeout_ms = parse_int(a, v, 100, 3600000);
+    else if (a == "--silent-timeout-ms")
+      out.silent_timeout_ms = parse_int(a, v, 100, 86400000);
+    else if (a == "--max-connections-per-ip")
+      out.max_connections_per_ip = parse_int(a, v, 0, 100000);
+    else if (a == "--max-pre-hello")
+      out.max_pre_hello = parse_int(a, v, 0, 100000);
+    else if (a == "--trusted-proxies") {
+      TrustedProxies::parse(v);  // refused here, before anything starts
+      out.trusted_proxies = v;
+    } else if (a == "--rate-limits")
+      apply_rate_limits(out.rate_limits, v);
     else if (a == "--threads")
       out.threads = parse_int(a, v, 0, 256);
     else if (a == "--render-lanes")
@@ -153,6 +190,16 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
   if (out.encoder != "nvenc" && out.encoder != "x264" && out.encoder != "auto")
     throw std::invalid_argument("--encoder must be nvenc, x264 or auto");
   return true;
+}
+
+void resolve_access_tokens(ServerOptions& out, const char* env_token, std::ostream& warnings) {
+  if (!out.token.empty()) {
+    warnings << "catgs-server: warning: --token is visible to every user of this host (/proc/PID/cmdline); "
+                "use --token-file FILE or the CATGS_TOKEN environment variable\n";
+    out.tokens.add(out.token, Role::admin);
+  }
+  if (!out.token_file.empty()) out.tokens.add_file(out.token_file);
+  if (env_token && *env_token) out.tokens.add(env_token, Role::admin);
 }
 
 }  // namespace catgs::server

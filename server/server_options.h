@@ -1,7 +1,12 @@
 // Command-line options of catgs-server.
 #pragma once
 
+#include <ostream>
 #include <string>
+#include <vector>
+
+#include "session/access_tokens.h"
+#include "session/rate_limit.h"
 
 namespace catgs::server {
 
@@ -19,9 +24,27 @@ struct ServerOptions {
   std::string web_root;            // folder served over HTTP at "/"
   int max_sessions = 8;            // sessions open at once; one more gets ERROR_SERVER_FULL
   int full_retry_ms = 2000;        // ERROR_SERVER_FULL's retry_after_ms: this .. 2x this (session.h kServerFullRetryMs)
-  std::string token;               // when non-empty, Hello.token must equal it
-  int threads = 0;                 // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
-  int render_lanes = 0;            // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
+  std::string token;               // --token T (visible in /proc: prefer the two below)
+  std::string token_file;          // --token-file FILE: "[viewer|admin] TOKEN" lines
+  // Every token from --token, --token-file and CATGS_TOKEN (resolve_access_tokens). When there is
+  // one, Hello.token must be one of them and /metrics needs an admin token.
+  AccessTokens tokens;
+  // --allowed-origins: origins beside the page's own and localhost that may open a WebSocket.
+  std::vector<std::string> allowed_origins;
+  // Time limits for silence (issue 22): no Hello within this many ms after the WebSocket opened,
+  // or no message at all from a session for this long, ends the connection with ERROR_TIMEOUT.
+  int hello_timeout_ms = 10000;
+  int silent_timeout_ms = 60000;
+  // WebSocket connections at once from one client address, and connections that have not said
+  // Hello yet (0: no cap). Refused at the upgrade (429 / 503).
+  int max_connections_per_ip = 128;
+  int max_pre_hello = 256;
+  // --trusted-proxies: reverse proxies whose X-Forwarded-For names the client for the
+  // per-address caps and limits (empty: the TCP peer is the client).
+  std::string trusted_proxies;
+  RateLimitSettings rate_limits;        // --rate-limits
+  int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
+  int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
   int slow_client_timeout_ms = 10000;   // frames unwritten this long -> ERROR_TOO_SLOW
   int crf = 23;                         // x264 constant rate factor (lower = better quality, more bytes)
   int encoder_threads = 2;              // per session's encoder; 0 = the library's choice
@@ -46,5 +69,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out);
 
 // The usage text.
 std::string server_usage();
+
+// Gathers the access tokens into out.tokens: --token (with a warning on `warnings`: a command
+// line is readable by every user of the host), --token-file, and `env_token` (CATGS_TOKEN; null
+// or empty when unset). Throws std::invalid_argument for an unreadable or empty token file.
+void resolve_access_tokens(ServerOptions& out, const char* env_token, std::ostream& warnings);
 
 }  // namespace catgs::server

@@ -13,6 +13,7 @@ import {
 import { loadProtocol } from './protocol.js';
 import { capViewport, parseMaxSize } from './viewport.js';
 import { parseView, viewUrl, withoutView } from './view_link.js';
+import { TOKEN_KEY, takeToken } from './token.js';
 
 const $ = (id) => document.getElementById(id);
 const canvas = $('view');
@@ -46,7 +47,7 @@ const state = {
   status: 'starting',
   closeInfo: null, // the last onClose argument while not connected
   serverError: null, // the Error of the current connection, if any
-  token: params.get('token') || sessionStorage.getItem('catgs.token') || '',
+  token: takeToken(location, sessionStorage, history), // and gone from the address bar
   recorder: null, // PathRecorder while recording
   recording: null, // the last finished recording (samples)
   waypoints: [],
@@ -106,6 +107,8 @@ const ERROR_WORDS = {
   3: 'the server rejected a request from this page',
   6: 'the server failed to render or encode',
   8: 'the connection was too slow for the stream',
+  9: 'this page sent more requests than the server allows',
+  10: 'the connection was idle too long',
 };
 
 const retryButton = [{ id: 'retry', label: 'retry now', onClick: () => state.connection && state.connection.retryNow() }];
@@ -128,7 +131,7 @@ function makeTokenForm() {
     e.preventDefault();
     state.token = input.value.trim();
     // This tab only: the token is the user's, not the link's (shared links leave it out).
-    sessionStorage.setItem('catgs.token', state.token);
+    sessionStorage.setItem(TOKEN_KEY, state.token);
     input.value = '';
     setStatus('connecting');
     state.connection.restart();
@@ -274,6 +277,7 @@ function onMessage(kind, msg) {
       break;
     case 'stats':
       overlay.setServerStats(msg);
+      keepAlive(); // message events still run when a hidden tab's timers are throttled
       break;
     case 'error':
       // Shown when the connection closes, with what happens next (onClose).
@@ -286,6 +290,18 @@ function onMessage(kind, msg) {
     default:
       break;
   }
+}
+
+// A Ping every 2 s at most: the round-trip time for the overlay, and proof of life for the
+// server, which ends a session silent for --silent-timeout-ms (60 s by default). Called from a
+// timer and from each Stats message (about one a second), because browsers throttle a hidden
+// tab's timers to once a minute after a while.
+let lastPingMs = -Infinity;
+function keepAlive() {
+  const now = performance.now();
+  if (!state.sessionOpen || now - lastPingMs < 1900) return;
+  lastPingMs = now;
+  send(state.protocol.encodePing(now));
 }
 
 function onResize() {
@@ -731,9 +747,7 @@ async function main() {
     clearTimeout(resizeTimer);
     resizeTimer = setTimeout(onResize, 150); // one Resize per gesture, not one per pixel
   });
-  setInterval(() => {
-    if (state.sessionOpen) send(state.protocol.encodePing(performance.now()));
-  }, 2000);
+  setInterval(keepAlive, 2000);
   // requestAnimationFrame stops in hidden tabs; a slow timer keeps poses and the overlay going.
   setInterval(() => {
     const now = performance.now();

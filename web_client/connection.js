@@ -22,6 +22,7 @@ export const ERROR_PROTOCOL = 2;
 export const ERROR_UNAUTHORIZED = 4;
 export const ERROR_SERVER_FULL = 5;
 export const ERROR_SHUTTING_DOWN = 7;
+export const ERROR_RATE_LIMITED = 9;
 
 // What to do after the server ended a session with `error` ({code, retry_after_ms}; null when
 // the connection just dropped). `welcomed`: this connection had a session.
@@ -35,7 +36,9 @@ export function retryPolicy(error, welcomed) {
   // match need a reload, not a loop.
   if (error.code === ERROR_PROTOCOL && !welcomed) return { permanent: true };
   const hint = Number(error.retry_after_ms) || 0;
-  if (hint > 0 && (error.code === ERROR_SERVER_FULL || error.code === ERROR_SHUTTING_DOWN)) {
+  // RATE_LIMITED's hint is when the server takes the next Hello from this address.
+  const hinted = [ERROR_SERVER_FULL, ERROR_SHUTTING_DOWN, ERROR_RATE_LIMITED];
+  if (hint > 0 && hinted.includes(error.code)) {
     // Bounded so a bad hint neither floods the server nor parks the page for an hour.
     return { permanent: false, delayMs: Math.min(Math.max(hint, 250), 60000) };
   }

@@ -45,8 +45,37 @@ constexpr std::size_t kMaxQueuedMessages = 256;  // non-frame messages a non-rea
 }  // namespace
 
 Session::Session(ConnId id, SessionShared& shared)
-    : id_(id), shared_(shared), strand_(boost::asio::make_strand(shared.io)), tick_(strand_) {
+    : id_(id),
+      shared_(shared),
+      strand_(boost::asio::make_strand(shared.io)),
+      tick_(strand_),
+      hello_timer_(strand_),
+      peer_(shared.transport.peer(id)) {
   shared_.metrics.connections_open++;
+  const auto now = Clock::now();
+  const RateLimitSettings& r = shared_.options.rate_limits;
+  ping_bucket_ = TokenBucket(r.ping, now);
+  key_frame_bucket_ = TokenBucket(r.key_frame, now);
+  resize_bucket_ = TokenBucket(r.resize, now);
+  quality_bucket_ = TokenBucket(r.quality, now);
+  last_message_ = now;
+}
+
+// An open socket that never says Hello would otherwise hold its descriptor and a --max-pre-hello
+// slot for ever (issue 22: 2000 idle sockets stayed open).
+void Session::start() {
+  // Armed on the strand like every other use of the timer; posted before any message of this
+  // connection can be, so a Hello always finds it armed.
+  boost::asio::post(strand_, [self = shared_from_this()] {
+    if (self->state_ != State::awaiting_hello) return;
+    self->hello_timer_.expires_after(std::chrono::milliseconds(self->shared_.options.hello_timeout_ms));
+    self->hello_timer_.async_wait([self](const boost::system::error_code& ec) {
+      if (ec || self->state_ != State::awaiting_hello) return;
+      self->shared_.metrics.count(ServerMetrics::Timeout::hello);
+      self->fail(pb::ERROR_TIMEOUT,
+                 "no Hello within " + std::to_string(self->shared_.options.hello_timeout_ms) + " ms");
+    });
+  });
 }
 
 Session::~Session() {
@@ -90,6 +119,7 @@ void Session::post_closed() {
     self->state_ = State::closed;
     self->pending_.reset();
     self->tick_.cancel();
+    self->hello_timer_.cancel();
   });
 }
 
@@ -123,10 +153,11 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   state_ = State::closed;
   gone_ = true;
   tick_.cancel();
+  hello_timer_.cancel();
   end_open_state();
   shared_.metrics.session_errors_total++;
-  std::cerr << "[session " << id_ << (session_id_.empty() ? "" : " " + session_id_) << "] " << pb::ErrorCode_Name(code)
-            << ": " << reason << "\n";
+  std::cerr << "[session " << id_ << (session_id_.empty() ? "" : " " + session_id_) << " " << peer_ << "] "
+            << pb::ErrorCode_Name(code) << ": " << reason << "\n";
   pb::ServerMessage m;
   m.mutable_error()->set_code(code);
   m.mutable_error()->set_reason(reason);
@@ -136,8 +167,18 @@ void Session::fail(pb::ErrorCode code, const std::string& reason, bool drop_queu
   shared_.transport.close(id_, std::move(bytes), drop_queued);
 }
 
+bool Session::within(TokenBucket& bucket, ServerMetrics::Limit limit, const char* what, const RateSpec& spec) {
+  const auto now = Clock::now();
+  if (bucket.take(now)) return true;
+  shared_.metrics.count(limit);
+  fail(pb::ERROR_RATE_LIMITED, std::string("too many ") + what + " (limit " + describe(spec) + ", --rate-limits)",
+       false, bucket.wait_ms(now));
+  return false;
+}
+
 void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received) {
   if (state_ == State::closed) return;
+  last_message_ = received;
   if (kind == MessageKind::text) return fail(pb::ERROR_MALFORMED, "text frames are not allowed");
   if (kind == MessageKind::oversize) return fail(pb::ERROR_MALFORMED, "message larger than 64 KiB");
   pb::ClientMessage msg;
@@ -156,6 +197,8 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
     case pb::ClientMessage::kPose:
       return handle_pose(msg.pose(), received);
     case pb::ClientMessage::kResize: {
+      const RateLimitSettings& r = shared_.options.rate_limits;
+      if (!within(resize_bucket_, ServerMetrics::Limit::resize, "Resizes", r.resize)) return;
       Viewport v;
       if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), viewport_limit(), v))
         return fail(bad->code, bad->reason);
@@ -165,6 +208,7 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
       return;
     }
     case pb::ClientMessage::kPing: {
+      if (!within(ping_bucket_, ServerMetrics::Limit::ping, "Pings", shared_.options.rate_limits.ping)) return;
       if (!std::isfinite(msg.ping().client_time_ms()))
         return fail(pb::ERROR_INVALID_ARGUMENT, "Ping time is NaN or Inf");
       pb::ServerMessage m;
@@ -174,9 +218,16 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
       return send(m);
     }
     case pb::ClientMessage::kKeyFrameRequest:
+      // Each one makes the next frame an IDR (many times a P frame's bytes and encode time).
+      if (!within(key_frame_bucket_, ServerMetrics::Limit::key_frame, "KeyFrameRequests",
+                  shared_.options.rate_limits.key_frame))
+        return;
       force_idr_ = true;
       return;
     case pb::ClientMessage::kQuality:
+      if (!within(quality_bucket_, ServerMetrics::Limit::quality, "Quality messages",
+                  shared_.options.rate_limits.quality))
+        return;
       if (auto bad = check_quality(msg.quality())) return fail(bad->code, bad->reason);
       max_bitrate_kbps_ = static_cast<int>(msg.quality().max_bitrate_kbps());
       force_idr_ = true;  // the encoder is rebuilt with it; its first frame is an IDR
@@ -186,11 +237,37 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
   }
 }
 
+bool Session::admit(const pb::Hello& hello) {
+  std::uint32_t retry_ms = 0;
+  if (!shared_.peers.take_hello(peer_, retry_ms)) {
+    shared_.metrics.count(ServerMetrics::Limit::hello);
+    fail(
+        pb::ERROR_RATE_LIMITED,
+        "too many Hellos from " + peer_ + " (limit " + describe(shared_.options.rate_limits.hello) + ", --rate-limits)",
+        false, retry_ms);
+    return false;
+  }
+  if (shared_.options.tokens.empty()) return true;
+  // The failure limit is checked before the token is: past it, a guess is not even compared.
+  if (!shared_.peers.may_try_token(peer_, retry_ms)) {
+    shared_.metrics.count(ServerMetrics::Limit::auth);
+    fail(pb::ERROR_RATE_LIMITED, "too many wrong tokens from " + peer_ + " (--rate-limits auth)", false, retry_ms);
+    return false;
+  }
+  if (shared_.options.tokens.role_of(hello.token()) == Role::none) {
+    shared_.peers.token_failed(peer_);
+    shared_.metrics.count(ServerMetrics::Unauthorized::hello);
+    fail(pb::ERROR_UNAUTHORIZED, "wrong or missing token");
+    return false;
+  }
+  return true;
+}
+
 void Session::handle_hello(const pb::Hello& hello) {
+  hello_timer_.cancel();
   Viewport v;
   if (auto bad = check_hello(hello, viewport_limit(), v)) return fail(bad->code, bad->reason);
-  if (!shared_.options.token.empty() && hello.token() != shared_.options.token)
-    return fail(pb::ERROR_UNAUTHORIZED, "wrong or missing token");
+  if (!admit(hello)) return;
   if (hello.codecs_size() > 0) {
     bool h264 = false;
     for (int c : hello.codecs()) h264 = h264 || c == pb::CODEC_H264;
@@ -207,6 +284,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
+  shared_.transport.said_hello(id_);  // no longer counts against --max-pre-hello
   if (shared_.renderer_kind == "cuda") gpu_ = shared_.gpus.acquire();  // the least busy GPU
   renderer_ = make_renderer(shared_.renderer_kind, shared_.model, shared_.render_options, nullptr, std::max(gpu_, 0));
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
@@ -496,6 +574,11 @@ void Session::on_tick() {
                 /*drop_queued=*/true);
   if (shared_.transport.queued(id_) > kMaxQueuedMessages)
     return fail(pb::ERROR_TOO_SLOW, "client does not read its messages", /*drop_queued=*/true);
+  // A session that says nothing (no pose, no Ping) for this long holds a slot for nobody.
+  if (now - last_message_ > std::chrono::milliseconds(shared_.options.silent_timeout_ms)) {
+    shared_.metrics.count(ServerMetrics::Timeout::silent);
+    return fail(pb::ERROR_TIMEOUT, "no message for " + std::to_string(shared_.options.silent_timeout_ms) + " ms");
+  }
   if (now - last_stats_ >= std::chrono::seconds(1)) send_stats();
   arm_tick();
 }

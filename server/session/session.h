@@ -36,6 +36,7 @@
 #include "render/render_scheduler.h"
 #include "session/message_validation.h"
 #include "session/first_view.h"
+#include "session/rate_limit.h"
 #include "server_metrics.h"
 #include "server_options.h"
 #include "transport/transport.h"
@@ -58,6 +59,8 @@ struct SessionShared {
   std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
   // Set by the server when SIGTERM starts the drain: a Hello now gets ERROR_SHUTTING_DOWN.
   std::atomic<bool> draining{false};
+  // Hello and failed-token limits per client address (a new connection per attempt).
+  PeerLimiter peers{options.rate_limits};
 };
 
 // Error.retry_after_ms hints, ms. Each Error carries base .. 2 x base, drawn uniformly, so the
@@ -75,6 +78,8 @@ class Session : public std::enable_shared_from_this<Session> {
   ~Session();
 
   ConnId id() const { return id_; }
+  // Starts the Hello clock (--hello-timeout-ms). Call once, right after construction.
+  void start();
   // Transport thread -> strand: a complete incoming message.
   void post_message(MessageKind kind, std::string bytes);
   // Transport thread -> strand: a Frame left the queue (written to the socket layer).
@@ -144,12 +149,20 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_tick();
   void send_stats();
   void end_open_state();
+  // Takes one token of `bucket` for a message of kind `limit`; past the limit, ends the session
+  // with ERROR_RATE_LIMITED (counted) and returns false.
+  bool within(TokenBucket& bucket, ServerMetrics::Limit limit, const char* what, const RateSpec& spec);
+  // Hello's access checks: the per-address Hello limit and the token (with its own limit on
+  // failures). Ends the session and returns false when refused.
+  bool admit(const pb::Hello& hello);
   ViewportLimit viewport_limit() const;  // --max-viewport
 
   const ConnId id_;
   SessionShared& shared_;
   boost::asio::strand<boost::asio::io_context::executor_type> strand_;
   boost::asio::steady_timer tick_;
+  boost::asio::steady_timer hello_timer_;  // --hello-timeout-ms
+  const std::string peer_;                 // client address (per-address limits, logs)
 
   // Set when the connection is gone or the session failed (any thread): render jobs still queued
   // for this session are skipped rather than rendered for nobody.
@@ -174,6 +187,8 @@ class Session : public std::enable_shared_from_this<Session> {
   Clock::time_point last_progress_;                        // last time the transport wrote one of our frames
   std::uint32_t next_frame_sequence_ = 0;
   Clock::time_point last_stats_;
+  Clock::time_point last_message_;  // the client's latest message (--silent-timeout-ms)
+  TokenBucket ping_bucket_, key_frame_bucket_, resize_bucket_, quality_bucket_;  // --rate-limits
   // Stats counters (totals, and sums since the last Stats message).
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
   std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)

@@ -1,6 +1,7 @@
 #include "session/session_manager.h"
 
 #include <chrono>
+#include <iostream>
 #include <thread>
 #include <vector>
 
@@ -8,6 +9,7 @@ namespace catgs::server {
 
 void SessionManager::on_open(ConnId id) {
   auto session = std::make_shared<Session>(id, shared_);
+  session->start();
   std::lock_guard<std::mutex> lock(mutex_);
   sessions_[id] = std::move(session);
 }
@@ -39,6 +41,29 @@ void SessionManager::on_close(ConnId id) {
 }
 
 std::string SessionManager::metrics_text() { return shared_.metrics.prometheus_text(); }
+
+int SessionManager::metrics_access(const std::string& authorization) {
+  return metrics_access_status(shared_.options.tokens, authorization, shared_.metrics);
+}
+
+void SessionManager::on_refused(Refusal why, const std::string& peer, const std::string& detail) {
+  count_refusal(shared_.metrics, why, peer, detail);
+}
+
+int metrics_access_status(const AccessTokens& tokens, const std::string& authorization, ServerMetrics& metrics) {
+  if (tokens.empty()) return 200;
+  static const std::string kBearer = "Bearer ";
+  const bool bearer = authorization.compare(0, kBearer.size(), kBearer) == 0;
+  const Role role = bearer ? tokens.role_of(std::string_view(authorization).substr(kBearer.size())) : Role::none;
+  if (role == Role::admin) return 200;
+  metrics.count(ServerMetrics::Unauthorized::metrics);
+  return role == Role::none ? 401 : 403;
+}
+
+void count_refusal(ServerMetrics& metrics, Refusal why, const std::string& peer, const std::string& detail) {
+  metrics.refused_upgrades_total[static_cast<int>(why)]++;
+  std::cerr << "[transport " << peer << "] upgrade refused (" << refusal_name(why) << "): " << detail << "\n";
+}
 
 int SessionManager::readiness(std::string& body) {
   const std::int64_t open = open_sessions();

@@ -13,6 +13,12 @@
 
 namespace catgs::server {
 
+// Shared with the server's loading-phase handler (server.cpp), which answers before the manager
+// exists: the /metrics verdict for an Authorization header, and the count and log line of an
+// upgrade refusal.
+int metrics_access_status(const AccessTokens& tokens, const std::string& authorization, ServerMetrics& metrics);
+void count_refusal(ServerMetrics& metrics, Refusal why, const std::string& peer, const std::string& detail);
+
 class SessionManager final : public TransportHandler {
  public:
   // `shared` must outlive the manager; its transport must be this manager's transport.
@@ -27,6 +33,10 @@ class SessionManager final : public TransportHandler {
   // 503 "draining" after start_draining(), 503 "full" while --max-sessions sessions are open,
   // else 200 "ready".
   int readiness(std::string& body) override;
+  // /metrics: 200 without tokens, else only with an admin bearer token (401 / 403, counted).
+  int metrics_access(const std::string& authorization) override;
+  // Counts and logs an upgrade the transport refused.
+  void on_refused(Refusal why, const std::string& peer, const std::string& detail) override;
 
   // The drain begins: /readyz turns 503 and every Hello from now on gets ERROR_SHUTTING_DOWN.
   // Live sessions go on. Thread-safe.

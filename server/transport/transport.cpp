@@ -23,7 +23,54 @@ struct Pss {
 // callback keeps the service loop responsive with many connections and big key frames.
 constexpr std::size_t kFragmentBytes = 64 * 1024;
 
+// A request header as a string ("" when absent).
+std::string header(lws* wsi, lws_token_indexes token) {
+  const int n = lws_hdr_total_length(wsi, token);
+  if (n <= 0 || n > 4096) return "";
+  std::string v(static_cast<std::size_t>(n) + 1, '\0');
+  if (lws_hdr_copy(wsi, v.data(), n + 1, token) < 0) return "";
+  v.resize(static_cast<std::size_t>(n));
+  return v;
+}
+
+std::string peer_of(lws* wsi) {
+  char buf[64] = {0};
+  return lws_get_peer_simple(wsi, buf, sizeof(buf)) ? std::string(buf) : std::string();
+}
+
+// Writes a complete HTTP answer (status, an optional extra header, a text body) on a connection
+// that asked for an upgrade. False when it could not be written.
+bool write_refusal(lws* wsi, unsigned status, const std::string& body, lws_token_indexes extra = WSI_TOKEN_COUNT,
+                   const std::string& extra_value = "") {
+  std::vector<unsigned char> buf(LWS_PRE + 1024 + body.size());
+  unsigned char *start = buf.data() + LWS_PRE, *p = start, *end = buf.data() + buf.size() - body.size() - 1;
+  if (lws_add_http_common_headers(wsi, status, "text/plain; charset=utf-8", body.size(), &p, end)) return false;
+  if (extra != WSI_TOKEN_COUNT &&
+      lws_add_http_header_by_token(wsi, extra, reinterpret_cast<const unsigned char*>(extra_value.data()),
+                                   static_cast<int>(extra_value.size()), &p, end))
+    return false;
+  if (lws_finalize_http_header(wsi, &p, end)) return false;
+  std::memcpy(p, body.data(), body.size());
+  p += body.size();
+  const int n = static_cast<int>(p - start);
+  return lws_write(wsi, start, static_cast<std::size_t>(n), LWS_WRITE_HTTP) == n;
+}
+
 }  // namespace
+
+const char* refusal_name(Refusal r) {
+  switch (r) {
+    case Refusal::version:
+      return "version";
+    case Refusal::origin:
+      return "origin";
+    case Refusal::per_ip:
+      return "per_ip";
+    case Refusal::pre_hello:
+      return "pre_hello";
+  }
+  return "unknown";
+}
 
 // Everything lws keeps pointers to for the life of the context.
 struct Transport::Static {
@@ -171,9 +218,67 @@ std::size_t Transport::queued(ConnId id) const {
   return it == conns_.end() ? 0 : it->second.queue.size();
 }
 
+void Transport::said_hello(ConnId id) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = conns_.find(id);
+  if (it == conns_.end() || it->second.said_hello) return;
+  it->second.said_hello = true;
+  pre_hello_--;
+}
+
+std::string Transport::peer(ConnId id) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = conns_.find(id);
+  return it == conns_.end() ? std::string() : it->second.peer;
+}
+
+// Runs before the handshake, with the request's headers at hand: a refusal here is an ordinary
+// HTTP answer the client can read, and no WebSocket (or session) is ever created for it.
+int Transport::on_upgrade(lws* wsi, const char* upgrade) {
+  if (!upgrade || std::strcmp(upgrade, "websocket") != 0) return 0;
+  const std::string peer = client_address(options_.proxies, peer_of(wsi), header(wsi, WSI_TOKEN_X_FORWARDED_FOR));
+  upgrading_wsi_ = wsi;
+  upgrading_client_ = peer;
+  auto refuse = [&](Refusal why, unsigned status, const std::string& detail, lws_token_indexes extra = WSI_TOKEN_COUNT,
+                    const std::string& extra_value = "") {
+    handler_.on_refused(why, peer, detail);
+    return write_refusal(wsi, status, detail + "\n", extra, extra_value) ? 1 : -1;
+  };
+  // RFC 6455 4.2.2: a server that does not speak the client's version answers 426 with the
+  // versions it does (lws 4.1.6 would carry on as if it were 13).
+  const std::string version = header(wsi, WSI_TOKEN_VERSION);
+  if (version != "13")
+    return refuse(Refusal::version, 426, "unsupported Sec-WebSocket-Version '" + version + "' (13 only)",
+                  WSI_TOKEN_VERSION, "13");
+  const std::string origin = header(wsi, WSI_TOKEN_ORIGIN);
+  if (!options_.origins.allows(origin, header(wsi, WSI_TOKEN_HOST)))
+    return refuse(Refusal::origin, HTTP_STATUS_FORBIDDEN,
+                  "origin '" + origin + "' may not open a session here (--allowed-origins)");
+  int from_peer = 0, pre_hello = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = per_ip_.find(peer);
+    from_peer = it == per_ip_.end() ? 0 : it->second;
+    pre_hello = pre_hello_;
+  }
+  if (options_.max_per_ip > 0 && from_peer >= options_.max_per_ip)
+    return refuse(Refusal::per_ip, 429,
+                  "too many connections from " + peer + " (" + std::to_string(options_.max_per_ip) +
+                      ", --max-connections-per-ip)",
+                  WSI_TOKEN_HTTP_RETRY_AFTER, "5");
+  if (options_.max_pre_hello > 0 && pre_hello >= options_.max_pre_hello)
+    return refuse(
+        Refusal::pre_hello, HTTP_STATUS_SERVICE_UNAVAILABLE,
+        "too many connections waiting for Hello (" + std::to_string(options_.max_pre_hello) + ", --max-pre-hello)",
+        WSI_TOKEN_HTTP_RETRY_AFTER, "2");
+  return 0;
+}
+
 int Transport::callback(lws* wsi, int reason, void* user, void* in, std::size_t len) {
   auto* self = static_cast<Transport*>(lws_context_user(lws_get_context(wsi)));
   switch (reason) {
+    case LWS_CALLBACK_HTTP_CONFIRM_UPGRADE:
+      return self->on_upgrade(wsi, static_cast<const char*>(in));
     case LWS_CALLBACK_HTTP:
     case LWS_CALLBACK_HTTP_WRITEABLE:
     case LWS_CALLBACK_CLOSED_HTTP:
@@ -205,8 +310,16 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
       } else if (path.rfind("/readyz", 0) == 0) {
         status = static_cast<unsigned>(handler_.readiness(body));
       } else if (path.rfind("/metrics", 0) == 0) {
-        body = handler_.metrics_text();
-        type = "text/plain; version=0.0.4; charset=utf-8";
+        // Behind the admin token when the server has tokens; /healthz and /readyz stay open
+        // for probes, which carry no credentials.
+        status = static_cast<unsigned>(handler_.metrics_access(header(wsi, WSI_TOKEN_HTTP_AUTHORIZATION)));
+        if (status == HTTP_STATUS_OK) {
+          body = handler_.metrics_text();
+          type = "text/plain; version=0.0.4; charset=utf-8";
+        } else {
+          body = status == HTTP_STATUS_UNAUTHORIZED ? "a token is required: Authorization: Bearer TOKEN\n"
+                                                    : "this token may not read /metrics (admin only)\n";
+        }
       } else {
         if (lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND, nullptr)) return -1;
         return lws_http_transaction_completed(wsi) ? -1 : 0;
@@ -214,6 +327,11 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
       unsigned char buf[LWS_PRE + 1024];
       unsigned char *start = buf + LWS_PRE, *p = start, *end = buf + sizeof(buf) - 1;
       if (lws_add_http_common_headers(wsi, status, type.c_str(), body.size(), &p, end)) return 1;
+      static const char kBearer[] = "Bearer realm=\"catgs\"";
+      if (status == HTTP_STATUS_UNAUTHORIZED &&
+          lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_WWW_AUTHENTICATE,
+                                       reinterpret_cast<const unsigned char*>(kBearer), sizeof(kBearer) - 1, &p, end))
+        return 1;
       if (lws_finalize_write_http_header(wsi, start, &p, end)) return 1;
       if (!pss) return -1;
       delete pss->body;
@@ -251,10 +369,18 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
   switch (reason) {
     case LWS_CALLBACK_ESTABLISHED: {
       ConnId id;
+      const std::string peer = upgrading_wsi_ == wsi ? upgrading_client_ : peer_of(wsi);
+      upgrading_wsi_ = nullptr;
       {
+        // Counted here, checked in on_upgrade: the handshake between the two runs in one go on
+        // this thread, so no other upgrade can slip in between.
         std::lock_guard<std::mutex> lock(mutex_);
         id = next_id_++;
-        conns_[id].wsi = wsi;
+        Conn& c = conns_[id];
+        c.wsi = wsi;
+        c.peer = peer;
+        per_ip_[peer]++;
+        pre_hello_++;
       }
       pss->id = id;
       // A bounded kernel send buffer: frames a peer does not read pile up in our queue, where
@@ -270,29 +396,13 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
     }
     case LWS_CALLBACK_RECEIVE: {
       if (!pss || !pss->id) return -1;
-      const bool first = lws_is_first_fragment(wsi) != 0;
-      const bool final = lws_is_final_fragment(wsi) != 0;
-      const bool binary = lws_frame_is_binary(wsi) != 0;
       MessageKind kind = MessageKind::binary;
       std::string message;
       {
         std::lock_guard<std::mutex> lock(mutex_);
         auto it = conns_.find(pss->id);
         if (it == conns_.end()) return -1;
-        Conn& c = it->second;
-        if (first && c.rx.empty() && !c.rx_oversize) c.rx_binary = binary;
-        if (!c.rx_oversize) {
-          if (c.rx.size() + len > options_.max_message_bytes) {
-            c.rx_oversize = true;  // discard the rest; report once the message ends
-            std::string().swap(c.rx);
-          } else {
-            c.rx.append(static_cast<const char*>(in), len);
-          }
-        }
-        if (!final) return 0;
-        kind = c.rx_oversize ? MessageKind::oversize : (c.rx_binary ? MessageKind::binary : MessageKind::text);
-        message.swap(c.rx);
-        c.rx_oversize = false;
+        if (!take_fragment(wsi, it->second, in, len, kind, message)) return 0;
       }
       handler_.on_message(pss->id, kind, std::move(message));
       return 0;
@@ -331,7 +441,13 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
       pss->id = 0;
       {
         std::lock_guard<std::mutex> lock(mutex_);
-        conns_.erase(id);
+        auto it = conns_.find(id);
+        if (it != conns_.end()) {
+          if (!it->second.said_hello) pre_hello_--;
+          auto ip = per_ip_.find(it->second.peer);
+          if (ip != per_ip_.end() && --ip->second <= 0) per_ip_.erase(ip);
+          conns_.erase(it);
+        }
       }
       handler_.on_close(id);
       return 0;
@@ -339,6 +455,31 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
     default:
       return 0;
   }
+}
+
+bool Transport::take_fragment(lws* wsi, Conn& c, const void* in, std::size_t len, MessageKind& kind,
+                              std::string& message) {
+  if (c.rx_oversize) return false;  // already reported; nothing more is read (below)
+  const bool first = lws_is_first_fragment(wsi) != 0;
+  const bool final = lws_is_final_fragment(wsi) != 0;
+  if (first && c.rx.empty()) c.rx_binary = lws_frame_is_binary(wsi) != 0;
+  // What the frame header declared and is still to come counts now, not once it has arrived:
+  // a frame declaring a gigabyte is refused at its first bytes (issue 22 finding 9).
+  const std::size_t declared = c.rx.size() + len + lws_remaining_packet_payload(wsi);
+  if (declared > options_.max_message_bytes) {
+    c.rx_oversize = true;
+    std::string().swap(c.rx);
+    // Stop reading this socket: the session answers with an Error and closes (the close's
+    // grace timeout ends a peer that does not read it).
+    lws_rx_flow_control(wsi, 0);
+    kind = MessageKind::oversize;
+    return true;
+  }
+  c.rx.append(static_cast<const char*>(in), len);
+  if (!final) return false;
+  kind = c.rx_binary ? MessageKind::binary : MessageKind::text;
+  message.swap(c.rx);
+  return true;
 }
 
 int Transport::write_some(lws* wsi, ConnId id) {

@@ -11,6 +11,16 @@
 // Handler::readiness() (200, or 503 while the server cannot take a new session: routing),
 // "/metrics" answers Handler::metrics_text() (Prometheus text).
 // WebSocket: subprotocol "catgs.v1" (or none) on any path.
+//
+// Upgrades are checked before the handshake (issue 22): Sec-WebSocket-Version must be 13 (else
+// 426 with the version we speak), the Origin must be allowed (origin_policy.h; else 403), and the
+// caps on connections per client address (429) and on connections that have not said Hello yet
+// (503) must have room. Each refusal is reported to TransportHandler::on_refused. An incoming
+// message is cut off as soon as it is known to exceed max_message_bytes, by the length a frame
+// declares before its payload is read: the connection stops reading and the handler is told
+// (`oversize`) so the session can send its Error and close.
+// lws 4.1.6 cannot refuse unmasked client frames (RFC 6455 5.1): its parser records the mask bit
+// and carries on, and no public call exposes the bit (server/README.md "Limits").
 #pragma once
 
 #include <atomic>
@@ -24,6 +34,9 @@
 #include <unordered_map>
 #include <vector>
 
+#include "transport/origin_policy.h"
+#include "transport/trusted_proxies.h"
+
 struct lws;
 struct lws_context;
 
@@ -34,6 +47,11 @@ using ConnId = std::uint64_t;
 
 // What arrived in one complete WebSocket message.
 enum class MessageKind { binary, text, oversize };
+
+// Why an upgrade was refused (TransportHandler::on_refused); also the /metrics label.
+enum class Refusal { version, origin, per_ip, pre_hello };
+inline constexpr int kRefusalKinds = 4;
+const char* refusal_name(Refusal r);
 
 class TransportHandler {
  public:
@@ -52,6 +70,17 @@ class TransportHandler {
   // GET /readyz: the HTTP status (200 when a new session would be admitted, else 503) with a
   // one-line reason in `body`.
   virtual int readiness(std::string& body) = 0;
+  // GET /metrics with this Authorization header ("" when none): 200 to serve it, 401 (no or an
+  // unknown token) or 403 (a token without the admin role) to refuse.
+  virtual int metrics_access(const std::string& authorization) {
+    (void)authorization;
+    return 200;
+  }
+  // An upgrade was refused before the handshake: `peer` is the client address, `detail` says
+  // what was wrong (e.g. the Origin).
+  virtual void on_refused(Refusal why, const std::string& peer, const std::string& detail) {
+    (void)why, (void)peer, (void)detail;
+  }
 };
 
 struct TransportOptions {
@@ -60,6 +89,10 @@ struct TransportOptions {
   std::string web_root;                       // static files at "/"
   std::size_t max_message_bytes = 64 * 1024;  // incoming messages above this are `oversize`
   int socket_send_buffer = 512 * 1024;        // SO_SNDBUF of WebSocket sockets; 0 = kernel's
+  OriginPolicy origins;                       // pages allowed to open a WebSocket
+  int max_per_ip = 128;                       // WebSocket connections per client address; 0 = no cap
+  int max_pre_hello = 256;                    // connections that have not said Hello; 0 = no cap
+  TrustedProxies proxies;                     // whose X-Forwarded-For names the client (peer())
 };
 
 class Transport {
@@ -88,6 +121,11 @@ class Transport {
   void close(ConnId id, std::string final_message, bool drop_queued, int grace_ms = 2000);
   // Thread-safe. Messages queued for `id` and not yet fully written (0 for unknown ids).
   std::size_t queued(ConnId id) const;
+  // Thread-safe. The connection said a valid Hello: it no longer counts against max_pre_hello.
+  void said_hello(ConnId id);
+  // Thread-safe. The client's address ("" for unknown ids): the TCP peer, or behind a trusted
+  // proxy the address its X-Forwarded-For names (trusted_proxies.h).
+  std::string peer(ConnId id) const;
 
  private:
   struct Outgoing {
@@ -104,11 +142,18 @@ class Transport {
     std::string rx;  // message being reassembled
     bool rx_oversize = false;
     bool rx_binary = true;  // opcode of the message's first fragment
+    std::string peer;       // client address
+    bool said_hello = false;
   };
 
   static int callback(lws* wsi, int reason, void* user, void* in, std::size_t len);
   int on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len);
   int on_http(lws* wsi, int reason, void* user, void* in, std::size_t len);
+  // LWS_CALLBACK_HTTP_CONFIRM_UPGRADE: 0 lets the upgrade go on, 1 when refused (answer written).
+  int on_upgrade(lws* wsi, const char* upgrade);
+  // Appends one received fragment to its message; true when the message is complete (or known
+  // to be oversize) and `kind` / `message` are set.
+  bool take_fragment(lws* wsi, Conn& c, const void* in, std::size_t len, MessageKind& kind, std::string& message);
   int write_some(lws* wsi, ConnId id);
   void service_loop();
   void wake();
@@ -122,7 +167,13 @@ class Transport {
 
   mutable std::mutex mutex_;  // guards conns_ and dirty_
   std::unordered_map<ConnId, Conn> conns_;
-  std::vector<ConnId> dirty_;  // connections with new work for the service thread
+  std::vector<ConnId> dirty_;                    // connections with new work for the service thread
+  std::unordered_map<std::string, int> per_ip_;  // open WebSocket connections per address
+  int pre_hello_ = 0;                            // open connections that have not said Hello
+  // The client address on_upgrade worked out, for the ESTABLISHED callback that follows it on
+  // this thread (the headers may be gone by then). Service thread only.
+  lws* upgrading_wsi_ = nullptr;
+  std::string upgrading_client_;
   ConnId next_id_ = 1;
 
   // Storage lws points into (must outlive the context).

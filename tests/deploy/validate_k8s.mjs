@@ -102,7 +102,9 @@ check('GPU: runtimeClassName, toleration, nvidia.com/gpu limit',
 const env = (n) => (c.env || []).find((e) => e.name === n);
 check('--threads from the CPU limit (downward API)',
   arg('--threads') === '$(CATGS_THREADS)' && env('CATGS_THREADS')?.valueFrom?.resourceFieldRef?.resource === 'limits.cpu');
-check('--token from a Secret', arg('--token') === '$(CATGS_TOKEN)' && !!env('CATGS_TOKEN')?.valueFrom?.secretKeyRef);
+check('the token from a Secret in CATGS_TOKEN, not on the command line (/proc)',
+  arg('--token') === undefined && !(c.args || []).some((a) => a.includes('CATGS_TOKEN')) &&
+  !!env('CATGS_TOKEN')?.valueFrom?.secretKeyRef);
 const scenesVol = pod.volumes.find((v) => v.persistentVolumeClaim);
 const pvc = objects.find((o) => o.kind === 'PersistentVolumeClaim' && o.metadata.name === scenesVol?.persistentVolumeClaim.claimName);
 check('the scenes PVC is defined, ReadOnlyMany, mounted read-only',
@@ -124,6 +126,8 @@ const sm = byKind('ServiceMonitor');
 const smPort = sm?.spec.endpoints?.[0]?.port;
 check('ServiceMonitor scrapes /metrics on a Service port',
   sm?.spec.endpoints?.[0]?.path === '/metrics' && svc.spec.ports.some((p) => p.name === smPort));
+check('ServiceMonitor sends the token /metrics needs',
+  sm?.spec.endpoints?.[0]?.authorization?.credentials?.name === env('CATGS_TOKEN')?.valueFrom?.secretKeyRef?.name);
 
 // The HPA's pods metric exists: the adapter rule exposes it, and the server exports the gauge.
 const adapter = parse(readFileSync(path.join(repo, 'deploy/k8s/prometheus-adapter-values.yaml'), 'utf8'));

@@ -223,6 +223,17 @@ try {
     await page.close();
   }
 
+  // 7b. A token in the link: used, then gone from the address bar and history, kept for the tab.
+  {
+    const page = await openPage(`${base}/?token=sesame&ws=${wsUrl('/ws-token')}`);
+    check(await moveUntil(page, (c) => c.framesDecoded >= 3), 'token link: streams with the token from the URL');
+    check(hellos('/ws-token').at(-1).msg.token === 'sesame', 'token link: Hello.token carries it');
+    check(!/[?&]token=/.test(page.url()), `token link: the URL no longer holds it (${page.url()})`);
+    const kept = await page.evaluate(() => sessionStorage.getItem('catgs.token'));
+    check(kept === 'sesame', `token link: kept in sessionStorage (${kept})`);
+    await page.close();
+  }
+
   // 8. Server full with retry_after_ms 2500: countdown, retry at the hint, retry now, and no red
   //    text left over the live picture afterwards.
   {

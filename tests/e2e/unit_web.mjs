@@ -23,6 +23,7 @@ const cam = await imp('camera.js');
 const h264 = await imp('h264.js');
 const proto = await imp('protocol.js');
 const conn = await imp('connection.js');
+const tokens = await imp('token.js');
 
 const close = (a, b, eps = 1e-9) => {
   assert.equal(a.length, b.length);
@@ -294,7 +295,26 @@ test('retry policy: a wrong token stops; SERVER_FULL / SHUTTING_DOWN follow the 
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_PROTOCOL }, false), { permanent: true });
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_PROTOCOL }, true), { permanent: false, delayMs: null });
   assert.deepEqual(conn.retryPolicy({ code: 8, retry_after_ms: 100 }, true), { permanent: false, delayMs: null });
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_RATE_LIMITED, retry_after_ms: 1500 }, false), { permanent: false, delayMs: 1500 });
   assert.deepEqual(conn.retryPolicy(null, true), { permanent: false, delayMs: null });
+});
+
+test('the token leaves the URL (history.replaceState) and stays in sessionStorage', () => {
+  const storage = new Map();
+  const store = { getItem: (k) => storage.get(k) ?? null, setItem: (k, v) => storage.set(k, v) };
+  const replaced = [];
+  const hist = { state: { s: 1 }, replaceState: (state, title, url) => replaced.push([state, url]) };
+  const loc = { href: 'http://h:8080/?scale=0.5&token=s3cret&view=1,2#x' };
+  assert.equal(tokens.takeToken(loc, store, hist), 's3cret');
+  assert.deepEqual(replaced, [[{ s: 1 }, 'http://h:8080/?scale=0.5&view=1%2C2#x']]);
+  assert.equal(storage.get(tokens.TOKEN_KEY), 's3cret');
+  // A reload: the URL has no token any more, the tab's storage still has it; nothing replaced.
+  assert.equal(tokens.takeToken({ href: 'http://h:8080/?scale=0.5' }, store, hist), 's3cret');
+  assert.equal(replaced.length, 1);
+  // An empty ?token= is removed too and keeps what the tab had.
+  assert.equal(tokens.takeToken({ href: 'http://h:8080/?token=' }, store, hist), 's3cret');
+  assert.equal(replaced[1][1], 'http://h:8080/');
+  assert.equal(tokens.takeToken({ href: 'http://h/' }, { getItem: () => null }, hist), '');
 });
 
 test('stream cap: 1920x1080 either way round, aspect kept, even; ?max moves it', () => {

@@ -108,7 +108,7 @@ long rss_kib(pid_t pid) {
   return -1;
 }
 
-int http_get(int port, const std::string& path, std::string& body, int timeout_ms) {
+int http_get(int port, const std::string& path, std::string& body, int timeout_ms, const std::string& extra_headers) {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in a{};
   a.sin_family = AF_INET;
@@ -118,7 +118,8 @@ int http_get(int port, const std::string& path, std::string& body, int timeout_m
     close(fd);
     return -1;
   }
-  const std::string req = "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n";
+  const std::string req =
+      "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n" + extra_headers + "\r\n";
   if (send(fd, req.data(), req.size(), MSG_NOSIGNAL) < 0) {
     close(fd);
     return -1;

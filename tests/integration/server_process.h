@@ -49,6 +49,8 @@ class ServerProcess {
 long rss_kib(pid_t pid);
 
 // GET http://127.0.0.1:port/path; returns the status code and fills `body` (-1: no answer).
-int http_get(int port, const std::string& path, std::string& body, int timeout_ms = 5000);
+// `extra_headers`: more request lines, each ending in "\r\n" (e.g. an Authorization header).
+int http_get(int port, const std::string& path, std::string& body, int timeout_ms = 5000,
+             const std::string& extra_headers = "");
 
 }  // namespace catgs::itest

@@ -77,4 +77,31 @@ double metric_value(const std::string& metrics, const std::string& series) {
   return -1;
 }
 
+std::optional<pb::Error> expect_error(loadgen::StreamClient& c, int timeout_ms) {
+  using Clock = std::chrono::steady_clock;
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (Clock::now() < deadline) {
+    try {
+      auto m = c.recv(50);
+      if (m && m->has_error()) return m->error();
+    } catch (const std::exception&) {
+      return std::nullopt;  // closed without an Error
+    }
+  }
+  return std::nullopt;
+}
+
+bool expect_closed(loadgen::StreamClient& c, int timeout_ms) {
+  using Clock = std::chrono::steady_clock;
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (Clock::now() < deadline) {
+    try {
+      c.recv(50);
+    } catch (const std::exception&) {
+      return true;
+    }
+  }
+  return false;
+}
+
 }  // namespace catgs::itest

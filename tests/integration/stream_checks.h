@@ -45,6 +45,12 @@ std::optional<pb::ServerMessage> wait_for(loadgen::StreamClient& c, int timeout_
   return std::nullopt;
 }
 
+// Reads until the server sends Error (returned) or closes; nullopt if neither in time.
+std::optional<pb::Error> expect_error(loadgen::StreamClient& c, int timeout_ms = 10000);
+
+// True when the server closes the connection within timeout_ms.
+bool expect_closed(loadgen::StreamClient& c, int timeout_ms = 5000);
+
 // PSNR (dB) of frame `f` decoded by `dec` against `ref`'s render of `pose`; -1 when the decoder
 // gave no picture. Adds a failure when the decoded size differs from the Frame's.
 double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose);
