@@ -33,7 +33,7 @@ prepare() {
   local carry=$ROOT/.carry_srv
   rm -rf "$carry" && mkdir -p "$carry/stage/bin" "$carry/stage/lib"
   local bins=("$build/bin/catgs-server" "$build/bin/catgs-loadgen"
-              "$build/tests/unit/catgs_server_unit_tests")
+              "$(find "$build" -type f -name catgs_server_unit_tests -perm -u+x | head -1)")
   for b in "${bins[@]}"; do
     [ -x "$b" ] || { echo "prepare: $b missing (build $build with the server)" >&2; return 1; }
     cp -f "$b" "$carry/stage/bin/"
