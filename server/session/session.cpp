@@ -284,7 +284,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
-  shared_.transport.said_hello(id_);  // no longer counts against --max-pre-hello
+  shared_.transport.said_hello(id_);                                   // no longer counts against --max-pre-hello
   if (shared_.renderer_kind == "cuda") gpu_ = shared_.gpus.acquire();  // the least busy GPU
   renderer_ = make_renderer(shared_.renderer_kind, shared_.model, shared_.render_options, nullptr, std::max(gpu_, 0));
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
