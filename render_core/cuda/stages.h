@@ -10,8 +10,8 @@
 #include "key_emission.h"            // stage 2: scan, emission
 #include "depth_order.h"             // stage 2a': the depth-first sort's order
 #include "sort.h"                    // stage 3
-#include "tile_ranges.h"             // stage 4 and the heavy-first tile order
-#include "rasterize.h"               // stage 5
-#include "task_split.h"              // catgs: split tasks and their order
-#include "rasterize_slices.h"        // stage 5 with slices, and the merge
+#include "tile_ranges.h"             // stage 4 and the heavy-first tile order (vanilla)
+#include "rasterize.h"               // stage 5 (vanilla: whole tiles)
+#include "task_split.h"              // exact, catgs: split tasks and their order
+#include "rasterize_slices.h"        // stage 5 with slices (exact, catgs), and the merge
 #include "colour/yuv420_convert.h"   // after stage 5: RGBA8 -> I420
