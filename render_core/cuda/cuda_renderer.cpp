@@ -93,18 +93,21 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   const stages::Projected proj = projected();
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
-  stages::scan_chunks(proj, n, chunk_start.as<uint64_t>(), scan_temp.as<void>(), scan_temp.bytes(),
-                      count + kVisibleCount, count + kReadListLength, stream);
+  stages::count_list(proj, n, count + kVisibleCount, count + kReadListLength, stream);
   // The host-device sync of a frame: CUB's radix sort takes the list length from the host, and
   // the list buffers may need to grow before emission writes into them.
   CATGS_CUDA(cudaMemcpyAsync(host_counts, count + kReadListLength, kReadSlots * sizeof(unsigned long long),
                              cudaMemcpyDeviceToHost, stream));
   CATGS_CUDA(cudaEventRecord(counts_ready, stream));
+  // Queued behind the readback, so the GPU works while the host waits for it: the chunks' starts
+  // and each listed Gaussian's end in the list, where emission in index order needs it (the
+  // depth-first order works its own out).
+  if (!depth_first) {
+    stages::scan_chunks(proj, n, chunk_start.as<uint64_t>(), scan_temp.as<void>(), scan_temp.bytes(), stream);
+    stages::gaussian_ends(proj, n, chunk_start.as<uint64_t>(), ends.as<uint64_t>(), stream);
+  }
   CATGS_CUDA(cudaEventSynchronize(counts_ready));
   ++syncs;
-  // While the host reads the counts: each listed Gaussian's end in the list, where emission in
-  // index order needs it (the depth-first order works its own out).
-  if (!depth_first) stages::gaussian_ends(proj, n, chunk_start.as<uint64_t>(), ends.as<uint64_t>(), stream);
   const uint64_t entries = host_counts[0];
   *visible = host_counts[1];
   // The single sort's key (forward_model/key_packing.h): 32-bit [tile | quantised depth] over the

@@ -4,6 +4,9 @@
 // FlashGS's contended global atomicAdd per Gaussian is what slows it on the city). Built with
 // -fmad=false, like pre-processing, so the exact tile test here answers exactly as it did when
 // the tiles were counted.
+#include <algorithm>
+
+#include <cub/block/block_reduce.cuh>
 #include <cub/block/block_scan.cuh>
 #include <cub/device/device_scan.cuh>
 #include <thrust/iterator/transform_iterator.h>
@@ -44,15 +47,24 @@ struct KeyOut {
   }
 };
 
-// counts[0] = render list length (the last chunk's start + its entries), counts[1] = visible
-// Gaussians: one 16-byte readback.
-__global__ void gather_counts_kernel(const uint64_t* chunk_start,  // [chunks]
-                                     const uint32_t* chunk_total,  // [chunks]
-                                     uint64_t chunks,
-                                     const unsigned long long* visible,  // [1]
-                                     unsigned long long* counts) {       // [2]
-  counts[0] = chunks > 0 ? chunk_start[chunks - 1] + chunk_total[chunks - 1] : 0ull;
-  counts[1] = *visible;
+// counts[0] += the chunks' entries (this block's share of a grid-stride sum: a block reduction,
+// then one atomic), counts[1] = visible Gaussians (block 0).
+constexpr int kCountThreads = 1024;
+__global__ void __launch_bounds__(kCountThreads)
+    count_list_kernel(const uint32_t* __restrict__ chunk_total,  // [chunks]
+                      uint64_t chunks,
+                      const unsigned long long* __restrict__ visible,  // [1]
+                      unsigned long long* counts) {                   // [2], counts[0] zeroed
+  using Reduce = cub::BlockReduce<unsigned long long, kCountThreads>;
+  __shared__ typename Reduce::TempStorage temp;
+  unsigned long long mine = 0;
+  for (uint64_t c = static_cast<uint64_t>(blockIdx.x) * kCountThreads + threadIdx.x; c < chunks;
+       c += static_cast<uint64_t>(gridDim.x) * kCountThreads)
+    mine += chunk_total[c];
+  const unsigned long long sum = Reduce(temp).Sum(mine);
+  if (threadIdx.x != 0) return;
+  if (sum > 0) atomicAdd(counts, sum);
+  if (blockIdx.x == 0) counts[1] = *visible;
 }
 
 // A block per chunk: each Gaussian's end in the list, its chunk's start + the inclusive sum of
@@ -302,15 +314,21 @@ std::size_t scan_temp_bytes(uint64_t chunks) {
   return bytes;
 }
 
-void scan_chunks(const Projected& p, uint64_t n, uint64_t* chunk_start, void* temp, std::size_t temp_bytes,
-                 const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream) {
+void count_list(const Projected& p, uint64_t n, const unsigned long long* visible, unsigned long long* counts,
+                cudaStream_t stream) {
   const uint64_t chunks = fm::chunk_count(n);
-  if (chunks > 0) {
-    WideCounts in(p.chunk_total, WidenToU64{});
-    CATGS_CUDA(cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, chunk_start, chunks, stream));
-  }
-  gather_counts_kernel<<<1, 1, 0, stream>>>(chunk_start, p.chunk_total, chunks, visible, counts);
-  CATGS_CUDA_LAUNCHED("gather_counts_kernel");
+  // One block per 16 k chunks (4 M Gaussians), at most 32: each sums a few thousand counts.
+  const auto blocks = static_cast<unsigned>(std::min<uint64_t>(32, chunks / (16 * kCountThreads) + 1));
+  count_list_kernel<<<blocks, kCountThreads, 0, stream>>>(p.chunk_total, chunks, visible, counts);
+  CATGS_CUDA_LAUNCHED("count_list_kernel");
+}
+
+void scan_chunks(const Projected& p, uint64_t n, uint64_t* chunk_start, void* temp, std::size_t temp_bytes,
+                 cudaStream_t stream) {
+  const uint64_t chunks = fm::chunk_count(n);
+  if (chunks == 0) return;
+  WideCounts in(p.chunk_total, WidenToU64{});
+  CATGS_CUDA(cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, chunk_start, chunks, stream));
 }
 
 void gaussian_ends(const Projected& p, uint64_t n, const uint64_t* chunk_start, uint64_t* ends, cudaStream_t stream) {

@@ -9,12 +9,17 @@
 
 namespace catgs::cuda::stages {
 
-// Stage 2a (key_emission.cu): exclusive scan of the chunks' entry counts (Projected::chunk_total)
-// into 64-bit chunk_start[chunk_count(n)] (CUB), then a one-thread kernel copies the list length
-// and *visible into counts[0..1] for one 16-byte readback.
+// Stage 2a (key_emission.cu): the list length, the sum of the chunks' entry counts
+// (Projected::chunk_total), into counts[0] (zeroed by the caller) and *visible into counts[1], for
+// the frame's one readback; a few blocks of a grid-stride sum, so the readback can start before
+// the scan below, which runs while the host waits for it.
+void count_list(const Projected& projected, uint64_t n, const unsigned long long* visible,
+                unsigned long long* counts, cudaStream_t stream);
+// Stage 2a (key_emission.cu): exclusive scan of the chunks' entry counts into 64-bit
+// chunk_start[chunk_count(n)] (CUB).
 std::size_t scan_temp_bytes(uint64_t chunks);
 void scan_chunks(const Projected& projected, uint64_t n, uint64_t* chunk_start, void* temp, std::size_t temp_bytes,
-                 const unsigned long long* visible, unsigned long long* counts, cudaStream_t stream);
+                 cudaStream_t stream);
 // Stage 2a' (key_emission.cu): ends[i], the end of Gaussian i's run in the list in index order
 // (its chunk's start + the inclusive sum of tiles_touched within the chunk), a block per chunk;
 // left unwritten in chunks without entries, which emission in index order skips.

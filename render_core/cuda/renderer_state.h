@@ -151,8 +151,9 @@ struct CudaRenderer::State {
   // Grows the buffers every frame of `n` Gaussians at this camera's size needs.
   void ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels);
 
-  // Stages 2-4 after pre-processing: scans the chunks' entry counts, reads back the list length and the
-  // visible count (the frame's counts sync), grows the list buffers, emits keys with `tests`
+  // Stages 2-4 after pre-processing: sums the chunks' entry counts and reads back the list length
+  // and the visible count (the frame's counts sync; the chunks' scan and the Gaussians' ends run
+  // on the GPU meanwhile), grows the list buffers, emits keys with `tests`
   // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
   // ranges. With `depth_first` the list is ordered by the depth-first sort (depth_order.cu; the
   // same list). Returns the list length. Throws std::length_error past 2^32 - 1 entries.
