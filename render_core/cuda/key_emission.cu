@@ -54,7 +54,7 @@ __global__ void __launch_bounds__(kCountThreads)
     count_list_kernel(const uint32_t* __restrict__ chunk_total,  // [chunks]
                       uint64_t chunks,
                       const unsigned long long* __restrict__ visible,  // [1]
-                      unsigned long long* counts) {                   // [2], counts[0] zeroed
+                      unsigned long long* counts) {                    // [2], counts[0] zeroed
   using Reduce = cub::BlockReduce<unsigned long long, kCountThreads>;
   __shared__ typename Reduce::TempStorage temp;
   unsigned long long mine = 0;

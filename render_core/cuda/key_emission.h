@@ -13,8 +13,8 @@ namespace catgs::cuda::stages {
 // (Projected::chunk_total), into counts[0] (zeroed by the caller) and *visible into counts[1], for
 // the frame's one readback; a few blocks of a grid-stride sum, so the readback can start before
 // the scan below, which runs while the host waits for it.
-void count_list(const Projected& projected, uint64_t n, const unsigned long long* visible,
-                unsigned long long* counts, cudaStream_t stream);
+void count_list(const Projected& projected, uint64_t n, const unsigned long long* visible, unsigned long long* counts,
+                cudaStream_t stream);
 // Stage 2a (key_emission.cu): exclusive scan of the chunks' entry counts into 64-bit
 // chunk_start[chunk_count(n)] (CUB).
 std::size_t scan_temp_bytes(uint64_t chunks);
