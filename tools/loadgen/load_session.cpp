@@ -37,7 +37,6 @@ Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const
     b.min = to_vec3(welcome.scene_bounds().min());
     b.max = to_vec3(welcome.scene_bounds().max());
     if (scene) b = robust_bounds(*scene);
-    const float radius = glm::length(to_vec3(welcome.initial_pose().position()) - b.center());
     GeneratorParams g;
     g.duration_s = 10.0;
     g.rate_hz = kTraceRateHz;
@@ -45,6 +44,12 @@ Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const
     g.height = height;
     g.fov_deg = static_cast<float>(welcome.initial_pose().vertical_fov_deg());
     if (scene) g.up = estimate_up(*scene);
+    if (welcome.scene_scale() > 0) {  // the viewer's orbit: about the server's orbit centre and up
+      const glm::vec3 centre = to_vec3(welcome.orbit_centre());
+      b.min = b.max = centre;
+      g.up = to_vec3(welcome.up());
+    }
+    const float radius = glm::length(to_vec3(welcome.initial_pose().position()) - b.center());
     return make_orbit(b, radius, 0.3f * radius, 360.0f, g);
   }
   if (spec.rfind("real:", 0) == 0) {

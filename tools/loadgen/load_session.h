@@ -15,8 +15,10 @@
 namespace catgs::loadgen {
 
 // The trace a session replays, by spec, at width x height:
-//   "orbit"          a 360 degree orbit in 10 s around the scene at the distance of Welcome's
-//                    initial pose (bounds: the scene's robust bounds with `scene`, else Welcome's)
+//   "orbit"          a 360 degree orbit in 10 s at the distance of Welcome's initial pose,
+//                    about Welcome's orbit centre and up (the viewer's orbit) when it sends them
+//                    (scene_scale > 0), else about the scene's robust bounds (with `scene`) or
+//                    Welcome's bounds
 //   "real:C.json"    an INRIA cameras.json path moved onto the scene (fit_trace_to_scene, 0.5 s
 //                    per view); needs `scene`
 //   "cameras:C.json" the scene's own cameras, interpolated as they are (0.5 s per view)
