@@ -66,6 +66,8 @@ prepare() {
   # .spz's codecs (render_core links them): static zlib and zstd with their headers.
   cp -f /usr/lib/x86_64-linux-gnu/libz.a /usr/lib/x86_64-linux-gnu/libzstd.a "$CARRY/deps/lib/"
   cp -f /usr/include/zlib.h /usr/include/zconf.h /usr/include/zstd.h /usr/include/zstd_errors.h "$CARRY/deps/include/"
+  # glTF (.glb/.gltf) reader: tinygltf, header-only as render_core builds it.
+  cp -f /usr/include/tiny_gltf.h "$CARRY/deps/include/"
   cat > "$CARRY/deps/lib/pkgconfig/stb.pc" <<'PC'
 prefix=${pcfiledir}/../..
 libdir=${prefix}/lib

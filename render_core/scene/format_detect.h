@@ -9,6 +9,7 @@ namespace catgs {
 enum class SceneFormat {
   ply,    // starts with "ply\n": INRIA 3DGS PLY or SuperSplat compressed PLY (ply_io.h)
   spz,    // starts with "NGSP" (version 4) or the gzip magic 1f 8b (versions 1-3) (spz_file.h)
+  gltf,   // starts with "glTF" (.glb) or is JSON naming KHR_gaussian_splatting (.gltf) (gltf_file.h)
   splat,  // no magic: antimatter15 .splat, recognised by its .splat extension (splat_file.h)
 };
 

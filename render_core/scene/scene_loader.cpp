@@ -9,6 +9,7 @@
 #include "ply_format.h"
 #include "scene/format_detect.h"
 #include "scene/splat_file.h"
+#include "scene/gltf_file.h"
 #include "scene/spz_file.h"
 
 namespace catgs {
@@ -216,12 +217,15 @@ GaussianModel load_scene(const std::string& path) {
     case SceneFormat::splat:
       m = read_splat(path);
       break;
+    case SceneFormat::gltf:
+      m = read_gltf(path);
+      break;
     case SceneFormat::ply:
       m = load_ply(path);
       break;
   }
   m.name = std::filesystem::path(path).filename().string();
-  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat"}) {
+  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat", ".glb", ".gltf"}) {
     const std::string s = suffix;
     if (m.name.size() > s.size() && m.name.compare(m.name.size() - s.size(), s.size(), s) == 0) {
       m.name.resize(m.name.size() - s.size());

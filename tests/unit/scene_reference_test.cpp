@@ -177,5 +177,92 @@ TEST(SplatTransformReference, FormatDetectedByContent) {
   EXPECT_EQ(b.name, "really_spz");
 }
 
+// glTF 2.0 + KHR_gaussian_splatting written by splat-transform (its writeGlb). splat-transform 2.7.1
+// cannot read .glb, so the reference is the scene it converted: the .glb holds float32 attributes
+// (exp of log scale, sigmoid of logit, axes rotated 180 degrees about z), so our reader must render
+// as the source does. A wrong axis, quaternion order, SH sign or activation fails this.
+double psnr_glb_against_source(const std::string& source, const std::string& cams) {
+  const std::string dir = test::temp_dir(), glb = dir + "/scene.glb";
+  const std::string err = test::splat_transform(source, glb);
+  EXPECT_TRUE(err.empty()) << err;
+  if (!err.empty()) return 0.0;
+  const GaussianModel ours = load_scene(glb);
+  const GaussianModel reference = load_scene(source);
+  EXPECT_EQ(ours.size(), reference.size());
+  EXPECT_EQ(ours.sh_degree, reference.sh_degree);
+  EXPECT_EQ(ours.name, "scene");
+  if (ours.size() != reference.size()) return 0.0;
+  return test::min_render_psnr(ours, reference, test::comparison_views(reference, cams));
+}
+
+TEST(SplatTransformReference, GlbWrittenBySplatTransform) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const double psnr = psnr_glb_against_source(flowers, cams);
+  std::cout << "[ info ] flowers_sh3 -> splat-transform .glb: ours vs the source PLY " << psnr << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+TEST(SplatTransformReference, BundledBikerAsGlb) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  const double psnr = psnr_glb_against_source(test::bundled_scene(), "");
+  std::cout << "[ info ] biker.compressed.ply -> splat-transform .glb: ours vs the source " << psnr << " dB\n";
+  EXPECT_GE(psnr, kSameDecodeDb);
+}
+
+// Damaged .glb files from splat-transform: each fails naming the file and the problem.
+TEST(SplatTransformReference, DamagedGlbNamesTheProblem) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  const std::string dir = test::temp_dir(), glb = dir + "/flowers.glb";
+  CONVERT(flowers, glb);
+  std::ifstream in(glb, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  auto expect_error = [&](const std::string& name, const std::string& content, const std::string& what) {
+    const std::string path = dir + "/" + name;
+    std::ofstream(path, std::ios::binary) << content;
+    try {
+      load_scene(path);
+      ADD_FAILURE() << name << " loaded";
+    } catch (const SceneFileError& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  auto replaced = [&](const std::string& from, const std::string& to) {
+    std::string s = bytes;
+    const std::size_t at = s.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) s.replace(at, from.size(), to);
+    return s;
+  };
+  // Same lengths, so the GLB chunk sizes stay right and only the named thing is wrong.
+  expect_error("no_ext.glb", replaced("\"KHR_gaussian_splatting\":{\"kernel", "\"KHR_gaussian_splattinX\":{\"kernel"),
+               "no mesh primitive with the KHR_gaussian_splatting extension");
+  expect_error("no_scale.glb", replaced("KHR_gaussian_splatting:SCALE", "KHR_gaussian_splatting:SCALX"),
+               "missing attribute KHR_gaussian_splatting:SCALE");
+  expect_error("truncated.glb", bytes.substr(0, bytes.size() / 2), "not valid glTF");
+  // OPACITY pointed at COLOR_0's accessor (VEC4 unsigned byte), as splat-transform orders them.
+  expect_error("byte_opacity.glb",
+               replaced("\"KHR_gaussian_splatting:OPACITY\":4", "\"KHR_gaussian_splatting:OPACITY\":1"),
+               "expected float (5126)");
+  // OPACITY's accessor (the only SCALAR) one element short.
+  const std::size_t n = load_scene(flowers).size();
+  const std::string count = "\"count\":" + std::to_string(n) + ",\"type\":\"SCALAR\"";
+  const std::string fewer = "\"count\":" + std::to_string(n - 1) + ",\"type\":\"SCALAR\"";
+  ASSERT_EQ(count.size(), fewer.size());
+  expect_error("short_opacity.glb", replaced(count, fewer), "POSITION has " + std::to_string(n));
+  // A NaN as the first Gaussian's x (POSITION is the BIN chunk's first accessor).
+  uint32_t json_length = 0;
+  std::memcpy(&json_length, bytes.data() + 12, 4);
+  std::string nan = bytes;
+  const uint32_t quiet_nan = 0x7fc00000u;
+  std::memcpy(&nan[20 + json_length + 8], &quiet_nan, 4);
+  expect_error("nan.glb", nan, "POSITION of Gaussian 0 is not finite");
+  // A .gltf whose JSON lacks the extension is not taken for glTF (detected by content).
+  expect_error("plain.gltf", "{\"asset\":{\"version\":\"2.0\"}}", "not a PLY file");
+}
+
 }  // namespace
 }  // namespace catgs
