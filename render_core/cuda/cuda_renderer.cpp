@@ -250,7 +250,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   if (exact) {
     // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the
     // average load is rasterized as slices by several blocks and merged, so a few heavy tiles do
-    // not hold the frame's tail (city tandt_train: rasterization 1.48 -> 0.58 ms, RESULTS.md).
+    // not hold the frame's tail (RESULTS.md, "Issue 19, fourth round").
     const uint64_t capacity = s.plan_frame_slices(tiles, entries, options_.speculation);
     CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
     const stages::SlicePlan plan = s.slice_plan();

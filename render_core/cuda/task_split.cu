@@ -4,8 +4,8 @@
 // cache holds the split tasks too).
 //
 // One block of 1024 threads does it all (plan_slices_kernel). It replaced two kernels, a
-// device-wide scan, two memsets and a CUB radix sort of the slices, whose launches cost 0.06 ms
-// a frame (RESULTS.md, "Issue 19, fourth round").
+// device-wide scan, two memsets and a CUB radix sort of the slices, whose launches cost more
+// than the work (RESULTS.md, "Issue 19, fourth round").
 #include <algorithm>
 
 #include <cub/block/block_scan.cuh>

@@ -45,9 +45,9 @@ std::vector<float> read_floats(const std::string& path, const tinygltf::Model& m
   }
   if (a.sparse.isSparse) throw SceneFileError(path, "attribute " + name + " is sparse (not supported)");
   const int comps = tinygltf::GetNumComponentsInType(type);
-  std::vector<float> out(count * comps, 0.0f);
-  if (a.bufferView < 0) return out;  // glTF: no buffer view means all zeros
-  if (a.bufferView >= static_cast<int>(m.bufferViews.size())) {
+  // Bounds first, in arithmetic that cannot wrap, then the allocation: `count` comes from the
+  // file. An accessor without a buffer view (all zeros in glTF) carries no Gaussians' data.
+  if (a.bufferView < 0 || a.bufferView >= static_cast<int>(m.bufferViews.size())) {
     throw SceneFileError(path, "attribute " + name + " names no buffer view");
   }
   const tinygltf::BufferView& v = m.bufferViews[a.bufferView];
@@ -55,13 +55,13 @@ std::vector<float> read_floats(const std::string& path, const tinygltf::Model& m
     throw SceneFileError(path, "attribute " + name + " names no buffer");
   }
   const std::vector<unsigned char>& data = m.buffers[v.buffer].data;
-  const std::size_t elem = sizeof(float) * comps;
+  const std::size_t elem = sizeof(float) * static_cast<std::size_t>(comps);
   const std::size_t stride = v.byteStride ? v.byteStride : elem;
-  const std::size_t start = v.byteOffset + a.byteOffset;
-  if (count > 0 && (start + (count - 1) * stride + elem > v.byteOffset + v.byteLength ||
-                    v.byteOffset + v.byteLength > data.size())) {
-    throw SceneFileError(path, "attribute " + name + " runs past the end of its buffer");
-  }
+  const std::size_t start = v.byteOffset + a.byteOffset, end = v.byteOffset + v.byteLength;
+  const bool fits = v.byteOffset <= data.size() && v.byteLength <= data.size() - v.byteOffset && start <= end &&
+                    (count == 0 || (end - start >= elem && count - 1 <= (end - start - elem) / stride));
+  if (!fits) throw SceneFileError(path, "attribute " + name + " runs past the end of its buffer");
+  std::vector<float> out(count * static_cast<std::size_t>(comps), 0.0f);
   for (std::size_t i = 0; i < count; ++i) std::memcpy(&out[i * comps], data.data() + start + i * stride, elem);
   for (std::size_t i = 0; i < out.size(); ++i) {
     if (!std::isfinite(out[i])) {

@@ -253,6 +253,10 @@ TEST(SplatTransformReference, DamagedGlbNamesTheProblem) {
   const std::string fewer = "\"count\":" + std::to_string(n - 1) + ",\"type\":\"SCALAR\"";
   ASSERT_EQ(count.size(), fewer.size());
   expect_error("short_opacity.glb", replaced(count, fewer), "POSITION has " + std::to_string(n));
+  // A count the buffer cannot hold is refused before anything is allocated for it.
+  const std::string positions = "\"count\":" + std::to_string(n) + ",\"type\":\"VEC3\"";
+  const std::string too_many = "\"count\":" + std::string(std::to_string(n).size(), '9') + ",\"type\":\"VEC3\"";
+  expect_error("long_positions.glb", replaced(positions, too_many), "POSITION runs past the end of its buffer");
   // A NaN as the first Gaussian's x (POSITION is the BIN chunk's first accessor).
   uint32_t json_length = 0;
   std::memcpy(&json_length, bytes.data() + 12, 4);
