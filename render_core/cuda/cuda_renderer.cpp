@@ -194,6 +194,7 @@ uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries
   slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
   tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
   slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
+  plan_scratch.ensure(stages::plan_scratch_bytes(tiles), "slice plan scratch", allocs);
   partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
   // The rasterizer's per-tile state starts as task_split.h says, once; its kernels keep it so.
   if (saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs))
@@ -204,7 +205,7 @@ uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries
     CATGS_CUDA(cudaMemsetAsync(slot_finished.as<void>(), 0, slot_finished.bytes(), stream));
   note_peak();
   stages::plan_slices(ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, slice_plan(),
-                      slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream);
+                      plan_scratch.as<void>(), slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream);
   heaviest = heaviest_tile.as<uint32_t>();  // the longest slice
   return capacity;
 }

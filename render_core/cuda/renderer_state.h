@@ -133,6 +133,7 @@ struct CudaRenderer::State {
   // The split plan of exact frames and catgs key frames (per slice and tile: plan_frame_slices),
   // and the partial slices of split tiles.
   GrowBuffer slice_range, slice_tile, tile_plan, slice_order, partials, saturated_from, slices_done, slot_finished;
+  GrowBuffer plan_scratch;  // task_split.cu: the counting pass's per-block results
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian) and its counters
   // (CatgsCounterSlot; the plan's totals among them).
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp, catgs_counters;
@@ -235,6 +236,7 @@ struct CudaRenderer::State {
                                 &saturated_from,
                                 &slices_done,
                                 &slot_finished,
+                                &plan_scratch,
                                 &catgs_counters,
                                 &yuv})
       b += g->bytes();

@@ -3,11 +3,13 @@
 // slices (exact frames and catgs key frames) and reused by a key frame's sub-frames (the sort
 // cache holds the split tasks too).
 //
-// One block of 1024 threads does it all (plan_slices_kernel). It replaced two kernels, a
-// device-wide scan, two memsets and a CUB radix sort of the slices, whose launches cost more
-// than the work (RESULTS.md, "Issue 19, fourth round").
+// Two launches of a block per 1024 tiles (plan_count_kernel, plan_place_kernel): they replaced
+// one block of 1024 threads that walked every tile twice (25-37 us at 1080p, ncu), which had
+// replaced two kernels, a device-wide scan, two memsets and a CUB radix sort of the slices,
+// whose launches cost more than the work (RESULTS.md, "Issue 19, fourth round" and "fifth").
 #include <algorithm>
 
+#include <cub/block/block_reduce.cuh>
 #include <cub/block/block_scan.cuh>
 
 #include "cuda_check.h"
@@ -35,80 +37,136 @@ __device__ __forceinline__ uint32_t first_slice_length(uint32_t load, uint32_t n
 
 __device__ __forceinline__ uint32_t level_of(uint32_t k) { return k < kLevels ? k : kLevels - 1; }
 
-// Two passes over the tiles, each thread taking tiles tid, tid + 1024, ... (coalesced): the
-// first counts the first slices by length bucket and the later slices by index k, and thread 0
-// turns the counts into where each group starts in the order (first slices from 0, the heaviest
-// bucket first; later slices from `tiles`, k = 1 first); the second numbers the slices and
-// partial slots tile by tile, 1024 tiles a round (a block scan, plus the rounds before), and
-// writes each tile's plan and slices and places them in the order. Within a group the order is
-// whatever the shared-memory atomics give: it moves only the kernel's tail, never the image.
+// The order's groups: first slices by length bucket, heaviest first (group kLoadBuckets - 1 - b
+// for bucket b), then later slices by level k = 1 .. kLevels - 1 (group kLoadBuckets + k - 1).
+// The first slices number `tiles`, so the later ones start there.
+constexpr int kGroups = kLoadBuckets + static_cast<int>(kLevels) - 1;
+
+__device__ __forceinline__ int first_group(uint32_t head) { return kLoadBuckets - 1 - load_bucket(head); }
+__device__ __forceinline__ int later_group(uint32_t k) { return kLoadBuckets + static_cast<int>(level_of(k)) - 1; }
+
+// Per-block results of the counting pass, in the plan's scratch (plan_scratch_bytes).
+struct PlanScratch {
+  unsigned* group_count;            // [blocks, kGroups] slices of each group in the block's tiles
+  unsigned long long* block_total;  // [blocks] (partial slots << 32 | slices) of the block's tiles
+  unsigned* block_longest;          // [blocks] the longest first slice in the block's tiles
+};
+
+__host__ __device__ inline PlanScratch plan_scratch(void* base, uint32_t blocks) {
+  auto* totals = static_cast<unsigned long long*>(base);
+  auto* counts = reinterpret_cast<unsigned*>(totals + blocks);
+  return {counts, totals, counts + static_cast<uint64_t>(blocks) * kGroups};
+}
+
+__host__ __device__ inline uint32_t plan_blocks(uint32_t tiles) {
+  return tiles == 0 ? 1u : (tiles + kPlanThreads - 1) / kPlanThreads;
+}
+
+// A tile's slices as (partial slots << 32 | slices): a split tile has a slot per slice.
+__device__ __forceinline__ unsigned long long slices_and_slots(uint32_t n) {
+  return (static_cast<unsigned long long>(n > 1 ? n : 0u) << 32) | n;
+}
+
+// Pass 1, a block per 1024 tiles: counts the block's slices by group (shared-memory atomics),
+// its slices and slots (a block reduction) and its longest first slice.
 __global__ void __launch_bounds__(kPlanThreads)
-    plan_slices_kernel(const uint2* __restrict__ ranges,  // [tiles]
-                       uint32_t tiles, uint64_t avg, bool split, uint64_t capacity, SlicePlan plan,
-                       uint32_t* __restrict__ order,      // [capacity]
-                       uint32_t* __restrict__ longest) {  // [1]
+    plan_count_kernel(const uint2* __restrict__ ranges,  // [tiles]
+                      uint32_t tiles, uint64_t avg, bool split, PlanScratch scratch) {
+  using Reduce = cub::BlockReduce<unsigned long long, kPlanThreads>;
+  __shared__ typename Reduce::TempStorage reduce_temp;
+  __shared__ unsigned count[kGroups], most;
+  for (auto g = threadIdx.x; g < kGroups; g += kPlanThreads) count[g] = 0;
+  if (threadIdx.x == 0) most = 0;
+  __syncthreads();
+  const uint32_t t = blockIdx.x * kPlanThreads + threadIdx.x;
+  uint32_t n = 0;
+  if (t < tiles) {
+    const uint32_t load = ranges[t].y - ranges[t].x;
+    n = slice_count(load, avg, split);
+    const uint32_t head = first_slice_length(load, n, avg);
+    atomicAdd(&count[first_group(head)], 1u);
+    atomicMax(&most, head);
+    for (uint32_t k = 1; k < n && k < kLevels - 1; ++k) atomicAdd(&count[later_group(k)], 1u);
+    if (n > kLevels - 1) atomicAdd(&count[later_group(kLevels - 1)], n - (kLevels - 1));
+  }
+  const unsigned long long total = Reduce(reduce_temp).Sum(slices_and_slots(n));
+  __syncthreads();
+  for (auto g = threadIdx.x; g < kGroups; g += kPlanThreads)
+    scratch.group_count[static_cast<uint64_t>(blockIdx.x) * kGroups + g] = count[g];
+  if (threadIdx.x == 0) {
+    scratch.block_total[blockIdx.x] = total;
+    scratch.block_longest[blockIdx.x] = most;
+  }
+}
+
+// Pass 2, the same blocks: each works out where each group starts in the order (an exclusive
+// scan of the groups' totals over every block) and where its own tiles' share of each group and
+// of the slices and slots starts (the blocks before it), then numbers its tiles' slices and
+// slots (a block scan), writes their plan and places them in the order. Within a block's share
+// of a group the order is whatever the shared-memory atomics give: it moves only the
+// rasterizer's tail, never the image. Block 0 writes the totals and the longest slice; every
+// block fills part of the order past the total with kNoSlice.
+__global__ void __launch_bounds__(kPlanThreads)
+    plan_place_kernel(const uint2* __restrict__ ranges,  // [tiles]
+                      uint32_t tiles, uint64_t avg, bool split, uint64_t capacity, SlicePlan plan, PlanScratch scratch,
+                      uint32_t* __restrict__ order,      // [capacity]
+                      uint32_t* __restrict__ longest) {  // [1]
   using Scan = cub::BlockScan<unsigned long long, kPlanThreads>;
   __shared__ typename Scan::TempStorage scan_temp;
-  __shared__ unsigned count[kLoadBuckets], next[kLoadBuckets], level_count[kLevels], level_next[kLevels], most;
-  __shared__ unsigned long long before;  // (slots << 32 | slices) of the rounds before
-  for (auto b = threadIdx.x; b < kLoadBuckets; b += kPlanThreads) count[b] = 0;
-  for (auto k = threadIdx.x; k < kLevels; k += kPlanThreads) level_count[k] = 0;
-  if (threadIdx.x == 0) {
-    most = 0;
-    before = 0;
+  __shared__ unsigned next[kGroups];
+  __shared__ unsigned long long before, total;
+  const uint32_t blocks = gridDim.x, b = blockIdx.x;
+  unsigned in_group = 0, mine = 0;  // group threadIdx.x: over every block, over the blocks before b
+  if (threadIdx.x < kGroups) {
+    for (uint32_t i = 0; i < blocks; ++i) {
+      const unsigned c = scratch.group_count[static_cast<uint64_t>(i) * kGroups + threadIdx.x];
+      in_group += c;
+      mine += i < b ? c : 0u;
+    }
   }
-  __syncthreads();
+  unsigned long long start = 0;
+  Scan(scan_temp).ExclusiveSum(static_cast<unsigned long long>(in_group), start);
+  if (threadIdx.x < kGroups) next[threadIdx.x] = static_cast<unsigned>(start) + mine;
+  if (threadIdx.x == 0) {
+    unsigned long long sum = 0, prefix = 0;
+    unsigned most = 0;
+    for (uint32_t i = 0; i < blocks; ++i) {
+      prefix += i < b ? scratch.block_total[i] : 0ull;
+      sum += scratch.block_total[i];
+      most = max(most, scratch.block_longest[i]);
+    }
+    before = prefix;
+    total = sum;
+    if (b == 0) {
+      plan.totals[0] = static_cast<unsigned>(sum);
+      plan.totals[1] = static_cast<unsigned>(sum >> 32);
+      *longest = most;
+    }
+  }
+  __syncthreads();  // next, before and total written; scan_temp free
 
-  for (uint32_t t = threadIdx.x; t < tiles; t += kPlanThreads) {
-    const uint32_t load = ranges[t].y - ranges[t].x, n = slice_count(load, avg, split);
+  const uint32_t t = b * kPlanThreads + threadIdx.x;
+  const uint2 r = t < tiles ? ranges[t] : make_uint2(0u, 0u);
+  const uint32_t load = r.y - r.x, n = t < tiles ? slice_count(load, avg, split) : 0u;
+  unsigned long long first = 0;
+  Scan(scan_temp).ExclusiveSum(slices_and_slots(n), first);
+  first += before;
+  if (t < tiles) {
+    const auto s = static_cast<uint32_t>(first), slot = static_cast<uint32_t>(first >> 32);
     const uint32_t head = first_slice_length(load, n, avg);
-    atomicAdd(&count[load_bucket(head)], 1u);
-    atomicMax(&most, head);
-    for (uint32_t k = 1; k < n && k < kLevels - 1; ++k) atomicAdd(&level_count[k], 1u);
-    if (n > kLevels - 1) atomicAdd(&level_count[kLevels - 1], n - (kLevels - 1));
-  }
-  __syncthreads();
-  if (threadIdx.x == 0) {
-    buckets_from_heaviest(count, next);
-    *longest = most;
-    unsigned at = tiles;
-    for (uint32_t k = 1; k < kLevels; ++k) {
-      level_next[k] = at;
-      at += level_count[k];
+    plan.tile_plan[t] = make_uint4(s, n, slot, 0u);
+    uint32_t at = r.x;
+    for (uint32_t k = 0; k < n; ++k) {
+      const uint32_t size = k == 0 ? head : static_cast<uint32_t>(avg);
+      plan.slice_range[s + k] = make_uint2(at, at + size);
+      plan.slice_tile[s + k] = make_uint2(t, k);
+      at += size;
+      order[atomicAdd(&next[k == 0 ? first_group(head) : later_group(k)], 1u)] = s + k;
     }
   }
-  __syncthreads();
-
-  for (uint32_t round = 0; round < tiles; round += kPlanThreads) {
-    const uint32_t t = round + threadIdx.x;
-    const uint2 r = t < tiles ? ranges[t] : make_uint2(0u, 0u);
-    const uint32_t load = r.y - r.x, n = t < tiles ? slice_count(load, avg, split) : 0u;
-    unsigned long long first = 0, in_round = 0;
-    Scan(scan_temp).ExclusiveSum((static_cast<unsigned long long>(n > 1 ? n : 0u) << 32) | n, first, in_round);
-    first += before;
-    __syncthreads();  // every thread has read `before`
-    if (threadIdx.x == 0) before += in_round;
-    if (t < tiles) {
-      const auto s = static_cast<uint32_t>(first), slot = static_cast<uint32_t>(first >> 32);
-      const uint32_t head = first_slice_length(load, n, avg);
-      plan.tile_plan[t] = make_uint4(s, n, slot, 0u);
-      uint32_t at = r.x;
-      for (uint32_t k = 0; k < n; ++k) {
-        const uint32_t size = k == 0 ? head : static_cast<uint32_t>(avg);
-        plan.slice_range[s + k] = make_uint2(at, at + size);
-        plan.slice_tile[s + k] = make_uint2(t, k);
-        at += size;
-        order[atomicAdd(k == 0 ? &next[load_bucket(head)] : &level_next[level_of(k)], 1u)] = s + k;
-      }
-    }
-    __syncthreads();  // `before` updated, scan_temp free
-  }
-  const auto total = static_cast<unsigned>(before);
-  if (threadIdx.x == 0) {
-    plan.totals[0] = total;
-    plan.totals[1] = static_cast<unsigned>(before >> 32);
-  }
-  for (uint64_t i = total + threadIdx.x; i < capacity; i += kPlanThreads) order[i] = kNoSlice;
+  const auto slices = static_cast<uint32_t>(total);
+  for (uint64_t i = slices + static_cast<uint64_t>(t); i < capacity; i += static_cast<uint64_t>(blocks) * kPlanThreads)
+    order[i] = kNoSlice;
 }
 
 }  // namespace
@@ -121,11 +179,20 @@ uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice) {
   return tiles + entries / split_average(tiles, entries, min_slice);
 }
 
+std::size_t plan_scratch_bytes(uint32_t tiles) {
+  const uint64_t blocks = plan_blocks(tiles);
+  return blocks * (sizeof(unsigned long long) + (kGroups + 1) * sizeof(unsigned));
+}
+
 void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, uint64_t min_slice,
-                 const SlicePlan& plan, uint32_t* order, uint32_t* longest, cudaStream_t stream) {
+                 const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream) {
   const uint64_t avg = split_average(tiles, entries, min_slice), capacity = slice_capacity(tiles, entries, min_slice);
-  plan_slices_kernel<<<1, kPlanThreads, 0, stream>>>(ranges, tiles, avg, split, capacity, plan, order, longest);
-  CATGS_CUDA_LAUNCHED("plan_slices_kernel");
+  const uint32_t blocks = plan_blocks(tiles);
+  const PlanScratch s = plan_scratch(scratch, blocks);
+  plan_count_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, avg, split, s);
+  CATGS_CUDA_LAUNCHED("plan_count_kernel");
+  plan_place_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, avg, split, capacity, plan, s, order, longest);
+  CATGS_CUDA_LAUNCHED("plan_place_kernel");
 }
 
 }  // namespace catgs::cuda::stages

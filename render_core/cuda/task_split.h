@@ -42,14 +42,16 @@ uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice);
 inline constexpr uint32_t kNoSlice = 0xffffffffu;
 
 // The plan and the order the rasterizer's blocks take its slices in, from the tile ranges, in
-// one launch (one block; no host round trip: the slice total stays on the device and a frame
-// launches `capacity` blocks). order [capacity]: first every tile's first slice (k = 0), longest
+// two launches of a block per 1024 tiles (no host round trip: the slice total stays on the
+// device and a frame launches `capacity` blocks); scratch: plan_scratch_bytes(tiles) of device
+// memory. order [capacity]: first every tile's first slice (k = 0), longest
 // first to within a quarter of an octave (load_bucket.cuh), so the heavy work starts early and
 // the light tiles fill in behind it; then the later slices (k >= 1, all avg long) tile by tile,
 // so a split tile's first slice has usually finished, and told its later ones which pixels it
 // ended, before they start (rasterize_slices.cu); kNoSlice past the total. *longest: the longest
 // slice's entries (CudaRenderer::diagnostics).
+std::size_t plan_scratch_bytes(uint32_t tiles);
 void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, uint64_t min_slice,
-                 const SlicePlan& plan, uint32_t* order, uint32_t* longest, cudaStream_t stream);
+                 const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages
