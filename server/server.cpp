@@ -108,7 +108,16 @@ int Server::run() {
 
 void Server::load_model() {
   const auto t0 = std::chrono::steady_clock::now();
-  model_ = std::make_shared<const GaussianModel>(load_scene(options_.scene));
+  // Big scenes take seconds to minutes: a line every 2 s says how far the load is.
+  auto last = t0;
+  const LoadProgress progress = [&](uint64_t done, uint64_t total) {
+    const auto now = std::chrono::steady_clock::now();
+    if (done == total || now - last < std::chrono::seconds(2)) return;
+    last = now;
+    std::cout << "scene: loading " << options_.scene << ": " << done << " of " << total << " Gaussians ("
+              << 100 * done / total << "%), " << ms_since(t0) << " ms" << std::endl;
+  };
+  model_ = std::make_shared<const GaussianModel>(load_scene(options_.scene, progress));
   std::cout << "scene: " << options_.scene << " (" << model_->name << "), " << model_->size()
             << " Gaussians, SH degree " << model_->sh_degree << ", loaded in " << ms_since(t0) << " ms\n";
   // A bad --cameras file stops the start here; a bad discovered one only warns.

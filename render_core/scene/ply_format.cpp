@@ -1,10 +1,17 @@
 // PLY header and body parsing with size checks done before any allocation a header could inflate.
 #include "ply_format.h"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
 #include <charconv>
 #include <cstring>
 #include <fstream>
 #include <sstream>
+#include <utility>
 
 #include "scene/gaussian_model.h"
 
@@ -69,6 +76,46 @@ const Element* File::element(const std::string& name) const {
   for (const auto& e : elements)
     if (e.name == name) return &e;
   return nullptr;
+}
+
+MappedFile::MappedFile(const std::string& path, uint64_t size) : size_(size) {
+  if (size == 0) return;
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw SceneFileError(path, std::string("cannot open file: ") + std::strerror(errno));
+  void* p = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
+  const int map_errno = errno;
+  ::close(fd);  // the mapping keeps the file
+  if (p == MAP_FAILED) throw SceneFileError(path, std::string("cannot map file: ") + std::strerror(map_errno));
+  ::madvise(p, size, MADV_SEQUENTIAL);  // read ahead, drop behind: the loaders walk it once
+  data_ = static_cast<const uint8_t*>(p);
+}
+
+MappedFile::~MappedFile() {
+  if (data_) ::munmap(const_cast<uint8_t*>(data_), size_);
+}
+
+MappedFile::MappedFile(MappedFile&& other) noexcept
+    : data_(std::exchange(other.data_, nullptr)), size_(std::exchange(other.size_, 0)) {}
+
+MappedFile& MappedFile::operator=(MappedFile&& other) noexcept {
+  if (this != &other) {
+    if (data_) ::munmap(const_cast<uint8_t*>(data_), size_);
+    data_ = std::exchange(other.data_, nullptr);
+    size_ = std::exchange(other.size_, 0);
+  }
+  return *this;
+}
+
+void MappedFile::release(uint64_t begin, uint64_t end) const {
+  const auto page = static_cast<uint64_t>(::sysconf(_SC_PAGESIZE));
+  begin = (begin + page - 1) / page * page;  // whole pages only: neighbours may still be read
+  end = std::min(end, size_) / page * page;
+  if (!data_ || begin >= end) return;
+  ::madvise(const_cast<uint8_t*>(data_) + begin, end - begin, MADV_DONTNEED);
+}
+
+void File::release_rows(const Element& e, uint64_t rows) const {
+  if (!ascii) bytes.release(e.data_offset, e.data_offset + rows * e.row_size);
 }
 
 double File::value(const Element& e, uint64_t row, int property) const {
@@ -192,8 +239,8 @@ void parse_header(const std::string& header, File& f) {
 }
 
 // A binary body: sizes checked against the file before allocating anything a header count could
-// inflate, then the whole file kept in f.bytes.
-void read_binary_body(std::istream& in, uint64_t file_size, uint64_t body_offset, File& f) {
+// inflate, then the whole file mapped into f.bytes.
+void read_binary_body(uint64_t file_size, uint64_t body_offset, File& f) {
   // Invariant: at <= file_size, so file_size - at never wraps.
   uint64_t at = body_offset;
   for (auto& e : f.elements) {
@@ -206,10 +253,7 @@ void read_binary_body(std::istream& in, uint64_t file_size, uint64_t body_offset
     at += e.count * e.row_size;
   }
   if (at != file_size) fail(f.path, std::to_string(file_size - at) + " bytes after the last element (wrong counts?)");
-  f.bytes.resize(file_size);
-  in.seekg(0);
-  if (!in.read(reinterpret_cast<char*>(f.bytes.data()), static_cast<std::streamsize>(file_size)))
-    fail(f.path, "read error");
+  f.bytes = MappedFile(f.path, file_size);
 }
 
 // An ascii body: every value parsed into the elements' ascii_rows.
@@ -267,7 +311,7 @@ File read_file(const std::string& path) {
   if (f.ascii)
     read_ascii_body(in, body_offset, file_size - body_offset, f);
   else
-    read_binary_body(in, file_size, body_offset, f);
+    read_binary_body(file_size, body_offset, f);
   return f;
 }
 

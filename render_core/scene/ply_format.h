@@ -31,15 +31,44 @@ struct Element {
   int find(const std::string& property) const;
 };
 
+// A read-only memory map of a whole file (POSIX mmap), unmapped on destruction. Its pages are the
+// page cache's, not the process's own memory, and release() hands a range back, so a reader
+// that walks the rows once holds only the rows it is on (peak memory ~ the model it builds, not
+// the model plus the file).
+class MappedFile {
+ public:
+  MappedFile() = default;
+  // Throws SceneFileError naming `path` when it cannot be opened or mapped.
+  MappedFile(const std::string& path, uint64_t size);
+  ~MappedFile();
+  MappedFile(MappedFile&& other) noexcept;
+  MappedFile& operator=(MappedFile&& other) noexcept;
+  MappedFile(const MappedFile&) = delete;
+  MappedFile& operator=(const MappedFile&) = delete;
+
+  const uint8_t* data() const { return data_; }
+  uint64_t size() const { return size_; }
+  // Drops the whole pages inside [begin, end) from this process's memory (madvise DONTNEED: a
+  // later read maps them again from the file, so nothing is lost, only re-read).
+  void release(uint64_t begin, uint64_t end) const;
+
+ private:
+  const uint8_t* data_ = nullptr;
+  uint64_t size_ = 0;
+};
+
 // A parsed PLY file: header and access to every value as double.
 struct File {
   std::string path;
   bool ascii = false;
   std::vector<Element> elements;
-  std::vector<uint8_t> bytes;  // the whole file (binary)
+  MappedFile bytes;  // the whole file, mapped (binary)
 
   const Element* element(const std::string& name) const;
   double value(const Element& e, uint64_t row, int property) const;
+  // Rows [0, rows) of `e` will not be read again: their whole pages leave this process's memory
+  // (binary files; a no-op for ascii ones, parsed up front).
+  void release_rows(const Element& e, uint64_t rows) const;
 };
 
 // Reads and validates a PLY file. Throws SceneFileError naming the path.

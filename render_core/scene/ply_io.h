@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "scene/gaussian_model.h"
@@ -29,7 +30,14 @@ namespace catgs {
 // before any allocation), has an element with rows but no properties, declares packed_* other
 // than uint32 or compressed f_rest_* other than uint8, or holds NaN, an infinite value other
 // than an opacity logit, or values beyond float range.
-GaussianModel load_scene(const std::string& path);
+//
+// Memory: binary PLY files are memory-mapped and their pages handed back as the rows are read,
+// so a load peaks near the model's own size, not the model's plus the file's
+// (tests/unit/load_memory_test.cpp measures it). `progress`, when set, is called with (Gaussians read, Gaussians in the
+// file) every few thousand Gaussians of a PLY file and once at the end (other formats: not
+// called), on the loading thread.
+using LoadProgress = std::function<void(uint64_t done, uint64_t total)>;
+GaussianModel load_scene(const std::string& path, const LoadProgress& progress = {});
 
 // Writes INRIA 3DGS PLY, binary little endian, SH degree of the model. Throws SceneFileError.
 void write_inria_ply(const GaussianModel& model, const std::string& path);

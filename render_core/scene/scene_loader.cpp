@@ -18,6 +18,35 @@ namespace {
 
 constexpr float kShC0 = 0.28209479177387814f;
 
+// A walk over a binary PLY's rows, in order: every kRowsPerStep rows it hands the rows behind it
+// back (ply::File::release_rows: the file's pages leave this process's memory, so the load peaks
+// near the model's size rather than the model's plus the file's) and reports progress.
+class RowWalk {
+ public:
+  static constexpr uint64_t kRowsPerStep = 8192;
+  RowWalk(const ply::File& f, std::initializer_list<const ply::Element*> per_row, const ply::Element* per_chunk,
+          uint64_t rows, const LoadProgress& progress)
+      : f_(f), per_row_(per_row), per_chunk_(per_chunk), rows_(rows), progress_(progress) {}
+  // Call before reading row i.
+  void at(uint64_t i) const {
+    if (i == 0 || i % kRowsPerStep != 0) return;
+    for (const ply::Element* e : per_row_)
+      if (e) f_.release_rows(*e, i);
+    if (per_chunk_) f_.release_rows(*per_chunk_, i / 256);
+    if (progress_) progress_(i, rows_);
+  }
+  void done() const {
+    if (progress_) progress_(rows_, rows_);
+  }
+
+ private:
+  const ply::File& f_;
+  std::vector<const ply::Element*> per_row_;
+  const ply::Element* per_chunk_;
+  uint64_t rows_;
+  const LoadProgress& progress_;
+};
+
 // f_rest count -> SH degree, or -1.
 int degree_of_rest_count(int rest) {
   for (int d = 0; d <= kMaxShDegree; ++d)
@@ -76,7 +105,7 @@ void set_sh_rest(GaussianModel& m, std::size_t i, int rest_index, float v) {
   m.sh[(i * static_cast<std::size_t>(K) + static_cast<std::size_t>(k)) * 3 + static_cast<std::size_t>(c)] = v;
 }
 
-GaussianModel load_inria(const ply::File& f, const ply::Element& v) {
+GaussianModel load_inria(const ply::File& f, const ply::Element& v, const LoadProgress& progress) {
   const std::string& path = f.path;
   GaussianModel m;
   const int rest = count_rest(v, path);
@@ -90,7 +119,9 @@ GaussianModel load_inria(const ply::File& f, const ply::Element& v) {
   for (int j = 0; j < rest; ++j) rest_idx[static_cast<std::size_t>(j)] = v.find("f_rest_" + std::to_string(j));
   const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
 
+  const RowWalk walk(f, {&v}, nullptr, v.count, progress);
   for (uint64_t i = 0; i < v.count; ++i) {
+    walk.at(i);
     auto get = [&](int prop) { return finite(f.value(v, i, prop), v, i, prop, path); };
     for (int a = 0; a < 3; ++a) {
       m.means[3 * i + a] = get(idx[a]);
@@ -101,6 +132,7 @@ GaussianModel load_inria(const ply::File& f, const ply::Element& v) {
     for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = get(idx[10 + a]);
     for (int j = 0; j < rest; ++j) set_sh_rest(m, i, j, get(rest_idx[static_cast<std::size_t>(j)]));
   }
+  walk.done();
   return m;
 }
 
@@ -112,7 +144,8 @@ float unorm(uint32_t v, int bits) {
 // Longer than the rest on purpose: one pass over the vertices decodes every packed property of a
 // Gaussian next to the chunk ranges it is dequantised with, in the order SuperSplat's writer packs
 // them, so the format can be read against its source line by line.
-GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, const ply::Element& v) {
+GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, const ply::Element& v,
+                              const LoadProgress& progress) {
   const std::string& path = f.path;
   if (chunk.count != (v.count + 255) / 256)
     throw SceneFileError(path, std::to_string(chunk.count) + " chunks cannot hold " + std::to_string(v.count) +
@@ -146,7 +179,9 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, con
   const std::size_t K = static_cast<std::size_t>(m.sh_coeffs());
 
   float r[12], cr[6] = {0, 0, 0, 1, 1, 1};
+  const RowWalk walk(f, {&v, sh}, &chunk, v.count, progress);
   for (uint64_t i = 0; i < v.count; ++i) {
+    walk.at(i);
     if (i % 256 == 0) {
       const uint64_t c = i / 256;
       for (int k = 0; k < 12; ++k) r[k] = finite(f.value(chunk, c, range_idx[k]), chunk, c, range_idx[k], path);
@@ -193,22 +228,24 @@ GaussianModel load_compressed(const ply::File& f, const ply::Element& chunk, con
       set_sh_rest(m, i, j, t * 8.0f - 4.0f);
     }
   }
+  walk.done();
   return m;
 }
 
-GaussianModel load_ply(const std::string& path) {
+GaussianModel load_ply(const std::string& path, const LoadProgress& progress) {
   const ply::File f = ply::read_file(path);
   const ply::Element* v = f.element("vertex");
   if (!v) throw SceneFileError(path, "no 'vertex' element");
   if (v->count == 0) throw SceneFileError(path, "the scene holds no Gaussians (vertex count 0)");
   if (v->count > (1ull << 31)) throw SceneFileError(path, "more than 2^31 Gaussians");
   const ply::Element* chunk = f.element("chunk");
-  return (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v) : load_inria(f, *v);
+  return (chunk && v->find("packed_position") >= 0) ? load_compressed(f, *chunk, *v, progress)
+                                                    : load_inria(f, *v, progress);
 }
 
 }  // namespace
 
-GaussianModel load_scene(const std::string& path) {
+GaussianModel load_scene(const std::string& path, const LoadProgress& progress) {
   GaussianModel m;
   switch (detect_scene_format(path)) {
     case SceneFormat::spz:
@@ -221,7 +258,7 @@ GaussianModel load_scene(const std::string& path) {
       m = read_gltf(path);
       break;
     case SceneFormat::ply:
-      m = load_ply(path);
+      m = load_ply(path, progress);
       break;
   }
   m.name = std::filesystem::path(path).filename().string();
