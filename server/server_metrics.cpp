@@ -74,6 +74,12 @@ std::string ServerMetrics::prometheus_text() const {
   put("catgs_session_errors_total", "counter", "Sessions ended with an Error.", session_errors_total.load());
   put("catgs_encoder_fallbacks_total", "counter",
       "Encoders opened as x264 because --encoder auto found NVENC unusable.", encoder_fallbacks_total.load());
+  put("catgs_quality_down_total", "counter", "Adaptive quality: a session stepped its resolution down.",
+      quality_down_total.load());
+  put("catgs_quality_up_total", "counter", "Adaptive quality: a session stepped its resolution back up.",
+      quality_up_total.load());
+  put("catgs_refine_frames_total", "counter", "Adaptive quality: full-size frames sent when the camera stopped.",
+      refine_frames_total.load());
   head("catgs_render_frames_total", "counter",
        "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
   o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'

@@ -77,6 +77,8 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> render_sub_frames_total{0};  // catgs sub-frames from the caches
   // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).
   std::atomic<std::uint64_t> encoder_fallbacks_total{0};
+  // --adaptive-quality (session/adaptive_quality.h): level changes and refine frames.
+  std::atomic<std::uint64_t> quality_down_total{0}, quality_up_total{0}, refine_frames_total{0};
 
   // Hardening (issue 22). Each array is indexed by the enum named beside it.
   std::atomic<std::uint64_t> refused_upgrades_total[4]{};  // transport.h Refusal

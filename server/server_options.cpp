@@ -82,6 +82,10 @@ std::string server_usage() {
          "                        CUDA renderer, --threads with the CPU one)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
          "  --crf N               x264 quality, 0..51 (default 23)\n"
+         "  --adaptive-quality on|off  lower a session's resolution (x0.75, x0.5) while the\n"
+         "                        server skips its poses, climb back when frames would fit,\n"
+         "                        and send a full-size frame when the camera stops (default off;\n"
+         "                        session/adaptive_quality.h has the rule)\n"
          "  --encoder-threads N   threads per session's encoder, 0 = the library's choice\n"
          "                        (default 2: x264's sliced threads halve a frame's encode\n"
          "                        time; more cost CPU that other sessions need)\n"
@@ -163,7 +167,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.render_lanes = parse_int(a, v, 0, 256);
     else if (a == "--slow-client-timeout-ms")
       out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
-    else if (a == "--crf")
+    else if (a == "--adaptive-quality") {
+      if (v != "on" && v != "off") throw std::invalid_argument("--adaptive-quality: on or off, not '" + v + "'");
+      out.adaptive_quality = v == "on";
+    } else if (a == "--crf")
       out.crf = parse_int(a, v, 0, 51);
     else if (a == "--encoder-threads")
       out.encoder_threads = parse_int(a, v, 0, 64);

@@ -47,6 +47,7 @@ struct ServerOptions {
   int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
   int slow_client_timeout_ms = 10000;   // frames unwritten this long -> ERROR_TOO_SLOW
   int crf = 23;                         // x264 constant rate factor (lower = better quality, more bytes)
+  bool adaptive_quality = false;        // --adaptive-quality (session/adaptive_quality.h)
   int encoder_threads = 2;              // per session's encoder; 0 = the library's choice
   int max_frames_in_flight = 2;         // frames queued to the transport but not yet written
   int socket_send_buffer = 512 * 1024;  // SO_SNDBUF of WebSocket sockets, bytes (0 = kernel's)

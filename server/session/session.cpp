@@ -334,11 +334,13 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   shared_.metrics.poses_total++;
   // The client's own end-to-end measurement of an earlier frame (0: nothing new).
   if (pose.shown_latency_ms() > 0) shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
-  if (pending_) {
+  const bool replaced = pending_.has_value();
+  if (replaced) {
     poses_skipped_++;  // latest pose wins: the older one is never rendered
     shared_.metrics.poses_skipped_total++;
     shared_.metrics.dropped_frames_total++;
   }
+  if (shared_.options.adaptive_quality) quality_.on_pose(received, replaced);
   pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), received};
   maybe_start_render();
 }
@@ -354,7 +356,18 @@ void Session::maybe_start_render() {
     planes = std::move(free_planes_.back());
     free_planes_.pop_back();
   }
-  Job job{*pending_, width_, height_, force_idr_, next_frame_sequence_++, last_send_ms_, max_bitrate_kbps_};
+  // Adaptive quality scales the size (a refine frame is full size); a new size is an IDR.
+  const int level = shared_.options.adaptive_quality && !pending_->full_size ? quality_.level() : 0;
+  Job job{*pending_,
+          AdaptiveQuality::scaled_side(width_, level),
+          AdaptiveQuality::scaled_side(height_, level),
+          force_idr_,
+          next_frame_sequence_++,
+          last_send_ms_,
+          max_bitrate_kbps_,
+          level};
+  last_started_ = pending_;
+  last_started_->full_size = false;
   pending_.reset();
   force_idr_ = false;
   rendering_ = true;
@@ -518,7 +531,10 @@ Session::JobResult Session::frame_message(const Job& job, const EncodedFrame& en
   t->set_render_key_frame(r.render_key_frame);
   t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
   t->set_previous_send_ms(job.previous_send_ms);
-  t->set_total_ms(ms_between(job.pose.received, Clock::now()));
+  r.total_ms = ms_between(job.pose.received, Clock::now());
+  r.quality_level = job.quality_level;
+  r.refine = job.pose.full_size;
+  t->set_total_ms(r.total_ms);
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();
@@ -552,6 +568,10 @@ void Session::on_job_done(JobResult result) {
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   m.speculation_window.observe(result.speculation_window);
+  if (shared_.options.adaptive_quality) {
+    if (!result.refine) quality_.on_frame(result.quality_level, result.total_ms);
+    last_frame_level_ = result.quality_level;
+  }
   handed_.push_back(Clock::now());
   shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
   maybe_start_render();
@@ -580,7 +600,21 @@ void Session::on_tick() {
     return fail(pb::ERROR_TIMEOUT, "no message for " + std::to_string(shared_.options.silent_timeout_ms) + " ms");
   }
   if (now - last_stats_ >= std::chrono::seconds(1)) send_stats();
+  if (shared_.options.adaptive_quality) adapt_quality(now);
   arm_tick();
+}
+
+void Session::adapt_quality(Clock::time_point now) {
+  const int step = quality_.on_tick(now);
+  if (step != 0) (step > 0 ? shared_.metrics.quality_up_total : shared_.metrics.quality_down_total)++;
+  // The camera stopped on a reduced frame: its pose once more at full size.
+  if (!pending_ && last_started_ && quality_.take_refine(now, last_frame_level_)) {
+    pending_ = last_started_;
+    pending_->full_size = true;
+    pending_->received = now;
+    shared_.metrics.refine_frames_total++;
+    maybe_start_render();
+  }
 }
 
 void Session::send_stats() {

@@ -34,6 +34,7 @@
 #include "encode/encoder.h"
 #include "render/gpu_assignment.h"
 #include "render/render_scheduler.h"
+#include "session/adaptive_quality.h"
 #include "session/message_validation.h"
 #include "session/first_view.h"
 #include "session/rate_limit.h"
@@ -98,6 +99,7 @@ class Session : public std::enable_shared_from_this<Session> {
     std::uint32_t sequence = 0;
     double client_time_ms = 0;
     Clock::time_point received;  // arrival on the transport thread
+    bool full_size = false;      // a refine frame: full size whatever the adaptive level
   };
   struct Job {
     PendingPose pose;
@@ -106,6 +108,7 @@ class Session : public std::enable_shared_from_this<Session> {
     std::uint32_t frame_sequence = 0;
     double previous_send_ms = 0;  // FrameTimings.previous_send_ms
     int max_bitrate_kbps = 0;     // Quality.max_bitrate_kbps (0: the server's default)
+    int quality_level = 0;        // AdaptiveQuality level the size was scaled to
   };
   // A rendered frame waiting for (or in) the encode stage.
   struct Rendered {
@@ -124,12 +127,17 @@ class Session : public std::enable_shared_from_this<Session> {
     int speculation_window = 0;
     std::size_t payload_bytes = 0;
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
+    double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
+    int quality_level = 0;
+    bool refine = false;  // an adaptive-quality refine frame
   };
 
   // `received`: when the transport thread handed the message over.
   void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
   void handle_hello(const pb::Hello& hello);
   void handle_pose(const pb::Pose& pose, Clock::time_point received);
+  // --adaptive-quality, on the tick: applies AdaptiveQuality's rule and queues a refine frame.
+  void adapt_quality(Clock::time_point now);
   // Ends the session with Error{code, reason, retry_after_ms} (the last message) and closes;
   // retry_after_ms is the client's reconnect hint (0: none).
   void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false, std::uint32_t retry_after_ms = 0);
@@ -176,10 +184,13 @@ class Session : public std::enable_shared_from_this<Session> {
   int max_bitrate_kbps_ = 0;  // the client's Quality
   bool force_idr_ = true;
   std::optional<PendingPose> pending_;
-  bool rendering_ = false;            // a render (or render-and-encode) job is running
-  bool encoding_ = false;             // an encode job is running
-  bool pipelined_ = true;             // render and encode as separate stages (false: NVENC, one job)
-  std::optional<Rendered> rendered_;  // rendered, waiting for the encoder
+  std::optional<PendingPose> last_started_;  // the pose of the last render started (refine frames)
+  AdaptiveQuality quality_;                  // --adaptive-quality
+  int last_frame_level_ = 0;                 // the level of the last frame handed off
+  bool rendering_ = false;                   // a render (or render-and-encode) job is running
+  bool encoding_ = false;                    // an encode job is running
+  bool pipelined_ = true;                    // render and encode as separate stages (false: NVENC, one job)
+  std::optional<Rendered> rendered_;         // rendered, waiting for the encoder
   std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
   int in_flight_ = 0;                                      // frames queued to the transport, not yet written
   std::deque<Clock::time_point> handed_;                   // when each in-flight frame went to the transport
