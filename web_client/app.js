@@ -11,6 +11,7 @@ import {
   toTraceFile, tourDuration, tourPoseAt,
 } from './paths.js';
 import { loadProtocol } from './protocol.js';
+import { applyHomography, cssTransform, planeDepthFor, reprojection } from './reproject.js';
 import { capViewport, parseMaxSize } from './viewport.js';
 import { parseView, viewUrl, withoutView } from './view_link.js';
 import { TOKEN_KEY, takeToken } from './token.js';
@@ -28,6 +29,9 @@ let renderScale = Math.min(Math.max(Number(params.get('scale')) || 1, 0.1), 4);
 const maxSize = parseMaxSize(params.get('max'));
 const linkView = parseView(params);
 const isTouch = (navigator.maxTouchPoints || 0) > 0 || matchMedia('(pointer: coarse)').matches;
+// Latency hiding (reproject.js): the last frame re-projected to the newest pose until its own
+// frame arrives. ?reproject=0 turns it off.
+const reprojectOn = params.get('reproject') !== '0';
 
 const state = {
   protocol: null,
@@ -39,6 +43,9 @@ const state = {
   viewport: null,
   poseSequence: 0,
   sentVersion: -1,
+  sentPoses: new Map(), // sequence -> the pose sent, until a frame answers it or a later one
+  shownPose: null, // the pose of the frame on the canvas (null: unknown, not re-projected)
+  reprojectVersion: -1, // the camera version the canvas transform was worked out for
   framesDecoded: 0,
   sessionFrames: 0,
   lastFrame: null,
@@ -82,6 +89,7 @@ function sendPose() {
   if (!send(state.protocol.encodePose({ sequence, clientTimeMs, shownLatencyMs, ...pose }))) return null;
   state.unreportedLatencyMs = 0;
   state.sentVersion = cam.version;
+  state.sentPoses.set(sequence, { position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg });
   state.lastPoseSent = { sequence, clientTimeMs, position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg };
   return sequence;
 }
@@ -195,6 +203,9 @@ function onWelcome(w) {
   state.sessionFrames = 0;
   state.closeInfo = null;
   state.poseSequence = 0; // the initial pose is sequence 0; ours count from 1
+  state.sentPoses = new Map();
+  state.shownPose = null;
+  canvas.style.transform = '';
   state.connection.markHealthy();
   state.decoder.reset();
   overlay.setSession(w);
@@ -230,6 +241,11 @@ function drawFrame(frame, meta) {
       canvas.height = h;
     }
     ctx.drawImage(frame, 0, 0, w, h);
+    if (meta) {
+      state.shownPose = state.sentPoses.get(meta.poseSequence) || null;
+      for (const k of state.sentPoses.keys()) if (k < meta.poseSequence) state.sentPoses.delete(k);
+    }
+    updateReprojection();
     const now = performance.now();
     state.framesDecoded++;
     state.sessionFrames++;
@@ -535,6 +551,7 @@ function step(now) {
     state.controls.update(dt);
   }
   if (cam && cam.version !== state.sentVersion) sendPose();
+  if (cam && cam.version !== state.reprojectVersion) updateReprojection();
   if (state.recorder && cam) state.recorder.add(now, cam.pose());
   if (now - lastOverlayMs > 250) {
     lastOverlayMs = now;
@@ -543,6 +560,31 @@ function step(now) {
     syncUrl(now);
     if (state.recorder) pathsStatus();
   }
+}
+
+// Shows the canvas's frame re-projected from its pose to the camera's (reproject.js), as a CSS
+// transform of the canvas; none when they are the same pose, when the frame's pose is unknown,
+// or when a corner would fall behind the new camera (a large turn: better the plain frame).
+function updateReprojection() {
+  const cam = state.camera;
+  state.reprojectVersion = cam ? cam.version : -1;
+  const from = state.shownPose;
+  const w = canvas.width;
+  const h = canvas.height;
+  let transform = '';
+  if (reprojectOn && cam && from && w > 0 && h > 0) {
+    const to = cam.pose();
+    const same =
+      from.fovDeg === to.fovDeg &&
+      from.position.every((v, i) => v === to.position[i]) &&
+      from.orientation.every((v, i) => v === to.orientation[i]);
+    if (!same) {
+      const H = reprojection(from, to, planeDepthFor(from, cam.target, cam.sceneScale), w, h);
+      const corners = [[0, 0], [w, 0], [0, h], [w, h]].map(([x, y]) => applyHomography(H, x, y));
+      if (corners.every((c) => c !== null)) transform = cssTransform(H, w, h, canvas.clientWidth, canvas.clientHeight);
+    }
+  }
+  if (canvas.style.transform !== transform) canvas.style.transform = transform;
 }
 
 function loop(now) {

@@ -21,6 +21,15 @@ export class Controls {
     element.addEventListener('pointerup', (e) => this._up(e));
     element.addEventListener('pointercancel', (e) => this._up(e));
     element.addEventListener('wheel', (e) => this._wheel(e), { passive: false });
+    // While the canvas is re-projected (a CSS transform until the next frame) it may not cover
+    // the window: a wheel over the uncovered page zooms too.
+    window.addEventListener(
+      'wheel',
+      (e) => {
+        if (e.target === document.body || e.target === document.documentElement) this._wheel(e);
+      },
+      { passive: false },
+    );
     element.addEventListener('contextmenu', (e) => e.preventDefault()); // right-drag pans
     window.addEventListener('keydown', (e) => this._key(e, true));
     window.addEventListener('keyup', (e) => this._key(e, false));

@@ -7,7 +7,8 @@
 // frames and closes; /ws-garbage sends an undecodable "key frame" as the 4th frame; /ws-token
 // wants Hello.token "sesame" (else Error(UNAUTHORIZED)); /ws-full refuses the first two Hellos
 // with Error(SERVER_FULL, retry_after_ms 2500); /ws-restart sends Error(SHUTTING_DOWN,
-// retry_after_ms 1200) after 5 frames; /ws-noframes welcomes but never sends a frame. Every
+// retry_after_ms 1200) after 5 frames; /ws-noframes welcomes but never sends a frame; /ws-hold
+// answers the first Pose only (the page keeps showing that frame, re-projected). Every
 // session gets Stats once a second (frames_sent cumulative, means 0 when nothing was rendered, as
 // the server does). Under /noproto/ the page is served but .proto answers 415 (as libwebsockets
 // does without a MIME type).
@@ -162,7 +163,7 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
         } else if (msg.body === 'key_frame_request') {
           next = 0; // the fixture's first access unit is its IDR
         } else if (msg.body === 'pose') {
-          if (scenario === '/ws-noframes') continue;
+          if (scenario === '/ws-noframes' || (scenario === '/ws-hold' && sent >= 1)) continue;
           let fr = frames[next];
           next = (next + 1) % frames.length;
           if (scenario === '/ws-garbage' && sent === 3) {

@@ -2,7 +2,8 @@
 // handshake and Hello fields, pose flow, WebCodecs decoding, overlay, the JSON schema fallback,
 // server Error display + reconnect message + reconnect, decoder error recovery, Resize; the
 // viewer's states (first view, unreachable, wrong token, server full, restarting), stale stats,
-// reset, shared view links, help, fullscreen, camera paths and tours, and a phone at DPR 3.
+// reset, shared view links, help, fullscreen, camera paths and tours, latency hiding (the held
+// frame re-projected), and a phone at DPR 3.
 // usage: node mock_test.mjs     Exit codes: 0 pass, 1 fail, 77 skipped (reason printed).
 import { existsSync, mkdtempSync, rmSync } from 'node:fs';
 import { createRequire } from 'node:module';
@@ -410,6 +411,70 @@ try {
     check(mine.slice(after + 1).some((r) => r.body === 'pose'), 'quality: the current pose follows, for the rebuilt encoder\'s first frame');
     check((await page.evaluate(() => document.getElementById('quality-status').textContent)) === 'stream 160x120', 'quality: the panel shows the stream size');
     await page.close();
+  }
+
+  // 11c. Latency hiding: while the newest pose's frame is on its way, the last frame is shown
+  // re-projected to it (a CSS matrix3d on the canvas); once that frame arrives, no transform.
+  {
+    const transformOf = (page) => page.evaluate(() => document.getElementById('view').style.transform);
+    const turnRight = (page, angle) =>
+      page.evaluate((a) => {
+        const p = window.catgs.pose();
+        // A turn about the camera's own down axis: forward swings right, the picture moves left.
+        const [w, x, y, z] = p.orientation;
+        const h = [Math.cos(a / 2), 0, Math.sin(a / 2), 0];
+        const q = [
+          w * h[0] - x * h[1] - y * h[2] - z * h[3],
+          w * h[1] + x * h[0] + y * h[3] - z * h[2],
+          w * h[2] - x * h[3] + y * h[0] + z * h[1],
+          w * h[3] + x * h[2] - y * h[1] + z * h[0],
+        ];
+        return window.catgs.setPose(p.position, q, p.fovDeg);
+      }, angle);
+    // The page's own first Pose is answered; the camera stays still until the turn below.
+    const firstFrame = async (page) => {
+      const end = Date.now() + 8000;
+      while (Date.now() < end && !(await page.evaluate(() => window.catgs.framesDecoded >= 1))) await sleep(50);
+      return page.evaluate(() => window.catgs.framesDecoded >= 1);
+    };
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws-hold')}`);
+    check(await firstFrame(page), 'reproject: the held session shows its first frame');
+    await sleep(200);
+    check((await transformOf(page)) === '', 'reproject: no transform while the frame matches the camera');
+    await turnRight(page, 0.05);
+    await sleep(300);
+    const t = await transformOf(page);
+    const m = /^matrix3d\((.*)\)$/.exec(t);
+    const v = m ? m[1].split(',').map(Number) : [];
+    // The shift of the picture, CSS pixels: -f tan(0.05) at the stream's focal length, scaled to
+    // the canvas's CSS size.
+    const info = await page.evaluate(() => {
+      const c = document.getElementById('view');
+      return { w: c.width, h: c.height, cssW: c.clientWidth, cssH: c.clientHeight, fov: window.catgs.pose().fovDeg };
+    });
+    const f = info.h / (2 * Math.tan((info.fov * Math.PI) / 360));
+    const want = -f * Math.tan(0.05) * (info.cssW / info.w);
+    // Where the matrix (column-major, origin at the corner) takes the canvas centre.
+    const [cx, cy] = [info.cssW / 2, info.cssH / 2];
+    const shift = v.length === 16 ? (v[0] * cx + v[4] * cy + v[12]) / (v[3] * cx + v[7] * cy + v[15]) - cx : NaN;
+    const rise = v.length === 16 ? (v[1] * cx + v[5] * cy + v[13]) / (v[3] * cx + v[7] * cy + v[15]) - cy : NaN;
+    check(Math.abs(shift - want) < 0.05 * Math.abs(want) && Math.abs(rise) < 0.5,
+      `reproject: a turn right moves the held frame's centre left by ${want.toFixed(1)} CSS px (${shift.toFixed(2)}, ${rise.toFixed(2)})`);
+    await page.close();
+    const off = await openPage(`${base}/?reproject=0&ws=${wsUrl('/ws-hold')}`);
+    check(await firstFrame(off), 'reproject=0: first frame');
+    await turnRight(off, 0.05);
+    await sleep(300);
+    check((await transformOf(off)) === '', 'reproject=0: the frame is never transformed');
+    await off.close();
+    const live = await openPage(`${base}/?ws=${wsUrl('/ws')}`);
+    check(await moveUntil(live, (c) => c.framesDecoded >= 2), 'reproject: a live session decodes');
+    const seq = await turnRight(live, 0.05);
+    const end = Date.now() + 5000;
+    while (Date.now() < end && (await live.evaluate(() => window.catgs.lastFrame.poseSequence)) !== seq) await sleep(50);
+    await sleep(100);
+    check((await transformOf(live)) === '', 'reproject: the transform goes once the frame of the new pose is shown');
+    await live.close();
   }
 
   // 12. A phone: 390x844 CSS pixels at DPR 3 with touch. The stream is capped (886x1920, not

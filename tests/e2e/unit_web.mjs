@@ -24,6 +24,7 @@ const h264 = await imp('h264.js');
 const proto = await imp('protocol.js');
 const conn = await imp('connection.js');
 const tokens = await imp('token.js');
+const reproject = await imp('reproject.js');
 
 const close = (a, b, eps = 1e-9) => {
   assert.equal(a.length, b.length);
@@ -164,6 +165,54 @@ test('fly moves along forward/right/up; setPose validates and keeps the target d
 test('intrinsics match Camera::from_pose', () => {
   const k = cam.intrinsicsFor(90, 480, 360);
   close([k.fx, k.fy, k.cx, k.cy], [180, 180, 240, 180], 1e-9);
+});
+
+// An independent oracle for the re-projection: project world points with each pinhole camera
+// directly (camera.js axes and intrinsics) and compare with the homography's answer.
+const projectPoint = (pose, X, width, height) => {
+  const k = cam.intrinsicsFor(pose.fovDeg, width, height);
+  const v = cam.vsub(X, pose.position);
+  const x = cam.vdot(v, cam.cameraRight(pose.orientation));
+  const y = cam.vdot(v, cam.cameraDown(pose.orientation));
+  const z = cam.vdot(v, cam.cameraForward(pose.orientation));
+  return [k.fx * (x / z) + k.cx, k.fy * (y / z) + k.cy];
+};
+
+test('re-projection: points on the target plane land where the new camera sees them', () => {
+  const target = [0.3, -0.2, 0.1];
+  const from = { position: [0.5, -1.0, -4.0], orientation: cam.lookAt([0.5, -1.0, -4.0], target, [0, -1, 0]), fovDeg: 55 };
+  const p2 = [1.4, -1.3, -3.6];
+  const to = { position: p2, orientation: cam.lookAt(p2, target, [0, -1, 0]), fovDeg: 50 };
+  const depth = reproject.planeDepthFor(from, target, 1);
+  const H = reproject.reprojection(from, to, depth, 640, 480);
+  const f = cam.cameraForward(from.orientation);
+  const r = cam.cameraRight(from.orientation);
+  const d = cam.cameraDown(from.orientation);
+  for (const [a, b] of [[0, 0], [0.8, -0.3], [-1.1, 0.6], [0.2, 0.9]]) {
+    const X = cam.vadd(cam.vadd(cam.vadd(from.position, cam.vscale(f, depth)), cam.vscale(r, a)), cam.vscale(d, b));
+    const x1 = projectPoint(from, X, 640, 480);
+    const x2 = projectPoint(to, X, 640, 480);
+    close(reproject.applyHomography(H, x1[0], x1[1]), x2, 1e-6);
+  }
+  // Off the plane the answer is approximate: a point twice as deep misses by some pixels.
+  const far = cam.vadd(from.position, cam.vscale(f, 2 * depth));
+  const miss = cam.vsub([...reproject.applyHomography(H, ...projectPoint(from, far, 640, 480)), 0], [...projectPoint(to, far, 640, 480), 0]);
+  assert.ok(cam.vlen(miss) > 1, 'a point off the plane should not land exactly');
+});
+
+test('re-projection: a pure rotation is exact at any depth; the same pose is the identity', () => {
+  const p = [0, 0, -3];
+  const from = { position: p, orientation: cam.lookAt(p, [0, 0, 0], [0, -1, 0]), fovDeg: 60 };
+  const turned = cam.qmul(cam.qfromAxisAngle([0, 1, 0], 0.1), from.orientation);
+  const to = { position: p, orientation: turned, fovDeg: 60 };
+  const H = reproject.reprojection(from, to, 3, 320, 240);
+  for (const depth of [0.5, 3, 40]) {
+    const X = cam.vadd(p, cam.vscale(cam.vnorm([0.2, 0.1, 1]), depth));
+    close(reproject.applyHomography(H, ...projectPoint(from, X, 320, 240)), projectPoint(to, X, 320, 240), 1e-6);
+  }
+  const I = reproject.reprojection(from, from, 3, 320, 240);
+  close(I.flat(), [1, 0, 0, 0, 1, 0, 0, 0, 1], 1e-9);
+  assert.equal(reproject.cssTransform(I, 320, 240, 640, 480), 'matrix3d(1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1)');
 });
 
 // A Baseline SPS (level 3.0) followed by PPS and an IDR slice header, as x264 would start an IDR.
