@@ -3,7 +3,7 @@
 # (idempotent). Uses sudo when not root. CUDA is not installed here: the CUDA core builds only
 # where /usr/local/cuda/bin/nvcc already exists (see README "GPU").
 # usage: install_deps.sh [GROUP...]   groups: build (compile the server: what the Docker images'
-# build stages install), test (GoogleTest, clang-format, node/npm, chromium), containers (podman,
+# build stages install), test (GoogleTest, clang-format, node/npm, chromium, clang + libFuzzer), containers (podman,
 # buildah, runc, debootstrap: the container test, tests/container). Default: all three.
 set -euo pipefail
 SUDO=""
@@ -16,7 +16,7 @@ build=(
   libglm-dev nlohmann-json3-dev libstb-dev
   zlib1g-dev libzstd-dev libtinygltf-dev
 )
-test=(git clang-format libgtest-dev nodejs npm chromium)
+test=(git clang-format libgtest-dev nodejs npm chromium clang libclang-rt-dev)
 containers=(podman buildah runc debootstrap uidmap fuse-overlayfs slirp4netns)
 groups=("$@")
 [ "${#groups[@]}" -gt 0 ] || groups=(build test containers)

@@ -4,6 +4,17 @@
 
 namespace catgs::cpu {
 
+namespace {
+// v (a floor or ceil) as an int within [lo, hi]: a huge or NaN box edge (a Gaussian far off the
+// tile, or of absurd size in a hostile file) must not be converted to int out of range, which is
+// undefined behaviour (found by tests/fuzz fuzz_scene).
+int clamped_int(float v, int lo, int hi) {
+  if (!(v > static_cast<float>(lo))) return lo;
+  if (!(v < static_cast<float>(hi))) return hi;
+  return static_cast<int>(v);
+}
+}  // namespace
+
 void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uint32_t begin, uint32_t end, int tx,
                 int ty, const TileGrid& grid, bool early_termination, glm::vec3* C, float* T, bool* stopped) {
   const int x0 = tx * fm::kTileSize, y0 = ty * fm::kTileSize;
@@ -20,10 +31,10 @@ void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uin
     // Box of q <= q_lim: half-widths sqrt(q_lim * cov_xx), sqrt(q_lim * cov_yy), cov = conic^-1.
     const glm::vec2 mean = projected.mean2d[g];
     const float hx = std::sqrt(q_lim * con.z / det), hy = std::sqrt(q_lim * con.x / det);
-    const int bx0 = std::max(x0, static_cast<int>(std::floor(mean.x - hx)));
-    const int bx1 = std::min(x1, static_cast<int>(std::ceil(mean.x + hx)));
-    const int by0 = std::max(y0, static_cast<int>(std::floor(mean.y - hy)));
-    const int by1 = std::min(y1, static_cast<int>(std::ceil(mean.y + hy)));
+    const int bx0 = clamped_int(std::floor(mean.x - hx), x0, x1 + 1);
+    const int bx1 = clamped_int(std::ceil(mean.x + hx), x0 - 1, x1);
+    const int by0 = clamped_int(std::floor(mean.y - hy), y0, y1 + 1);
+    const int by1 = clamped_int(std::ceil(mean.y + hy), y0 - 1, y1);
     const float opacity = projected.opacity[g];
     const glm::vec3 color = projected.color[g];
     for (int py = by0; py <= by1; ++py) {

@@ -1,0 +1,58 @@
+// Fuzz target: any bytes as a scene file (the format detected by content, as load_scene does),
+// then, for a scene that loads and is small, a render of it at 16 x 16 by the CPU core (exact
+// pipeline, a camera looking at the scene's bounds). A SceneFileError is the expected answer to
+// bad bytes; anything else (a crash, a sanitizer report, another exception) is a finding.
+#include <unistd.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include <glm/gtc/quaternion.hpp>
+
+#include "cpu/cpu_renderer.h"
+#include "scene/ply_io.h"
+
+namespace {
+
+// The scene file of this process (load_scene reads a path).
+const std::string& scratch_path() {
+  static const std::string path = "/tmp/catgs-fuzz-scene-" + std::to_string(::getpid()) + ".bin";
+  return path;
+}
+
+void render_small(const std::shared_ptr<const catgs::GaussianModel>& model) {
+  const catgs::Bounds b = model->bounds();
+  const glm::vec3 centre = 0.5f * (b.min + b.max);
+  const float extent = glm::length(b.max - b.min);
+  if (!(extent > 0.0f && extent < 1e6f)) return;
+  const glm::vec3 eye = centre - glm::vec3(0.0f, 0.0f, 1.5f * extent + 1e-3f);
+  catgs::RenderOptions options;
+  options.pipeline = catgs::Pipeline::exact;
+  catgs::cpu::CpuRenderer renderer(model, options);
+  catgs::Image image;
+  renderer.render(catgs::Camera::from_pose(eye, glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 16, 16), image);
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  {
+    std::FILE* f = std::fopen(scratch_path().c_str(), "wb");
+    if (!f) return 0;
+    if (size > 0) std::fwrite(data, 1, size, f);
+    std::fclose(f);
+  }
+  try {
+    auto model = std::make_shared<const catgs::GaussianModel>(catgs::load_scene(scratch_path()));
+    if (model->size() <= 4096) render_small(model);
+  } catch (const catgs::SceneFileError&) {
+    // The loader's answer to bad bytes: a clear error naming the file.
+  } catch (const std::length_error&) {
+    // The render budget's answer to a scene whose render list would not fit (renderer.h).
+  }
+  return 0;
+}
