@@ -101,8 +101,9 @@ std::string server_usage() {
          "                        the new certificate, open sessions go on; bad files are logged\n"
          "                        and the previous certificate stays\n"
          "  --tls-key FILE        the certificate's private key, PEM, unencrypted (both or neither)\n"
-         "  --probe URL           GET http://HOST:PORT/PATH, exit 0 on 2xx, else 1 (a container\n"
-         "                        HEALTHCHECK without curl or a shell); starts no server\n"
+         "  --probe URL           GET http[s]://HOST:PORT/PATH, exit 0 on 2xx, else 1 (a container\n"
+         "                        HEALTHCHECK without curl or a shell; https does not check the\n"
+         "                        certificate); starts no server\n"
          "rate limits (--rate-limits name=RATE/BURST,...; defaults shown):\n" +
          rate_limits_usage() + "catgs settings (--speculation name=value,...):\n" + speculation_settings_usage();
 }

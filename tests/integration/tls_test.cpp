@@ -13,6 +13,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -217,6 +218,10 @@ TEST(Tls, ServesPageHealthzAndSession) {
   const std::string health = tls_request(port, get_request("/healthz"));
   EXPECT_EQ(status_of(health), 200) << health;
   EXPECT_EQ(health.substr(health.find("\r\n\r\n") + 4), "ok\n");
+  // The containers' HEALTHCHECK (catgs-server --probe) over https.
+  const std::string probe =
+      std::string(CATGS_SERVER_BIN) + " --probe https://127.0.0.1:" + std::to_string(port) + "/healthz >/dev/null 2>&1";
+  EXPECT_EQ(std::system(probe.c_str()), 0) << probe;
 
   // The page's own https origin opens a WebSocket (the web client's wss:// URL); another
   // site's does not.
