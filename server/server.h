@@ -18,9 +18,10 @@
 //             start: an Error ends a session (protocol), and telling them at the start would cut
 //             every user off at once, which is what the drain exists to avoid.
 //   stopping  the rest get ERROR_SHUTTING_DOWN, the transport and the pools stop, exit code 0.
-// SIGINT (an operator's Ctrl-C) or a second SIGTERM skips the rest of the drain. SIGHUP, in any
-// phase, re-reads --tls-cert / --tls-key (Transport::reload_tls): sessions stay, and a bad file is
-// logged while the previous certificate stays in use.
+// SIGINT (an operator's Ctrl-C) or a second SIGTERM skips the rest of the drain. SIGHUP while
+// serving or draining (one during loading waits until serving) re-reads --tls-cert / --tls-key
+// (Transport::reload_tls): sessions stay, and a bad file is logged while the previous
+// certificate stays in use.
 #pragma once
 
 #include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first

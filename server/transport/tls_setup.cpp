@@ -88,6 +88,9 @@ TlsCredentials TlsCredentials::load(const std::string& cert_path, const std::str
 
 void TlsCredentials::install(ssl_ctx_st* ctx) const {
   if (!material_) throw std::logic_error("TlsCredentials::install: nothing loaded");
+  // TLS 1.2 at least whatever the system's OpenSSL configuration says (RFC 8996 retired 1.0/1.1).
+  if (SSL_CTX_set_min_proto_version(ctx, TLS1_2_VERSION) != 1)
+    throw std::runtime_error("OpenSSL refused TLS 1.2 as the lowest version" + openssl_reason());
   // override = 1: replace the certificate, key and chain the context had, in one call.
   if (SSL_CTX_use_cert_and_key(ctx, material_->cert.get(), material_->key.get(), material_->chain.get(), 1) != 1)
     throw std::runtime_error("OpenSSL refused the certificate and key" + openssl_reason());

@@ -26,8 +26,8 @@ class TlsCredentials {
   // no certificate / no key, or the key does not belong to the certificate.
   static TlsCredentials load(const std::string& cert_path, const std::string& key_path);
 
-  // Makes `ctx` present these credentials from its next handshake on (replacing what it had).
-  // Throws std::runtime_error when OpenSSL refuses them.
+  // Makes `ctx` present these credentials from its next handshake on (replacing what it had),
+  // and accept TLS 1.2 or later only. Throws std::runtime_error when OpenSSL refuses them.
   void install(ssl_ctx_st* ctx) const;
 
   // The server certificate in one line for the log: subject, serial (hex) and end of validity,

@@ -200,8 +200,8 @@ class Transport {
   std::string upgrading_client_;
   ConnId next_id_ = 1;
 
-  // TLS: what start() loaded (never changed after), the vhost's SSL_CTX (owned by lws; service thread only once
-  // started), and a reload waiting for the service thread (guarded by mutex_).
+  // TLS: what start() loaded (never changed after), the vhost's SSL_CTX (owned by lws; the
+  // service thread's once started), and a reload waiting for that thread (guarded by mutex_).
   TlsCredentials tls_credentials_;
   ssl_ctx_st* ssl_ctx_ = nullptr;
   struct PendingTls {

@@ -21,6 +21,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include <lws_config.h>  // LWS_WITH_TLS: whether this libwebsockets can serve TLS at all
 #include <openssl/err.h>
 #include <openssl/evp.h>
 #include <openssl/pem.h>
@@ -38,6 +39,14 @@ using namespace catgs::loadgen;
 using namespace catgs::itest;
 using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
+
+#if defined(LWS_WITH_TLS)
+constexpr bool kLwsHasTls = true;
+#else
+constexpr bool kLwsHasTls = false;
+#endif
+#define SKIP_WITHOUT_LWS_TLS() \
+  if (!kLwsHasTls) GTEST_SKIP() << "this libwebsockets is built without TLS (LWS_WITH_TLS unset in lws_config.h)"
 
 // A self-signed certificate for CN=localhost with serial `serial`, and its key, as PEM files.
 struct TestCert {
@@ -204,6 +213,7 @@ std::string startup_error(const std::vector<std::string>& args) {
 
 // The page, /healthz, the Origin check and a whole session, over TLS on one port.
 TEST(Tls, ServesPageHealthzAndSession) {
+  SKIP_WITHOUT_LWS_TLS();
   TempDir dir;
   const TestCert a = make_cert(dir.path, "a", 1);
   ServerProcess server(tls_args(a));
@@ -237,6 +247,7 @@ TEST(Tls, ServesPageHealthzAndSession) {
 
 // The TLS port serves only TLS: plain HTTP gets no page (lws fails the handshake and closes).
 TEST(Tls, PlainHttpOnTheTlsPortGetsNoPage) {
+  SKIP_WITHOUT_LWS_TLS();
   TempDir dir;
   ServerProcess server(tls_args(make_cert(dir.path, "a", 1)));
   std::string body;
@@ -271,6 +282,7 @@ TEST(Tls, BadFilesFailAtStartNamingTheFile) {
 // SIGHUP: new connections get the new certificate, an open session keeps streaming; bad new
 // files are logged and the certificate in use stays.
 TEST(Tls, SighupReloadsTheCertificateKeepingSessions) {
+  SKIP_WITHOUT_LWS_TLS();
   TempDir dir;
   const TestCert live = make_cert(dir.path, "live", 1);
   const TestCert next = make_cert(dir.path, "next", 2);
