@@ -10,7 +10,7 @@ SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 build=(
   build-essential cmake ninja-build pkg-config
-  libboost-dev libwebsockets-dev
+  libboost-dev libwebsockets-dev libssl-dev
   libavcodec-dev libavutil-dev libswscale-dev libx264-dev
   libprotobuf-dev protobuf-compiler
   libglm-dev nlohmann-json3-dev libstb-dev

@@ -27,6 +27,8 @@ TransportOptions transport_options(const ServerOptions& options) {
   t.max_per_ip = options.max_connections_per_ip;
   t.max_pre_hello = options.max_pre_hello;
   t.proxies = TrustedProxies::parse(options.trusted_proxies);
+  t.tls_cert = options.tls_cert;
+  t.tls_key = options.tls_key;
   return t;
 }
 
@@ -92,7 +94,9 @@ int Server::run() {
   // (/healthz 200, /readyz 503) while a large scene loads. Work posted before the pools start
   // just waits in their io_contexts.
   transport_->start();
-  std::cout << "probes on http://127.0.0.1:" << transport_->port() << "/ (/healthz, /readyz: loading)" << std::endl;
+  print_tls();
+  std::cout << "probes on " << url_scheme("http") << "://127.0.0.1:" << transport_->port()
+            << "/ (/healthz, /readyz: loading)" << std::endl;
   load_model();
   resolve_renderer();
   resolve_encoder();
@@ -174,7 +178,39 @@ void Server::catch_signals() {
   // SIGINT/SIGTERM are caught from here on (one that arrives before wait_for_signal() is kept).
   // Registered before the "listening" line: a supervisor that stops the server right after it
   // gets a clean shutdown.
-  signals_.emplace(signal_io_, SIGINT, SIGTERM);
+  // SIGHUP reloads the TLS certificate and key (reload_tls) and is caught for the same reason.
+  signals_.emplace(signal_io_, SIGINT, SIGTERM, SIGHUP);
+}
+
+void Server::arm_signals() {
+  last_signal_ = 0;
+  signal_io_.restart();
+  signals_->async_wait([this](const boost::system::error_code& ec, int sig) {
+    if (!ec) last_signal_ = sig;
+  });
+}
+
+std::string Server::url_scheme(const std::string& plain) const { return transport_->tls() ? plain + "s" : plain; }
+
+void Server::print_tls() const {
+  if (!transport_->tls()) return;
+  const TlsCredentials& c = transport_->tls_credentials();
+  std::cout << "tls: " << options_.tls_cert << " (" << c.describe() << "); HTTPS and WSS only, SIGHUP reloads"
+            << std::endl;
+}
+
+void Server::reload_tls() {
+  if (!transport_->tls()) {
+    std::cout << "SIGHUP: nothing to reload (no --tls-cert)" << std::endl;
+    return;
+  }
+  try {
+    const TlsCredentials c = transport_->reload_tls();
+    std::cout << "tls: reloaded on SIGHUP: " << c.describe() << std::endl;
+  } catch (const std::exception& e) {
+    std::cerr << "catgs-server: tls: reload on SIGHUP failed, the previous certificate stays: " << e.what()
+              << std::endl;
+  }
 }
 
 void Server::start_pools() {
@@ -192,15 +228,17 @@ void Server::print_listening() const {
             << renders_.lanes() << " render lanes"
             << (gpus_->devices().empty() ? std::string() : ", " + std::to_string(gpus_->devices().size()) + " GPU(s)")
             << "\n"
-            << "listening on http://127.0.0.1:" << transport_->port() << "/ (WebSocket "
-            << "catgs.v1 at ws://127.0.0.1:" << transport_->port() << "/ws)" << std::endl;
+            << "listening on " << url_scheme("http") << "://127.0.0.1:" << transport_->port() << "/ (WebSocket "
+            << "catgs.v1 at " << url_scheme("ws") << "://127.0.0.1:" << transport_->port() << "/ws)" << std::endl;
 }
 
 int Server::wait_for_signal() {
-  signals_->async_wait([this](const boost::system::error_code& ec, int sig) {
-    if (!ec) last_signal_ = sig;
-  });
-  signal_io_.run();
+  for (;;) {
+    arm_signals();
+    signal_io_.run();
+    if (last_signal_ != SIGHUP) break;
+    reload_tls();
+  }
   const int sig = last_signal_;
   std::cout << "signal " << sig << (sig == SIGTERM ? ": draining" : ": shutting down") << std::endl;
   return sig;
@@ -212,14 +250,17 @@ void Server::drain() {
   manager_->start_draining();
   std::cout << "drain: " << manager_->open_sessions() << " sessions may stream for up to " << options_.drain_timeout_s
             << " s; new sessions are refused, /readyz answers 503" << std::endl;
-  // Another signal (SIGINT, or SIGTERM again) ends the drain early.
-  last_signal_ = 0;
-  signal_io_.restart();
-  signals_->async_wait([this](const boost::system::error_code& ec, int sig) {
-    if (!ec) last_signal_ = sig;
-  });
-  while (manager_->open_sessions() > 0 && std::chrono::steady_clock::now() < deadline && last_signal_ == 0)
+  // Another signal (SIGINT, or SIGTERM again) ends the drain early; SIGHUP still reloads.
+  arm_signals();
+  while (manager_->open_sessions() > 0 && std::chrono::steady_clock::now() < deadline) {
     signal_io_.run_for(std::chrono::milliseconds(50));
+    if (last_signal_ != SIGHUP) {
+      if (last_signal_) break;
+      continue;
+    }
+    reload_tls();
+    arm_signals();
+  }
   const char* why = last_signal_ ? "signal" : manager_->open_sessions() > 0 ? "timeout" : "no sessions left";
   std::cout << "drain ended (" << why << ") after " << ms_since(t0) << " ms, " << manager_->open_sessions()
             << " sessions left" << std::endl;

@@ -18,7 +18,10 @@
 //             start: an Error ends a session (protocol), and telling them at the start would cut
 //             every user off at once, which is what the drain exists to avoid.
 //   stopping  the rest get ERROR_SHUTTING_DOWN, the transport and the pools stop, exit code 0.
-// SIGINT (an operator's Ctrl-C) or a second SIGTERM skips the rest of the drain.
+// SIGINT (an operator's Ctrl-C) or a second SIGTERM skips the rest of the drain. SIGHUP while
+// serving or draining (one during loading waits until serving) re-reads --tls-cert / --tls-key
+// (Transport::reload_tls): sessions stay, and a bad file is logged while the previous
+// certificate stays in use.
 #pragma once
 
 #include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
@@ -98,7 +101,15 @@ class Server {
   void catch_signals();
   void start_pools();
   void print_listening() const;
-  // Blocks until SIGINT or SIGTERM; returns the signal.
+  // Clears last_signal_ and waits for the next signal (run signal_io_ to receive it).
+  void arm_signals();
+  // "http" -> "https", "ws" -> "wss" when the transport speaks TLS.
+  std::string url_scheme(const std::string& plain) const;
+  // The "tls:" line: the certificate file and TlsCredentials::describe() (nothing without TLS).
+  void print_tls() const;
+  // SIGHUP: Transport::reload_tls, logged; a bad file is logged and the old certificate stays.
+  void reload_tls();
+  // Blocks until SIGINT or SIGTERM (reloading on each SIGHUP meanwhile); returns the signal.
   int wait_for_signal();
   // SIGTERM: not ready, no new sessions, live ones go on until they leave, the timeout passes
   // or another signal comes.

@@ -99,8 +99,15 @@ std::string server_usage() {
          "  --drain-timeout-s N   on SIGTERM, let live sessions stream up to N s before they get\n"
          "                        ERROR_SHUTTING_DOWN (default 30; /readyz answers 503 meanwhile,\n"
          "                        new sessions are refused); SIGINT or a second SIGTERM stops at once\n"
-         "  --probe URL           GET http://HOST:PORT/PATH, exit 0 on 2xx, else 1 (a container\n"
-         "                        HEALTHCHECK without curl or a shell); starts no server\n"
+         "  --tls-cert FILE       TLS certificate, PEM (the server's first, then intermediates);\n"
+         "                        with --tls-key the port serves only HTTPS and WSS (plain HTTP\n"
+         "                        gets no answer). SIGHUP re-reads both files: new connections get\n"
+         "                        the new certificate, open sessions go on; bad files are logged\n"
+         "                        and the previous certificate stays\n"
+         "  --tls-key FILE        the certificate's private key, PEM, unencrypted (both or neither)\n"
+         "  --probe URL           GET http[s]://HOST:PORT/PATH, exit 0 on 2xx, else 1 (a container\n"
+         "                        HEALTHCHECK without curl or a shell; https does not check the\n"
+         "                        certificate); starts no server\n"
          "rate limits (--rate-limits name=RATE/BURST,...; defaults shown):\n" +
          rate_limits_usage() + "catgs settings (--speculation name=value,...):\n" + speculation_settings_usage();
 }
@@ -184,6 +191,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.max_pixels_in_flight = parse_int(a, v, 0, 1 << 30);
     else if (a == "--drain-timeout-s")
       out.drain_timeout_s = parse_int(a, v, 0, 3600);
+    else if (a == "--tls-cert")
+      out.tls_cert = v;
+    else if (a == "--tls-key")
+      out.tls_key = v;
     else if (a == "--probe")
       out.probe_url = v;
     else
@@ -192,6 +203,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
   if (out.threads == 0)  // encodes are CPU-bound: one worker per core (x264 adds its own threads)
     out.threads = std::max(4, static_cast<int>(std::thread::hardware_concurrency()));
   if (out.max_pixels_in_flight == 0) out.max_pixels_in_flight = 2LL * out.max_viewport_width * out.max_viewport_height;
+  if (out.tls_cert.empty() != out.tls_key.empty())
+    throw std::invalid_argument("--tls-cert and --tls-key go together (one is missing)");
   if (out.renderer != "cpu" && out.renderer != "cuda" && out.renderer != "auto")
     throw std::invalid_argument("--renderer must be cpu, cuda or auto");
   if (out.encoder != "nvenc" && out.encoder != "x264" && out.encoder != "auto")

@@ -59,6 +59,10 @@ struct ServerOptions {
   // SIGTERM: seconds live sessions may keep streaming before they are told ERROR_SHUTTING_DOWN
   // (server.h "Drain"); 0 ends them at once.
   int drain_timeout_s = 30;
+  // --tls-cert FILE --tls-key FILE (both or neither): the port serves HTTPS and WSS only
+  // (transport/tls_setup.h); SIGHUP re-reads both files.
+  std::string tls_cert;
+  std::string tls_key;
   // --probe URL: GET the URL, exit 0 on a 2xx answer, 1 otherwise (probe.h), and do nothing else.
   std::string probe_url;
 };

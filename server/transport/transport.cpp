@@ -1,7 +1,9 @@
 #include "transport/transport.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstring>
+#include <iostream>
 #include <stdexcept>
 
 #include <sys/socket.h>
@@ -18,6 +20,10 @@ struct Pss {
   ConnId id;          // WebSocket connections: our id (0 before ESTABLISHED)
   std::string* body;  // HTTP: the response body waiting for a writable callback
 };
+
+// The transport whose lws_create_context() is running on this thread: lws hands over the vhost's
+// SSL_CTX from inside it, with a vhost-setup wsi that may not lead back to the context's user pointer.
+thread_local Transport* g_starting = nullptr;
 
 // Outgoing WebSocket messages are written in fragments of this size: one lws_write per writable
 // callback keeps the service loop responsive with many connections and big key frames.
@@ -86,6 +92,8 @@ Transport::Transport(TransportOptions options, TransportHandler& handler)
 Transport::~Transport() { stop(); }
 
 void Transport::start() {
+  // Checked before anything binds: a bad file is named here (lws would only say "no context").
+  if (tls()) tls_credentials_ = TlsCredentials::load(options_.tls_cert, options_.tls_key);
   Static& s = *static_;
   std::memset(s.protocols, 0, sizeof(s.protocols));
   // protocols[0] also receives WebSocket upgrades that name no subprotocol.
@@ -140,10 +148,26 @@ void Transport::start() {
   info.mounts = &s.mount_root;
   info.user = this;
   if (options_.bind.find(':') == std::string::npos) info.options |= LWS_SERVER_OPTION_DISABLE_IPV6;
+  if (tls()) {
+#if !defined(LWS_WITH_TLS)
+    throw std::runtime_error("--tls-cert: this libwebsockets was built without TLS");
+#endif
+    // No file paths on purpose: lws makes an empty SSL_CTX for the vhost and hands it over
+    // (on_ssl_context), where the checked credentials go now and a reload goes later.
+    info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT | LWS_SERVER_OPTION_CREATE_VHOST_SSL_CTX;
+    info.alpn = "http/1.1";  // transport.h "TLS"
+  }
+  g_starting = this;
   context_ = lws_create_context(&info);
+  g_starting = nullptr;
+  if (context_ && tls() && !ssl_ctx_) {
+    lws_context_destroy(context_);
+    context_ = nullptr;
+    throw std::runtime_error("--tls-cert: libwebsockets did not set up TLS");
+  }
   if (!context_)
     throw std::runtime_error("cannot listen on " + options_.bind + ":" + std::to_string(options_.port) +
-                             " (port in use or bad address?)");
+                             (tls() ? " with TLS" : "") + " (port in use or bad address?)");
   lws_vhost* vhost = lws_get_vhost_by_name(context_, "default");
   port_ = vhost ? lws_get_vhost_listen_port(vhost) : options_.port;
   stopping_ = false;
@@ -274,7 +298,55 @@ int Transport::on_upgrade(lws* wsi, const char* upgrade) {
   return 0;
 }
 
+int Transport::on_ssl_context(ssl_ctx_st* ctx) {
+  try {
+    tls_credentials_.install(ctx);
+  } catch (const std::exception& e) {
+    std::cerr << "catgs-server: --tls-cert " << options_.tls_cert << ": " << e.what() << std::endl;
+    return 1;  // lws fails the context
+  }
+  ssl_ctx_ = ctx;
+  return 0;
+}
+
+TlsCredentials Transport::reload_tls() {
+  if (!tls()) throw std::runtime_error("TLS is off (no --tls-cert)");
+  TlsCredentials fresh = TlsCredentials::load(options_.tls_cert, options_.tls_key);
+  auto pending = std::make_unique<PendingTls>();
+  pending->credentials = fresh;
+  std::future<std::string> done = pending->done.get_future();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!context_) throw std::runtime_error("the transport is not running");
+    pending_tls_ = std::move(pending);
+    lws_cancel_service(context_);
+  }
+  // The SSL_CTX is the service thread's: it makes new connections from it.
+  if (done.wait_for(std::chrono::seconds(5)) != std::future_status::ready)
+    throw std::runtime_error("the service thread did not take the new certificate within 5 s");
+  const std::string error = done.get();
+  if (!error.empty()) throw std::runtime_error(error);
+  return fresh;
+}
+
+void Transport::apply_pending_tls() {
+  std::unique_ptr<PendingTls> pending;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending.swap(pending_tls_);
+  }
+  if (!pending) return;
+  try {
+    pending->credentials.install(ssl_ctx_);
+    pending->done.set_value("");
+  } catch (const std::exception& e) {
+    pending->done.set_value(e.what());
+  }
+}
+
 int Transport::callback(lws* wsi, int reason, void* user, void* in, std::size_t len) {
+  if (reason == LWS_CALLBACK_OPENSSL_LOAD_EXTRA_SERVER_VERIFY_CERTS)
+    return g_starting ? g_starting->on_ssl_context(static_cast<ssl_ctx_st*>(user)) : 1;
   auto* self = static_cast<Transport*>(lws_context_user(lws_get_context(wsi)));
   switch (reason) {
     case LWS_CALLBACK_HTTP_CONFIRM_UPGRADE:
@@ -411,6 +483,7 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
       if (!pss || !pss->id) return 0;
       return write_some(wsi, pss->id);
     case LWS_CALLBACK_EVENT_WAIT_CANCELLED: {
+      apply_pending_tls();
       // Another thread queued work: ask for writable callbacks (only legal on this thread).
       std::vector<ConnId> dirty;
       std::vector<std::pair<lws*, int>> arm;  // connections whose close timeout starts now

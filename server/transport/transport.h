@@ -21,12 +21,18 @@
 // (`oversize`) so the session can send its Error and close.
 // lws 4.1.6 cannot refuse unmasked client frames (RFC 6455 5.1): its parser records the mask bit
 // and carries on, and no public call exposes the bit (server/README.md "Limits").
+//
+// TLS (issue 22): with a certificate and key (tls_setup.h) the port speaks only TLS, HTTPS and
+// WSS alike; a plain-HTTP request there fails the handshake and is closed unanswered. ALPN offers
+// HTTP/1.1 alone: the upgrade checks above are made for HTTP/1.1 upgrades, and WebSockets over
+// HTTP/2 (RFC 8441) would take another path through lws.
 #pragma once
 
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -35,6 +41,7 @@
 #include <vector>
 
 #include "transport/origin_policy.h"
+#include "transport/tls_setup.h"
 #include "transport/trusted_proxies.h"
 
 struct lws;
@@ -93,6 +100,7 @@ struct TransportOptions {
   int max_per_ip = 128;                       // WebSocket connections per client address; 0 = no cap
   int max_pre_hello = 256;                    // connections that have not said Hello; 0 = no cap
   TrustedProxies proxies;                     // whose X-Forwarded-For names the client (peer())
+  std::string tls_cert, tls_key;              // PEM files; both set: TLS only (tls_setup.h)
 };
 
 class Transport {
@@ -104,8 +112,19 @@ class Transport {
   Transport& operator=(const Transport&) = delete;
 
   // Creates the lws context (binds the port) and starts the service thread. Throws
-  // std::runtime_error when the port cannot be bound.
+  // std::runtime_error when the port cannot be bound, or (before binding) when the TLS files do
+  // not load (TlsCredentials::load's message names the file).
   void start();
+  // Whether the port speaks TLS (options.tls_cert set).
+  bool tls() const { return !options_.tls_cert.empty(); }
+  // The credentials start() loaded (empty without TLS).
+  const TlsCredentials& tls_credentials() const { return tls_credentials_; }
+  // Thread-safe (SIGHUP). Reads options.tls_cert / tls_key again and waits until the service
+  // thread has put them in place: handshakes from then on present the new certificate,
+  // connections already open keep theirs. Returns the new credentials. Throws
+  // std::runtime_error naming the file when they do not load (the old ones stay), or when TLS
+  // is off or the transport is not running.
+  TlsCredentials reload_tls();
   // Closes every connection, stops the service thread and destroys the context. Idempotent.
   void stop();
   // The port actually listened on (after start()).
@@ -155,6 +174,11 @@ class Transport {
   // to be oversize) and `kind` / `message` are set.
   bool take_fragment(lws* wsi, Conn& c, const void* in, std::size_t len, MessageKind& kind, std::string& message);
   int write_some(lws* wsi, ConnId id);
+  // LWS_CALLBACK_OPENSSL_LOAD_EXTRA_SERVER_VERIFY_CERTS: lws made the vhost's SSL_CTX
+  // (LWS_SERVER_OPTION_CREATE_VHOST_SSL_CTX, no certificate of its own); ours goes in.
+  int on_ssl_context(ssl_ctx_st* ctx);
+  // Service thread: installs credentials reload_tls() queued.
+  void apply_pending_tls();
   void service_loop();
   void wake();
 
@@ -175,6 +199,16 @@ class Transport {
   lws* upgrading_wsi_ = nullptr;
   std::string upgrading_client_;
   ConnId next_id_ = 1;
+
+  // TLS: what start() loaded (never changed after), the vhost's SSL_CTX (owned by lws; the
+  // service thread's once started), and a reload waiting for that thread (guarded by mutex_).
+  TlsCredentials tls_credentials_;
+  ssl_ctx_st* ssl_ctx_ = nullptr;
+  struct PendingTls {
+    TlsCredentials credentials;
+    std::promise<std::string> done;  // "" once installed, else why not
+  };
+  std::unique_ptr<PendingTls> pending_tls_;
 
   // Storage lws points into (must outlive the context).
   struct Static;

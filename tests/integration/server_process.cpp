@@ -41,7 +41,7 @@ ServerProcess::ServerProcess(const std::vector<std::string>& args, int timeout_m
   }
   close(log_fd);
   const std::regex re(std::string(until == Until::serving ? "listening" : "probes") +
-                      " on http://127\\.0\\.0\\.1:([0-9]+)/");
+                      " on https?://127\\.0\\.0\\.1:([0-9]+)/");
   const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
   while (Clock::now() < deadline) {
     std::smatch m;
@@ -108,16 +108,20 @@ long rss_kib(pid_t pid) {
   return -1;
 }
 
-int http_get(int port, const std::string& path, std::string& body, int timeout_ms, const std::string& extra_headers) {
+int connect_loopback(int port) {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in a{};
   a.sin_family = AF_INET;
   a.sin_port = htons(static_cast<uint16_t>(port));
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
-    close(fd);
-    return -1;
-  }
+  if (fd >= 0 && connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) == 0) return fd;
+  if (fd >= 0) close(fd);
+  return -1;
+}
+
+int http_get(int port, const std::string& path, std::string& body, int timeout_ms, const std::string& extra_headers) {
+  const int fd = connect_loopback(port);
+  if (fd < 0) return -1;
   const std::string req =
       "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n" + extra_headers + "\r\n";
   if (send(fd, req.data(), req.size(), MSG_NOSIGNAL) < 0) {

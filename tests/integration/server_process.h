@@ -48,6 +48,9 @@ class ServerProcess {
 // Resident set size of process `pid` in KiB (VmRSS of /proc/PID/status); -1 when unreadable.
 long rss_kib(pid_t pid);
 
+// A TCP connection to 127.0.0.1:port: the socket, or -1 when it could not be made.
+int connect_loopback(int port);
+
 // GET http://127.0.0.1:port/path; returns the status code and fills `body` (-1: no answer).
 // `extra_headers`: more request lines, each ending in "\r\n" (e.g. an Authorization header).
 int http_get(int port, const std::string& path, std::string& body, int timeout_ms = 5000,

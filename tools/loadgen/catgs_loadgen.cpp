@@ -33,6 +33,7 @@ namespace {
 const char* kUsage =
     "usage: catgs-loadgen [options]\n"
     "  --host H --port N        server (default 127.0.0.1:8080)\n"
+    "  --tls                    wss:// (a server with --tls-cert); its certificate is not checked\n"
     "  --sessions N             concurrent sessions (default 1; the ramp's upper limit)\n"
     "  --size WxH[,WxH...]      frame sizes, assigned to sessions in turn (default 1280x720)\n"
     "  --width W --height H     same as --size WxH\n"
@@ -127,6 +128,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
   LoadSessionConfig base;
   base.host = args.get("--host", base.host);
   base.port = args.get_int("--port", base.port);
+  base.tls = args.has("--tls");
   base.token = args.get("--token");
   base.offset_s = args.get_double("--offset-s", 0.37);
   base.rate_hz = args.get_double("--rate", 60);
@@ -220,7 +222,7 @@ int main(int argc, char** argv) {
         {"--host",           "--port",     "--sessions", "--size",  "--width",   "--height", "--trace",
          "--scene",          "--offset-s", "--rate",     "--depth", "--seconds", "--decode", "--check-every",
          "--check-min-psnr", "--warmup",   "--stale-ms", "--token", "--json",    "--ramp!",  "--ramp-step",
-         "--max-p95-ms",     "--min-fps",  "--progress", "--help!"});
+         "--max-p95-ms",     "--min-fps",  "--progress", "--tls!",  "--help!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

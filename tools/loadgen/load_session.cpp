@@ -84,6 +84,7 @@ void note_error(SessionResult& r, const std::string& what) {
 
 // Connects and says Hello; the Welcome's size and names go into `r`.
 pb::Welcome open_session(const LoadSessionConfig& cfg, StreamClient& client, SessionResult& r) {
+  client.ws().use_tls(cfg.tls);
   client.connect(cfg.port, cfg.host);
   const pb::Welcome welcome = client.hello(cfg.width, cfg.height, cfg.token);
   r.width = static_cast<int>(welcome.width());

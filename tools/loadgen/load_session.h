@@ -46,6 +46,7 @@ struct LoadSessionConfig {
   int index = 0;  // session number (report only)
   std::string host = "127.0.0.1";
   int port = 8080;
+  bool tls = false;  // wss:// (WsClient::use_tls)
   int width = 1280, height = 720;
   std::string token;
   std::string trace = "orbit";                 // make_load_trace spec

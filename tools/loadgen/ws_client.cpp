@@ -9,10 +9,17 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstring>
 #include <stdexcept>
+
+#include <openssl/err.h>
+#include <openssl/evp.h>
+#include <openssl/ssl.h>
+#include <openssl/x509.h>
 
 namespace catgs::loadgen {
 
@@ -27,8 +34,87 @@ int remaining_ms(Clock::time_point deadline) {
 
 }  // namespace
 
-WsClient::~WsClient() {
+WsClient::~WsClient() { close_socket(); }
+
+void WsClient::close_socket() {
+  if (ssl_) SSL_free(ssl_);
+  if (ssl_ctx_) SSL_CTX_free(ssl_ctx_);
+  ssl_ = nullptr;
+  ssl_ctx_ = nullptr;
   if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+void WsClient::start_tls(int timeout_ms) {
+  // OpenSSL writes with send() without MSG_NOSIGNAL: a server that closed first would kill a
+  // test or load process with SIGPIPE instead of failing the write.
+  std::signal(SIGPIPE, SIG_IGN);
+  ssl_ctx_ = SSL_CTX_new(TLS_client_method());
+  if (!ssl_ctx_) throw std::runtime_error("ws: no TLS context");
+  SSL_CTX_set_verify(ssl_ctx_, SSL_VERIFY_NONE, nullptr);  // ws_client.h: self-signed certificates
+  // Without AUTO_RETRY a read that only finds TLS 1.3 session tickets returns instead of blocking
+  // past the caller's timeout (read_some).
+  SSL_CTX_clear_mode(ssl_ctx_, SSL_MODE_AUTO_RETRY);
+  ssl_ = SSL_new(ssl_ctx_);
+  if (!ssl_ || SSL_set_fd(ssl_, fd_) != 1) throw std::runtime_error("ws: no TLS connection object");
+  // The handshake blocks: bound it by the connect timeout.
+  timeval tv{timeout_ms / 1000, (timeout_ms % 1000) * 1000};
+  setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+  const int ok = SSL_connect(ssl_);
+  timeval none{0, 0};
+  setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &none, sizeof(none));
+  if (ok != 1) {
+    char why[256] = "no answer";
+    if (const unsigned long e = ERR_get_error()) ERR_error_string_n(e, why, sizeof(why));
+    ERR_clear_error();
+    throw std::runtime_error(std::string("ws: TLS handshake failed: ") + why);
+  }
+}
+
+std::string certificate_sha256(x509_st* cert) {
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int n = 0;
+  if (!cert || X509_digest(cert, EVP_sha256(), md, &n) != 1) return "";
+  static const char kHex[] = "0123456789abcdef";
+  std::string hex;
+  for (unsigned int i = 0; i < n; ++i) {
+    hex.push_back(kHex[md[i] >> 4]);
+    hex.push_back(kHex[md[i] & 15]);
+  }
+  return hex;
+}
+
+std::string WsClient::peer_certificate_sha256() const {
+  if (!ssl_) return "";
+  X509* cert = SSL_get1_peer_certificate(ssl_);
+  const std::string sha = certificate_sha256(cert);
+  X509_free(cert);
+  return sha;
+}
+
+long WsClient::read_some(std::string& rx, int timeout_ms) {
+  // Bytes OpenSSL has already decrypted do not make the socket readable.
+  if (!ssl_ || SSL_pending(ssl_) == 0) {
+    pollfd p{fd_, POLLIN, 0};
+    const int r = ::poll(&p, 1, timeout_ms);
+    if (r == 0) return 0;
+    if (r < 0) return errno == EINTR ? 0 : -1;
+  }
+  char buf[65536];
+  long n = 0;
+  if (ssl_) {
+    n = SSL_read(ssl_, buf, sizeof(buf));
+    if (n <= 0) {
+      const int e = SSL_get_error(ssl_, static_cast<int>(n));
+      ERR_clear_error();
+      return e == SSL_ERROR_WANT_READ ? 0 : -1;  // WANT_READ: a record without data (a ticket)
+    }
+  } else {
+    n = ::recv(fd_, buf, sizeof(buf), 0);
+    if (n <= 0) return -1;
+  }
+  rx.append(buf, static_cast<std::size_t>(n));
+  return n;
 }
 
 void WsClient::connect(const std::string& host, int port, const std::string& path, const std::string& protocol,
@@ -51,6 +137,14 @@ void WsClient::connect(const std::string& host, int port, const std::string& pat
   }
   int one = 1;
   setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
+  if (tls_) {
+    try {
+      start_tls(timeout_ms);
+    } catch (const std::exception&) {
+      close_socket();
+      throw;
+    }
+  }
   std::string req = "GET " + path + " HTTP/1.1\r\nHost: " + host + ":" + std::to_string(port) +
                     "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                     "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n";
@@ -67,13 +161,10 @@ void WsClient::connect(const std::string& host, int port, const std::string& pat
       head.resize(end);
       break;
     }
-    pollfd p{fd_, POLLIN, 0};
-    if (::poll(&p, 1, remaining_ms(deadline)) <= 0)
+    const long n = read_some(head, remaining_ms(deadline));
+    if (n < 0) throw std::runtime_error("ws: connection closed during handshake");
+    if (n == 0 && remaining_ms(deadline) == 0)
       throw std::runtime_error("ws: no handshake answer within " + std::to_string(timeout_ms) + " ms");
-    char buf[4096];
-    const ssize_t n = ::recv(fd_, buf, sizeof(buf), 0);
-    if (n <= 0) throw std::runtime_error("ws: connection closed during handshake");
-    head.append(buf, static_cast<std::size_t>(n));
   }
   if (head.compare(0, 12, "HTTP/1.1 101") != 0)
     throw std::runtime_error("ws: upgrade refused: " + head.substr(0, head.find("\r\n")));
@@ -82,6 +173,16 @@ void WsClient::connect(const std::string& host, int port, const std::string& pat
 void WsClient::write_all(const char* data, std::size_t size) {
   if (fd_ < 0) throw std::runtime_error("ws: not connected");
   while (size > 0) {
+    if (ssl_) {
+      const int n = SSL_write(ssl_, data, static_cast<int>(std::min<std::size_t>(size, 1 << 30)));
+      if (n <= 0) {
+        ERR_clear_error();
+        throw std::runtime_error("ws: TLS write failed");
+      }
+      data += n;
+      size -= static_cast<std::size_t>(n);
+      continue;
+    }
     const ssize_t n = ::send(fd_, data, size, MSG_NOSIGNAL);
     if (n < 0) {
       if (errno == EINTR) continue;
@@ -181,17 +282,9 @@ WsClient::Recv WsClient::recv(std::string& payload, bool& binary, int timeout_ms
         return Recv::message;
       }
     }
-    pollfd p{fd_, POLLIN, 0};
-    const int r = ::poll(&p, 1, remaining_ms(deadline));
-    if (r == 0) return Recv::timeout;
-    if (r < 0) {
-      if (errno == EINTR) continue;
-      return Recv::closed;
-    }
-    char buf[65536];
-    const ssize_t n = ::recv(fd_, buf, sizeof(buf), 0);
-    if (n <= 0) return Recv::closed;
-    rx_.append(buf, static_cast<std::size_t>(n));
+    const long n = read_some(rx_, remaining_ms(deadline));
+    if (n < 0) return Recv::closed;
+    if (n == 0 && remaining_ms(deadline) == 0) return Recv::timeout;
   }
 }
 
@@ -200,16 +293,15 @@ void WsClient::close() {
   try {
     send_frame(0x8, std::string("\x03\xe8", 2));  // 1000 normal closure
   } catch (const std::exception&) {}
-  ::close(fd_);
-  fd_ = -1;
+  if (ssl_) SSL_shutdown(ssl_);  // close_notify; the answer is not awaited
+  close_socket();
 }
 
 void WsClient::close_abrupt() {
   if (fd_ < 0) return;
   linger l{1, 0};  // RST instead of an orderly FIN: the rudest disconnect TCP allows
   setsockopt(fd_, SOL_SOCKET, SO_LINGER, &l, sizeof(l));
-  ::close(fd_);
-  fd_ = -1;
+  close_socket();
 }
 
 }  // namespace catgs::loadgen

@@ -1,13 +1,20 @@
-// A small blocking WebSocket client over a raw TCP socket (RFC 6455, client side, no TLS, no
-// extensions). Made for tests and load generation: besides normal use it can send malformed
-// frames, stop reading, and drop the TCP connection without a close frame.
-// Not thread-safe: one thread per client.
+// A small blocking WebSocket client over a raw TCP socket (RFC 6455, client side, no
+// extensions), optionally over TLS (wss://, OpenSSL). Made for tests and load generation: besides
+// normal use it can send malformed frames, stop reading, and drop the TCP connection without a
+// close frame. Not thread-safe: one thread per client.
 #pragma once
 
 #include <cstdint>
 #include <string>
 
+struct ssl_st;      // OpenSSL's SSL
+struct ssl_ctx_st;  // OpenSSL's SSL_CTX
+struct x509_st;     // OpenSSL's X509
+
 namespace catgs::loadgen {
+
+// SHA-256 of `cert` (DER), lower-case hex ("" for null): which certificate a server presented.
+std::string certificate_sha256(x509_st* cert);
 
 class WsClient {
  public:
@@ -23,6 +30,11 @@ class WsClient {
   void connect(const std::string& host, int port, const std::string& path, const std::string& protocol,
                int timeout_ms = 5000, int receive_buffer = 0);
   bool connected() const { return fd_ >= 0; }
+  // Before connect(): speak TLS (wss://). The server's certificate is NOT verified (test and
+  // load clients meet self-signed certificates); peer_certificate_sha256() says which one came.
+  void use_tls(bool on) { tls_ = on; }
+  // SHA-256 of the server's certificate (DER, lower-case hex) after a TLS connect; "" otherwise.
+  std::string peer_certificate_sha256() const;
 
   // Sends one complete binary / text message (a single masked frame). Throws on socket errors.
   void send_binary(const std::string& payload);
@@ -43,10 +55,18 @@ class WsClient {
  private:
   void send_frame(int opcode, const std::string& payload);
   void write_all(const char* data, std::size_t size);
+  // The TLS handshake on the connected socket. Throws std::runtime_error.
+  void start_tls(int timeout_ms);
+  // Reads what is there within `timeout_ms` into rx: > 0 bytes read, 0 timeout, < 0 closed.
+  long read_some(std::string& rx, int timeout_ms);
+  void close_socket();
   // Tries to parse one frame from rx_; returns false when incomplete.
   bool parse_frame(bool& fin, int& opcode, std::string& payload);
 
   int fd_ = -1;
+  bool tls_ = false;
+  ssl_ctx_st* ssl_ctx_ = nullptr;
+  ssl_st* ssl_ = nullptr;
   std::string rx_;       // bytes received, not yet parsed
   std::string message_;  // fragments of the message being reassembled
   int message_opcode_ = 0;
