@@ -377,11 +377,13 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
       std::string path = uri;
       std::string body, type = "text/plain; charset=utf-8";
       unsigned status = HTTP_STATUS_OK;
-      if (path.rfind("/healthz", 0) == 0) {
+      // Exact paths: lws hands this callback every URI its mounts' prefixes match (/healthzXYZ,
+      // /metrics/foo), and those are not ours to answer (issue 22, finding 8).
+      if (path == "/healthz") {
         body = "ok\n";
-      } else if (path.rfind("/readyz", 0) == 0) {
+      } else if (path == "/readyz") {
         status = static_cast<unsigned>(handler_.readiness(body));
-      } else if (path.rfind("/metrics", 0) == 0) {
+      } else if (path == "/metrics") {
         // Behind the admin token when the server has tokens; /healthz and /readyz stay open
         // for probes, which carry no credentials.
         status = static_cast<unsigned>(handler_.metrics_access(header(wsi, WSI_TOKEN_HTTP_AUTHORIZATION)));

@@ -113,6 +113,18 @@ TEST(Hardening, UpgradeNeedsWebSocketVersion13) {
   EXPECT_EQ(metric_value(metrics(server.port()), "catgs_refused_upgrades_total{reason=\"version\"}"), 2.0);
 }
 
+// The probes and /metrics answer their own paths only: a longer path that starts like one of them
+// is 404, as any unknown path (issue 22, finding 8: /healthzXYZ and /metricsfoo answered 200).
+TEST(Hardening, ProbePathsMatchExactly) {
+  ServerProcess server(server_args(kBiker));
+  std::string body;
+  for (const char* path : {"/healthz", "/readyz", "/metrics"})
+    EXPECT_EQ(http_get(server.port(), path, body), 200) << path;
+  for (const char* path : {"/healthzXYZ", "/healthz/x", "/readyzz", "/metricsfoo", "/metrics/x"})
+    EXPECT_EQ(http_get(server.port(), path, body), 404) << path;
+  EXPECT_EQ(http_get(server.port(), "/healthz?probe=1", body), 200) << "a query string is not part of the path";
+}
+
 // A frame declaring 1 GiB is refused at its first bytes, not read for its whole length: Error
 // MALFORMED and a close while the client is still "sending".
 TEST(Hardening, DeclaredFrameLengthCheckedBeforeThePayload) {
