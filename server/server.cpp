@@ -68,6 +68,10 @@ int Server::ToManager::metrics_access(const std::string& authorization) {
 void Server::ToManager::on_refused(Refusal why, const std::string& peer, const std::string& detail) {
   count_refusal(*metrics, why, peer, detail);
 }
+std::string Server::ToManager::scenes_json() {
+  if (auto* m = manager.load()) return m->scenes_json();
+  return "[]\n";
+}
 int Server::ToManager::readiness(std::string& body) {
   if (auto* m = manager.load()) return m->readiness(body);
   body = "loading\n";
@@ -121,11 +125,24 @@ void Server::load_model() {
     std::cout << "scene: loading " << options_.scene << ": " << done << " of " << total << " Gaussians ("
               << 100 * done / total << "%), " << ms_since(t0) << " ms" << std::endl;
   };
-  model_ = std::make_shared<const GaussianModel>(load_scene(options_.scene, progress));
-  std::cout << "scene: " << options_.scene << " (" << model_->name << "), " << model_->size()
-            << " Gaussians, SH degree " << model_->sh_degree << ", loaded in " << ms_since(t0) << " ms\n";
-  // A bad --cameras file stops the start here; a bad discovered one only warns.
-  frame_ = choose_scene_frame(*model_, options_.scene, options_.cameras, std::cout);
+  std::vector<std::string> files{options_.scene};
+  files.insert(files.end(), options_.more_scenes.begin(), options_.more_scenes.end());
+  for (const std::string& file : files) {
+    const auto t_file = std::chrono::steady_clock::now();
+    auto model = std::make_shared<const GaussianModel>(load_scene(file, progress));
+    std::cout << "scene: " << file << " (" << model->name << "), " << model->size() << " Gaussians, SH degree "
+              << model->sh_degree << ", loaded in " << ms_since(t_file) << " ms\n";
+    for (const SceneEntry& other : scenes_)
+      if (other.model->name == model->name)
+        throw std::runtime_error("--scene " + file + ": a scene named '" + model->name + "' is already served (" +
+                                 other.path + "); Hello picks scenes by name");
+    // A bad --cameras file stops the start here; a bad discovered one only warns. --cameras
+    // belongs to the first scene; the others find theirs beside them.
+    const std::string cameras = scenes_.empty() ? options_.cameras : "";
+    const SceneFrame frame = choose_scene_frame(*model, file, cameras, std::cout);
+    scenes_.push_back({model, model->bounds(), frame, file});
+  }
+  model_ = scenes_.front().model;
 }
 
 void Server::resolve_renderer() {
@@ -169,8 +186,7 @@ void Server::resolve_encoder() {
 
 void Server::build_sessions() {
   shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, options_,
-                                                             model_, model_->bounds(), frame_, render_options_,
-                                                             renderer_kind_, encoder_kind_});
+                                                             scenes_, render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
 }
 

@@ -87,6 +87,7 @@ class Server {
     std::string metrics_text() override;
     int readiness(std::string& body) override;
     int metrics_access(const std::string& authorization) override;
+    std::string scenes_json() override;
     void on_refused(Refusal why, const std::string& peer, const std::string& detail) override;
   };
   using Deadline = std::chrono::steady_clock::time_point;
@@ -123,8 +124,8 @@ class Server {
 
   const ServerOptions& options_;
   ServerMetrics metrics_;
-  std::shared_ptr<const GaussianModel> model_;
-  SceneFrame frame_;  // first view, orbit centre, up, scale (load_model)
+  std::shared_ptr<const GaussianModel> model_;  // the first scene's (renderer and GPU set-up)
+  std::vector<SceneEntry> scenes_;              // every --scene (load_model)
   RenderOptions render_options_;
   std::string renderer_kind_;  // "cpu" or "cuda"
   std::string encoder_kind_;   // "x264" or "nvenc"

@@ -40,7 +40,10 @@ void parse_size(const std::string& name, const std::string& v, int& width, int& 
 
 std::string server_usage() {
   return "usage: catgs-server [options]\n"
-         "  --scene FILE          scene PLY (default: assets/scenes/biker.compressed.ply)\n"
+         "  --scene FILE          scene file (default: assets/scenes/biker.compressed.ply); repeat\n"
+         "                        it to serve several: Hello.scene picks one by name (the file\n"
+         "                        name without its extension), the first by default; GET /scenes\n"
+         "                        lists them (--cameras applies to the first)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -115,6 +118,7 @@ std::string server_usage() {
 bool parse_server_options(int argc, char** argv, ServerOptions& out) {
   out.scene = std::string(CATGS_SOURCE_DIR) + "/assets/scenes/biker.compressed.ply";
   out.web_root = std::string(CATGS_SOURCE_DIR) + "/web_client";
+  bool scene_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") {
@@ -123,9 +127,14 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     }
     if (i + 1 >= argc) throw std::invalid_argument("option " + a + " needs a value");
     const std::string v = argv[++i];
-    if (a == "--scene")
-      out.scene = v;
-    else if (a == "--cameras")
+    if (a == "--scene") {
+      // The first --scene replaces the bundled default; later ones are further scenes.
+      if (scene_given)
+        out.more_scenes.push_back(v);
+      else
+        out.scene = v;
+      scene_given = true;
+    } else if (a == "--cameras")
       out.cameras = v;
     else if (a == "--port")
       out.port = parse_int(a, v, 0, 65535);

@@ -28,6 +28,8 @@ let renderScale = Math.min(Math.max(Number(params.get('scale')) || 1, 0.1), 4);
 // a phone at DPR 3 would otherwise ask for 1170x2532. ?max=WxH moves the cap.
 const maxSize = parseMaxSize(params.get('max'));
 const linkView = parseView(params);
+// ?scene=NAME opens that scene of a server that serves several (GET /scenes lists them).
+const sceneParam = (params.get('scene') || '').slice(0, 128);
 const isTouch = (navigator.maxTouchPoints || 0) > 0 || matchMedia('(pointer: coarse)').matches;
 // Latency hiding (reproject.js): the last frame re-projected to the newest pose until its own
 // frame arrives. ?reproject=0 turns it off.
@@ -209,6 +211,7 @@ function onWelcome(w) {
   state.connection.markHealthy();
   state.decoder.reset();
   overlay.setSession(w);
+  $('scene-picker').value = w.scene_name;
   // Keep the user's view across a reconnect to the same scene; start fresh otherwise.
   if (!state.camera || state.camera.sceneName !== w.scene_name) {
     state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds, w);
@@ -628,12 +631,40 @@ function onKey(e) {
   e.preventDefault();
 }
 
+// A server with several scenes lists them at GET /scenes: the picker shows them, and choosing
+// one reopens the page on it (?scene=NAME; a view in the URL belongs to the old scene and goes).
+async function loadScenePicker() {
+  const picker = $('scene-picker');
+  let scenes = [];
+  try {
+    const res = await fetch(new URL('scenes', location.href), { cache: 'no-cache' });
+    if (res.ok) scenes = await res.json();
+  } catch {
+    return; // an older server, or none: no picker
+  }
+  if (!Array.isArray(scenes) || scenes.length < 2) return;
+  for (const s of scenes) {
+    const o = document.createElement('option');
+    o.value = String(s.name);
+    o.textContent = `${s.name} (${(Number(s.gaussians) / 1e6).toFixed(2)} M)`;
+    picker.append(o);
+  }
+  picker.value = (state.welcome && state.welcome.scene_name) || sceneParam || String(scenes[0].name);
+  picker.hidden = false;
+  picker.addEventListener('change', () => {
+    const url = new URL(withoutView(location.href));
+    url.searchParams.set('scene', picker.value);
+    location.assign(url.href);
+  });
+}
+
 function wireUi() {
   $('hint').textContent = isTouch
     ? '1 finger: orbit · 2 fingers: zoom, pan · ? help'
     : 'drag: orbit · right-drag: pan · wheel: zoom · WASD: fly · H: help';
   $('btn-reset').addEventListener('click', resetView);
   $('btn-link').addEventListener('click', copyLink);
+  loadScenePicker();
   $('btn-fullscreen').addEventListener('click', toggleFullscreen);
   $('btn-help').addEventListener('click', () => togglePanel('helppanel', 'btn-help'));
   $('btn-paths').addEventListener('click', () => togglePanel('paths', 'btn-paths'));
@@ -778,7 +809,7 @@ async function main() {
       setStatus('handshake');
       onResize(); // the window may have changed while disconnected
       const v = state.viewport;
-      send(state.protocol.encodeHello({ width: v.width, height: v.height, token: state.token }));
+      send(state.protocol.encodeHello({ width: v.width, height: v.height, token: state.token, scene: sceneParam }));
     },
     onMessage,
     onClose,

@@ -50,7 +50,8 @@ export function makeProtocol(root) {
     codecName: (v) => Codec.valuesById[v] || `codec ${v}`,
     errorCodeName: (v) => ErrorCode.valuesById[v] || `ERROR_${v}`,
 
-    encodeHello({ width, height, token = '', clientName = 'catgs-web' }) {
+    // `scene`: a scene name from GET /scenes ('' the server's first; servers before it ignore it).
+    encodeHello({ width, height, token = '', clientName = 'catgs-web', scene = '' }) {
       return encode({
         hello: {
           protocol_version: PROTOCOL_VERSION,
@@ -59,6 +60,7 @@ export function makeProtocol(root) {
           codecs: [Codec.values.CODEC_H264],
           token,
           client_name: clientName,
+          scene,
         },
       });
     },

@@ -7,7 +7,10 @@
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
+#include <filesystem>
 #include <random>
+
+#include <nlohmann/json.hpp>
 
 #include "camera/camera.h"
 #include "session/first_view.h"
@@ -43,6 +46,27 @@ constexpr auto kTick = std::chrono::milliseconds(250);
 constexpr std::size_t kMaxQueuedMessages = 256;  // non-frame messages a non-reader may pile up
 
 }  // namespace
+
+const SceneEntry* find_scene(const std::vector<SceneEntry>& scenes, const std::string& name) {
+  if (scenes.empty()) return nullptr;
+  if (name.empty()) return &scenes.front();
+  for (const SceneEntry& s : scenes)
+    if (s.model->name == name) return &s;
+  return nullptr;
+}
+
+std::string scenes_json(const std::vector<SceneEntry>& scenes) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const SceneEntry& s : scenes)
+    out.push_back({{"name", s.model->name},
+                   {"gaussians", s.model->size()},
+                   {"sh_degree", s.model->sh_degree},
+                   {"bounds",
+                    {{"min", {s.bounds.min.x, s.bounds.min.y, s.bounds.min.z}},
+                     {"max", {s.bounds.max.x, s.bounds.max.y, s.bounds.max.z}}}},
+                   {"file", std::filesystem::path(s.path).filename().string()}});
+  return out.dump() + "\n";
+}
 
 Session::Session(ConnId id, SessionShared& shared)
     : id_(id),
@@ -273,6 +297,14 @@ void Session::handle_hello(const pb::Hello& hello) {
     for (int c : hello.codecs()) h264 = h264 || c == pb::CODEC_H264;
     if (!h264) return fail(pb::ERROR_INVALID_ARGUMENT, "client does not accept H.264");
   }
+  scene_ = find_scene(shared_.scenes, hello.scene());
+  if (!scene_) {
+    std::string names;
+    for (const SceneEntry& s : shared_.scenes) names += (names.empty() ? "" : ", ") + s.model->name;
+    // The name comes from the client: only its first 64 bytes go into the reason.
+    return fail(pb::ERROR_INVALID_ARGUMENT,
+                "no scene '" + hello.scene().substr(0, 64) + "' on this server (it has: " + names + ")");
+  }
   if (shared_.draining)
     return fail(pb::ERROR_SHUTTING_DOWN, "server draining: connect again", false, jittered(kShuttingDownRetryMs));
   if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
@@ -286,7 +318,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   shared_.metrics.sessions_total++;
   shared_.transport.said_hello(id_);                                   // no longer counts against --max-pre-hello
   if (shared_.renderer_kind == "cuda") gpu_ = shared_.gpus.acquire();  // the least busy GPU
-  renderer_ = make_renderer(shared_.renderer_kind, shared_.model, shared_.render_options, nullptr, std::max(gpu_, 0));
+  renderer_ = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
   pipelined_ = !(shared_.encoder_kind == "nvenc" && renderer_->name() == "cuda");
   for (int i = 0; pipelined_ && i < 2; ++i) free_planes_.push_back(std::make_unique<Yuv420Image>());
@@ -298,10 +330,10 @@ void Session::handle_hello(const pb::Hello& hello) {
   pb::ServerMessage m;
   pb::Welcome* w = m.mutable_welcome();
   w->set_session_id(session_id_);
-  w->set_scene_name(shared_.model->name);
-  set_vec3(w->mutable_scene_bounds()->mutable_min(), shared_.bounds.min);
-  set_vec3(w->mutable_scene_bounds()->mutable_max(), shared_.bounds.max);
-  const CameraPose start = first_view_pose(shared_.frame, width_, height_);
+  w->set_scene_name(scene_->model->name);
+  set_vec3(w->mutable_scene_bounds()->mutable_min(), scene_->bounds.min);
+  set_vec3(w->mutable_scene_bounds()->mutable_max(), scene_->bounds.max);
+  const CameraPose start = first_view_pose(scene_->frame, width_, height_);
   pb::Pose* p = w->mutable_initial_pose();
   p->set_sequence(0);
   set_vec3(p->mutable_position(), start.position);
@@ -310,9 +342,9 @@ void Session::handle_hello(const pb::Hello& hello) {
   p->mutable_orientation()->set_y(start.orientation.y);
   p->mutable_orientation()->set_z(start.orientation.z);
   p->set_vertical_fov_deg(start.vertical_fov_deg);
-  set_vec3(w->mutable_orbit_centre(), shared_.frame.orbit_centre);
-  set_vec3(w->mutable_up(), shared_.frame.up);
-  w->set_scene_scale(shared_.frame.scene_scale);
+  set_vec3(w->mutable_orbit_centre(), scene_->frame.orbit_centre);
+  set_vec3(w->mutable_up(), scene_->frame.up);
+  w->set_scene_scale(scene_->frame.scene_scale);
   w->set_codec(pb::CODEC_H264);
   w->set_width(static_cast<std::uint32_t>(width_));
   w->set_height(static_cast<std::uint32_t>(height_));

@@ -44,6 +44,22 @@
 
 namespace catgs::server {
 
+// A scene the server serves: its model (shared by its sessions; one device copy per GPU), bounds
+// (Welcome.scene_bounds) and the first view and frame to navigate in (Welcome).
+struct SceneEntry {
+  std::shared_ptr<const GaussianModel> model;
+  Bounds bounds;
+  SceneFrame frame;
+  std::string path;  // the file it was loaded from
+};
+
+// The scene named `name` (GaussianModel::name), or the first for an empty name; null when there
+// is none of that name.
+const SceneEntry* find_scene(const std::vector<SceneEntry>& scenes, const std::string& name);
+// GET /scenes: [{"name", "gaussians", "sh_degree", "bounds": {"min": [x, y, z], "max": [...]},
+// "file"}] in --scene order (the first is the default), as JSON.
+std::string scenes_json(const std::vector<SceneEntry>& scenes);
+
 // What all sessions share (owned by the Server; it outlives every session).
 struct SessionShared {
   boost::asio::io_context& io;  // the worker pool: strands, encode jobs, timers
@@ -52,9 +68,7 @@ struct SessionShared {
   Transport& transport;
   ServerMetrics& metrics;
   const ServerOptions& options;
-  std::shared_ptr<const GaussianModel> model;
-  Bounds bounds;     // model bounds (Welcome.scene_bounds)
-  SceneFrame frame;  // the first view and the frame to navigate in (Welcome)
+  std::vector<SceneEntry> scenes;  // every --scene, in order; the first is the default
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
   std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
@@ -180,6 +194,7 @@ class Session : public std::enable_shared_from_this<Session> {
   State state_ = State::awaiting_hello;
   bool counted_open_ = false;  // holds one of the server's session slots
   std::string session_id_;
+  const SceneEntry* scene_ = nullptr;  // chosen at Hello (Hello.scene)
   int width_ = 0, height_ = 0;
   int max_bitrate_kbps_ = 0;  // the client's Quality
   bool force_idr_ = true;

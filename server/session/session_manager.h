@@ -30,6 +30,7 @@ class SessionManager final : public TransportHandler {
   void on_sent(ConnId id) override;
   void on_close(ConnId id) override;
   std::string metrics_text() override;
+  std::string scenes_json() override;
   // 503 "draining" after start_draining(), 503 "full" while --max-sessions sessions are open,
   // else 200 "ready".
   int readiness(std::string& body) override;

@@ -82,7 +82,7 @@ const char* refusal_name(Refusal r) {
 struct Transport::Static {
   lws_protocols protocols[3];
   lws_protocol_vhost_options mime[6];
-  lws_http_mount mount_root, mount_healthz, mount_readyz, mount_metrics;
+  lws_http_mount mount_root, mount_healthz, mount_readyz, mount_metrics, mount_scenes;
   std::string web_root;
 };
 
@@ -127,7 +127,8 @@ void Transport::start() {
     m.origin_protocol = LWSMPRO_CALLBACK;
     m.mountpoint_len = static_cast<unsigned char>(std::strlen(path));
   };
-  callback_mount(s.mount_metrics, "/metrics", nullptr);
+  callback_mount(s.mount_scenes, "/scenes", nullptr);
+  callback_mount(s.mount_metrics, "/metrics", &s.mount_scenes);
   callback_mount(s.mount_readyz, "/readyz", &s.mount_metrics);
   callback_mount(s.mount_healthz, "/healthz", &s.mount_readyz);
   std::memset(&s.mount_root, 0, sizeof(s.mount_root));
@@ -383,6 +384,9 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
         body = "ok\n";
       } else if (path == "/readyz") {
         status = static_cast<unsigned>(handler_.readiness(body));
+      } else if (path == "/scenes") {
+        body = handler_.scenes_json();
+        type = "application/json";
       } else if (path == "/metrics") {
         // Behind the admin token when the server has tokens; /healthz and /readyz stay open
         // for probes, which carry no credentials.

@@ -77,6 +77,8 @@ class TransportHandler {
   // GET /readyz: the HTTP status (200 when a new session would be admitted, else 503) with a
   // one-line reason in `body`.
   virtual int readiness(std::string& body) = 0;
+  // Body of GET /scenes (JSON: the scenes a Hello may name); "[]" until they are loaded.
+  virtual std::string scenes_json() { return "[]\n"; }
   // GET /metrics with this Authorization header ("" when none): 200 to serve it, 401 (no or an
   // unknown token) or 403 (a token without the admin role) to refuse.
   virtual int metrics_access(const std::string& authorization) {

@@ -8,7 +8,8 @@
 // wants Hello.token "sesame" (else Error(UNAUTHORIZED)); /ws-full refuses the first two Hellos
 // with Error(SERVER_FULL, retry_after_ms 2500); /ws-restart sends Error(SHUTTING_DOWN,
 // retry_after_ms 1200) after 5 frames; /ws-noframes welcomes but never sends a frame; /ws-hold
-// answers the first Pose only (the page keeps showing that frame, re-projected). Every
+// answers the first Pose only (the page keeps showing that frame, re-projected). GET /scenes
+// lists two scenes (the page's picker). Every
 // session gets Stats once a second (frames_sent cumulative, means 0 when nothing was rendered, as
 // the server does). Under /noproto/ the page is served but .proto answers 415 (as libwebsockets
 // does without a MIME type).
@@ -90,6 +91,15 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
 
   const server = http.createServer((req, res) => {
     let p = decodeURIComponent(new URL(req.url, 'http://x').pathname);
+    if (p === '/scenes') {
+      // Two scenes, as a server with two --scene files lists them (the WebSocket serves 'mock').
+      const scenes = [
+        { name: 'mock', gaussians: 152746, sh_degree: 0, bounds: { min: [-1, -1, -1], max: [1, 1, 1] }, file: 'mock.ply' },
+        { name: 'garden', gaussians: 5834784, sh_degree: 3, bounds: { min: [-9, -9, -9], max: [9, 9, 9] }, file: 'garden.ply' },
+      ];
+      res.writeHead(200, { 'content-type': 'application/json' }).end(JSON.stringify(scenes));
+      return;
+    }
     const noProto = p.startsWith('/noproto/');
     if (noProto) p = p.slice('/noproto'.length);
     if (p.endsWith('/')) p += 'index.html';

@@ -3,7 +3,7 @@
 // server Error display + reconnect message + reconnect, decoder error recovery, Resize; the
 // viewer's states (first view, unreachable, wrong token, server full, restarting), stale stats,
 // reset, shared view links, help, fullscreen, camera paths and tours, latency hiding (the held
-// frame re-projected), and a phone at DPR 3.
+// frame re-projected), the scene picker, and a phone at DPR 3.
 // usage: node mock_test.mjs     Exit codes: 0 pass, 1 fail, 77 skipped (reason printed).
 import { existsSync, mkdtempSync, rmSync } from 'node:fs';
 import { createRequire } from 'node:module';
@@ -475,6 +475,27 @@ try {
     await sleep(100);
     check((await transformOf(live)) === '', 'reproject: the transform goes once the frame of the new pose is shown');
     await live.close();
+  }
+
+  // 11d. Scene picker: the server lists two scenes; picking one reopens the page on it and its
+  // Hello names it.
+  {
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws')}`);
+    check(await moveUntil(page, (c) => c.framesDecoded >= 1), 'scenes: first frame');
+    const opts = await page.evaluate(() => {
+      const p = document.getElementById('scene-picker');
+      return { hidden: p.hidden, names: [...p.options].map((o) => o.value), value: p.value };
+    });
+    check(!opts.hidden && opts.names.join(',') === 'mock,garden' && opts.value === 'mock',
+      `scenes: the picker lists mock and garden, mock chosen (${JSON.stringify(opts)})`);
+    const before = hellos('/ws').length;
+    await Promise.all([page.waitForNavigation(), page.selectOption('#scene-picker', 'garden')]);
+    check(new URL(page.url()).searchParams.get('scene') === 'garden', `scenes: the page reopened with ?scene=garden (${page.url()})`);
+    const end = Date.now() + 8000;
+    while (Date.now() < end && hellos('/ws').length === before) await sleep(50);
+    const last = hellos('/ws').at(-1);
+    check(last && last.msg.scene === 'garden', `scenes: the new session's Hello names garden (${last && JSON.stringify(last.msg.scene)})`);
+    await page.close();
   }
 
   // 12. A phone: 390x844 CSS pixels at DPR 3 with touch. The stream is capped (886x1920, not

@@ -163,6 +163,51 @@ TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
   }
 }
 
+// Several scenes (issue 20): --scene twice; GET /scenes lists both in order; a Hello without a
+// scene gets the first; Hello.scene picks the other, whose frames match a CPU render of that
+// scene; an unknown name is refused with ERROR_INVALID_ARGUMENT naming the scenes there are.
+TEST(ServerIntegration, SeveralScenesPickedByName) {
+  if (!std::filesystem::exists(kFlowers) || !std::filesystem::exists(kFlowersCams))
+    GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
+  ServerProcess server(server_args(kBiker, {"--scene", kFlowers, "--crf", "18"}));
+  std::string body;
+  ASSERT_EQ(http_get(server.port(), "/scenes", body), 200);
+  const auto biker = body.find("\"name\":\"biker\""), flowers = body.find("\"name\":\"flowers_sh3\"");
+  EXPECT_NE(biker, std::string::npos) << body;
+  EXPECT_NE(flowers, std::string::npos) << body;
+  EXPECT_LT(biker, flowers) << "the first --scene comes first: " << body;
+  EXPECT_NE(body.find("\"gaussians\":38347"), std::string::npos) << body;
+  {
+    StreamClient c;
+    c.connect(server.port());
+    EXPECT_EQ(c.hello(160, 120).scene_name(), "biker");
+  }
+  const int W = 480, H = 320;
+  StreamClient c;
+  c.connect(server.port());
+  const pb::Welcome w = c.hello(W, H, "", 10000, "flowers_sh3");
+  EXPECT_EQ(w.scene_name(), "flowers_sh3");
+  std::vector<Camera> views = load_inria_cameras(kFlowersCams, W, H);
+  H264Decoder dec;
+  cpu::CpuRenderer ref(load_model(kFlowers), RenderOptions{});
+  for (std::uint32_t i = 0; i < 2; ++i) {
+    const pb::Pose pose = pose_from_camera(views[i], i, now_ms());
+    c.send_pose(pose);
+    auto m = wait_for(c, 30000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+    ASSERT_TRUE(m) << "no frame for pose " << i;
+    EXPECT_GE(frame_psnr(dec, ref, m->frame(), pose), 30.0) << "frame " << i << " is not flowers_sh3's";
+  }
+  StreamClient u;
+  u.connect(server.port());
+  try {
+    u.hello(160, 120, "", 10000, "garden");
+    ADD_FAILURE() << "a Hello for a scene the server does not have was welcomed";
+  } catch (const Refused& r) {
+    EXPECT_EQ(r.error().code(), pb::ERROR_INVALID_ARGUMENT);
+    EXPECT_NE(r.error().reason().find("biker, flowers_sh3"), std::string::npos) << r.error().reason();
+  }
+}
+
 TEST(ServerIntegration, ResizeKeyFrameRequestPingAndStats) {
   ServerProcess server(server_args(kBiker));
   StreamClient c;

@@ -50,7 +50,8 @@ void StreamClient::send_pose(const pb::Pose& pose) {
   send(m);
 }
 
-pb::Welcome StreamClient::hello(int width, int height, const std::string& token, int timeout_ms) {
+pb::Welcome StreamClient::hello(int width, int height, const std::string& token, int timeout_ms,
+                                const std::string& scene) {
   pb::ClientMessage m;
   pb::Hello* h = m.mutable_hello();
   h->set_protocol_version(1);
@@ -59,6 +60,7 @@ pb::Welcome StreamClient::hello(int width, int height, const std::string& token,
   h->add_codecs(pb::CODEC_H264);
   h->set_token(token);
   h->set_client_name("catgs-loadgen");
+  h->set_scene(scene);
   send(m);
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (std::chrono::steady_clock::now() < deadline) {

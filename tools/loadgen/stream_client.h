@@ -40,7 +40,9 @@ class StreamClient {
   void connect(int port, const std::string& host = "127.0.0.1", int timeout_ms = 5000, int receive_buffer = 0);
   // Sends Hello and waits for Welcome. Throws Refused (a std::runtime_error naming the Error) if
   // the server refuses, std::runtime_error on timeout.
-  pb::Welcome hello(int width, int height, const std::string& token = "", int timeout_ms = 10000);
+  // `scene`: Hello.scene (a name from GET /scenes; "" the server's first).
+  pb::Welcome hello(int width, int height, const std::string& token = "", int timeout_ms = 10000,
+                    const std::string& scene = "");
   // Sends one ClientMessage.
   void send(const pb::ClientMessage& message);
   void send_pose(const pb::Pose& pose);
