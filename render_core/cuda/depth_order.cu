@@ -61,6 +61,17 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   }
 }
 
+// The depth sort with 32-bit offsets where the count fits (sort.cu: CUB's onesweep takes more
+// pairs a thread, so fewer tiles).
+std::size_t depth_sort(void* temp, std::size_t bytes, cub::DoubleBuffer<uint32_t>& k, cub::DoubleBuffer<uint32_t>& v,
+                       uint64_t n, uint64_t count, cudaStream_t stream) {
+  if (n <= 0x7fffffffull)
+    CATGS_CUDA(cub::DeviceRadixSort::SortPairs(temp, bytes, k, v, static_cast<uint32_t>(count), 0, 32, stream));
+  else
+    CATGS_CUDA(cub::DeviceRadixSort::SortPairs(temp, bytes, k, v, static_cast<int64_t>(count), 0, 32, stream));
+  return bytes;
+}
+
 }  // namespace
 
 std::size_t depth_order_temp_bytes(uint64_t n) {
@@ -70,7 +81,7 @@ std::size_t depth_order_temp_bytes(uint64_t n) {
                                    static_cast<uint32_t*>(nullptr), static_cast<unsigned*>(nullptr),
                                    static_cast<int64_t>(n), IsVisible{nullptr}));
   cub::DoubleBuffer<uint32_t> k(nullptr, nullptr), v(nullptr, nullptr);
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(nullptr, sort, k, v, static_cast<int64_t>(n), 0, 32));
+  sort = depth_sort(nullptr, 0, k, v, n, n, nullptr);
   CountsInDepthOrder in(nullptr, TouchedOf{nullptr, 0});
   EndsByGaussian out(nullptr, nullptr);
   CATGS_CUDA(cub::DeviceScan::InclusiveSum(nullptr, scan, in, out, static_cast<int64_t>(n)));
@@ -89,7 +100,7 @@ const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const float* dep
   CATGS_CUDA_LAUNCHED("gather_depth_keys_kernel");
   // Stable: equal depths keep index order, as the single [tile | depth] sort keeps them.
   cub::DoubleBuffer<uint32_t> k(b.keys[0], b.keys[1]), v(b.index[0], b.index[1]);
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(b.temp, temp_bytes, k, v, static_cast<int64_t>(visible), 0, 32, stream));
+  depth_sort(b.temp, temp_bytes, k, v, n, visible, stream);
   // Each Gaussian's end slot: the running sum of the tile counts in depth order, written back
   // at the Gaussian's own index (what emit_keys reads). Invisible Gaussians keep theirs: they
   // emit nothing.

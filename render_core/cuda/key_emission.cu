@@ -197,7 +197,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     last = other > last ? other : last;
   }
   const auto sentinel = static_cast<uint32_t>(tiles_x * tiles_y);
-  for (uint64_t base = first; base < last; base += 32) {  // warp-uniform
+  for (uint64_t base = first; base < last;) {  // warp-uniform
     const uint64_t s = base + static_cast<uint64_t>(lane);
     int owner = 0;
     for (int step = 16; step > 0; step >>= 1)
@@ -209,6 +209,15 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     const uint32_t owner_depth = __shfl_sync(kAll, depth_bits, owner);
     const int owner_width = __shfl_sync(kAll, width, owner);
     const bool owner_small = __shfl_sync(kAll, static_cast<int>(small), owner) != 0;
+    // A window that starts in a big Gaussian's run (emit_big_kernel writes it) jumps to the run's
+    // end: a near Gaussian's thousands of slots held the warp for a round per 32 of them.
+    const int head = __shfl_sync(kAll, owner, 0);
+    const uint64_t head_end = __shfl_sync(kAll, end, head);
+    if (!__shfl_sync(kAll, static_cast<int>(owner_small), 0) && head_end > base) {
+      base = head_end;
+      continue;
+    }
+    base += 32;
     if (s >= last || !owner_small) continue;
     const auto rank = static_cast<uint32_t>(s - owner_start);
     if (rank < static_cast<uint32_t>(__popc(owner_mask))) {

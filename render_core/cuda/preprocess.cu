@@ -57,7 +57,7 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
 // and a chunk total of 0 and reads nothing else. Otherwise each thread reads its Gaussian once
 // (SH only for visible Gaussians) and writes the projected features of visible ones and
 // tiles_touched of all.
-__global__ void __launch_bounds__(tune::kGaussianThreads)
+__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
     preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
                       unsigned long long* visible,      // [1] running count of visible Gaussians
                       unsigned long long* depth_range,  // [2] listed depths (record_depth_range)

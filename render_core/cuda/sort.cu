@@ -12,37 +12,62 @@
 
 namespace catgs::cuda::stages {
 
-std::size_t sort_temp_bytes(uint64_t entries, int key_bits) {
+namespace {
+
+// CUB picks its offset type from num_items' width (cub/detail/choose_offset.cuh): 32-bit offsets
+// for a 32-bit count. On sm_90 its onesweep pass then takes 23 pairs of 32-bit keys and values a
+// thread instead of 17 with 64-bit offsets (tuning_radix_sort.cuh), so a 1080p list of ~1.2 M
+// entries is one wave of 384-thread tiles on 132 SMs instead of 1.4. Lists past 2^31 - 1 entries
+// keep 64-bit offsets (GPU test row list>2^31).
+bool narrow_offsets(uint64_t entries) { return entries <= 0x7fffffffull; }
+
+template <typename Key, typename Count>
+cudaError_t radix_sort(void* temp, std::size_t& bytes, cub::DoubleBuffer<Key>& k, cub::DoubleBuffer<uint32_t>& v,
+                       Count entries, int key_bits, cudaStream_t stream) {
+  return cub::DeviceRadixSort::SortPairs(temp, bytes, k, v, entries, 0, key_bits, stream);
+}
+
+template <typename Key>
+std::size_t temp_bytes_for(uint64_t entries, int key_bits) {
   std::size_t bytes = 0;
-  cub::DoubleBuffer<uint64_t> k(nullptr, nullptr);
+  cub::DoubleBuffer<Key> k(nullptr, nullptr);
   cub::DoubleBuffer<uint32_t> v(nullptr, nullptr);
-  // 64-bit num_items: CUB picks 64-bit offsets, so lists past 2^31 entries sort correctly.
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(nullptr, bytes, k, v, entries, 0, key_bits));
+  if (narrow_offsets(entries))
+    CATGS_CUDA(radix_sort(nullptr, bytes, k, v, static_cast<uint32_t>(entries), key_bits, nullptr));
+  else
+    CATGS_CUDA(radix_sort(nullptr, bytes, k, v, entries, key_bits, nullptr));
   return bytes;
 }
 
-int sort_pairs(uint64_t* keys[2], uint32_t* values[2], uint64_t entries, int key_bits, void* temp,
-               std::size_t temp_bytes, cudaStream_t stream) {
+template <typename Key>
+int sort_with(Key* keys[2], uint32_t* values[2], uint64_t entries, int key_bits, void* temp, std::size_t temp_bytes,
+              cudaStream_t stream) {
   if (entries == 0) return 0;
-  cub::DoubleBuffer<uint64_t> k(keys[0], keys[1]);
+  cub::DoubleBuffer<Key> k(keys[0], keys[1]);
   cub::DoubleBuffer<uint32_t> v(values[0], values[1]);
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(temp, temp_bytes, k, v, entries, 0, key_bits, stream));
+  if (narrow_offsets(entries))
+    CATGS_CUDA(radix_sort(temp, temp_bytes, k, v, static_cast<uint32_t>(entries), key_bits, stream));
+  else
+    CATGS_CUDA(radix_sort(temp, temp_bytes, k, v, entries, key_bits, stream));
   return k.selector;
 }
 
+}  // namespace
+
+std::size_t sort_temp_bytes(uint64_t entries, int key_bits) { return temp_bytes_for<uint64_t>(entries, key_bits); }
+
+int sort_pairs(uint64_t* keys[2], uint32_t* values[2], uint64_t entries, int key_bits, void* temp,
+               std::size_t temp_bytes, cudaStream_t stream) {
+  return sort_with(keys, values, entries, key_bits, temp, temp_bytes, stream);
+}
+
 std::size_t sort_narrow_temp_bytes(uint64_t entries, int key_bits) {
-  std::size_t bytes = 0;
-  cub::DoubleBuffer<uint32_t> k(nullptr, nullptr), v(nullptr, nullptr);
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(nullptr, bytes, k, v, entries, 0, key_bits));
-  return bytes;
+  return temp_bytes_for<uint32_t>(entries, key_bits);
 }
 
 int sort_pairs_narrow(uint32_t* keys[2], uint32_t* values[2], uint64_t entries, int key_bits, void* temp,
                       std::size_t temp_bytes, cudaStream_t stream) {
-  if (entries == 0) return 0;
-  cub::DoubleBuffer<uint32_t> k(keys[0], keys[1]), v(values[0], values[1]);
-  CATGS_CUDA(cub::DeviceRadixSort::SortPairs(temp, temp_bytes, k, v, entries, 0, key_bits, stream));
-  return k.selector;
+  return sort_with(keys, values, entries, key_bits, temp, temp_bytes, stream);
 }
 
 }  // namespace catgs::cuda::stages

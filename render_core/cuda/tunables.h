@@ -57,6 +57,11 @@ inline constexpr int kRasterMinBlocks = 8;
 // Both are compute- or DRAM-bound with long per-thread state; at 72 registers (3 blocks) each was
 // slower (RESULTS.md, "Two rounds before" and "Three rounds before").
 inline constexpr int kPathKernelMinBlocks = 4;
+// Blocks per SM the exact pre-processing kernel is built for: 5 x 256 threads, so at most 51
+// registers (48 and a 64-byte spill, against 65 unbounded: 3 blocks). The city's pre-processing,
+// which reads 7 M Gaussians a frame, ran 8-15% faster; 6 blocks (40 registers, a 96-byte spill)
+// lost it again (RESULTS.md, "Issue 19, sixth round").
+inline constexpr int kPreprocessMinBlocks = 5;
 inline constexpr int kSubframeFeaturesMinBlocks = 4;
 
 // Reusable buffers grow to this multiple of the size asked for, so a trace whose render list
@@ -76,6 +81,7 @@ static_assert(kGaussianThreads % 32 == 0 && kEntryThreads % 32 == 0 && kBigThrea
 static_assert(kBigRectTiles >= 1, "big Gaussians have more tiles than one thread handles well");
 static_assert(kBigRectTiles <= 32, "a small Gaussian's trail tiles fit one 32-bit mask (Trails::tile_mask)");
 static_assert(kRasterMinBlocks * kRasterThreads <= 2048, "an SM holds at most 2048 threads");
+static_assert(kPreprocessMinBlocks * kGaussianThreads <= 2048, "an SM holds at most 2048 threads");
 static_assert(kPathKernelMinBlocks * kGaussianThreads * 64 <= 65536, "64 registers a thread fit the SM's file");
 
 }  // namespace catgs::cuda::tune
