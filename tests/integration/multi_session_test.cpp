@@ -260,6 +260,34 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
   std::filesystem::remove(json_path);
 }
 
+// catgs-loadgen --scene-name (issue 20): against a server with two scenes, the session asks for
+// the second by name and its decoded frames match a CPU render of that scene (--check-every); the
+// same run without the name gets the server's first scene, and the check against the second one
+// fails (exit status 1), so the name is what picked it.
+TEST(MultiSession, LoadgenAsksForASceneByName) {
+  const std::string flowers = kDataDir + "/scenes/flowers_sh3.ply";
+  const std::string cams = kDataDir + "/traces/flowers_sh3.cameras.json";
+  if (!std::filesystem::exists(flowers) || !std::filesystem::exists(cams))
+    GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
+  ServerProcess server(server_args(kBiker, {"--scene", flowers, "--crf", "18"}));
+  const std::string json_path = "/tmp/catgs-itest-scene-name-" + std::to_string(server.port()) + ".json";
+  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
+                           " --scene " + flowers + " --trace cameras:" + cams +
+                           " --size 480x320 --rate 10 --seconds 2 --warmup 0 --check-every 2 --json " + json_path;
+  ASSERT_EQ(std::system((base + " --scene-name flowers_sh3 > /dev/null").c_str()), 0);
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));
+  const auto& s = j["run"]["sessions"][0];
+  EXPECT_EQ(s["scene"].get<std::string>(), "flowers_sh3") << s.dump();
+  EXPECT_GT(s["checked"].get<int>(), 0) << s.dump();
+  EXPECT_GE(s["psnr_min_db"].get<double>(), 30.0) << s.dump();
+  const int status = std::system((base + " > /dev/null 2>&1").c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1) << "biker's frames passed a check against flowers_sh3";
+  const nlohmann::json first = nlohmann::json::parse(std::ifstream(json_path));
+  EXPECT_EQ(first["run"]["sessions"][0]["scene"].get<std::string>(), "biker");
+  std::filesystem::remove(json_path);
+}
+
 // catgs-loadgen against a full server: one session streams, the other is refused. The refused
 // one is reported as refused (status, refusal, no numbers), the run exits 3 (refused, nothing
 // failed), no PSNR is claimed for unchecked frames, and the progress line shows on stderr while

@@ -40,6 +40,8 @@ const char* kUsage =
     "  --trace T[,T...]         orbit | real:C.json | cameras:C.json | FILE.trace, in turn\n"
     "                           (default orbit)\n"
     "  --scene FILE             the server's scene, for real: traces (and a better orbit)\n"
+    "  --scene-name NAME        ask the server for this scene (a name from its GET /scenes;\n"
+    "                           default: its first)\n"
     "  --offset-s S             session i starts i*S seconds into its trace (default 0.37)\n"
     "  --rate HZ                poses per second per session (default 60; 0 = closed loop)\n"
     "  --depth D                closed loop: poses outstanding (default 1)\n"
@@ -130,6 +132,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
   base.port = args.get_int("--port", base.port);
   base.tls = args.has("--tls");
   base.token = args.get("--token");
+  base.scene_name = args.get("--scene-name");
   base.offset_s = args.get_double("--offset-s", 0.37);
   base.rate_hz = args.get_double("--rate", 60);
   base.depth = std::max(1, args.get_int("--depth", 1));
@@ -172,8 +175,15 @@ int run_once(int max_sessions, const std::vector<LoadSessionConfig>& templates, 
   const int code = run_exit_code(results, base);
   if (code != 0) {
     const RunSummary t = summarize_run(results);
+    std::size_t bad_checks = 0;  // sessions whose reference check failed (or checked nothing)
+    for (const auto& r : results)
+      if (!r.refused && base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) ++bad_checks;
     std::cerr << "catgs-loadgen: " << t.failed << " of " << t.sessions << " sessions failed, " << t.refused
-              << " refused by the server (exit " << code << ")\n";
+              << " refused by the server";
+    if (bad_checks > 0)
+      std::cerr << ", " << bad_checks << " failed the reference check (PSNR below " << base.check_min_psnr
+                << " dB, or no frame checked)";
+    std::cerr << " (exit " << code << ")\n";
   }
   return code;
 }
@@ -220,7 +230,7 @@ int main(int argc, char** argv) {
     const tools::Args args(
         argc, argv,
         {"--host",           "--port",     "--sessions", "--size",  "--width",   "--height", "--trace",
-         "--scene",          "--offset-s", "--rate",     "--depth", "--seconds", "--decode", "--check-every",
+         "--scene",          "--scene-name", "--offset-s", "--rate",     "--depth", "--seconds", "--decode", "--check-every",
          "--check-min-psnr", "--warmup",   "--stale-ms", "--token", "--json",    "--ramp!",  "--ramp-step",
          "--max-p95-ms",     "--min-fps",  "--progress", "--tls!",  "--help!"});
     if (args.has("--help")) {

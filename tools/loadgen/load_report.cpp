@@ -123,6 +123,7 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"height", s.height},
          {"session_id", s.session_id},
          {"renderer", s.renderer},
+         {"scene", s.scene},
          {"encoder", s.encoder},
          {"pipeline", s.pipeline},
          {"seconds", s.run_seconds},

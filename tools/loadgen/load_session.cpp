@@ -86,13 +86,14 @@ void note_error(SessionResult& r, const std::string& what) {
 pb::Welcome open_session(const LoadSessionConfig& cfg, StreamClient& client, SessionResult& r) {
   client.ws().use_tls(cfg.tls);
   client.connect(cfg.port, cfg.host);
-  const pb::Welcome welcome = client.hello(cfg.width, cfg.height, cfg.token);
+  const pb::Welcome welcome = client.hello(cfg.width, cfg.height, cfg.token, 10000, cfg.scene_name);
   r.width = static_cast<int>(welcome.width());
   r.height = static_cast<int>(welcome.height());
   r.session_id = welcome.session_id();
   r.renderer = welcome.renderer();
   r.encoder = welcome.encoder();
   r.pipeline = welcome.pipeline();
+  r.scene = welcome.scene_name();
   return welcome;
 }
 
