@@ -271,8 +271,8 @@ TEST(MultiSession, LoadgenAsksForASceneByName) {
     GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
   ServerProcess server(server_args(kBiker, {"--scene", flowers, "--crf", "18"}));
   const std::string json_path = "/tmp/catgs-itest-scene-name-" + std::to_string(server.port()) + ".json";
-  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
-                           " --scene " + flowers + " --trace cameras:" + cams +
+  const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
+                           flowers + " --trace cameras:" + cams +
                            " --size 480x320 --rate 10 --seconds 2 --warmup 0 --check-every 2 --json " + json_path;
   ASSERT_EQ(std::system((base + " --scene-name flowers_sh3 > /dev/null").c_str()), 0);
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));

@@ -229,10 +229,10 @@ int main(int argc, char** argv) {
   try {
     const tools::Args args(
         argc, argv,
-        {"--host",           "--port",     "--sessions", "--size",  "--width",   "--height", "--trace",
-         "--scene",          "--scene-name", "--offset-s", "--rate",     "--depth", "--seconds", "--decode", "--check-every",
-         "--check-min-psnr", "--warmup",   "--stale-ms", "--token", "--json",    "--ramp!",  "--ramp-step",
-         "--max-p95-ms",     "--min-fps",  "--progress", "--tls!",  "--help!"});
+        {"--host",        "--port",           "--sessions", "--size",     "--width", "--height",  "--trace",
+         "--scene",       "--scene-name",     "--offset-s", "--rate",     "--depth", "--seconds", "--decode",
+         "--check-every", "--check-min-psnr", "--warmup",   "--stale-ms", "--token", "--json",    "--ramp!",
+         "--ramp-step",   "--max-p95-ms",     "--min-fps",  "--progress", "--tls!",  "--help!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

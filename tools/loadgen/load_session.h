@@ -49,7 +49,7 @@ struct LoadSessionConfig {
   bool tls = false;  // wss:// (WsClient::use_tls)
   int width = 1280, height = 720;
   std::string token;
-  std::string scene_name;  // Hello.scene: a name from the server's GET /scenes; "" its first scene
+  std::string scene_name;                      // Hello.scene: a name from the server's GET /scenes; "" its first scene
   std::string trace = "orbit";                 // make_load_trace spec
   std::shared_ptr<const GaussianModel> scene;  // optional; needed by "real:" traces
   double offset_s = 0;                         // start this far into the trace
