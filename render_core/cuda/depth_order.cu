@@ -11,7 +11,6 @@
 // from": the depth-first sort).
 #include <algorithm>
 
-#include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
 #include <thrust/iterator/counting_iterator.h>
@@ -20,6 +19,7 @@
 
 #include "cuda_check.h"
 #include "depth_order.h"
+#include "sort.h"
 #include "tunables.h"
 
 namespace catgs::cuda::stages {
@@ -61,17 +61,6 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   }
 }
 
-// The depth sort with 32-bit offsets where the count fits (sort.cu: CUB's onesweep takes more
-// pairs a thread, so fewer tiles).
-std::size_t depth_sort(void* temp, std::size_t bytes, cub::DoubleBuffer<uint32_t>& k, cub::DoubleBuffer<uint32_t>& v,
-                       uint64_t n, uint64_t count, cudaStream_t stream) {
-  if (n <= 0x7fffffffull)
-    CATGS_CUDA(cub::DeviceRadixSort::SortPairs(temp, bytes, k, v, static_cast<uint32_t>(count), 0, 32, stream));
-  else
-    CATGS_CUDA(cub::DeviceRadixSort::SortPairs(temp, bytes, k, v, static_cast<int64_t>(count), 0, 32, stream));
-  return bytes;
-}
-
 }  // namespace
 
 std::size_t depth_order_temp_bytes(uint64_t n) {
@@ -80,8 +69,8 @@ std::size_t depth_order_temp_bytes(uint64_t n) {
   CATGS_CUDA(cub::DeviceSelect::If(nullptr, select, thrust::counting_iterator<uint32_t>(0),
                                    static_cast<uint32_t*>(nullptr), static_cast<unsigned*>(nullptr),
                                    static_cast<int64_t>(n), IsVisible{nullptr}));
-  cub::DoubleBuffer<uint32_t> k(nullptr, nullptr), v(nullptr, nullptr);
-  sort = depth_sort(nullptr, 0, k, v, n, n, nullptr);
+  // The sort's offsets follow its count (sort.cu), which is V <= N at run time: size for both.
+  sort = std::max(sort_narrow_temp_bytes(n, 32), sort_narrow_temp_bytes(std::min<uint64_t>(n, 0x7fffffffull), 32));
   CountsInDepthOrder in(nullptr, TouchedOf{nullptr, 0});
   EndsByGaussian out(nullptr, nullptr);
   CATGS_CUDA(cub::DeviceScan::InclusiveSum(nullptr, scan, in, out, static_cast<int64_t>(n)));
@@ -99,12 +88,13 @@ const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const float* dep
       b.index[0], b.count, static_cast<uint32_t>(visible), depth, static_cast<uint32_t>(n), b.keys[0]);
   CATGS_CUDA_LAUNCHED("gather_depth_keys_kernel");
   // Stable: equal depths keep index order, as the single [tile | depth] sort keeps them.
-  cub::DoubleBuffer<uint32_t> k(b.keys[0], b.keys[1]), v(b.index[0], b.index[1]);
-  depth_sort(b.temp, temp_bytes, k, v, n, visible, stream);
+  uint32_t* k[2] = {b.keys[0], b.keys[1]};
+  uint32_t* v[2] = {b.index[0], b.index[1]};
+  const int half = sort_pairs_narrow(k, v, visible, 32, b.temp, temp_bytes, stream);
   // Each Gaussian's end slot: the running sum of the tile counts in depth order, written back
   // at the Gaussian's own index (what emit_keys reads). Invisible Gaussians keep theirs: they
   // emit nothing.
-  const uint32_t* order = v.Current();
+  const uint32_t* order = v[half];
   CountsInDepthOrder in(order, TouchedOf{tiles_touched, n});
   EndsByGaussian out(ends, order);
   CATGS_CUDA(cub::DeviceScan::InclusiveSum(b.temp, temp_bytes, in, out, static_cast<int64_t>(visible), stream));

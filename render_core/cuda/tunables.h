@@ -58,8 +58,8 @@ inline constexpr int kRasterMinBlocks = 8;
 // slower (RESULTS.md, "Two rounds before" and "Three rounds before").
 inline constexpr int kPathKernelMinBlocks = 4;
 // Blocks per SM the exact pre-processing kernel is built for: 5 x 256 threads, so at most 51
-// registers (48 and a 64-byte spill, against 65 unbounded: 3 blocks). The city's pre-processing,
-// which reads 7 M Gaussians a frame, ran 8-15% faster; 6 blocks (40 registers, a 96-byte spill)
+// registers (unbounded it takes more and fits 3 blocks). The city's pre-processing, which reads
+// every Gaussian of a 7 M scene a frame, gained from the occupancy; 6 blocks spilled more and
 // lost it again (RESULTS.md, "Issue 19, sixth round").
 inline constexpr int kPreprocessMinBlocks = 5;
 inline constexpr int kSubframeFeaturesMinBlocks = 4;

@@ -8,6 +8,7 @@
 //   catgs-loadgen --port 8080 --sessions 4 --size 1280x720 --trace orbit --seconds 10
 //   catgs-loadgen --sessions 4 --trace orbit,real:C.json --scene S.ply --size 1280x720,640x480
 //   catgs-loadgen --ramp --sessions 32 --max-p95-ms 25 --min-fps 60 --json ramp.json
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -152,6 +153,11 @@ LoadSessionConfig base_config(const tools::Args& args) {
   return base;
 }
 
+// A reference check (--check-every) that found a bad frame, or checked none, fails the session.
+bool check_failed(const SessionResult& r, const LoadSessionConfig& base) {
+  return !r.refused && base.check_every > 0 && (r.check_failures > 0 || r.checked == 0);
+}
+
 // The exit status of a run (see kUsage): 1 when a session failed or a reference check did, else
 // 3 when the server refused sessions, else 0.
 int run_exit_code(const std::vector<SessionResult>& results, const LoadSessionConfig& base) {
@@ -159,9 +165,7 @@ int run_exit_code(const std::vector<SessionResult>& results, const LoadSessionCo
   for (const auto& r : results) {
     refused = refused || r.refused;
     if (r.refused) continue;
-    failed = failed || session_status(r) == "failed";
-    // A reference check that found a bad frame, or checked none, fails the run.
-    if (base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) failed = true;
+    failed = failed || session_status(r) == "failed" || check_failed(r, base);
   }
   return failed ? 1 : refused ? 3 : 0;
 }
@@ -175,9 +179,8 @@ int run_once(int max_sessions, const std::vector<LoadSessionConfig>& templates, 
   const int code = run_exit_code(results, base);
   if (code != 0) {
     const RunSummary t = summarize_run(results);
-    std::size_t bad_checks = 0;  // sessions whose reference check failed (or checked nothing)
-    for (const auto& r : results)
-      if (!r.refused && base.check_every > 0 && (r.check_failures > 0 || r.checked == 0)) ++bad_checks;
+    const auto bad_checks =
+        std::count_if(results.begin(), results.end(), [&](const SessionResult& r) { return check_failed(r, base); });
     std::cerr << "catgs-loadgen: " << t.failed << " of " << t.sessions << " sessions failed, " << t.refused
               << " refused by the server";
     if (bad_checks > 0)
