@@ -49,34 +49,59 @@ __device__ __forceinline__ TilePixel tile_pixel(int tx, int ty, int rank) {
   return {x0, y0, rank, static_cast<float>(x0 + o.x), static_cast<float>(y0 + o.y)};
 }
 
-// The sub-tiles of the tile at (x0, y0) that a splat's 1/255 ellipse q <= q_max can reach, as a
-// bit per warp (bit 2 row + column). The test is the ellipse's bounding box against each
-// sub-tile's pixel centres: half-widths sqrt(q Sigma_xx), sqrt(q Sigma_yy) with Sigma the 2D
-// covariance, the conic's inverse (Sigma_xx = C / det, Sigma_yy = A / det, det = AC - B^2 worked
-// out in double, as it cancels for thin Gaussians). Widened so that no pixel the box misses could
-// pass blend_entry's own tests: q_max + 4e-3 (blend_entry skips q > q_max + 2e-3 before its exp,
-// and alpha < 1/255 after it), x 1.001 (q's few-ulp rounding, relative to its terms) and + 0.02
-// px (the pixel offset's rounding). A warp skips an entry only where every one of its pixels
-// would skip it, so the image is the same bit for bit. Culled splats (q_max -inf) reach nothing;
-// a splat whose box is not finite reaches every sub-tile (blend_entry decides, as before).
+// sqrt(max(x, 0)) through the hardware reciprocal square root (a few ulps off, where the
+// callers' margins are 1e-3): 3 instructions instead of sqrtf's IEEE rounding.
+__device__ __forceinline__ float rough_sqrt(float x) { return x > 0.0f ? x * rsqrtf(x) : 0.0f; }
+
+// The sub-tiles of the tile at (x0, y0) that a splat's 1/255 ellipse q <= q_max reaches, as a
+// bit per warp (bit 2 row + column). A warp skips an entry only where every one of its pixels
+// would skip it, so the image is the same bit for bit. Tested against the ellipse itself, not
+// its bounding box: a thin Gaussian seen at a slant has a box far wider than itself, and a warp
+// walks every entry whose mask holds its bit (RESULTS.md, "Issue 19, seventh round").
+// For each column of sub-tiles (kSubTileW pixel columns, offsets dx in [a, b] from the mean), the
+// ellipse's y-extent over that column: at offset dx the ellipse
+// q(dx, dy) = A dx^2 + 2B dx dy + C dy^2 <= Q spans dy = c(dx) +- h(dx), c = -(B / C) dx,
+// h = sqrt((Q - D dx^2) / C), D = det / C. Its upper end is concave in dx and peaks at
+// dx_t = -B sqrt(Q / (A det)) (where A dx + B dy = 0: the ellipse's point of largest dy),
+// its lower end is convex with its trough at -dx_t, so the column's extent is
+// [c - h at clamp(-dx_t), c + h at clamp(dx_t)], dx clamped to the column and to the ellipse's
+// columns |dx| <= sqrt(Q / D). A sub-tile of the column is reached where that extent meets its
+// pixel rows: the ellipse meets the sub-tile's rectangle exactly then. Margins, so that no pixel
+// that blend_entry would blend is left out: Q = q_max + 4e-3 + 2e-6 M (blend_entry's own cut is
+// at q_max + 2e-3; M bounds the size of the quadratic's terms over the tile, whose few-ulp
+// rounding a thin Gaussian's cancelling terms can add to a pixel's q, as in entry_reaches_tile),
+// columns widened by 0.02 px, each end by 1e-3 of its terms + 0.02 px, and the ellipse's reach
+// by 1e-3 (the hardware divisions and square roots are a few ulps off). Where the ellipse is not
+// a finite positive definite one, every sub-tile (blend_entry decides).
 __device__ __forceinline__ uint32_t subtile_mask(const Splat& s, int x0, int y0) {
   constexpr uint32_t kAll = (1u << (tune::kSubTilesX * tune::kSubTilesY)) - 1u;
   const float A = s.mean_ab.z, B = s.mean_ab.w, C = s.c_opacity_q_cut.x;
-  const float q = s.c_opacity_q_cut.z + 4e-3f;
-  if (!(q > 0.0f)) return 0u;
-  const auto det = static_cast<float>(static_cast<double>(A) * C - static_cast<double>(B) * B);
-  const float ex = sqrtf(q * C / det) * 1.001f + 0.02f, ey = sqrtf(q * A / det) * 1.001f + 0.02f;
-  if (!(ex < INFINITY && ey < INFINITY)) return kAll;  // NaN or inf: no box
+  if (!(s.c_opacity_q_cut.z + 4e-3f > 0.0f)) return 0u;  // culled
   const float lx = s.mean_ab.x - static_cast<float>(x0), ly = s.mean_ab.y - static_cast<float>(y0);
-  uint32_t cols = 0;
-  for (int c = 0; c < tune::kSubTilesX; ++c) {
-    const auto lo = static_cast<float>(c * tune::kSubTileW), hi = lo + static_cast<float>(tune::kSubTileW - 1);
-    cols |= (lx - ex <= hi && lx + ex >= lo) ? 1u << c : 0u;
-  }
+  constexpr float kLast = static_cast<float>(tune::kTileSize - 1);
+  const float X = fmaxf(fabsf(lx), fabsf(kLast - lx)), Y = fmaxf(fabsf(ly), fabsf(kLast - ly));
+  const float M = fabsf(A) * X * X + 2.0f * fabsf(B) * X * Y + fabsf(C) * Y * Y;
+  const float Q = s.c_opacity_q_cut.z + 4e-3f + 2e-6f * M;
+  const auto det = static_cast<float>(static_cast<double>(A) * C - static_cast<double>(B) * B);
+  const float inv_c = __fdividef(1.0f, C), D = det * inv_c, slope = -B * inv_c;
+  const float ex = rough_sqrt(__fdividef(Q, D)) * 1.001f + 0.02f;  // columns reached: |dx| <= ex
+  const float dx_t = -B * rough_sqrt(__fdividef(Q, A * det));
+  if (!(C > 0.0f && D > 0.0f && ex < INFINITY && fabsf(dx_t) < INFINITY && fabsf(slope) < INFINITY)) return kAll;
   uint32_t mask = 0;
-  for (int r = 0; r < tune::kSubTilesY; ++r) {
-    const auto lo = static_cast<float>(r * tune::kSubTileH), hi = lo + static_cast<float>(tune::kSubTileH - 1);
-    mask |= (ly - ey <= hi && ly + ey >= lo) ? cols << (tune::kSubTilesX * r) : 0u;
+  for (int c = 0; c < tune::kSubTilesX; ++c) {
+    const float a = fmaxf(static_cast<float>(c * tune::kSubTileW) - lx - 0.02f, -ex);
+    const float b = fminf(static_cast<float>(c * tune::kSubTileW + tune::kSubTileW - 1) - lx + 0.02f, ex);
+    if (a > b) continue;
+    const float xt = fminf(b, fmaxf(a, dx_t)), xs = fminf(b, fmaxf(a, -dx_t));
+    const float ht = rough_sqrt((Q - D * xt * xt) * inv_c), hs = rough_sqrt((Q - D * xs * xs) * inv_c);
+    const float ct = slope * xt, cs = slope * xs;
+    const float top = ct + ht + 1e-3f * (fabsf(ct) + ht) + 0.02f;
+    const float bottom = cs - hs - 1e-3f * (fabsf(cs) + hs) - 0.02f;
+    for (int r = 0; r < tune::kSubTilesY; ++r) {
+      const float lo = static_cast<float>(r * tune::kSubTileH) - ly;
+      const float hi = lo + static_cast<float>(tune::kSubTileH - 1);
+      mask |= (bottom <= hi && top >= lo) ? 1u << (tune::kSubTilesX * r + c) : 0u;
+    }
   }
   return mask;
 }

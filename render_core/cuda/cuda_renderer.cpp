@@ -77,6 +77,8 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   tile_mask.ensure(n * sizeof(uint32_t), "tile masks", allocs);
   ends.ensure((n + 1) * sizeof(uint64_t), "emission offsets", allocs);  // + depth_order's spare
   big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
+  huge_part_count.ensure(static_cast<std::size_t>(tune::kHugeListed) * tune::kHugeParts * sizeof(uint32_t),
+                         "huge-Gaussian part counts", allocs);
   const std::size_t chunks = fm::chunk_count(n);
   chunk_total.ensure(chunks * sizeof(uint32_t), "chunk entry counts", allocs);
   chunk_start.ensure(chunks * sizeof(uint64_t), "chunk starts", allocs);

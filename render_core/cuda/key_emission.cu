@@ -232,11 +232,12 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   }
 }
 
-// Big Gaussians (preprocess.cu count_big_kernel's two passes): a warp per Gaussian of at most
-// tune::kHugeRectTiles tiles, then a block per huge one. Either walks the rectangle in row-major
+// Big Gaussians (preprocess.cu count_big_kernel's two passes): a warp per big Gaussian, then a
+// block per part of a huge one (huge_parts, tile_test.cuh). Either walks its tiles in row-major
 // order, a round of 32 (or kBigThreads) tiles at a time, and the threads whose tile passes take
 // consecutive slots (ballot + popc, and across a block's warps their counts' prefix), so the
-// order is the one the per-thread loop (and the CPU reference) produces.
+// order is the one the per-thread loop (and the CPU reference) produces: a part's slots start
+// after the entries its Gaussian's earlier parts counted (BigList::part_count).
 __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big, TileTests tests,
                                                                      const float* __restrict__ depth,             // [N]
                                                                      const ushort4* __restrict__ rect,            // [N]
@@ -248,14 +249,13 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
   __shared__ uint32_t warp_hits[kWarps];
   const unsigned lane = threadIdx.x & 31u, warp = threadIdx.x / 32u;
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
-  const unsigned total = *big.count;
   const auto sentinel = static_cast<uint32_t>(tiles_x * tiles_y);
-  for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < total; w += warps) {
+  for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < big.count[0]; w += warps) {
     const uint32_t i = big.index[w];
     const uint32_t touched = tiles_touched[i];
     const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
-    if (touched == 0 || area > tune::kHugeRectTiles) continue;  // warp-uniform
+    if (touched == 0) continue;  // warp-uniform
     const uint64_t end = ends[i];
     uint64_t at = end - touched;
     const uint32_t depth_bits = __float_as_uint(depth[i]);
@@ -277,20 +277,31 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
       values[s] = i;
     }
   }
-  for (unsigned w = blockIdx.x; w < total; w += gridDim.x) {
-    const uint32_t i = big.index[w];
+  const uint64_t items = static_cast<uint64_t>(big.count[1]) * tune::kHugeParts;  // (huge one, part)
+  for (uint64_t item = blockIdx.x; item < items; item += gridDim.x) {
+    const auto h = static_cast<unsigned>(item / tune::kHugeParts);
+    const int p = static_cast<int>(item % tune::kHugeParts);
+    const uint32_t i = big.huge(h);
     const uint32_t touched = tiles_touched[i];
     const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
-    if (touched == 0 || area <= tune::kHugeRectTiles) continue;  // block-uniform
-    const uint64_t end = ends[i];
-    uint64_t at = end - touched;  // the same in every thread: advanced by the block's total
+    // A square test (vanilla) had no count pass: one part, as its runs need no counts.
+    const int parts = tests.kind == TileTestKind::square ? 1 : huge_parts(big, h, area);
+    if (touched == 0 || p >= parts) continue;  // block-uniform
+    // This part's slots [at, end): after its Gaussian's earlier parts' entries.
+    uint64_t at = ends[i] - touched, end = ends[i];
+    if (parts > 1) {
+      const uint32_t* counts = big.part_count + static_cast<uint64_t>(h) * tune::kHugeParts;
+      for (int q = 0; q < p; ++q) at += counts[q];
+      end = at + counts[p];
+    }
     const uint32_t depth_bits = __float_as_uint(depth[i]);
     const GaussianTileTest test = load_tile_test(tests, i);
-    for (int base = 0; base < area && at < end; base += static_cast<int>(blockDim.x)) {
+    const int last = huge_part_first(p + 1, parts, area);
+    for (int base = huge_part_first(p, parts, area); base < last && at < end; base += static_cast<int>(blockDim.x)) {
       const int t = base + static_cast<int>(threadIdx.x);
       const int tx = r.x + (t % rw), ty = r.y + (t / rw);
-      const bool hit = t < area && test(tx, ty);
+      const bool hit = t < last && test(tx, ty);
       const unsigned hits = __ballot_sync(0xffffffffu, hit);
       if (lane == 0) warp_hits[warp] = static_cast<uint32_t>(__popc(hits));
       __syncthreads();

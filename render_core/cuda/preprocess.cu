@@ -72,7 +72,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
     return;
   }
   uint32_t touched = 0;
-  bool is_big = false;
+  bool is_big = false, is_huge = false;
   float depth = 0.0f;
   if (i < scene.n) {
     do {
@@ -95,7 +95,8 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
       if (exact) {
         rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height);
         const int area = fm::tile_count(rect);
-        is_big = area > tune::kBigRectTiles;  // counted by count_big_kernel, a warp each
+        is_big = area > tune::kBigRectTiles;    // counted by count_big_kernel, a warp each
+        is_huge = area > tune::kHugeRectTiles;  // or a block per part
         const uint32_t mask =
             area == 0 || is_big ? 0u : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height);
         touched = static_cast<uint32_t>(__popc(mask));
@@ -105,6 +106,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
         rect = fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y);
         touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
         is_big = touched > static_cast<uint32_t>(tune::kBigRectTiles);  // emitted a warp each
+        is_huge = touched > static_cast<uint32_t>(tune::kHugeRectTiles);
       }
       if (touched == 0 && !is_big) break;
 
@@ -119,30 +121,33 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, touched, i, big, visible, out.chunk_total);
+  list_big_and_count_visible(is_big, is_huge, touched, i, big, visible, out.chunk_total);
   // Big Gaussians' depths count where count_big_kernel finds them entries: the range is over
   // the Gaussians with entries, as the CPU reference's sort works it out from its list.
   record_depth_range(touched > 0, depth, depth_range);
 }
 
-// Record of a big Gaussian's count (one thread): its tiles_touched, its chunk's total and, where
-// it has entries and depth_range is not null, the depth range as record_depth_range keeps it.
-__device__ void record_big_count(uint32_t i, uint32_t n, const float* depth, uint32_t* tiles_touched,
+// Record of a big Gaussian's count, or of one part's of a huge one (one thread): adds n to its
+// tiles_touched (zero from pre-processing) and its chunk's total and, where it has entries and
+// depth_range is not null, keeps the depth range as record_depth_range does. Returns whether
+// this made the Gaussian visible (its first entries), so that each counts once.
+__device__ bool record_big_count(uint32_t i, uint32_t n, const float* depth, uint32_t* tiles_touched,
                                  uint32_t* chunk_total, unsigned long long* depth_range) {
-  tiles_touched[i] = n;
-  if (n == 0) return;
+  if (n == 0) return false;
+  const uint32_t before = atomicAdd(tiles_touched + i, n);
   atomicAdd(chunk_total + i / fm::kChunkSize, n);
   if (depth_range) {
     const unsigned bits = __float_as_uint(depth[i]);
     atomicMax(depth_range, static_cast<unsigned long long>(~bits));
     atomicMax(depth_range + 1, static_cast<unsigned long long>(bits));
   }
+  return before == 0;
 }
 
 // Big Gaussians, the same tile test as key emission (tile_test.cuh), in two passes of one
-// launch: a warp per Gaussian of at most tune::kHugeRectTiles tiles (32 tiles a round), then a
-// block per huge one (kBigThreads tiles a round). Blocks start the second pass as they finish the
-// first; the passes share no data.
+// launch: a warp per big Gaussian (32 tiles a round), then a block per part of a huge one
+// (kBigThreads tiles a round; huge_parts). Blocks start the second pass as they finish the
+// first; the passes share no data. A part's count is kept for key emission (BigList::part_count).
 __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList big, TileTests tests,
                                                                       const ushort4* rect,                // [N]
                                                                       const float* depth,                 // [N]
@@ -154,33 +159,35 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
   __shared__ typename BlockSum::TempStorage sum_temp;
   const int lane = static_cast<int>(threadIdx.x & 31u);
   const unsigned warps = gridDim.x * (blockDim.x / 32u);
-  const unsigned total = *big.count;
   unsigned long long found = 0;
-  for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < total; w += warps) {
+  for (unsigned w = (blockIdx.x * blockDim.x + threadIdx.x) / 32u; w < big.count[0]; w += warps) {
     const uint32_t i = big.index[w];
     const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
-    if (area > tune::kHugeRectTiles) continue;  // the block pass's (warp-uniform)
     const GaussianTileTest hit = load_tile_test(tests, i);
     uint32_t n = 0;
     for (int t = lane; t < area; t += 32) n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
     n = __reduce_add_sync(0xffffffffu, n);
-    if (lane == 0) record_big_count(i, n, depth, tiles_touched, chunk_total, depth_range);
-    found += n > 0 ? 1u : 0u;
+    if (lane == 0) found += record_big_count(i, n, depth, tiles_touched, chunk_total, depth_range) ? 1u : 0u;
   }
-  for (unsigned w = blockIdx.x; w < total; w += gridDim.x) {
-    const uint32_t i = big.index[w];
+  const uint64_t items = static_cast<uint64_t>(big.count[1]) * tune::kHugeParts;  // (huge one, part)
+  for (uint64_t item = blockIdx.x; item < items; item += gridDim.x) {
+    const auto h = static_cast<unsigned>(item / tune::kHugeParts);
+    const int p = static_cast<int>(item % tune::kHugeParts);
+    const uint32_t i = big.huge(h);
     const ushort4 r = rect[i];
     const int rw = r.z - r.x, area = rw * (r.w - r.y);
-    if (area <= tune::kHugeRectTiles) continue;  // the warp pass's (block-uniform)
+    const int parts = huge_parts(big, h, area);
+    if (p >= parts) continue;  // block-uniform
     const GaussianTileTest hit = load_tile_test(tests, i);
     uint32_t n = 0;
-    for (int t = static_cast<int>(threadIdx.x); t < area; t += static_cast<int>(blockDim.x))
+    for (int t = huge_part_first(p, parts, area) + static_cast<int>(threadIdx.x);
+         t < huge_part_first(p + 1, parts, area); t += static_cast<int>(blockDim.x))
       n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
     n = BlockSum(sum_temp).Sum(n);  // valid in thread 0
     if (threadIdx.x == 0) {
-      record_big_count(i, n, depth, tiles_touched, chunk_total, depth_range);
-      found += n > 0 ? 1u : 0u;
+      if (parts > 1) big.part_count[static_cast<uint64_t>(h) * tune::kHugeParts + p] = n;
+      found += record_big_count(i, n, depth, tiles_touched, chunk_total, depth_range) ? 1u : 0u;
     }
     __syncthreads();  // sum_temp is reused
   }

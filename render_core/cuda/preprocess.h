@@ -15,14 +15,16 @@ namespace catgs::cuda::stages {
 // Adds the number of visible Gaussians to *visible (one atomic per block), and widens
 // depth_range[2] to the view depths of the Gaussians with entries (float bits; [0] complemented,
 // both running maxima: zero them first) for the single sort's key (fm::single_sort_packing). Big Gaussians are
-// appended to `big` (one atomic per warp that holds any); with `exact`, their tiles are counted
-// by a second kernel, a warp per Gaussian. `big.count` must be zero on entry. Writes each chunk's
+// appended to `big`, huge ones to its huge end (one atomic per warp that holds any); with
+// `exact`, their tiles are counted by a second kernel (count_big_tiles). `big.count` must be zero
+// on entry. Writes each chunk's
 // entry count to out.chunk_total.
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
                 unsigned long long* visible, unsigned long long* depth_range, const BigList& big, cudaStream_t stream);
 
-// Stage 1, big Gaussians (preprocess.cu): a warp per Gaussian of `big` counts the tiles of its
-// rectangle (out.rect) passing `tests` into out.tiles_touched, adds them to its chunk's
+// Stage 1, big Gaussians (preprocess.cu): a warp per big Gaussian of `big`, and a block per part
+// of a huge one (huge_parts, tile_test.cuh; each part's count into big.part_count), counts the
+// tiles of its rectangle (out.rect) passing `tests` into out.tiles_touched (zero on entry), adds them to its chunk's
 // out.chunk_total, adds the Gaussians found visible to *visible and, where depth_range is not
 // null, widens it by the depths (out.depth) of those with entries.
 void count_big_tiles(const BigList& big, const TileTests& tests, const Projected& out, unsigned long long* visible,

@@ -14,8 +14,9 @@
 //   say, fetches only those: DESIGN.md's FlashGS lesson). Each gather reads the entry's 32-byte
 //   splat and its 16-byte colour: two sectors (stages.h Splat).
 // - When it stages an entry, the fetching thread also works out which sub-tiles the entry's
-//   ellipse can reach (its bounding box: blend.cuh subtile_mask), and each warp then walks only
-//   the round's entries that reach its sub-tile (a ballot over the masks, then its set bits).
+//   ellipse can reach (the ellipse over each column of sub-tiles: blend.cuh subtile_mask), and
+//   each warp then walks only the round's entries that reach its sub-tile (a ballot over the
+//   masks, then its set bits).
 //   Small Gaussians reach a few of a tile's 8 sub-tiles, so most warps skip most entries at no
 //   cost, where before every pixel evaluated every entry (RESULTS.md, issue 19).
 // - After the barrier every thread blends the round's Gaussians in depth order, skipping those

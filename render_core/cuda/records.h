@@ -77,10 +77,14 @@ struct Projected {
 using fm::DepthKeyPacking;
 
 // Gaussians whose candidate rectangle has more than tune::kBigRectTiles tiles, handled a warp
-// each: their indices (order arbitrary) and how many there are, both in device memory.
+// each, and huge ones (over tune::kHugeRectTiles), a block per part: their indices (order
+// arbitrary) and how many there are, all in device memory.
 struct BigList {
-  uint32_t* index;  // [N] capacity
-  unsigned* count;  // [1]
+  uint32_t* index;       // [capacity]: big ones from index[0] up, huge ones from index[capacity - 1] down
+  unsigned* count;       // [2]: big ones (not huge), huge ones
+  uint64_t capacity;     // N
+  uint32_t* part_count;  // [tune::kHugeListed * tune::kHugeParts]: entries of each part of a huge one
+  __device__ uint32_t huge(unsigned h) const { return index[capacity - 1 - h]; }
 };
 
 // catgs key frames: each visible Gaussian's trail (forward_model.h fm::Trail), pixel units.

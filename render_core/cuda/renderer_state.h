@@ -65,7 +65,7 @@ class GrowBuffer {
 // readback (render-list length, visible count, and the listed Gaussians' depth range as float
 // bits, the low end complemented so that both ends are running maxima from zero: the one copy
 // build_render_list syncs on) and the big-Gaussian count (stages::BigList::count, its low 32
-// bits).
+// bits; its high 32 bits: the huge ones').
 enum CounterSlot {
   kVisibleCount = 0,
   kReadListLength = 1,
@@ -117,7 +117,7 @@ struct CudaRenderer::State {
   int width = 0, height = 0;
 
   // Per Gaussian.
-  GrowBuffer splat, color, depth, rect, tiles_touched, tile_mask, ends, scan_temp, big;
+  GrowBuffer splat, color, depth, rect, tiles_touched, tile_mask, ends, scan_temp, big, huge_part_count;
   // Per chunk of fm::kChunkSize Gaussians: render-list entries, and where the chunk's start.
   GrowBuffer chunk_total, chunk_start;
   // Per render-list entry (two halves each, for the radix sort's double buffer).
@@ -179,7 +179,9 @@ struct CudaRenderer::State {
             tiles_touched.as<uint32_t>(), tile_mask.as<uint32_t>(), chunk_total.as<uint32_t>()};
   }
   stages::BigList big_list() const {
-    return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount)};
+    // The 64-bit counter slot holds both 32-bit counts (big, huge).
+    return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount),
+            big.bytes() / sizeof(uint32_t), huge_part_count.as<uint32_t>()};
   }
   stages::Trails trails() const {
     return {trail_mean0_motion.as<float4>(), trail_conic_q.as<float4>(), trail_cov.as<float4>(),
@@ -205,6 +207,7 @@ struct CudaRenderer::State {
                                 &ends,
                                 &scan_temp,
                                 &big,
+                                &huge_part_count,
                                 &keys[0],
                                 &keys[1],
                                 &values[0],

@@ -58,7 +58,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
                                   BigList big) {
   const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   uint32_t touched = 0;
-  bool is_big = false;
+  bool is_big = false, is_huge = false;
   if (i < scene.n) {
     do {
       const float opacity = fm::sigmoid(scene.opacity_logits[i]);
@@ -99,8 +99,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
       const fm::TileRect rect =
           fm::trail_tile_rect(trail.mean0, trail.motion, trail.cov, trail.q_trail, key.width, key.height);
       const int area = fm::tile_count(rect);
-      is_big = area > tune::kBigRectTiles;  // counted by count_big_tiles, a warp each
-      uint32_t mask = 0;                    // row-major bit per tile of the rectangle
+      is_big = area > tune::kBigRectTiles;    // counted by count_big_tiles, a warp each
+      is_huge = area > tune::kHugeRectTiles;  // or a block per part
+      uint32_t mask = 0;                      // row-major bit per tile of the rectangle
       if (area > 0 && !is_big) {
         const fm::TrailTileTest test = fm::make_trail_tile_test(trail.mean0, trail.motion, trail_conic, trail.q_trail);
         for (int ty = rect.y0, bit = 0; ty < rect.y1; ++ty)
@@ -123,7 +124,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, touched, i, big, visible, out.chunk_total);
+  list_big_and_count_visible(is_big, is_huge, touched, i, big, visible, out.chunk_total);
 }
 
 // M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.

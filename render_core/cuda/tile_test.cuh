@@ -50,23 +50,26 @@ __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, u
 }
 
 // The end of a pre-processing kernel (full or speculative), called by every thread of the block:
-// big Gaussians join the big list (one atomic per warp holding any: they are few), and the
-// visible count takes one atomic per block, not per Gaussian (DESIGN.md: no contended atomics);
-// the block's chunk gets the sum of its tiles_touched (Projected::chunk_total). Big Gaussians
-// are counted visible, and added to their chunk's total, by count_big_tiles once their tiles are
-// known.
-__device__ __forceinline__ void list_big_and_count_visible(bool is_big, uint32_t touched, uint64_t i,
+// big Gaussians join the big list, huge ones (is_huge implies is_big) its huge end (one atomic
+// per warp holding any: they are few), and the visible count takes one atomic per block, not per
+// Gaussian (DESIGN.md: no contended atomics); the block's chunk gets the sum of its tiles_touched
+// (Projected::chunk_total). Big Gaussians are counted visible, and added to their chunk's total,
+// by count_big_tiles once their tiles are known.
+__device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_huge, uint32_t touched, uint64_t i,
                                                            const BigList& big, unsigned long long* visible,
                                                            uint32_t* chunk_total) {
   __shared__ uint32_t warp_total[tune::kGaussianThreads / 32];
-  const unsigned lanes = __ballot_sync(0xffffffffu, is_big);
   const int lane = static_cast<int>(threadIdx.x & 31u);
-  if (lanes != 0u) {
+  for (int list = 0; list < 2; ++list) {  // 0: big (not huge), 1: huge
+    const bool mine = list == 0 ? is_big && !is_huge : is_huge;
+    const unsigned lanes = __ballot_sync(0xffffffffu, mine);
+    if (lanes == 0u) continue;  // warp-uniform
     const int leader = __ffs(lanes) - 1;
     unsigned base = 0;
-    if (lane == leader) base = atomicAdd(big.count, static_cast<unsigned>(__popc(lanes)));
+    if (lane == leader) base = atomicAdd(big.count + list, static_cast<unsigned>(__popc(lanes)));
     base = __shfl_sync(0xffffffffu, base, leader);
-    if (is_big) big.index[base + __popc(lanes & ((1u << lane) - 1u))] = static_cast<uint32_t>(i);
+    const uint64_t at = base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)));
+    if (mine) big.index[list == 0 ? at : big.capacity - 1 - at] = static_cast<uint32_t>(i);
   }
   const uint32_t total = __reduce_add_sync(0xffffffffu, touched);
   if (lane == 0) warp_total[threadIdx.x / 32u] = total;
@@ -77,5 +80,15 @@ __device__ __forceinline__ void list_big_and_count_visible(bool is_big, uint32_t
   chunk_total[blockIdx.x] = block_total;
   if (block_visible > 0) atomicAdd(visible, static_cast<unsigned long long>(block_visible));
 }
+
+// The parts a huge Gaussian (the h-th of the huge list, `area` rectangle tiles) is cut into
+// (tunables.h kHugeParts): a block each in count_big_tiles and key emission, which must agree.
+// Part p holds the rectangle's tiles [huge_part_first(p), huge_part_first(p + 1)) in row-major
+// order.
+__device__ __forceinline__ int huge_parts(const BigList& big, unsigned h, int area) {
+  if (h >= static_cast<unsigned>(tune::kHugeListed)) return 1;
+  return min(tune::kHugeParts, (area + tune::kHugePartTiles - 1) / tune::kHugePartTiles);
+}
+__device__ __forceinline__ int huge_part_first(int p, int parts, int area) { return p * area / parts; }
 
 }  // namespace catgs::cuda::stages

@@ -45,6 +45,14 @@ inline constexpr int kBigThreads = 256;
 // warp for hundreds of rounds while the rest of the GPU idled (RESULTS.md, "Issue 19, third
 // round": the ncu figures).
 inline constexpr int kHugeRectTiles = kBigThreads;
+// A huge Gaussian's rectangle is cut into up to kHugeParts parts of about kHugePartTiles tiles
+// (row-major runs), a block each, so that the frame's largest Gaussians (thousands of tiles near
+// the camera) do not hold one block for dozens of rounds while the rest of the GPU idles. The
+// first kHugeListed huge Gaussians of a frame are cut (their parts' counts are kept for key
+// emission: BigList::part_count); any beyond take a block each.
+inline constexpr int kHugeParts = 16;
+inline constexpr int kHugePartTiles = 2 * kBigThreads;
+inline constexpr int kHugeListed = 16384;
 
 // Blocks per SM the rasterizers (rasterize.cu, rasterize_slices.cu) are built for: 8 x 256
 // threads fill an SM at 32 registers. The tile-culled slice kernel wants more and spills at 32,
