@@ -69,7 +69,8 @@ __device__ __forceinline__ float rough_sqrt(float x) { return x > 0.0f ? x * rsq
 // pixel rows: the ellipse meets the sub-tile's rectangle exactly then. Margins, so that no pixel
 // that blend_entry would blend is left out: Q = q_max + 4e-3 + 2e-6 M (blend_entry's own cut is
 // at q_max + 2e-3; M bounds the size of the quadratic's terms over the tile, whose few-ulp
-// rounding a thin Gaussian's cancelling terms can add to a pixel's q, as in entry_reaches_tile),
+// rounding a thin Gaussian's cancelling terms can add to a pixel's q: both err by a few ulps, 6e-8
+// of M),
 // columns widened by 0.02 px, each end by 1e-3 of its terms + 0.02 px, and the ellipse's reach
 // by 1e-3 (the hardware divisions and square roots are a few ulps off). Where the ellipse is not
 // a finite positive definite one, every sub-tile (blend_entry decides).
@@ -106,15 +107,15 @@ __device__ __forceinline__ uint32_t subtile_mask(const Splat& s, int x0, int y0)
   return mask;
 }
 
-// Writes one entry (its splat, colour and sub-tile mask for the tile at (x0, y0)) into batch
-// slot `slot`.
-__device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, const Splat& s, float4 color, int x0,
-                                            int y0) {
+// Writes one entry (its splat, colour and sub-tile mask, subtile_mask's for this tile) into
+// batch slot `slot`.
+__device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, const Splat& s, float4 color,
+                                            uint32_t subtiles) {
   const float4 ab = s.mean_ab, rest = s.c_opacity_q_cut;
   batch.mean_cut[slot] = make_float4(ab.x, ab.y, rest.w, 0.0f);
   batch.power_opacity[slot] = make_float4(-0.5f * ab.z, -ab.w, -0.5f * rest.x, rest.y);
   batch.color[slot] = color;
-  batch.subtiles[slot] = subtile_mask(s, x0, y0);
+  batch.subtiles[slot] = subtiles;
 }
 
 // fm::gaussian_power, -(a dx^2 + c dy^2) / 2 - b dx dy, as dx (A dx + B dy) + C dy^2 with
@@ -124,43 +125,6 @@ __device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, co
 // blend_range_culled must agree bit for bit (GPU test tilecull).
 __device__ __forceinline__ float pixel_power(float4 k, float dx, float dy) {
   return fmaf(dx, fmaf(k.x, dx, k.y * dy), (k.z * dy) * dy);
-}
-
-// fm::min_quadratic_over_rect for the cull: the minimum of q = a dx^2 + 2b dx dy + c dy^2 over
-// dx in [x0, x1], dy in [y0, y1] (0 where the rectangle holds the mean, else the least of the
-// four edges' minima), with each edge's optimum dy = (-b / c) dx, dx = (-b / a) dy from two
-// divisions instead of four. The cull runs this once per fetched entry, and divisions are most
-// of its instructions. The optimum moves by an ulp or so, which raises the minimum only to
-// second order: far inside entry_reaches_tile's rounding margin.
-__device__ __forceinline__ float min_quadratic_over_tile(float4 conic, float x0, float x1, float y0, float y1) {
-  if (x0 <= 0.0f && 0.0f <= x1 && y0 <= 0.0f && 0.0f <= y1) return 0.0f;
-  const glm::vec3 k(conic.x, conic.y, conic.z);
-  const float sy = -conic.y / conic.z, sx = -conic.y / conic.x;
-  const float q0 = fm::conic_quadratic(k, x0, fminf(y1, fmaxf(y0, sy * x0)));  // edge dx = x0
-  const float q1 = fm::conic_quadratic(k, x1, fminf(y1, fmaxf(y0, sy * x1)));  // edge dx = x1
-  const float q2 = fm::conic_quadratic(k, fminf(x1, fmaxf(x0, sx * y0)), y0);  // edge dy = y0
-  const float q3 = fm::conic_quadratic(k, fminf(x1, fmaxf(x0, sx * y1)), y1);  // edge dy = y1
-  return fminf(fminf(q0, q1), fminf(q2, q3));
-}
-
-// The cull's test for one entry (blend_range_culled): fm::ellipse_touches_tile at the splat's
-// q_max = fm::opacity_aware_qmax(opacity), plus a margin for float rounding that grows with the
-// size of the quadratic's terms over the tile. kExactQMargin alone is an absolute 1e-3; where the
-// terms are large and cancel (a thin Gaussian seen along its length, far from the tile), the
-// few-ulp errors of the minimum and of a pixel's own power can pass it, and the cull would drop an
-// entry that some pixel blends at alpha just above 1/255. M = A X^2 + 2|B| X Y + C Y^2, with X and
-// Y the largest |offsets| over the tile, bounds the terms' size at every point of it; both
-// evaluations err by a few ulps (6e-8) of M, so 1e-6 M covers them.
-__device__ __forceinline__ bool entry_reaches_tile(const Splat& s, int tx, int ty, int width, int height) {
-  const float4 co = make_float4(s.mean_ab.z, s.mean_ab.w, s.c_opacity_q_cut.x, 0.0f);  // (A, B, C)
-  // The tile's pixel centres inside the image, relative to the mean (as fm::ellipse_touches_tile).
-  const int px0 = tx * tune::kTileSize, py0 = ty * tune::kTileSize;
-  const float x0 = static_cast<float>(px0) - s.mean_ab.x, y0 = static_cast<float>(py0) - s.mean_ab.y;
-  const float x1 = static_cast<float>(min(px0 + tune::kTileSize - 1, width - 1)) - s.mean_ab.x;
-  const float y1 = static_cast<float>(min(py0 + tune::kTileSize - 1, height - 1)) - s.mean_ab.y;
-  const float X = fmaxf(fabsf(x0), fabsf(x1)), Y = fmaxf(fabsf(y0), fabsf(y1));
-  const float M = fabsf(co.x) * X * X + 2.0f * fabsf(co.y) * X * Y + fabsf(co.z) * Y * Y;
-  return min_quadratic_over_tile(co, x0, x1, y0, y1) <= s.c_opacity_q_cut.z + fm::kExactQMargin + 1e-6f * M;
 }
 
 // Pixel state: colour C and transmittance T (start at 0 and 1); done stops the pixel.
@@ -237,7 +201,7 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
     if (fetch < end) {  // bounds-checked prefetch
       const uint32_t gi = values[fetch];
       const Splat sp = g.splat[gi];
-      stage_entry(batch, static_cast<uint32_t>(at.rank), sp, g.color[gi], at.x0, at.y0);
+      stage_entry(batch, static_cast<uint32_t>(at.rank), sp, g.color[gi], subtile_mask(sp, at.x0, at.y0));
     }
     __syncthreads();
     blend_batch(batch, min(static_cast<uint32_t>(tune::kRasterBatch), end - base), at, early_termination, px);
@@ -247,24 +211,24 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 
 // As blend_range, for a list whose entries need not reach this tile at this pose (catgs: a key
 // frame's trail list, walked at the key pose or at a sub-frame's pose). Each round, the thread
-// that fetches an entry also asks the exact pipeline's own list test (entry_reaches_tile:
-// fm::ellipse_touches_tile, the opacity-aware ellipse q <= q_max at this frame's features, with
-// margins for rounding) whether it reaches tile (tx, ty), and only the entries that do are
-// compacted into shared memory, in list (depth) order. A dropped entry would have been skipped
-// by every pixel of the tile (alpha < 1/255 there), so the image is the same bit for bit; what
-// is saved is 256 pixels' worth of blending per dropped entry (a trail list holds several times
-// the exact list on the city's real paths: RESULTS.md, "Where the tuned defaults come from"). Culled sub-frame Gaussians (opacity 0) are
-// dropped too.
+// that fetches an entry works out its sub-tile mask (subtile_mask: the sub-tiles its ellipse
+// q <= q_max reaches at this frame's features, with margins for rounding), and only the entries
+// that reach a sub-tile are compacted into shared memory, in list (depth) order. A dropped entry
+// would have been skipped by every pixel of the tile (alpha < 1/255 there), so the image is the
+// same bit for bit; what is saved is the blending of every entry that does not reach the tile
+// now (a trail list holds several times the exact list on the city's real paths: RESULTS.md,
+// "Where the tuned defaults come from"). Culled sub-frame Gaussians (q_max -inf) reach none.
 // - The test reads only the entry's splat (one random 32-byte sector, stages.h Splat); the
-//   colour, a second sector, is gathered for the kept entries only.
+//   colour, a second sector, is gathered for the kept entries only. The mask serves both the cull
+//   and the warps' walk: one ellipse test per fetched entry (RESULTS.md, "Issue 19, seventh
+//   round": before, an exact tile test decided the cull and the mask was worked out after it).
 // Every thread of the block must call this (barriers inside); `skip.stop()` (block-uniform) ends
 // the run early.
 template <typename Skip>
 __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
                                                    const uint32_t* values,  // [L]
-                                                   const Projected& g, int tx, int ty, int width, int height,
-                                                   const TilePixel& at, bool early_termination, BlendBatch& batch,
-                                                   PixelState& px, Skip skip) {
+                                                   const Projected& g, const TilePixel& at, bool early_termination,
+                                                   BlendBatch& batch, PixelState& px, Skip skip) {
   constexpr int kWarps = tune::kRasterThreads / 32;
   __shared__ uint32_t warp_kept[kWarps];
   const int lane = at.rank & 31, warp = at.rank >> 5;
@@ -272,14 +236,14 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
     skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
     const uint32_t fetch = base + static_cast<uint32_t>(at.rank);
-    bool keep = false;
-    uint32_t gi = 0;
+    uint32_t gi = 0, subtiles = 0;
     Splat sp{};
     if (fetch < end) {  // bounds-checked prefetch
       gi = values[fetch];
       sp = g.splat[gi];
-      keep = sp.c_opacity_q_cut.y > 0.0f && entry_reaches_tile(sp, tx, ty, width, height);
+      subtiles = subtile_mask(sp, at.x0, at.y0);
     }
+    const bool keep = subtiles != 0u;
     const uint32_t ballot = __ballot_sync(0xffffffffu, keep);
     if (lane == 0) warp_kept[warp] = static_cast<uint32_t>(__popc(ballot));
     __syncthreads();
@@ -291,7 +255,7 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
     }
     if (keep) {
       slot += static_cast<uint32_t>(__popc(ballot & ((1u << lane) - 1u)));
-      stage_entry(batch, slot, sp, g.color[gi], at.x0, at.y0);
+      stage_entry(batch, slot, sp, g.color[gi], subtiles);
     }
     __syncthreads();
     blend_batch(batch, count, at, early_termination, px);

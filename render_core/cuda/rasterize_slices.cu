@@ -6,8 +6,8 @@
 //
 // Tile culling (on by default, CudaRenderer::set_tile_culling): catgs walks a key frame's trail
 // list, whose entries reach their tile somewhere along the window but not all at this pose, so
-// each round keeps only the entries whose ellipse reaches the tile now (blend_range_culled): same
-// image, less blending.
+// each round keeps only the entries whose ellipse reaches one of its sub-tiles now
+// (blend_range_culled): same image, less blending.
 //
 // Design. One 256-thread block per slice, thread = pixel, blending the slice's run of the tile's
 // list exactly as rasterize.cu blends a whole tile (blend.cuh). Blocks take slices in the order
@@ -132,7 +132,7 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
   // Blends this slice's run, with or without the per-round tile cull (blend.cuh).
   auto blend = [&](auto skip) {
     if constexpr (kTileCull)
-      blend_range_culled(range.x, range.y, values, g, tx, ty, width, height, at, early_termination, batch, state, skip);
+      blend_range_culled(range.x, range.y, values, g, at, early_termination, batch, state, skip);
     else
       blend_range(range.x, range.y, values, g, at, early_termination, batch, state, skip);
   };
