@@ -280,6 +280,7 @@ void Server::drain() {
 void Server::shut_down() {
   manager_->shutdown(1500);  // sessions get ERROR_SHUTTING_DOWN while lws still runs
   transport_->stop();        // destroys the lws context; remaining connections close
+  scenes_->stop();           // loads still running end now; their waiters' news posts to io_, still running
   // Sessions are closed, so the pools run dry. Renders first: a render in progress posts its
   // result to its session's strand on io_, which must still be running to take it.
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);

@@ -61,7 +61,9 @@ SceneStore::SceneStore(std::vector<Source> sources, Options options) : options_(
   publish_gauges();
 }
 
-SceneStore::~SceneStore() {
+SceneStore::~SceneStore() { stop(); }
+
+void SceneStore::stop() {
   stopping_ = true;
   std::vector<Worker> workers;
   {

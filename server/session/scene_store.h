@@ -114,9 +114,12 @@ class SceneStore {
   // first use then fails with the loader's error. Throws std::runtime_error when two sources have
   // one name (naming both files: Hello picks scenes by name) or there are none.
   SceneStore(std::vector<Source> sources, Options options);
-  // Cancels loads in progress (at their next progress call; their waiters get an error) and
-  // waits for their threads.
+  // stop().
   ~SceneStore();
+  // Cancels loads in progress (at their next progress call; their waiters get an error) and
+  // waits for their threads; later acquires of an unloaded scene wait for ever (the server calls
+  // it while stopping, before its pools: waiters' callbacks post to them).
+  void stop();
   SceneStore(const SceneStore&) = delete;
   SceneStore& operator=(const SceneStore&) = delete;
 
