@@ -6,7 +6,6 @@
 
 #include "encode/encoder.h"
 #include "session/message_validation.h"
-#include "scene/ply_io.h"
 #include "session/first_view.h"
 
 namespace catgs::server {
@@ -101,8 +100,8 @@ int Server::run() {
   print_tls();
   std::cout << "probes on " << url_scheme("http") << "://127.0.0.1:" << transport_->port()
             << "/ (/healthz, /readyz: loading)" << std::endl;
-  load_model();
   resolve_renderer();
+  load_model();
   resolve_encoder();
   build_sessions();
   start_pools();
@@ -115,42 +114,43 @@ int Server::run() {
 }
 
 void Server::load_model() {
-  const auto t0 = std::chrono::steady_clock::now();
-  // Big scenes take seconds to minutes: a line every 2 s says how far the load is.
-  auto last = t0;
-  const LoadProgress progress = [&](uint64_t done, uint64_t total) {
-    const auto now = std::chrono::steady_clock::now();
-    if (done == total || now - last < std::chrono::seconds(2)) return;
-    last = now;
-    std::cout << "scene: loading " << options_.scene << ": " << done << " of " << total << " Gaussians ("
-              << 100 * done / total << "%), " << ms_since(t0) << " ms" << std::endl;
+  SceneStore::Options o;
+  o.budget_bytes = static_cast<std::uint64_t>(options_.scene_memory_mb) << 20;
+  o.metrics = &metrics_;
+  o.log = &std::cout;
+  // One copy of each loaded scene per GPU, uploaded before its first session and dropped with it.
+  o.prepare = [this](LoadedScene& scene) {
+    for (int d : gpus_->devices()) {
+      const auto t0 = std::chrono::steady_clock::now();
+      scene.residents.push_back(make_renderer("cuda", scene.model, render_options_, nullptr, d));
+      std::cout << "gpu " << d << ": scene " << scene.model->name << " uploaded in " << ms_since(t0) << " ms"
+                << std::endl;
+    }
   };
-  std::vector<std::string> files{options_.scene};
-  files.insert(files.end(), options_.more_scenes.begin(), options_.more_scenes.end());
-  for (const std::string& file : files) {
-    const auto t_file = std::chrono::steady_clock::now();
-    auto model = std::make_shared<const GaussianModel>(load_scene(file, progress));
-    std::cout << "scene: " << file << " (" << model->name << "), " << model->size() << " Gaussians, SH degree "
-              << model->sh_degree << ", loaded in " << ms_since(t_file) << " ms\n";
-    for (const SceneEntry& other : scenes_)
-      if (other.model->name == model->name)
-        throw std::runtime_error("--scene " + file + ": a scene named '" + model->name + "' is already served (" +
-                                 other.path + "); Hello picks scenes by name");
-    // A bad --cameras file stops the start here; a bad discovered one only warns. --cameras
-    // belongs to the first scene; the others find theirs beside them.
-    const std::string cameras = scenes_.empty() ? options_.cameras : "";
-    const SceneFrame frame = choose_scene_frame(*model, file, cameras, std::cout);
-    scenes_.push_back({model, model->bounds(), frame, file});
-  }
-  model_ = scenes_.front().model;
+  std::vector<SceneStore::Source> sources{{options_.scene, options_.cameras}};
+  for (const std::string& file : options_.more_scenes) sources.push_back({file, ""});  // cameras found beside them
+  scenes_ = std::make_unique<SceneStore>(std::move(sources), std::move(o));
+  // The default scene now, so that its first session starts at once and a bad file or --cameras
+  // stops the start; the others on first use (session/scene_store.h).
+  scenes_->load_now(0);
+  if (scenes_->size() > 1)
+    std::cout << "scenes: " << scenes_->names() << " (the first loaded; the others load on first use"
+              << (options_.scene_memory_mb ? ", within --scene-memory-mb " + std::to_string(options_.scene_memory_mb)
+                                           : std::string())
+              << ")" << std::endl;
 }
 
 void Server::resolve_renderer() {
   render_options_.pipeline = parse_pipeline(options_.pipeline);
   apply_speculation_settings(render_options_.speculation, options_.speculation);
-  // Resolved once so every session uses the same core, and the log says why.
+  // Resolved once, before any scene loads, so every session uses the same core and the log says
+  // why: over a one-Gaussian model (the choice does not depend on the scene).
+  auto probe = std::make_shared<GaussianModel>();
+  probe->name = "probe";
+  probe->resize(1);
+  probe->rotations[0] = 1.0f;  // (w, x, y, z) = identity
   std::string why;
-  renderer_kind_ = make_renderer(options_.renderer, model_, render_options_, &why)->name();
+  renderer_kind_ = make_renderer(options_.renderer, probe, render_options_, &why)->name();
   std::cout << "renderer: " << renderer_kind_ << " (" << why << "), pipeline "
             << pipeline_name(render_options_.pipeline) << "\n";
   resolve_gpus();
@@ -160,11 +160,6 @@ void Server::resolve_gpus() {
   std::vector<int> devices;
   if (renderer_kind_ == "cuda") devices = parse_gpus(options_.gpus, cuda_device_count());
   gpus_ = std::make_unique<GpuAssignment>(devices);
-  for (int d : devices) {  // one copy of the scene per GPU, uploaded before the first session
-    const auto t0 = std::chrono::steady_clock::now();
-    resident_.push_back(make_renderer("cuda", model_, render_options_, nullptr, d));
-    std::cout << "gpu " << d << ": scene uploaded in " << ms_since(t0) << " ms\n";
-  }
   metrics_.set_gpus(devices, [g = gpus_.get()] { return g->sessions(); });
 }
 
@@ -186,7 +181,7 @@ void Server::resolve_encoder() {
 
 void Server::build_sessions() {
   shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, options_,
-                                                             scenes_, render_options_, renderer_kind_, encoder_kind_});
+                                                             *scenes_, render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
 }
 
@@ -285,6 +280,7 @@ void Server::drain() {
 void Server::shut_down() {
   manager_->shutdown(1500);  // sessions get ERROR_SHUTTING_DOWN while lws still runs
   transport_->stop();        // destroys the lws context; remaining connections close
+  scenes_->stop();           // loads still running end now; their waiters' news posts to io_, still running
   // Sessions are closed, so the pools run dry. Renders first: a render in progress posts its
   // result to its session's strand on io_, which must still be running to take it.
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);

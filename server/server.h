@@ -9,7 +9,8 @@
 // Phases, as /readyz reports them (capacity-aware routing: a load balancer sends new users only
 // to pods that answer 200; /healthz stays 200 throughout, so liveness never kills a loading or
 // draining server):
-//   loading   HTTP listens first, then the scene loads and the renderer and encoder are resolved:
+//   loading   HTTP listens first, then the renderer is resolved, the first scene loads and the
+//             encoder is resolved (the other scenes load later, on first use):
 //             /readyz 503 "loading"; a WebSocket gets ERROR_SERVER_FULL with a retry hint.
 //   serving   /readyz 200, or 503 "full" while --max-sessions sessions are open.
 //   draining  SIGTERM: /readyz 503 "draining", every new Hello gets ERROR_SHUTTING_DOWN, live
@@ -45,6 +46,7 @@
 #include "server_options.h"
 #include "session/first_view.h"
 #include "session/session.h"
+#include "session/scene_store.h"
 #include "session/session_manager.h"
 #include "transport/transport.h"
 
@@ -59,15 +61,17 @@ class Server {
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
 
-  // Listens (printing "probes on http://ADDR:PORT/"), loads options.scene, then resolves the
-  // renderer and the encoder once (an "auto" choice and the NVENC probe happen here), printing
-  // the scene, renderer and encoder lines; starts the pools, prints the "listening on" line
+  // Listens (printing "probes on http://ADDR:PORT/"), resolves the renderer once (an "auto"
+  // choice happens here), lists every --scene and loads the first (the others load on first use:
+  // session/scene_store.h), resolves the encoder (the NVENC probe), printing the renderer, scene
+  // and encoder lines; starts the pools, prints the "listening on" line
   // (from here sessions are admitted), blocks until SIGINT or SIGTERM, drains (see above), then
   // shuts down: remaining sessions get ERROR_SHUTTING_DOWN, the transport stops, the render
   // lanes drain, then the worker pool; prints the totals. Returns the process exit code (0).
   // Throws std::runtime_error when the port cannot be bound (before any thread starts), and
-  // what load_scene, make_renderer and make_encoder throw (std::runtime_error for a file, GPU or
-  // codec that cannot be had, std::invalid_argument for an unknown name). Call once.
+  // what SceneStore (two scenes of one name), load_scene (the first scene), make_renderer and
+  // make_encoder throw (std::runtime_error for a file, GPU or codec that cannot be had,
+  // std::invalid_argument for an unknown name). Call once.
   int run();
 
  private:
@@ -93,10 +97,12 @@ class Server {
   using Deadline = std::chrono::steady_clock::time_point;
 
   // Start-up, in this order.
-  void load_model();
   void resolve_renderer();
-  // --gpus: the GPUs of the CUDA renderer and a resident scene copy on each (none on the CPU).
+  // --gpus: the GPUs of the CUDA renderer (none on the CPU).
   void resolve_gpus();
+  // The scene store over every --scene (listed from headers), and the first scene loaded (with
+  // a copy on each GPU).
+  void load_model();
   void resolve_encoder();
   void build_sessions();
   void catch_signals();
@@ -124,16 +130,14 @@ class Server {
 
   const ServerOptions& options_;
   ServerMetrics metrics_;
-  std::shared_ptr<const GaussianModel> model_;  // the first scene's (renderer and GPU set-up)
-  std::vector<SceneEntry> scenes_;              // every --scene (load_model)
   RenderOptions render_options_;
   std::string renderer_kind_;  // "cpu" or "cuda"
   std::string encoder_kind_;   // "x264" or "nvenc"
-  // The GPUs sessions render on (--gpus; none with the CPU renderer), and a renderer per GPU held
-  // for the server's life so each GPU keeps its copy of the scene between sessions. Declared
+  // The GPUs sessions render on (--gpus; none with the CPU renderer) and the scenes (each loaded
+  // one holds a renderer per GPU, so each GPU keeps one copy of it between sessions). Declared
   // before io_: sessions, which io_'s handlers may hold to the end, use both.
   std::unique_ptr<GpuAssignment> gpus_;
-  std::vector<std::unique_ptr<Renderer>> resident_;
+  std::unique_ptr<SceneStore> scenes_;
   // Declared before everything that holds sessions: strands and timers live in it, and queued
   // handlers hold sessions, so it must outlive them.
   boost::asio::io_context io_;

@@ -80,6 +80,15 @@ std::string ServerMetrics::prometheus_text() const {
       quality_up_total.load());
   put("catgs_refine_frames_total", "counter", "Adaptive quality: full-size frames sent when the camera stopped.",
       refine_frames_total.load());
+  put("catgs_scenes_loaded", "gauge", "Scenes in memory (--scene; loaded on first use).", scenes_loaded.load());
+  put("catgs_scene_bytes", "gauge", "Host bytes of the loaded scenes' models (each GPU holds a copy besides).",
+      scene_bytes.load());
+  put("catgs_scene_loads_total", "counter", "Scene loads that finished (start-up and first use).",
+      scene_loads_total.load());
+  put("catgs_scene_load_failures_total", "counter", "Scene loads that failed (their waiting sessions got an Error).",
+      scene_load_failures_total.load());
+  put("catgs_scene_unloads_total", "counter", "Unused scenes unloaded to stay within --scene-memory-mb.",
+      scene_unloads_total.load());
   head("catgs_render_frames_total", "counter",
        "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
   o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'

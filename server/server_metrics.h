@@ -20,6 +20,10 @@
 //   catgs_timeouts_total{kind}            connections closed for silence: no Hello, or a silent session
 //   catgs_rate_limited_total{kind}        sessions ended (or Hellos refused) for going past a rate limit
 //   catgs_unauthorized_total{what}        wrong or missing tokens: Hello, /metrics
+//   catgs_scenes_loaded, catgs_scene_bytes  scenes in memory now and their models' host bytes
+//                              (session/scene_store.h; a GPU copy per device besides)
+//   catgs_scene_loads_total, catgs_scene_load_failures_total, catgs_scene_unloads_total
+//                              loads finished / failed, scenes unloaded for --scene-memory-mb
 #pragma once
 
 #include <atomic>
@@ -79,6 +83,11 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> encoder_fallbacks_total{0};
   // --adaptive-quality (session/adaptive_quality.h): level changes and refine frames.
   std::atomic<std::uint64_t> quality_down_total{0}, quality_up_total{0}, refine_frames_total{0};
+
+  // Scenes (session/scene_store.h, kept by the store): loaded now, their host bytes, and loads
+  // that finished, loads that failed and unloads under --scene-memory-mb.
+  std::atomic<std::int64_t> scenes_loaded{0}, scene_bytes{0};
+  std::atomic<std::uint64_t> scene_loads_total{0}, scene_load_failures_total{0}, scene_unloads_total{0};
 
   // Hardening (issue 22). Each array is indexed by the enum named beside it.
   std::atomic<std::uint64_t> refused_upgrades_total[4]{};  // transport.h Refusal

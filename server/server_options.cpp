@@ -43,7 +43,11 @@ std::string server_usage() {
          "  --scene FILE          scene file (default: assets/scenes/biker.compressed.ply); repeat\n"
          "                        it to serve several: Hello.scene picks one by name (the file\n"
          "                        name without its extension), the first by default; GET /scenes\n"
-         "                        lists them (--cameras applies to the first)\n"
+         "                        lists them (--cameras applies to the first). The first loads at\n"
+         "                        start-up, the others on first use (their sessions see progress)\n"
+         "  --scene-memory-mb N   keep the loaded scenes' models within N MiB of host memory:\n"
+         "                        a load unloads scenes no session uses, least recently used\n"
+         "                        first (default 0: no budget, scenes stay once loaded)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -136,6 +140,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       scene_given = true;
     } else if (a == "--cameras")
       out.cameras = v;
+    else if (a == "--scene-memory-mb")
+      out.scene_memory_mb = parse_int(a, v, 0, 1 << 24);
     else if (a == "--port")
       out.port = parse_int(a, v, 0, 65535);
     else if (a == "--bind")

@@ -15,18 +15,21 @@ struct ServerOptions {
   std::string scene;                     // scene file (INRIA or compressed PLY): the first, the default
   std::vector<std::string> more_scenes;  // further --scene files (Hello.scene picks one by name)
   std::string cameras;                   // INRIA cameras.json of the scene's training views; "" = look beside it
-  int port = 8080;                       // TCP port; 0 lets the kernel pick (the chosen one is logged)
-  std::string bind = "0.0.0.0";          // interface address to listen on
-  std::string renderer = "auto";         // "cpu" | "cuda" | "auto"
-  std::string gpus = "all";              // CUDA devices sessions spread over: "all" or "0,1" (gpu_assignment.h)
-  std::string encoder = "auto";          // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
-  std::string pipeline = "exact";        // "vanilla" | "exact" | "catgs"
-  std::string speculation;               // catgs settings, "name=value,..." (speculation/settings.h)
-  std::string web_root;                  // folder served over HTTP at "/"
-  int max_sessions = 8;                  // sessions open at once; one more gets ERROR_SERVER_FULL
-  int full_retry_ms = 2000;  // ERROR_SERVER_FULL's retry_after_ms: this .. 2x this (session.h kServerFullRetryMs)
-  std::string token;         // --token T (visible in /proc: prefer the two below)
-  std::string token_file;    // --token-file FILE: "[viewer|admin] TOKEN" lines
+  // --scene-memory-mb: host memory the loaded scenes' models may hold, MiB, before unused ones
+  // are unloaded (session/scene_store.h); 0: no budget, every scene stays once loaded.
+  int scene_memory_mb = 0;
+  int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
+  std::string bind = "0.0.0.0";    // interface address to listen on
+  std::string renderer = "auto";   // "cpu" | "cuda" | "auto"
+  std::string gpus = "all";        // CUDA devices sessions spread over: "all" or "0,1" (gpu_assignment.h)
+  std::string encoder = "auto";    // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
+  std::string pipeline = "exact";  // "vanilla" | "exact" | "catgs"
+  std::string speculation;         // catgs settings, "name=value,..." (speculation/settings.h)
+  std::string web_root;            // folder served over HTTP at "/"
+  int max_sessions = 8;            // sessions open at once; one more gets ERROR_SERVER_FULL
+  int full_retry_ms = 2000;        // ERROR_SERVER_FULL's retry_after_ms: this .. 2x this (session.h kServerFullRetryMs)
+  std::string token;               // --token T (visible in /proc: prefer the two below)
+  std::string token_file;          // --token-file FILE: "[viewer|admin] TOKEN" lines
   // Every token from --token, --token-file and CATGS_TOKEN (resolve_access_tokens). When there is
   // one, Hello.token must be one of them and /metrics needs an admin token.
   AccessTokens tokens;

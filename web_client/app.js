@@ -54,6 +54,7 @@ const state = {
   lastPoseSent: null,
   reconnectAt: 0,
   status: 'starting',
+  loadProgress: null, // the last LoadProgress (the scene loading for this session)
   closeInfo: null, // the last onClose argument while not connected
   serverError: null, // the Error of the current connection, if any
   token: takeToken(location, sessionStorage, history), // and gone from the address bar
@@ -163,6 +164,12 @@ function updateStateMessage() {
     case 'handshake':
       overlay.showMessage('state', 'connecting to the server…', 'info');
       break;
+    case 'loading-scene': {
+      // The server loads a scene on its first use; LoadProgress comes until Welcome.
+      const p = state.loadProgress || { scene_name: '', percent: 0 };
+      overlay.showMessage('state', `loading scene ${p.scene_name}: ${p.percent}%`, 'info');
+      break;
+    }
     case 'first-view':
       overlay.showMessage('state', 'rendering the first view…', 'info');
       break;
@@ -305,6 +312,10 @@ function onMessage(kind, msg) {
       break;
     case 'pong':
       overlay.setRtt(performance.now() - msg.client_time_ms);
+      break;
+    case 'load_progress':
+      state.loadProgress = msg;
+      setStatus('loading-scene');
       break;
     default:
       break;
@@ -809,7 +820,9 @@ async function main() {
       setStatus('handshake');
       onResize(); // the window may have changed while disconnected
       const v = state.viewport;
-      send(state.protocol.encodeHello({ width: v.width, height: v.height, token: state.token, scene: sceneParam }));
+      send(state.protocol.encodeHello({
+        width: v.width, height: v.height, token: state.token, scene: sceneParam, loadProgress: true,
+      }));
     },
     onMessage,
     onClose,

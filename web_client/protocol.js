@@ -51,7 +51,8 @@ export function makeProtocol(root) {
     errorCodeName: (v) => ErrorCode.valuesById[v] || `ERROR_${v}`,
 
     // `scene`: a scene name from GET /scenes ('' the server's first; servers before it ignore it).
-    encodeHello({ width, height, token = '', clientName = 'catgs-web', scene = '' }) {
+    // `loadProgress`: ask for LoadProgress messages while the scene loads (before Welcome).
+    encodeHello({ width, height, token = '', clientName = 'catgs-web', scene = '', loadProgress = false }) {
       return encode({
         hello: {
           protocol_version: PROTOCOL_VERSION,
@@ -61,6 +62,7 @@ export function makeProtocol(root) {
           token,
           client_name: clientName,
           scene,
+          load_progress: loadProgress,
         },
       });
     },
@@ -94,7 +96,7 @@ export function makeProtocol(root) {
       return encode({ quality: { max_bitrate_kbps: maxBitrateKbps } });
     },
 
-    // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | null, msg }
+    // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | 'load_progress' | null, msg }
     decodeServer(bytes) {
       const m = ServerMessage.decode(bytes);
       const kind = m.body || null; // protobufjs' oneof getter names the field that is set

@@ -10,6 +10,7 @@
 #include "scene/format_detect.h"
 #include "scene/splat_file.h"
 #include "scene/gltf_file.h"
+#include "scene/scene_peek.h"
 #include "scene/spz_file.h"
 
 namespace catgs {
@@ -261,14 +262,7 @@ GaussianModel load_scene(const std::string& path, const LoadProgress& progress) 
       m = load_ply(path, progress);
       break;
   }
-  m.name = std::filesystem::path(path).filename().string();
-  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat", ".glb", ".gltf"}) {
-    const std::string s = suffix;
-    if (m.name.size() > s.size() && m.name.compare(m.name.size() - s.size(), s.size(), s) == 0) {
-      m.name.resize(m.name.size() - s.size());
-      break;
-    }
-  }
+  m.name = scene_name(path);
   try {
     m.validate();
   } catch (const std::exception& e) {

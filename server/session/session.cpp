@@ -47,27 +47,6 @@ constexpr std::size_t kMaxQueuedMessages = 256;  // non-frame messages a non-rea
 
 }  // namespace
 
-const SceneEntry* find_scene(const std::vector<SceneEntry>& scenes, const std::string& name) {
-  if (scenes.empty()) return nullptr;
-  if (name.empty()) return &scenes.front();
-  for (const SceneEntry& s : scenes)
-    if (s.model->name == name) return &s;
-  return nullptr;
-}
-
-std::string scenes_json(const std::vector<SceneEntry>& scenes) {
-  nlohmann::json out = nlohmann::json::array();
-  for (const SceneEntry& s : scenes)
-    out.push_back({{"name", s.model->name},
-                   {"gaussians", s.model->size()},
-                   {"sh_degree", s.model->sh_degree},
-                   {"bounds",
-                    {{"min", {s.bounds.min.x, s.bounds.min.y, s.bounds.min.z}},
-                     {"max", {s.bounds.max.x, s.bounds.max.y, s.bounds.max.z}}}},
-                   {"file", std::filesystem::path(s.path).filename().string()}});
-  return out.dump() + "\n";
-}
-
 Session::Session(ConnId id, SessionShared& shared)
     : id_(id),
       shared_(shared),
@@ -160,6 +139,7 @@ ViewportLimit Session::viewport_limit() const {
 void Session::end_open_state() {
   if (pending_) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
   pending_.reset();
+  scene_use_.reset();  // the scene may be unloaded now (a wait for its load is withdrawn)
   if (counted_open_) {
     counted_open_ = false;
     shared_.metrics.sessions_open--;
@@ -297,14 +277,11 @@ void Session::handle_hello(const pb::Hello& hello) {
     for (int c : hello.codecs()) h264 = h264 || c == pb::CODEC_H264;
     if (!h264) return fail(pb::ERROR_INVALID_ARGUMENT, "client does not accept H.264");
   }
-  scene_ = find_scene(shared_.scenes, hello.scene());
-  if (!scene_) {
-    std::string names;
-    for (const SceneEntry& s : shared_.scenes) names += (names.empty() ? "" : ", ") + s.model->name;
+  const std::optional<std::size_t> scene = shared_.scenes.find(hello.scene());
+  if (!scene)
     // The name comes from the client: only its first 64 bytes go into the reason.
-    return fail(pb::ERROR_INVALID_ARGUMENT,
-                "no scene '" + hello.scene().substr(0, 64) + "' on this server (it has: " + names + ")");
-  }
+    return fail(pb::ERROR_INVALID_ARGUMENT, "no scene '" + hello.scene().substr(0, 64) +
+                                                "' on this server (it has: " + shared_.scenes.names() + ")");
   if (shared_.draining)
     return fail(pb::ERROR_SHUTTING_DOWN, "server draining: connect again", false, jittered(kShuttingDownRetryMs));
   if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
@@ -316,15 +293,58 @@ void Session::handle_hello(const pb::Hello& hello) {
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
-  shared_.transport.said_hello(id_);                                   // no longer counts against --max-pre-hello
+  shared_.transport.said_hello(id_);  // no longer counts against --max-pre-hello
+  state_ = State::loading;
+  width_ = v.width;  // a Resize while the scene loads replaces it
+  height_ = v.height;
+  load_progress_ = hello.load_progress();
+  client_name_ = hello.client_name().substr(0, 128);
+  // The scene is there (ready is posted at once) or loads on a thread of its own: this strand
+  // and every other session go on meanwhile. Both callbacks come back through the strand.
+  auto self = shared_from_this();
+  scene_use_ = shared_.scenes.acquire(
+      *scene,
+      [self](int percent, std::uint64_t done, std::uint64_t total) {
+        boost::asio::post(self->strand_,
+                          [self, percent, done, total] { self->send_load_progress(percent, done, total); });
+      },
+      [self](std::shared_ptr<const LoadedScene> loaded, const std::string& error) {
+        boost::asio::post(self->strand_, [self, loaded = std::move(loaded), error] {
+          self->on_scene_ready(std::move(loaded), error);
+        });
+      });
+}
+
+void Session::send_load_progress(int percent, std::uint64_t done, std::uint64_t total) {
+  // Callbacks from the loading thread and from acquire() may arrive out of order: only a rise
+  // goes out, and nothing after Welcome.
+  if (state_ != State::loading || !load_progress_ || percent <= progress_sent_) return;
+  progress_sent_ = percent;
+  pb::ServerMessage m;
+  pb::LoadProgress* p = m.mutable_load_progress();
+  p->set_scene_name(shared_.scenes.name(scene_use_->index()));
+  p->set_percent(static_cast<std::uint32_t>(percent));
+  p->set_gaussians_read(static_cast<std::uint32_t>(std::min<std::uint64_t>(done, UINT32_MAX)));
+  p->set_gaussians_total(static_cast<std::uint32_t>(std::min<std::uint64_t>(total, UINT32_MAX)));
+  send(m);
+}
+
+void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std::string& error) {
+  if (state_ != State::loading) return;  // closed meanwhile
+  if (!scene)
+    return fail(pb::ERROR_INTERNAL,
+                "scene '" + shared_.scenes.name(scene_use_->index()) + "' failed to load: " + error);
+  scene_ = std::move(scene);
   if (shared_.renderer_kind == "cuda") gpu_ = shared_.gpus.acquire();  // the least busy GPU
-  renderer_ = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));
+  try {
+    renderer_ = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));
+  } catch (const std::exception& e) {  // e.g. no device memory left for another scene copy
+    return fail(pb::ERROR_INTERNAL, "renderer for scene '" + scene_->model->name + "': " + e.what());
+  }
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
   pipelined_ = !(shared_.encoder_kind == "nvenc" && renderer_->name() == "cuda");
   for (int i = 0; pipelined_ && i < 2; ++i) free_planes_.push_back(std::make_unique<Yuv420Image>());
   state_ = State::open;
-  width_ = v.width;
-  height_ = v.height;
   session_id_ = random_session_id();
 
   pb::ServerMessage m;
@@ -352,11 +372,13 @@ void Session::handle_hello(const pb::Hello& hello) {
   w->set_encoder(shared_.encoder_kind);
   w->set_pipeline(pipeline_name(shared_.render_options.pipeline));
   send(m);
-  std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_ << " client '"
-            << hello.client_name().substr(0, 128) << "'\n";
+  std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_ << " scene '"
+            << scene_->model->name << "' client '" << client_name_ << "'\n";
   last_stats_ = Clock::now();
   last_progress_ = last_stats_;
+  last_message_ = last_stats_;  // a load's wait is not the client's silence
   arm_tick();
+  maybe_start_render();  // a Pose sent before Welcome
 }
 
 void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {

@@ -38,27 +38,12 @@
 #include "session/message_validation.h"
 #include "session/first_view.h"
 #include "session/rate_limit.h"
+#include "session/scene_store.h"
 #include "server_metrics.h"
 #include "server_options.h"
 #include "transport/transport.h"
 
 namespace catgs::server {
-
-// A scene the server serves: its model (shared by its sessions; one device copy per GPU), bounds
-// (Welcome.scene_bounds) and the first view and frame to navigate in (Welcome).
-struct SceneEntry {
-  std::shared_ptr<const GaussianModel> model;
-  Bounds bounds;
-  SceneFrame frame;
-  std::string path;  // the file it was loaded from
-};
-
-// The scene named `name` (GaussianModel::name), or the first for an empty name; null when there
-// is none of that name.
-const SceneEntry* find_scene(const std::vector<SceneEntry>& scenes, const std::string& name);
-// GET /scenes: [{"name", "gaussians", "sh_degree", "bounds": {"min": [x, y, z], "max": [...]},
-// "file"}] in --scene order (the first is the default), as JSON.
-std::string scenes_json(const std::vector<SceneEntry>& scenes);
 
 // What all sessions share (owned by the Server; it outlives every session).
 struct SessionShared {
@@ -68,7 +53,7 @@ struct SessionShared {
   Transport& transport;
   ServerMetrics& metrics;
   const ServerOptions& options;
-  std::vector<SceneEntry> scenes;  // every --scene, in order; the first is the default
+  SceneStore& scenes;  // every --scene, in order, the first the default; loaded on first use
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
   std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
@@ -106,7 +91,8 @@ class Session : public std::enable_shared_from_this<Session> {
 
  private:
   using Clock = std::chrono::steady_clock;
-  enum class State { awaiting_hello, open, closed };
+  // loading: past Hello, waiting for its scene to load (SceneStore::acquire); holds a session slot.
+  enum class State { awaiting_hello, loading, open, closed };
 
   struct PendingPose {
     CameraPose pose;
@@ -149,6 +135,10 @@ class Session : public std::enable_shared_from_this<Session> {
   // `received`: when the transport thread handed the message over.
   void handle_message(MessageKind kind, const std::string& bytes, Clock::time_point received);
   void handle_hello(const pb::Hello& hello);
+  // The scene's load ended (on the strand): Welcome and the stream, or Error naming the file.
+  void on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std::string& error);
+  // While the scene loads: LoadProgress to a client that asked for it (Hello.load_progress).
+  void send_load_progress(int percent, std::uint64_t done, std::uint64_t total);
   void handle_pose(const pb::Pose& pose, Clock::time_point received);
   // --adaptive-quality, on the tick: applies AdaptiveQuality's rule and queues a refine frame.
   void adapt_quality(Clock::time_point now);
@@ -194,7 +184,11 @@ class Session : public std::enable_shared_from_this<Session> {
   State state_ = State::awaiting_hello;
   bool counted_open_ = false;  // holds one of the server's session slots
   std::string session_id_;
-  const SceneEntry* scene_ = nullptr;  // chosen at Hello (Hello.scene)
+  std::unique_ptr<SceneStore::Use> scene_use_;  // from Hello until the session ends: keeps it loaded
+  std::shared_ptr<const LoadedScene> scene_;    // once loaded
+  bool load_progress_ = false;                  // Hello.load_progress
+  std::string client_name_;                     // Hello.client_name (logs), at most 128 bytes
+  int progress_sent_ = -1;                      // the last LoadProgress percent sent
   int width_ = 0, height_ = 0;
   int max_bitrate_kbps_ = 0;  // the client's Quality
   bool force_idr_ = true;

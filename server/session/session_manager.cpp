@@ -42,7 +42,7 @@ void SessionManager::on_close(ConnId id) {
 
 std::string SessionManager::metrics_text() { return shared_.metrics.prometheus_text(); }
 
-std::string SessionManager::scenes_json() { return server::scenes_json(shared_.scenes); }
+std::string SessionManager::scenes_json() { return shared_.scenes.json(); }
 
 int SessionManager::metrics_access(const std::string& authorization) {
   return metrics_access_status(shared_.options.tokens, authorization, shared_.metrics);

@@ -156,20 +156,36 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
             fullRefusals++;
             return fail(5, 'server full (1 sessions)', 2500);
           }
-          statsTimer = setInterval(() => {
-            const rendered = sent > sentAtStats;
-            sentAtStats = sent;
-            send({ stats: { frames_sent: sent, poses_received: sent, render_ms_mean: rendered ? 12.5 : 0,
-              encode_ms_mean: rendered ? 3.5 : 0, bytes_per_second: rendered ? 250000 : 0 } });
-          }, 1000);
-          send({ welcome: {
-            session_id: `mock-${session}`, scene_name: 'mock', renderer: 'cpu', encoder: 'x264', pipeline: 'exact',
-            codec: 1, width: 160, height: 120,
-            scene_bounds: { min: { x: -1, y: -1, z: -1 }, max: { x: 1, y: 1, z: 1 } },
-            initial_pose: { position: { x: 0, y: 0, z: -4 }, orientation: { w: 1 }, vertical_fov_deg: 50 },
-            // Not the bounds' centre: the page must orbit around this one.
-            orbit_centre: { x: 0, y: 0, z: 1 }, up: { x: 0, y: -1, z: 0 }, scene_scale: 5,
-          } });
+          const open = () => {
+            statsTimer = setInterval(() => {
+              const rendered = sent > sentAtStats;
+              sentAtStats = sent;
+              send({ stats: { frames_sent: sent, poses_received: sent, render_ms_mean: rendered ? 12.5 : 0,
+                encode_ms_mean: rendered ? 3.5 : 0, bytes_per_second: rendered ? 250000 : 0 } });
+            }, 1000);
+            send({ welcome: {
+              session_id: `mock-${session}`, scene_name: 'mock', renderer: 'cpu', encoder: 'x264', pipeline: 'exact',
+              codec: 1, width: 160, height: 120,
+              scene_bounds: { min: { x: -1, y: -1, z: -1 }, max: { x: 1, y: 1, z: 1 } },
+              initial_pose: { position: { x: 0, y: 0, z: -4 }, orientation: { w: 1 }, vertical_fov_deg: 50 },
+              // Not the bounds' centre: the page must orbit around this one.
+              orbit_centre: { x: 0, y: 0, z: 1 }, up: { x: 0, y: -1, z: 0 }, scene_scale: 5,
+            } });
+          };
+          if (scenario === '/ws-loading') {
+            // A scene loading on first use: LoadProgress (only when the Hello asked for it), then
+            // Welcome 1.5 s later.
+            if (msg.hello.load_progress) {
+              send({ load_progress: { scene_name: 'mock', percent: 0 } });
+              setTimeout(() => send({ load_progress: { scene_name: 'mock', percent: 42, gaussians_read: 42,
+                gaussians_total: 100 } }), 200);
+              setTimeout(() => send({ load_progress: { scene_name: 'mock', percent: 100, gaussians_read: 100,
+                gaussians_total: 100 } }), 1400);
+            }
+            setTimeout(open, 1500);
+          } else {
+            open();
+          }
         } else if (msg.body === 'key_frame_request') {
           next = 0; // the fixture's first access unit is its IDR
         } else if (msg.body === 'pose') {

@@ -257,6 +257,20 @@ try {
     await page.close();
   }
 
+  // 8b. A scene loading on first use: the Hello asks for progress, the status line says
+  //     "loading scene NAME: NN%", then the first view streams and the line goes.
+  {
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws-loading')}`);
+    check(await waitText(page, /loading scene mock: 42%/, 4000), 'loading: "loading scene mock: 42%" while it loads');
+    const h = hellos('/ws-loading');
+    check(h.length === 1 && h[0].msg.load_progress === true, 'loading: Hello.load_progress is set');
+    check(await moveUntil(page, (c) => c.framesDecoded >= 3), 'loading: streams once the scene is there');
+    await sleep(300);
+    const t = await page.evaluate(() => window.catgs.overlayText());
+    check(!/loading scene/.test(t), `loading: the loading line is gone (${JSON.stringify(t)})`);
+    await page.close();
+  }
+
   // 9. Server restarting (SHUTTING_DOWN, retry_after_ms 1200): says so, comes back on its own.
   {
     const page = await openPage(`${base}/?ws=${wsUrl('/ws-restart')}`);

@@ -51,7 +51,8 @@ void StreamClient::send_pose(const pb::Pose& pose) {
 }
 
 pb::Welcome StreamClient::hello(int width, int height, const std::string& token, int timeout_ms,
-                                const std::string& scene) {
+                                const std::string& scene, std::vector<pb::ServerMessage>* before_welcome,
+                                bool load_progress) {
   pb::ClientMessage m;
   pb::Hello* h = m.mutable_hello();
   h->set_protocol_version(1);
@@ -61,6 +62,7 @@ pb::Welcome StreamClient::hello(int width, int height, const std::string& token,
   h->set_token(token);
   h->set_client_name("catgs-loadgen");
   h->set_scene(scene);
+  h->set_load_progress(load_progress);
   send(m);
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (std::chrono::steady_clock::now() < deadline) {
@@ -68,6 +70,7 @@ pb::Welcome StreamClient::hello(int width, int height, const std::string& token,
     if (!msg) continue;
     if (msg->has_welcome()) return msg->welcome();
     if (msg->has_error()) throw Refused(msg->error());
+    if (before_welcome) before_welcome->push_back(*msg);
   }
   throw std::runtime_error("no Welcome within " + std::to_string(timeout_ms) + " ms");
 }

@@ -5,6 +5,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "camera/camera.h"
 #include "catgs_stream.pb.h"
@@ -40,9 +41,12 @@ class StreamClient {
   void connect(int port, const std::string& host = "127.0.0.1", int timeout_ms = 5000, int receive_buffer = 0);
   // Sends Hello and waits for Welcome. Throws Refused (a std::runtime_error naming the Error) if
   // the server refuses, std::runtime_error on timeout.
-  // `scene`: Hello.scene (a name from GET /scenes; "" the server's first).
+  // `scene`: Hello.scene (a name from GET /scenes; "" the server's first). `load_progress`: sets
+  // Hello.load_progress (the server then sends LoadProgress while the scene loads).
+  // `before_welcome`: when set, receives every message that came before Welcome, in order.
   pb::Welcome hello(int width, int height, const std::string& token = "", int timeout_ms = 10000,
-                    const std::string& scene = "");
+                    const std::string& scene = "", std::vector<pb::ServerMessage>* before_welcome = nullptr,
+                    bool load_progress = false);
   // Sends one ClientMessage.
   void send(const pb::ClientMessage& message);
   void send_pose(const pb::Pose& pose);
