@@ -15,8 +15,8 @@
 //   splat and its 16-byte colour: two sectors (stages.h Splat).
 // - When it stages an entry, the fetching thread also works out which sub-tiles the entry's
 //   ellipse can reach (the ellipse over each column of sub-tiles: blend.cuh subtile_mask), and
-//   each warp then walks only the round's entries that reach its sub-tile (a ballot over the
-//   masks, then its set bits).
+//   each warp then walks only the round's entries that reach its sub-tile (it lists them first,
+//   a ballot over 32 masks at a time, then walks its list: blend.cuh blend_batch).
 //   Small Gaussians reach a few of a tile's 8 sub-tiles, so most warps skip most entries at no
 //   cost, where before every pixel evaluated every entry (RESULTS.md, issue 19).
 // - After the barrier every thread blends the round's Gaussians in depth order, skipping those
@@ -31,8 +31,8 @@
 //   each shared-memory entry once for both, drew the same image but rasterized slower, likely
 //   because the blend loop is bound by latency and half the warps per SM were left to hide it
 //   (RESULTS.md, "This round (2026-11-22)": two pixels per thread tried and dropped).
-// - Shared memory: 256 x (16 + 16 + 16 + 4) bytes = 13 KiB per block, so occupancy is set by
-//   registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
+// - Shared memory: 256 x (16 + 16 + 16 + 4) bytes of entries and 8 x 256 bytes of warp lists
+//   = 15 KiB per block, so occupancy is set by registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
 // - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
 //   later encoder can read the frame without a host copy.
 #include "blend.cuh"

@@ -100,7 +100,7 @@ __device__ __forceinline__ void merge_pixel(const SlicePlan& plan, uint32_t tile
 }
 
 // kTileCull: blend_range_culled (a trail list) or blend_range (an exact list), as separate
-// kernels so that each is built for its own registers: the unculled one fits 32 without spilling.
+// kernels so that each is built for its own registers (both at 32, with small spills).
 // Together they took 48, which capped the culled kernel at 5 blocks per SM (ncu, city bicycle
 // sub-frames: 54% achieved occupancy, 36% of cycles with no eligible warp, against exact's 32
 // registers and 91%).
