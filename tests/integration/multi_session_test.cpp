@@ -150,17 +150,7 @@ TEST(MultiSession, DisconnectsMidStreamFreeEverything) {
   ServerProcess server(server_args(kBiker));
   unsetenv("MALLOC_ARENA_MAX");
   const Trace orbit = biker_orbit(96, 64, 8);
-  auto cycle = [&](int i) {
-    StreamClient c;
-    c.connect(server.port());
-    c.hello(96, 64);
-    c.send_pose(pose_from_camera(orbit[static_cast<std::size_t>(i) % orbit.size()].camera, 0, now_ms()));
-    if (i % 2 == 0) wait_for(c, 10000, [](const pb::ServerMessage& s) { return s.has_frame(); });
-    if (i % 4 < 2)
-      c.ws().close();
-    else
-      c.ws().close_abrupt();  // mid-render for odd i: the frame is still being made
-  };
+  auto cycle = [&](int i) { connect_and_leave(server.port(), i, orbit); };
   auto settle = [&] {  // until the server has noticed every close
     std::string metrics;
     const auto deadline = Clock::now() + std::chrono::seconds(10);

@@ -14,9 +14,7 @@
 // ./build/cpu/bin/catgs_integration_tests --gtest_filter='Soak.*' (results in RESULTS.md).
 #include <gtest/gtest.h>
 
-#include <arpa/inet.h>
 #include <dirent.h>
-#include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -74,15 +72,8 @@ bool error_then_close(StreamClient& c, int timeout_ms) {
 }
 
 bool long_url(int port) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(static_cast<uint16_t>(port));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
-    close(fd);
-    return false;
-  }
+  const int fd = connect_loopback(port);
+  if (fd < 0) return false;
   const std::string req = "GET /" + std::string(64 * 1024, 'a') + " HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
   (void)!send(fd, req.data(), req.size(), MSG_NOSIGNAL);
   // The server must answer (a status) or close; it must not keep the socket open.
@@ -122,19 +113,6 @@ bool hostile_attempt(int port, Hostile kind) {
   return error_then_close(c, 10000);
 }
 
-// One churn cycle: a short session closed cleanly or dropped, before or after its first frame.
-void churn_cycle(int port, int i, const Trace& orbit) {
-  StreamClient c;
-  c.connect(port);
-  c.hello(96, 64);
-  c.send_pose(pose_from_camera(orbit[static_cast<std::size_t>(i) % orbit.size()].camera, 0, now_ms()));
-  if (i % 2 == 0) wait_for(c, 10000, [](const pb::ServerMessage& s) { return s.has_frame(); });
-  if (i % 4 < 2)
-    c.ws().close();
-  else
-    c.ws().close_abrupt();
-}
-
 struct Sample {
   double t_s;
   long rss_kib;
@@ -163,7 +141,7 @@ TEST(Soak, HealthySessionsKeepStreamingThroughChurnAndHostileClients) {
   // first session's work queue holds an eventfd, an epoll and a timerfd for good).
   {
     const Trace orbit = biker_orbit(96, 64, 8);
-    for (int i = 0; i < 4; ++i) churn_cycle(port, i, orbit);
+    for (int i = 0; i < 4; ++i) connect_and_leave(port, i, orbit);
     for (int k = 0; k < kHostileKinds; ++k) ASSERT_TRUE(hostile_attempt(port, static_cast<Hostile>(k)));
   }
   std::string metrics;
@@ -191,7 +169,7 @@ TEST(Soak, HealthySessionsKeepStreamingThroughChurnAndHostileClients) {
     const Trace orbit = biker_orbit(96, 64, 8);
     for (int i = 0; !stop; ++i) {
       try {
-        churn_cycle(port, i, orbit);
+        connect_and_leave(port, i, orbit);
       } catch (const std::exception&) {
         ++churn_failures;
       }

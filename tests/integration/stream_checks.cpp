@@ -50,6 +50,18 @@ Trace biker_orbit(int width, int height, int frames) {
   return make_orbit(b, r, 0.2f * r, 120.0f, p);
 }
 
+void connect_and_leave(int port, int i, const Trace& orbit) {
+  loadgen::StreamClient c;
+  c.connect(port);
+  c.hello(96, 64);
+  c.send_pose(loadgen::pose_from_camera(orbit[static_cast<std::size_t>(i) % orbit.size()].camera, 0, now_ms()));
+  if (i % 2 == 0) wait_for(c, 10000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+  if (i % 4 < 2)
+    c.ws().close();
+  else
+    c.ws().close_abrupt();
+}
+
 double now_ms() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }

@@ -45,6 +45,11 @@ std::optional<pb::ServerMessage> wait_for(loadgen::StreamClient& c, int timeout_
   return std::nullopt;
 }
 
+// One connect / Hello (96 x 64) / pose / disconnect cycle against the server on `port`, the pose
+// orbit[i % size]: for even i it waits for the frame, and it closes cleanly for i % 4 < 2 and
+// drops the connection (a reset, mid-render for odd i) otherwise.
+void connect_and_leave(int port, int i, const Trace& orbit);
+
 // Reads until the server sends Error (returned) or closes; nullopt if neither in time.
 std::optional<pb::Error> expect_error(loadgen::StreamClient& c, int timeout_ms = 10000);
 
