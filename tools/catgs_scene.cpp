@@ -32,7 +32,7 @@
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
 #include "scene_tools/morton.h"
-#include "scene_tools/sh_rotation.h"
+#include "scene/sh_rotation.h"
 #include "camera/trace.h"
 #include "common/cli_args.h"
 

@@ -10,7 +10,7 @@
 
 #include "cpu/cpu_renderer.h"  // parallel_for
 #include "scene/scene_bounds.h"
-#include "scene_tools/sh_rotation.h"
+#include "scene/sh_rotation.h"
 
 namespace catgs {
 

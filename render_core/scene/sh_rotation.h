@@ -1,5 +1,5 @@
 // Rotating a Gaussian's view-dependent colour with the Gaussian (the city builder turns each copy
-// of a scene about its up axis).
+// of a scene about its up axis; the glTF reader applies node rotations).
 #pragma once
 
 #include <glm/mat3x3.hpp>

@@ -1,4 +1,4 @@
-#include "scene_tools/sh_rotation.h"
+#include "scene/sh_rotation.h"
 
 #include <algorithm>
 #include <array>
