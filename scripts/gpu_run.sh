@@ -85,6 +85,8 @@ PC
 d=$(cd "$(dirname "$0")/.." && pwd)
 mods=() out=()
 for a in "$@"; do case "$a" in --*) ;; *) mods+=("$a") ;; esac; done
+# Modules it does not carry are absent, so optional ones (libwebp, libzip: SOG) are left out.
+for m in "${mods[@]}"; do case "$m" in stb|zlib|libzstd) ;; *) exit 1 ;; esac; done
 lib() { case "$1" in stb) echo -lstb ;; zlib) echo -lz ;; libzstd) echo -lzstd ;; esac; }
 inc() { case "$1" in stb) echo "-I$d/include/stb" ;; *) echo "-I$d/include" ;; esac; }
 for a in "$@"; do

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "scene/gltf_file.h"
+#include "scene/sog_file.h"
 #include "scene/spz_file.h"
 
 namespace catgs {
@@ -20,6 +21,7 @@ SceneFormat detect_scene_format(const std::string& path) {
   if (head.size() >= 4 && head[0] == 'p' && head[1] == 'l' && head[2] == 'y') return SceneFormat::ply;
   if (looks_like_spz(head)) return SceneFormat::spz;
   if (looks_like_gltf(head)) return SceneFormat::gltf;
+  if (looks_like_sog_zip(head) || looks_like_sog_meta(head)) return SceneFormat::sog;
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   if (ext == ".splat") return SceneFormat::splat;

@@ -11,6 +11,8 @@ enum class SceneFormat {
   spz,    // starts with "NGSP" (version 4) or the gzip magic 1f 8b (versions 1-3) (spz_file.h)
   gltf,   // starts with "glTF" (.glb) or is JSON naming KHR_gaussian_splatting (.gltf) (gltf_file.h)
   splat,  // no magic: antimatter15 .splat, recognised by its .splat extension (splat_file.h)
+  sog,    // a zip archive ("PK\3\4", a bundled .sog) or JSON naming "means" and "files" (SOG's
+          // meta.json) (sog_file.h)
 };
 
 // Reads the first bytes of `path`. Files with none of the magics above and no .splat extension

@@ -1,4 +1,5 @@
-// Scene loading: INRIA 3DGS PLY and SuperSplat compressed PLY -> GaussianModel.
+// Scene loading: every format by content (format_detect.h); INRIA 3DGS PLY and SuperSplat
+// compressed PLY here, the others in their own files.
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -11,6 +12,7 @@
 #include "scene/splat_file.h"
 #include "scene/gltf_file.h"
 #include "scene/scene_peek.h"
+#include "scene/sog_file.h"
 #include "scene/spz_file.h"
 
 namespace catgs {
@@ -257,6 +259,9 @@ GaussianModel load_scene(const std::string& path, const LoadProgress& progress) 
       break;
     case SceneFormat::gltf:
       m = read_gltf(path);
+      break;
+    case SceneFormat::sog:
+      m = read_sog(path);
       break;
     case SceneFormat::ply:
       m = load_ply(path, progress);

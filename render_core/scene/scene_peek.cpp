@@ -7,6 +7,7 @@
 
 #include "scene/format_detect.h"
 #include "scene/gaussian_model.h"
+#include "scene/sog_file.h"
 
 namespace catgs {
 
@@ -55,8 +56,11 @@ void peek_ply(const std::string& path, ScenePeek& out) {
 }  // namespace
 
 std::string scene_name(const std::string& path) {
-  std::string name = std::filesystem::path(path).filename().string();
-  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat", ".glb", ".gltf"}) {
+  const std::filesystem::path p(path);
+  std::string name = p.filename().string();
+  // An unbundled SOG scene is a folder: meta.json says nothing of the scene.
+  if (name == "meta.json" && p.parent_path().has_filename()) return p.parent_path().filename().string();
+  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat", ".glb", ".gltf", ".sog"}) {
     const std::string s = suffix;
     if (name.size() > s.size() && name.compare(name.size() - s.size(), s.size(), s) == 0) {
       name.resize(name.size() - s.size());
@@ -79,6 +83,13 @@ ScenePeek peek_scene(const std::string& path) {
     case SceneFormat::gltf:
       out.format = "gltf";
       break;
+    case SceneFormat::sog: {
+      const SogSummary sog = peek_sog(path);
+      out.format = "sog";
+      out.gaussians = sog.gaussians;
+      out.sh_degree = sog.sh_degree;
+      break;
+    }
     case SceneFormat::splat: {
       std::error_code ec;
       const std::uint64_t size = std::filesystem::file_size(path, ec);

@@ -27,20 +27,6 @@ constexpr double kSameDecodeDb = 50.0;
     ASSERT_TRUE(err.empty()) << err;                            \
   } while (0)
 
-// Our reader on `file` against our INRIA reader on splat-transform's decode of it.
-double psnr_against_reference_decode(const std::string& file, const std::string& dir, const std::string& cameras = "") {
-  const std::string decoded = dir + "/reference_decode.ply";
-  const std::string err = test::splat_transform(file, decoded);
-  EXPECT_TRUE(err.empty()) << err;
-  if (!err.empty()) return 0.0;
-  const GaussianModel ours = load_scene(file);
-  const GaussianModel reference = load_scene(decoded);
-  EXPECT_EQ(ours.size(), reference.size());
-  EXPECT_EQ(ours.sh_degree, reference.sh_degree);
-  if (ours.size() != reference.size()) return 0.0;
-  return test::min_render_psnr(ours, reference, test::comparison_views(reference, cameras));
-}
-
 struct OurWriterCheck {
   double same = 0;   // splat-transform's decode of our file vs our reader on it
   double lossy = 0;  // splat-transform's decode of our file vs the original
@@ -70,7 +56,7 @@ TEST(SplatTransformReference, CompressedPlyWrittenBySplatTransform) {
   CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
   const std::string dir = test::temp_dir(), file = dir + "/flowers.compressed.ply";
   CONVERT(flowers, file);
-  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  const double psnr = test::psnr_against_reference_decode(file, dir, cams);
   std::cout << "[ info ] flowers_sh3 -> splat-transform compressed PLY: ours vs its decode " << psnr << " dB\n";
   EXPECT_GE(psnr, kSameDecodeDb);
 }
@@ -78,7 +64,7 @@ TEST(SplatTransformReference, CompressedPlyWrittenBySplatTransform) {
 // The bundled scene was written by SuperSplat 2.7.1: it must look as PlayCanvas's tools show it.
 TEST(SplatTransformReference, BundledBikerWrittenBySuperSplat) {
   CATGS_REQUIRE_SPLAT_TRANSFORM();
-  const double psnr = psnr_against_reference_decode(test::bundled_scene(), test::temp_dir());
+  const double psnr = test::psnr_against_reference_decode(test::bundled_scene(), test::temp_dir());
   std::cout << "[ info ] biker.compressed.ply (SuperSplat): ours vs splat-transform's decode " << psnr << " dB\n";
   EXPECT_GE(psnr, kSameDecodeDb);
 }
@@ -108,7 +94,7 @@ TEST_P(SpzVersionTest, WrittenBySplatTransform) {
   const std::string dir = test::temp_dir(), file = dir + "/flowers.spz";
   const std::string err = test::splat_transform(flowers, file, "--spz-version " + std::to_string(GetParam()));
   ASSERT_TRUE(err.empty()) << err;
-  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  const double psnr = test::psnr_against_reference_decode(file, dir, cams);
   std::cout << "[ info ] flowers_sh3 -> splat-transform .spz v" << GetParam() << ": ours vs its decode " << psnr
             << " dB\n";
   EXPECT_GE(psnr, kSameDecodeDb);
@@ -159,7 +145,7 @@ TEST(SplatTransformReference, SplatRecordsDecodedAsSplatTransformDoes) {
   CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
   const std::string dir = test::temp_dir(), file = dir + "/flowers.splat";
   write_splat_like_convert_py(load_scene(flowers), file);
-  const double psnr = psnr_against_reference_decode(file, dir, cams);
+  const double psnr = test::psnr_against_reference_decode(file, dir, cams);
   std::cout << "[ info ] flowers_sh3 as .splat: ours vs splat-transform's decode " << psnr << " dB\n";
   EXPECT_GE(psnr, kSameDecodeDb);
 }

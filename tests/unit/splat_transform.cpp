@@ -7,6 +7,7 @@
 #include "camera/trace.h"
 #include "common/image_io.h"
 #include "renderer/renderer.h"
+#include "scene/ply_io.h"
 #include "scene/scene_bounds.h"
 
 namespace catgs::test {
@@ -27,9 +28,10 @@ std::string splat_transform_missing() {
   return "";
 }
 
-std::string splat_transform(const std::string& in, const std::string& out, const std::string& extra) {
+std::string splat_transform(const std::string& in, const std::string& out, const std::string& extra,
+                            const std::string& actions) {
   const std::string cmd = quoted(CATGS_NODE_PATH) + " " + quoted(CATGS_SPLAT_TRANSFORM) + " -q -w " + extra + " " +
-                          quoted(in) + " " + quoted(out) + " >/dev/null 2>&1";
+                          quoted(in) + " " + actions + " " + quoted(out) + " >/dev/null 2>&1";
   const int rc = std::system(cmd.c_str());
   if (rc != 0 || !std::filesystem::exists(out)) return cmd + " failed (status " + std::to_string(rc) + ")";
   return "";
@@ -67,6 +69,19 @@ double min_render_psnr(const GaussianModel& a, const GaussianModel& b, const std
     worst = std::min(worst, psnr_rgba8(ia, ib));
   }
   return worst;
+}
+
+double psnr_against_reference_decode(const std::string& file, const std::string& dir, const std::string& cameras_json) {
+  const std::string decoded = dir + "/reference_decode.ply";
+  const std::string err = splat_transform(file, decoded);
+  EXPECT_TRUE(err.empty()) << err;
+  if (!err.empty()) return 0.0;
+  const GaussianModel ours = load_scene(file);
+  const GaussianModel reference = load_scene(decoded);
+  EXPECT_EQ(ours.size(), reference.size());
+  EXPECT_EQ(ours.sh_degree, reference.sh_degree);
+  if (ours.size() != reference.size()) return 0.0;
+  return min_render_psnr(ours, reference, comparison_views(reference, cameras_json));
 }
 
 }  // namespace catgs::test
