@@ -106,8 +106,8 @@ std::string ServerMetrics::prometheus_text() const {
            "reason", refused_upgrades_total, {"version", "origin", "per_ip", "pre_hello"});
   labelled("catgs_timeouts_total",
            "Connections closed for silence: hello (no Hello in --hello-timeout-ms), silent (no message in "
-           "--silent-timeout-ms).",
-           "kind", timeouts_total, {"hello", "silent"});
+           "--silent-timeout-ms), scene_load (the scene not loaded in --scene-load-timeout-ms).",
+           "kind", timeouts_total, {"hello", "silent", "scene_load"});
   labelled("catgs_rate_limited_total", "Hellos refused and sessions ended for going past a --rate-limits limit.",
            "kind", rate_limited_total, {"hello", "auth", "ping", "key_frame", "resize", "quality"});
   labelled("catgs_unauthorized_total", "Wrong or missing tokens: in a Hello, or for /metrics.", "what",

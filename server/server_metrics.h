@@ -17,7 +17,8 @@
 //   catgs_gpu_sessions{gpu}, catgs_gpu_render_seconds{gpu}   per GPU of --gpus (CUDA renderer):
 //                              sessions rendering there, and their render times
 //   catgs_refused_upgrades_total{reason}  WebSocket upgrades refused before the handshake
-//   catgs_timeouts_total{kind}            connections closed for silence: no Hello, or a silent session
+//   catgs_timeouts_total{kind}            connections closed for silence: no Hello, or a silent session,
+//                                         or for a scene that did not load in time (scene_load)
 //   catgs_rate_limited_total{kind}        sessions ended (or Hellos refused) for going past a rate limit
 //   catgs_unauthorized_total{what}        wrong or missing tokens: Hello, /metrics
 //   catgs_scenes_loaded, catgs_scene_bytes  scenes in memory now and their models' host bytes
@@ -91,8 +92,8 @@ struct ServerMetrics {
 
   // Hardening (issue 22). Each array is indexed by the enum named beside it.
   std::atomic<std::uint64_t> refused_upgrades_total[4]{};  // transport.h Refusal
-  enum class Timeout { hello, silent };
-  std::atomic<std::uint64_t> timeouts_total[2]{};
+  enum class Timeout { hello, silent, scene_load };
+  std::atomic<std::uint64_t> timeouts_total[3]{};
   enum class Limit { hello, auth, ping, key_frame, resize, quality };
   std::atomic<std::uint64_t> rate_limited_total[6]{};
   enum class Unauthorized { hello, metrics };

@@ -76,6 +76,8 @@ std::string server_usage() {
          "  --hello-timeout-ms N  close a WebSocket that sends no Hello in N ms (default 10000)\n"
          "  --silent-timeout-ms N end a session that sends nothing for N ms (default 60000; the\n"
          "                        page pings every 2 s)\n"
+         "  --scene-load-timeout-ms N  end a session whose scene has not loaded after N ms (default\n"
+         "                        600000); the load goes on, and a later session may find it loaded\n"
          "  --max-connections-per-ip N  WebSocket connections from one address (default 128;\n"
          "                        0 = no cap; behind a proxy every client has the proxy's address)\n"
          "  --max-pre-hello N     connections that have not said Hello yet (default 256; 0 = no cap)\n"
@@ -174,6 +176,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.hello_timeout_ms = parse_int(a, v, 100, 3600000);
     else if (a == "--silent-timeout-ms")
       out.silent_timeout_ms = parse_int(a, v, 100, 86400000);
+    else if (a == "--scene-load-timeout-ms")
+      out.scene_load_timeout_ms = parse_int(a, v, 100, 86400000);
     else if (a == "--max-connections-per-ip")
       out.max_connections_per_ip = parse_int(a, v, 0, 100000);
     else if (a == "--max-pre-hello")

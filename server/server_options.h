@@ -39,6 +39,9 @@ struct ServerOptions {
   // or no message at all from a session for this long, ends the connection with ERROR_TIMEOUT.
   int hello_timeout_ms = 10000;
   int silent_timeout_ms = 60000;
+  // A session that waits longer than this for its scene to load (a stalled file system, a load
+  // that hangs) ends with ERROR_TIMEOUT; the load itself goes on for later sessions (issue 20).
+  int scene_load_timeout_ms = 600000;
   // WebSocket connections at once from one client address, and connections that have not said
   // Hello yet (0: no cap). Refused at the upgrade (429 / 503).
   int max_connections_per_ip = 128;

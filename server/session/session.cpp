@@ -313,6 +313,17 @@ void Session::handle_hello(const pb::Hello& hello) {
           self->on_scene_ready(std::move(loaded), error);
         });
       });
+  // A load that hangs (a stalled network file system) must not hold this session for ever: the
+  // Hello timer, idle since the Hello, bounds the wait (on_scene_ready cancels it). Ending the
+  // session withdraws its wait (scene_use_); the load goes on for whoever asks next.
+  hello_timer_.expires_after(std::chrono::milliseconds(shared_.options.scene_load_timeout_ms));
+  hello_timer_.async_wait([self](const boost::system::error_code& ec) {
+    if (ec || self->state_ != State::loading) return;
+    self->shared_.metrics.count(ServerMetrics::Timeout::scene_load);
+    self->fail(pb::ERROR_TIMEOUT, "scene '" + self->shared_.scenes.name(self->scene_use_->index()) +
+                                      "' did not load within " +
+                                      std::to_string(self->shared_.options.scene_load_timeout_ms) + " ms");
+  });
 }
 
 void Session::send_load_progress(int percent, std::uint64_t done, std::uint64_t total) {
@@ -331,6 +342,7 @@ void Session::send_load_progress(int percent, std::uint64_t done, std::uint64_t 
 
 void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std::string& error) {
   if (state_ != State::loading) return;  // closed meanwhile
+  hello_timer_.cancel();                 // the scene-load bound
   if (!scene)
     return fail(pb::ERROR_INTERNAL,
                 "scene '" + shared_.scenes.name(scene_use_->index()) + "' failed to load: " + error);

@@ -173,7 +173,7 @@ class Session : public std::enable_shared_from_this<Session> {
   SessionShared& shared_;
   boost::asio::strand<boost::asio::io_context::executor_type> strand_;
   boost::asio::steady_timer tick_;
-  boost::asio::steady_timer hello_timer_;  // --hello-timeout-ms
+  boost::asio::steady_timer hello_timer_;  // --hello-timeout-ms, then --scene-load-timeout-ms
   const std::string peer_;                 // client address (per-address limits, logs)
 
   // Set when the connection is gone or the session failed (any thread): render jobs still queued

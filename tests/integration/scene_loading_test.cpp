@@ -1,9 +1,14 @@
 // Scenes on demand (issue 20, "Scene choice"; server/session/scene_store.h), against the real
 // server on the CPU renderer: scenes past the first load on first use, once for all the sessions
-// that ask, with LoadProgress before Welcome; a bad file ends only its own sessions; a memory
+// that ask, with LoadProgress before Welcome; a bad file or a load that hangs ends only its own
+// sessions; a memory
 // budget unloads unused scenes and keeps those in use; /metrics counts it all. The scenes are
 // copies of the bundled biker under other names (always present), so nothing here skips.
 #include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -155,6 +160,49 @@ TEST(SceneLoading, BadSceneFileEndsOnlyItsOwnSession) {
   expect_frames(good, 2, 3, "the good session after the other's failed load");
   EXPECT_EQ(metric(server.port(), "catgs_scene_load_failures_total"), 1);
   EXPECT_EQ(metric(server.port(), "catgs_scenes_loaded"), 1);
+}
+
+// A load that hangs (the file became a FIFO nobody writes: open() blocks, as on a stalled network
+// file system) ends its waiting session after --scene-load-timeout-ms with ERROR_TIMEOUT naming
+// the scene, counted; the other session streams on. Writing to the FIFO at the end lets the load
+// fail (an empty file), so the server stops cleanly.
+TEST(SceneLoading, HungLoadTimesOutItsSessionOnly) {
+  const auto files = biker_copies("hung", {"good", "stuck"});
+  ServerProcess server(server_args(files[0], {"--scene", files[1], "--scene-load-timeout-ms", "1500"}));
+  const int port = server.port();
+  fs::remove(files[1]);  // listed from its header at start-up; from now on a FIFO
+  ASSERT_EQ(mkfifo(files[1].c_str(), 0600), 0);
+  StreamClient good;
+  good.connect(port);
+  good.hello(160, 120);
+  expect_frames(good, 0, 2, "the good session before");
+  StreamClient stuck;
+  stuck.connect(port);
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    stuck.hello(160, 120, "", 30000, "stuck", nullptr, true);
+    ADD_FAILURE() << "a session on a scene whose load hangs was welcomed";
+  } catch (const Refused& r) {
+    EXPECT_EQ(r.error().code(), pb::ERROR_TIMEOUT);
+    EXPECT_NE(r.error().reason().find("scene 'stuck' did not load within 1500 ms"), std::string::npos)
+        << r.error().reason();
+  }
+  const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_GE(waited, 1.4);
+  EXPECT_LT(waited, 10.0);
+  EXPECT_TRUE(expect_closed(stuck));
+  expect_frames(good, 2, 3, "the good session after the other's timeout");
+  EXPECT_EQ(metric(port, "catgs_timeouts_total{kind=\"scene_load\"}"), 1);
+  EXPECT_EQ(metric(port, "catgs_scene_load_failures_total"), 0) << "the load is still under way";
+  // Unblock the load: whenever a reader waits in open() (format detection opens the file, then
+  // the reader opens it again), a writer opens and closes the FIFO: the reader sees an empty file.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (metric(port, "catgs_scene_load_failures_total") != 1 && std::chrono::steady_clock::now() < deadline) {
+    const int fd = open(files[1].c_str(), O_WRONLY | O_NONBLOCK);  // ENXIO while no reader waits
+    if (fd >= 0) close(fd);
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(metric(port, "catgs_scene_load_failures_total"), 1);
 }
 
 // --scene-memory-mb that holds one biker (8.2 MiB) but not two: a scene in use is kept when
