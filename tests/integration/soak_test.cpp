@@ -11,7 +11,8 @@
 //
 // Length and load from the environment: CATGS_SOAK_SECONDS (default 30, what CI runs) and
 // CATGS_SOAK_SESSIONS (default 16). The 10-minute run: CATGS_SOAK_SECONDS=600
-// ./build/cpu/bin/catgs_integration_tests --gtest_filter='Soak.*' (results in RESULTS.md).
+// ./build/cpu/bin/catgs_serial_tests --gtest_filter='Soak.*' (results in RESULTS.md). It runs alone
+// under ctest (RUN_SERIAL, tests/integration/CMakeLists.txt): it loads the machine.
 #include <gtest/gtest.h>
 
 #include <dirent.h>
