@@ -352,6 +352,8 @@ int Transport::callback(lws* wsi, int reason, void* user, void* in, std::size_t 
   switch (reason) {
     case LWS_CALLBACK_HTTP_CONFIRM_UPGRADE:
       return self->on_upgrade(wsi, static_cast<const char*>(in));
+    case LWS_CALLBACK_FILTER_HTTP_CONNECTION:
+      return self->on_http_filter(wsi);
     case LWS_CALLBACK_HTTP:
     case LWS_CALLBACK_HTTP_WRITEABLE:
     case LWS_CALLBACK_CLOSED_HTTP:
@@ -367,6 +369,22 @@ int Transport::callback(lws* wsi, int reason, void* user, void* in, std::size_t 
       // Static file serving and the HTTP plumbing live in lws's default handler.
       return lws_callback_http_dummy(wsi, static_cast<lws_callback_reasons>(reason), user, in, len);
   }
+}
+
+int Transport::on_http_filter(lws* wsi) {
+  // RFC 9112 6.3: a message with both Transfer-Encoding and Content-Length, or with Content-Length
+  // given twice, has no single length; a server must not guess (a proxy in front may have guessed
+  // otherwise, and the rest of the bytes would be read as another request). lws 4.1.6 serves such
+  // requests: refuse them here, for every path (page files included), and close.
+  const bool chunked = lws_hdr_total_length(wsi, WSI_TOKEN_HTTP_TRANSFER_ENCODING) > 0;
+  const bool length = lws_hdr_total_length(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH) > 0;
+  const bool twice = lws_hdr_fragment_length(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH, 1) > 0;
+  if (!(chunked && length) && !twice) return 0;
+  std::cerr << "http: 400 for " << peer_of(wsi) << ": "
+            << (twice ? "Content-Length given twice" : "both Transfer-Encoding and Content-Length") << "\n";
+  lws_return_http_status(wsi, HTTP_STATUS_BAD_REQUEST,
+                         twice ? "Content-Length given twice" : "both Transfer-Encoding and Content-Length");
+  return 1;
 }
 
 int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t len) {

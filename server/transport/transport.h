@@ -172,6 +172,10 @@ class Transport {
   int on_http(lws* wsi, int reason, void* user, void* in, std::size_t len);
   // LWS_CALLBACK_HTTP_CONFIRM_UPGRADE: 0 lets the upgrade go on, 1 when refused (answer written).
   int on_upgrade(lws* wsi, const char* upgrade);
+  // Every HTTP request, its headers parsed, before lws routes it (files, probes, upgrades):
+  // refuses ambiguous message framing with 400 (issue 22 finding 8: request smuggling through a
+  // proxy that reads the length differently). Non-zero closes the connection.
+  int on_http_filter(lws* wsi);
   // Appends one received fragment to its message; true when the message is complete (or known
   // to be oversize) and `kind` / `message` are set.
   bool take_fragment(lws* wsi, Conn& c, const void* in, std::size_t len, MessageKind& kind, std::string& message);

@@ -125,6 +125,22 @@ TEST(Hardening, ProbePathsMatchExactly) {
   EXPECT_EQ(http_get(server.port(), "/healthz?probe=1", body), 200) << "a query string is not part of the path";
 }
 
+// Requests whose length is ambiguous (RFC 9112 6.3: Transfer-Encoding with Content-Length, or
+// Content-Length twice) get 400 on every path, the page's files included; lws 4.1.6 served them
+// (200 for /healthz), which lets a request be smuggled past a proxy that reads the length
+// differently. Plain requests are still served.
+TEST(Hardening, AmbiguousMessageLengthGets400) {
+  ServerProcess server(server_args(kBiker));
+  std::string body;
+  for (const char* path : {"/healthz", "/metrics", "/", "/index.html"}) {
+    SCOPED_TRACE(path);
+    EXPECT_EQ(http_get(server.port(), path, body, 5000, "Content-Length: 5\r\nTransfer-Encoding: chunked\r\n"), 400);
+    EXPECT_EQ(http_get(server.port(), path, body, 5000, "Content-Length: 0\r\nContent-Length: 7\r\n"), 400);
+    EXPECT_EQ(http_get(server.port(), path, body, 5000, "Content-Length: 0\r\n"), 200);
+  }
+  EXPECT_NE(server.log().find("http: 400 for 127.0.0.1: both Transfer-Encoding and Content-Length"), std::string::npos);
+}
+
 // A frame declaring 1 GiB is refused at its first bytes, not read for its whole length: Error
 // MALFORMED and a close while the client is still "sending".
 TEST(Hardening, DeclaredFrameLengthCheckedBeforeThePayload) {
