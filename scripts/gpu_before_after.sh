@@ -12,6 +12,10 @@
 #                                                   # snapshots and per-frame render lists compared
 #                                                   # (PATHS=...: the real paths and the city's flyover)
 #                                                   # -> $OUT/before_after.md, $OUT/before_after.tar.gz
+#   scripts/gpu_before_after.sh scale [FRAMES]      # issue 19's scale rows: the city of 13, 49 and 101 copies
+#                                                   # (--radius-sq 4, 16, 32) on the fly-over and the centre view,
+#                                                   # both builds alternating (default 300 frames; COPIES=...)
+#                                                   # -> $OUT/scale_before_after.md, $OUT/scale.tar.gz
 # Both builds use the same flags; the earlier tree keeps its own layout (binaries found by name).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -51,6 +55,27 @@ if [ "${1:-}" = tests ]; then
   done
   python3 "$ROOT/scripts/compare_runs.py" tests "$OUT/gpu_tests_before.md" "$OUT/gpu_tests_after.md" | tee "$OUT/tests_before_after.md"
   exit 0
+fi
+
+if [ "${1:-}" = scale ]; then
+  FRAMES=${2:-300}
+  J=/tmp/ba_scale; rm -rf "$J"; mkdir -p "$J"
+  for r2 in ${COPIES:-4 16 32}; do
+    for trace in flyover centre; do
+      for side in ${ORDER:-before after}; do
+        b=$B_BENCH; [ $side = after ] && b=$A_BENCH
+        mkdir -p "$J/snap_${side}_city-r${r2}_$trace"
+        echo "== $side: city --radius-sq $r2, $trace"
+        "$b" --scene "$S/tumblewood_sh2.compressed.ply" --city --radius-sq "$r2" --up 0,-1,0 --trace "$trace" \
+          --width 1920 --height 1080 --pipeline "${PIPES:-exact,catgs}" --frames "$FRAMES" \
+          --json "$J/${side}_city-r${r2}_$trace.json" --snapshot-dir "$J/snap_${side}_city-r${r2}_$trace" \
+          > "$J/${side}_city-r${r2}_$trace.log" 2>&1 || status=1
+      done
+    done
+  done
+  python3 "$ROOT/scripts/compare_runs.py" bench "$J" | tee "$OUT/scale_before_after.md"
+  tar czf "$OUT/scale.tar.gz" -C "$J" .
+  exit $status
 fi
 
 FRAMES=${2:-600}

@@ -97,8 +97,10 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
     out.tile_rect[i] = rect;
     out.tiles_touched[i] = touched;
   };
-  // A chunk at a time, as the CUDA kernel takes a chunk per block; exact skips the chunks that
-  // cannot reach the image (their Gaussians keep tiles_touched = 0).
+  // A chunk at a time, as the CUDA core takes a block per chunk; exact skips the chunks that
+  // cannot reach the image (the CUDA core's cull_chunks_kernel, which lists the chunks kept for
+  // its later stages). Their Gaussians get tiles_touched = 0 here; the CUDA core leaves them
+  // unwritten and reads them as 0 through its chunk totals (cuda/records.h listed_tiles).
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
     const std::size_t begin = c * fm::kChunkSize, end = std::min(n, begin + fm::kChunkSize);
     const bool outside = exact && fm::chunk_outside_view(chunks[c], view);

@@ -82,6 +82,7 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   const std::size_t chunks = fm::chunk_count(n);
   chunk_total.ensure(chunks * sizeof(uint32_t), "chunk entry counts", allocs);
   chunk_start.ensure(chunks * sizeof(uint64_t), "chunk starts", allocs);
+  live_chunks.ensure(chunks * sizeof(uint32_t), "kept chunks", allocs);
   scan_temp.ensure(stages::scan_temp_bytes(chunks), "scan scratch", allocs);
   ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
   heaviest_tile.ensure(sizeof(uint32_t), "heaviest tile", allocs);
@@ -90,8 +91,9 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
 }
 
-uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::CameraParams& cam,
-                                                const stages::TileTests& tests, bool depth_first, uint64_t* visible) {
+uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkWalk& walk,
+                                                const stages::CameraParams& cam, const stages::TileTests& tests,
+                                                bool depth_first, uint64_t* visible) {
   const stages::Projected proj = projected();
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
@@ -106,7 +108,7 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
   // depth-first order works its own out).
   if (!depth_first) {
     stages::scan_chunks(proj, n, chunk_start.as<uint64_t>(), scan_temp.as<void>(), scan_temp.bytes(), stream);
-    stages::gaussian_ends(proj, n, chunk_start.as<uint64_t>(), ends.as<uint64_t>(), stream);
+    stages::gaussian_ends(proj, n, walk, chunk_start.as<uint64_t>(), ends.as<uint64_t>(), stream);
   }
   CATGS_CUDA(cudaEventSynchronize(counts_ready));
   ++syncs;
@@ -142,8 +144,8 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
     note_peak();
     uint64_t* k[2] = {keys[0].as<uint64_t>(), keys[1].as<uint64_t>()};
     uint32_t* k32[2] = {keys[0].as<uint32_t>(), keys[1].as<uint32_t>()};
-    stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), k[0], narrow ? k32[0] : nullptr, packing,
-                      v[0], nullptr, 0, stream);
+    stages::emit_keys(proj, ends.as<uint64_t>(), n, walk, cam, tests, big_list(), k[0], narrow ? k32[0] : nullptr,
+                      packing, v[0], nullptr, 0, stream);
     CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
     const int half =
         narrow ? stages::sort_pairs_narrow(k32, v, entries, key_bits, sort_temp.as<void>(), sort_temp.bytes(), stream)
@@ -174,11 +176,11 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::Camera
                                         depth_count.as<unsigned>(),
                                         depth_temp.as<void>(),
                                         depth_temp.bytes()};
-  const uint32_t* by_depth =
-      stages::depth_order_ends(proj.tiles_touched, proj.depth, n, *visible, order, ends.as<uint64_t>(), stream);
+  const uint32_t* by_depth = stages::depth_order_ends(proj.tiles_touched, proj.chunk_total, proj.depth, n, *visible,
+                                                      order, ends.as<uint64_t>(), stream);
   uint32_t* k[2] = {keys[0].as<uint32_t>(), keys[1].as<uint32_t>()};
-  stages::emit_keys(proj, ends.as<uint64_t>(), n, cam, tests, big_list(), nullptr, k[0], fm::tile_only_packing(), v[0],
-                    by_depth, *visible, stream);
+  stages::emit_keys(proj, ends.as<uint64_t>(), n, walk, cam, tests, big_list(), nullptr, k[0], fm::tile_only_packing(),
+                    v[0], by_depth, *visible, stream);
   CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
   const int half = stages::sort_pairs_narrow(k, v, entries, tile_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
   sorted_values = v[half];
@@ -242,13 +244,14 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   s.syncs = 0;
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-  stages::preprocess(sv, cam, exact, proj, counters + kVisibleCount, counters + kReadDepthLowComplement, big, s.stream);
+  stages::preprocess(sv, cam, exact, proj, s.live_chunk_list(), counters + kVisibleCount,
+                     counters + kReadDepthLowComplement, big, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
 
   const stages::TileTests tests{
       exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square, proj.splat, {}, cam.width, cam.height};
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, cam, tests, exact && depth_first_sort(), &visible);
+  const uint64_t entries = s.build_render_list(n, s.live_walk(n), cam, tests, exact && depth_first_sort(), &visible);
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
   if (exact) {
     // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the
@@ -325,6 +328,13 @@ CudaRenderer::Diagnostics CudaRenderer::diagnostics() const {
     uint32_t heaviest = 0;
     CATGS_CUDA(cudaMemcpy(&heaviest, s.heaviest, sizeof heaviest, cudaMemcpyDeviceToHost));
     d.heaviest_tile_entries = heaviest;
+  }
+  d.chunks = fm::chunk_count(scene_->size());
+  if (s.width > 0) {
+    CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
+    unsigned kept = 0;
+    CATGS_CUDA(cudaMemcpy(&kept, s.live_chunk_list().count, sizeof kept, cudaMemcpyDeviceToHost));
+    d.chunks_kept = kept;
   }
   return d;
 }

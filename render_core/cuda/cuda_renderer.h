@@ -198,6 +198,10 @@ class CudaRenderer final : public Renderer {
     // tile is several slices; catgs sub-frames: their key frame's; vanilla: its heaviest tile).
     // One block walks it alone, so it bounds the rasterization time.
     std::size_t heaviest_tile_entries = 0;
+    // Chunks (fm::kChunkSize Gaussians) the last frame's exact or vanilla pre-processing kept
+    // after chunk culling, of `chunks` (0 kept where the frame ran no such pre-processing: catgs
+    // speculative key frames and sub-frames).
+    std::size_t chunks_kept = 0, chunks = 0;
   };
   Diagnostics diagnostics() const;
 

@@ -26,15 +26,19 @@ namespace catgs::cuda::stages {
 
 namespace {
 
+// Both read tiles_touched through listed_tiles: a chunk that exact pre-processing culled left
+// its Gaussians' counts unwritten (records.h).
 struct IsVisible {
   const uint32_t* tiles_touched;  // [N]
-  __host__ __device__ bool operator()(uint32_t i) const { return tiles_touched[i] > 0; }
+  const uint32_t* chunk_total;    // [chunks]
+  __device__ bool operator()(uint32_t i) const { return listed_tiles(tiles_touched, chunk_total, i) > 0; }
 };
 
 struct TouchedOf {  // Gaussian index -> its tile count, widened for the 64-bit scan
   const uint32_t* tiles_touched;
+  const uint32_t* chunk_total;
   uint64_t n;  // index n: a padding slot (gather_depth_keys_kernel), no tiles
-  __host__ __device__ uint64_t operator()(uint32_t i) const { return i < n ? tiles_touched[i] : 0u; }
+  __device__ uint64_t operator()(uint32_t i) const { return i < n ? listed_tiles(tiles_touched, chunk_total, i) : 0u; }
 };
 
 using CountsInDepthOrder = thrust::transform_iterator<TouchedOf, const uint32_t*, uint64_t>;
@@ -68,21 +72,22 @@ std::size_t depth_order_temp_bytes(uint64_t n) {
   std::size_t select = 0, sort = 0, scan = 0;
   CATGS_CUDA(cub::DeviceSelect::If(nullptr, select, thrust::counting_iterator<uint32_t>(0),
                                    static_cast<uint32_t*>(nullptr), static_cast<unsigned*>(nullptr),
-                                   static_cast<int64_t>(n), IsVisible{nullptr}));
+                                   static_cast<int64_t>(n), IsVisible{nullptr, nullptr}));
   // The sort's offsets follow its count (sort.cu), which is V <= N at run time: size for both.
   sort = std::max(sort_narrow_temp_bytes(n, 32), sort_narrow_temp_bytes(std::min<uint64_t>(n, 0x7fffffffull), 32));
-  CountsInDepthOrder in(nullptr, TouchedOf{nullptr, 0});
+  CountsInDepthOrder in(nullptr, TouchedOf{nullptr, nullptr, 0});
   EndsByGaussian out(nullptr, nullptr);
   CATGS_CUDA(cub::DeviceScan::InclusiveSum(nullptr, scan, in, out, static_cast<int64_t>(n)));
   return std::max(select, std::max(sort, scan));
 }
 
-const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const float* depth, uint64_t n, uint64_t visible,
-                                 const DepthOrderBuffers& b, uint64_t* ends, cudaStream_t stream) {
+const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const uint32_t* chunk_total, const float* depth,
+                                 uint64_t n, uint64_t visible, const DepthOrderBuffers& b, uint64_t* ends,
+                                 cudaStream_t stream) {
   if (visible == 0) return b.index[0];
   std::size_t temp_bytes = b.temp_bytes;  // CUB takes it by reference
   CATGS_CUDA(cub::DeviceSelect::If(b.temp, temp_bytes, thrust::counting_iterator<uint32_t>(0), b.index[0], b.count,
-                                   static_cast<int64_t>(n), IsVisible{tiles_touched}, stream));
+                                   static_cast<int64_t>(n), IsVisible{tiles_touched, chunk_total}, stream));
   const auto blocks = static_cast<unsigned>((visible + tune::kGaussianThreads - 1) / tune::kGaussianThreads);
   gather_depth_keys_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(
       b.index[0], b.count, static_cast<uint32_t>(visible), depth, static_cast<uint32_t>(n), b.keys[0]);
@@ -95,7 +100,7 @@ const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const float* dep
   // at the Gaussian's own index (what emit_keys reads). Invisible Gaussians keep theirs: they
   // emit nothing.
   const uint32_t* order = v[half];
-  CountsInDepthOrder in(order, TouchedOf{tiles_touched, n});
+  CountsInDepthOrder in(order, TouchedOf{tiles_touched, chunk_total, n});
   EndsByGaussian out(ends, order);
   CATGS_CUDA(cub::DeviceScan::InclusiveSum(b.temp, temp_bytes, in, out, static_cast<int64_t>(visible), stream));
   return order;

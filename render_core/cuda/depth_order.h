@@ -10,7 +10,7 @@
 namespace catgs::cuda::stages {
 
 // Stage 2a' (depth_order.cu, the depth-first sort): sorts the `visible` Gaussians with
-// tiles_touched > 0 by depth (stable, so equal depths keep index order) and rewrites ends[i] of
+// entries (records.h listed_tiles) by depth (stable, so equal depths keep index order) and rewrites ends[i] of
 // each of them as the inclusive running sum of tiles_touched in that order (the others keep
 // theirs). Emission then lays each Gaussian's entries out in depth order, and a stable sort on
 // the tile alone (sort_pairs_narrow) gives the [tile | depth] list. `visible` comes from the
@@ -25,7 +25,8 @@ struct DepthOrderBuffers {
   std::size_t temp_bytes;
 };
 std::size_t depth_order_temp_bytes(uint64_t n);
-const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const float* depth, uint64_t n, uint64_t visible,
-                                 const DepthOrderBuffers& buffers, uint64_t* ends, cudaStream_t stream);
+const uint32_t* depth_order_ends(const uint32_t* tiles_touched, const uint32_t* chunk_total, const float* depth,
+                                 uint64_t n, uint64_t visible, const DepthOrderBuffers& buffers, uint64_t* ends,
+                                 cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -67,23 +67,45 @@ __global__ void __launch_bounds__(kCountThreads)
   if (blockIdx.x == 0) counts[1] = *visible;
 }
 
-// A block per chunk: each Gaussian's end in the list, its chunk's start + the inclusive sum of
-// tiles_touched over the chunk up to it. A chunk without entries (culled, or nothing listed)
-// is left alone: emission skips it too.
+// A block per chunk of the walk: each Gaussian's end in the list, its chunk's start + the
+// inclusive sum of tiles_touched over the chunk up to it. A chunk without entries (nothing
+// listed) is left alone: emission skips it too.
 __global__ void __launch_bounds__(fm::kChunkSize)
     gaussian_ends_kernel(const uint32_t* __restrict__ tiles_touched,  // [N]
                          const uint32_t* __restrict__ chunk_total,    // [chunks]
                          const uint64_t* __restrict__ chunk_start,    // [chunks]
-                         uint64_t n,
+                         uint64_t n, ChunkWalk walk,
                          uint64_t* __restrict__ ends) {  // [N]
   using Scan = cub::BlockScan<uint32_t, fm::kChunkSize>;
   __shared__ typename Scan::TempStorage scratch;
-  if (chunk_total[blockIdx.x] == 0u) return;  // block-uniform
-  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * fm::kChunkSize + threadIdx.x;
-  const uint32_t touched = i < n ? tiles_touched[i] : 0u;
-  uint32_t upto = 0;
-  Scan(scratch).InclusiveSum(touched, upto);
-  if (i < n) ends[i] = chunk_start[blockIdx.x] + upto;
+  const uint64_t chunks = walk.size();
+  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
+    const uint64_t c = walk.chunk(k);
+    if (chunk_total[c] == 0u) continue;  // block-uniform
+    const uint64_t i = c * fm::kChunkSize + threadIdx.x;
+    const uint32_t touched = i < n ? tiles_touched[i] : 0u;
+    uint32_t upto = 0;
+    Scan(scratch).InclusiveSum(touched, upto);
+    if (i < n) ends[i] = chunk_start[c] + upto;
+    __syncthreads();  // scratch is reused next round
+  }
+}
+
+// Calls emit(j) for this thread's walk positions: with an `order`, the thread's index in the grid
+// (j indexes the order); without, thread x of each walked chunk that has entries (j = the
+// Gaussian, c * kChunkSize + x; the chunk test is block-uniform, so warps stay whole).
+template <typename Emit>
+__device__ __forceinline__ void for_each_walked(const uint32_t* order, const ChunkWalk& walk,
+                                                const uint32_t* __restrict__ chunk_total, Emit&& emit) {
+  if (order) {
+    emit(static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x);
+    return;
+  }
+  const uint64_t chunks = walk.size();
+  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
+    const uint64_t c = walk.chunk(k);
+    if (chunk_total[c] != 0u) emit(c * fm::kChunkSize + threadIdx.x);
+  }
 }
 
 // One thread per Gaussian writes its run of keys, testing each tile of its rectangle (vanilla
@@ -91,18 +113,14 @@ __global__ void __launch_bounds__(fm::kChunkSize)
 // emit_mask_keys_kernel). Writes are bounded by
 // its own slot [begin, end): a disagreement between counting and emitting could never spill into
 // a neighbour. Thread j takes Gaussian order[j] when an order is given, else Gaussian j.
-__global__ void __launch_bounds__(tune::kGaussianThreads)
-    emit_keys_kernel(const uint32_t* __restrict__ order,  // [n] or null
-                     TileTests tests,
-                     const float* __restrict__ depth,             // [N]
-                     const ushort4* __restrict__ rect,            // [N]
-                     const uint32_t* __restrict__ tiles_touched,  // [N]
-                     const uint64_t* __restrict__ ends,           // [N] end of each Gaussian's run
-                     const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
-                     uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
-                     uint32_t* __restrict__ values) {   // [L]
-  if (!order && chunk_total[blockIdx.x] == 0u) return;  // a chunk without entries (block-uniform)
-  const uint64_t j = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+__device__ __forceinline__ void emit_gaussian_keys(uint64_t j, const uint32_t* __restrict__ order,  // [n] or null
+                                                   const TileTests& tests,
+                                                   const float* __restrict__ depth,             // [N]
+                                                   const ushort4* __restrict__ rect,            // [N]
+                                                   const uint32_t* __restrict__ tiles_touched,  // [N]
+                                                   const uint64_t* __restrict__ ends,           // [N] end of each run
+                                                   uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
+                                                   const KeyOut& keys, uint32_t* __restrict__ values) {  // [L]
   if (j >= n) return;
   const uint64_t i = order ? order[j] : j;
   if (i >= gaussians || tiles_touched[i] == 0) return;  // (depth_order's padding index is N)
@@ -126,6 +144,22 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     keys.put(at, sentinel, 0xffffffffu);
     values[at] = static_cast<uint32_t>(i);
   }
+}
+
+// Thread j of the walk (`order` given) or of each walked chunk with entries (index order).
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+    emit_keys_kernel(const uint32_t* __restrict__ order,  // [n] or null
+                     TileTests tests,
+                     const float* __restrict__ depth,             // [N]
+                     const ushort4* __restrict__ rect,            // [N]
+                     const uint32_t* __restrict__ tiles_touched,  // [N]
+                     const uint64_t* __restrict__ ends,           // [N] end of each Gaussian's run
+                     const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
+                     ChunkWalk walk, uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
+                     uint32_t* __restrict__ values) {  // [L]
+  for_each_walked(order, walk, chunk_total, [&](uint64_t j) {
+    emit_gaussian_keys(j, order, tests, depth, rect, tiles_touched, ends, n, gaussians, tiles_x, tiles_y, keys, values);
+  });
 }
 
 // Position of the r-th set bit (r from 0) of mask, r < popc(mask): a binary search on popc.
@@ -153,19 +187,15 @@ __device__ __forceinline__ int nth_set_bit(uint32_t mask, uint32_t r) {
 // r = s - start picks the r-th set bit of that lane's mask, i.e. the r-th listed tile in
 // row-major order, as a per-Gaussian loop writes them. Big Gaussians' slots are left to
 // emit_big_kernel. Every thread of a warp must reach the shuffles: no early return.
-__global__ void __launch_bounds__(tune::kGaussianThreads)
-    emit_mask_keys_kernel(const uint32_t* __restrict__ order,          // [n] or null
-                          const uint32_t* __restrict__ tile_mask,      // [N]
-                          const float* __restrict__ depth,             // [N]
-                          const ushort4* __restrict__ rect,            // [N]
-                          const uint32_t* __restrict__ tiles_touched,  // [N]
-                          const uint64_t* __restrict__ ends,           // [N]
-                          const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
-                          uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
-                          uint32_t* __restrict__ values) {  // [L]
+__device__ __forceinline__ void emit_mask_keys_warp(uint64_t j, const uint32_t* __restrict__ order,  // [n] or null
+                                                    const uint32_t* __restrict__ tile_mask,          // [N]
+                                                    const float* __restrict__ depth,                 // [N]
+                                                    const ushort4* __restrict__ rect,                // [N]
+                                                    const uint32_t* __restrict__ tiles_touched,      // [N]
+                                                    const uint64_t* __restrict__ ends,               // [N]
+                                                    uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
+                                                    const KeyOut& keys, uint32_t* __restrict__ values) {  // [L]
   constexpr unsigned kAll = 0xffffffffu;
-  if (!order && chunk_total[blockIdx.x] == 0u) return;  // a chunk without entries (block-uniform)
-  const uint64_t j = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   const auto lane = static_cast<int>(threadIdx.x & 31u);
   // This lane's run [start, end). Lanes past the walk (or the depth order's padding) get a run
   // that starts after every slot, so no search lands on them; starts rise with the lane.
@@ -230,6 +260,23 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     }
     values[s] = owner_index;
   }
+}
+
+// Thread j of the walk (`order` given) or of each walked chunk with entries (index order).
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+    emit_mask_keys_kernel(const uint32_t* __restrict__ order,          // [n] or null
+                          const uint32_t* __restrict__ tile_mask,      // [N]
+                          const float* __restrict__ depth,             // [N]
+                          const ushort4* __restrict__ rect,            // [N]
+                          const uint32_t* __restrict__ tiles_touched,  // [N]
+                          const uint64_t* __restrict__ ends,           // [N]
+                          const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
+                          ChunkWalk walk, uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
+                          uint32_t* __restrict__ values) {  // [L]
+  for_each_walked(order, walk, chunk_total, [&](uint64_t j) {
+    emit_mask_keys_warp(j, order, tile_mask, depth, rect, tiles_touched, ends, n, gaussians, tiles_x, tiles_y, keys,
+                        values);
+  });
 }
 
 // Big Gaussians (preprocess.cu count_big_kernel's two passes): a warp per big Gaussian, then a
@@ -351,35 +398,39 @@ void scan_chunks(const Projected& p, uint64_t n, uint64_t* chunk_start, void* te
   CATGS_CUDA(cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, chunk_start, chunks, stream));
 }
 
-void gaussian_ends(const Projected& p, uint64_t n, const uint64_t* chunk_start, uint64_t* ends, cudaStream_t stream) {
-  const uint64_t chunks = fm::chunk_count(n);
-  if (chunks == 0) return;
-  if (chunks > 0x7fffffffull) throw std::length_error("gaussian_ends: too many chunks for one grid");
-  gaussian_ends_kernel<<<static_cast<unsigned>(chunks), fm::kChunkSize, 0, stream>>>(p.tiles_touched, p.chunk_total,
-                                                                                     chunk_start, n, ends);
+void gaussian_ends(const Projected& p, uint64_t n, const ChunkWalk& walk, const uint64_t* chunk_start, uint64_t* ends,
+                   cudaStream_t stream) {
+  const uint64_t blocks = walk.blocks();
+  if (blocks == 0) return;
+  if (blocks > 0x7fffffffull) throw std::length_error("gaussian_ends: too many chunks for one grid");
+  gaussian_ends_kernel<<<static_cast<unsigned>(blocks), fm::kChunkSize, 0, stream>>>(p.tiles_touched, p.chunk_total,
+                                                                                     chunk_start, n, walk, ends);
   CATGS_CUDA_LAUNCHED("gaussian_ends_kernel");
 }
 
-void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const CameraParams& cam, const TileTests& tests,
-               const BigList& big, uint64_t* wide_keys, uint32_t* narrow_keys, DepthKeyPacking packing,
-               uint32_t* values, const uint32_t* order, uint64_t order_count, cudaStream_t stream) {
+void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const ChunkWalk& chunks, const CameraParams& cam,
+               const TileTests& tests, const BigList& big, uint64_t* wide_keys, uint32_t* narrow_keys,
+               DepthKeyPacking packing, uint32_t* values, const uint32_t* order, uint64_t order_count,
+               cudaStream_t stream) {
   if (n == 0) return;
   const KeyOut keys{wide_keys, narrow_keys, packing};
   const uint64_t walk = order ? order_count : n;
-  const uint64_t blocks = (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  // A thread per Gaussian of the order, or a block per walked chunk.
+  const uint64_t blocks = order ? (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads : chunks.blocks();
+  if (blocks > 0x7fffffffull) throw std::length_error("emit_keys: too many Gaussians for one grid");
   // The small Gaussians' tile answers, where the counting kept them (trails; exact ellipses).
   const uint32_t* mask = tests.kind == TileTestKind::trail     ? tests.trails.tile_mask
                          : tests.kind == TileTestKind::ellipse ? p.tile_mask
                                                                : nullptr;
   if (walk > 0 && mask) {
     emit_mask_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-        order, mask, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, walk, n, cam.tiles_x, cam.tiles_y, keys,
-        values);
+        order, mask, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, chunks, walk, n, cam.tiles_x, cam.tiles_y,
+        keys, values);
     CATGS_CUDA_LAUNCHED("emit_mask_keys_kernel");
   } else if (walk > 0) {
     emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-        order, tests, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, walk, n, cam.tiles_x, cam.tiles_y, keys,
-        values);
+        order, tests, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, chunks, walk, n, cam.tiles_x, cam.tiles_y,
+        keys, values);
     CATGS_CUDA_LAUNCHED("emit_keys_kernel");
   }
   emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, p.depth, p.rect, p.tiles_touched,

@@ -21,10 +21,11 @@ std::size_t scan_temp_bytes(uint64_t chunks);
 void scan_chunks(const Projected& projected, uint64_t n, uint64_t* chunk_start, void* temp, std::size_t temp_bytes,
                  cudaStream_t stream);
 // Stage 2a' (key_emission.cu): ends[i], the end of Gaussian i's run in the list in index order
-// (its chunk's start + the inclusive sum of tiles_touched within the chunk), a block per chunk;
-// left unwritten in chunks without entries, which emission in index order skips.
-void gaussian_ends(const Projected& projected, uint64_t n, const uint64_t* chunk_start, uint64_t* ends,
-                   cudaStream_t stream);
+// (its chunk's start + the inclusive sum of tiles_touched within the chunk), a block per chunk of
+// `walk` (records.h ChunkWalk: the chunks pre-processing kept); left unwritten in chunks without
+// entries, which emission in index order skips.
+void gaussian_ends(const Projected& projected, uint64_t n, const ChunkWalk& walk, const uint64_t* chunk_start,
+                   uint64_t* ends, cudaStream_t stream);
 
 // Stage 2b (key_emission.cu): each Gaussian writes its keys and values (its index) at
 // [ends[i] - tiles_touched[i], ends[i]), in row-major tile order; never more than
@@ -34,11 +35,11 @@ void gaussian_ends(const Projected& projected, uint64_t n, const uint64_t* chunk
 // the warp writes on consecutive slots (coalesced). Keys are made as `packing` says
 // (forward_model/key_packing.h): 64-bit into `wide_keys`, or, when `narrow_keys` is not null,
 // 32-bit into it (the single sort's [tile | quantised depth]; the tile id alone for the
-// depth-first sort). `order` (or null: all N in index order, skipping chunks without entries):
-// the `order_count` Gaussians to walk, in that order (depth_order_ends's).
-void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const CameraParams& cam,
-               const TileTests& tests, const BigList& big, uint64_t* wide_keys, uint32_t* narrow_keys,
-               DepthKeyPacking packing, uint32_t* values, const uint32_t* order, uint64_t order_count,
-               cudaStream_t stream);
+// depth-first sort). `order` (or null: the Gaussians of the chunks of `chunks`, skipping chunks
+// without entries): the `order_count` Gaussians to walk, in that order (depth_order_ends's).
+void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const ChunkWalk& chunks,
+               const CameraParams& cam, const TileTests& tests, const BigList& big, uint64_t* wide_keys,
+               uint32_t* narrow_keys, DepthKeyPacking packing, uint32_t* values, const uint32_t* order,
+               uint64_t order_count, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -41,7 +41,7 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
     warp_high[warp] = high;
   }
   __syncthreads();
-  if (threadIdx.x != 0) return;
+  if (threadIdx.x != 0) return;  // the caller's next barrier keeps warp_low/high until thread 0 read them
   unsigned block_low = 0, block_high = 0;
   for (unsigned w = 0; w < blockDim.x / 32u; ++w) {
     block_low = max(block_low, warp_low[w]);
@@ -52,25 +52,35 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
   if (block_high > seen[1]) atomicMax(depth_range + 1, static_cast<unsigned long long>(block_high));
 }
 
-// One thread per Gaussian, a block per chunk. exact first tests the block's chunk against the
-// view (fm::chunk_outside_view): a chunk that cannot reach the image writes tiles_touched = 0
-// and a chunk total of 0 and reads nothing else. Otherwise each thread reads its Gaussian once
-// (SH only for visible Gaussians) and writes the projected features of visible ones and
-// tiles_touched of all.
-__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
-    preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out,
-                      unsigned long long* visible,      // [1] running count of visible Gaussians
-                      unsigned long long* depth_range,  // [2] listed depths (record_depth_range)
-                      BigList big) {
-  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  __shared__ bool outside;
-  if (threadIdx.x == 0) outside = exact && fm::chunk_outside_view(scene.chunks[blockIdx.x], cam);
-  __syncthreads();
-  if (outside) {  // block-uniform
-    if (i < scene.n) out.tiles_touched[i] = 0;
-    if (threadIdx.x == 0) out.chunk_total[blockIdx.x] = 0;
-    return;
-  }
+// Chunk culling, a thread per chunk: exact drops the chunks that cannot reach the image
+// (fm::chunk_outside_view; vanilla keeps every chunk, as reference 3DGS culls only per Gaussian).
+// A dropped chunk gets chunk_total = 0 and nothing else is written for it; a kept one is
+// appended to live[] (one atomic per warp that keeps any; the order is free, see ChunkWalk).
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+    cull_chunks_kernel(const fm::ChunkBounds* __restrict__ chunks,  // [count]
+                       uint64_t count, CameraParams cam, bool exact,
+                       uint32_t* __restrict__ chunk_total,  // [count]
+                       uint32_t* __restrict__ live,         // [count]
+                       unsigned* live_count) {              // [1], zero on entry
+  const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  const bool keep = c < count && !(exact && fm::chunk_outside_view(chunks[c], cam));
+  if (c < count && !keep) chunk_total[c] = 0u;
+  const unsigned lanes = __ballot_sync(0xffffffffu, keep);
+  if (lanes == 0u) return;  // warp-uniform
+  const int lane = static_cast<int>(threadIdx.x & 31u), leader = __ffs(lanes) - 1;
+  unsigned base = 0;
+  if (lane == leader) base = atomicAdd(live_count, static_cast<unsigned>(__popc(lanes)));
+  base = __shfl_sync(0xffffffffu, base, leader);
+  if (keep) live[base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)))] = static_cast<uint32_t>(c);
+}
+
+// One thread per Gaussian of chunk c (a block's thread x takes Gaussian c * kChunkSize + x): reads
+// its Gaussian once (SH only for visible Gaussians) and writes the projected features of visible
+// ones and tiles_touched of all, and the chunk's total. Every thread of the block calls it.
+__device__ __forceinline__ void preprocess_chunk(uint64_t c, const SceneView& scene, const CameraParams& cam,
+                                                 bool exact, const Projected& out, unsigned long long* visible,
+                                                 unsigned long long* depth_range, const BigList& big) {
+  const uint64_t i = c * fm::kChunkSize + threadIdx.x;
   uint32_t touched = 0;
   bool is_big = false, is_huge = false;
   float depth = 0.0f;
@@ -111,9 +121,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
       if (touched == 0 && !is_big) break;
 
       const glm::vec3 dir = glm::normalize(mean - cam.position);
-      const glm::vec3 c = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), dir);
+      const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), dir);
       out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
-      out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
+      out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
       out.depth[i] = p_cam.z;
       depth = p_cam.z;
       out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
@@ -121,10 +131,23 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, is_huge, touched, i, big, visible, out.chunk_total);
+  list_big_and_count_visible(is_big, is_huge, touched, i, c, big, visible, out.chunk_total);
   // Big Gaussians' depths count where count_big_kernel finds them entries: the range is over
   // the Gaussians with entries, as the CPU reference's sort works it out from its list.
   record_depth_range(touched > 0, depth, depth_range);
+}
+
+// A block per chunk that cull_chunks_kernel kept (grid-stride over the list: ChunkWalk).
+__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
+    preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out, ChunkWalk live,
+                      unsigned long long* visible,      // [1] running count of visible Gaussians
+                      unsigned long long* depth_range,  // [2] listed depths (record_depth_range)
+                      BigList big) {
+  const uint64_t chunks = live.size();
+  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
+    preprocess_chunk(live.chunk(k), scene, cam, exact, out, visible, depth_range, big);
+    __syncthreads();  // the shared words of the block reductions are rewritten next round
+  }
 }
 
 // Record of a big Gaussian's count, or of one part's of a huge one (one thread): adds n to its
@@ -197,12 +220,18 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
 }  // namespace
 
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
-                unsigned long long* visible, unsigned long long* depth_range, const BigList& big, cudaStream_t stream) {
+                const LiveChunks& live, unsigned long long* visible, unsigned long long* depth_range,
+                const BigList& big, cudaStream_t stream) {
   if (scene.n == 0) return;
-  const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
-  if (blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
-  preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(scene, cam, exact, out,
-                                                                                          visible, depth_range, big);
+  const uint64_t chunks = fm::chunk_count(scene.n);
+  const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
+  cull_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
+      scene.chunks, chunks, cam, exact, out.chunk_total, live.index, live.count);
+  CATGS_CUDA_LAUNCHED("cull_chunks_kernel");
+  const ChunkWalk walk = live.walk(chunks);
+  preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
+      scene, cam, exact, out, walk, visible, depth_range, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};

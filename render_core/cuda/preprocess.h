@@ -9,18 +9,21 @@
 
 namespace catgs::cuda::stages {
 
-// Stage 1 (preprocess.cu): chunk culling (exact: fm::chunk_outside_view, a block per chunk),
-// frustum culling, EWA 2D covariance, conic, SH colour, tile bounds and
-// per-Gaussian tile counts (vanilla: 3-sigma square; exact: opacity-aware ellipse-vs-tile test).
+// Stage 1 (preprocess.cu): chunk culling first (exact: fm::chunk_outside_view, a thread per
+// chunk; vanilla keeps every chunk), whose kept chunks go to `live` (records.h LiveChunks, its
+// count zero on entry; a culled chunk gets chunk_total = 0 and nothing else), then a block per
+// kept chunk: frustum culling, EWA 2D covariance, conic, SH colour, tile bounds and per-Gaussian
+// tile counts (vanilla: 3-sigma square; exact: opacity-aware ellipse-vs-tile test).
 // Adds the number of visible Gaussians to *visible (one atomic per block), and widens
 // depth_range[2] to the view depths of the Gaussians with entries (float bits; [0] complemented,
 // both running maxima: zero them first) for the single sort's key (fm::single_sort_packing). Big Gaussians are
 // appended to `big`, huge ones to its huge end (one atomic per warp that holds any); with
 // `exact`, their tiles are counted by a second kernel (count_big_tiles). `big.count` must be zero
-// on entry. Writes each chunk's
-// entry count to out.chunk_total.
+// on entry. Writes each chunk's entry count to out.chunk_total; tiles_touched only in kept chunks
+// (records.h listed_tiles).
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
-                unsigned long long* visible, unsigned long long* depth_range, const BigList& big, cudaStream_t stream);
+                const LiveChunks& live, unsigned long long* visible, unsigned long long* depth_range,
+                const BigList& big, cudaStream_t stream);
 
 // Stage 1, big Gaussians (preprocess.cu): a warp per big Gaussian of `big`, and a block per part
 // of a huge one (huge_parts, tile_test.cuh; each part's count into big.part_count), counts the

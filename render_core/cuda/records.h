@@ -55,7 +55,9 @@ struct __align__(32) Splat {
 };
 
 // Stage 1 output, one entry per Gaussian (and one per chunk of fm::kChunkSize Gaussians);
-// tiles_touched == 0 marks a culled Gaussian whose other fields are left unwritten.
+// tiles_touched == 0 marks a culled Gaussian whose other fields are left unwritten, and a culled
+// chunk (chunk_total == 0) leaves even its Gaussians' tiles_touched unwritten: read them through
+// listed_tiles where the chunk may have been culled.
 struct Projected {
   Splat* splat;             // [N] 2D mean, conic, opacity, q_max, power cut
   float4* color;            // [N] (r, g, b, unused): 16-byte loads in the rasterizer
@@ -70,6 +72,40 @@ struct Projected {
   // list scan runs over chunks, and later stages skip a chunk with none (a culled one) without
   // reading its Gaussians.
   uint32_t* chunk_total;
+};
+
+// Gaussian i's render-list entries, where only the chunks stage 1 walked were written
+// (tiles_touched is left unwritten in a culled chunk, whose chunk_total is 0).
+__device__ __forceinline__ uint32_t listed_tiles(const uint32_t* tiles_touched, const uint32_t* chunk_total,
+                                                 uint64_t i) {
+  return chunk_total[i / fm::kChunkSize] != 0u ? tiles_touched[i] : 0u;
+}
+
+// The chunks (fm::kChunkSize Gaussians each) that a frame's per-Gaussian stages walk, a block
+// per chunk. Exact pre-processing culls whole chunks first (cull_chunks, preprocess.cu) and lists
+// those left, in no particular order (each chunk's outputs do not depend on the order, and the
+// list is laid out by the chunks' scan in index order); the other stages then launch at most
+// tune::kChunkWalkBlocks blocks over that list, so a culled chunk costs a few bytes, not a block
+// and a write per Gaussian (issue 19: "cull whole chunks first"). A null `index` walks every
+// chunk in index order, a block each (the speculative pre-processing culls no chunks).
+struct ChunkWalk {
+  const uint32_t* index;  // [chunks] or null
+  const unsigned* count;  // [1] device: the chunks in index[]
+  uint64_t chunks;        // fm::chunk_count(N): every chunk, the most index[] can hold
+  __device__ uint64_t size() const { return index ? *count : chunks; }
+  __device__ uint64_t chunk(uint64_t k) const { return index ? index[k] : k; }
+  // Blocks of a launch that walks the chunks a block each (grid-stride past the cap).
+  uint64_t blocks() const {
+    return index ? (chunks < tune::kChunkWalkBlocks ? chunks : tune::kChunkWalkBlocks) : chunks;
+  }
+};
+
+// Where stage 1 lists the chunks it keeps: index [chunk_count(N)] and count [1] (device, zero on
+// entry), read back by later stages as a ChunkWalk.
+struct LiveChunks {
+  uint32_t* index;
+  unsigned* count;
+  ChunkWalk walk(uint64_t chunks) const { return {index, count, chunks}; }
 };
 
 // Render-list sort keys (forward_model/key_packing.h): 64-bit plain [tile | depth bits], or the

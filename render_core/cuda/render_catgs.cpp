@@ -103,8 +103,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
     // No window: the frame is rendered in full by the exact pipeline's stages (a one-pose trail
     // is the exact ellipse, so the list is the same; the path-wide kernel only costs more) and
     // opens no group. Task splitting still applies.
-    stages::preprocess(sv, cam, true, proj, counters + kVisibleCount, counters + kReadDepthLowComplement, s.big_list(),
-                       s.stream);
+    stages::preprocess(sv, cam, true, proj, s.live_chunk_list(), counters + kVisibleCount,
+                       counters + kReadDepthLowComplement, s.big_list(), s.stream);
     tests = {stages::TileTestKind::ellipse, proj.splat, {}, cam.width, cam.height};
   }
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
@@ -113,7 +113,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
   // the predictor and the depth-first sort bought").
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, cam, tests, window > 0 && depth_first_sort(), &visible);
+  const uint64_t entries = s.build_render_list(n, window > 0 ? State::every_chunk(n) : s.live_walk(n), cam, tests,
+                                               window > 0 && depth_first_sort(), &visible);
   if (window > 0)  // the frustum cache, for the group's sub-frames
     stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(),
                           s.catgs_counters.as<unsigned>() + kCachedCount, s.select_temp.as<void>(),

@@ -64,8 +64,9 @@ class GrowBuffer {
 // Slots of State::counters (64-bit, device): the running visible count, the frame's 32-byte
 // readback (render-list length, visible count, and the listed Gaussians' depth range as float
 // bits, the low end complemented so that both ends are running maxima from zero: the one copy
-// build_render_list syncs on) and the big-Gaussian count (stages::BigList::count, its low 32
-// bits; its high 32 bits: the huge ones').
+// build_render_list syncs on), the big-Gaussian count (stages::BigList::count, its low 32
+// bits; its high 32 bits: the huge ones') and the chunks pre-processing kept (stages::LiveChunks,
+// low 32 bits).
 enum CounterSlot {
   kVisibleCount = 0,
   kReadListLength = 1,
@@ -74,7 +75,8 @@ enum CounterSlot {
   kReadDepthHigh = 4,
   kReadSlots = 4,
   kBigCount = 5,
-  kCounterSlots = 6
+  kLiveChunkCount = 6,
+  kCounterSlots = 7
 };
 // Slots of State::catgs_counters (32-bit, device) and of its pinned host mirror host_catgs (the
 // first kHostCatgsSlots): M's float bits, the sub-frame's "outside its trail" flag, the key
@@ -118,8 +120,9 @@ struct CudaRenderer::State {
 
   // Per Gaussian.
   GrowBuffer splat, color, depth, rect, tiles_touched, tile_mask, ends, scan_temp, big, huge_part_count;
-  // Per chunk of fm::kChunkSize Gaussians: render-list entries, and where the chunk's start.
-  GrowBuffer chunk_total, chunk_start;
+  // Per chunk of fm::kChunkSize Gaussians: render-list entries, where the chunk's start, and the
+  // chunks exact pre-processing kept (stages::LiveChunks).
+  GrowBuffer chunk_total, chunk_start, live_chunks;
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // The depth-first sort (depth_order.cu): visible Gaussians and their depth keys (two halves
@@ -158,8 +161,10 @@ struct CudaRenderer::State {
   // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
   // ranges. With `depth_first` the list is ordered by the depth-first sort (depth_order.cu; the
   // same list). Returns the list length. Throws std::length_error past 2^32 - 1 entries.
-  uint64_t build_render_list(uint64_t n, const stages::CameraParams& cam, const stages::TileTests& tests,
-                             bool depth_first, uint64_t* visible);
+  // `walk`: the chunks pre-processing visited (live_walk() after preprocess, every chunk after
+  // the speculative pre-processing).
+  uint64_t build_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
+                             const stages::TileTests& tests, bool depth_first, uint64_t* visible);
 
   // Plans the split tasks of a frame of `entries` list entries and their order (task_split.cu,
   // paper sec. 3.4; after the tile ranges) and returns the slice capacity, the blocks the frame's
@@ -178,6 +183,13 @@ struct CudaRenderer::State {
     return {splat.as<stages::Splat>(),    color.as<float4>(),       depth.as<float>(),         rect.as<ushort4>(),
             tiles_touched.as<uint32_t>(), tile_mask.as<uint32_t>(), chunk_total.as<uint32_t>()};
   }
+  // Where preprocess lists the chunks it keeps, and the same list as later stages walk it.
+  stages::LiveChunks live_chunk_list() const {
+    return {live_chunks.as<uint32_t>(),
+            reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kLiveChunkCount)};
+  }
+  stages::ChunkWalk live_walk(uint64_t n) const { return live_chunk_list().walk(fm::chunk_count(n)); }
+  static stages::ChunkWalk every_chunk(uint64_t n) { return {nullptr, nullptr, fm::chunk_count(n)}; }
   stages::BigList big_list() const {
     // The 64-bit counter slot holds both 32-bit counts (big, huge).
     return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount),
@@ -204,6 +216,7 @@ struct CudaRenderer::State {
                                 &tile_mask,
                                 &chunk_total,
                                 &chunk_start,
+                                &live_chunks,
                                 &ends,
                                 &scan_temp,
                                 &big,

@@ -124,7 +124,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, is_huge, touched, i, big, visible, out.chunk_total);
+  list_big_and_count_visible(is_big, is_huge, touched, i, blockIdx.x, big, visible, out.chunk_total);
 }
 
 // M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.

@@ -52,12 +52,12 @@ __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, u
 // The end of a pre-processing kernel (full or speculative), called by every thread of the block:
 // big Gaussians join the big list, huge ones (is_huge implies is_big) its huge end (one atomic
 // per warp holding any: they are few), and the visible count takes one atomic per block, not per
-// Gaussian (DESIGN.md: no contended atomics); the block's chunk gets the sum of its tiles_touched
+// Gaussian (DESIGN.md: no contended atomics); the block's chunk `chunk` gets the sum of its tiles_touched
 // (Projected::chunk_total). Big Gaussians are counted visible, and added to their chunk's total,
 // by count_big_tiles once their tiles are known.
 __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_huge, uint32_t touched, uint64_t i,
-                                                           const BigList& big, unsigned long long* visible,
-                                                           uint32_t* chunk_total) {
+                                                           uint64_t chunk, const BigList& big,
+                                                           unsigned long long* visible, uint32_t* chunk_total) {
   __shared__ uint32_t warp_total[tune::kGaussianThreads / 32];
   const int lane = static_cast<int>(threadIdx.x & 31u);
   for (int list = 0; list < 2; ++list) {  // 0: big (not huge), 1: huge
@@ -74,11 +74,12 @@ __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_
   const uint32_t total = __reduce_add_sync(0xffffffffu, touched);
   if (lane == 0) warp_total[threadIdx.x / 32u] = total;
   const int block_visible = __syncthreads_count(touched > 0);
-  if (threadIdx.x != 0) return;
-  uint32_t block_total = 0;
-  for (unsigned w = 0; w < blockDim.x / 32u; ++w) block_total += warp_total[w];
-  chunk_total[blockIdx.x] = block_total;
-  if (block_visible > 0) atomicAdd(visible, static_cast<unsigned long long>(block_visible));
+  if (threadIdx.x == 0) {  // no return: a kernel may walk several chunks (records.h ChunkWalk)
+    uint32_t block_total = 0;
+    for (unsigned w = 0; w < blockDim.x / 32u; ++w) block_total += warp_total[w];
+    chunk_total[chunk] = block_total;
+    if (block_visible > 0) atomicAdd(visible, static_cast<unsigned long long>(block_visible));
+  }
 }
 
 // The parts a huge Gaussian (the h-th of the huge list, `area` rectangle tiles) is cut into

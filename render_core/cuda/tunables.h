@@ -72,6 +72,12 @@ inline constexpr int kPathKernelMinBlocks = 4;
 inline constexpr int kPreprocessMinBlocks = 5;
 inline constexpr int kSubframeFeaturesMinBlocks = 4;
 
+// Most blocks of a launch that walks the chunks exact pre-processing kept (records.h ChunkWalk):
+// about 4 waves of 8 blocks on 132 SMs. The list's length is known only on the device, so the
+// launch is sized for the most it could hold and blocks stride over it; a cap keeps a scene of
+// millions of culled chunks from paying a block launch per chunk.
+inline constexpr uint64_t kChunkWalkBlocks = 4096;
+
 // Reusable buffers grow to this multiple of the size asked for, so a trace whose render list
 // creeps upwards does not reallocate every frame.
 inline constexpr double kGrowthFactor = 1.25;

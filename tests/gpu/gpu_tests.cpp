@@ -29,6 +29,10 @@
 //  list>2^31  a render list of more than 2^31 entries renders (or fails with a clear CudaError
 //             for lack of device memory); > 2^32 - 1 entries throws std::length_error.
 //  city26M    49 tumblewood copies (26.6 M Gaussians): CUDA == CPU on a fly-over view.
+//  chunkcull  13 tumblewood copies: one CUDA exact renderer (single sort, and one depth first)
+//             draws a fly-over view, then a view of the centre copies, where most chunks are
+//             culled and keep the first frame's tile counts unwritten: CUDA == CPU (>= 50 dB, the
+//             same list) on both, and fewer than half the chunks were kept on the second.
 // catgs pipeline (paper sec. 3; issue 4), over real camera paths interpolated at 120 FPS:
 //  catgs=cpu  CUDA catgs vs the CPU reference's catgs, frame by frame: the same key/sub-frame
 //             decisions on >= 95% of frames, and where they agree PSNR >= 50 dB.
@@ -824,20 +828,34 @@ void huge_checks() {
 }
 
 // 7: tens of millions of Gaussians (49 copies), CUDA == CPU on a fly-over view.
-void city_checks(const Scenes& sc) {
-  const int W = sc.W, H = sc.H;
-  catgs::CityParams p;
-  p.radius_sq = 16;  // 49 cells
-  p.up = {0.0f, -1.0f, 0.0f};
+// The city of tumblewood copies within `radius_sq` cells of the centre (tools/scene_tools/city.h),
+// and a fly-over camera over it with `flight`'s parameters at the tests' size.
+struct TestCity {
+  std::shared_ptr<GaussianModel> model;
   catgs::CityLayout layout;
+  Camera view(const Scenes& sc, const catgs::FlyoverParams& flight) const {
+    catgs::GeneratorParams g;
+    g.width = sc.W;
+    g.height = sc.H;
+    g.duration_s = 1.0;
+    g.rate_hz = 2.0;
+    return catgs::make_city_flyover(layout, flight, g)[1].camera;
+  }
+};
+TestCity test_city(const Scenes& sc, int radius_sq) {
+  catgs::CityParams p;
+  p.radius_sq = radius_sq;
+  p.up = {0.0f, -1.0f, 0.0f};
+  TestCity c;
   auto base = catgs::load_scene(sc.dir + "/tumblewood_sh2.compressed.ply");
-  auto city = std::make_shared<GaussianModel>(catgs::tile_scene(base, p, &layout));
-  catgs::GeneratorParams g;
-  g.width = W;
-  g.height = H;
-  g.duration_s = 1.0;
-  g.rate_hz = 2.0;
-  const auto trace = catgs::make_city_flyover(layout, catgs::FlyoverParams{}, g);
+  c.model = std::make_shared<GaussianModel>(catgs::tile_scene(base, p, &c.layout));
+  return c;
+}
+
+void city_checks(const Scenes& sc) {
+  const TestCity tc = test_city(sc, 16);  // 49 cells
+  const auto& city = tc.model;
+  const Camera fly = tc.view(sc, catgs::FlyoverParams{});
   auto dev = catgs::cuda::DeviceScene::upload(*city);
   for (Pipeline pl : {Pipeline::vanilla, Pipeline::exact}) {
     catgs::RenderOptions o;
@@ -845,13 +863,50 @@ void city_checks(const Scenes& sc) {
     catgs::cpu::CpuRenderer c(city, o);
     catgs::cuda::CudaRenderer r(dev, o);
     Image a, b;
-    c.render(trace[1].camera, a);
-    r.render(trace[1].camera, b);
+    c.render(fly, a);
+    r.render(fly, b);
     const Diff d = compare(a, b);
     add({"city", city->name, "fly1", catgs::pipeline_name(pl), d.psnr, d.max_abs, d.max_abs8,
          static_cast<long long>(c.last_stats().render_list_length),
          static_cast<long long>(r.last_stats().render_list_length), d.psnr >= 50.0,
          std::to_string(city->size()) + " Gaussians, " + std::to_string(dev->bytes() >> 20) + " MiB on device"});
+  }
+}
+
+// 8: chunk culling's kept-chunk list (preprocess.cu cull_chunks_kernel) against the CPU, after a
+// frame that listed chunks this one culls (their tile counts are stale: records.h listed_tiles).
+void chunk_cull_checks(const Scenes& sc) {
+  const TestCity tc = test_city(sc, 4);  // 13 cells
+  const auto& city = tc.model;
+  catgs::FlyoverParams centre;  // catgs-bench --trace centre
+  centre.altitude = 0.4f;
+  centre.pitch_deg = 70.0f;
+  centre.start_cells = -0.25f;
+  centre.end_cells = 0.25f;
+  const Camera wide = tc.view(sc, catgs::FlyoverParams{}), narrow = tc.view(sc, centre);
+  auto dev = catgs::cuda::DeviceScene::upload(*city);
+  catgs::RenderOptions o;
+  o.pipeline = Pipeline::exact;
+  catgs::cpu::CpuRenderer cpu(city, o);
+  for (bool depth_first : {false, true}) {
+    catgs::cuda::CudaOptions co;
+    co.depth_first_sort = depth_first;
+    catgs::cuda::CudaRenderer gpu(dev, o, co);
+    const char* views[2] = {"fly1", "centre1"};
+    for (int v = 0; v < 2; ++v) {
+      const Camera& cam = v == 0 ? wide : narrow;
+      Image a, b;
+      cpu.render(cam, a);
+      gpu.render(cam, b);
+      const Diff d = compare(a, b);
+      const auto lc = static_cast<long long>(cpu.last_stats().render_list_length);
+      const auto lg = static_cast<long long>(gpu.last_stats().render_list_length);
+      const auto diag = gpu.diagnostics();
+      const bool culled = v == 0 || 2 * diag.chunks_kept < diag.chunks;
+      add({"chunkcull", city->name, views[v], depth_first ? "ex/depth" : "exact", d.psnr, d.max_abs, d.max_abs8, lc, lg,
+           d.psnr >= 50.0 && lc == lg && culled,
+           std::to_string(diag.chunks_kept) + " of " + std::to_string(diag.chunks) + " chunks kept"});
+    }
   }
 }
 
@@ -900,6 +955,7 @@ int run(int argc, char** argv) {
   yuv420_checks(sc);
   if (!sc.quick) steady_checks(sc);
   if (!sc.quick) huge_checks();
+  if (!sc.quick) chunk_cull_checks(sc);
   if (!sc.quick && !args.has("--skip-large")) {
     tile_bits_checks(sc);
     list_limit_checks();
