@@ -75,9 +75,11 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
 // preprocess) and a trail holding their ellipse at each (fm::build_trail, widened by `widening`),
 // and count the tiles their trail touches (fm::trail_touches_tile). Before any 2D covariance, a
 // Gaussian that lies beyond one same image edge at every camera of the path, by more than
-// fm::edges_beyond's bound widened as its trail would be, is culled (touches no tile).
-void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path, const TrailWidening& widening,
-                            ProjectedGaussians& out);
+// fm::edges_beyond's bound widened as its trail would be, is culled (touches no tile). Before
+// that, whole chunks (`chunks`: fm::chunk_bounds of the model) that fm::chunk_misses_path culls
+// are skipped, as the CUDA core does; the result is the same with or without that step.
+void speculative_preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
+                            const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out);
 
 // catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
 // means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M).

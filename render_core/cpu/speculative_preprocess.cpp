@@ -1,8 +1,11 @@
 // catgs key frame, stage 1: pre-processing over the speculation window (paper sec. 3.1). Mirrors
 // preprocess.cpp, projecting each Gaussian at every camera of the predicted path and testing
 // tiles against its trail instead of its ellipse.
+#include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
+#include "forward_model/chunk_bounds.h"
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 #include "forward_model/sh_storage.h"
@@ -71,8 +74,8 @@ float max_screen_motion(const GaussianModel& model, const Camera& a, const Camer
   return m;
 }
 
-void speculative_preprocess(const GaussianModel& model, const std::vector<Camera>& path, const TrailWidening& widening,
-                            ProjectedGaussians& out) {
+void speculative_preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
+                            const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out) {
   if (path.empty() || path.size() > static_cast<std::size_t>(kMaxPathCameras))
     throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPathCameras) + " cameras");
   const std::size_t n = model.size();
@@ -81,8 +84,10 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
   const int K = model.sh_coeffs();
   std::vector<CameraTerms> terms(path.size());
   for (std::size_t k = 0; k < path.size(); ++k) terms[k] = {fm::view_of(path[k]), path[k].position()};
+  if (chunks.size() != fm::chunk_count(n))
+    throw std::invalid_argument("speculative_preprocess: chunk bounds of another scene");
 
-  parallel_for(n, 4096, [&](std::size_t i) {
+  auto gaussian = [&](std::size_t i) {
     out.tiles_touched[i] = 0;
     const float opacity = fm::sigmoid(model.opacity_logits[i]);
     const float q_max = fm::opacity_aware_qmax(opacity);
@@ -142,6 +147,21 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<Camera
     out.trail_cov[i] = trail.cov;
     out.trail_conic[i] = trail_conic;
     out.q_trail[i] = trail.q_trail;
+  };
+  // A chunk at a time, as the CUDA core takes a block per chunk; whole chunks that no path view
+  // can show (fm::chunk_misses_path: the CUDA core's cull_path_chunks_kernel) are skipped, their
+  // Gaussians left with tiles_touched = 0.
+  const auto view_at = [&](int k) -> const fm::View& { return terms[static_cast<std::size_t>(k)].view; };
+  parallel_for(chunks.size(), 16, [&](std::size_t c) {
+    const std::size_t begin = c * fm::kChunkSize, end = std::min(n, begin + fm::kChunkSize);
+    const bool culled = fm::chunk_misses_path(chunks[c], static_cast<int>(path.size()), view_at, 1.0f + widening.slack,
+                                              widening.margin_px, widening.motion_margin);
+    for (std::size_t i = begin; i < end; ++i) {
+      if (culled)
+        out.tiles_touched[i] = 0;
+      else
+        gaussian(i);
+    }
   });
 }
 

@@ -45,7 +45,7 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   // the one-pose trail's, built without the trail machinery); it opens no group.
   const Pipeline stages = window > 0 ? Pipeline::catgs : Pipeline::exact;
   if (window > 0)
-    speculative_preprocess(*model_, planner_.path(camera, window), trail_widening(sp, window), projected_);
+    speculative_preprocess(*model_, chunks_, planner_.path(camera, window), trail_widening(sp, window), projected_);
   else
     preprocess(*model_, chunks_, camera, Pipeline::exact, projected_);
   const auto t1 = clock::now();

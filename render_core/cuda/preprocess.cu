@@ -54,24 +54,13 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
 
 // Chunk culling, a thread per chunk: exact drops the chunks that cannot reach the image
 // (fm::chunk_outside_view; vanilla keeps every chunk, as reference 3DGS culls only per Gaussian).
-// A dropped chunk gets chunk_total = 0 and nothing else is written for it; a kept one is
-// appended to live[] (one atomic per warp that keeps any; the order is free, see ChunkWalk).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     cull_chunks_kernel(const fm::ChunkBounds* __restrict__ chunks,  // [count]
                        uint64_t count, CameraParams cam, bool exact,
                        uint32_t* __restrict__ chunk_total,  // [count]
-                       uint32_t* __restrict__ live,         // [count]
-                       unsigned* live_count) {              // [1], zero on entry
+                       LiveChunks live) {                   // count zero on entry
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  const bool keep = c < count && !(exact && fm::chunk_outside_view(chunks[c], cam));
-  if (c < count && !keep) chunk_total[c] = 0u;
-  const unsigned lanes = __ballot_sync(0xffffffffu, keep);
-  if (lanes == 0u) return;  // warp-uniform
-  const int lane = static_cast<int>(threadIdx.x & 31u), leader = __ffs(lanes) - 1;
-  unsigned base = 0;
-  if (lane == leader) base = atomicAdd(live_count, static_cast<unsigned>(__popc(lanes)));
-  base = __shfl_sync(0xffffffffu, base, leader);
-  if (keep) live[base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)))] = static_cast<uint32_t>(c);
+  keep_or_drop_chunk(c < count && !(exact && fm::chunk_outside_view(chunks[c], cam)), c, count, chunk_total, live);
 }
 
 // One thread per Gaussian of chunk c (a block's thread x takes Gaussian c * kChunkSize + x): reads
@@ -227,7 +216,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
   cull_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene.chunks, chunks, cam, exact, out.chunk_total, live.index, live.count);
+      scene.chunks, chunks, cam, exact, out.chunk_total, live);
   CATGS_CUDA_LAUNCHED("cull_chunks_kernel");
   const ChunkWalk walk = live.walk(chunks);
   preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(

@@ -97,8 +97,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
     stages::PathParams pp{};
     pp.count = static_cast<int>(path.size());
     for (std::size_t k = 0; k < path.size(); ++k) pp.cam[k] = camera_params(path[k]);
-    stages::speculative_preprocess(sv, pp, trail_widening(sp, window), proj, s.trails(), counters + kVisibleCount,
-                                   s.big_list(), s.stream);
+    stages::speculative_preprocess(sv, pp, trail_widening(sp, window), proj, s.trails(), s.live_chunk_list(),
+                                   counters + kVisibleCount, s.big_list(), s.stream);
   } else {
     // No window: the frame is rendered in full by the exact pipeline's stages (a one-pose trail
     // is the exact ellipse, so the list is the same; the path-wide kernel only costs more) and
@@ -113,10 +113,10 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
   // the predictor and the depth-first sort bought").
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, window > 0 ? State::every_chunk(n) : s.live_walk(n), cam, tests,
-                                               window > 0 && depth_first_sort(), &visible);
+  const uint64_t entries =
+      s.build_render_list(n, s.live_walk(n), cam, tests, window > 0 && depth_first_sort(), &visible);
   if (window > 0)  // the frustum cache, for the group's sub-frames
-    stages::select_cached(proj.tiles_touched, n, s.cached.as<uint32_t>(),
+    stages::select_cached(proj.tiles_touched, proj.chunk_total, n, s.cached.as<uint32_t>(),
                           s.catgs_counters.as<unsigned>() + kCachedCount, s.select_temp.as<void>(),
                           s.select_temp.bytes(), s.stream);
   const uint64_t capacity = s.plan_frame_slices(tiles, entries, sp);  // paper sec. 3.4
@@ -144,8 +144,8 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   stages::update_subframe_features(scene_view(*scene_), camera_params(camera), s.cached.as<uint32_t>(),
                                    static_cast<uint32_t>(s.key_visible), s.projected(), s.trails(), cc + kOutside,
                                    s.stream);
-  stages::check_unlisted(scene_view(*scene_), camera_params(camera), s.tiles_touched.as<uint32_t>(), cc + kOutside,
-                         s.stream);
+  stages::check_unlisted(scene_view(*scene_), camera_params(camera), s.tiles_touched.as<uint32_t>(),
+                         s.chunk_total.as<uint32_t>(), cc + kOutside, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
   CATGS_CUDA(cudaEventSynchronize(s.plan_ready));  // the key frame's slice total, long since copied
   // Nothing is drawn if the check failed.

@@ -161,8 +161,7 @@ struct CudaRenderer::State {
   // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
   // ranges. With `depth_first` the list is ordered by the depth-first sort (depth_order.cu; the
   // same list). Returns the list length. Throws std::length_error past 2^32 - 1 entries.
-  // `walk`: the chunks pre-processing visited (live_walk() after preprocess, every chunk after
-  // the speculative pre-processing).
+  // `walk`: the chunks pre-processing kept (live_walk()).
   uint64_t build_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
                              const stages::TileTests& tests, bool depth_first, uint64_t* visible);
 
@@ -189,7 +188,6 @@ struct CudaRenderer::State {
             reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kLiveChunkCount)};
   }
   stages::ChunkWalk live_walk(uint64_t n) const { return live_chunk_list().walk(fm::chunk_count(n)); }
-  static stages::ChunkWalk every_chunk(uint64_t n) { return {nullptr, nullptr, fm::chunk_count(n)}; }
   stages::BigList big_list() const {
     // The 64-bit counter slot holds both 32-bit counts (big, huge).
     return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount),

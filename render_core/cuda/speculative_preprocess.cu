@@ -5,6 +5,7 @@
 // their answers as bit masks, big ones are counted and emitted by key_emission.cu from the
 // stored trail), so counting and emission agree; what contraction changes is the last bits of a
 // trail against the CPU reference's, which only widens or narrows a trail by float rounding.
+#include "forward_model/chunk_bounds.h"
 #include "forward_model/trail.h"
 #include "cuda_check.h"
 #include "splat.cuh"
@@ -51,12 +52,12 @@ __device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 
 // hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory. Held to 64
 // registers (4 blocks of 256 per SM, 20 bytes of spill): the kernel is compute-bound, and at 72
 // registers (3 blocks) it was slower (tunables.h kPathKernelMinBlocks).
-__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBlocks)
-    speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening widening, Projected out,
-                                  Trails trails,
-                                  unsigned long long* visible,  // [1]
-                                  BigList big) {
-  const uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+// A block per chunk of the walk (thread x takes Gaussian c * kChunkSize + x); every thread calls it.
+__device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, const SceneView& scene,
+                                                             const PathParams& path, const TrailWidening& widening,
+                                                             const Projected& out, const Trails& trails,
+                                                             unsigned long long* visible, const BigList& big) {
+  const uint64_t i = chunk * fm::kChunkSize + threadIdx.x;
   uint32_t touched = 0;
   bool is_big = false, is_huge = false;
   if (i < scene.n) {
@@ -124,7 +125,33 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
     } while (false);
     out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, is_huge, touched, i, blockIdx.x, big, visible, out.chunk_total);
+  list_big_and_count_visible(is_big, is_huge, touched, i, chunk, big, visible, out.chunk_total);
+}
+
+__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBlocks)
+    speculative_preprocess_kernel(SceneView scene, PathParams path, TrailWidening widening, Projected out,
+                                  Trails trails, ChunkWalk live,
+                                  unsigned long long* visible,  // [1]
+                                  BigList big) {
+  const uint64_t chunks = live.size();
+  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
+    speculative_preprocess_chunk(live.chunk(k), scene, path, widening, out, trails, visible, big);
+    __syncthreads();  // the block reduction's shared words are rewritten next round
+  }
+}
+
+// Chunk culling over the path, a thread per chunk (fm::chunk_misses_path: a chunk none of whose
+// Gaussians the per-Gaussian cull above would keep).
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+    cull_path_chunks_kernel(const fm::ChunkBounds* __restrict__ chunks,  // [count]
+                            uint64_t count, PathParams path, TrailWidening widening,
+                            uint32_t* __restrict__ chunk_total,  // [count]
+                            LiveChunks live) {                   // count zero on entry
+  const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  const auto view_at = [&](int k) -> const fm::View& { return path.cam[k]; };
+  keep_or_drop_chunk(c < count && !fm::chunk_misses_path(chunks[c], path.count, view_at, 1.0f + widening.slack,
+                                                         widening.margin_px, widening.motion_margin),
+                     c, count, chunk_total, live);
 }
 
 // M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.
@@ -150,15 +177,20 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 }  // namespace
 
 void speculative_preprocess(const SceneView& scene, const PathParams& path, const TrailWidening& widening,
-                            const Projected& out, const Trails& trails, unsigned long long* visible, const BigList& big,
-                            cudaStream_t stream) {
+                            const Projected& out, const Trails& trails, const LiveChunks& live,
+                            unsigned long long* visible, const BigList& big, cudaStream_t stream) {
   if (path.count < 1 || path.count > kMaxPathCameras)
     throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPathCameras) + " cameras");
   if (scene.n == 0) return;
-  const uint64_t blocks = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
-  if (blocks > 0x7fffffffull) throw std::length_error("speculative_preprocess: too many Gaussians for one grid");
-  speculative_preprocess_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene, path, widening, out, trails, visible, big);
+  const uint64_t chunks = fm::chunk_count(scene.n);
+  const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  if (cull_blocks > 0x7fffffffull) throw std::length_error("speculative_preprocess: too many Gaussians for one grid");
+  cull_path_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
+      scene.chunks, chunks, path, widening, out.chunk_total, live);
+  CATGS_CUDA_LAUNCHED("cull_path_chunks_kernel");
+  const ChunkWalk walk = live.walk(chunks);
+  speculative_preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
+      scene, path, widening, out, trails, walk, visible, big);
   CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");
   const TileTests tests{TileTestKind::trail, nullptr, trails, path.cam[0].width, path.cam[0].height};
   count_big_tiles(big, tests, out, visible, nullptr, stream);

@@ -14,10 +14,12 @@ namespace catgs::cuda::stages {
 // key frame's features, a trail (fm::build_trail, widened by `widening`) and the number of
 // tiles the trail touches. Big trails are counted by count_big_tiles (called here). A Gaussian
 // beyond one same image edge at every camera of the path is culled before any 2D covariance
-// (as cpu::speculative_preprocess).
+// (as cpu::speculative_preprocess). Whole chunks are culled first (fm::chunk_misses_path, a
+// thread per chunk): the kept ones go to `live` (count zero on entry), a culled one gets
+// chunk_total = 0 and leaves its Gaussians' tiles_touched unwritten (records.h listed_tiles).
 void speculative_preprocess(const SceneView& scene, const PathParams& path, const TrailWidening& widening,
-                            const Projected& out, const Trails& trails, unsigned long long* visible, const BigList& big,
-                            cudaStream_t stream);
+                            const Projected& out, const Trails& trails, const LiveChunks& live,
+                            unsigned long long* visible, const BigList& big, cudaStream_t stream);
 
 // catgs planner input (speculative_preprocess.cu; mirrors cpu::max_screen_motion): the largest
 // screen motion (pixels) between cameras a and b of the means visible in a deeper than

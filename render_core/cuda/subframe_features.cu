@@ -18,7 +18,8 @@ namespace {
 
 struct Listed {
   const uint32_t* tiles_touched;  // [N]
-  __host__ __device__ bool operator()(uint32_t i) const { return tiles_touched[i] > 0; }
+  const uint32_t* chunk_total;    // [chunks]: a culled chunk's counts are unwritten (listed_tiles)
+  __device__ bool operator()(uint32_t i) const { return listed_tiles(tiles_touched, chunk_total, i) > 0; }
 };
 
 // One thread per cached Gaussian. A Gaussian culled at this pose gets zero conic and opacity
@@ -92,6 +93,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     unlisted_kernel(SceneView scene, CameraParams cam,
                     const uint32_t* tiles_touched,  // [N] of the key frame
+                    const uint32_t* chunk_total,    // [chunks] of the key frame
                     unsigned* outside) {            // [1]
   // Already raised by the features kernel (queued before): the frame re-keys, nothing to add.
   if (*outside) return;
@@ -102,7 +104,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     if (fm::chunk_outside_view(scene.chunks[c], cam)) continue;  // warp-uniform
     const uint64_t end = min(scene.n, (c + 1) * fm::kChunkSize);
     for (uint64_t i = c * fm::kChunkSize + lane; i < end; i += 32) {
-      if (tiles_touched[i] > 0) continue;
+      if (listed_tiles(tiles_touched, chunk_total, i) > 0) continue;
       if (fm::unlisted_reaches_image(scene.means + 3 * i, scene.log_scales + 3 * i, scene.rotations + 4 * i,
                                      scene.opacity_logits[i], cam))
         *outside = 1u;
@@ -112,13 +114,13 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 
 }  // namespace
 
-void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched, unsigned* outside,
-                    cudaStream_t stream) {
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
+                    const uint32_t* chunk_total, unsigned* outside, cudaStream_t stream) {
   if (scene.n == 0) return;
   const uint64_t warps_per_block = tune::kGaussianThreads / 32;
   const uint64_t want = (fm::chunk_count(scene.n) + warps_per_block - 1) / warps_per_block;
   const auto blocks = static_cast<unsigned>(want < 8192 ? want : 8192);
-  unlisted_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, tiles_touched, outside);
+  unlisted_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, tiles_touched, chunk_total, outside);
   CATGS_CUDA_LAUNCHED("unlisted_kernel");
 }
 
@@ -126,14 +128,14 @@ std::size_t select_cached_temp_bytes(uint64_t n) {
   std::size_t bytes = 0;
   CATGS_CUDA(cub::DeviceSelect::If(nullptr, bytes, thrust::counting_iterator<uint32_t>(0),
                                    static_cast<uint32_t*>(nullptr), static_cast<unsigned*>(nullptr),
-                                   static_cast<int64_t>(n), Listed{nullptr}));
+                                   static_cast<int64_t>(n), Listed{nullptr, nullptr}));
   return bytes;
 }
 
-void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, unsigned* count, void* temp,
-                   std::size_t temp_bytes, cudaStream_t stream) {
+void select_cached(const uint32_t* tiles_touched, const uint32_t* chunk_total, uint64_t n, uint32_t* cached,
+                   unsigned* count, void* temp, std::size_t temp_bytes, cudaStream_t stream) {
   CATGS_CUDA(cub::DeviceSelect::If(temp, temp_bytes, thrust::counting_iterator<uint32_t>(0), cached, count,
-                                   static_cast<int64_t>(n), Listed{tiles_touched}, stream));
+                                   static_cast<int64_t>(n), Listed{tiles_touched, chunk_total}, stream));
 }
 
 void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached, uint32_t count,

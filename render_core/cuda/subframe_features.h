@@ -10,10 +10,11 @@
 namespace catgs::cuda::stages {
 
 // Frustum cache (subframe_features.cu; paper sec. 3.2): the indices of the Gaussians with
-// tiles_touched > 0, increasing, into cached[]; their number into *count (device).
+// entries (records.h listed_tiles: tiles_touched > 0 in a chunk the key frame kept), increasing,
+// into cached[]; their number into *count (device).
 std::size_t select_cached_temp_bytes(uint64_t n);
-void select_cached(const uint32_t* tiles_touched, uint64_t n, uint32_t* cached, unsigned* count, void* temp,
-                   std::size_t temp_bytes, cudaStream_t stream);
+void select_cached(const uint32_t* tiles_touched, const uint32_t* chunk_total, uint64_t n, uint32_t* cached,
+                   unsigned* count, void* temp, std::size_t temp_bytes, cudaStream_t stream);
 
 // catgs sub-frame, stage 1 (subframe_features.cu; mirrors cpu::update_subframe_features):
 // recomputes the splat (mean, conic, opacity: 0 when culled here) and colour of the `count` cached
@@ -23,10 +24,10 @@ void update_subframe_features(const SceneView& scene, const CameraParams& cam, c
                               const Projected& projected, const Trails& trails, unsigned* outside, cudaStream_t stream);
 
 // catgs sub-frame (subframe_features.cu; mirrors cpu::unlisted_reach_image): sets *outside = 1
-// when a Gaussian the key frame did not list (tiles_touched == 0) reaches a pixel at `cam`: it is
-// outside the frustum cache, so only a key frame can draw it. Chunks outside the view at `cam`
-// (fm::chunk_outside_view) are skipped whole.
-void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched, unsigned* outside,
-                    cudaStream_t stream);
+// when a Gaussian the key frame did not list (records.h listed_tiles of its tiles_touched and
+// chunk_total is 0) reaches a pixel at `cam`: it is outside the frustum cache, so only a key frame
+// can draw it. Chunks outside the view at `cam` (fm::chunk_outside_view) are skipped whole.
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
+                    const uint32_t* chunk_total, unsigned* outside, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -54,38 +54,104 @@ CATGS_HD std::size_t chunk_count(std::size_t n) { return (n + kChunkSize - 1) / 
 // The bounds of every chunk of `model`, in chunk order (chunk_count(model.size()) entries).
 std::vector<ChunkBounds> chunk_bounds(const GaussianModel& model);
 
-// True when no Gaussian of chunk `b` can list a tile of view `v` in the exact pipeline (see
-// above). The margins (+2 px, and 1e-5 of the largest |u|, |w|) cover float rounding of the
-// per-Gaussian maths and of this bound.
+// Where a chunk's means land in view `v`: `not_in_front` when every one lies behind the near
+// plane or past the far plane; `unbounded` when the bound cannot say (not finite, or the box
+// straddles the near plane, so a mean may project anywhere); else `box`, the pixel box of every
+// mean in front of the near plane (u = fx x / z + cx - 0.5, w likewise), and z_lo > near.
+struct ChunkOnScreen {
+  enum Kind { not_in_front, unbounded, box } kind;
+  float u_lo, u_hi, w_lo, w_hi, z_lo;
+};
 CATGS_HD bool chunk_finite(float x) { return x - x == 0.0f; }  // false for NaN and +-inf
-CATGS_HD bool chunk_outside_view(const ChunkBounds& b, const View& v) {
+CATGS_HD ChunkOnScreen chunk_on_screen(const ChunkBounds& b, const View& v) {
+  ChunkOnScreen s{ChunkOnScreen::unbounded, INFINITY, -INFINITY, INFINITY, -INFINITY, INFINITY};
   bool finite = chunk_finite(b.max_scale) && chunk_finite(b.q_max);
-  float z_lo = INFINITY, z_hi = -INFINITY;
+  float z_hi = -INFINITY;
   glm::vec3 p[8];
   for (int k = 0; k < 8; ++k) {
     const glm::vec3 corner((k & 1) ? b.hi.x : b.lo.x, (k & 2) ? b.hi.y : b.lo.y, (k & 4) ? b.hi.z : b.lo.z);
     p[k] = v.R * corner + v.t;
     finite = finite && chunk_finite(p[k].x) && chunk_finite(p[k].y) && chunk_finite(p[k].z);
-    z_lo = fminf(z_lo, p[k].z);
+    s.z_lo = fminf(s.z_lo, p[k].z);
     z_hi = fmaxf(z_hi, p[k].z);
   }
-  if (!finite) return false;                                    // never cull what the bound cannot hold
-  if (z_hi <= v.near_plane || z_lo > v.far_plane) return true;  // all behind near, or all past far
-  if (!(z_lo > v.near_plane)) return false;                     // straddles the near plane
-  float u_lo = INFINITY, u_hi = -INFINITY, w_lo = INFINITY, w_hi = -INFINITY;
+  if (!finite) return s;  // never cull what the bound cannot hold
+  if (z_hi <= v.near_plane || s.z_lo > v.far_plane) {
+    s.kind = ChunkOnScreen::not_in_front;
+    return s;
+  }
+  if (!(s.z_lo > v.near_plane)) return s;  // straddles the near plane
   for (int k = 0; k < 8; ++k) {
     const float u = v.fx * p[k].x / p[k].z + v.cx - 0.5f, w = v.fy * p[k].y / p[k].z + v.cy - 0.5f;
-    u_lo = fminf(u_lo, u);
-    u_hi = fmaxf(u_hi, u);
-    w_lo = fminf(w_lo, w);
-    w_hi = fmaxf(w_hi, w);
+    s.u_lo = fminf(s.u_lo, u);
+    s.u_hi = fmaxf(s.u_hi, u);
+    s.w_lo = fminf(s.w_lo, w);
+    s.w_hi = fmaxf(s.w_hi, w);
   }
+  s.kind = ChunkOnScreen::box;
+  return s;
+}
+
+// The largest ellipse half extent (pixels) of any Gaussian of chunk `b` in front of z_lo, before
+// margins: sqrt(q_max) (max_scale ||J||_F + sqrt(0.3)), ||J||_F at the clamp limits (see above).
+// The margin covering float rounding of the per-Gaussian maths and of this bound: 2 px and 1e-5
+// of the largest |u|, |w|.
+CATGS_HD float chunk_half_extent(const ChunkBounds& b, const View& v, float z_lo) {
   const float cx = kFrustumClamp * v.tan_half_fov.x, cy = kFrustumClamp * v.tan_half_fov.y;
   const float jf = sqrtf(v.fx * v.fx * (1.0f + cx * cx) + v.fy * v.fy * (1.0f + cy * cy)) / z_lo;
-  const float slack = 2.0f + 1e-5f * fmaxf(fmaxf(fabsf(u_lo), fabsf(u_hi)), fmaxf(fabsf(w_lo), fabsf(w_hi)));
-  const float r = sqrtf(fmaxf(b.q_max, 0.0f)) * (b.max_scale * jf + sqrtf(kLowPass)) + slack;
-  return u_lo - r > static_cast<float>(v.width - 1) || u_hi + r < 0.0f || w_lo - r > static_cast<float>(v.height - 1) ||
-         w_hi + r < 0.0f;
+  return sqrtf(fmaxf(b.q_max, 0.0f)) * (b.max_scale * jf + sqrtf(kLowPass));
+}
+CATGS_HD float chunk_rounding_slack(const ChunkOnScreen& s) {
+  return 2.0f + 1e-5f * fmaxf(fmaxf(fabsf(s.u_lo), fabsf(s.u_hi)), fmaxf(fabsf(s.w_lo), fabsf(s.w_hi)));
+}
+// The image edges a box widened by r lies beyond, as fm::edges_beyond's bits (1 left, 2 right,
+// 4 top, 8 bottom).
+CATGS_HD unsigned chunk_edges_beyond(const ChunkOnScreen& s, float r, const View& v) {
+  return (s.u_hi + r < 0.0f ? 1u : 0u) | (s.u_lo - r > static_cast<float>(v.width - 1) ? 2u : 0u) |
+         (s.w_hi + r < 0.0f ? 4u : 0u) | (s.w_lo - r > static_cast<float>(v.height - 1) ? 8u : 0u);
+}
+
+// True when no Gaussian of chunk `b` can list a tile of view `v` in the exact pipeline (see
+// above).
+CATGS_HD bool chunk_outside_view(const ChunkBounds& b, const View& v) {
+  const ChunkOnScreen s = chunk_on_screen(b, v);
+  if (s.kind != ChunkOnScreen::box) return s.kind == ChunkOnScreen::not_in_front;
+  return chunk_edges_beyond(s, chunk_half_extent(b, v, s.z_lo) + chunk_rounding_slack(s), v) != 0u;
+}
+
+// The catgs key frame's form (the speculative pre-processing, paper sec. 3.1): true when no
+// Gaussian of chunk `b` survives its per-Gaussian cull over the path of `count` views
+// (view_at(k), the key view first). A Gaussian is dropped there when it is not in front of the
+// key view, or (path_misses_image) when at every view where it is in front it lies beyond one
+// same image edge by more than widen (r + 1) + extra, where r is its half extent and extra =
+// margin_px + 1 + motion_margin |uw - u0|, the last term where it is in front of the last view
+// (its centre's motion from the key view to the last). The chunk form bounds each term over the
+// chunk: r by chunk_half_extent, |uw - u0| by the farthest corners of the two views' boxes; a
+// view where every mean lies out of front constrains nothing, one the box straddles keeps the
+// chunk.
+template <typename ViewAt>
+CATGS_HD bool chunk_misses_path(const ChunkBounds& b, int count, ViewAt view_at, float widen, float margin_px,
+                                float motion_margin) {
+  const ChunkOnScreen key = chunk_on_screen(b, view_at(0));
+  if (key.kind != ChunkOnScreen::box) return key.kind == ChunkOnScreen::not_in_front;
+  float extra = margin_px + 1.0f;
+  const ChunkOnScreen last = chunk_on_screen(b, view_at(count - 1));
+  if (last.kind == ChunkOnScreen::unbounded) return false;
+  if (last.kind == ChunkOnScreen::box) {
+    const float dx = fmaxf(fabsf(last.u_hi - key.u_lo), fabsf(key.u_hi - last.u_lo));
+    const float dy = fmaxf(fabsf(last.w_hi - key.w_lo), fabsf(key.w_hi - last.w_lo));
+    extra += motion_margin * sqrtf(dx * dx + dy * dy);
+  }
+  unsigned beyond = 0xfu;
+  for (int k = 0; k < count && beyond != 0u; ++k) {
+    const View& v = view_at(k);
+    const ChunkOnScreen s = k == 0 ? key : chunk_on_screen(b, v);
+    if (s.kind == ChunkOnScreen::not_in_front) continue;
+    if (s.kind == ChunkOnScreen::unbounded) return false;
+    const float r = widen * (chunk_half_extent(b, v, s.z_lo) + 1.0f) + extra + chunk_rounding_slack(s);
+    beyond &= chunk_edges_beyond(s, r, v);
+  }
+  return beyond != 0u;
 }
 
 }  // namespace catgs::fm

@@ -116,6 +116,94 @@ TEST(ChunkCulling, NeverCullsAListedGaussian) {
   EXPECT_GT(checked, 0u);
 }
 
+// The catgs key frame's form (fm::chunk_misses_path): speculative pre-processing over a path
+// of 3 poses gives the same tiles with and without it, on real scenes; returns the chunks culled.
+Counts expect_same_trail_tiles(const GaussianModel& m) {
+  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(m), none = never_cull(m.size());
+  const std::vector<Camera> views = views_of(m, 320, 180);
+  const TrailWidening widening{0.1f, 0.5f, 0.25f};
+  Counts c;
+  for (std::size_t k = 0; k + 3 <= views.size(); k += 3) {
+    // Three consecutive views: orbit steps, or turns in place from the centre.
+    const std::vector<Camera> path(views.begin() + static_cast<std::ptrdiff_t>(k),
+                                   views.begin() + static_cast<std::ptrdiff_t>(k + 3));
+    cpu::ProjectedGaussians culled, full;
+    cpu::speculative_preprocess(m, chunks, path, widening, culled);
+    cpu::speculative_preprocess(m, none, path, widening, full);
+    EXPECT_EQ(culled.tiles_touched, full.tiles_touched) << "path from view " << k;
+    std::vector<fm::View> v;
+    for (const Camera& cam : path) v.push_back(fm::view_of(cam));
+    const auto view_at = [&](int j) -> const fm::View& { return v[static_cast<std::size_t>(j)]; };
+    for (const fm::ChunkBounds& b : chunks)
+      c.culled += fm::chunk_misses_path(b, static_cast<int>(v.size()), view_at, 1.1f, 0.5f, 0.25f) ? 1 : 0;
+    c.chunks += chunks.size();
+  }
+  return c;
+}
+
+TEST(ChunkCulling, SameTrailTilesOnTheBundledScene) {
+  const Counts c = expect_same_trail_tiles(*test::cached_scene(test::bundled_scene()));
+  EXPECT_GT(c.culled, c.chunks / 20) << "the paths should leave some chunks outside";
+}
+
+TEST(ChunkCulling, SameTrailTilesOnFlowers) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const Counts c = expect_same_trail_tiles(*test::cached_scene(path));
+  EXPECT_GT(c.culled, 0u);
+}
+
+// Random chunks near the frustum's sides and a path that turns and moves the camera: whenever
+// the path test culls, the per-Gaussian speculative pre-processing lists none of the chunk's
+// Gaussians.
+TEST(ChunkCulling, PathTestNeverCullsAListedGaussian) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  GaussianModel m;
+  m.sh_degree = 0;
+  const std::size_t per_chunk = 64;
+  const TrailWidening widening{0.1f, 0.5f, 0.25f};
+  std::size_t culled_chunks = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const float yaw = glm::radians(20.0f * (u01(rng) - 0.5f));
+    const glm::vec3 move(0.5f * (u01(rng) - 0.5f), 0.2f * (u01(rng) - 0.5f), 0.5f * (u01(rng) - 0.5f));
+    std::vector<Camera> path;
+    for (int k = 0; k < 4; ++k) {
+      const float t = static_cast<float>(k) / 3.0f;
+      path.push_back(Camera::from_pose(t * move, glm::angleAxis(t * yaw, glm::vec3(0.0f, 1.0f, 0.0f)), 60.0f, 160, 90));
+    }
+    const fm::View v0 = fm::view_of(path[0]);
+    const float z = 0.05f + 20.0f * u01(rng) * u01(rng);
+    const float side = (u01(rng) < 0.5f ? -1.0f : 1.0f) * (0.5f + u01(rng)) * v0.tan_half_fov.x * z;
+    const glm::vec3 centre(u01(rng) < 0.5f ? side : 0.3f * side, u01(rng) < 0.5f ? side * 0.56f : 0.0f,
+                           u01(rng) < 0.2f ? -z : z);
+    const glm::vec3 half = glm::vec3(u01(rng), u01(rng), u01(rng)) * (u01(rng) < 0.5f ? 0.05f : 1.0f);
+    const float log_scale = std::log(0.001f + 0.2f * u01(rng) * u01(rng));
+    m.resize(per_chunk);
+    for (std::size_t i = 0; i < per_chunk; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        m.means[3 * i + a] = centre[a] + half[a] * (2.0f * u01(rng) - 1.0f);
+        m.log_scales[3 * i + a] = log_scale - 2.0f * u01(rng);
+      }
+      glm::vec4 q(u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f);
+      q /= glm::length(q);
+      for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = q[a];
+      m.opacity_logits[i] = 8.0f * u01(rng) - 2.0f;
+    }
+    const std::vector<fm::ChunkBounds> b = fm::chunk_bounds(m);
+    std::vector<fm::View> v;
+    for (const Camera& cam : path) v.push_back(fm::view_of(cam));
+    const auto view_at = [&](int j) -> const fm::View& { return v[static_cast<std::size_t>(j)]; };
+    if (!fm::chunk_misses_path(b[0], 4, view_at, 1.0f + widening.slack, widening.margin_px, widening.motion_margin))
+      continue;
+    ++culled_chunks;
+    cpu::ProjectedGaussians full;
+    cpu::speculative_preprocess(m, never_cull(per_chunk), path, widening, full);
+    for (std::size_t i = 0; i < per_chunk; ++i)
+      ASSERT_EQ(full.tiles_touched[i], 0u) << "trial " << trial << ": chunk culled, Gaussian " << i << " lists tiles";
+  }
+  EXPECT_GT(culled_chunks, 200u) << "too few culled chunks to say much";
+}
+
 TEST(ChunkCulling, NonFiniteBoundsNeverCull) {
   const Camera cam = Camera::from_pose(glm::vec3(0.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 160, 90);
   const fm::View v = fm::view_of(cam);
