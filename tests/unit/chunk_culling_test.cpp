@@ -74,6 +74,32 @@ TEST(ChunkCulling, SameTilesOnFlowers) {
   EXPECT_GT(c.culled, 0u);
 }
 
+// Fills `m` with one chunk of Gaussians in a random box centred near the frustum's side planes
+// (tan_half_fov_x of the view) at depth 0.05..20 (behind the camera with `behind_share`), up to
+// 1 unit wide, with random scales, rotations and opacities.
+void random_chunk(GaussianModel& m, std::size_t per_chunk, float tan_half_fov_x, float behind_share,
+                  std::mt19937& rng) {
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  const float z = 0.05f + 20.0f * u01(rng) * u01(rng);
+  const float side = (u01(rng) < 0.5f ? -1.0f : 1.0f) * (0.5f + u01(rng)) * tan_half_fov_x * z;
+  const glm::vec3 centre(u01(rng) < 0.5f ? side : 0.3f * side, u01(rng) < 0.5f ? side * 0.56f : 0.0f,
+                         u01(rng) < behind_share ? -z : z);
+  const glm::vec3 half = glm::vec3(u01(rng), u01(rng), u01(rng)) * (u01(rng) < 0.5f ? 0.05f : 1.0f);
+  const float log_scale = std::log(0.001f + 0.2f * u01(rng) * u01(rng));
+  m.sh_degree = 0;
+  m.resize(per_chunk);
+  for (std::size_t i = 0; i < per_chunk; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      m.means[3 * i + a] = centre[a] + half[a] * (2.0f * u01(rng) - 1.0f);
+      m.log_scales[3 * i + a] = log_scale - 2.0f * u01(rng);
+    }
+    glm::vec4 q(u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f);
+    q /= glm::length(q);
+    for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = q[a];
+    m.opacity_logits[i] = 8.0f * u01(rng) - 2.0f;
+  }
+}
+
 // Random chunks around the view's edges, the near plane and the far plane: whenever the chunk
 // test culls, every Gaussian drawn inside the chunk's bound is culled Gaussian by Gaussian.
 TEST(ChunkCulling, NeverCullsAListedGaussian) {
@@ -86,23 +112,7 @@ TEST(ChunkCulling, NeverCullsAListedGaussian) {
   const std::size_t per_chunk = 64;
   std::size_t culled_chunks = 0, checked = 0;
   for (int trial = 0; trial < 3000; ++trial) {
-    // A box centred near the frustum's side planes at depth 0.05..20, up to 1 unit wide.
-    const float z = 0.05f + 20.0f * u01(rng) * u01(rng);
-    const float side = (u01(rng) < 0.5f ? -1.0f : 1.0f) * (0.5f + u01(rng)) * v.tan_half_fov.x * z;
-    const glm::vec3 centre(u01(rng) < 0.5f ? side : 0.3f * side, u01(rng) < 0.5f ? side * 0.56f : 0.0f, z);
-    const glm::vec3 half = glm::vec3(u01(rng), u01(rng), u01(rng)) * (u01(rng) < 0.5f ? 0.05f : 1.0f);
-    const float log_scale = std::log(0.001f + 0.2f * u01(rng) * u01(rng));
-    m.resize(per_chunk);
-    for (std::size_t i = 0; i < per_chunk; ++i) {
-      for (int a = 0; a < 3; ++a) {
-        m.means[3 * i + a] = centre[a] + half[a] * (2.0f * u01(rng) - 1.0f);
-        m.log_scales[3 * i + a] = log_scale - 2.0f * u01(rng);
-      }
-      glm::vec4 q(u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f);
-      q /= glm::length(q);
-      for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = q[a];
-      m.opacity_logits[i] = 8.0f * u01(rng) - 2.0f;
-    }
+    random_chunk(m, per_chunk, v.tan_half_fov.x, 0.0f, rng);
     const std::vector<fm::ChunkBounds> b = fm::chunk_bounds(m);
     ASSERT_EQ(b.size(), 1u);
     if (!fm::chunk_outside_view(b[0], v)) continue;
@@ -171,24 +181,7 @@ TEST(ChunkCulling, PathTestNeverCullsAListedGaussian) {
       const float t = static_cast<float>(k) / 3.0f;
       path.push_back(Camera::from_pose(t * move, glm::angleAxis(t * yaw, glm::vec3(0.0f, 1.0f, 0.0f)), 60.0f, 160, 90));
     }
-    const fm::View v0 = fm::view_of(path[0]);
-    const float z = 0.05f + 20.0f * u01(rng) * u01(rng);
-    const float side = (u01(rng) < 0.5f ? -1.0f : 1.0f) * (0.5f + u01(rng)) * v0.tan_half_fov.x * z;
-    const glm::vec3 centre(u01(rng) < 0.5f ? side : 0.3f * side, u01(rng) < 0.5f ? side * 0.56f : 0.0f,
-                           u01(rng) < 0.2f ? -z : z);
-    const glm::vec3 half = glm::vec3(u01(rng), u01(rng), u01(rng)) * (u01(rng) < 0.5f ? 0.05f : 1.0f);
-    const float log_scale = std::log(0.001f + 0.2f * u01(rng) * u01(rng));
-    m.resize(per_chunk);
-    for (std::size_t i = 0; i < per_chunk; ++i) {
-      for (int a = 0; a < 3; ++a) {
-        m.means[3 * i + a] = centre[a] + half[a] * (2.0f * u01(rng) - 1.0f);
-        m.log_scales[3 * i + a] = log_scale - 2.0f * u01(rng);
-      }
-      glm::vec4 q(u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f, u01(rng) - 0.5f);
-      q /= glm::length(q);
-      for (int a = 0; a < 4; ++a) m.rotations[4 * i + a] = q[a];
-      m.opacity_logits[i] = 8.0f * u01(rng) - 2.0f;
-    }
+    random_chunk(m, per_chunk, fm::view_of(path[0]).tan_half_fov.x, 0.2f, rng);
     const std::vector<fm::ChunkBounds> b = fm::chunk_bounds(m);
     std::vector<fm::View> v;
     for (const Camera& cam : path) v.push_back(fm::view_of(cam));
