@@ -198,9 +198,9 @@ class CudaRenderer final : public Renderer {
     // tile is several slices; catgs sub-frames: their key frame's; vanilla: its heaviest tile).
     // One block walks it alone, so it bounds the rasterization time.
     std::size_t heaviest_tile_entries = 0;
-    // Chunks (fm::kChunkSize Gaussians) the last frame's exact or vanilla pre-processing kept
-    // after chunk culling, of `chunks` (0 kept where the frame ran no such pre-processing: catgs
-    // speculative key frames and sub-frames).
+    // Chunks (fm::kChunkSize Gaussians) the last frame's pre-processing kept after chunk culling
+    // (exact, vanilla, or a catgs key frame's speculative pre-processing), of `chunks`; a catgs
+    // sub-frame reports its key frame's.
     std::size_t chunks_kept = 0, chunks = 0;
   };
   Diagnostics diagnostics() const;

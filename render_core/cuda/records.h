@@ -82,12 +82,12 @@ __device__ __forceinline__ uint32_t listed_tiles(const uint32_t* tiles_touched, 
 }
 
 // The chunks (fm::kChunkSize Gaussians each) that a frame's per-Gaussian stages walk, a block
-// per chunk. Exact pre-processing culls whole chunks first (cull_chunks, preprocess.cu) and lists
-// those left, in no particular order (each chunk's outputs do not depend on the order, and the
+// per chunk. Pre-processing culls whole chunks first (exact: cull_chunks_kernel, preprocess.cu;
+// catgs key frames: cull_path_chunks_kernel, speculative_preprocess.cu) and lists those left, in no particular order (each chunk's outputs do not depend on the order, and the
 // list is laid out by the chunks' scan in index order); the other stages then launch at most
 // tune::kChunkWalkBlocks blocks over that list, so a culled chunk costs a few bytes, not a block
 // and a write per Gaussian (issue 19: "cull whole chunks first"). A null `index` walks every
-// chunk in index order, a block each (the speculative pre-processing culls no chunks).
+// chunk in index order, a block each (no stage asks for that now: both pre-processings list).
 struct ChunkWalk {
   const uint32_t* index;  // [chunks] or null
   const unsigned* count;  // [1] device: the chunks in index[]
