@@ -5,6 +5,7 @@
 # On the build machine:
 #   scripts/gpu_run.sh prepare                      # .carry/: scenes, traces, GLM and friends
 #   git archive --format=tar.gz -o .carry/before_src.tar.gz REV
+#   (BEFORE_TAR=FILE BEFORE_DIR=DIR on the GPU machine: another earlier tree, a variant, say)
 # On the GPU machine (device tool; carry [".carry"]):
 #   scripts/gpu_before_after.sh tests               # GPU tests of both builds -> $OUT/gpu_tests_{before,after}.md
 #                                                   # (TEST_ARGS=--skip-large: without the 8192-px, 2^31 and city rows)
@@ -32,9 +33,12 @@ build() {  # build SRC_DIR LABEL: configures and builds catgs-bench and catgs-gp
 }
 exe() { find "$1/build/gpu" -type f -name "$2" -perm -u+x | head -1; }
 
-BEFORE=/tmp/before_src  # kept while the machine stays warm: a second call rebuilds nothing
+# The earlier tree: BEFORE_TAR (default .carry/before_src.tar.gz) unpacked into BEFORE_DIR, kept
+# while the machine stays warm, so a second call rebuilds nothing; another BEFORE_TAR and
+# BEFORE_DIR put a variant of the working tree beside it in the same call.
+BEFORE=${BEFORE_DIR:-/tmp/before_src}
 if [ ! -d "$BEFORE/build/gpu" ]; then
-  mkdir -p "$BEFORE" && tar xzf "$CARRY/before_src.tar.gz" -C "$BEFORE" || exit 2
+  mkdir -p "$BEFORE" && tar xzf "${BEFORE_TAR:-$CARRY/before_src.tar.gz}" -C "$BEFORE" || exit 2
 fi
 build "$BEFORE" before & build "$ROOT" after & wait
 for side in before after; do

@@ -17,16 +17,25 @@ __device__ __forceinline__ uint32_t unorm8(float v) {
   return static_cast<uint32_t>(v * 255.0f + 0.5f);
 }
 
-// One round's entries in shared memory: the 2D mean with the splat's power_cut as (x, y, cut,
-// unused), the conic pre-scaled for pixel_power as (-A/2, -B, -C/2) with the opacity, the colour,
-// and the sub-tiles the entry reaches (bit w: warp w's, subtile_mask).
-struct BlendBatch {
-  float4 mean_cut[tune::kRasterBatch];
-  float4 power_opacity[tune::kRasterBatch];
-  float4 color[tune::kRasterBatch];
-  uint32_t subtiles[tune::kRasterBatch];
-  uint8_t warp_list[tune::kRasterThreads / 32][tune::kRasterBatch];  // per warp: its entries (blend_batch)
+// One staged render-list entry: the 2D mean with the first two terms of the exponent, the third
+// with log2(opacity), and the colour (stage_entry), 48 bytes, so that a warp reads an entry with
+// two 16-byte loads and a 4-byte one from one address (its offset in the batch, kept in the warp's
+// list) instead of working out three.
+struct alignas(16) BlendEntry {
+  float4 mean_k;       // (x, y, kA, kB)
+  float4 kc_log2o_rg;  // (kC, log2(opacity), r, g)
+  float b;
 };
+
+// One round's entries in shared memory, a null entry after them (alpha 0 everywhere: the walk's
+// padding), and the sub-tiles each entry reaches (bit w: warp w's, subtile_mask).
+struct BlendBatch {
+  BlendEntry entry[tune::kRasterBatch + 1];
+  uint32_t subtiles[tune::kRasterBatch];
+  // Per warp: byte offsets into `entry` of its entries (blend_batch), read 4 at a time.
+  alignas(8) uint16_t warp_list[tune::kRasterThreads / 32][tune::kRasterBatch];
+};
+inline constexpr uint32_t kNullEntry = tune::kRasterBatch;
 
 // The pixel that thread `rank` of a rasterizer block owns, as an offset from its tile's corner:
 // warp w takes the 8 x 4 sub-tile at column w % 2, row w / 2 (tunables.h kSubTileW), lane l the
@@ -77,13 +86,13 @@ __device__ __forceinline__ float rough_sqrt(float x) { return x > 0.0f ? x * rsq
 // a finite positive definite one, every sub-tile (blend_entry decides).
 __device__ __forceinline__ uint32_t subtile_mask(const Splat& s, int x0, int y0) {
   constexpr uint32_t kAll = (1u << (tune::kSubTilesX * tune::kSubTilesY)) - 1u;
-  const float A = s.mean_ab.z, B = s.mean_ab.w, C = s.c_opacity_q_cut.x;
-  if (!(s.c_opacity_q_cut.z + 4e-3f > 0.0f)) return 0u;  // culled
+  const float A = s.mean_ab.z, B = s.mean_ab.w, C = s.c_opacity_q_log2.x;
+  if (!(s.c_opacity_q_log2.z + 4e-3f > 0.0f)) return 0u;  // culled
   const float lx = s.mean_ab.x - static_cast<float>(x0), ly = s.mean_ab.y - static_cast<float>(y0);
   constexpr float kLast = static_cast<float>(tune::kTileSize - 1);
   const float X = fmaxf(fabsf(lx), fabsf(kLast - lx)), Y = fmaxf(fabsf(ly), fabsf(kLast - ly));
   const float M = fabsf(A) * X * X + 2.0f * fabsf(B) * X * Y + fabsf(C) * Y * Y;
-  const float Q = s.c_opacity_q_cut.z + 4e-3f + 2e-6f * M;
+  const float Q = s.c_opacity_q_log2.z + 4e-3f + 2e-6f * M;
   const auto det = static_cast<float>(static_cast<double>(A) * C - static_cast<double>(B) * B);
   const float inv_c = __fdividef(1.0f, C), D = det * inv_c, slope = -B * inv_c;
   const float ex = rough_sqrt(__fdividef(Q, D)) * 1.001f + 0.02f;  // columns reached: |dx| <= ex
@@ -108,24 +117,45 @@ __device__ __forceinline__ uint32_t subtile_mask(const Splat& s, int x0, int y0)
   return mask;
 }
 
+// log2(e) / 2: the exponent of alpha = opacity exp(-q / 2) in base 2 is
+// log2(opacity) - log2(e) q / 2.
+constexpr float kHalfLog2e = 0.72134752044448170368f;
+
 // Writes one entry (its splat, colour and sub-tile mask, subtile_mask's for this tile) into
-// batch slot `slot`.
+// batch slot `slot`, with the conic pre-scaled so that blend_entry's exponent is in base 2:
+// (kA, kB, kC) = -log2(e) (A / 2, B, C / 2).
 __device__ __forceinline__ void stage_entry(BlendBatch& batch, uint32_t slot, const Splat& s, float4 color,
                                             uint32_t subtiles) {
-  const float4 ab = s.mean_ab, rest = s.c_opacity_q_cut;
-  batch.mean_cut[slot] = make_float4(ab.x, ab.y, rest.w, 0.0f);
-  batch.power_opacity[slot] = make_float4(-0.5f * ab.z, -ab.w, -0.5f * rest.x, rest.y);
-  batch.color[slot] = color;
+  const float4 ab = s.mean_ab, rest = s.c_opacity_q_log2;
+  BlendEntry& e = batch.entry[slot];
+  e.mean_k = make_float4(ab.x, ab.y, -kHalfLog2e * ab.z, -2.0f * kHalfLog2e * ab.w);
+  e.kc_log2o_rg = make_float4(-kHalfLog2e * rest.x, rest.w, color.x, color.y);
+  e.b = color.z;
   batch.subtiles[slot] = subtiles;
 }
 
-// fm::gaussian_power, -(a dx^2 + c dy^2) / 2 - b dx dy, as dx (A dx + B dy) + C dy^2 with
-// (A, B, C) = (-a/2, -b, -c/2) (k.xyz, stage_entry): 5 instructions, written with explicit fmaf
-// so that it rounds alike wherever it is inlined. The rasterizers are built with FMA
-// contraction, which the compiler may apply differently in different copies, and blend_range and
-// blend_range_culled must agree bit for bit (GPU test tilecull).
-__device__ __forceinline__ float pixel_power(float4 k, float dx, float dy) {
-  return fmaf(dx, fmaf(k.x, dx, k.y * dy), (k.z * dy) * dy);
+// The walk's padding (blend_batch): a finite entry with log2(opacity) = -inf, which no pixel
+// blends. Written by one thread before a run's first barrier.
+__device__ __forceinline__ void stage_null_entry(BlendBatch& batch) {
+  batch.entry[kNullEntry] = {make_float4(0.0f, 0.0f, 0.0f, 0.0f), make_float4(0.0f, -INFINITY, 0.0f, 0.0f), 0.0f};
+}
+
+// log2(alpha) before the clamp, log2(opacity) + log2(e) fm::gaussian_power:
+// dx (kA dx + kB dy) + (kC dy^2 + log2(opacity)) with (kA, kB, kC) from stage_entry: 5
+// instructions, opacity folded in, written with explicit fmaf so that it rounds alike wherever
+// it is inlined. The rasterizers are built with FMA contraction, which the compiler may apply
+// differently in different copies, and blend_range and blend_range_culled must agree bit for
+// bit (GPU test tilecull).
+__device__ __forceinline__ float log2_alpha(float4 m, float kc, float log2o, float dx, float dy) {
+  return fmaf(dx, fmaf(m.z, dx, m.w * dy), fmaf(kc * dy, dy, log2o));
+}
+
+// 2^x through the hardware's ex2.approx (2 ulps; 0 for x = -inf, subnormal results flushed to 0,
+// far below 1/255): one instruction.
+__device__ __forceinline__ float fast_exp2(float x) {
+  float y;
+  asm("ex2.approx.ftz.f32 %0, %1;" : "=f"(y) : "f"(x));
+  return y;
 }
 
 // Pixel state: colour C and transmittance T (start at 0 and 1); done stops the pixel.
@@ -135,31 +165,37 @@ struct PixelState {
   bool done;
 };
 
-// Blends batch entry j into the pixel at (fpx, fpy) by the reference 3DGS rule: skipped where
-// power > 0 or alpha < 1/255; with early termination the pixel stops (done) before the entry that
-// would take T below 1e-4, without blending it.
-__device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t j, float fpx, float fpy,
+// Blends the batch entry at byte offset `offset` into the pixel at (fpx, fpy) by the reference
+// 3DGS rule: skipped where power > 0 or alpha < 1/255; with early termination the pixel stops
+// (done) before the entry that would take T below 1e-4, without blending it. A done pixel and the
+// null entry blend nothing.
+// Without branches: every pixel works out alpha (one ex2, opacity in the exponent) and the rule
+// picks what it keeps, so a warp runs one path whatever its pixels decide, and the loads and
+// exponentials of the next entries can be issued ahead of this one's transmittance chain
+// (blend_batch unrolls). Before, three data-dependent branches a pixel and entry (a power cut
+// before the exp, the alpha test, the stop) each cost a compare and a jump and split the warp,
+// and the entries ran one after the other. Same rule, rounding apart: the exponent is formed in
+// base 2 and T - alpha T with one rounding, so alpha and T differ from the CPU reference's by
+// a few ulps (its expf, T (1 - alpha)), as the hardware exp already made them.
+__device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t offset, float fpx, float fpy,
                                             bool early_termination, PixelState& px) {
-  const float4 m = batch.mean_cut[j];
-  const float4 k = batch.power_opacity[j];
-  const float power = pixel_power(k, m.x - fpx, m.y - fpy);
-  if (power < m.z || power > 0.0f) return;  // m.z = power_cut: alpha < 1/255, exp not needed
-  // The hardware exp (ex2.approx after a multiply): at most 2 + 1.17 |power| ulps off, so at most
-  // 9 ulps (1e-6) over the powers that reach it (power_cut >= ln(1/255) - 1e-3), against the
-  // libm expf's 2 instructions more per blended entry and pixel, the rasterizers' inner loop.
-  const float alpha = fminf(fm::kMaxAlpha, k.w * __expf(power));
-  if (alpha < fm::kMinAlpha) return;
-  const float test_T = px.T * (1.0f - alpha);
-  if (early_termination && test_T < fm::kMinTransmittance) {
-    px.done = true;
-    return;
-  }
-  const float4 c = batch.color[j];
+  const BlendEntry& en = *reinterpret_cast<const BlendEntry*>(reinterpret_cast<const char*>(batch.entry) + offset);
+  const float4 m = en.mean_k;
+  const float4 k = en.kc_log2o_rg;
+  const float e = log2_alpha(m, k.x, k.y, m.x - fpx, m.y - fpy);
+  const float alpha = fminf(fm::kMaxAlpha, fast_exp2(e));
+  // e <= log2(opacity): power <= 0 (the reference skips power > 0).
+  const bool keep = !px.done && e <= k.y && alpha >= fm::kMinAlpha;
   const float w = alpha * px.T;
-  px.C.x = fmaf(c.x, w, px.C.x);  // explicit, as pixel_power
-  px.C.y = fmaf(c.y, w, px.C.y);
-  px.C.z = fmaf(c.z, w, px.C.z);
-  px.T = test_T;
+  const float test_T = fmaf(-alpha, px.T, px.T);
+  const bool stop = keep && early_termination && test_T < fm::kMinTransmittance;
+  const bool blend = keep && !stop;
+  px.done = px.done || stop;
+  const float wb = blend ? w : 0.0f;
+  px.C.x = fmaf(k.z, wb, px.C.x);  // explicit, as log2_alpha
+  px.C.y = fmaf(k.w, wb, px.C.y);
+  px.C.z = fmaf(en.b, wb, px.C.z);
+  px.T = blend ? test_T : px.T;
 }
 
 // Blends a round's `count` staged entries, in list order, into the pixel at (fpx, fpy) of warp
@@ -175,21 +211,32 @@ __device__ __forceinline__ void blend_batch(BlendBatch& batch, uint32_t count, c
   constexpr unsigned kAll = 0xffffffffu;
   const uint32_t bit = 1u << (at.rank >> 5);
   const auto lane = static_cast<uint32_t>(at.rank & 31);
-  uint8_t* list = batch.warp_list[at.rank >> 5];
+  uint16_t* list = batch.warp_list[at.rank >> 5];
   uint32_t hits = 0;
   for (uint32_t base = 0; base < count; base += 32) {
     const uint32_t j = base + lane;
     const bool hit = j < count && (batch.subtiles[j] & bit) != 0u;
     const uint32_t ballot = __ballot_sync(kAll, hit);
-    if (hit) list[hits + static_cast<uint32_t>(__popc(ballot & ((1u << lane) - 1u)))] = static_cast<uint8_t>(j);
+    if (hit)
+      list[hits + static_cast<uint32_t>(__popc(ballot & ((1u << lane) - 1u)))] =
+          static_cast<uint16_t>(j * sizeof(BlendEntry));
     hits += static_cast<uint32_t>(__popc(ballot));
   }
+  // The walk reads four offsets a load: the list is padded to a multiple of 4 with the null
+  // entry, which blends nothing (stage_null_entry).
+  if (lane < 3 && hits + lane < static_cast<uint32_t>(tune::kRasterBatch))
+    list[hits + lane] = static_cast<uint16_t>(kNullEntry * sizeof(BlendEntry));
   __syncwarp();  // the list before its reads
   for (uint32_t k0 = 0; k0 < hits; k0 += 32) {
     if (__all_sync(kAll, px.done)) break;
     const uint32_t end = min(hits, k0 + 32u);
-    for (uint32_t k = k0; k < end; ++k)
-      if (!px.done) blend_entry(batch, list[k], at.fpx, at.fpy, early_termination, px);
+    for (uint32_t k = k0; k < end; k += 4) {
+      const uint2 four = *reinterpret_cast<const uint2*>(list + k);
+      blend_entry(batch, four.x & 0xffffu, at.fpx, at.fpy, early_termination, px);
+      blend_entry(batch, four.x >> 16, at.fpx, at.fpy, early_termination, px);
+      blend_entry(batch, four.y & 0xffffu, at.fpx, at.fpy, early_termination, px);
+      blend_entry(batch, four.y >> 16, at.fpx, at.fpy, early_termination, px);
+    }
   }
   __syncwarp();  // every read of the list before the next round writes it
 }
@@ -205,6 +252,7 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
                                             const uint32_t* values,  // [L]
                                             const Projected& g, const TilePixel& at, bool early_termination,
                                             BlendBatch& batch, PixelState& px, Skip skip) {
+  if (at.rank == 0) stage_null_entry(batch);  // before the first barrier below
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
     skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;
@@ -243,6 +291,7 @@ __device__ __forceinline__ void blend_range_culled(uint32_t begin, uint32_t end,
   constexpr int kWarps = tune::kRasterThreads / 32;
   __shared__ uint32_t warp_kept[kWarps];
   const int lane = at.rank & 31, warp = at.rank >> 5;
+  if (at.rank == 0) stage_null_entry(batch);  // before the first barrier below
   for (uint32_t base = begin; base < end; base += tune::kRasterBatch) {
     skip.refresh(px);
     if (__syncthreads_count(px.done || skip.stop()) == tune::kRasterThreads) break;

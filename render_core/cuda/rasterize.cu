@@ -21,18 +21,20 @@
 //   cost, where before every pixel evaluated every entry (RESULTS.md, issue 19).
 // - After the barrier every thread blends the round's Gaussians in depth order, skipping those
 //   with power > 0 or alpha < 1/255, and stops before the Gaussian that would take T below 1e-4
-//   (the reference 3DGS rule, as on the CPU). A pixel whose power lies below the entry's
-//   power_cut (splat.cuh: ln(1 / (255 opacity)), less a margin) skips before the exp: most pixels
-//   of a tile lie outside most of its Gaussians' 1/255 ellipses, and the answer is the same. A
-//   second barrier protects shared memory before the next fetch.
+//   (the reference 3DGS rule, as on the CPU), without branches: alpha = 2^(log2(opacity) +
+//   log2(e) power) for every entry a warp walks, and the rule selects what the pixel keeps
+//   (blend.cuh blend_entry; 4 entries a step, so the next entries' loads and exponentials issue
+//   ahead of this one's transmittance). A second barrier protects shared memory before the next
+//   fetch.
 // - Early termination: __syncthreads_count(done) at the top of each round ends the whole block
 //   once all its pixels are saturated, so opaque tiles never walk the rest of their list.
 // - One pixel per thread on purpose: blocks of 16 x 8 threads owning two pixels each, reading
 //   each shared-memory entry once for both, drew the same image but rasterized slower, likely
 //   because the blend loop is bound by latency and half the warps per SM were left to hide it
 //   (RESULTS.md, "This round (2026-11-22)": two pixels per thread tried and dropped).
-// - Shared memory: 256 x (16 + 16 + 16 + 4) bytes of entries and 8 x 256 bytes of warp lists
-//   = 15 KiB per block, so occupancy is set by registers, not shared memory. Colour is stored as float4 so each fetch is one 16-byte load.
+// - Shared memory: 257 x 48 bytes of entries (the last a null entry that pads the warps' walks),
+//   256 x 4 bytes of sub-tile masks and 8 x 256 x 2 bytes of warp lists = 17 KiB per block, so
+//   occupancy is set by registers, not shared memory.
 // - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
 //   later encoder can read the frame without a host copy.
 #include "blend.cuh"

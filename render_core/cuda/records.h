@@ -47,11 +47,11 @@ struct SceneView {
 // - conic (A, B, C): the inverse 2D covariance, q = A dx^2 + 2B dx dy + C dy^2 (paper eq. 2-3).
 // - q_max = 2 ln(255 opacity) (fm::opacity_aware_qmax): alpha >= 1/255 iff q <= q_max; -inf at
 //   opacity 0 (a Gaussian culled at a sub-frame's pose).
-// - power_cut = -q_max / 2 - 1e-3: a pixel whose power -q/2 lies below it skips the entry before
-//   the exp (blend.cuh blend_entry); +inf at opacity 0, so every pixel skips it.
+// - log2_opacity = log2(opacity): the rasterizers blend alpha = 2^(log2_opacity + log2(e) power)
+//   (blend.cuh blend_entry), opacity folded into the exponent; -inf at opacity 0.
 struct __align__(32) Splat {
-  float4 mean_ab;          // (mean.x, mean.y, A, B)
-  float4 c_opacity_q_cut;  // (C, opacity, q_max, power_cut)
+  float4 mean_ab;           // (mean.x, mean.y, A, B)
+  float4 c_opacity_q_log2;  // (C, opacity, q_max, log2_opacity)
 };
 
 // Stage 1 output, one entry per Gaussian (and one per chunk of fm::kChunkSize Gaussians);
@@ -59,7 +59,7 @@ struct __align__(32) Splat {
 // chunk (chunk_total == 0) leaves even its Gaussians' tiles_touched unwritten: read them through
 // listed_tiles where the chunk may have been culled.
 struct Projected {
-  Splat* splat;             // [N] 2D mean, conic, opacity, q_max, power cut
+  Splat* splat;             // [N] 2D mean, conic, opacity, q_max, log2(opacity)
   float4* color;            // [N] (r, g, b, unused): 16-byte loads in the rasterizer
   float* depth;             // [N] camera-space z
   ushort4* rect;            // [N] tile rectangle [x0, x1) x [y0, y1)

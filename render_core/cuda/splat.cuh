@@ -11,20 +11,17 @@ namespace catgs::cuda::stages {
 
 // The splat of a Gaussian with 2D mean `mean` (pixels), conic (A, B, C) and `opacity` in (0, 1],
 // whose q_max = fm::opacity_aware_qmax(opacity) the caller has worked out (every caller needs it
-// for its own tests). power_cut = -q_max / 2 - 1e-3 = ln(1 / (255 opacity)) - 1e-3: the power
-// below which alpha = opacity exp(power) is surely under 1/255. The 1e-3 moves exp by 0.1%, far
-// beyond the few-ulp errors of logf and of the rasterizers' __expf (under 10 ulps there), so the rasterizers' cut skips only entries that
-// their own alpha < 1/255 test skips (blend.cuh blend_entry): the image is the same bit for bit.
-// Halving is exact in float, so this is the value the rasterizers worked out per fetched entry
-// before it was stored here (-logf(255 opacity) - 1e-3), with one logf per Gaussian instead.
+// for its own tests), and log2(opacity), which the rasterizers add to the exponent instead of
+// multiplying alpha by the opacity (blend.cuh blend_entry): one log2f per Gaussian instead of a
+// multiply per entry and pixel.
 __device__ __forceinline__ Splat make_splat(glm::vec2 mean, glm::vec3 conic, float opacity, float q_max) {
-  return {make_float4(mean.x, mean.y, conic.x, conic.y), make_float4(conic.z, opacity, q_max, -0.5f * q_max - 1e-3f)};
+  return {make_float4(mean.x, mean.y, conic.x, conic.y), make_float4(conic.z, opacity, q_max, log2f(opacity))};
 }
 
 // A Gaussian culled at a sub-frame's pose: opacity 0, q_max -inf (no quadratic is below it) and
-// power_cut +inf (every pixel skips it), as make_splat gives at opacity 0.
+// log2(opacity) -inf (alpha 0 at every pixel), as make_splat gives at opacity 0.
 __device__ __forceinline__ Splat culled_splat() {
-  return {make_float4(0.0f, 0.0f, 0.0f, 0.0f), make_float4(0.0f, 0.0f, -INFINITY, INFINITY)};
+  return {make_float4(0.0f, 0.0f, 0.0f, 0.0f), make_float4(0.0f, 0.0f, -INFINITY, -INFINITY)};
 }
 
 // The SH coefficients of Gaussian i as fm::sh_to_color_from reads them: binary16 in device

@@ -39,8 +39,8 @@ __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, u
   if (t.kind == TileTestKind::ellipse) {
     const Splat s = t.splat[i];
     g.mean = glm::vec2(s.mean_ab.x, s.mean_ab.y);
-    g.conic = glm::vec3(s.mean_ab.z, s.mean_ab.w, s.c_opacity_q_cut.x);
-    g.q = s.c_opacity_q_cut.z;
+    g.conic = glm::vec3(s.mean_ab.z, s.mean_ab.w, s.c_opacity_q_log2.x);
+    g.q = s.c_opacity_q_log2.z;
   } else if (t.kind == TileTestKind::trail) {
     const float4 mm = t.trails.mean0_motion[i];
     const float4 cq = t.trails.conic_q[i];
