@@ -5,7 +5,8 @@
                                              pipeline); PSNR, errors and render lists must agree
   compare_runs.py bench DIR                  catgs-bench JSON {before,after}_SCENE_PATH.json in DIR:
                                              mean and p99 frame times, per-frame render lists and
-                                             snapshots (snap_{before,after}_SCENE_PATH/*.png)
+                                             snapshots (snap_{before,after}_SCENE_PATH/*.png),
+                                             then the mean stage times before -> after
 Prints markdown tables.
 """
 import filecmp, glob, json, os, sys
@@ -40,6 +41,7 @@ def tests(before, after):
 def bench(d):
     print('| scene, path | pipeline | before ms (p99) | after ms (p99) | after / before | pre-processing + keys ms, before -> after | lists | snapshot |')
     print('|---|---|---|---|---|---|---|---|')
+    stage_rows = []
     for fb in sorted(glob.glob(os.path.join(d, 'before_*.json'))):
         tag = os.path.basename(fb)[len('before_'):-len('.json')]
         fa = os.path.join(d, 'after_%s.json' % tag)
@@ -66,6 +68,13 @@ def bench(d):
             print('| %s | %s | %.3f (%.3f) | %.3f (%.3f) | %.3f | %.3f -> %.3f | %s | %s |' % (
                 tag, name, mb, p['frame_ms']['p99'], ma, q['frame_ms']['p99'], ma / mb, front(p), front(q), lists,
                 snap))
+            stage_rows.append((tag, name, p.get('stages_ms_mean', {}), q.get('stages_ms_mean', {})))
+    stages = ('preprocess', 'keys', 'sort', 'tile_ranges', 'rasterize')
+    print('\n| scene, path | pipeline | ' + ' | '.join('%s ms' % s for s in stages) + ' |')
+    print('|---|---|' + '---|' * len(stages))
+    for tag, name, sb, sa in stage_rows:
+        print('| %s | %s | ' % (tag, name) + ' | '.join(
+            '%.3f -> %.3f' % (sb.get(s, 0.0), sa.get(s, 0.0)) for s in stages) + ' |')
 
 
 if __name__ == '__main__':
