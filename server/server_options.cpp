@@ -1,5 +1,6 @@
 #include "server_options.h"
 
+#include "cpu_quota.h"
 #include "speculation/settings.h"
 #include "transport/origin_policy.h"
 #include "transport/trusted_proxies.h"
@@ -85,8 +86,8 @@ std::string server_usage() {
          "                        X-Forwarded-For names the client for the per-address limits\n"
          "                        (default none: the header is ignored, clients can forge it)\n"
          "  --rate-limits LIST    name=RATE/BURST,... (per second / burst; see below)\n"
-         "  --threads N           worker threads: sessions, encoding (default 0: the number of\n"
-         "                        cores, at least 4)\n"
+         "  --threads N           worker threads: sessions, encoding (default 0: the cores this\n"
+         "                        process may use, its affinity and cgroup CPU limit, at least 4)\n"
          "  --render-lanes N      renders at once, sessions in turn (default: 4 per GPU with the\n"
          "                        CUDA renderer, --threads with the CPU one)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
@@ -219,8 +220,9 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else
       throw std::invalid_argument("unknown option '" + a + "'\n" + server_usage());
   }
-  if (out.threads == 0)  // encodes are CPU-bound: one worker per core (x264 adds its own threads)
-    out.threads = std::max(4, static_cast<int>(std::thread::hardware_concurrency()));
+  // Encodes are CPU-bound: one worker per core this process may use (its affinity and its
+  // cgroup's CPU limit, cpu_quota.h), not per core of the host; x264 adds its own threads.
+  if (out.threads == 0) out.threads = std::max(4, usable_cores());
   if (out.max_pixels_in_flight == 0) out.max_pixels_in_flight = 2LL * out.max_viewport_width * out.max_viewport_height;
   if (out.tls_cert.empty() != out.tls_key.empty())
     throw std::invalid_argument("--tls-cert and --tls-key go together (one is missing)");

@@ -50,7 +50,7 @@ struct ServerOptions {
   // per-address caps and limits (empty: the TCP peer is the client).
   std::string trusted_proxies;
   RateLimitSettings rate_limits;        // --rate-limits
-  int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, cores)
+  int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, usable_cores())
   int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
   int slow_client_timeout_ms = 10000;   // frames unwritten this long -> ERROR_TOO_SLOW
   int crf = 23;                         // x264 constant rate factor (lower = better quality, more bytes)

@@ -9,6 +9,7 @@
 #include "preprocess.h"
 #include "tile_test.cuh"
 #include "tunables.h"
+#include "warp_reduce.cuh"
 
 namespace catgs::cuda::stages {
 
@@ -33,8 +34,8 @@ __device__ uint32_t exact_tile_mask(const fm::TileRect& rect, glm::vec2 mean, gl
 __device__ void record_depth_range(bool listed, float depth, unsigned long long* depth_range) {
   __shared__ unsigned warp_low[tune::kGaussianThreads / 32], warp_high[tune::kGaussianThreads / 32];
   const unsigned bits = __float_as_uint(depth);
-  const unsigned low = __reduce_max_sync(0xffffffffu, listed ? ~bits : 0u);
-  const unsigned high = __reduce_max_sync(0xffffffffu, listed ? bits : 0u);
+  const unsigned low = warp_max(listed ? ~bits : 0u);
+  const unsigned high = warp_max(listed ? bits : 0u);
   const unsigned warp = threadIdx.x / 32u;
   if ((threadIdx.x & 31u) == 0u) {
     warp_low[warp] = low;
@@ -179,7 +180,7 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
     const GaussianTileTest hit = load_tile_test(tests, i);
     uint32_t n = 0;
     for (int t = lane; t < area; t += 32) n += hit(r.x + t % rw, r.y + t / rw) ? 1u : 0u;
-    n = __reduce_add_sync(0xffffffffu, n);
+    n = warp_sum(n);
     if (lane == 0) found += record_big_count(i, n, depth, tiles_touched, chunk_total, depth_range) ? 1u : 0u;
   }
   const uint64_t items = static_cast<uint64_t>(big.count[1]) * tune::kHugeParts;  // (huge one, part)

@@ -11,6 +11,7 @@
 #include "forward_model/forward_model.h"
 #include "forward_model/trail.h"
 #include "records.h"
+#include "warp_reduce.cuh"
 
 namespace catgs::cuda::stages {
 
@@ -71,7 +72,7 @@ __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_
     const uint64_t at = base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)));
     if (mine) big.index[list == 0 ? at : big.capacity - 1 - at] = static_cast<uint32_t>(i);
   }
-  const uint32_t total = __reduce_add_sync(0xffffffffu, touched);
+  const uint32_t total = warp_sum(touched);
   if (lane == 0) warp_total[threadIdx.x / 32u] = total;
   const int block_visible = __syncthreads_count(touched > 0);
   if (threadIdx.x == 0) {  // no return: a kernel may walk several chunks (records.h ChunkWalk)

@@ -8,6 +8,7 @@
 
 #include "scene/gltf_file.h"
 #include "scene/sog_file.h"
+#include "scene/splat_file.h"
 #include "scene/spz_file.h"
 
 namespace catgs {
@@ -22,9 +23,12 @@ SceneFormat detect_scene_format(const std::string& path) {
   if (looks_like_spz(head)) return SceneFormat::spz;
   if (looks_like_gltf(head)) return SceneFormat::gltf;
   if (looks_like_sog_zip(head) || looks_like_sog_meta(head)) return SceneFormat::sog;
+  std::error_code ec;
+  const std::uintmax_t size = std::filesystem::file_size(path, ec);
+  if (!ec && looks_like_splat(head, size)) return SceneFormat::splat;
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".splat") return SceneFormat::splat;
+  if (ext == ".splat") return SceneFormat::splat;  // its reader names what is wrong
   return SceneFormat::ply;
 }
 

@@ -1,6 +1,7 @@
 // .splat reader (layout, axes and losses in splat_file.h).
 #include "scene/splat_file.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -53,6 +54,25 @@ void decode_record(const uint8_t* r, std::size_t i, GaussianModel& m, const std:
 }
 
 }  // namespace
+
+bool looks_like_splat(const std::vector<uint8_t>& head, std::uint64_t file_size) {
+  if (file_size == 0 || file_size % kRecordBytes != 0 || head.size() < kRecordBytes) return false;
+  const std::size_t records = std::min<std::size_t>(head.size() / kRecordBytes, 128);
+  for (std::size_t i = 0; i < records; ++i) {
+    const uint8_t* r = &head[i * kRecordBytes];
+    for (int a = 0; a < 3; ++a) {
+      const float p = f32_at(r + 4 * a), s = f32_at(r + 12 + 4 * a);
+      if (!(std::fabs(p) < 1e7f) || !(s > 0.0f && s < 1e7f)) return false;
+    }
+    float len2 = 0;
+    for (int k = 0; k < 4; ++k) {
+      const float q = static_cast<float>(r[28 + k]) / 127.5f - 1.0f;
+      len2 += q * q;
+    }
+    if (!(len2 >= 0.8f && len2 <= 1.2f)) return false;
+  }
+  return true;
+}
 
 GaussianModel read_splat(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

@@ -13,11 +13,21 @@
 // converter drops it). Alpha 0 or 255 reads as an opacity logit of -+kOpacityLogitLimit.
 #pragma once
 
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "scene/gaussian_model.h"
 
 namespace catgs {
+
+// Whether a file of `file_size` bytes whose first bytes are `head` reads as .splat, which has no
+// magic: a whole number of 32-byte records, and every record in `head` (up to 128) with finite
+// positions under 1e7, positive finite scales under 1e7 and rotation bytes of a near-unit
+// quaternion (|q|^2 in [0.8, 1.2]; convert.py writes 255 (q + 1) / 2 of a unit q, so 8-bit
+// rounding moves |q|^2 by under 0.03). Other data (random bytes, text, another format's
+// header) fails the first of these within a record or two. `head` must hold at least one record.
+bool looks_like_splat(const std::vector<uint8_t>& head, std::uint64_t file_size);
 
 // Reads a .splat file. Throws SceneFileError naming `path` when the file is missing, empty, not
 // a whole number of 32-byte records, or holds a NaN or infinite position or a non-positive or

@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "scene/format_detect.h"
 #include "scene/ply_io.h"
 #include "scene/spz_file.h"
 #include "splat_transform.h"
@@ -161,6 +162,46 @@ TEST(SplatTransformReference, FormatDetectedByContent) {
   EXPECT_EQ(b.size(), a.size());
   EXPECT_EQ(b.means, a.means);
   EXPECT_EQ(b.name, "really_spz");
+}
+
+// .splat has no magic: its records are recognised (splat_file.h looks_like_splat), so a .splat
+// saved under another name loads as the same scene, while other data named .bin stays "not a
+// PLY file", and a .splat whose records fail the checks falls back to its extension only.
+TEST(SceneFormatDetection, SplatRecognisedByItsRecords) {
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  const std::string dir = test::temp_dir(), splat = dir + "/flowers.splat", misnamed = dir + "/really_splat.bin";
+  write_splat_like_convert_py(load_scene(flowers), splat);
+  std::filesystem::copy_file(splat, misnamed);
+  EXPECT_EQ(detect_scene_format(misnamed), SceneFormat::splat);
+  const GaussianModel a = load_scene(splat), b = load_scene(misnamed);
+  ASSERT_EQ(b.size(), a.size());
+  EXPECT_EQ(b.means, a.means);
+  EXPECT_EQ(b.rotations, a.rotations);
+
+  // 4096 bytes that are not records (a 32-byte multiple, as .splat): text, then a record with a
+  // zero quaternion (bytes 127.5 +- 0.5 decode to |q| ~ 0).
+  const std::string text = dir + "/text.bin", flat = dir + "/flat.bin";
+  {
+    std::ofstream out(text, std::ios::binary);
+    for (int i = 0; i < 128; ++i) out << "thirty-two bytes of plain text!\n";
+  }
+  {
+    std::vector<char> bytes(std::filesystem::file_size(splat) < 4096 ? 0 : 4096);
+    std::ifstream(splat, std::ios::binary).read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    for (int k = 0; k < 4; ++k) bytes[32 * 5 + 28 + k] = static_cast<char>(128);
+    std::ofstream(flat, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  }
+  EXPECT_EQ(detect_scene_format(text), SceneFormat::ply);
+  EXPECT_EQ(detect_scene_format(flat), SceneFormat::ply);
+  try {
+    load_scene(text);
+    ADD_FAILURE() << "text loaded as a scene";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("text.bin"), std::string::npos) << e.what();
+  }
+  const std::string flat_splat = dir + "/flat.splat";
+  std::filesystem::copy_file(flat, flat_splat);
+  EXPECT_EQ(detect_scene_format(flat_splat), SceneFormat::splat);  // by its name, for its reader
 }
 
 // glTF 2.0 + KHR_gaussian_splatting written by splat-transform (its writeGlb). splat-transform 2.7.1
