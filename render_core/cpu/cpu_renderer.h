@@ -82,8 +82,12 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
                             const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out);
 
 // catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
-// means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M).
-float max_screen_motion(const GaussianModel& model, const Camera& a, const Camera& b, float min_depth);
+// means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M). Chunks none of
+// whose means can count (fm::chunk_means_off_image, `chunks` as fm::chunk_bounds(model)) are
+// skipped, as the CUDA core does; the result is the same with or without that step. Throws
+// std::invalid_argument for chunk bounds of another scene.
+float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
+                        const Camera& b, float min_depth);
 
 // catgs sub-frame (cpu/subframe_features.cpp; paper sec. 3.2): recomputes mean2d, conic,
 // opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there) and

@@ -53,12 +53,19 @@ bool path_misses_image(const GaussianModel& model, std::size_t i, glm::vec3 mean
 
 }  // namespace
 
-float max_screen_motion(const GaussianModel& model, const Camera& a, const Camera& b, float min_depth) {
+float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
+                        const Camera& b, float min_depth) {
   const std::size_t n = model.size();
-  std::vector<float> per_chunk((n + 4095) / 4096, 0.0f);
-  parallel_for(per_chunk.size(), 1, [&](std::size_t c) {
+  if (chunks.size() != fm::chunk_count(n))
+    throw std::invalid_argument("max_screen_motion: chunk bounds of another scene");
+  const fm::View va = fm::view_of(a);
+  std::vector<float> per_chunk(chunks.size(), 0.0f);
+  parallel_for(chunks.size(), 16, [&](std::size_t c) {
+    // A chunk none of whose means can count is skipped whole, as the CUDA stage does
+    // (fm::chunk_means_off_image: on a scene of many copies most chunks lie off the key image).
+    if (fm::chunk_means_off_image(chunks[c], va, min_depth)) return;
     float m = 0.0f;
-    for (std::size_t i = c * 4096; i < std::min(n, (c + 1) * 4096); ++i) {
+    for (std::size_t i = c * fm::kChunkSize; i < std::min(n, (c + 1) * fm::kChunkSize); ++i) {
       const glm::vec3 x(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
       const glm::vec3 pa = a.R * x + a.t, pb = b.R * x + b.t;
       if (!(pa.z > min_depth) || !(pb.z > a.near_plane)) continue;

@@ -37,10 +37,10 @@ void SpeculativeRenderer::key_frame(const Camera& camera) {
   const SpeculationParams& sp = options_.speculation;
   const auto t0 = clock::now();
   // Plan the window from the predicted path (never from future input): M over one frame, W.
-  const int window =
-      planner_.window_wanted()
-          ? planner_.window_for(max_screen_motion(*model_, camera, planner_.next_camera(camera), sp.depth_threshold))
-          : 0;
+  const int window = planner_.window_wanted()
+                         ? planner_.window_for(max_screen_motion(*model_, chunks_, camera, planner_.next_camera(camera),
+                                                                 sp.depth_threshold))
+                         : 0;
   // Without a window the frame is rendered in full by the exact pipeline's stages (its list is
   // the one-pose trail's, built without the trail machinery); it opens no group.
   const Pipeline stages = window > 0 ? Pipeline::catgs : Pipeline::exact;

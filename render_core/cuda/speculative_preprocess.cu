@@ -154,24 +154,34 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
                      c, count, chunk_total, live);
 }
 
-// M: grid-stride max over Gaussians, a warp reduction, one atomicMax per warp.
+// M: a warp per chunk (grid-stride over the scene's chunks), the chunk skipped whole when none
+// of its means can count (fm::chunk_means_off_image: on a scene of many copies most chunks lie
+// off the key image, and M read every mean at every key frame that wanted a window), else its
+// 32 lanes read its means (coalesced); a warp reduction, one atomicMax per warp.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    max_screen_motion_kernel(const float* means,  // [N, 3]
+    max_screen_motion_kernel(const float* means,             // [N, 3]
+                             const fm::ChunkBounds* chunks,  // [chunks]
                              uint64_t n, CameraParams a, CameraParams b, float min_depth,
                              unsigned* max_bits) {  // [1]
   float m = 0.0f;
-  const uint64_t stride = static_cast<uint64_t>(gridDim.x) * blockDim.x;
-  for (uint64_t i = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x; i < n; i += stride) {
-    const glm::vec3 x(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
-    const glm::vec3 pa = a.R * x + a.t, pb = b.R * x + b.t;
-    if (!(pa.z > min_depth) || !(pb.z > a.near_plane)) continue;
-    const glm::vec2 ua(a.fx * pa.x / pa.z + a.cx, a.fy * pa.y / pa.z + a.cy);
-    if (ua.x < 0 || ua.y < 0 || ua.x > static_cast<float>(a.width) || ua.y > static_cast<float>(a.height)) continue;
-    const glm::vec2 ub(b.fx * pb.x / pb.z + b.cx, b.fy * pb.y / pb.z + b.cy);
-    m = fmaxf(m, glm::length(ub - ua));
+  const uint64_t chunk_count = fm::chunk_count(n);
+  const uint64_t warps = static_cast<uint64_t>(gridDim.x) * blockDim.x / 32u;
+  const auto lane = static_cast<unsigned>(threadIdx.x & 31u);
+  for (uint64_t c = (static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32u; c < chunk_count; c += warps) {
+    if (fm::chunk_means_off_image(chunks[c], a, min_depth)) continue;  // warp-uniform
+    const uint64_t end = min(n, (c + 1) * fm::kChunkSize);
+    for (uint64_t i = c * fm::kChunkSize + lane; i < end; i += 32u) {
+      const glm::vec3 x(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+      const glm::vec3 pa = a.R * x + a.t, pb = b.R * x + b.t;
+      if (!(pa.z > min_depth) || !(pb.z > a.near_plane)) continue;
+      const glm::vec2 ua(a.fx * pa.x / pa.z + a.cx, a.fy * pa.y / pa.z + a.cy);
+      if (ua.x < 0 || ua.y < 0 || ua.x > static_cast<float>(a.width) || ua.y > static_cast<float>(a.height)) continue;
+      const glm::vec2 ub(b.fx * pb.x / pb.z + b.cx, b.fy * pb.y / pb.z + b.cy);
+      m = fmaxf(m, glm::length(ub - ua));
+    }
   }
   for (int off = 16; off > 0; off >>= 1) m = fmaxf(m, __shfl_xor_sync(0xffffffffu, m, off));
-  if ((threadIdx.x & 31u) == 0 && m > 0.0f) atomicMax(max_bits, __float_as_uint(m));
+  if (lane == 0 && m > 0.0f) atomicMax(max_bits, __float_as_uint(m));
 }
 
 }  // namespace
@@ -199,10 +209,11 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
 void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b, float min_depth,
                        unsigned* max_bits, cudaStream_t stream) {
   if (scene.n == 0) return;
-  const uint64_t want = (scene.n + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  const uint64_t warps_per_block = tune::kGaussianThreads / 32;
+  const uint64_t want = (fm::chunk_count(scene.n) + warps_per_block - 1) / warps_per_block;
   const auto blocks = static_cast<unsigned>(want < 4096 ? want : 4096);
-  max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene.means, scene.n, a, b, min_depth,
-                                                                          max_bits);
+  max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene.means, scene.chunks, scene.n, a, b,
+                                                                          min_depth, max_bits);
   CATGS_CUDA_LAUNCHED("max_screen_motion_kernel");
 }
 

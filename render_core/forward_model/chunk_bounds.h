@@ -119,6 +119,31 @@ CATGS_HD bool chunk_outside_view(const ChunkBounds& b, const View& v) {
   return chunk_edges_beyond(s, chunk_half_extent(b, v, s.z_lo) + chunk_rounding_slack(s), v) != 0u;
 }
 
+// The speculation planner's form (M, the largest screen motion of a mean on the key image:
+// cpu::max_screen_motion): true when no mean of chunk `b` counts for M at view `v`, which takes
+// the means in front of it deeper than `min_depth` whose centre u = fx x / z + cx, w =
+// fy y / z + cy lies on the image, [0, W] x [0, H] (centres only: no radius, no half-pixel
+// shift). Either every corner of the box of means lies at depth below min_depth by more than the
+// rounding of a mean's depth (1e-5 of its terms), or the box lies in front of the near plane and
+// its centres' pixel box lies beyond one image edge by more than chunk_rounding_slack.
+CATGS_HD bool chunk_means_off_image(const ChunkBounds& b, const View& v, float min_depth) {
+  float z_hi = -INFINITY, size = 0.0f;
+  bool finite = true;
+  for (int k = 0; k < 8; ++k) {
+    const glm::vec3 corner((k & 1) ? b.hi.x : b.lo.x, (k & 2) ? b.hi.y : b.lo.y, (k & 4) ? b.hi.z : b.lo.z);
+    const float z = (v.R * corner + v.t).z;
+    finite = finite && chunk_finite(z);
+    z_hi = fmaxf(z_hi, z);
+    size = fmaxf(size, fabsf(corner.x) + fabsf(corner.y) + fabsf(corner.z) + fabsf(v.t.z));
+  }
+  if (finite && z_hi + 1e-5f * size < min_depth) return true;
+  const ChunkOnScreen s = chunk_on_screen(b, v);
+  if (s.kind != ChunkOnScreen::box) return false;  // not in front may still lie past the far plane
+  const float r = chunk_rounding_slack(s);
+  return s.u_hi + 0.5f + r < 0.0f || s.u_lo + 0.5f - r > static_cast<float>(v.width) || s.w_hi + 0.5f + r < 0.0f ||
+         s.w_lo + 0.5f - r > static_cast<float>(v.height);
+}
+
 // The catgs key frame's form (the speculative pre-processing, paper sec. 3.1): true when no
 // Gaussian of chunk `b` survives its per-Gaussian cull over the path of `count` views
 // (view_at(k), the key view first). A Gaussian is dropped there when it is not in front of the

@@ -197,6 +197,68 @@ TEST(ChunkCulling, PathTestNeverCullsAListedGaussian) {
   EXPECT_GT(culled_chunks, 200u) << "too few culled chunks to say much";
 }
 
+// M (cpu::max_screen_motion), the speculation planner's input, skips chunks none of whose means
+// can count (fm::chunk_means_off_image): the same M as Gaussian by Gaussian (NaN bounds skip
+// nothing), on real scenes, for consecutive views and three depth thresholds; returns the
+// chunks skipped.
+Counts expect_same_motion(const GaussianModel& m) {
+  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(m), none = never_cull(m.size());
+  const std::vector<Camera> views = views_of(m, 320, 180);
+  Counts c;
+  for (std::size_t k = 0; k + 1 < views.size(); ++k)
+    for (float min_depth : {0.05f, 0.4f, 2.0f}) {
+      const float skipping = cpu::max_screen_motion(m, chunks, views[k], views[k + 1], min_depth);
+      const float every = cpu::max_screen_motion(m, none, views[k], views[k + 1], min_depth);
+      EXPECT_EQ(skipping, every) << "view " << k << ", min_depth " << min_depth;
+      for (const fm::ChunkBounds& b : chunks)
+        c.culled += fm::chunk_means_off_image(b, fm::view_of(views[k]), min_depth) ? 1 : 0;
+      c.chunks += chunks.size();
+    }
+  return c;
+}
+
+TEST(ChunkCulling, SameMotionOnTheBundledScene) {
+  const Counts c = expect_same_motion(*test::cached_scene(test::bundled_scene()));
+  EXPECT_GT(c.culled, c.chunks / 10) << "the views should leave a good share of the chunks off the image";
+}
+
+TEST(ChunkCulling, SameMotionOnFlowers) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const Counts c = expect_same_motion(*test::cached_scene(path));
+  EXPECT_GT(c.culled, 0u);
+}
+
+// Random chunks around the view's edges, in front and behind: whenever M's chunk test skips,
+// no mean drawn inside the chunk counts for M (deeper than min_depth, centre on the image).
+TEST(ChunkCulling, MotionSkipNeverDropsACountingMean) {
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  const Camera cam = Camera::from_pose(glm::vec3(0.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 160, 90);
+  const fm::View v = fm::view_of(cam);
+  GaussianModel m;
+  const std::size_t per_chunk = 64;
+  std::size_t skipped = 0, kept = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    random_chunk(m, per_chunk, v.tan_half_fov.x, 0.2f, rng);
+    const float min_depth = 0.02f + 3.0f * u01(rng) * u01(rng);
+    if (!fm::chunk_means_off_image(fm::chunk_bounds(m)[0], v, min_depth)) {
+      ++kept;
+      continue;
+    }
+    ++skipped;
+    for (std::size_t i = 0; i < per_chunk; ++i) {
+      const glm::vec3 x(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
+      const glm::vec3 p = cam.R * x + cam.t;
+      if (!(p.z > min_depth)) continue;
+      const float u = cam.fx * p.x / p.z + cam.cx, w = cam.fy * p.y / p.z + cam.cy;
+      ASSERT_FALSE(u >= 0 && w >= 0 && u <= static_cast<float>(cam.width) && w <= static_cast<float>(cam.height))
+          << "trial " << trial << ": chunk skipped, mean " << i << " lies on the image at depth " << p.z;
+    }
+  }
+  EXPECT_GT(skipped, 300u) << "too few skipped chunks to say much";
+  EXPECT_GT(kept, 300u);
+}
+
 TEST(ChunkCulling, NonFiniteBoundsNeverCull) {
   const Camera cam = Camera::from_pose(glm::vec3(0.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 160, 90);
   const fm::View v = fm::view_of(cam);

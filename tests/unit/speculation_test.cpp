@@ -305,7 +305,7 @@ TEST(Speculation, WindowShrinksWithSpeedAndStopsAtTheLimit) {
     r->render_at(t[1].camera, t[1].time_s, img);
     ASSERT_TRUE(r->last_stats().key_frame);
     // The planner's rule on the motion it predicted (exact at constant speed).
-    const float M = cpu::max_screen_motion(*m, t[1].camera, t[2].camera, 0.4f);
+    const float M = cpu::max_screen_motion(*m, fm::chunk_bounds(*m), t[1].camera, t[2].camera, 0.4f);
     EXPECT_EQ(r->last_stats().window, motion_adaptive_window(M, {})) << step_deg << " deg/frame, M " << M;
     windows.push_back(r->last_stats().window);
   }
