@@ -70,8 +70,14 @@ std::string ServerMetrics::prometheus_text() const {
   put("catgs_poses_total", "counter", "Poses received.", poses_total.load());
   put("catgs_poses_skipped_total", "counter", "Poses replaced before rendering.", poses_skipped_total.load());
   put("catgs_dropped_frames_total", "counter",
-      "Poses that never got a frame (replaced, or pending when the session ended).", dropped_frames_total.load());
+      "Frames lost: rendered or being rendered for a session that ended or failed, or a pose pending "
+      "when its session ended (poses replaced by a newer one are catgs_poses_skipped_total).",
+      dropped_frames_total.load());
   put("catgs_session_errors_total", "counter", "Sessions ended with an Error.", session_errors_total.load());
+  put("catgs_render_budget_refusals_total", "counter",
+      "Frames refused because their render list would exceed the budget (RenderListBudget); the "
+      "session ends with ERROR_INVALID_ARGUMENT.",
+      render_budget_refusals_total.load());
   put("catgs_encoder_fallbacks_total", "counter",
       "Encoders opened as x264 because --encoder auto found NVENC unusable.", encoder_fallbacks_total.load());
   put("catgs_quality_down_total", "counter", "Adaptive quality: a session stepped its resolution down.",

@@ -75,11 +75,13 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> bytes_total{0};       // Frame payload bytes
   std::atomic<std::uint64_t> poses_total{0};
   std::atomic<std::uint64_t> poses_skipped_total{0};  // replaced by a newer pose (latest wins)
-  // Poses that never got a frame: skipped, or still pending / rendering when the session ended.
+  // Frames lost: a pose pending, or a frame rendering or encoding, when its session ended or
+  // failed (a pose replaced by a newer one is a skip, poses_skipped_total, not a drop).
   std::atomic<std::uint64_t> dropped_frames_total{0};
-  std::atomic<std::uint64_t> session_errors_total{0};     // sessions ended with an Error
-  std::atomic<std::uint64_t> render_key_frames_total{0};  // full pre-process renders
-  std::atomic<std::uint64_t> render_sub_frames_total{0};  // catgs sub-frames from the caches
+  std::atomic<std::uint64_t> session_errors_total{0};          // sessions ended with an Error
+  std::atomic<std::uint64_t> render_budget_refusals_total{0};  // frames over the render-list budget
+  std::atomic<std::uint64_t> render_key_frames_total{0};       // full pre-process renders
+  std::atomic<std::uint64_t> render_sub_frames_total{0};       // catgs sub-frames from the caches
   // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).
   std::atomic<std::uint64_t> encoder_fallbacks_total{0};
   // --adaptive-quality (session/adaptive_quality.h): level changes and refine frames.

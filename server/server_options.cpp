@@ -6,6 +6,8 @@
 #include "transport/trusted_proxies.h"
 
 #include <algorithm>
+#include <cctype>
+#include <filesystem>
 #include <iostream>
 #include <thread>
 #include <stdexcept>
@@ -41,8 +43,9 @@ void parse_size(const std::string& name, const std::string& v, int& width, int& 
 
 std::string server_usage() {
   return "usage: catgs-server [options]\n"
-         "  --scene FILE          scene file (default: assets/scenes/biker.compressed.ply); repeat\n"
-         "                        it to serve several: Hello.scene picks one by name (the file\n"
+         "  --scene FILE|DIR      scene file (default: assets/scenes/biker.compressed.ply), or a\n"
+         "                        folder of them (.ply .spz .splat .glb .gltf .sog, SOG folders);\n"
+         "                        repeat it to serve several: Hello.scene picks one by name (the file\n"
          "                        name without its extension), the first by default; GET /scenes\n"
          "                        lists them (--cameras applies to the first). The first loads at\n"
          "                        start-up, the others on first use (their sessions see progress)\n"
@@ -122,6 +125,31 @@ std::string server_usage() {
          rate_limits_usage() + "catgs settings (--speculation name=value,...):\n" + speculation_settings_usage();
 }
 
+std::vector<std::string> scenes_in_folder(const std::string& dir) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(fs::path(dir) / "meta.json", ec)) return {(fs::path(dir) / "meta.json").string()};
+  std::vector<std::string> found;
+  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
+    const fs::path p = e.path();
+    std::string ext = p.extension().string();
+    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (e.is_directory(ec)) {
+      if (fs::exists(p / "meta.json", ec)) found.push_back((p / "meta.json").string());
+    } else if (e.is_regular_file(ec) && (ext == ".ply" || ext == ".spz" || ext == ".splat" || ext == ".glb" ||
+                                         ext == ".gltf" || ext == ".sog")) {
+      found.push_back(p.string());
+    }
+  }
+  if (ec) throw std::invalid_argument("--scene " + dir + ": cannot list the folder (" + ec.message() + ")");
+  std::sort(found.begin(), found.end());
+  if (found.empty())
+    throw std::invalid_argument("--scene " + dir +
+                                ": no scene files in the folder (.ply, .spz, .splat, .glb, .gltf, .sog, or a "
+                                "folder with a SOG meta.json)");
+  return found;
+}
+
 bool parse_server_options(int argc, char** argv, ServerOptions& out) {
   out.scene = std::string(CATGS_SOURCE_DIR) + "/assets/scenes/biker.compressed.ply";
   out.web_root = std::string(CATGS_SOURCE_DIR) + "/web_client";
@@ -135,12 +163,18 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     if (i + 1 >= argc) throw std::invalid_argument("option " + a + " needs a value");
     const std::string v = argv[++i];
     if (a == "--scene") {
-      // The first --scene replaces the bundled default; later ones are further scenes.
-      if (scene_given)
-        out.more_scenes.push_back(v);
-      else
-        out.scene = v;
-      scene_given = true;
+      // The first --scene replaces the bundled default; later ones are further scenes. A folder
+      // stands for the scenes in it (scenes_in_folder), in name order.
+      std::error_code ec;
+      const std::vector<std::string> files =
+          std::filesystem::is_directory(v, ec) ? scenes_in_folder(v) : std::vector<std::string>{v};
+      for (const std::string& file : files) {
+        if (scene_given)
+          out.more_scenes.push_back(file);
+        else
+          out.scene = file;
+        scene_given = true;
+      }
     } else if (a == "--cameras")
       out.cameras = v;
     else if (a == "--scene-memory-mb")

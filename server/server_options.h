@@ -79,6 +79,12 @@ struct ServerOptions {
 // Returns false when --help was given (usage already printed).
 bool parse_server_options(int argc, char** argv, ServerOptions& out);
 
+// The scenes a `--scene DIR` stands for: DIR/meta.json when DIR is an unbundled SOG scene, else
+// its files named .ply (INRIA or compressed), .spz, .splat, .glb, .gltf or .sog and its
+// sub-folders holding a SOG meta.json (as SUB/meta.json), not deeper, sorted by path. Throws
+// std::invalid_argument naming the folder when it cannot be listed or holds no scene.
+std::vector<std::string> scenes_in_folder(const std::string& dir);
+
 // The usage text.
 std::string server_usage();
 

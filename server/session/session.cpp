@@ -402,9 +402,8 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   if (pose.shown_latency_ms() > 0) shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
   const bool replaced = pending_.has_value();
   if (replaced) {
-    poses_skipped_++;  // latest pose wins: the older one is never rendered
-    shared_.metrics.poses_skipped_total++;
-    shared_.metrics.dropped_frames_total++;
+    poses_skipped_++;                       // latest pose wins: the older one is never rendered
+    shared_.metrics.poses_skipped_total++;  // a skip, not a drop: the newer pose is rendered instead
   }
   if (shared_.options.adaptive_quality) quality_.on_pose(received, replaced);
   pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), received};
@@ -456,6 +455,7 @@ void Session::maybe_start_render() {
         self->free_planes_.push_back(std::move(frame.planes));
         JobResult failed;
         failed.error = frame.error;
+        failed.over_budget = frame.over_budget;
         return self->on_job_done(std::move(failed));
       }
       self->rendered_ = std::move(frame);
@@ -512,6 +512,9 @@ Session::Rendered Session::run_render(Job job, std::unique_ptr<Yuv420Image> plan
   }
   try {
     render_into(r.job, r.planes->target(r.job.width, r.job.height), r);
+  } catch (const RenderBudgetError& e) {
+    r.error = e.what();
+    r.over_budget = true;
   } catch (const std::exception& e) {
     r.error = e.what();
   }
@@ -565,6 +568,11 @@ Session::JobResult Session::run_render_and_encode(const Job& job) {
     // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
     render_into(job, encoder_->input_target(), r);
     return frame_message(job, encoder_->encode_input(idr), r);
+  } catch (const RenderBudgetError& e) {
+    JobResult r;
+    r.error = e.what();
+    r.over_budget = true;
+    return r;
   } catch (const std::exception& e) {
     JobResult r;
     r.error = e.what();
@@ -610,6 +618,14 @@ Session::JobResult Session::frame_message(const Job& job, const EncodedFrame& en
 void Session::on_job_done(JobResult result) {
   if (state_ != State::open || result.message.empty()) shared_.metrics.dropped_frames_total++;
   if (state_ != State::open) return;
+  // A view whose render list the renderer refused (RenderListBudget: a scene of giant Gaussians,
+  // say) is the request's fault, not the server's: INVALID_ARGUMENT with the rule's message, so
+  // that a client can tell it from a failure, and a counter for the operator.
+  if (result.message.empty() && result.over_budget) {
+    shared_.metrics.render_budget_refusals_total++;
+    return fail(pb::ERROR_INVALID_ARGUMENT,
+                "this view cannot be rendered: " + result.error + " (a smaller viewport or another view may fit)");
+  }
   if (result.message.empty()) return fail(pb::ERROR_INTERNAL, "render/encode failed: " + result.error);
   if (in_flight_ == 0) last_progress_ = Clock::now();  // the slow-reader clock starts now
   in_flight_++;

@@ -117,11 +117,13 @@ class Session : public std::enable_shared_from_this<Session> {
     bool render_key_frame = true;
     int speculation_window = 0;
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
-    std::string error;  // non-empty: the render failed
+    std::string error;         // non-empty: the render failed
+    bool over_budget = false;  // it failed with RenderBudgetError (renderer.h): the view, not the server
   };
   struct JobResult {
     std::string message;  // serialized ServerMessage{Frame}; empty on failure
     std::string error;
+    bool over_budget = false;      // as Rendered::over_budget
     bool key_frame = false;        // an IDR access unit
     bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
     int speculation_window = 0;

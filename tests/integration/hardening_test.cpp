@@ -13,12 +13,17 @@
 
 #include <chrono>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <memory>
+#include <random>
 #include <regex>
 #include <thread>
 
+#include <glm/gtc/quaternion.hpp>
+
 #include "good_client.h"
+#include "scene/ply_io.h"
 #include "loadgen/stream_client.h"
 #include "server_process.h"
 #include "stream_checks.h"
@@ -403,6 +408,63 @@ TEST(Hardening, TokensFromFileAndEnvironment) {
 
 TEST(Hardening, UnreadableTokenFileStopsStartUp) {
   EXPECT_THROW(ServerProcess(server_args(kBiker, {"--token-file", "/nonexistent/tokens"})), std::runtime_error);
+}
+
+}  // namespace
+
+namespace {
+
+// Issue 22, finding 6, end to end: a scene of giant Gaussians (log-scale 5, every one in every
+// tile) is served to a small viewport, and a larger one whose render list would pass the budget
+// (60 k Gaussians x 300 tiles = 18 M entries > the 16 M floor at 320x240) ends with
+// ERROR_INVALID_ARGUMENT naming the budget, counted in catgs_render_budget_refusals_total, while
+// the small session keeps streaming.
+TEST(Hardening, ViewOverTheRenderListBudgetIsRefusedClearly) {
+  GaussianModel m;
+  m.resize(60000);
+  std::mt19937 rng(22);
+  std::uniform_real_distribution<float> u(-0.5f, 0.5f);
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    for (int a = 0; a < 3; ++a) {
+      m.means[3 * i + a] = u(rng);
+      m.log_scales[3 * i + a] = 5.0f;
+    }
+    m.rotations[4 * i] = 1.0f;
+    m.opacity_logits[i] = 5.0f;
+  }
+  const std::string scene = "/tmp/catgs-itest-giant-" + std::to_string(::getpid()) + ".ply";
+  write_inria_ply(m, scene);
+  {
+    ServerProcess server(server_args(scene));
+    const Camera look =
+        Camera::from_pose(glm::vec3(0.0f, 0.0f, -5.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 64, 48);
+    StreamClient small;
+    small.connect(server.port());
+    small.hello(64, 48);
+    small.send_pose(pose_from_camera(look, 1, now_ms()));
+    ASSERT_TRUE(wait_for(small, 30000, [](const pb::ServerMessage& s) { return s.has_frame(); }))
+        << "the small viewport must render";
+
+    StreamClient large;
+    large.connect(server.port());
+    large.hello(320, 240);
+    const Camera wide =
+        Camera::from_pose(glm::vec3(0.0f, 0.0f, -5.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 320, 240);
+    large.send_pose(pose_from_camera(wide, 1, now_ms()));
+    const auto e = expect_error(large, 30000);
+    ASSERT_TRUE(e) << "no Error for a view over the budget";
+    EXPECT_EQ(e->code(), pb::ERROR_INVALID_ARGUMENT) << e->reason();
+    EXPECT_NE(e->reason().find("budget"), std::string::npos) << e->reason();
+    EXPECT_TRUE(expect_closed(large, 5000));
+
+    small.send_pose(pose_from_camera(look, 2, now_ms()));
+    EXPECT_TRUE(wait_for(small, 30000, [](const pb::ServerMessage& s) { return s.has_frame(); }))
+        << "the other session noticed";
+    std::string metrics;
+    ASSERT_EQ(http_get(server.port(), "/metrics", metrics), 200);
+    EXPECT_EQ(metric_value(metrics, "catgs_render_budget_refusals_total"), 1.0) << metrics;
+  }
+  std::filesystem::remove(scene);
 }
 
 }  // namespace

@@ -333,6 +333,12 @@ TEST(MultiSession, LoadgenReportsRefusedSessionsSkipsAndProgress) {
   EXPECT_EQ(ok, 1);
   EXPECT_EQ(refused, 1);
   EXPECT_EQ(j["run"]["total"]["refused"].get<int>(), 1);
+  // The server's counters agree: skips are not drops. A drop is a pose pending, or a frame in
+  // flight, when its session ends: at most 2 for the one session that streamed.
+  std::string metrics;
+  ASSERT_EQ(http_get(server.port(), "/metrics", metrics), 200);
+  EXPECT_GT(metric_value(metrics, "catgs_poses_skipped_total"), 100.0) << metrics;
+  EXPECT_LE(metric_value(metrics, "catgs_dropped_frames_total"), 2.0) << metrics;
   EXPECT_NE(out.str().find("refused by the server: ERROR_SERVER_FULL"), std::string::npos) << out.str();
   EXPECT_EQ(out.str().find("0x0"), std::string::npos) << out.str();
   EXPECT_NE(err.str().find("sessions: 1 open, 1 refused, 0 failed"), std::string::npos) << err.str();

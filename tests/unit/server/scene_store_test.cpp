@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "scene/ply_io.h"
+#include "server_options.h"
 #include "session/scene_store.h"
 #include "test_data.h"
 
@@ -301,6 +302,42 @@ TEST(SceneStore, WithoutBudgetEverySceneStays) {
   }
   EXPECT_EQ(metrics.scenes_loaded.load(), 3);
   EXPECT_EQ(metrics.scene_unloads_total.load(), 0u);
+}
+
+}  // namespace
+
+namespace {
+
+// `--scene DIR` (issue 20): the folder's scene files in name order, SOG folders as their
+// meta.json, nothing deeper and no other files; a SOG folder itself is one scene; an empty folder
+// is an error naming it.
+TEST(SceneFolder, ListsItsScenesInNameOrder) {
+  const fs::path dir = fs::path(test::temp_dir()) / "scenes";
+  for (const char* f : {"b.spz", "a.compressed.ply", "c.GLB", "notes.txt", "sog/meta.json", "deep/x/y.ply"}) {
+    fs::create_directories((dir / f).parent_path());
+    std::ofstream(dir / f) << "x";
+  }
+  const std::vector<std::string> want = {(dir / "a.compressed.ply").string(), (dir / "b.spz").string(),
+                                         (dir / "c.GLB").string(), (dir / "sog/meta.json").string()};
+  EXPECT_EQ(scenes_in_folder(dir.string()), want);
+  EXPECT_EQ(scenes_in_folder((dir / "sog").string()), std::vector<std::string>{(dir / "sog/meta.json").string()});
+
+  ServerOptions o;
+  const std::string d = dir.string(), extra = "/elsewhere/z.ply";
+  const char* argv[] = {"catgs-server", "--scene", d.c_str(), "--scene", extra.c_str()};
+  ASSERT_TRUE(parse_server_options(5, const_cast<char**>(argv), o));
+  EXPECT_EQ(o.scene, want[0]);
+  EXPECT_EQ(o.more_scenes, (std::vector<std::string>{want[1], want[2], want[3], extra}));
+
+  const fs::path empty = fs::path(test::temp_dir()) / "empty";
+  fs::create_directories(empty / "deep");
+  std::ofstream(empty / "readme.md") << "x";
+  try {
+    scenes_in_folder(empty.string());
+    ADD_FAILURE() << "an empty folder gave scenes";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find(empty.string()), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
