@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 namespace catgs::server {
 
@@ -31,8 +32,24 @@ void AdaptiveQuality::on_frame(int level, double cost_ms) {
   cost_level_ = level;
 }
 
+void AdaptiveQuality::on_latency(Clock::time_point now, double latency_ms) {
+  latencies_.push_back({now, latency_ms});
+  drop_old(now);
+}
+
 void AdaptiveQuality::drop_old(Clock::time_point now) {
   while (!poses_.empty() && now - poses_.front().at > params_.window) poses_.pop_front();
+  while (!latencies_.empty() && now - latencies_.front().at > params_.window) latencies_.pop_front();
+}
+
+bool AdaptiveQuality::frames_late() const {
+  if (latencies_.size() < 5 || pose_interval_ms_ <= 0) return false;
+  std::vector<double> ms;
+  for (const LatencyEvent& l : latencies_) ms.push_back(l.ms);
+  std::nth_element(ms.begin(), ms.begin() + static_cast<std::ptrdiff_t>(ms.size() / 2), ms.end());
+  const double limit = std::max(std::chrono::duration<double, std::milli>(params_.late_min).count(),
+                                params_.late_intervals * pose_interval_ms_);
+  return ms[ms.size() / 2] > limit;
 }
 
 int AdaptiveQuality::on_tick(Clock::time_point now) {
@@ -43,11 +60,14 @@ int AdaptiveQuality::on_tick(Clock::time_point now) {
   const auto received = poses_.size();
   int step = 0;
   // At least a few poses, so that one replaced pose in a quiet second does not count.
-  if (received >= 5 && static_cast<double>(replaced) > params_.down_skip_fraction * static_cast<double>(received) &&
-      level_ + 1 < kLevels) {
+  const bool skipping =
+      received >= 5 && static_cast<double>(replaced) > params_.down_skip_fraction * static_cast<double>(received);
+  const bool late = frames_late();
+  if ((skipping || late) && level_ + 1 < kLevels) {
     step = -1;
-  } else if (level_ > 0 && received >= 1 && replaced == 0 && (!have_change_ || now - changed_at_ >= params_.up_after) &&
-             cost_level_ == level_ && pose_interval_ms_ > 0) {
+  } else if (level_ > 0 && received >= 1 && replaced == 0 && !late &&
+             (!have_change_ || now - changed_at_ >= params_.up_after) && cost_level_ == level_ &&
+             pose_interval_ms_ > 0) {
     const double grow = kScales[level_ - 1] / kScales[level_];
     if (cost_ms_ * grow * grow < params_.up_cost_fraction * pose_interval_ms_) step = +1;
   }
@@ -56,6 +76,7 @@ int AdaptiveQuality::on_tick(Clock::time_point now) {
   changed_at_ = now;
   have_change_ = true;
   poses_.clear();  // the next decision looks at the new level only
+  latencies_.clear();
   return step;
 }
 

@@ -7,9 +7,13 @@
 // The rule, evaluated on the session's tick (every 250 ms):
 // - Down one level when, over the last `window`, more than `down_skip_fraction` of the poses
 //   received were replaced by a newer one before being rendered (latest pose wins: the server
-//   renders fewer frames than the client asks for).
+//   renders fewer frames than the client asks for), or when the frames come late: the median of
+//   the pose-to-shown latencies the client reported in the window (Pose.shown_latency_ms, at
+//   least 5 of them) exceeds max(`late_min`, `late_intervals` pose intervals). A frame can be
+//   late with no pose skipped: the network or the client's decoder, not the renderer, holds it
+//   (fewer pixels are fewer bits and a cheaper decode).
 // - Up one level when the session has been at this level for `up_after`, the camera moved in
-//   the last `window` with no pose skipped, and the frame cost measured at this level (refine
+//   the last `window` with no pose skipped and no late median, and the frame cost measured at this level (refine
 //   frames left out), scaled by the pixels of the level above, is under `up_cost_fraction` of
 //   the client's pose interval (so it should still fit).
 // Down needs at least 5 poses in the window, so that one skipped pose of a quiet second does not
@@ -39,6 +43,8 @@ class AdaptiveQuality {
     Duration hold{2000};
     Duration up_after{3000};
     Duration refine_after{500};
+    double late_intervals = 4.0;
+    Duration late_min{150};
   };
   static constexpr int kLevels = 3;
   static constexpr double kScales[kLevels] = {1.0, 0.75, 0.5};
@@ -48,6 +54,8 @@ class AdaptiveQuality {
 
   // A pose arrived at `now`; `replaced` when it replaced one that was never rendered.
   void on_pose(Clock::time_point now, bool replaced);
+  // The client reported at `now` that an earlier frame was shown `latency_ms` after its pose.
+  void on_latency(Clock::time_point now, double latency_ms);
   // A frame rendered at `level` was handed off; `cost_ms` as above (not for refine frames).
   void on_frame(int level, double cost_ms);
   // The tick: applies the rule. Returns +1 (up), -1 (down) or 0.
@@ -67,12 +75,19 @@ class AdaptiveQuality {
     bool replaced;
   };
   void drop_old(Clock::time_point now);
+  // The window's latencies say the frames come late (see the rule).
+  bool frames_late() const;
 
   Params params_;
   int level_ = 0;
   Clock::time_point changed_at_{};
   bool have_change_ = false;
   std::deque<PoseEvent> poses_;  // within the last window
+  struct LatencyEvent {
+    Clock::time_point at;
+    double ms;
+  };
+  std::deque<LatencyEvent> latencies_;  // within the last window
   Clock::time_point last_pose_{};
   bool have_pose_ = false;
   double pose_interval_ms_ = 0;  // exponential average

@@ -399,7 +399,10 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   poses_received_++;
   shared_.metrics.poses_total++;
   // The client's own end-to-end measurement of an earlier frame (0: nothing new).
-  if (pose.shown_latency_ms() > 0) shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
+  if (pose.shown_latency_ms() > 0) {
+    shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
+    if (shared_.options.adaptive_quality) quality_.on_latency(received, pose.shown_latency_ms());
+  }
   const bool replaced = pending_.has_value();
   if (replaced) {
     poses_skipped_++;                       // latest pose wins: the older one is never rendered

@@ -60,6 +60,33 @@ TEST(AdaptiveQuality, ClimbsBackOnlyWhenTheCostWouldFit) {
   EXPECT_EQ(q.level(), 0);
 }
 
+// Frames shown late with no pose skipped (the network or the decoder holds them): down while
+// the client's median pose-to-shown latency passes max(150 ms, 4 pose intervals), no climb back
+// while it does, and latencies under the limit change nothing.
+TEST(AdaptiveQuality, LateFramesStepDownWithoutSkips) {
+  const auto drive_latency = [](AdaptiveQuality& q, Clock::time_point t, int ms, double latency_ms) {
+    for (int at = 0; at < ms; at += 16) {  // 60 Hz poses, none replaced, cheap frames
+      const Clock::time_point now = t + milliseconds(at);
+      q.on_pose(now, false);
+      q.on_latency(now, latency_ms);
+      q.on_frame(q.level(), 2.0);
+      if (at % 250 < 16) q.on_tick(now);
+    }
+    return t + milliseconds(ms);
+  };
+  AdaptiveQuality fine, late;
+  drive_latency(fine, Clock::time_point{}, 6000, 120.0);  // under 150 ms
+  EXPECT_EQ(fine.level(), 0);
+  Clock::time_point t = drive_latency(late, Clock::time_point{}, 1100, 400.0);
+  EXPECT_EQ(late.level(), 1);
+  t = drive_latency(late, t, 6000, 400.0);
+  EXPECT_EQ(late.level(), 2) << "still late: down again after the hold, never up";
+  // On time again: 2 ms frames fit (x2.25 at the level above: 4.5 ms, under 0.6 x 16 ms), so it
+  // climbs back once the late latencies leave the window.
+  t = drive_latency(late, t, 3100, 40.0);
+  EXPECT_EQ(late.level(), 1);
+}
+
 TEST(AdaptiveQuality, RefineOncePerStopBelowFullSize) {
   AdaptiveQuality q;
   Clock::time_point t = drive(q, Clock::time_point{}, 1100, 16, 2, 40.0);
