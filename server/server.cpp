@@ -258,7 +258,7 @@ int Server::wait_for_signal() {
 void Server::drain() {
   const auto t0 = std::chrono::steady_clock::now();
   const auto deadline = t0 + std::chrono::seconds(options_.drain_timeout_s);
-  manager_->start_draining();
+  manager_->start_draining(deadline);
   std::cout << "drain: " << manager_->open_sessions() << " sessions may stream for up to " << options_.drain_timeout_s
             << " s; new sessions are refused, /readyz answers 503" << std::endl;
   // Another signal (SIGINT, or SIGTERM again) ends the drain early; SIGHUP still reloads.

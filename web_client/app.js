@@ -282,6 +282,7 @@ function onClose(info) {
   state.closeInfo = info;
   state.decoder.reset();
   overlay.clearSession();
+  overlay.clearMessage('drain'); // the state line says what happens next
   state.reconnectAt = performance.now() + (retryInMs || 0);
   let status = 'disconnected';
   if (permanent) status = error && error.code === ERROR_UNAUTHORIZED ? 'needs-token' : 'refused';
@@ -303,6 +304,12 @@ function onMessage(kind, msg) {
       break;
     case 'stats':
       overlay.setServerStats(msg);
+      // The server is shutting down (a rollout, a scale-down): say when this stream ends; the
+      // reconnect then finds another replica.
+      if (msg.drain_ms_left > 0) {
+        overlay.showMessage('drain', `server restarting: this stream ends in ${Math.ceil(msg.drain_ms_left / 1000)} s, ` +
+          'then reconnects', 'warn');
+      }
       keepAlive(); // message events still run when a hidden tab's timers are throttled
       break;
     case 'error':

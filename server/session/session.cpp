@@ -716,6 +716,12 @@ void Session::send_stats() {
   s->set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
   s->set_key_frames(render_key_frames_);
   s->set_sub_frames(render_sub_frames_);
+  // Draining: the client learns when this session will end (the page says so), within a second of
+  // SIGTERM, rather than only from the Error at the deadline.
+  if (shared_.draining) {
+    const double left = ms_between(now, shared_.drain_deadline.load());
+    s->set_drain_ms_left(static_cast<std::uint32_t>(std::clamp(left, 1.0, 3.6e6)));
+  }
   send(m);
   // A still camera sends no poses and gets no frames: an idle interval has no frame rate to add.
   if (frames_since_stats_ > 0) shared_.metrics.session_fps.observe(frames_since_stats_ / seconds);

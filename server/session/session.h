@@ -57,8 +57,10 @@ struct SessionShared {
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
   std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
-  // Set by the server when SIGTERM starts the drain: a Hello now gets ERROR_SHUTTING_DOWN.
+  // Set by the server when SIGTERM starts the drain: a Hello now gets ERROR_SHUTTING_DOWN, and
+  // open sessions' Stats carry the time left until drain_deadline (steady clock).
   std::atomic<bool> draining{false};
+  std::atomic<std::chrono::steady_clock::time_point> drain_deadline{};
   // Hello and failed-token limits per client address (a new connection per attempt).
   PeerLimiter peers{options.rate_limits};
 };

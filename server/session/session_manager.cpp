@@ -82,7 +82,10 @@ int SessionManager::readiness(std::string& body) {
   return 200;
 }
 
-void SessionManager::start_draining() { shared_.draining = true; }
+void SessionManager::start_draining(std::chrono::steady_clock::time_point deadline) {
+  shared_.drain_deadline = deadline;
+  shared_.draining = true;
+}
 
 std::int64_t SessionManager::open_sessions() const { return shared_.metrics.sessions_open.load(); }
 

@@ -41,7 +41,8 @@ class SessionManager final : public TransportHandler {
 
   // The drain begins: /readyz turns 503 and every Hello from now on gets ERROR_SHUTTING_DOWN.
   // Live sessions go on. Thread-safe.
-  void start_draining();
+  // `deadline`: when the drain ends open sessions (Stats.drain_ms_left counts down to it).
+  void start_draining(std::chrono::steady_clock::time_point deadline);
   // Sessions past Hello now (connections still awaiting Hello are not counted).
   std::int64_t open_sessions() const;
 

@@ -8,7 +8,8 @@
 // wants Hello.token "sesame" (else Error(UNAUTHORIZED)); /ws-full refuses the first two Hellos
 // with Error(SERVER_FULL, retry_after_ms 2500); /ws-restart sends Error(SHUTTING_DOWN,
 // retry_after_ms 1200) after 5 frames; /ws-noframes welcomes but never sends a frame; /ws-hold
-// answers the first Pose only (the page keeps showing that frame, re-projected). GET /scenes
+// answers the first Pose only (the page keeps showing that frame, re-projected); /ws-drain sends
+// Stats.drain_ms_left 2600 (a draining server) right after Welcome and streams on. GET /scenes
 // lists two scenes (the page's picker). Every
 // session gets Stats once a second (frames_sent cumulative, means 0 when nothing was rendered, as
 // the server does). Under /noproto/ the page is served but .proto answers 415 (as libwebsockets
@@ -185,6 +186,8 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
             setTimeout(open, 1500);
           } else {
             open();
+            // A server draining (SIGTERM): its Stats say when the session will end.
+            if (scenario === '/ws-drain') send({ stats: { frames_sent: 0, drain_ms_left: 2600 } });
           }
         } else if (msg.body === 'key_frame_request') {
           next = 0; // the fixture's first access unit is its IDR

@@ -279,6 +279,14 @@ try {
     await page.close();
   }
 
+  // 9b. A draining server's Stats (drain_ms_left): the page says when this stream ends.
+  {
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws-drain')}`);
+    check(await moveUntil(page, (c) => /server restarting: this stream ends in 3 s/.test(c.overlayText())),
+      'drain: "server restarting: this stream ends in 3 s"');
+    await page.close();
+  }
+
   // 10. Reset, shared links, help, fullscreen.
   {
     const target = { position: [0.25, -0.5, -3], orientation: [0.9800666, 0.1986693, 0, 0], fov: 40 };

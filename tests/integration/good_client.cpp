@@ -93,6 +93,7 @@ void GoodClient::run() {
         }
         throw std::runtime_error("good client got Error: " + m->error().reason());
       }
+      if (m->has_stats() && m->stats().drain_ms_left() > 0) drain_ms_left_ = m->stats().drain_ms_left();
       if (!m->has_frame()) continue;
       int w = 0, h = 0;
       if (!dec.decode(m->frame().payload(), rgba, w, h) || w != width_ || h != height_)

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -24,6 +25,8 @@ class GoodClient {
   // Stops streaming and closes the connection.
   void stop();
   int frames() const { return frames_.load(); }
+  // Stats.drain_ms_left of the last Stats that had one (0: none did).
+  std::uint32_t drain_ms_left() const { return drain_ms_left_.load(); }
   // The longest wait between two frames (or since the last one) since reset_gaps(), ms.
   double max_gap_ms();
   void reset_gaps();
@@ -47,6 +50,7 @@ class GoodClient {
   std::thread thread_;
   std::atomic<bool> stop_{false}, ended_{false};
   std::atomic<int> frames_{0};
+  std::atomic<std::uint32_t> drain_ms_left_{0};
   std::mutex mutex_;
   std::string error_;
   std::optional<loadgen::pb::Error> server_error_;

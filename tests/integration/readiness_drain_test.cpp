@@ -134,9 +134,15 @@ TEST(ReadinessDrain, SigtermDrainsLiveSessionsUntilTheTimeout) {
   EXPECT_GE(refused->retry_after_ms(), 500u);
   EXPECT_LE(refused->retry_after_ms(), 1000u);
 
-  // The live session keeps streaming through the drain...
+  // The live session keeps streaming through the drain, and its Stats (every second) say when
+  // it will end...
   const int frames_at_term = live.frames();
   EXPECT_TRUE(live.wait_frames(5, 2000)) << "no frames during the drain\n" << server.log();
+  const auto told_by = Clock::now() + std::chrono::milliseconds(1500);
+  while (live.drain_ms_left() == 0 && Clock::now() < told_by)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_GT(live.drain_ms_left(), 0u) << "no Stats.drain_ms_left within 1.5 s of SIGTERM";
+  EXPECT_LE(live.drain_ms_left(), kDrainS * 1000);
   // ...and is told SHUTTING_DOWN, with a retry hint, when the drain times out.
   ASSERT_TRUE(live.wait_end(static_cast<int>(kDrainS * 1000) + 5000)) << server.log();
   const double ended_s = std::chrono::duration<double>(live.ended_at() - t_term).count();
