@@ -17,8 +17,7 @@ namespace {
 // Per-connection memory lws allocates (zeroed, no constructors run): the same layout for the
 // WebSocket and HTTP protocols because lws may hand either kind of wsi to protocols[0].
 struct Pss {
-  ConnId id;          // WebSocket connections: our id (0 before ESTABLISHED)
-  std::string* body;  // HTTP: the response body waiting for a writable callback
+  ConnId id;  // WebSocket connections: our id (0 before ESTABLISHED)
 };
 
 // The transport whose lws_create_context() is running on this thread: lws hands over the vhost's
@@ -44,13 +43,17 @@ std::string peer_of(lws* wsi) {
   return lws_get_peer_simple(wsi, buf, sizeof(buf)) ? std::string(buf) : std::string();
 }
 
-// Writes a complete HTTP answer (status, an optional extra header, a text body) on a connection
-// that asked for an upgrade. False when it could not be written.
-bool write_refusal(lws* wsi, unsigned status, const std::string& body, lws_token_indexes extra = WSI_TOKEN_COUNT,
-                   const std::string& extra_value = "") {
+// Writes a complete HTTP answer (status, an optional extra header, a body of `type`) in one
+// write: on a connection that asked for an upgrade, and for our own paths (/healthz, /readyz,
+// /scenes, /metrics), so that an answer never waits for a writable callback that a pipelined
+// request's could overtake (issue 22, finding 8: two pipelined GET /healthz got two header blocks
+// and no body). lws buffers what the socket does not take at once. False when it could not be
+// written.
+bool write_whole_response(lws* wsi, unsigned status, const std::string& body, lws_token_indexes extra = WSI_TOKEN_COUNT,
+                          const std::string& extra_value = "", const char* type = "text/plain; charset=utf-8") {
   std::vector<unsigned char> buf(LWS_PRE + 1024 + body.size());
   unsigned char *start = buf.data() + LWS_PRE, *p = start, *end = buf.data() + buf.size() - body.size() - 1;
-  if (lws_add_http_common_headers(wsi, status, "text/plain; charset=utf-8", body.size(), &p, end)) return false;
+  if (lws_add_http_common_headers(wsi, status, type, body.size(), &p, end)) return false;
   if (extra != WSI_TOKEN_COUNT &&
       lws_add_http_header_by_token(wsi, extra, reinterpret_cast<const unsigned char*>(extra_value.data()),
                                    static_cast<int>(extra_value.size()), &p, end))
@@ -271,7 +274,7 @@ int Transport::on_upgrade(lws* wsi, const char* upgrade) {
   auto refuse = [&](Refusal why, unsigned status, const std::string& detail, lws_token_indexes extra = WSI_TOKEN_COUNT,
                     const std::string& extra_value = "") {
     handler_.on_refused(why, peer, detail);
-    return write_refusal(wsi, status, detail + "\n", extra, extra_value) ? 1 : -1;
+    return write_whole_response(wsi, status, detail + "\n", extra, extra_value) ? 1 : -1;
   };
   // RFC 6455 4.2.2: a server that does not speak the client's version answers 426 with the
   // versions it does (lws 4.1.6 would carry on as if it were 13).
@@ -400,6 +403,15 @@ int Transport::on_http_filter(lws* wsi) {
   const bool chunked = lws_hdr_total_length(wsi, WSI_TOKEN_HTTP_TRANSFER_ENCODING) > 0;
   const bool length = lws_hdr_total_length(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH) > 0;
   const bool twice = lws_hdr_fragment_length(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH, 1) > 0;
+  // A GET with a body (Content-Length above 0, or chunked): lws 4.1.6 answers the GET and leaves
+  // the body in the stream, where it was read as the next request (issue 22, finding 8). Nothing
+  // we serve takes a body: refuse, and close, before the body's bytes are read.
+  if (!(chunked && length) && !twice && lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) > 0 &&
+      (chunked || header(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH).find_first_not_of("0 \t") != std::string::npos)) {
+    std::cerr << "http: 400 for " << peer_of(wsi) << ": a GET with a body\n";
+    lws_return_http_status(wsi, HTTP_STATUS_BAD_REQUEST, "a GET request carries no body");
+    return 1;
+  }
   if (!(chunked && length) && !twice) return 0;
   std::cerr << "http: 400 for " << peer_of(wsi) << ": "
             << (twice ? "Content-Length given twice" : "both Transfer-Encoding and Content-Length") << "\n";
@@ -409,7 +421,6 @@ int Transport::on_http_filter(lws* wsi) {
 }
 
 int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t len) {
-  auto* pss = static_cast<Pss*>(user);
   switch (reason) {
     case LWS_CALLBACK_HTTP: {
       char uri[256] = {0};
@@ -441,39 +452,13 @@ int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t l
         if (lws_return_http_status(wsi, HTTP_STATUS_NOT_FOUND, nullptr)) return -1;
         return lws_http_transaction_completed(wsi) ? -1 : 0;
       }
-      unsigned char buf[LWS_PRE + 1024];
-      unsigned char *start = buf + LWS_PRE, *p = start, *end = buf + sizeof(buf) - 1;
-      if (lws_add_http_common_headers(wsi, status, type.c_str(), body.size(), &p, end)) return 1;
-      static const char kBearer[] = "Bearer realm=\"catgs\"";
-      if (status == HTTP_STATUS_UNAUTHORIZED &&
-          lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_WWW_AUTHENTICATE,
-                                       reinterpret_cast<const unsigned char*>(kBearer), sizeof(kBearer) - 1, &p, end))
-        return 1;
-      if (lws_finalize_write_http_header(wsi, start, &p, end)) return 1;
-      if (!pss) return -1;
-      delete pss->body;
-      pss->body = new std::string(std::move(body));
-      lws_callback_on_writable(wsi);
-      return 0;
-    }
-    case LWS_CALLBACK_HTTP_WRITEABLE: {
-      if (!pss || !pss->body) break;
-      std::vector<unsigned char> buf(LWS_PRE + pss->body->size());
-      std::memcpy(buf.data() + LWS_PRE, pss->body->data(), pss->body->size());
-      const int n = lws_write(wsi, buf.data() + LWS_PRE, pss->body->size(), LWS_WRITE_HTTP_FINAL);
-      delete pss->body;
-      pss->body = nullptr;
-      if (n < 0) return -1;
+      const bool bearer = status == HTTP_STATUS_UNAUTHORIZED;
+      if (!write_whole_response(wsi, status, body, bearer ? WSI_TOKEN_HTTP_WWW_AUTHENTICATE : WSI_TOKEN_COUNT,
+                                bearer ? "Bearer realm=\"catgs\"" : "", type.c_str()))
+        return -1;
       return lws_http_transaction_completed(wsi) ? -1 : 0;
     }
-    case LWS_CALLBACK_CLOSED_HTTP:
-    case LWS_CALLBACK_HTTP_DROP_PROTOCOL:
-      if (pss) {
-        delete pss->body;
-        pss->body = nullptr;
-      }
-      break;
-    default:
+    default:  // writable, closed: our answers are written whole above
       break;
   }
   return lws_callback_http_dummy(wsi, static_cast<lws_callback_reasons>(reason), user, in, len);

@@ -18,7 +18,10 @@
 #include <memory>
 #include <random>
 #include <regex>
+#include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include <glm/gtc/quaternion.hpp>
 
@@ -128,6 +131,78 @@ TEST(Hardening, ProbePathsMatchExactly) {
   for (const char* path : {"/healthzXYZ", "/healthz/x", "/readyzz", "/metricsfoo", "/metrics/x"})
     EXPECT_EQ(http_get(server.port(), path, body), 404) << path;
   EXPECT_EQ(http_get(server.port(), "/healthz?probe=1", body), 200) << "a query string is not part of the path";
+}
+
+// Reads HTTP/1.1 responses from `fd` until `count` complete ones (status, body by
+// Content-Length) are in, the peer closes, or 5 s pass.
+std::vector<std::pair<int, std::string>> read_responses(int fd, std::size_t count) {
+  std::vector<std::pair<int, std::string>> out;
+  std::string in;
+  const auto deadline = Clock::now() + std::chrono::seconds(5);
+  while (out.size() < count && Clock::now() < deadline) {
+    const auto he = in.find("\r\n\r\n");
+    std::smatch m;
+    if (he != std::string::npos) {
+      const std::string head = in.substr(0, he);
+      std::size_t length = 0;
+      if (std::regex_search(head, m, std::regex("content-length: *([0-9]+)", std::regex::icase)))
+        length = std::stoul(m[1]);
+      if (in.size() >= he + 4 + length) {
+        const int status = std::regex_search(head, m, std::regex("^HTTP/1\\.1 ([0-9]{3})")) ? std::stoi(m[1]) : -1;
+        out.emplace_back(status, in.substr(he + 4, length));
+        in.erase(0, he + 4 + length);
+        continue;
+      }
+    }
+    pollfd p{fd, POLLIN, 0};
+    if (poll(&p, 1, 100) <= 0) continue;
+    char buf[4096];
+    const ssize_t n = recv(fd, buf, sizeof(buf), 0);
+    if (n <= 0) break;
+    in.append(buf, static_cast<std::size_t>(n));
+  }
+  return out;
+}
+
+// Pipelined requests on one connection (issue 22, finding 8): each gets its whole answer, in
+// order (before, two GET /healthz got two header blocks and no body, and a third none at all).
+TEST(Hardening, PipelinedRequestsGetWholeAnswersInOrder) {
+  ServerProcess server(server_args(kBiker));
+  const int fd = connect_loopback(server.port());
+  ASSERT_GE(fd, 0);
+  const std::string req =
+      "GET /healthz HTTP/1.1\r\nHost: a\r\n\r\nGET /readyz HTTP/1.1\r\nHost: a\r\n\r\n"
+      "GET /scenes HTTP/1.1\r\nHost: a\r\n\r\nGET /healthz HTTP/1.1\r\nHost: a\r\n\r\n";
+  ASSERT_EQ(send(fd, req.data(), req.size(), MSG_NOSIGNAL), static_cast<ssize_t>(req.size()));
+  const auto r = read_responses(fd, 4);
+  close(fd);
+  ASSERT_EQ(r.size(), 4u);
+  EXPECT_EQ(r[0], std::make_pair(200, std::string("ok\n")));
+  EXPECT_EQ(r[1].first, 200);
+  EXPECT_EQ(r[1].second.rfind("ready", 0), 0u) << r[1].second;
+  EXPECT_EQ(r[2].first, 200);
+  EXPECT_EQ(r[2].second.rfind("[", 0), 0u) << r[2].second;
+  EXPECT_EQ(r[3], std::make_pair(200, std::string("ok\n")));
+}
+
+// A GET with a body is refused (400) before the body is read, so its bytes cannot pass for a
+// second request; a GET with Content-Length: 0 is an ordinary GET.
+TEST(Hardening, GetWithABodyGets400) {
+  ServerProcess server(server_args(kBiker));
+  const int fd = connect_loopback(server.port());
+  ASSERT_GE(fd, 0);
+  const std::string req =
+      "GET /healthz HTTP/1.1\r\nHost: a\r\nContent-Length: 40\r\n\r\n"
+      "GET /metrics HTTP/1.1\r\nHost: a\r\n\r\n\r\n";
+  ASSERT_EQ(send(fd, req.data(), req.size(), MSG_NOSIGNAL), static_cast<ssize_t>(req.size()));
+  const auto r = read_responses(fd, 2);
+  close(fd);
+  ASSERT_GE(r.size(), 1u);
+  EXPECT_EQ(r[0].first, 400);
+  EXPECT_EQ(r.size(), 1u) << "the body was read as a request: " << r[1].first;
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/healthz", body, 5000, "Content-Length: 0\r\n"), 200);
+  EXPECT_NE(server.log().find("http: 400 for 127.0.0.1: a GET with a body"), std::string::npos) << server.log();
 }
 
 // Requests whose length is ambiguous (RFC 9112 6.3: Transfer-Encoding with Content-Length, or
