@@ -315,7 +315,7 @@ bool looks_like_gltf(const std::vector<uint8_t>& head) {
   return text.find(kExt) != std::string::npos;
 }
 
-GaussianModel read_gltf(const std::string& path) {
+GaussianModel read_gltf(const std::string& path, const LoadProgress& progress) {
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(ignore_image, nullptr);
   tinygltf::Model m;
@@ -359,6 +359,7 @@ GaussianModel read_gltf(const std::string& path) {
     read_primitive(path, m, *instances[k].primitive, model, at, counts[k]);
     apply_transform(path, instances[k], model, at, at + counts[k]);
     at += counts[k];
+    if (progress) progress(at, n);  // after each primitive; the last is (n, n)
   }
   return model;
 }

@@ -50,6 +50,7 @@
 #include <vector>
 
 #include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
 
 namespace catgs {
 
@@ -63,6 +64,6 @@ bool looks_like_gltf(const std::vector<uint8_t>& head);
 // type (not float or an 8-/16-bit integer), an SH degree with missing coefficients, a non-finite
 // value (naming the Gaussian's index and the attribute), a node transform that is not a
 // similarity, or a node tree that names missing nodes or has a cycle.
-GaussianModel read_gltf(const std::string& path);
+GaussianModel read_gltf(const std::string& path, const LoadProgress& progress = {});
 
 }  // namespace catgs

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
 
 namespace catgs {
 
@@ -33,10 +34,11 @@ namespace catgs {
 //
 // Memory: binary PLY files are memory-mapped and their pages handed back as the rows are read,
 // so a load peaks near the model's own size, not the model's plus the file's
-// (tests/unit/load_memory_test.cpp measures it). `progress`, when set, is called with (Gaussians read, Gaussians in the
-// file) every few thousand Gaussians of a PLY file and once at the end (other formats: not
-// called), on the loading thread.
-using LoadProgress = std::function<void(uint64_t done, uint64_t total)>;
+// (tests/unit/load_memory_test.cpp measures it). `progress`, when set, is called with (Gaussians
+// read, Gaussians in the file), rising, on the loading thread (load_progress.h): every 8192
+// Gaussians of a PLY file, every 65536 of an .spz or .splat file (after the .spz's
+// decompression), after each glTF primitive, and (N, N) at the end for every format (for SOG
+// only that: its images decode whole).
 GaussianModel load_scene(const std::string& path, const LoadProgress& progress = {});
 
 // Writes INRIA 3DGS PLY, binary little endian, SH degree of the model. Throws SceneFileError.

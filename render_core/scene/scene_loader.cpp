@@ -252,16 +252,16 @@ GaussianModel load_scene(const std::string& path, const LoadProgress& progress) 
   GaussianModel m;
   switch (detect_scene_format(path)) {
     case SceneFormat::spz:
-      m = read_spz(path);
+      m = read_spz(path, progress);
       break;
     case SceneFormat::splat:
-      m = read_splat(path);
+      m = read_splat(path, progress);
       break;
     case SceneFormat::gltf:
-      m = read_gltf(path);
+      m = read_gltf(path, progress);
       break;
     case SceneFormat::sog:
-      m = read_sog(path);
+      m = read_sog(path, progress);
       break;
     case SceneFormat::ply:
       m = load_ply(path, progress);

@@ -54,7 +54,7 @@ bool sog_supported() { return false; }
 
 SogSummary peek_sog(const std::string& path) { unsupported(path); }
 
-GaussianModel read_sog(const std::string& path) { unsupported(path); }
+GaussianModel read_sog(const std::string& path, const LoadProgress&) { unsupported(path); }
 
 #else
 
@@ -491,11 +491,13 @@ SogSummary peek_sog(const std::string& path) {
   return s;
 }
 
-GaussianModel read_sog(const std::string& path) {
+GaussianModel read_sog(const std::string& path, const LoadProgress& progress) {
   const SogFiles files(path);
   const json root = parse_meta(files, path);
   const Meta meta(root, path);
-  return decode(files, meta_version(root, path) == 2 ? plan_v2(meta) : plan_v1(meta, path), path);
+  GaussianModel m = decode(files, meta_version(root, path) == 2 ? plan_v2(meta) : plan_v1(meta, path), path);
+  if (progress) progress(m.size(), m.size());  // its images decode whole: no steps between
+  return m;
 }
 
 #endif  // CATGS_HAVE_SOG

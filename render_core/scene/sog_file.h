@@ -58,6 +58,7 @@
 #include <vector>
 
 #include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
 
 namespace catgs {
 
@@ -89,6 +90,6 @@ SogSummary peek_sog(const std::string& path);
 // non-finite values, a missing image (named), an image that is not lossless WebP or is too small
 // for `count` Gaussians, a codebook index or palette label past its table (naming the Gaussian),
 // or a Gaussian count of 0 or over 2^31.
-GaussianModel read_sog(const std::string& path);
+GaussianModel read_sog(const std::string& path, const LoadProgress& progress = {});
 
 }  // namespace catgs

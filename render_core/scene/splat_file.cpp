@@ -74,7 +74,7 @@ bool looks_like_splat(const std::vector<uint8_t>& head, std::uint64_t file_size)
   return true;
 }
 
-GaussianModel read_splat(const std::string& path) {
+GaussianModel read_splat(const std::string& path, const LoadProgress& progress) {
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, "cannot open file");
   const std::vector<uint8_t> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
@@ -84,7 +84,12 @@ GaussianModel read_splat(const std::string& path) {
   GaussianModel m;
   m.sh_degree = 0;
   m.resize(bytes.size() / kRecordBytes);
-  for (std::size_t i = 0; i < m.size(); ++i) decode_record(&bytes[i * kRecordBytes], i, m, path);
+  const ProgressSteps steps(progress, m.size());
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    steps.at(i);
+    decode_record(&bytes[i * kRecordBytes], i, m, path);
+  }
+  steps.done();
   return m;
 }
 

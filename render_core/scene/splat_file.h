@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
 
 namespace catgs {
 
@@ -32,6 +33,6 @@ bool looks_like_splat(const std::vector<uint8_t>& head, std::uint64_t file_size)
 // Reads a .splat file. Throws SceneFileError naming `path` when the file is missing, empty, not
 // a whole number of 32-byte records, or holds a NaN or infinite position or a non-positive or
 // non-finite scale (named by record and field).
-GaussianModel read_splat(const std::string& path);
+GaussianModel read_splat(const std::string& path, const LoadProgress& progress = {});
 
 }  // namespace catgs

@@ -198,7 +198,8 @@ float opacity_logit_of_byte(uint8_t a) {
   return std::log(t / (1.0f - t));
 }
 
-GaussianModel to_model(const Streams& s) {
+GaussianModel to_model(const Streams& s, const LoadProgress& progress) {
+  const ProgressSteps steps(progress, s.count);
   GaussianModel m;
   m.sh_degree = s.sh_degree;
   m.resize(s.count);
@@ -206,6 +207,7 @@ GaussianModel to_model(const Streams& s) {
   const float unit = std::ldexp(1.0f, -s.fractional_bits);
   const float flip[3] = {1, -1, -1};  // RUB -> RDF
   for (std::size_t i = 0; i < s.count; ++i) {
+    steps.at(i);
     for (int a = 0; a < 3; ++a) {
       const uint8_t* p = &s.positions[9 * i + 3 * a];
       int32_t fixed = p[0] | (p[1] << 8) | (p[2] << 16);
@@ -227,6 +229,7 @@ GaussianModel to_model(const Streams& s) {
         m.sh[(i * K + k) * 3 + c] =
             kShFlip[k - 1] * (static_cast<float>(s.sh[(i * (K - 1) + k - 1) * 3 + c]) - 128.0f) / 128.0f;
   }
+  steps.done();
   return m;
 }
 
@@ -355,11 +358,11 @@ bool looks_like_spz(const std::vector<uint8_t>& head) {
   return head.size() >= 2 && head[0] == 0x1f && head[1] == 0x8b;
 }
 
-GaussianModel read_spz(const std::string& path) {
+GaussianModel read_spz(const std::string& path, const LoadProgress& progress) {
   const std::vector<uint8_t> file = read_all(path);
   if (!looks_like_spz(file)) fail(path, "not an .spz file (neither 'NGSP' nor gzip magic)");
   const Streams s = file[0] == 0x1f ? parse_legacy(file, path) : parse_ngsp(file, path);
-  return to_model(s);
+  return to_model(s, progress);
 }
 
 void write_spz(const GaussianModel& model, const std::string& path, int version) {

@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
 
 namespace catgs {
 
@@ -43,7 +44,7 @@ bool looks_like_spz(const std::vector<uint8_t>& head);
 // Reads an .spz file of version 2, 3 or 4. Throws SceneFileError naming `path` for a missing or
 // unreadable file, a bad magic, an unsupported version or SH degree (> 3), a corrupt gzip or zstd
 // stream, or streams whose sizes disagree with the header's point count.
-GaussianModel read_spz(const std::string& path);
+GaussianModel read_spz(const std::string& path, const LoadProgress& progress = {});
 
 // Writes an .spz file of `version` 3 (gzip) or 4 (zstd streams; the default). Throws
 // SceneFileError naming `path` on an unsupported version, a model of more than 2^32 - 1 Gaussians,

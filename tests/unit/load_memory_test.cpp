@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "scene/ply_io.h"
+#include "scene/spz_file.h"
 #include "test_data.h"
 
 namespace catgs {
@@ -67,6 +68,27 @@ TEST(SceneLoadMemory, ProgressRisesToTheGaussianCount) {
     if (k > 0) EXPECT_GT(calls[k].first, calls[k - 1].first);
   }
   EXPECT_EQ(calls.back().first, m.size());
+}
+
+// The other formats report too (issue 18: big scenes log load progress): the bundled scene as
+// .spz (v3 and v4), progress rising to its count, with steps between for a scene of more than
+// 65536 Gaussians (.splat: SceneFormatDetection.SplatRecognisedByItsRecords).
+TEST(SceneLoadMemory, ProgressOfSpzAndSplatFiles) {
+  const GaussianModel biker = load_scene(test::bundled_scene());
+  const std::string dir = test::temp_dir();
+  std::vector<std::string> files = {dir + "/biker_v3.spz", dir + "/biker_v4.spz"};
+  write_spz(biker, files[0], 3);
+  write_spz(biker, files[1], 4);
+  for (const std::string& file : files) {
+    SCOPED_TRACE(file);
+    std::vector<std::pair<uint64_t, uint64_t>> calls;
+    const GaussianModel m = load_scene(file, [&](uint64_t done, uint64_t total) { calls.emplace_back(done, total); });
+    ASSERT_EQ(m.size(), biker.size());
+    ASSERT_GE(calls.size(), 3u) << "152746 Gaussians: steps at 65536 and 131072, then the end";
+    for (const auto& c : calls) EXPECT_EQ(c.second, m.size());
+    for (std::size_t k = 1; k < calls.size(); ++k) EXPECT_GT(calls[k].first, calls[k - 1].first);
+    EXPECT_EQ(calls.back().first, m.size());
+  }
 }
 
 }  // namespace

@@ -173,7 +173,12 @@ TEST(SceneFormatDetection, SplatRecognisedByItsRecords) {
   write_splat_like_convert_py(load_scene(flowers), splat);
   std::filesystem::copy_file(splat, misnamed);
   EXPECT_EQ(detect_scene_format(misnamed), SceneFormat::splat);
-  const GaussianModel a = load_scene(splat), b = load_scene(misnamed);
+  std::vector<std::pair<uint64_t, uint64_t>> calls;
+  const GaussianModel a = load_scene(splat, [&](uint64_t done, uint64_t total) { calls.emplace_back(done, total); });
+  const GaussianModel b = load_scene(misnamed);
+  ASSERT_GE(calls.size(), a.size() > 65536 ? 2u : 1u);  // a step every 65536 records, then the end
+  for (std::size_t k = 1; k < calls.size(); ++k) EXPECT_GT(calls[k].first, calls[k - 1].first);
+  EXPECT_EQ(calls.back(), std::make_pair(static_cast<uint64_t>(a.size()), static_cast<uint64_t>(a.size())));
   ASSERT_EQ(b.size(), a.size());
   EXPECT_EQ(b.means, a.means);
   EXPECT_EQ(b.rotations, a.rotations);
