@@ -84,6 +84,47 @@ TEST(SplatTransformReference, ReadsOurCompressedPly) {
   EXPECT_GE(r.lossy, 30.0);
 }
 
+// A second real scene (tumblewood_sh2: SH degree 2, an outdoor capture, where flowers_sh3 is SH 3
+// and biker SH 0): splat-transform's compressed PLY and .spz (v4 and v3) decode as its own decode
+// does, and it reads our compressed PLY and .spz as ours does.
+TEST(SplatTransformReference, TumblewoodBothWays) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(tumblewood, "scenes/tumblewood_sh2.ply");
+  const std::string dir = test::temp_dir();
+  for (const char* out : {"/t.compressed.ply", "/t4.spz", "/t3.spz"}) {
+    SCOPED_TRACE(out);
+    const std::string file = dir + out;
+    const std::string err =
+        test::splat_transform(tumblewood, file, std::string(out) == "/t3.spz" ? "--spz-version 3" : "");
+    ASSERT_TRUE(err.empty()) << err;
+    const double psnr = test::psnr_against_reference_decode(file, dir);
+    std::cout << "[ info ] tumblewood_sh2 -> splat-transform " << out << ": ours vs its decode " << psnr << " dB\n";
+    EXPECT_GE(psnr, kSameDecodeDb);
+  }
+  const auto ply = check_our_writer(tumblewood, "", dir + "/ours.compressed.ply",
+                                    [](const GaussianModel& m, const std::string& p) { write_compressed_ply(m, p); });
+  const auto spz = check_our_writer(tumblewood, "", dir + "/ours.spz",
+                                    [](const GaussianModel& m, const std::string& p) { write_spz(m, p, 4); });
+  std::cout << "[ info ] our compressed PLY / .spz of tumblewood_sh2: splat-transform's decode vs ours " << ply.same
+            << " / " << spz.same << " dB\n";
+  EXPECT_GE(ply.same, kSameDecodeDb);
+  EXPECT_GE(spz.same, kSameDecodeDb);
+}
+
+// splat-transform reads our INRIA PLY writer's file as the scene we wrote (a lossless format: the
+// renders agree to float rounding).
+TEST(SplatTransformReference, ReadsOurInriaPly) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const auto r = check_our_writer(flowers, cams, test::temp_dir() + "/ours.ply",
+                                  [](const GaussianModel& m, const std::string& p) { write_inria_ply(m, p); });
+  std::cout << "[ info ] our INRIA PLY of flowers_sh3: splat-transform's decode vs ours " << r.same
+            << " dB, vs the original " << r.lossy << " dB\n";
+  EXPECT_GE(r.same, kSameDecodeDb);
+  EXPECT_GE(r.lossy, kSameDecodeDb);
+}
+
 // .spz written by splat-transform, i.e. by Niantic's own writer (@adobe/spz, the WASM build of
 // nianticlabs/spz): version 4 (zstd streams, its default) and version 3 (gzip).
 class SpzVersionTest : public ::testing::TestWithParam<int> {};
