@@ -3,10 +3,13 @@
 // @kubernetes-models/prometheus-operator), then the deployment's own invariants (readiness on
 // /readyz, grace period = preStop + drain + margin, no fixed replicas, no affinity, ...), and
 // that the HPA's metric is the one the prometheus-adapter rule exposes.
-// The schema check covers types, formats (quantities, int32), enums and required fields; it does
-// not reject unknown field names (kubeconform -strict would; it is not packaged for Debian 12).
+// The schema check covers types, formats (quantities, int32), enums and required fields; the
+// compiled validators let unknown field names through, so a second walk (unknownFields) checks
+// every field name against the models' TypeScript declarations (the interfaces the validators
+// were generated from), as kubeconform -strict would (it is not packaged for Debian 12).
 // usage: node validate_k8s.mjs [REPO]. Exit 0 all pass, 1 a failure, 77 (SKIP) without npm ci.
 import { existsSync, readFileSync } from 'node:fs';
+import { createRequire } from 'node:module';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 
@@ -44,6 +47,87 @@ async function validate(obj) {
   new Model(obj).validate();
 }
 
+// The .d.ts beside the module `spec` imports (relative to `from`), or null: a relative path, a
+// package subpath node resolves, or one its "exports" map does not list (found in node_modules
+// folders above `from`).
+function declarations(spec, from, req) {
+  const dtsOf = (js) => js.replace(/\.(c|m)?js$/, '') + '.d.ts';
+  if (spec.startsWith('.')) return dtsOf(path.resolve(path.dirname(from), spec));
+  try {
+    const dts = dtsOf(req.resolve(spec));
+    if (existsSync(dts)) return dts;
+  } catch {
+    // not exported: look for the file itself
+  }
+  for (let dir = path.dirname(from); dir !== path.dirname(dir); dir = path.dirname(dir)) {
+    const dts = path.join(dir, 'node_modules', `${spec}.d.ts`);
+    if (existsSync(dts)) return dts;
+  }
+  return null;
+}
+
+// The field names and types of the interface a model's .d.ts declares first, and where its
+// imported interfaces live: { props: Map(name -> type text), imports: Map(type name -> .d.ts) }.
+const interfaces = new Map();
+function interfaceOf(dts) {
+  if (interfaces.has(dts)) return interfaces.get(dts);
+  const text = readFileSync(dts, 'utf8');
+  const req = createRequire(dts);
+  const imports = new Map();
+  for (const m of text.matchAll(/^import \{ ([^}]+) \} from "([^"]+)";$/gm)) {
+    const target = declarations(m[2], dts, req);
+    for (const name of m[1].split(',').map((s) => s.trim())) imports.set(name, target);
+  }
+  const body = text.match(/^export interface \w+(?: extends [\w, ]+)? \{\n([\s\S]*?)^\}/m);
+  const props = new Map();
+  // A field's type is one line, or an object type over several ({ [key: string]: string; }).
+  for (const m of (body ? body[1] : '').matchAll(/^ {4}"([^"]+)"\??: (\{[\s\S]*?^ {4}\}|[^\n]+?);$/gm))
+    props.set(m[1], m[2].replace(/\s+/g, ' '));
+  const r = { props, imports };
+  interfaces.set(dts, r);
+  return r;
+}
+
+// Field names of `value` (at `where`) that its type `type` (declared in `dts`) does not have.
+function unknownFields(value, type, dts, where, out) {
+  if (value === null || typeof value !== 'object') return out;
+  const array = type.match(/^Array<(.+)>$/);
+  if (array) {
+    if (Array.isArray(value)) value.forEach((v, i) => unknownFields(v, array[1], dts, `${where}[${i}]`, out));
+    return out;
+  }
+  const map = type.match(/^\{\s*\[key: string\]: (.+?);?\s*\}$/);
+  if (map) {
+    for (const [k, v] of Object.entries(value)) unknownFields(v, map[1], dts, `${where}.${k}`, out);
+    return out;
+  }
+  const target = interfaceOf(dts).imports.get(type);
+  if (!target) return out;  // a primitive, a union or a type not imported here: no fields to check
+  const { props } = interfaceOf(target);
+  for (const [k, v] of Object.entries(value)) {
+    if (!props.has(k)) out.push(`${where}.${k}`);
+    else unknownFields(v, props.get(k), target, `${where}.${k}`, out);
+  }
+  return out;
+}
+
+// The top-level object against its kind's interface.
+function unknownTopLevel(obj) {
+  const [group, version] = obj.apiVersion.includes('/') ? obj.apiVersion.split('/') : ['', obj.apiVersion];
+  const mod = group === 'monitoring.coreos.com'
+    ? `@kubernetes-models/prometheus-operator/${group}/${version}/${obj.kind}`
+    : `kubernetes-models/${group ? `${group}/` : ''}${version}/${obj.kind}`;
+  const dts = declarations(mod, path.join(here, 'x.mjs'), createRequire(path.join(here, 'x.mjs')));
+  if (!dts) throw new Error(`no declarations for ${mod}`);
+  const { props } = interfaceOf(dts);
+  const out = [];
+  for (const [k, v] of Object.entries(obj)) {
+    if (!props.has(k)) out.push(k);
+    else unknownFields(v, props.get(k), dts, k, out);
+  }
+  return out;
+}
+
 const file = path.join(repo, 'deploy/k8s/catgs-stream.yaml');
 const docs = parseAllDocuments(readFileSync(file, 'utf8'));
 const objects = [];
@@ -60,6 +144,16 @@ for (const o of objects) {
   }
 }
 
+for (const o of objects) {
+  let unknown;
+  try {
+    unknown = unknownTopLevel(o);
+  } catch (e) {
+    unknown = [`(no declarations: ${e.message})`];
+  }
+  check(`${o.kind}/${o.metadata?.name} has no unknown field names`, unknown.length === 0, unknown.join(', '));
+}
+
 // The validator is live: a wrong type must be refused.
 const byKind = (k) => objects.find((o) => o.kind === k);
 const dep = byKind('Deployment');
@@ -72,6 +166,15 @@ try {
   refused = true;
 }
 check('the schema check refuses a string containerPort (self-test)', refused);
+// The field-name walk is live: misspelt fields, deep in a pod template and in a map's values,
+// are named.
+const misspelt = structuredClone(dep);
+misspelt.spec.template.spec.containers[0].readinessProbes = misspelt.spec.template.spec.containers[0].readinessProbe;
+misspelt.spec.template.metadata.lables = { a: 'b' };
+const named = unknownTopLevel(misspelt);
+check('the field-name walk names misspelt fields (self-test)',
+  named.includes('spec.template.spec.containers[0].readinessProbes') && named.includes('spec.template.metadata.lables'),
+  named.join(', '));
 
 // Deployment invariants (deploy/README.md).
 const pod = dep.spec.template.spec;
