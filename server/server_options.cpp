@@ -134,10 +134,11 @@ std::vector<std::string> scenes_in_folder(const std::string& dir) {
     const fs::path p = e.path();
     std::string ext = p.extension().string();
     for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    if (e.is_directory(ec)) {
-      if (fs::exists(p / "meta.json", ec)) found.push_back((p / "meta.json").string());
-    } else if (e.is_regular_file(ec) && (ext == ".ply" || ext == ".spz" || ext == ".splat" || ext == ".glb" ||
-                                         ext == ".gltf" || ext == ".sog")) {
+    std::error_code entry;  // a broken link is skipped, not a failed listing
+    if (e.is_directory(entry)) {
+      if (fs::exists(p / "meta.json", entry)) found.push_back((p / "meta.json").string());
+    } else if (e.is_regular_file(entry) && (ext == ".ply" || ext == ".spz" || ext == ".splat" || ext == ".glb" ||
+                                            ext == ".gltf" || ext == ".sog")) {
       found.push_back(p.string());
     }
   }

@@ -406,8 +406,10 @@ int Transport::on_http_filter(lws* wsi) {
   // A GET with a body (Content-Length above 0, or chunked): lws 4.1.6 answers the GET and leaves
   // the body in the stream, where it was read as the next request (issue 22, finding 8). Nothing
   // we serve takes a body: refuse, and close, before the body's bytes are read.
-  if (!(chunked && length) && !twice && lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) > 0 &&
-      (chunked || header(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH).find_first_not_of("0 \t") != std::string::npos)) {
+  // header() gives "" for a value it will not copy (over 4 KiB): that counts as a body too.
+  const std::string declared = length ? header(wsi, WSI_TOKEN_HTTP_CONTENT_LENGTH) : "0";
+  const bool body = chunked || declared.empty() || declared.find_first_not_of("0 \t") != std::string::npos;
+  if (!(chunked && length) && !twice && lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) > 0 && body) {
     std::cerr << "http: 400 for " << peer_of(wsi) << ": a GET with a body\n";
     lws_return_http_status(wsi, HTTP_STATUS_BAD_REQUEST, "a GET request carries no body");
     return 1;

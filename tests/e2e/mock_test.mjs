@@ -284,6 +284,7 @@ try {
     const page = await openPage(`${base}/?ws=${wsUrl('/ws-drain')}`);
     check(await moveUntil(page, (c) => /server restarting: this stream ends in 3 s/.test(c.overlayText())),
       'drain: "server restarting: this stream ends in 3 s"');
+    await shot(page, 'server_draining');
     await page.close();
   }
 

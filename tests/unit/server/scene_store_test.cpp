@@ -309,7 +309,7 @@ TEST(SceneStore, WithoutBudgetEverySceneStays) {
 namespace {
 
 // `--scene DIR` (issue 20): the folder's scene files in name order, SOG folders as their
-// meta.json, nothing deeper and no other files; a SOG folder itself is one scene; an empty folder
+// meta.json, nothing deeper, no other files and no dangling links; a SOG folder itself is one scene; an empty folder
 // is an error naming it.
 TEST(SceneFolder, ListsItsScenesInNameOrder) {
   const fs::path dir = fs::path(test::temp_dir()) / "scenes";
@@ -317,6 +317,7 @@ TEST(SceneFolder, ListsItsScenesInNameOrder) {
     fs::create_directories((dir / f).parent_path());
     std::ofstream(dir / f) << "x";
   }
+  fs::create_symlink(dir / "gone.ply", dir / "broken.ply");  // a dangling link is skipped
   const std::vector<std::string> want = {(dir / "a.compressed.ply").string(), (dir / "b.spz").string(),
                                          (dir / "c.GLB").string(), (dir / "sog/meta.json").string()};
   EXPECT_EQ(scenes_in_folder(dir.string()), want);
