@@ -77,10 +77,10 @@ __device__ __forceinline__ float rough_sqrt(float x) { return x > 0.0f ? x * rsq
 // [c - h at clamp(-dx_t), c + h at clamp(dx_t)], dx clamped to the column and to the ellipse's
 // columns |dx| <= sqrt(Q / D). A sub-tile of the column is reached where that extent meets its
 // pixel rows: the ellipse meets the sub-tile's rectangle exactly then. Margins, so that no pixel
-// that blend_entry would blend is left out: Q = q_max + 4e-3 + 2e-6 M (blend_entry's own cut is
-// at q_max + 2e-3; M bounds the size of the quadratic's terms over the tile, whose few-ulp
-// rounding a thin Gaussian's cancelling terms can add to a pixel's q: both err by a few ulps, 6e-8
-// of M),
+// that blend_entry would blend is left out: Q = q_max + 4e-3 + 2e-6 M (blend_entry blends where
+// alpha >= 1/255, q <= q_max to within the few ulps of its ex2 and of log2(opacity), under 1e-5
+// in q; M bounds the size of the quadratic's terms over the tile, whose few-ulp rounding a thin
+// Gaussian's cancelling terms can add to a pixel's q: both err by a few ulps, 6e-8 of M),
 // columns widened by 0.02 px, each end by 1e-3 of its terms + 0.02 px, and the ellipse's reach
 // by 1e-3 (the hardware divisions and square roots are a few ulps off). Where the ellipse is not
 // a finite positive definite one, every sub-tile (blend_entry decides).
