@@ -4,8 +4,8 @@
 // hold whatever the machine's speed: every healthy session streams to the end without an error
 // and never waits 10 s for a frame (issue 22 finding 5 stalled one for 27.8 s), every hostile
 // client gets its Error (or its connection closed) and ends, and once everyone has gone the
-// server holds the file descriptors it held before (no leaked socket) and its memory stopped
-// growing (the second half of the run, as DisconnectsMidStreamFreeEverything). It reports the
+// server holds the file descriptors it held before (no leaked socket) and the floor of its memory
+// did not rise from the first half of the run to the second (a leak raises it). It reports the
 // healthy sessions' frame gaps (the longest wait in each 5 s window), the churn and hostile
 // counts, memory and descriptors, as a table and, with CATGS_SOAK_JSON=FILE, as JSON.
 //
@@ -243,9 +243,16 @@ TEST(Soak, HealthySessionsKeepStreamingThroughChurnAndHostileClients) {
   ASSERT_GE(samples.size(), 2u);
   const Sample& half = samples[(samples.size() - 1) / 2];
   const Sample& last = samples.back();
-  // As DisconnectsMidStreamFreeEverything: a leak grows in both halves, allocator arenas settle
-  // in the first. 16 MiB over the second half allows about 40 KiB per churn cycle of a 30 s run.
-  EXPECT_LT(last.rss_kib - half.rss_kib, 16 * 1024) << "server RSS grew over the second half of the run";
+  // A leak raises the floor of RSS; sessions that come and go move its peaks by +-20 MiB from one
+  // 5 s sample to the next with no trend (seen: 402, 385, 386, 385, 404, 388 MiB), so comparing two
+  // single samples flakes. Compare the lowest sample of the second half with the lowest of the
+  // first: 16 MiB over half a run (about 45 churn cycles) catches a leak of ~0.35 MiB a cycle.
+  const std::size_t mid = samples.size() / 2;
+  const auto by_rss = [](const Sample& a, const Sample& b) { return a.rss_kib < b.rss_kib; };
+  const long floor_first = std::min_element(samples.begin(), samples.begin() + mid, by_rss)->rss_kib;
+  const long floor_second = std::min_element(samples.begin() + mid, samples.end(), by_rss)->rss_kib;
+  EXPECT_LT(floor_second - floor_first, 16 * 1024)
+      << "the lowest server RSS of the second half is above the first half's: it grew, a leak";
 
   // The report.
   int fds_max = 0;
@@ -267,7 +274,8 @@ TEST(Soak, HealthySessionsKeepStreamingThroughChurnAndHostileClients) {
     std::cout << "[ soak ] hostile " << kHostileNames[k] << ": " << hostile_answered[k] << " of " << hostile_tries[k]
               << " answered\n";
   std::cout << "[ soak ] server RSS " << samples.front().rss_kib / 1024 << " MiB at 5 s, " << half.rss_kib / 1024
-            << " MiB at half time, " << last.rss_kib / 1024 << " MiB at the end (max " << rss_max / 1024
+            << " MiB at half time, " << last.rss_kib / 1024 << " MiB at the end (max " << rss_max / 1024 << ", lowest " << floor_first / 1024 << " in the first half, "
+            << floor_second / 1024 << " in the second"
             << "); file descriptors " << fds_before << " before, max " << fds_max << ", " << fds_after
             << " after everyone left\n";
   if (const char* path = std::getenv("CATGS_SOAK_JSON")) {
