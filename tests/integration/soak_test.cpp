@@ -274,8 +274,8 @@ TEST(Soak, HealthySessionsKeepStreamingThroughChurnAndHostileClients) {
     std::cout << "[ soak ] hostile " << kHostileNames[k] << ": " << hostile_answered[k] << " of " << hostile_tries[k]
               << " answered\n";
   std::cout << "[ soak ] server RSS " << samples.front().rss_kib / 1024 << " MiB at 5 s, " << half.rss_kib / 1024
-            << " MiB at half time, " << last.rss_kib / 1024 << " MiB at the end (max " << rss_max / 1024 << ", lowest " << floor_first / 1024 << " in the first half, "
-            << floor_second / 1024 << " in the second"
+            << " MiB at half time, " << last.rss_kib / 1024 << " MiB at the end (max " << rss_max / 1024 << ", lowest "
+            << floor_first / 1024 << " in the first half, " << floor_second / 1024 << " in the second"
             << "); file descriptors " << fds_before << " before, max " << fds_max << ", " << fds_after
             << " after everyone left\n";
   if (const char* path = std::getenv("CATGS_SOAK_JSON")) {
