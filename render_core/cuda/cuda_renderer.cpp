@@ -1,7 +1,6 @@
 // CudaRenderer: runs the five stages on its own stream over reusable device buffers.
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <map>
 #include <mutex>
 #include <string>
@@ -93,7 +92,7 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
 
 uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkWalk& walk,
                                                 const stages::CameraParams& cam, const stages::TileTests& tests,
-                                                bool depth_first, uint64_t* visible) {
+                                                bool depth_first, const RenderListBudget& budget, uint64_t* visible) {
   const stages::Projected proj = projected();
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
@@ -120,14 +119,10 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkW
   const stages::DepthKeyPacking packing =
       fm::single_sort_packing(~static_cast<uint32_t>(host_counts[kReadDepthLowComplement - kReadListLength]),
                               static_cast<uint32_t>(host_counts[kReadDepthHigh - kReadListLength]), tiles);
-  // Where the CUDA core would mirror the CPU core's RenderOptions::list_budget (renderer.h; issue
-  // 22): a check of `entries` here, before the buffers below grow, with 24 bytes an entry (two key
-  // and two value buffers). Not enabled yet: the catgs benchmarks' wide windows list up to 722 M
-  // entries at 1080p on purpose (tests/gpu/RESULTS.md), so the GPU needs its own defaults.
-  if (entries > std::numeric_limits<uint32_t>::max())
-    throw std::length_error("CUDA renderer: render list of " + std::to_string(entries) +
-                            " entries exceeds 2^32 - 1 (32-bit tile ranges); lower the resolution "
-                            "or split the scene");
+  // The render-list budget (renderer.h; issue 22), as the CPU core checks it: a scene of giant
+  // Gaussians is refused here, before the list buffers below grow, and not after gigabytes of
+  // them. Its cap also keeps the list within the 32-bit tile ranges.
+  budget.check(entries, cam.width, cam.height, kBytesPerListEntry);
 
   for (int h = 0; h < 2; ++h) {
     keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", &allocations);
@@ -251,7 +246,8 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   const stages::TileTests tests{
       exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square, proj.splat, {}, cam.width, cam.height};
   uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, s.live_walk(n), cam, tests, exact && depth_first_sort(), &visible);
+  const uint64_t entries =
+      s.build_render_list(n, s.live_walk(n), cam, tests, exact && depth_first_sort(), options_.list_budget, &visible);
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
   if (exact) {
     // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the

@@ -59,6 +59,11 @@ bool device_usable(std::string* reason);
 // 79.1 GiB"). Throws CudaError.
 std::string device_description();
 
+// Device bytes a render-list entry takes, as RenderListBudget (renderer.h) counts them: two key
+// buffers (8 bytes each: the sort ping-pongs) and two value buffers (4 each). The CPU core's is
+// 28 (cpu_renderer.h); neither counts the sort's scratch.
+inline constexpr std::uint64_t kBytesPerListEntry = 24;
+
 // Device memory in use on the current device (total - free), bytes. Throws CudaError.
 std::size_t device_memory_used();
 

@@ -113,8 +113,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
   // the predictor and the depth-first sort bought").
   uint64_t visible = 0;
-  const uint64_t entries =
-      s.build_render_list(n, s.live_walk(n), cam, tests, window > 0 && depth_first_sort(), &visible);
+  const uint64_t entries = s.build_render_list(n, s.live_walk(n), cam, tests, window > 0 && depth_first_sort(),
+                                               options_.list_budget, &visible);
   if (window > 0)  // the frustum cache, for the group's sub-frames
     stages::select_cached(proj.tiles_touched, proj.chunk_total, n, s.cached.as<uint32_t>(),
                           s.catgs_counters.as<unsigned>() + kCachedCount, s.select_temp.as<void>(),

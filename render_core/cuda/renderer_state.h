@@ -160,10 +160,13 @@ struct CudaRenderer::State {
   // on the GPU meanwhile), grows the list buffers, emits keys with `tests`
   // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
   // ranges. With `depth_first` the list is ordered by the depth-first sort (depth_order.cu; the
-  // same list). Returns the list length. Throws std::length_error past 2^32 - 1 entries.
-  // `walk`: the chunks pre-processing kept (live_walk()).
+  // same list). Returns the list length. Throws RenderBudgetError (renderer.h) when the list is
+  // over `budget` for the camera's size (kBytesPerListEntry an entry; the 2^32 - 1 limit of the
+  // 32-bit tile ranges included), after the counts sync and before any list buffer grows, as the
+  // CPU core's emit_keys. `walk`: the chunks pre-processing kept (live_walk()).
   uint64_t build_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
-                             const stages::TileTests& tests, bool depth_first, uint64_t* visible);
+                             const stages::TileTests& tests, bool depth_first, const RenderListBudget& budget,
+                             uint64_t* visible);
 
   // Plans the split tasks of a frame of `entries` list entries and their order (task_split.cu,
   // paper sec. 3.4; after the tile ranges) and returns the slice capacity, the blocks the frame's

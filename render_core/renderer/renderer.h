@@ -51,6 +51,10 @@ struct RenderListBudget {
   // Throws RenderBudgetError when `entries` exceeds max_entries(...); the message names the
   // entries, the bytes they would take, the budget and the rule.
   void check(std::uint64_t entries, int width, int height, std::uint64_t bytes_per_entry) const;
+
+  // Only the 2^32 - 1 limit of the 32-bit tile ranges: for benchmarks and tests that make lists
+  // past the server's budget on purpose (wide speculation windows, lists past 2^31 entries).
+  static RenderListBudget unlimited() { return {UINT64_MAX, UINT64_MAX, 0}; }
 };
 
 // A frame whose render list would exceed the budget (a std::length_error, as the 2^32 limit).
@@ -63,7 +67,7 @@ struct RenderOptions {
   Pipeline pipeline = Pipeline::exact;
   glm::vec3 background{0.0f};     // linear RGB in [0, 1], composited behind the Gaussians
   SpeculationParams speculation;  // catgs; exact frames take task_splitting and min_slice_entries
-  RenderListBudget list_budget;   // enforced by the CPU core before the list is allocated
+  RenderListBudget list_budget;   // enforced by both cores before the list is allocated
 };
 
 // An image in host memory, row-major, top row first.

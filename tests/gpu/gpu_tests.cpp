@@ -2,7 +2,7 @@
 // scripts/gpu_run.sh; no GoogleTest there). Prints a table, writes it with --out, and exits
 // non-zero when any check fails.
 //
-//   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large]
+//   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large] [--only budget]
 //
 // DIR holds flowers_sh3.ply, biker.compressed.ply and tumblewood_sh2.compressed.ply (the compact
 // copy: the 85 MB original does not fit a GPU run's 64 MiB of files); TRACES holds
@@ -28,6 +28,12 @@
 //  tiles18    8192x4608 (147456 tiles, 18 tile-key bits) CUDA == CPU.
 //  list>2^31  a render list of more than 2^31 entries renders (or fails with a clear CudaError
 //             for lack of device memory); > 2^32 - 1 entries throws std::length_error.
+//  budget     the render-list budget (renderer.h; issue 22): 20 k whole-image Gaussians at 1280x720
+//             (72 M entries, over the default 59 M) are refused by CUDA vanilla, exact and catgs
+//             with RenderBudgetError naming the same entry count as the CPU core's refusal, before
+//             any list buffer grows (buffers held under a tenth of the list's 24 bytes an entry);
+//             the same renderer then draws the scene at 64x48 (within the budget) equal to the CPU
+//             (>= 50 dB, the same list).
 //  city26M    49 tumblewood copies (26.6 M Gaussians): CUDA == CPU on a fly-over view.
 //  chunkcull  13 tumblewood copies: one CUDA exact renderer (single sort, and one depth first)
 //             draws a fly-over view, then a view of the centre copies, where most chunks are
@@ -760,6 +766,7 @@ void list_limit_checks() {
   auto wall = wall_scene(n);
   catgs::RenderOptions o;
   o.pipeline = Pipeline::vanilla;
+  o.list_budget = catgs::RenderListBudget::unlimited();  // the 2^32 - 1 limit alone
   Row row{"list>2^31", wall->name, "front", "vanilla", 0, 0, 0, -1, -1, false, ""};
   try {
     auto dev = catgs::cuda::DeviceScene::upload(*wall);
@@ -803,6 +810,66 @@ void list_limit_checks() {
     row2.note = std::string("unexpected: ") + e.what();
   }
   add(row2);
+}
+
+// The entry count a RenderBudgetError names ("render list of N entries"), or -1.
+long long refused_entries(const std::string& what) {
+  const std::string lead = "render list of ";
+  const auto at = what.find(lead);
+  return at == std::string::npos ? -1 : std::atoll(what.c_str() + at + lead.size());
+}
+
+// One frame through `render`: the entry count of its RenderBudgetError, -1 when it drew the
+// frame, -2 when it failed otherwise (the message in `note`).
+template <typename Render>
+long long refusal(Render&& render, std::string& note) {
+  try {
+    render();
+    return -1;
+  } catch (const catgs::RenderBudgetError& e) {
+    return refused_entries(e.what());
+  } catch (const std::exception& e) {
+    note = std::string("unexpected: ") + e.what();
+    return -2;
+  }
+}
+
+// 6a: the render-list budget, CUDA as the CPU core.
+void budget_checks() {
+  auto wall = wall_scene(20000);
+  auto dev = catgs::cuda::DeviceScene::upload(*wall);
+  const Camera big = front_camera(1280, 720), small = front_camera(64, 48);
+  for (const Pipeline p : {Pipeline::vanilla, Pipeline::exact, Pipeline::catgs}) {
+    catgs::RenderOptions o;
+    o.pipeline = p;
+    Row row{"budget", wall->name, "front", catgs::pipeline_name(p), 0, 0, 0, -1, -1, false, ""};
+    std::unique_ptr<catgs::Renderer> cpu;
+    if (p == Pipeline::catgs)
+      cpu = std::make_unique<catgs::cpu::SpeculativeRenderer>(wall, o);
+    else
+      cpu = std::make_unique<catgs::cpu::CpuRenderer>(wall, o);
+    catgs::cuda::CudaRenderer gpu(dev, o);
+    Image c, g;
+    row.list_ref = refusal([&] { cpu->render(big, c); }, row.note);
+    row.list_gpu = refusal([&] { gpu.render(big, g); }, row.note);
+    const std::size_t held = gpu.diagnostics().buffer_bytes;  // what the refused frame grew
+    const bool refused = row.list_gpu > 0 && row.list_gpu == row.list_ref &&
+                         held < static_cast<std::size_t>(row.list_gpu) * catgs::cuda::kBytesPerListEntry / 10;
+    // The session's renderer goes on: a small view of the same scene is within the budget.
+    std::string small_note;
+    const bool drew = refusal([&] { cpu->render(small, c); }, small_note) == -1 &&
+                      refusal([&] { gpu.render(small, g); }, small_note) == -1;
+    const Diff d = drew ? compare(c, g) : Diff{0, 0, 0};
+    row.psnr = d.psnr;
+    row.max_abs = d.max_abs;
+    row.max_abs8 = d.max_abs8;
+    row.pass = refused && drew && d.psnr >= 50.0 &&
+               gpu.last_stats().render_list_length == cpu->last_stats().render_list_length;
+    if (row.note.empty())
+      row.note = "refused holding " + std::to_string(held >> 10) + " KiB of buffers; 64x48 after: list " +
+                 std::to_string(gpu.last_stats().render_list_length) + " " + small_note;
+    add(row);
+  }
 }
 
 // 6b: more huge Gaussians than key emission keeps part counts for (tunables.h kHugeListed): the
@@ -933,7 +1000,7 @@ int report(const std::string& gpu, const std::string& out) {
 }
 
 int run(int argc, char** argv) {
-  const catgs::tools::Args args(argc, argv, {"--scenes", "--traces", "--out", "--quick!", "--skip-large!"});
+  const catgs::tools::Args args(argc, argv, {"--scenes", "--traces", "--out", "--quick!", "--skip-large!", "--only"});
   std::string why;
   if (!catgs::cuda::device_usable(&why)) {
     std::fprintf(stderr, "no usable CUDA device: %s\n", why.c_str());
@@ -949,12 +1016,17 @@ int run(int argc, char** argv) {
   std::printf("GPU: %s\n", gpu.c_str());
   std::printf("%-10s %-16s %-7s %-8s %8s %10s %4s %12s %12s  %s\n", "test", "scene", "view", "pipeline", "PSNR dB",
               "max|err|", "8bit", "list (ref)", "list (gpu)", "result");
+  if (args.get("--only", "") == "budget") {  // the budget rows alone (they need no scene files)
+    budget_checks();
+    return report(gpu, args.get("--out", "")) == 0 ? 0 : 1;
+  }
   equality_checks(sc);
   if (!sc.quick) grow_checks(sc);
   catgs_checks(sc);
   yuv420_checks(sc);
   if (!sc.quick) steady_checks(sc);
   if (!sc.quick) huge_checks();
+  if (!sc.quick) budget_checks();
   if (!sc.quick) chunk_cull_checks(sc);
   if (!sc.quick && !args.has("--skip-large")) {
     tile_bits_checks(sc);

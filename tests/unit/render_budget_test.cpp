@@ -53,6 +53,9 @@ TEST(RenderListBudget, RuleFollowsTheViewport) {
   EXPECT_EQ(tight.max_entries(16, 16, 28), 1u);
   EXPECT_NO_THROW(tight.check(1, 16, 16, 28));
   EXPECT_THROW(tight.check(2, 16, 16, 28), RenderBudgetError);
+  // Lifted (benchmarks): only the 32-bit tile ranges' limit is left.
+  EXPECT_EQ(RenderListBudget::unlimited().max_entries(3840, 2160, 28), 0xffffffffull);
+  EXPECT_THROW(RenderListBudget::unlimited().check(1ull << 32, 64, 48, 28), RenderBudgetError);
 }
 
 TEST(RenderListBudget, GiantGaussiansFailFastWithAClearError) {
