@@ -649,6 +649,14 @@ function onKey(e) {
   e.preventDefault();
 }
 
+// A /scenes entry as the picker shows it. A scene not loaded yet whose format cannot be peeked
+// has `gaussians: null`: its name alone, rather than a made-up "(0.00 M)".
+function sceneLabel(s) {
+  const n = s.gaussians;
+  if (typeof n !== 'number' || !Number.isFinite(n)) return String(s.name);
+  return `${s.name} (${(n / 1e6).toFixed(2)} M)`;
+}
+
 // A server with several scenes lists them at GET /scenes: the picker shows them, and choosing
 // one reopens the page on it (?scene=NAME; a view in the URL belongs to the old scene and goes).
 async function loadScenePicker() {
@@ -664,7 +672,7 @@ async function loadScenePicker() {
   for (const s of scenes) {
     const o = document.createElement('option');
     o.value = String(s.name);
-    o.textContent = `${s.name} (${(Number(s.gaussians) / 1e6).toFixed(2)} M)`;
+    o.textContent = sceneLabel(s);
     picker.append(o);
   }
   picker.value = (state.welcome && state.welcome.scene_name) || sceneParam || String(scenes[0].name);

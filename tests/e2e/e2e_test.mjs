@@ -4,8 +4,11 @@
 // (PSNR >= 25 dB: the stream is lossy H.264, the reference is exact). Then the viewer's features
 // against the real server: a shared link shows its view (compared with catgs-render of that
 // pose), a recorded path exported as cameras.json replays through catgs-loadgen (and its first
-// view, read back by catgs-render, is the pose the page sent), and a second server with --token
-// and --max-sessions 1 gives the token prompt and the full-server retry.
+// view, read back by catgs-render, is the pose the page sent), the same path exported as our
+// .trace is read by catgs-render (one image per pose; first and last pose as sent) and replayed by
+// catgs-loadgen, a second server with --token and --max-sessions 1 gives the token prompt and the
+// full-server retry, and a third with --adaptive-quality on shows narrower frames under a pose
+// flood (catgs_quality_down_total rises) and a full-size refine frame once the camera stops.
 //
 // usage: node e2e_test.mjs --server PATH/catgs-server --render PATH/catgs-render
 //                          [--loadgen PATH/catgs-loadgen] [--repo ROOT]
@@ -13,7 +16,7 @@
 // (or CATGS_SERVER / CATGS_RENDER / CATGS_LOADGEN / CATGS_E2E_OUT in the environment)
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / binaries; the reason is printed).
 import { spawn, spawnSync } from 'node:child_process';
-import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { existsSync, mkdirSync, mkdtempSync, readFileSync, readdirSync, rmSync, writeFileSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import net from 'node:net';
 import os from 'node:os';
@@ -346,6 +349,8 @@ async function run() {
   } else {
     log('catgs-loadgen not given: the replay of the recorded path is not checked');
   }
+  const lastSent = [p0[0] + 0.048 * scale, p0[1], p0[2] + 0.048 * scale]; // the loop's k = 12 above
+  await checkTraceExport(page, { port, reference, render, lastSent });
   await page.close();
 
   // ---- A server with a token and one session: the token prompt, then the full-server retry,
@@ -371,6 +376,141 @@ async function run() {
   check(after === '', `once in, nothing stale on screen (${JSON.stringify(after)})`);
   await visitor.screenshot({ path: path.join(outDir, 'visitor_streaming.png') });
   await visitor.close();
+
+  await checkAdaptiveQuality();
+}
+
+// Runs a C++ tool; returns spawnSync's result with a one-line summary of why it failed.
+function runTool(bin, toolArgs) {
+  const r = spawnSync(bin, toolArgs, { encoding: 'utf8' });
+  r.why = `exit ${r.status}${r.status === 0 ? '' : `: ${(r.stderr || '').trim().split('\n').slice(-2).join(' / ')}`}`;
+  return r;
+}
+
+const pngsIn = (dir) => (existsSync(dir) ? readdirSync(dir).filter((n) => /^frame_\d+\.png$/.test(n)).sort() : []);
+const readPng = (file) => PNG.sync.read(readFileSync(file));
+
+// The same recording exported as our trace file (paths.js toTraceFile) is read by the C++ side
+// (render_core/camera/trace.cpp read_trace): catgs-render renders one image per pose line, its
+// first and last poses are the poses the page sent, and catgs-loadgen replays it with its
+// reference check. `ctx`: the server's port, the fixed pose's reference image (decoded), the
+// test's own render(name, position) and the last position the recording was sent.
+async function checkTraceExport(page, ctx) {
+  const traceText = await page.evaluate(() => window.catgs.exportTrace());
+  const tracePath = path.join(outDir, 'recorded.trace');
+  writeFileSync(tracePath, traceText || '');
+  // Pose lines: neither blank, nor a comment, nor the 'catgs-trace 1' header.
+  const poses = (traceText || '').split('\n').filter((l) => l.trim() && !l.startsWith('#')).length - 1;
+  const recorded = (await page.evaluate(() => window.catgs.recording) || []).length;
+  check(poses >= 3 && poses === recorded, `the recording exports as a trace of ${poses} poses (${recorded} recorded)`);
+  if (poses < 2) return;
+
+  // Every pose line is read: one image each (small, so that all of them render quickly).
+  const allDir = path.join(outDir, 'recorded_trace_all');
+  rmSync(allDir, { recursive: true, force: true });
+  const all = runTool(renderBin, ['--scene', scene, '--trace', tracePath, '--out-dir', allDir, '--width', '96', '--height', '72', '--renderer', 'cpu']);
+  const written = pngsIn(allDir).length;
+  check(all.status === 0 && written === poses, `catgs-render reads the page's trace: ${written} images for its ${poses} poses (${all.why})`);
+
+  // Its first and last poses at full size (--every: just those two) against renders of the poses
+  // the test sent; the last one must not match the first (the path moved).
+  const endsDir = path.join(outDir, 'recorded_trace_ends');
+  rmSync(endsDir, { recursive: true, force: true });
+  const ends = runTool(renderBin, ['--scene', scene, '--trace', tracePath, '--out-dir', endsDir, '--every', String(poses - 1), '--renderer', 'cpu']);
+  const [firstPng, lastPng] = pngsIn(endsDir).map((n) => path.join(endsDir, n));
+  check(ends.status === 0 && !!lastPng, `catgs-render renders the trace's first and last poses (${ends.why})`);
+  if (lastPng) {
+    const lastRef = readPng(ctx.render('recorded_last', ctx.lastSent));
+    const first = psnrRgb(readPng(firstPng), ctx.reference);
+    const last = psnrRgb(readPng(lastPng), lastRef);
+    const lastVsStart = psnrRgb(readPng(lastPng), ctx.reference);
+    log(`trace pose 0 vs the fixed pose's render ${first.toFixed(2)} dB; last pose vs its render ${last.toFixed(2)} dB, vs the start ${lastVsStart.toFixed(2)} dB`);
+    check(first >= 40, 'the trace\'s first pose is the pose the page sent first (>= 40 dB against its render)');
+    check(last >= 40 && last > lastVsStart + 3, 'the trace\'s last pose is the pose the page sent last (>= 40 dB, and not the start view)');
+  }
+
+  if (!loadgenBin || !existsSync(loadgenBin)) return;
+  const jsonOut = path.join(outDir, 'recorded_trace_loadgen.json');
+  const lg = runTool(loadgenBin, ['--port', String(ctx.port), '--scene', scene, '--trace', tracePath, '--size', '160x120',
+    '--seconds', '2', '--rate', '10', '--check-every', '2', '--warmup', '1', '--progress', '0', '--json', jsonOut]);
+  log(`catgs-loadgen on the recorded trace:\n${lg.stdout.replace(/^/gm, '    ')}`);
+  check(lg.status === 0, `catgs-loadgen replays the page's trace file (${lg.why})`);
+  if (lg.status !== 0) return;
+  const r = JSON.parse(readFileSync(jsonOut, 'utf8')).run.sessions[0];
+  check(r.frames > 5 && r.checked > 0 && r.check_failures === 0,
+    `... its frames match the CPU reference (${r.frames} frames, ${r.checked} checked, min ${r.psnr_min_db} dB)`);
+}
+
+// One counter from the server's /metrics (Prometheus text); NaN when it is missing.
+async function metric(base, name) {
+  const text = await (await fetch(`${base}/metrics`)).text();
+  const m = new RegExp(`^${name} (\\S+)$`, 'm').exec(text);
+  return m ? Number(m[1]) : NaN;
+}
+
+// In the page: a timer moves the camera every 5 ms (about 200 poses a second, far more than the
+// CPU renderer draws at this size, so the server replaces most of them) and notes the narrowest
+// frame the page showed. window.catgsFlood.stop() ends it and returns the last pose's sequence.
+function startPoseFlood(page) {
+  return page.evaluate(() => {
+    const { position: p, orientation: q, fovDeg: f } = window.catgs.pose();
+    const flood = (window.catgsFlood = { minWidth: Infinity, sent: 0 });
+    let i = 0;
+    const timer = setInterval(() => {
+      const d = 0.02 * Math.sin(++i * 0.05);
+      if (window.catgs.setPose([p[0] + d, p[1], p[2] + d], q, f) !== null) flood.sent++;
+      const shown = window.catgs.lastFrame;
+      if (shown) flood.minWidth = Math.min(flood.minWidth, shown.width);
+    }, 5);
+    flood.stop = () => {
+      clearInterval(timer);
+      return window.catgs.lastPoseSent.sequence;
+    };
+  });
+}
+
+// Adaptive quality (server --adaptive-quality on, rule in server/session/adaptive_quality.h) as
+// the page shows it: under a pose flood the frames it draws get narrower and /metrics counts the
+// step down; once the camera stops, a full-size refine frame of the last pose is shown.
+async function checkAdaptiveQuality() {
+  const t0 = Date.now();
+  const aq = await startServer(['--adaptive-quality', 'on']);
+  const page = await context.newPage();
+  page.on('console', (m) => pageLog.push(`adaptive console.${m.type()}: ${m.text()}`));
+  await page.goto(`${aq.base}/`);
+  await page.waitForFunction(() => window.catgs && window.catgs.connected, null, { timeout: 30000 });
+  const full = await page.evaluate(() => window.catgs.viewport);
+  const downBefore = await metric(aq.base, 'catgs_quality_down_total');
+  check(downBefore === 0, `adaptive: /metrics has catgs_quality_down_total, 0 before any motion (${downBefore})`);
+
+  await startPoseFlood(page);
+  const narrowest = () => page.evaluate(() => window.catgsFlood.minWidth);
+  const narrowed = await waitFor('a frame narrower than the viewport', async () => (await narrowest()) < full.width, 20000)
+    .then(() => true, () => false);
+  const minWidth = await narrowest();
+  check(narrowed && minWidth <= 0.75 * full.width,
+    `adaptive: under a pose flood the page shows narrower frames (${minWidth} wide, viewport ${full.width})`);
+  const downAfter = await waitFor('catgs_quality_down_total to rise', async () => {
+    const v = await metric(aq.base, 'catgs_quality_down_total');
+    return v > downBefore ? v : 0;
+  }, 10000).catch(() => downBefore);
+  check(downAfter > downBefore, `adaptive: /metrics catgs_quality_down_total rose (${downBefore} -> ${downAfter})`);
+
+  // The camera stops: a refine frame of the last pose, at the viewport's size, follows.
+  const last = await page.evaluate(() => window.catgsFlood.stop());
+  const sent = await page.evaluate(() => window.catgsFlood.sent);
+  const refined = await waitFor(`a ${full.width}x${full.height} frame of pose ${last}`, () => page.evaluate(([s, w, h]) => {
+    const f = window.catgs.lastFrame;
+    return f && f.poseSequence === s && f.width === w && f.height === h;
+  }, [last, full.width, full.height]), 10000).then(() => true, () => false);
+  const shown = await page.evaluate(() => window.catgs.lastFrame);
+  check(refined, `adaptive: once the camera stops, the last pose is shown at full size (shown: pose ${shown.poseSequence}, ` +
+    `${shown.width}x${shown.height}; last sent ${last})`);
+  const refines = await metric(aq.base, 'catgs_refine_frames_total');
+  check(refines >= 1, `adaptive: /metrics counts the refine frame (catgs_refine_frames_total ${refines})`);
+  await page.screenshot({ path: path.join(outDir, 'adaptive_refined.png') });
+  await page.close();
+  log(`adaptive quality scenario: ${sent} poses flooded, ${((Date.now() - t0) / 1000).toFixed(1)} s`);
 }
 
 let code = 0;

@@ -10,7 +10,7 @@
 // retry_after_ms 1200) after 5 frames; /ws-noframes welcomes but never sends a frame; /ws-hold
 // answers the first Pose only (the page keeps showing that frame, re-projected); /ws-drain sends
 // Stats.drain_ms_left 2600 (a draining server) right after Welcome and streams on. GET /scenes
-// lists two scenes (the page's picker). Every
+// lists three scenes, one with unknown counts (the page's picker). Every
 // session gets Stats once a second (frames_sent cumulative, means 0 when nothing was rendered, as
 // the server does). Under /noproto/ the page is served but .proto answers 415 (as libwebsockets
 // does without a MIME type).
@@ -93,10 +93,12 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
   const server = http.createServer((req, res) => {
     let p = decodeURIComponent(new URL(req.url, 'http://x').pathname);
     if (p === '/scenes') {
-      // Two scenes, as a server with two --scene files lists them (the WebSocket serves 'mock').
+      // Three scenes, as a server with three --scene files lists them (the WebSocket serves
+      // 'mock'); 'city' is not loaded yet and its format cannot be peeked, so its counts are null.
       const scenes = [
         { name: 'mock', gaussians: 152746, sh_degree: 0, bounds: { min: [-1, -1, -1], max: [1, 1, 1] }, file: 'mock.ply' },
         { name: 'garden', gaussians: 5834784, sh_degree: 3, bounds: { min: [-9, -9, -9], max: [9, 9, 9] }, file: 'garden.ply' },
+        { name: 'city', gaussians: null, sh_degree: null, bounds: null, file: 'city.spz', loaded: false },
       ];
       res.writeHead(200, { 'content-type': 'application/json' }).end(JSON.stringify(scenes));
       return;

@@ -500,17 +500,19 @@ try {
     await live.close();
   }
 
-  // 11d. Scene picker: the server lists two scenes; picking one reopens the page on it and its
-  // Hello names it.
+  // 11d. Scene picker: the server lists three scenes; picking one reopens the page on it and its
+  // Hello names it. A scene whose size is not known yet (gaussians: null) shows its name alone.
   {
     const page = await openPage(`${base}/?ws=${wsUrl('/ws')}`);
     check(await moveUntil(page, (c) => c.framesDecoded >= 1), 'scenes: first frame');
     const opts = await page.evaluate(() => {
       const p = document.getElementById('scene-picker');
-      return { hidden: p.hidden, names: [...p.options].map((o) => o.value), value: p.value };
+      return { hidden: p.hidden, names: [...p.options].map((o) => o.value), labels: [...p.options].map((o) => o.textContent), value: p.value };
     });
-    check(!opts.hidden && opts.names.join(',') === 'mock,garden' && opts.value === 'mock',
-      `scenes: the picker lists mock and garden, mock chosen (${JSON.stringify(opts)})`);
+    check(!opts.hidden && opts.names.join(',') === 'mock,garden,city' && opts.value === 'mock',
+      `scenes: the picker lists mock, garden and city, mock chosen (${JSON.stringify(opts)})`);
+    check(opts.labels.join('|') === 'mock (0.15 M)|garden (5.83 M)|city',
+      `scenes: sizes in millions, a scene of unknown size by name alone (${JSON.stringify(opts.labels)})`);
     const before = hellos('/ws').length;
     await Promise.all([page.waitForNavigation(), page.selectOption('#scene-picker', 'garden')]);
     check(new URL(page.url()).searchParams.get('scene') === 'garden', `scenes: the page reopened with ?scene=garden (${page.url()})`);
