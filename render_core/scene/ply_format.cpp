@@ -8,8 +8,10 @@
 #include <algorithm>
 #include <cerrno>
 #include <charconv>
+#include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <utility>
 
@@ -257,6 +259,33 @@ void read_binary_body(uint64_t file_size, uint64_t body_offset, File& f) {
 }
 
 // An ascii body: every value parsed into the elements' ascii_rows.
+// Whether an ascii value is one that a binary field of `type` could hold: integral and in range
+// for the integer types, within float's range (or +-inf, NaN) for f32. The loaders convert values
+// to their declared types (a packed_* uint32, an 8-bit SH code), and converting one that does not
+// fit is undefined behaviour; a binary file cannot hold such a value, so an ascii one may not.
+bool fits_type(Type type, double v) {
+  auto integer_in = [v](double lo, double hi) { return v >= lo && v <= hi && std::floor(v) == v; };
+  switch (type) {
+    case Type::i8:
+      return integer_in(-128.0, 127.0);
+    case Type::u8:
+      return integer_in(0.0, 255.0);
+    case Type::i16:
+      return integer_in(-32768.0, 32767.0);
+    case Type::u16:
+      return integer_in(0.0, 65535.0);
+    case Type::i32:
+      return integer_in(-2147483648.0, 2147483647.0);
+    case Type::u32:
+      return integer_in(0.0, 4294967295.0);
+    case Type::f32:
+      return !std::isfinite(v) || std::fabs(v) <= static_cast<double>(std::numeric_limits<float>::max());
+    case Type::f64:
+      return true;
+  }
+  return false;
+}
+
 void read_ascii_body(std::istream& in, uint64_t body_offset, uint64_t body, File& f) {
   uint64_t values = 0;
   for (const auto& e : f.elements) {
@@ -286,6 +315,9 @@ void read_ascii_body(std::istream& in, uint64_t body_offset, uint64_t body, File
         if (res.ec != std::errc())
           fail(f.path, "truncated or malformed ascii value at element '" + e.name + "' row " + std::to_string(r) +
                            " property '" + e.properties[k].name + "'");
+        if (!fits_type(e.properties[k].type, v))
+          fail(f.path, "ascii value " + std::string(p, res.ptr) + " at element '" + e.name + "' row " +
+                           std::to_string(r) + " property '" + e.properties[k].name + "' does not fit its type");
         e.ascii_rows[r * e.properties.size() + k] = v;
         p = res.ptr;
       }

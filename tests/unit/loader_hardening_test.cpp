@@ -4,10 +4,13 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
 #include "forward_model/forward_model.h"
+#include "scene/ply_format.h"
 #include "scene/ply_io.h"
 #include "scene_files.h"
 #include "test_data.h"
@@ -110,6 +113,33 @@ TEST_F(LoaderHardeningTest, AsciiElementWithoutPropertiesIsRefused) {
 TEST_F(LoaderHardeningTest, DoubleOutsideFloatRangeIsRefused) {
   const std::string text = inria_header("ascii", "1", "double") + "end_header\n0 1e300 0 0 0 0 0 0 0 0 1 0 0 0\n";
   expect_scene_error(save("big.ply", text), "value outside float range in element 'vertex' row 0 property 'y'");
+}
+
+// Found after the issue: in an ascii file every value is parsed as a double whatever its declared
+// type, so a uint packed_* or uchar SH code of 5e9, -1, 1.5 or nan reached the compressed loader's
+// double-to-uint32 conversion (undefined). A value must fit its declared type, as in a binary file.
+TEST_F(LoaderHardeningTest, AsciiValueMustFitItsDeclaredType) {
+  auto file = [&](const std::string& type, const std::string& value) {
+    std::string h = inria_header("ascii", "1");
+    h += "property " + type + " extra\nend_header\n0 0 0 0 0 0 0 0 0 0 1 0 0 0 " + value + "\n";
+    return save("ascii_" + type + ".ply", h);
+  };
+  for (const char* bad : {"5000000000", "-1", "1.5", "nan", "inf"}) {
+    SCOPED_TRACE(bad);
+    expect_scene_error(file("uint", bad), "row 0 property 'extra' does not fit its type");
+  }
+  expect_scene_error(file("uchar", "256"), "ascii value 256 at element 'vertex' row 0 property 'extra'");
+  expect_scene_error(file("float", "1e39"), "does not fit its type");
+  // The ends of each range, and float's own inf and nan (the loaders judge those), still read.
+  for (const auto& [type, value] : std::vector<std::pair<std::string, std::string>>{{"uint", "4294967295"},
+                                                                                    {"uint", "0"},
+                                                                                    {"uchar", "255"},
+                                                                                    {"char", "-128"},
+                                                                                    {"float", "inf"},
+                                                                                    {"float", "nan"}}) {
+    SCOPED_TRACE(type + " " + value);
+    EXPECT_NO_THROW(ply::read_file(file(type, value)));
+  }
 }
 
 // Finding 4: an infinite radius made static_cast<int> undefined in the vanilla tile bounds (on
