@@ -29,6 +29,9 @@ SceneFormat detect_scene_format(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   if (ext == ".splat") return SceneFormat::splat;  // its reader names what is wrong
+  // A .gltf's JSON may name its extension only past the first 4 KiB (a writer that puts a
+  // data-URI buffer first): its name decides, and tinygltf names what is wrong.
+  if (ext == ".gltf") return SceneFormat::gltf;
   return SceneFormat::ply;
 }
 

@@ -18,6 +18,7 @@
 #include "cpu/cpu_renderer.h"
 #include "scene/ply_io.h"
 #include "camera/trace.h"
+#include "session/first_view.h"
 #include "loadgen/h264_decoder.h"
 #include "good_client.h"
 #include "server_process.h"
@@ -160,6 +161,84 @@ TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
     EXPECT_GE(psnr, 30.0) << "frame " << i;
     std::cout << "[ info ] flowers frame " << i << ": " << m->frame().payload().size() << " bytes, PSNR " << psnr
               << " dB\n";
+  }
+}
+
+// Welcome's navigation frame end to end (issue 18 item 4): the server started on flowers_sh3 sends
+// in Welcome the orbit centre, up, scene scale and initial pose that first_view.h computes for the
+// same scene (called here on the scene as the test loads it): with --cameras, those of the
+// training cameras; without, those of the dense content. Independently of first_view.cpp, with
+// cameras the up is the cameras' mean up (their -y axes averaged here), the orbit centre lies
+// inside the ring they stand in, and the initial pose is one of them.
+void expect_welcome_frame(const pb::Welcome& w, const server::SceneFrame& f, int width, int height) {
+  EXPECT_FLOAT_EQ(static_cast<float>(w.orbit_centre().x()), f.orbit_centre.x);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.orbit_centre().y()), f.orbit_centre.y);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.orbit_centre().z()), f.orbit_centre.z);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.up().x()), f.up.x);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.up().y()), f.up.y);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.up().z()), f.up.z);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.scene_scale()), f.scene_scale);
+  const server::CameraPose start = server::first_view_pose(f, width, height);
+  const pb::Pose& p = w.initial_pose();
+  EXPECT_FLOAT_EQ(static_cast<float>(p.position().x()), start.position.x);
+  EXPECT_FLOAT_EQ(static_cast<float>(p.position().y()), start.position.y);
+  EXPECT_FLOAT_EQ(static_cast<float>(p.position().z()), start.position.z);
+  const glm::quat q(static_cast<float>(p.orientation().w()), static_cast<float>(p.orientation().x()),
+                    static_cast<float>(p.orientation().y()), static_cast<float>(p.orientation().z()));
+  EXPECT_GT(std::fabs(glm::dot(q, start.orientation)), 1.0f - 1e-6f);  // q and -q: one rotation
+  EXPECT_FLOAT_EQ(static_cast<float>(p.vertical_fov_deg()), start.vertical_fov_deg);
+}
+
+TEST(ServerIntegration, WelcomeCarriesTheFirstViewFrame) {
+  if (!std::filesystem::exists(kFlowers) || !std::filesystem::exists(kFlowersCams))
+    GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
+  const int W = 320, H = 240;
+  const std::vector<Camera> cams = load_inria_cameras(kFlowersCams);
+  {
+    ServerProcess server(server_args(kFlowers, {"--cameras", kFlowersCams}));
+    StreamClient c;
+    c.connect(server.port());
+    const pb::Welcome w = c.hello(W, H);
+    const server::SceneFrame f = server::frame_from_cameras(cams, kFlowersCams);
+    expect_welcome_frame(w, f, W, H);
+    EXPECT_NE(server.log().find("first view: cameras " + kFlowersCams), std::string::npos) << server.log();
+
+    glm::vec3 mean_up(0.0f), mean_position(0.0f);
+    float farthest = 0.0f, nearest_camera = std::numeric_limits<float>::max();
+    for (const Camera& cam : cams) {
+      mean_up -= cam.orientation() * glm::vec3(0.0f, 1.0f, 0.0f);  // camera y is down
+      mean_position += cam.position() / static_cast<float>(cams.size());
+    }
+    const glm::vec3 up(w.up().x(), w.up().y(), w.up().z()),
+        centre(w.orbit_centre().x(), w.orbit_centre().y(), w.orbit_centre().z());
+    const glm::vec3 start(w.initial_pose().position().x(), w.initial_pose().position().y(),
+                          w.initial_pose().position().z());
+    for (const Camera& cam : cams) {
+      farthest = std::max(farthest, glm::distance(cam.position(), mean_position));
+      nearest_camera = std::min(nearest_camera, glm::distance(cam.position(), start));
+    }
+    const float up_error = glm::degrees(std::acos(std::min(1.0f, glm::dot(up, glm::normalize(mean_up)))));
+    std::cout << "[ info ] Welcome with cameras: orbit centre (" << centre.x << ", " << centre.y << ", " << centre.z
+              << "), up (" << up.x << ", " << up.y << ", " << up.z << "), " << up_error
+              << " degrees from the cameras' mean up, scene scale " << w.scene_scale() << "; the initial pose is "
+              << nearest_camera << " from a training camera\n";
+    EXPECT_LT(up_error, 0.01f);
+    EXPECT_LT(glm::distance(centre, mean_position), farthest);
+    EXPECT_GT(w.scene_scale(), 0.1 * farthest);
+    EXPECT_LT(w.scene_scale(), 2.0 * farthest);
+    EXPECT_LT(nearest_camera, 1e-4f * farthest);
+  }
+  {
+    ServerProcess server(server_args(kFlowers));  // no cameras beside the scene: the content
+    StreamClient c;
+    c.connect(server.port());
+    const pb::Welcome w = c.hello(W, H);
+    const server::SceneFrame f = server::frame_from_content(*load_model(kFlowers));
+    expect_welcome_frame(w, f, W, H);
+    EXPECT_NE(server.log().find("first view: content"), std::string::npos) << server.log();
+    std::cout << "[ info ] Welcome from the content: orbit centre (" << w.orbit_centre().x() << ", "
+              << w.orbit_centre().y() << ", " << w.orbit_centre().z() << "), up (" << w.up().x() << ", " << w.up().y()
+              << ", " << w.up().z() << "), scene scale " << w.scene_scale() << "\n";
   }
 }
 

@@ -262,4 +262,70 @@ TEST(GltfTransforms, QuantizedAttributesDequantizeAsGltfSays) {
   EXPECT_GE(psnr, kSameDb);
 }
 
+// Base64 (RFC 4648, with padding) for a data URI.
+std::string base64(const std::string& bytes) {
+  static const char* const kDigits = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  for (std::size_t i = 0; i < bytes.size(); i += 3) {
+    uint32_t v = static_cast<uint32_t>(static_cast<uint8_t>(bytes[i])) << 16;
+    if (i + 1 < bytes.size()) v |= static_cast<uint32_t>(static_cast<uint8_t>(bytes[i + 1])) << 8;
+    if (i + 2 < bytes.size()) v |= static_cast<uint8_t>(bytes[i + 2]);
+    out += kDigits[(v >> 18) & 63];
+    out += kDigits[(v >> 12) & 63];
+    out += i + 1 < bytes.size() ? kDigits[(v >> 6) & 63] : '=';
+    out += i + 2 < bytes.size() ? kDigits[v & 63] : '=';
+  }
+  return out;
+}
+
+// The glTF JSON as a text .gltf: "asset" and "extensionsUsed" first (as glTF writers put them;
+// format detection by content looks for KHR_gaussian_splatting in a file's first 4 KiB), then
+// the rest in the .glb's order, with buffers[0] read from `uri`. `buffers_first`: the buffers
+// first instead, so a data URI pushes every mention of the extension past those 4 KiB (the file's
+// .gltf name must decide).
+std::string gltf_text(const json& gltf, const std::string& uri, bool buffers_first = false) {
+  nlohmann::ordered_json out;
+  if (buffers_first) out["buffers"] = json::array({{{"byteLength", gltf["buffers"][0]["byteLength"]}, {"uri", uri}}});
+  out["asset"] = gltf["asset"];
+  out["extensionsUsed"] = gltf["extensionsUsed"];
+  for (const auto& [key, value] : gltf.items())
+    if (key != "asset" && key != "extensionsUsed") out[key] = value;
+  out["buffers"][0]["uri"] = uri;
+  return out.dump();
+}
+
+// A text .gltf (glTF 2.0 section 4.3: JSON, buffers named by URI), made from splat-transform's .glb
+// of the bundled biker with its binary chunk as an external .bin file and as a base64 data URI,
+// reads as the .glb does: the same Gaussians, bit for bit, and the same renders.
+TEST(GltfText, ExternalAndDataUriBuffersReadAsTheGlb) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  const std::string dir = test::temp_dir(), plain = dir + "/biker.glb";
+  ASSERT_EQ(test::splat_transform(test::bundled_scene(), plain), "");
+  const Glb g = read_glb(plain);
+  ASSERT_EQ(g.gltf["buffers"].size(), 1u);
+  // The BIN chunk is padded to 4 bytes; a URI's bytes must be the buffer's byteLength exactly.
+  const std::string bin = g.bin.substr(0, g.gltf["buffers"][0]["byteLength"].get<std::size_t>());
+  test::write_bytes(dir + "/biker.bin", bin);
+  test::write_bytes(dir + "/external.gltf", gltf_text(g.gltf, "biker.bin"));
+  const std::string data_uri = "data:application/octet-stream;base64," + base64(bin);
+  test::write_bytes(dir + "/inline.gltf", gltf_text(g.gltf, data_uri));
+  const std::string late = gltf_text(g.gltf, data_uri, /*buffers_first=*/true);
+  ASSERT_GT(late.find("KHR_gaussian_splatting"), 4096u) << "the extension must be named past 4 KiB";
+  test::write_bytes(dir + "/late_extension.gltf", late);
+  const GaussianModel glb = load_scene(plain);
+  for (const std::string name : {"external.gltf", "inline.gltf", "late_extension.gltf"}) {
+    const GaussianModel text = load_scene(dir + "/" + name);
+    ASSERT_EQ(text.size(), glb.size()) << name;
+    EXPECT_EQ(text.sh_degree, glb.sh_degree) << name;
+    EXPECT_EQ(text.means, glb.means) << name;
+    EXPECT_EQ(text.rotations, glb.rotations) << name;
+    EXPECT_EQ(text.log_scales, glb.log_scales) << name;
+    EXPECT_EQ(text.opacity_logits, glb.opacity_logits) << name;
+    EXPECT_EQ(text.sh, glb.sh) << name;
+    const double psnr = test::min_render_psnr(text, glb, test::comparison_views(glb));
+    std::cout << "[ info ] " << name << " vs the .glb: " << psnr << " dB (identical renders: 1e9)\n";
+    EXPECT_GE(psnr, 1e9) << name;
+  }
+}
+
 }  // namespace

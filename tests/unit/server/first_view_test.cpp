@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <random>
 #include <sstream>
 
 #include <glm/glm.hpp>
@@ -305,6 +306,121 @@ TEST(FirstViewRealScenes, TumblewoodFromItsContent) {
 TEST(FirstViewRealScenes, BikerFromItsContent) {
   CATGS_REQUIRE_DATA(scene, "scenes/biker.compressed.ply");
   expect_frames_the_object(scene);
+}
+
+// ---- up: the estimate against independent references ----
+
+// The normal of the ground of a capture (grass, a lawn, a floor), signed towards -y: the plane
+// that holds the most of the Gaussian means near the scene's middle (the nearest half of them to
+// the per-axis median point: an unbounded capture's background is far from any plane) within 2%
+// of that half's radius. RANSAC over planes through 3 of those means picked at random (fixed seed;
+// 500 tries, scored on at most 20,000 of them, evenly picked), then twice refined by least squares
+// (the smallest principal axis of the plane's inliers). A different estimator from content_up
+// (the smallest axis of all the means in a ball around the density mode), so they disagree where
+// content_up is fooled by what stands on the ground. `inlier_share`: the share of the middle
+// half's means within the tolerance of the final plane.
+glm::vec3 ground_normal(const GaussianModel& m, double* inlier_share) {
+  auto at = [&](std::size_t i) { return glm::dvec3(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]); };
+  glm::dvec3 median;
+  for (int a = 0; a < 3; ++a) {
+    std::vector<double> v(m.size());
+    for (std::size_t i = 0; i < m.size(); ++i) v[i] = m.means[3 * i + a];
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    median[a] = v[v.size() / 2];
+  }
+  std::vector<double> dist(m.size());
+  for (std::size_t i = 0; i < m.size(); ++i) dist[i] = glm::distance(at(i), median);
+  std::vector<double> sorted = dist;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+  const double radius = sorted[sorted.size() / 2], tolerance = 0.02 * radius;
+  std::vector<glm::dvec3> middle;
+  for (std::size_t i = 0; i < m.size(); ++i)
+    if (dist[i] <= radius) middle.push_back(at(i));
+  std::vector<glm::dvec3> sample;
+  const std::size_t stride = std::max<std::size_t>(1, middle.size() / 20000);
+  for (std::size_t i = 0; i < middle.size(); i += stride) sample.push_back(middle[i]);
+  std::mt19937 rng(18);
+  std::uniform_int_distribution<std::size_t> pick(0, sample.size() - 1);
+  glm::dvec3 normal(0.0, -1.0, 0.0);
+  double offset = 0.0;
+  std::size_t best = 0;
+  for (int t = 0; t < 500; ++t) {
+    const glm::dvec3 a = sample[pick(rng)], b = sample[pick(rng)], c = sample[pick(rng)];
+    const glm::dvec3 n = glm::cross(b - a, c - a);
+    if (glm::length(n) < 1e-12) continue;
+    const glm::dvec3 u = glm::normalize(n);
+    std::size_t count = 0;
+    for (const glm::dvec3& p : sample) count += std::fabs(glm::dot(u, p - a)) <= tolerance ? 1 : 0;
+    if (count > best) {
+      best = count;
+      normal = u;
+      offset = glm::dot(u, a);
+    }
+  }
+  std::size_t inliers = 0;
+  for (int refine = 0; refine < 2; ++refine) {
+    glm::dvec3 mean(0.0);
+    inliers = 0;
+    for (const glm::dvec3& p : middle)
+      if (std::fabs(glm::dot(normal, p) - offset) <= tolerance) {
+        mean += p;
+        ++inliers;
+      }
+    mean /= static_cast<double>(inliers);
+    glm::dmat3 cov(0.0);
+    for (const glm::dvec3& p : middle)
+      if (std::fabs(glm::dot(normal, p) - offset) <= tolerance) cov += glm::outerProduct(p - mean, p - mean);
+    // The smallest axis: power iteration on trace(cov) I - cov, started at the current normal.
+    const double trace = cov[0][0] + cov[1][1] + cov[2][2];
+    const glm::dmat3 flipped = trace * glm::dmat3(1.0) - cov;
+    for (int k = 0; k < 500; ++k) normal = glm::normalize(flipped * normal);
+    offset = glm::dot(normal, mean);
+  }
+  inliers = 0;
+  for (const glm::dvec3& p : middle) inliers += std::fabs(glm::dot(normal, p) - offset) <= tolerance ? 1 : 0;
+  *inlier_share = static_cast<double>(inliers) / static_cast<double>(middle.size());
+  return glm::vec3(normal.y > 0.0 ? -normal : normal);
+}
+
+// The up estimated from the content (tumblewood has no cameras here) is level: within 3 degrees of
+// the normal of its ground, the grass the sign stands in (40% of the middle half's means lie on
+// it; CATGS_FIRST_VIEW_SHOTS keeps the first view, the grass level in it). Measured: the estimate
+// 1.4 degrees from the ground's normal; -y is 2.4 from it, so this capture's frame is nearly
+// level already (the roll of about 20 degrees that issue 18 reports does not reproduce on this
+// file: an orbit about -y would roll its horizon by at most 2.4 degrees).
+TEST(FirstViewRealScenes, TumblewoodUpIsLevel) {
+  CATGS_REQUIRE_DATA(scene, "scenes/tumblewood_sh2.ply");
+  const auto model = test::cached_scene(scene);
+  double share = 0.0;
+  const glm::vec3 ground = ground_normal(*model, &share);
+  const SceneFrame frame = frame_from_content(*model);
+  std::cout << "  ground normal (" << ground.x << ", " << ground.y << ", " << ground.z << "), " << share
+            << " of the means on it; estimated up " << degrees_between(frame.up, ground) << " degrees from it, -y "
+            << degrees_between(glm::vec3(0, -1, 0), ground) << "; " << frame.source << "\n";
+  EXPECT_GT(share, 0.25);  // the plane is a ground, not a few splats that happen to line up
+  EXPECT_NE(frame.source.find("up from its flattest axis"), std::string::npos) << frame.source;
+  EXPECT_LT(degrees_between(frame.up, ground), 3.0f);
+  shot(render(*model, first_view_pose(frame, kW, kH)), "tumblewood_first");
+}
+
+// Every real scene with training cameras (flowers only, here): the up estimated from the content is
+// within 3 degrees of the cameras' mean up (measured 1.9; -y is 18.1 from it). The ground-plane
+// reference agrees with the cameras too (measured: its normal 1.5 degrees from their mean up),
+// which is what makes it a fair reference where there are no cameras.
+TEST(FirstViewRealScenes, FlowersUpMatchesItsCameras) {
+  CATGS_REQUIRE_DATA(scene, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const auto model = test::cached_scene(scene);
+  const glm::vec3 cameras_up = frame_from_cameras(load_inria_cameras(cams), cams).up;
+  const SceneFrame frame = frame_from_content(*model);
+  double share = 0.0;
+  const glm::vec3 ground = ground_normal(*model, &share);
+  std::cout << "  cameras' mean up (" << cameras_up.x << ", " << cameras_up.y << ", " << cameras_up.z
+            << "); estimated up " << degrees_between(frame.up, cameras_up) << " degrees from it, -y "
+            << degrees_between(glm::vec3(0, -1, 0), cameras_up) << ", the ground's normal "
+            << degrees_between(ground, cameras_up) << " (" << share << " of the means on it)\n";
+  EXPECT_LT(degrees_between(frame.up, cameras_up), 3.0f);
+  EXPECT_LT(degrees_between(ground, cameras_up), 3.0f);
 }
 
 // ---- cameras.json discovery ----

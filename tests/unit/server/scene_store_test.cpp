@@ -138,6 +138,8 @@ TEST(SceneStore, WaitersOfOneSceneShareOneLoadAndSeeProgressTo100) {
   SceneStore::Options o;
   o.loader = gate.loader();
   o.metrics = &metrics;
+  std::ostringstream log;
+  o.log = &log;
   SceneStore store(biker_copies({"a", "b"}), o);
   gate.close();
   Waiter w1, w2;
@@ -166,6 +168,10 @@ TEST(SceneStore, WaitersOfOneSceneShareOneLoadAndSeeProgressTo100) {
   }
   // The biker's 152,746 rows report every 8192: the first waiter saw the steps in between.
   EXPECT_GE(w1.events.size(), 10u);
+  // The log has a line past each quarter, though no report lands on 25 or 50% (26.8, 53.6).
+  std::size_t lines = 0;
+  for (std::size_t at = 0; (at = log.str().find(" Gaussians (", at)) != std::string::npos; ++at) ++lines;
+  EXPECT_EQ(lines, 3u) << log.str();
   // Once loaded, a third use gets the same scene at once, without another load.
   Waiter w3;
   auto u3 = store.acquire(1, w3.progress(), w3.ready());
