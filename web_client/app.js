@@ -219,6 +219,8 @@ function onWelcome(w) {
   state.decoder.reset();
   overlay.setSession(w);
   $('scene-picker').value = w.scene_name;
+  // A page opened while the server was still starting got no scene list: ask again now.
+  if (!scenePickerLoaded) loadScenePicker();
   // Keep the user's view across a reconnect to the same scene; start fresh otherwise.
   if (!state.camera || state.camera.sceneName !== w.scene_name) {
     state.camera = OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds, w);
@@ -659,7 +661,21 @@ function sceneLabel(s) {
 
 // A server with several scenes lists them at GET /scenes: the picker shows them, and choosing
 // one reopens the page on it (?scene=NAME; a view in the URL belongs to the old scene and goes).
+// Set once the picker holds the server's scenes (two or more); until then every Welcome asks.
+let scenePickerLoaded = false;
+let scenePickerAsking = false;
+
 async function loadScenePicker() {
+  if (scenePickerLoaded || scenePickerAsking) return;
+  scenePickerAsking = true;
+  try {
+    await fillScenePicker();
+  } finally {
+    scenePickerAsking = false;
+  }
+}
+
+async function fillScenePicker() {
   const picker = $('scene-picker');
   let scenes = [];
   try {
@@ -677,6 +693,7 @@ async function loadScenePicker() {
   }
   picker.value = (state.welcome && state.welcome.scene_name) || sceneParam || String(scenes[0].name);
   picker.hidden = false;
+  scenePickerLoaded = true;
   picker.addEventListener('change', () => {
     const url = new URL(withoutView(location.href));
     url.searchParams.set('scene', picker.value);

@@ -8,12 +8,17 @@
 // .trace is read by catgs-render (one image per pose; first and last pose as sent) and replayed by
 // catgs-loadgen, a second server with --token and --max-sessions 1 gives the token prompt and the
 // full-server retry, and a third with --adaptive-quality on shows narrower frames under a pose
-// flood (catgs_quality_down_total rises) and a full-size refine frame once the camera stops.
+// flood (catgs_quality_down_total rises), a full-size refine frame once the camera stops, and
+// full-size frames again under slow poses (catgs_quality_up_total rises); a fourth serves two
+// scenes (the bundled biker and flowers_sh3 from the data folder): the page's scene picker lists
+// both, and choosing the second reopens the page on it, showing that scene's render of the pose.
 //
 // usage: node e2e_test.mjs --server PATH/catgs-server --render PATH/catgs-render
-//                          [--loadgen PATH/catgs-loadgen] [--repo ROOT]
+//                          [--loadgen PATH/catgs-loadgen] [--repo ROOT] [--data DIR]
 //                          [--out DIR] [--min-psnr 25] [--frames 30]
-// (or CATGS_SERVER / CATGS_RENDER / CATGS_LOADGEN / CATGS_E2E_OUT in the environment)
+// (or CATGS_SERVER / CATGS_RENDER / CATGS_LOADGEN / CATGS_DATA_DIR / CATGS_E2E_OUT in the
+// environment; the data folder, by default ../shared/data beside the checkout, is optional: without
+// its scenes/flowers_sh3.ply the scene picker step is skipped and says why)
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / binaries; the reason is printed).
 import { spawn, spawnSync } from 'node:child_process';
 import { existsSync, mkdirSync, mkdtempSync, readFileSync, readdirSync, rmSync, writeFileSync } from 'node:fs';
@@ -45,6 +50,7 @@ const outDir = path.resolve(args.out || process.env.CATGS_E2E_OUT || mkdtempSync
 const minPsnr = Number(args['min-psnr'] || 25);
 const minFrames = Number(args.frames || 30);
 const scene = args.scene || path.join(repo, 'assets/scenes/biker.compressed.ply');
+const dataDir = path.resolve(args.data || process.env.CATGS_DATA_DIR || path.join(repo, '../shared/data'));
 const webRoot = path.join(repo, 'web_client');
 const VIEW = { width: 480, height: 360 }; // small: the CPU renderer keeps up
 
@@ -129,6 +135,20 @@ function psnrForeground(a, b, threshold = 16) {
     }
   }
   return { psnr: se === 0 ? Infinity : 10 * Math.log10((255 * 255 * n * 3) / se), fraction: n / (a.width * a.height) };
+}
+
+// catgs-render's CPU image of `sceneFile` at `pose` ({ position, orientation [w, x, y, z], fovDeg },
+// as the page's hook takes it), width x height, with the intrinsics Camera::from_pose derives
+// (square pixels, principal point at the centre); returns the PNG's path in outDir.
+function renderPose(sceneFile, name, pose, width, height) {
+  const f = height / (2 * Math.tan((pose.fovDeg * Math.PI) / 360));
+  const g = (v) => v.toPrecision(17);
+  const trace = path.join(outDir, `${name}.trace`);
+  writeFileSync(trace, `catgs-trace 1\n0 ${[...pose.position, ...pose.orientation, f, f, width / 2, height / 2].map(g).join(' ')} ${width} ${height}\n`);
+  const out = path.join(outDir, `${name}.png`);
+  const r = spawnSync(renderBin, ['--scene', sceneFile, '--trace', trace, '--out', out, '--renderer', 'cpu'], { encoding: 'utf8' });
+  if (r.status !== 0) throw new Error(`catgs-render failed (${r.status}): ${r.stderr}${r.stdout}`);
+  return out;
 }
 
 const failures = [];
@@ -249,16 +269,7 @@ async function run() {
   writeFileSync(streamedPath, Buffer.from(shot.png.split(',')[1], 'base64'));
 
   // Reference: catgs-render of the same pose, with the intrinsics Camera::from_pose derives.
-  const f = height / (2 * Math.tan((fov0 * Math.PI) / 360));
-  const g = (v) => v.toPrecision(17);
-  const render = (name, position) => {
-    const trace = path.join(outDir, `${name}.trace`);
-    writeFileSync(trace, `catgs-trace 1\n0 ${[...position, ...q0, f, f, width / 2, height / 2].map(g).join(' ')} ${width} ${height}\n`);
-    const out = path.join(outDir, `${name}.png`);
-    const r = spawnSync(renderBin, ['--scene', scene, '--trace', trace, '--out', out, '--renderer', 'cpu'], { encoding: 'utf8' });
-    if (r.status !== 0) throw new Error(`catgs-render failed (${r.status}): ${r.stderr}${r.stdout}`);
-    return out;
-  };
+  const render = (name, position) => renderPose(scene, name, { position, orientation: q0, fovDeg: fov0 }, width, height);
   const refPath = render('reference', p0);
   const streamed = PNG.sync.read(readFileSync(streamedPath));
   const reference = PNG.sync.read(readFileSync(refPath));
@@ -378,6 +389,7 @@ async function run() {
   await visitor.close();
 
   await checkAdaptiveQuality();
+  await checkScenePicker();
 }
 
 // Runs a C++ tool; returns spawnSync's result with a one-line summary of why it failed.
@@ -469,9 +481,43 @@ function startPoseFlood(page) {
   });
 }
 
+// In the page: a timer sends one pose every `intervalMs`, moving the camera a little, and notes
+// the first frame shown for each of these poses (pose sequence, size, time): the answer, not a
+// refine frame of the same pose that may follow. window.catgsSlow.stop() ends it and returns
+// what it noted.
+function startSlowPoses(page, intervalMs) {
+  return page.evaluate((ms) => {
+    const { position: p, orientation: q, fovDeg: f } = window.catgs.pose();
+    const slow = (window.catgsSlow = { first: null, sent: 0, answers: [] });
+    let i = 0;
+    let answered = -1;
+    const send = () => {
+      const s = window.catgs.setPose([p[0] + 0.01 * Math.sin(++i * 0.5), p[1], p[2]], q, f);
+      if (s === null) return;
+      slow.sent++;
+      if (slow.first === null) slow.first = s;
+    };
+    const watch = setInterval(() => {
+      const fr = window.catgs.lastFrame;
+      if (!fr || slow.first === null || fr.poseSequence < slow.first || fr.poseSequence <= answered) return;
+      answered = fr.poseSequence;
+      slow.answers.push({ pose: fr.poseSequence, width: fr.width, height: fr.height, at: performance.now() });
+    }, 10);
+    send();
+    const timer = setInterval(send, ms);
+    slow.stop = () => {
+      clearInterval(timer);
+      clearInterval(watch);
+      return { sent: slow.sent, answers: slow.answers };
+    };
+  }, intervalMs);
+}
+
 // Adaptive quality (server --adaptive-quality on, rule in server/session/adaptive_quality.h) as
 // the page shows it: under a pose flood the frames it draws get narrower and /metrics counts the
-// step down; once the camera stops, a full-size refine frame of the last pose is shown.
+// step down; once the camera stops, a full-size refine frame of the last pose is shown; then
+// slow poses (the frames fit again) bring the level back up: /metrics counts as many steps up as
+// there were down, and the page shows those poses at full size again.
 async function checkAdaptiveQuality() {
   const t0 = Date.now();
   const aq = await startServer(['--adaptive-quality', 'on']);
@@ -509,8 +555,130 @@ async function checkAdaptiveQuality() {
   const refines = await metric(aq.base, 'catgs_refine_frames_total');
   check(refines >= 1, `adaptive: /metrics counts the refine frame (catgs_refine_frames_total ${refines})`);
   await page.screenshot({ path: path.join(outDir, 'adaptive_refined.png') });
+
+  // Slow poses: the rule climbs one level once the session has been 3 s at a level, the camera
+  // moved in the last second with no pose skipped, and the frame cost at this level, scaled by
+  // the pixels of the level above (x1.78, x2.25), is under 0.6 of the average pose interval
+  // (which starts from the flood's few ms: gaps of 1 s or more are not counted). On the CPU
+  // renderer the biker costs about the same at every level (its Gaussians, not its pixels:
+  // 160-270 ms a frame on 2 cores busy with other builds), so one pose every 400 ms (budget
+  // 240 ms) climbed back on a quiet machine but not within 20 s on a busy one; one every 900 ms
+  // (budget 540 ms) does on both. The server's refine frames follow each reduced answer (the
+  // camera is still for 500 ms); they are left out. The first slow pose is still answered at the
+  // reduced size (a refine is not a level change); once the level is back, they are full size.
+  const tSlow = Date.now();
+  const downs = await metric(aq.base, 'catgs_quality_down_total');
+  const upBefore = await metric(aq.base, 'catgs_quality_up_total');
+  check(upBefore === 0, `adaptive: /metrics has catgs_quality_up_total, 0 before the slow poses (${upBefore})`);
+  await startSlowPoses(page, 900);
+  const upAfter = await waitFor(`catgs_quality_up_total to reach ${downs}`, async () => {
+    const v = await metric(aq.base, 'catgs_quality_up_total');
+    return v >= downs ? v : 0;
+  }, 20000).catch(() => metric(aq.base, 'catgs_quality_up_total'));
+  const upS = (Date.now() - tSlow) / 1000;
+  check(upAfter > upBefore && upAfter >= downs,
+    `adaptive: under slow poses /metrics catgs_quality_up_total rose back (${upBefore} -> ${upAfter}, ${downs} down) within ${upS.toFixed(1)} s`);
+  // A slow pose sent after that is answered at the viewport's size.
+  const mark = await page.evaluate(() => window.catgs.lastPoseSent.sequence);
+  const restored = await waitFor('a slow pose shown at full size', () => page.evaluate(([m, w, h]) =>
+    window.catgsSlow.answers.find((a) => a.pose > m && a.width === w && a.height === h) || null, [mark, full.width, full.height]), 5000)
+    .catch(() => null);
+  const slow = await page.evaluate(() => window.catgsSlow.stop());
+  // The sizes the slow poses were answered at, in order, run-length coded: "240x180 x4, 360x270 x3".
+  const runs = [];
+  for (const a of slow.answers) {
+    const size = `${a.width}x${a.height}`;
+    if (runs.length && runs.at(-1).size === size) runs.at(-1).n++;
+    else runs.push({ size, n: 1 });
+  }
+  log(`adaptive: ${slow.sent} slow poses in ${((Date.now() - tSlow) / 1000).toFixed(1)} s, answered at: ` +
+    `${runs.map((r) => `${r.size} x${r.n}`).join(', ') || 'none'}`);
+  const firstSlow = slow.answers[0];
+  check(!!firstSlow && firstSlow.width < full.width,
+    `adaptive: the first slow pose is still shown at the reduced size (${firstSlow ? `${firstSlow.width}x${firstSlow.height}` : 'none shown'})`);
+  check(!!restored, `adaptive: then slow poses are shown at full size again (${restored ? `pose ${restored.pose}, ` +
+    `${restored.width}x${restored.height}` : `none after pose ${mark} within 5 s`}; catgs_refine_frames_total ` +
+    `${await metric(aq.base, 'catgs_refine_frames_total')})`);
   await page.close();
-  log(`adaptive quality scenario: ${sent} poses flooded, ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+  log(`adaptive quality scenario: ${sent} poses flooded, ${((Date.now() - t0) / 1000).toFixed(1)} s ` +
+    `(slow poses until full size: ${((Date.now() - tSlow) / 1000).toFixed(1)} s)`);
+}
+
+// Opens `page` on a key frame of its current pose (KeyFrameRequest re-sends the pose); returns
+// that frame's metadata and the decoded canvas.
+async function keyFrameShot(page, timeout = 60000) {
+  const seq = await page.evaluate(() => window.catgs.requestKeyFrame());
+  await page.waitForFunction((s) => {
+    const f = window.catgs.lastFrame;
+    return f && f.poseSequence >= s && f.keyFrame;
+  }, seq, { timeout });
+  const shot = await page.evaluate(() => ({ frame: window.catgs.lastFrame, png: window.catgs.snapshot() }));
+  return { seq, frame: shot.frame, png: PNG.sync.read(Buffer.from(shot.png.split(',')[1], 'base64')) };
+}
+
+// The scene picker against a real server with two scenes (--scene twice: the bundled biker, then
+// flowers_sh3 from the data folder, loaded on first use): the picker lists GET /scenes' names,
+// the first chosen; choosing the second reopens the page with ?scene=flowers_sh3, whose Welcome
+// names it and whose frame at the scene's start pose matches catgs-render of flowers_sh3 at that
+// pose (>= minPsnr) and not catgs-render of biker at the same pose.
+async function checkScenePicker() {
+  const second = path.join(dataDir, 'scenes/flowers_sh3.ply');
+  if (!existsSync(second)) {
+    log(`SKIP (scene picker on a real server): ${second} is missing (give the data folder with --data or CATGS_DATA_DIR)`);
+    return;
+  }
+  const t0 = Date.now();
+  const two = await startServer(['--scene', second]);
+  // /scenes is [] until the first scene has loaded, and the page asks once, when it opens (a page
+  // opened during the server's start-up shows no picker): wait for the list first.
+  const listed = async () => {
+    const r = await fetch(`${two.base}/scenes`);
+    const list = r.ok ? await r.json() : [];
+    return Array.isArray(list) && list.length ? list.map((s) => String(s.name)) : null;
+  };
+  const names = (await waitFor('GET /scenes to list the scenes', listed, 60000, 200).catch(() => null)) || [];
+  check(names.join(',') === 'biker,flowers_sh3', `scenes: GET /scenes lists biker, then flowers_sh3 (${names.join(', ')})`);
+  const page = await context.newPage();
+  page.on('console', (m) => pageLog.push(`scenes console.${m.type()}: ${m.text()}`));
+  await page.goto(`${two.base}/`);
+  await page.waitForFunction(() => window.catgs && window.catgs.connected, null, { timeout: 30000 });
+  const picker = await waitFor('the scene picker', () => page.evaluate(() => {
+    const p = document.getElementById('scene-picker');
+    return p && !p.hidden && p.options.length ? { names: [...p.options].map((o) => o.value), value: p.value } : null;
+  }), 10000).catch(() => null);
+  check(!!picker && picker.names.join(',') === names.join(',') && picker.value === names[0],
+    `scenes: the picker lists /scenes' names, the first chosen (${JSON.stringify(picker)})`);
+  if (!picker || !picker.names.includes('flowers_sh3')) return;
+
+  await Promise.all([page.waitForNavigation({ timeout: 30000 }), page.selectOption('#scene-picker', 'flowers_sh3')]);
+  check(new URL(page.url()).searchParams.get('scene') === 'flowers_sh3', `scenes: the page reopened with ?scene=flowers_sh3 (${page.url()})`);
+  // The scene loads on first use: the Welcome follows once it is there.
+  await page.waitForFunction(() => window.catgs && window.catgs.connected && window.catgs.welcome, null, { timeout: 120000 });
+  const welcome = await page.evaluate(() => window.catgs.welcome);
+  check(welcome.scene_name === 'flowers_sh3', `scenes: the new session's Welcome names flowers_sh3 (${welcome.scene_name})`);
+  const chosen = await page.evaluate(() => document.getElementById('scene-picker').value);
+  check(chosen === 'flowers_sh3', `scenes: the picker shows flowers_sh3 chosen (${chosen})`);
+
+  // The scene's start pose, sent by the hook, then a key frame of it.
+  const ip = welcome.initial_pose;
+  const pose = {
+    position: [ip.position.x, ip.position.y, ip.position.z],
+    orientation: [ip.orientation.w, ip.orientation.x, ip.orientation.y, ip.orientation.z],
+    fovDeg: ip.vertical_fov_deg,
+  };
+  await page.evaluate((p) => window.catgs.setPose(p.position, p.orientation, p.fovDeg), pose);
+  const shot = await keyFrameShot(page);
+  const { width, height } = shot.frame;
+  writeFileSync(path.join(outDir, 'scene_flowers_streamed.png'), PNG.sync.write(shot.png));
+  await page.screenshot({ path: path.join(outDir, 'scene_picker_flowers.png') });
+  const own = psnrRgb(shot.png, readPng(renderPose(second, 'scene_flowers_reference', pose, width, height)));
+  const other = psnrRgb(shot.png, readPng(renderPose(scene, 'scene_biker_same_pose', pose, width, height)));
+  log(`scenes: flowers_sh3 frame (pose ${shot.frame.poseSequence}, ${width}x${height}) vs catgs-render of flowers_sh3 ` +
+    `${own.toFixed(2)} dB, vs biker at the same pose ${other.toFixed(2)} dB`);
+  check(own >= minPsnr, `scenes: the frame shown after the switch matches flowers_sh3's render of its pose (${own.toFixed(2)} dB >= ${minPsnr} dB)`);
+  check(other < minPsnr && other < own - 3, `scenes: ... and not biker's render of the same pose (${other.toFixed(2)} dB)`);
+  await page.close();
+  log(`scene picker scenario: ${((Date.now() - t0) / 1000).toFixed(1)} s`);
 }
 
 let code = 0;
