@@ -338,8 +338,12 @@ TEST(SplatTransformReference, DamagedGlbNamesTheProblem) {
   const uint32_t quiet_nan = 0x7fc00000u;
   std::memcpy(&nan[20 + json_length + 8], &quiet_nan, 4);
   expect_error("nan.glb", nan, "POSITION of Gaussian 0 is not finite");
-  // A .gltf whose JSON lacks the extension is not taken for glTF (detected by content).
-  expect_error("plain.gltf", "{\"asset\":{\"version\":\"2.0\"}}", "not a PLY file");
+  // A .gltf whose JSON lacks the extension: its name makes it glTF (format_detect.cpp: the
+  // extension may be named past the first 4 KiB), and the reader says what it lacks.
+  expect_error("plain.gltf", "{\"asset\":{\"version\":\"2.0\"}}",
+               "no mesh primitive with the KHR_gaussian_splatting extension");
+  // The same JSON under another name is not taken for glTF (detected by content).
+  expect_error("plain.json", "{\"asset\":{\"version\":\"2.0\"}}", "not a PLY file");
 }
 
 }  // namespace
