@@ -10,6 +10,7 @@
 #include "scene/ply_io.h"
 #include "scene/spz_file.h"
 #include "scene_files.h"
+#include "splat_transform.h"
 #include "test_data.h"
 
 namespace catgs {
@@ -91,45 +92,48 @@ TEST(DamagedSplat, WholeRecordsOnlyAndNaNNamed) {
 }
 
 // Alpha bytes 0 and 255 (opacity exactly 0 and 1, whose logits are -+inf) load as the finite
-// logits -+kOpacityLogitLimit in .splat, .spz (versions 4 and 3) and compressed PLY, and a middle
-// byte as its own logit: .splat's records are written here byte by byte; the .spz and compressed
-// PLY files by our writers from logits of -+kOpacityLogitLimit (sigmoid(-+20) * 255 rounds to 0 and
-// 255) and 0 (byte 128, logit ln(128 / 127); compressed PLY: q = lround(0.5 * 255) = 128 too).
-TEST(AlphaEnds, ZeroAndOneLoadAsClampedFiniteLogits) {
-  const std::string dir = test::temp_dir();
+// logits -+kOpacityLogitLimit, and a middle byte as a logit near 0.
+void expect_alpha_ends(const GaussianModel& m, float middle_tolerance, const std::string& what) {
+  ASSERT_EQ(m.size(), 3u) << what;
+  for (float logit : m.opacity_logits) EXPECT_TRUE(std::isfinite(logit)) << what;
+  EXPECT_EQ(m.opacity_logits[0], -kOpacityLogitLimit) << what;
+  EXPECT_EQ(m.opacity_logits[1], kOpacityLogitLimit) << what;
+  EXPECT_NEAR(m.opacity_logits[2], 0.0f, middle_tolerance) << what;
+}
+
+// .splat: records written here byte by byte (alpha is byte 27), alpha 0, 255 and 128 (logit
+// ln(128 / 127)).
+TEST(AlphaEnds, SplatBytesLoadAsClampedFiniteLogits) {
   std::string bytes;
   for (const int alpha : {0, 255, 128}) {
     std::string r = splat_record(1);
     r[27] = static_cast<char>(alpha);
     bytes += r;
   }
-  const float middle = std::log(128.0f / 127.0f);
-  auto expect_ends = [&](const GaussianModel& m, const std::string& what) {
-    ASSERT_EQ(m.size(), 3u) << what;
-    for (float logit : m.opacity_logits) EXPECT_TRUE(std::isfinite(logit)) << what;
-    EXPECT_EQ(m.opacity_logits[0], -kOpacityLogitLimit) << what;
-    EXPECT_EQ(m.opacity_logits[1], kOpacityLogitLimit) << what;
-    EXPECT_NEAR(m.opacity_logits[2], middle, 1e-4) << what;
-  };
-  expect_ends(load_scene(save(dir + "/alpha.splat", bytes)), ".splat");
+  expect_alpha_ends(load_scene(save(test::temp_dir() + "/alpha.splat", bytes)), 0.01f, ".splat");
+}
 
+// .spz and compressed PLY written by splat-transform (not by our writers) from an INRIA PLY of
+// opacity logits -inf, +inf and 0: its quantiser stores alpha 0 and 255 for the infinite ones.
+TEST(AlphaEnds, SplatTransformFilesLoadAsClampedFiniteLogits) {
+  CATGS_REQUIRE_SPLAT_TRANSFORM();
+  const std::string dir = test::temp_dir();
   GaussianModel three;
   three.sh_degree = 0;
   three.resize(3);
-  const float logits[3] = {-kOpacityLogitLimit, kOpacityLogitLimit, 0.0f};
+  const float inf = std::numeric_limits<float>::infinity();
+  const float logits[3] = {-inf, inf, 0.0f};
   for (std::size_t i = 0; i < 3; ++i) {
     three.means[3 * i] = static_cast<float>(i);
     for (int a = 0; a < 3; ++a) three.log_scales[3 * i + a] = -2.0f;
     three.rotations[4 * i] = 1.0f;
     three.opacity_logits[i] = logits[i];
   }
-  for (const int version : {4, 3}) {
-    const std::string spz = dir + "/alpha_v" + std::to_string(version) + ".spz";
-    write_spz(three, spz, version);
-    expect_ends(load_scene(spz), ".spz version " + std::to_string(version));
+  write_inria_ply(three, dir + "/alpha.ply");
+  for (const char* out : {"alpha.spz", "alpha.compressed.ply"}) {
+    ASSERT_EQ(test::splat_transform(dir + "/alpha.ply", dir + "/" + out), "") << out;
+    expect_alpha_ends(load_scene(dir + "/" + out), 0.02f, out);
   }
-  write_compressed_ply(three, dir + "/alpha.compressed.ply");
-  expect_ends(load_scene(dir + "/alpha.compressed.ply"), "compressed PLY");
 }
 
 }  // namespace
