@@ -513,6 +513,7 @@ try {
       `scenes: the picker lists mock, garden and city, mock chosen (${JSON.stringify(opts)})`);
     check(opts.labels.join('|') === 'mock (0.15 M)|garden (5.83 M)|city',
       `scenes: sizes in millions, a scene of unknown size by name alone (${JSON.stringify(opts.labels)})`);
+    await shot(page, 'scene_picker');
     const before = hellos('/ws').length;
     await Promise.all([page.waitForNavigation(), page.selectOption('#scene-picker', 'garden')]);
     check(new URL(page.url()).searchParams.get('scene') === 'garden', `scenes: the page reopened with ?scene=garden (${page.url()})`);
