@@ -21,13 +21,15 @@ mkdir -p "$build/crashes"
 echo "== fuzz build (clang, ASan + UBSan): $build"
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
   -DWITH_CUDA=OFF -DCATGS_FUZZ=ON > "$build/configure.log" 2>&1 || { tail -20 "$build/configure.log"; exit 1; }
-cmake --build "$build" --target fuzz_scene fuzz_protocol > "$build/build.log" 2>&1 || { tail -40 "$build/build.log"; exit 1; }
+cmake --build "$build" --target fuzz_scene fuzz_protocol fuzz_session > "$build/build.log" 2>&1 || { tail -40 "$build/build.log"; exit 1; }
 status=0
-for target in scene protocol; do
+for target in scene protocol session; do
   corpus="$build/corpus/$target"
   mkdir -p "$corpus"
   dict=()
-  [ -f "$root/tests/fuzz/$target.dict" ] && dict=(-dict="$root/tests/fuzz/$target.dict")
+  words="$root/tests/fuzz/$target.dict"
+  [ "$target" = session ] && words="$root/tests/fuzz/protocol.dict"  # a session's input is messages
+  [ -f "$words" ] && dict=(-dict="$words")
   echo "== fuzz_$target for $seconds s"
   # -rss_limit_mb: a scene may legitimately take a few hundred MB; more is a finding.
   if (cd "$build/crashes" && "$build/bin/fuzz_$target" -max_total_time="$seconds" -rss_limit_mb=4096 -timeout=20 \

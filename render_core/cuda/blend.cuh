@@ -11,9 +11,9 @@
 
 namespace catgs::cuda::stages {
 
-// As catgs::to_unorm8 (renderer.h): clamp to [0, 1], * 255, round half up.
+// As catgs::to_unorm8 (renderer.h): clamp to [0, 1], * 255, round half up; NaN to 0.
 __device__ __forceinline__ uint32_t unorm8(float v) {
-  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+  v = v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f;
   return static_cast<uint32_t>(v * 255.0f + 0.5f);
 }
 

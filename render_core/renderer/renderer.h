@@ -78,8 +78,10 @@ struct Image {
 };
 
 // Converts a float colour to 8 bits as the forward model says: clamp to [0, 1], * 255, round.
+// NaN maps to 0: the comparisons are written so that NaN fails `v > 0` (a float-to-integer cast of
+// NaN is undefined behaviour in C++).
 inline uint8_t to_unorm8(float v) {
-  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+  v = v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f;
   return static_cast<uint8_t>(v * 255.0f + 0.5f);
 }
 

@@ -50,7 +50,7 @@ struct SessionShared {
   boost::asio::io_context& io;  // the worker pool: strands, encode jobs, timers
   RenderScheduler& renders;     // render jobs, sessions in turn (render_scheduler.h)
   GpuAssignment& gpus;          // which GPU a session renders on (CUDA renderer; gpu_assignment.h)
-  Transport& transport;
+  ConnectionLink& transport;    // the Transport (transport.h); a fake in tests/fuzz/fuzz_session.cpp
   ServerMetrics& metrics;
   const ServerOptions& options;
   SceneStore& scenes;  // every --scene, in order, the first the default; loaded on first use

@@ -40,6 +40,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "transport/connection_link.h"
 #include "transport/origin_policy.h"
 #include "transport/tls_setup.h"
 #include "transport/trusted_proxies.h"
@@ -48,9 +49,6 @@ struct lws;
 struct lws_context;
 
 namespace catgs::server {
-
-// Identifies one WebSocket connection for its lifetime (never reused).
-using ConnId = std::uint64_t;
 
 // What arrived in one complete WebSocket message.
 enum class MessageKind { binary, text, oversize };
@@ -105,7 +103,7 @@ struct TransportOptions {
   std::string tls_cert, tls_key;              // PEM files; both set: TLS only (tls_setup.h)
 };
 
-class Transport {
+class Transport final : public ConnectionLink {
  public:
   // The handler must outlive the transport.
   Transport(TransportOptions options, TransportHandler& handler);
@@ -134,19 +132,19 @@ class Transport {
 
   // Thread-safe. Queues one binary message. `counted` messages produce on_sent() once written.
   // Ignored when the connection is gone or closing.
-  void send(ConnId id, std::string bytes, bool counted);
+  void send(ConnId id, std::string bytes, bool counted) override;
   // Thread-safe. Closes the connection after the queued messages are written (or after
   // `grace_ms` at most, for a peer that does not read). `drop_queued` discards messages not yet
   // started (used for too-slow clients, whose queue will never drain); `final_message`, when
   // non-empty, is queued last (an Error).
-  void close(ConnId id, std::string final_message, bool drop_queued, int grace_ms = 2000);
+  void close(ConnId id, std::string final_message, bool drop_queued, int grace_ms = 2000) override;
   // Thread-safe. Messages queued for `id` and not yet fully written (0 for unknown ids).
-  std::size_t queued(ConnId id) const;
+  std::size_t queued(ConnId id) const override;
   // Thread-safe. The connection said a valid Hello: it no longer counts against max_pre_hello.
-  void said_hello(ConnId id);
+  void said_hello(ConnId id) override;
   // Thread-safe. The client's address ("" for unknown ids): the TCP peer, or behind a trusted
   // proxy the address its X-Forwarded-For names (trusted_proxies.h).
-  std::string peer(ConnId id) const;
+  std::string peer(ConnId id) const override;
 
  private:
   struct Outgoing {

@@ -82,6 +82,22 @@ INSTANTIATE_TEST_SUITE_P(RealScenes, BruteForceTest,
                                            Case{"biker_130deg_exact", false, 130, Pipeline::exact}),
                          [](const auto& param_info) { return std::string(param_info.param.name); });
 
+// The 8-bit conversion every output goes through (renderer.h; the CUDA blend's unorm8 is the
+// same expression): clamp, * 255, round half up, and a NaN colour black rather than a
+// float-to-integer cast of NaN (undefined behaviour, reported by UBSan in the fuzz build).
+TEST(ToUnorm8, ClampsRoundsAndMapsNanToZero) {
+  EXPECT_EQ(to_unorm8(0.0f), 0);
+  EXPECT_EQ(to_unorm8(1.0f), 255);
+  EXPECT_EQ(to_unorm8(0.5f), 128);         // 128.0 exactly: half up
+  EXPECT_EQ(to_unorm8(1.4f / 255.0f), 1);  // 1.9 -> 1
+  EXPECT_EQ(to_unorm8(-0.25f), 0);
+  EXPECT_EQ(to_unorm8(3.0f), 255);
+  EXPECT_EQ(to_unorm8(INFINITY), 255);
+  EXPECT_EQ(to_unorm8(-INFINITY), 0);
+  EXPECT_EQ(to_unorm8(std::nanf("")), 0);
+  EXPECT_EQ(to_unorm8(-std::nanf("")), 0);
+}
+
 TEST(CpuRenderer, ExactListIsShorterAndImageClose) {
   auto m = scene(test::bundled_scene());
   const Camera cam = biker_view(*m, 640, 480, 40.0f);

@@ -1,0 +1,36 @@
+// What a session may do to its own connection: the part of the Transport a Session uses.
+//
+// Transport (transport.h) implements it over libwebsockets; the session fuzz target
+// (tests/fuzz/fuzz_session.cpp) implements it in memory, so the protocol state machine runs
+// without sockets or an lws service thread. Every call is thread-safe and names the connection
+// by its ConnId; calls for a connection that is gone or closing are ignored (no error).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+namespace catgs::server {
+
+// Identifies one WebSocket connection for its lifetime (never reused).
+using ConnId = std::uint64_t;
+
+class ConnectionLink {
+ public:
+  virtual ~ConnectionLink() = default;
+  // Queues one binary message (a serialized ServerMessage). `counted` messages (Frames) are
+  // reported back once written (TransportHandler::on_sent, Session::post_sent).
+  virtual void send(ConnId id, std::string bytes, bool counted) = 0;
+  // Closes the connection after its queued messages are written (or after `grace_ms`).
+  // `drop_queued` discards messages not yet started; `final_message`, when non-empty, is queued
+  // last (the session's Error).
+  virtual void close(ConnId id, std::string final_message, bool drop_queued, int grace_ms = 2000) = 0;
+  // Messages queued for `id` and not yet fully written (0 for unknown ids).
+  virtual std::size_t queued(ConnId id) const = 0;
+  // The connection said a valid Hello: it no longer counts against --max-pre-hello.
+  virtual void said_hello(ConnId id) = 0;
+  // The client's address ("" for unknown ids).
+  virtual std::string peer(ConnId id) const = 0;
+};
+
+}  // namespace catgs::server
