@@ -19,8 +19,8 @@
 # for every architecture the Dockerfile names (cuobjdump), it runs as uid 10001, `--help` works, and
 # without a GPU `--renderer cuda` (the image's entrypoint) exits non-zero within seconds, saying the
 # CUDA renderer is unavailable (a pod on a node without a usable GPU crash-loops instead of turning
-# Ready on the CPU). --export DIR copies the binary and its runtime libraries (the image's /runtime
-# closure) out, for a run on a GPU machine without containers.
+# Ready on the CPU). --export DIR copies the binary, its runtime libraries and a catgs-loadgen out
+# (DIR/image.tar.xz) for tests/container/cuda_image_gpu_run.sh on a GPU machine without containers.
 # usage: cuda_image_build.sh [--jobs N] [--export DIR] [--skip-build]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
@@ -158,6 +158,8 @@ if [ -x "$cuda_home/bin/cuobjdump" ]; then
 else
   echo "cuda_image_build: no cuobjdump under $cuda_home/bin: the architectures were not listed"
 fi
+hc="$(podman image inspect "$image" --format '{{json .Config.Healthcheck}}' 2>/dev/null)"
+check "HEALTHCHECK is catgs-server --probe" "grep -q '\"--probe\"' <<<'$hc'"
 check "runs as uid 10001" "[ \"\$(podman run --rm --runtime runc ${limits[*]} --entrypoint id $image -u)\" = 10001 ]"
 check "--help works" "podman run --rm --runtime runc ${limits[*]} --entrypoint catgs-server $image --help >/dev/null"
 start=$(date +%s%N)
@@ -192,6 +194,7 @@ if [ -n "$export_dir" ]; then
     "cmake --build build/cuda -j $jobs --target catgs-loadgen >/dev/null && cp build/cuda/bin/catgs-loadgen /out/"
   podman run --rm --runtime runc "${limits[@]}" -v "$out:/out" --entrypoint sh "$image-build" \
     -c "$copy_closure" /out/catgs-loadgen
-  echo "cuda_image_build: exported the binary, catgs-loadgen and $(ls "$export_dir/lib" | wc -l) libraries to $export_dir ($(du -sh "$export_dir" | cut -f1))"
+  tar -C "$out" -cf - catgs-server catgs-loadgen lib web_client | xz -9 -T2 >"$out/image.tar.xz"
+  echo "cuda_image_build: exported the binary, catgs-loadgen and $(ls "$export_dir/lib" | wc -l) libraries to $export_dir; $out/image.tar.xz is $(du -h "$out/image.tar.xz" | cut -f1) (tests/container/cuda_image_gpu_run.sh runs it on a GPU machine)"
 fi
 exit $fail
