@@ -153,7 +153,7 @@ if [ -x "$cuda_home/bin/cuobjdump" ]; then
   for a in $(tr ';' ' ' <<<"$archs"); do
     n="${a%-real}"
     check "SASS for sm_$n" "grep -q 'sm_$n ' <<<'$sass'"
-    [ "$a" = "$n" ] && check "PTX for compute_$n" "grep -q 'sm_$n ' <<<'$ptx'"
+    if [ "$a" = "$n" ]; then check "PTX for compute_$n" "grep -q 'sm_$n ' <<<'$ptx'"; fi
   done
 else
   echo "cuda_image_build: no cuobjdump under $cuda_home/bin: the architectures were not listed"
