@@ -22,6 +22,10 @@
 #        13-copy city (~7 M), real camera paths in turn, 60 poses/s per session, x264 (auto:
 #        NVENC if the GPU has it), no client decode; CPU and GPU utilisation sampled
 #        -> $OUT/sweep.md (table), $OUT/sweep.tar.gz (every loadgen JSON), $OUT/sweep.log
+# The encoder policy's measurements (issue 35), carry [".carry_srv"] alone (it holds the compact
+# tumblewood scene): `unpack`, `scenes` (tumblewood x10, the 13-copy city, the real paths
+# fitted), `rd SCENE WxH SETTINGS` (catgs-encode-bench), `ramp NAME SCENE WxH PIPELINE START STEP
+# MAX P95_MS MIN_FPS [SERVER ARGS]` (sessions until a bound breaks; scripts/ramp_table.py).
 # CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -32,7 +36,8 @@ prepare() {
   local build=${1:-build/cuda}
   local carry=$ROOT/.carry_srv
   rm -rf "$carry" && mkdir -p "$carry/stage/bin" "$carry/stage/lib"
-  local bins=("$build/bin/catgs-server" "$build/bin/catgs-loadgen"
+  local bins=("$build/bin/catgs-server" "$build/bin/catgs-loadgen" "$build/bin/catgs-scene"
+              "$build/bin/catgs-encode-bench"
               "$(find "$build" -type f -name catgs_server_unit_tests -perm -u+x | head -1)")
   for b in "${bins[@]}"; do
     [ -x "$b" ] || { echo "prepare: $b missing (build $build with the server)" >&2; return 1; }
@@ -49,6 +54,14 @@ prepare() {
   rm -rf "$carry/stage"
   mkdir -p "$carry/traces"
   cp -f "${CATGS_DATA_DIR:-$ROOT/../shared/data}"/traces/*.cameras.json "$carry/traces/"
+  # The scenes of `scenes` (tumblewood x10 and the 13-copy city are made from it on the GPU
+  # machine): the compact copy gpu_run.sh prepare makes, or made here.
+  mkdir -p "$carry/scenes"
+  local tw=$ROOT/.carry/scenes/tumblewood_sh2.compressed.ply
+  if [ -f "$tw" ]; then cp -f "$tw" "$carry/scenes/"; else
+    "$build/bin/catgs-scene" compact --scene "${CATGS_DATA_DIR:-$ROOT/../shared/data}/scenes/tumblewood_sh2.ply" \
+      --out "$carry/scenes/tumblewood_sh2.compressed.ply" --up 0,-1,0 || return 1
+  fi
   du -sh "$carry"
 }
 
@@ -188,9 +201,98 @@ PY
   return $status
 }
 
+
+# scenes: tumblewood_sh2 x10 and the 13-copy city (~7 M) with the three real camera paths fitted
+# to each, under /tmp/catgs_sweep (made once per machine; the `sweep` above makes the same).
+scenes() {
+  local W=/tmp/catgs_sweep S=$ROOT/.carry_srv
+  export LD_LIBRARY_PATH=$SRV/lib
+  mkdir -p "$W/json"
+  [ -f "$W/city_flowers_sh3.trace" ] && return 0
+  "$SRV/bin/catgs-scene" compact --scene "$S/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
+    --out "$W/tumblewood.compressed.ply" || return 1
+  "$SRV/bin/catgs-scene" tile --scene "$S/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
+    --radius-sq 4 --up 0,-1,0 --out-compressed "$W/city.compressed.ply" || return 1
+  for scene in tumblewood city; do
+    for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+      "$SRV/bin/catgs-scene" trace --scene "$W/$scene.compressed.ply" --cameras "$S/traces/$path.cameras.json" \
+        --out "$W/${scene}_$path.trace" --up 0,-1,0 --frames 1200 || return 1
+    done
+  done
+}
+
+# rd SCENE WxH SETTINGS [FRAMES]: catgs-encode-bench on SCENE's bicycle path (CUDA renders, x264)
+# -> $OUT/rd_SCENE_WxH.json and its table.
+rd() {
+  local scene=$1 size=$2 settings=$3 frames=${4:-240} W=/tmp/catgs_sweep
+  export LD_LIBRARY_PATH=$SRV/lib
+  "$SRV/bin/catgs-encode-bench" --scene "$W/$scene.compressed.ply" --trace "$W/${scene}_mipnerf360_bicycle.trace" \
+    --renderer cuda --width "${size%x*}" --height "${size#*x}" --frames "$frames" --settings "$settings" \
+    --json "$OUT/rd_${scene}_$size.json"
+}
+
+# measure TAG N SIZE PORT TRACES SECONDS: one catgs-loadgen run of N sessions against the server
+# (SERVER_PID) with the host's CPU, the server's CPU and GPU utilisation -> $W/json/TAG.json.
+measure() {
+  local tag=$1 n=$2 size=$3 port=$4 traces=$5 seconds=$6 W=/tmp/catgs_sweep
+  nvidia-smi --query-gpu=utilization.gpu --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
+  local smi=$! cpu0 srv0 cpu1 srv1
+  cpu0=$(head -1 /proc/stat)
+  srv0=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
+  "$SRV/bin/catgs-loadgen" --port "$port" --sessions "$n" --size "$size" --trace "$traces" \
+    --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" > "$W/load_$tag.txt" 2>&1
+  cpu1=$(head -1 /proc/stat)
+  srv1=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
+  kill "$smi" 2>/dev/null; wait "$smi" 2>/dev/null
+  python3 - "$W/json/$tag.json" "$cpu0" "$cpu1" "$srv0" "$srv1" "$W/gpu_$tag.txt" <<'PY'
+import json, sys
+path, c0, c1, s0, s1, gpu = sys.argv[1:]
+a = [int(x) for x in c0.split()[1:]]; b = [int(x) for x in c1.split()[1:]]
+d = [y - x for x, y in zip(a, b)]
+busy = 1 - (d[3] + d[4]) / max(1, sum(d))          # idle + iowait
+u = [float(x) for x in open(gpu).read().split() if x.strip()]
+j = json.load(open(path))
+j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)) / 100.0,
+             "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u)}
+json.dump(j, open(path, "w"), indent=1)
+PY
+}
+
+# ramp NAME SCENE WxH PIPELINE START STEP MAX P95_MS MIN_FPS [SERVER ARGS...]: sessions START,
+# START + STEP, ... until the pooled p95 pose-to-frame passes P95_MS or the slowest session's FPS
+# falls under MIN_FPS (or a session fails); each count a catgs-loadgen run of 6 s (30 frames of
+# warm-up) on the three real paths in turn -> $W/json/ramp-NAME_N.json; the table is ramp_table.py.
+ramp() {
+  local name=$1 scene=$2 size=$3 pipeline=$4 start=$5 step=$6 max=$7 p95=$8 fps=$9 W=/tmp/catgs_sweep
+  shift 9
+  export LD_LIBRARY_PATH=$SRV/lib
+  start_server "$W/$scene.compressed.ply" "$W/server_ramp-$name.log" --pipeline "$pipeline" "$@" || return 1
+  local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
+  echo "{\"name\": \"$name\", \"scene\": \"$scene\", \"size\": \"$size\", \"pipeline\": \"$pipeline\", \"args\": \"$*\", \"p95_bound\": $p95, \"fps_bound\": $fps}" > "$W/json/ramp-${name}.meta"
+  for ((n = start; n <= max; n += step)); do
+    measure "ramp-${name}_$n" "$n" "$size" "$PORT" "$traces" 6
+    local verdict
+    verdict=$(python3 -c "
+import json,sys; j=json.load(open(sys.argv[1])); t=j['run']['total']
+bad=[]
+if t.get('errors',0): bad.append('%d errors' % t['errors'])
+if t['latency']['p95_ms'] > $p95: bad.append('p95 %.1f ms' % t['latency']['p95_ms'])
+if t['fps_min'] < $fps: bad.append('slowest %.1f FPS' % t['fps_min'])
+print('; '.join(bad))" "$W/json/ramp-${name}_$n.json" 2>&1)
+    echo "ramp $name: $n sessions: ${verdict:-held}"
+    [ -n "$verdict" ] && break
+  done
+  grep -E "GPU|encoder:|ERROR" "$W/server_ramp-$name.log" | head -5
+  stop_server
+}
+
 case "${1:-}" in
   prepare) shift; prepare "$@" ;;
   check) OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; check ;;
   sweep) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; sweep "$@" ;;
+  unpack) unpack ;;
+  scenes) scenes ;;
+  rd) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; rd "$@" ;;
+  ramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; ramp "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
 esac

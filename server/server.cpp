@@ -173,7 +173,11 @@ void Server::resolve_encoder() {
   bool fell_back = false;
   encoder_kind_ = make_encoder(options_.encoder, probe, &why, &fell_back)->name();
   if (fell_back) metrics_.encoder_fallbacks_total++;
-  std::cout << "encoder: " << encoder_kind_ << " (" << why << "), crf " << options_.crf << "\n";
+  std::cout << "encoder: " << encoder_kind_ << " (" << why << "), crf " << options_.encoder_policy.crf << ", bitrate "
+            << (options_.encoder_policy.bitrate_kbps < 0    ? "auto"
+                : options_.encoder_policy.bitrate_kbps == 0 ? "off"
+                                                            : std::to_string(options_.encoder_policy.bitrate_kbps))
+            << ", " << options_.encoder_policy.usable_cores << " cores for encoders\n";
   metrics_.renderer = renderer_kind_;
   metrics_.encoder = encoder_kind_;
   metrics_.pipeline = pipeline_name(render_options_.pipeline);

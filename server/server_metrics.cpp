@@ -69,6 +69,11 @@ std::string ServerMetrics::prometheus_text() const {
   put("catgs_frame_bytes_total", "counter", "Encoded frame bytes sent.", bytes_total.load());
   put("catgs_poses_total", "counter", "Poses received.", poses_total.load());
   put("catgs_poses_skipped_total", "counter", "Poses replaced before rendering.", poses_skipped_total.load());
+  put("catgs_deadline_skips_total", "counter",
+      "Rendered frames dropped before encoding: past their display slot with a newer pose waiting.",
+      deadline_skips_total.load());
+  put("catgs_encoder_rebuilds_total", "counter", "Encoders rebuilt for a new thread share as sessions joined or left.",
+      encoder_rebuilds_total.load());
   put("catgs_dropped_frames_total", "counter",
       "Frames lost: rendered or being rendered for a session that ended or failed, or a pose pending "
       "when its session ended (poses replaced by a newer one are catgs_poses_skipped_total).",

@@ -75,6 +75,11 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> bytes_total{0};       // Frame payload bytes
   std::atomic<std::uint64_t> poses_total{0};
   std::atomic<std::uint64_t> poses_skipped_total{0};  // replaced by a newer pose (latest wins)
+  // Rendered frames dropped before their encode: they would have missed their display slot and
+  // a newer pose was waiting (session/frame_pacing.h).
+  std::atomic<std::uint64_t> deadline_skips_total{0};
+  // Encoders rebuilt because the live sessions changed the threads they should get (an IDR each).
+  std::atomic<std::uint64_t> encoder_rebuilds_total{0};
   // Frames lost: a pose pending, or a frame rendering or encoding, when its session ended or
   // failed (a pose replaced by a newer one is a skip, poses_skipped_total, not a drop).
   std::atomic<std::uint64_t> dropped_frames_total{0};

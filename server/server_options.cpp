@@ -31,6 +31,20 @@ int parse_int(const std::string& name, const std::string& v, int lo, int hi) {
   return x;
 }
 
+double parse_double(const std::string& name, const std::string& v, double lo, double hi) {
+  std::size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(v, &used);
+  } catch (const std::exception&) {
+    throw std::invalid_argument(name + " needs a number, got '" + v + "'");
+  }
+  if (used != v.size() || !(x >= lo && x <= hi))
+    throw std::invalid_argument(name + " must be a number in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                                "], got '" + v + "'");
+  return x;
+}
+
 // "WxH" with each side in [16, 4096] (the protocol's viewport range).
 void parse_size(const std::string& name, const std::string& v, int& width, int& height) {
   const auto x = v.find('x');
@@ -94,15 +108,28 @@ std::string server_usage() {
          "  --render-lanes N      renders at once, sessions in turn (default: 4 per GPU with the\n"
          "                        CUDA renderer, --threads with the CPU one)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
-         "  --crf N               x264 quality, 0..51 (default 23)\n"
+         "  --bitrate auto|off|KBPS  each stream's VBV maximum rate (capped CRF): auto (default)\n"
+         "                        --bits-per-pixel x width x height x 60 frames/s, at least\n"
+         "                        1500 kbit/s; off: --crf alone; a client's Quality lowers it\n"
+         "  --bits-per-pixel F    auto's bits per pixel per frame (default 0.09: 11.2 Mbit/s\n"
+         "                        at 1080p60, 5.0 at 720p60; RESULTS.md \"Encoder policy\")\n"
+         "  --crf N               x264 quality floor, 0..51 (default 23): a simple view takes\n"
+         "                        only the bits this quality needs\n"
+         "  --vbv-ms N            the VBV's size in ms of the bitrate (default 250): how far one\n"
+         "                        frame (an IDR) may exceed the average\n"
+         "  --intra-refresh N     x264 periodic intra refresh over N frames instead of IDRs\n"
+         "                        after the first (default 0: off)\n"
          "  --adaptive-quality on|off  lower a session's resolution (x0.75, x0.5) while the\n"
          "                        server skips its poses, climb back when frames would fit,\n"
          "                        and send a full-size frame when the camera stops (default off;\n"
          "                        session/adaptive_quality.h has the rule)\n"
-         "  --encoder-threads N   threads per session's encoder, 0 = the library's choice\n"
-         "                        (default 2: x264's sliced threads halve a frame's encode\n"
-         "                        time; more cost CPU that other sessions need)\n"
+         "  --encoder-threads N   sliced threads per session's encoder (default 0: auto, the\n"
+         "                        usable cores shared by the live sessions, at most what the\n"
+         "                        viewport gains from: encode/encoder_policy.h)\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
+         "  --frame-deadline S|off  skip a rendered frame before encoding when it would reach\n"
+         "                        the client more than S pose intervals after its pose and a\n"
+         "                        newer pose waits (default 2: 33 ms at 60 poses/s)\n"
          "  --socket-send-buffer BYTES  SO_SNDBUF per WebSocket (default 524288; 0 = kernel)\n"
          "  --max-viewport WxH    largest viewport a client may ask for (default 3840x2160; a\n"
          "                        viewport fits when its pixels are at most W x H and its longer\n"
@@ -233,9 +260,19 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       if (v != "on" && v != "off") throw std::invalid_argument("--adaptive-quality: on or off, not '" + v + "'");
       out.adaptive_quality = v == "on";
     } else if (a == "--crf")
-      out.crf = parse_int(a, v, 0, 51);
+      out.encoder_policy.crf = parse_int(a, v, 0, 51);
+    else if (a == "--bitrate")
+      out.encoder_policy.bitrate_kbps = v == "auto" ? -1 : v == "off" ? 0 : parse_int(a, v, 100, 1000000);
+    else if (a == "--bits-per-pixel")
+      out.encoder_policy.bits_per_pixel = parse_double(a, v, 0.001, 10.0);
+    else if (a == "--vbv-ms")
+      out.encoder_policy.vbv_buffer_ms = parse_int(a, v, 1, 10000);
+    else if (a == "--intra-refresh")
+      out.encoder_policy.intra_refresh_frames = parse_int(a, v, 0, 1000);
     else if (a == "--encoder-threads")
-      out.encoder_threads = parse_int(a, v, 0, 64);
+      out.encoder_policy.threads = parse_int(a, v, 0, 64);
+    else if (a == "--frame-deadline")
+      out.frame_deadline_slots = v == "off" ? 0.0 : parse_double(a, v, 0.0, 100.0);
     else if (a == "--max-frames-in-flight")
       out.max_frames_in_flight = parse_int(a, v, 1, 16);
     else if (a == "--socket-send-buffer")
@@ -257,7 +294,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
   }
   // Encodes are CPU-bound: one worker per core this process may use (its affinity and its
   // cgroup's CPU limit, cpu_quota.h), not per core of the host; x264 adds its own threads.
-  if (out.threads == 0) out.threads = std::max(4, usable_cores());
+  out.encoder_policy.usable_cores = usable_cores();
+  if (out.threads == 0) out.threads = std::max(4, out.encoder_policy.usable_cores);
   if (out.max_pixels_in_flight == 0) out.max_pixels_in_flight = 2LL * out.max_viewport_width * out.max_viewport_height;
   if (out.tls_cert.empty() != out.tls_key.empty())
     throw std::invalid_argument("--tls-cert and --tls-key go together (one is missing)");

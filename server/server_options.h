@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "encode/encoder_policy.h"
 #include "session/access_tokens.h"
 #include "session/rate_limit.h"
 
@@ -49,13 +50,18 @@ struct ServerOptions {
   // --trusted-proxies: reverse proxies whose X-Forwarded-For names the client for the
   // per-address caps and limits (empty: the TCP peer is the client).
   std::string trusted_proxies;
-  RateLimitSettings rate_limits;        // --rate-limits
-  int threads = 0;                      // Boost.Asio worker threads (strands, encoding); 0 = max(4, usable_cores())
-  int render_lanes = 0;                 // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
-  int slow_client_timeout_ms = 10000;   // frames unwritten this long -> ERROR_TOO_SLOW
-  int crf = 23;                         // x264 constant rate factor (lower = better quality, more bytes)
-  bool adaptive_quality = false;        // --adaptive-quality (session/adaptive_quality.h)
-  int encoder_threads = 2;              // per session's encoder; 0 = the library's choice
+  RateLimitSettings rate_limits;       // --rate-limits
+  int threads = 0;                     // Boost.Asio worker threads (strands, encoding); 0 = max(4, usable_cores())
+  int render_lanes = 0;                // renders at once (FIFO); 0 = 4 for CUDA, `threads` for CPU
+  int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
+  bool adaptive_quality = false;       // --adaptive-quality (session/adaptive_quality.h)
+  // --bitrate, --bits-per-pixel, --crf, --vbv-ms, --intra-refresh, --encoder-threads: how each
+  // session's stream is sized (encode/encoder_policy.h); usable_cores is filled at parse time.
+  EncoderPolicy encoder_policy;
+  // --frame-deadline: a frame's display slot in pose intervals after its pose arrived; a rendered
+  // frame that would miss it is skipped before encoding when a newer pose waits
+  // (session/frame_pacing.h). 0: never skip.
+  double frame_deadline_slots = 2.0;
   int max_frames_in_flight = 2;         // frames queued to the transport but not yet written
   int socket_send_buffer = 512 * 1024;  // SO_SNDBUF of WebSocket sockets, bytes (0 = kernel's)
   int max_viewport_width = 3840;        // --max-viewport WxH: larger Hello/Resize -> ERROR_INVALID_ARGUMENT

@@ -19,11 +19,21 @@ namespace catgs::server {
 
 struct EncoderConfig {
   int width = 0, height = 0;  // pixels, even, >= 16
-  int fps = 60;               // nominal frame rate (time base; NVENC's one-frame VBV)
-  int crf = 23;               // x264 constant rate factor
-  int bitrate_kbps = 0;       // NVENC CBR target; 0: width * height * fps / 15 bits/s. x264: a
-                              // ceiling (capped CRF, VBV of a quarter second); 0: CRF alone
-  int threads = 0;            // encoder threads, 0 = the library's choice
+  int fps = 60;               // nominal frame rate (time base; the VBV's frame budget)
+  // Rate control (encoder_policy.h chooses these for a session). x264: capped CRF, the streaming
+  // setting: `crf` is the quality floor (a still or simple view takes only the bits crf needs),
+  // `bitrate_kbps` the VBV's maximum rate (a busy view is held to it, its quality drops instead),
+  // `vbv_buffer_ms` the VBV's size in milliseconds of that rate (how far one frame may overshoot
+  // the average: an IDR is at most about that many ms of the stream). bitrate_kbps 0: crf alone.
+  // NVENC: CBR at bitrate_kbps (0: width * height * fps / 15 bits/s) with the same VBV size.
+  int crf = 23;
+  int bitrate_kbps = 0;
+  int vbv_buffer_ms = 0;  // 0: 250 ms (x264), one frame (NVENC)
+  // x264: periodic intra refresh (a column of intra blocks sweeps the picture over
+  // `intra_refresh_frames` frames) instead of IDR pictures after the first one: no frame is an
+  // intra-coded size spike. A forced IDR (force_idr) is still an IDR. 0: off.
+  int intra_refresh_frames = 0;
+  int threads = 0;  // encoder threads, 0 = the library's choice; x264 uses sliced threads (no delay)
   // nvenc: pictures arrive as CUDA device planes (AV_PIX_FMT_CUDA frames of a hw_frames_ctx on
   // the CUDA primary context of device `cuda_device`, sw_format yuv420p; input_target() is then
   // device memory). x264 ignores both (its input is always host memory).

@@ -131,9 +131,10 @@ NvencEncoder::NvencEncoder(const EncoderConfig& config) try
         const long bitrate = nvenc_bitrate(config);
         ctx->bit_rate = bitrate;
         ctx->rc_max_rate = bitrate;
-        // One frame of VBV: a frame never waits behind the bits of earlier ones (NVENC's
-        // default VBV is about two seconds).
-        ctx->rc_buffer_size = static_cast<int>(bitrate / config.fps);
+        // One frame of VBV unless the policy says otherwise: a frame never waits behind the bits
+        // of earlier ones (NVENC's default VBV is about two seconds).
+        ctx->rc_buffer_size = config.vbv_buffer_ms > 0 ? static_cast<int>(bitrate / 1000 * config.vbv_buffer_ms)
+                                                       : static_cast<int>(bitrate / config.fps);
         av_opt_set(ctx->priv_data, "preset", "p1", 0);
         av_opt_set(ctx->priv_data, "tune", "ull", 0);
         av_opt_set(ctx->priv_data, "rc", "cbr", 0);

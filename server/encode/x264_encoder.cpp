@@ -1,6 +1,7 @@
 #include "encode/x264_encoder.h"
 
 #include <cstdint>
+#include <string>
 
 extern "C" {
 #include <libavcodec/avcodec.h>
@@ -9,19 +10,39 @@ extern "C" {
 
 namespace catgs::server {
 
+namespace {
+
+constexpr int kDefaultVbvMs = 250;
+
+// x264's own options, given as x264-params (libavcodec has no field for intra refresh's period).
+std::string x264_params(const EncoderConfig& config) {
+  if (config.intra_refresh_frames <= 0) return "";
+  // keyint is the refresh period under intra refresh: a column of intra macroblocks crosses
+  // the picture once every intra_refresh_frames frames; no IDR follows the first one.
+  return "intra-refresh=1:keyint=" + std::to_string(config.intra_refresh_frames);
+}
+
+}  // namespace
+
 X264Encoder::X264Encoder(const EncoderConfig& config)
     : LibavEncoder("x264", "libx264", config, [&config](AVCodecContext* ctx) {
         ctx->gop_size = 1 << 30;  // X264_KEYINT_MAX_INFINITE: IDR only on demand
+        // Sliced threads: every thread codes a band of the same picture, so threads cut a
+        // frame's latency and add no frame of delay (frame threads would pipeline frames).
+        // zerolatency picks them already; stated here so that no default can change it.
+        ctx->thread_type = FF_THREAD_SLICE;
         av_opt_set(ctx->priv_data, "preset", "ultrafast", 0);
         av_opt_set(ctx->priv_data, "tune", "zerolatency", 0);
         av_opt_set_double(ctx->priv_data, "crf", config.crf, 0);
         av_opt_set_int(ctx->priv_data, "forced-idr", 1, 0);  // pict_type I -> IDR, not just I
         if (config.bitrate_kbps > 0) {
-          // Capped CRF: quality as --crf asks while the stream fits, the VBV lowers it when not.
-          // A quarter second of buffer keeps the cap tight without a frame-sized VBV's blur.
+          // Capped CRF: quality as crf asks while the stream fits, the VBV lowers it when not.
           ctx->rc_max_rate = static_cast<std::int64_t>(config.bitrate_kbps) * 1000;
-          ctx->rc_buffer_size = static_cast<int>(ctx->rc_max_rate / 4);
+          const int vbv_ms = config.vbv_buffer_ms > 0 ? config.vbv_buffer_ms : kDefaultVbvMs;
+          ctx->rc_buffer_size = static_cast<int>(ctx->rc_max_rate * vbv_ms / 1000);
         }
+        const std::string params = x264_params(config);
+        if (!params.empty()) av_opt_set(ctx->priv_data, "x264-params", params.c_str(), 0);
       }) {}
 
 }  // namespace catgs::server

@@ -1,6 +1,7 @@
 // H.264 through libavcodec's libx264: ultrafast, zerolatency, no B-frames, infinite GOP with IDR
 // on demand (forced-idr), Annex B with SPS/PPS in band on every IDR, yuv420p BT.709 limited
-// range, constant rate factor EncoderConfig::crf.
+// range. Rate control as EncoderConfig says: capped CRF (crf the quality floor, a VBV of
+// bitrate_kbps and vbv_buffer_ms), optional periodic intra refresh, sliced threads.
 #pragma once
 
 #include "encode/libav_encoder.h"

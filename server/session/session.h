@@ -35,6 +35,7 @@
 #include "render/gpu_assignment.h"
 #include "render/render_scheduler.h"
 #include "session/adaptive_quality.h"
+#include "session/frame_pacing.h"
 #include "session/message_validation.h"
 #include "session/first_view.h"
 #include "session/rate_limit.h"
@@ -44,6 +45,10 @@
 #include "transport/transport.h"
 
 namespace catgs::server {
+
+inline double ms_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
 
 // What all sessions share (owned by the Server; it outlives every session).
 struct SessionShared {
@@ -199,6 +204,7 @@ class Session : public std::enable_shared_from_this<Session> {
   std::optional<PendingPose> pending_;
   std::optional<PendingPose> last_started_;  // the pose of the last render started (refine frames)
   AdaptiveQuality quality_;                  // --adaptive-quality
+  FramePacing pacing_;                       // --frame-deadline
   int last_frame_level_ = 0;                 // the level of the last frame handed off
   bool rendering_ = false;                   // a render (or render-and-encode) job is running
   bool encoding_ = false;                    // an encode job is running
@@ -225,6 +231,8 @@ class Session : public std::enable_shared_from_this<Session> {
   int gpu_ = -1;  // the CUDA device renderer_ renders on (shared_.gpus), -1: none (CPU renderer)
   std::unique_ptr<Encoder> encoder_;
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with (touched in jobs only)
+  int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
+  Clock::time_point encoder_built_{};
 };
 
 }  // namespace catgs::server

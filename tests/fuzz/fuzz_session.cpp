@@ -109,7 +109,7 @@ struct World {
     options.max_viewport_width = kMaxSide;
     options.max_viewport_height = kMaxSide;
     options.encoder = "x264";
-    options.encoder_threads = 1;
+    options.encoder_policy.threads = 1;
     SceneStore::Options o;  // no log: the chunk loads once, quietly
     scenes = std::make_unique<SceneStore>(
         std::vector<SceneStore::Source>{

@@ -57,6 +57,7 @@ const char* kUsage =
     "  --json FILE              write the report (every ramp step) as JSON\n"
     "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
     "  --ramp-step x2|+K        session counts double (default) or grow by K\n"
+    "  --ramp-start N           the ramp's first session count (default 1)\n"
     "  --max-p95-ms MS          ramp bound: pooled p95 pose-to-frame latency\n"
     "  --min-fps F              ramp bound: the slowest session's FPS\n"
     "  --progress S             a progress line on stderr every S seconds (default 1; 0: none)\n"
@@ -200,7 +201,9 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
   const double max_p95 = args.get_double("--max-p95-ms", 0), min_fps = args.get_double("--min-fps", 0);
   int held = 0;
   report["ramp"] = nlohmann::json::array();
-  for (int n = 1; n <= max_sessions; n = add ? n + add : 2 * n) {
+  const int start = args.get_int("--ramp-start", 1);
+  if (start < 1) throw std::invalid_argument("--ramp-start must be >= 1");
+  for (int n = start; n <= max_sessions; n = add ? n + add : 2 * n) {
     const auto results = run_sessions(n, templates, progress_s);
     const RunSummary t = summarize_run(results);
     char broken[96] = "";
@@ -232,10 +235,10 @@ int main(int argc, char** argv) {
   try {
     const tools::Args args(
         argc, argv,
-        {"--host",        "--port",           "--sessions", "--size",     "--width", "--height",  "--trace",
-         "--scene",       "--scene-name",     "--offset-s", "--rate",     "--depth", "--seconds", "--decode",
-         "--check-every", "--check-min-psnr", "--warmup",   "--stale-ms", "--token", "--json",    "--ramp!",
-         "--ramp-step",   "--max-p95-ms",     "--min-fps",  "--progress", "--tls!",  "--help!"});
+        {"--host",        "--port",           "--sessions",   "--size",     "--width",    "--height",  "--trace",
+         "--scene",       "--scene-name",     "--offset-s",   "--rate",     "--depth",    "--seconds", "--decode",
+         "--check-every", "--check-min-psnr", "--warmup",     "--stale-ms", "--token",    "--json",    "--ramp!",
+         "--ramp-step",   "--ramp-start",     "--max-p95-ms", "--min-fps",  "--progress", "--tls!",    "--help!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

@@ -1,0 +1,84 @@
+#!/usr/bin/env python3
+"""Markdown table of gpu_server_run.sh ramps: one row per ramp (issue 35's table).
+
+usage: ramp_table.py DIR   (DIR/json holds ramp-NAME.meta and ramp-NAME_N.json per session count)
+
+Per ramp: the largest session count that held both bounds, the first step's (one session's)
+p95 / p99, and at the largest count held: the slowest session's FPS, pooled p95 / p99, Mbit/s and
+bits a pixel per session, the server's mean render / encode / queue ms, CPU busy, the server's
+CPU (cores) and GPU utilisation; then what broke the next step and the stage that grew most.
+"""
+import glob
+import json
+import os
+import sys
+
+
+def load(w):
+    ramps = []
+    for meta in sorted(glob.glob(os.path.join(w, "json", "ramp-*.meta"))):
+        m = json.load(open(meta))
+        steps = []
+        for f in glob.glob(os.path.join(w, "json", f"ramp-{m['name']}_*.json")):
+            n = int(f.rsplit("_", 1)[1][:-5])
+            steps.append((n, json.load(open(f))))
+        steps.sort(key=lambda s: s[0])
+        ramps.append((m, steps))
+    return ramps
+
+
+def held(m, j):
+    t = j["run"]["total"]
+    return not t.get("errors", 0) and t["latency"]["p95_ms"] <= m["p95_bound"] and t["fps_min"] >= m["fps_bound"]
+
+
+def limit(prev, broke):
+    """The stage whose mean grew most from the last held step to the broken one."""
+    if broke is None:
+        return "not reached"
+    a = prev["run"]["total"]["server"] if prev else {}
+    b = broke["run"]["total"]["server"]
+    growth = {k: b.get(k + "_ms", 0) - a.get(k + "_ms", 0) for k in ("queue", "render", "encode", "send")}
+    stage = max(growth, key=growth.get)
+    h = broke.get("host", {})
+    return (f"{stage} +{growth[stage]:.1f} ms (CPU {100 * h.get('cpu_busy_fraction', 0):.0f}%, "
+            f"GPU {h.get('gpu_util_mean') or 0:.0f}%)")
+
+
+def main(w):
+    print("| ramp | scene | size | pipeline | server flags | sessions held | one session p95 / p99 ms | "
+          "at the largest held: FPS min, p95 / p99 ms | Mbit/s a session | bits a pixel | render / encode / "
+          "queue ms | CPU busy | server CPU (cores) | GPU util | next step broke by | stage that grew most |")
+    print("|" + "---|" * 16)
+    for m, steps in load(w):
+        if not steps:
+            continue
+        good = [(n, j) for n, j in steps if held(m, j)]
+        n_held, jh = good[-1] if good else (0, None)
+        bad = next(((n, j) for n, j in steps if not held(m, j)), (None, None))
+        first = steps[0][1]["run"]["total"]["latency"]
+        one = f"{first['p95_ms']:.1f} / {first['p99_ms']:.1f}" + ("" if steps[0][0] == 1 else f" (at {steps[0][0]})")
+        w_, h_ = (int(x) for x in m["size"].split("x"))
+        if jh:
+            t = jh["run"]["total"]
+            srv, host = t["server"], jh.get("host", {})
+            mbps = 8 * t["bytes_per_second"] / n_held / 1e6
+            secs = max(s["seconds"] for s in jh["run"]["sessions"])
+            at = (f"{t['fps_min']:.1f}, {t['latency']['p95_ms']:.1f} / {t['latency']['p99_ms']:.1f}", f"{mbps:.1f}",
+                  f"{mbps * 1e6 / (w_ * h_ * 60):.3f}",
+                  f"{srv['render_ms']:.2f} / {srv['encode_ms']:.2f} / {srv['queue_ms']:.2f}",
+                  f"{100 * host.get('cpu_busy_fraction', 0):.0f}%", f"{host.get('server_cpu_seconds', 0) / secs:.1f}",
+                  f"{host.get('gpu_util_mean') or 0:.0f}%")
+        else:
+            at = ("none held",) + ("",) * 6
+        broke = ""
+        if bad[1] is not None:
+            t = bad[1]["run"]["total"]
+            broke = (f"{bad[0]}: p95 {t['latency']['p95_ms']:.1f} ms, slowest {t['fps_min']:.1f} FPS"
+                     + (f", {t['errors']} errors" if t.get("errors") else ""))
+        print(f"| {m['name']} | {m['scene']} | {m['size']} | {m['pipeline']} | {m['args'] or 'defaults'} | {n_held} | "
+              f"{one} | " + " | ".join(at) + f" | {broke} | {limit(jh, bad[1])} |")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])

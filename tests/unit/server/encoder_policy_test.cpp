@@ -1,0 +1,188 @@
+// The encoder policy (encode/encoder_policy.h) and what x264 makes of it: the target bitrate by
+// viewport with the client's cap, threads shared among live sessions, the rebuild rule, and on
+// real renders of the bundled scene: a capped stream holds its cap, sliced threads give one
+// access unit a frame with a slice per thread, intra refresh leaves the first IDR the only one.
+// Streams are checked by libavcodec's h264 decoder and by reading their NAL unit types.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+#include "common/image_io.h"
+#include "camera/camera.h"
+#include "cpu/cpu_renderer.h"
+#include "encode/encoder_policy.h"
+#include "encode/x264_encoder.h"
+#include "loadgen/h264_decoder.h"
+#include "session/first_view.h"
+#include "test_data.h"
+
+extern "C" {
+#include <libavutil/log.h>
+}
+
+namespace {
+
+const int kQuietLibav = (av_log_set_level(AV_LOG_ERROR), 0);
+
+using namespace catgs;
+using namespace catgs::server;
+
+TEST(EncoderPolicy, TargetBitrateFollowsTheViewportAndTheClientCap) {
+  EncoderPolicy p;                                              // auto, 0.09 bits a pixel, floor 1500 kbit/s
+  EXPECT_EQ(target_bitrate_kbps(p, 1920, 1080, 60, 0), 11197);  // 0.09 x 1920 x 1080 x 60 / 1000
+  EXPECT_EQ(target_bitrate_kbps(p, 1280, 720, 60, 0), 4977);
+  EXPECT_EQ(target_bitrate_kbps(p, 640, 360, 60, 0), 1500);         // the floor
+  EXPECT_EQ(target_bitrate_kbps(p, 1920, 1080, 60, 3000), 3000);    // a client's cap lowers it
+  EXPECT_EQ(target_bitrate_kbps(p, 1920, 1080, 60, 50000), 11197);  // but never raises it
+  p.bitrate_kbps = 0;                                               // off: crf alone unless the client caps it
+  EXPECT_EQ(target_bitrate_kbps(p, 1920, 1080, 60, 0), 0);
+  EXPECT_EQ(target_bitrate_kbps(p, 1920, 1080, 60, 2500), 2500);
+  p.bitrate_kbps = 8000;
+  EXPECT_EQ(target_bitrate_kbps(p, 640, 360, 60, 0), 8000);
+}
+
+TEST(EncoderPolicy, ThreadsShareTheCoresAmongLiveSessions) {
+  EncoderPolicy p;
+  p.usable_cores = 16;
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 1), useful_threads(1920, 1080));
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 4), 4);
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 7), 2);
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 20), 1);  // never 0
+  EXPECT_EQ(encoder_threads(p, 640, 360, 1), useful_threads(640, 360));
+  EXPECT_LE(useful_threads(640, 360), useful_threads(1280, 720));
+  EXPECT_LE(useful_threads(1280, 720), useful_threads(1920, 1080));
+  p.threads = 3;  // --encoder-threads 3: fixed
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 20), 3);
+  const EncoderConfig c = encoder_config(EncoderPolicy{}, 1280, 720, 60, 1, 0);
+  EXPECT_EQ(c.width, 1280);
+  EXPECT_EQ(c.bitrate_kbps, 4977);
+  EXPECT_EQ(c.crf, EncoderPolicy{}.crf);
+}
+
+TEST(EncoderPolicy, FewerThreadsAtOnceMoreOnlyAfterTheGrowDelay) {
+  using std::chrono::seconds;
+  EXPECT_TRUE(should_rebuild(8, 4, seconds(0)));  // sessions joined
+  EXPECT_FALSE(should_rebuild(4, 4, seconds(100)));
+  EXPECT_FALSE(should_rebuild(4, 8, seconds(1)));  // sessions left a moment ago
+  EXPECT_TRUE(should_rebuild(4, 8, kGrowDelay));
+}
+
+// Frames of the bundled biker along a short orbit around the server's first view (moving content).
+std::vector<Yuv420Image> biker_frames(int w, int h, int n, std::vector<Image>* raw = nullptr) {
+  auto model = test::cached_scene(test::bundled_scene());
+  const SceneFrame frame = frame_from_content(*model);
+  const CameraPose p = first_view_pose(frame, w, h);
+  cpu::CpuRenderer renderer(model, RenderOptions{});
+  std::vector<Yuv420Image> out;
+  for (int k = 0; k < n; ++k) {
+    const glm::quat turn = glm::angleAxis(glm::radians(0.6f * static_cast<float>(k)), frame.up);
+    const glm::vec3 pos = frame.orbit_centre + turn * (p.position - frame.orbit_centre);
+    Image img;
+    renderer.render(Camera::from_pose(pos, turn * p.orientation, p.vertical_fov_deg, w, h), img);
+    out.push_back(rgba_to_yuv420_bt709(img.rgba8.data(), w, h, w * 4));
+    if (raw) raw->push_back(std::move(img));
+  }
+  return out;
+}
+
+// NAL unit types of an Annex B access unit, in order.
+std::vector<int> nal_types(const std::vector<std::uint8_t>& au) {
+  std::vector<int> types;
+  for (std::size_t i = 0; i + 3 < au.size(); ++i)
+    if (au[i] == 0 && au[i + 1] == 0 && au[i + 2] == 1) {
+      types.push_back(au[i + 3] & 0x1f);
+      i += 3;
+    }
+  return types;
+}
+
+int count(const std::vector<int>& v, int x) { return static_cast<int>(std::count(v.begin(), v.end(), x)); }
+
+struct Stream {
+  std::vector<EncodedFrame> frames;
+  double mean_kbps = 0;
+  double mean_psnr = 0;
+};
+
+Stream encode_all(const EncoderConfig& c, const std::vector<Yuv420Image>& frames, const std::vector<Image>& raw) {
+  X264Encoder enc(c);
+  loadgen::H264Decoder dec;
+  Stream s;
+  double bytes = 0;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    s.frames.push_back(enc.encode_yuv420(frames[k].planes(), false));
+    bytes += static_cast<double>(s.frames.back().data.size());
+    Image d;
+    EXPECT_TRUE(
+        dec.decode(std::string(s.frames.back().data.begin(), s.frames.back().data.end()), d.rgba8, d.width, d.height))
+        << "frame " << k;
+    s.mean_psnr += psnr_rgba8(d, raw[k]) / static_cast<double>(frames.size());
+  }
+  s.mean_kbps = bytes * 8 * c.fps / static_cast<double>(frames.size()) / 1000;
+  return s;
+}
+
+TEST(EncoderPolicy, CappedStreamHoldsItsCapAndCrfIsItsFloor) {
+  std::vector<Image> raw;
+  const auto frames = biker_frames(320, 192, 48, &raw);
+  EncoderConfig c;
+  c.width = 320;
+  c.height = 192;
+  c.crf = 12;  // more bits than the cap allows on this moving view
+  const Stream free = encode_all(c, frames, raw);
+  c.bitrate_kbps = std::max(200, static_cast<int>(free.mean_kbps / 4));
+  c.vbv_buffer_ms = 100;
+  const Stream capped = encode_all(c, frames, raw);
+  // The VBV may overshoot by at most its buffer over the run: 100 ms of 48 frames / 60 fps.
+  EXPECT_LE(capped.mean_kbps, c.bitrate_kbps * (1 + 0.1 / 0.8) + 1) << "uncapped " << free.mean_kbps;
+  EXPECT_LT(capped.mean_psnr, free.mean_psnr);
+  EXPECT_GT(capped.mean_psnr, 25.0);  // still the scene
+  // A cap far above what crf needs changes nothing: crf is the floor of the quality.
+  c.bitrate_kbps = static_cast<int>(free.mean_kbps * 20);
+  const Stream loose = encode_all(c, frames, raw);
+  EXPECT_NEAR(loose.mean_kbps, free.mean_kbps, free.mean_kbps * 0.02);
+}
+
+TEST(EncoderPolicy, SlicedThreadsGiveEveryFrameAtOnceWithASlicePerThread) {
+  std::vector<Image> raw;
+  const auto frames = biker_frames(640, 352, 6, &raw);
+  for (int threads : {1, 4}) {
+    SCOPED_TRACE(threads);
+    EncoderConfig c;
+    c.width = 640;
+    c.height = 352;
+    c.threads = threads;
+    const Stream s = encode_all(c, frames, raw);  // encode_yuv420 throws on a frame of delay
+    ASSERT_EQ(s.frames.size(), frames.size());
+    EXPECT_EQ(count(nal_types(s.frames[0].data), 5), threads);  // IDR slices
+    EXPECT_EQ(count(nal_types(s.frames[3].data), 1), threads);  // P slices
+    EXPECT_GT(s.mean_psnr, 30.0);
+  }
+}
+
+TEST(EncoderPolicy, IntraRefreshSendsNoIdrAfterTheFirstUnlessForced) {
+  std::vector<Image> raw;
+  const auto frames = biker_frames(320, 192, 40, &raw);
+  EncoderConfig c;
+  c.width = 320;
+  c.height = 192;
+  c.intra_refresh_frames = 10;  // four refresh waves in 40 frames
+  const Stream s = encode_all(c, frames, raw);
+  EXPECT_GT(count(nal_types(s.frames[0].data), 5), 0);
+  std::size_t largest_later = 0;
+  for (std::size_t k = 1; k < s.frames.size(); ++k) {
+    EXPECT_EQ(count(nal_types(s.frames[k].data), 5), 0) << "frame " << k;
+    largest_later = std::max(largest_later, s.frames[k].data.size());
+  }
+  // Without refresh (the default) a forced IDR is one intra picture; with it, no later frame is
+  // that large: the intra blocks are spread over the period.
+  EXPECT_LT(largest_later, s.frames[0].data.size());
+  X264Encoder enc(c);
+  enc.encode_yuv420(frames[0].planes(), false);
+  enc.encode_yuv420(frames[1].planes(), false);
+  EXPECT_GT(count(nal_types(enc.encode_yuv420(frames[2].planes(), true).data), 5), 0);  // a KeyFrameRequest
+}
+
+}  // namespace

@@ -1,0 +1,230 @@
+// catgs-encode-bench: the rate-distortion-latency table behind the encoder policy (issue 35).
+//
+//   catgs-encode-bench --scene S --trace T.trace --width 1920 --height 1080
+//       [--renderer auto|cpu|cuda] [--pipeline exact] [--frames 240] [--step 2] [--fps 60]
+//       [--settings "crf=23,bitrate=off,threads=2;bitrate=auto,threads=4;..."] [--json OUT]
+//
+// The trace's poses (every `step`-th: a 120 Hz trace at 60 poses/s) are rendered once, as the
+// server would (Camera::from_pose at the given size), keeping each raw 8-bit render and its
+// BT.709 I420 planes (the server's conversion). Then, row by row, `sessions` encoders of the
+// row's policy (each a session's own stream, on its own thread) encode those frames paced at
+// `fps`, as a session's encoder is fed; the first session's access units are decoded by
+// libavcodec's h264 decoder and compared with the raw renders. Per row: encode ms (wall, p50 /
+// p95 / max over every session's frames), process CPU ms a frame, bytes (mean, max, first = the
+// IDR), bits a pixel, Mbit/s at fps, PSNR of the decoded frame against the raw render (mean,
+// min; 8-bit RGB). A table on stdout and JSON (with per-frame records). A benchmark: it reports,
+// never fails on numbers.
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <numeric>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "camera/trace.h"
+#include "common/cli_args.h"
+#include "common/image_io.h"
+#include "encode/encoder_policy.h"
+#include "encode/x264_encoder.h"
+#include "encode_bench/rd_settings.h"
+#include "loadgen/h264_decoder.h"
+#include "renderer/renderer.h"
+#include "scene/ply_io.h"
+
+extern "C" {
+#include <libavutil/log.h>
+}
+
+namespace {
+
+using catgs::encode_bench::RdSetting;
+using Clock = std::chrono::steady_clock;
+
+constexpr const char* kDefaultSettings =
+    "crf=23,bitrate=off,threads=2;crf=28,bitrate=off,threads=4;crf=23,bitrate=auto,threads=1;"
+    "crf=23,bitrate=auto,threads=2;crf=23,bitrate=auto,threads=4;crf=23,bitrate=auto,threads=8;"
+    "crf=23,bitrate=auto,threads=4,ir=60";
+
+struct Frame {
+  catgs::Image raw;        // the render, rgba8
+  catgs::Yuv420Image yuv;  // its I420 planes
+};
+
+struct Row {
+  RdSetting setting;
+  catgs::server::EncoderConfig config;  // as the policy made it for `sessions` live sessions
+  std::vector<double> encode_ms;        // every session's frames
+  std::vector<double> bytes, psnr;      // the first session's frames
+  std::vector<int> key;                 // the first session's IDR flags
+  double cpu_ms_per_frame = 0;
+};
+
+double process_cpu_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) * 1e3 + static_cast<double>(t.tv_nsec) / 1e6;
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t i =
+      std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size()))) - (p > 0 ? 1 : 0));
+  return v[i];
+}
+
+double mean(const std::vector<double>& v) {
+  return v.empty() ? 0 : std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+}
+
+std::vector<Frame> render_frames(const catgs::tools::Args& args, int width, int height, int frames, int step) {
+  auto model = std::make_shared<const catgs::GaussianModel>(catgs::load_scene(args.require("--scene")));
+  const catgs::Trace trace = catgs::read_trace(args.require("--trace"));
+  if (trace.empty()) throw std::invalid_argument("--trace holds no pose");
+  catgs::RenderOptions options;
+  options.pipeline = catgs::parse_pipeline(args.get("--pipeline", "exact"));
+  std::string why;
+  auto renderer = catgs::make_renderer(args.get("--renderer", "auto"), model, options, &why);
+  std::cerr << "renderer: " << renderer->name() << " (" << why << "), " << model->size() << " Gaussians\n";
+  std::vector<Frame> out(static_cast<std::size_t>(frames));
+  for (int k = 0; k < frames; ++k) {
+    const catgs::Camera& c = trace[static_cast<std::size_t>(k) * step % trace.size()].camera;
+    // The server's camera for a pose: position, orientation and vertical fov at the viewport.
+    const catgs::Camera cam =
+        catgs::Camera::from_pose(c.position(), c.orientation(), c.vertical_fov_deg(), width, height);
+    renderer->render(cam, out[k].raw);
+    out[k].yuv = catgs::rgba_to_yuv420_bt709(out[k].raw.rgba8.data(), width, height, width * 4);
+  }
+  return out;
+}
+
+// One session's stream: frame k starts at start + k / fps, or as soon as frame k - 1 is done.
+void encode_session(const catgs::server::EncoderConfig& config, const std::vector<Frame>& frames, int fps,
+                    Clock::time_point start, std::vector<double>& encode_ms,
+                    std::vector<std::vector<std::uint8_t>>* units) {
+  catgs::server::X264Encoder encoder(config);
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    std::this_thread::sleep_until(start +
+                                  std::chrono::microseconds(static_cast<long>(static_cast<double>(k) * 1e6 / fps)));
+    const catgs::server::EncodedFrame e = encoder.encode_yuv420(frames[k].yuv.planes(), false);
+    encode_ms.push_back(e.encode_ms);
+    if (units) units->push_back(e.data);
+  }
+}
+
+Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int height, int fps) {
+  Row row;
+  row.setting = s;
+  row.config = catgs::server::encoder_config(s.policy, width, height, fps, s.sessions, 0);
+  std::vector<std::vector<double>> times(static_cast<std::size_t>(s.sessions));
+  std::vector<std::vector<std::uint8_t>> units;
+  const double cpu0 = process_cpu_ms();
+  const auto start = Clock::now() + std::chrono::milliseconds(20);
+  std::vector<std::thread> threads;
+  for (int i = 0; i < s.sessions; ++i)
+    threads.emplace_back(encode_session, std::cref(row.config), std::cref(frames), fps, start, std::ref(times[i]),
+                         i == 0 ? &units : nullptr);
+  for (auto& t : threads) t.join();
+  row.cpu_ms_per_frame = (process_cpu_ms() - cpu0) / static_cast<double>(frames.size() * s.sessions);
+  for (const auto& t : times) row.encode_ms.insert(row.encode_ms.end(), t.begin(), t.end());
+  catgs::loadgen::H264Decoder decoder;
+  catgs::Image decoded;
+  for (std::size_t k = 0; k < units.size(); ++k) {
+    const std::string au(units[k].begin(), units[k].end());
+    row.bytes.push_back(static_cast<double>(au.size()));
+    row.key.push_back(k == 0 ? 1 : 0);
+    if (!decoder.decode(au, decoded.rgba8, decoded.width, decoded.height))
+      throw std::runtime_error("setting '" + s.label + "': frame " + std::to_string(k) + " did not decode");
+    row.psnr.push_back(std::min(99.0, catgs::psnr_rgba8(decoded, frames[k].raw)));
+  }
+  return row;
+}
+
+nlohmann::json row_json(const Row& r, int width, int height, int fps) {
+  const double bpp = mean(r.bytes) * 8 / (static_cast<double>(width) * height);
+  return {{"label", r.setting.label},
+          {"sessions", r.setting.sessions},
+          {"threads", r.config.threads},
+          {"crf", r.config.crf},
+          {"bitrate_kbps", r.config.bitrate_kbps},
+          {"vbv_ms", r.config.vbv_buffer_ms},
+          {"intra_refresh_frames", r.config.intra_refresh_frames},
+          {"encode_ms",
+           {{"p50", percentile(r.encode_ms, 0.5)},
+            {"p95", percentile(r.encode_ms, 0.95)},
+            {"max", percentile(r.encode_ms, 1.0)},
+            {"mean", mean(r.encode_ms)}}},
+          {"cpu_ms_per_frame", r.cpu_ms_per_frame},
+          {"bytes", {{"mean", mean(r.bytes)}, {"max", percentile(r.bytes, 1.0)}, {"first", r.bytes.front()}}},
+          {"bits_per_pixel", bpp},
+          {"mbit_s", mean(r.bytes) * 8 * fps / 1e6},
+          {"psnr_db", {{"mean", mean(r.psnr)}, {"min", percentile(r.psnr, 0.0)}}},
+          {"frames", {{"encode_ms", r.encode_ms}, {"bytes", r.bytes}, {"psnr_db", r.psnr}}}};
+}
+
+void print_table(const nlohmann::json& rows) {
+  std::cout << "| setting | sessions | threads | kbit/s cap | encode ms p50 / p95 / max | CPU ms a frame | "
+               "KiB mean / max / IDR | bits a pixel | Mbit/s | PSNR dB mean / min |\n"
+               "|---|---|---|---|---|---|---|---|---|---|\n"
+            << std::fixed;
+  for (const auto& r : rows) {
+    std::cout << std::setprecision(2) << "| " << r["label"].get<std::string>() << " | " << r["sessions"] << " | "
+              << r["threads"] << " | " << r["bitrate_kbps"] << " | " << r["encode_ms"]["p50"].get<double>() << " / "
+              << r["encode_ms"]["p95"].get<double>() << " / " << r["encode_ms"]["max"].get<double>() << " | "
+              << r["cpu_ms_per_frame"].get<double>() << " | " << std::setprecision(1)
+              << r["bytes"]["mean"].get<double>() / 1024 << " / " << r["bytes"]["max"].get<double>() / 1024 << " / "
+              << r["bytes"]["first"].get<double>() / 1024 << " | " << std::setprecision(4)
+              << r["bits_per_pixel"].get<double>() << " | " << std::setprecision(2) << r["mbit_s"].get<double>()
+              << " | " << r["psnr_db"]["mean"].get<double>() << " / " << r["psnr_db"]["min"].get<double>() << " |\n";
+  }
+}
+
+int usable_cores() { return static_cast<int>(std::max(1u, std::thread::hardware_concurrency())); }
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  av_log_set_level(AV_LOG_ERROR);  // x264's banner and statistics per encoder
+  try {
+    const catgs::tools::Args args(argc, argv,
+                                  {"--scene", "--trace", "--renderer", "--pipeline", "--width", "--height", "--frames",
+                                   "--step", "--fps", "--settings", "--json", "--cores"});
+    const int width = args.get_int("--width", 1920), height = args.get_int("--height", 1080);
+    const int frames = args.get_int("--frames", 240), step = args.get_int("--step", 2), fps = args.get_int("--fps", 60);
+    if (frames < 1 || step < 1 || fps < 1) throw std::invalid_argument("--frames, --step and --fps must be >= 1");
+    const int cores = args.get_int("--cores", usable_cores());
+    const auto settings = catgs::encode_bench::parse_rd_settings(args.get("--settings", kDefaultSettings), cores);
+    const std::vector<Frame> rendered = render_frames(args, width, height, frames, step);
+    nlohmann::json rows = nlohmann::json::array();
+    for (const RdSetting& s : settings) {
+      rows.push_back(row_json(run_row(s, rendered, width, height, fps), width, height, fps));
+      std::cerr << "done: " << s.label << "\n";
+    }
+    std::cout << "catgs-encode-bench " << width << "x" << height << " at " << fps << " frames/s, " << frames
+              << " frames, " << cores << " cores\n";
+    print_table(rows);
+    if (args.has("--json")) {
+      nlohmann::json j{{"scene", args.get("--scene")},
+                       {"trace", args.get("--trace")},
+                       {"width", width},
+                       {"height", height},
+                       {"fps", fps},
+                       {"frames", frames},
+                       {"step", step},
+                       {"cores", cores},
+                       {"rows", rows}};
+      std::ofstream(args.get("--json")) << j.dump(1) << "\n";
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "catgs-encode-bench: " << e.what() << "\n";
+    return 1;
+  }
+}
