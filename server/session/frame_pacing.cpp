@@ -10,6 +10,10 @@ constexpr double kSmoothing = 0.1;  // EMA weight of a new sample: about the las
 // Pose gaps outside this range are pauses (the camera stopped) or bursts, not the pose rate.
 constexpr double kMinIntervalMs = 4.0, kMaxIntervalMs = 100.0;
 
+void smooth(double& average, double sample) {
+  average = average == 0 ? sample : average + kSmoothing * (sample - average);
+}
+
 }  // namespace
 
 void FramePacing::on_pose(Clock::time_point t) {
@@ -21,14 +25,16 @@ void FramePacing::on_pose(Clock::time_point t) {
   have_pose_ = true;
 }
 
-void FramePacing::on_encode(double ms) {
-  encode_ms_ = encode_ms_ == 0 ? ms : encode_ms_ + kSmoothing * (ms - encode_ms_);
-}
+void FramePacing::on_rendered(double ms) { smooth(rendered_ms_, ms); }
 
-bool FramePacing::skip_before_encode(Clock::time_point received, Clock::time_point now, bool newer_pose_waiting) const {
-  if (slots_ <= 0 || !newer_pose_waiting) return false;
+void FramePacing::on_encode(double ms) { smooth(encode_ms_, ms); }
+
+bool FramePacing::skip_before_encode(Clock::time_point received, Clock::time_point now, bool newer_pose_waiting) {
   const double age = std::chrono::duration<double, std::milli>(now - received).count();
-  return age + encode_ms_ > deadline_ms();
+  const bool skip = slots_ > 0 && newer_pose_waiting && !skipped_last_ && age + encode_ms_ > deadline_ms() &&
+                    rendered_ms_ + encode_ms_ <= deadline_ms();
+  skipped_last_ = skip;
+  return skip;
 }
 
 }  // namespace catgs::server

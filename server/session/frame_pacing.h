@@ -6,9 +6,15 @@
 // The display slot of a pose is `slots` pose intervals after the pose arrived (2 at 60 poses/s:
 // 33 ms, the tour latency bound); the interval is measured from the client's own pose arrivals
 // (an exponential moving average, so network batching does not move it). A rendered frame is
-// skipped when its age plus the session's typical encode time would pass the slot AND a newer
-// pose is waiting to be rendered: the newest pose is always rendered and encoded, so a slow
-// host lowers the frame rate, never stops the stream.
+// skipped when all of these hold:
+//  - its age plus the session's typical encode time would pass the slot;
+//  - a newer pose is waiting to be rendered;
+//  - that pose can still make its own slot: the session's typical wait-and-render time (pose
+//    arrival to rendered picture) plus its encode time fit in the slot (a host that cannot
+//    render and encode in time at all, the CPU renderer say, never skips: it would skip every
+//    frame);
+//  - the frame before it was encoded (never two skips in a row: the stream never stalls).
+// A slow host therefore lowers a session's frame rate, never stops its stream.
 #pragma once
 
 #include <chrono>
@@ -24,24 +30,29 @@ class FramePacing {
 
   // A pose arrived at `t`.
   void on_pose(Clock::time_point t);
+  // A render finished `ms` milliseconds after its pose arrived (queue wait + render).
+  void on_rendered(double ms);
   // An encode took `ms` milliseconds.
   void on_encode(double ms);
 
   double pose_interval_ms() const { return pose_interval_ms_; }
   double encode_ms() const { return encode_ms_; }
+  double rendered_ms() const { return rendered_ms_; }
   // The display slot, ms after a pose arrives (0 when pacing is off).
   double deadline_ms() const { return slots_ > 0 ? slots_ * pose_interval_ms_ : 0; }
 
   // Whether a rendered frame of the pose that arrived at `received` should be dropped at `now`
-  // instead of encoded (the rule above).
-  bool skip_before_encode(Clock::time_point received, Clock::time_point now, bool newer_pose_waiting) const;
+  // instead of encoded (the rule above). Counts the decision for the no-two-in-a-row rule: call
+  // once per rendered frame, when its encode could start.
+  bool skip_before_encode(Clock::time_point received, Clock::time_point now, bool newer_pose_waiting);
 
  private:
   double slots_;
   double pose_interval_ms_ = 1000.0 / 60.0;  // until measured: the browser's rate
-  double encode_ms_ = 0;
+  double encode_ms_ = 0, rendered_ms_ = 0;   // moving averages; 0 until measured
   Clock::time_point last_pose_{};
   bool have_pose_ = false;
+  bool skipped_last_ = false;
 };
 
 }  // namespace catgs::server

@@ -70,6 +70,7 @@ void Session::maybe_start_render() {
         failed.over_budget = frame.over_budget;
         return self->on_job_done(std::move(failed));
       }
+      self->pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
       self->rendered_ = std::move(frame);
       self->maybe_start_encode();
       self->maybe_start_render();

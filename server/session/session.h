@@ -1,5 +1,7 @@
 // One client session (DESIGN.md "Server"): protocol state machine, latest-pose-wins render
-// scheduling, encoder, flow control and statistics.
+// scheduling, encoder, flow control and statistics. The protocol state machine (Hello, scene
+// load, Welcome, messages, timeouts, Stats) is session.cpp; the frame pipeline (render job,
+// encode job, pacing, adaptive quality, the Frame message) is frame_pipeline.cpp.
 //
 // Threading: every member below "strand state" is touched only on the session's strand. Renders
 // run as jobs on the render scheduler's lanes, encodes as jobs on the worker pool (never on the

@@ -272,7 +272,7 @@ TEST(MultiSession, LoadgenAsksForASceneByName) {
   const std::string cams = kDataDir + "/traces/flowers_sh3.cameras.json";
   if (!std::filesystem::exists(flowers) || !std::filesystem::exists(cams))
     GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
-  ServerProcess server(server_args(kBiker, {"--scene", flowers, "--crf", "18"}));
+  ServerProcess server(server_args(kBiker, {"--scene", flowers, "--crf", "18", "--bitrate", "off"}));
   const std::string json_path = "/tmp/catgs-itest-scene-name-" + std::to_string(server.port()) + ".json";
   const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
                            flowers + " --trace cameras:" + cams +

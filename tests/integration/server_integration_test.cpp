@@ -140,8 +140,10 @@ TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
   if (!std::filesystem::exists(kFlowers) || !std::filesystem::exists(kFlowersCams))
     GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
   // An outdoor scene full of fine detail: x264's default crf 23 lands just under 30 dB here, so
-  // this stream uses crf 18 (the server's --crf quality knob).
-  ServerProcess server(server_args(kFlowers, {"--crf", "18"}));
+  // this stream uses crf 18 (the server's --crf quality knob), without the default bitrate cap:
+  // this test is about the frames' fidelity, and the cap budgets each frame as one of 60 a second
+  // (a CPU session here gets a few).
+  ServerProcess server(server_args(kFlowers, {"--crf", "18", "--bitrate", "off"}));
   const int W = 480, H = 320;
   std::vector<Camera> keys = load_inria_cameras(kFlowersCams, W, H);
   keys.resize(4);
@@ -248,7 +250,7 @@ TEST(ServerIntegration, WelcomeCarriesTheFirstViewFrame) {
 TEST(ServerIntegration, SeveralScenesPickedByName) {
   if (!std::filesystem::exists(kFlowers) || !std::filesystem::exists(kFlowersCams))
     GTEST_SKIP() << "real data not found under " << kDataDir << " (flowers_sh3.ply / flowers_sh3.cameras.json)";
-  ServerProcess server(server_args(kBiker, {"--scene", kFlowers, "--crf", "18"}));
+  ServerProcess server(server_args(kBiker, {"--scene", kFlowers, "--crf", "18", "--bitrate", "off"}));
   std::string body;
   ASSERT_EQ(http_get(server.port(), "/scenes", body), 200);
   const auto biker = body.find("\"name\":\"biker\""), flowers = body.find("\"name\":\"flowers_sh3\"");

@@ -1,5 +1,6 @@
 // Deadline-aware pacing (session/frame_pacing.h): the pose interval is measured from arrivals,
-// a frame is skipped before encode only when it would miss its slot and a newer pose waits.
+// a frame is skipped before encode only when it would miss its slot, a newer pose waits and can
+// make its own slot, and never twice in a row.
 #include <gtest/gtest.h>
 
 #include "session/frame_pacing.h"
@@ -20,16 +21,24 @@ TEST(FramePacing, SlotIsTwoMeasuredPoseIntervals) {
   EXPECT_NEAR(p.deadline_ms(), 40.0, 0.1);
 }
 
-TEST(FramePacing, SkipsALateFrameOnlyWhenANewerPoseWaits) {
+TEST(FramePacing, SkipsALateFrameOnlyWhenANewerPoseWaitsAndCanMakeItsSlot) {
   FramePacing p;  // slot 33.3 ms at 60 poses/s
   p.on_encode(10.0);
-  const auto received = FramePacing::Clock::now();
-  EXPECT_FALSE(p.skip_before_encode(received, received + milliseconds(20), true));    // 20 + 10 < 33
-  EXPECT_TRUE(p.skip_before_encode(received, received + milliseconds(25), true));     // 25 + 10 > 33
-  EXPECT_FALSE(p.skip_before_encode(received, received + milliseconds(200), false));  // the newest pose
+  p.on_rendered(5.0);  // a pose is rendered 5 ms after it arrives: the next one can make it
+  const auto t = FramePacing::Clock::now();
+  EXPECT_FALSE(p.skip_before_encode(t, t + milliseconds(20), true));    // 20 + 10 < 33: in time
+  EXPECT_FALSE(p.skip_before_encode(t, t + milliseconds(200), false));  // the newest pose
+  EXPECT_TRUE(p.skip_before_encode(t, t + milliseconds(25), true));     // 25 + 10 > 33
+  EXPECT_FALSE(p.skip_before_encode(t, t + milliseconds(25), true));    // not twice in a row
+  EXPECT_TRUE(p.skip_before_encode(t, t + milliseconds(25), true));
+  FramePacing slow;  // renders that take 40 ms: no frame could be in time, skipping would stall
+  slow.on_encode(10.0);
+  slow.on_rendered(40.0);
+  EXPECT_FALSE(slow.skip_before_encode(t, t + milliseconds(60), true));
   FramePacing off(0);
   off.on_encode(10.0);
-  EXPECT_FALSE(off.skip_before_encode(received, received + milliseconds(200), true));
+  off.on_rendered(1.0);
+  EXPECT_FALSE(off.skip_before_encode(t, t + milliseconds(200), true));
 }
 
 }  // namespace
