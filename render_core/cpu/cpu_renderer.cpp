@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -44,39 +43,11 @@ void CpuRenderer::set_options(const RenderOptions& options) {
 
 void CpuRenderer::render(const Camera& camera, Image& out) {
   validate_camera(camera);
-  using clock = std::chrono::steady_clock;
-  auto ms = [](clock::time_point a, clock::time_point b) {
-    return std::chrono::duration<double, std::milli>(b - a).count();
-  };
-  const TileGrid grid = TileGrid::of(camera.width, camera.height);
-  const auto t0 = clock::now();
-  preprocess(*model_, chunks_, camera, options_.pipeline, projected_);
-  const auto t1 = clock::now();
-  emit_keys(projected_, grid, options_.pipeline, options_.list_budget, list_);
-  const auto t2 = clock::now();
-  sort_render_list(list_, single_sort_packing_of(list_, grid));
-  const auto t3 = clock::now();
-  identify_tile_ranges(list_, grid, ranges_);
-  const auto t4 = clock::now();
-  if (options_.pipeline == Pipeline::exact) {  // task splitting, as the CUDA core (renderer.h)
-    const SpeculationParams& sp = options_.speculation;
-    plan_slices(ranges_, list_.keys.size(), sp.task_splitting, slices_, static_cast<std::size_t>(sp.min_slice_entries));
-    rasterize_slices(projected_, list_, slices_, grid, true, options_.background, out);
-  } else {
-    rasterize(projected_, list_, ranges_, grid, options_.background, out);
-  }
-  const auto t5 = clock::now();
-
   stats_ = {};
-  stats_.visible = static_cast<std::size_t>(std::count_if(
-      projected_.tiles_touched.begin(), projected_.tiles_touched.end(), [](uint32_t n) { return n > 0; }));
-  stats_.render_list_length = list_.keys.size();
-  stats_.preprocess_ms = ms(t0, t1);
-  stats_.keys_ms = ms(t1, t2);
-  stats_.sort_ms = ms(t2, t3);
-  stats_.ranges_ms = ms(t3, t4);
-  stats_.rasterize_ms = ms(t4, t5);
-  stats_.total_ms = ms(t0, t5);
+  // exact frames split heavy tiles (task splitting, as the CUDA core; renderer.h) and stop each
+  // pixel early; vanilla blends a tile whole. Over the budget, in passes (cpu/full_frame.cpp).
+  render_full_frame(*model_, chunks_, camera, options_.pipeline, options_, true, {projected_, list_, ranges_, slices_},
+                    out, stats_);
 }
 
 }  // namespace catgs::cpu

@@ -66,8 +66,10 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // its 3-sigma square; exact counts the tiles passing fm::ellipse_touches_tile (opacity-aware).
 // exact first skips whole chunks that cannot reach the image (`chunks`: fm::chunk_bounds(model),
 // forward_model/chunk_bounds.h); the result is the same with or without that step.
+// `region`: one pass of a frame drawn in passes (renderer/render_passes.h) counts only the tiles
+// of its region (fm::clip_tile_rect; every Gaussian is projected with the whole camera).
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
-                Pipeline pipeline, ProjectedGaussians& out);
+                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles);
 
 // catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
@@ -109,8 +111,11 @@ bool unlisted_reach_image(const GaussianModel& model, const std::vector<fm::Chun
 // Task splitting (cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
 // order, a tile's slices consecutive and in list order. split = false: one slice per tile.
 // min_slice: the slice length's floor (SpeculationParams::min_slice_entries; 0: the paper's l).
+// The slice length l = list_length / ranges.size(): a pass of a frame drawn in passes gives the
+// whole frame's list length, so its tiles split as in one pass, and plans only tiles
+// [first_tile, end_tile).
 void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split, std::vector<TileSlice>& slices,
-                 std::size_t min_slice = 0);
+                 std::size_t min_slice = 0, std::uint32_t first_tile = 0, std::uint32_t end_tile = UINT32_MAX);
 
 // Stage 5 with slices (cpu/rasterize_slices.cpp): each slice blends its entries into a partial
 // colour C_k and transmittance T_k per pixel (early termination within the slice if enabled); the
@@ -120,9 +125,11 @@ void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split, 
 // higher threshold for later slices). `slices`: [begin, end) runs of `list`, a tile's slices
 // consecutive and in list order (plan_slices); `out` becomes grid.width x grid.height (linear RGB
 // floats and RGBA8); `merge_ms`, if given, receives the merge's wall time in milliseconds.
+// Writes only tiles [first_tile, end_tile) (a pass of a frame drawn in passes; `out` keeps the
+// other passes' tiles).
 void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
                       const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out,
-                      double* merge_ms = nullptr);
+                      double* merge_ms = nullptr, std::uint32_t first_tile = 0, std::uint32_t end_tile = UINT32_MAX);
 
 // Stage 2 (cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
 // its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
@@ -131,6 +138,10 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
 // std::length_error past 2^32 - 1 entries (values and ranges are 32-bit), before allocating.
 void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
                const RenderListBudget& budget, RenderList& list);
+
+// The list length a pre-processed frame (or pass) will emit: the sum of tiles_touched
+// (cpu/key_emission.cpp), which the renderers hold against the budget before emit_keys.
+std::uint64_t count_entries(const ProjectedGaussians& projected);
 
 // Host bytes a render-list entry takes: its key (8) and value (4), and the sort's (key, value)
 // pair (16 with padding).
@@ -146,6 +157,11 @@ void sort_render_list(RenderList& list, const fm::DepthKeyPacking& packing);
 // first).
 fm::DepthKeyPacking single_sort_packing_of(const RenderList& list, const TileGrid& grid);
 
+// The single sort's key of the list a pre-processed frame will emit, from the depths of its
+// Gaussians with entries (the same as single_sort_packing_of that list): a frame drawn in passes
+// sorts every pass with its whole frame's key, so each tile's order is the single pass's.
+fm::DepthKeyPacking single_sort_packing_of(const ProjectedGaussians& projected, const TileGrid& grid);
+
 // Stage 4 (cpu/tile_ranges.cpp): tile ranges of a sorted list; tiles without entries get
 // [0, 0).
 void identify_tile_ranges(const RenderList& list, const TileGrid& grid, TileRanges& ranges);
@@ -153,9 +169,31 @@ void identify_tile_ranges(const RenderList& list, const TileGrid& grid, TileRang
 // Stage 5 (cpu/rasterize.cpp): front-to-back alpha blending per pixel over its tile's range
 // (paper eq. 3): alpha = min(0.99, opacity * exp(power)), skipped below 1/255, a pixel stops
 // before the Gaussian that would take T below 1e-4; C + T * background. Fills out.rgb and
-// out.rgba8 at grid size.
+// out.rgba8 at grid size; only tiles [first_tile, end_tile) are written (as rasterize_slices).
 void rasterize(const ProjectedGaussians& projected, const RenderList& list, const TileRanges& ranges,
-               const TileGrid& grid, glm::vec3 background, Image& out);
+               const TileGrid& grid, glm::vec3 background, Image& out, std::uint32_t first_tile = 0,
+               std::uint32_t end_tile = UINT32_MAX);
+
+// A whole frame through the exact or vanilla stages, as both renderers draw it (CpuRenderer's
+// frames, SpeculativeRenderer's key frames without a window; cpu/full_frame.cpp): pre-processing,
+// then, when its list fits options.list_budget (kBytesPerListEntry an entry), keys, the single
+// sort, tile ranges and rasterization (`stages` exact: task splitting as options.speculation
+// says, and rasterize_slices with `early_termination`; vanilla: a tile whole). Over the budget
+// it is drawn in passes of tiles (renderer/render_passes.h draw_in_passes, the driver the CUDA
+// core runs too), each pass sorting with the whole frame's key and splitting with its slice
+// length, into `out`: the image is the single pass's. Throws RenderBudgetError as
+// draw_in_passes does. Sets stats' counts (visible, render_list_length: every pass's entries,
+// passes, longest_pass, slices: the last pass's) and stage times (summed over the passes, total
+// included); leaves the other fields. The buffers hold the last pass's state.
+struct FrameBuffers {
+  ProjectedGaussians& projected;
+  RenderList& list;
+  TileRanges& ranges;
+  std::vector<TileSlice>& slices;
+};
+void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
+                       Pipeline stages, const RenderOptions& options, bool early_termination,
+                       const FrameBuffers& buffers, Image& out, FrameStats& stats);
 
 // Runs fn(i) for i in [0, n) on all hardware threads, dynamically scheduled in chunks of `grain`.
 void parallel_for(std::size_t n, std::size_t grain, const std::function<void(std::size_t)>& fn);
@@ -201,7 +239,10 @@ class SpeculativeRenderer final : public Renderer {
   void set_options(const RenderOptions& options) override;
 
  private:
-  void key_frame(const Camera& camera);
+  // Plans and pre-processes a key frame, its window narrowed while its list is over the budget
+  // (SpeculationPlanner::narrower_window); a frame left without a window is drawn into `out` here
+  // (render_full_frame) and returns true, one with a window builds the group's caches.
+  bool key_frame(const Camera& camera, Image& out);
 
   std::shared_ptr<const GaussianModel> model_;
   std::vector<fm::ChunkBounds> chunks_;  // of model_, for chunk culling
@@ -212,6 +253,7 @@ class SpeculativeRenderer final : public Renderer {
   TileRanges ranges_;
   std::vector<TileSlice> slices_;
   std::vector<uint32_t> cached_;  // frustum cache: Gaussians with list entries
+  std::size_t key_visible_ = 0;   // the last key frame's Gaussians with list entries
   FrameStats stats_;
 };
 

@@ -8,6 +8,12 @@
 
 namespace catgs::cpu {
 
+std::uint64_t count_entries(const ProjectedGaussians& projected) {
+  std::uint64_t total = 0;
+  for (const uint32_t n : projected.tiles_touched) total += n;
+  return total;
+}
+
 void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
                const RenderListBudget& budget, RenderList& list) {
   const std::size_t n = projected.tiles_touched.size();

@@ -39,7 +39,7 @@ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 c
 }  // namespace
 
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
-                Pipeline pipeline, ProjectedGaussians& out) {
+                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region) {
   const std::size_t n = model.size();
   out.resize(n);
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
@@ -76,12 +76,12 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
     fm::TileRect rect;
     uint32_t touched;
     if (exact) {
-      rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height);
+      rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height), region);
       touched =
           fm::tile_count(rect) == 0 ? 0u : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height);
     } else {
       const float radius = fm::three_sigma_radius(cov2);
-      rect = fm::square_tile_rect(mean2d, radius, grid.tiles_x, grid.tiles_y);
+      rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, grid.tiles_x, grid.tiles_y), region);
       touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
     }
     if (touched == 0) return;

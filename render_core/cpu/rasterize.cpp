@@ -7,14 +7,17 @@
 namespace catgs::cpu {
 
 void rasterize(const ProjectedGaussians& projected, const RenderList& list, const TileRanges& ranges,
-               const TileGrid& grid, glm::vec3 background, Image& out) {
+               const TileGrid& grid, glm::vec3 background, Image& out, std::uint32_t first_tile,
+               std::uint32_t end_tile) {
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
   out.rgb.resize(pixels * 3);
   out.rgba8.resize(pixels * 4);
 
-  parallel_for(static_cast<std::size_t>(grid.tile_count()), 1, [&](std::size_t tile) {
+  const std::size_t first = first_tile, end = std::min<std::size_t>(grid.tile_count(), end_tile);
+  parallel_for(end > first ? end - first : 0, 1, [&](std::size_t k) {
+    const std::size_t tile = first + k;
     const int tx = static_cast<int>(tile) % grid.tiles_x, ty = static_cast<int>(tile) / grid.tiles_x;
     glm::vec3 C[kTilePixels] = {};
     float T[kTilePixels];

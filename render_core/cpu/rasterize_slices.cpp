@@ -14,8 +14,8 @@
 namespace catgs::cpu {
 
 void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
-                      const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out,
-                      double* merge_ms) {
+                      const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out, double* merge_ms,
+                      std::uint32_t first_tile, std::uint32_t end_tile) {
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
@@ -44,7 +44,10 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
   for (std::size_t s = slices.size(); s-- > 0;) first_slice[slices[s].tile] = s;
   for (std::size_t t = static_cast<std::size_t>(grid.tile_count()); t-- > 0;)
     if (first_slice[t] == slices.size()) first_slice[t] = first_slice[t + 1];
-  parallel_for(static_cast<std::size_t>(grid.tile_count()), 1, [&](std::size_t tile) {
+  // Only this pass's tiles: the image keeps the other passes' (renderer/render_passes.h).
+  const std::size_t first = first_tile, end = std::min<std::size_t>(grid.tile_count(), end_tile);
+  parallel_for(end > first ? end - first : 0, 1, [&](std::size_t k) {
+    const std::size_t tile = first + k;
     const int tx = static_cast<int>(tile) % grid.tiles_x, ty = static_cast<int>(tile) / grid.tiles_x;
     for (int ly = 0; ly < fm::kTileSize; ++ly) {
       const int py = ty * fm::kTileSize + ly;

@@ -35,4 +35,15 @@ fm::DepthKeyPacking single_sort_packing_of(const RenderList& list, const TileGri
   return fm::single_sort_packing(low, high, static_cast<uint32_t>(grid.tile_count()));
 }
 
+fm::DepthKeyPacking single_sort_packing_of(const ProjectedGaussians& projected, const TileGrid& grid) {
+  uint32_t low = 0xffffffffu, high = 0u;
+  for (std::size_t i = 0; i < projected.tiles_touched.size(); ++i) {
+    if (projected.tiles_touched[i] == 0) continue;
+    const uint32_t depth_bits = fm::float_bits(projected.depth[i]);  // as fm::render_key writes it
+    low = std::min(low, depth_bits);
+    high = std::max(high, depth_bits);
+  }
+  return fm::single_sort_packing(low, high, static_cast<uint32_t>(grid.tile_count()));
+}
+
 }  // namespace catgs::cpu

@@ -5,6 +5,7 @@
 #include <mutex>
 #include <string>
 
+#include "renderer/render_passes.h"
 #include "renderer_state.h"
 
 namespace catgs::cuda {
@@ -93,6 +94,19 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
 uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkWalk& walk,
                                                 const stages::CameraParams& cam, const stages::TileTests& tests,
                                                 bool depth_first, const RenderListBudget& budget, uint64_t* visible) {
+  const ListCounts counts = count_render_list(n, walk, cam, depth_first);
+  *visible = counts.visible;
+  // The render-list budget (renderer.h; issue 22), as the CPU core checks it: a scene of giant
+  // Gaussians is refused here, before the list buffers grow, and not after gigabytes of them.
+  // Its cap also keeps the list within the 32-bit tile ranges.
+  budget.check(counts.entries, cam.width, cam.height, kBytesPerListEntry);
+  emit_render_list(n, walk, cam, tests, depth_first, counts.entries, counts.visible, counts.packing);
+  return counts.entries;
+}
+
+CudaRenderer::State::ListCounts CudaRenderer::State::count_render_list(uint64_t n, const stages::ChunkWalk& walk,
+                                                                       const stages::CameraParams& cam,
+                                                                       bool depth_first) {
   const stages::Projected proj = projected();
   auto* count = counters.as<unsigned long long>();
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
@@ -111,19 +125,22 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkW
   }
   CATGS_CUDA(cudaEventSynchronize(counts_ready));
   ++syncs;
-  const uint64_t entries = host_counts[0];
-  *visible = host_counts[1];
+  ListCounts c;
+  c.entries = host_counts[0];
+  c.visible = host_counts[1];
   // The single sort's key (forward_model/key_packing.h): 32-bit [tile | quantised depth] over the
   // listed depths' range, where pre-processing recorded one (preprocess; the speculative
   // pre-processing does not: its lists sort depth first, or with plain keys) and it fits.
-  const stages::DepthKeyPacking packing =
-      fm::single_sort_packing(~static_cast<uint32_t>(host_counts[kReadDepthLowComplement - kReadListLength]),
-                              static_cast<uint32_t>(host_counts[kReadDepthHigh - kReadListLength]), tiles);
-  // The render-list budget (renderer.h; issue 22), as the CPU core checks it: a scene of giant
-  // Gaussians is refused here, before the list buffers below grow, and not after gigabytes of
-  // them. Its cap also keeps the list within the 32-bit tile ranges.
-  budget.check(entries, cam.width, cam.height, kBytesPerListEntry);
+  c.packing = fm::single_sort_packing(~static_cast<uint32_t>(host_counts[kReadDepthLowComplement - kReadListLength]),
+                                      static_cast<uint32_t>(host_counts[kReadDepthHigh - kReadListLength]), tiles);
+  return c;
+}
 
+void CudaRenderer::State::emit_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
+                                           const stages::TileTests& tests, bool depth_first, uint64_t entries,
+                                           uint64_t visible, const stages::DepthKeyPacking& packing) {
+  const stages::Projected proj = projected();
+  const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
   for (int h = 0; h < 2; ++h) {
     keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", &allocations);
     values[h].ensure(entries * sizeof(uint32_t), "render-list values", &allocations);
@@ -151,7 +168,7 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkW
       stages::tile_ranges(k32[half], packing, entries, tiles, ranges.as<uint2>(), stream);
     else
       stages::tile_ranges(k[half], packing, entries, tiles, ranges.as<uint2>(), stream);
-    return entries;
+    return;
   }
 
   // Depth-first: the visible Gaussians sorted by depth hand out the list slots (the depth sort
@@ -171,24 +188,26 @@ uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkW
                                         depth_count.as<unsigned>(),
                                         depth_temp.as<void>(),
                                         depth_temp.bytes()};
-  const uint32_t* by_depth = stages::depth_order_ends(proj.tiles_touched, proj.chunk_total, proj.depth, n, *visible,
+  const uint32_t* by_depth = stages::depth_order_ends(proj.tiles_touched, proj.chunk_total, proj.depth, n, visible,
                                                       order, ends.as<uint64_t>(), stream);
   uint32_t* k[2] = {keys[0].as<uint32_t>(), keys[1].as<uint32_t>()};
   stages::emit_keys(proj, ends.as<uint64_t>(), n, walk, cam, tests, big_list(), nullptr, k[0], fm::tile_only_packing(),
-                    v[0], by_depth, *visible, stream);
+                    v[0], by_depth, visible, stream);
   CATGS_CUDA(cudaEventRecord(events[kKeysEmitted], stream));
   const int half = stages::sort_pairs_narrow(k, v, entries, tile_bits, sort_temp.as<void>(), sort_temp.bytes(), stream);
   sorted_values = v[half];
   CATGS_CUDA(cudaEventRecord(events[kSorted], stream));
   stages::tile_ranges(k[half], fm::tile_only_packing(), entries, tiles, ranges.as<uint2>(), stream);
-  return entries;
 }
 
-uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp) {
+uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp,
+                                                uint64_t frame_entries, uint32_t first_tile, uint32_t end_tile) {
   std::size_t* allocs = &allocations;
   const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
-  const uint64_t capacity = stages::slice_capacity(tiles, entries, min_slice);
-  const uint64_t slots = entries / stages::split_average(tiles, entries, min_slice);
+  // The slice length of the whole frame (a pass splits its tiles as the single pass would).
+  const uint64_t avg = stages::split_average(tiles, std::max(entries, frame_entries), min_slice);
+  const uint64_t capacity = stages::pass_slice_capacity(tiles, entries, avg);
+  const uint64_t slots = entries / avg;
   slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
   slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
   tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
@@ -203,8 +222,9 @@ uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries
   if (slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs))
     CATGS_CUDA(cudaMemsetAsync(slot_finished.as<void>(), 0, slot_finished.bytes(), stream));
   note_peak();
-  stages::plan_slices(ranges.as<uint2>(), tiles, entries, sp.task_splitting, min_slice, slice_plan(),
-                      plan_scratch.as<void>(), slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream);
+  stages::plan_slices(ranges.as<uint2>(), tiles, avg, capacity, sp.task_splitting, slice_plan(),
+                      plan_scratch.as<void>(), slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream,
+                      first_tile, end_tile);
   heaviest = heaviest_tile.as<uint32_t>();  // the longest slice
   return capacity;
 }
@@ -224,8 +244,20 @@ DeviceFrame CudaRenderer::render_device_at(const Camera& camera, double time_s) 
 DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   validate_camera(camera);
   State& s = *state_;
-  const DeviceScene& scene = *scene_;
+  s.syncs = 0;
+  CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
+  stats_ = {};
   const bool exact = options_.pipeline != Pipeline::vanilla;
+  draw_full_frame(camera, exact, true, exact && depth_first_sort());
+  s.width = camera.width;
+  s.height = camera.height;
+  stats_ready_ = false;
+  return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
+}
+
+void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first) {
+  State& s = *state_;
+  const DeviceScene& scene = *scene_;
   const uint64_t n = scene.size();
   const stages::CameraParams cam = camera_params(camera);
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
@@ -234,53 +266,72 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   const stages::SceneView sv = scene_view(scene);
   const stages::Projected proj = s.projected();
   auto* counters = s.counters.as<unsigned long long>();
-  const stages::BigList big = s.big_list();
-
-  s.syncs = 0;
-  CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
-  CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-  stages::preprocess(sv, cam, exact, proj, s.live_chunk_list(), counters + kVisibleCount,
-                     counters + kReadDepthLowComplement, big, s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
-
+  const RenderListBudget& budget = options_.list_budget;
+  const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
   const stages::TileTests tests{
       exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square, proj.splat, {}, cam.width, cam.height};
-  uint64_t visible = 0;
-  const uint64_t entries =
-      s.build_render_list(n, s.live_walk(n), cam, tests, exact && depth_first_sort(), options_.list_budget, &visible);
-  const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-  if (exact) {
-    // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the
-    // average load is rasterized as slices by several blocks and merged, so a few heavy tiles do
-    // not hold the frame's tail (RESULTS.md, "Issue 19, fourth round").
-    const uint64_t capacity = s.plan_frame_slices(tiles, entries, options_.speculation);
-    CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
-    const stages::SlicePlan plan = s.slice_plan();
-    stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values, proj,
-                             cam, true, false, bg, nullptr, s.partials.as<float4>(), s.rgb.as<float>(),
-                             s.rgba8.as<uint32_t>(), s.stream);
+
+  // Stage 1 over `region` (every tile, or one pass's), then the counts readback. kPreprocessed
+  // marks the whole frame's pre-processing (a frame in passes: the later stage times hold the
+  // passes' pre-processing too; total_ms is the frame's).
+  auto count = [&](const fm::TileRect& region, bool whole) {
+    CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
+    stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
+                       counters + kReadDepthLowComplement, s.big_list(), s.stream);
+    if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
+    return s.count_render_list(n, s.live_walk(n), cam, depth_first);
+  };
+  const State::ListCounts frame = count(fm::kAllTiles, true);
+
+  // Stages 2-5 of what was counted last (`c`), over tiles [first, end), sorted with the frame's
+  // key and split with the frame's slice length.
+  auto draw = [&](const State::ListCounts& c, uint32_t first, uint32_t end) {
+    s.emit_render_list(n, s.live_walk(n), cam, tests, depth_first, c.entries, c.visible, frame.packing);
+    if (exact) {
+      // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the
+      // average load is rasterized as slices by several blocks and merged, so a few heavy tiles do
+      // not hold the frame's tail (RESULTS.md, "Issue 19, fourth round").
+      const uint64_t capacity = s.plan_frame_slices(tiles, c.entries, options_.speculation, frame.entries, first, end);
+      CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
+      const stages::SlicePlan plan = s.slice_plan();
+      stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values,
+                               proj, cam, early_termination, false, bg, nullptr, s.partials.as<float4>(),
+                               s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
+    } else {
+      // vanilla, the reference 3DGS: a block per tile, the heaviest tiles first
+      // (longest-processing-time-first scheduling of the raster blocks).
+      stages::order_tiles(s.ranges.as<uint2>() + first, end - first, s.tile_order.as<uint32_t>(),
+                          s.heaviest_tile.as<uint32_t>(), s.stream);
+      s.heaviest = s.heaviest_tile.as<uint32_t>();
+      CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
+      stages::rasterize(s.ranges.as<uint2>(), s.tile_order.as<uint32_t>(), first, end - first, s.sorted_values, proj,
+                        cam, bg, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
+    }
     CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
     CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));  // merged by the slices themselves
-  } else {
-    // vanilla, the reference 3DGS: a block per tile, the heaviest tiles first
-    // (longest-processing-time-first scheduling of the raster blocks).
-    stages::order_tiles(s.ranges.as<uint2>(), tiles, s.tile_order.as<uint32_t>(), s.heaviest_tile.as<uint32_t>(),
-                        s.stream);
-    s.heaviest = s.heaviest_tile.as<uint32_t>();
-    CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
-    stages::rasterize(s.ranges.as<uint2>(), s.tile_order.as<uint32_t>(), s.sorted_values, proj, cam, bg,
-                      s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
-    CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-    CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
-  }
+  };
 
-  s.width = camera.width;
-  s.height = camera.height;
-  stats_ = {};
-  stats_.visible = static_cast<std::size_t>(visible);
-  stats_.render_list_length = static_cast<std::size_t>(entries);
-  stats_ready_ = false;
-  return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
+  stats_.visible = static_cast<std::size_t>(frame.visible);
+  stats_.render_list_length = static_cast<std::size_t>(frame.entries);
+  if (frame.entries <= budget.max_entries(camera.width, camera.height, kBytesPerListEntry)) {
+    draw(frame, 0, tiles);
+    stats_.passes = 1;
+    stats_.longest_pass = stats_.render_list_length;
+    return;
+  }
+  // Over the budget: in passes of tiles (renderer/render_passes.h), the CPU core's driver.
+  State::ListCounts pass;
+  const PassesDrawn done = draw_in_passes(
+      budget, camera.width, camera.height, kBytesPerListEntry, frame.entries, frame.visible,
+      [&](const fm::TileRect& region) {
+        pass = count(region, false);
+        return pass.entries;
+      },
+      [&](const fm::TileRect& region, uint64_t) {
+        draw(pass, first_tile(region, cam.tiles_x), end_tile(region, cam.tiles_x));
+      });
+  stats_.passes = done.passes;
+  stats_.longest_pass = static_cast<std::size_t>(done.longest);
 }
 
 const FrameStats& CudaRenderer::last_stats() const {

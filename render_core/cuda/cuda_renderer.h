@@ -212,7 +212,14 @@ class CudaRenderer final : public Renderer {
 
  private:
   struct State;
-  DeviceFrame render_full(const Camera& camera);                  // vanilla, exact
+  DeviceFrame render_full(const Camera& camera);  // vanilla, exact
+  // A whole frame through the exact (or vanilla) stages after kStart: pre-processing, counts, and
+  // stages 2-5 in one pass, or, over the list budget, in passes of tiles (renderer/render_passes.h,
+  // as cpu::render_full_frame), each sorted with the frame's key and split with its slice length.
+  // Sets stats_'s visible, render_list_length, passes and longest_pass. Throws RenderBudgetError
+  // as draw_in_passes. Used by render_full and by catgs key frames without a window (which sort
+  // in one radix sort: depth_first false).
+  void draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first);
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp

@@ -68,8 +68,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 // its Gaussian once (SH only for visible Gaussians) and writes the projected features of visible
 // ones and tiles_touched of all, and the chunk's total. Every thread of the block calls it.
 __device__ __forceinline__ void preprocess_chunk(uint64_t c, const SceneView& scene, const CameraParams& cam,
-                                                 bool exact, const Projected& out, unsigned long long* visible,
-                                                 unsigned long long* depth_range, const BigList& big) {
+                                                 bool exact, const fm::TileRect& region, const Projected& out,
+                                                 unsigned long long* visible, unsigned long long* depth_range,
+                                                 const BigList& big) {
   const uint64_t i = c * fm::kChunkSize + threadIdx.x;
   uint32_t touched = 0;
   bool is_big = false, is_huge = false;
@@ -93,7 +94,7 @@ __device__ __forceinline__ void preprocess_chunk(uint64_t c, const SceneView& sc
       const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f, cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
       fm::TileRect rect;
       if (exact) {
-        rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height);
+        rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height), region);
         const int area = fm::tile_count(rect);
         is_big = area > tune::kBigRectTiles;    // counted by count_big_kernel, a warp each
         is_huge = area > tune::kHugeRectTiles;  // or a block per part
@@ -103,7 +104,7 @@ __device__ __forceinline__ void preprocess_chunk(uint64_t c, const SceneView& sc
         if (touched > 0) out.tile_mask[i] = mask;
       } else {
         const float radius = fm::three_sigma_radius(cov2);
-        rect = fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y);
+        rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y), region);
         touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
         is_big = touched > static_cast<uint32_t>(tune::kBigRectTiles);  // emitted a warp each
         is_huge = touched > static_cast<uint32_t>(tune::kHugeRectTiles);
@@ -129,13 +130,13 @@ __device__ __forceinline__ void preprocess_chunk(uint64_t c, const SceneView& sc
 
 // A block per chunk that cull_chunks_kernel kept (grid-stride over the list: ChunkWalk).
 __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
-    preprocess_kernel(SceneView scene, CameraParams cam, bool exact, Projected out, ChunkWalk live,
+    preprocess_kernel(SceneView scene, CameraParams cam, bool exact, fm::TileRect region, Projected out, ChunkWalk live,
                       unsigned long long* visible,      // [1] running count of visible Gaussians
                       unsigned long long* depth_range,  // [2] listed depths (record_depth_range)
                       BigList big) {
   const uint64_t chunks = live.size();
   for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
-    preprocess_chunk(live.chunk(k), scene, cam, exact, out, visible, depth_range, big);
+    preprocess_chunk(live.chunk(k), scene, cam, exact, region, out, visible, depth_range, big);
     __syncthreads();  // the shared words of the block reductions are rewritten next round
   }
 }
@@ -209,9 +210,9 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
 
 }  // namespace
 
-void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
-                const LiveChunks& live, unsigned long long* visible, unsigned long long* depth_range,
-                const BigList& big, cudaStream_t stream) {
+void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
+                const Projected& out, const LiveChunks& live, unsigned long long* visible,
+                unsigned long long* depth_range, const BigList& big, cudaStream_t stream) {
   if (scene.n == 0) return;
   const uint64_t chunks = fm::chunk_count(scene.n);
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
@@ -221,7 +222,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   CATGS_CUDA_LAUNCHED("cull_chunks_kernel");
   const ChunkWalk walk = live.walk(chunks);
   preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
-      scene, cam, exact, out, walk, visible, depth_range, big);
+      scene, cam, exact, region, out, walk, visible, depth_range, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};

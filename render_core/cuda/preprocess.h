@@ -20,10 +20,12 @@ namespace catgs::cuda::stages {
 // appended to `big`, huge ones to its huge end (one atomic per warp that holds any); with
 // `exact`, their tiles are counted by a second kernel (count_big_tiles). `big.count` must be zero
 // on entry. Writes each chunk's entry count to out.chunk_total; tiles_touched only in kept chunks
-// (records.h listed_tiles).
-void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const Projected& out,
-                const LiveChunks& live, unsigned long long* visible, unsigned long long* depth_range,
-                const BigList& big, cudaStream_t stream);
+// (records.h listed_tiles). `region`: one pass of a frame drawn in passes (renderer/render_passes.h)
+// counts only that region's tiles (fm::clip_tile_rect; the camera stays the whole frame's), as
+// cpu::preprocess; fm::kAllTiles for a frame in one pass.
+void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
+                const Projected& out, const LiveChunks& live, unsigned long long* visible,
+                unsigned long long* depth_range, const BigList& big, cudaStream_t stream);
 
 // Stage 1, big Gaussians (preprocess.cu): a warp per big Gaussian of `big`, and a block per part
 // of a huge one (huge_parts, tile_test.cuh; each part's count into big.part_count), counts the

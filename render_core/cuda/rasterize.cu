@@ -48,15 +48,16 @@ namespace {
 
 __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
     rasterize_kernel(const uint2* __restrict__ ranges,         // [tiles] [start, end) into the sorted list
-                     const uint32_t* __restrict__ tile_order,  // [tiles]
-                     const uint32_t* __restrict__ values,      // [L] sorted Gaussian indices
-                     Projected g,                              // [N] features
+                     const uint32_t* __restrict__ tile_order,  // [blocks], from first_tile
+                     uint32_t first_tile,
+                     const uint32_t* __restrict__ values,  // [L] sorted Gaussian indices
+                     Projected g,                          // [N] features
                      int width, int height, int tiles_x, float3 background,
                      float* __restrict__ out_rgb,         // [H, W, 3]
                      uint32_t* __restrict__ out_rgba8) {  // [H, W]
   __shared__ BlendBatch batch;
 
-  const uint32_t tile = tile_order[blockIdx.x];
+  const uint32_t tile = first_tile + tile_order[blockIdx.x];
   const int tx = static_cast<int>(tile % static_cast<uint32_t>(tiles_x));
   const int ty = static_cast<int>(tile / static_cast<uint32_t>(tiles_x));
   const TilePixel at = tile_pixel(tx, ty, static_cast<int>(threadIdx.x));
@@ -73,12 +74,13 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
 
 }  // namespace
 
-void rasterize(const uint2* ranges, const uint32_t* tile_order, const uint32_t* sorted_values,
-               const Projected& projected, const CameraParams& cam, float3 background, float* out_rgb,
-               uint32_t* out_rgba8, cudaStream_t stream) {
-  const auto tiles = static_cast<unsigned>(cam.tiles_x * cam.tiles_y);
-  rasterize_kernel<<<tiles, tune::kRasterThreads, 0, stream>>>(ranges, tile_order, sorted_values, projected, cam.width,
-                                                               cam.height, cam.tiles_x, background, out_rgb, out_rgba8);
+void rasterize(const uint2* ranges, const uint32_t* tile_order, uint32_t first_tile, uint32_t tile_count,
+               const uint32_t* sorted_values, const Projected& projected, const CameraParams& cam, float3 background,
+               float* out_rgb, uint32_t* out_rgba8, cudaStream_t stream) {
+  if (tile_count == 0) return;
+  rasterize_kernel<<<tile_count, tune::kRasterThreads, 0, stream>>>(ranges, tile_order, first_tile, sorted_values,
+                                                                    projected, cam.width, cam.height, cam.tiles_x,
+                                                                    background, out_rgb, out_rgba8);
   CATGS_CUDA_LAUNCHED("rasterize_kernel");
 }
 

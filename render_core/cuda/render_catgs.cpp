@@ -30,15 +30,17 @@ DeviceFrame CudaRenderer::render_catgs(const Camera& camera, double time_s) {
   validate_camera(camera);
   State& s = *state_;
   s.syncs = 0;
+  stats_ = {};
   const bool candidate = s.planner.observe(camera, time_s);
   const bool served = candidate && catgs_sub_frame(camera);
-  if (served)
+  if (served) {
     s.planner.subframe_served();
-  else
-    catgs_key_frame(camera);
+    stats_.longest_pass = static_cast<std::size_t>(s.key_entries);
+  } else {
+    catgs_key_frame(camera);  // sets the budget's fields of stats_ (passes, narrowing)
+  }
   s.width = camera.width;
   s.height = camera.height;
-  stats_ = {};
   stats_.key_frame = s.key_frame;
   stats_.subframe_rejected = candidate && !served;
   stats_.window = s.planner.window();
@@ -85,53 +87,69 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
 
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   // The window from the predicted path (never from future input): M over one frame, then W.
-  const int window = s.planner.window_wanted()
-                         ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp.depth_threshold)
-                         : 0;
+  const int planned = s.planner.window_wanted()
+                          ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp.depth_threshold)
+                          : 0;
   const stages::Projected proj = s.projected();
   auto* counters = s.counters.as<unsigned long long>();
-  CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-  stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
-  if (window > 0) {
+  const stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
+  const RenderListBudget& budget = options_.list_budget;
+  const uint64_t limit = budget.max_entries(camera.width, camera.height, kBytesPerListEntry);
+  // A window whose trail list is over the budget is narrowed (issue 35), as the CPU core does
+  // from the same counts (SpeculationPlanner::narrower_window); giant Gaussians are refused at once.
+  int window = planned;
+  State::ListCounts counts;
+  for (; window > 0; window = SpeculationPlanner::narrower_window(window)) {
     const std::vector<Camera> path = s.planner.path(camera, window);
     stages::PathParams pp{};
     pp.count = static_cast<int>(path.size());
     for (std::size_t k = 0; k < path.size(); ++k) pp.cam[k] = camera_params(path[k]);
+    CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
     stages::speculative_preprocess(sv, pp, trail_widening(sp, window), proj, s.trails(), s.live_chunk_list(),
                                    counters + kVisibleCount, s.big_list(), s.stream);
-  } else {
-    // No window: the frame is rendered in full by the exact pipeline's stages (a one-pose trail
-    // is the exact ellipse, so the list is the same; the path-wide kernel only costs more) and
-    // opens no group. Task splitting still applies.
-    stages::preprocess(sv, cam, true, proj, s.live_chunk_list(), counters + kVisibleCount,
-                       counters + kReadDepthLowComplement, s.big_list(), s.stream);
-    tests = {stages::TileTestKind::ellipse, proj.splat, {}, cam.width, cam.height};
+    counts = s.count_render_list(n, s.live_walk(n), cam, depth_first_sort());
+    if (counts.entries <= limit) break;
+    budget.check_reach(counts.entries, counts.visible, camera.width, camera.height, kBytesPerListEntry);
   }
-  CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
-
-  // The depth-first sort pays for a trail list, several times the exact one; an exact list sorts
-  // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
-  // the predictor and the depth-first sort bought").
-  uint64_t visible = 0;
-  const uint64_t entries = s.build_render_list(n, s.live_walk(n), cam, tests, window > 0 && depth_first_sort(),
-                                               options_.list_budget, &visible);
-  if (window > 0)  // the frustum cache, for the group's sub-frames
-    stages::select_cached(proj.tiles_touched, proj.chunk_total, n, s.cached.as<uint32_t>(),
-                          s.catgs_counters.as<unsigned>() + kCachedCount, s.select_temp.as<void>(),
-                          s.select_temp.bytes(), s.stream);
-  const uint64_t capacity = s.plan_frame_slices(tiles, entries, sp);  // paper sec. 3.4
-  // The group's sub-frames launch one block per slice: the totals come back while this frame
-  // rasterizes, and only a sub-frame waits for them (plan_ready).
+  stats_.planned_window = planned;
+  stats_.window_narrowed = window < planned;
   unsigned* cc = s.catgs_counters.as<unsigned>();
-  CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
-                             cudaMemcpyDeviceToHost, s.stream));
-  CATGS_CUDA(cudaEventRecord(s.plan_ready, s.stream));
-  CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
 
-  catgs_rasterize(camera, static_cast<uint32_t>(capacity), nullptr, window > 0);
-  s.key_entries = entries;
-  s.key_visible = visible;
-  s.key_capacity = capacity;
+  if (window == 0) {
+    // No window: the frame is rendered in full by the exact pipeline's stages (a one-pose trail
+    // is the exact ellipse, so the list is the same; the path-wide kernel only costs more), in
+    // passes over the budget, and opens no group. Task splitting still applies.
+    draw_full_frame(camera, true, sp.early_termination, false);
+    CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
+                               cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(cudaEventRecord(s.plan_ready, s.stream));
+    s.key_entries = stats_.render_list_length;
+    s.key_visible = stats_.visible;
+    s.key_capacity = 0;  // no group: no sub-frame rasterizes this plan
+  } else {
+    CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
+    // The depth-first sort pays for a trail list, several times the exact one; an exact list sorts
+    // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
+    // the predictor and the depth-first sort bought").
+    s.emit_render_list(n, s.live_walk(n), cam, tests, depth_first_sort(), counts.entries, counts.visible,
+                       counts.packing);
+    // the frustum cache, for the group's sub-frames
+    stages::select_cached(proj.tiles_touched, proj.chunk_total, n, s.cached.as<uint32_t>(), cc + kCachedCount,
+                          s.select_temp.as<void>(), s.select_temp.bytes(), s.stream);
+    const uint64_t capacity = s.plan_frame_slices(tiles, counts.entries, sp);  // paper sec. 3.4
+    // The group's sub-frames launch one block per slice: the totals come back while this frame
+    // rasterizes, and only a sub-frame waits for them (plan_ready).
+    CATGS_CUDA(cudaMemcpyAsync(s.host_catgs + kSliceTotals, cc + kSliceTotals, 2 * sizeof(unsigned),
+                               cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(cudaEventRecord(s.plan_ready, s.stream));
+    CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
+    catgs_rasterize(camera, static_cast<uint32_t>(capacity), nullptr, true);
+    s.key_entries = counts.entries;
+    s.key_visible = counts.visible;
+    s.key_capacity = capacity;
+    stats_.passes = 1;
+    stats_.longest_pass = static_cast<std::size_t>(counts.entries);
+  }
   s.key_frame = true;
   s.planner.start_group(camera, window);
 }

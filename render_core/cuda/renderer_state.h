@@ -167,11 +167,29 @@ struct CudaRenderer::State {
   uint64_t build_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
                              const stages::TileTests& tests, bool depth_first, const RenderListBudget& budget,
                              uint64_t* visible);
+  // build_render_list in two halves, for the frames that look at the counts before listing
+  // (issue 35: a catgs key frame narrows its window, a frame over the budget is drawn in passes).
+  // count_render_list: the counts readback (the frame's sync; with !depth_first the chunks'
+  // scan and the Gaussians' ends are queued behind it); emit_render_list: grows the list buffers
+  // for `counts.entries`, emits, sorts and writes the ranges with `packing` (a pass: its whole
+  // frame's single-sort key, so each tile's order is the single pass's), as build_render_list.
+  struct ListCounts {
+    uint64_t entries = 0, visible = 0;
+    stages::DepthKeyPacking packing = fm::plain_key_packing();  // the single sort's, from the depths
+  };
+  ListCounts count_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
+                               bool depth_first);
+  void emit_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
+                        const stages::TileTests& tests, bool depth_first, uint64_t entries, uint64_t visible,
+                        const stages::DepthKeyPacking& packing);
 
   // Plans the split tasks of a frame of `entries` list entries and their order (task_split.cu,
   // paper sec. 3.4; after the tile ranges) and returns the slice capacity, the blocks the frame's
-  // rasterize_slices launches (cuda_renderer.cpp).
-  uint64_t plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp);
+  // rasterize_slices launches (cuda_renderer.cpp). A pass of a frame drawn in passes gives its
+  // frame's list length as `frame_entries` (the slice length is the frame's) and plans tiles
+  // [first_tile, end_tile) only.
+  uint64_t plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp, uint64_t frame_entries = 0,
+                             uint32_t first_tile = 0, uint32_t end_tile = 0xffffffffu);
 
   // catgs key frames (render_catgs.cpp): grows the trail and frustum-cache buffers; measures M
   // between the key camera and the predicted next one (one 4-byte readback) and returns the

@@ -71,7 +71,8 @@ __device__ __forceinline__ unsigned long long slices_and_slots(uint32_t n) {
 // its slices and slots (a block reduction) and its longest first slice.
 __global__ void __launch_bounds__(kPlanThreads)
     plan_count_kernel(const uint2* __restrict__ ranges,  // [tiles]
-                      uint32_t tiles, uint64_t avg, bool split, PlanScratch scratch) {
+                      uint32_t tiles, uint32_t first_tile, uint32_t end_tile, uint64_t avg, bool split,
+                      PlanScratch scratch) {
   using Reduce = cub::BlockReduce<unsigned long long, kPlanThreads>;
   __shared__ typename Reduce::TempStorage reduce_temp;
   __shared__ unsigned count[kGroups], most;
@@ -80,7 +81,7 @@ __global__ void __launch_bounds__(kPlanThreads)
   __syncthreads();
   const uint32_t t = blockIdx.x * kPlanThreads + threadIdx.x;
   uint32_t n = 0;
-  if (t < tiles) {
+  if (t < tiles && t >= first_tile && t < end_tile) {  // a pass plans its own tiles only
     const uint32_t load = ranges[t].y - ranges[t].x;
     n = slice_count(load, avg, split);
     const uint32_t head = first_slice_length(load, n, avg);
@@ -108,7 +109,8 @@ __global__ void __launch_bounds__(kPlanThreads)
 // block fills part of the order past the total with kNoSlice.
 __global__ void __launch_bounds__(kPlanThreads)
     plan_place_kernel(const uint2* __restrict__ ranges,  // [tiles]
-                      uint32_t tiles, uint64_t avg, bool split, uint64_t capacity, SlicePlan plan, PlanScratch scratch,
+                      uint32_t tiles, uint32_t first_tile, uint32_t end_tile, uint64_t avg, bool split,
+                      uint64_t capacity, SlicePlan plan, PlanScratch scratch,
                       uint32_t* __restrict__ order,      // [capacity]
                       uint32_t* __restrict__ longest) {  // [1]
   using Scan = cub::BlockScan<unsigned long long, kPlanThreads>;
@@ -147,7 +149,8 @@ __global__ void __launch_bounds__(kPlanThreads)
 
   const uint32_t t = b * kPlanThreads + threadIdx.x;
   const uint2 r = t < tiles ? ranges[t] : make_uint2(0u, 0u);
-  const uint32_t load = r.y - r.x, n = t < tiles ? slice_count(load, avg, split) : 0u;
+  const bool planned = t < tiles && t >= first_tile && t < end_tile;
+  const uint32_t load = r.y - r.x, n = planned ? slice_count(load, avg, split) : 0u;
   unsigned long long first = 0;
   Scan(scan_temp).ExclusiveSum(slices_and_slots(n), first);
   first += before;
@@ -184,14 +187,15 @@ std::size_t plan_scratch_bytes(uint32_t tiles) {
   return blocks * (sizeof(unsigned long long) + (kGroups + 1) * sizeof(unsigned));
 }
 
-void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, uint64_t min_slice,
-                 const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream) {
-  const uint64_t avg = split_average(tiles, entries, min_slice), capacity = slice_capacity(tiles, entries, min_slice);
+void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t avg, uint64_t capacity, bool split,
+                 const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream,
+                 uint32_t first_tile, uint32_t end_tile) {
   const uint32_t blocks = plan_blocks(tiles);
   const PlanScratch s = plan_scratch(scratch, blocks);
-  plan_count_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, avg, split, s);
+  plan_count_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, first_tile, end_tile, avg, split, s);
   CATGS_CUDA_LAUNCHED("plan_count_kernel");
-  plan_place_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, avg, split, capacity, plan, s, order, longest);
+  plan_place_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, first_tile, end_tile, avg, split, capacity,
+                                                         plan, s, order, longest);
   CATGS_CUDA_LAUNCHED("plan_place_kernel");
 }
 

@@ -37,6 +37,10 @@ struct SlicePlan {
 };
 uint64_t split_average(uint32_t tiles, uint64_t entries, uint64_t min_slice);
 uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice);
+// A pass of a frame drawn in passes (renderer/render_passes.h): its slice length is the whole
+// frame's, avg = split_average(tiles, frame entries, min_slice), so its tiles split as in one pass;
+// its `entries` entries make at most tiles + entries / avg slices.
+inline uint64_t pass_slice_capacity(uint32_t tiles, uint64_t entries, uint64_t avg) { return tiles + entries / avg; }
 
 // order[] past the slice total (its blocks return at once).
 inline constexpr uint32_t kNoSlice = 0xffffffffu;
@@ -50,8 +54,12 @@ inline constexpr uint32_t kNoSlice = 0xffffffffu;
 // so a split tile's first slice has usually finished, and told its later ones which pixels it
 // ended, before they start (rasterize_slices.cu); kNoSlice past the total. *longest: the longest
 // slice's entries (CudaRenderer::diagnostics).
+// `avg`: the slice length (split_average; a pass's, its frame's), `capacity`: the order's length
+// (slice_capacity, or pass_slice_capacity for a pass). Only tiles [first_tile, end_tile) get
+// slices (a pass's region: the other tiles keep the other passes' pixels); the rest none.
 std::size_t plan_scratch_bytes(uint32_t tiles);
-void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t entries, bool split, uint64_t min_slice,
-                 const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream);
+void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t avg, uint64_t capacity, bool split,
+                 const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream,
+                 uint32_t first_tile = 0, uint32_t end_tile = 0xffffffffu);
 
 }  // namespace catgs::cuda::stages

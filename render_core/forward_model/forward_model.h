@@ -133,6 +133,18 @@ struct TileRect {
 };
 CATGS_HD int tile_count(const TileRect& r) { return (r.x1 > r.x0 && r.y1 > r.y0) ? (r.x1 - r.x0) * (r.y1 - r.y0) : 0; }
 
+// Every tile: the region of a frame drawn in one pass (clip_tile_rect leaves a rectangle as is).
+inline constexpr TileRect kAllTiles{0, 0, 0x7fffffff, 0x7fffffff};
+
+// `r` clipped to `region`: the tiles a Gaussian may list in one pass of a frame drawn in passes
+// (renderer/render_passes.h). Its projection and tile tests stay the whole frame's (the camera,
+// and so the Jacobian clamp at 1.3x the frame's field of view, is not cut), so the passes' lists
+// together are the single pass's list. Empty (tile_count 0) where they do not meet.
+CATGS_HD TileRect clip_tile_rect(const TileRect& r, const TileRect& region) {
+  return {r.x0 > region.x0 ? r.x0 : region.x0, r.y0 > region.y0 ? r.y0 : region.y0, r.x1 < region.x1 ? r.x1 : region.x1,
+          r.y1 < region.y1 ? r.y1 : region.y1};
+}
+
 // A tile coordinate clamped to [0, hi] in float before the conversion: a float outside int's range
 // (an infinite radius, a mean far off screen) would make static_cast<int> undefined. NaN gives 0.
 // Truncation toward zero, as the reference's int conversion, for every value inside the range.

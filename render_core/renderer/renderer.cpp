@@ -31,13 +31,42 @@ std::uint64_t RenderListBudget::max_entries(int width, int height, std::uint64_t
 }
 
 void RenderListBudget::check(std::uint64_t entries, int width, int height, std::uint64_t bytes_per_entry) const {
+  if (entries <= max_entries(width, height, bytes_per_entry)) return;
+  throw error(entries, width, height, bytes_per_entry, "the scene has Gaussians that cover much of the screen");
+}
+
+void RenderListBudget::check_reach(std::uint64_t entries, std::uint64_t listed, int width, int height,
+                                   std::uint64_t bytes_per_entry) const {
+  if (entries <= max_entries(width, height, bytes_per_entry)) return;
+  // Giant Gaussians: on average each listed one reaches more than 1 / giant_share of the tiles,
+  // entries / listed > tiles / giant_share. (The products fit 64 bits: a Gaussian lists each tile
+  // at most once, so entries <= listed x tiles < 2^32 x 2^18, and giant_share is small.)
+  const auto tiles = static_cast<std::uint64_t>((width + 15) / 16) * static_cast<std::uint64_t>((height + 15) / 16);
+  if (giant_share > 0 && entries * giant_share > listed * tiles)
+    throw error(entries, width, height, bytes_per_entry, "the scene has Gaussians that cover much of the screen");
+}
+
+void RenderListBudget::check_passes(std::uint64_t entries, std::uint64_t listed, int width, int height,
+                                    std::uint64_t bytes_per_entry) const {
   const std::uint64_t limit = max_entries(width, height, bytes_per_entry);
   if (entries <= limit) return;
-  throw RenderBudgetError(
+  check_reach(entries, listed, width, height, bytes_per_entry);
+  // Passes hold disjoint parts of the list: fewer than entries / limit of them cannot hold it.
+  if (limit == 0 || max_passes <= 1)  // passes are off: refused as a single pass is
+    throw error(entries, width, height, bytes_per_entry, "the scene has Gaussians that cover much of the screen");
+  if ((entries - 1) / limit >= max_passes)
+    throw error(entries, width, height, bytes_per_entry,
+                "more than " + std::to_string(max_passes) + " passes of the budget would be needed");
+}
+
+RenderBudgetError RenderListBudget::error(std::uint64_t entries, int width, int height, std::uint64_t bytes_per_entry,
+                                          const std::string& why) const {
+  const std::uint64_t limit = max_entries(width, height, bytes_per_entry);
+  return RenderBudgetError(
       "render list of " + std::to_string(entries) + " entries (" + std::to_string(entries * bytes_per_entry >> 20) +
       " MiB) exceeds the render-list budget of " + std::to_string(limit) + " entries for a " + std::to_string(width) +
       "x" + std::to_string(height) + " frame (" + std::to_string(max_entries_per_tile) + " a tile, at most " +
-      std::to_string(max_bytes >> 20) + " MiB): the scene has Gaussians that cover much of the screen");
+      std::to_string(max_bytes >> 20) + " MiB): " + why);
 }
 
 }  // namespace catgs

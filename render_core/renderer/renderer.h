@@ -32,6 +32,12 @@ enum class Pipeline { vanilla, exact, catgs };
 Pipeline parse_pipeline(const std::string& name);
 const char* pipeline_name(Pipeline pipeline);
 
+// A frame whose render list would exceed the budget (a std::length_error, as the 2^32 limit).
+class RenderBudgetError : public std::length_error {
+ public:
+  using std::length_error::length_error;
+};
+
 // The per-frame render-list budget (issue 22): a scene of giant Gaussians lists every one of them
 // in every tile (20 k Gaussians of log-scale 5 made 163 M entries, 4.5 GB and 18 s a 1080p frame),
 // so the list a frame may build is bounded by the viewport, and refused before it is allocated.
@@ -41,26 +47,58 @@ const char* pipeline_name(Pipeline pipeline);
 // 1.6x the 7 M city's largest default catgs key-frame list there, 83.5 M in tests/gpu/RESULTS.md),
 // at least 16 M entries (a whole scene in a thumbnail lists every Gaussian in its few tiles) and
 // 4 GiB.
+//
+// The rule bounds what one pass lists, not what a legitimate view may show (issue 35: a view of
+// the 7 M-Gaussian city at 1280x720 listed 59.35 M entries, just over the 59.0 M there). A frame
+// over it is not refused but drawn in smaller pieces, the same on both cores:
+// - catgs: a speculative key frame whose list is over the budget is planned again with half the
+//   window (SpeculationPlanner::narrower_window), down to W = 0, an exact frame (FrameStats
+//   window_narrowed).
+// - exact, vanilla and catgs's W = 0 frames: drawn in passes of tiles (renderer/render_passes.h),
+//   bands of whole tile rows (a run of one row's tiles where a row alone is over), each listing,
+//   sorting and rasterizing only its tiles within the budget, into the one image, which equals
+//   the single-pass image (every pass keeps the full frame's camera, sort key and split length).
+//   FrameStats::passes counts them.
+// RenderBudgetError is left for what passes cannot or must not draw:
+// - giant Gaussians (issue 22's hostile scene): the listed Gaussians reach on average more than
+//   1 / giant_share of the frame's tiles (20 k Gaussians of log-scale 5 reach all of them; the
+//   real scenes' views list a few tiles per Gaussian, tests/unit/render_passes_test.cpp);
+// - a frame that would take more than max_passes passes (the work a frame may cost stays
+//   bounded: at most max_passes x max_entries entries);
+// - a single tile whose own list is over the budget (no pass can hold it).
 struct RenderListBudget {
   std::uint64_t max_entries_per_tile = 16384;
   std::uint64_t max_bytes = 4ull << 30;
   std::uint64_t min_entries = 1ull << 24;
+  std::uint64_t max_passes = 16;   // 1: no passes, a frame over max_entries() is refused
+  std::uint64_t giant_share = 16;  // 0: no giant-Gaussian refusal
 
-  // The most entries a width x height frame may list with `bytes_per_entry` bytes an entry.
+  // The most entries a width x height frame (or one pass of it) may list with `bytes_per_entry`
+  // bytes an entry.
   std::uint64_t max_entries(int width, int height, std::uint64_t bytes_per_entry) const;
   // Throws RenderBudgetError when `entries` exceeds max_entries(...); the message names the
   // entries, the bytes they would take, the budget and the rule.
   void check(std::uint64_t entries, int width, int height, std::uint64_t bytes_per_entry) const;
+  // For a frame over max_entries(): throws RenderBudgetError (check()'s message) when its `listed`
+  // Gaussians (those with entries) reach on average more than 1 / giant_share of the tiles. A
+  // catgs key frame checks its trail list so (a trail is a few percent longer than the ellipse)
+  // before narrowing its window, so a scene of giant Gaussians costs one pre-processing, not one
+  // a window.
+  void check_reach(std::uint64_t entries, std::uint64_t listed, int width, int height,
+                   std::uint64_t bytes_per_entry) const;
+  // For a frame over max_entries(): throws RenderBudgetError (check()'s message, and the reason)
+  // unless it may be drawn in passes: check_reach(), and at most max_passes x max_entries()
+  // entries.
+  void check_passes(std::uint64_t entries, std::uint64_t listed, int width, int height,
+                    std::uint64_t bytes_per_entry) const;
+  // The error for a frame of `entries` entries over the budget, `why` appended to check()'s message.
+  RenderBudgetError error(std::uint64_t entries, int width, int height, std::uint64_t bytes_per_entry,
+                          const std::string& why) const;
 
-  // Only the 2^32 - 1 limit of the 32-bit tile ranges: for benchmarks and tests that make lists
-  // past the server's budget on purpose (wide speculation windows, lists past 2^31 entries).
-  static RenderListBudget unlimited() { return {UINT64_MAX, UINT64_MAX, 0}; }
-};
-
-// A frame whose render list would exceed the budget (a std::length_error, as the 2^32 limit).
-class RenderBudgetError : public std::length_error {
- public:
-  using std::length_error::length_error;
+  // Only the 2^32 - 1 limit of the 32-bit tile ranges, and no passes: for benchmarks and tests that
+  // make lists past the server's budget on purpose (wide speculation windows, lists past 2^31
+  // entries).
+  static RenderListBudget unlimited() { return {UINT64_MAX, UINT64_MAX, 0, 1, 0}; }
 };
 
 struct RenderOptions {
@@ -100,6 +138,15 @@ struct FrameStats {
   bool subframe_rejected = false;
   std::size_t cached = 0;  // Gaussians in the frustum cache
   std::size_t slices = 0;  // rasterization tasks after task splitting (tiles when unsplit)
+  // The render-list budget (RenderListBudget, issue 35). passes: 1, or the passes of tiles a frame
+  // over the budget was drawn in (render_list_length then sums them; longest_pass is the longest
+  // pass's list, render_list_length with one pass). window_narrowed: a catgs key frame whose list
+  // at planned_window (the planner's W) was over the budget, drawn with `window` < planned_window
+  // instead (0: as an exact frame).
+  int passes = 1;
+  std::size_t longest_pass = 0;
+  bool window_narrowed = false;
+  int planned_window = 0;
 };
 
 class Renderer {

@@ -10,7 +10,8 @@
 //      calls subframe_served(), or renders a key frame;
 //   3. for a key frame: window_wanted() says whether to measure M at all; if so the renderer
 //      measures M between the key camera and next_camera() and asks window_for(M); it pre-processes
-//      over path(key, W) and calls start_group(key, W).
+//      over path(key, W), and while that list is over the render-list budget pre-processes again
+//      with W = narrower_window(W) (W = 0: an exact frame); then it calls start_group(key, W).
 #pragma once
 
 #include <vector>
@@ -44,6 +45,11 @@ class SpeculationPlanner {
   Camera next_camera(const Camera& key) const { return predicted_camera(key, 1); }
   // W for the largest per-frame screen motion M (pixels): motion_adaptive_window().
   int window_for(float max_motion_px) const { return motion_adaptive_window(max_motion_px, params_); }
+  // The window to plan a key frame with instead of `window`, whose list was over the render-list
+  // budget (renderer.h RenderListBudget, issue 35): half of it, so a window's list shrinks
+  // toward the exact list of W = 0, which the budget holds (in passes where it must). Both cores
+  // narrow from the same counts, so they open the same groups.
+  static int narrower_window(int window) { return window / 2; }
   // The key camera followed by the W predicted cameras at k / F_target, k = 1..W.
   std::vector<Camera> path(const Camera& key, int window) const;
 

@@ -2,7 +2,7 @@
 // scripts/gpu_run.sh; no GoogleTest there). Prints a table, writes it with --out, and exits
 // non-zero when any check fails.
 //
-//   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large] [--only budget]
+//   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large] [--only budget|passes]
 //
 // DIR holds flowers_sh3.ply, biker.compressed.ply and tumblewood_sh2.compressed.ply (the compact
 // copy: the 85 MB original does not fit a GPU run's 64 MiB of files); TRACES holds
@@ -34,6 +34,15 @@
 //             any list buffer grows (buffers held under a tenth of the list's 24 bytes an entry);
 //             the same renderer then draws the scene at 64x48 (within the budget) equal to the CPU
 //             (>= 50 dB, the same list).
+//  passes     the budget's passes and narrowed windows (issue 35), biker at 1280x720: vanilla and
+//             exact with a third of their list a pass: >= 3 passes, as many as the CPU's, the
+//             list's total the one-pass length, PSNR >= 50 dB vs the CPU's passes and >= 60 dB vs
+//             one CUDA pass; catgs over a 40 deg/s orbit, (orbit-fb) a budget of a third of the
+//             exact list: every frame an exact frame in passes, >= 60 dB vs the unbudgeted CUDA
+//             exact frame; (orbit-nw) a budget halfway between the windowed key lists: some key
+//             frames narrowed; both: CPU and CUDA take the same decisions (key frame, W, narrowed,
+//             passes) on >= 95% of frames and agree >= 50 dB there. `--only passes` runs these
+//             and the budget rows alone.
 //  city26M    49 tumblewood copies (26.6 M Gaussians): CUDA == CPU on a fly-over view.
 //  chunkcull  13 tumblewood copies: one CUDA exact renderer (single sort, and one depth first)
 //             draws a fly-over view, then a view of the centre copies, where most chunks are
@@ -872,6 +881,132 @@ void budget_checks() {
   }
 }
 
+// 6c: the render-list budget's passes and narrowed windows (renderer.h, issue 35), CUDA as the CPU
+// core. A budget of `limit` entries a pass at any size (min_entries alone sets it).
+catgs::RenderListBudget pass_budget(std::uint64_t limit) {
+  catgs::RenderListBudget b;
+  b.max_entries_per_tile = 0;
+  b.min_entries = limit;
+  b.max_passes = 1000;
+  return b;
+}
+
+void passes_checks(Scenes& sc) {
+  if (!sc.biker) {
+    sc.biker = load(sc.dir + "/biker.compressed.ply", 1.0f);
+    sc.biker_dev = catgs::cuda::DeviceScene::upload(*sc.biker);
+  }
+  const auto& model = sc.biker;
+  const auto& dev = sc.biker_dev;
+  // vanilla, exact: a third of the list a pass; the image equals one pass (the same entries per
+  // tile, sorted with the frame's key, split with its slice length) and the CPU's passes.
+  const Camera cam = orbit_views(*model, sc.W, sc.H)[1];
+  for (const Pipeline p : {Pipeline::vanilla, Pipeline::exact}) {
+    catgs::RenderOptions o;
+    o.pipeline = p;
+    o.speculation.min_slice_entries = 0;  // the paper's slice length: tiles really split
+    catgs::cuda::CudaRenderer one(dev, o);
+    Image g1, g, c;
+    one.render(cam, g1);
+    const std::uint64_t entries = one.last_stats().render_list_length, limit = entries / 3;
+    o.list_budget = pass_budget(limit);
+    catgs::cpu::CpuRenderer cpu(model, o);
+    catgs::cuda::CudaRenderer gpu(dev, o);
+    cpu.render(cam, c);
+    gpu.render(cam, g);
+    const catgs::FrameStats &cs = cpu.last_stats(), &gs = gpu.last_stats();
+    const Diff vs_cpu = compare(c, g), vs_one = compare(g, g1);
+    char note[200];
+    std::snprintf(note, sizeof note,
+                  "%d passes (CPU %d), longest %zu of %llu a pass; vs one CUDA pass: %s dB, max abs %.3g", gs.passes,
+                  cs.passes, gs.longest_pass, static_cast<unsigned long long>(limit), fmt_psnr(vs_one.psnr).c_str(),
+                  vs_one.max_abs);
+    add({"passes", model->name, "orbit1", catgs::pipeline_name(p), vs_cpu.psnr, vs_cpu.max_abs, vs_cpu.max_abs8,
+         static_cast<long long>(cs.render_list_length), static_cast<long long>(gs.render_list_length),
+         vs_cpu.psnr >= 50.0 && vs_one.psnr >= 60.0 && gs.passes >= 3 && gs.passes == cs.passes &&
+             gs.longest_pass <= limit && gs.render_list_length == entries,
+         note});
+  }
+
+  // catgs over an orbit (40 degrees a second, 0.3 s at 120 Hz).
+  catgs::GeneratorParams gp;
+  gp.width = sc.W;
+  gp.height = sc.H;
+  gp.duration_s = 0.3;
+  gp.up = {0.0f, -1.0f, 0.0f};
+  const auto rb = catgs::robust_bounds(*model);
+  const glm::vec3 e = rb.extent();
+  const float r = 0.6f * std::max(e.x, std::max(e.y, e.z));
+  const catgs::Trace trace = catgs::make_orbit(rb, r, 0.3f * r, 12.0f, gp);
+  catgs::RenderOptions o = catgs_options();
+  o.speculation.min_slice_entries = 0;
+  catgs::RenderOptions exact_o = o;
+  exact_o.pipeline = Pipeline::exact;
+  catgs::cuda::CudaRenderer exact(dev, exact_o);
+  Image x;
+  exact.render(trace[0].camera, x);
+  const std::uint64_t exact_entries = exact.last_stats().render_list_length;
+  // The unbudgeted CPU run's key-frame lists with a window: the budget goes halfway between.
+  std::uint64_t shortest = UINT64_MAX, longest = 0;
+  {
+    catgs::cpu::SpeculativeRenderer free_run(model, o);
+    Image a;
+    for (const auto& tc : trace) {
+      free_run.render_at(tc.camera, tc.time_s, a);
+      const catgs::FrameStats& st = free_run.last_stats();
+      if (st.key_frame && st.window > 0) {
+        shortest = std::min<std::uint64_t>(shortest, st.render_list_length);
+        longest = std::max<std::uint64_t>(longest, st.render_list_length);
+      }
+    }
+  }
+  for (const bool fallback : {true, false}) {
+    // fallback: a third of the exact list, so every key frame falls back to an exact frame in
+    // passes (compared with the unbudgeted CUDA exact frame of its pose); narrowed: halfway between
+    // the windowed key lists, so the longer ones narrow (CPU and CUDA must narrow alike).
+    const std::uint64_t limit = fallback ? exact_entries / 3 : shortest + (longest - shortest) / 2;
+    catgs::RenderOptions bo = o;
+    bo.list_budget = pass_budget(limit);
+    catgs::cpu::SpeculativeRenderer cpu(model, bo);
+    catgs::cuda::CudaRenderer gpu(dev, bo);
+    Image c, g;
+    int agree = 0, narrowed = 0, in_passes = 0;
+    double min_psnr = 1e9, min_vs_exact = 1e9, max_abs = 0;
+    int max_abs8 = 0;
+    for (const auto& tc : trace) {
+      cpu.render_at(tc.camera, tc.time_s, c);
+      gpu.render_at(tc.camera, tc.time_s, g);
+      const catgs::FrameStats &cs = cpu.last_stats(), &gs = gpu.last_stats();
+      const bool same = cs.key_frame == gs.key_frame && cs.window == gs.window &&
+                        cs.window_narrowed == gs.window_narrowed && cs.passes == gs.passes;
+      agree += same ? 1 : 0;
+      narrowed += gs.window_narrowed ? 1 : 0;
+      in_passes += gs.passes > 1 ? 1 : 0;
+      if (same) {
+        const Diff d = compare(c, g);
+        min_psnr = std::min(min_psnr, d.psnr);
+        max_abs = std::max(max_abs, d.max_abs);
+        max_abs8 = std::max(max_abs8, d.max_abs8);
+      }
+      if (fallback) {
+        exact.render(tc.camera, x);
+        min_vs_exact = std::min(min_vs_exact, compare(g, x).psnr);
+      }
+    }
+    const int frames = static_cast<int>(trace.size());
+    char note[200];
+    std::snprintf(note, sizeof note, "limit %llu: %d/%d frames agree, %d narrowed, %d in passes%s%s",
+                  static_cast<unsigned long long>(limit), agree, frames, narrowed, in_passes,
+                  fallback ? "; vs unbudgeted CUDA exact min " : "",
+                  fallback ? (fmt_psnr(min_vs_exact) + " dB").c_str() : "");
+    const bool pass = 100 * agree >= 95 * frames && min_psnr >= 50.0 &&
+                      (fallback ? in_passes == frames && min_vs_exact >= 60.0 : narrowed > 0 && shortest < longest);
+    add({"passes", model->name, fallback ? "orbit-fb" : "orbit-nw", "catgs", min_psnr, max_abs, max_abs8,
+         static_cast<long long>(cpu.last_stats().render_list_length),
+         static_cast<long long>(gpu.last_stats().render_list_length), pass, note});
+  }
+}
+
 // 6b: more huge Gaussians than key emission keeps part counts for (tunables.h kHugeListed): the
 // first kHugeListed are counted and emitted a block per part, the rest a block each. Every
 // Gaussian of the wall covers the whole image, so each is huge; the list and image must be the
@@ -1020,6 +1155,11 @@ int run(int argc, char** argv) {
     budget_checks();
     return report(gpu, args.get("--out", "")) == 0 ? 0 : 1;
   }
+  if (args.get("--only", "") == "passes") {  // the budget's passes and narrowed windows (biker only)
+    budget_checks();
+    passes_checks(sc);
+    return report(gpu, args.get("--out", "")) == 0 ? 0 : 1;
+  }
   equality_checks(sc);
   if (!sc.quick) grow_checks(sc);
   catgs_checks(sc);
@@ -1027,6 +1167,7 @@ int run(int argc, char** argv) {
   if (!sc.quick) steady_checks(sc);
   if (!sc.quick) huge_checks();
   if (!sc.quick) budget_checks();
+  if (!sc.quick) passes_checks(sc);
   if (!sc.quick) chunk_cull_checks(sc);
   if (!sc.quick && !args.has("--skip-large")) {
     tile_bits_checks(sc);
