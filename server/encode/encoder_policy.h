@@ -9,7 +9,9 @@
 //
 // Threads: x264's sliced threads cut one frame's encode time, so a lone session should get
 // several; but the host's cores are shared by every session's encoder, so the threads a session
-// gets are min(what its viewport can use, usable cores / live sessions), at least 1. When
+// gets are 2 x usable cores / live sessions (an encoder is busy only part of each frame
+// interval, and more threads cost little more CPU a frame), at least what its viewport needs to
+// keep 60 frames/s (needed_threads) and at most what it gains from (useful_threads). When
 // sessions join, a session's next encoder gets fewer threads; when they leave, more (the server
 // rebuilds an encoder only when its thread count should change, see should_rebuild()).
 #pragma once
@@ -26,7 +28,7 @@ struct EncoderPolicy {
   double bits_per_pixel = 0.09;  // --bits-per-pixel: auto's bits per pixel per frame
   int min_kbps = 1500;           // auto's floor (small viewports)
   int crf = 23;                  // --crf: the quality floor
-  int vbv_buffer_ms = 250;       // --vbv-ms: the VBV's size in ms of the target rate
+  int vbv_buffer_ms = 100;       // --vbv-ms: the VBV's size in ms of the target rate
   int intra_refresh_frames = 0;  // --intra-refresh N: refresh period in frames (0: off)
   int threads = 0;               // --encoder-threads: > 0 fixed per session; 0 auto (above)
   int usable_cores = 1;          // the cores this process may use (cpu_quota.h)
@@ -40,6 +42,10 @@ int target_bitrate_kbps(const EncoderPolicy& policy, int width, int height, int 
 // The most sliced threads a width x height picture gains from (the measured table in
 // RESULTS.md: beyond it a frame's encode time no longer falls).
 int useful_threads(int width, int height);
+
+// The fewest sliced threads that encode a width x height frame within 3/4 of a 60 Hz frame
+// interval (the measured table in RESULTS.md): fewer and the session cannot hold 60 frames/s.
+int needed_threads(int width, int height);
 
 // x264 threads for one session's encoder while `live_sessions` sessions share the host.
 int encoder_threads(const EncoderPolicy& policy, int width, int height, int live_sessions);

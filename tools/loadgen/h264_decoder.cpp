@@ -44,29 +44,37 @@ bool H264Decoder::decode(const std::string& au, std::vector<std::uint8_t>& rgba,
   while (avcodec_receive_frame(ctx_, frame_) == 0) {
     width = frame_->width;
     height = frame_->height;
-    if (!sws_ || sws_w_ != width || sws_h_ != height) {
-      if (sws_) sws_freeContext(sws_);
-      sws_ = sws_getContext(width, height, static_cast<AVPixelFormat>(frame_->format), width, height, AV_PIX_FMT_RGBA,
-                            SWS_BILINEAR, nullptr, nullptr, nullptr);
-      if (!sws_) throw std::runtime_error("h264 decoder: no colour converter");
-      // BT.709 limited range in, full-range RGB out.
-      const int* bt709 = sws_getCoefficients(SWS_CS_ITU709);
-      sws_setColorspaceDetails(sws_, bt709, 0, bt709, 1, 0, 1 << 16, 1 << 16);
-      sws_w_ = width;
-      sws_h_ = height;
-    }
-    const std::size_t bytes = static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4;
-    // swscale's SIMD paths may write a little past the last row: give it slack, then trim
-    // (the slack stays in the vector's capacity).
-    rgba.resize(bytes + 256);
-    std::uint8_t* dst[1] = {rgba.data()};
-    const int dst_stride[1] = {width * 4};
-    sws_scale(sws_, frame_->data, frame_->linesize, 0, height, dst, dst_stride);
-    rgba.resize(bytes);
+    if (frame_->format != AV_PIX_FMT_YUV420P) throw std::runtime_error("h264 decoder: not a 4:2:0 8-bit stream");
+    const std::uint8_t* planes[3] = {frame_->data[0], frame_->data[1], frame_->data[2]};
+    const int strides[3] = {frame_->linesize[0], frame_->linesize[1], frame_->linesize[2]};
+    to_rgba(planes, strides, width, height, rgba);
     av_frame_unref(frame_);
     got = true;
   }
   return got;
+}
+
+void H264Decoder::to_rgba(const std::uint8_t* const planes[3], const int strides[3], int width, int height,
+                          std::vector<std::uint8_t>& rgba) {
+  if (!sws_ || sws_w_ != width || sws_h_ != height) {
+    if (sws_) sws_freeContext(sws_);
+    sws_ = sws_getContext(width, height, AV_PIX_FMT_YUV420P, width, height, AV_PIX_FMT_RGBA, SWS_BILINEAR, nullptr,
+                          nullptr, nullptr);
+    if (!sws_) throw std::runtime_error("h264 decoder: no colour converter");
+    // BT.709 limited range in, full-range RGB out.
+    const int* bt709 = sws_getCoefficients(SWS_CS_ITU709);
+    sws_setColorspaceDetails(sws_, bt709, 0, bt709, 1, 0, 1 << 16, 1 << 16);
+    sws_w_ = width;
+    sws_h_ = height;
+  }
+  const std::size_t bytes = static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4;
+  // swscale's SIMD paths may write a little past the last row: give it slack, then trim
+  // (the slack stays in the vector's capacity).
+  rgba.resize(bytes + 256);
+  std::uint8_t* dst[1] = {rgba.data()};
+  const int dst_stride[1] = {width * 4};
+  sws_scale(sws_, planes, strides, 0, height, dst, dst_stride);
+  rgba.resize(bytes);
 }
 
 }  // namespace catgs::loadgen

@@ -26,6 +26,11 @@ class H264Decoder {
   // first) filled when a picture came out; false when the decoder produced none (e.g. P-frames
   // before the first IDR). Throws std::runtime_error for corrupt data.
   bool decode(const std::string& access_unit, std::vector<std::uint8_t>& rgba, int& width, int& height);
+  // The colour conversion decode() applies to a decoded picture, on any BT.709 limited-range
+  // I420 planes (Y, U, V with their strides): what a stream would show with no coding loss, the
+  // ceiling of a stream's PSNR against the RGB it was made from (4:2:0 chroma, 8-bit rounding).
+  void to_rgba(const std::uint8_t* const planes[3], const int strides[3], int width, int height,
+               std::vector<std::uint8_t>& rgba);
 
  private:
   AVCodecContext* ctx_ = nullptr;

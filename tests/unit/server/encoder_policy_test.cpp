@@ -47,9 +47,13 @@ TEST(EncoderPolicy, ThreadsShareTheCoresAmongLiveSessions) {
   EncoderPolicy p;
   p.usable_cores = 16;
   EXPECT_EQ(encoder_threads(p, 1920, 1080, 1), useful_threads(1920, 1080));
-  EXPECT_EQ(encoder_threads(p, 1920, 1080, 4), 4);
-  EXPECT_EQ(encoder_threads(p, 1920, 1080, 7), 2);
-  EXPECT_EQ(encoder_threads(p, 1920, 1080, 20), 1);  // never 0
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 8), 4);   // twice the cores, shared
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 10), 3);
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 40), 2);  // what 1080p needs for 60 frames/s
+  EXPECT_EQ(encoder_threads(p, 1280, 720, 40), 1);
+  EXPECT_EQ(needed_threads(1280, 720), 1);
+  EXPECT_EQ(needed_threads(1920, 1080), 2);
+  EXPECT_EQ(needed_threads(3840, 2160), 6);
   EXPECT_EQ(encoder_threads(p, 640, 360, 1), useful_threads(640, 360));
   EXPECT_LE(useful_threads(640, 360), useful_threads(1280, 720));
   EXPECT_LE(useful_threads(1280, 720), useful_threads(1920, 1080));
