@@ -47,7 +47,7 @@ TEST(EncoderPolicy, ThreadsShareTheCoresAmongLiveSessions) {
   EncoderPolicy p;
   p.usable_cores = 16;
   EXPECT_EQ(encoder_threads(p, 1920, 1080, 1), useful_threads(1920, 1080));
-  EXPECT_EQ(encoder_threads(p, 1920, 1080, 8), 4);   // twice the cores, shared
+  EXPECT_EQ(encoder_threads(p, 1920, 1080, 8), 4);  // twice the cores, shared
   EXPECT_EQ(encoder_threads(p, 1920, 1080, 10), 3);
   EXPECT_EQ(encoder_threads(p, 1920, 1080, 40), 2);  // what 1080p needs for 60 frames/s
   EXPECT_EQ(encoder_threads(p, 1280, 720, 40), 1);
