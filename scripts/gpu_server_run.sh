@@ -168,29 +168,7 @@ sweep() {
     for size in $sizes; do
       for n in $scene_counts; do
         local tag=$scene-${pipeline}_${size}_$n
-        nvidia-smi --query-gpu=utilization.gpu --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
-        local smi=$!
-        local cpu0 srv0
-        cpu0=$(head -1 /proc/stat)
-        srv0=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
-        "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions "$n" --size "$size" --trace "$traces" \
-          --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" > "$W/load_$tag.txt" 2>&1 || status=1
-        local cpu1 srv1
-        cpu1=$(head -1 /proc/stat)
-        srv1=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
-        kill "$smi" 2>/dev/null; wait "$smi" 2>/dev/null
-        python3 - "$W/json/$tag.json" "$cpu0" "$cpu1" "$srv0" "$srv1" "$W/gpu_$tag.txt" "$seconds" <<'PY'
-import json, sys
-path, c0, c1, s0, s1, gpu, seconds = sys.argv[1:]
-a = [int(x) for x in c0.split()[1:]]; b = [int(x) for x in c1.split()[1:]]
-d = [y - x for x, y in zip(a, b)]
-busy = 1 - (d[3] + d[4]) / max(1, sum(d))          # idle + iowait
-u = [float(x) for x in open(gpu).read().split() if x.strip()]
-j = json.load(open(path))
-j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)) / 100.0,
-             "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u)}
-json.dump(j, open(path, "w"), indent=1)
-PY
+        measure "$tag" "$n" "$size" "$PORT" "$traces" "$seconds" || status=1
         tail -4 "$W/load_$tag.txt" | head -2
         echo "-- $tag done"
       done
@@ -243,8 +221,9 @@ measure() {
   local smi=$! cpu0 srv0 cpu1 srv1
   cpu0=$(head -1 /proc/stat)
   srv0=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
+  local rc=0
   "$SRV/bin/catgs-loadgen" --port "$port" --sessions "$n" --size "$size" --trace "$traces" \
-    --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" > "$W/load_$tag.txt" 2>&1
+    --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" > "$W/load_$tag.txt" 2>&1 || rc=1
   cpu1=$(head -1 /proc/stat)
   srv1=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
   kill "$smi" 2>/dev/null; wait "$smi" 2>/dev/null
@@ -260,6 +239,7 @@ j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)
              "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u)}
 json.dump(j, open(path, "w"), indent=1)
 PY
+  return $rc
 }
 
 # ramp NAME SCENE WxH PIPELINE START STEP MAX P95_MS MIN_FPS [SERVER ARGS...]: sessions START,

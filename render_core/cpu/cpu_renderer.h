@@ -4,6 +4,7 @@
 // Multi-threaded over Gaussians and tiles; deterministic (the same input gives the same bits).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -18,6 +19,12 @@
 #include "renderer/renderer.h"
 
 namespace catgs::cpu {
+
+// Stage times of the CPU core: wall clock, milliseconds.
+using clock = std::chrono::steady_clock;
+inline double ms_between(clock::time_point a, clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
 
 // The tile grid of an image: ceil(W / 16) x ceil(H / 16) tiles, row-major tile ids.
 struct TileGrid {

@@ -9,15 +9,6 @@
 
 namespace catgs::cpu {
 
-namespace {
-
-using clock = std::chrono::steady_clock;
-double ms_between(clock::time_point a, clock::time_point b) {
-  return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
-}  // namespace
-
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
                        const FrameBuffers& buffers, Image& out, FrameStats& stats) {

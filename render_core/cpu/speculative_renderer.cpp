@@ -9,15 +9,6 @@
 
 namespace catgs::cpu {
 
-namespace {
-
-using clock = std::chrono::steady_clock;
-double ms_between(clock::time_point a, clock::time_point b) {
-  return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
-}  // namespace
-
 SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options)
     : model_(std::move(model)) {
   if (!model_) throw std::invalid_argument("SpeculativeRenderer: null model");
