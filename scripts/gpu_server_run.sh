@@ -146,18 +146,7 @@ sweep() {
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$W/gpu.txt"
   nproc | tee "$W/cores.txt"
   echo "== scenes: tumblewood_sh2 x10 and the 13-copy city"
-  if [ ! -f "$W/city_flowers_sh3.trace" ]; then  # made once per machine
-  "$C/bin/catgs-scene" compact --scene "$C/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
-    --out "$W/tumblewood.compressed.ply" || return 1
-  "$C/bin/catgs-scene" tile --scene "$C/scenes/tumblewood_sh2.compressed.ply" --scale 10 \
-    --radius-sq 4 --up 0,-1,0 --out-compressed "$W/city.compressed.ply" || return 1
-  for scene in tumblewood city; do
-    for path in mipnerf360_bicycle tandt_train flowers_sh3; do
-      "$C/bin/catgs-scene" trace --scene "$W/$scene.compressed.ply" --cameras "$C/traces/$path.cameras.json" \
-        --out "$W/${scene}_$path.trace" --up 0,-1,0 --frames 1200 || return 1
-    done
-  done
-  fi
+  make_scenes "$C/bin/catgs-scene" "$C/scenes/tumblewood_sh2.compressed.ply" "$C/traces" || return 1
   local status=0
   for scene in tumblewood city; do
     start_server "$W/$scene.compressed.ply" "$W/server_$scene-$pipeline.log" --pipeline "$pipeline" \
@@ -191,13 +180,21 @@ scenes() {
   mkdir -p "$W/json"
   [ -f "$W/city_flowers_sh3.trace" ] && return 0
   xz -dc "$S/scenes/tumblewood_sh2.compressed.ply.xz" > "$W/tumblewood_sh2.compressed.ply" || return 1
-  "$SRV/bin/catgs-scene" compact --scene "$W/tumblewood_sh2.compressed.ply" --scale 10 \
-    --out "$W/tumblewood.compressed.ply" || return 1
-  "$SRV/bin/catgs-scene" tile --scene "$W/tumblewood_sh2.compressed.ply" --scale 10 \
-    --radius-sq 4 --up 0,-1,0 --out-compressed "$W/city.compressed.ply" || return 1
+  make_scenes "$SRV/bin/catgs-scene" "$W/tumblewood_sh2.compressed.ply" "$S/traces"
+}
+
+# make_scenes CATGS_SCENE SOURCE TRACES: tumblewood x10 and the 13-copy city from SOURCE (the
+# compact tumblewood_sh2) and the three real paths of TRACES fitted to each, in /tmp/catgs_sweep
+# (once per machine).
+make_scenes() {
+  local tool=$1 src=$2 traces=$3 W=/tmp/catgs_sweep
+  mkdir -p "$W/json"
+  [ -f "$W/city_flowers_sh3.trace" ] && return 0
+  "$tool" compact --scene "$src" --scale 10 --out "$W/tumblewood.compressed.ply" || return 1
+  "$tool" tile --scene "$src" --scale 10 --radius-sq 4 --up 0,-1,0 --out-compressed "$W/city.compressed.ply" || return 1
   for scene in tumblewood city; do
     for path in mipnerf360_bicycle tandt_train flowers_sh3; do
-      "$SRV/bin/catgs-scene" trace --scene "$W/$scene.compressed.ply" --cameras "$S/traces/$path.cameras.json" \
+      "$tool" trace --scene "$W/$scene.compressed.ply" --cameras "$traces/$path.cameras.json" \
         --out "$W/${scene}_$path.trace" --up 0,-1,0 --frames 1200 || return 1
     done
   done

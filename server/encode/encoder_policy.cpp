@@ -18,10 +18,9 @@ int target_bitrate_kbps(const EncoderPolicy& policy, int width, int height, int 
 int useful_threads(int width, int height) {
   // Sliced threads split the picture into bands of macroblock rows; past some count a band's
   // fixed cost (its slice header, prediction stopping at its edges, waking its thread) outweighs
-  // the split. Measured on the H100 host's 16 cores, one session alone on the 7 M city
-  // (RESULTS.md "Encoder policy"): at 1080p p50 / p95 15.6 / 18.6 ms with 1 thread, 6.4 / 7.8
-  // with 4, 4.6 / 6.1 with 8, 4.5 / 10.2 with 12; at 720p 2.0 / 2.7 ms with 8 (3.2 / 4.8 with 4).
-  // Sizes not measured take their neighbour's count.
+  // the split. The counts are where catgs-encode-bench's encode time stopped falling for one
+  // session alone on the H100 host (RESULTS.md, "Encoder policy": 8 at 720p and 1080p, where 12
+  // was worse at p95); 640x360 and sizes past 1080p were not measured and take a neighbour's.
   const long pixels = static_cast<long>(width) * height;
   if (pixels <= 640L * 360) return 4;
   if (pixels <= 1920L * 1080) return 8;
@@ -29,8 +28,9 @@ int useful_threads(int width, int height) {
 }
 
 int needed_threads(int width, int height) {
-  // x264 ultrafast on the H100 host codes about 1.5 M pixels in 12.5 ms (3/4 of a 60 Hz frame
-  // interval) on one thread: 720p p95 7.9 ms on 1 thread, 1080p 18.6 ms on 1 and 11.8 on 2.
+  // A thread per 1.5 M pixels: the rule that matches catgs-encode-bench's table on the H100 host
+  // (RESULTS.md, "Encoder policy": 720p within 12.5 ms at p95, 3/4 of a 60 Hz frame interval, on
+  // one thread; 1080p on two, not on one). Past 1080p it is an extrapolation.
   const double pixels = static_cast<double>(width) * height;
   return std::clamp(static_cast<int>(std::ceil(pixels / 1.5e6)), 1, useful_threads(width, height));
 }
@@ -38,8 +38,8 @@ int needed_threads(int width, int height) {
 int encoder_threads(const EncoderPolicy& policy, int width, int height, int live_sessions) {
   if (policy.threads > 0) return policy.threads;
   // A session's encoder is busy only part of each frame interval, and sliced threads cost about
-  // the same CPU a frame as one thread (16-18 CPU ms at 1080p for 1 to 8 threads), so the cores
-  // are shared at twice their count: the threads wait less for each other than the sessions do.
+  // the same CPU a frame as one thread (RESULTS.md, "Encoder policy"), so the cores are shared at
+  // twice their count: the threads wait less for each other than the sessions do.
   const int share = std::max(1, 2 * policy.usable_cores / std::max(1, live_sessions));
   return std::clamp(share, needed_threads(width, height), useful_threads(width, height));
 }

@@ -2,6 +2,7 @@
 
 #include <dlfcn.h>
 
+#include <algorithm>
 #include <climits>
 #include <map>
 #include <mutex>
@@ -133,8 +134,8 @@ NvencEncoder::NvencEncoder(const EncoderConfig& config) try
         ctx->rc_max_rate = bitrate;
         // One frame of VBV unless the policy says otherwise: a frame never waits behind the bits
         // of earlier ones (NVENC's default VBV is about two seconds).
-        ctx->rc_buffer_size = config.vbv_buffer_ms > 0 ? static_cast<int>(bitrate / 1000 * config.vbv_buffer_ms)
-                                                       : static_cast<int>(bitrate / config.fps);
+        const long buffer = config.vbv_buffer_ms > 0 ? bitrate / 1000 * config.vbv_buffer_ms : bitrate / config.fps;
+        ctx->rc_buffer_size = static_cast<int>(std::min<long>(buffer, INT_MAX));
         av_opt_set(ctx->priv_data, "preset", "p1", 0);
         av_opt_set(ctx->priv_data, "tune", "ull", 0);
         av_opt_set(ctx->priv_data, "rc", "cbr", 0);

@@ -1,5 +1,7 @@
 #include "encode/x264_encoder.h"
 
+#include <algorithm>
+#include <climits>
 #include <cstdint>
 #include <string>
 
@@ -39,7 +41,8 @@ X264Encoder::X264Encoder(const EncoderConfig& config)
           // Capped CRF: quality as crf asks while the stream fits, the VBV lowers it when not.
           ctx->rc_max_rate = static_cast<std::int64_t>(config.bitrate_kbps) * 1000;
           const int vbv_ms = config.vbv_buffer_ms > 0 ? config.vbv_buffer_ms : kDefaultVbvMs;
-          ctx->rc_buffer_size = static_cast<int>(ctx->rc_max_rate * vbv_ms / 1000);
+          // --bitrate and --vbv-ms are bounded, their product is not within an int: clamped.
+          ctx->rc_buffer_size = static_cast<int>(std::min<std::int64_t>(ctx->rc_max_rate * vbv_ms / 1000, INT_MAX));
         }
         const std::string params = x264_params(config);
         if (!params.empty()) av_opt_set(ctx->priv_data, "x264-params", params.c_str(), 0);

@@ -18,23 +18,6 @@
 namespace catgs {
 namespace {
 
-// n Gaussians of log-scale `log_scale`, nearly opaque, scattered in a unit box at the origin.
-std::shared_ptr<const GaussianModel> giant_gaussians(std::size_t n, float log_scale) {
-  auto m = std::make_shared<GaussianModel>();
-  m->resize(n);
-  std::mt19937 rng(22);
-  std::uniform_real_distribution<float> u(-0.5f, 0.5f);
-  for (std::size_t i = 0; i < n; ++i) {
-    for (int a = 0; a < 3; ++a) {
-      m->means[3 * i + a] = u(rng);
-      m->log_scales[3 * i + a] = log_scale;
-    }
-    m->rotations[4 * i] = 1.0f;
-    m->opacity_logits[i] = 5.0f;
-  }
-  return m;
-}
-
 // 5 units back from the origin on -z, looking at it (OpenCV axes: +z forward).
 Camera camera_at_origin(int width, int height) {
   return Camera::from_pose(glm::vec3(0.0f, 0.0f, -5.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, width, height);
@@ -61,7 +44,7 @@ TEST(RenderListBudget, RuleFollowsTheViewport) {
 TEST(RenderListBudget, GiantGaussiansFailFastWithAClearError) {
   // 20 k Gaussians x 3600 tiles = 72 M entries > 59 M (16384 a tile at 1280x720): the old core
   // allocated and sorted all of them (about 2 GB with the sort's pairs) before drawing.
-  const auto model = giant_gaussians(20000, 5.0f);
+  const auto model = test::giant_gaussians(20000, 5.0f);
   for (const Pipeline p : {Pipeline::vanilla, Pipeline::exact}) {
     SCOPED_TRACE(pipeline_name(p));
     RenderOptions options;
@@ -91,7 +74,7 @@ TEST(RenderListBudget, OrdinaryScenesAndSmallGiantScenesStillRender) {
   Image out;
   EXPECT_NO_THROW(biker.render(camera_at_origin(640, 360), out));
   // 100 giant Gaussians at 1280x720: 360 k entries, well inside the budget.
-  cpu::CpuRenderer few(giant_gaussians(100, 5.0f), RenderOptions{});
+  cpu::CpuRenderer few(test::giant_gaussians(100, 5.0f), RenderOptions{});
   ASSERT_NO_THROW(few.render(camera_at_origin(1280, 720), out));
   EXPECT_EQ(few.last_stats().render_list_length, 100u * 80 * 45);
 }

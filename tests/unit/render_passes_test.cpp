@@ -171,23 +171,6 @@ TEST(RenderPasses, GiantGaussiansAreRefusedManySmallOnesAreNot) {
   EXPECT_THROW(RenderListBudget::unlimited().check_passes(1ull << 32, 1ull << 30, 3840, 2160, 28), RenderBudgetError);
 }
 
-// n Gaussians of log-scale 5, nearly opaque, in a unit box (render_budget_test.cpp's scene).
-std::shared_ptr<const GaussianModel> giant_gaussians(std::size_t n) {
-  auto m = std::make_shared<GaussianModel>();
-  m->resize(n);
-  std::mt19937 rng(22);
-  std::uniform_real_distribution<float> u(-0.5f, 0.5f);
-  for (std::size_t i = 0; i < n; ++i) {
-    for (int a = 0; a < 3; ++a) {
-      m->means[3 * i + a] = u(rng);
-      m->log_scales[3 * i + a] = 5.0f;
-    }
-    m->rotations[4 * i] = 1.0f;
-    m->opacity_logits[i] = 5.0f;
-  }
-  return m;
-}
-
 // catgs refuses them too, with or without a window (a trail list of giant Gaussians is refused
 // by its reach before any narrowing). 2000 of them at 320x180 with a budget of 100 k entries:
 // 480 k entries, every Gaussian in all 240 tiles.
@@ -195,7 +178,7 @@ TEST(RenderPasses, GiantGaussiansStillRefusedByCatgs) {
   RenderOptions o;
   o.pipeline = Pipeline::catgs;
   o.list_budget = budget_of(100000);
-  cpu::SpeculativeRenderer r(giant_gaussians(2000), o);
+  cpu::SpeculativeRenderer r(test::giant_gaussians(2000, 5.0f), o);
   const Camera cam =
       Camera::from_pose(glm::vec3(0.0f, 0.0f, -5.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 320, 180);
   Image out;

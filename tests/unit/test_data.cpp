@@ -3,6 +3,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <random>
 
 #include "scene/ply_io.h"
 
@@ -39,6 +40,22 @@ std::shared_ptr<const GaussianModel> cached_scene(const std::string& path) {
   auto& s = cache[path];
   if (!s) s = std::make_shared<GaussianModel>(load_scene(path));
   return s;
+}
+
+std::shared_ptr<const GaussianModel> giant_gaussians(std::size_t n, float log_scale) {
+  auto m = std::make_shared<GaussianModel>();
+  m->resize(n);
+  std::mt19937 rng(22);
+  std::uniform_real_distribution<float> u(-0.5f, 0.5f);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      m->means[3 * i + a] = u(rng);
+      m->log_scales[3 * i + a] = log_scale;
+    }
+    m->rotations[4 * i] = 1.0f;
+    m->opacity_logits[i] = 5.0f;
+  }
+  return m;
 }
 
 }  // namespace catgs::test

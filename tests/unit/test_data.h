@@ -22,6 +22,11 @@ std::string temp_dir();
 // The scene at `path`, loaded once per test process and shared (tests only read it).
 std::shared_ptr<const GaussianModel> cached_scene(const std::string& path);
 
+// Issue 22's hostile scene: n Gaussians of log-scale `log_scale` (5: each covers the whole view
+// of a camera a few units away), opacity logit 5, identity rotation, means uniform in the unit
+// box at the origin (seed 22).
+std::shared_ptr<const GaussianModel> giant_gaussians(std::size_t n, float log_scale);
+
 }  // namespace catgs::test
 
 // Skips the test with a visible reason when a real-data file is missing.

@@ -104,6 +104,14 @@ std::vector<int> nal_types(const std::vector<std::uint8_t>& au) {
 
 int count(const std::vector<int>& v, int x) { return static_cast<int>(std::count(v.begin(), v.end(), x)); }
 
+// A width x height x264 config at the policy's defaults but no rate cap (crf 23 alone).
+EncoderConfig small_config(int w, int h) {
+  EncoderConfig c;
+  c.width = w;
+  c.height = h;
+  return c;
+}
+
 struct Stream {
   std::vector<EncodedFrame> frames;
   double mean_kbps = 0;
@@ -131,9 +139,7 @@ Stream encode_all(const EncoderConfig& c, const std::vector<Yuv420Image>& frames
 TEST(EncoderPolicy, CappedStreamHoldsItsCapAndCrfIsItsFloor) {
   std::vector<Image> raw;
   const auto frames = biker_frames(320, 192, 48, &raw);
-  EncoderConfig c;
-  c.width = 320;
-  c.height = 192;
+  EncoderConfig c = small_config(320, 192);
   c.crf = 12;  // more bits than the cap allows on this moving view
   const Stream free = encode_all(c, frames, raw);
   c.bitrate_kbps = std::max(200, static_cast<int>(free.mean_kbps / 4));
@@ -154,9 +160,7 @@ TEST(EncoderPolicy, SlicedThreadsGiveEveryFrameAtOnceWithASlicePerThread) {
   const auto frames = biker_frames(640, 352, 6, &raw);
   for (int threads : {1, 4}) {
     SCOPED_TRACE(threads);
-    EncoderConfig c;
-    c.width = 640;
-    c.height = 352;
+    EncoderConfig c = small_config(640, 352);
     c.threads = threads;
     const Stream s = encode_all(c, frames, raw);  // encode_yuv420 throws on a frame of delay
     ASSERT_EQ(s.frames.size(), frames.size());
@@ -169,9 +173,7 @@ TEST(EncoderPolicy, SlicedThreadsGiveEveryFrameAtOnceWithASlicePerThread) {
 TEST(EncoderPolicy, IntraRefreshSendsNoIdrAfterTheFirstUnlessForced) {
   std::vector<Image> raw;
   const auto frames = biker_frames(320, 192, 40, &raw);
-  EncoderConfig c;
-  c.width = 320;
-  c.height = 192;
+  EncoderConfig c = small_config(320, 192);
   c.intra_refresh_frames = 10;  // four refresh waves in 40 frames
   const Stream s = encode_all(c, frames, raw);
   EXPECT_GT(count(nal_types(s.frames[0].data), 5), 0);
