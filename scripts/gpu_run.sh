@@ -39,7 +39,7 @@
 #                                                            original does not fit)
 #   .carry/traces/*.cameras.json                    0.3 MB
 #   .carry/deps/{include,share/cmake,lib}           ~8 MB   GLM, nlohmann-json, stb + libstb.a, zlib and
-#                                                            zstd (static, for .spz),
+#                                                            zstd (static, for .spz), xxhash.h,
 #                                                            a pkg-config shim for stb
 #   .carry/bin/{catgs-bench,catgs-gpu-tests,catgs-scene}  prebuilt x86-64 (glibc 2.36), static
 #                                                            cudart; bin/lib/libstb.so.0
@@ -68,6 +68,8 @@ prepare() {
   cp -f /usr/include/zlib.h /usr/include/zconf.h /usr/include/zstd.h /usr/include/zstd_errors.h "$CARRY/deps/include/"
   # glTF (.glb/.gltf) reader: tinygltf, header-only as render_core builds it.
   cp -f /usr/include/tiny_gltf.h "$CARRY/deps/include/"
+  # The scene cache's checksums: xxHash, header-only as render_core builds it.
+  cp -f /usr/include/xxhash.h "$CARRY/deps/include/"
   cat > "$CARRY/deps/lib/pkgconfig/stb.pc" <<'PC'
 prefix=${pcfiledir}/../..
 libdir=${prefix}/lib

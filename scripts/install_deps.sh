@@ -14,7 +14,7 @@ build=(
   libavcodec-dev libavutil-dev libswscale-dev libx264-dev
   libprotobuf-dev protobuf-compiler
   libglm-dev nlohmann-json3-dev libstb-dev
-  zlib1g-dev libzstd-dev libtinygltf-dev libwebp-dev libzip-dev
+  zlib1g-dev libzstd-dev libtinygltf-dev libwebp-dev libzip-dev libxxhash-dev
 )
 test=(git clang-format libgtest-dev nodejs npm chromium clang libclang-rt-dev)
 containers=(podman buildah runc debootstrap uidmap fuse-overlayfs slirp4netns)

@@ -7,6 +7,7 @@
 #include "encode/encoder.h"
 #include "session/message_validation.h"
 #include "session/first_view.h"
+#include "scene/scene_cache.h"
 
 namespace catgs::server {
 
@@ -118,6 +119,15 @@ void Server::load_model() {
   o.budget_bytes = static_cast<std::uint64_t>(options_.scene_memory_mb) << 20;
   o.metrics = &metrics_;
   o.log = &std::cout;
+  if (options_.scene_cache != "off") {
+    const SceneCacheMode mode = options_.scene_cache == "write" ? SceneCacheMode::write : SceneCacheMode::read;
+    o.loader = [mode](const std::string& path, const LoadProgress& progress) {
+      CachedLoadOptions c;
+      c.mode = mode;
+      c.log = [](const std::string& line) { std::cout << line << std::endl; };
+      return load_scene_cached(path, c, progress);
+    };
+  }
   // One copy of each loaded scene per GPU, uploaded before its first session and dropped with it.
   o.prepare = [this](LoadedScene& scene) {
     for (int d : gpus_->devices()) {

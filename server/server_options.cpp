@@ -66,6 +66,11 @@ std::string server_usage() {
          "  --scene-memory-mb N   keep the loaded scenes' models within N MiB of host memory:\n"
          "                        a load unloads scenes no session uses, least recently used\n"
          "                        first (default 0: no budget, scenes stay once loaded)\n"
+         "  --scene-cache off|read|write  the scene cache beside each scene (SCENE.catgs-cache,\n"
+         "                        written by `catgs-scene cache`): read uses it when it is valid\n"
+         "                        for the scene as it is now (else the scene is read, the reason\n"
+         "                        logged); write also writes it after a plain load (a folder that\n"
+         "                        is not writable is logged and ignored) (default read)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -206,7 +211,11 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       }
     } else if (a == "--cameras")
       out.cameras = v;
-    else if (a == "--scene-memory-mb")
+    else if (a == "--scene-cache") {
+      if (v != "off" && v != "read" && v != "write")
+        throw std::invalid_argument("--scene-cache must be off, read or write, got '" + v + "'");
+      out.scene_cache = v;
+    } else if (a == "--scene-memory-mb")
       out.scene_memory_mb = parse_int(a, v, 0, 1 << 24);
     else if (a == "--port")
       out.port = parse_int(a, v, 0, 65535);

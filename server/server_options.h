@@ -19,6 +19,9 @@ struct ServerOptions {
   // --scene-memory-mb: host memory the loaded scenes' models may hold, MiB, before unused ones
   // are unloaded (session/scene_store.h); 0: no budget, every scene stays once loaded.
   int scene_memory_mb = 0;
+  // --scene-cache: "off", "read" (a valid cache beside the scene is used) or "write" (also
+  // written after a plain load); scene/scene_cache.h.
+  std::string scene_cache = "read";
   int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
   std::string bind = "0.0.0.0";    // interface address to listen on
   std::string renderer = "auto";   // "cpu" | "cuda" | "auto"

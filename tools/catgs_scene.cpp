@@ -21,12 +21,22 @@
 //       The cameras as they are, interpolated (interpolate_views): what catgs-loadgen and
 //       catgs-bench replay for `cameras:C.json`, as a trace file (the web viewer's tour test
 //       compares its own Catmull-Rom + slerp with it).
+//   catgs-scene cache   --scene S [--out C] [--threads N]
+//       Writes the scene cache (scene/scene_cache.h; default S.catgs-cache beside S): the next
+//       load of S through the cache (catgs-server --scene-cache) copies it instead of parsing.
+//   catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]
+//                       [--cache-dir D] [--json OUT] [--upload]
+//       Load times, plain and cached, cold and warm page cache, with peak memory
+//       (scene_tools/load_bench.h): a table and JSON.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
 
 #include "common/image_io.h"
 #include "scene/ply_io.h"
+#include "scene/scene_cache.h"
+#include "scene_tools/load_bench.h"
 #include "scene/spz_file.h"
 #include "renderer/renderer.h"
 #include "scene/scene_bounds.h"
@@ -49,7 +59,10 @@ const char* kUsage =
     "                   [--width 1920 --height 1080] [--fov 60] [--altitude 0.75] [--pitch 24]\n"
     "       catgs-scene trace --scene S --cameras C.json --out T.trace [--scale 10] [--up X,Y,Z]\n"
     "                   [--rate 120] [--seconds-per-view 0.5] [--distance 0.6] [--frames N]\n"
-    "                   [--width 1920 --height 1080]\n";
+    "                   [--width 1920 --height 1080]\n"
+    "       catgs-scene cache --scene S [--out C] [--threads N]\n"
+    "       catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]\n"
+    "                   [--cache-dir D] [--json OUT] [--upload]\n";
 
 glm::vec3 parse_vec3(const std::string& s) {
   glm::vec3 v;
@@ -204,6 +217,33 @@ int interpolate(const catgs::tools::Args& args) {
   return 0;
 }
 
+int cache(const catgs::tools::Args& args) {
+  const std::string scene = args.require("--scene");
+  const std::string out = args.get("--out", catgs::scene_cache_path(scene));
+  const int threads = args.get_int("--threads", 0);
+  const auto m = catgs::load_scene(scene, catgs::LoadOptions{threads, false});
+  catgs::write_scene_cache(m, scene, out, threads);
+  std::printf("wrote %s: %zu Gaussians, SH degree %d\n", out.c_str(), m.size(), m.sh_degree);
+  return 0;
+}
+
+int load_bench(const catgs::tools::Args& args) {
+  catgs::tools::LoadBenchOptions o;
+  std::string list = args.require("--scenes");
+  for (std::size_t at = 0; at <= list.size();) {
+    const std::size_t comma = std::min(list.find(',', at), list.size());
+    if (comma > at) o.scenes.push_back(list.substr(at, comma - at));
+    at = comma + 1;
+  }
+  o.threads = args.get_int("--threads", 0);
+  o.repeat = args.get_int("--repeat", 3);
+  o.reference = !args.has("--no-reference");
+  o.upload = args.has("--upload");
+  o.cache_dir = args.get("--cache-dir");
+  o.json_path = args.get("--json");
+  return catgs::tools::run_load_bench(o);
+}
+
 int run(int argc, char** argv) {
   if (argc < 2 || std::string(argv[1]) == "--help") {
     std::cout << kUsage;
@@ -212,16 +252,20 @@ int run(int argc, char** argv) {
   const std::string cmd = argv[1];
   const catgs::tools::Args args(
       argc - 1, argv + 1,
-      {"--scene",           "--out",         "--out-compressed",   "--no-write!", "--check-views", "--width",
-       "--height",          "--radius-sq",   "--spacing",          "--scale",     "--seed",        "--up",
-       "--no-sh-rotation!", "--flyover-out", "--frames",           "--rate",      "--fov",         "--altitude",
-       "--pitch",           "--cameras",     "--seconds-per-view", "--distance",  "--png-prefix",  "--spz-version"});
+      {"--scene",           "--out",         "--out-compressed",   "--no-write!",     "--check-views", "--width",
+       "--height",          "--radius-sq",   "--spacing",          "--scale",         "--seed",        "--up",
+       "--no-sh-rotation!", "--flyover-out", "--frames",           "--rate",          "--fov",         "--altitude",
+       "--pitch",           "--cameras",     "--seconds-per-view", "--distance",      "--png-prefix",  "--spz-version",
+       "--threads",         "--scenes",      "--repeat",           "--no-reference!", "--cache-dir",   "--json",
+       "--upload!"});
   if (cmd == "info") return info(args);
   if (cmd == "compact") return compact(args);
   if (cmd == "convert") return convert(args);
   if (cmd == "tile") return tile(args);
   if (cmd == "trace") return trace(args);
   if (cmd == "interpolate") return interpolate(args);
+  if (cmd == "cache") return cache(args);
+  if (cmd == "load-bench") return load_bench(args);
   throw std::invalid_argument("unknown command '" + cmd + "'");
 }
 

@@ -1,5 +1,8 @@
 #include "scene/gaussian_model.h"
 
+#include "scene/load_blocks.h"
+
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -31,10 +34,16 @@ void GaussianModel::validate() const {
   if (means.size() != 3 * n || log_scales.size() != 3 * n || rotations.size() != 4 * n ||
       sh.size() != n * static_cast<std::size_t>(sh_coeffs()) * 3)
     throw std::runtime_error("array sizes disagree with " + std::to_string(n) + " Gaussians");
+  // In parallel blocks (load_blocks.h: the lowest failing block's error wins, so the first bad
+  // value is named, as a serial walk would).
   auto check = [](const std::vector<float>& v, std::size_t stride, const char* what) {
-    for (std::size_t k = 0; k < v.size(); ++k)
-      if (!std::isfinite(v[k]))
-        throw std::runtime_error(std::string("non-finite ") + what + " of Gaussian " + std::to_string(k / stride));
+    constexpr std::size_t kBlock = 1 << 20;
+    run_blocks((v.size() + kBlock - 1) / kBlock, 0, [&](uint64_t b) {
+      const std::size_t end = std::min(v.size(), (b + 1) * kBlock);
+      for (std::size_t k = b * kBlock; k < end; ++k)
+        if (!std::isfinite(v[k]))
+          throw std::runtime_error(std::string("non-finite ") + what + " of Gaussian " + std::to_string(k / stride));
+    });
   };
   check(means, 3, "mean");
   check(log_scales, 3, "log-scale");

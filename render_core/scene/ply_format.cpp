@@ -116,8 +116,8 @@ void MappedFile::release(uint64_t begin, uint64_t end) const {
   ::madvise(const_cast<uint8_t*>(data_) + begin, end - begin, MADV_DONTNEED);
 }
 
-void File::release_rows(const Element& e, uint64_t rows) const {
-  if (!ascii) bytes.release(e.data_offset, e.data_offset + rows * e.row_size);
+void File::release_rows(const Element& e, uint64_t begin, uint64_t end) const {
+  if (!ascii) bytes.release(e.data_offset + begin * e.row_size, e.data_offset + end * e.row_size);
 }
 
 double File::value(const Element& e, uint64_t row, int property) const {

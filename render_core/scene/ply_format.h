@@ -68,7 +68,9 @@ struct File {
   double value(const Element& e, uint64_t row, int property) const;
   // Rows [0, rows) of `e` will not be read again: their whole pages leave this process's memory
   // (binary files; a no-op for ascii ones, parsed up front).
-  void release_rows(const Element& e, uint64_t rows) const;
+  void release_rows(const Element& e, uint64_t rows) const { release_rows(e, 0, rows); }
+  // The same for rows [begin, end) (a block of a parallel load; load_blocks.h).
+  void release_rows(const Element& e, uint64_t begin, uint64_t end) const;
 };
 
 // Reads and validates a PLY file. Throws SceneFileError naming the path.

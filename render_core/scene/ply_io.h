@@ -74,6 +74,8 @@ namespace catgs {
 // than uint32 or compressed f_rest_* other than uint8, or holds NaN, an infinite value other
 // than an opacity logit, or values beyond float range.
 //
+// Speed: the rows of a PLY file are parsed in parallel (LoadOptions below; RESULTS.md, "Scene
+// loading", has the rates).
 // Memory: binary PLY files are memory-mapped and their pages handed back as the rows are read,
 // so a load peaks near the model's own size, not the model's plus the file's
 // (tests/unit/load_memory_test.cpp measures it). `progress`, when set, is called with (Gaussians
@@ -82,6 +84,18 @@ namespace catgs {
 // decompression), after each glTF primitive, and (N, N) at the end for every format (for SOG
 // only that: its images decode whole).
 GaussianModel load_scene(const std::string& path, const LoadProgress& progress = {});
+
+// How load_scene reads INRIA and compressed PLY (the other formats read as they always do).
+struct LoadOptions {
+  // Threads that parse the rows (load_blocks.h): 0 = every hardware thread. Each takes blocks of
+  // 8192 consecutive rows; the model, the errors and the progress calls' thread are the same for
+  // any count (the first bad row in file order is the one named).
+  int threads = 0;
+  // The serial reference reader: one thread, every value through the generic typed accessor
+  // (tests compare the fast float32 path and the parallel split against it).
+  bool reference = false;
+};
+GaussianModel load_scene(const std::string& path, const LoadOptions& options, const LoadProgress& progress = {});
 
 // Writes INRIA 3DGS PLY, binary little endian, SH degree of the model. Throws SceneFileError.
 void write_inria_ply(const GaussianModel& model, const std::string& path);

@@ -1,0 +1,120 @@
+// The scene cache (issue 37): a scene once read, stored beside it in the layout the render cores
+// use, so the next load is a memory-mapped copy at disk speed instead of a parse.
+//
+// What it holds: the GaussianModel's arrays exactly as load_scene returns them (float32, in file
+// order, which is the chunk order both cores cull by), and what DeviceScene::upload derives from
+// them: the SH in binary16 (forward_model/sh_storage.h half_bits) and the bound of every chunk of
+// fm::kChunkSize Gaussians (forward_model/chunk_bounds.h). A cached load gives the same model, bit
+// for bit, as a plain one (tests/unit/scene_cache_test.cpp).
+//
+// It is derived data, never trusted beyond what it can prove:
+// - the source: its size, modification time (ns) and an XXH3 hash of its first 64 KiB (a PLY's
+//   header) are stored; any difference rejects the cache;
+// - the version: kSceneCacheVersion, bumped whenever a reader's output or this layout changes; a
+//   cache of another version (or a file that is not a cache) is rejected;
+// - the bytes: the header carries its own XXH3 hash and every 4 MiB block of every section its
+//   own, checked as the block is copied out; a truncated file fails its size check.
+// A rejected cache is rebuilt by load_scene_cached (SceneCacheMode::write), with a log line that
+// says why.
+//
+// File layout (little endian; offsets from the file's start):
+//   0      CacheHeader (below), 4096 bytes reserved
+//   4096   the block hashes: uint64 XXH3-64 of each kCacheBlockBytes block of each section, the
+//          sections in order
+//   then   the sections, each at a 4096-byte boundary: means [N, 3] f32, log_scales [N, 3] f32,
+//          rotations [N, 4] f32 (w, x, y, z), opacity_logits [N] f32, sh [N, K, 3] f32,
+//          sh_half [N, K, 3] binary16 bits, chunks [chunk_count(N)] fm::ChunkBounds (32 bytes)
+//   (units and frames those of GaussianModel, gaussian_model.h).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "forward_model/chunk_bounds.h"
+#include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
+#include "scene/ply_io.h"
+
+namespace catgs {
+
+// Bump when a scene reader's output, the chunk bounds, the half rounding or this layout change.
+inline constexpr uint32_t kSceneCacheVersion = 1;
+inline constexpr uint64_t kCacheBlockBytes = 4ull << 20;
+
+// The cache file of a scene: the scene's path + ".catgs-cache" (a SOG's meta.json gets
+// meta.json.catgs-cache in its folder).
+std::string scene_cache_path(const std::string& scene_path);
+
+// Thrown when a cache cannot be used; what() names the cache file and says why (missing,
+// truncated, not a cache, another version, written for a different or changed source, a
+// checksum mismatch).
+class SceneCacheRejected : public std::runtime_error {
+ public:
+  SceneCacheRejected(const std::string& cache_path, const std::string& why)
+      : std::runtime_error(cache_path + ": " + why) {}
+};
+
+// Writes the cache of `model` (as load_scene returned it for `scene_path`) to `cache_path`
+// through a temporary file beside it renamed into place, so a reader never maps half a cache.
+// `threads` as LoadOptions::threads. Memory: the sections are written block by block from the
+// model (SH rounded to half a block at a time), so writing adds a few blocks per thread. Throws
+// SceneFileError naming the file (scene_path cannot be read, cache_path's folder is not
+// writable, the disk is full).
+void write_scene_cache(const GaussianModel& model, const std::string& scene_path, const std::string& cache_path,
+                       int threads = 0);
+
+// An opened cache file: mapped read-only, its header checked against the source.
+class SceneCache {
+ public:
+  // Throws SceneCacheRejected naming cache_path (see above for why).
+  static std::unique_ptr<SceneCache> open(const std::string& cache_path, const std::string& scene_path);
+  ~SceneCache();
+
+  uint64_t size() const;  // Gaussians
+  int sh_degree() const;
+  // Checks every block's hash and copies the model out (the sections' pages leave this process's
+  // memory behind the copy, so the load peaks near the model's size); name = scene_name(scene).
+  // The half SH and chunk sections are checked too. `progress` as load_scene's, on the calling
+  // thread. Throws SceneCacheRejected on a mismatch.
+  GaussianModel read_model(int threads = 0, const LoadProgress& progress = {}) const;
+  // The upload layout, straight from the mapping (checked by read_model):
+  const uint16_t* sh_half() const;        // [N, K, 3] binary16 bits (fm::half_bits of sh)
+  const fm::ChunkBounds* chunks() const;  // [fm::chunk_count(N)]
+
+  struct Impl;
+
+ private:
+  explicit SceneCache(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+enum class SceneCacheMode {
+  off,    // load_scene, nothing else
+  read,   // a valid cache is used; otherwise the scene is read (the reason logged)
+  write,  // as read, and a missing or rejected cache is written after the scene is read (a folder
+          // that is not writable is logged and the load goes on)
+};
+
+struct CachedLoadOptions {
+  LoadOptions load;  // threads, for the parse and the cache copy
+  SceneCacheMode mode = SceneCacheMode::write;
+  std::string cache_path;                       // empty: scene_cache_path(path)
+  std::function<void(const std::string&)> log;  // one line per decision (used, rejected, written)
+};
+
+// What load_scene_cached did.
+struct CachedLoadReport {
+  bool from_cache = false;
+  bool written = false;  // the cache was (re)written
+  std::string why;       // why the cache was not used (empty when it was, or mode off)
+};
+
+// load_scene through the cache. Throws what load_scene throws (the cache's own faults never
+// fail a load: they are logged and the scene is read).
+GaussianModel load_scene_cached(const std::string& path, const CachedLoadOptions& options,
+                                const LoadProgress& progress = {}, CachedLoadReport* report = nullptr);
+
+}  // namespace catgs
