@@ -36,7 +36,7 @@ double seconds_since(Clock::time_point t0) { return std::chrono::duration<double
 
 // What a child sends back: up to 8 timings (s), its peak resident set, an error.
 struct ChildResult {
-  double seconds[8] = {};
+  double seconds[12] = {};
   double base_mib = 0;  // resident at the start (the program, its libraries, a CUDA context)
   double peak_mib = 0;  // peak resident
   char error[512] = {};
@@ -129,45 +129,63 @@ uint64_t model_bytes(const GaussianModel& m) {
   return 4 * (m.means.size() + m.log_scales.size() + m.rotations.size() + m.opacity_logits.size() + m.sh.size());
 }
 
-// Where the time of a plain load goes, phase by phase (one warm child).
+// Where the time of a plain load goes, phase by phase (one warm child). The index of each phase's
+// time in ChildResult::seconds is its index here.
+constexpr const char* kPhases[] = {"read (8 MiB reads)",
+                                   "parse, reference (1 thread)",
+                                   "parse + validate, load_scene",
+                                   "validate (again, alone)",
+                                   "model arrays allocated (resize, 1 thread)",
+                                   "chunk bounds",
+                                   "SH to half (1 thread)",
+                                   "SH to half (load threads, as DeviceScene::upload)",
+                                   "scene bounds (1 thread)"};
+static_assert(sizeof(kPhases) / sizeof(kPhases[0]) <= sizeof(ChildResult::seconds) / sizeof(double));
+
 void phases(SceneResult& s, const LoadBenchOptions& o) {
   const ChildResult r = in_child([&](ChildResult& out) {
+    int k = 0;
     auto t0 = Clock::now();
+    auto lap = [&] {  // the time since the last lap into the next phase
+      out.seconds[k++] = seconds_since(t0);
+      t0 = Clock::now();
+    };
     read_through(s.path);
-    out.seconds[0] = seconds_since(t0);
+    lap();
     if (o.reference) {
       LoadOptions ref;
       ref.reference = true;
-      t0 = Clock::now();
       (void)load_scene(s.path, ref);
-      out.seconds[1] = seconds_since(t0);
     }
-    LoadOptions fast;
-    fast.threads = o.threads;
-    t0 = Clock::now();
-    const GaussianModel m = load_scene(s.path, fast);
-    out.seconds[2] = seconds_since(t0);
-    t0 = Clock::now();
+    lap();
+    const GaussianModel m = load_scene(s.path, LoadOptions{o.threads, false});
+    lap();
     m.validate();
-    out.seconds[3] = seconds_since(t0);
-    t0 = Clock::now();
+    lap();
+    {
+      GaussianModel empty;
+      empty.sh_degree = m.sh_degree;
+      empty.resize(m.size());
+    }
+    lap();
     const auto chunks = fm::chunk_bounds(m);
-    out.seconds[4] = seconds_since(t0);
-    t0 = Clock::now();
+    lap();
     std::vector<uint16_t> half(m.sh.size());
-    for (std::size_t k = 0; k < half.size(); ++k) half[k] = fm::half_bits(m.sh[k]);
-    out.seconds[5] = seconds_since(t0);
-    t0 = Clock::now();
+    for (std::size_t i = 0; i < half.size(); ++i) half[i] = fm::half_bits(m.sh[i]);
+    lap();
+    constexpr std::size_t kBlock = 1 << 20;  // as DeviceScene::upload rounds them
+    run_blocks((half.size() + kBlock - 1) / kBlock, o.threads, [&](uint64_t b) {
+      const std::size_t end = std::min(half.size(), (b + 1) * kBlock);
+      for (std::size_t i = b * kBlock; i < end; ++i) half[i] = fm::half_bits(m.sh[i]);
+    });
+    lap();
     (void)m.bounds();
-    out.seconds[6] = seconds_since(t0);
-    out.seconds[7] = static_cast<double>(chunks.size() + half.size());  // keeps them alive
+    lap();
+    if (chunks.empty() || half.empty()) throw std::logic_error("no chunks or SH");
   });
   if (r.error[0]) throw std::runtime_error(r.error);
-  const char* names[] = {
-      "read (8 MiB reads)", "parse, reference (1 thread)", "parse + validate, load_scene", "validate (again, alone)",
-      "chunk bounds",       "SH to half (1 thread)",       "scene bounds (1 thread)"};
-  for (int k = 0; k < 7; ++k)
-    if (k != 1 || o.reference) s.phases_ms.emplace_back(names[k], 1e3 * r.seconds[k]);
+  for (std::size_t k = 0; k < sizeof(kPhases) / sizeof(kPhases[0]); ++k)
+    if (k != 1 || o.reference) s.phases_ms.emplace_back(kPhases[k], 1e3 * r.seconds[k]);
 }
 
 // One load row: `repeat` loads in one child, the best kept; cold drops the file first.
