@@ -73,12 +73,12 @@ float scene_percentile(const std::vector<float>& v, double q) {
   return kth_smallest(v, static_cast<std::size_t>(q * static_cast<double>(v.size() - 1)));
 }
 
-std::vector<float> distances_from(const GaussianModel& m, glm::vec3 c) {
-  std::vector<float> d(m.size());
+// Into `d` (resized to N): reused across the mean-shift's iterations, so its pages fault once.
+void distances_from(const GaussianModel& m, glm::vec3 c, std::vector<float>& d) {
+  d.resize(m.size());
   for_blocks(m.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) d[i] = glm::distance(mean_at(m, i), c);
   });
-  return d;
 }
 
 float opacity(const GaussianModel& m, std::size_t i) { return 1.0f / (1.0f + std::exp(-m.opacity_logits[i])); }
@@ -148,8 +148,9 @@ glm::vec3 density_mode(const GaussianModel& m) {
   for_blocks(m.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) alpha[i] = opacity(m, i);
   });
+  std::vector<float> d;
   for (int iteration = 0; iteration < 50; ++iteration) {
-    const std::vector<float> d = distances_from(m, c);
+    distances_from(m, c, d);
     const float kernel = scene_percentile(d, 0.25);
     // Serial on purpose: the sums' order, hence their rounding, is the one the tests know.
     glm::dvec3 sum(0.0);
@@ -300,7 +301,8 @@ DenseContent dense_content(const GaussianModel& model) {
   if (model.size() == 0) throw std::logic_error("dense content of an empty Gaussian model");
   DenseContent c;
   c.mode = density_mode(model);
-  const std::vector<float> d = distances_from(model, c.mode);
+  std::vector<float> d;
+  distances_from(model, c.mode, d);
   c.radius = content_radius(d, &c.share);
   const BallMoments ball = ball_moments(model, d, c.radius);
   c.centre = ball.count > 0 ? glm::vec3(ball.mean) : c.mode;
