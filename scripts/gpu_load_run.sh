@@ -8,18 +8,21 @@
 #   cmake --preset cuda && cmake --build build/cuda --target catgs-scene catgs-bench catgs-gpu-tests
 #   scripts/gpu_run.sh prepare
 # On the GPU machine, carry [".carry"]:
-#   scripts/gpu_load_run.sh [STAGE...]      stages: small city13 city101 (default: small city13)
+#   scripts/gpu_load_run.sh [STAGE...]      stages: small city13 build101 city101 (default: small city13)
 #     small    biker (compressed PLY, bundled), flowers_sh3 (INRIA PLY, SH 3), tumblewood_sh2 as
 #              INRIA PLY (88.9 MB, decoded from the carried compact copy: the original does not
 #              fit the carry; same size and layout, values quantised)
 #     city13   the 13-copy city (7.05 M Gaussians, INRIA PLY, 1.16 GB), built from the compact
 #              tumblewood (catgs-scene tile, as gpu_server_run.sh's scenes)
-#     city101  the 101-copy city (54.8 M, 9.0 GB; --radius-sq 32), built on the machine (a few
-#              minutes; run it in a call of its own), no serial reference row
+#     build101 builds the 101-copy city (54.8 M, 9.0 GB; --radius-sq 32) on the machine, nothing
+#              else (a few minutes: a call of its own, the next one right after it while the
+#              machine is warm)
+#     city101  its table (builds it first when missing), one warm load a row, no serial reference
 #   -> $OUT/load_STAGE.json and .md (the tables), $OUT/load.log. Scenes and caches go to
 #   $CATGS_LOAD_DIR (default /tmp/catgs_load) and stay for the next call while the machine is
 #   warm. The log records that folder's file system: on tmpfs "cold" equals "warm" (the file is
 #   memory), so point CATGS_LOAD_DIR at a disk for cold rows that mean something.
+#   CATGS_LOAD_UPLOAD=0 leaves the upload out (to try the script with a CPU-only catgs-scene).
 # Exit status: non-zero if a stage failed.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -42,7 +45,9 @@ df -hT "$W" | tail -1
 bench() {  # bench NAME ARGS... : load-bench over the scenes, table to NAME.md
   local name=$1
   shift
-  "$TOOL" load-bench --upload --json "$OUT/load_$name.json" "$@" | tee "$OUT/load_$name.md"
+  local upload=()
+  [ "${CATGS_LOAD_UPLOAD:-1}" = 0 ] || upload=(--upload)
+  "$TOOL" load-bench "${upload[@]}" --json "$OUT/load_$name.json" "$@" | tee "$OUT/load_$name.md"
   return "${PIPESTATUS[0]}"
 }
 
@@ -52,9 +57,8 @@ small() {
   bench small --scenes "$W/biker.compressed.ply,$W/flowers_sh3.ply,$W/tumblewood_sh2.ply" --repeat 5
 }
 
-city() {  # city NAME RADIUS_SQ BENCH_ARGS...
+build_city() {  # build_city NAME RADIUS_SQ
   local name=$1 r=$2
-  shift 2
   if [ ! -f "$W/$name.ply" ]; then
     local t0=$SECONDS
     "$TOOL" tile --scene "$TUMBLE" --scale 10 --radius-sq "$r" --up 0,-1,0 --out "$W/$name.ply" > "$W/$name.tile.log" ||
@@ -62,6 +66,12 @@ city() {  # city NAME RADIUS_SQ BENCH_ARGS...
     head -1 "$W/$name.tile.log"
     echo "$name: built in $((SECONDS - t0)) s, $(du -h "$W/$name.ply" | cut -f1)"
   fi
+}
+
+city() {  # city NAME RADIUS_SQ BENCH_ARGS...
+  local name=$1 r=$2
+  shift 2
+  build_city "$name" "$r" || return 1
   bench "$name" --scenes "$W/$name.ply" "$@"
 }
 
@@ -73,8 +83,9 @@ for s in "${stages[@]}"; do
   case "$s" in
     small) small ;;
     city13) city city13 4 --repeat 3 ;;
-    city101) city city101 32 --repeat 2 --no-reference ;;
-    *) echo "unknown stage '$s' (small, city13, city101)"; false ;;
+    build101) build_city city101 32 ;;
+    city101) city city101 32 --repeat 1 --no-reference ;;
+    *) echo "unknown stage '$s' (small, city13, build101, city101)"; false ;;
   esac || { echo "stage $s FAILED"; status=1; }
   echo "== stage $s: $((SECONDS - t0)) s"
 done
