@@ -244,3 +244,36 @@ TEST(SceneLoading, BudgetUnloadsUnusedScenesAndKeepsUsedOnes) {
 }
 
 }  // namespace
+
+// --scene-cache (issue 37): `write` reads the scene and writes its cache beside it; the next
+// server uses the cache (`read`, the default) and streams the same scene; a cache damaged
+// between the two is logged with its reason, the scene read, the server serving as before.
+TEST(SceneLoading, SceneCacheWrittenThenUsedAndDamageLogged) {
+  const auto files = biker_copies("cache", {"cached"});
+  const std::string cache = files[0] + ".catgs-cache";
+  {
+    ServerProcess server(server_args(files[0], {"--scene-cache", "write"}));
+    EXPECT_NE(server.log().find("scene cache: " + cache + ": no cache file; reading the scene"), std::string::npos)
+        << server.log();
+    EXPECT_NE(server.log().find("scene cache: wrote " + cache), std::string::npos) << server.log();
+  }
+  ASSERT_TRUE(fs::exists(cache));
+  {
+    ServerProcess server(server_args(files[0], {}));
+    EXPECT_NE(server.log().find("scene cache: " + cache + ": used"), std::string::npos) << server.log();
+    StreamClient c;
+    c.connect(server.port());
+    c.hello(160, 120, "", 30000, "cached");
+    expect_frames(c, 0, 2, "a session on the cached scene");
+  }
+  fs::resize_file(cache, fs::file_size(cache) - 100);
+  {
+    ServerProcess server(server_args(files[0], {"--scene-cache", "read"}));
+    EXPECT_NE(server.log().find("truncated or extended"), std::string::npos) << server.log();
+    EXPECT_EQ(server.log().find("scene cache: wrote"), std::string::npos) << "read never writes: " << server.log();
+    StreamClient c;
+    c.connect(server.port());
+    c.hello(160, 120, "", 30000, "cached");
+    expect_frames(c, 0, 2, "a session after the damaged cache was passed over");
+  }
+}
