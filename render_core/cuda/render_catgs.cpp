@@ -61,17 +61,25 @@ void CudaRenderer::State::ensure_catgs_buffers(uint64_t n) {
 }
 
 int CudaRenderer::State::measure_window(const stages::SceneView& scene, const stages::CameraParams& key,
-                                        const stages::CameraParams& next, float depth_threshold) {
+                                        const stages::CameraParams& next, const SpeculationParams& sp) {
   unsigned* cc = catgs_counters.as<unsigned>();
+  // With a quantile, the histogram of the motions too (about 1 KiB more to read back).
+  const bool binned = sp.motion_quantile < 1.0f;
   CATGS_CUDA(cudaMemsetAsync(cc + kMotionBits, 0, sizeof(unsigned), stream));
-  stages::max_screen_motion(scene, key, next, depth_threshold, cc + kMotionBits, stream);
+  if (binned) CATGS_CUDA(cudaMemsetAsync(cc + kMotionCounts, 0, fm::kMotionBins * sizeof(unsigned), stream));
+  stages::max_screen_motion(scene, key, next, sp.depth_threshold, cc + kMotionBits,
+                            binned ? cc + kMotionCounts : nullptr, stream);
   CATGS_CUDA(
       cudaMemcpyAsync(host_catgs + kMotionBits, cc + kMotionBits, sizeof(unsigned), cudaMemcpyDeviceToHost, stream));
+  if (binned)
+    CATGS_CUDA(cudaMemcpyAsync(host_catgs + kMotionCounts, cc + kMotionCounts, fm::kMotionBins * sizeof(unsigned),
+                               cudaMemcpyDeviceToHost, stream));
   CATGS_CUDA(cudaEventRecord(catgs_readback, stream));
   CATGS_CUDA(cudaEventSynchronize(catgs_readback));
   ++syncs;
   float motion = 0.0f;
   std::memcpy(&motion, host_catgs + kMotionBits, sizeof motion);
+  if (binned) motion = fm::motion_quantile(host_catgs + kMotionCounts, motion, sp.motion_quantile);
   return planner.window_for(motion);
 }
 
@@ -87,9 +95,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
 
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   // The window from the predicted path (never from future input): M over one frame, then W.
-  const int planned = s.planner.window_wanted()
-                          ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp.depth_threshold)
-                          : 0;
+  const int planned =
+      s.planner.window_wanted() ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp) : 0;
   const stages::Projected proj = s.projected();
   auto* counters = s.counters.as<unsigned long long>();
   const stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
@@ -160,8 +167,8 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   CATGS_CUDA(cudaMemsetAsync(cc + kOutside, 0, sizeof(unsigned), s.stream));
   stages::update_subframe_features(scene_view(*scene_), camera_params(camera), s.cached.as<uint32_t>(),
-                                   static_cast<uint32_t>(s.key_visible), s.projected(), s.trails(), cc + kOutside,
-                                   s.stream);
+                                   static_cast<uint32_t>(s.key_visible), options_.speculation.subframe_key_colour,
+                                   s.projected(), s.trails(), cc + kOutside, s.stream);
   stages::check_unlisted(scene_view(*scene_), camera_params(camera), s.tiles_touched.as<uint32_t>(),
                          s.chunk_total.as<uint32_t>(), cc + kOutside, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
