@@ -90,14 +90,13 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
 void speculative_preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
                             const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out);
 
-// catgs planner input M (paper sec. 3.1; forward_model/motion_bound.h): the screen motion
-// (pixels) between cameras `a` and `b` of the means visible in `a` deeper than `min_depth`, their
-// maximum for quantile >= 1 (the paper's M), else fm::motion_quantile of their histogram. Chunks
-// none of whose means can count (fm::chunk_means_off_image, `chunks` as fm::chunk_bounds(model))
-// are skipped, as the CUDA core does; the result is the same with or without that step. Throws
+// catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
+// means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M). Chunks none of
+// whose means can count (fm::chunk_means_off_image, `chunks` as fm::chunk_bounds(model)) are
+// skipped, as the CUDA core does; the result is the same with or without that step. Throws
 // std::invalid_argument for chunk bounds of another scene.
-float screen_motion_bound(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
-                          const Camera& b, float min_depth, float quantile = 1.0f);
+float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
+                        const Camera& b, float min_depth);
 
 // catgs sub-frame (cpu/subframe_features.cpp; paper sec. 3.2): recomputes mean2d, conic,
 // opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there; the

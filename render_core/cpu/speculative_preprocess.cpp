@@ -2,12 +2,10 @@
 // preprocess.cpp, projecting each Gaussian at every camera of the predicted path and testing
 // tiles against its trail instead of its ellipse.
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <stdexcept>
 
 #include "forward_model/chunk_bounds.h"
-#include "forward_model/motion_bound.h"
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 #include "forward_model/sh_storage.h"
@@ -55,21 +53,18 @@ bool path_misses_image(const GaussianModel& model, std::size_t i, glm::vec3 mean
 
 }  // namespace
 
-float screen_motion_bound(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
-                          const Camera& b, float min_depth, float quantile) {
+float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
+                        const Camera& b, float min_depth) {
   const std::size_t n = model.size();
   if (chunks.size() != fm::chunk_count(n))
-    throw std::invalid_argument("screen_motion_bound: chunk bounds of another scene");
+    throw std::invalid_argument("max_screen_motion: chunk bounds of another scene");
   const fm::View va = fm::view_of(a);
-  const bool binned = quantile < 1.0f;
   std::vector<float> per_chunk(chunks.size(), 0.0f);
-  std::vector<std::atomic<uint32_t>> counts(fm::kMotionBins);
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
     // A chunk none of whose means can count is skipped whole, as the CUDA stage does
     // (fm::chunk_means_off_image: on a scene of many copies most chunks lie off the key image).
     if (fm::chunk_means_off_image(chunks[c], va, min_depth)) return;
     float m = 0.0f;
-    uint32_t local[fm::kMotionBins] = {};
     for (std::size_t i = c * fm::kChunkSize; i < std::min(n, (c + 1) * fm::kChunkSize); ++i) {
       const glm::vec3 x(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
       const glm::vec3 pa = a.R * x + a.t, pb = b.R * x + b.t;
@@ -77,21 +72,13 @@ float screen_motion_bound(const GaussianModel& model, const std::vector<fm::Chun
       const glm::vec2 ua(a.fx * pa.x / pa.z + a.cx, a.fy * pa.y / pa.z + a.cy);
       if (ua.x < 0 || ua.y < 0 || ua.x > static_cast<float>(a.width) || ua.y > static_cast<float>(a.height)) continue;
       const glm::vec2 ub(b.fx * pb.x / pb.z + b.cx, b.fy * pb.y / pb.z + b.cy);
-      const float motion = glm::length(ub - ua);
-      m = std::max(m, motion);
-      if (binned) ++local[fm::motion_bin(motion)];
+      m = std::max(m, glm::length(ub - ua));
     }
     per_chunk[c] = m;
-    if (binned)
-      for (int k = 0; k < fm::kMotionBins; ++k)
-        if (local[k] != 0) counts[k].fetch_add(local[k], std::memory_order_relaxed);
   });
   float m = 0.0f;
   for (float v : per_chunk) m = std::max(m, v);
-  if (!binned) return m;
-  uint32_t hist[fm::kMotionBins];
-  for (int k = 0; k < fm::kMotionBins; ++k) hist[k] = counts[k].load();
-  return fm::motion_quantile(hist, m, quantile);
+  return m;
 }
 
 void speculative_preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,

@@ -61,25 +61,17 @@ void CudaRenderer::State::ensure_catgs_buffers(uint64_t n) {
 }
 
 int CudaRenderer::State::measure_window(const stages::SceneView& scene, const stages::CameraParams& key,
-                                        const stages::CameraParams& next, const SpeculationParams& sp) {
+                                        const stages::CameraParams& next, float depth_threshold) {
   unsigned* cc = catgs_counters.as<unsigned>();
-  // With a quantile, the histogram of the motions too (about 1 KiB more to read back).
-  const bool binned = sp.motion_quantile < 1.0f;
   CATGS_CUDA(cudaMemsetAsync(cc + kMotionBits, 0, sizeof(unsigned), stream));
-  if (binned) CATGS_CUDA(cudaMemsetAsync(cc + kMotionCounts, 0, fm::kMotionBins * sizeof(unsigned), stream));
-  stages::max_screen_motion(scene, key, next, sp.depth_threshold, cc + kMotionBits,
-                            binned ? cc + kMotionCounts : nullptr, stream);
+  stages::max_screen_motion(scene, key, next, depth_threshold, cc + kMotionBits, stream);
   CATGS_CUDA(
       cudaMemcpyAsync(host_catgs + kMotionBits, cc + kMotionBits, sizeof(unsigned), cudaMemcpyDeviceToHost, stream));
-  if (binned)
-    CATGS_CUDA(cudaMemcpyAsync(host_catgs + kMotionCounts, cc + kMotionCounts, fm::kMotionBins * sizeof(unsigned),
-                               cudaMemcpyDeviceToHost, stream));
   CATGS_CUDA(cudaEventRecord(catgs_readback, stream));
   CATGS_CUDA(cudaEventSynchronize(catgs_readback));
   ++syncs;
   float motion = 0.0f;
   std::memcpy(&motion, host_catgs + kMotionBits, sizeof motion);
-  if (binned) motion = fm::motion_quantile(host_catgs + kMotionCounts, motion, sp.motion_quantile);
   return planner.window_for(motion);
 }
 
@@ -95,8 +87,9 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
 
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   // The window from the predicted path (never from future input): M over one frame, then W.
-  const int planned =
-      s.planner.window_wanted() ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp) : 0;
+  const int planned = s.planner.window_wanted()
+                          ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp.depth_threshold)
+                          : 0;
   const stages::Projected proj = s.projected();
   auto* counters = s.counters.as<unsigned long long>();
   const stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};

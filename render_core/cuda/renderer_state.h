@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <string>
 
-#include "forward_model/motion_bound.h"
 #include "speculation/speculation_planner.h"
 #include "cuda_check.h"
 #include "stages.h"
@@ -81,16 +80,14 @@ enum CounterSlot {
 };
 // Slots of State::catgs_counters (32-bit, device) and of its pinned host mirror host_catgs (the
 // first kHostCatgsSlots): M's float bits, the sub-frame's "outside its trail" flag, the key
-// frame's slice and partial-slot totals (stages::SlicePlan::totals), the frustum-cache size and
-// the histogram of the motions behind M (fm::kMotionBins counts, read back for a quantile).
+// frame's slice and partial-slot totals (stages::SlicePlan::totals) and the frustum-cache size.
 enum CatgsCounterSlot {
   kMotionBits = 0,
   kOutside = 1,
   kSliceTotals = 2,  // and 3: partial slots
   kCachedCount = 4,
-  kMotionCounts = 8,
-  kCatgsCounterSlots = kMotionCounts + fm::kMotionBins,
-  kHostCatgsSlots = kCatgsCounterSlots
+  kHostCatgsSlots = 4,
+  kCatgsCounterSlots = 8
 };
 
 // Frame events: a key frame records all; a catgs sub-frame records kStart, kPreprocessed (its
@@ -195,11 +192,11 @@ struct CudaRenderer::State {
                              uint32_t first_tile = 0, uint32_t end_tile = 0xffffffffu);
 
   // catgs key frames (render_catgs.cpp): grows the trail and frustum-cache buffers; measures M
-  // between the key camera and the predicted next one (one readback: 4 bytes, or about 1 KiB
-  // with M's histogram for sp.motion_quantile < 1) and returns the planner's W.
+  // between the key camera and the predicted next one (one 4-byte readback) and returns the
+  // planner's W.
   void ensure_catgs_buffers(uint64_t n);
   int measure_window(const stages::SceneView& scene, const stages::CameraParams& key, const stages::CameraParams& next,
-                     const SpeculationParams& sp);
+                     float depth_threshold);
 
   // Views of the buffers as the stages take them.
   stages::Projected projected() const {

@@ -6,7 +6,6 @@
 // stored trail), so counting and emission agree; what contraction changes is the last bits of a
 // trail against the CPU reference's, which only widens or narrows a trail by float rounding.
 #include "forward_model/chunk_bounds.h"
-#include "forward_model/motion_bound.h"
 #include "forward_model/trail.h"
 #include "cuda_check.h"
 #include "splat.cuh"
@@ -158,19 +157,12 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 // M: a warp per chunk (grid-stride over the scene's chunks), the chunk skipped whole when none
 // of its means can count (fm::chunk_means_off_image: on a scene of many copies most chunks lie
 // off the key image, and M read every mean at every key frame that wanted a window), else its
-// 32 lanes read its means (coalesced); a warp reduction, one atomicMax per warp. With `counts`,
-// each motion is binned too (fm::motion_bin) in the block's shared histogram, added to the
-// global one once per block and bin.
+// 32 lanes read its means (coalesced); a warp reduction, one atomicMax per warp.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     max_screen_motion_kernel(const float* means,             // [N, 3]
                              const fm::ChunkBounds* chunks,  // [chunks]
                              uint64_t n, CameraParams a, CameraParams b, float min_depth,
-                             unsigned* max_bits,  // [1]
-                             unsigned* counts) {  // [fm::kMotionBins] or null
-  __shared__ unsigned hist[fm::kMotionBins];
-  if (counts)
-    for (int k = threadIdx.x; k < fm::kMotionBins; k += blockDim.x) hist[k] = 0u;
-  __syncthreads();
+                             unsigned* max_bits) {  // [1]
   float m = 0.0f;
   const uint64_t chunk_count = fm::chunk_count(n);
   const uint64_t warps = static_cast<uint64_t>(gridDim.x) * blockDim.x / 32u;
@@ -185,17 +177,11 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
       const glm::vec2 ua(a.fx * pa.x / pa.z + a.cx, a.fy * pa.y / pa.z + a.cy);
       if (ua.x < 0 || ua.y < 0 || ua.x > static_cast<float>(a.width) || ua.y > static_cast<float>(a.height)) continue;
       const glm::vec2 ub(b.fx * pb.x / pb.z + b.cx, b.fy * pb.y / pb.z + b.cy);
-      const float motion = glm::length(ub - ua);
-      m = fmaxf(m, motion);
-      if (counts) atomicAdd(&hist[fm::motion_bin(motion)], 1u);
+      m = fmaxf(m, glm::length(ub - ua));
     }
   }
   for (int off = 16; off > 0; off >>= 1) m = fmaxf(m, __shfl_xor_sync(0xffffffffu, m, off));
   if (lane == 0 && m > 0.0f) atomicMax(max_bits, __float_as_uint(m));
-  if (!counts) return;
-  __syncthreads();
-  for (int k = threadIdx.x; k < fm::kMotionBins; k += blockDim.x)
-    if (hist[k] != 0u) atomicAdd(&counts[k], hist[k]);
 }
 
 }  // namespace
@@ -221,13 +207,13 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
 }
 
 void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b, float min_depth,
-                       unsigned* max_bits, unsigned* counts, cudaStream_t stream) {
+                       unsigned* max_bits, cudaStream_t stream) {
   if (scene.n == 0) return;
   const uint64_t warps_per_block = tune::kGaussianThreads / 32;
   const uint64_t want = (fm::chunk_count(scene.n) + warps_per_block - 1) / warps_per_block;
   const auto blocks = static_cast<unsigned>(want < 4096 ? want : 4096);
   max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene.means, scene.chunks, scene.n, a, b,
-                                                                          min_depth, max_bits, counts);
+                                                                          min_depth, max_bits);
   CATGS_CUDA_LAUNCHED("max_screen_motion_kernel");
 }
 

@@ -21,14 +21,12 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
                             const Projected& out, const Trails& trails, const LiveChunks& live,
                             unsigned long long* visible, const BigList& big, cudaStream_t stream);
 
-// catgs planner input (speculative_preprocess.cu; mirrors cpu::screen_motion_bound): the largest
+// catgs planner input (speculative_preprocess.cu; mirrors cpu::max_screen_motion): the largest
 // screen motion (pixels) between cameras a and b of the means visible in a deeper than
 // min_depth, as float bits into *max_bits (which must hold 0 on entry; atomicMax on the bits of
-// non-negative floats orders like the floats), and, when `counts` is not null, the histogram of
-// those motions (forward_model/motion_bound.h: counts [fm::kMotionBins], zero on entry) for a
-// quantile. Reads only the chunks whose means may count (fm::chunk_means_off_image), so its cost
-// follows the key view, not the scene's size.
+// non-negative floats orders like the floats). Reads only the chunks whose means may count
+// (fm::chunk_means_off_image), so its cost follows the key view, not the scene's size.
 void max_screen_motion(const SceneView& scene, const CameraParams& a, const CameraParams& b, float min_depth,
-                       unsigned* max_bits, unsigned* counts, cudaStream_t stream);
+                       unsigned* max_bits, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -17,7 +17,6 @@ void validate(const SpeculationParams& p) {
   check(p.target_fps > 0.0 && std::isfinite(p.target_fps), "target fps must be positive");
   check(p.tile_size > 0.0f && std::isfinite(p.tile_size), "tile size l must be positive");
   check(p.depth_threshold >= 0.0f && std::isfinite(p.depth_threshold), "depth threshold d must be >= 0");
-  check(p.motion_quantile > 0.0f && p.motion_quantile <= 1.0f, "motion quantile must be in (0, 1]");
   check(p.trail.slack >= 0.0f && p.trail.margin_px >= 0.0f && p.trail.motion_margin >= 0.0f &&
             std::isfinite(p.trail.slack) && std::isfinite(p.trail.margin_px) && std::isfinite(p.trail.motion_margin),
         "trail margins must be finite and >= 0");

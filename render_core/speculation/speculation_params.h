@@ -50,18 +50,11 @@ struct SpeculationParams {
   bool task_splitting = true;          // false (--no-split): one rasterization task per tile
 
   // Tuned beyond the paper.
-  // M is this quantile of the per-frame screen motion of the means that count (on the key image,
-  // deeper than d), not their maximum: 1 is the paper's maximum, under which one near Gaussian
-  // closes the window for the whole frame. A Gaussian faster than M keeps its own, longer trail
-  // (fm::build_trail follows each Gaussian's motion) and the sub-frame check re-keys a frame it
-  // leaves, so M only sets how far ahead the key frame plans (issue 36; RESULTS.md, "A robust
-  // motion bound"). In (0, 1]; forward_model/motion_bound.h bins the motions.
-  float motion_quantile = 1.0f;
   // A sub-frame keeps the colours its key frame evaluated (view direction from the key camera)
   // instead of evaluating the SH at its own pose: the SH coefficients are the largest read of the
   // sub-frame's features, which are bound by DRAM (issue 36). The colour then lags the view
   // direction by at most a window's camera motion (RESULTS.md, "Sub-frame colours").
-  bool subframe_key_colour = false;
+  bool subframe_key_colour = true;
   TrailMargins trail;
   SpeculationBackoff backoff;
   // Task splitting's slice length: the paper's average load l = L / t or this many entries,
@@ -80,7 +73,7 @@ struct SpeculationParams {
 
 // Checks the parameters a planner accepts: a window in 0..kMaxWindow, a backoff in 0..1000
 // frames, min_served in 0..kMaxWindow, a non-negative slice floor, a finite positive F_target and
-// l, a finite d >= 0, a motion quantile in (0, 1], finite trail margins >= 0, a fit window in (0, 1] s and an acceleration
+// l, a finite d >= 0, finite trail margins >= 0, a fit window in (0, 1] s and an acceleration
 // window in [0, 1] s. Throws std::invalid_argument naming the parameter.
 void validate(const SpeculationParams& params);
 

@@ -124,27 +124,17 @@ TEST(BenchVariants, MalformedListsAreRefused) {
 TEST(BenchVariants, TheSyntaxListsPresetsAndEverySetting) {
   const std::string syntax = variant_syntax();
   for (const char* part : {"catgs-nocache = catgs{cache=off}", "catgs-nosplit = catgs{split=off}", "catgs-wN", "window",
-                           "backoff", "split", "cache", "fit_ms", "accel_ms", "motion_q", "key_colour", "key_sort"})
+                           "backoff", "split", "cache", "fit_ms", "accel_ms", "key_colour"})
     EXPECT_TRUE(contains(syntax, part)) << part;
 }
 
-// key_sort is the bench's own (the CUDA core's key-frame sort), taken out before the speculation
-// settings; issue 36's motion quantile and key-frame colours are speculation settings.
-TEST(BenchVariants, KeySortAndIssue36Settings) {
-  const Variant plain = parse_variant("catgs");
-  EXPECT_FALSE(plain.depth_first_sort.has_value());
-  EXPECT_EQ(plain.speculation.motion_quantile, 1.0f);
-  EXPECT_FALSE(plain.speculation.subframe_key_colour);
-  const Variant v = parse_variant("catgs{motion_q=0.95,key_sort=single,key_colour=on}");
-  ASSERT_TRUE(v.depth_first_sort.has_value());
-  EXPECT_FALSE(*v.depth_first_sort);
-  EXPECT_EQ(v.settings, "motion_q=0.95,key_colour=on");
-  EXPECT_FLOAT_EQ(v.speculation.motion_quantile, 0.95f);
-  EXPECT_TRUE(v.speculation.subframe_key_colour);
-  EXPECT_TRUE(*parse_variant("catgs-w2{key_sort=depth}").depth_first_sort);
-  EXPECT_TRUE(contains(error_of("catgs{key_sort=fast}"), "key_sort must be single or depth"));
-  EXPECT_TRUE(contains(error_of("catgs{motion_q=0}"), "motion quantile"));
-  EXPECT_TRUE(contains(error_of("catgs{motion_q=1.5}"), "motion quantile"));
+// Issue 36's key-frame colours are on by default; key_colour=off is the paper's SH at each pose.
+TEST(BenchVariants, KeyColourSetting) {
+  EXPECT_TRUE(parse_variant("catgs").speculation.subframe_key_colour);
+  const Variant v = parse_variant("catgs-w2{key_colour=off}");
+  EXPECT_EQ(v.settings, "window=2,key_colour=off");
+  EXPECT_FALSE(v.speculation.subframe_key_colour);
+  EXPECT_TRUE(contains(error_of("catgs{key_colour=maybe}"), "key_colour"));
 }
 
 }  // namespace

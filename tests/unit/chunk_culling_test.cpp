@@ -197,7 +197,7 @@ TEST(ChunkCulling, PathTestNeverCullsAListedGaussian) {
   EXPECT_GT(culled_chunks, 200u) << "too few culled chunks to say much";
 }
 
-// M (cpu::screen_motion_bound), the speculation planner's input, skips chunks none of whose means
+// M (cpu::max_screen_motion), the speculation planner's input, skips chunks none of whose means
 // can count (fm::chunk_means_off_image): the same M as Gaussian by Gaussian (NaN bounds skip
 // nothing), on real scenes, for consecutive views and three depth thresholds; returns the
 // chunks skipped.
@@ -207,14 +207,9 @@ Counts expect_same_motion(const GaussianModel& m) {
   Counts c;
   for (std::size_t k = 0; k + 1 < views.size(); ++k)
     for (float min_depth : {0.05f, 0.4f, 2.0f}) {
-      const float skipping = cpu::screen_motion_bound(m, chunks, views[k], views[k + 1], min_depth);
-      const float every = cpu::screen_motion_bound(m, none, views[k], views[k + 1], min_depth);
+      const float skipping = cpu::max_screen_motion(m, chunks, views[k], views[k + 1], min_depth);
+      const float every = cpu::max_screen_motion(m, none, views[k], views[k + 1], min_depth);
       EXPECT_EQ(skipping, every) << "view " << k << ", min_depth " << min_depth;
-      // and the quantile of issue 36 (its histogram counts the same means)
-      const float q_skipping = cpu::screen_motion_bound(m, chunks, views[k], views[k + 1], min_depth, 0.9f);
-      const float q_every = cpu::screen_motion_bound(m, none, views[k], views[k + 1], min_depth, 0.9f);
-      EXPECT_EQ(q_skipping, q_every) << "view " << k << ", min_depth " << min_depth;
-      EXPECT_LE(q_skipping, skipping);
       for (const fm::ChunkBounds& b : chunks)
         c.culled += fm::chunk_means_off_image(b, fm::view_of(views[k]), min_depth) ? 1 : 0;
       c.chunks += chunks.size();

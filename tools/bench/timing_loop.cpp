@@ -185,7 +185,7 @@ class QualityCheck {
 
 PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>& scene, const Variant& variant,
                                  const TimingPlan& plan, QualityCheck& quality, std::size_t used_before_scene) {
-  cuda::CudaRenderer r(scene, options_of(variant), cuda::CudaOptions{variant.depth_first_sort});
+  cuda::CudaRenderer r(scene, options_of(variant));
   PipelineResult res = result_of(variant);
   EventTimer timer;
   for (int k = 0; k < plan.warmup; ++k) {

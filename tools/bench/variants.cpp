@@ -1,7 +1,6 @@
 #include "bench/variants.h"
 
 #include <algorithm>
-#include <sstream>
 #include <stdexcept>
 
 #include "speculation/settings.h"
@@ -59,22 +58,6 @@ void split_braces(const std::string& text, std::string& name, std::string& setti
   settings = text.substr(open + 1, close - open - 1);
 }
 
-// Takes the bench's own key_sort=single|depth out of `settings` (comma-separated) into `v`.
-void take_key_sort(const std::string& text, std::string& settings, Variant& v) {
-  std::string kept, item;
-  std::stringstream items(settings);
-  while (std::getline(items, item, ',')) {
-    if (item.rfind("key_sort=", 0) != 0) {
-      kept += (kept.empty() ? "" : ",") + item;
-      continue;
-    }
-    const std::string value = item.substr(9);
-    if (value != "single" && value != "depth") throw bad_variant(text, "key_sort must be single or depth");
-    v.depth_first_sort = value == "depth";
-  }
-  settings = kept;
-}
-
 }  // namespace
 
 Variant parse_variant(const std::string& text) {
@@ -87,7 +70,6 @@ Variant parse_variant(const std::string& text) {
     throw bad_variant(text, "unknown name '" + name + "'\n" + variant_syntax());
   if (braces && v.pipeline != Pipeline::catgs)
     throw bad_variant(text, std::string(pipeline_name(v.pipeline)) + " takes no settings (catgs only)");
-  take_key_sort(text, braced, v);
   if (!braced.empty()) v.settings += (v.settings.empty() ? "" : ",") + braced;
   try {
     apply_speculation_settings(v.speculation, v.settings);
@@ -130,8 +112,7 @@ std::string variant_syntax() {
   out +=
       "  e.g. --pipeline 'exact,catgs{window=2,backoff=0},catgs-w2{backoff=0}' (quoted: a shell\n"
       "  expands braces with commas); the table and the JSON name each variant as written.\n"
-      "  SETTINGS (catgs only):\n"
-      "  key_sort      single|depth: the CUDA core's key-frame sort (the bench's own; default depth)\n";
+      "  SETTINGS (catgs only):\n";
   return out + speculation_settings_usage();
 }
 

@@ -6,12 +6,9 @@
 // only. The paper's ablations are presets that expand to settings, and take braces too:
 //   catgs-nocache = catgs{cache=off}, catgs-nosplit = catgs{split=off}, catgs-wN = catgs{window=N},
 //   catgs-w2{backoff=0} = catgs{window=2,backoff=0}.
-// One setting belongs to the bench, not to SpeculationParams: key_sort=single|depth picks how the
-// CUDA core sorts a catgs key frame's list (cuda::CudaOptions::depth_first_sort; default depth).
 // Anything else is an error (std::invalid_argument) that lists this syntax.
 #pragma once
 
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,9 +19,8 @@ namespace catgs::bench {
 struct Variant {
   std::string name;  // as the user wrote it: the table's and the JSON's pipeline name
   Pipeline pipeline = Pipeline::exact;
-  std::string settings;                  // the settings applied, presets expanded ("window=2,backoff=0"; "" for none)
-  SpeculationParams speculation;         // the defaults with `settings` applied
-  std::optional<bool> depth_first_sort;  // key_sort: the CUDA core's key-frame sort (unset: its default)
+  std::string settings;           // the settings applied, presets expanded ("window=2,backoff=0"; "" for none)
+  SpeculationParams speculation;  // the defaults with `settings` applied
 };
 
 // One variant ("catgs-w2{backoff=0}"). Throws std::invalid_argument naming the variant: an unknown
