@@ -11,7 +11,6 @@ void validate(const SpeculationParams& p) {
   };
   check(p.initial_window >= 0 && p.initial_window <= kMaxWindow, "speculation window must be in 0..32");
   check(p.backoff.frames >= 0 && p.backoff.frames <= 1000, "speculation backoff must be in 0..1000 frames");
-  check(p.backoff.motion_frames >= 0 && p.backoff.motion_frames <= 1000, "motion backoff must be in 0..1000 frames");
   check(p.backoff.min_served >= 0 && p.backoff.min_served <= kMaxWindow,
         "sub-frames a group must serve must be in 0..32");
   check(p.min_slice_entries >= 0, "minimum slice length must not be negative");

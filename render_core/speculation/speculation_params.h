@@ -33,14 +33,9 @@ struct TrailMargins {
 // up to 8x; a group that repays resets it. frames = 0: no backoff. (RESULTS.md, "Speculation
 // backoff" and "Issue 19, fourth round": 4 and 4 were faster than 2 and 2 on five of the six
 // real-path rows and equal on the sixth, once frames without a window cost what exact frames do.)
-// motion_frames: after a key frame whose measured M closed the window (W = 0: the camera moves
-// too fast to speculate), this many more frames render in full without measuring M again, so a
-// fast stretch of a path does not pay M's kernel and its host readback on every frame
-// (issue 36; RESULTS.md, "Motion backoff"). 0: M is measured at every key frame.
 struct SpeculationBackoff {
   int frames = 4;
   int min_served = 4;
-  int motion_frames = 0;
 };
 
 struct SpeculationParams {

@@ -25,7 +25,6 @@ void SpeculationPlanner::set_params(const SpeculationParams& params) {
   params_ = params;
   group_open_ = false;
   backoff_ = full_frames_left_ = 0;
-  motion_closed_ = false;
 }
 
 bool SpeculationPlanner::observe(const Camera& camera, double time_s) {
@@ -61,9 +60,6 @@ void SpeculationPlanner::start_group(const Camera& key, int window) {
   } else if (full_frames_left_ > 0) {
     --full_frames_left_;
   }
-  // M closed this key frame's window: the next motion_frames frames render in full unmeasured.
-  if (window == 0 && motion_closed_) full_frames_left_ = std::max(full_frames_left_, params_.backoff.motion_frames);
-  motion_closed_ = false;
   key_camera_ = key;
   window_ = window;
   subframes_served_ = 0;

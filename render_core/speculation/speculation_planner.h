@@ -44,12 +44,7 @@ class SpeculationPlanner {
   // The predicted camera 1 / F_target after the newest pose, with `key`'s intrinsics (M's pair).
   Camera next_camera(const Camera& key) const { return predicted_camera(key, 1); }
   // W for the largest per-frame screen motion M (pixels): motion_adaptive_window().
-  // Remembers whether M closed the window (SpeculationBackoff::motion_frames).
-  int window_for(float max_motion_px) {
-    const int w = motion_adaptive_window(max_motion_px, params_);
-    motion_closed_ = w == 0;
-    return w;
-  }
+  int window_for(float max_motion_px) const { return motion_adaptive_window(max_motion_px, params_); }
   // The window to plan a key frame with instead of `window`, whose list was over the render-list
   // budget (renderer.h RenderListBudget, issue 35): half of it, so a window's list shrinks
   // toward the exact list of W = 0, which the budget holds (in passes where it must). Both cores
@@ -80,7 +75,6 @@ class SpeculationPlanner {
   int window_ = 0, subframes_served_ = 0;
   int backoff_ = 0, full_frames_left_ = 0;  // the current backoff, and the full frames it still asks
   bool group_open_ = false;
-  bool motion_closed_ = false;  // this key frame's M gave W = 0
   double clock_s_ = 0.0;
 };
 

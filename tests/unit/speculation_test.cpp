@@ -141,50 +141,6 @@ TEST(SpeculationPlanner, BacksOffAfterGroupsThatDoNotRepayTheirKeyFrame) {
   EXPECT_EQ(frame(false), 4);
 }
 
-// SpeculationBackoff::motion_frames: after M closes the window, that many frames render in full
-// without asking for M; a window closed by the budget or by a poor group does not count.
-TEST(SpeculationPlanner, MotionBackoffSkipsMAfterAFastFrame) {
-  SpeculationParams p;
-  p.backoff.frames = 0;
-  p.backoff.motion_frames = 3;
-  SpeculationPlanner planner(p);
-  Camera cam;
-  double t = 0.0;
-  int measured = 0;
-  // A key frame every frame (no sub-frame served); M from `motion` when a window is wanted.
-  auto frame = [&](float motion) {
-    planner.observe(cam, t);
-    t += 1.0 / 120.0;
-    int window = 0;
-    if (planner.window_wanted()) {
-      ++measured;
-      window = planner.window_for(motion);
-    }
-    planner.start_group(cam, window);
-    return window;
-  };
-  EXPECT_EQ(frame(1.0f), 4);
-  EXPECT_EQ(frame(1000.0f), 0);  // M closes the window: 3 frames unmeasured
-  measured = 0;
-  for (int k = 0; k < 3; ++k) EXPECT_EQ(frame(1.0f), 0) << k;
-  EXPECT_EQ(measured, 0);
-  EXPECT_EQ(frame(1.0f), 4);
-  EXPECT_EQ(measured, 1);
-  // A window narrowed to 0 after a slow M (the render-list budget) starts no motion backoff.
-  planner.observe(cam, t);
-  t += 1.0 / 120.0;
-  ASSERT_TRUE(planner.window_wanted());
-  EXPECT_EQ(planner.window_for(1.0f), 4);
-  planner.start_group(cam, 0);
-  EXPECT_EQ(frame(1.0f), 4);
-  p.backoff.motion_frames = 0;  // off: M at every key frame
-  planner.set_params(p);
-  EXPECT_EQ(frame(1000.0f), 0);
-  measured = 0;
-  EXPECT_EQ(frame(1.0f), 4);
-  EXPECT_EQ(measured, 1);
-}
-
 // SpeculationParams::min_slice_entries: slices are at least that long (the first taking the
 // remainder), and only tiles over twice that split.
 TEST(TaskSplitting, SliceLengthFloor) {
