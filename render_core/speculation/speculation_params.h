@@ -53,7 +53,7 @@ struct SpeculationParams {
   // A sub-frame keeps the colours its key frame evaluated (view direction from the key camera)
   // instead of evaluating the SH at its own pose: the SH coefficients are the largest read of the
   // sub-frame's features, which are bound by DRAM (issue 36). The colour then lags the view
-  // direction by at most a window's camera motion (RESULTS.md, "Sub-frame colours").
+  // direction by at most a window's camera motion (RESULTS.md, "Issue 36, first round").
   bool subframe_key_colour = true;
   TrailMargins trail;
   SpeculationBackoff backoff;
