@@ -24,7 +24,7 @@ struct TrailMargins {
   // plus this fraction of the Gaussian's own screen motion over the window: an error in the
   // camera's velocity moves each Gaussian in proportion to its own motion (RESULTS.md, "Trail
   // margins").
-  float motion_margin = 0.1f;
+  float motion_margin = 0.05f;
 };
 
 // Speculation backoff (SpeculationPlanner::start_group): a group that closes having served fewer
