@@ -20,6 +20,9 @@
 #include "common/cli_args.h"
 #ifdef CATGS_RENDER_VIDEO
 #include "video/tour_video.h"
+extern "C" {
+#include <libavutil/log.h>
+}
 #endif
 
 namespace {
@@ -75,6 +78,7 @@ std::shared_ptr<catgs::Renderer> open_renderer(const catgs::tools::Args& args) {
 // --video: everything that can be checked (the trace, the size, the output file) is checked
 // before the scene loads; an unfinished file is removed.
 int render_video(const catgs::tools::Args& args) {
+  av_log_set_level(AV_LOG_ERROR);  // x264's banner and statistics, the muxer's notes
   const int fps = args.get_int("--fps", 60);
   if (fps <= 0) throw std::invalid_argument("--fps must be positive");
   catgs::Trace cameras = load_cameras(args, 0, 0);

@@ -39,6 +39,7 @@ struct DecodedVideo {
   std::string codec;
   int width = 0, height = 0;
   AVRational frame_rate{0, 1};
+  int level = 0;                    // level_idc in the avcC
   double duration_s = 0;        // the stream's duration, as its header says
   std::vector<double> times_s;  // each decoded frame's presentation time
   std::vector<bool> key;        // each decoded frame is a key frame
@@ -58,6 +59,7 @@ DecodedVideo decode_file(const std::string& path) {
   const AVCodec* codec = avcodec_find_decoder(st->codecpar->codec_id);
   v.codec = codec ? codec->name : "?";
   v.frame_rate = st->avg_frame_rate;
+  v.level = st->codecpar->level;
   v.duration_s = static_cast<double>(st->duration) * av_q2d(st->time_base);
   AVCodecContext* dec = avcodec_alloc_context3(codec);
   avcodec_parameters_to_context(dec, st->codecpar);
@@ -161,6 +163,8 @@ TEST(TourVideo, DecodedFileMatchesThePngs) {
   ASSERT_EQ(v.frames.size(), static_cast<std::size_t>(kFrames));
   EXPECT_NEAR(v.duration_s, static_cast<double>(kFrames) / kFps, 1e-6);
   EXPECT_TRUE(v.key[0]);
+  // x264 picks the level itself; our table (which refuses sizes past 6.2) agrees with it.
+  EXPECT_EQ(v.level, server::h264_level(kW, kH, kFps));
   double worst = 1e9;
   for (int k = 0; k < kFrames; ++k) {
     EXPECT_NEAR(v.times_s[static_cast<std::size_t>(k)], static_cast<double>(k) / kFps, 1e-6) << "frame " << k;
