@@ -32,14 +32,14 @@ const char* kUsage =
     "                    --trace FILE.trace) [--width W] [--height H]\n"
     "                    [--pipeline vanilla|exact] [--renderer cpu|cuda|auto]\n"
     "                    [--background R,G,B] (--out FILE.png | --out-dir DIR [--every N] |\n"
-    "                    --video FILE.mp4 [--fps F] [--crf C] [--preset P])\n"
+    "                    --video FILE.mp4 [--fps F] [--crf C] [--preset P] [--max-frames N])\n"
     "  --video: the trace sampled on its clock at --fps (default 60) frames a second, H.264 in MP4\n"
     "  (x264 --preset, default medium, --crf, default 18), at --width x --height (default the\n"
-    "  trace's size); progress on stderr.\n";
+    "  trace's size); at most --max-frames (default 216000: an hour at 60 fps); progress on stderr.\n";
 
 // The cameras to render at width x height (0: their own size): a trace file, or views of an
-// INRIA cameras.json (one --view, or --all interpolated at --fps).
-catgs::Trace load_cameras(const catgs::tools::Args& args, int width, int height) {
+// INRIA cameras.json (one --view, or --all interpolated at --fps, default `default_rate`).
+catgs::Trace load_cameras(const catgs::tools::Args& args, int width, int height, double default_rate) {
   catgs::Trace trace;
   if (args.has("--trace")) {
     trace = catgs::read_trace(args.get("--trace"));
@@ -49,7 +49,7 @@ catgs::Trace load_cameras(const catgs::tools::Args& args, int width, int height)
     return trace;
   }
   const auto cams = catgs::load_inria_cameras(args.require("--cameras"), width, height);
-  if (args.has("--all")) return catgs::interpolate_views(cams, args.get_double("--fps", 30.0), 1.0);
+  if (args.has("--all")) return catgs::interpolate_views(cams, args.get_double("--fps", default_rate), 1.0);
   const int k = args.get_int("--view", 0);
   if (k < 0 || k >= static_cast<int>(cams.size()))
     throw std::invalid_argument("--view " + std::to_string(k) + " outside 0.." + std::to_string(cams.size() - 1));
@@ -75,13 +75,15 @@ std::shared_ptr<catgs::Renderer> open_renderer(const catgs::tools::Args& args) {
 }
 
 #ifdef CATGS_RENDER_VIDEO
+constexpr int kMaxVideoFrames = 216000;  // an hour at 60 fps: --max-frames raises it
+
 // --video: everything that can be checked (the trace, the size, the output file) is checked
 // before the scene loads; an unfinished file is removed.
 int render_video(const catgs::tools::Args& args) {
   av_log_set_level(AV_LOG_ERROR);  // x264's banner and statistics, the muxer's notes
   const int fps = args.get_int("--fps", 60);
   if (fps <= 0) throw std::invalid_argument("--fps must be positive");
-  catgs::Trace cameras = load_cameras(args, 0, 0);
+  catgs::Trace cameras = load_cameras(args, 0, 0, fps);
   catgs::tools::TourVideoOptions o;
   o.path = args.get("--video");
   o.width = args.get_int("--width", cameras.front().camera.width);
@@ -89,6 +91,13 @@ int render_video(const catgs::tools::Args& args) {
   o.fps = fps;
   o.crf = args.get_int("--crf", o.crf);
   o.preset = args.get("--preset", o.preset);
+  // A path of absurd length (a typo in a time, a million poses) fails here, not out of memory.
+  const double span_s = cameras.back().time_s - cameras.front().time_s;
+  const long max_frames = args.get_int("--max-frames", kMaxVideoFrames);
+  if (span_s * fps + 1.0 > static_cast<double>(max_frames))
+    throw std::invalid_argument(args.get("--trace", "the path") + " lasts " + std::to_string(span_s) +
+                                " s: " + std::to_string(static_cast<long long>(span_s * fps) + 1) + " frames at " +
+                                std::to_string(fps) + " fps, more than --max-frames " + std::to_string(max_frames));
   catgs::Trace frames = catgs::resample_trace(cameras, fps);
   for (auto& tc : frames) tc.camera = tc.camera.rescaled(o.width, o.height);
   catgs::tools::TourVideo video(o);
@@ -97,8 +106,8 @@ int render_video(const catgs::tools::Args& args) {
   try {
     video.render(*renderer, frames, stderr, isatty(STDERR_FILENO) == 1);
   } catch (...) {
-    std::error_code ec;
-    std::filesystem::remove(o.path, ec);
+    std::error_code ec;  // the unfinished file, never a device such as /dev/full
+    if (std::filesystem::is_regular_file(o.path, ec)) std::filesystem::remove(o.path, ec);
     throw;
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -111,10 +120,10 @@ int render_video(const catgs::tools::Args& args) {
 
 int run(int argc, char** argv) {
   using catgs::tools::Args;
-  const Args args(
-      argc, argv,
-      {"--scene", "--cameras", "--view", "--all!", "--fps", "--trace", "--width", "--height", "--pipeline",
-       "--renderer", "--background", "--out", "--out-dir", "--every", "--video", "--crf", "--preset", "--help!"});
+  const Args args(argc, argv,
+                  {"--scene", "--cameras", "--view", "--all!", "--fps", "--trace", "--width", "--height", "--pipeline",
+                   "--renderer", "--background", "--out", "--out-dir", "--every", "--video", "--crf", "--preset",
+                   "--max-frames", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage;
     return 0;
@@ -127,7 +136,7 @@ int run(int argc, char** argv) {
 #endif
   }
   const auto renderer = open_renderer(args);
-  const catgs::Trace trace = load_cameras(args, args.get_int("--width", 0), args.get_int("--height", 0));
+  const catgs::Trace trace = load_cameras(args, args.get_int("--width", 0), args.get_int("--height", 0), 30.0);
 
   catgs::Image image;
   if (args.has("--out")) {

@@ -39,7 +39,7 @@ struct DecodedVideo {
   std::string codec;
   int width = 0, height = 0;
   AVRational frame_rate{0, 1};
-  int level = 0;                    // level_idc in the avcC
+  int level = 0;                // level_idc in the avcC
   double duration_s = 0;        // the stream's duration, as its header says
   std::vector<double> times_s;  // each decoded frame's presentation time
   std::vector<bool> key;        // each decoded frame is a key frame
@@ -220,6 +220,14 @@ TEST(TourVideo, BadInputGetsAClearError) {
   expect_refused("--trace " + trace + " --video " + dir + "/no/such/folder/x.mp4", dir,
                  dir + "/no/such/folder/x.mp4: cannot open for writing");
   expect_refused("--trace " + trace + out + " --preset warpspeed", dir, "x264: cannot open libx264");
+  // Two poses 10^7 s apart: 6 * 10^8 frames at 60 fps, refused before anything is allocated.
+  std::ofstream(dir + "/long.trace") << "catgs-trace 1\n0 0 0 -5 1 0 0 0 50 50 32 24 64 48\n"
+                                     << "10000000 0 0 -4 1 0 0 0 50 50 32 24 64 48\n";
+  expect_refused("--trace " + dir + "/long.trace" + out, dir, "frames at 60 fps, more than --max-frames 216000");
+  if (fs::is_character_file("/dev/full")) {  // a full disk; the device is not removed as a failed file
+    expect_refused("--trace " + trace + " --video /dev/full", dir, "/dev/full: cannot write the MP4 header");
+    EXPECT_TRUE(fs::is_character_file("/dev/full"));
+  }
   EXPECT_FALSE(fs::exists(dir + "/x.mp4"));
 }
 
