@@ -21,8 +21,9 @@
 #        (bench_city_flyover.json + snapshots), all packed into $OUT/bench.tar.gz.
 #     --compare LIST (after the tests, instead of the benchmark) runs the catgs-bench variants of
 #     LIST (quoted, e.g. 'exact,catgs,catgs{motion_margin=0.2},catgs-w2{backoff=0}'; see
-#     catgs-bench --help) side by side on tumblewood x10 and the city over the three real paths
-#     -> compare_{tumblewood,city}_PATH.json, packed into $OUT/compare.tar.gz.
+#     catgs-bench --help) side by side on tumblewood x10 and the city over the three real paths,
+#     and on the city fly-over -> compare_{tumblewood,city}_PATH.json, compare_city_flyover.json,
+#     packed into $OUT/compare.tar.gz.
 #     --before DIR (with --compare) runs DIR/catgs-bench, an earlier build carried along (e.g.
 #     .carry/bin_before, copied from .carry/bin before the next `prepare`), right after each of
 #     those runs -> compare_before_*.json, in the same archive.
@@ -230,6 +231,10 @@ if [ "$BENCH" = 1 ]; then
 fi
 if [ -n "$COMPARE" ]; then
   real_paths "$COMPARE" "$OUT/compare"
+  echo "== compare: city fly-over: $COMPARE"
+  "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
+    --width 1920 --height 1080 --pipeline "$COMPARE" --frames "$FRAMES" --quality-every 3 \
+    --json "$OUT/compare_city_flyover.json" || status=1
   # The device returns 8 files: the JSONs go back packed (a run cut short returns them loose).
   (cd "$OUT" && tar czf compare.tar.gz compare_*.json && rm -f compare_*.json)
 fi

@@ -11,7 +11,7 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 build=(
   build-essential cmake ninja-build pkg-config
   libboost-dev libwebsockets-dev libssl-dev
-  libavcodec-dev libavutil-dev libswscale-dev libx264-dev
+  libavcodec-dev libavformat-dev libavutil-dev libswscale-dev libx264-dev
   libprotobuf-dev protobuf-compiler
   libglm-dev nlohmann-json3-dev libstb-dev
   zlib1g-dev libzstd-dev libtinygltf-dev libwebp-dev libzip-dev libxxhash-dev

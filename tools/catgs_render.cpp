@@ -4,6 +4,11 @@
 //                --pipeline vanilla|exact --renderer cpu|cuda|auto --out F.png
 //   catgs-render --scene S.ply --cameras C.json --all --fps 30 --out-dir DIR    (interpolated path)
 //   catgs-render --scene S.ply --trace T.trace --out-dir DIR [--every N]
+//   catgs-render --scene S.ply --trace T.trace --video OUT.mp4 --width W --height H --fps F
+//                [--crf 18] [--preset medium]                      (H.264 in MP4, tools/video/)
+#include <unistd.h>
+
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -13,6 +18,12 @@
 #include "renderer/renderer.h"
 #include "camera/trace.h"
 #include "common/cli_args.h"
+#ifdef CATGS_RENDER_VIDEO
+#include "video/tour_video.h"
+extern "C" {
+#include <libavutil/log.h>
+}
+#endif
 
 namespace {
 
@@ -20,17 +31,33 @@ const char* kUsage =
     "usage: catgs-render --scene FILE (--cameras CAMERAS.json [--view K | --all [--fps F]] |\n"
     "                    --trace FILE.trace) [--width W] [--height H]\n"
     "                    [--pipeline vanilla|exact] [--renderer cpu|cuda|auto]\n"
-    "                    [--background R,G,B] (--out FILE.png | --out-dir DIR) [--every N]\n";
+    "                    [--background R,G,B] (--out FILE.png | --out-dir DIR [--every N] |\n"
+    "                    --video FILE.mp4 [--fps F] [--crf C] [--preset P] [--max-frames N])\n"
+    "  --video: the trace sampled on its clock at --fps (default 60) frames a second, H.264 in MP4\n"
+    "  (x264 --preset, default medium, --crf, default 18), at --width x --height (default the\n"
+    "  trace's size); at most --max-frames (default 216000: an hour at 60 fps); progress on stderr.\n";
 
-int run(int argc, char** argv) {
-  using catgs::tools::Args;
-  const Args args(argc, argv,
-                  {"--scene", "--cameras", "--view", "--all!", "--fps", "--trace", "--width", "--height", "--pipeline",
-                   "--renderer", "--background", "--out", "--out-dir", "--every", "--help!"});
-  if (args.has("--help")) {
-    std::cout << kUsage;
-    return 0;
+// The cameras to render at width x height (0: their own size): a trace file, or views of an
+// INRIA cameras.json (one --view, or --all interpolated at --fps, default `default_rate`).
+catgs::Trace load_cameras(const catgs::tools::Args& args, int width, int height, double default_rate) {
+  catgs::Trace trace;
+  if (args.has("--trace")) {
+    trace = catgs::read_trace(args.get("--trace"));
+    if (trace.empty()) throw std::invalid_argument(args.get("--trace") + ": the trace has no cameras");
+    if (width > 0 && height > 0)
+      for (auto& tc : trace) tc.camera = tc.camera.rescaled(width, height);
+    return trace;
   }
+  const auto cams = catgs::load_inria_cameras(args.require("--cameras"), width, height);
+  if (args.has("--all")) return catgs::interpolate_views(cams, args.get_double("--fps", default_rate), 1.0);
+  const int k = args.get_int("--view", 0);
+  if (k < 0 || k >= static_cast<int>(cams.size()))
+    throw std::invalid_argument("--view " + std::to_string(k) + " outside 0.." + std::to_string(cams.size() - 1));
+  trace.push_back({0.0, cams[static_cast<std::size_t>(k)]});
+  return trace;
+}
+
+std::shared_ptr<catgs::Renderer> open_renderer(const catgs::tools::Args& args) {
   auto model = std::make_shared<catgs::GaussianModel>(catgs::load_scene(args.require("--scene")));
   catgs::RenderOptions options;
   options.pipeline = catgs::parse_pipeline(args.get("--pipeline", "exact"));
@@ -41,27 +68,75 @@ int run(int argc, char** argv) {
     options.background = {r, g, b};
   }
   std::string why;
-  auto renderer = catgs::make_renderer(args.get("--renderer", "cpu"), model, options, &why);
+  std::shared_ptr<catgs::Renderer> renderer = catgs::make_renderer(args.get("--renderer", "cpu"), model, options, &why);
   std::cerr << "scene " << model->name << ": " << model->size() << " Gaussians, SH degree " << model->sh_degree << "; "
             << why << "\n";
-  const int width = args.get_int("--width", 0), height = args.get_int("--height", 0);
+  return renderer;
+}
 
-  catgs::Trace trace;
-  if (args.has("--trace")) {
-    trace = catgs::read_trace(args.get("--trace"));
-    if (width > 0 && height > 0)
-      for (auto& tc : trace) tc.camera = tc.camera.rescaled(width, height);
-  } else {
-    const auto cams = catgs::load_inria_cameras(args.require("--cameras"), width, height);
-    if (args.has("--all")) {
-      trace = catgs::interpolate_views(cams, args.get_double("--fps", 30.0), 1.0);
-    } else {
-      const int k = args.get_int("--view", 0);
-      if (k < 0 || k >= static_cast<int>(cams.size()))
-        throw std::invalid_argument("--view " + std::to_string(k) + " outside 0.." + std::to_string(cams.size() - 1));
-      trace.push_back({0.0, cams[static_cast<std::size_t>(k)]});
-    }
+#ifdef CATGS_RENDER_VIDEO
+constexpr int kMaxVideoFrames = 216000;  // an hour at 60 fps: --max-frames raises it
+
+// --video: everything that can be checked (the trace, the size, the output file) is checked
+// before the scene loads; an unfinished file is removed.
+int render_video(const catgs::tools::Args& args) {
+  av_log_set_level(AV_LOG_ERROR);  // x264's banner and statistics, the muxer's notes
+  const int fps = args.get_int("--fps", 60);
+  if (fps <= 0) throw std::invalid_argument("--fps must be positive");
+  catgs::Trace cameras = load_cameras(args, 0, 0, fps);
+  catgs::tools::TourVideoOptions o;
+  o.path = args.get("--video");
+  o.width = args.get_int("--width", cameras.front().camera.width);
+  o.height = args.get_int("--height", cameras.front().camera.height);
+  o.fps = fps;
+  o.crf = args.get_int("--crf", o.crf);
+  o.preset = args.get("--preset", o.preset);
+  // A path of absurd length (a typo in a time, a million poses) fails here, not out of memory.
+  const double span_s = cameras.back().time_s - cameras.front().time_s;
+  const long max_frames = args.get_int("--max-frames", kMaxVideoFrames);
+  if (span_s * fps + 1.0 > static_cast<double>(max_frames))
+    throw std::invalid_argument(args.get("--trace", "the path") + " lasts " + std::to_string(span_s) +
+                                " s: " + std::to_string(static_cast<long long>(span_s * fps) + 1) + " frames at " +
+                                std::to_string(fps) + " fps, more than --max-frames " + std::to_string(max_frames));
+  catgs::Trace frames = catgs::resample_trace(cameras, fps);
+  for (auto& tc : frames) tc.camera = tc.camera.rescaled(o.width, o.height);
+  catgs::tools::TourVideo video(o);
+  const auto renderer = open_renderer(args);
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    video.render(*renderer, frames, stderr, isatty(STDERR_FILENO) == 1);
+  } catch (...) {
+    std::error_code ec;  // the unfinished file, never a device such as /dev/full
+    if (std::filesystem::is_regular_file(o.path, ec)) std::filesystem::remove(o.path, ec);
+    throw;
   }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::cerr << "wrote " << o.path << ": " << frames.size() << " frames, " << o.width << "x" << o.height << " at " << fps
+            << " fps (" << static_cast<double>(frames.size()) / fps << " s), " << std::filesystem::file_size(o.path)
+            << " bytes, in " << seconds << " s\n";
+  return 0;
+}
+#endif
+
+int run(int argc, char** argv) {
+  using catgs::tools::Args;
+  const Args args(argc, argv,
+                  {"--scene", "--cameras", "--view", "--all!", "--fps", "--trace", "--width", "--height", "--pipeline",
+                   "--renderer", "--background", "--out", "--out-dir", "--every", "--video", "--crf", "--preset",
+                   "--max-frames", "--help!"});
+  if (args.has("--help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  if (args.has("--video")) {
+#ifdef CATGS_RENDER_VIDEO
+    return render_video(args);
+#else
+    throw std::invalid_argument("--video: this catgs-render was built without the server's encoders (libavcodec)");
+#endif
+  }
+  const auto renderer = open_renderer(args);
+  const catgs::Trace trace = load_cameras(args, args.get_int("--width", 0), args.get_int("--height", 0), 30.0);
 
   catgs::Image image;
   if (args.has("--out")) {

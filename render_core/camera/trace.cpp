@@ -149,6 +149,36 @@ Trace interpolate_views(const std::vector<Camera>& keys, double rate_hz, double 
   return trace;
 }
 
+Trace resample_trace(const Trace& trace, double rate_hz) {
+  if (trace.empty()) throw std::invalid_argument("resampling an empty trace");
+  if (!(rate_hz > 0)) throw std::invalid_argument("resampling rate must be positive");
+  constexpr double kSnap = 1e-6;  // seconds: a sample this close to a trace camera is that camera
+  const double t0 = trace.front().time_s, span = trace.back().time_s - t0;
+  const auto n = static_cast<std::size_t>(std::floor(span * rate_hz + kSnap * rate_hz)) + 1;
+  Trace out;
+  out.reserve(n);
+  std::size_t i = 0;  // trace[i].time_s <= t < trace[i + 1].time_s
+  for (std::size_t k = 0; k < n; ++k) {
+    const double t = t0 + static_cast<double>(k) / rate_hz;
+    while (i + 1 < trace.size() && trace[i + 1].time_s <= t + kSnap) ++i;
+    const TimedCamera& a = trace[i];
+    if (i + 1 == trace.size() || t - a.time_s <= kSnap) {
+      out.push_back({t, a.camera});
+      continue;
+    }
+    const TimedCamera& b = trace[i + 1];
+    const float u = static_cast<float>((t - a.time_s) / (b.time_s - a.time_s));
+    Camera c = a.camera;
+    c.fx += u * (b.camera.fx - c.fx);
+    c.fy += u * (b.camera.fy - c.fy);
+    c.cx += u * (b.camera.cx - c.cx);
+    c.cy += u * (b.camera.cy - c.cy);
+    const glm::vec3 eye = glm::mix(a.camera.position(), b.camera.position(), u);
+    out.push_back({t, camera_at(eye, glm::slerp(a.camera.orientation(), b.camera.orientation(), u), c)});
+  }
+  return out;
+}
+
 Trace make_orbit(const Bounds& bounds, float radius, float height_offset, float degrees, const GeneratorParams& p) {
   glm::vec3 a, b;
   plane_basis(p.up, &a, &b);

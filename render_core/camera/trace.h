@@ -30,6 +30,14 @@ std::vector<Camera> load_inria_cameras(const std::string& path, int width = 0, i
 // for fewer than 2 keys or a non-positive rate.
 Trace interpolate_views(const std::vector<Camera>& keys, double rate_hz, double seconds_per_view);
 
+// The trace sampled on its own clock at `rate_hz`: cameras at t = t0 + k / rate_hz (t0 its first
+// time) for every such t up to its last time, each between the two trace cameras around t:
+// position linear, orientation slerp, intrinsics linear (the size of the earlier camera). A time
+// within 1e-6 s of a trace camera's gives that camera as it is, so a trace recorded at
+// rate_hz comes back unchanged. Used to render a trace to video at a chosen frame rate. Throws
+// std::invalid_argument for an empty trace or a non-positive rate.
+Trace resample_trace(const Trace& trace, double rate_hz);
+
 // Synthetic generators around a scene's bounds (all cameras look at the bounds' centre unless
 // said otherwise). `duration_s` seconds sampled at `rate_hz`; size `width` x `height`; vertical
 // field of view `fov_deg`. Up is -y in camera (world up taken as `up`).

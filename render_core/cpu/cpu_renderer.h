@@ -99,13 +99,15 @@ float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkB
                         const Camera& b, float min_depth);
 
 // catgs sub-frame (cpu/subframe_features.cpp; paper sec. 3.2): recomputes mean2d, conic,
-// opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there) and
+// opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there; the
+// key frame's colour kept with `key_colour`: SpeculationParams::subframe_key_colour) and
 // checks that each on-screen ellipse reaches only tiles its trail was listed in (fm::trail_contains,
 // else the exact fm::listed_tiles_cover). Returns false when one does not: the frame must be
 // rendered as a key frame.
 // Also false when unlisted_reach_image().
 bool update_subframe_features(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
-                              const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& projected);
+                              const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& projected,
+                              bool key_colour = false);
 
 // catgs sub-frame (cpu/subframe_features.cpp): does a Gaussian the key frame did not list
 // (tiles_touched == 0) reach a pixel at `camera` (fm::unlisted_reaches_image)? Such a Gaussian is

@@ -93,7 +93,8 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
   bool sub = candidate;
   if (candidate) {
     const auto t0 = clock::now();
-    sub = update_subframe_features(*model_, chunks_, camera, cached_, projected_);
+    sub = update_subframe_features(*model_, chunks_, camera, cached_, projected_,
+                                   options_.speculation.subframe_key_colour);
     stats_.preprocess_ms = ms_between(t0, clock::now());
   }
   bool drawn = false;

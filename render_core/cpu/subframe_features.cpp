@@ -12,7 +12,8 @@
 namespace catgs::cpu {
 
 bool update_subframe_features(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
-                              const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& out) {
+                              const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& out,
+                              bool key_colour) {
   const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
                                static_cast<float>(camera.height) / (2.0f * camera.fy));
   const glm::vec3 cam_pos = camera.position();
@@ -48,6 +49,7 @@ bool update_subframe_features(const GaussianModel& model, const std::vector<fm::
     out.mean2d[i] = mean2d;
     out.conic[i] = conic;
     out.opacity[i] = fm::sigmoid(model.opacity_logits[i]);
+    if (key_colour) return;  // the key frame's, as listed (speculative_preprocess)
     out.color[i] =
         fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]},
                              glm::normalize(mean - cam_pos));

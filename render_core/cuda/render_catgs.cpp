@@ -160,8 +160,8 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   CATGS_CUDA(cudaMemsetAsync(cc + kOutside, 0, sizeof(unsigned), s.stream));
   stages::update_subframe_features(scene_view(*scene_), camera_params(camera), s.cached.as<uint32_t>(),
-                                   static_cast<uint32_t>(s.key_visible), s.projected(), s.trails(), cc + kOutside,
-                                   s.stream);
+                                   static_cast<uint32_t>(s.key_visible), options_.speculation.subframe_key_colour,
+                                   s.projected(), s.trails(), cc + kOutside, s.stream);
   stages::check_unlisted(scene_view(*scene_), camera_params(camera), s.tiles_touched.as<uint32_t>(),
                          s.chunk_total.as<uint32_t>(), cc + kOutside, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));

@@ -32,7 +32,7 @@ struct Listed {
 __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeaturesMinBlocks)
     subframe_features_kernel(SceneView scene, CameraParams cam,
                              const uint32_t* cached,  // [count]
-                             uint32_t count, Projected out, Trails trails,
+                             uint32_t count, bool key_colour, Projected out, Trails trails,
                              unsigned* outside) {  // [1]
   const uint32_t c = blockIdx.x * blockDim.x + threadIdx.x;
   if (c >= count) return;
@@ -80,8 +80,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
         *outside = 1u;  // any writer will do: one flag for the frame
     }
   }
-  const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), glm::normalize(mean - cam.position));
   out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
+  if (key_colour) return;  // the key frame's colour stays (SpeculationParams::subframe_key_colour)
+  const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), glm::normalize(mean - cam.position));
   out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
 }
 
@@ -139,12 +140,12 @@ void select_cached(const uint32_t* tiles_touched, const uint32_t* chunk_total, u
 }
 
 void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached, uint32_t count,
-                              const Projected& projected, const Trails& trails, unsigned* outside,
+                              bool key_colour, const Projected& projected, const Trails& trails, unsigned* outside,
                               cudaStream_t stream) {
   if (count == 0) return;
   const unsigned blocks = (count + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
-  subframe_features_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, cached, count, projected, trails,
-                                                                          outside);
+  subframe_features_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, cached, count, key_colour,
+                                                                          projected, trails, outside);
   CATGS_CUDA_LAUNCHED("subframe_features_kernel");
 }
 

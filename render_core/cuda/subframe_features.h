@@ -17,11 +17,13 @@ void select_cached(const uint32_t* tiles_touched, const uint32_t* chunk_total, u
                    unsigned* count, void* temp, std::size_t temp_bytes, cudaStream_t stream);
 
 // catgs sub-frame, stage 1 (subframe_features.cu; mirrors cpu::update_subframe_features):
-// recomputes the splat (mean, conic, opacity: 0 when culled here) and colour of the `count` cached
-// Gaussians at `cam`, and sets *outside = 1 when an on-screen ellipse reaches a tile its trail was
-// not listed in (the frame must then be a key frame). *outside must hold 0 on entry.
+// recomputes the splat (mean, conic, opacity: 0 when culled here) and colour (unless
+// `key_colour`: the key frame's is kept) of the `count` cached Gaussians at `cam`, and sets
+// *outside = 1 when an on-screen ellipse reaches a tile its trail was not listed in (the frame
+// must then be a key frame). *outside must hold 0 on entry.
 void update_subframe_features(const SceneView& scene, const CameraParams& cam, const uint32_t* cached, uint32_t count,
-                              const Projected& projected, const Trails& trails, unsigned* outside, cudaStream_t stream);
+                              bool key_colour, const Projected& projected, const Trails& trails, unsigned* outside,
+                              cudaStream_t stream);
 
 // catgs sub-frame (subframe_features.cu; mirrors cpu::unlisted_reach_image): sets *outside = 1
 // when a Gaussian the key frame did not list (records.h listed_tiles of its tiles_touched and

@@ -24,7 +24,7 @@ struct TrailMargins {
   // plus this fraction of the Gaussian's own screen motion over the window: an error in the
   // camera's velocity moves each Gaussian in proportion to its own motion (RESULTS.md, "Trail
   // margins").
-  float motion_margin = 0.1f;
+  float motion_margin = 0.05f;
 };
 
 // Speculation backoff (SpeculationPlanner::start_group): a group that closes having served fewer
@@ -50,6 +50,11 @@ struct SpeculationParams {
   bool task_splitting = true;          // false (--no-split): one rasterization task per tile
 
   // Tuned beyond the paper.
+  // A sub-frame keeps the colours its key frame evaluated (view direction from the key camera)
+  // instead of evaluating the SH at its own pose: the SH coefficients are the largest read of the
+  // sub-frame's features, which are bound by DRAM (issue 36). The colour then lags the view
+  // direction by at most a window's camera motion (RESULTS.md, "Issue 36, first round").
+  bool subframe_key_colour = true;
   TrailMargins trail;
   SpeculationBackoff backoff;
   // Task splitting's slice length: the paper's average load l = L / t or this many entries,

@@ -34,6 +34,12 @@ struct EncoderConfig {
   // intra-coded size spike. A forced IDR (force_idr) is still an IDR. 0: off.
   int intra_refresh_frames = 0;
   int threads = 0;  // encoder threads, 0 = the library's choice; x264 uses sliced threads (no delay)
+  // x264's speed/size trade-off ("ultrafast" .. "veryslow"): streams take ultrafast, a video
+  // file (catgs-render --video) a slower one for fewer bytes at the same crf. nvenc ignores it.
+  std::string x264_preset = "ultrafast";
+  // A container's global header: SPS/PPS once in extradata() (AV_CODEC_FLAG_GLOBAL_HEADER), not
+  // in band on IDR pictures, as MP4 wants (its avcC box is made from it). Streams leave it off.
+  bool global_header = false;
   // nvenc: pictures arrive as CUDA device planes (AV_PIX_FMT_CUDA frames of a hw_frames_ctx on
   // the CUDA primary context of device `cuda_device`, sw_format yuv420p; input_target() is then
   // device memory). x264 ignores both (its input is always host memory).
@@ -44,6 +50,7 @@ struct EncoderConfig {
 // One encoded access unit.
 struct EncodedFrame {
   std::vector<std::uint8_t> data;  // H.264 Annex B: start codes, SPS/PPS in band on IDR frames
+                                   // (unless global_header)
   bool key_frame = false;          // IDR
   double encode_ms = 0;            // encoder time (plane copy included)
 };
@@ -70,6 +77,9 @@ class Encoder {
   // Encodes the picture written into the last input_target(). IDR rules and encoder failures as
   // encode_yuv420(); throws std::logic_error without a preceding input_target().
   virtual EncodedFrame encode_input(bool force_idr) = 0;
+  // The global header (EncoderConfig::global_header): SPS and PPS as Annex B NAL units with start
+  // codes, as libavcodec's extradata holds them; empty without global_header.
+  virtual std::vector<std::uint8_t> extradata() const = 0;
 };
 
 // Creates an encoder by name:

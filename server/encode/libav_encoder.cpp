@@ -59,7 +59,9 @@ LibavEncoder::LibavEncoder(std::string name, const char* codec_name, const Encod
   ctx_->color_range = AVCOL_RANGE_MPEG;
   ctx_->color_primaries = AVCOL_PRI_BT709;
   ctx_->color_trc = AVCOL_TRC_BT709;
-  // No AV_CODEC_FLAG_GLOBAL_HEADER: SPS/PPS then come in band before every IDR.
+  // Streams: no AV_CODEC_FLAG_GLOBAL_HEADER, so SPS/PPS come in band before every IDR (a client
+  // may join at any IDR). Files: SPS/PPS once, in extradata, for the container's header.
+  if (config.global_header) ctx_->flags |= AV_CODEC_FLAG_GLOBAL_HEADER;
   try {
     configure(ctx_);
   } catch (...) {
@@ -136,6 +138,11 @@ EncodedFrame LibavEncoder::encode_input(bool force_idr) {
   if (!input_ready_) throw std::logic_error(name_ + ": encode_input() without input_target()");
   input_ready_ = false;
   return encode_frame(force_idr, EncodedFrame{});
+}
+
+std::vector<std::uint8_t> LibavEncoder::extradata() const {
+  if (!ctx_->extradata || ctx_->extradata_size <= 0) return {};
+  return {ctx_->extradata, ctx_->extradata + ctx_->extradata_size};
 }
 
 EncodedFrame LibavEncoder::encode_frame(bool force_idr, EncodedFrame out) {

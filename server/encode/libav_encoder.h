@@ -28,11 +28,12 @@ class LibavEncoder : public Encoder {
   EncodedFrame encode_yuv420(const Yuv420Planes& planes, bool force_idr) override;
   Yuv420Target input_target() override;
   EncodedFrame encode_input(bool force_idr) override;
+  std::vector<std::uint8_t> extradata() const override;
 
  protected:
   // Opens libavcodec encoder `codec_name` as `name` for config's size: sets size, yuv420p,
-  // time base 1/fps, no B-frames, BT.709 limited-range colour, no global header (SPS/PPS in
-  // band on every IDR), then calls `configure` for the codec's own options before
+  // time base 1/fps, no B-frames, BT.709 limited-range colour, a global header only when
+  // config.global_header (else SPS/PPS in band on every IDR), then calls `configure` for the codec's own options before
   // avcodec_open2. A `configure` that sets pix_fmt AV_PIX_FMT_CUDA and a hw_frames_ctx makes
   // the encoder take hw frames (input_target() only; encode_yuv420() then throws
   // std::logic_error). Throws std::invalid_argument for a bad size (odd, < 16, > 8192) and

@@ -33,7 +33,7 @@ X264Encoder::X264Encoder(const EncoderConfig& config)
         // frame's latency and add no frame of delay (frame threads would pipeline frames).
         // zerolatency picks them already; stated here so that no default can change it.
         ctx->thread_type = FF_THREAD_SLICE;
-        av_opt_set(ctx->priv_data, "preset", "ultrafast", 0);
+        av_opt_set(ctx->priv_data, "preset", config.x264_preset.c_str(), 0);
         av_opt_set(ctx->priv_data, "tune", "zerolatency", 0);
         av_opt_set_double(ctx->priv_data, "crf", config.crf, 0);
         av_opt_set_int(ctx->priv_data, "forced-idr", 1, 0);  // pict_type I -> IDR, not just I

@@ -1,6 +1,6 @@
-// H.264 through libavcodec's libx264: ultrafast, zerolatency, no B-frames, infinite GOP with IDR
-// on demand (forced-idr), Annex B with SPS/PPS in band on every IDR, yuv420p BT.709 limited
-// range. Rate control as EncoderConfig says: capped CRF (crf the quality floor, a VBV of
+// H.264 through libavcodec's libx264: EncoderConfig's preset (ultrafast for streams),
+// zerolatency, no B-frames, infinite GOP with IDR on demand (forced-idr), Annex B with SPS/PPS in
+// band on every IDR (or once in extradata with global_header), yuv420p BT.709 limited range. Rate control as EncoderConfig says: capped CRF (crf the quality floor, a VBV of
 // bitrate_kbps and vbv_buffer_ms), optional periodic intra refresh, sliced threads.
 #pragma once
 

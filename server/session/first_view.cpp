@@ -225,22 +225,66 @@ glm::vec3 content_up(const BallMoments& ball, bool* from_content) {
   return glm::normalize(axis);
 }
 
+// The unit vector from the orbit centre to a content-based first view (first_view_pose's
+// header): from -z made perpendicular to up, ~17 degrees above the horizon (the ground in view,
+// the subject not seen edge-on).
+glm::vec3 content_view_offset(glm::vec3 up) {
+  up = glm::normalize(up);
+  glm::vec3 back = glm::vec3(0.0f, 0.0f, -1.0f) - glm::dot(glm::vec3(0.0f, 0.0f, -1.0f), up) * up;
+  if (glm::length(back) < 1e-3f) back = glm::cross(up, glm::vec3(1.0f, 0.0f, 0.0f));  // up along z
+  return glm::normalize(glm::normalize(back) + 0.3f * up);
+}
+
+// The content box (frame_from_content): the [kBoxTail, 1 - kBoxTail] quantiles of `points` along
+// the first view's level axes (its right, `up`, and the horizontal direction between them), its
+// centre in world coordinates, and the points inside it.
+struct ContentBox {
+  glm::vec3 centre{0.0f};
+  std::vector<glm::vec3> inside;
+};
+
+ContentBox content_box(const std::vector<glm::vec3>& points, glm::vec3 up) {
+  const glm::mat3 view = glm::mat3_cast(level_orientation(-content_view_offset(up), up));
+  const glm::vec3 right = view[0], vertical = glm::normalize(up), ahead = glm::normalize(glm::cross(right, vertical));
+  const glm::vec3 axes[3] = {right, vertical, ahead};
+  glm::vec3 lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    std::vector<float> v;
+    v.reserve(points.size());
+    for (const glm::vec3& p : points) v.push_back(glm::dot(p, axes[a]));
+    lo[a] = scene_percentile(v, kBoxTail);
+    hi[a] = scene_percentile(v, 1.0 - kBoxTail);
+  }
+  ContentBox box;
+  for (int a = 0; a < 3; ++a) box.centre += 0.5f * (lo[a] + hi[a]) * axes[a];
+  for (const glm::vec3& p : points) {
+    bool in = true;
+    for (int a = 0; a < 3; ++a) in = in && glm::dot(p, axes[a]) >= lo[a] && glm::dot(p, axes[a]) <= hi[a];
+    if (in) box.inside.push_back(p);
+  }
+  return box;
+}
+
 // How far from orbit_centre, back along the view axis of `orientation`, a camera must stand for
-// kFramedShare of the content points to project inside |x/z| <= tan_h, |y/z| <= tan_v. A point at
-// camera-frame offset (x, y, z) from the centre needs d >= max(|x| / tan_h, |y| / tan_v) - z.
+// frame.framed_share of the content points to project inside the picture less frame.margin on
+// each side, |x/z| <= fit tan_h, |y/z| <= fit tan_v (fit = 1 - 2 margin). A point at camera-frame
+// offset (x, y, z) from the centre needs d >= max(|x| / (fit tan_h), |y| / (fit tan_v)) - z.
+// Without content points: the distance at which the content sphere fills the narrower field of
+// view.
 float framing_distance(const SceneFrame& frame, glm::quat orientation, float tan_h, float tan_v) {
-  const float sphere = std::max(frame.content_radius, 1e-3f) / std::sin(std::atan(std::min(tan_h, tan_v)));
-  if (frame.content_points.empty()) return sphere;
+  if (frame.content_points.empty())
+    return std::max(frame.content_radius, 1e-3f) / std::sin(std::atan(std::min(tan_h, tan_v)));
+  const float fit = 1.0f - 2.0f * static_cast<float>(frame.margin);
   const glm::mat3 axes = glm::mat3_cast(orientation);  // columns: right, down, forward
   std::vector<float> need;
   need.reserve(frame.content_points.size());
   for (const glm::vec3& p : frame.content_points) {
     const glm::vec3 rel = p - frame.orbit_centre;
     const float x = glm::dot(rel, axes[0]), y = glm::dot(rel, axes[1]), z = glm::dot(rel, axes[2]);
-    need.push_back(std::max(std::fabs(x) / tan_h, std::fabs(y) / tan_v) - z);
+    need.push_back(std::max(std::fabs(x) / (fit * tan_h), std::fabs(y) / (fit * tan_v)) - z);
   }
   // Never inside the content: at least a tenth of its radius out.
-  return std::max(percentile(std::move(need), kFramedShare), 0.1f * frame.content_radius);
+  return std::max(percentile(std::move(need), frame.framed_share), 0.1f * frame.content_radius);
 }
 
 }  // namespace
@@ -310,31 +354,47 @@ DenseContent dense_content(const GaussianModel& model) {
   return c;
 }
 
+// Every `stride`-th point, at most kMaxFramedPoints of them.
+std::vector<glm::vec3> evenly_picked(const std::vector<glm::vec3>& points) {
+  std::vector<glm::vec3> picked;
+  const std::size_t stride = points.size() / kMaxFramedPoints + 1;
+  for (std::size_t i = 0; i < points.size(); i += stride) picked.push_back(points[i]);
+  return picked;
+}
+
 SceneFrame frame_from_content(const GaussianModel& model) {
   const DenseContent c = dense_content(model);
   SceneFrame f;
-  f.orbit_centre = c.centre;
   f.up = c.up;
   f.content_radius = c.radius;
-  std::vector<glm::vec3> inside;
+  std::vector<glm::vec3> ball;
   for (std::size_t i = 0; i < model.size(); ++i)
-    if (glm::distance(mean_at(model, i), c.mode) <= c.radius) inside.push_back(mean_at(model, i));
-  const std::size_t stride = inside.size() / kMaxFramedPoints + 1;
-  for (std::size_t i = 0; i < inside.size(); i += stride) f.content_points.push_back(inside[i]);
+    if (glm::distance(mean_at(model, i), c.mode) <= c.radius) ball.push_back(mean_at(model, i));
+  const bool object = c.share >= kObjectShare;
+  ContentBox box = object ? content_box(ball, c.up) : ContentBox{};
+  if (object && !box.inside.empty()) {  // the whole object, centred, with a margin
+    f.orbit_centre = box.centre;
+    f.content_points = evenly_picked(box.inside);
+    f.framed_share = 1.0;
+    f.margin = kFramedMargin;
+  } else {  // a scene: its dense core, less the ragged edge
+    f.orbit_centre = c.centre;
+    f.content_points = evenly_picked(ball);
+    f.framed_share = kFramedShare;
+    f.margin = 0.0;
+  }
   f.scene_scale = glm::distance(first_view_pose(f, 16, 9).position, f.orbit_centre);
   f.source = "content: the densest " + std::to_string(static_cast<int>(std::lround(100.0 * c.share))) +
              "% of the Gaussians, radius " + std::to_string(c.radius) + ", up " +
-             (c.up_from_content ? "from its flattest axis" : "-y (no flat layer near the y axis)");
+             (c.up_from_content ? "from its flattest axis" : "-y (no flat layer near the y axis)") +
+             (object ? ", an object: framed whole by its percentile box" : ", a scene: its core framed");
   return f;
 }
 
 CameraPose first_view_pose(const SceneFrame& frame, int width, int height, float fov_deg) {
   if (frame.training_view) return *frame.training_view;
   const glm::vec3 up = glm::normalize(frame.up);
-  glm::vec3 back = glm::vec3(0.0f, 0.0f, -1.0f) - glm::dot(glm::vec3(0.0f, 0.0f, -1.0f), up) * up;
-  if (glm::length(back) < 1e-3f) back = glm::cross(up, glm::vec3(1.0f, 0.0f, 0.0f));  // up along z
-  // ~17 degrees above the horizon: the ground in view, the subject not seen edge-on.
-  const glm::vec3 offset = glm::normalize(glm::normalize(back) + 0.3f * up);
+  const glm::vec3 offset = content_view_offset(up);
   CameraPose pose;
   pose.orientation = level_orientation(-offset, up);
   pose.vertical_fov_deg = fov_deg;

@@ -30,8 +30,12 @@ struct SceneFrame {
   std::optional<CameraPose> training_view;
   float content_radius = 1.0f;  // world units
   // The dense content's means (world; at most kMaxFramedPoints, evenly picked) that the first
-  // view frames; empty: it frames the sphere of content_radius.
+  // view frames (frame_from_content); empty: it frames the sphere of content_radius.
   std::vector<glm::vec3> content_points;
+  // What the first view keeps in the picture: this share of content_points (the rest: the ragged
+  // edge of a scene's content), with `margin` of the picture's width and height free on each side.
+  double framed_share = 1.0;
+  double margin = 0.0;
   std::string source;  // for the start-up log: "cameras FILE, camera K" or "content ..."
 };
 
@@ -100,21 +104,40 @@ struct DenseContent {
 DenseContent dense_content(const GaussianModel& model);
 
 inline constexpr std::size_t kMaxFramedPoints = 20000;
-// The share of content_points a first view keeps in the picture (the rest: the content's ragged
-// edge, which would otherwise push the camera back).
+// An object capture: the dense content holds at least this share of the Gaussians (nothing
+// around it; biker, guitar and tumblewood keep 98%, the flower bed of flowers a third).
+inline constexpr double kObjectShare = 0.9;
+// An object's content box: per axis, the [kBoxTail, 1 - kBoxTail] quantiles of its means. It
+// leaves out stray Gaussians (which would push the camera back), not a side of the object: the
+// ball's 95th percentile of distances, framed before, cut off the top of a tall object (the
+// biker's head, the guitar's headstock).
+inline constexpr double kBoxTail = 0.002;
+// An object's first view leaves this share of the picture's width and height free on each side.
+inline constexpr double kFramedMargin = 0.08;
+// The share of a scene's content points its first view keeps in the picture.
 inline constexpr double kFramedShare = 0.95;
 
-// The frame from the dense content: orbit_centre = centre, up, content_radius = radius,
-// content_points = the Gaussians' means in the ball, scene_scale = the distance of the first
-// view of a 16:9 viewport.
+// The frame from the dense content:
+//   up      dense_content's up; content_radius dense_content's radius;
+//   object  (share >= kObjectShare) orbit_centre is the centre of the content box: per axis of
+//           the first view's level frame (its right, up, and the horizontal direction between
+//           them) the middle of the [kBoxTail, 1 - kBoxTail] quantiles of the means in
+//           dense_content's ball; content_points are the means inside that box, all framed
+//           (framed_share 1) with margin kFramedMargin. A box, not the ball: a tall object's
+//           ball is much wider than the object, and its centre need not be the ball's.
+//   scene   orbit_centre is dense_content's centre; content_points are the means in the ball,
+//           kFramedShare of them framed, no margin (the content is part of a larger world).
+//   content_points: at most kMaxFramedPoints, evenly picked;
+//   scene_scale: the distance of the first view of a 16:9 viewport.
 SceneFrame frame_from_content(const GaussianModel& model);
 
 // The first view for a viewport of width x height: the training view when there is one (its
 // own field of view), else a camera with vertical field of view `fov_deg` looking at
 // orbit_centre from the side the scene's first camera usually stands on (-z, made perpendicular
 // to up) raised 17 degrees towards up, its x axis horizontal (perpendicular to up), at the
-// nearest distance from which kFramedShare of content_points project into the picture (or the
-// content sphere fits the narrower field of view when there are none).
+// nearest distance from which framed_share of content_points project into the picture less
+// `margin` on each side (or the content sphere fits the narrower field of view when there are
+// no content points).
 CameraPose first_view_pose(const SceneFrame& frame, int width, int height, float fov_deg = 60.0f);
 
 // A cameras.json that belongs to `scene_path`, or "" when none exists: "<scene without

@@ -124,8 +124,17 @@ TEST(BenchVariants, MalformedListsAreRefused) {
 TEST(BenchVariants, TheSyntaxListsPresetsAndEverySetting) {
   const std::string syntax = variant_syntax();
   for (const char* part : {"catgs-nocache = catgs{cache=off}", "catgs-nosplit = catgs{split=off}", "catgs-wN", "window",
-                           "backoff", "split", "cache", "fit_ms", "accel_ms"})
+                           "backoff", "split", "cache", "fit_ms", "accel_ms", "key_colour"})
     EXPECT_TRUE(contains(syntax, part)) << part;
+}
+
+// Issue 36's key-frame colours are on by default; key_colour=off is the paper's SH at each pose.
+TEST(BenchVariants, KeyColourSetting) {
+  EXPECT_TRUE(parse_variant("catgs").speculation.subframe_key_colour);
+  const Variant v = parse_variant("catgs-w2{key_colour=off}");
+  EXPECT_EQ(v.settings, "window=2,key_colour=off");
+  EXPECT_FALSE(v.speculation.subframe_key_colour);
+  EXPECT_TRUE(contains(error_of("catgs{key_colour=maybe}"), "key_colour"));
 }
 
 }  // namespace

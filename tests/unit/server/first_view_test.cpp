@@ -308,6 +308,98 @@ TEST(FirstViewRealScenes, BikerFromItsContent) {
   expect_frames_the_object(scene);
 }
 
+// ---- objects framed whole (issue 38, item 5) ----
+
+std::string copy_cameras(const std::string& from, const fs::path& to) {
+  fs::create_directories(to.parent_path());
+  fs::copy_file(from, to, fs::copy_options::overwrite_existing);
+  return to.string();
+}
+
+// Where the object is in a render on the black background: the bounding box of the pixels whose
+// RGB sum exceeds `threshold` (of 765), and how many there are.
+struct ObjectPixels {
+  int left = 0, top = 0, right = -1, bottom = -1;  // inclusive; right < left: none
+  std::size_t count = 0;
+};
+
+ObjectPixels object_pixels(const Image& img, int threshold) {
+  ObjectPixels o{img.width, img.height, -1, -1, 0};
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) {
+      const std::uint8_t* px = &img.rgba8[4 * (static_cast<std::size_t>(y) * img.width + x)];
+      if (px[0] + px[1] + px[2] <= threshold) continue;
+      ++o.count;
+      o.left = std::min(o.left, x);
+      o.right = std::max(o.right, x);
+      o.top = std::min(o.top, y);
+      o.bottom = std::max(o.bottom, y);
+    }
+  return o;
+}
+
+// The first frame of an object capture without training cameras, rendered by the CPU core:
+// background on all four sides of the object (no object pixel in a border 2% of the picture
+// wide on any side), the object centred (the free space left and right, and above and below,
+// differ by at most 10% of the picture) and large (its box spans at least 60% of the picture's
+// width or height). Landscape and portrait viewports alike. CATGS_FIRST_VIEW_SHOTS keeps the
+// renders. Object pixels: RGB sum above 30 of 765 (the black background is 0; the faint halo of
+// low-opacity Gaussians around the object stays below it).
+void expect_framed_whole_and_centred(const std::string& scene, const std::string& tag) {
+  const auto model = test::cached_scene(scene);
+  const SceneFrame frame = frame_from_content(*model);
+  std::cout << "  " << frame.source << "\n";
+  for (const auto& [w, h] : {std::pair{320, 180}, std::pair{180, 320}}) {
+    const CameraPose view = first_view_pose(frame, w, h);
+    Image img;
+    cpu::CpuRenderer(model, RenderOptions{})
+        .render(Camera::from_pose(view.position, view.orientation, view.vertical_fov_deg, w, h), img);
+    shot(img, tag + "_first_" + std::to_string(w) + "x" + std::to_string(h));
+    const ObjectPixels o = object_pixels(img, 30);
+    ASSERT_GT(o.count, 0u) << tag << " " << w << "x" << h << ": nothing on screen";
+    const int free_left = o.left, free_right = w - 1 - o.right, free_top = o.top, free_bottom = h - 1 - o.bottom;
+    std::cout << "  " << w << "x" << h << ": object box x " << o.left << ".." << o.right << ", y " << o.top << ".."
+              << o.bottom << "; free left " << free_left << ", right " << free_right << ", top " << free_top
+              << ", bottom " << free_bottom << " px\n";
+    const int border_x = std::max(1, w / 50), border_y = std::max(1, h / 50);
+    EXPECT_GE(free_left, border_x) << tag << " " << w << "x" << h << ": the object touches the left edge";
+    EXPECT_GE(free_right, border_x) << tag << " " << w << "x" << h << ": the object touches the right edge";
+    EXPECT_GE(free_top, border_y) << tag << " " << w << "x" << h << ": the object's top is cut off";
+    EXPECT_GE(free_bottom, border_y) << tag << " " << w << "x" << h << ": the object's bottom is cut off";
+    EXPECT_LE(std::abs(free_left - free_right), w / 10) << tag << " " << w << "x" << h << ": not centred across";
+    EXPECT_LE(std::abs(free_top - free_bottom), h / 10) << tag << " " << w << "x" << h << ": not centred up-down";
+    EXPECT_TRUE(o.right - o.left + 1 >= 0.6 * w || o.bottom - o.top + 1 >= 0.6 * h)
+        << tag << " " << w << "x" << h << ": the object is framed too small";
+  }
+}
+
+TEST(FirstViewRealScenes, BikerFramedWholeAndCentred) {
+  expect_framed_whole_and_centred(test::bundled_scene(), "biker");
+}
+
+TEST(FirstViewRealScenes, GuitarFramedWholeAndCentred) {
+  CATGS_REQUIRE_DATA(scene, "scenes/guitar.compressed.ply");
+  expect_framed_whole_and_centred(scene, "guitar");
+}
+
+// A scene with training cameras still opens on one of them, unchanged (the content box plays no
+// part): flowers with its cameras.json found beside it.
+TEST(FirstViewRealScenes, TrainingCamerasStillGiveTheFirstView) {
+  CATGS_REQUIRE_DATA(scene, "scenes/flowers_sh3.ply");
+  CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
+  const fs::path dir = test::temp_dir();
+  copy_cameras(cams, dir / "flowers_sh3.cameras.json");
+  std::ostringstream log;
+  const SceneFrame f = choose_scene_frame(*test::cached_scene(scene), (dir / "flowers_sh3.ply").string(), "", log);
+  const CameraPose first = first_view_pose(f, 320, 180);
+  const std::vector<Camera> cameras = load_inria_cameras(cams);
+  const bool is_a_camera = std::any_of(cameras.begin(), cameras.end(), [&](const Camera& c) {
+    return glm::distance(c.position(), first.position) < 1e-5f &&
+           std::fabs(glm::dot(c.orientation(), first.orientation)) > 1.0f - 1e-6f;
+  });
+  EXPECT_TRUE(is_a_camera) << log.str();
+}
+
 // ---- up: the estimate against independent references ----
 
 // The normal of the ground of a capture (grass, a lawn, a floor), signed towards -y: the plane
@@ -424,12 +516,6 @@ TEST(FirstViewRealScenes, FlowersUpMatchesItsCameras) {
 }
 
 // ---- cameras.json discovery ----
-
-std::string copy_cameras(const std::string& from, const fs::path& to) {
-  fs::create_directories(to.parent_path());
-  fs::copy_file(from, to, fs::copy_options::overwrite_existing);
-  return to.string();
-}
 
 TEST(FirstViewDiscovery, FindsCamerasBesideTheSceneAndInTheInriaLayout) {
   CATGS_REQUIRE_DATA(cams, "traces/flowers_sh3.cameras.json");
