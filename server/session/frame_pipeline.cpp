@@ -39,7 +39,9 @@ void Session::maybe_start_render() {
           AdaptiveQuality::scaled_side(width_, level),
           AdaptiveQuality::scaled_side(height_, level),
           force_idr_,
-          next_frame_sequence_++,
+          // Pipelined, the number is given at the encode (maybe_start_encode): a frame skipped
+          // before its encode must leave no gap, as Frame sequences rise by one from 0.
+          pipelined_ ? 0 : next_frame_sequence_++,
           last_send_ms_,
           max_bitrate_kbps_,
           level};
@@ -98,6 +100,7 @@ void Session::maybe_start_encode() {
     return;
   }
   encoding_ = true;
+  rendered_->job.frame_sequence = next_frame_sequence_++;  // in encode (= send) order, no gaps
   auto frame = std::make_shared<Rendered>(std::move(*rendered_));
   rendered_.reset();
   boost::asio::post(shared_.io, [self = shared_from_this(), frame] {
