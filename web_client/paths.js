@@ -182,7 +182,8 @@ export function toInriaCameras(poses, width, height, name = 'view') {
     const { fx, fy } = intrinsicsFor(p.fovDeg, width, height);
     return {
       id,
-      img_name: `${name}_${String(id).padStart(4, '0')}`,
+      // A hotspot tour's waypoint names its hotspot (annotations.js), so tour.json shows which.
+      img_name: p.hotspot ? `hotspot_${p.hotspot}` : `${name}_${String(id).padStart(4, '0')}`,
       width,
       height,
       position: p.position.slice(),
