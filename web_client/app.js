@@ -147,7 +147,8 @@ function onDepthResult(msg) {
   const waiting = state.depthRequests.get(msg.request_id);
   if (!waiting) return;
   state.depthRequests.delete(msg.request_id);
-  waiting.resolve(msg);
+  // A plain object with every field (proto3 leaves zeros out: opacity 0, no hit).
+  waiting.resolve(state.protocol.root.lookupType('catgs.stream.v1.DepthResult').toObject(msg, { defaults: true }));
 }
 
 // Fly to `pose` over a second, as a tour of two views (the same interpolation).
@@ -980,6 +981,8 @@ async function main() {
     playTour: playHotspotTour,
     save: (json) => state.sessionOpen && send(state.protocol.encodeSaveAnnotations(json)),
     linkChanged: notesLinkChanged,
+    closePanel: () => togglePanel('notes', 'btn-notes', false),
+    clearNotice: () => overlay.clearMessage('notice'),
   });
   state.notes.fromLink(params.get('notes'));
   state.walk = new WalkMode({

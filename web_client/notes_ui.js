@@ -12,7 +12,7 @@ const $ = (id) => document.getElementById(id);
 export class NotesUi {
   // app: { camera() -> OrbitCamera|null, probe(cssX, cssY) -> Promise<DepthResult>,
   //        notice(text, level, ms), flyTo(pose), playTour(waypoints), save(json) -> bool,
-  //        linkChanged() }
+  //        clearNotice(), linkChanged(), closePanel() }
   constructor(app) {
     this.app = app;
     this.server = { version: 1, hotspots: [] }; // the scene's file (Annotations)
@@ -114,6 +114,14 @@ export class NotesUi {
   setMode(mode) {
     this.mode = this.mode === mode ? null : mode;
     if (this.mode === 'measure' && this.measurePoints.length === 2) this.measurePoints = [];
+    // The whole scene takes the clicks: the panel closes (it would cover much of a small screen).
+    this.app.clearNotice();
+    if (this.mode) {
+      this.app.closePanel();
+      this.showCard(null);
+      this.app.notice(this.mode === 'hotspot' ? 'click the scene where the hotspot goes (Esc: cancel)'
+        : 'click two points to measure between (Esc: cancel)', 'info', 6000);
+    }
     $('btn-add-hotspot').setAttribute('aria-pressed', String(this.mode === 'hotspot'));
     $('btn-measure').setAttribute('aria-pressed', String(this.mode === 'measure'));
     document.body.classList.toggle('picking', !!this.mode);
@@ -146,10 +154,12 @@ export class NotesUi {
       if (this.measurePoints.length >= 2) this.measurePoints = [];
       this.measurePoints.push(p);
       if (this.measurePoints.length === 2) {
+        this.setMode(null); // done: the next drag orbits again (M measures anew)
         this.app.notice(`distance ${this.measurement.text}`);
         this.app.linkChanged();
       }
     } else if (mode === 'hotspot') {
+      this.app.clearNotice();
       this.pending = p;
       $('hotspot-form').hidden = false;
       $('hotspot-title').focus();
@@ -264,6 +274,16 @@ export class NotesUi {
     }
     const line = $('measure-line');
     const label = $('measure-label');
+    // The points clicked so far, as dots.
+    ['measure-a', 'measure-b'].forEach((id, i) => {
+      const q = pose && this.measurePoints[i] ? projectPoint(pose, this.measurePoints[i], w, h) : null;
+      const dot = $(id);
+      dot.style.display = q ? '' : 'none';
+      if (q) {
+        dot.setAttribute('cx', q.x);
+        dot.setAttribute('cy', q.y);
+      }
+    });
     const m = this.measurement;
     const a = m && pose ? projectPoint(pose, m.a, w, h) : null;
     const b = m && pose ? projectPoint(pose, m.b, w, h) : null;
@@ -336,6 +356,7 @@ export class NotesUi {
 
   _wire() {
     $('btn-add-hotspot').addEventListener('click', () => this.setMode('hotspot'));
+    $('hotspot-card').addEventListener('click', () => this.showCard(null));
     $('btn-measure').addEventListener('click', () => this.setMode('measure'));
     $('btn-clear-measure').addEventListener('click', () => this.clearMeasure());
     $('btn-hotspot-tour').addEventListener('click', () => this.tour());

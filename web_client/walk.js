@@ -6,7 +6,7 @@
 // the bottom left walks (drag from its centre).
 //
 // Eye height: 1.6 m when the scene has a scale (metres per unit), else a tenth of Welcome's
-// scene_scale. The probes refresh about 5 times a second each while walking (10 DepthRequests a
+// scene_scale; at least 0.4 units (twice the near plane, which the probes cannot see within). The probes refresh about 5 times a second each while walking (10 DepthRequests a
 // second, within the server's default limit of 20): between answers the last distances hold.
 
 import { cameraForward, cameraRight, lookAt, vadd, vdot, vlen, vnorm, vscale, vsub } from './camera.js';
@@ -14,6 +14,7 @@ import { alongGround, walkStep } from './annotations.js';
 
 const PROBE_INTERVAL_MS = 200;
 const PROBE_SIZE = 64; // the probes' views: 64 x 64 pixels, the pixel at the centre
+const NEAR_PLANE = 0.2; // the renderer culls Gaussians nearer than this (DESIGN.md "Forward model")
 
 export class WalkMode {
   // app: { camera(), probePose(pose, width, height, x, y) -> Promise<DepthResult>, metresPerUnit(),
@@ -32,9 +33,16 @@ export class WalkMode {
     if (pad) this._wirePad(pad);
   }
 
+  // At least twice the renderer's near plane: the probes cannot see what is nearer than it.
   eyeHeight(cam) {
     const mpu = this.app.metresPerUnit();
-    return mpu ? 1.6 / mpu : cam.sceneScale * 0.1;
+    return Math.max(mpu ? 1.6 / mpu : cam.sceneScale * 0.1, 2 * NEAR_PLANE);
+  }
+
+  // How far short of a wall the camera stops: a quarter of the eye height, and beyond the near
+  // plane (a wall nearer than it is culled, and the camera would walk through).
+  radius(cam) {
+    return Math.max(this.eyeHeight(cam) * 0.25, 1.5 * NEAR_PLANE);
   }
 
   toggle(force) {
@@ -71,11 +79,14 @@ export class WalkMode {
     const wallPose = { position: cam.position, orientation: lookAt(cam.position, vadd(cam.position, at), cam.up), fovDeg: 30 };
     this.inFlight = 2;
     const done = () => this.inFlight--;
+    // An answer describes the camera where it was when asked: the walk since then is taken off.
+    const from = cam.position.slice();
+    const since = (axis) => vdot(vsub(this.app.camera().position, from), axis);
     this.app.probePose(groundPose, PROBE_SIZE, PROBE_SIZE, c, c).then((r) => {
-      this.ground = r && r.hit ? r.depth : Infinity;
+      this.ground = r && r.hit ? r.depth + since(cam.up) : Infinity;
     }).catch(() => {}).finally(done);
     this.app.probePose(wallPose, PROBE_SIZE, PROBE_SIZE, c, c).then((r) => {
-      this.wall = r && r.hit ? r.depth : Infinity;
+      this.wall = r && r.hit ? r.depth - since(at) : Infinity;
       this.wallDir = at;
     }).catch(() => {}).finally(done);
   }
@@ -104,7 +115,7 @@ export class WalkMode {
       wallDistance: sameDir ? this.wall : Infinity,
       groundDistance: this.ground,
       eyeHeight: eye,
-      radius: eye * 0.25,
+      radius: this.radius(cam),
       ease: Math.min(1, dt * 5),
     });
     this.blocked = !!dir && vlen(alongGround(vsub(next, before), cam.up)) < 1e-9;
@@ -121,7 +132,8 @@ export class WalkMode {
   }
 
   snapshot() {
-    return { on: this.on, ground: Number.isFinite(this.ground) ? this.ground : null, wall: Number.isFinite(this.wall) ? this.wall : null, blocked: this.blocked };
+    const cam = this.app.camera();
+    return { on: this.on, eyeHeight: cam ? this.eyeHeight(cam) : null, radius: cam ? this.radius(cam) : null, ground: Number.isFinite(this.ground) ? this.ground : null, wall: Number.isFinite(this.wall) ? this.wall : null, blocked: this.blocked };
   }
 
   _wirePad(pad) {

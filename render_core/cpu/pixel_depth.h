@@ -10,8 +10,9 @@
 // grazes a foreground edge lands between the two surfaces, in empty space.
 //
 // It reads the host model, so it answers the same for a CPU and a CUDA server (the CUDA core
-// would need a second path for a one-pixel render; this one visits every Gaussian once, in a
-// few tens of ms on the 7 M-Gaussian city: cheap for a click, not for every frame).
+// would need a second path for a one-pixel render). It visits every Gaussian once, serially (a
+// cheap screen-radius test first): made for a click or a few probes a second, not for every
+// pixel of a frame; RESULTS.md has its time.
 #pragma once
 
 #include <cstddef>

@@ -451,6 +451,15 @@ void Session::handle_depth(const pb::DepthRequest& request) {
   });
 }
 
+// An annotations error as the client sees it: the file by its name, without the server's folders
+// (the log keeps the whole path).
+static std::string client_error(std::string error, const std::string& scene_path) {
+  const std::string folder = std::filesystem::path(scene_path).parent_path().string();
+  if (folder.empty()) return error;
+  for (std::size_t at; (at = error.find(folder + "/")) != std::string::npos;) error.erase(at, folder.size() + 1);
+  return error;
+}
+
 void Session::send_annotations() {
   const AnnotationsFile file = read_annotations(scene_->path);
   if (!file.error.empty())
@@ -458,7 +467,7 @@ void Session::send_annotations() {
   pb::ServerMessage m;
   pb::Annotations* a = m.mutable_annotations();
   a->set_json(file.json);
-  a->set_error(file.error);
+  a->set_error(client_error(file.error, scene_->path));
   a->set_can_save(role_ >= Role::author);
   send(m);
 }
@@ -480,7 +489,8 @@ void Session::handle_save_annotations(const pb::SaveAnnotations& save) {
       a->set_saved(true);
       std::cerr << "[session " << id_ << " " << session_id_ << "] saved " << annotations_path(scene_->path) << "\n";
     } catch (const std::exception& e) {
-      a->set_error(e.what());
+      std::cerr << "[session " << id_ << " " << session_id_ << "] annotations not saved: " << e.what() << "\n";
+      a->set_error(client_error(e.what(), scene_->path));
     }
   }
   send(m);

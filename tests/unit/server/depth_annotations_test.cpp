@@ -53,8 +53,8 @@ void add_wall(GaussianModel& m, float z, float half, float opacity_logit) {
   std::size_t i = first;
   for (int a = 0; a < n; ++a)
     for (int b = 0; b < n; ++b, ++i) {
-      grown.means[3 * i] = -half + step * a;
-      grown.means[3 * i + 1] = -half + step * b;
+      grown.means[3 * i] = -half + step * static_cast<float>(a);
+      grown.means[3 * i + 1] = -half + step * static_cast<float>(b);
       grown.means[3 * i + 2] = z;
       grown.log_scales[3 * i] = grown.log_scales[3 * i + 1] = std::log(0.15f);
       grown.log_scales[3 * i + 2] = std::log(0.005f);
@@ -169,7 +169,9 @@ TEST(PixelDepth, OpacityMatchesTheRenderersTransmittanceOnBiker) {
       const std::size_t p = (static_cast<std::size_t>(y) * w + x) * 3;
       const float T = white.rgb[p] - black.rgb[p];
       EXPECT_NEAR(d.opacity, 1.0f - T, 2e-3f) << "pixel " << x << ", " << y;
-      if (std::fabs(T - 0.5f) > 0.01f) EXPECT_EQ(d.hit, T < 0.5f) << "pixel " << x << ", " << y << " T " << T;
+      if (std::fabs(T - 0.5f) > 0.01f) {
+        EXPECT_EQ(d.hit, T < 0.5f) << "pixel " << x << ", " << y << " T " << T;
+      }
       if (d.hit) {
         ++hits;
         // The point is on the biker: inside the bounds of its Gaussians.
