@@ -21,11 +21,22 @@
 //       The cameras as they are, interpolated (interpolate_views): what catgs-loadgen and
 //       catgs-bench replay for `cameras:C.json`, as a trace file (the web viewer's tour test
 //       compares its own Catmull-Rom + slerp with it).
+//   catgs-scene probe   --scene S [--cameras C.json] [--frames 8] [--grid 8] [--width 1280 --height 720]
+//                       [--json OUT]
+//       Times the depth probe (cpu/pixel_depth.h, the server's DepthRequest): a grid x grid of
+//       pixels on each of the first --frames cameras (without --cameras, one view of the robust
+//       bounds from -z); prints a table (ms per probe, hits) and writes JSON.
+#include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <fstream>
 #include <cstdio>
 #include <iostream>
 
+#include <nlohmann/json.hpp>
+
 #include "common/image_io.h"
+#include "cpu/pixel_depth.h"
 #include "scene/ply_io.h"
 #include "scene/spz_file.h"
 #include "renderer/renderer.h"
@@ -49,7 +60,9 @@ const char* kUsage =
     "                   [--width 1920 --height 1080] [--fov 60] [--altitude 0.75] [--pitch 24]\n"
     "       catgs-scene trace --scene S --cameras C.json --out T.trace [--scale 10] [--up X,Y,Z]\n"
     "                   [--rate 120] [--seconds-per-view 0.5] [--distance 0.6] [--frames N]\n"
-    "                   [--width 1920 --height 1080]\n";
+    "                   [--width 1920 --height 1080]\n"
+    "       catgs-scene probe --scene S [--cameras C.json] [--frames 8] [--grid 8] [--width 1280 --height 720]\n"
+    "                   [--json OUT]\n";
 
 glm::vec3 parse_vec3(const std::string& s) {
   glm::vec3 v;
@@ -204,24 +217,99 @@ int interpolate(const catgs::tools::Args& args) {
   return 0;
 }
 
+// The views `probe` times: the first `frames` cameras of --cameras, or one view of the robust
+// bounds' centre from -z at twice their diagonal (60 degrees vertical).
+std::vector<catgs::Camera> probe_views(const catgs::tools::Args& args, const catgs::GaussianModel& m, int w, int h) {
+  std::vector<catgs::Camera> views;
+  if (args.has("--cameras")) {
+    views = catgs::load_inria_cameras(args.get("--cameras"), w, h);
+    views.resize(std::min<std::size_t>(views.size(), static_cast<std::size_t>(args.get_int("--frames", 8))));
+  } else {
+    const catgs::Bounds b = catgs::robust_bounds(m);
+    const glm::vec3 eye = b.center() - glm::vec3(0.0f, 0.0f, 2.0f * glm::length(b.extent()));
+    views.push_back(catgs::Camera::from_pose(eye, glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, w, h));
+  }
+  return views;
+}
+
+int probe(const catgs::tools::Args& args) {
+  const auto m = catgs::load_scene(args.require("--scene"));
+  const int w = args.get_int("--width", 1280), h = args.get_int("--height", 720), grid = args.get_int("--grid", 8);
+  std::vector<double> ms;
+  int hits = 0;
+  const auto views = probe_views(args, m, w, h);
+  for (const catgs::Camera& cam : views)
+    for (int j = 0; j < grid; ++j)
+      for (int i = 0; i < grid; ++i) {
+        const double x = (i + 0.5) * w / grid, y = (j + 0.5) * h / grid;
+        const auto t0 = std::chrono::steady_clock::now();
+        const catgs::cpu::PixelDepth d = catgs::cpu::probe_pixel_depth(m, cam, x, y);
+        ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+        hits += d.hit ? 1 : 0;
+      }
+  if (ms.empty()) throw std::invalid_argument("no views to probe");
+  std::vector<double> sorted = ms;
+  std::sort(sorted.begin(), sorted.end());
+  const auto pct = [&sorted](double q) {
+    return sorted[static_cast<std::size_t>(q * static_cast<double>(sorted.size() - 1))];
+  };
+  double sum = 0;
+  for (double v : ms) sum += v;
+  const double mean = sum / static_cast<double>(ms.size());
+  std::printf("%-16s %10s %6s %7s %6s %9s %9s %9s %9s\n", "scene", "gaussians", "views", "probes", "hits", "mean_ms",
+              "median_ms", "p95_ms", "max_ms");
+  std::printf("%-16s %10zu %6zu %7zu %6d %9.3f %9.3f %9.3f %9.3f\n", m.name.c_str(), m.size(), views.size(), ms.size(),
+              hits, mean, pct(0.5), pct(0.95), sorted.back());
+  if (args.has("--json")) {
+    const nlohmann::json j = {
+        {"scene", m.name},       {"gaussians", m.size()}, {"views", views.size()},  {"width", w},
+        {"height", h},           {"probes", ms.size()},   {"hits", hits},           {"mean_ms", mean},
+        {"median_ms", pct(0.5)}, {"p95_ms", pct(0.95)},   {"max_ms", sorted.back()}};
+    std::ofstream(args.get("--json")) << j.dump(1) << "\n";
+  }
+  return 0;
+}
+
 int run(int argc, char** argv) {
   if (argc < 2 || std::string(argv[1]) == "--help") {
     std::cout << kUsage;
     return argc < 2 ? 1 : 0;
   }
   const std::string cmd = argv[1];
-  const catgs::tools::Args args(
-      argc - 1, argv + 1,
-      {"--scene",           "--out",         "--out-compressed",   "--no-write!", "--check-views", "--width",
-       "--height",          "--radius-sq",   "--spacing",          "--scale",     "--seed",        "--up",
-       "--no-sh-rotation!", "--flyover-out", "--frames",           "--rate",      "--fov",         "--altitude",
-       "--pitch",           "--cameras",     "--seconds-per-view", "--distance",  "--png-prefix",  "--spz-version"});
+  const catgs::tools::Args args(argc - 1, argv + 1,
+                                {"--scene",
+                                 "--out",
+                                 "--out-compressed",
+                                 "--no-write!",
+                                 "--check-views",
+                                 "--width",
+                                 "--height",
+                                 "--radius-sq",
+                                 "--spacing",
+                                 "--scale",
+                                 "--seed",
+                                 "--up",
+                                 "--no-sh-rotation!",
+                                 "--flyover-out",
+                                 "--frames",
+                                 "--rate",
+                                 "--fov",
+                                 "--altitude",
+                                 "--pitch",
+                                 "--cameras",
+                                 "--seconds-per-view",
+                                 "--distance",
+                                 "--png-prefix",
+                                 "--spz-version",
+                                 "--grid",
+                                 "--json"});
   if (cmd == "info") return info(args);
   if (cmd == "compact") return compact(args);
   if (cmd == "convert") return convert(args);
   if (cmd == "tile") return tile(args);
   if (cmd == "trace") return trace(args);
   if (cmd == "interpolate") return interpolate(args);
+  if (cmd == "probe") return probe(args);
   throw std::invalid_argument("unknown command '" + cmd + "'");
 }
 

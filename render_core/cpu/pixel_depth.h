@@ -27,10 +27,10 @@ namespace catgs::cpu {
 inline constexpr float kSurfaceTransmittance = 0.5f;  // the median: T falls to this at the surface
 
 struct PixelDepth {
-  bool hit = false;            // T fell to kSurfaceTransmittance or below
-  float depth = 0.0f;          // hit: camera-space z of that Gaussian's mean, world units
-  glm::vec3 point{0.0f};       // hit: world point on the pixel's ray at camera-space z = depth
-  float opacity = 0.0f;        // 1 - T after the whole ray (the renderer's stop rule), 0..1
+  bool hit = false;              // T fell to kSurfaceTransmittance or below
+  float depth = 0.0f;            // hit: camera-space z of that Gaussian's mean, world units
+  glm::vec3 point{0.0f};         // hit: world point on the pixel's ray at camera-space z = depth
+  float opacity = 0.0f;          // 1 - T after the whole ray (the renderer's stop rule), 0..1
   std::size_t contributors = 0;  // Gaussians with alpha >= 1/255 at the pixel
 };
 

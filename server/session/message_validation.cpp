@@ -78,8 +78,9 @@ std::optional<Violation> check_quality(const pb::Quality& quality) {
   return std::nullopt;
 }
 
-std::optional<Violation> check_depth_request(const pb::DepthRequest& request, const std::optional<CameraPose>& last_pose,
-                                             const Viewport& viewport, DepthQuery& out) {
+std::optional<Violation> check_depth_request(const pb::DepthRequest& request,
+                                             const std::optional<CameraPose>& last_pose, const Viewport& viewport,
+                                             DepthQuery& out) {
   if (request.has_pose()) {
     if (auto bad = check_pose(request.pose(), out.pose))
       return Violation{bad->code, "DepthRequest pose: " + bad->reason};
@@ -103,10 +104,9 @@ std::optional<Violation> check_depth_request(const pb::DepthRequest& request, co
     return Violation{pb::ERROR_INVALID_ARGUMENT, "DepthRequest pixel is NaN or Inf"};
   // Written so that the message shows the pixel and the view the client should have used.
   if (!(request.x() >= 0 && request.x() < out.width && request.y() >= 0 && request.y() < out.height))
-    return Violation{pb::ERROR_INVALID_ARGUMENT, "DepthRequest pixel (" + std::to_string(request.x()) + ", " +
-                                                     std::to_string(request.y()) + ") is outside the " +
-                                                     std::to_string(out.width) + "x" + std::to_string(out.height) +
-                                                     " view"};
+    return Violation{pb::ERROR_INVALID_ARGUMENT,
+                     "DepthRequest pixel (" + std::to_string(request.x()) + ", " + std::to_string(request.y()) +
+                         ") is outside the " + std::to_string(out.width) + "x" + std::to_string(out.height) + " view"};
   out.x = request.x();
   out.y = request.y();
   return std::nullopt;

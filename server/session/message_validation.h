@@ -80,7 +80,8 @@ struct DepthQuery {
 // when it has none (a violation when that is empty too); its size, 1..4096 a side, or `viewport`
 // when both are 0; x and y finite and inside the view. The violation's reason goes into
 // DepthResult.error (the session goes on); its code is ERROR_INVALID_ARGUMENT.
-std::optional<Violation> check_depth_request(const pb::DepthRequest& request, const std::optional<CameraPose>& last_pose,
-                                             const Viewport& viewport, DepthQuery& out);
+std::optional<Violation> check_depth_request(const pb::DepthRequest& request,
+                                             const std::optional<CameraPose>& last_pose, const Viewport& viewport,
+                                             DepthQuery& out);
 
 }  // namespace catgs::server

@@ -229,9 +229,9 @@ class Session : public std::enable_shared_from_this<Session> {
   Clock::time_point last_message_;  // the client's latest message (--silent-timeout-ms)
   TokenBucket ping_bucket_, key_frame_bucket_, resize_bucket_, quality_bucket_;  // --rate-limits
   TokenBucket depth_bucket_, save_bucket_;                                       // --rate-limits
-  Role role_ = Role::none;                // the Hello token's role (none: the server has no tokens)
-  std::optional<CameraPose> last_pose_;   // the newest valid Pose (a DepthRequest without one)
-  int depths_in_flight_ = 0;              // DepthRequests probing on the pool
+  Role role_ = Role::none;               // the Hello token's role (none: the server has no tokens)
+  std::optional<CameraPose> last_pose_;  // the newest valid Pose (a DepthRequest without one)
+  int depths_in_flight_ = 0;             // DepthRequests probing on the pool
   // Stats counters (totals, and sums since the last Stats message).
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
   std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)

@@ -26,10 +26,10 @@
 import { spawn } from 'node:child_process';
 import { copyFileSync, existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { createRequire } from 'node:module';
-import net from 'node:net';
 import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
+import { CHROMIUM_ARGS, freePort, sleep, stopServers, waitFor } from './harness.mjs';
 
 const SKIP = 77;
 const here = path.dirname(fileURLToPath(import.meta.url));
@@ -58,16 +58,6 @@ if (!serverBin || !existsSync(serverBin)) {
 const require = createRequire(import.meta.url);
 const { chromium } = require('playwright-core');
 
-const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-async function waitFor(what, fn, timeoutMs, intervalMs = 100) {
-  const end = Date.now() + timeoutMs;
-  for (;;) {
-    const v = await fn();
-    if (v) return v;
-    if (Date.now() > end) throw new Error(`timed out after ${timeoutMs} ms waiting for ${what}`);
-    await sleep(intervalMs);
-  }
-}
 const failures = [];
 function check(ok, what) {
   log(`${ok ? 'ok  ' : 'FAIL'} ${what}`);
@@ -77,14 +67,7 @@ function check(ok, what) {
 const servers = [];
 let serverLog = '';
 async function startServer(serverArgs) {
-  const port = await new Promise((resolve, reject) => {
-    const s = net.createServer();
-    s.once('error', reject);
-    s.listen(0, '127.0.0.1', () => {
-      const p = s.address().port;
-      s.close(() => resolve(p));
-    });
-  });
+  const port = await freePort();
   const all = [...serverArgs, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot];
   log(`starting catgs-server ${all.join(' ')}`);
   const proc = spawn(serverBin, all, { stdio: ['ignore', 'pipe', 'pipe'] });
@@ -379,8 +362,7 @@ try {
   context = await chromium.launchPersistentContext(profileDir, {
     executablePath: CHROMIUM,
     headless: true,
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-      '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+    args: CHROMIUM_ARGS,
     viewport: VIEW,
     deviceScaleFactor: 1,
   });
@@ -394,13 +376,7 @@ try {
   code = 1;
 } finally {
   if (context) await context.close().catch(() => {});
-  for (const proc of servers) {
-    if (proc.exitCode !== null || proc.signalCode !== null) continue;
-    proc.kill('SIGTERM');
-    const killer = setTimeout(() => proc.kill('SIGKILL'), 5000);
-    await new Promise((r) => proc.once('exit', r));
-    clearTimeout(killer);
-  }
+  await stopServers(servers);
   rmSync(profileDir, { recursive: true, force: true });
   rmSync(tmp, { recursive: true, force: true });
 }

@@ -78,8 +78,8 @@ GaussianModel walls(float front_logit) {
 glm::vec3 ray_meets_plane(const glm::vec3& centre, const glm::quat& c2w, float fov_deg, int w, int h, double x,
                           double y, float plane_z) {
   const double f = h / (2.0 * std::tan(fov_deg * M_PI / 360.0));
-  const glm::vec3 dir = glm::mat3_cast(c2w) * glm::vec3(static_cast<float>((x - w / 2.0) / f),
-                                                         static_cast<float>((y - h / 2.0) / f), 1.0f);
+  const glm::vec3 dir = glm::mat3_cast(c2w) *
+                        glm::vec3(static_cast<float>((x - w / 2.0) / f), static_cast<float>((y - h / 2.0) / f), 1.0f);
   return centre + dir * ((plane_z - centre.z) / dir.z);
 }
 
