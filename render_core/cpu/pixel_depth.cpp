@@ -15,7 +15,8 @@ namespace catgs::cpu {
 namespace {
 
 // (depth, alpha) of each Gaussian that reaches the sample point `s` (pixel units), unsorted.
-std::vector<std::pair<float, float>> ray_hits(const GaussianModel& model, const Camera& camera, glm::vec2 s) {
+std::vector<std::pair<float, float>> ray_hits(const GaussianModel& model, const Camera& camera, glm::vec2 s,
+                                              const std::vector<fm::ChunkBounds>* chunks) {
   // A 1 x 1 view whose only pixel is `s`: edges_beyond() then rejects every Gaussian whose
   // conservative screen radius does not reach s, before its covariance is computed. The field of
   // view (the Jacobian's clamp) stays the real camera's.
@@ -26,7 +27,14 @@ std::vector<std::pair<float, float>> ray_hits(const GaussianModel& model, const 
   const glm::vec2 tan_half_fov = fm::view_of(camera).tan_half_fov;
 
   std::vector<std::pair<float, float>> hits;
+  if (chunks && chunks->size() != fm::chunk_count(model.size()))
+    throw std::invalid_argument("depth probe: chunk bounds of another scene");
   for (std::size_t i = 0; i < model.size(); ++i) {
+    // A chunk that cannot reach the one pixel: on to the next chunk.
+    if (chunks && i % fm::kChunkSize == 0 && fm::chunk_outside_view((*chunks)[i / fm::kChunkSize], one)) {
+      i += fm::kChunkSize - 1;
+      continue;
+    }
     const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
     const glm::vec3 p = camera.R * mean + camera.t;
     if (!(p.z > camera.near_plane) || p.z > camera.far_plane) continue;
@@ -53,14 +61,15 @@ std::vector<std::pair<float, float>> ray_hits(const GaussianModel& model, const 
 
 }  // namespace
 
-PixelDepth probe_pixel_depth(const GaussianModel& model, const Camera& camera, double x, double y) {
+PixelDepth probe_pixel_depth(const GaussianModel& model, const Camera& camera, double x, double y,
+                             const std::vector<fm::ChunkBounds>* chunks) {
   validate_camera(camera);
   if (!std::isfinite(x) || !std::isfinite(y)) throw std::invalid_argument("pixel coordinates are NaN or Inf");
   if (x < 0.0 || y < 0.0 || x >= camera.width || y >= camera.height)
     throw std::invalid_argument("pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is outside the " +
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height) + " view");
   const glm::vec2 s(static_cast<float>(x) - 0.5f, static_cast<float>(y) - 0.5f);
-  std::vector<std::pair<float, float>> hits = ray_hits(model, camera, s);
+  std::vector<std::pair<float, float>> hits = ray_hits(model, camera, s, chunks);
   // Front to back; equal depths keep a fixed order so the answer is deterministic.
   std::sort(hits.begin(), hits.end());
 

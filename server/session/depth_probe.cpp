@@ -8,7 +8,8 @@
 
 namespace catgs::server {
 
-pb::DepthResult answer_depth(const GaussianModel& model, const DepthQuery& query, std::uint32_t request_id) {
+pb::DepthResult answer_depth(const GaussianModel& model, const std::vector<fm::ChunkBounds>* chunks,
+                             const DepthQuery& query, std::uint32_t request_id) {
   pb::DepthResult r;
   r.set_request_id(request_id);
   const auto start = std::chrono::steady_clock::now();
@@ -16,7 +17,7 @@ pb::DepthResult answer_depth(const GaussianModel& model, const DepthQuery& query
     // The same camera as a frame of this pose and size (frame_pipeline.cpp).
     const Camera camera = Camera::from_pose(query.pose.position, query.pose.orientation, query.pose.vertical_fov_deg,
                                             query.width, query.height);
-    const cpu::PixelDepth d = cpu::probe_pixel_depth(model, camera, query.x, query.y);
+    const cpu::PixelDepth d = cpu::probe_pixel_depth(model, camera, query.x, query.y, chunks);
     r.set_hit(d.hit);
     r.set_opacity(d.opacity);
     if (d.hit) {

@@ -5,6 +5,9 @@
 
 #include <cstdint>
 
+#include <vector>
+
+#include "forward_model/chunk_bounds.h"
 #include "scene/gaussian_model.h"
 #include "session/message_validation.h"
 
@@ -12,6 +15,8 @@ namespace catgs::server {
 
 // Probes `query` (validated by check_depth_request) and fills a DepthResult with request_id,
 // hit, point, depth, opacity and server_ms; `error` when the probe throws. Never throws.
-pb::DepthResult answer_depth(const GaussianModel& model, const DepthQuery& query, std::uint32_t request_id);
+// `chunks`: the model's chunk bounds (LoadedScene::chunks), or null.
+pb::DepthResult answer_depth(const GaussianModel& model, const std::vector<fm::ChunkBounds>* chunks,
+                             const DepthQuery& query, std::uint32_t request_id);
 
 }  // namespace catgs::server

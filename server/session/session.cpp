@@ -443,7 +443,7 @@ void Session::handle_depth(const pb::DepthRequest& request) {
   ++depths_in_flight_;
   boost::asio::post(shared_.io, [self = shared_from_this(), scene = scene_, query, id = request.request_id()] {
     pb::ServerMessage m;
-    *m.mutable_depth_result() = answer_depth(*scene->model, query, id);
+    *m.mutable_depth_result() = answer_depth(*scene->model, &scene->chunks, query, id);
     boost::asio::post(self->strand_, [self, m = std::move(m)] {
       self->depths_in_flight_--;
       if (self->state_ == State::open) self->send(m);

@@ -163,9 +163,16 @@ TEST(PixelDepth, OpacityMatchesTheRenderersTransmittanceOnBiker) {
   opt.background = glm::vec3(1.0f);
   make_renderer("cpu", model, opt)->render(cam, white);
   int hits = 0;
+  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(*model);
   for (int y = 5; y < h; y += 11)
     for (int x = 3; x < w; x += 13) {
       const cpu::PixelDepth d = cpu::probe_pixel_depth(*model, cam, x + 0.5, y + 0.5);
+      // The chunk culling the server uses changes nothing.
+      const cpu::PixelDepth culled = cpu::probe_pixel_depth(*model, cam, x + 0.5, y + 0.5, &chunks);
+      EXPECT_EQ(culled.hit, d.hit);
+      EXPECT_EQ(culled.depth, d.depth);
+      EXPECT_EQ(culled.opacity, d.opacity);
+      EXPECT_EQ(culled.contributors, d.contributors);
       const std::size_t p = (static_cast<std::size_t>(y) * w + x) * 3;
       const float T = white.rgb[p] - black.rgb[p];
       EXPECT_NEAR(d.opacity, 1.0f - T, 2e-3f) << "pixel " << x << ", " << y;
