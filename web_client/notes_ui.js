@@ -241,6 +241,21 @@ export class NotesUi {
     return this.ownScale;
   }
 
+  // Removes a hotspot: the viewer's own at once (the link follows), the server's from what the
+  // next Save writes.
+  remove(id) {
+    const before = this.own.length;
+    this.own = this.own.filter((h) => h.id !== id);
+    if (this.own.length !== before) {
+      this.app.linkChanged();
+    } else {
+      this.server = { ...this.server, hotspots: this.server.hotspots.filter((h) => h.id !== id) };
+      if (this.server.tour) this.server.tour = this.server.tour.filter((t) => t !== id);
+      this.app.notice('removed here: Save on server to remove it from the file');
+    }
+    this._render();
+  }
+
   clearMeasure() {
     this.measurePoints = [];
     this.app.linkChanged();
@@ -334,8 +349,20 @@ export class NotesUi {
       el.title = h.text || h.title;
       el.classList.toggle('own', h.own);
       const li = document.createElement('li');
-      li.textContent = `${h.title}${h.own ? ' (yours)' : ''}`;
-      li.addEventListener('click', () => this.open(h.id));
+      const name = document.createElement('span');
+      name.textContent = `${h.title}${h.own ? ' (yours)' : ''}`;
+      name.addEventListener('click', () => this.open(h.id));
+      li.append(name);
+      // The viewer's own can go; the server's only for an author (gone from the file at Save).
+      if (h.own || this.canSave) {
+        const del = document.createElement('button');
+        del.type = 'button';
+        del.className = 'delete';
+        del.textContent = '×';
+        del.title = h.own ? 'remove' : 'remove (Save on server to keep it so)';
+        del.addEventListener('click', () => this.remove(h.id));
+        li.append(del);
+      }
       list.append(li);
     }
     this._status();

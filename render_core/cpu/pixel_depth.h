@@ -11,8 +11,9 @@
 //
 // It reads the host model, so it answers the same for a CPU and a CUDA server (the CUDA core
 // would need a second path for a one-pixel render). It visits every Gaussian once, serially (a
-// cheap screen-radius test first): made for a click or a few probes a second, not for every
-// pixel of a frame; RESULTS.md has its time.
+// cheap screen-radius test first), or, given the chunk bounds, only the chunks that may reach the
+// pixel: made for a click or a few probes a second, not for every pixel of a frame; RESULTS.md
+// has its time.
 #pragma once
 
 #include <cstddef>

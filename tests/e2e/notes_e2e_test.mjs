@@ -296,6 +296,14 @@ async function bikerScenarios(tmp) {
   check(tourJson.includes('hotspot_seat') && tourJson.includes('hotspot_lower-part'), 'tour.json names the hotspots it steps through');
   await waitFor('the tour\'s end', async () => !(await hook(page, () => window.catgs.playing)), 10000);
 
+  // The author removes a hotspot in the list and saves: the file keeps the other.
+  if (!(await page.isVisible('#notes'))) await page.click('#btn-notes');
+  await page.click('#hotspot-list li:has-text("Lower part") button.delete');
+  await page.click('#btn-save-notes');
+  await waitFor('the file without it', () => JSON.parse(readFileSync(notesFile, 'utf8')).hotspots.length === 1, 10000);
+  check(JSON.parse(readFileSync(notesFile, 'utf8')).hotspots[0].id === 'seat', 'a hotspot removed in the list and saved is gone from the file');
+  await page.click('#btn-notes');
+
   // ---- a flood of depth requests ends the flooding session only ----
   await hook(viewer, (p) => {
     for (let i = 0; i < 200; i++) window.catgs.probePose(p, 480, 360, 240, 180).catch(() => {});

@@ -581,6 +581,9 @@ test('annotations: the server\'s rules, ids, hotspot tours and the share link', 
   assert.equal(notes.hotspotId('The Seat!', new Set(['the-seat'])), 'the-seat-2');
   const keys = notes.hotspotTour(n, (h) => ({ position: [9, 9, 9], orientation: [1, 0, 0, 0], fovDeg: 60, from: h.id }));
   assert.deepEqual(keys.map((k) => k.hotspot), ['b', 'a']);
+  // tour.json keeps which hotspot each waypoint is (img_name hotspot_ID), through an import.
+  const imported = paths.fromInriaCameras(JSON.stringify(paths.toInriaCameras(keys, 640, 480, 'tour')));
+  assert.deepEqual(imported.map((k) => k.hotspot), ['b', 'a']);
   assert.deepEqual(keys[0].position, [9, 9, 9], 'a hotspot without a view is seen from viewFor');
   assert.deepEqual(keys[1].position, [0, 0, -1]);
   // The link carries the viewer's own hotspots, measurement and scale; garbage is named.
