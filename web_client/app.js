@@ -707,7 +707,10 @@ function updateReprojection() {
       from.position.every((v, i) => v === to.position[i]) &&
       from.orientation.every((v, i) => v === to.orientation[i]);
     if (!same) {
-      const H = reprojection(from, to, planeDepthFor(from, cam.target, cam.sceneScale), w, h);
+      // Walk mode orbits about a point just ahead (looking around): the scene's depth is the
+      // probes' instead, or a frame would be re-projected as if the world were that near.
+      const depth = state.walk.on ? state.walk.sceneDepth(cam) : planeDepthFor(from, cam.target, cam.sceneScale);
+      const H = reprojection(from, to, depth, w, h);
       const corners = [[0, 0], [w, 0], [0, h], [w, h]].map(([x, y]) => applyHomography(H, x, y));
       if (corners.every((c) => c !== null)) transform = cssTransform(H, w, h, canvas.clientWidth, canvas.clientHeight);
     }
@@ -990,7 +993,7 @@ async function main() {
     probePose,
     metresPerUnit: () => state.notes.metresPerUnit,
     notice,
-  }, $('walk-pad'));
+  }, isTouch ? $('walk-pad') : null); // the pad only where fingers walk; keys elsewhere
   installTestHook();
   wireUi();
   state.viewport = viewportSize();

@@ -131,6 +131,12 @@ export class WalkMode {
     }
   }
 
+  // A depth for re-projecting the shown frame while walking: the wall ahead when one was seen,
+  // else the scene scale (the orbit centre sits just in front of the camera in walk mode).
+  sceneDepth(cam) {
+    return Number.isFinite(this.wall) && this.wall > NEAR_PLANE ? this.wall : cam.sceneScale;
+  }
+
   snapshot() {
     const cam = this.app.camera();
     return { on: this.on, eyeHeight: cam ? this.eyeHeight(cam) : null, radius: cam ? this.radius(cam) : null, ground: Number.isFinite(this.ground) ? this.ground : null, wall: Number.isFinite(this.wall) ? this.wall : null, blocked: this.blocked };
