@@ -87,7 +87,7 @@ std::string server_usage() {
          "  --web-root DIR        static files served at / (default: web_client/)\n"
          "  --max-sessions N      concurrent sessions (default 8)\n"
          "  --full-retry-ms N     reconnect hint sent with ERROR_SERVER_FULL: N .. 2N ms, drawn (default 2000)\n"
-         "  --token-file FILE     access tokens, one a line: '[viewer|admin] TOKEN' (a bare TOKEN\n"
+         "  --token-file FILE     access tokens, one a line: '[viewer|author|admin] TOKEN' (a bare TOKEN\n"
          "                        is admin). With tokens, Hello needs one and GET /metrics needs an\n"
          "                        admin one (Authorization: Bearer TOKEN); /healthz, /readyz stay open.\n"
          "                        The CATGS_TOKEN environment variable adds an admin token\n"

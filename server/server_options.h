@@ -33,7 +33,7 @@ struct ServerOptions {
   int max_sessions = 8;            // sessions open at once; one more gets ERROR_SERVER_FULL
   int full_retry_ms = 2000;        // ERROR_SERVER_FULL's retry_after_ms: this .. 2x this (session.h kServerFullRetryMs)
   std::string token;               // --token T (visible in /proc: prefer the two below)
-  std::string token_file;          // --token-file FILE: "[viewer|admin] TOKEN" lines
+  std::string token_file;          // --token-file FILE: "[viewer|author|admin] TOKEN" lines
   // Every token from --token, --token-file and CATGS_TOKEN (resolve_access_tokens). When there is
   // one, Hello.token must be one of them and /metrics needs an admin token.
   AccessTokens tokens;

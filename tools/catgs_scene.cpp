@@ -28,12 +28,23 @@
 //                       [--cache-dir D] [--json OUT] [--upload]
 //       Load times, plain and cached, cold and warm page cache, with peak memory
 //       (scene_tools/load_bench.h): a table and JSON.
+//   catgs-scene probe   --scene S [--cameras C.json] [--frames 8] [--grid 8] [--width 1280 --height 720]
+//                       [--json OUT]
+//       Times the depth probe (cpu/pixel_depth.h, the server's DepthRequest): a grid x grid of
+//       pixels on each of the first --frames cameras (without --cameras, one view of the robust
+//       bounds from -z), without and with chunk culling (the server's); prints a table (ms per
+//       probe, hits) and writes JSON.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <fstream>
 #include <cstdio>
 #include <iostream>
 
+#include <nlohmann/json.hpp>
+
 #include "common/image_io.h"
+#include "cpu/pixel_depth.h"
 #include "scene/ply_io.h"
 #include "scene/scene_cache.h"
 #include "scene_tools/load_bench.h"
@@ -62,7 +73,9 @@ const char* kUsage =
     "                   [--width 1920 --height 1080]\n"
     "       catgs-scene cache --scene S [--out C] [--threads N]\n"
     "       catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]\n"
-    "                   [--cache-dir D] [--json OUT] [--upload]\n";
+    "                   [--cache-dir D] [--json OUT] [--upload]\n"
+    "       catgs-scene probe --scene S [--cameras C.json] [--frames 8] [--grid 8] [--width 1280 --height 720]\n"
+    "                   [--json OUT]\n";
 
 glm::vec3 parse_vec3(const std::string& s) {
   glm::vec3 v;
@@ -244,6 +257,63 @@ int load_bench(const catgs::tools::Args& args) {
   return catgs::tools::run_load_bench(o);
 }
 
+// The views `probe` times: the first `frames` cameras of --cameras, or one view of the robust
+// bounds' centre from -z at their diagonal (60 degrees vertical).
+std::vector<catgs::Camera> probe_views(const catgs::tools::Args& args, const catgs::GaussianModel& m, int w, int h) {
+  std::vector<catgs::Camera> views;
+  if (args.has("--cameras")) {
+    views = catgs::load_inria_cameras(args.get("--cameras"), w, h);
+    views.resize(std::min<std::size_t>(views.size(), static_cast<std::size_t>(args.get_int("--frames", 8))));
+  } else {
+    const catgs::Bounds b = catgs::robust_bounds(m);
+    const glm::vec3 eye = b.center() - glm::vec3(0.0f, 0.0f, glm::length(b.extent()));
+    views.push_back(catgs::Camera::from_pose(eye, glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, w, h));
+  }
+  return views;
+}
+
+// Times `views` x grid^2 probes, with or without chunk culling: one row of the table and the JSON.
+nlohmann::json time_probes(const catgs::GaussianModel& m, const std::vector<catgs::Camera>& views, int grid,
+                           const std::vector<catgs::fm::ChunkBounds>* chunks) {
+  std::vector<double> ms;
+  int hits = 0;
+  for (const catgs::Camera& cam : views)
+    for (int j = 0; j < grid; ++j)
+      for (int i = 0; i < grid; ++i) {
+        const double x = (i + 0.5) * cam.width / grid, y = (j + 0.5) * cam.height / grid;
+        const auto t0 = std::chrono::steady_clock::now();
+        const catgs::cpu::PixelDepth d = catgs::cpu::probe_pixel_depth(m, cam, x, y, chunks);
+        ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+        hits += d.hit ? 1 : 0;
+      }
+  if (ms.empty()) throw std::invalid_argument("no views to probe");
+  std::sort(ms.begin(), ms.end());
+  const auto pct = [&ms](double q) { return ms[static_cast<std::size_t>(q * static_cast<double>(ms.size() - 1))]; };
+  double sum = 0;
+  for (double v : ms) sum += v;
+  const double mean = sum / static_cast<double>(ms.size());
+  const char* culling = chunks ? "chunks" : "none";
+  std::printf("%-16s %10zu %-8s %6zu %7zu %6d %9.3f %9.3f %9.3f %9.3f\n", m.name.c_str(), m.size(), culling,
+              views.size(), ms.size(), hits, mean, pct(0.5), pct(0.95), ms.back());
+  return {{"culling", culling},    {"probes", ms.size()}, {"hits", hits},       {"mean_ms", mean},
+          {"median_ms", pct(0.5)}, {"p95_ms", pct(0.95)}, {"max_ms", ms.back()}};
+}
+
+int probe(const catgs::tools::Args& args) {
+  const auto m = catgs::load_scene(args.require("--scene"));
+  const int w = args.get_int("--width", 1280), h = args.get_int("--height", 720), grid = args.get_int("--grid", 8);
+  const auto views = probe_views(args, m, w, h);
+  const auto chunks = catgs::fm::chunk_bounds(m);
+  std::printf("%-16s %10s %-8s %6s %7s %6s %9s %9s %9s %9s\n", "scene", "gaussians", "culling", "views", "probes",
+              "hits", "mean_ms", "median_ms", "p95_ms", "max_ms");
+  nlohmann::json j = {{"scene", m.name}, {"gaussians", m.size()}, {"views", views.size()},
+                      {"width", w},      {"height", h},           {"rows", nlohmann::json::array()}};
+  j["rows"].push_back(time_probes(m, views, grid, nullptr));
+  j["rows"].push_back(time_probes(m, views, grid, &chunks));
+  if (args.has("--json")) std::ofstream(args.get("--json")) << j.dump(1) << "\n";
+  return 0;
+}
+
 int run(int argc, char** argv) {
   if (argc < 2 || std::string(argv[1]) == "--help") {
     std::cout << kUsage;
@@ -257,7 +327,7 @@ int run(int argc, char** argv) {
        "--no-sh-rotation!", "--flyover-out", "--frames",           "--rate",          "--fov",         "--altitude",
        "--pitch",           "--cameras",     "--seconds-per-view", "--distance",      "--png-prefix",  "--spz-version",
        "--threads",         "--scenes",      "--repeat",           "--no-reference!", "--cache-dir",   "--json",
-       "--upload!"});
+       "--upload!",         "--grid"});
   if (cmd == "info") return info(args);
   if (cmd == "compact") return compact(args);
   if (cmd == "convert") return convert(args);
@@ -266,6 +336,7 @@ int run(int argc, char** argv) {
   if (cmd == "interpolate") return interpolate(args);
   if (cmd == "cache") return cache(args);
   if (cmd == "load-bench") return load_bench(args);
+  if (cmd == "probe") return probe(args);
   throw std::invalid_argument("unknown command '" + cmd + "'");
 }
 

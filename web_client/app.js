@@ -13,6 +13,8 @@ import {
 import { loadProtocol } from './protocol.js';
 import { applyHomography, cssTransform, planeDepthFor, reprojection } from './reproject.js';
 import { capViewport, parseMaxSize } from './viewport.js';
+import { NotesUi } from './notes_ui.js';
+import { WalkMode } from './walk.js';
 import { parseView, viewUrl, withoutView } from './view_link.js';
 import { TOKEN_KEY, takeToken } from './token.js';
 
@@ -66,6 +68,10 @@ const state = {
   urlSettleAt: 0,
   maxBitrateKbps: 0, // the quality menu's ceiling (0: the server's default); sent as Quality
   unreportedLatencyMs: 0, // the newest shown frame's pose-to-frame latency, for the next Pose
+  depthRequests: new Map(), // request_id -> { resolve, reject } of DepthRequests awaiting DepthResult
+  nextDepthId: 1,
+  notes: null, // NotesUi: hotspots, measurement, scale
+  walk: null, // WalkMode
 };
 
 function viewportSize() {
@@ -108,6 +114,56 @@ function requestKeyFrame() {
   if (!state.sessionOpen) return null;
   send(state.protocol.encodeKeyFrameRequest());
   return resendPose();
+}
+
+// ---- depth under a pixel (DepthRequest -> DepthResult) ----
+
+// What lies under pixel (x, y) of a width x height view of `pose` (the server's depth probe).
+// Resolves with the DepthResult (hit, point, depth, opacity, error); rejects when not connected or
+// the session ends first.
+function probePose(pose, width, height, x, y) {
+  if (!state.sessionOpen) return Promise.reject(new Error('not connected'));
+  const requestId = state.nextDepthId++;
+  return new Promise((resolve, reject) => {
+    state.depthRequests.set(requestId, { resolve, reject });
+    if (!send(state.protocol.encodeDepthRequest({ requestId, x, y, width, height, pose }))) {
+      state.depthRequests.delete(requestId);
+      reject(new Error('not connected'));
+    }
+  });
+}
+
+// The pixel under CSS pixel (x, y) of the canvas, as the camera sees it now (the shown frame is
+// re-projected to this pose): the view is the canvas's CSS box, which has the stream's aspect.
+function probeCss(x, y) {
+  const cam = state.camera;
+  if (!cam) return Promise.reject(new Error('no view yet'));
+  const w = Math.max(1, Math.round(canvas.clientWidth || window.innerWidth));
+  const h = Math.max(1, Math.round(canvas.clientHeight || window.innerHeight));
+  return probePose(cam.pose(), w, h, x, y);
+}
+
+function onDepthResult(msg) {
+  const waiting = state.depthRequests.get(msg.request_id);
+  if (!waiting) return;
+  state.depthRequests.delete(msg.request_id);
+  // A plain object with every field (proto3 leaves zeros out: opacity 0, no hit).
+  waiting.resolve(state.protocol.root.lookupType('catgs.stream.v1.DepthResult').toObject(msg, { defaults: true }));
+}
+
+// Fly to `pose` over a second, as a tour of two views (the same interpolation).
+function flyTo(pose) {
+  if (!state.camera) return false;
+  return playKeys('fly', [state.camera.pose(), pose], 0.5);
+}
+
+// The notes' share-link value in the address (viewUrl keeps it, the token never).
+function notesLinkChanged() {
+  const u = new URL(location.href);
+  const v = state.notes.linkValue();
+  if (v) u.searchParams.set('notes', v);
+  else u.searchParams.delete('notes');
+  history.replaceState(null, '', u.href);
 }
 
 // ---- connection state, in words ----
@@ -237,6 +293,8 @@ function onWelcome(w) {
     state.urlVersion = state.camera.version;
   }
   setStatus('first-view');
+  // Answers of the last session never come: their waits end.
+  rejectDepthRequests();
   // A chosen quality outlives reconnects; the default is never sent (older servers lack Quality).
   if (state.maxBitrateKbps > 0) send(state.protocol.encodeQuality(state.maxBitrateKbps));
   sendPose();
@@ -278,9 +336,15 @@ function drawFrame(frame, meta) {
   }
 }
 
+function rejectDepthRequests() {
+  for (const w of state.depthRequests.values()) w.reject(new Error('the session ended'));
+  state.depthRequests.clear();
+}
+
 function onClose(info) {
   const { code, reason, retryInMs, error, permanent, reached } = info;
   state.sessionOpen = false;
+  rejectDepthRequests();
   state.closeInfo = info;
   state.decoder.reset();
   overlay.clearSession();
@@ -325,6 +389,12 @@ function onMessage(kind, msg) {
     case 'load_progress':
       state.loadProgress = msg;
       setStatus('loading-scene');
+      break;
+    case 'depth_result':
+      onDepthResult(msg);
+      break;
+    case 'annotations':
+      state.notes.onAnnotations(msg);
       break;
     default:
       break;
@@ -439,7 +509,7 @@ function togglePanel(id, buttonId, show) {
   const panel = $(id);
   const open = show ?? panel.hidden;
   // One panel at a time: they all sit under the toolbar.
-  for (const [p, b] of [['paths', 'btn-paths'], ['helppanel', 'btn-help'], ['quality', 'btn-quality']]) {
+  for (const [p, b] of [['paths', 'btn-paths'], ['notes', 'btn-notes'], ['helppanel', 'btn-help'], ['quality', 'btn-quality']]) {
     $(p).hidden = p === id ? !open : true;
     $(b).setAttribute('aria-expanded', String(p === id && open));
   }
@@ -484,8 +554,7 @@ function play(kind) {
     const s = state.recording;
     playback = { kind, duration: s[s.length - 1].t, at: (t) => poseAtTime(s, t) };
   } else if (kind === 'tour' && state.waypoints.length >= 2) {
-    const keys = state.waypoints.slice();
-    playback = { kind, duration: tourDuration(keys), at: (t) => tourPoseAt(keys, t) };
+    return playKeys('tour', state.waypoints.slice());
   }
   if (!playback) {
     notice(kind === 'tour' ? 'add at least 2 views for a tour' : 'record a path first', 'warn');
@@ -495,6 +564,30 @@ function play(kind) {
   state.playback = playback;
   pathsStatus();
   return true;
+}
+
+// Plays waypoints `keys` as a tour (secondsPerView apart). Waypoints of hotspots (`hotspot`: an
+// id) show that hotspot's card as the tour reaches them.
+function playKeys(kind, keys, secondsPerView = 2) {
+  if (!state.camera || keys.length < 2) return false;
+  if (state.recorder) toggleRecording();
+  state.playback = {
+    kind,
+    duration: tourDuration(keys, secondsPerView),
+    at: (t) => tourPoseAt(keys, t, secondsPerView),
+    keys,
+    secondsPerView,
+    shown: -1,
+    t0: performance.now(),
+  };
+  pathsStatus();
+  return true;
+}
+
+// A hotspot tour: its waypoints become the tour (so tour.json exports them) and it plays.
+function playHotspotTour(keys) {
+  state.waypoints = keys;
+  return playKeys('tour', keys);
 }
 
 function stopPlayback() {
@@ -567,12 +660,24 @@ function step(now) {
   const cam = state.camera;
   if (state.playback && cam) {
     const t = (now - state.playback.t0) / 1000;
-    const p = state.playback.at(Math.min(t, state.playback.duration));
+    const pb = state.playback;
+    const p = pb.at(Math.min(t, pb.duration));
     cam.setPose(p.position, p.orientation, p.fovDeg);
-    if (t >= state.playback.duration) stopPlayback();
+    // A hotspot waypoint reached: its card.
+    if (pb.keys) {
+      const k = Math.round(Math.min(t, pb.duration) / pb.secondsPerView);
+      if (k !== pb.shown && Math.abs(t - k * pb.secondsPerView) < 0.25 && pb.keys[k] && pb.keys[k].hotspot) {
+        pb.shown = k;
+        state.notes.showCard(state.notes.hotspots.find((h) => h.id === pb.keys[k].hotspot));
+      }
+    }
+    if (t >= pb.duration) stopPlayback();
+  } else if (state.walk.on) {
+    state.walk.update(dt, state.controls.keys, state.controls.shiftHeld, now);
   } else {
     state.controls.update(dt);
   }
+  state.notes.update();
   if (cam && cam.version !== state.sentVersion) sendPose();
   if (cam && cam.version !== state.reprojectVersion) updateReprojection();
   if (state.recorder && cam) state.recorder.add(now, cam.pose());
@@ -602,7 +707,10 @@ function updateReprojection() {
       from.position.every((v, i) => v === to.position[i]) &&
       from.orientation.every((v, i) => v === to.orientation[i]);
     if (!same) {
-      const H = reprojection(from, to, planeDepthFor(from, cam.target, cam.sceneScale), w, h);
+      // Walk mode orbits about a point just ahead (looking around): the scene's depth is the
+      // probes' instead, or a frame would be re-projected as if the world were that near.
+      const depth = state.walk.on ? state.walk.sceneDepth(cam) : planeDepthFor(from, cam.target, cam.sceneScale);
+      const H = reprojection(from, to, depth, w, h);
       const corners = [[0, 0], [w, 0], [0, h], [w, h]].map(([x, y]) => applyHomography(H, x, y));
       if (corners.every((c) => c !== null)) transform = cssTransform(H, w, h, canvas.clientWidth, canvas.clientHeight);
     }
@@ -636,6 +744,19 @@ function onKey(e) {
     case 'P':
       togglePanel('paths', 'btn-paths');
       break;
+    case 'n':
+    case 'N':
+      togglePanel('notes', 'btn-notes');
+      break;
+    case 'm':
+    case 'M':
+      togglePanel('notes', 'btn-notes', true);
+      state.notes.setMode('measure');
+      break;
+    case 'g':
+    case 'G':
+      toggleWalk();
+      break;
     case 'h':
     case 'H':
     case '?':
@@ -643,6 +764,7 @@ function onKey(e) {
       break;
     case 'Escape':
       stopPlayback();
+      if (state.notes.mode) state.notes.setMode(state.notes.mode); // off
       togglePanel('paths', 'btn-paths', false);
       break;
     default:
@@ -712,6 +834,19 @@ function wireUi() {
   $('btn-help').addEventListener('click', () => togglePanel('helppanel', 'btn-help'));
   $('btn-paths').addEventListener('click', () => togglePanel('paths', 'btn-paths'));
   $('btn-quality').addEventListener('click', () => togglePanel('quality', 'btn-quality'));
+  $('btn-notes').addEventListener('click', () => togglePanel('notes', 'btn-notes'));
+  $('btn-walk').addEventListener('click', toggleWalk);
+  // A click (no drag) on the scene picks a point while adding a hotspot or measuring.
+  let downAt = null;
+  canvas.addEventListener('pointerdown', (e) => (downAt = { x: e.clientX, y: e.clientY }));
+  canvas.addEventListener('pointerup', (e) => {
+    if (!downAt || !state.notes.mode) return;
+    const moved = Math.hypot(e.clientX - downAt.x, e.clientY - downAt.y);
+    downAt = null;
+    if (moved > 4) return;
+    const b = canvas.getBoundingClientRect();
+    state.notes.pick(e.clientX - b.left, e.clientY - b.top);
+  });
   const scaleSelect = $('quality-scale');
   if (![...scaleSelect.options].some((o) => Number(o.value) === renderScale)) {
     scaleSelect.add(new Option(`${Math.round(renderScale * 100)}% (?scale)`, String(renderScale)), 0);
@@ -812,10 +947,53 @@ function installTestHook() {
     importText,
     setRenderScale,
     setMaxBitrate,
+    // Hotspots, measurement, walk mode (issue 38).
+    probe: probeCss, // (cssX, cssY) -> Promise<DepthResult as an object>
+    probePose,
+    get notes() {
+      return state.notes.snapshot();
+    },
+    setNotesMode: (mode) => state.notes.setMode(mode),
+    pick: (x, y) => state.notes.pick(x, y),
+    addHotspot: (title, text, keepView) => state.notes.addHotspot(title, text, keepView),
+    openHotspot: (id) => state.notes.open(id),
+    hotspotTour: () => state.notes.tour(),
+    setScale: (metres) => state.notes.setScale(metres),
+    saveNotes: () => state.notes.save(),
+    toggleWalk,
+    get walk() {
+      return state.walk.snapshot();
+    },
   };
 }
 
+function toggleWalk() {
+  stopPlayback();
+  const on = state.walk.toggle();
+  $('btn-walk').setAttribute('aria-pressed', String(on));
+  notice(on ? 'walk mode: WASD / arrows walk, drag looks around, G leaves it' : 'walk mode off');
+  return on;
+}
+
 async function main() {
+  state.notes = new NotesUi({
+    camera: () => state.camera,
+    probe: probeCss,
+    notice,
+    flyTo,
+    playTour: playHotspotTour,
+    save: (json) => state.sessionOpen && send(state.protocol.encodeSaveAnnotations(json)),
+    linkChanged: notesLinkChanged,
+    closePanel: () => togglePanel('notes', 'btn-notes', false),
+    clearNotice: () => overlay.clearMessage('notice'),
+  });
+  state.notes.fromLink(params.get('notes'));
+  state.walk = new WalkMode({
+    camera: () => state.camera,
+    probePose,
+    metresPerUnit: () => state.notes.metresPerUnit,
+    notice,
+  }, isTouch ? $('walk-pad') : null); // the pad only where fingers walk; keys elsewhere
   installTestHook();
   wireUi();
   state.viewport = viewportSize();

@@ -182,7 +182,8 @@ export function toInriaCameras(poses, width, height, name = 'view') {
     const { fx, fy } = intrinsicsFor(p.fovDeg, width, height);
     return {
       id,
-      img_name: `${name}_${String(id).padStart(4, '0')}`,
+      // A hotspot tour's waypoint names its hotspot (annotations.js), so tour.json shows which.
+      img_name: p.hotspot ? `hotspot_${p.hotspot}` : `${name}_${String(id).padStart(4, '0')}`,
       width,
       height,
       position: p.position.slice(),
@@ -212,11 +213,14 @@ export function fromInriaCameras(text) {
     if (!Array.isArray(R) || R.length !== 3 || !R.every((r) => Array.isArray(r) && r.length === 3 && r.every(finite))) {
       throw bad('bad rotation (3x3 rows expected)');
     }
-    return {
+    const pose = {
       position: c.position.slice(),
       orientation: quatFromMatrix(R),
       fovDeg: (2 * Math.atan(c.height / (2 * c.fy)) * 180) / Math.PI,
     };
+    // A hotspot tour's waypoint (toInriaCameras): the tour shows that hotspot's card there.
+    if (typeof c.img_name === 'string' && c.img_name.startsWith('hotspot_')) pose.hotspot = c.img_name.slice(8);
+    return pose;
   });
 }
 

@@ -96,7 +96,31 @@ export function makeProtocol(root) {
       return encode({ quality: { max_bitrate_kbps: maxBitrateKbps } });
     },
 
-    // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | 'load_progress' | null, msg }
+    // What lies under pixel (x, y) of a width x height view of `pose` (DepthResult answers).
+    encodeDepthRequest({ requestId, x, y, width, height, pose }) {
+      return encode({
+        depth_request: {
+          request_id: requestId,
+          x,
+          y,
+          width,
+          height,
+          pose: {
+            position: vec3(pose.position),
+            orientation: quat(pose.orientation),
+            vertical_fov_deg: pose.fovDeg,
+          },
+        },
+      });
+    },
+
+    // An author saves the scene's annotations (the JSON of server/session/annotations.h).
+    encodeSaveAnnotations(json) {
+      return encode({ save_annotations: { json } });
+    },
+
+    // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | 'load_progress' | 'depth_result' |
+    //      'annotations' | null, msg }
     decodeServer(bytes) {
       const m = ServerMessage.decode(bytes);
       const kind = m.body || null; // protobufjs' oneof getter names the field that is set

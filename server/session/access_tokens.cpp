@@ -34,13 +34,17 @@ void AccessTokens::add_file(const std::string& path) {
     words >> first >> second >> extra;
     if (first.empty() || first[0] == '#') continue;
     const std::string where = "--token-file " + path + " line " + std::to_string(line_no);
-    if (!extra.empty()) throw std::invalid_argument(where + ": expected '[viewer|admin] TOKEN'");
+    if (!extra.empty()) throw std::invalid_argument(where + ": expected '[viewer|author|admin] TOKEN'");
     if (second.empty()) {
       add(first, Role::admin);
-    } else if (first == "viewer" || first == "admin") {
-      add(second, first == "admin" ? Role::admin : Role::viewer);
+    } else if (first == "viewer") {
+      add(second, Role::viewer);
+    } else if (first == "author") {
+      add(second, Role::author);
+    } else if (first == "admin") {
+      add(second, Role::admin);
     } else {
-      throw std::invalid_argument(where + ": unknown role '" + first + "' (viewer or admin)");
+      throw std::invalid_argument(where + ": unknown role '" + first + "' (viewer, author or admin)");
     }
   }
   if (tokens_.size() == before) throw std::invalid_argument("--token-file " + path + ": no token in it");

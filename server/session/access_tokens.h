@@ -1,12 +1,13 @@
 // Access tokens (issue 22 finding 10): where they come from, their roles, and how a candidate is
 // compared with them.
 //
-// Sources, all merged: --token-file FILE (one token a line, "[viewer|admin] TOKEN"; a bare TOKEN
+// Sources, all merged: --token-file FILE (one token a line, "[viewer|author|admin] TOKEN"; a bare TOKEN
 // and blank or # lines as below), the CATGS_TOKEN environment variable, and --token T (kept for
 // compatibility, but anyone on the host can read a command line in /proc/PID/cmdline; the server
 // warns). A token from CATGS_TOKEN, --token or a bare line is an admin token: one shared secret
 // that does everything, as --token always did.
-// Roles: viewer may open sessions (Hello.token); admin may also read /metrics (a bearer token).
+// Roles: viewer may open sessions (Hello.token); author may also save the scenes' annotations
+// (hotspots, SaveAnnotations; issue 38); admin may do both and read /metrics (a bearer token).
 #pragma once
 
 #include <string>
@@ -15,7 +16,8 @@
 
 namespace catgs::server {
 
-enum class Role { none = 0, viewer = 1, admin = 2 };
+// Ordered: each role may do what the ones below it may.
+enum class Role { none = 0, viewer = 1, author = 2, admin = 3 };
 
 // True when a equals b. The time taken depends on a's length only (a is the candidate a client
 // sent, b the secret): never on where the first difference is, nor on b's length, so timing

@@ -78,4 +78,38 @@ std::optional<Violation> check_quality(const pb::Quality& quality) {
   return std::nullopt;
 }
 
+std::optional<Violation> check_depth_request(const pb::DepthRequest& request,
+                                             const std::optional<CameraPose>& last_pose, const Viewport& viewport,
+                                             DepthQuery& out) {
+  if (request.has_pose()) {
+    if (auto bad = check_pose(request.pose(), out.pose))
+      return Violation{bad->code, "DepthRequest pose: " + bad->reason};
+  } else if (last_pose) {
+    out.pose = *last_pose;
+  } else {
+    return Violation{pb::ERROR_INVALID_ARGUMENT, "DepthRequest without a pose before any Pose"};
+  }
+  if (request.width() == 0 && request.height() == 0) {
+    out.width = viewport.width;
+    out.height = viewport.height;
+  } else if (request.width() < 1 || request.width() > kMaxViewport || request.height() < 1 ||
+             request.height() > kMaxViewport) {
+    return Violation{pb::ERROR_INVALID_ARGUMENT, "DepthRequest view " + std::to_string(request.width()) + "x" +
+                                                     std::to_string(request.height()) + " outside 1..4096"};
+  } else {
+    out.width = static_cast<int>(request.width());
+    out.height = static_cast<int>(request.height());
+  }
+  if (!std::isfinite(request.x()) || !std::isfinite(request.y()))
+    return Violation{pb::ERROR_INVALID_ARGUMENT, "DepthRequest pixel is NaN or Inf"};
+  // Written so that the message shows the pixel and the view the client should have used.
+  if (!(request.x() >= 0 && request.x() < out.width && request.y() >= 0 && request.y() < out.height))
+    return Violation{pb::ERROR_INVALID_ARGUMENT,
+                     "DepthRequest pixel (" + std::to_string(request.x()) + ", " + std::to_string(request.y()) +
+                         ") is outside the " + std::to_string(out.width) + "x" + std::to_string(out.height) + " view"};
+  out.x = request.x();
+  out.y = request.y();
+  return std::nullopt;
+}
+
 }  // namespace catgs::server

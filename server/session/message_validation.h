@@ -1,6 +1,7 @@
 // Checks of client messages against the protocol's rules (proto/catgs_stream.proto).
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -66,5 +67,21 @@ inline constexpr std::uint32_t kMaxBitrateKbps = 100000;
 // Validates Quality: max_bitrate_kbps 0 (the server's default) or in [100, 100000] kbit/s.
 // ERROR_INVALID_ARGUMENT otherwise.
 std::optional<Violation> check_quality(const pb::Quality& quality);
+
+// A DepthRequest ready for the probe (render_core/cpu/pixel_depth.h): the camera, its size and
+// the pixel in continuous image coordinates.
+struct DepthQuery {
+  CameraPose pose;
+  int width = 0, height = 0;  // pixels
+  double x = 0, y = 0;        // x in [0, width), y in [0, height)
+};
+
+// Validates DepthRequest: its pose as check_pose (sequence and times ignored), or `last_pose`
+// when it has none (a violation when that is empty too); its size, 1..4096 a side, or `viewport`
+// when both are 0; x and y finite and inside the view. The violation's reason goes into
+// DepthResult.error (the session goes on); its code is ERROR_INVALID_ARGUMENT.
+std::optional<Violation> check_depth_request(const pb::DepthRequest& request,
+                                             const std::optional<CameraPose>& last_pose, const Viewport& viewport,
+                                             DepthQuery& out);
 
 }  // namespace catgs::server

@@ -59,9 +59,13 @@ void apply_rate_limits(RateLimitSettings& settings, const std::string& list) {
       settings.resize = spec;
     else if (name == "quality")
       settings.quality = spec;
+    else if (name == "depth")
+      settings.depth = spec;
+    else if (name == "save")
+      settings.save = spec;
     else
       throw std::invalid_argument("--rate-limits: unknown limit '" + name +
-                                  "' (hello, auth, ping, key_frame, resize, quality)");
+                                  "' (hello, auth, ping, key_frame, resize, quality, depth, save)");
   }
 }
 
@@ -82,7 +86,8 @@ std::string rate_limits_usage() {
   const Row rows[] = {
       {"hello", d.hello, "Hellos per client address"}, {"auth", d.auth, "failed token attempts per client address"},
       {"ping", d.ping, "Pings per session"},           {"key_frame", d.key_frame, "KeyFrameRequests per session"},
-      {"resize", d.resize, "Resizes per session"},     {"quality", d.quality, "Quality messages per session"}};
+      {"resize", d.resize, "Resizes per session"},     {"quality", d.quality, "Quality messages per session"},
+      {"depth", d.depth, "DepthRequests per session"}, {"save", d.save, "SaveAnnotations per session"}};
   std::ostringstream o;
   for (const Row& r : rows) {
     std::ostringstream spec;

@@ -1,5 +1,7 @@
 #include "session/scene_store.h"
 
+#include "forward_model/chunk_bounds.h"
+
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -235,6 +237,7 @@ std::shared_ptr<LoadedScene> SceneStore::read_scene(std::size_t index) {
   scene->model = std::make_shared<const GaussianModel>(std::move(model));
   scene->path = source.path;
   scene->bounds = scene->model->bounds();
+  scene->chunks = fm::chunk_bounds(*scene->model);  // the depth probe's culling (DepthRequest)
   scene->bytes = model_bytes(*scene->model);
   // A bad --cameras file fails the load (at start-up: the start); a bad discovered one only warns.
   std::ostringstream frame_log;

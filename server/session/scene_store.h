@@ -40,6 +40,7 @@
 #include <thread>
 #include <vector>
 
+#include "forward_model/chunk_bounds.h"
 #include "renderer/renderer.h"
 #include "scene/gaussian_model.h"
 #include "scene/ply_io.h"
@@ -52,10 +53,11 @@ namespace catgs::server {
 // A loaded scene: what sessions render and navigate in. Immutable once published.
 struct LoadedScene {
   std::shared_ptr<const GaussianModel> model;
-  Bounds bounds;            // of the means (Welcome.scene_bounds)
-  SceneFrame frame;         // the first view and the frame to navigate in (Welcome)
-  std::string path;         // the file it was loaded from
-  std::uint64_t bytes = 0;  // model_bytes(*model)
+  Bounds bounds;                        // of the means (Welcome.scene_bounds)
+  SceneFrame frame;                     // the first view and the frame to navigate in (Welcome)
+  std::vector<fm::ChunkBounds> chunks;  // of the model's Gaussians, for the depth probe (pixel_depth.h)
+  std::string path;                     // the file it was loaded from
+  std::uint64_t bytes = 0;              // model_bytes(*model)
   // Renderers held while the scene is loaded so each GPU keeps one copy of it between sessions
   // (filled by Options::prepare; empty on the CPU renderer).
   std::vector<std::unique_ptr<Renderer>> residents;

@@ -13,6 +13,8 @@
 #include <nlohmann/json.hpp>
 
 #include "camera/camera.h"
+#include "session/annotations.h"
+#include "session/depth_probe.h"
 #include "session/first_view.h"
 
 namespace catgs::server {
@@ -40,6 +42,9 @@ void set_vec3(pb::Vec3* v, const glm::vec3& x) {
 
 constexpr auto kTick = std::chrono::milliseconds(250);
 constexpr std::size_t kMaxQueuedMessages = 256;  // non-frame messages a non-reader may pile up
+// DepthRequests of one session probing at once: a page waits for each answer (walk mode keeps
+// two in flight); more are answered with an error rather than queued behind the probes.
+constexpr int kMaxDepthsInFlight = 4;
 
 }  // namespace
 
@@ -58,6 +63,8 @@ Session::Session(ConnId id, SessionShared& shared)
   key_frame_bucket_ = TokenBucket(r.key_frame, now);
   resize_bucket_ = TokenBucket(r.resize, now);
   quality_bucket_ = TokenBucket(r.quality, now);
+  depth_bucket_ = TokenBucket(r.depth, now);
+  save_bucket_ = TokenBucket(r.save, now);
   last_message_ = now;
 }
 
@@ -233,6 +240,10 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
       max_bitrate_kbps_ = static_cast<int>(msg.quality().max_bitrate_kbps());
       force_idr_ = true;  // the encoder is rebuilt with it; its first frame is an IDR
       return;
+    case pb::ClientMessage::kDepthRequest:
+      return handle_depth(msg.depth_request());
+    case pb::ClientMessage::kSaveAnnotations:
+      return handle_save_annotations(msg.save_annotations());
     default:
       return fail(pb::ERROR_MALFORMED, "unknown message");
   }
@@ -255,7 +266,8 @@ bool Session::admit(const pb::Hello& hello) {
     fail(pb::ERROR_RATE_LIMITED, "too many wrong tokens from " + peer_ + " (--rate-limits auth)", false, retry_ms);
     return false;
   }
-  if (shared_.options.tokens.role_of(hello.token()) == Role::none) {
+  role_ = shared_.options.tokens.role_of(hello.token());
+  if (role_ == Role::none) {
     shared_.peers.token_failed(peer_);
     shared_.metrics.count(ServerMetrics::Unauthorized::hello);
     fail(pb::ERROR_UNAUTHORIZED, "wrong or missing token");
@@ -386,6 +398,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   last_stats_ = Clock::now();
   last_progress_ = last_stats_;
   last_message_ = last_stats_;  // a load's wait is not the client's silence
+  send_annotations();
   arm_tick();
   maybe_start_render();  // a Pose sent before Welcome
 }
@@ -408,7 +421,79 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   if (shared_.options.adaptive_quality) quality_.on_pose(received, replaced);
   pacing_.on_pose(received);
   pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), received};
+  last_pose_ = cam;
   maybe_start_render();
+}
+
+void Session::handle_depth(const pb::DepthRequest& request) {
+  if (!within(depth_bucket_, ServerMetrics::Limit::depth, "DepthRequests", shared_.options.rate_limits.depth)) return;
+  // A request that cannot be answered gets an answer that says why; the session goes on (a pixel
+  // outside the view is the page's race with a Resize as often as a bug).
+  auto refuse = [this, &request](const std::string& why) {
+    pb::ServerMessage m;
+    m.mutable_depth_result()->set_request_id(request.request_id());
+    m.mutable_depth_result()->set_error(why);
+    send(m);
+  };
+  if (state_ != State::open) return refuse("the scene is not open yet");
+  DepthQuery query;
+  if (auto bad = check_depth_request(request, last_pose_, Viewport{width_, height_}, query)) return refuse(bad->reason);
+  if (depths_in_flight_ >= kMaxDepthsInFlight)
+    return refuse("already " + std::to_string(kMaxDepthsInFlight) + " DepthRequests in flight: wait for an answer");
+  ++depths_in_flight_;
+  boost::asio::post(shared_.io, [self = shared_from_this(), scene = scene_, query, id = request.request_id()] {
+    pb::ServerMessage m;
+    *m.mutable_depth_result() = answer_depth(*scene->model, &scene->chunks, query, id);
+    boost::asio::post(self->strand_, [self, m = std::move(m)] {
+      self->depths_in_flight_--;
+      if (self->state_ == State::open) self->send(m);
+    });
+  });
+}
+
+// An annotations error as the client sees it: the file by its name, without the server's folders
+// (the log keeps the whole path).
+static std::string client_error(std::string error, const std::string& scene_path) {
+  const std::string folder = std::filesystem::path(scene_path).parent_path().string();
+  if (folder.empty()) return error;
+  for (std::size_t at; (at = error.find(folder + "/")) != std::string::npos;) error.erase(at, folder.size() + 1);
+  return error;
+}
+
+void Session::send_annotations() {
+  const AnnotationsFile file = read_annotations(scene_->path);
+  if (!file.error.empty())
+    std::cerr << "[session " << id_ << " " << session_id_ << "] annotations not shown: " << file.error << "\n";
+  pb::ServerMessage m;
+  pb::Annotations* a = m.mutable_annotations();
+  a->set_json(file.json);
+  a->set_error(client_error(file.error, scene_->path));
+  a->set_can_save(role_ >= Role::author);
+  send(m);
+}
+
+void Session::handle_save_annotations(const pb::SaveAnnotations& save) {
+  if (!within(save_bucket_, ServerMetrics::Limit::save, "SaveAnnotations", shared_.options.rate_limits.save)) return;
+  pb::ServerMessage m;
+  pb::Annotations* a = m.mutable_annotations();
+  a->set_can_save(role_ >= Role::author);
+  // A server without tokens has no authors: anyone who reaches it could otherwise write files.
+  if (!a->can_save()) {
+    a->set_error(shared_.options.tokens.empty() ? "this server saves no annotations (it has no author tokens)"
+                                                : "saving annotations needs an author or admin token");
+  } else if (state_ != State::open) {
+    a->set_error("the scene is not open yet");
+  } else {
+    try {
+      a->set_json(write_annotations(scene_->path, save.json()));
+      a->set_saved(true);
+      std::cerr << "[session " << id_ << " " << session_id_ << "] saved " << annotations_path(scene_->path) << "\n";
+    } catch (const std::exception& e) {
+      std::cerr << "[session " << id_ << " " << session_id_ << "] annotations not saved: " << e.what() << "\n";
+      a->set_error(client_error(e.what(), scene_->path));
+    }
+  }
+  send(m);
 }
 
 void Session::arm_tick() {

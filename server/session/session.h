@@ -36,6 +36,7 @@
 #include "encode/encoder.h"
 #include "render/gpu_assignment.h"
 #include "render/render_scheduler.h"
+#include "session/access_tokens.h"
 #include "session/adaptive_quality.h"
 #include "session/frame_pacing.h"
 #include "session/message_validation.h"
@@ -151,6 +152,12 @@ class Session : public std::enable_shared_from_this<Session> {
   // While the scene loads: LoadProgress to a client that asked for it (Hello.load_progress).
   void send_load_progress(int percent, std::uint64_t done, std::uint64_t total);
   void handle_pose(const pb::Pose& pose, Clock::time_point received);
+  // DepthRequest: validated here, probed on the worker pool (depth_probe.h), answered on the strand.
+  void handle_depth(const pb::DepthRequest& request);
+  // SaveAnnotations: an author's hotspots written beside the scene (annotations.h).
+  void handle_save_annotations(const pb::SaveAnnotations& save);
+  // Annotations after Welcome: the file beside the scene, or its error (the scene opens anyway).
+  void send_annotations();
   // --adaptive-quality, on the tick: applies AdaptiveQuality's rule and queues a refine frame.
   void adapt_quality(Clock::time_point now);
   // Ends the session with Error{code, reason, retry_after_ms} (the last message) and closes;
@@ -221,6 +228,10 @@ class Session : public std::enable_shared_from_this<Session> {
   Clock::time_point last_stats_;
   Clock::time_point last_message_;  // the client's latest message (--silent-timeout-ms)
   TokenBucket ping_bucket_, key_frame_bucket_, resize_bucket_, quality_bucket_;  // --rate-limits
+  TokenBucket depth_bucket_, save_bucket_;                                       // --rate-limits
+  Role role_ = Role::none;               // the Hello token's role (none: the server has no tokens)
+  std::optional<CameraPose> last_pose_;  // the newest valid Pose (a DepthRequest without one)
+  int depths_in_flight_ = 0;             // DepthRequests probing on the pool
   // Stats counters (totals, and sums since the last Stats message).
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
   std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)

@@ -507,3 +507,108 @@ test('the page\'s tour matches the core\'s interpolate_views (catgs-scene interp
     rmSync(dir, { recursive: true, force: true });
   }
 });
+
+// ---- issue 38: depth requests, hotspots, measurements, walk mode (annotations.js) ----
+
+const notes = await imp('annotations.js');
+
+test('DepthRequest and SaveAnnotations encode, DepthResult and Annotations decode', () => {
+  const p = proto.makeProtocol(pb.parse(protoText, { keepCase: true }).root);
+  const d = p.decodeClient(p.encodeDepthRequest({
+    requestId: 5, x: 10.5, y: 20.25, width: 640, height: 480,
+    pose: { position: [1, 2, 3], orientation: [1, 0, 0, 0], fovDeg: 50 },
+  }));
+  assert.equal(d.kind, 'depth_request');
+  assert.equal(d.msg.request_id, 5);
+  assert.equal(d.msg.x, 10.5);
+  assert.equal(d.msg.height, 480);
+  assert.equal(d.msg.pose.vertical_fov_deg, 50);
+  assert.deepEqual({ ...d.msg.pose.position }, { x: 1, y: 2, z: 3 });
+  const s = p.decodeClient(p.encodeSaveAnnotations('{"version":1}'));
+  assert.equal(s.kind, 'save_annotations');
+  assert.equal(s.msg.json, '{"version":1}');
+  const r = p.decodeServer(p.encodeServer({ depth_result: { request_id: 5, hit: true, point: { x: 1, y: 2, z: 3 }, depth: 4 } }));
+  assert.equal(r.kind, 'depth_result');
+  assert.equal(r.msg.depth, 4);
+  const a = p.decodeServer(p.encodeServer({ annotations: { json: '{}', can_save: true } }));
+  assert.equal(a.kind, 'annotations');
+  assert.equal(a.msg.can_save, true);
+});
+
+test('hotspot markers project as the renderer does (pinhole, principal point at the centre)', () => {
+  // 90 degrees vertical on 200 x 100: f = 50 px. A point 5 ahead and 1 right of the camera.
+  const pose = { position: [0, 0, 0], orientation: [1, 0, 0, 0], fovDeg: 90 };
+  const s = notes.projectPoint(pose, [1, 0.5, 5], 200, 100);
+  close([s.x, s.y, s.depth], [100 + 50 * 0.2, 50 + 50 * 0.1, 5], 1e-9);
+  assert.equal(notes.projectPoint(pose, [0, 0, -1], 200, 100), null, 'behind the camera');
+  // A camera turned 90 degrees about its down axis (y) looks along world +x.
+  const turned = { position: [0, 0, 0], orientation: cam.qfromAxisAngle([0, 1, 0], Math.PI / 2), fovDeg: 90 };
+  const t = notes.projectPoint(turned, [4, 0, 0], 200, 100);
+  close([t.x, t.y, t.depth], [100, 50, 4], 1e-9);
+  // The ray of a pixel goes through the point that projects there.
+  const ray = notes.pixelRay(pose, s.x, s.y, 200, 100);
+  close(ray, cam.vnorm([1, 0.5, 5]), 1e-12);
+});
+
+test('measurements: units, metres with a scale from one known distance', () => {
+  const m = notes.measure([0, 0, 0], [3, 4, 0], null);
+  assert.equal(m.units, 5);
+  assert.equal(m.text, '5.000 units');
+  const scale = notes.scaleFrom(5, 2); // those 5 units are 2 m
+  assert.equal(scale, 0.4);
+  const m2 = notes.measure([0, 0, 0], [0, 0, 2.5], scale);
+  assert.equal(m2.metres, 1);
+  assert.equal(m2.text, '1.000 m');
+  assert.equal(notes.formatMetres(0.5), '50.0 cm');
+  assert.throws(() => notes.scaleFrom(0, 1), /measure a distance first/);
+  assert.throws(() => notes.scaleFrom(5, -1), /positive number/);
+});
+
+test('annotations: the server\'s rules, ids, hotspot tours and the share link', () => {
+  const doc = { version: 1, hotspots: [
+    { id: 'a', title: 'A', position: [0, 0, 1], view: { position: [0, 0, -1], orientation: [1, 0, 0, 0], fov: 50 } },
+    { id: 'b', title: 'B', text: 'b!', position: [1, 0, 1] },
+  ], tour: ['b', 'a', 'gone'] };
+  const n = notes.normaliseAnnotations(doc);
+  assert.deepEqual(n.tour, ['b', 'a']);
+  assert.equal(n.hotspots[0].text, '');
+  for (const [bad, says] of [
+    [{ version: 2, hotspots: [] }, /version/],
+    [{ version: 1, hotspots: [{ id: 'x', title: 'X', position: [1, 2] }] }, /hotspots\[0\]\.position/],
+    [{ version: 1, hotspots: [{ id: 'x', title: '', position: [1, 2, 3] }] }, /hotspots\[0\]\.title/],
+    [{ version: 1, hotspots: [{ id: 'x', title: 'X', position: [1, 2, 3] }, { id: 'x', title: 'Y', position: [1, 2, 3] }] }, /second hotspot/],
+  ]) assert.throws(() => notes.normaliseAnnotations(bad), says);
+  assert.equal(notes.hotspotId('The Seat!', new Set(['the-seat'])), 'the-seat-2');
+  const keys = notes.hotspotTour(n, (h) => ({ position: [9, 9, 9], orientation: [1, 0, 0, 0], fovDeg: 60, from: h.id }));
+  assert.deepEqual(keys.map((k) => k.hotspot), ['b', 'a']);
+  // tour.json keeps which hotspot each waypoint is (img_name hotspot_ID), through an import.
+  const imported = paths.fromInriaCameras(JSON.stringify(paths.toInriaCameras(keys, 640, 480, 'tour')));
+  assert.deepEqual(imported.map((k) => k.hotspot), ['b', 'a']);
+  assert.deepEqual(keys[0].position, [9, 9, 9], 'a hotspot without a view is seen from viewFor');
+  assert.deepEqual(keys[1].position, [0, 0, -1]);
+  // The link carries the viewer's own hotspots, measurement and scale; garbage is named.
+  const link = notes.encodeNotes({ hotspots: n.hotspots, measure: [[0, 0, 0], [1, 1, 1]], metresPerUnit: 0.25 });
+  assert.match(link, /^[A-Za-z0-9_-]+$/, 'base64url: safe in a URL as is');
+  const back = notes.decodeNotes(link);
+  assert.deepEqual(back.hotspots, n.hotspots);
+  assert.deepEqual(back.measure, [[0, 0, 0], [1, 1, 1]]);
+  assert.equal(back.metresPerUnit, 0.25);
+  assert.equal(notes.encodeNotes({}), '');
+  assert.throws(() => notes.decodeNotes('%%%'), /notes: not base64url JSON/);
+  assert.throws(() => notes.decodeNotes(Buffer.from('{"version":1,"hotspots":[],"measure":[1]}').toString('base64url')), /measure/);
+});
+
+test('walk step: stops short of a wall, eases to eye height above the ground', () => {
+  const up = [0, -1, 0];
+  // Walking +z by 0.1 with a wall 1.0 ahead and a radius of 0.3: free.
+  let p = notes.walkStep([0, 0, 0], [0, 0, 0.1], up, { wallDistance: 1.0, groundDistance: Infinity, eyeHeight: 1.6, radius: 0.3 });
+  close(p, [0, 0, 0.1]);
+  // 0.35 ahead: the step would end within the radius: blocked.
+  p = notes.walkStep([0, 0, 0], [0, 0, 0.1], up, { wallDistance: 0.35, eyeHeight: 1.6, radius: 0.3 });
+  close(p, [0, 0, 0]);
+  // The ground 1.0 below with an eye height of 1.6: rise by half the difference (ease 0.5), i.e.
+  // along up (-y).
+  p = notes.walkStep([0, 0, 0], [0, 0, 0], up, { groundDistance: 1.0, eyeHeight: 1.6, radius: 0.3, ease: 0.5 });
+  close(p, [0, -0.3, 0]);
+  close(notes.alongGround([1, 2, 3], up), [1, 0, 3]);
+});
