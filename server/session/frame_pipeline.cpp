@@ -35,16 +35,11 @@ void Session::maybe_start_render() {
   }
   // Adaptive quality scales the size (a refine frame is full size); a new size is an IDR.
   const int level = shared_.options.adaptive_quality && !pending_->full_size ? quality_.level() : 0;
-  Job job{*pending_,
-          AdaptiveQuality::scaled_side(width_, level),
-          AdaptiveQuality::scaled_side(height_, level),
+  Job job{*pending_, AdaptiveQuality::scaled_side(width_, level), AdaptiveQuality::scaled_side(height_, level),
           force_idr_,
           // Pipelined, the number is given at the encode (maybe_start_encode): a frame skipped
           // before its encode must leave no gap, as Frame sequences rise by one from 0.
-          pipelined_ ? 0 : next_frame_sequence_++,
-          last_send_ms_,
-          max_bitrate_kbps_,
-          level};
+          pipelined_ ? 0 : next_frame_sequence_++, last_send_ms_, max_bitrate_kbps_, level};
   last_started_ = pending_;
   last_started_->full_size = false;
   pending_.reset();
