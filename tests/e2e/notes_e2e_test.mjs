@@ -200,7 +200,18 @@ async function bikerScenarios(tmp) {
   };
   await addAt(240, 180, 'Seat', 'Where the rider sits');
   const lastProbe = (await hook(page, () => window.catgs.notes)).lastProbe;
-  await addAt(200, 230, 'Lower part', 'Below the seat');
+  // A second point below the seat where the probe finds the biker (the first view frames him
+  // whole, so a fixed pixel may fall beside him).
+  let below = null;
+  for (const [x, y] of [[200, 230], [240, 240], [245, 260], [235, 220], [250, 280]]) {
+    const r = await hook(page, (q) => window.catgs.probe(q[0], q[1]), [x, y]);
+    if (r.hit) {
+      below = [x, y];
+      break;
+    }
+  }
+  check(below !== null, `a pixel on the biker below the seat (${JSON.stringify(below)})`);
+  await addAt(...below, 'Lower part', 'Below the seat');
   n = await hook(page, () => window.catgs.notes);
   check(n.hotspots.length === 2 && n.hotspots.every((h) => h.own && h.view), `two hotspots added with their views (${n.hotspots.map((h) => h.id)})`);
   check(n.hotspots[0].position.every((v, i) => Math.abs(v - [lastProbe.point.x, lastProbe.point.y, lastProbe.point.z][i]) < 1e-9),
