@@ -179,8 +179,10 @@ bool Session::within(TokenBucket& bucket, ServerMetrics::Limit limit, const char
   const auto now = Clock::now();
   if (bucket.take(now)) return true;
   shared_.metrics.count(limit);
-  fail(pb::ERROR_RATE_LIMITED, std::string("too many ") + what + " (limit " + describe(spec) + ", --rate-limits)",
-       false, bucket.wait_ms(now));
+  // Queued frames are dropped: the Error goes out next, not behind frames a flooding peer may be
+  // too busy to read before the close's grace time ends (the page then showed no reason).
+  fail(pb::ERROR_RATE_LIMITED, std::string("too many ") + what + " (limit " + describe(spec) + ", --rate-limits)", true,
+       bucket.wait_ms(now));
   return false;
 }
 

@@ -316,11 +316,19 @@ async function bikerScenarios(tmp) {
   await page.click('#btn-notes');
 
   // ---- a flood of depth requests ends the flooding session only ----
+  // What the page shows is sampled every 20 ms from before the flood: the page may reconnect
+  // before a poll from here sees the message that names the reason.
+  await hook(viewer, () => {
+    window.shownTexts = [];
+    setInterval(() => window.shownTexts.push(String(window.catgs.overlayText() || '')), 20);
+  });
   await hook(viewer, (p) => {
     for (let i = 0; i < 200; i++) window.catgs.probePose(p, 480, 360, 240, 180).catch(() => {});
   }, pose);
   await waitFor('the flooding session to end', async () => (await hook(viewer, () => window.catgs.status)) !== 'streaming', 10000);
-  const said = await hook(viewer, () => window.catgs.overlayText());
+  const shown = async () => (await hook(viewer, () => window.shownTexts)).find((t) => /too many DepthRequests/.test(t));
+  const said = (await waitFor('the reason on the flooding page', shown, 10000).catch(() => '')) || '';
+  if (!said) log(`shown during the flood: ${JSON.stringify([...new Set(await hook(viewer, () => window.shownTexts))])}`);
   check(/too many DepthRequests/.test(said), `the flooding page says why it was cut off: "${said.split('\n').find((l) => /DepthRequests/.test(l))}"`);
   await shot(viewer, 'notes_flood.png');
   const f0 = await hook(page, () => window.catgs.framesDecoded);
