@@ -244,6 +244,9 @@ std::unique_ptr<SceneCache> SceneCache::open(const std::string& cache_path, cons
     throw reject("cache version " + std::to_string(h.version) + ", this build reads version " +
                  std::to_string(kSceneCacheVersion));
   if (header_hash(h) != h.header_hash) throw reject("header checksum mismatch");
+  // A count no file of this size can hold is refused before the layout's arithmetic uses it
+  // (every Gaussian takes over 4 bytes), so those products stay far below 2^64.
+  if (h.gaussians > size / 4) throw reject("Gaussian count " + std::to_string(h.gaussians) + " larger than the file");
   // The layout must be the one this build would write for that many Gaussians.
   const CacheHeader expect = layout(h.gaussians, static_cast<int>(std::min<uint32_t>(h.sh_degree, kMaxShDegree)));
   if (h.sh_degree > static_cast<uint32_t>(kMaxShDegree) || h.chunk_size != expect.chunk_size ||
