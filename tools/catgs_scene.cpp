@@ -24,6 +24,10 @@
 //   catgs-scene cache   --scene S [--out C] [--threads N]
 //       Writes the scene cache (scene/scene_cache.h; default S.catgs-cache beside S): the next
 //       load of S through the cache (catgs-server --scene-cache) copies it instead of parsing.
+//   catgs-scene lod     --scene S --out O [--branching 8] [--threads N]
+//       Builds the scene's level of detail (scene_tools/lod_build.h) and writes it as a LOD file
+//       (scene/scene_cache.h; conventionally S.catgs-lod) keyed to S: catgs-bench, catgs-render
+//       and catgs-server draw it with --scene S --lod-file O.
 //   catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]
 //                       [--cache-dir D] [--json OUT] [--upload]
 //       Load times, plain and cached, cold and warm page cache, with peak memory
@@ -52,6 +56,7 @@
 #include "renderer/renderer.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
+#include "scene_tools/lod_build.h"
 #include "scene_tools/morton.h"
 #include "scene/sh_rotation.h"
 #include "camera/trace.h"
@@ -72,6 +77,7 @@ const char* kUsage =
     "                   [--rate 120] [--seconds-per-view 0.5] [--distance 0.6] [--frames N]\n"
     "                   [--width 1920 --height 1080]\n"
     "       catgs-scene cache --scene S [--out C] [--threads N]\n"
+    "       catgs-scene lod --scene S --out O [--branching 8] [--threads N]\n"
     "       catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]\n"
     "                   [--cache-dir D] [--json OUT] [--upload]\n"
     "       catgs-scene probe --scene S [--cameras C.json] [--frames 8] [--grid 8] [--width 1280 --height 720]\n"
@@ -240,6 +246,20 @@ int cache(const catgs::tools::Args& args) {
   return 0;
 }
 
+int lod(const catgs::tools::Args& args) {
+  const std::string scene = args.require("--scene"), out = args.require("--out");
+  const int threads = args.get_int("--threads", 0);
+  const auto m = catgs::load_scene(scene, catgs::LoadOptions{threads, false});
+  catgs::LodBuildReport report;
+  const auto lod = catgs::build_lod(m, {args.get_int("--branching", 8)}, &report);
+  catgs::write_scene_cache(lod, scene, out, threads);
+  std::printf("wrote %s: %zu Gaussians (%zu leaves%s), levels of", out.c_str(), lod.size(), m.size(),
+              report.reordered ? ", Morton-sorted" : "");
+  for (std::size_t n : report.level_nodes) std::printf(" %zu", n);
+  std::printf(" chunks; built in %.2f s\n", report.seconds);
+  return 0;
+}
+
 int load_bench(const catgs::tools::Args& args) {
   catgs::tools::LoadBenchOptions o;
   std::string list = args.require("--scenes");
@@ -335,6 +355,7 @@ int run(int argc, char** argv) {
   if (cmd == "trace") return trace(args);
   if (cmd == "interpolate") return interpolate(args);
   if (cmd == "cache") return cache(args);
+  if (cmd == "lod") return lod(args);
   if (cmd == "load-bench") return load_bench(args);
   if (cmd == "probe") return probe(args);
   throw std::invalid_argument("unknown command '" + cmd + "'");

@@ -13,6 +13,7 @@
 #include <glm/glm.hpp>
 
 #include "forward_model/chunk_bounds.h"
+#include "forward_model/lod.h"
 #include "forward_model/forward_model.h"
 #include "forward_model/key_packing.h"
 #include "speculation/speculation_planner.h"
@@ -75,8 +76,12 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // forward_model/chunk_bounds.h); the result is the same with or without that step.
 // `region`: one pass of a frame drawn in passes (renderer/render_passes.h) counts only the tiles
 // of its region (fm::clip_tile_rect; every Gaussian is projected with the whole camera).
+// A scene with LOD (model.lod) projects only the chunks of its cut at `camera` with bound
+// `lod_error_px` (fm::lod_chunk_drawn; 0: the leaves), in every pipeline; the others are skipped
+// as culled chunks are.
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
-                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles);
+                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
+                float lod_error_px = 0.0f);
 
 // catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
@@ -87,16 +92,20 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
 // fm::edges_beyond's bound widened as its trail would be, is culled (touches no tile). Before
 // that, whole chunks (`chunks`: fm::chunk_bounds of the model) that fm::chunk_misses_path culls
 // are skipped, as the CUDA core does; the result is the same with or without that step.
+// A scene with LOD takes the cut at the key camera (path.front(), bound `lod_error_px`) for the
+// whole window, so every sub-frame draws the Gaussians its key frame listed.
 void speculative_preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
-                            const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out);
+                            const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out,
+                            float lod_error_px = 0.0f);
 
 // catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
 // means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M). Chunks none of
 // whose means can count (fm::chunk_means_off_image, `chunks` as fm::chunk_bounds(model)) are
 // skipped, as the CUDA core does; the result is the same with or without that step. Throws
-// std::invalid_argument for chunk bounds of another scene.
+// std::invalid_argument for chunk bounds of another scene. With LOD, only the chunks of the cut
+// at `a` (bound `lod_error_px`) count.
 float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
-                        const Camera& b, float min_depth);
+                        const Camera& b, float min_depth, float lod_error_px = 0.0f);
 
 // catgs sub-frame (cpu/subframe_features.cpp; paper sec. 3.2): recomputes mean2d, conic,
 // opacity and colour of the cached Gaussians at `camera` (opacity 0 for one culled there; the
@@ -104,18 +113,20 @@ float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkB
 // checks that each on-screen ellipse reaches only tiles its trail was listed in (fm::trail_contains,
 // else the exact fm::listed_tiles_cover). Returns false when one does not: the frame must be
 // rendered as a key frame.
-// Also false when unlisted_reach_image().
+// Also false when unlisted_reach_image() (`key_cut`: the key frame's LOD cut, passed on).
 bool update_subframe_features(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
                               const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& projected,
-                              bool key_colour = false);
+                              bool key_colour = false, const fm::LodCut& key_cut = {});
 
 // catgs sub-frame (cpu/subframe_features.cpp): does a Gaussian the key frame did not list
 // (tiles_touched == 0) reach a pixel at `camera` (fm::unlisted_reaches_image)? Such a Gaussian is
 // outside the frustum cache, so the sub-frame would miss it: the frame must be a key frame
 // (DESIGN.md 1: prediction error must never show as holes). Chunks outside the view
-// (fm::chunk_outside_view over `chunks`, fm::chunk_bounds(model)) hold none and are skipped.
+// (fm::chunk_outside_view over `chunks`, fm::chunk_bounds(model)) hold none and are skipped, and
+// so are the chunks outside the key frame's LOD cut `key_cut` (their Gaussians are drawn by
+// another level; the default draws every chunk, right for a scene without LOD only).
 bool unlisted_reach_image(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
-                          const ProjectedGaussians& projected);
+                          const ProjectedGaussians& projected, const fm::LodCut& key_cut = {});
 
 // Task splitting (cpu/task_split.cpp; paper sec. 3.4): slices of the tile ranges, in tile
 // order, a tile's slices consecutive and in list order. split = false: one slice per tile.
@@ -262,6 +273,7 @@ class SpeculativeRenderer final : public Renderer {
   TileRanges ranges_;
   std::vector<TileSlice> slices_;
   std::vector<uint32_t> cached_;  // frustum cache: Gaussians with list entries
+  fm::LodCut key_cut_;            // the LOD cut of the group's key frame (lod.h)
   std::size_t key_visible_ = 0;   // the last key frame's Gaussians with list entries
   FrameStats stats_;
 };

@@ -18,7 +18,7 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
   const SpeculationParams& sp = options.speculation;
   const auto start = clock::now();
   stats.preprocess_ms = stats.keys_ms = stats.sort_ms = stats.ranges_ms = stats.rasterize_ms = stats.merge_ms = 0;
-  preprocess(model, chunks, camera, stages, projected);
+  preprocess(model, chunks, camera, stages, projected, fm::kAllTiles, options.lod_error_px);
   stats.preprocess_ms += ms_between(start, clock::now());
   const std::uint64_t entries = count_entries(projected);
   stats.visible = static_cast<std::size_t>(
@@ -66,7 +66,7 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
         options.list_budget, camera.width, camera.height, kBytesPerListEntry, entries, stats.visible,
         [&](const fm::TileRect& region) {
           const auto t = clock::now();
-          preprocess(model, chunks, camera, stages, projected, region);
+          preprocess(model, chunks, camera, stages, projected, region, options.lod_error_px);
           stats.preprocess_ms += ms_between(t, clock::now());
           return count_entries(projected);
         },

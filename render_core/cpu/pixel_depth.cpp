@@ -31,7 +31,10 @@ std::vector<std::pair<float, float>> ray_hits(const GaussianModel& model, const 
     throw std::invalid_argument("depth probe: chunk bounds of another scene");
   for (std::size_t i = 0; i < model.size(); ++i) {
     // A chunk that cannot reach the one pixel: on to the next chunk.
-    if (chunks && i % fm::kChunkSize == 0 && fm::chunk_outside_view((*chunks)[i / fm::kChunkSize], one)) {
+    // With LOD, the leaves only (full detail: the depth of what the scene really holds).
+    if (i % fm::kChunkSize == 0 &&
+        ((!model.lod.empty() && !fm::lod_chunk_drawn(model.lod.data(), i / fm::kChunkSize, one, 0.0f)) ||
+         (chunks && fm::chunk_outside_view((*chunks)[i / fm::kChunkSize], one)))) {
       i += fm::kChunkSize - 1;
       continue;
     }

@@ -44,7 +44,8 @@ struct PixelDepth {
 // or a pixel outside the image or not finite).
 // `chunks` (optional, fm::chunk_bounds(model)) skips whole chunks of 256 Gaussians that cannot
 // reach the pixel, the renderer's own conservative chunk test: the answer is the same with or
-// without them, only faster on scenes in Morton order (catgs-scene compact).
+// without them, only faster on scenes in Morton order (catgs-scene compact). A scene with LOD
+// (forward_model/lod.h) is probed at full detail: its leaves only.
 PixelDepth probe_pixel_depth(const GaussianModel& model, const Camera& camera, double x, double y,
                              const std::vector<fm::ChunkBounds>* chunks = nullptr);
 

@@ -39,7 +39,7 @@ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 c
 }  // namespace
 
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
-                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region) {
+                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region, float lod_error_px) {
   const std::size_t n = model.size();
   out.resize(n);
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
@@ -51,6 +51,7 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
 
   if (chunks.size() != fm::chunk_count(n)) throw std::invalid_argument("preprocess: chunk bounds of another scene");
   const fm::View view = fm::view_of(camera);
+  const fm::LodCut lod = fm::lod_cut(model.lod, view, lod_error_px);
 
   auto gaussian = [&](std::size_t i) {
     out.tiles_touched[i] = 0;
@@ -100,10 +101,11 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
   // A chunk at a time, as the CUDA core takes a block per chunk; exact skips the chunks that
   // cannot reach the image (the CUDA core's cull_chunks_kernel, which lists the chunks kept for
   // its later stages). Their Gaussians get tiles_touched = 0 here; the CUDA core leaves them
-  // unwritten and reads them as 0 through its chunk totals (cuda/records.h listed_tiles).
+  // unwritten and reads them as 0 through its chunk totals (cuda/records.h listed_tiles). Every
+  // pipeline skips the chunks outside the LOD cut (lod.h): another level draws them.
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
     const std::size_t begin = c * fm::kChunkSize, end = std::min(n, begin + fm::kChunkSize);
-    const bool outside = exact && fm::chunk_outside_view(chunks[c], view);
+    const bool outside = (exact && fm::chunk_outside_view(chunks[c], view)) || !lod.drawn(c);
     for (std::size_t i = begin; i < end; ++i) {
       if (outside)
         out.tiles_touched[i] = 0;

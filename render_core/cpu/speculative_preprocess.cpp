@@ -54,16 +54,17 @@ bool path_misses_image(const GaussianModel& model, std::size_t i, glm::vec3 mean
 }  // namespace
 
 float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
-                        const Camera& b, float min_depth) {
+                        const Camera& b, float min_depth, float lod_error_px) {
   const std::size_t n = model.size();
   if (chunks.size() != fm::chunk_count(n))
     throw std::invalid_argument("max_screen_motion: chunk bounds of another scene");
   const fm::View va = fm::view_of(a);
+  const fm::LodCut lod = fm::lod_cut(model.lod, va, lod_error_px);
   std::vector<float> per_chunk(chunks.size(), 0.0f);
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
     // A chunk none of whose means can count is skipped whole, as the CUDA stage does
     // (fm::chunk_means_off_image: on a scene of many copies most chunks lie off the key image).
-    if (fm::chunk_means_off_image(chunks[c], va, min_depth)) return;
+    if (!lod.drawn(c) || fm::chunk_means_off_image(chunks[c], va, min_depth)) return;
     float m = 0.0f;
     for (std::size_t i = c * fm::kChunkSize; i < std::min(n, (c + 1) * fm::kChunkSize); ++i) {
       const glm::vec3 x(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
@@ -82,7 +83,8 @@ float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkB
 }
 
 void speculative_preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
-                            const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out) {
+                            const std::vector<Camera>& path, const TrailWidening& widening, ProjectedGaussians& out,
+                            float lod_error_px) {
   if (path.empty() || path.size() > static_cast<std::size_t>(kMaxPathCameras))
     throw std::invalid_argument("speculation path must hold 1.." + std::to_string(kMaxPathCameras) + " cameras");
   const std::size_t n = model.size();
@@ -157,11 +159,12 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
   };
   // A chunk at a time, as the CUDA core takes a block per chunk; whole chunks that no path view
   // can show (fm::chunk_misses_path: the CUDA core's cull_path_chunks_kernel) are skipped, their
-  // Gaussians left with tiles_touched = 0.
+  // Gaussians left with tiles_touched = 0, and so are the chunks outside the key view's LOD cut.
+  const fm::LodCut lod = fm::lod_cut(model.lod, terms[0].view, lod_error_px);
   const auto view_at = [&](int k) -> const fm::View& { return terms[static_cast<std::size_t>(k)].view; };
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
     const std::size_t begin = c * fm::kChunkSize, end = std::min(n, begin + fm::kChunkSize);
-    const bool culled = fm::chunk_misses_path(chunks[c], static_cast<int>(path.size()), view_at, 1.0f + widening.slack,
+    const bool culled = !lod.drawn(c) || fm::chunk_misses_path(chunks[c], static_cast<int>(path.size()), view_at, 1.0f + widening.slack,
                                               widening.margin_px, widening.motion_margin);
     for (std::size_t i = begin; i < end; ++i) {
       if (culled)

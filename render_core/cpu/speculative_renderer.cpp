@@ -30,15 +30,16 @@ bool SpeculativeRenderer::key_frame(const Camera& camera, Image& out) {
   const auto t0 = clock::now();
   // Plan the window from the predicted path (never from future input): M over one frame, W.
   const int planned = planner_.window_wanted()
-                          ? planner_.window_for(max_screen_motion(*model_, chunks_, camera,
-                                                                  planner_.next_camera(camera), sp.depth_threshold))
+                          ? planner_.window_for(max_screen_motion(*model_, chunks_, camera, planner_.next_camera(camera),
+                                                                  sp.depth_threshold, options_.lod_error_px))
                           : 0;
   // A window whose trail list is over the budget is narrowed (issue 35), as the CUDA core does
   // from the same counts: its list shrinks toward the exact list of W = 0.
   const std::uint64_t limit = options_.list_budget.max_entries(camera.width, camera.height, kBytesPerListEntry);
   int window = planned;
   for (; window > 0; window = SpeculationPlanner::narrower_window(window)) {
-    speculative_preprocess(*model_, chunks_, planner_.path(camera, window), trail_widening(sp, window), projected_);
+    speculative_preprocess(*model_, chunks_, planner_.path(camera, window), trail_widening(sp, window), projected_,
+                           options_.lod_error_px);
     const std::uint64_t entries = count_entries(projected_);
     if (entries <= limit) break;
     // Giant Gaussians are refused at once: no window would make their list fit.
@@ -47,6 +48,8 @@ bool SpeculativeRenderer::key_frame(const Camera& camera, Image& out) {
     options_.list_budget.check_reach(entries, listed, camera.width, camera.height, kBytesPerListEntry);
   }
   const double planning_ms = ms_between(t0, clock::now());
+  // The group's sub-frames keep this key frame's LOD cut (their Gaussians are its list's).
+  key_cut_ = fm::lod_cut(model_->lod, fm::view_of(camera), options_.lod_error_px);
   if (window == 0) {
     // Without a window the frame is rendered in full by the exact pipeline's stages (its list is
     // the one-pose trail's, built without the trail machinery), in passes over the budget; it
@@ -94,7 +97,7 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
   if (candidate) {
     const auto t0 = clock::now();
     sub = update_subframe_features(*model_, chunks_, camera, cached_, projected_,
-                                   options_.speculation.subframe_key_colour);
+                                   options_.speculation.subframe_key_colour, key_cut_);
     stats_.preprocess_ms = ms_between(t0, clock::now());
   }
   bool drawn = false;

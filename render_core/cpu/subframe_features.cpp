@@ -13,7 +13,7 @@ namespace catgs::cpu {
 
 bool update_subframe_features(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
                               const Camera& camera, const std::vector<uint32_t>& cached, ProjectedGaussians& out,
-                              bool key_colour) {
+                              bool key_colour, const fm::LodCut& key_cut) {
   const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
                                static_cast<float>(camera.height) / (2.0f * camera.fy));
   const glm::vec3 cam_pos = camera.position();
@@ -55,18 +55,19 @@ bool update_subframe_features(const GaussianModel& model, const std::vector<fm::
                              glm::normalize(mean - cam_pos));
   });
   if (!inside.load()) return false;
-  return !unlisted_reach_image(model, chunks, camera, out);
+  return !unlisted_reach_image(model, chunks, camera, out, key_cut);
 }
 
 bool unlisted_reach_image(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
-                          const ProjectedGaussians& projected) {
+                          const ProjectedGaussians& projected, const fm::LodCut& key_cut) {
   const fm::View view = fm::view_of(camera);
   const std::size_t n = model.size();
   if (chunks.size() != fm::chunk_count(n))
     throw std::invalid_argument("unlisted_reach_image: chunk bounds of another scene");
   std::atomic<bool> reached{false};
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
-    if (reached.load(std::memory_order_relaxed) || fm::chunk_outside_view(chunks[c], view)) return;
+    if (reached.load(std::memory_order_relaxed) || !key_cut.drawn(c) || fm::chunk_outside_view(chunks[c], view))
+      return;
     for (std::size_t i = c * fm::kChunkSize; i < std::min(n, (c + 1) * fm::kChunkSize); ++i)
       if (projected.tiles_touched[i] == 0 &&
           fm::unlisted_reaches_image(&model.means[3 * i], &model.log_scales[3 * i], &model.rotations[4 * i],

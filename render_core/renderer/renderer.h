@@ -106,6 +106,10 @@ struct RenderOptions {
   glm::vec3 background{0.0f};     // linear RGB in [0, 1], composited behind the Gaussians
   SpeculationParams speculation;  // catgs; exact frames take task_splitting and min_slice_entries
   RenderListBudget list_budget;   // enforced by both cores before the list is allocated
+  // Level of detail (forward_model/lod.h): the screen-space error bound tau, pixels, of the cut
+  // through a scene's LOD tree; 0 = full detail (the leaves only). A scene without LOD ignores
+  // it. The default keeps >= 35 dB PSNR against full detail (RESULTS.md, issue 37).
+  float lod_error_px = 1.0f;
 };
 
 // An image in host memory, row-major, top row first.

@@ -82,6 +82,7 @@ void GaussianModel::validate() const {
   check(rotations, 4, "rotation");
   check(opacity_logits, 1, "opacity");
   check(sh, static_cast<std::size_t>(sh_coeffs()) * 3, "SH coefficient");
+  fm::validate_lod(lod, n);
 }
 
 }  // namespace catgs

@@ -8,6 +8,8 @@
 
 #include <glm/glm.hpp>
 
+#include "forward_model/lod.h"
+
 namespace catgs {
 
 inline constexpr int kMaxShDegree = 3;
@@ -45,6 +47,9 @@ struct GaussianModel {
   std::vector<float> rotations;
   std::vector<float> opacity_logits;
   std::vector<float> sh;
+  // Level of detail (forward_model/lod.h): one node per chunk of kChunkSize Gaussians, or empty
+  // (no LOD: every Gaussian is drawn). Built by tools/scene_tools/lod_build.h.
+  std::vector<fm::LodNode> lod;
 
   std::size_t size() const { return opacity_logits.size(); }
   int sh_coeffs() const { return sh_coeff_count(sh_degree); }
@@ -52,8 +57,8 @@ struct GaussianModel {
   void resize(std::size_t n);
   // Bounds of the means. Throws std::logic_error on an empty model.
   Bounds bounds() const;
-  // Checks shapes agree and every value is finite; throws std::runtime_error naming the first bad
-  // Gaussian and property.
+  // Checks shapes agree and every value is finite, and the LOD tree (fm::validate_lod); throws
+  // std::runtime_error naming the first bad Gaussian and property, or the bad LOD node.
   void validate() const;
 };
 

@@ -28,8 +28,9 @@ constexpr char kMagic[8] = {'C', 'A', 'T', 'G', 'S', 'C', 'A', 'C'};
 constexpr uint32_t kEndian = 0x01020304u;
 constexpr uint64_t kAlign = 4096;
 constexpr uint64_t kHeadBytes = 64 * 1024;  // of the source, hashed
-enum Section { kMeans, kLogScales, kRotations, kOpacity, kSh, kShHalf, kChunks, kSections };
-const char* const kSectionNames[kSections] = {"means", "log_scales", "rotations", "opacity", "sh", "sh_half", "chunks"};
+enum Section { kMeans, kLogScales, kRotations, kOpacity, kSh, kShHalf, kChunks, kLod, kSections };
+const char* const kSectionNames[kSections] = {"means", "log_scales", "rotations", "opacity",
+                                              "sh",    "sh_half",    "chunks",    "lod"};
 
 struct SourceStamp {
   uint64_t size = 0;
@@ -44,6 +45,7 @@ struct CacheHeader {
   uint64_t gaussians;
   uint32_t sh_degree;
   uint32_t chunk_size;
+  uint64_t lod_nodes;  // 0 (no LOD) or chunk_count(gaussians)
   SourceStamp source;
   uint64_t block_bytes;
   uint64_t offset[kSections];
@@ -78,7 +80,7 @@ SourceStamp stamp(const std::string& path) {
 }
 
 // The layout of a model's cache: section sizes and offsets, the hash table's place.
-CacheHeader layout(uint64_t n, int sh_degree) {
+CacheHeader layout(uint64_t n, int sh_degree, bool lod) {
   CacheHeader h{};
   std::memcpy(h.magic, kMagic, sizeof kMagic);
   h.version = kSceneCacheVersion;
@@ -87,9 +89,12 @@ CacheHeader layout(uint64_t n, int sh_degree) {
   h.sh_degree = static_cast<uint32_t>(sh_degree);
   h.chunk_size = fm::kChunkSize;
   h.block_bytes = kCacheBlockBytes;
+  h.lod_nodes = lod ? fm::chunk_count(n) : 0;
   const uint64_t sh = n * static_cast<uint64_t>(sh_coeff_count(sh_degree)) * 3;
   const uint64_t bytes[kSections] = {
-      3 * n * 4, 3 * n * 4, 4 * n * 4, n * 4, sh * 4, sh * 2, fm::chunk_count(n) * sizeof(fm::ChunkBounds)};
+      3 * n * 4, 3 * n * 4, 4 * n * 4,
+      n * 4,     sh * 4,    sh * 2,    fm::chunk_count(n) * sizeof(fm::ChunkBounds),
+      h.lod_nodes * sizeof(fm::LodNode)};
   h.hash_count = 0;
   for (int s = 0; s < kSections; ++s) {
     h.bytes[s] = bytes[s];
@@ -157,7 +162,8 @@ std::string scene_cache_path(const std::string& scene_path) { return scene_path 
 
 void write_scene_cache(const GaussianModel& model, const std::string& scene_path, const std::string& cache_path,
                        int threads) {
-  CacheHeader h = layout(model.size(), model.sh_degree);
+  fm::validate_lod(model.lod, model.size());
+  CacheHeader h = layout(model.size(), model.sh_degree, !model.lod.empty());
   h.source = stamp(scene_path);
   const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(model);
   const std::string tmp = cache_path + ".tmp." + std::to_string(::getpid());
@@ -180,6 +186,8 @@ void write_scene_cache(const GaussianModel& model, const std::string& scene_path
         src = half.data();
       } else if (b.section == kChunks) {
         src = reinterpret_cast<const char*>(chunks.data()) + b.begin;
+      } else if (b.section == kLod) {
+        src = reinterpret_cast<const char*>(model.lod.data()) + b.begin;
       } else {
         src = static_cast<const char*>(float_section(model, b.section)) + b.begin;
       }
@@ -248,9 +256,10 @@ std::unique_ptr<SceneCache> SceneCache::open(const std::string& cache_path, cons
   // (every Gaussian takes over 4 bytes), so those products stay far below 2^64.
   if (h.gaussians > size / 4) throw reject("Gaussian count " + std::to_string(h.gaussians) + " larger than the file");
   // The layout must be the one this build would write for that many Gaussians.
-  const CacheHeader expect = layout(h.gaussians, static_cast<int>(std::min<uint32_t>(h.sh_degree, kMaxShDegree)));
+  const CacheHeader expect =
+      layout(h.gaussians, static_cast<int>(std::min<uint32_t>(h.sh_degree, kMaxShDegree)), h.lod_nodes != 0);
   if (h.sh_degree > static_cast<uint32_t>(kMaxShDegree) || h.chunk_size != expect.chunk_size ||
-      h.block_bytes != expect.block_bytes || h.hashes_offset != expect.hashes_offset ||
+      h.block_bytes != expect.block_bytes || h.lod_nodes != expect.lod_nodes || h.hashes_offset != expect.hashes_offset ||
       h.hash_count != expect.hash_count || h.file_size != expect.file_size ||
       std::memcmp(h.offset, expect.offset, sizeof h.offset) != 0 ||
       std::memcmp(h.bytes, expect.bytes, sizeof h.bytes) != 0)
@@ -284,6 +293,7 @@ GaussianModel SceneCache::read_model(int threads, const LoadProgress& progress) 
   GaussianModel m;
   m.sh_degree = static_cast<int>(c.h.sh_degree);
   m.resize(c.h.gaussians);
+  m.lod.resize(c.h.lod_nodes);
   m.name = scene_name(c.scene);
   const std::vector<Block> bl = blocks(c.h);
   const auto* table = reinterpret_cast<const uint64_t*>(c.file.data() + c.h.hashes_offset);
@@ -296,7 +306,7 @@ GaussianModel SceneCache::read_model(int threads, const LoadProgress& progress) 
         if (XXH3_64bits(src, b.end - b.begin) != table[b.slot])
           throw SceneCacheRejected(c.path, std::string("checksum mismatch in section ") + kSectionNames[b.section] +
                                                " at byte " + std::to_string(b.begin));
-        if (void* dst = float_section(m, b.section))
+        if (void* dst = b.section == kLod ? static_cast<void*>(m.lod.data()) : float_section(m, b.section))
           std::memcpy(static_cast<char*>(dst) + b.begin, src, b.end - b.begin);
         c.file.release(c.h.offset[b.section] + b.begin, c.h.offset[b.section] + b.end);
       },
@@ -304,7 +314,22 @@ GaussianModel SceneCache::read_model(int threads, const LoadProgress& progress) 
         if (progress && done < bl.size()) progress(n * done / bl.size(), n);
       });
   if (progress) progress(n, n);
+  try {
+    fm::validate_lod(m.lod, m.size());
+  } catch (const std::exception& e) {
+    throw SceneCacheRejected(c.path, e.what());
+  }
   return m;
+}
+
+bool SceneCache::has_lod() const { return impl_->h.lod_nodes != 0; }
+
+GaussianModel load_lod_file(const std::string& lod_path, const std::string& scene_path, int threads,
+                            const LoadProgress& progress) {
+  const auto cache = SceneCache::open(lod_path, scene_path);
+  if (!cache->has_lod())
+    throw SceneCacheRejected(lod_path, "a scene cache without a level of detail (write one with catgs-scene lod)");
+  return cache->read_model(threads, progress);
 }
 
 GaussianModel load_scene_cached(const std::string& path, const CachedLoadOptions& options, const LoadProgress& progress,

@@ -23,8 +23,14 @@
 //          sections in order
 //   then   the sections, each at a 4096-byte boundary: means [N, 3] f32, log_scales [N, 3] f32,
 //          rotations [N, 4] f32 (w, x, y, z), opacity_logits [N] f32, sh [N, K, 3] f32,
-//          sh_half [N, K, 3] binary16 bits, chunks [chunk_count(N)] fm::ChunkBounds (32 bytes)
+//          sh_half [N, K, 3] binary16 bits, chunks [chunk_count(N)] fm::ChunkBounds (32 bytes),
+//          lod [chunk_count(N) or 0] fm::LodNode (32 bytes; forward_model/lod.h)
 //   (units and frames those of GaussianModel, gaussian_model.h).
+//
+// A LOD file (catgs-scene lod, conventionally S.catgs-lod) is such a cache of the LOD model
+// tools/scene_tools/lod_build.h makes from scene S, keyed to S: its N holds the leaves and the
+// merged levels, its lod section the tree. It is our own derived file, not a PLY: another
+// viewer would draw every level on top of the others.
 #pragma once
 
 #include <cstdint>
@@ -41,7 +47,7 @@
 namespace catgs {
 
 // Bump when a scene reader's output, the chunk bounds, the half rounding or this layout change.
-inline constexpr uint32_t kSceneCacheVersion = 1;
+inline constexpr uint32_t kSceneCacheVersion = 2;  // 2: the lod section
 inline constexpr uint64_t kCacheBlockBytes = 4ull << 20;
 
 // The cache file of a scene: the scene's path + ".catgs-cache" (a SOG's meta.json gets
@@ -75,6 +81,7 @@ class SceneCache {
 
   uint64_t size() const;  // Gaussians
   int sh_degree() const;
+  bool has_lod() const;  // the model has a level of detail (a LOD file)
   // Checks every block's hash and copies the model out (the sections' pages leave this process's
   // memory behind the copy, so the load peaks near the model's size); name = scene_name(scene).
   // The half SH and chunk sections are checked too. `progress` as load_scene's, on the calling
@@ -111,6 +118,12 @@ struct CachedLoadReport {
   bool written = false;  // the cache was (re)written
   std::string why;       // why the cache was not used (empty when it was, or mode off)
 };
+
+// A LOD file (see above) of scene `scene_path`: the LOD model, lod filled and validated. Throws
+// SceneCacheRejected naming lod_path (missing, truncated, foreign, of another version or
+// source, a checksum mismatch, a bad tree, or a plain cache without LOD).
+GaussianModel load_lod_file(const std::string& lod_path, const std::string& scene_path, int threads = 0,
+                            const LoadProgress& progress = {});
 
 // load_scene through the cache. Throws what load_scene throws (the cache's own faults never
 // fail a load: they are logged and the scene is read).

@@ -4,6 +4,7 @@
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
 //               --pipeline V[,V...] [--frames N] [--warmup N] [--json OUT.json]
 //               [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu] [--quality-every K]
+//               [--lod [--branching 8] | --lod-file F] [--lod-error PX]
 //
 // Variants V (bench/variants.h; `catgs-bench --help` lists the settings): vanilla, exact, or
 // catgs optionally followed by SpeculationParams settings in braces, catgs{window=2,backoff=0},
@@ -24,6 +25,11 @@
 //
 // --city builds DESIGN.md's city in memory from S (13 copies on a diamond grid, x10 scale; with
 // --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by --scale (default 1).
+// Level of detail (forward_model/lod.h): --lod builds it in memory after that
+// (scene_tools/lod_build.h; its build time and level sizes are printed and in the JSON);
+// --lod-file F reads S's LOD file (catgs-scene lod). Every variant draws the cut at --lod-error
+// PX (default RenderOptions::lod_error_px; 0 = full detail), and with --quality-every K every K-th
+// frame of every variant, on both cores, is compared with the full-detail exact render.
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "centre" (a slow pass
 // over the city's middle copy, 0.4 extents up, pitched down 70 deg: only the centre copies are in
 // view, however many the city has), "real:CAMERAS.json" (a
@@ -57,6 +63,8 @@
 #include "common/cli_args.h"
 #include "scene/ply_io.h"
 #include "scene/scene_bounds.h"
+#include "scene/scene_cache.h"
+#include "scene_tools/lod_build.h"
 #include "scene_tools/city.h"
 
 namespace {
@@ -74,6 +82,7 @@ const char* kUsage =
     "                   [--height 1080] [--pipeline V[,V...]] [--frames 600] [--warmup 30]\n"
     "                   [--quality-every 1] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu] [--help]\n"
+    "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX]\n"
     "       V: a pipeline variant, e.g. catgs{window=2,backoff=0} (default: vanilla,exact; --help\n"
     "          lists the variants and their settings)\n";
 
@@ -91,12 +100,16 @@ struct BenchScene {
   bool city = false;
   glm::vec3 up{0.0f};
   double load_s = 0;  // loading and building
+  catgs::LodBuildReport lod;  // --lod
 };
 
 BenchScene load_bench_scene(const Args& args) {
   const auto t_load = std::chrono::steady_clock::now();
   BenchScene s;
-  s.model = catgs::load_scene(args.require("--scene"));
+  if (args.has("--lod-file") && (args.has("--lod") || args.has("--city") || args.has("--scale")))
+    throw std::invalid_argument("--lod-file is the scene as it is: no --lod, --city or --scale with it");
+  s.model = args.has("--lod-file") ? catgs::load_lod_file(args.get("--lod-file"), args.require("--scene"))
+                                   : catgs::load_scene(args.require("--scene"));
   s.city = args.has("--city");
   s.up = args.has("--up") ? parse_vec3(args.get("--up")) : glm::vec3(0.0f);
   if (s.city) {
@@ -112,6 +125,12 @@ BenchScene load_bench_scene(const Args& args) {
     const float scale = static_cast<float>(args.get_double("--scale", 1.0));
     if (scale != 1.0f) catgs::scale_scene(s.model, scale);
     if (glm::length(s.up) == 0.0f) s.up = catgs::estimate_up(s.model);
+  }
+  if (args.has("--lod")) {
+    s.model = catgs::build_lod(s.model, {args.get_int("--branching", 8)}, &s.lod);
+    std::fprintf(stderr, "LOD built in %.2f s: %zu Gaussians, chunks per level:", s.lod.seconds, s.model.size());
+    for (std::size_t n : s.lod.level_nodes) std::fprintf(stderr, " %zu", n);
+    std::fprintf(stderr, "\n");
   }
   s.load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_load).count();
   return s;
@@ -206,7 +225,8 @@ int run(int argc, char** argv) {
                   {"--scene",         "--city!",        "--radius-sq", "--spacing",          "--seed",     "--scale",
                    "--trace",         "--width",        "--height",    "--pipeline",         "--frames",   "--warmup",
                    "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance", "--renderer",
-                   "--quality-every", "--help!"});
+                   "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error",
+                   "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;
@@ -228,12 +248,18 @@ int run(int argc, char** argv) {
   c.scene = s.model.name;
   c.gaussians = s.model.size();
   c.sh_degree = s.model.sh_degree;
+  c.lod = !s.model.lod.empty();
+  c.lod_error_px = static_cast<float>(args.get_double("--lod-error", catgs::RenderOptions{}.lod_error_px));
+  c.lod_build_s = s.lod.seconds;
+  c.lod_levels = s.lod.level_nodes;
   const catgs::Trace trace = make_bench_trace(args, s, c.width, c.height, c.warmup + c.frames);
   TimingPlan plan;
   plan.trace = &trace;
   plan.warmup = c.warmup;
   plan.frames = c.frames;
   plan.quality_every = args.get_int("--quality-every", 1);
+  plan.lod = c.lod;
+  plan.lod_error_px = c.lod_error_px;
   plan.snapshot_dir = args.get("--snapshot-dir");
 
   std::vector<PipelineResult> results;

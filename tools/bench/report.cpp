@@ -41,6 +41,8 @@ nlohmann::json context_json(const BenchContext& c) {
   j["height"] = c.height;
   j["frames"] = c.frames;
   j["warmup"] = c.warmup;
+  if (c.lod)
+    j["lod"] = {{"error_px", c.lod_error_px}, {"build_s", c.lod_build_s}, {"level_chunks", c.lod_levels}};
   j["timing"] = c.on_gpu
                     ? "CUDA events around render_device() on the renderer's stream; pose in, image in device memory out"
                     : "steady clock around render_at(); pose in, 8-bit image in host memory out";
@@ -146,6 +148,19 @@ void quality_report(const PipelineResult& r, nlohmann::json& p) {
       r.name.c_str(), r.sub_psnr.size() + r.subframes_inf, r.subframes_inf, q.mean, q.min, e.max, grow.mean, grow.max);
 }
 
+// A scene with LOD and --quality-every: every compared frame against the full-detail render.
+void lod_quality_report(const PipelineResult& r, nlohmann::json& p) {
+  if (r.lod_psnr.empty() && r.lod_identical == 0) return;
+  const Summary q = summarize(r.lod_psnr);
+  p["lod_quality_vs_full_detail"] = {{"compared", r.lod_psnr.size() + r.lod_identical},
+                                     {"identical", r.lod_identical},
+                                     {"psnr_db_mean_finite", q.mean},
+                                     {"psnr_db_min", q.min}};
+  std::printf("%-10s   LOD frames vs full detail: %zu compared (%zu identical), PSNR mean %.2f dB (finite ones), "
+              "min %.2f dB\n",
+              r.name.c_str(), r.lod_psnr.size() + r.lod_identical, r.lod_identical, q.mean, q.min);
+}
+
 // exact against vanilla, and every catgs variant against the full-frame pipelines of this run.
 void ratios(const std::vector<PipelineResult>& results, nlohmann::json& j) {
   auto find = [&](const char* name) -> const PipelineResult* {
@@ -183,6 +198,7 @@ nlohmann::json report(const BenchContext& context, const std::vector<PipelineRes
       speculation_report(r, p);
       quality_report(r, p);
     }
+    lod_quality_report(r, p);
     j["pipelines"].push_back(p);
   }
   ratios(results, j);

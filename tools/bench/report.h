@@ -22,6 +22,12 @@ struct BenchContext {
   std::size_t scene_device_bytes = 0;  // CUDA: the DeviceScene's bytes
   std::string trace;                   // --trace as given
   int width = 0, height = 0, frames = 0, warmup = 0;
+  // Level of detail (forward_model/lod.h): the scene has it (built by --lod or read by
+  // --lod-file), the bound every variant drew with, the build time (--lod) and chunks per level.
+  bool lod = false;
+  float lod_error_px = 0.0f;
+  double lod_build_s = 0.0;
+  std::vector<std::size_t> lod_levels;
 };
 
 // Prints the table (a row per variant; catgs: key / sub-frames, groups by W, stages, quality)

@@ -19,8 +19,9 @@ namespace {
 
 // The server's render-list budget is lifted: a benchmark measures the lists a variant makes, and
 // wide speculation windows list several times the default budget on purpose.
-RenderOptions options_of(const Variant& variant) {
+RenderOptions options_of(const Variant& variant, const TimingPlan& plan) {
   RenderOptions o;
+  o.lod_error_px = plan.lod_error_px;
   o.pipeline = variant.pipeline;
   o.speculation = variant.speculation;
   o.list_budget = RenderListBudget::unlimited();
@@ -55,11 +56,23 @@ void record_key_frame(PipelineResult& res, double ms, const FrameStats& s) {
   res.open_served = 0;
 }
 
+void record_lod_quality(PipelineResult& res, double psnr) {
+  if (std::isinf(psnr))
+    ++res.lod_identical;
+  else
+    res.lod_psnr.push_back(psnr);
+}
+
 PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& model, const Variant& variant,
                                 const TimingPlan& plan) {
-  auto r = make_renderer("cpu", model, options_of(variant));
+  auto r = make_renderer("cpu", model, options_of(variant, plan));
   PipelineResult res = result_of(variant);
-  Image img;
+  Image img, full;
+  // LOD against full detail (after timing): the exact pipeline at lod_error_px 0.
+  RenderOptions full_detail;
+  full_detail.lod_error_px = 0.0f;
+  full_detail.list_budget = RenderListBudget::unlimited();
+  const auto reference = plan.lod && plan.quality_every > 0 ? make_renderer("cpu", model, full_detail) : nullptr;
   for (int k = 0; k < plan.warmup; ++k) r->render_at(plan.camera_at(k), TimingPlan::time_at(k), img);
   for (int k = 0; k < plan.frames; ++k) {
     const int frame = plan.warmup + k;
@@ -67,6 +80,10 @@ PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& mode
     r->render_at(plan.camera_at(frame), TimingPlan::time_at(frame), img);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     record_frame(res, ms, r->last_stats());
+    if (reference && k % plan.quality_every == 0) {
+      reference->render(plan.camera_at(frame), full);
+      record_lod_quality(res, psnr_rgba8(img, full));
+    }
   }
   if (!plan.snapshot_dir.empty()) write_snapshot(img, plan.snapshot_dir, model->name + "_cpu_" + res.name);
   return res;
@@ -138,19 +155,27 @@ class EventTimer {
 RenderOptions exact_options() {
   RenderOptions o;
   o.pipeline = Pipeline::exact;
+  o.lod_error_px = 0.0f;  // full detail
   o.list_budget = RenderListBudget::unlimited();
   return o;
 }
 
 // --quality-every: a timed catgs frame against a full exact render of the same pose by a second
 // renderer. A sub-frame gives the image quality (PSNR over 8-bit RGB, max abs error of the float
-// image), a key frame the render-list growth (catgs key list / exact list).
+// image), a key frame the render-list growth (catgs key list / exact list). With LOD, every
+// compared frame also gives its PSNR against the full-detail render (lod_psnr).
 class QualityCheck {
  public:
   explicit QualityCheck(const std::shared_ptr<const cuda::DeviceScene>& scene) : reference_(scene, exact_options()) {}
 
-  void compare(PipelineResult& res, const FrameStats& stats, const cuda::DeviceFrame& frame, const Camera& camera) {
+  void compare(PipelineResult& res, const FrameStats& stats, const cuda::DeviceFrame& frame, const Camera& camera,
+               bool lod) {
     reference_.render(camera, full_);
+    if (lod) {
+      download(frame);
+      record_lod_quality(res, psnr_rgba8(image_, full_));
+    }
+    if (res.pipeline != Pipeline::catgs) return;
     if (stats.key_frame) {
       res.list_growth.push_back(static_cast<double>(stats.render_list_length) /
                                 std::max<double>(1.0, static_cast<double>(reference_.last_stats().render_list_length)));
@@ -185,14 +210,14 @@ class QualityCheck {
 
 PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>& scene, const Variant& variant,
                                  const TimingPlan& plan, QualityCheck& quality, std::size_t used_before_scene) {
-  cuda::CudaRenderer r(scene, options_of(variant));
+  cuda::CudaRenderer r(scene, options_of(variant, plan));
   PipelineResult res = result_of(variant);
   EventTimer timer;
   for (int k = 0; k < plan.warmup; ++k) {
     r.render_device_at(plan.camera_at(k), TimingPlan::time_at(k));
     (void)r.last_stats();
   }
-  const bool compare = variant.pipeline == Pipeline::catgs && plan.quality_every > 0;
+  const bool compare = (variant.pipeline == Pipeline::catgs || plan.lod) && plan.quality_every > 0;
   const std::size_t allocs_before = r.diagnostics().allocations;
   for (int k = 0; k < plan.frames; ++k) {
     const Camera cam = plan.camera_at(plan.warmup + k);
@@ -202,7 +227,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
     const FrameStats stats = r.last_stats();
     record_frame(res, ms, stats);
     res.heaviest.push_back(static_cast<double>(r.diagnostics().heaviest_tile_entries));   // after timing
-    if (compare && k % plan.quality_every == 0) quality.compare(res, stats, frame, cam);  // after timing too
+    if (compare && k % plan.quality_every == 0) quality.compare(res, stats, frame, cam, plan.lod);  // after timing too
   }
   const cuda::CudaRenderer::Diagnostics d = r.diagnostics();
   res.allocations_timed = d.allocations - allocs_before;

@@ -1,0 +1,92 @@
+// Level of detail (issue 37): a tree of chunks whose upper levels are merged Gaussians, cut per
+// view by screen-space error inside the chunk culling both cores already do, so a far part of a
+// city costs a few merged chunks instead of every Gaussian it holds (Hierarchical 3DGS, Kerbl et
+// al., SIGGRAPH 2024, sec. 4: a hierarchy of merged Gaussians cut by projected size).
+//
+// Layout of a scene with LOD (tools/scene_tools/lod_build.h writes it): the original Gaussians
+// (the leaves) first, padded with invisible Gaussians to a multiple of kChunkSize, then the
+// merged Gaussians of level 1, level 2, ... up to a level of one node; every node is exactly one
+// chunk of kChunkSize Gaussians (its last ones may be padding). GaussianModel::lod holds one
+// LodNode per chunk (empty: no LOD, every chunk is drawn).
+//
+// The cut, per chunk and stateless (no per-frame host work, no kernel of its own): the projected
+// error of node c seen from the camera centre e is
+//   err_px(c) = error(c) * max(fx, fy) / dist(e, box(c))   (infinite when e lies in the box),
+// and chunk c is drawn iff (leaf(c) or err_px(c) <= tau) and (root(c) or err_px(parent) > tau).
+// Errors never decrease upwards and a parent's box contains its children's, so err_px never
+// increases down a root-to-leaf path (float subtraction, products and sqrt are monotone): exactly
+// one node of every such path is drawn, the highest whose err_px is <= tau. tau <= 0 draws the
+// leaves only, the scene as it was before LOD, bit for bit.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "forward_model/forward_model.h"
+
+namespace catgs::fm {
+
+inline constexpr uint32_t kLodNoParent = 0xffffffffu;  // LodNode::parent of a root
+
+// One chunk's node, 32 bytes (two float4 loads on the GPU).
+// - lo, hi: the box of the means of every LEAF Gaussian below the node (itself for a leaf), world
+//   units; a parent's box contains its children's.
+// - error: world units, how far drawing this node instead of its leaves can be off (0 for a leaf,
+//   > 0 above; never below a child's). lod_build.h says how it is measured.
+// - parent: the parent's chunk index (a higher chunk), kLodNoParent for a root.
+struct alignas(16) LodNode {
+  float lo[3];
+  float hi[3];
+  float error;
+  uint32_t parent;
+};
+static_assert(sizeof(LodNode) == 32, "two float4");
+
+// The camera centre of view v in world units: -R^T t.
+CATGS_HD glm::vec3 lod_eye(const View& v) { return -(glm::transpose(v.R) * v.t); }
+
+// err_px of node n seen from `eye` with focal length `focal` (pixels): 0 for a leaf, infinite
+// inside the box (and where the distance underflows to 0).
+CATGS_HD float lod_error_px(const LodNode& n, glm::vec3 eye, float focal) {
+  if (n.error == 0.0f) return 0.0f;
+  float d2 = 0.0f;
+  for (int a = 0; a < 3; ++a) {
+    const float gap = fmaxf(fmaxf(n.lo[a] - eye[a], eye[a] - n.hi[a]), 0.0f);
+    d2 += gap * gap;
+  }
+  const float d = sqrtf(d2);
+  return d > 0.0f ? n.error * focal / d : INFINITY;
+}
+
+// Is chunk c drawn in view v at bound tau (pixels)? `nodes`: the scene's LodNode array (see
+// above); tau <= 0 or NaN: the leaves only.
+CATGS_HD bool lod_chunk_drawn(const LodNode* nodes, uint64_t c, const View& v, float tau) {
+  const LodNode& n = nodes[c];
+  if (!(tau > 0.0f)) return n.error == 0.0f;
+  const glm::vec3 eye = lod_eye(v);
+  const float focal = fmaxf(v.fx, v.fy);
+  if (!(lod_error_px(n, eye, focal) <= tau)) return false;
+  return n.parent == kLodNoParent || lod_error_px(nodes[n.parent], eye, focal) > tau;
+}
+
+// The cut of one frame on the host (the CPU core): `nodes` null for a scene without LOD (every
+// chunk drawn). A catgs window takes the cut of its key view for all its sub-frames, so they
+// draw the same Gaussians the key frame listed.
+struct LodCut {
+  const LodNode* nodes = nullptr;
+  View view;
+  float tau = 0.0f;
+  bool drawn(uint64_t c) const { return nodes == nullptr || lod_chunk_drawn(nodes, c, view, tau); }
+};
+inline LodCut lod_cut(const std::vector<LodNode>& lod, const View& v, float tau) {
+  return {lod.empty() ? nullptr : lod.data(), v, tau};
+}
+
+// Checks a LOD tree against a model of `gaussians` Gaussians: one node per chunk, leaves (error
+// 0) first and every node above them of error > 0, parents at higher chunks, errors finite and
+// non-decreasing upwards, boxes nested. Throws std::runtime_error saying which node and what.
+// (Empty: no LOD, always fine.)
+void validate_lod(const std::vector<LodNode>& lod, std::size_t gaussians);
+
+}  // namespace catgs::fm

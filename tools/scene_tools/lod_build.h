@@ -1,0 +1,48 @@
+// Building a scene's level of detail (issue 37; catgs-scene lod, catgs-bench --lod): the tree of
+// chunks forward_model/lod.h describes, made offline from any scene.
+//
+// Steps:
+// 1. The leaves: the scene's Gaussians in Morton order (scene_tools/morton.h; a scene that
+//    catgs-scene compact wrote already is and is left as it is), padded with invisible
+//    Gaussians (opacity logit -kOpacityLogitLimit, log-scale kLodPadLogScale, at the chunk's
+//    first mean) to a multiple of fm::kChunkSize. Leaf node boxes: their means.
+// 2. Level l + 1, node j: the `branching` consecutive nodes [b j, b j + b) of level l (all of them
+//    chunks), their visible Gaussians in order (a Morton run of the scene), cut into kChunkSize
+//    runs as equal as possible (run r: [r m / 256, (r + 1) m / 256) of m), each run merged into
+//    one Gaussian (lod_merge.h merge_gaussians; an empty run gives padding). Its box: the union
+//    of its children's; its parent: set when level l + 2 is built. Levels stop at one node.
+// 3. A node's error (world units): the largest distance a Gaussian's mean moved in its merge
+//    (MergedGaussian::spread over its runs) plus the largest error of its children, so it bounds
+//    how far any leaf's centre lies from the merged Gaussian that stands for it; floored at 1e-30
+//    so a merge of singletons still counts as a merge. err_px = error x focal / distance is then
+//    the screen distance (pixels) detail can shift by, the error H3DGS's cut bounds too.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "scene/gaussian_model.h"
+
+namespace catgs {
+
+struct LodBuildOptions {
+  int branching = 8;  // children per node, 2..64
+};
+
+struct LodBuildReport {
+  std::vector<std::size_t> level_nodes;  // nodes (chunks) of level 0 (leaves), 1, ...
+  bool reordered = false;                // the leaves were Morton-sorted (the input was not)
+  double seconds = 0;                    // wall time of the build
+};
+
+// The LOD model of `scene` (its Gaussians as leaves, then the merged levels; lod filled and
+// valid). Throws std::invalid_argument for an empty scene, one that has a LOD already, or a
+// branching outside 2..64.
+GaussianModel build_lod(const GaussianModel& scene, const LodBuildOptions& options = {},
+                        LodBuildReport* report = nullptr);
+
+// How many leaf Gaussians (padding included) a LOD model holds: the Gaussians of its chunks of
+// error 0. 0 for a model without LOD.
+std::size_t lod_leaf_gaussians(const GaussianModel& model);
+
+}  // namespace catgs
