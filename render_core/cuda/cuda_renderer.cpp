@@ -263,7 +263,7 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
   const std::size_t pixels = static_cast<std::size_t>(camera.width) * camera.height;
   s.ensure_frame_buffers(n, tiles, pixels);
-  const stages::SceneView sv = scene_view(scene);
+  const stages::SceneView sv = scene_view(scene, options_.lod_error_px);
   const stages::Projected proj = s.projected();
   auto* counters = s.counters.as<unsigned long long>();
   const RenderListBudget& budget = options_.list_budget;

@@ -112,6 +112,8 @@ class DeviceScene {
   const uint16_t* sh() const { return sh_; }
   // [fm::chunk_count(N)] the bound of each run of fm::kChunkSize Gaussians (chunk culling).
   const fm::ChunkBounds* chunks() const { return chunks_; }
+  // [fm::chunk_count(N)] the LOD tree's nodes (forward_model/lod.h), nullptr without LOD.
+  const fm::LodNode* lod() const { return lod_; }
 
  private:
   DeviceScene() = default;
@@ -124,6 +126,7 @@ class DeviceScene {
   float* opacity_logits_ = nullptr;
   uint16_t* sh_ = nullptr;
   fm::ChunkBounds* chunks_ = nullptr;
+  fm::LodNode* lod_ = nullptr;
 };
 
 // A rendered frame in device memory, valid until the renderer's next frame; ready once `stream`

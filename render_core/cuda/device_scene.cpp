@@ -67,6 +67,8 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
   });
   s->sh_ = upload_array(sh_half, &s->bytes_, "SH coefficients");
   s->chunks_ = upload_array(fm::chunk_bounds(model), &s->bytes_, "chunk bounds");
+  fm::validate_lod(model.lod, n);
+  s->lod_ = upload_array(model.lod, &s->bytes_, "LOD nodes");  // nullptr without LOD
   return s;
 }
 
@@ -79,6 +81,7 @@ DeviceScene::~DeviceScene() {
     if (p) cudaFree(p);
   if (sh_) cudaFree(sh_);
   if (chunks_) cudaFree(chunks_);
+  if (lod_) cudaFree(lod_);
   if (switched) (void)cudaSetDevice(previous);
 }
 

@@ -54,14 +54,15 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
 }
 
 // Chunk culling, a thread per chunk: exact drops the chunks that cannot reach the image
-// (fm::chunk_outside_view; vanilla keeps every chunk, as reference 3DGS culls only per Gaussian).
+// (fm::chunk_outside_view; vanilla keeps every chunk, as reference 3DGS culls only per Gaussian),
+// every pipeline the chunks outside the LOD cut (lod_drawn, cpu/preprocess.cpp's loop).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    cull_chunks_kernel(const fm::ChunkBounds* __restrict__ chunks,  // [count]
-                       uint64_t count, CameraParams cam, bool exact,
+    cull_chunks_kernel(SceneView scene, uint64_t count, CameraParams cam, bool exact,
                        uint32_t* __restrict__ chunk_total,  // [count]
                        LiveChunks live) {                   // count zero on entry
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  keep_or_drop_chunk(c < count && !(exact && fm::chunk_outside_view(chunks[c], cam)), c, count, chunk_total, live);
+  keep_or_drop_chunk(c < count && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)) && lod_drawn(scene, c, cam),
+                     c, count, chunk_total, live);
 }
 
 // One thread per Gaussian of chunk c (a block's thread x takes Gaussian c * kChunkSize + x): reads
@@ -218,7 +219,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
   cull_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene.chunks, chunks, cam, exact, out.chunk_total, live);
+      scene, chunks, cam, exact, out.chunk_total, live);
   CATGS_CUDA_LAUNCHED("cull_chunks_kernel");
   const ChunkWalk walk = live.walk(chunks);
   preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(

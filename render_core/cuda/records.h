@@ -13,6 +13,7 @@
 #include "forward_model/chunk_bounds.h"
 #include "forward_model/forward_model.h"
 #include "forward_model/key_packing.h"
+#include "forward_model/lod.h"
 #include "speculation/speculation_params.h"
 #include "tunables.h"
 
@@ -35,7 +36,15 @@ struct SceneView {
   int sh_degree;
   uint64_t n;
   const fm::ChunkBounds* chunks;  // [chunk_count(N)] (forward_model/chunk_bounds.h)
+  const fm::LodNode* lod;         // [chunk_count(N)] (forward_model/lod.h), nullptr: no LOD
+  float lod_error_px;             // the cut's bound, pixels (RenderOptions::lod_error_px)
 };
+
+// Is chunk c in the scene's LOD cut at view `at` (fm::lod_chunk_drawn; every chunk without LOD)?
+// A chunk outside it is skipped as a culled chunk is: another level draws its Gaussians.
+CATGS_HD bool lod_drawn(const SceneView& scene, uint64_t c, const fm::View& at) {
+  return scene.lod == nullptr || fm::lod_chunk_drawn(scene.lod, c, at, scene.lod_error_px);
+}
 
 // One Gaussian's footprint on the image at this frame: everything a rasterizer reads of a
 // render-list entry except its colour, packed in one 32-byte record (one DRAM sector, as the

@@ -83,7 +83,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
   s.ensure_frame_buffers(n, tiles, static_cast<std::size_t>(camera.width) * camera.height);
   s.ensure_catgs_buffers(n);
-  const stages::SceneView sv = scene_view(*scene_);
+  const stages::SceneView sv = scene_view(*scene_, options_.lod_error_px);
 
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   // The window from the predicted path (never from future input): M over one frame, then W.
@@ -159,10 +159,14 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   unsigned* cc = s.catgs_counters.as<unsigned>();
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   CATGS_CUDA(cudaMemsetAsync(cc + kOutside, 0, sizeof(unsigned), s.stream));
-  stages::update_subframe_features(scene_view(*scene_), camera_params(camera), s.cached.as<uint32_t>(),
+  stages::update_subframe_features(scene_view(*scene_, options_.lod_error_px), camera_params(camera),
+                                   s.cached.as<uint32_t>(),
                                    static_cast<uint32_t>(s.key_visible), options_.speculation.subframe_key_colour,
                                    s.projected(), s.trails(), cc + kOutside, s.stream);
-  stages::check_unlisted(scene_view(*scene_), camera_params(camera), s.tiles_touched.as<uint32_t>(),
+  // The group's LOD cut is its key frame's (the key camera's): a chunk outside it is drawn by
+  // another level, so its unlisted Gaussians must not turn the frame into a key frame.
+  stages::check_unlisted(scene_view(*scene_, options_.lod_error_px), camera_params(camera),
+                         camera_params(s.planner.key_camera()), s.tiles_touched.as<uint32_t>(),
                          s.chunk_total.as<uint32_t>(), cc + kOutside, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
   CATGS_CUDA(cudaEventSynchronize(s.plan_ready));  // the key frame's slice total, long since copied

@@ -98,7 +98,8 @@ enum Event { kStart, kPreprocessed, kKeysEmitted, kSorted, kRanged, kRasterized,
 stages::CameraParams camera_params(const Camera& camera);
 
 // The scene as the kernels see it.
-inline stages::SceneView scene_view(const DeviceScene& scene) {
+// The scene as the kernels read it, its LOD cut at bound `lod_error_px` (RenderOptions).
+inline stages::SceneView scene_view(const DeviceScene& scene, float lod_error_px) {
   return {scene.means(),
           scene.log_scales(),
           scene.rotations(),
@@ -106,7 +107,9 @@ inline stages::SceneView scene_view(const DeviceScene& scene) {
           reinterpret_cast<const __half*>(scene.sh()),
           scene.sh_degree(),
           scene.size(),
-          scene.chunks()};
+          scene.chunks(),
+          scene.lod(),
+          lod_error_px};
 }
 
 struct CudaRenderer::State {

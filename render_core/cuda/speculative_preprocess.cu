@@ -141,34 +141,36 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
 }
 
 // Chunk culling over the path, a thread per chunk (fm::chunk_misses_path: a chunk none of whose
-// Gaussians the per-Gaussian cull above would keep).
+// Gaussians the per-Gaussian cull above would keep), and the chunks outside the LOD cut at the
+// key view (lod_drawn at path.cam[0]: the whole window draws the key frame's cut).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    cull_path_chunks_kernel(const fm::ChunkBounds* __restrict__ chunks,  // [count]
-                            uint64_t count, PathParams path, TrailWidening widening,
+    cull_path_chunks_kernel(SceneView scene, uint64_t count, PathParams path, TrailWidening widening,
                             uint32_t* __restrict__ chunk_total,  // [count]
                             LiveChunks live) {                   // count zero on entry
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   const auto view_at = [&](int k) -> const fm::View& { return path.cam[k]; };
-  keep_or_drop_chunk(c < count && !fm::chunk_misses_path(chunks[c], path.count, view_at, 1.0f + widening.slack,
-                                                         widening.margin_px, widening.motion_margin),
+  keep_or_drop_chunk(c < count && lod_drawn(scene, c, path.cam[0]) &&
+                         !fm::chunk_misses_path(scene.chunks[c], path.count, view_at, 1.0f + widening.slack,
+                                                widening.margin_px, widening.motion_margin),
                      c, count, chunk_total, live);
 }
 
 // M: a warp per chunk (grid-stride over the scene's chunks), the chunk skipped whole when none
 // of its means can count (fm::chunk_means_off_image: on a scene of many copies most chunks lie
 // off the key image, and M read every mean at every key frame that wanted a window), else its
-// 32 lanes read its means (coalesced); a warp reduction, one atomicMax per warp.
+// 32 lanes read its means (coalesced); a warp reduction, one atomicMax per warp. Chunks outside
+// the LOD cut at `a` (the key view) do not count.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    max_screen_motion_kernel(const float* means,             // [N, 3]
-                             const fm::ChunkBounds* chunks,  // [chunks]
-                             uint64_t n, CameraParams a, CameraParams b, float min_depth,
+    max_screen_motion_kernel(SceneView scene, CameraParams a, CameraParams b, float min_depth,
                              unsigned* max_bits) {  // [1]
+  const float* means = scene.means;  // [N, 3]
+  const uint64_t n = scene.n;
   float m = 0.0f;
   const uint64_t chunk_count = fm::chunk_count(n);
   const uint64_t warps = static_cast<uint64_t>(gridDim.x) * blockDim.x / 32u;
   const auto lane = static_cast<unsigned>(threadIdx.x & 31u);
   for (uint64_t c = (static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32u; c < chunk_count; c += warps) {
-    if (fm::chunk_means_off_image(chunks[c], a, min_depth)) continue;  // warp-uniform
+    if (!lod_drawn(scene, c, a) || fm::chunk_means_off_image(scene.chunks[c], a, min_depth)) continue;  // warp-uniform
     const uint64_t end = min(n, (c + 1) * fm::kChunkSize);
     for (uint64_t i = c * fm::kChunkSize + lane; i < end; i += 32u) {
       const glm::vec3 x(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
@@ -196,7 +198,7 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (cull_blocks > 0x7fffffffull) throw std::length_error("speculative_preprocess: too many Gaussians for one grid");
   cull_path_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene.chunks, chunks, path, widening, out.chunk_total, live);
+      scene, chunks, path, widening, out.chunk_total, live);
   CATGS_CUDA_LAUNCHED("cull_path_chunks_kernel");
   const ChunkWalk walk = live.walk(chunks);
   speculative_preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
@@ -212,8 +214,7 @@ void max_screen_motion(const SceneView& scene, const CameraParams& a, const Came
   const uint64_t warps_per_block = tune::kGaussianThreads / 32;
   const uint64_t want = (fm::chunk_count(scene.n) + warps_per_block - 1) / warps_per_block;
   const auto blocks = static_cast<unsigned>(want < 4096 ? want : 4096);
-  max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene.means, scene.chunks, scene.n, a, b,
-                                                                          min_depth, max_bits);
+  max_screen_motion_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, a, b, min_depth, max_bits);
   CATGS_CUDA_LAUNCHED("max_screen_motion_kernel");
 }
 

@@ -90,9 +90,10 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
 // a pixel at this pose raises the flag (fm::unlisted_reaches_image; most return after reading
 // tiles_touched or after the cheap bound). A chunk outside the view at this pose
 // (fm::chunk_outside_view, every lane works it out: no shared memory, no barrier) holds no such
-// Gaussian and is skipped without reading its Gaussians.
+// Gaussian and is skipped without reading its Gaussians, and so is a chunk outside the key
+// frame's LOD cut (lod_drawn at `key`): another level draws it.
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    unlisted_kernel(SceneView scene, CameraParams cam,
+    unlisted_kernel(SceneView scene, CameraParams cam, CameraParams key,
                     const uint32_t* tiles_touched,  // [N] of the key frame
                     const uint32_t* chunk_total,    // [chunks] of the key frame
                     unsigned* outside) {            // [1]
@@ -102,7 +103,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   const uint64_t warps = static_cast<uint64_t>(gridDim.x) * (blockDim.x / 32u);
   const uint64_t lane = threadIdx.x & 31u;
   for (uint64_t c = (static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x) / 32u; c < chunks; c += warps) {
-    if (fm::chunk_outside_view(scene.chunks[c], cam)) continue;  // warp-uniform
+    if (!lod_drawn(scene, c, key) || fm::chunk_outside_view(scene.chunks[c], cam)) continue;  // warp-uniform
     const uint64_t end = min(scene.n, (c + 1) * fm::kChunkSize);
     for (uint64_t i = c * fm::kChunkSize + lane; i < end; i += 32) {
       if (listed_tiles(tiles_touched, chunk_total, i) > 0) continue;
@@ -115,13 +116,14 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 
 }  // namespace
 
-void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
-                    const uint32_t* chunk_total, unsigned* outside, cudaStream_t stream) {
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const CameraParams& key,
+                    const uint32_t* tiles_touched, const uint32_t* chunk_total, unsigned* outside,
+                    cudaStream_t stream) {
   if (scene.n == 0) return;
   const uint64_t warps_per_block = tune::kGaussianThreads / 32;
   const uint64_t want = (fm::chunk_count(scene.n) + warps_per_block - 1) / warps_per_block;
   const auto blocks = static_cast<unsigned>(want < 8192 ? want : 8192);
-  unlisted_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, tiles_touched, chunk_total, outside);
+  unlisted_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(scene, cam, key, tiles_touched, chunk_total, outside);
   CATGS_CUDA_LAUNCHED("unlisted_kernel");
 }
 

@@ -28,8 +28,10 @@ void update_subframe_features(const SceneView& scene, const CameraParams& cam, c
 // catgs sub-frame (subframe_features.cu; mirrors cpu::unlisted_reach_image): sets *outside = 1
 // when a Gaussian the key frame did not list (records.h listed_tiles of its tiles_touched and
 // chunk_total is 0) reaches a pixel at `cam`: it is outside the frustum cache, so only a key frame
-// can draw it. Chunks outside the view at `cam` (fm::chunk_outside_view) are skipped whole.
-void check_unlisted(const SceneView& scene, const CameraParams& cam, const uint32_t* tiles_touched,
-                    const uint32_t* chunk_total, unsigned* outside, cudaStream_t stream);
+// can draw it. Chunks outside the view at `cam` (fm::chunk_outside_view) are skipped whole, and
+// so are chunks outside the LOD cut at the group's key camera `key` (records.h lod_drawn).
+void check_unlisted(const SceneView& scene, const CameraParams& cam, const CameraParams& key,
+                    const uint32_t* tiles_touched, const uint32_t* chunk_total, unsigned* outside,
+                    cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

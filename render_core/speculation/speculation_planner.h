@@ -56,6 +56,9 @@ class SpeculationPlanner {
   // A key frame was rendered with window W: a new group opens (W > 0) or none (W = 0). The group
   // it closes, if any, sets the backoff (SpeculationParams::backoff).
   void start_group(const Camera& key, int window);
+  // The open group's key camera (start_group's `key`; the CUDA core's sub-frames take the LOD cut
+  // at it, forward_model/lod.h).
+  const Camera& key_camera() const { return key_camera_; }
   // The candidate sub-frame passed its containment check and was served from the caches.
   void subframe_served() { ++subframes_served_; }
 

@@ -2,7 +2,8 @@
 // scripts/gpu_run.sh; no GoogleTest there). Prints a table, writes it with --out, and exits
 // non-zero when any check fails.
 //
-//   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large] [--only budget|passes]
+//   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large]
+//                   [--only budget|passes|lod]
 //
 // DIR holds flowers_sh3.ply, biker.compressed.ply and tumblewood_sh2.compressed.ply (the compact
 // copy: the 85 MB original does not fit a GPU run's 64 MiB of files); TRACES holds
@@ -48,6 +49,12 @@
 //             draws a fly-over view, then a view of the centre copies, where most chunks are
 //             culled and keep the first frame's tile counts unwritten: CUDA == CPU (>= 50 dB, the
 //             same list) on both, and fewer than half the chunks were kept on the second.
+//  lod        13 tumblewood copies with their level of detail (scene_tools/lod_build.h) at the
+//             default RenderOptions::lod_error_px, along the fly-over at 120 FPS: CUDA exact ==
+//             CPU exact on 4 views (>= 50 dB, the same list); CUDA catgs vs CPU catgs frame by
+//             frame (the same key/sub-frame decisions on >= 95% of frames, >= 50 dB where they
+//             agree); and CUDA exact at lod_error_px 0 on the LOD scene == CUDA exact on the
+//             scene without LOD (bit for bit); fewer chunks kept with LOD than without.
 // catgs pipeline (paper sec. 3; issue 4), over real camera paths interpolated at 120 FPS:
 //  catgs=cpu  CUDA catgs vs the CPU reference's catgs, frame by frame: the same key/sub-frame
 //             decisions on >= 95% of frames, and where they agree PSNR >= 50 dB.
@@ -84,6 +91,8 @@
 #include "scene/ply_io.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
+#include "scene_tools/lod_build.h"
+#include "scene_tools/morton.h"
 #include "camera/trace.h"
 #include "colour/yuv420.h"
 #include "common/cli_args.h"
@@ -1112,6 +1121,81 @@ void chunk_cull_checks(const Scenes& sc) {
   }
 }
 
+// 9: level of detail (forward_model/lod.h): the cut both cores take, CUDA against the CPU.
+void lod_checks(const Scenes& sc) {
+  const TestCity tc = test_city(sc, 4);  // 13 cells
+  catgs::LodBuildReport built;
+  const auto lod = std::make_shared<GaussianModel>(catgs::build_lod(*tc.model, {}, &built));
+  // The scene without LOD in the LOD's leaf order (Morton), for the bit-for-bit check at tau 0.
+  const auto full = std::make_shared<GaussianModel>(catgs::permuted(*tc.model, catgs::morton_order(*tc.model)));
+  auto dev = catgs::cuda::DeviceScene::upload(*lod);
+  auto dev_full = catgs::cuda::DeviceScene::upload(*full);
+  catgs::GeneratorParams g;
+  g.width = sc.W;
+  g.height = sc.H;
+  g.duration_s = 0.5;  // 61 frames: the CPU's catgs frames of 7 M Gaussians take the time
+  g.rate_hz = 120.0;
+  const catgs::Trace trace = catgs::make_city_flyover(tc.layout, catgs::FlyoverParams{}, g);
+  catgs::RenderOptions o;
+  o.pipeline = Pipeline::exact;
+  const std::string levels = std::to_string(lod->size()) + " Gaussians, " + std::to_string(built.level_nodes.size()) +
+                             " levels, built in " + std::to_string(built.seconds) + " s";
+  {
+    catgs::cpu::CpuRenderer cpu(lod, o);
+    catgs::cuda::CudaRenderer gpu(dev, o);
+    for (std::size_t k = 0; k < trace.size(); k += trace.size() / 4) {
+      Image a, b;
+      cpu.render(trace[k].camera, a);
+      gpu.render(trace[k].camera, b);
+      const Diff d = compare(a, b);
+      const auto lc = static_cast<long long>(cpu.last_stats().render_list_length);
+      const auto lg = static_cast<long long>(gpu.last_stats().render_list_length);
+      add({"lod", lod->name, "fly" + std::to_string(k), "exact", d.psnr, d.max_abs, d.max_abs8, lc, lg,
+           d.psnr >= 50.0 && lc == lg, levels});
+    }
+  }
+  {  // tau 0: the leaves only, the scene as it was
+    catgs::RenderOptions zero = o;
+    zero.lod_error_px = 0.0f;
+    catgs::cuda::CudaRenderer a_gpu(dev, zero), b_gpu(dev_full, zero), tau_gpu(dev, o);
+    Image a, b, t;
+    const Camera& cam = trace[trace.size() / 2].camera;
+    a_gpu.render(cam, a);
+    b_gpu.render(cam, b);
+    tau_gpu.render(cam, t);
+    const Diff d = compare(a, b);
+    const auto kept_lod = tau_gpu.diagnostics().chunks_kept, kept_full = b_gpu.diagnostics().chunks_kept;
+    add({"lod", lod->name, "tau0", "exact", d.psnr, d.max_abs, d.max_abs8,
+         static_cast<long long>(b_gpu.last_stats().render_list_length),
+         static_cast<long long>(a_gpu.last_stats().render_list_length), d.max_abs == 0.0 && kept_lod < kept_full,
+         "vs the scene without LOD; chunks kept at the default bound " + std::to_string(kept_lod) + ", without LOD " +
+             std::to_string(kept_full)});
+  }
+  catgs::RenderOptions co = o;
+  co.pipeline = Pipeline::catgs;
+  catgs::cpu::SpeculativeRenderer cpu(lod, co);
+  catgs::cuda::CudaRenderer gpu(dev, co);
+  std::size_t agree = 0, subs = 0;
+  double min_psnr = INFINITY, max_abs = 0;
+  int max8 = 0;
+  for (const auto& f : trace) {
+    Image a, b;
+    cpu.render_at(f.camera, f.time_s, a);
+    gpu.render_at(f.camera, f.time_s, b);
+    if (cpu.last_stats().key_frame != gpu.last_stats().key_frame) continue;
+    ++agree;
+    subs += gpu.last_stats().key_frame ? 0 : 1;
+    const Diff d = compare(a, b);
+    min_psnr = std::min(min_psnr, d.psnr);
+    max_abs = std::max(max_abs, d.max_abs);
+    max8 = std::max(max8, d.max_abs8);
+  }
+  char note[160];
+  std::snprintf(note, sizeof note, "%zu frames: decisions agree on %zu (%zu sub-frames)", trace.size(), agree, subs);
+  add({"lod", lod->name, "flyover", "catgs", min_psnr, max_abs, max8, -1, -1,
+       agree * 100 >= trace.size() * 95 && min_psnr >= 50.0 && subs > 0, note});
+}
+
 // The table (markdown) of every check, to `out` if given; returns the number that failed.
 int report(const std::string& gpu, const std::string& out) {
   int failed = 0;
@@ -1155,6 +1239,10 @@ int run(int argc, char** argv) {
     budget_checks();
     return report(gpu, args.get("--out", "")) == 0 ? 0 : 1;
   }
+  if (args.get("--only", "") == "lod") {  // the level of detail rows alone (tumblewood)
+    lod_checks(sc);
+    return report(gpu, args.get("--out", "")) == 0 ? 0 : 1;
+  }
   if (args.get("--only", "") == "passes") {  // the budget's passes and narrowed windows (biker only)
     budget_checks();
     passes_checks(sc);
@@ -1169,6 +1257,7 @@ int run(int argc, char** argv) {
   if (!sc.quick) budget_checks();
   if (!sc.quick) passes_checks(sc);
   if (!sc.quick) chunk_cull_checks(sc);
+  if (!sc.quick) lod_checks(sc);
   if (!sc.quick && !args.has("--skip-large")) {
     tile_bits_checks(sc);
     list_limit_checks();

@@ -4,7 +4,7 @@
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
 //               --pipeline V[,V...] [--frames N] [--warmup N] [--json OUT.json]
 //               [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu] [--quality-every K]
-//               [--lod [--branching 8] | --lod-file F] [--lod-error PX]
+//               [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]]
 //
 // Variants V (bench/variants.h; `catgs-bench --help` lists the settings): vanilla, exact, or
 // catgs optionally followed by SpeculationParams settings in braces, catgs{window=2,backoff=0},
@@ -28,8 +28,9 @@
 // Level of detail (forward_model/lod.h): --lod builds it in memory after that
 // (scene_tools/lod_build.h; its build time and level sizes are printed and in the JSON);
 // --lod-file F reads S's LOD file (catgs-scene lod). Every variant draws the cut at --lod-error
-// PX (default RenderOptions::lod_error_px; 0 = full detail), and with --quality-every K every K-th
-// frame of every variant, on both cores, is compared with the full-detail exact render.
+// PX (default RenderOptions::lod_error_px; 0 = full detail; a list PX,PX... runs every variant
+// at each bound, named VARIANT@PX), and with --quality-every K every K-th frame of every variant,
+// on both cores, is compared with the full-detail exact render.
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "centre" (a slow pass
 // over the city's middle copy, 0.4 extents up, pitched down 70 deg: only the centre copies are in
 // view, however many the city has), "real:CAMERAS.json" (a
@@ -82,7 +83,7 @@ const char* kUsage =
     "                   [--height 1080] [--pipeline V[,V...]] [--frames 600] [--warmup 30]\n"
     "                   [--quality-every 1] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu] [--help]\n"
-    "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX]\n"
+    "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]]\n"
     "       V: a pipeline variant, e.g. catgs{window=2,backoff=0} (default: vanilla,exact; --help\n"
     "          lists the variants and their settings)\n";
 
@@ -178,6 +179,38 @@ catgs::Trace make_bench_trace(const Args& args, const BenchScene& s, int width, 
   return trace;
 }
 
+// --lod-error PX[,PX...]: the LOD bounds to run every variant at ("default": RenderOptions's).
+std::vector<float> lod_bounds(const Args& args) {
+  std::vector<float> out;
+  const std::string list = args.get("--lod-error", std::to_string(catgs::RenderOptions{}.lod_error_px));
+  for (std::size_t at = 0; at <= list.size();) {
+    const std::size_t comma = std::min(list.find(',', at), list.size());
+    std::string item = list.substr(at, comma - at);
+    if (item == "default") item = std::to_string(catgs::RenderOptions{}.lod_error_px);
+    std::size_t used = 0;
+    float v = -1.0f;
+    try {
+      v = std::stof(item, &used);
+    } catch (const std::exception&) {
+    }
+    if (used != item.size() || item.empty() || !(v >= 0.0f))
+      throw std::invalid_argument("--lod-error: '" + item + "' is not a bound in pixels >= 0");
+    out.push_back(v);
+    at = comma + 1;
+  }
+  return out;
+}
+
+// With several LOD bounds, a variant's result is named VARIANT@PX.
+PipelineResult named_at(PipelineResult r, float bound, std::size_t bounds) {
+  if (bounds > 1) {
+    char at[32];
+    std::snprintf(at, sizeof at, "@%g", bound);
+    r.name += at;
+  }
+  return r;
+}
+
 // --renderer: true for the CUDA core (the default where it is built). Throws when it is asked for
 // and missing or unusable.
 bool use_cuda(const Args& args) {
@@ -193,8 +226,8 @@ bool use_cuda(const Args& args) {
 }
 
 #if CATGS_HAVE_CUDA
-std::vector<PipelineResult> run_on_cuda(BenchScene& s, const std::vector<Variant>& variants, const TimingPlan& plan,
-                                        BenchContext& c) {
+std::vector<PipelineResult> run_on_cuda(BenchScene& s, const std::vector<Variant>& variants, TimingPlan plan,
+                                        const std::vector<float>& bounds, BenchContext& c) {
   const std::size_t used_before_scene = catgs::cuda::device_memory_used();
   const auto scene = catgs::cuda::DeviceScene::upload(s.model);
   c.scene_device_bytes = scene->bytes();
@@ -205,19 +238,31 @@ std::vector<PipelineResult> run_on_cuda(BenchScene& s, const std::vector<Variant
                static_cast<double>(scene->bytes()) / (1 << 20), s.load_s, c.trace.c_str(), plan.trace->size(), c.warmup,
                c.frames, c.width, c.height);
   s.model = catgs::GaussianModel{};  // the host copy is no longer needed
-  return catgs::bench::time_on_cuda(scene, variants, plan, used_before_scene);
+  std::vector<PipelineResult> results;
+  for (float bound : bounds) {
+    plan.lod_error_px = bound;
+    for (PipelineResult& r : catgs::bench::time_on_cuda(scene, variants, plan, used_before_scene))
+      results.push_back(named_at(std::move(r), bound, bounds.size()));
+  }
+  return results;
 }
 #endif
 
-std::vector<PipelineResult> run_on_cpu(BenchScene& s, const std::vector<Variant>& variants, const TimingPlan& plan,
-                                       const BenchContext& c) {
+std::vector<PipelineResult> run_on_cpu(BenchScene& s, const std::vector<Variant>& variants, TimingPlan plan,
+                                       const std::vector<float>& bounds, const BenchContext& c) {
   std::fprintf(stderr,
                "CPU reference: %s\nscene %s: %zu Gaussians (SH %d), built in %.1f s; trace %s: "
                "%zu cameras, %d warm-up + %d timed frames at %dx%d\n",
                c.gpu.c_str(), c.scene.c_str(), c.gaussians, c.sh_degree, s.load_s, c.trace.c_str(), plan.trace->size(),
                c.warmup, c.frames, c.width, c.height);
   const auto shared = std::make_shared<const catgs::GaussianModel>(std::move(s.model));
-  return catgs::bench::time_on_cpu(shared, variants, plan);
+  std::vector<PipelineResult> results;
+  for (float bound : bounds) {
+    plan.lod_error_px = bound;
+    for (PipelineResult& r : catgs::bench::time_on_cpu(shared, variants, plan))
+      results.push_back(named_at(std::move(r), bound, bounds.size()));
+  }
+  return results;
 }
 
 int run(int argc, char** argv) {
@@ -249,7 +294,8 @@ int run(int argc, char** argv) {
   c.gaussians = s.model.size();
   c.sh_degree = s.model.sh_degree;
   c.lod = !s.model.lod.empty();
-  c.lod_error_px = static_cast<float>(args.get_double("--lod-error", catgs::RenderOptions{}.lod_error_px));
+  const std::vector<float> bounds = lod_bounds(args);
+  c.lod_error_px = bounds.front();
   c.lod_build_s = s.lod.seconds;
   c.lod_levels = s.lod.level_nodes;
   const catgs::Trace trace = make_bench_trace(args, s, c.width, c.height, c.warmup + c.frames);
@@ -264,9 +310,9 @@ int run(int argc, char** argv) {
 
   std::vector<PipelineResult> results;
 #if CATGS_HAVE_CUDA
-  if (c.on_gpu) results = run_on_cuda(s, variants, plan, c);
+  if (c.on_gpu) results = run_on_cuda(s, variants, plan, bounds, c);
 #endif
-  if (!c.on_gpu) results = run_on_cpu(s, variants, plan, c);
+  if (!c.on_gpu) results = run_on_cpu(s, variants, plan, bounds, c);
   const nlohmann::json j = catgs::bench::report(c, results);
   if (args.has("--json")) catgs::bench::write_json(j, args.get("--json"));
   return 0;

@@ -25,7 +25,7 @@ struct BenchContext {
   // Level of detail (forward_model/lod.h): the scene has it (built by --lod or read by
   // --lod-file), the bound every variant drew with, the build time (--lod) and chunks per level.
   bool lod = false;
-  float lod_error_px = 0.0f;
+  float lod_error_px = 0.0f;  // the first bound (--lod-error; the variants' names carry each)
   double lod_build_s = 0.0;
   std::vector<std::size_t> lod_levels;
 };

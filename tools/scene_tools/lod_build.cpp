@@ -79,7 +79,7 @@ void build_node(GaussianModel& out, std::size_t chunk, std::size_t child_begin, 
     }
   }
   const std::size_t m = visible.size(), K3 = static_cast<std::size_t>(out.sh_coeffs()) * 3;
-  float spread = 0.0f;
+  double spread_sq = 0.0, weight = 0.0;  // the node's weighted mean square spread
   const std::size_t first = chunk * kChunk;
   std::size_t anchor = child_begin * kChunk;  // where padding sits (below)
   bool anchored = false;
@@ -94,14 +94,16 @@ void build_node(GaussianModel& out, std::size_t chunk, std::size_t child_begin, 
     }
     for (int a = 0; a < 4; ++a) out.rotations[4 * g + a] = merged.rotation[a];
     out.opacity_logits[g] = merged.opacity_logit;
-    spread = std::max(spread, merged.spread);
+    spread_sq += merged.weight * static_cast<double>(merged.spread) * merged.spread;
+    weight += merged.weight;
     if (!anchored) anchor = g, anchored = true;
   }
   // Padding sits on the chunk's first merged mean (or its first child's first mean when nothing
   // was visible), so it widens no chunk bound.
   for (std::size_t r = 0; r < kChunk; ++r)
     if (r * m / kChunk == (r + 1) * m / kChunk) write_padding(out, first + r, &out.means[3 * anchor]);
-  node.error = std::max(child_error + spread, kMinMergeError);
+  const double spread = weight > 0.0 ? std::sqrt(spread_sq / weight) : 0.0;
+  node.error = std::max(child_error + static_cast<float>(spread), kMinMergeError);
   out.lod[chunk] = node;
 }
 

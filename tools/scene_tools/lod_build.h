@@ -11,11 +11,14 @@
 //    runs as equal as possible (run r: [r m / 256, (r + 1) m / 256) of m), each run merged into
 //    one Gaussian (lod_merge.h merge_gaussians; an empty run gives padding). Its box: the union
 //    of its children's; its parent: set when level l + 2 is built. Levels stop at one node.
-// 3. A node's error (world units): the largest distance a Gaussian's mean moved in its merge
-//    (MergedGaussian::spread over its runs) plus the largest error of its children, so it bounds
-//    how far any leaf's centre lies from the merged Gaussian that stands for it; floored at 1e-30
-//    so a merge of singletons still counts as a merge. err_px = error x focal / distance is then
-//    the screen distance (pixels) detail can shift by, the error H3DGS's cut bounds too.
+// 3. A node's error (world units): the weighted RMS distance the means of its inputs moved in
+//    their merges (MergedGaussian::spread and weight over its runs, weights as the merge's) plus
+//    the largest error of its children, floored at 1e-30 so a merge of singletons still counts
+//    as a merge. err_px = error x focal / distance is then how far (pixels, RMS over the node's
+//    coverage) detail moves on screen when the node stands for its leaves. RMS and not the
+//    largest move: Morton runs jump between clusters at cell boundaries, and one run spanning a
+//    gap would make a node's largest move its own size (the cut then never leaves the leaves),
+//    while that run's merged Gaussian spreads its coverage thin (lod_merge.h) and barely shows.
 #pragma once
 
 #include <cstddef>

@@ -93,7 +93,7 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
     std::copy_n(&m.sh[i * K3], K3, sh_out);
     return {glm::vec3(mean_of(i)), glm::vec3(m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]),
             glm::vec4(m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3]),
-            m.opacity_logits[i], 0.0f};
+            m.opacity_logits[i], 0.0f, 1.0};
   }
   // Weights: opacity x the area of the largest cross-section (see the header).
   double w[64];
@@ -121,7 +121,7 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
   for (int k = 0; k < count; ++k) mean += weight[k] * mean_of(index[k]);
   mean /= w_sum;
   glm::dmat3 cov(0.0);
-  double spread = 0.0;
+  double spread_sq = 0.0;
   for (int k = 0; k < count; ++k) {
     const uint32_t i = index[k];
     const fm::Cov3 s = fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
@@ -130,7 +130,7 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
     const glm::dvec3 d = mean_of(i) - mean;
     const glm::dmat3 own(s.xx, s.xy, s.xz, s.xy, s.yy, s.yz, s.xz, s.yz, s.zz);
     cov += weight[k] * (own + glm::outerProduct(d, d));
-    spread = std::max(spread, glm::length(d));
+    spread_sq += weight[k] * glm::dot(d, d);
   }
   cov /= w_sum;
   for (std::size_t c = 0; c < K3; ++c) {
@@ -148,7 +148,7 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
   const double floor = 1.0 - kOpacityLogitLimit;
   const double logit = alpha > 0.0 ? std::max(std::log(alpha / (1.0 - alpha)), floor) : floor;
   return {glm::vec3(mean), glm::vec3(glm::log(sigma)), quaternion_of(axes), static_cast<float>(logit),
-          static_cast<float>(spread)};
+          static_cast<float>(std::sqrt(spread_sq / w_sum)), w_sum};
 }
 
 }  // namespace catgs

@@ -19,15 +19,17 @@ inline constexpr float kLodPadLogScale = -20.0f;
 inline bool is_lod_padding(float opacity_logit) { return opacity_logit <= -kOpacityLogitLimit; }
 
 // One merged Gaussian, in GaussianModel's units and frames (world units, log std devs, a unit
-// (w, x, y, z) quaternion, an opacity logit); `spread` is the largest distance from `mean` of
-// the mean of a Gaussian merged into it (world units; 0 for a single Gaussian), the run's part
-// of its node's error (lod_build.h).
+// (w, x, y, z) quaternion, an opacity logit); `spread` is the weighted RMS distance from `mean`
+// of the means of the Gaussians merged into it, sqrt(sum w_i |mu_i - mu|^2 / sum w_i) (world
+// units; 0 for a single Gaussian), and `weight` sum w_i (below): the run's part of its node's
+// error (lod_build.h).
 struct MergedGaussian {
   glm::vec3 mean;
   glm::vec3 log_scale;
   glm::vec4 rotation;
   float opacity_logit;
   float spread;
+  double weight;
 };
 
 // Merges the `count` >= 1 Gaussians `index[0..count)` of `model` into one, writing its SH

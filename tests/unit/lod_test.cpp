@@ -1,0 +1,369 @@
+// Level of detail (issue 37; forward_model/lod.h, tools/scene_tools/lod_build.h, lod_merge.h):
+// the merge against direct formulas, the eigen solver against its input, the cut property on
+// trees built from real scenes, renders of a small real city against the full-detail model on
+// both CPU pipelines, and LOD files.
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "common/image_io.h"
+#include "cpu/cpu_renderer.h"
+#include "forward_model/chunk_bounds.h"
+#include "renderer/renderer.h"
+#include "scene/ply_io.h"
+#include "scene/scene_cache.h"
+#include "scene_tools/city.h"
+#include "scene_tools/lod_build.h"
+#include "scene_tools/lod_merge.h"
+#include "scene_tools/morton.h"
+#include "test_data.h"
+
+namespace catgs {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The 3x3 covariance of Gaussian i of `m` (fm::covariance_3d), in double.
+glm::dmat3 covariance_of(const GaussianModel& m, std::size_t i) {
+  const fm::Cov3 c = fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
+                                       {m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2],
+                                        m.rotations[4 * i + 3]});
+  return glm::dmat3(c.xx, c.xy, c.xz, c.xy, c.yy, c.yz, c.xz, c.yz, c.zz);
+}
+
+double max_abs_diff(const glm::dmat3& a, const glm::dmat3& b) {
+  double d = 0.0;
+  for (int c = 0; c < 3; ++c)
+    for (int r = 0; r < 3; ++r) d = std::max(d, std::fabs(a[c][r] - b[c][r]));
+  return d;
+}
+
+// A model of the Gaussians `pick` of `m`, means moved by `shift[k]`.
+GaussianModel subset(const GaussianModel& m, const std::vector<std::size_t>& pick, const std::vector<glm::vec3>& shift) {
+  GaussianModel out;
+  out.sh_degree = m.sh_degree;
+  out.resize(pick.size());
+  const std::size_t K3 = static_cast<std::size_t>(m.sh_coeffs()) * 3;
+  for (std::size_t k = 0; k < pick.size(); ++k) {
+    const std::size_t i = pick[k];
+    for (int a = 0; a < 3; ++a) out.means[3 * k + a] = m.means[3 * i + a] + shift[k][a];
+    std::copy_n(&m.log_scales[3 * i], 3, &out.log_scales[3 * k]);
+    std::copy_n(&m.rotations[4 * i], 4, &out.rotations[4 * k]);
+    out.opacity_logits[k] = m.opacity_logits[i];
+    std::copy_n(&m.sh[i * K3], K3, &out.sh[k * K3]);
+  }
+  return out;
+}
+
+// The merged Gaussian of `pair` (both of its Gaussians) as a one-Gaussian model.
+GaussianModel merged_model(const GaussianModel& pair, MergedGaussian* merged = nullptr) {
+  GaussianModel out;
+  out.sh_degree = pair.sh_degree;
+  out.resize(1);
+  const uint32_t index[2] = {0, 1};
+  const MergedGaussian g = merge_gaussians(pair, index, 2, out.sh.data());
+  for (int a = 0; a < 3; ++a) out.means[a] = g.mean[a], out.log_scales[a] = g.log_scale[a];
+  for (int a = 0; a < 4; ++a) out.rotations[a] = g.rotation[a];
+  out.opacity_logits[0] = g.opacity_logit;
+  if (merged) *merged = g;
+  return out;
+}
+
+TEST(LodMerge, TwoIdenticalGaussiansMergeIntoTheirComposite) {
+  const auto m = test::cached_scene(test::bundled_scene());
+  for (std::size_t i : {0ul, 1000ul, 77777ul}) {
+    const GaussianModel pair = subset(*m, {i, i}, {glm::vec3(0.0f), glm::vec3(0.0f)});
+    MergedGaussian g;
+    const GaussianModel one = merged_model(pair, &g);
+    for (int a = 0; a < 3; ++a) EXPECT_FLOAT_EQ(one.means[a], pair.means[a]) << i;
+    const glm::dmat3 want = covariance_of(pair, 0);
+    EXPECT_LT(max_abs_diff(covariance_of(one, 0), want), 1e-5 * std::fabs(want[0][0] + want[1][1] + want[2][2]))
+        << i;
+    for (std::size_t c = 0; c < pair.sh.size() / 2; ++c) EXPECT_FLOAT_EQ(one.sh[c], pair.sh[c]) << i;
+    // Optical depths add: one Gaussian of the opacity the stacked pair composites to.
+    const double alpha = fm::sigmoid(pair.opacity_logits[0]);
+    EXPECT_NEAR(fm::sigmoid(one.opacity_logits[0]), std::min(0.99, 1.0 - (1.0 - alpha) * (1.0 - alpha)), 1e-5) << i;
+    EXPECT_LT(g.spread, 1e-6f) << i;  // the means coincide (double rounding aside)
+  }
+}
+
+TEST(LodMerge, TwoGaussiansApartMatchTheMixtureMoments) {
+  const auto m = test::cached_scene(test::bundled_scene());
+  const GaussianModel pair = subset(*m, {10, 20000}, {glm::vec3(0.0f), glm::vec3(0.3f, -0.1f, 0.2f)});
+  const GaussianModel one = merged_model(pair);
+  // The mixture's moments in the second-moment form, E[x x^T] - mu mu^T, with the weights
+  // opacity x the product of the two largest std devs.
+  double w[2], w_sum = 0.0;
+  for (int k = 0; k < 2; ++k) {
+    glm::dvec3 s(std::exp(pair.log_scales[3 * k]), std::exp(pair.log_scales[3 * k + 1]),
+                 std::exp(pair.log_scales[3 * k + 2]));
+    const double smallest = std::min({s.x, s.y, s.z});
+    w[k] = fm::sigmoid(pair.opacity_logits[k]) * (s.x * s.y * s.z / smallest);
+    w_sum += w[k];
+  }
+  glm::dvec3 mu(0.0);
+  glm::dmat3 second(0.0);
+  for (int k = 0; k < 2; ++k) {
+    const glm::dvec3 x(pair.means[3 * k], pair.means[3 * k + 1], pair.means[3 * k + 2]);
+    mu += w[k] / w_sum * x;
+    second += w[k] / w_sum * (covariance_of(pair, k) + glm::outerProduct(x, x));
+  }
+  const glm::dmat3 cov = second - glm::outerProduct(mu, mu);
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(one.means[a], mu[a], 1e-5);
+  EXPECT_LT(max_abs_diff(covariance_of(one, 0), cov), 1e-5 * (cov[0][0] + cov[1][1] + cov[2][2]));
+  const std::size_t K3 = pair.sh.size() / 2;
+  for (std::size_t c = 0; c < K3; ++c) EXPECT_NEAR(one.sh[c], (w[0] * pair.sh[c] + w[1] * pair.sh[K3 + c]) / w_sum, 1e-5);
+}
+
+TEST(LodMerge, EigenSolverReconstructsItsInput) {
+  std::mt19937 rng(37);
+  std::uniform_real_distribution<double> u(-2.0, 2.0);
+  const auto m = test::cached_scene(test::bundled_scene());
+  for (int t = 0; t < 300; ++t) {
+    glm::dmat3 a;
+    if (t < 200) {
+      for (int c = 0; c < 3; ++c)
+        for (int r = 0; r <= c; ++r) a[c][r] = a[r][c] = u(rng);
+    } else {
+      a = covariance_of(*m, static_cast<std::size_t>(t) * 500);  // real, often very flat
+    }
+    if (t == 0) a = glm::dmat3(1.0);  // already diagonal, repeated eigenvalues
+    glm::dvec3 values;
+    glm::dmat3 v;
+    symmetric_eigen3(a, values, v);
+    const double scale = std::max({std::fabs(values[0]), std::fabs(values[1]), std::fabs(values[2]), 1e-30});
+    glm::dmat3 d(0.0);
+    for (int k = 0; k < 3; ++k) d[k][k] = values[k];
+    EXPECT_LT(max_abs_diff(v * d * glm::transpose(v), a), 1e-12 * scale) << t;
+    EXPECT_LT(max_abs_diff(glm::transpose(v) * v, glm::dmat3(1.0)), 1e-12) << t;
+    EXPECT_NEAR(glm::determinant(v), 1.0, 1e-12) << t;
+    EXPECT_GE(values[0], values[1]);
+    EXPECT_GE(values[1], values[2]);
+    // The quaternion turns back into the same rotation through the forward model.
+    const glm::mat3 r = fm::quat_to_mat(quaternion_of(v));
+    EXPECT_LT(max_abs_diff(glm::dmat3(r), v), 1e-6) << t;
+  }
+}
+
+// Every leaf chunk has exactly one drawn node among itself and its ancestors.
+void expect_cut(const std::vector<fm::LodNode>& lod, const fm::View& v, float tau, const std::string& what) {
+  std::size_t leaves = 0;
+  while (leaves < lod.size() && lod[leaves].error == 0.0f) ++leaves;
+  std::vector<char> drawn(lod.size());
+  for (std::size_t c = 0; c < lod.size(); ++c) drawn[c] = fm::lod_chunk_drawn(lod.data(), c, v, tau);
+  for (std::size_t c = 0; c < leaves; ++c) {
+    int on_path = 0;
+    for (uint32_t n = static_cast<uint32_t>(c); n != fm::kLodNoParent; n = lod[n].parent) on_path += drawn[n];
+    ASSERT_EQ(on_path, 1) << what << ": leaf chunk " << c << " at tau " << tau;
+  }
+  if (tau == 0.0f)
+    for (std::size_t c = 0; c < lod.size(); ++c) ASSERT_EQ(drawn[c] != 0, c < leaves) << what << ": chunk " << c;
+}
+
+TEST(LodTree, EveryViewDrawsACutThroughTheTree) {
+  const auto m = test::cached_scene(test::bundled_scene());
+  LodBuildReport report;
+  const GaussianModel lod = build_lod(*m, {}, &report);
+  lod.validate();
+  ASSERT_GE(report.level_nodes.size(), 3u);
+  EXPECT_EQ(report.level_nodes.front(), fm::chunk_count(m->size()));
+  EXPECT_EQ(report.level_nodes.back(), 1u);
+  EXPECT_EQ(lod_leaf_gaussians(lod), report.level_nodes.front() * fm::kChunkSize);
+  const Bounds b = m->bounds();
+  const float size = glm::length(b.extent());
+  std::mt19937 rng(3737);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::size_t above_leaves = 0;
+  for (int t = 0; t < 60; ++t) {
+    // Inside the scene's box, near it and far from it, looking anywhere.
+    const float reach = t < 20 ? 0.5f : t < 40 ? 2.0f : 40.0f;
+    const glm::vec3 at = b.center() + reach * size * glm::vec3(u(rng), u(rng), u(rng));
+    const glm::quat q = glm::normalize(glm::quat(u(rng), u(rng), u(rng), u(rng)));
+    const fm::View v = fm::view_of(Camera::from_pose(at, q, 60.0f, 640, 360));
+    for (float tau : {0.0f, 0.25f, 1.0f, 4.0f, 64.0f, 1e9f}) {
+      expect_cut(lod.lod, v, tau, "view " + std::to_string(t));
+      if (tau > 0.0f)
+        for (std::size_t c = lod_leaf_gaussians(lod) / fm::kChunkSize; c < lod.lod.size(); ++c)
+          above_leaves += fm::lod_chunk_drawn(lod.lod.data(), c, v, tau) ? 1 : 0;
+    }
+  }
+  EXPECT_GT(above_leaves, 0u) << "no view drew a merged node";
+}
+
+TEST(LodTree, LeavesAreTheSceneInMortonOrderAndBoxesNest) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const auto m = test::cached_scene(path);
+  const GaussianModel lod = build_lod(*m);
+  const GaussianModel sorted = permuted(*m, morton_order(*m));
+  const std::size_t n = m->size();
+  EXPECT_EQ(std::memcmp(lod.means.data(), sorted.means.data(), 3 * n * 4), 0);
+  EXPECT_EQ(std::memcmp(lod.sh.data(), sorted.sh.data(), sorted.sh.size() * 4), 0);
+  EXPECT_EQ(std::memcmp(lod.opacity_logits.data(), sorted.opacity_logits.data(), n * 4), 0);
+  for (std::size_t i = n; i < lod_leaf_gaussians(lod); ++i)
+    EXPECT_LT(fm::sigmoid(lod.opacity_logits[i]), fm::kMinAlpha) << "padding " << i;
+  // Every leaf Gaussian's mean lies in the box of every node above it.
+  for (std::size_t i = 0; i < n; i += 7)
+    for (uint32_t c = static_cast<uint32_t>(i / fm::kChunkSize); c != fm::kLodNoParent; c = lod.lod[c].parent)
+      for (int a = 0; a < 3; ++a) {
+        ASSERT_LE(lod.lod[c].lo[a], lod.means[3 * i + a]) << i << " node " << c;
+        ASSERT_GE(lod.lod[c].hi[a], lod.means[3 * i + a]) << i << " node " << c;
+      }
+  // A Morton-sorted scene is not sorted again.
+  LodBuildReport report;
+  (void)build_lod(sorted, {}, &report);
+  EXPECT_FALSE(report.reordered);
+}
+
+TEST(LodTree, ValidateRefusesBrokenTrees) {
+  const auto m = test::cached_scene(test::bundled_scene());
+  const GaussianModel good = build_lod(*m);
+  struct Case {
+    const char* name;
+    std::function<void(GaussianModel&)> damage;
+    const char* says;
+  };
+  const std::size_t top = good.lod.size() - 1, leaf = 5;
+  const std::vector<Case> cases = {
+      {"a node short", [](GaussianModel& g) { g.lod.pop_back(); }, "nodes for"},
+      {"a parent below", [&](GaussianModel& g) { g.lod[top - 1].parent = 0; }, "not a higher chunk"},
+      {"an error above its parent's",
+       [&](GaussianModel& g) { g.lod[g.lod[leaf].parent].error = 2.0f * g.lod[top].error + 1.0f; },
+       "error above its parent's"},
+      {"a box outside its parent's", [&](GaussianModel& g) { g.lod[leaf].hi[0] = g.lod[top].hi[0] + 1.0f; },
+       "box not inside"},
+      {"a NaN error", [&](GaussianModel& g) { g.lod[top].error = NAN; }, "not finite"},
+  };
+  for (const Case& c : cases) {
+    GaussianModel bad = good;
+    c.damage(bad);
+    try {
+      bad.validate();
+      ADD_FAILURE() << c.name << ": accepted";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(c.says), std::string::npos) << c.name << ": " << e.what();
+    }
+  }
+}
+
+// --- Renders: a small city of a real scene, the full model against its LOD --------------------
+
+struct City {
+  GaussianModel full;  // the city in Morton order (the LOD's leaves, without padding)
+  GaussianModel lod;
+  std::vector<Camera> views;  // fly-over poses, near to far
+};
+
+const City& small_city() {
+  static const City city = [] {
+    City c;
+    const auto flowers = test::cached_scene(test::data_file("scenes/flowers_sh3.ply"));
+    CityParams p;
+    p.radius_sq = 2;  // 9 copies: the cells with i^2 + j^2 <= 2
+    p.up = glm::vec3(0.0f, -1.0f, 0.0f);
+    CityLayout layout;
+    const GaussianModel city = tile_scene(*flowers, p, &layout);
+    c.full = permuted(city, morton_order(city));
+    c.lod = build_lod(c.full);
+    GeneratorParams g;
+    g.width = 320;
+    g.height = 180;
+    g.rate_hz = 120.0;
+    g.duration_s = 1.0;
+    g.up = layout.up;
+    FlyoverParams far = {};
+    far.start_cells = -3.0f;  // from outside the city towards its middle
+    far.end_cells = 0.0f;
+    const Trace t = make_city_flyover(layout, far, g);
+    for (std::size_t k = 0; k < t.size(); k += t.size() / 8) c.views.push_back(t[k].camera);
+    return c;
+  }();
+  return city;
+}
+
+// Renders `views` of `model` with `pipeline` at `tau`, frame k posed at k / 120 s.
+std::vector<Image> render(const GaussianModel& model, Pipeline pipeline, float tau, const std::vector<Camera>& views,
+                          std::vector<std::size_t>* visible = nullptr) {
+  RenderOptions o;
+  o.pipeline = pipeline;
+  o.lod_error_px = tau;
+  auto r = make_renderer("cpu", std::make_shared<const GaussianModel>(model), o);
+  std::vector<Image> out(views.size());
+  for (std::size_t k = 0; k < views.size(); ++k) {
+    r->render_at(views[k], static_cast<double>(k) / 120.0, out[k]);
+    if (visible) visible->push_back(r->last_stats().visible);
+  }
+  return out;
+}
+
+TEST(LodRender, FullDetailIsBitIdenticalAndTheDefaultKeeps35dB) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const City& c = small_city();
+  const float tau = RenderOptions{}.lod_error_px;
+  ASSERT_GT(tau, 0.0f);
+  for (Pipeline p : {Pipeline::exact, Pipeline::catgs}) {
+    std::vector<std::size_t> full_visible, lod_visible;
+    const auto full = render(c.full, p, tau, c.views, &full_visible);  // no LOD: tau ignored
+    const auto zero = render(c.lod, p, 0.0f, c.views);
+    const auto lod = render(c.lod, p, tau, c.views, &lod_visible);
+    bool fewer = false;
+    for (std::size_t k = 0; k < c.views.size(); ++k) {
+      EXPECT_EQ(zero[k].rgba8, full[k].rgba8) << pipeline_name(p) << " view " << k;
+      EXPECT_EQ(zero[k].rgb, full[k].rgb) << pipeline_name(p) << " view " << k;
+      const double psnr = psnr_rgba8(lod[k], full[k]);
+      EXPECT_GE(psnr, 35.0) << pipeline_name(p) << " view " << k;
+      EXPECT_LE(lod_visible[k], full_visible[k]) << pipeline_name(p) << " view " << k;
+      fewer = fewer || lod_visible[k] < full_visible[k];
+      std::printf("%s view %zu: PSNR %.2f dB, visible %zu of %zu\n", pipeline_name(p), k, psnr, lod_visible[k],
+                  full_visible[k]);
+    }
+    EXPECT_TRUE(fewer) << pipeline_name(p) << ": no view drew fewer Gaussians with LOD";
+  }
+}
+
+// --- LOD files ----------------------------------------------------------------------------------
+
+TEST(LodFile, WritesWhatItReadsAndRefusesBadFiles) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const std::string dir = test::temp_dir();
+  const std::string scene = dir + "/flowers.ply", out = dir + "/flowers.catgs-lod";
+  fs::copy_file(path, scene);
+  const GaussianModel lod = build_lod(load_scene(scene));
+  write_scene_cache(lod, scene, out);
+  // Read back, it is the model a fresh build makes (the build is deterministic).
+  const GaussianModel again = load_lod_file(out, scene);
+  const GaussianModel rebuilt = build_lod(load_scene(scene));
+  ASSERT_EQ(again.size(), rebuilt.size());
+  ASSERT_EQ(again.lod.size(), rebuilt.lod.size());
+  EXPECT_EQ(std::memcmp(again.lod.data(), rebuilt.lod.data(), again.lod.size() * sizeof(fm::LodNode)), 0);
+  EXPECT_EQ(again.means, rebuilt.means);
+  EXPECT_EQ(again.log_scales, rebuilt.log_scales);
+  EXPECT_EQ(again.rotations, rebuilt.rotations);
+  EXPECT_EQ(again.opacity_logits, rebuilt.opacity_logits);
+  EXPECT_EQ(again.sh, rebuilt.sh);
+  auto refused = [&](const std::string& file, const std::string& says) {
+    try {
+      (void)load_lod_file(file, scene);
+      ADD_FAILURE() << file << ": accepted";
+    } catch (const SceneCacheRejected& e) {
+      EXPECT_NE(std::string(e.what()).find(file), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  };
+  const std::string cut = dir + "/cut.catgs-lod";
+  fs::copy_file(out, cut);
+  fs::resize_file(cut, fs::file_size(out) - 4096);
+  refused(cut, "truncated");
+  const std::string foreign = dir + "/foreign.catgs-lod";
+  std::ofstream(foreign) << std::string(8192, 'x');
+  refused(foreign, "not a scene cache");
+  const std::string plain = dir + "/plain.catgs-cache";
+  write_scene_cache(load_scene(scene), scene, plain);
+  refused(plain, "without a level of detail");
+}
+
+}  // namespace
+}  // namespace catgs
