@@ -1,6 +1,8 @@
 #include "speculation/settings.h"
 #include "server.h"
 
+#include <unistd.h>
+
 #include <csignal>
 #include <iostream>
 
@@ -119,15 +121,28 @@ void Server::load_model() {
   o.budget_bytes = static_cast<std::uint64_t>(options_.scene_memory_mb) << 20;
   o.metrics = &metrics_;
   o.log = &std::cout;
-  if (options_.scene_cache != "off") {
-    const SceneCacheMode mode = options_.scene_cache == "write" ? SceneCacheMode::write : SceneCacheMode::read;
-    o.loader = [mode](const std::string& path, const LoadProgress& progress) {
-      CachedLoadOptions c;
-      c.mode = mode;
-      c.log = [](const std::string& line) { std::cout << line << std::endl; };
-      return load_scene_cached(path, c, progress);
-    };
-  }
+  const SceneCacheMode mode = options_.scene_cache == "write"  ? SceneCacheMode::write
+                              : options_.scene_cache == "read" ? SceneCacheMode::read
+                                                               : SceneCacheMode::off;
+  // A LOD file beside the scene (SCENE.catgs-lod, forward_model/lod.h) is served instead of the
+  // scene; one that does not match it is logged and the scene read as usual.
+  o.loader = [mode](const std::string& path, const LoadProgress& progress) {
+    const std::string lod = path + ".catgs-lod";
+    if (::access(lod.c_str(), F_OK) == 0) {
+      try {
+        GaussianModel m = load_lod_file(lod, path, 0, progress);
+        std::cout << "scene " << path << ": level of detail from " << lod << " (" << m.size() << " Gaussians, "
+                  << m.lod.size() << " chunks)" << std::endl;
+        return m;
+      } catch (const SceneCacheRejected& e) {
+        std::cout << "scene " << path << ": LOD file not used: " << e.what() << std::endl;
+      }
+    }
+    CachedLoadOptions c;
+    c.mode = mode;
+    c.log = [](const std::string& line) { std::cout << line << std::endl; };
+    return load_scene_cached(path, c, progress);
+  };
   // One copy of each loaded scene per GPU, uploaded before its first session and dropped with it.
   o.prepare = [this](LoadedScene& scene) {
     for (int d : gpus_->devices()) {
@@ -152,6 +167,7 @@ void Server::load_model() {
 
 void Server::resolve_renderer() {
   render_options_.pipeline = parse_pipeline(options_.pipeline);
+  if (options_.lod_error_px >= 0.0f) render_options_.lod_error_px = options_.lod_error_px;
   apply_speculation_settings(render_options_.speculation, options_.speculation);
   // Resolved once, before any scene loads, so every session uses the same core and the log says
   // why: over a one-Gaussian model (the choice does not depend on the scene).

@@ -71,6 +71,11 @@ std::string server_usage() {
          "                        for the scene as it is now (else the scene is read, the reason\n"
          "                        logged); write also writes it after a plain load (a folder that\n"
          "                        is not writable is logged and ignored) (default read)\n"
+         "  --lod-error PX        level of detail: a scene with a LOD file beside it (SCENE.catgs-lod,\n"
+         "                        written by `catgs-scene lod`) is served from it, each frame\n"
+         "                        drawing the cut of screen-space error PX pixels (0 = full\n"
+         "                        detail; default 1); a LOD file that does not match the scene is\n"
+         "                        logged and the scene read as usual\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -215,7 +220,9 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       if (v != "off" && v != "read" && v != "write")
         throw std::invalid_argument("--scene-cache must be off, read or write, got '" + v + "'");
       out.scene_cache = v;
-    } else if (a == "--scene-memory-mb")
+    } else if (a == "--lod-error")
+      out.lod_error_px = static_cast<float>(parse_double(a, v, 0.0, 1e6));
+    else if (a == "--scene-memory-mb")
       out.scene_memory_mb = parse_int(a, v, 0, 1 << 24);
     else if (a == "--port")
       out.port = parse_int(a, v, 0, 65535);

@@ -22,6 +22,10 @@ struct ServerOptions {
   // --scene-cache: "off", "read" (a valid cache beside the scene is used) or "write" (also
   // written after a plain load); scene/scene_cache.h.
   std::string scene_cache = "read";
+  // --lod-error: the level-of-detail bound in pixels (RenderOptions::lod_error_px; 0 = full
+  // detail) for scenes with a LOD file beside them (SCENE.catgs-lod, catgs-scene lod); negative:
+  // RenderOptions's default.
+  float lod_error_px = -1.0f;
   int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
   std::string bind = "0.0.0.0";    // interface address to listen on
   std::string renderer = "auto";   // "cpu" | "cuda" | "auto"

@@ -6,6 +6,8 @@
 //   catgs-render --scene S.ply --trace T.trace --out-dir DIR [--every N]
 //   catgs-render --scene S.ply --trace T.trace --video OUT.mp4 --width W --height H --fps F
 //                [--crf 18] [--preset medium]                      (H.264 in MP4, tools/video/)
+//   --lod-file F draws S's level of detail (a LOD file: catgs-scene lod) at --lod-error PX
+//   (default RenderOptions::lod_error_px; 0 = full detail).
 #include <unistd.h>
 
 #include <chrono>
@@ -15,6 +17,7 @@
 
 #include "common/image_io.h"
 #include "scene/ply_io.h"
+#include "scene/scene_cache.h"
 #include "renderer/renderer.h"
 #include "camera/trace.h"
 #include "common/cli_args.h"
@@ -31,7 +34,8 @@ const char* kUsage =
     "usage: catgs-render --scene FILE (--cameras CAMERAS.json [--view K | --all [--fps F]] |\n"
     "                    --trace FILE.trace) [--width W] [--height H]\n"
     "                    [--pipeline vanilla|exact] [--renderer cpu|cuda|auto]\n"
-    "                    [--background R,G,B] (--out FILE.png | --out-dir DIR [--every N] |\n"
+    "                    [--background R,G,B] [--lod-file F [--lod-error PX]]\n"
+    "                    (--out FILE.png | --out-dir DIR [--every N] |\n"
     "                    --video FILE.mp4 [--fps F] [--crf C] [--preset P] [--max-frames N])\n"
     "  --video: the trace sampled on its clock at --fps (default 60) frames a second, H.264 in MP4\n"
     "  (x264 --preset, default medium, --crf, default 18), at --width x --height (default the\n"
@@ -58,8 +62,11 @@ catgs::Trace load_cameras(const catgs::tools::Args& args, int width, int height,
 }
 
 std::shared_ptr<catgs::Renderer> open_renderer(const catgs::tools::Args& args) {
-  auto model = std::make_shared<catgs::GaussianModel>(catgs::load_scene(args.require("--scene")));
+  auto model = std::make_shared<catgs::GaussianModel>(
+      args.has("--lod-file") ? catgs::load_lod_file(args.get("--lod-file"), args.require("--scene"))
+                             : catgs::load_scene(args.require("--scene")));
   catgs::RenderOptions options;
+  options.lod_error_px = static_cast<float>(args.get_double("--lod-error", options.lod_error_px));
   options.pipeline = catgs::parse_pipeline(args.get("--pipeline", "exact"));
   if (args.has("--background")) {
     float r, g, b;
@@ -121,9 +128,9 @@ int render_video(const catgs::tools::Args& args) {
 int run(int argc, char** argv) {
   using catgs::tools::Args;
   const Args args(argc, argv,
-                  {"--scene", "--cameras", "--view", "--all!", "--fps", "--trace", "--width", "--height", "--pipeline",
-                   "--renderer", "--background", "--out", "--out-dir", "--every", "--video", "--crf", "--preset",
-                   "--max-frames", "--help!"});
+                  {"--scene",  "--cameras",  "--view",     "--all!",       "--fps",      "--trace",     "--width",
+                   "--height", "--pipeline", "--renderer", "--background", "--out",      "--out-dir",   "--every",
+                   "--video",  "--crf",      "--preset",   "--max-frames", "--lod-file", "--lod-error", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage;
     return 0;

@@ -164,8 +164,9 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
   const auto view_at = [&](int k) -> const fm::View& { return terms[static_cast<std::size_t>(k)].view; };
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
     const std::size_t begin = c * fm::kChunkSize, end = std::min(n, begin + fm::kChunkSize);
-    const bool culled = !lod.drawn(c) || fm::chunk_misses_path(chunks[c], static_cast<int>(path.size()), view_at, 1.0f + widening.slack,
-                                              widening.margin_px, widening.motion_margin);
+    const bool culled =
+        !lod.drawn(c) || fm::chunk_misses_path(chunks[c], static_cast<int>(path.size()), view_at, 1.0f + widening.slack,
+                                               widening.margin_px, widening.motion_margin);
     for (std::size_t i = begin; i < end; ++i) {
       if (culled)
         out.tiles_touched[i] = 0;

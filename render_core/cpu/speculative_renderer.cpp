@@ -29,10 +29,11 @@ bool SpeculativeRenderer::key_frame(const Camera& camera, Image& out) {
   const SpeculationParams& sp = options_.speculation;
   const auto t0 = clock::now();
   // Plan the window from the predicted path (never from future input): M over one frame, W.
-  const int planned = planner_.window_wanted()
-                          ? planner_.window_for(max_screen_motion(*model_, chunks_, camera, planner_.next_camera(camera),
-                                                                  sp.depth_threshold, options_.lod_error_px))
-                          : 0;
+  const int planned =
+      planner_.window_wanted()
+          ? planner_.window_for(max_screen_motion(*model_, chunks_, camera, planner_.next_camera(camera),
+                                                  sp.depth_threshold, options_.lod_error_px))
+          : 0;
   // A window whose trail list is over the budget is narrowed (issue 35), as the CUDA core does
   // from the same counts: its list shrinks toward the exact list of W = 0.
   const std::uint64_t limit = options_.list_budget.max_entries(camera.width, camera.height, kBytesPerListEntry);

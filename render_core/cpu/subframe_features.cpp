@@ -66,8 +66,7 @@ bool unlisted_reach_image(const GaussianModel& model, const std::vector<fm::Chun
     throw std::invalid_argument("unlisted_reach_image: chunk bounds of another scene");
   std::atomic<bool> reached{false};
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
-    if (reached.load(std::memory_order_relaxed) || !key_cut.drawn(c) || fm::chunk_outside_view(chunks[c], view))
-      return;
+    if (reached.load(std::memory_order_relaxed) || !key_cut.drawn(c) || fm::chunk_outside_view(chunks[c], view)) return;
     for (std::size_t i = c * fm::kChunkSize; i < std::min(n, (c + 1) * fm::kChunkSize); ++i)
       if (projected.tiles_touched[i] == 0 &&
           fm::unlisted_reaches_image(&model.means[3 * i], &model.log_scales[3 * i], &model.rotations[4 * i],

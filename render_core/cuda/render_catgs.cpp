@@ -160,9 +160,9 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   CATGS_CUDA(cudaMemsetAsync(cc + kOutside, 0, sizeof(unsigned), s.stream));
   stages::update_subframe_features(scene_view(*scene_, options_.lod_error_px), camera_params(camera),
-                                   s.cached.as<uint32_t>(),
-                                   static_cast<uint32_t>(s.key_visible), options_.speculation.subframe_key_colour,
-                                   s.projected(), s.trails(), cc + kOutside, s.stream);
+                                   s.cached.as<uint32_t>(), static_cast<uint32_t>(s.key_visible),
+                                   options_.speculation.subframe_key_colour, s.projected(), s.trails(), cc + kOutside,
+                                   s.stream);
   // The group's LOD cut is its key frame's (the key camera's): a chunk outside it is drawn by
   // another level, so its unlisted Gaussians must not turn the frame into a key frame.
   stages::check_unlisted(scene_view(*scene_, options_.lod_error_px), camera_params(camera),

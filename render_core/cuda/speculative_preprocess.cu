@@ -163,7 +163,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     max_screen_motion_kernel(SceneView scene, CameraParams a, CameraParams b, float min_depth,
                              unsigned* max_bits) {  // [1]
-  const float* means = scene.means;  // [N, 3]
+  const float* means = scene.means;                 // [N, 3]
   const uint64_t n = scene.n;
   float m = 0.0f;
   const uint64_t chunk_count = fm::chunk_count(n);

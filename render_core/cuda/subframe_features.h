@@ -31,7 +31,6 @@ void update_subframe_features(const SceneView& scene, const CameraParams& cam, c
 // can draw it. Chunks outside the view at `cam` (fm::chunk_outside_view) are skipped whole, and
 // so are chunks outside the LOD cut at the group's key camera `key` (records.h lod_drawn).
 void check_unlisted(const SceneView& scene, const CameraParams& cam, const CameraParams& key,
-                    const uint32_t* tiles_touched, const uint32_t* chunk_total, unsigned* outside,
-                    cudaStream_t stream);
+                    const uint32_t* tiles_touched, const uint32_t* chunk_total, unsigned* outside, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

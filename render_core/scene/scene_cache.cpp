@@ -91,10 +91,14 @@ CacheHeader layout(uint64_t n, int sh_degree, bool lod) {
   h.block_bytes = kCacheBlockBytes;
   h.lod_nodes = lod ? fm::chunk_count(n) : 0;
   const uint64_t sh = n * static_cast<uint64_t>(sh_coeff_count(sh_degree)) * 3;
-  const uint64_t bytes[kSections] = {
-      3 * n * 4, 3 * n * 4, 4 * n * 4,
-      n * 4,     sh * 4,    sh * 2,    fm::chunk_count(n) * sizeof(fm::ChunkBounds),
-      h.lod_nodes * sizeof(fm::LodNode)};
+  const uint64_t bytes[kSections] = {3 * n * 4,
+                                     3 * n * 4,
+                                     4 * n * 4,
+                                     n * 4,
+                                     sh * 4,
+                                     sh * 2,
+                                     fm::chunk_count(n) * sizeof(fm::ChunkBounds),
+                                     h.lod_nodes * sizeof(fm::LodNode)};
   h.hash_count = 0;
   for (int s = 0; s < kSections; ++s) {
     h.bytes[s] = bytes[s];
@@ -259,8 +263,8 @@ std::unique_ptr<SceneCache> SceneCache::open(const std::string& cache_path, cons
   const CacheHeader expect =
       layout(h.gaussians, static_cast<int>(std::min<uint32_t>(h.sh_degree, kMaxShDegree)), h.lod_nodes != 0);
   if (h.sh_degree > static_cast<uint32_t>(kMaxShDegree) || h.chunk_size != expect.chunk_size ||
-      h.block_bytes != expect.block_bytes || h.lod_nodes != expect.lod_nodes || h.hashes_offset != expect.hashes_offset ||
-      h.hash_count != expect.hash_count || h.file_size != expect.file_size ||
+      h.block_bytes != expect.block_bytes || h.lod_nodes != expect.lod_nodes ||
+      h.hashes_offset != expect.hashes_offset || h.hash_count != expect.hash_count || h.file_size != expect.file_size ||
       std::memcmp(h.offset, expect.offset, sizeof h.offset) != 0 ||
       std::memcmp(h.bytes, expect.bytes, sizeof h.bytes) != 0)
     throw reject("section layout does not match its Gaussian count");

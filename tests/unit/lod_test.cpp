@@ -29,9 +29,9 @@ namespace fs = std::filesystem;
 
 // The 3x3 covariance of Gaussian i of `m` (fm::covariance_3d), in double.
 glm::dmat3 covariance_of(const GaussianModel& m, std::size_t i) {
-  const fm::Cov3 c = fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
-                                       {m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2],
-                                        m.rotations[4 * i + 3]});
+  const fm::Cov3 c =
+      fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
+                        {m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3]});
   return glm::dmat3(c.xx, c.xy, c.xz, c.xy, c.yy, c.yz, c.xz, c.yz, c.zz);
 }
 
@@ -43,7 +43,8 @@ double max_abs_diff(const glm::dmat3& a, const glm::dmat3& b) {
 }
 
 // A model of the Gaussians `pick` of `m`, means moved by `shift[k]`.
-GaussianModel subset(const GaussianModel& m, const std::vector<std::size_t>& pick, const std::vector<glm::vec3>& shift) {
+GaussianModel subset(const GaussianModel& m, const std::vector<std::size_t>& pick,
+                     const std::vector<glm::vec3>& shift) {
   GaussianModel out;
   out.sh_degree = m.sh_degree;
   out.resize(pick.size());
@@ -81,8 +82,7 @@ TEST(LodMerge, TwoIdenticalGaussiansMergeIntoTheirComposite) {
     const GaussianModel one = merged_model(pair, &g);
     for (int a = 0; a < 3; ++a) EXPECT_FLOAT_EQ(one.means[a], pair.means[a]) << i;
     const glm::dmat3 want = covariance_of(pair, 0);
-    EXPECT_LT(max_abs_diff(covariance_of(one, 0), want), 1e-5 * std::fabs(want[0][0] + want[1][1] + want[2][2]))
-        << i;
+    EXPECT_LT(max_abs_diff(covariance_of(one, 0), want), 1e-5 * std::fabs(want[0][0] + want[1][1] + want[2][2])) << i;
     for (std::size_t c = 0; c < pair.sh.size() / 2; ++c) EXPECT_FLOAT_EQ(one.sh[c], pair.sh[c]) << i;
     // Optical depths add: one Gaussian of the opacity the stacked pair composites to.
     const double alpha = fm::sigmoid(pair.opacity_logits[0]);
@@ -116,7 +116,8 @@ TEST(LodMerge, TwoGaussiansApartMatchTheMixtureMoments) {
   for (int a = 0; a < 3; ++a) EXPECT_NEAR(one.means[a], mu[a], 1e-5);
   EXPECT_LT(max_abs_diff(covariance_of(one, 0), cov), 1e-5 * (cov[0][0] + cov[1][1] + cov[2][2]));
   const std::size_t K3 = pair.sh.size() / 2;
-  for (std::size_t c = 0; c < K3; ++c) EXPECT_NEAR(one.sh[c], (w[0] * pair.sh[c] + w[1] * pair.sh[K3 + c]) / w_sum, 1e-5);
+  for (std::size_t c = 0; c < K3; ++c)
+    EXPECT_NEAR(one.sh[c], (w[0] * pair.sh[c] + w[1] * pair.sh[K3 + c]) / w_sum, 1e-5);
 }
 
 TEST(LodMerge, EigenSolverReconstructsItsInput) {
@@ -367,3 +368,4 @@ TEST(LodFile, WritesWhatItReadsAndRefusesBadFiles) {
 
 }  // namespace
 }  // namespace catgs
+

@@ -100,7 +100,7 @@ struct BenchScene {
   catgs::CityLayout layout;
   bool city = false;
   glm::vec3 up{0.0f};
-  double load_s = 0;  // loading and building
+  double load_s = 0;          // loading and building
   catgs::LodBuildReport lod;  // --lod
 };
 
@@ -191,8 +191,7 @@ std::vector<float> lod_bounds(const Args& args) {
     float v = -1.0f;
     try {
       v = std::stof(item, &used);
-    } catch (const std::exception&) {
-    }
+    } catch (const std::exception&) {}
     if (used != item.size() || item.empty() || !(v >= 0.0f))
       throw std::invalid_argument("--lod-error: '" + item + "' is not a bound in pixels >= 0");
     out.push_back(v);
@@ -266,12 +265,12 @@ std::vector<PipelineResult> run_on_cpu(BenchScene& s, const std::vector<Variant>
 }
 
 int run(int argc, char** argv) {
-  const Args args(argc, argv,
-                  {"--scene",         "--city!",        "--radius-sq", "--spacing",          "--seed",     "--scale",
-                   "--trace",         "--width",        "--height",    "--pipeline",         "--frames",   "--warmup",
-                   "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance", "--renderer",
-                   "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error",
-                   "--help!"});
+  const Args args(
+      argc, argv,
+      {"--scene",         "--city!",        "--radius-sq", "--spacing",          "--seed",      "--scale",
+       "--trace",         "--width",        "--height",    "--pipeline",         "--frames",    "--warmup",
+       "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance",  "--renderer",
+       "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;

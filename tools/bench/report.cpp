@@ -41,8 +41,7 @@ nlohmann::json context_json(const BenchContext& c) {
   j["height"] = c.height;
   j["frames"] = c.frames;
   j["warmup"] = c.warmup;
-  if (c.lod)
-    j["lod"] = {{"error_px", c.lod_error_px}, {"build_s", c.lod_build_s}, {"level_chunks", c.lod_levels}};
+  if (c.lod) j["lod"] = {{"error_px", c.lod_error_px}, {"build_s", c.lod_build_s}, {"level_chunks", c.lod_levels}};
   j["timing"] = c.on_gpu
                     ? "CUDA events around render_device() on the renderer's stream; pose in, image in device memory out"
                     : "steady clock around render_at(); pose in, 8-bit image in host memory out";
@@ -156,9 +155,10 @@ void lod_quality_report(const PipelineResult& r, nlohmann::json& p) {
                                      {"identical", r.lod_identical},
                                      {"psnr_db_mean_finite", q.mean},
                                      {"psnr_db_min", q.min}};
-  std::printf("%-10s   LOD frames vs full detail: %zu compared (%zu identical), PSNR mean %.2f dB (finite ones), "
-              "min %.2f dB\n",
-              r.name.c_str(), r.lod_psnr.size() + r.lod_identical, r.lod_identical, q.mean, q.min);
+  std::printf(
+      "%-10s   LOD frames vs full detail: %zu compared (%zu identical), PSNR mean %.2f dB (finite ones), "
+      "min %.2f dB\n",
+      r.name.c_str(), r.lod_psnr.size() + r.lod_identical, r.lod_identical, q.mean, q.min);
 }
 
 // exact against vanilla, and every catgs variant against the full-frame pipelines of this run.

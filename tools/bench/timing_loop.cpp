@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
@@ -35,10 +36,12 @@ PipelineResult result_of(const Variant& variant) {
   return res;
 }
 
-// DIR/FILE_NAME.png, creating DIR.
-void write_snapshot(const Image& image, const std::string& dir, const std::string& file_name) {
+// DIR/FILE_NAME.png, creating DIR; a scene with LOD adds the bound (FILE_NAME_lodPX.png).
+void write_snapshot(const Image& image, const std::string& dir, const std::string& file_name, const TimingPlan& plan) {
   std::filesystem::create_directories(dir);
-  write_png(image, dir + "/" + file_name + ".png");
+  char lod[32] = "";
+  if (plan.lod) std::snprintf(lod, sizeof lod, "_lod%g", plan.lod_error_px);
+  write_png(image, dir + "/" + file_name + lod + ".png");
 }
 
 // A key frame: the group it closes (by that group's W), and the group it opens.
@@ -85,7 +88,7 @@ PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& mode
       record_lod_quality(res, psnr_rgba8(img, full));
     }
   }
-  if (!plan.snapshot_dir.empty()) write_snapshot(img, plan.snapshot_dir, model->name + "_cpu_" + res.name);
+  if (!plan.snapshot_dir.empty()) write_snapshot(img, plan.snapshot_dir, model->name + "_cpu_" + res.name, plan);
   return res;
 }
 
@@ -226,7 +229,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
     const float ms = timer.stop(r.stream());
     const FrameStats stats = r.last_stats();
     record_frame(res, ms, stats);
-    res.heaviest.push_back(static_cast<double>(r.diagnostics().heaviest_tile_entries));   // after timing
+    res.heaviest.push_back(static_cast<double>(r.diagnostics().heaviest_tile_entries));             // after timing
     if (compare && k % plan.quality_every == 0) quality.compare(res, stats, frame, cam, plan.lod);  // after timing too
   }
   const cuda::CudaRenderer::Diagnostics d = r.diagnostics();
@@ -237,7 +240,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
   if (!plan.snapshot_dir.empty()) {
     Image img;
     r.render(plan.camera_at(plan.warmup + plan.frames / 2), img);
-    write_snapshot(img, plan.snapshot_dir, scene->name() + "_" + res.name);
+    write_snapshot(img, plan.snapshot_dir, scene->name() + "_" + res.name, plan);
   }
   return res;
 }

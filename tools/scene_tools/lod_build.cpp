@@ -86,8 +86,7 @@ void build_node(GaussianModel& out, std::size_t chunk, std::size_t child_begin, 
   for (std::size_t r = 0; r < kChunk; ++r) {
     const std::size_t lo = r * m / kChunk, hi = (r + 1) * m / kChunk, g = first + r;
     if (lo == hi) continue;  // padding, written below once the chunk's first mean is known
-    const MergedGaussian merged =
-        merge_gaussians(out, visible.data() + lo, static_cast<int>(hi - lo), &out.sh[g * K3]);
+    const MergedGaussian merged = merge_gaussians(out, visible.data() + lo, static_cast<int>(hi - lo), &out.sh[g * K3]);
     for (int a = 0; a < 3; ++a) {
       out.means[3 * g + a] = merged.mean[a];
       out.log_scales[3 * g + a] = merged.log_scale[a];

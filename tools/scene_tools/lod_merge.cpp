@@ -91,9 +91,12 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
   if (count == 1) {
     const uint32_t i = index[0];
     std::copy_n(&m.sh[i * K3], K3, sh_out);
-    return {glm::vec3(mean_of(i)), glm::vec3(m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]),
+    return {glm::vec3(mean_of(i)),
+            glm::vec3(m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]),
             glm::vec4(m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3]),
-            m.opacity_logits[i], 0.0f, 1.0};
+            m.opacity_logits[i],
+            0.0f,
+            1.0};
   }
   // Weights: opacity x the area of the largest cross-section (see the header).
   double w[64];
@@ -124,9 +127,9 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
   double spread_sq = 0.0;
   for (int k = 0; k < count; ++k) {
     const uint32_t i = index[k];
-    const fm::Cov3 s = fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
-                                         {m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2],
-                                          m.rotations[4 * i + 3]});
+    const fm::Cov3 s =
+        fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
+                          {m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3]});
     const glm::dvec3 d = mean_of(i) - mean;
     const glm::dmat3 own(s.xx, s.xy, s.xz, s.xy, s.yy, s.yz, s.xz, s.yz, s.zz);
     cov += weight[k] * (own + glm::outerProduct(d, d));
@@ -147,8 +150,12 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
   // Floored above the padding's logit (is_lod_padding): a merge is never taken for padding.
   const double floor = 1.0 - kOpacityLogitLimit;
   const double logit = alpha > 0.0 ? std::max(std::log(alpha / (1.0 - alpha)), floor) : floor;
-  return {glm::vec3(mean), glm::vec3(glm::log(sigma)), quaternion_of(axes), static_cast<float>(logit),
-          static_cast<float>(std::sqrt(spread_sq / w_sum)), w_sum};
+  return {glm::vec3(mean),
+          glm::vec3(glm::log(sigma)),
+          quaternion_of(axes),
+          static_cast<float>(logit),
+          static_cast<float>(std::sqrt(spread_sq / w_sum)),
+          w_sum};
 }
 
 }  // namespace catgs
