@@ -47,7 +47,7 @@ S=$CARRY/scenes T=$CARRY/traces
 TUMBLE=$S/tumblewood_sh2.compressed.ply
 
 city() {  # city NAME RADIUS_SQ
-  "$BIN/catgs-bench" --scene "$TUMBLE" --city --radius-sq "$2" --up 0,-1,0 --lod --lod-error 0,default \
+  "$BIN/catgs-bench" --scene "$TUMBLE" --city --radius-sq "$2" --up 0,-1,0 --lod --lod-error 0,1,2,4 \
     --trace flyover --width 1920 --height 1080 --pipeline exact,catgs --warmup 30 --frames 300 \
     --quality-every 10 --json "$OUT/lod_$1.json"
 }
