@@ -43,8 +43,32 @@ struct alignas(16) LodNode {
 };
 static_assert(sizeof(LodNode) == 32, "two float4");
 
-// The camera centre of view v in world units: -R^T t.
-CATGS_HD glm::vec3 lod_eye(const View& v) { return -(glm::transpose(v.R) * v.t); }
+// A product and a sum that never fuse into an FMA, so the CPU and every CUDA kernel (some are
+// built with contraction on, cuda/CMakeLists.txt) round the cut's arithmetic alike and draw the
+// same chunks.
+CATGS_HD float lod_mul(float a, float b) {
+#ifdef __CUDA_ARCH__
+  return __fmul_rn(a, b);
+#else
+  return a * b;
+#endif
+}
+CATGS_HD float lod_add(float a, float b) {
+#ifdef __CUDA_ARCH__
+  return __fadd_rn(a, b);
+#else
+  return a + b;
+#endif
+}
+
+// The camera centre of view v in world units: -R^T t (glm: R[c] is column c, so (R^T t)_c is
+// column c dotted with t).
+CATGS_HD glm::vec3 lod_eye(const View& v) {
+  glm::vec3 e;
+  for (int c = 0; c < 3; ++c)
+    e[c] = -lod_add(lod_add(lod_mul(v.R[c][0], v.t[0]), lod_mul(v.R[c][1], v.t[1])), lod_mul(v.R[c][2], v.t[2]));
+  return e;
+}
 
 // err_px of node n seen from `eye` with focal length `focal` (pixels): 0 for a leaf, infinite
 // inside the box (and where the distance underflows to 0).
@@ -53,10 +77,10 @@ CATGS_HD float lod_error_px(const LodNode& n, glm::vec3 eye, float focal) {
   float d2 = 0.0f;
   for (int a = 0; a < 3; ++a) {
     const float gap = fmaxf(fmaxf(n.lo[a] - eye[a], eye[a] - n.hi[a]), 0.0f);
-    d2 += gap * gap;
+    d2 = lod_add(d2, lod_mul(gap, gap));
   }
   const float d = sqrtf(d2);
-  return d > 0.0f ? n.error * focal / d : INFINITY;
+  return d > 0.0f ? lod_mul(n.error, focal) / d : INFINITY;
 }
 
 // Is chunk c drawn in view v at bound tau (pixels)? `nodes`: the scene's LodNode array (see
