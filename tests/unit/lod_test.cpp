@@ -368,4 +368,3 @@ TEST(LodFile, WritesWhatItReadsAndRefusesBadFiles) {
 
 }  // namespace
 }  // namespace catgs
-
