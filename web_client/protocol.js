@@ -119,8 +119,17 @@ export function makeProtocol(root) {
       return encode({ save_annotations: { json } });
     },
 
+    // Render `path` (9 floats a pose: video_export.js pathFloats) to an MP4 on the server.
+    encodeExportVideo({ exportId, path, width, height, fps, pipeline = '' }) {
+      return encode({ export_video: { export_id: exportId, path, width, height, fps, pipeline } });
+    },
+
+    encodeExportCancel(exportId) {
+      return encode({ export_cancel: { export_id: exportId } });
+    },
+
     // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | 'load_progress' | 'depth_result' |
-    //      'annotations' | null, msg }
+    //      'annotations' | 'export_progress' | 'export_chunk' | null, msg }
     decodeServer(bytes) {
       const m = ServerMessage.decode(bytes);
       const kind = m.body || null; // protobufjs' oneof getter names the field that is set

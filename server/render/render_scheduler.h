@@ -15,6 +15,13 @@
 // alone. The next session in turn waits for room rather than being overtaken by smaller jobs, so
 // a large frame cannot starve.
 //
+// Background jobs (post_background: the frames of a video export, session/video_export.h) run at
+// a lower priority: a lane takes one only when no session's job is queued, within the same pixel
+// cap, and never on the last free lane when there are several (one lane stays for live work). An
+// export posts its next frame only when the previous one is done, so between any two of its
+// frames every live job queued meanwhile goes first: a live frame waits at most for one export
+// frame already running, and not at all while another lane is free.
+//
 // Lane count (default_lanes): --render-lanes when given; otherwise 4 with the CUDA renderer (a
 // few renders in flight share one GPU) and --threads with the CPU renderer (a CPU render is CPU
 // work like the pool's, so it gets as many threads).
@@ -67,6 +74,13 @@ class RenderScheduler {
     enqueue(owner, pixels, std::make_unique<Task<std::decay_t<Job>>>(std::forward<Job>(job)));
   }
 
+  // Thread-safe. Queues a background job (see above), FIFO among background jobs; `owner` is for
+  // logs and metrics only.
+  template <class Job>
+  void post_background(Owner owner, std::int64_t pixels, Job&& job) {
+    enqueue_background(owner, pixels, std::make_unique<Task<std::decay_t<Job>>>(std::forward<Job>(job)));
+  }
+
   // Thread-safe: jobs queued (not running) and pixels of the jobs running, for metrics and tests.
   std::size_t queued() const;
   std::int64_t pixels_in_flight() const;
@@ -98,6 +112,10 @@ class RenderScheduler {
   };
 
   void enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
+  void enqueue_background(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
+  // Under mutex_: a background job may start now (no live job queued, a lane left, room).
+  bool take_background(Entry& out);
+  void finished(const Entry& e);  // under mutex_: a job's lane and pixels are free again
   void lane_loop();
   // Under mutex_: the next owner's next job when it may start now (nullopt-like empty Entry).
   bool take_next(Entry& out);
@@ -107,6 +125,8 @@ class RenderScheduler {
   std::condition_variable changed_;
   std::map<Owner, std::deque<Entry>> queues_;  // owners with queued jobs
   std::deque<Owner> turn_;                     // those owners, in the order they are served
+  std::deque<Entry> background_;               // background jobs, FIFO
+  int lane_count_ = 0;                         // start()'s lanes (lanes_ is not read under the mutex)
   std::size_t queued_ = 0;
   int running_ = 0;
   std::int64_t pixels_in_flight_ = 0;
