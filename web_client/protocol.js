@@ -33,6 +33,9 @@ const vec3 = (v) => ({ x: v[0], y: v[1], z: v[2] });
 const quat = (q) => ({ w: q[0], x: q[1], y: q[2], z: q[3] });
 
 export function makeProtocol(root) {
+  // protobufjs 7.6 works out a field's wire features (packed repeated floats: ExportVideoRequest
+  // .path) when the schema is resolved; unresolved, it writes them unpacked, 25% larger.
+  root.resolveAll();
   const ClientMessage = root.lookupType(`${PKG}.ClientMessage`);
   const ServerMessage = root.lookupType(`${PKG}.ServerMessage`);
   const Codec = root.lookupEnum(`${PKG}.Codec`);

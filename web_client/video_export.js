@@ -49,11 +49,14 @@ const clock = (s) => {
   return `${m}:${String(r).padStart(2, '0')}`;
 };
 
+// "8.2 kB", "12.5 MB".
+export const sizeText = (bytes) => (bytes < 1e6 ? `${(bytes / 1e3).toFixed(1)} kB` : `${(bytes / 1e6).toFixed(1)} MB`);
+
 // The bar's text for an ExportProgress.
 export function progressText(p) {
   if (p.error) return `export failed: ${p.error}`;
   if (p.cancelled) return 'export cancelled';
-  if (p.done) return `rendered ${p.frames_total} frames (${p.duration_s.toFixed(1)} s), downloading ${(p.bytes / 1e6).toFixed(1)} MB`;
+  if (p.done) return `rendered ${p.frames_total} frames (${p.duration_s.toFixed(1)} s), downloading ${sizeText(p.bytes)}`;
   const left = p.frames_done > 0 ? `, ${clock(p.eta_ms / 1000)} left` : '';
   return `rendering ${p.frames_done}/${p.frames_total} frames${left}`;
 }
@@ -135,7 +138,8 @@ export class VideoExportUi {
     if (p.error || p.cancelled) {
       this.current = null;
       $('btn-export-cancel').hidden = true;
-      if (p.error) this.app.notice(progressText(p), 'error', 6000);
+      // The panel says it; a closed panel (the viewer moved on) gets a notice instead.
+      if (p.error && $('paths').hidden) this.app.notice(progressText(p), 'error', 6000);
     } else if (p.done) {
       this.current.assembler = new ChunkAssembler(p.bytes);
     }
@@ -160,7 +164,7 @@ export class VideoExportUi {
     const a = $('export-download');
     a.href = this.file.url;
     a.download = this.file.name;
-    a.textContent = `Download ${this.file.name} (${(blob.size / 1e6).toFixed(1)} MB)`;
+    a.textContent = `Download ${this.file.name} (${sizeText(blob.size)})`;
     a.hidden = false;
     $('export-status').textContent = `ready: ${this.last.frames_total} frames, ${this.last.duration_s.toFixed(1)} s`;
     $('btn-export-cancel').hidden = true;
