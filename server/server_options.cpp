@@ -157,6 +157,9 @@ std::string server_usage() {
          "  --export-max-seconds N  longest exported path, seconds (default 600)\n"
          "  --export-max-concurrent N  exports rendering at once, server-wide (default 1; 0: no\n"
          "                        exports); a session renders one at a time\n"
+         "  --export-yield-ms N   an export frame waits up to N ms for a moment when no live\n"
+         "                        render runs, then runs beside them (default 1000; 0: it waits\n"
+         "                        only for queued live renders)\n"
          "  --export-dir DIR      folder of the exports' temporary MP4 files (default\n"
          "                        TMPDIR/catgs-exports; its catgs-export-*.mp4 files are deleted\n"
          "                        at start-up)\n"
@@ -318,6 +321,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.export_limits.max_concurrent = parse_int(a, v, 0, 64);
     else if (a == "--export-dir")
       out.export_dir = v;
+    else if (a == "--export-yield-ms")
+      out.export_yield_ms = parse_int(a, v, 0, 60000);
     else if (a == "--probe")
       out.probe_url = v;
     else

@@ -86,6 +86,9 @@ struct ServerOptions {
   // earlier exports' files at start-up.
   ExportLimits export_limits;
   std::string export_dir;
+  // --export-yield-ms: how long an export frame waits for a moment when no live render runs
+  // before it runs beside them (render/render_scheduler.h "Background jobs").
+  int export_yield_ms = 1000;
   // --probe URL: GET the URL, exit 0 on a 2xx answer, 1 otherwise (probe.h), and do nothing else.
   std::string probe_url;
 };

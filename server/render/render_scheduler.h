@@ -17,10 +17,14 @@
 //
 // Background jobs (post_background: the frames of a video export, session/video_export.h) run at
 // a lower priority: a lane takes one only when no session's job is queued, within the same pixel
-// cap, and never on the last free lane when there are several (one lane stays for live work). An
-// export posts its next frame only when the previous one is done, so between any two of its
-// frames every live job queued meanwhile goes first: a live frame waits at most for one export
-// frame already running, and not at all while another lane is free.
+// cap, never on the last free lane when there are several (one lane stays for live work), and,
+// for up to the background yield (--export-yield-ms, 1 s by default), only while no session's job
+// is running either: an export frame beside a live one shares the GPU (or, with the CPU core,
+// every core) with it and slows it down (RESULTS.md, "Video export"). An export posts its next
+// frame only when the previous one is done, so between any two of its frames every live job
+// queued meanwhile goes first: a live frame waits at most for one export frame already running,
+// and not at all while another lane is free. On a saturated server an export gets about one
+// frame per yield.
 //
 // Lane count (default_lanes): --render-lanes when given; otherwise 4 with the CUDA renderer (a
 // few renders in flight share one GPU) and --threads with the CPU renderer (a CPU render is CPU
@@ -59,6 +63,10 @@ class RenderScheduler {
   // The lane count for `requested` (ServerOptions::render_lanes; > 0 wins), the resolved
   // `renderer_kind` ("cpu" or "cuda") and the worker count `threads`.
   static int default_lanes(int requested, const std::string& renderer_kind, int threads);
+
+  // How long a background job waits for a moment when no live job runs (default 1000 ms; set
+  // before start()). 0: it waits only for queued live jobs.
+  void set_background_yield(std::chrono::milliseconds yield) { background_yield_ = yield; }
 
   // Starts `lanes` (>= 1) lane threads with a cap of `max_pixels_in_flight` (> 0) pixels rendering
   // at once. Jobs posted before start() wait in their queues.
@@ -109,6 +117,8 @@ class RenderScheduler {
   struct Entry {
     std::int64_t pixels = 0;
     std::unique_ptr<TaskBase> task;
+    bool background = false;
+    std::chrono::steady_clock::time_point queued_at{};  // background jobs: when posted
   };
 
   void enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
@@ -127,6 +137,8 @@ class RenderScheduler {
   std::deque<Owner> turn_;                     // those owners, in the order they are served
   std::deque<Entry> background_;               // background jobs, FIFO
   int lane_count_ = 0;                         // start()'s lanes (lanes_ is not read under the mutex)
+  int live_running_ = 0;                       // sessions' jobs running now
+  std::chrono::milliseconds background_yield_{1000};
   std::size_t queued_ = 0;
   int running_ = 0;
   std::int64_t pixels_in_flight_ = 0;

@@ -19,84 +19,28 @@
 // usage: node export_e2e_test.mjs --server PATH/catgs-server --probe PATH/catgs-video-probe
 //        [--repo ROOT] [--out DIR]
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / binaries).
-import { execFileSync, spawn } from 'node:child_process';
-import { existsSync, mkdirSync, mkdtempSync, readdirSync, rmSync, writeFileSync } from 'node:fs';
-import { createRequire } from 'node:module';
+import { execFileSync } from 'node:child_process';
+import { mkdirSync, mkdtempSync, readdirSync, writeFileSync } from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { CHROMIUM_ARGS, freePort, sleep, stopServers, waitFor } from './harness.mjs';
+import { BrowserTestRun, browserOrSkip, sleep, waitFor } from './harness.mjs';
 
-const SKIP = 77;
 const here = path.dirname(fileURLToPath(import.meta.url));
-const CHROMIUM = process.env.CATGS_CHROMIUM || '/usr/bin/chromium';
 const args = {};
 for (let i = 2; i < process.argv.length; i += 2) args[process.argv[i].replace(/^--/, '')] = process.argv[i + 1];
 const repo = path.resolve(args.repo || path.join(here, '../..'));
 const serverBin = args.server || process.env.CATGS_SERVER;
 const probeBin = args.probe;
 const outDir = path.resolve(args.out || mkdtempSync(path.join(os.tmpdir(), 'catgs-export-out-')));
-const webRoot = path.join(repo, 'web_client');
 const VIEW = { width: 480, height: 360 };
-
-const log = (...m) => console.log('[export]', ...m);
-if (!existsSync(CHROMIUM)) {
-  console.log(`SKIP: ${CHROMIUM} is missing (apt-get install chromium)`);
-  process.exit(SKIP);
-}
-if (!existsSync(path.join(here, 'node_modules/playwright-core'))) {
-  console.log('SKIP: tests/e2e/node_modules is missing: run scripts/setup_web.sh');
-  process.exit(SKIP);
-}
-for (const [name, bin] of [['catgs-server', serverBin], ['catgs-video-probe', probeBin]]) {
-  if (!bin || !existsSync(bin)) {
-    console.log(`SKIP: ${name} binary not given or missing (${bin || 'none'})`);
-    process.exit(SKIP);
-  }
-}
-const require = createRequire(import.meta.url);
-const { chromium } = require('playwright-core');
-
-const failures = [];
-function check(ok, what) {
-  log(`${ok ? 'ok  ' : 'FAIL'} ${what}`);
-  if (!ok) failures.push(what);
-}
-
-const servers = [];
-let serverLog = '';
-async function startServer(serverArgs) {
-  const port = await freePort();
-  const all = [...serverArgs, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot];
-  log(`starting catgs-server ${all.join(' ')}`);
-  const proc = spawn(serverBin, all, { stdio: ['ignore', 'pipe', 'pipe'] });
-  servers.push(proc);
-  proc.stdout.on('data', (d) => (serverLog += d));
-  proc.stderr.on('data', (d) => (serverLog += d));
-  const base = `http://127.0.0.1:${port}`;
-  await waitFor('the server to answer HTTP', async () => {
-    if (proc.exitCode !== null) throw new Error(`catgs-server exited with ${proc.exitCode}`);
-    return fetch(`${base}/`).then((r) => r.ok, () => false);
-  }, 60000, 200);
-  return base;
-}
-
+const { chromium, chromiumPath } = browserOrSkip(here, { 'catgs-server': serverBin, 'catgs-video-probe': probeBin });
+const run = new BrowserTestRun('export', { serverBin, webRoot: path.join(repo, 'web_client'), outDir });
+const { log, check } = run;
 let context = null;
-const pageLog = [];
-async function openPage(url) {
-  const page = await context.newPage();
-  page.on('console', (m) => pageLog.push(`console.${m.type()}: ${m.text()}`));
-  page.on('pageerror', (e) => pageLog.push(`pageerror: ${e.message}`));
-  await page.goto(url);
-  await page.waitForFunction(() => window.catgs && window.catgs.connected && window.catgs.framesDecoded > 0, null, { timeout: 60000 });
-  return page;
-}
+const openPage = (url) => run.openPage(context, url);
 const hook = (page, fn, arg) => page.evaluate(fn, arg);
-const shot = async (page, name) => {
-  const f = path.join(outDir, name);
-  await page.screenshot({ path: f });
-  log(`screenshot ${f}`);
-};
+const shot = (page, name) => run.shot(page, name);
 const exportFiles = (dir) => readdirSync(dir).filter((f) => f.startsWith('catgs-export-'));
 
 // Records a path: the camera turns a little around its start, one step every 150 ms.
@@ -136,6 +80,15 @@ async function pickSize(page, size, fps) {
   }, [size, fps]);
 }
 
+// Clicks Export video; resolves with the server's refusal.
+async function exportRefusal(page) {
+  await page.click('#btn-export-video');
+  return waitFor('the refusal', async () => {
+    const s = await hook(page, () => window.catgs.videoExport);
+    return s.progress && s.progress.error;
+  }, 10000);
+}
+
 async function streamsOn(page, what) {
   const before = await hook(page, () => window.catgs.framesDecoded);
   const p = await hook(page, () => window.catgs.pose());
@@ -149,7 +102,7 @@ async function scenarios(tmp) {
   mkdirSync(exportDir);
   writeFileSync(path.join(exportDir, 'catgs-export-0badc0de.mp4'), 'left by a killed server');
   writeFileSync(path.join(tmp, 'tokens'), 'author A1\nviewer V1\n');
-  const base = await startServer(['--token-file', path.join(tmp, 'tokens'), '--export-dir', exportDir,
+  const base = await run.startServer(['--token-file', path.join(tmp, 'tokens'), '--export-dir', exportDir,
     '--export-max-size', '640x360', '--export-max-seconds', '20']);
 
   // ---- the author: record, export, download ----
@@ -224,11 +177,7 @@ async function scenarios(tmp) {
 
   // ---- over a cap: a clear error in the page, the view streams on ----
   await pickSize(page, '1280x720', 30);
-  await page.click('#btn-export-video');
-  const err = await waitFor('the refusal', async () => {
-    const s = await hook(page, () => window.catgs.videoExport);
-    return s.progress && s.progress.error;
-  }, 10000);
+  const err = await exportRefusal(page);
   const shown = await page.textContent('#export-status');
   check(/1280x720 is over the server's --export-max-size 640x360/.test(shown),
     `the page shows the cap and its flag: "${shown}"`);
@@ -240,43 +189,13 @@ async function scenarios(tmp) {
   const viewer = await openPage(`${base}/?token=V1`);
   await recordPath(viewer, 3);
   await pickSize(viewer, '160x90', 10);
-  await viewer.click('#btn-export-video');
-  const no = await waitFor('the viewer\'s refusal', async () => {
-    const s = await hook(viewer, () => window.catgs.videoExport);
-    return s.progress && s.progress.error;
-  }, 10000);
+  const no = await exportRefusal(viewer);
   check(/needs an author or admin token/.test(no), `a viewer's export is refused: "${no}"`);
   await streamsOn(viewer, 'the viewer\'s refused export');
   await viewer.close();
 }
 
-let code = 0;
-const profileDir = mkdtempSync(path.join(os.tmpdir(), 'catgs-export-chromium-'));
-const tmp = mkdtempSync(path.join(os.tmpdir(), 'catgs-export-'));
-try {
-  mkdirSync(outDir, { recursive: true });
-  context = await chromium.launchPersistentContext(profileDir, {
-    executablePath: CHROMIUM,
-    headless: true,
-    args: CHROMIUM_ARGS,
-    viewport: VIEW,
-    deviceScaleFactor: 1,
-    acceptDownloads: true,
-  });
+process.exit(await run.main(chromium, chromiumPath, { viewport: VIEW, acceptDownloads: true }, async (ctx, tmp) => {
+  context = ctx;
   await scenarios(tmp);
-  if (failures.length) code = 1;
-} catch (e) {
-  console.error(`[export] FAIL: ${e.stack || e}`);
-  code = 1;
-} finally {
-  if (context) await context.close().catch(() => {});
-  await stopServers(servers);
-  rmSync(profileDir, { recursive: true, force: true });
-  rmSync(tmp, { recursive: true, force: true });
-}
-if (code !== 0) {
-  console.error('[export] page log:\n' + pageLog.slice(-60).join('\n'));
-  console.error('[export] server log (tail):\n' + serverLog.slice(-4000));
-}
-console.log(code === 0 ? '1 passed, 0 failed' : `0 passed, 1 failed (${failures.length} checks)`);
-process.exit(code);
+}));

@@ -27,6 +27,7 @@ const size = args.size || '480x270';
 const exportSize = args['export-size'] || '640x360';
 const exportFps = Number(args['export-fps'] || 30);
 const outDir = path.resolve(args.out || mkdtempSync(path.join(os.tmpdir(), 'catgs-export-bench-')));
+mkdirSync(outDir, { recursive: true });
 const require = createRequire(import.meta.url);
 const { chromium } = require('playwright-core');
 
@@ -75,7 +76,6 @@ try {
   await stopServers([server]);
   rmSync(tmp, { recursive: true, force: true });
 }
-mkdirSync(outDir, { recursive: true });
 writeFileSync(path.join(outDir, 'export_load_bench.json'), JSON.stringify(report, null, 1) + '\n');
 console.log(`live session ${size} (catgs-loadgen, ${seconds} s) with an export of ${exportSize} at ${exportFps} fps`);
 console.log('| phase | fps | latency p50 ms | p95 ms | p99 ms | export frames rendered |');

@@ -104,6 +104,48 @@ TEST(RenderScheduler, BackgroundJobsLeaveALaneForLiveWork) {
   EXPECT_EQ(background_peak, 2) << "3 lanes: at most 2 background jobs at once";
 }
 
+// A background job also waits while a live job runs (it would share the device with it), up to
+// the yield; then it runs beside it, so that a busy server still exports.
+TEST(RenderScheduler, BackgroundJobsWaitForAGapUpToTheYield) {
+  for (const bool long_yield : {true, false}) {
+    SCOPED_TRACE(long_yield ? "yield 20 s: waits for the live job" : "yield 30 ms: runs beside it");
+    RenderScheduler s;
+    s.set_background_yield(std::chrono::milliseconds(long_yield ? 20000 : 30));
+    std::mutex mutex;
+    std::condition_variable changed;
+    bool live_started = false, background_ran = false, release = false, ran_beside = false;
+    s.start(3, 1000);
+    s.post(1, 10, [&] {
+      std::unique_lock<std::mutex> lock(mutex);
+      live_started = true;
+      changed.notify_all();
+      // Held until the test releases it, or (short yield) until the background job has run.
+      changed.wait_for(lock, std::chrono::seconds(5), [&] { return release || background_ran; });
+      ran_beside = background_ran;
+    });
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      changed.wait(lock, [&] { return live_started; });
+    }
+    s.post_background(7, 10, [&] {
+      std::lock_guard<std::mutex> lock(mutex);
+      background_ran = true;
+      changed.notify_all();
+    });
+    if (long_yield) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      std::lock_guard<std::mutex> lock(mutex);
+      EXPECT_FALSE(background_ran) << "it ran beside a live job within its yield";
+      release = true;
+      changed.notify_all();
+    }
+    ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+    s.stop();
+    EXPECT_TRUE(background_ran);
+    EXPECT_EQ(ran_beside, !long_yield);
+  }
+}
+
 TEST(RenderScheduler, PixelsInFlightStayWithinTheCap) {
   RenderScheduler s;
   std::atomic<long long> now_pixels{0}, peak{0};
