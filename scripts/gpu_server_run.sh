@@ -6,7 +6,9 @@
 # minus glibc and the C++ runtime, about 45 MB as tar.xz). That and the scenes of gpu_run.sh do
 # not fit one run's 64 MiB, hence two runs back to back on the same warm machine:
 #
-# On the build machine, once (after `cmake --preset cuda && cmake --build build/cuda`):
+# On the build machine, once (after `cmake --preset cuda -DCATGS_VIDEO_EXPORT=OFF && cmake --build
+# build/cuda`; with video export ON the server also brings libavformat's closure, 34 more
+# libraries, +6.4 MB as xz, which leaves the two runs' carry about 1 MiB under 64 MiB):
 #   scripts/gpu_server_run.sh prepare [BUILD_DIR]      -> .carry_srv/ (git-ignored)
 # On the GPU machine:
 #   1. carry [".carry_srv"]:  scripts/gpu_server_run.sh check
@@ -44,6 +46,10 @@ prepare() {
     cp -f "$b" "$carry/stage/bin/"
   done
   strip "$carry"/stage/bin/* 2>/dev/null || true
+  if ldd "$build/bin/catgs-server" | grep -q libavformat; then
+    echo "prepare: note: this catgs-server has video export (libavformat, +6.4 MB xz in the carry);" \
+      "configure $build with -DCATGS_VIDEO_EXPORT=OFF for a smaller one" >&2
+  fi
   # Every shared library they load, except glibc's and the C++ runtime (the GPU machine's newer
   # ones serve binaries built against older ones; mixing glibc versions would not work).
   ldd "${bins[@]}" | awk '/=> \//{print $3}' | sort -u |

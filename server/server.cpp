@@ -9,6 +9,7 @@
 #include "encode/encoder.h"
 #include "session/message_validation.h"
 #include "session/first_view.h"
+#include "session/video_export.h"
 #include "scene/scene_cache.h"
 
 namespace catgs::server {
@@ -213,6 +214,14 @@ void Server::build_sessions() {
   shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, options_,
                                                              *scenes_, render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
+  // Video export's files: a folder of their own, emptied of what an earlier run left there.
+  if (video_export_built() && options_.export_limits.max_concurrent > 0) {
+    shared_->export_folder = export_folder(options_.export_dir);
+    const int stale = remove_stale_exports(shared_->export_folder);
+    std::cout << "video export: files in " << shared_->export_folder;
+    if (stale) std::cout << " (deleted " << stale << " left by an earlier run)";
+    std::cout << std::endl;
+  }
 }
 
 void Server::catch_signals() {
@@ -260,6 +269,7 @@ void Server::start_pools() {
   int lanes = RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads);
   if (options_.render_lanes == 0 && !gpus_->devices().empty())  // the CUDA default is per GPU
     lanes *= static_cast<int>(gpus_->devices().size());
+  renders_.set_background_yield(std::chrono::milliseconds(options_.export_yield_ms));
   renders_.start(lanes, options_.max_pixels_in_flight);
 }
 

@@ -120,7 +120,8 @@ std::string ServerMetrics::prometheus_text() const {
            "--silent-timeout-ms), scene_load (the scene not loaded in --scene-load-timeout-ms).",
            "kind", timeouts_total, {"hello", "silent", "scene_load"});
   labelled("catgs_rate_limited_total", "Hellos refused and sessions ended for going past a --rate-limits limit.",
-           "kind", rate_limited_total, {"hello", "auth", "ping", "key_frame", "resize", "quality", "depth", "save"});
+           "kind", rate_limited_total,
+           {"hello", "auth", "ping", "key_frame", "resize", "quality", "depth", "save", "export"});
   labelled("catgs_unauthorized_total", "Wrong or missing tokens: in a Hello, or for /metrics.", "what",
            unauthorized_total, {"hello", "metrics"});
 

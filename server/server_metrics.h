@@ -101,8 +101,8 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> refused_upgrades_total[4]{};  // transport.h Refusal
   enum class Timeout { hello, silent, scene_load };
   std::atomic<std::uint64_t> timeouts_total[3]{};
-  enum class Limit { hello, auth, ping, key_frame, resize, quality, depth, save };
-  std::atomic<std::uint64_t> rate_limited_total[8]{};
+  enum class Limit { hello, auth, ping, key_frame, resize, quality, depth, save, export_video };
+  std::atomic<std::uint64_t> rate_limited_total[9]{};
   enum class Unauthorized { hello, metrics };
   std::atomic<std::uint64_t> unauthorized_total[2]{};
   void count(Timeout t) { timeouts_total[static_cast<int>(t)]++; }

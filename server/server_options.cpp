@@ -156,6 +156,18 @@ std::string server_usage() {
          "                        the new certificate, open sessions go on; bad files are logged\n"
          "                        and the previous certificate stays\n"
          "  --tls-key FILE        the certificate's private key, PEM, unencrypted (both or neither)\n"
+         "  --export-max-poses N  poses in an ExportVideoRequest (default 1800: one 64 KiB message)\n"
+         "  --export-max-size WxH largest exported video (default 3840x2160; as --max-viewport)\n"
+         "  --export-max-fps N    highest exported frame rate (default 60)\n"
+         "  --export-max-seconds N  longest exported path, seconds (default 600)\n"
+         "  --export-max-concurrent N  exports rendering at once, server-wide (default 1; 0: no\n"
+         "                        exports); a session renders one at a time\n"
+         "  --export-yield-ms N   an export frame waits up to N ms for a moment when no live\n"
+         "                        render runs, then runs beside them (default 1000; 0: it waits\n"
+         "                        only for queued live renders)\n"
+         "  --export-dir DIR      folder of the exports' temporary MP4 files (default\n"
+         "                        TMPDIR/catgs-exports; its catgs-export-*.mp4 files are deleted\n"
+         "                        at start-up)\n"
          "  --probe URL           GET http[s]://HOST:PORT/PATH, exit 0 on 2xx, else 1 (a container\n"
          "                        HEALTHCHECK without curl or a shell; https does not check the\n"
          "                        certificate); starts no server\n"
@@ -304,6 +316,20 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.tls_cert = v;
     else if (a == "--tls-key")
       out.tls_key = v;
+    else if (a == "--export-max-poses")
+      out.export_limits.max_poses = parse_int(a, v, 2, 1000000);
+    else if (a == "--export-max-size")
+      parse_size(a, v, out.export_limits.max_width, out.export_limits.max_height);
+    else if (a == "--export-max-fps")
+      out.export_limits.max_fps = parse_int(a, v, 1, 240);
+    else if (a == "--export-max-seconds")
+      out.export_limits.max_seconds = parse_int(a, v, 1, 86400);
+    else if (a == "--export-max-concurrent")
+      out.export_limits.max_concurrent = parse_int(a, v, 0, 64);
+    else if (a == "--export-dir")
+      out.export_dir = v;
+    else if (a == "--export-yield-ms")
+      out.export_yield_ms = parse_int(a, v, 0, 60000);
     else if (a == "--probe")
       out.probe_url = v;
     else

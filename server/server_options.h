@@ -7,6 +7,7 @@
 
 #include "encode/encoder_policy.h"
 #include "session/access_tokens.h"
+#include "session/message_validation.h"
 #include "session/rate_limit.h"
 
 namespace catgs::server {
@@ -83,6 +84,15 @@ struct ServerOptions {
   // (transport/tls_setup.h); SIGHUP re-reads both files.
   std::string tls_cert;
   std::string tls_key;
+  // Video export (session/video_export.h): caps on ExportVideoRequest (--export-max-poses,
+  // --export-max-size WxH, --export-max-fps, --export-max-seconds, --export-max-concurrent) and
+  // the folder of its temporary files (--export-dir; "" = TMPDIR/catgs-exports), emptied of
+  // earlier exports' files at start-up.
+  ExportLimits export_limits;
+  std::string export_dir;
+  // --export-yield-ms: how long an export frame waits for a moment when no live render runs
+  // before it runs beside them (render/render_scheduler.h "Background jobs").
+  int export_yield_ms = 1000;
   // --probe URL: GET the URL, exit 0 on a 2xx answer, 1 otherwise (probe.h), and do nothing else.
   std::string probe_url;
 };

@@ -5,7 +5,7 @@
 //   catgs-render --scene S.ply --cameras C.json --all --fps 30 --out-dir DIR    (interpolated path)
 //   catgs-render --scene S.ply --trace T.trace --out-dir DIR [--every N]
 //   catgs-render --scene S.ply --trace T.trace --video OUT.mp4 --width W --height H --fps F
-//                [--crf 18] [--preset medium]                      (H.264 in MP4, tools/video/)
+//                [--crf 18] [--preset medium]                      (H.264 in MP4, server/encode/tour_video.h)
 //   --lod-file F draws S's level of detail (a LOD file: catgs-scene lod) at --lod-error PX
 //   (default RenderOptions::lod_error_px; 0 = full detail).
 #include <unistd.h>
@@ -22,7 +22,8 @@
 #include "camera/trace.h"
 #include "common/cli_args.h"
 #ifdef CATGS_RENDER_VIDEO
-#include "video/tour_video.h"
+#include "common/progress.h"
+#include "encode/tour_video.h"
 extern "C" {
 #include <libavutil/log.h>
 }
@@ -91,7 +92,7 @@ int render_video(const catgs::tools::Args& args) {
   const int fps = args.get_int("--fps", 60);
   if (fps <= 0) throw std::invalid_argument("--fps must be positive");
   catgs::Trace cameras = load_cameras(args, 0, 0, fps);
-  catgs::tools::TourVideoOptions o;
+  catgs::server::TourVideoOptions o;
   o.path = args.get("--video");
   o.width = args.get_int("--width", cameras.front().camera.width);
   o.height = args.get_int("--height", cameras.front().camera.height);
@@ -107,11 +108,12 @@ int render_video(const catgs::tools::Args& args) {
                                 std::to_string(fps) + " fps, more than --max-frames " + std::to_string(max_frames));
   catgs::Trace frames = catgs::resample_trace(cameras, fps);
   for (auto& tc : frames) tc.camera = tc.camera.rescaled(o.width, o.height);
-  catgs::tools::TourVideo video(o);
+  catgs::server::TourVideo video(o);
   const auto renderer = open_renderer(args);
   const auto t0 = std::chrono::steady_clock::now();
   try {
-    video.render(*renderer, frames, stderr, isatty(STDERR_FILENO) == 1);
+    catgs::tools::Progress meter(stderr, isatty(STDERR_FILENO) == 1, static_cast<long>(frames.size()), "frames");
+    video.render(*renderer, frames, [&meter](long done) { meter.update(done); });
   } catch (...) {
     std::error_code ec;  // the unfinished file, never a device such as /dev/full
     if (std::filesystem::is_regular_file(o.path, ec)) std::filesystem::remove(o.path, ec);

@@ -8,13 +8,14 @@ import { StreamDecoder, hasWebCodecs } from './decoder.js';
 import { Overlay } from './overlay.js';
 import {
   LOADGEN_SECONDS_PER_VIEW, PathRecorder, fromInriaCameras, fromTraceFile, poseAtTime, resample, toInriaCameras,
-  toTraceFile, tourDuration, tourPoseAt,
+  TOUR_SECONDS_PER_VIEW, toTraceFile, tourDuration, tourPoseAt,
 } from './paths.js';
 import { loadProtocol } from './protocol.js';
 import { applyHomography, cssTransform, planeDepthFor, reprojection } from './reproject.js';
 import { capViewport, parseMaxSize } from './viewport.js';
 import { NotesUi } from './notes_ui.js';
 import { WalkMode } from './walk.js';
+import { VideoExportUi, tourSamples } from './video_export.js';
 import { parseView, viewUrl, withoutView } from './view_link.js';
 import { TOKEN_KEY, takeToken } from './token.js';
 
@@ -72,6 +73,7 @@ const state = {
   nextDepthId: 1,
   notes: null, // NotesUi: hotspots, measurement, scale
   walk: null, // WalkMode
+  videoExport: null, // VideoExportUi: Export video in the Paths panel
 };
 
 function viewportSize() {
@@ -345,6 +347,7 @@ function onClose(info) {
   const { code, reason, retryInMs, error, permanent, reached } = info;
   state.sessionOpen = false;
   rejectDepthRequests();
+  state.videoExport.onClosed();
   state.closeInfo = info;
   state.decoder.reset();
   overlay.clearSession();
@@ -395,6 +398,12 @@ function onMessage(kind, msg) {
       break;
     case 'annotations':
       state.notes.onAnnotations(msg);
+      break;
+    case 'export_progress':
+      state.videoExport.onProgress(msg);
+      break;
+    case 'export_chunk':
+      state.videoExport.onChunk(msg);
       break;
     default:
       break;
@@ -964,6 +973,12 @@ function installTestHook() {
     get walk() {
       return state.walk.snapshot();
     },
+    // Export video: (options { size: 'WxH', fps, pipeline }) -> export id; its state.
+    exportVideo: (options) => state.videoExport.start(options),
+    cancelExport: () => state.videoExport.cancel(),
+    get videoExport() {
+      return state.videoExport.snapshot();
+    },
   };
 }
 
@@ -994,6 +1009,15 @@ async function main() {
     metresPerUnit: () => state.notes.metresPerUnit,
     notice,
   }, isTouch ? $('walk-pad') : null); // the pad only where fingers walk; keys elsewhere
+  state.videoExport = new VideoExportUi({
+    send,
+    protocol: () => state.protocol,
+    // The recorded path, else the tour (the page's pace between views).
+    samples: () => state.recording && state.recording.length >= 2
+      ? state.recording
+      : state.waypoints.length >= 2 ? tourSamples(state.waypoints, TOUR_SECONDS_PER_VIEW) : null,
+    notice,
+  });
   installTestHook();
   wireUi();
   state.viewport = viewportSize();

@@ -33,6 +33,9 @@ const vec3 = (v) => ({ x: v[0], y: v[1], z: v[2] });
 const quat = (q) => ({ w: q[0], x: q[1], y: q[2], z: q[3] });
 
 export function makeProtocol(root) {
+  // protobufjs 7.6 works out a field's wire features (packed repeated floats: ExportVideoRequest
+  // .path) when the schema is resolved; unresolved, it writes them unpacked, 25% larger.
+  root.resolveAll();
   const ClientMessage = root.lookupType(`${PKG}.ClientMessage`);
   const ServerMessage = root.lookupType(`${PKG}.ServerMessage`);
   const Codec = root.lookupEnum(`${PKG}.Codec`);
@@ -119,8 +122,17 @@ export function makeProtocol(root) {
       return encode({ save_annotations: { json } });
     },
 
+    // Render `path` (9 floats a pose: video_export.js pathFloats) to an MP4 on the server.
+    encodeExportVideo({ exportId, path, width, height, fps, pipeline = '' }) {
+      return encode({ export_video: { export_id: exportId, path, width, height, fps, pipeline } });
+    },
+
+    encodeExportCancel(exportId) {
+      return encode({ export_cancel: { export_id: exportId } });
+    },
+
     // -> { kind: 'welcome' | 'frame' | 'stats' | 'error' | 'pong' | 'load_progress' | 'depth_result' |
-    //      'annotations' | null, msg }
+    //      'annotations' | 'export_progress' | 'export_chunk' | null, msg }
     decodeServer(bytes) {
       const m = ServerMessage.decode(bytes);
       const kind = m.body || null; // protobufjs' oneof getter names the field that is set

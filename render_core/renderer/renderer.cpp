@@ -9,6 +9,27 @@
 
 namespace catgs {
 
+// Pipeline names (here, not in the factory: the server's message checks use them without the
+// cores).
+Pipeline parse_pipeline(const std::string& name) {
+  if (name == "vanilla") return Pipeline::vanilla;
+  if (name == "exact") return Pipeline::exact;
+  if (name == "catgs") return Pipeline::catgs;
+  throw std::invalid_argument("unknown pipeline '" + name + "' (vanilla, exact or catgs)");
+}
+
+const char* pipeline_name(Pipeline p) {
+  switch (p) {
+    case Pipeline::vanilla:
+      return "vanilla";
+    case Pipeline::exact:
+      return "exact";
+    case Pipeline::catgs:
+      return "catgs";
+  }
+  return "?";
+}
+
 double Renderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
   check_yuv420_target("render_yuv420_at", out, camera.width, camera.height);
   if (out.memory != MemoryKind::host)

@@ -9,25 +9,6 @@
 
 namespace catgs {
 
-Pipeline parse_pipeline(const std::string& name) {
-  if (name == "vanilla") return Pipeline::vanilla;
-  if (name == "exact") return Pipeline::exact;
-  if (name == "catgs") return Pipeline::catgs;
-  throw std::invalid_argument("unknown pipeline '" + name + "' (vanilla, exact or catgs)");
-}
-
-const char* pipeline_name(Pipeline p) {
-  switch (p) {
-    case Pipeline::vanilla:
-      return "vanilla";
-    case Pipeline::exact:
-      return "exact";
-    case Pipeline::catgs:
-      return "catgs";
-  }
-  return "?";
-}
-
 std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr<const GaussianModel> model,
                                         const RenderOptions& options, std::string* why, int gpu) {
   auto say = [why](const std::string& s) {

@@ -18,6 +18,7 @@ void RenderScheduler::start(int lanes, std::int64_t max_pixels_in_flight) {
     std::lock_guard<std::mutex> lock(mutex_);
     stopping_ = false;
     max_pixels_in_flight_ = max_pixels_in_flight;
+    lane_count_ = lanes;
   }
   for (int i = 0; i < lanes; ++i) lanes_.emplace_back([this] { lane_loop(); });
 }
@@ -33,8 +34,42 @@ void RenderScheduler::enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<
   changed_.notify_all();  // drain() waits on the same condition: a lane must be among the woken
 }
 
+void RenderScheduler::enqueue_background(Owner, std::int64_t pixels, std::unique_ptr<TaskBase> task) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    background_.push_back(Entry{pixels, std::move(task), true, std::chrono::steady_clock::now()});
+    ++queued_;
+  }
+  changed_.notify_all();
+}
+
+bool RenderScheduler::take_background(Entry& out) {
+  if (background_.empty()) return false;
+  // One lane stays for live work when there are several (poll() runs with no lanes at all).
+  if (lane_count_ > 1 && running_ >= lane_count_ - 1) return false;
+  // A live render running shares the device (or the cores) with it: wait for a gap, up to the
+  // yield time (then run anyway, so that a busy server still exports).
+  if (live_running_ > 0 && std::chrono::steady_clock::now() < background_.front().queued_at + background_yield_)
+    return false;
+  const std::int64_t pixels = background_.front().pixels;
+  if (running_ > 0 && pixels_in_flight_ + pixels > max_pixels_in_flight_) return false;
+  out = std::move(background_.front());
+  background_.pop_front();
+  --queued_;
+  ++running_;
+  pixels_in_flight_ += pixels;
+  return true;
+}
+
+void RenderScheduler::finished(const Entry& e) {
+  --running_;
+  if (!e.background) --live_running_;
+  pixels_in_flight_ -= e.pixels;
+}
+
 bool RenderScheduler::take_next(Entry& out) {
-  if (turn_.empty()) return false;
+  // Live work first: a background job only when no session's job is queued.
+  if (turn_.empty()) return take_background(out);
   const Owner owner = turn_.front();
   auto it = queues_.find(owner);
   const std::int64_t pixels = it->second.front().pixels;
@@ -49,6 +84,7 @@ bool RenderScheduler::take_next(Entry& out) {
     turn_.push_back(owner);  // one job per owner per round
   --queued_;
   ++running_;
+  ++live_running_;
   pixels_in_flight_ += pixels;
   return true;
 }
@@ -68,13 +104,20 @@ void RenderScheduler::lane_loop() {
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
     Entry e;
-    changed_.wait(lock, [&] { return stopping_ || take_next(e); });
+    while (!stopping_ && !take_next(e)) {
+      // A background job waiting for a gap in the live renders is due at its yield's end.
+      const auto due = background_.empty() ? std::chrono::steady_clock::time_point::max()
+                                           : background_.front().queued_at + background_yield_;
+      if (due > std::chrono::steady_clock::now() && due != std::chrono::steady_clock::time_point::max())
+        changed_.wait_until(lock, due);
+      else
+        changed_.wait(lock);
+    }
     if (!e.task) return;  // stopping
     lock.unlock();
     run_task(e);
     lock.lock();
-    --running_;
-    pixels_in_flight_ -= e.pixels;
+    finished(e);
     // Room freed: any lane may now start the next owner's job; drain() may be waiting too.
     changed_.notify_all();
   }
@@ -116,8 +159,7 @@ std::size_t RenderScheduler::poll() {
     run_task(e);
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      --running_;
-      pixels_in_flight_ -= e.pixels;
+      finished(e);
     }
     ++ran;
   }

@@ -15,6 +15,17 @@
 // alone. The next session in turn waits for room rather than being overtaken by smaller jobs, so
 // a large frame cannot starve.
 //
+// Background jobs (post_background: the frames of a video export, session/video_export.h) run at
+// a lower priority: a lane takes one only when no session's job is queued, within the same pixel
+// cap, never on the last free lane when there are several (one lane stays for live work), and,
+// for up to the background yield (--export-yield-ms, 1 s by default), only while no session's job
+// is running either: an export frame beside a live one shares the GPU (or, with the CPU core,
+// every core) with it and slows it down (RESULTS.md, "Video export"). An export posts its next
+// frame only when the previous one is done, so between any two of its frames every live job
+// queued meanwhile goes first: a live frame waits at most for one export frame already running,
+// and not at all while another lane is free. On a saturated server an export gets about one
+// frame per yield.
+//
 // Lane count (default_lanes): --render-lanes when given; otherwise 4 with the CUDA renderer (a
 // few renders in flight share one GPU) and --threads with the CPU renderer (a CPU render is CPU
 // work like the pool's, so it gets as many threads).
@@ -53,6 +64,10 @@ class RenderScheduler {
   // `renderer_kind` ("cpu" or "cuda") and the worker count `threads`.
   static int default_lanes(int requested, const std::string& renderer_kind, int threads);
 
+  // How long a background job waits for a moment when no live job runs (default 1000 ms; set
+  // before start()). 0: it waits only for queued live jobs.
+  void set_background_yield(std::chrono::milliseconds yield) { background_yield_ = yield; }
+
   // Starts `lanes` (>= 1) lane threads with a cap of `max_pixels_in_flight` (> 0) pixels rendering
   // at once. Jobs posted before start() wait in their queues.
   void start(int lanes, std::int64_t max_pixels_in_flight);
@@ -65,6 +80,13 @@ class RenderScheduler {
   template <class Job>
   void post(Owner owner, std::int64_t pixels, Job&& job) {
     enqueue(owner, pixels, std::make_unique<Task<std::decay_t<Job>>>(std::forward<Job>(job)));
+  }
+
+  // Thread-safe. Queues a background job (see above), FIFO among background jobs; `owner` is for
+  // logs and metrics only.
+  template <class Job>
+  void post_background(Owner owner, std::int64_t pixels, Job&& job) {
+    enqueue_background(owner, pixels, std::make_unique<Task<std::decay_t<Job>>>(std::forward<Job>(job)));
   }
 
   // Thread-safe: jobs queued (not running) and pixels of the jobs running, for metrics and tests.
@@ -95,9 +117,15 @@ class RenderScheduler {
   struct Entry {
     std::int64_t pixels = 0;
     std::unique_ptr<TaskBase> task;
+    bool background = false;
+    std::chrono::steady_clock::time_point queued_at{};  // background jobs: when posted
   };
 
   void enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
+  void enqueue_background(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
+  // Under mutex_: a background job may start now (no live job queued, a lane left, room).
+  bool take_background(Entry& out);
+  void finished(const Entry& e);  // under mutex_: a job's lane and pixels are free again
   void lane_loop();
   // Under mutex_: the next owner's next job when it may start now (nullopt-like empty Entry).
   bool take_next(Entry& out);
@@ -107,6 +135,10 @@ class RenderScheduler {
   std::condition_variable changed_;
   std::map<Owner, std::deque<Entry>> queues_;  // owners with queued jobs
   std::deque<Owner> turn_;                     // those owners, in the order they are served
+  std::deque<Entry> background_;               // background jobs, FIFO
+  int lane_count_ = 0;                         // start()'s lanes (lanes_ is not read under the mutex)
+  int live_running_ = 0;                       // sessions' jobs running now
+  std::chrono::milliseconds background_yield_{1000};
   std::size_t queued_ = 0;
   int running_ = 0;
   std::int64_t pixels_in_flight_ = 0;

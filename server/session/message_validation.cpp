@@ -112,4 +112,86 @@ std::optional<Violation> check_depth_request(const pb::DepthRequest& request,
   return std::nullopt;
 }
 
+namespace {
+
+Violation export_violation(const std::string& reason) {
+  return Violation{pb::ERROR_INVALID_ARGUMENT, "ExportVideoRequest: " + reason};
+}
+
+// Pose k of the path as a Pose message, so that it is held to check_pose's rules.
+pb::Pose path_pose(const pb::ExportVideoRequest& request, int k) {
+  const float* f = request.path().data() + static_cast<std::ptrdiff_t>(k) * kExportFloatsPerPose;
+  pb::Pose pose;
+  pose.mutable_position()->set_x(f[1]);
+  pose.mutable_position()->set_y(f[2]);
+  pose.mutable_position()->set_z(f[3]);
+  pose.mutable_orientation()->set_w(f[4]);
+  pose.mutable_orientation()->set_x(f[5]);
+  pose.mutable_orientation()->set_y(f[6]);
+  pose.mutable_orientation()->set_z(f[7]);
+  pose.set_vertical_fov_deg(f[8]);
+  return pose;
+}
+
+}  // namespace
+
+std::optional<Violation> check_export_request(const pb::ExportVideoRequest& request, const ExportLimits& limits,
+                                              ExportPlan& out) {
+  const int floats = request.path_size();
+  if (floats % kExportFloatsPerPose != 0)
+    return export_violation("path has " + std::to_string(floats) + " floats, not 9 a pose");
+  const int poses = floats / kExportFloatsPerPose;
+  if (poses > limits.max_poses)
+    return export_violation("a path of " + std::to_string(poses) + " poses is over the server's --export-max-poses " +
+                            std::to_string(limits.max_poses));
+  if (poses < 2) return export_violation("a path needs at least 2 poses, got " + std::to_string(poses));
+  const std::uint32_t w = request.width(), h = request.height();
+  const std::string size = std::to_string(w) + "x" + std::to_string(h);
+  if (w < kMinViewport || w > kMaxViewport || h < kMinViewport || h > kMaxViewport)
+    return export_violation("video size " + size + " outside 16..4096");
+  if (w % 2 || h % 2) return export_violation("video size " + size + ": width and height must be even (4:2:0)");
+  const std::uint64_t max_pixels = static_cast<std::uint64_t>(limits.max_width) * limits.max_height;
+  if (std::uint64_t{w} * h > max_pixels ||
+      std::max(w, h) > static_cast<std::uint32_t>(std::max(limits.max_width, limits.max_height)))
+    return export_violation("video size " + size + " is over the server's --export-max-size " +
+                            std::to_string(limits.max_width) + "x" + std::to_string(limits.max_height));
+  if (request.fps() < 1 || request.fps() > static_cast<std::uint32_t>(limits.max_fps))
+    return export_violation("fps " + std::to_string(request.fps()) + " outside 1..--export-max-fps " +
+                            std::to_string(limits.max_fps));
+  Pipeline pipeline = Pipeline::exact;
+  if (!request.pipeline().empty()) {
+    try {
+      pipeline = parse_pipeline(request.pipeline());
+    } catch (const std::exception&) {
+      return export_violation("unknown pipeline '" + request.pipeline().substr(0, 32) + "' (vanilla, exact or catgs)");
+    }
+  }
+  Trace path;
+  path.reserve(static_cast<std::size_t>(poses));
+  for (int k = 0; k < poses; ++k) {
+    const float t = request.path(k * kExportFloatsPerPose);
+    if (!std::isfinite(t)) return export_violation("pose " + std::to_string(k) + ": time is NaN or Inf");
+    if (k > 0 && t < path.back().time_s) return export_violation("pose " + std::to_string(k) + ": time goes backwards");
+    CameraPose pose;
+    if (auto bad = check_pose(path_pose(request, k), pose))
+      return export_violation("pose " + std::to_string(k) + ": " + bad->reason);
+    path.push_back(TimedCamera{t, Camera::from_pose(pose.position, pose.orientation, pose.vertical_fov_deg,
+                                                    static_cast<int>(w), static_cast<int>(h))});
+  }
+  const double span_s = path.back().time_s - path.front().time_s;
+  if (span_s > limits.max_seconds)
+    return export_violation("a path of " + std::to_string(span_s) + " s is over the server's --export-max-seconds " +
+                            std::to_string(limits.max_seconds));
+  const double t0 = path.front().time_s;
+  for (TimedCamera& c : path) c.time_s -= t0;
+  out.frames = resample_trace(path, request.fps());
+  out.export_id = request.export_id();
+  out.width = static_cast<int>(w);
+  out.height = static_cast<int>(h);
+  out.fps = static_cast<int>(request.fps());
+  out.pipeline = pipeline;
+  out.duration_s = static_cast<double>(out.frames.size()) / out.fps;
+  return std::nullopt;
+}
+
 }  // namespace catgs::server

@@ -8,7 +8,9 @@
 #include <glm/gtc/quaternion.hpp>
 #include <glm/vec3.hpp>
 
+#include "camera/trace.h"
 #include "catgs_stream.pb.h"
+#include "renderer/renderer.h"
 
 namespace catgs::server {
 
@@ -83,5 +85,38 @@ struct DepthQuery {
 std::optional<Violation> check_depth_request(const pb::DepthRequest& request,
                                              const std::optional<CameraPose>& last_pose, const Viewport& viewport,
                                              DepthQuery& out);
+
+// The server's caps on ExportVideoRequest (--export-max-poses, --export-max-size WxH,
+// --export-max-fps, --export-max-seconds, --export-max-concurrent; server/README.md "Video
+// export" says why each default). Sizes as --max-viewport: pixel count and longer side.
+struct ExportLimits {
+  int max_poses = 1800;  // what one 64 KiB message holds (9 floats a pose, packed)
+  int max_width = 3840, max_height = 2160;
+  int max_fps = 60;
+  int max_seconds = 600;   // of video: 36000 frames at 60 fps
+  int max_concurrent = 1;  // exports rendering at once, server-wide
+};
+
+inline constexpr int kExportFloatsPerPose = 9;  // ExportVideoRequest.path
+
+// A validated ExportVideoRequest: the frames to render, in order (the path sampled at fps on its
+// clock, resample_trace; cameras of width x height, times from 0), and how.
+struct ExportPlan {
+  std::uint32_t export_id = 0;
+  int width = 0, height = 0, fps = 0;
+  Pipeline pipeline = Pipeline::exact;
+  Trace frames;
+  double duration_s = 0;  // frames.size() / fps
+};
+
+// Validates ExportVideoRequest against the protocol and `limits`: the pose count (checked before
+// anything is parsed, so a million poses cost nothing), 9 floats a pose, each pose as check_pose
+// (finite, a non-zero quaternion, fov in (1, 170)), times finite and never decreasing, a size
+// 16..4096 a side, even, within max_width x max_height, fps 1..max_fps, the path's span at most
+// max_seconds, the pipeline's name. Each reason names the cap's flag. Fills `out` (the resampled
+// frames) only when it returns nullopt. Code ERROR_INVALID_ARGUMENT; the reason goes into
+// ExportProgress.error (the session goes on).
+std::optional<Violation> check_export_request(const pb::ExportVideoRequest& request, const ExportLimits& limits,
+                                              ExportPlan& out);
 
 }  // namespace catgs::server

@@ -63,9 +63,11 @@ void apply_rate_limits(RateLimitSettings& settings, const std::string& list) {
       settings.depth = spec;
     else if (name == "save")
       settings.save = spec;
+    else if (name == "export")
+      settings.export_video = spec;
     else
       throw std::invalid_argument("--rate-limits: unknown limit '" + name +
-                                  "' (hello, auth, ping, key_frame, resize, quality, depth, save)");
+                                  "' (hello, auth, ping, key_frame, resize, quality, depth, save, export)");
   }
 }
 
@@ -83,11 +85,15 @@ std::string rate_limits_usage() {
     const RateSpec& spec;
     const char* what;
   };
-  const Row rows[] = {
-      {"hello", d.hello, "Hellos per client address"}, {"auth", d.auth, "failed token attempts per client address"},
-      {"ping", d.ping, "Pings per session"},           {"key_frame", d.key_frame, "KeyFrameRequests per session"},
-      {"resize", d.resize, "Resizes per session"},     {"quality", d.quality, "Quality messages per session"},
-      {"depth", d.depth, "DepthRequests per session"}, {"save", d.save, "SaveAnnotations per session"}};
+  const Row rows[] = {{"hello", d.hello, "Hellos per client address"},
+                      {"auth", d.auth, "failed token attempts per client address"},
+                      {"ping", d.ping, "Pings per session"},
+                      {"key_frame", d.key_frame, "KeyFrameRequests per session"},
+                      {"resize", d.resize, "Resizes per session"},
+                      {"quality", d.quality, "Quality messages per session"},
+                      {"depth", d.depth, "DepthRequests per session"},
+                      {"save", d.save, "SaveAnnotations per session"},
+                      {"export", d.export_video, "ExportVideoRequests per session"}};
   std::ostringstream o;
   for (const Row& r : rows) {
     std::ostringstream spec;

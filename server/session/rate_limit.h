@@ -1,5 +1,5 @@
 // Rate limits on what a client may ask for (issue 22 finding 10): token buckets per session for
-// Ping, KeyFrameRequest, Resize, Quality, DepthRequest and SaveAnnotations, and per client address for Hello and for failed
+// Ping, KeyFrameRequest, Resize, Quality, DepthRequest, SaveAnnotations and ExportVideoRequest, and per client address for Hello and for failed
 // token attempts (a Hello is the first message of a new connection, so its limit has to outlive
 // one session). Beyond a limit the session ends with ERROR_RATE_LIMITED (session.cpp).
 #pragma once
@@ -34,10 +34,14 @@ struct RateLimitSettings {
   // click, walk mode about 10 a second while moving)
   RateSpec depth{20, 40};
   RateSpec save{1, 5};  // per session: SaveAnnotations (each rewrites a file beside the scene)
+  // per session: ExportVideoRequest (the page sends one per click on "Export video"; a session
+  // renders one export at a time and the server --export-max-concurrent, so this only bounds the
+  // cost of checking requests: a person trying sizes against the caps stays well within it)
+  RateSpec export_video{1, 10};
 };
 
 // Applies "name=RATE/BURST,..." (or name=off) to `settings`; names: hello, auth, ping,
-// key_frame, resize, quality, depth, save. Throws std::invalid_argument naming the bad entry.
+// key_frame, resize, quality, depth, save, export. Throws std::invalid_argument naming the bad entry.
 void apply_rate_limits(RateLimitSettings& settings, const std::string& list);
 // "5 a second, burst 20": for Error reasons and logs.
 std::string describe(const RateSpec& spec);

@@ -65,6 +65,7 @@ Session::Session(ConnId id, SessionShared& shared)
   quality_bucket_ = TokenBucket(r.quality, now);
   depth_bucket_ = TokenBucket(r.depth, now);
   save_bucket_ = TokenBucket(r.save, now);
+  export_bucket_ = TokenBucket(r.export_video, now);
   last_message_ = now;
 }
 
@@ -116,6 +117,7 @@ void Session::post_sent() {
       self->shared_.metrics.send_seconds.observe(self->last_send_ms_ / 1000.0);
     }
     self->maybe_start_render();
+    if (self->export_ && self->export_->sending) self->send_export_chunks();
   });
 }
 
@@ -143,6 +145,7 @@ ViewportLimit Session::viewport_limit() const {
 void Session::end_open_state() {
   if (pending_) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
   pending_.reset();
+  end_export();        // a closed page gets no file: its rendering stops and its file goes
   scene_use_.reset();  // the scene may be unloaded now (a wait for its load is withdrawn)
   if (counted_open_) {
     counted_open_ = false;
@@ -246,6 +249,10 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
       return handle_depth(msg.depth_request());
     case pb::ClientMessage::kSaveAnnotations:
       return handle_save_annotations(msg.save_annotations());
+    case pb::ClientMessage::kExportVideo:
+      return handle_export(msg.export_video());
+    case pb::ClientMessage::kExportCancel:
+      return handle_export_cancel(msg.export_cancel());
     default:
       return fail(pb::ERROR_MALFORMED, "unknown message");
   }
@@ -521,6 +528,7 @@ void Session::on_tick() {
     return fail(pb::ERROR_TIMEOUT, "no message for " + std::to_string(shared_.options.silent_timeout_ms) + " ms");
   }
   if (now - last_stats_ >= std::chrono::seconds(1)) send_stats();
+  if (export_ && export_->sending) send_export_chunks();
   if (shared_.options.adaptive_quality) adapt_quality(now);
   arm_tick();
 }

@@ -22,6 +22,7 @@
 #include <chrono>
 #include <cstdint>
 #include <deque>
+#include <fstream>
 #include <memory>
 #include <optional>
 #include <string>
@@ -43,6 +44,7 @@
 #include "session/first_view.h"
 #include "session/rate_limit.h"
 #include "session/scene_store.h"
+#include "session/video_export.h"
 #include "server_metrics.h"
 #include "server_options.h"
 #include "transport/transport.h"
@@ -71,6 +73,11 @@ struct SessionShared {
   std::atomic<std::chrono::steady_clock::time_point> drain_deadline{};
   // Hello and failed-token limits per client address (a new connection per attempt).
   PeerLimiter peers{options.rate_limits};
+  // Video exports rendering now, server-wide (--export-max-concurrent), and the folder of their
+  // files (video_export.h export_folder(); set by the server at start-up, empty when exports
+  // are off or not built).
+  std::atomic<int> exports_running{0};
+  std::string export_folder;
 };
 
 // Error.retry_after_ms hints, ms. Each Error carries base .. 2 x base, drawn uniformly, so the
@@ -156,6 +163,20 @@ class Session : public std::enable_shared_from_this<Session> {
   void handle_depth(const pb::DepthRequest& request);
   // SaveAnnotations: an author's hotspots written beside the scene (annotations.h).
   void handle_save_annotations(const pb::SaveAnnotations& save);
+  // ExportVideoRequest / ExportCancel, and the export's steps (export_pipeline.cpp): validated
+  // and authorised here, one frame per background job on the render lanes, progress to the page,
+  // then the file in chunks.
+  void handle_export(const pb::ExportVideoRequest& request);
+  void handle_export_cancel(const pb::ExportCancel& cancel);
+  void post_export_step();  // the export's next frame, at low priority
+  // On the strand: a step of `video` ended (finished: the file is complete; error: it failed).
+  void on_export_step(const std::shared_ptr<VideoExport>& video, bool finished, const std::string& error);
+  // The running export's state (ExportProgress); `error` / `cancelled`: how it ended.
+  void send_export_progress(const std::string& error = {}, bool cancelled = false);
+  void refuse_export(std::uint32_t export_id, const std::string& why);  // ExportProgress.error
+  void send_export_chunks();  // the finished file's next chunks, a few queued at a time
+  // Ends the session's export: its slot (if still rendering) and its file go.
+  void end_export();
   // Annotations after Welcome: the file beside the scene, or its error (the scene opens anyway).
   void send_annotations();
   // --adaptive-quality, on the tick: applies AdaptiveQuality's rule and queues a refine frame.
@@ -232,6 +253,18 @@ class Session : public std::enable_shared_from_this<Session> {
   Role role_ = Role::none;               // the Hello token's role (none: the server has no tokens)
   std::optional<CameraPose> last_pose_;  // the newest valid Pose (a DepthRequest without one)
   int depths_in_flight_ = 0;             // DepthRequests probing on the pool
+  TokenBucket export_bucket_;            // --rate-limits export
+  // The session's video export (one at a time): rendering (a step job in flight or not), then
+  // sending its file. Null when there is none.
+  struct Export {
+    std::shared_ptr<VideoExport> video;
+    bool holds_slot = false;  // counts in shared_.exports_running (while rendering)
+    bool sending = false;     // finished: its file goes out in chunks
+    Clock::time_point started, last_progress;
+    std::unique_ptr<std::ifstream> file;
+    double size = 0, sent = 0;  // bytes
+  };
+  std::unique_ptr<Export> export_;
   // Stats counters (totals, and sums since the last Stats message).
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
   std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)

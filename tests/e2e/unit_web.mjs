@@ -612,3 +612,55 @@ test('walk step: stops short of a wall, eases to eye height above the ground', (
   close(p, [0, -0.3, 0]);
   close(notes.alongGround([1, 2, 3], up), [1, 0, 3]);
 });
+
+// ---- issue 38: Export video (video_export.js) ----
+
+const vexport = await imp('video_export.js');
+
+test('ExportVideoRequest carries the path as 9 floats a pose; the largest fits one 64 KiB message', () => {
+  const p = proto.makeProtocol(pb.parse(protoText, { keepCase: true }).root);
+  const samples = [0, 0.5, 1.25].map((t, k) => ({ t, position: [k, 2, 3], orientation: [1, 0, 0, 0], fovDeg: 50 }));
+  const floats = vexport.pathFloats(samples);
+  assert.deepEqual(floats.slice(9, 18), [0.5, 1, 2, 3, 1, 0, 0, 0, 50]);
+  const d = p.decodeClient(p.encodeExportVideo({ exportId: 4, path: floats, width: 160, height: 90, fps: 10 }));
+  assert.equal(d.kind, 'export_video');
+  assert.equal(d.msg.export_id, 4);
+  assert.equal(d.msg.fps, 10);
+  assert.deepEqual(Array.from(d.msg.path), floats);
+  assert.equal(p.decodeClient(p.encodeExportCancel(4)).msg.export_id, 4);
+  // A long recording (60 Hz for a minute) is sampled again into MAX_EXPORT_POSES, ends kept.
+  const long = Array.from({ length: 3600 }, (_, k) => ({ t: k / 60, position: [k, 0, 0], orientation: [1, 0, 0, 0], fovDeg: 50 }));
+  const thin = vexport.pathFloats(long);
+  assert.equal(thin.length, 9 * vexport.MAX_EXPORT_POSES);
+  assert.equal(thin[0], 0);
+  assert.ok(Math.abs(thin[thin.length - 9] - 3599 / 60) < 1e-4);
+  assert.ok(Math.abs(thin[thin.length - 8] - 3599) < 1e-3);
+  // The server's message limit is 64 KiB (transport.h max_message_bytes); its default
+  // --export-max-poses (1800) fits too.
+  const bytes = (n) => p.encodeExportVideo({ exportId: 1, path: vexport.pathFloats(long, n), width: 3840, height: 2160, fps: 60, pipeline: 'exact' }).length;
+  assert.ok(bytes(vexport.MAX_EXPORT_POSES) < 65536, `${bytes(vexport.MAX_EXPORT_POSES)} bytes`);
+  assert.ok(bytes(1800) <= 65536, `${bytes(1800)} bytes`);
+  assert.throws(() => vexport.pathFloats(samples.slice(0, 1)), /at least 2 poses/);
+});
+
+test('ExportProgress and ExportChunk decode; chunks join in order; the bar\'s text', () => {
+  const p = proto.makeProtocol(pb.parse(protoText, { keepCase: true }).root);
+  const g = p.decodeServer(p.encodeServer({ export_progress: { export_id: 2, frames_done: 30, frames_total: 120, eta_ms: 95000 } }));
+  assert.equal(g.kind, 'export_progress');
+  assert.equal(vexport.progressText(g.msg), 'rendering 30/120 frames, 1:35 left');
+  assert.equal(vexport.progressText({ error: 'x is over --export-max-size' }), 'export failed: x is over --export-max-size');
+  assert.equal(vexport.progressText({ done: true, frames_total: 120, duration_s: 4, bytes: 2.5e6 }), 'rendered 120 frames (4.0 s), downloading 2.5 MB');
+  const c = p.decodeServer(p.encodeServer({ export_chunk: { export_id: 2, offset: 3, data: new Uint8Array([4, 5]), last: true } }));
+  assert.equal(c.kind, 'export_chunk');
+  const a = new vexport.ChunkAssembler(5);
+  assert.equal(a.add({ offset: 0, data: new Uint8Array([1, 2, 3]), last: false }), false);
+  assert.equal(a.add(c.msg), true);
+  assert.equal(a.received, 5);
+  assert.throws(() => new vexport.ChunkAssembler(5).add({ offset: 3, data: new Uint8Array(2) }), /expected 0/);
+  // A tour becomes samples every 0.1 s through its waypoints.
+  const keys = [[0, 0, 0], [2, 0, 0], [4, 0, 0]].map((position) => ({ position, orientation: [1, 0, 0, 0], fovDeg: 50 }));
+  const s = vexport.tourSamples(keys, 2);
+  assert.equal(s[s.length - 1].t, 4);
+  assert.ok(Math.abs(s[s.length - 1].position[0] - 4) < 1e-9);
+  assert.ok(s.length >= 40 && s.length <= 42);
+});

@@ -27,6 +27,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     case pb::ClientMessage::kQuality:
       (void)catgs::server::check_quality(m.quality());
       break;
+    case pb::ClientMessage::kExportVideo: {
+      catgs::server::ExportPlan plan;  // a valid path is sampled at its fps (36000 frames at most)
+      (void)catgs::server::check_export_request(m.export_video(), catgs::server::ExportLimits{}, plan);
+      break;
+    }
     default:
       break;
   }

@@ -72,6 +72,12 @@ SEEDS = {
     "bad_pose": connection(message(hello()), PAUSE,
                            message(encode("pose { sequence: 1 orientation { w: 1e200 } vertical_fov_deg: 55 }")), PAUSE),
     "unknown_scene": connection(message(hello(extra='scene: "nowhere"')), PAUSE),
+    # Export video: a two-pose path (refused here: the target's server has no author token), a
+    # cancel of an export that is not running, then the stream goes on.
+    "export": connection(message(hello()), PAUSE, message(encode(
+        "export_video { export_id: 1 width: 32 height: 24 fps: 10 "
+        + "".join(f"path: {v} " for v in [0, -0.12, -2.26, -1.5, 1, 0, 0, 0, 55, 0.5, -0.1, -2.26, -1.5, 1, 0, 0, 0, 55])
+        + "}")), PAUSE, message(encode("export_cancel { export_id: 1 }")), message(pose(1)), PAUSE, WRITTEN),
 }
 
 

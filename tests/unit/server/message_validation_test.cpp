@@ -112,4 +112,110 @@ TEST(MessageValidation, ShownLatencyIsFiniteAndBounded) {
   }
 }
 
+// ---- ExportVideoRequest (issue 38: "Export video" from the page) ----
+
+// A path of `poses` poses `dt` s apart, moving along x and looking down +z.
+pb::ExportVideoRequest export_request(int poses, float dt = 0.5f, std::uint32_t w = 160, std::uint32_t h = 90,
+                                      std::uint32_t fps = 10) {
+  pb::ExportVideoRequest r;
+  r.set_export_id(7);
+  r.set_width(w);
+  r.set_height(h);
+  r.set_fps(fps);
+  for (int k = 0; k < poses; ++k)
+    for (float v : {k * dt, 0.1f * k, 0.0f, -3.0f, 1.0f, 0.0f, 0.0f, 0.0f, 50.0f}) r.add_path(v);
+  return r;
+}
+
+std::string export_refusal(const pb::ExportVideoRequest& r, const ExportLimits& limits = {}) {
+  ExportPlan plan;
+  const auto bad = check_export_request(r, limits, plan);
+  if (!bad) return "";
+  EXPECT_EQ(bad->code, pb::ERROR_INVALID_ARGUMENT);
+  EXPECT_TRUE(plan.frames.empty()) << "a refused request filled the plan";
+  return bad->reason;
+}
+
+TEST(ExportValidation, AGoodPathIsSampledAtTheVideoRate) {
+  ExportPlan plan;
+  // 4 poses 0.5 s apart from t = 100 s: 1.5 s of path, 16 frames at 10 fps (t = 0 .. 1.5 s).
+  pb::ExportVideoRequest r = export_request(4);
+  for (int k = 0; k < 4; ++k) r.set_path(k * kExportFloatsPerPose, 100.0f + 0.5f * k);
+  r.set_pipeline("catgs");
+  ASSERT_FALSE(check_export_request(r, {}, plan).has_value());
+  EXPECT_EQ(plan.export_id, 7u);
+  EXPECT_EQ(plan.width, 160);
+  EXPECT_EQ(plan.height, 90);
+  EXPECT_EQ(plan.pipeline, catgs::Pipeline::catgs);
+  ASSERT_EQ(plan.frames.size(), 16u);
+  EXPECT_NEAR(plan.duration_s, 1.6, 1e-9);
+  EXPECT_NEAR(plan.frames[5].time_s, 0.5, 1e-6);
+  EXPECT_EQ(plan.frames[5].camera.width, 160);
+  // Frame 5 is pose 1 (x = 0.1); frame 2 is 40% of the way from pose 0 to pose 1.
+  EXPECT_NEAR(plan.frames[5].camera.position().x, 0.1f, 1e-5f);
+  EXPECT_NEAR(plan.frames[2].camera.position().x, 0.04f, 1e-5f);
+  r.clear_pipeline();
+  ASSERT_FALSE(check_export_request(r, {}, plan).has_value());
+  EXPECT_EQ(plan.pipeline, catgs::Pipeline::exact) << "the default is full quality";
+}
+
+TEST(ExportValidation, CapsNameTheirFlags) {
+  // A million poses: refused by count, before any pose is looked at.
+  EXPECT_NE(export_refusal(export_request(1000000))
+                .find("a path of 1000000 poses is over the server's "
+                      "--export-max-poses 1800"),
+            std::string::npos);
+  EXPECT_NE(export_refusal(export_request(4, 0.5f, 7680, 4320)).find("7680x4320 outside 16..4096"), std::string::npos);
+  EXPECT_NE(export_refusal(export_request(4, 0.5f, 4096, 2304)).find("over the server's --export-max-size 3840x2160"),
+            std::string::npos);
+  EXPECT_EQ(export_refusal(export_request(4, 0.5f, 2160, 3840)), "") << "portrait 4K fits as --max-viewport does";
+  EXPECT_NE(export_refusal(export_request(4, 0.5f, 160, 90, 120)).find("fps 120 outside 1..--export-max-fps 60"),
+            std::string::npos);
+  EXPECT_NE(export_refusal(export_request(4, 0.5f, 160, 90, 0)).find("fps 0"), std::string::npos);
+  // 11 minutes of path (two poses 660 s apart).
+  EXPECT_NE(export_refusal(export_request(2, 660.0f)).find("over the server's --export-max-seconds 600"),
+            std::string::npos);
+  ExportLimits tight;
+  tight.max_poses = 3;
+  tight.max_fps = 5;
+  tight.max_seconds = 1;
+  tight.max_width = 64;
+  tight.max_height = 64;
+  EXPECT_NE(export_refusal(export_request(4), tight).find("--export-max-poses 3"), std::string::npos);
+  EXPECT_NE(export_refusal(export_request(3, 0.25f, 96, 64, 5), tight).find("--export-max-size 64x64"),
+            std::string::npos);
+  EXPECT_EQ(export_refusal(export_request(3, 0.25f, 64, 64, 5), tight), "");
+  EXPECT_NE(export_refusal(export_request(3, 0.75f, 64, 64, 5), tight).find("--export-max-seconds 1"),
+            std::string::npos);
+}
+
+TEST(ExportValidation, BadPathsAreRefused) {
+  EXPECT_NE(export_refusal(export_request(1)).find("at least 2 poses"), std::string::npos);
+  pb::ExportVideoRequest r = export_request(3);
+  r.add_path(1.0f);
+  EXPECT_NE(export_refusal(r).find("28 floats, not 9 a pose"), std::string::npos);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  struct Case {
+    int field;  // of pose 1
+    float value;
+    const char* says;
+  };
+  for (const Case c : {Case{0, nan, "pose 1: time is NaN or Inf"}, Case{1, inf, "pose 1: Pose has NaN or Inf"},
+                       Case{6, nan, "pose 1: Pose has NaN or Inf"}, Case{8, 0.5f, "pose 1: vertical_fov_deg"},
+                       Case{0, -1.0f, "pose 1: time goes backwards"}}) {
+    r = export_request(3);
+    r.set_path(kExportFloatsPerPose + c.field, c.value);
+    EXPECT_NE(export_refusal(r).find(c.says), std::string::npos) << c.says << " / " << export_refusal(r);
+  }
+  r = export_request(3);
+  for (int i = 4; i < 8; ++i) r.set_path(kExportFloatsPerPose + i, 0.0f);
+  EXPECT_NE(export_refusal(r).find("pose 1: Pose orientation is a zero quaternion"), std::string::npos);
+  r = export_request(3, 0.5f, 161, 90);
+  EXPECT_NE(export_refusal(r).find("must be even"), std::string::npos);
+  r = export_request(3);
+  r.set_pipeline("warp");
+  EXPECT_NE(export_refusal(r).find("unknown pipeline 'warp'"), std::string::npos);
+}
+
 }  // namespace

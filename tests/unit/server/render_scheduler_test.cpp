@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <algorithm>
 #include <chrono>
+#include <condition_variable>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -34,6 +37,113 @@ TEST(RenderScheduler, SessionsTakeTurns) {
   ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
   s.stop();
   EXPECT_EQ(order, (std::vector<int>{1, 2, 3, 1, 2, 1, 1}));
+}
+
+// Video export frames (post_background) run only when no session's job is queued: posted first,
+// they still go after every live job, and an export that posts its next frame after each one
+// (as session/export_pipeline.cpp does) lets the live jobs queued meanwhile go first.
+TEST(RenderScheduler, BackgroundJobsYieldToLiveJobs) {
+  RenderScheduler s;
+  std::mutex mutex;
+  std::vector<int> order;  // 0: a background job, else the live owner
+  auto record = [&](int who) {
+    std::lock_guard<std::mutex> lock(mutex);
+    order.push_back(who);
+  };
+  s.post_background(7, 100, [&] { record(0); });
+  s.post_background(7, 100, [&] { record(0); });
+  s.post(1, 100, [&] { record(1); });
+  s.post(2, 100, [&] { record(2); });
+  s.post(1, 100, [&] { record(1); });
+  s.start(1, 1000);
+  ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+  EXPECT_EQ(order, (std::vector<int>{1, 2, 1, 0, 0}));
+
+  // A self-reposting export: each of its frames queues a live job, which runs before its next frame.
+  order.clear();
+  std::function<void(int)> frame = [&](int left) {
+    record(0);
+    s.post(3, 100, [&] { record(3); });
+    if (left > 1) s.post_background(7, 100, [&frame, left] { frame(left - 1); });
+  };
+  s.post_background(7, 100, [&frame] { frame(3); });
+  ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+  s.stop();
+  EXPECT_EQ(order, (std::vector<int>{0, 3, 0, 3, 0, 3}));
+}
+
+// With several lanes, one stays free for live work: background jobs never take the last one. The
+// background jobs here hold their lanes until the live job has run: were no lane left for it,
+// they would wait out their 5 s and say so.
+TEST(RenderScheduler, BackgroundJobsLeaveALaneForLiveWork) {
+  RenderScheduler s;
+  std::mutex mutex;
+  std::condition_variable live_ran;
+  bool live_done = false;
+  int background_now = 0, background_peak = 0, timed_out = 0;
+  auto blocking = [&] {
+    std::unique_lock<std::mutex> lock(mutex);
+    background_peak = std::max(background_peak, ++background_now);
+    if (!live_ran.wait_for(lock, std::chrono::seconds(5), [&] { return live_done; })) timed_out++;
+    background_now--;
+  };
+  for (int k = 0; k < 4; ++k) s.post_background(static_cast<RenderScheduler::Owner>(k), 10, blocking);
+  s.start(3, 1000);
+  while (true) {  // both lanes the background may have are taken
+    std::lock_guard<std::mutex> lock(mutex);
+    if (background_now == 2) break;
+  }
+  s.post(1, 10, [&] {
+    std::lock_guard<std::mutex> lock(mutex);
+    live_done = true;
+    live_ran.notify_all();
+  });
+  ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(20)));
+  s.stop();
+  EXPECT_EQ(timed_out, 0) << "the live job did not get the lane left for it";
+  EXPECT_EQ(background_peak, 2) << "3 lanes: at most 2 background jobs at once";
+}
+
+// A background job also waits while a live job runs (it would share the device with it), up to
+// the yield; then it runs beside it, so that a busy server still exports.
+TEST(RenderScheduler, BackgroundJobsWaitForAGapUpToTheYield) {
+  for (const bool long_yield : {true, false}) {
+    SCOPED_TRACE(long_yield ? "yield 20 s: waits for the live job" : "yield 30 ms: runs beside it");
+    RenderScheduler s;
+    s.set_background_yield(std::chrono::milliseconds(long_yield ? 20000 : 30));
+    std::mutex mutex;
+    std::condition_variable changed;
+    bool live_started = false, background_ran = false, release = false, ran_beside = false;
+    s.start(3, 1000);
+    s.post(1, 10, [&] {
+      std::unique_lock<std::mutex> lock(mutex);
+      live_started = true;
+      changed.notify_all();
+      // Held until the test releases it, or (short yield) until the background job has run.
+      changed.wait_for(lock, std::chrono::seconds(5), [&] { return release || background_ran; });
+      ran_beside = background_ran;
+    });
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      changed.wait(lock, [&] { return live_started; });
+    }
+    s.post_background(7, 10, [&] {
+      std::lock_guard<std::mutex> lock(mutex);
+      background_ran = true;
+      changed.notify_all();
+    });
+    if (long_yield) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      std::lock_guard<std::mutex> lock(mutex);
+      EXPECT_FALSE(background_ran) << "it ran beside a live job within its yield";
+      release = true;
+      changed.notify_all();
+    }
+    ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+    s.stop();
+    EXPECT_TRUE(background_ran);
+    EXPECT_EQ(ran_beside, !long_yield);
+  }
 }
 
 TEST(RenderScheduler, PixelsInFlightStayWithinTheCap) {
