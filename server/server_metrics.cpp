@@ -100,6 +100,9 @@ std::string ServerMetrics::prometheus_text() const {
       scene_load_failures_total.load());
   put("catgs_scene_unloads_total", "counter", "Unused scenes unloaded to stay within --scene-memory-mb.",
       scene_unloads_total.load());
+  put("catgs_exports_running", "gauge", "Video exports rendering now (at most --export-max-concurrent).",
+      exports_running.load());
+  put("catgs_export_frames_total", "counter", "Frames rendered for video exports.", export_frames_total.load());
   head("catgs_render_frames_total", "counter",
        "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
   o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'
@@ -122,6 +125,10 @@ std::string ServerMetrics::prometheus_text() const {
   labelled("catgs_rate_limited_total", "Hellos refused and sessions ended for going past a --rate-limits limit.",
            "kind", rate_limited_total,
            {"hello", "auth", "ping", "key_frame", "resize", "quality", "depth", "save", "export"});
+  labelled("catgs_exports_total",
+           "Video exports ended: sent (the file went to the page), failed, cancelled (Cancel, or the page closed), "
+           "refused (the request was refused).",
+           "result", exports_total, {"sent", "failed", "cancelled", "refused"});
   labelled("catgs_unauthorized_total", "Wrong or missing tokens: in a Hello, or for /metrics.", "what",
            unauthorized_total, {"hello", "metrics"});
 

@@ -25,6 +25,11 @@
 //                              (session/scene_store.h; a GPU copy per device besides)
 //   catgs_scene_loads_total, catgs_scene_load_failures_total, catgs_scene_unloads_total
 //                              loads finished / failed, scenes unloaded for --scene-memory-mb
+//   catgs_exports_running      video exports rendering now (session/export_pipeline.cpp)
+//   catgs_exports_total{result}  exports ended: sent (the file went to the page), failed,
+//                              cancelled (Cancel, or the page closed), refused (ExportVideoRequest
+//                              refused: role, caps, one running)
+//   catgs_export_frames_total  frames rendered for exports
 #pragma once
 
 #include <atomic>
@@ -96,6 +101,14 @@ struct ServerMetrics {
   // that finished, loads that failed and unloads under --scene-memory-mb.
   std::atomic<std::int64_t> scenes_loaded{0}, scene_bytes{0};
   std::atomic<std::uint64_t> scene_loads_total{0}, scene_load_failures_total{0}, scene_unloads_total{0};
+
+  // Video export from the page: the render slots taken now (each export holds one while it
+  // renders; --export-max-concurrent bounds it), how exports ended, and their frames.
+  std::atomic<int> exports_running{0};
+  enum class ExportEnd { sent, failed, cancelled, refused };
+  std::atomic<std::uint64_t> exports_total[4]{};
+  std::atomic<std::uint64_t> export_frames_total{0};
+  void count(ExportEnd e) { exports_total[static_cast<int>(e)]++; }
 
   // Hardening (issue 22). Each array is indexed by the enum named beside it.
   std::atomic<std::uint64_t> refused_upgrades_total[4]{};  // transport.h Refusal

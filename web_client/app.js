@@ -276,6 +276,9 @@ function onWelcome(w) {
   state.connection.markHealthy();
   state.decoder.reset();
   overlay.setSession(w);
+  // Export video only where the server would take it (an author's or admin's session on a server
+  // with export built in); a viewer's request would be refused anyway.
+  $('export-controls').hidden = !w.can_export;
   $('scene-picker').value = w.scene_name;
   // A page opened while the server was still starting got no scene list: ask again now.
   if (!scenePickerLoaded) loadScenePicker();

@@ -33,6 +33,13 @@ void Session::refuse_export(std::uint32_t export_id, const std::string& why) {
   m.mutable_export_progress()->set_export_id(export_id);
   m.mutable_export_progress()->set_error(why);
   send(m);
+  shared_.metrics.count(ServerMetrics::ExportEnd::refused);
+}
+
+bool Session::may_export() const {
+  const ServerOptions& o = shared_.options;
+  return video_export_built() && role_ >= Role::author && o.export_limits.max_concurrent > 0 &&
+         !shared_.export_folder.empty();
 }
 
 void Session::handle_export(const pb::ExportVideoRequest& request) {
@@ -54,8 +61,8 @@ void Session::handle_export(const pb::ExportVideoRequest& request) {
         id, "export " + std::to_string(export_->video->id()) + " is still running: cancel it or wait for its file");
   ExportPlan plan;
   if (auto bad = check_export_request(request, o.export_limits, plan)) return refuse_export(id, bad->reason);
-  if (++shared_.exports_running > o.export_limits.max_concurrent) {
-    shared_.exports_running--;
+  if (++shared_.metrics.exports_running > o.export_limits.max_concurrent) {
+    shared_.metrics.exports_running--;
     return refuse_export(id, "the server is already rendering " + std::to_string(o.export_limits.max_concurrent) +
                                  " export(s) (--export-max-concurrent): try again later");
   }
@@ -79,7 +86,7 @@ void Session::handle_export_cancel(const pb::ExportCancel& cancel) {
   if (!export_ || export_->video->id() != cancel.export_id()) return;  // over already, or never was
   std::cerr << "[session " << id_ << " " << session_id_ << "] export " << cancel.export_id() << " cancelled\n";
   send_export_progress({}, /*cancelled=*/true);
-  end_export();
+  end_export(ServerMetrics::ExportEnd::cancelled);
 }
 
 void Session::post_export_step() {
@@ -104,7 +111,7 @@ void Session::on_export_step(const std::shared_ptr<VideoExport>& video, bool fin
   if (!error.empty()) {
     std::cerr << "[session " << id_ << " " << session_id_ << "] export " << video->id() << " failed: " << error << "\n";
     send_export_progress("rendering failed: " + error);
-    return end_export();
+    return end_export(ServerMetrics::ExportEnd::failed);
   }
   const auto now = Clock::now();
   if (!finished) {
@@ -115,14 +122,14 @@ void Session::on_export_step(const std::shared_ptr<VideoExport>& video, bool fin
     return post_export_step();
   }
   // Rendered: the slot goes to the next export; the file goes to the page.
-  shared_.exports_running--;
+  shared_.metrics.exports_running--;
   export_->holds_slot = false;
   std::error_code ec;
   const auto size = std::filesystem::file_size(video->path(), ec);
   export_->file = std::make_unique<std::ifstream>(video->path(), std::ios::binary);
   if (ec || size == 0 || !*export_->file) {
     send_export_progress("cannot read the finished file" + (ec ? ": " + ec.message() : std::string()));
-    return end_export();
+    return end_export(ServerMetrics::ExportEnd::failed);
   }
   export_->size = static_cast<double>(size);
   export_->sending = true;
@@ -165,7 +172,7 @@ void Session::send_export_chunks() {
     data->resize(n);
     if (!e.file->read(data->data(), static_cast<std::streamsize>(n))) {
       send_export_progress("cannot read the finished file at byte " + std::to_string(static_cast<long long>(e.sent)));
-      return end_export();
+      return end_export(ServerMetrics::ExportEnd::failed);
     }
     e.sent += static_cast<double>(n);
     c->set_last(e.sent >= e.size);
@@ -173,14 +180,16 @@ void Session::send_export_chunks() {
   }
   if (e.sent >= e.size) {
     std::cerr << "[session " << id_ << " " << session_id_ << "] export " << e.video->id() << " sent\n";
-    end_export();  // the page has it (queued): the server's copy goes
+    end_export(ServerMetrics::ExportEnd::sent);  // the page has it (queued): the server's copy goes
   }
 }
 
-void Session::end_export() {
+void Session::end_export(ServerMetrics::ExportEnd how) {
   if (!export_) return;
+  shared_.metrics.export_frames_total += static_cast<std::uint64_t>(export_->video->frames_done());
+  shared_.metrics.count(how);
   export_->video->cancel();  // a step in flight renders nothing more
-  if (export_->holds_slot) shared_.exports_running--;
+  if (export_->holds_slot) shared_.metrics.exports_running--;
   export_.reset();  // the file goes with the last reference (a step job's, when one runs)
 }
 

@@ -145,7 +145,8 @@ ViewportLimit Session::viewport_limit() const {
 void Session::end_open_state() {
   if (pending_) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
   pending_.reset();
-  end_export();        // a closed page gets no file: its rendering stops and its file goes
+  // A closed page gets no file: its rendering stops and its file goes.
+  end_export(ServerMetrics::ExportEnd::cancelled);
   scene_use_.reset();  // the scene may be unloaded now (a wait for its load is withdrawn)
   if (counted_open_) {
     counted_open_ = false;
@@ -395,6 +396,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   set_vec3(w->mutable_orbit_centre(), scene_->frame.orbit_centre);
   set_vec3(w->mutable_up(), scene_->frame.up);
   w->set_scene_scale(scene_->frame.scene_scale);
+  w->set_can_export(may_export());
   w->set_codec(pb::CODEC_H264);
   w->set_width(static_cast<std::uint32_t>(width_));
   w->set_height(static_cast<std::uint32_t>(height_));

@@ -73,11 +73,10 @@ struct SessionShared {
   std::atomic<std::chrono::steady_clock::time_point> drain_deadline{};
   // Hello and failed-token limits per client address (a new connection per attempt).
   PeerLimiter peers{options.rate_limits};
-  // Video exports rendering now, server-wide (--export-max-concurrent), and the folder of their
-  // files (video_export.h export_folder(); set by the server at start-up, empty when exports
-  // are off or not built).
-  std::atomic<int> exports_running{0};
-  std::string export_folder;
+  // The folder of video exports' files (video_export.h export_folder(); set by the server at
+  // start-up, empty when exports are off or not built). The exports rendering now, server-wide
+  // (--export-max-concurrent), are metrics.exports_running.
+  std::string export_folder = {};
 };
 
 // Error.retry_after_ms hints, ms. Each Error carries base .. 2 x base, drawn uniformly, so the
@@ -167,6 +166,9 @@ class Session : public std::enable_shared_from_this<Session> {
   // and authorised here, one frame per background job on the render lanes, progress to the page,
   // then the file in chunks.
   void handle_export(const pb::ExportVideoRequest& request);
+  // Whether this session's requests would get past the build, folder and role checks (Welcome's
+  // can_export): the page hides what the server would refuse anyway.
+  bool may_export() const;
   void handle_export_cancel(const pb::ExportCancel& cancel);
   void post_export_step();  // the export's next frame, at low priority
   // On the strand: a step of `video` ended (finished: the file is complete; error: it failed).
@@ -176,7 +178,7 @@ class Session : public std::enable_shared_from_this<Session> {
   void refuse_export(std::uint32_t export_id, const std::string& why);  // ExportProgress.error
   void send_export_chunks();  // the finished file's next chunks, a few queued at a time
   // Ends the session's export: its slot (if still rendering) and its file go.
-  void end_export();
+  void end_export(ServerMetrics::ExportEnd how);
   // Annotations after Welcome: the file beside the scene, or its error (the scene opens anyway).
   void send_annotations();
   // --adaptive-quality, on the tick: applies AdaptiveQuality's rule and queues a refine frame.
@@ -258,7 +260,7 @@ class Session : public std::enable_shared_from_this<Session> {
   // sending its file. Null when there is none.
   struct Export {
     std::shared_ptr<VideoExport> video;
-    bool holds_slot = false;  // counts in shared_.exports_running (while rendering)
+    bool holds_slot = false;  // counts in metrics.exports_running (while rendering)
     bool sending = false;     // finished: its file goes out in chunks
     Clock::time_point started, last_progress;
     std::unique_ptr<std::ifstream> file;

@@ -101,7 +101,7 @@ async function scenarios(tmp) {
   const exportDir = path.join(tmp, 'exports');
   mkdirSync(exportDir);
   writeFileSync(path.join(exportDir, 'catgs-export-0badc0de.mp4'), 'left by a killed server');
-  writeFileSync(path.join(tmp, 'tokens'), 'author A1\nviewer V1\n');
+  writeFileSync(path.join(tmp, 'tokens'), 'author A1\nviewer V1\nadmin X1\n');
   const base = await run.startServer(['--token-file', path.join(tmp, 'tokens'), '--export-dir', exportDir,
     '--export-max-size', '640x360', '--export-max-seconds', '20']);
 
@@ -186,13 +186,30 @@ async function scenarios(tmp) {
   await page.close();
 
   // ---- a viewer may not export ----
+  // The page hides Export video from a viewer (Welcome.can_export); a request sent anyway (through
+  // the hook, as a hand-made client would) is refused by the server.
   const viewer = await openPage(`${base}/?token=V1`);
   await recordPath(viewer, 3);
-  await pickSize(viewer, '160x90', 10);
-  const no = await exportRefusal(viewer);
-  check(/needs an author or admin token/.test(no), `a viewer's export is refused: "${no}"`);
+  if (!(await viewer.isVisible('#paths'))) await viewer.click('#btn-paths');
+  check(!(await viewer.isVisible('#btn-export-video')) && !(await hook(viewer, () => window.catgs.welcome.can_export)),
+    'a viewer\'s page shows no Export video (Welcome.can_export is false)');
+  await hook(viewer, () => window.catgs.exportVideo({ size: '160x90', fps: 10 }));
+  const no = await waitFor('the refusal', async () => {
+    const s = await hook(viewer, () => window.catgs.videoExport);
+    return s.progress && s.progress.error;
+  }, 10000);
+  check(/needs an author or admin token/.test(no), `a viewer's export sent anyway is refused: "${no}"`);
   await streamsOn(viewer, 'the viewer\'s refused export');
   await viewer.close();
+
+  // ---- /metrics counts what happened above: one export sent, one cancelled, three refused ----
+  const metrics = await fetch(`${base}/metrics`, { headers: { Authorization: 'Bearer X1' } }).then((r) => r.text());
+  const value = (series) => Number((metrics.match(new RegExp(`^${series.replace(/[{}"]/g, '\\$&')} (\\S+)$`, 'm')) || [])[1]);
+  const counts = ['sent', 'cancelled', 'failed', 'refused'].map((r) => value(`catgs_exports_total{result="${r}"}`));
+  check(counts.join() === '1,1,0,3' && value('catgs_exports_running') === 0,
+    `/metrics counts the exports (sent, cancelled, failed, refused: ${counts.join(', ')}; running ${value('catgs_exports_running')})`);
+  check(value('catgs_export_frames_total') >= frames,
+    `/metrics counts the export frames (${value('catgs_export_frames_total')}, at least the ${frames} of the sent one)`);
 }
 
 process.exit(await run.main(chromium, chromiumPath, { viewport: VIEW, acceptDownloads: true }, async (ctx, tmp) => {
