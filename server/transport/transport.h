@@ -157,6 +157,7 @@ class Transport final : public ConnectionLink {
     std::deque<Outgoing> queue;
     bool closing = false;      // no more sends accepted
     bool close_armed = false;  // the service thread has set the close timeout
+    bool close_sent = false;   // the close frame is lws's now: it waits for the peer's answer
     int grace_ms = 2000;
     std::string rx;  // message being reassembled
     bool rx_oversize = false;
