@@ -394,6 +394,30 @@ TEST(Hardening, PerSessionRateLimits) {
   EXPECT_EQ(good.error(), "");
 }
 
+// A session ended for a flood closes with the WebSocket closing handshake (RFC 6455 sec. 7.1.1):
+// the Error, then the server's close frame, and the server waits for the client's close frame
+// before it ends the TCP connection. Hanging up first made the flood's remaining messages, and the
+// client's close frame, meet a closed socket and draw a reset, which made Chromium drop the Error
+// and the close frame unread now and then (e2e_browser_notes: close code 1006 and no reason).
+TEST(Hardening, RateLimitedSessionEndsWithTheClosingHandshake) {
+  ServerProcess server(server_args(kBiker, {"--rate-limits", "ping=2/4"}));
+  loadgen::StreamClient flood;
+  flood.connect(server.port());
+  flood.hello(64, 64);
+  for (int i = 0; i < 60; ++i) flood.send(ping_message());  // the burst is 4: 56 reach a closing session
+  auto e = expect_error(flood, 5000);
+  ASSERT_TRUE(e) << "no Error for a flood";
+  EXPECT_EQ(e->code(), pb::ERROR_RATE_LIMITED) << e->reason();
+  std::string payload;
+  bool binary = false;
+  loadgen::WsClient::Recv r;
+  while ((r = flood.ws().recv(payload, binary, 5000)) == loadgen::WsClient::Recv::message) {}
+  ASSERT_EQ(r, loadgen::WsClient::Recv::closed) << "no close frame after the Error";
+  EXPECT_EQ(flood.ws().close_code(), 1000) << "the connection ended without the server's close frame";
+  EXPECT_FALSE(flood.ws().peer_hung_up(500)) << "the server hung up before the client's close frame";
+  flood.ws().close();
+}
+
 // A flood of Hellos (new connections) from one address past its rate gets ERROR_RATE_LIMITED
 // with a retry hint; a session already open keeps its frames.
 TEST(Hardening, HelloFloodFromOneAddress) {

@@ -264,8 +264,12 @@ WsClient::Recv WsClient::recv(std::string& payload, bool& binary, int timeout_ms
     int opcode = 0;
     std::string data;
     while (parse_frame(fin, opcode, data)) {
-      if (opcode == 0x8) return Recv::closed;  // close frame
-      if (opcode == 0x9) {                     // ping -> pong
+      if (opcode == 0x8) {  // close frame: its status code first, when it has one
+        if (data.size() >= 2)
+          close_code_ = (static_cast<unsigned char>(data[0]) << 8) | static_cast<unsigned char>(data[1]);
+        return Recv::closed;
+      }
+      if (opcode == 0x9) {  // ping -> pong
         send_frame(0xA, data);
         continue;
       }
@@ -286,6 +290,15 @@ WsClient::Recv WsClient::recv(std::string& payload, bool& binary, int timeout_ms
     if (n < 0) return Recv::closed;
     if (n == 0 && remaining_ms(deadline) == 0) return Recv::timeout;
   }
+}
+
+bool WsClient::peer_hung_up(int timeout_ms) {
+  if (fd_ < 0 || ssl_ || !rx_.empty()) return false;
+  pollfd p{fd_, POLLIN, 0};
+  if (::poll(&p, 1, timeout_ms) <= 0) return false;
+  char c;
+  const ssize_t n = ::recv(fd_, &c, 1, MSG_PEEK | MSG_DONTWAIT);
+  return n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR);
 }
 
 void WsClient::close() {

@@ -47,6 +47,14 @@ class WsClient {
   // `closed` when the server closed (close frame or EOF) or the socket failed.
   Recv recv(std::string& payload, bool& binary, int timeout_ms);
 
+  // The status code of the server's close frame once recv() returned `closed` for one (RFC 6455
+  // sec. 7.1.5); 0 before, or when the connection ended without a close frame.
+  int close_code() const { return close_code_; }
+  // Whether the server ended the TCP connection (EOF or reset) within `timeout_ms`, with nothing
+  // unread before it. A server that sent its close frame must wait for ours (RFC 6455 sec. 7.1.1):
+  // tests check it does not hang up first. Plain TCP only (false under TLS).
+  bool peer_hung_up(int timeout_ms);
+
   // Sends a close frame and closes the socket.
   void close();
   // Closes the TCP connection at once, without a WebSocket close frame (RST via SO_LINGER 0).
@@ -64,6 +72,7 @@ class WsClient {
   bool parse_frame(bool& fin, int& opcode, std::string& payload);
 
   int fd_ = -1;
+  int close_code_ = 0;
   bool tls_ = false;
   ssl_ctx_st* ssl_ctx_ = nullptr;
   ssl_st* ssl_ = nullptr;
