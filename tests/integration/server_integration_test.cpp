@@ -536,8 +536,22 @@ TEST(ServerIntegration, HostileLargeFramesDoNotStallOthers) {
   ServerProcess server(server_args(kBiker, {"--max-sessions", "64"}));  // a session cap does not help
   GoodClient good(server.port());
   ASSERT_TRUE(good.wait_frames(3)) << good.error();
-  good.reset_gaps();
   const Trace orbit = biker_orbit(3840, 2160, 4);
+  // What one 4K CPU render costs here and now (a 2-core CI runner beside other tests' servers, a
+  // developer's machine beside a build): the bound below scales with it.
+  double render_4k_ms = 0;
+  {
+    StreamClient probe;
+    probe.connect(server.port());
+    probe.hello(3840, 2160);
+    const auto t0 = Clock::now();
+    probe.send_pose(pose_from_camera(orbit[0].camera, 1, now_ms()));
+    for (auto m = probe.recv(60000); m && !m->has_frame(); m = probe.recv(60000)) {}
+    render_4k_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    probe.ws().close();
+  }
+  ASSERT_TRUE(good.wait_frames(2)) << good.error();
+  good.reset_gaps();
   const auto attack_start = Clock::now();
   for (int round = 0; round < 3; ++round) {
     std::vector<std::unique_ptr<StreamClient>> hostile;
@@ -553,11 +567,14 @@ TEST(ServerIntegration, HostileLargeFramesDoNotStallOthers) {
   const double attack_ms = std::chrono::duration<double, std::milli>(Clock::now() - attack_start).count();
   ASSERT_TRUE(good.wait_frames(10, 60000)) << good.error();
   const double gap = good.max_gap_ms();
+  // A 4K CPU render may be in progress on each render lane when the attack ends (a hostile session
+  // still connected is served in its turn), sharing the cores with the healthy session's render;
+  // nothing like the backlog of every hostile render (60 renders over 4 lanes: 15 in a row).
+  const double bound = std::max(5000.0, 3.0 * render_4k_ms);
   std::cout << "[ info ] 60 hostile 3840x2160 Hello+Pose+reset connections over " << attack_ms
-            << " ms; the healthy session's longest frame gap: " << gap << " ms\n";
-  // One 4K CPU render may be in progress when the attack starts (a hostile session still
-  // connected is served in its turn); nothing like the backlog of every hostile render.
-  EXPECT_LT(gap, 5000.0) << "healthy session stalled";
+            << " ms; the healthy session's longest frame gap: " << gap << " ms (bound " << bound
+            << " ms: one 4K render took " << render_4k_ms << " ms)\n";
+  EXPECT_LT(gap, bound) << "healthy session stalled";
   std::string metrics;
   http_get(server.port(), "/metrics", metrics);
   std::cout << "[ info ] frames dropped (hostile renders skipped or discarded): "
