@@ -2,10 +2,12 @@
 // the merge against direct formulas, the eigen solver against its input, the cut property on
 // trees built from real scenes, renders of a small real city against the full-detail model on
 // both CPU pipelines, and LOD files.
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <numeric>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -18,6 +20,7 @@
 #include "scene/scene_cache.h"
 #include "scene_tools/city.h"
 #include "scene_tools/lod_build.h"
+#include "scene_tools/lod_cluster.h"
 #include "scene_tools/lod_merge.h"
 #include "scene_tools/morton.h"
 #include "test_data.h"
@@ -115,9 +118,11 @@ TEST(LodMerge, TwoGaussiansApartMatchTheMixtureMoments) {
   const glm::dmat3 cov = second - glm::outerProduct(mu, mu);
   for (int a = 0; a < 3; ++a) EXPECT_NEAR(one.means[a], mu[a], 1e-5);
   EXPECT_LT(max_abs_diff(covariance_of(one, 0), cov), 1e-5 * (cov[0][0] + cov[1][1] + cov[2][2]));
+  // The colour: weighted by opacity alone (lod_merge.h says why).
   const std::size_t K3 = pair.sh.size() / 2;
+  const double a0 = fm::sigmoid(pair.opacity_logits[0]), a1 = fm::sigmoid(pair.opacity_logits[1]);
   for (std::size_t c = 0; c < K3; ++c)
-    EXPECT_NEAR(one.sh[c], (w[0] * pair.sh[c] + w[1] * pair.sh[K3 + c]) / w_sum, 1e-5);
+    EXPECT_NEAR(one.sh[c], (a0 * pair.sh[c] + a1 * pair.sh[K3 + c]) / (a0 + a1), 1e-5);
 }
 
 TEST(LodMerge, EigenSolverReconstructsItsInput) {
@@ -148,6 +153,64 @@ TEST(LodMerge, EigenSolverReconstructsItsInput) {
     const glm::mat3 r = fm::quat_to_mat(quaternion_of(v));
     EXPECT_LT(max_abs_diff(glm::dmat3(r), v), 1e-6) << t;
   }
+}
+
+// --- Clusters: a median kd split of a node's Gaussians ------------------------------------------
+
+// A 16 x 16 x 8 lattice (spacing 1, shuffled, offset) has one right answer for 256 equal
+// clusters that are as small as can be: its 2 x 2 x 2 blocks (a cluster of 8 lattice points
+// any wider spans a gap of at least one spacing).
+TEST(LodCluster, ALatticeSplitsIntoItsBlocks) {
+  std::vector<float> means;
+  for (int x = 0; x < 16; ++x)
+    for (int y = 0; y < 16; ++y)
+      for (int z = 0; z < 8; ++z)
+        for (float v : {x + 3.0f, y + 5.0f, z + 1.0f}) means.push_back(v);
+  std::vector<uint32_t> items(means.size() / 3);
+  std::iota(items.begin(), items.end(), 0u);
+  std::shuffle(items.begin(), items.end(), std::mt19937(37));
+  const std::vector<std::size_t> bounds = kd_clusters(means.data(), items, 256);
+  ASSERT_EQ(bounds.size(), 257u);
+  std::vector<int> seen(items.size());
+  for (std::size_t r = 0; r < 256; ++r) {
+    ASSERT_EQ(bounds[r + 1] - bounds[r], 8u) << "cluster " << r;
+    for (int a = 0; a < 3; ++a) {
+      float lo = INFINITY, hi = -INFINITY;
+      for (std::size_t k = bounds[r]; k < bounds[r + 1]; ++k) {
+        lo = std::min(lo, means[3 * items[k] + a]);
+        hi = std::max(hi, means[3 * items[k] + a]);
+      }
+      EXPECT_EQ(hi - lo, 1.0f) << "cluster " << r << " axis " << a;  // one block, not two
+    }
+    for (std::size_t k = bounds[r]; k < bounds[r + 1]; ++k) ++seen[items[k]];
+  }
+  for (std::size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i], 1) << "item " << i;
+}
+
+// Random counts: every item once, sizes floor or ceil of the mean, and fewer items than
+// clusters leave the rest empty.
+TEST(LodCluster, SizesAreEvenAndEveryItemIsKept) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-5.0f, 5.0f);
+  for (std::size_t n : {0ul, 1ul, 100ul, 255ul, 256ul, 257ul, 1000ul, 2048ul}) {
+    std::vector<float> means(3 * n);
+    for (float& v : means) v = u(rng);
+    std::vector<uint32_t> items(n);
+    std::iota(items.begin(), items.end(), 0u);
+    const std::vector<std::size_t> bounds = kd_clusters(means.data(), items, 256);
+    ASSERT_EQ(bounds.front(), 0u);
+    ASSERT_EQ(bounds.back(), n);
+    for (std::size_t r = 0; r < 256; ++r) {
+      ASSERT_LE(bounds[r], bounds[r + 1]) << n;
+      EXPECT_GE(bounds[r + 1] - bounds[r], n / 256) << n << " cluster " << r;
+      EXPECT_LE(bounds[r + 1] - bounds[r], (n + 255) / 256) << n << " cluster " << r;
+    }
+    std::vector<uint32_t> sorted = items;
+    std::sort(sorted.begin(), sorted.end());
+    for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(sorted[i], i) << n;
+  }
+  std::vector<uint32_t> none;
+  EXPECT_THROW(kd_clusters(nullptr, none, 0), std::invalid_argument);
 }
 
 // Every leaf chunk has exactly one drawn node among itself and its ancestors.

@@ -11,6 +11,7 @@
 
 #include "cpu/cpu_renderer.h"  // parallel_for
 #include "forward_model/chunk_bounds.h"
+#include "scene_tools/lod_cluster.h"
 #include "scene_tools/lod_merge.h"
 #include "scene_tools/morton.h"
 
@@ -78,13 +79,14 @@ void build_node(GaussianModel& out, std::size_t chunk, std::size_t child_begin, 
       node.hi[a] = std::max(node.hi[a], child.hi[a]);
     }
   }
-  const std::size_t m = visible.size(), K3 = static_cast<std::size_t>(out.sh_coeffs()) * 3;
+  const std::size_t K3 = static_cast<std::size_t>(out.sh_coeffs()) * 3;
+  const std::vector<std::size_t> runs = kd_clusters(out.means.data(), visible, kChunk);
   double spread_sq = 0.0, weight = 0.0;  // the node's weighted mean square spread
   const std::size_t first = chunk * kChunk;
   std::size_t anchor = child_begin * kChunk;  // where padding sits (below)
   bool anchored = false;
   for (std::size_t r = 0; r < kChunk; ++r) {
-    const std::size_t lo = r * m / kChunk, hi = (r + 1) * m / kChunk, g = first + r;
+    const std::size_t lo = runs[r], hi = runs[r + 1], g = first + r;
     if (lo == hi) continue;  // padding, written below once the chunk's first mean is known
     const MergedGaussian merged = merge_gaussians(out, visible.data() + lo, static_cast<int>(hi - lo), &out.sh[g * K3]);
     for (int a = 0; a < 3; ++a) {
@@ -100,7 +102,7 @@ void build_node(GaussianModel& out, std::size_t chunk, std::size_t child_begin, 
   // Padding sits on the chunk's first merged mean (or its first child's first mean when nothing
   // was visible), so it widens no chunk bound.
   for (std::size_t r = 0; r < kChunk; ++r)
-    if (r * m / kChunk == (r + 1) * m / kChunk) write_padding(out, first + r, &out.means[3 * anchor]);
+    if (runs[r] == runs[r + 1]) write_padding(out, first + r, &out.means[3 * anchor]);
   const double spread = weight > 0.0 ? std::sqrt(spread_sq / weight) : 0.0;
   node.error = std::max(child_error + static_cast<float>(spread), kMinMergeError);
   out.lod[chunk] = node;

@@ -107,9 +107,11 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
     weight = w_heap.data();
   }
   double w_sum = 0.0, depth = 0.0;  // depth: the optical depth integral, sum tau_i a_i
+  double alpha_sum = 0.0;           // the colour's weights (see the header)
   for (int k = 0; k < count; ++k) {
     const uint32_t i = index[k];
     const double alpha = fm::sigmoid(m.opacity_logits[i]);
+    alpha_sum += alpha;
     const double area = two_largest(std::exp(m.log_scales[3 * i]), std::exp(m.log_scales[3 * i + 1]),
                                     std::exp(m.log_scales[3 * i + 2]));
     weight[k] = alpha * area;
@@ -138,8 +140,13 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
   cov /= w_sum;
   for (std::size_t c = 0; c < K3; ++c) {
     double sum = 0.0;
-    for (int k = 0; k < count; ++k) sum += weight[k] * m.sh[index[k] * K3 + c];
-    sh_out[c] = static_cast<float>(sum / w_sum);
+    if (alpha_sum > 0.0) {
+      for (int k = 0; k < count; ++k) sum += fm::sigmoid(m.opacity_logits[index[k]]) * m.sh[index[k] * K3 + c];
+      sh_out[c] = static_cast<float>(sum / alpha_sum);
+    } else {
+      for (int k = 0; k < count; ++k) sum += m.sh[index[k] * K3 + c];
+      sh_out[c] = static_cast<float>(sum / count);
+    }
   }
   glm::dvec3 lambda;
   glm::dmat3 axes;

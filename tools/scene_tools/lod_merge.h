@@ -38,7 +38,11 @@ struct MergedGaussian {
 //   devs (the area of its largest cross-section, over pi): what it covers on screen when seen
 //   face-on, the H3DGS weight (opacity times surface); all weights 0 falls back to equal ones;
 // - mean = sum w_i mu_i / sum w_i; covariance = sum w_i (Sigma_i + (mu_i - mu)(mu_i - mu)^T) /
-//   sum w_i (the moments of the weighted mixture), SH = the weighted mean of the coefficients;
+//   sum w_i (the moments of the weighted mixture);
+// - SH: the mean of the coefficients weighted by alpha_i alone (all 0: an equal mix). A merged
+//   Gaussian is drawn when its cluster is about a pixel wide (lod_build.h), where every child is
+//   a blob of the rasterizer's low-pass size whatever its own, so each adds to the pixel's colour
+//   by its opacity, not its area (measured: +0.5 dB on the far fly-over frame, RESULTS.md);
 // - scale and rotation: the covariance's eigen decomposition (symmetric_eigen3), eigenvalues
 //   floored at 1e-12 (a flat merge stays drawable);
 // - opacity: the optical depth tau = -ln(1 - alpha) integrated over a face-on cross-section is
