@@ -108,8 +108,8 @@ struct RenderOptions {
   RenderListBudget list_budget;   // enforced by both cores before the list is allocated
   // Level of detail (forward_model/lod.h): the screen-space error bound tau, pixels, of the cut
   // through a scene's LOD tree; 0 = full detail (the leaves only). A scene without LOD ignores
-  // it. The default keeps >= 35 dB PSNR against full detail on every frame measured, the 201-copy
-  // city's 1080p fly-over included (RESULTS.md, issue 37); 1 px kept only a 35.2 dB mean there.
+  // it. The default is the largest bound measured that keeps >= 35 dB PSNR against full detail on
+  // every frame of the cities' 1080p fly-over (RESULTS.md, "Level of detail", issue 37).
   float lod_error_px = 0.75f;
 };
 

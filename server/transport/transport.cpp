@@ -600,7 +600,7 @@ int Transport::write_some(lws* wsi, ConnId id) {
       // then skip the closing handshake and shut the socket down at once, and the peer's answer
       // (its close frame, or messages it sent meanwhile) would meet a closed socket and draw an
       // RST, which can make the peer drop the Error and the close frame unread (a page then saw
-      // close code 1006 and no reason about 1 flood in 10 under load).
+      // close code 1006 and no reason; RESULTS.md, "The closing handshake").
       if (!c.closing || c.close_sent) return 0;
       c.close_sent = true;
       // Everything (including the final Error) is written: close with a normal close frame.

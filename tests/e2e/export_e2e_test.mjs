@@ -193,6 +193,7 @@ async function scenarios(tmp) {
   if (!(await viewer.isVisible('#paths'))) await viewer.click('#btn-paths');
   check(!(await viewer.isVisible('#btn-export-video')) && !(await hook(viewer, () => window.catgs.welcome.can_export)),
     'a viewer\'s page shows no Export video (Welcome.can_export is false)');
+  await shot(viewer, 'export_viewer_paths.png');
   await hook(viewer, () => window.catgs.exportVideo({ size: '160x90', fps: 10 }));
   const no = await waitFor('the refusal', async () => {
     const s = await hook(viewer, () => window.catgs.videoExport);

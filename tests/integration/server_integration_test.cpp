@@ -546,8 +546,10 @@ TEST(ServerIntegration, HostileLargeFramesDoNotStallOthers) {
     probe.hello(3840, 2160);
     const auto t0 = Clock::now();
     probe.send_pose(pose_from_camera(orbit[0].camera, 1, now_ms()));
-    for (auto m = probe.recv(60000); m && !m->has_frame(); m = probe.recv(60000)) {}
+    bool framed = false;
+    for (auto m = probe.recv(60000); m && !(framed = m->has_frame()); m = probe.recv(60000)) {}
     render_4k_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    ASSERT_TRUE(framed) << "no 4K frame within 60 s: the bound below would mean nothing";
     probe.ws().close();
   }
   ASSERT_TRUE(good.wait_frames(2)) << good.error();
