@@ -109,7 +109,8 @@ struct RenderOptions {
   // Level of detail (forward_model/lod.h): the screen-space error bound tau, pixels, of the cut
   // through a scene's LOD tree; 0 = full detail (the leaves only). A scene without LOD ignores
   // it. The default is the largest bound measured that keeps >= 35 dB PSNR against full detail on
-  // every frame of the cities' 1080p fly-over (RESULTS.md, "Level of detail", issue 37).
+  // every compared frame (every 10th) of the 101- and 201-copy cities' 1080p fly-over
+  // (RESULTS.md, "Level of detail", issue 37).
   float lod_error_px = 0.75f;
 };
 

@@ -14,15 +14,15 @@
 //    its parent: set when level l + 2 is built. Levels stop at one node.
 //    (Equal runs of the Morton order, the first build, jumped between cells at the curve's
 //    seams and merged Gaussians metres apart; at the same number drawn the kd clusters keep
-//    1.4-3 dB more on the city fly-over, RESULTS.md.)
+//    more PSNR on the city fly-over: RESULTS.md, "Second round".)
 // 3. A node's error (world units): the weighted RMS distance the means of its inputs moved in
 //    their merges (MergedGaussian::spread and weight over its clusters, weights as the merge's)
 //    plus the largest error of its children, floored at 1e-30 so a merge of singletons still
 //    counts as a merge. err_px = error x focal / distance is then how far (pixels, RMS over the
 //    node's coverage) detail moves on screen when the node stands for its leaves. RMS over the
 //    clusters and not the largest cluster's spread: one sparse cluster (floaters, a lone leaf)
-//    would keep its whole chunk at full detail (measured: about 2 dB less at the same number
-//    drawn, RESULTS.md).
+//    would keep its whole chunk at full detail (measured lower at the same number drawn:
+//    RESULTS.md, "Second round").
 #pragma once
 
 #include <cstddef>

@@ -14,9 +14,10 @@ namespace catgs {
 // `clusters` >= 1 groups and returns the group bounds: group r is items[bounds[r],
 // bounds[r + 1]) (bounds has clusters + 1 entries, bounds[0] = 0, the last items.size()).
 // Groups hold floor or ceil of items.size() / clusters items when clusters is a power of two
-// (as lod_build's 256 is; empty groups when there are fewer items than clusters). Method: split the items at the median of the axis along which their means
-// spread most (the split point at the share of items the left half's clusters get), recursively,
-// left half first; ties keep no particular order. Throws std::invalid_argument for clusters < 1.
+// (as lod_build's 256 is; empty groups when there are fewer items than clusters). Method: split
+// the items at the median of the axis along which their means spread most (the split point at
+// the share of items the left half's clusters get), recursively, left half first; ties keep no
+// particular order. Throws std::invalid_argument for clusters < 1.
 std::vector<std::size_t> kd_clusters(const float* means, std::vector<uint32_t>& items, std::size_t clusters);
 
 }  // namespace catgs
