@@ -5,7 +5,10 @@
 # in the JSON), flown over at 1920x1080 (30 warm-up + 300 timed frames at 120 FPS) by exact and
 # catgs at each bound of $CATGS_LOD_BOUNDS (default 0,1,1.5,2,2.5,4 pixels; 0 = full detail, the
 # scene as it was; RenderOptions::lod_error_px is 1), every 10th frame of every variant compared
-# with the full-detail exact render (PSNR); and the GPU tests' LOD rows (catgs-gpu-tests --only lod: CUDA vs CPU on
+# with the full-detail exact render (PSNR), and with $CATGS_LOD_AA = F (default 0: off) also
+# with the anti-aliased reference (full detail at F times the size, box-filtered: catgs-bench
+# --aa-reference), the full-detail frames too; $CATGS_LOD_PIPES picks the pipelines (default
+# exact,catgs); and the GPU tests' LOD rows (catgs-gpu-tests --only lod: CUDA vs CPU on
 # the 13-copy city with its LOD).
 #
 # On the build machine, once (as for gpu_run.sh): scripts/gpu_run.sh prepare
@@ -31,6 +34,10 @@ BUDGET=${CATGS_LOD_BUDGET_S:-540}
 # The bounds (1080p pixels) each city runs at: 0 (full detail), the default 1, and around 2,
 # where the kd-cluster build keeps 35 dB on the CPU fly-over (1 at 540p, RESULTS.md).
 BOUNDS=${CATGS_LOD_BOUNDS:-0,1,1.5,2,2.5,4}
+AA=${CATGS_LOD_AA:-0}
+PIPES=${CATGS_LOD_PIPES:-exact,catgs}
+AA_ARGS=()
+[ "$AA" != 0 ] && AA_ARGS=(--aa-reference "$AA")
 mkdir -p "$OUT"
 exec > >(tee -a "$OUT/lod.log") 2>&1
 
@@ -51,8 +58,8 @@ TUMBLE=$S/tumblewood_sh2.compressed.ply
 
 city() {  # city NAME RADIUS_SQ
   "$BIN/catgs-bench" --scene "$TUMBLE" --city --radius-sq "$2" --up 0,-1,0 --lod --lod-error "$BOUNDS" \
-    --trace flyover --width 1920 --height 1080 --pipeline exact,catgs --warmup 30 --frames 300 \
-    --quality-every 10 --json "$OUT/lod_$1.json"
+    --trace flyover --width 1920 --height 1080 --pipeline "$PIPES" --warmup 30 --frames 300 \
+    --quality-every 10 "${AA_ARGS[@]}" --json "$OUT/lod_$1.json"
 }
 
 stages=("$@")
@@ -80,18 +87,22 @@ python3 - "$OUT" > "$OUT/lod_table.md" <<'PY' || status=1
 import glob, json, os, sys
 out = sys.argv[1]
 print("| city | Gaussians (with LOD) | LOD build s | device MiB (scene) | variant | mean ms | p99 ms | "
-      "visible | list | PSNR vs full detail mean / min dB | device MiB used |")
-print("|---|---|---|---|---|---|---|---|---|---|---|")
+      "visible | list | PSNR vs full detail mean / min dB | device MiB used | "
+      "PSNR vs anti-aliased reference mean / min dB (full detail's) |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|")
 for path in sorted(glob.glob(os.path.join(out, "lod_city*.json")), key=lambda p: int(p.split("city")[-1][:-5])):
     j = json.load(open(path))
     for p in j.get("pipelines", []):
         q = p.get("lod_quality_vs_full_detail", {})
         psnr = "%s / %s" % (("%.2f" % q["psnr_db_mean_finite"]) if q.get("compared", 0) > q.get("identical", 0) else "inf",
                             ("%.2f" % q["psnr_db_min"]) if q.get("compared", 0) > q.get("identical", 0) else "inf") if q else "-"
-        print("| %s | %d | %.1f | %.0f | %s | %.3f | %.3f | %.0f | %.0f | %s | %.0f |" % (
+        a = p.get("quality_vs_aa_reference")
+        aa = ("%.2f / %.2f (%.2f / %.2f)" % (a["psnr_db_mean_finite"], a["psnr_db_min"],
+                                            a["full_detail_psnr_db_mean_finite"], a["full_detail_psnr_db_min"])) if a else "-"
+        print("| %s | %d | %.1f | %.0f | %s | %.3f | %.3f | %.0f | %.0f | %s | %.0f | %s |" % (
             os.path.basename(path)[4:-5], j["gaussians"], j.get("lod", {}).get("build_s", 0),
             j["scene_device_bytes"] / 2**20, p["pipeline"], p["frame_ms"]["mean"], p["frame_ms"]["p99"],
-            p.get("visible_mean", 0), p["render_list"]["mean"], psnr, p.get("device_memory_used_bytes", 0) / 2**20))
+            p.get("visible_mean", 0), p["render_list"]["mean"], psnr, p.get("device_memory_used_bytes", 0) / 2**20, aa))
 PY
 cat "$OUT/lod_table.md"
 echo "== done: status $status in $SECONDS s"

@@ -4,7 +4,7 @@
 //   catgs-bench --scene S [--city] [--scale F] --trace T --width 1920 --height 1080
 //               --pipeline V[,V...] [--frames N] [--warmup N] [--json OUT.json]
 //               [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu] [--quality-every K]
-//               [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]]
+//               [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]] [--aa-reference F]
 //
 // Variants V (bench/variants.h; `catgs-bench --help` lists the settings): vanilla, exact, or
 // catgs optionally followed by SpeculationParams settings in braces, catgs{window=2,backoff=0},
@@ -30,7 +30,11 @@
 // --lod-file F reads S's LOD file (catgs-scene lod). Every variant draws the cut at --lod-error
 // PX (default RenderOptions::lod_error_px; 0 = full detail; a list PX,PX... runs every variant
 // at each bound, named VARIANT@PX), and with --quality-every K every K-th frame of every variant,
-// on both cores, is compared with the full-detail exact render.
+// on both cores, is compared with the full-detail exact render. --aa-reference F (F >= 2) also
+// compares those frames, and the full-detail render of the same pose, with an anti-aliased
+// reference: full detail rendered F times larger each way and box-filtered down (a merged
+// Gaussian averages texture that full detail samples at one point a pixel; this says how much of
+// the LOD's loss against full detail is that).
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "centre" (a slow pass
 // over the city's middle copy, 0.4 extents up, pitched down 70 deg: only the centre copies are in
 // view, however many the city has), "real:CAMERAS.json" (a
@@ -83,7 +87,7 @@ const char* kUsage =
     "                   [--height 1080] [--pipeline V[,V...]] [--frames 600] [--warmup 30]\n"
     "                   [--quality-every 1] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu] [--help]\n"
-    "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]]\n"
+    "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]] [--aa-reference F]\n"
     "       V: a pipeline variant, e.g. catgs{window=2,backoff=0} (default: vanilla,exact; --help\n"
     "          lists the variants and their settings)\n";
 
@@ -270,7 +274,8 @@ int run(int argc, char** argv) {
       {"--scene",         "--city!",        "--radius-sq", "--spacing",          "--seed",      "--scale",
        "--trace",         "--width",        "--height",    "--pipeline",         "--frames",    "--warmup",
        "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance",  "--renderer",
-       "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error", "--help!"});
+       "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error", "--aa-reference",
+       "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;
@@ -305,6 +310,9 @@ int run(int argc, char** argv) {
   plan.quality_every = args.get_int("--quality-every", 1);
   plan.lod = c.lod;
   plan.lod_error_px = c.lod_error_px;
+  plan.aa_factor = args.get_int("--aa-reference", 0);
+  if (plan.aa_factor != 0 && (plan.aa_factor < 2 || !plan.lod))
+    throw std::invalid_argument("--aa-reference F needs F >= 2 and a scene with LOD (--lod or --lod-file)");
   plan.snapshot_dir = args.get("--snapshot-dir");
 
   std::vector<PipelineResult> results;

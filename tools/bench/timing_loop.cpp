@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cmath>
 #include <filesystem>
+#include <memory>
 #include <stdexcept>
 
 #if CATGS_HAVE_CUDA
@@ -66,11 +67,22 @@ void record_lod_quality(PipelineResult& res, double psnr) {
     res.lod_psnr.push_back(psnr);
 }
 
+// --aa-reference: `frame` and `full` (full detail, same pose) against `hi` (full detail at
+// aa_factor times the size), box-filtered down.
+void record_aa_quality(PipelineResult& res, const Image& frame, const Image& full, const Image& hi, int aa_factor) {
+  const Image aa = box_downsample(hi, aa_factor);
+  res.lod_psnr_aa.push_back(psnr_rgba8(frame, aa));
+  res.full_psnr_aa.push_back(psnr_rgba8(full, aa));
+}
+
+// The reference's camera: the same view at aa_factor times the size.
+Camera aa_camera(const Camera& c, int aa_factor) { return c.rescaled(c.width * aa_factor, c.height * aa_factor); }
+
 PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& model, const Variant& variant,
                                 const TimingPlan& plan) {
   auto r = make_renderer("cpu", model, options_of(variant, plan));
   PipelineResult res = result_of(variant);
-  Image img, full;
+  Image img, full, hi;
   // LOD against full detail (after timing): the exact pipeline at lod_error_px 0.
   RenderOptions full_detail;
   full_detail.lod_error_px = 0.0f;
@@ -86,6 +98,10 @@ PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& mode
     if (reference && k % plan.quality_every == 0) {
       reference->render(plan.camera_at(frame), full);
       record_lod_quality(res, psnr_rgba8(img, full));
+      if (plan.aa_factor >= 2) {
+        reference->render(aa_camera(plan.camera_at(frame), plan.aa_factor), hi);
+        record_aa_quality(res, img, full, hi, plan.aa_factor);
+      }
     }
   }
   if (!plan.snapshot_dir.empty()) write_snapshot(img, plan.snapshot_dir, model->name + "_cpu_" + res.name, plan);
@@ -169,7 +185,10 @@ RenderOptions exact_options() {
 // compared frame also gives its PSNR against the full-detail render (lod_psnr).
 class QualityCheck {
  public:
-  explicit QualityCheck(const std::shared_ptr<const cuda::DeviceScene>& scene) : reference_(scene, exact_options()) {}
+  QualityCheck(const std::shared_ptr<const cuda::DeviceScene>& scene, int aa_factor)
+      : reference_(scene, exact_options()), aa_factor_(aa_factor) {
+    if (aa_factor_ >= 2) aa_reference_ = std::make_unique<cuda::CudaRenderer>(scene, exact_options());
+  }
 
   void compare(PipelineResult& res, const FrameStats& stats, const cuda::DeviceFrame& frame, const Camera& camera,
                bool lod) {
@@ -177,6 +196,10 @@ class QualityCheck {
     if (lod) {
       download(frame);
       record_lod_quality(res, psnr_rgba8(image_, full_));
+      if (aa_reference_) {  // a renderer of its own: its buffers stay at the large size
+        aa_reference_->render(aa_camera(camera, aa_factor_), hi_);
+        record_aa_quality(res, image_, full_, hi_, aa_factor_);
+      }
     }
     if (res.pipeline != Pipeline::catgs) return;
     if (stats.key_frame) {
@@ -208,7 +231,9 @@ class QualityCheck {
   }
 
   cuda::CudaRenderer reference_;
-  Image image_, full_;
+  int aa_factor_;
+  std::unique_ptr<cuda::CudaRenderer> aa_reference_;  // --aa-reference
+  Image image_, full_, hi_;
 };
 
 PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>& scene, const Variant& variant,
@@ -250,7 +275,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
 std::vector<PipelineResult> time_on_cuda(const std::shared_ptr<const cuda::DeviceScene>& scene,
                                          const std::vector<Variant>& variants, const TimingPlan& plan,
                                          std::size_t used_before_scene) {
-  QualityCheck quality(scene);
+  QualityCheck quality(scene, plan.lod ? plan.aa_factor : 0);
   std::vector<PipelineResult> results;
   for (const Variant& variant : variants)
     results.push_back(time_cuda_variant(scene, variant, plan, quality, used_before_scene));

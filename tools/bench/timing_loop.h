@@ -41,7 +41,11 @@ struct PipelineResult {
   // A scene with LOD and --quality-every: every compared frame (any pipeline, key or sub-frame)
   // against the full-detail exact render of the same pose (lod_error_px 0), PSNR over 8-bit RGB.
   std::vector<double> lod_psnr;
-  std::size_t lod_identical = 0;                                                    // of those, identical (PSNR +inf)
+  std::size_t lod_identical = 0;  // of those, identical (PSNR +inf)
+  // With --aa-reference F as well: the same frames, and the full-detail render of their pose,
+  // against the anti-aliased reference (full detail at F times the size, box-filtered down:
+  // common/image_io.h box_downsample). PSNR over 8-bit RGB (+inf kept: an identical frame).
+  std::vector<double> lod_psnr_aa, full_psnr_aa;
   std::size_t peak_buffer_bytes = 0, device_used_bytes = 0, allocations_timed = 0;  // CUDA
   int syncs = 0;                                                                    // CUDA
 };
@@ -58,6 +62,7 @@ struct TimingPlan {
   int quality_every = 1;  // CUDA: compare every K-th timed catgs frame with exact (0: never)
   float lod_error_px = RenderOptions{}.lod_error_px;  // every variant's LOD bound (renderer.h)
   bool lod = false;          // the scene has LOD: every K-th frame of every variant, on both cores, against full detail
+  int aa_factor = 0;         // >= 2 (with lod): those frames also against the anti-aliased reference
   std::string snapshot_dir;  // not empty: a PNG per variant there
   Camera camera_at(int k) const { return (*trace)[static_cast<std::size_t>(k) % trace->size()].camera; }
   static double time_at(int k) { return k * (1.0 / 120.0); }

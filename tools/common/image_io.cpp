@@ -1,7 +1,9 @@
 // PNG I/O (stb, Debian's libstb) and image comparison.
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 #include <stb_image.h>
 #include <stb_image_write.h>
@@ -23,6 +25,35 @@ double psnr_rgba8(const Image& a, const Image& b) {
   if (se == 0.0) return std::numeric_limits<double>::infinity();
   const double mse = se / (3.0 * static_cast<double>(pixels));
   return 10.0 * std::log10(255.0 * 255.0 / mse);
+}
+
+Image box_downsample(const Image& hi, int factor) {
+  if (factor < 1 || hi.width % factor != 0 || hi.height % factor != 0)
+    throw std::invalid_argument("box_downsample: size " + std::to_string(hi.width) + "x" + std::to_string(hi.height) +
+                                " is not a multiple of factor " + std::to_string(factor));
+  if (hi.rgb.size() != static_cast<std::size_t>(hi.width) * hi.height * 3)
+    throw std::invalid_argument("box_downsample: the image has no float colours");
+  Image lo;
+  lo.width = hi.width / factor;
+  lo.height = hi.height / factor;
+  lo.rgb.assign(static_cast<std::size_t>(lo.width) * lo.height * 3, 0.0f);
+  lo.rgba8.assign(static_cast<std::size_t>(lo.width) * lo.height * 4, 255);
+  const float inv = 1.0f / static_cast<float>(factor * factor);
+  for (int y = 0; y < lo.height; ++y)
+    for (int x = 0; x < lo.width; ++x) {
+      const std::size_t o = static_cast<std::size_t>(y) * lo.width + x;
+      for (int c = 0; c < 3; ++c) {
+        float sum = 0.0f;
+        for (int dy = 0; dy < factor; ++dy)
+          for (int dx = 0; dx < factor; ++dx) {
+            const std::size_t i = static_cast<std::size_t>(y * factor + dy) * hi.width + (x * factor + dx);
+            sum += std::clamp(hi.rgb[3 * i + c], 0.0f, 1.0f);  // NaN stays NaN: to_unorm8 maps it to 0
+          }
+        lo.rgb[3 * o + c] = sum * inv;
+        lo.rgba8[4 * o + c] = to_unorm8(lo.rgb[3 * o + c]);
+      }
+    }
+  return lo;
 }
 
 void write_png(const Image& image, const std::string& path) {

@@ -12,6 +12,14 @@ namespace catgs {
 // Throws std::invalid_argument when sizes differ.
 double psnr_rgba8(const Image& a, const Image& b);
 
+// An anti-aliased image from one rendered `factor` times larger in each direction: each output
+// pixel is the mean of its factor x factor block of `hi`'s float colours, each clamped to [0, 1]
+// first (what a display shows of a sample), then rounded to 8 bits as the renderer does
+// (to_unorm8). The reference of supersampling evaluations (render large, box-filter down, as
+// Mip-Splatting's multi-scale tests do). Throws std::invalid_argument when factor < 1, `hi` has
+// no float colours, or its size is not a multiple of factor.
+Image box_downsample(const Image& hi, int factor);
+
 // Writes out.rgba8 as an 8-bit RGB PNG. Throws std::runtime_error naming the path.
 void write_png(const Image& image, const std::string& path);
 // Reads an 8-bit PNG (RGB or RGBA) into rgba8 (rgb left empty). Throws std::runtime_error.
