@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <memory>
 #include <stdexcept>
+#include <string>
 
 #if CATGS_HAVE_CUDA
 #include <cuda_runtime.h>
@@ -104,7 +105,17 @@ PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& mode
       }
     }
   }
-  if (!plan.snapshot_dir.empty()) write_snapshot(img, plan.snapshot_dir, model->name + "_cpu_" + res.name, plan);
+  if (!plan.snapshot_dir.empty()) {
+    write_snapshot(img, plan.snapshot_dir, model->name + "_cpu_" + res.name, plan);
+    // The last compared pose's references, to look at beside the frame: full detail, the large
+    // render (to box-filter with another tool) and its box filter.
+    if (!hi.rgba8.empty()) {
+      const std::string base = plan.snapshot_dir + "/" + model->name + "_cpu_";
+      write_png(full, base + "full_detail.png");
+      write_png(hi, base + "full_detail_x" + std::to_string(plan.aa_factor) + ".png");
+      write_png(box_downsample(hi, plan.aa_factor), base + "aa_reference.png");
+    }
+  }
   return res;
 }
 
