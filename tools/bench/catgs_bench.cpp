@@ -64,6 +64,7 @@
 #include "bench/report.h"
 #include "bench/timing_loop.h"
 #include "bench/variants.h"
+#include "camera/camera.h"
 #include "camera/trace.h"
 #include "common/cli_args.h"
 #include "scene/ply_io.h"
@@ -313,6 +314,12 @@ int run(int argc, char** argv) {
   plan.aa_factor = args.get_int("--aa-reference", 0);
   if (plan.aa_factor != 0 && (plan.aa_factor < 2 || !plan.lod))
     throw std::invalid_argument("--aa-reference F needs F >= 2 and a scene with LOD (--lod or --lod-file)");
+  // The reference is F times the frame each way: refused here, before timing, where it would be
+  // over the renderers' largest side (and F x width could overflow an int).
+  if (plan.aa_factor > catgs::kMaxImageSide / std::max({c.width, c.height, 1}))
+    throw std::invalid_argument("--aa-reference " + std::to_string(plan.aa_factor) + ": the reference would be over " +
+                                std::to_string(catgs::kMaxImageSide) + " pixels a side at " + std::to_string(c.width) +
+                                "x" + std::to_string(c.height));
   plan.snapshot_dir = args.get("--snapshot-dir");
 
   std::vector<PipelineResult> results;

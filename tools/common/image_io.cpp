@@ -38,7 +38,7 @@ Image box_downsample(const Image& hi, int factor) {
   lo.height = hi.height / factor;
   lo.rgb.assign(static_cast<std::size_t>(lo.width) * lo.height * 3, 0.0f);
   lo.rgba8.assign(static_cast<std::size_t>(lo.width) * lo.height * 4, 255);
-  const float inv = 1.0f / static_cast<float>(factor * factor);
+  const float inv = 1.0f / (static_cast<float>(factor) * static_cast<float>(factor));  // no int overflow
   for (int y = 0; y < lo.height; ++y)
     for (int x = 0; x < lo.width; ++x) {
       const std::size_t o = static_cast<std::size_t>(y) * lo.width + x;
