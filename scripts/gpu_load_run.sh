@@ -23,6 +23,8 @@
 #   warm. The log records that folder's file system: on tmpfs "cold" equals "warm" (the file is
 #   memory), so point CATGS_LOAD_DIR at a disk for cold rows that mean something.
 #   CATGS_LOAD_UPLOAD=0 leaves the upload out (to try the script with a CPU-only catgs-scene).
+#   CATGS_LOAD_TOOL=PATH runs another catgs-scene (an earlier commit's, side by side), its tables
+#   named with CATGS_LOAD_TAG appended (load_city13_before.json).
 # Exit status: non-zero if a stage failed.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -33,7 +35,7 @@ W=${CATGS_LOAD_DIR:-/tmp/catgs_load}
 mkdir -p "$OUT" "$W"
 exec > >(tee -a "$OUT/load.log") 2>&1
 
-TOOL=$CARRY/bin/catgs-scene
+TOOL=${CATGS_LOAD_TOOL:-$CARRY/bin/catgs-scene}  # another build side by side: CATGS_LOAD_TOOL, CATGS_LOAD_TAG
 export LD_LIBRARY_PATH=$CARRY/bin/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
 [ -x "$TOOL" ] || { echo "gpu_load_run.sh: $TOOL missing (scripts/gpu_run.sh prepare on the build machine)"; exit 1; }
 TUMBLE=$CARRY/scenes/tumblewood_sh2.compressed.ply
@@ -47,6 +49,7 @@ bench() {  # bench NAME ARGS... : load-bench over the scenes, table to NAME.md
   shift
   local upload=()
   [ "${CATGS_LOAD_UPLOAD:-1}" = 0 ] || upload=(--upload)
+  name=$name${CATGS_LOAD_TAG:-}
   "$TOOL" load-bench "${upload[@]}" --json "$OUT/load_$name.json" "$@" | tee "$OUT/load_$name.md"
   return "${PIPESTATUS[0]}"
 }

@@ -9,8 +9,8 @@
 #        .carry/bin instead (built on the build machine by `prepare`; they need nothing but the
 #        CUDA driver); a failed build falls back to those (when there) and exits non-zero;
 #     2. runs the GPU tests (CUDA vs the CPU reference) -> $OUT/gpu_tests.md (--quick: their
-#        quick subset; --no-tests: none); --sanitize first runs the quick subset under
-#        compute-sanitizer memcheck;
+#        quick subset; --no-tests: none); --sanitize first runs the quick subset and the hostile
+#        values' rows (issue 49) under compute-sanitizer memcheck;
 #     3. runs the benchmark (--no-bench: none) at 1920x1080, catgs-bench's 30 warm-up frames then
 #        --frames N timed frames (default 600) at 120 FPS, sub-frame quality on every 3rd frame:
 #        vanilla,exact,catgs,catgs-nocache,catgs-nosplit on tumblewood_sh2 (x10) and on the 13-copy
@@ -181,6 +181,12 @@ if [ "$SANITIZE" = 1 ]; then
     "$TEST_EXE" --scenes "$S" --traces "$T" --quick > "$ROOT/build/sanitizer.log" 2>&1
   rc=$?; echo "memcheck rc $rc"; tail -3 "$ROOT/build/sanitizer.log"
   [ $rc -eq 0 ] || { status=1; cp "$ROOT/build/sanitizer.log" "$OUT/"; }
+  echo "== compute-sanitizer memcheck (hostile values, issue 49, 320x180)"
+  compute-sanitizer --tool memcheck --error-exitcode 9 --print-limit 20 \
+    "$TEST_EXE" --scenes "$S" --traces "$T" --only hostile --quick --out "$OUT/gpu_hostile_memcheck.md" \
+    > "$ROOT/build/sanitizer_hostile.log" 2>&1
+  rc=$?; echo "memcheck (hostile) rc $rc"; tail -3 "$ROOT/build/sanitizer_hostile.log"
+  [ $rc -eq 0 ] || { status=1; cp "$ROOT/build/sanitizer_hostile.log" "$OUT/"; }
 fi
 if [ "$TESTS" = 1 ]; then
   echo "== GPU tests"

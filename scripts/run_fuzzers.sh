@@ -21,9 +21,9 @@ mkdir -p "$build/crashes"
 echo "== fuzz build (clang, ASan + UBSan): $build"
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
   -DWITH_CUDA=OFF -DCATGS_FUZZ=ON > "$build/configure.log" 2>&1 || { tail -20 "$build/configure.log"; exit 1; }
-cmake --build "$build" --target fuzz_scene fuzz_protocol fuzz_session > "$build/build.log" 2>&1 || { tail -40 "$build/build.log"; exit 1; }
+cmake --build "$build" --target fuzz_scene fuzz_scene_cache fuzz_protocol fuzz_session > "$build/build.log" 2>&1 || { tail -40 "$build/build.log"; exit 1; }
 status=0
-for target in scene protocol session; do
+for target in scene scene_cache protocol session; do
   corpus="$build/corpus/$target"
   mkdir -p "$corpus"
   dict=()

@@ -24,7 +24,8 @@ void validate_lod(const std::vector<LodNode>& lod, std::size_t gaussians) {
     if (n.error == 0.0f && above_leaves) throw bad(c, "error 0 (a leaf) above a merged node");
     above_leaves = above_leaves || n.error > 0.0f;
     for (int a = 0; a < 3; ++a)
-      if (!(n.lo[a] <= n.hi[a])) throw bad(c, "empty or non-finite box");
+      if (!std::isfinite(n.lo[a]) || !std::isfinite(n.hi[a]) || !(n.lo[a] <= n.hi[a]))
+        throw bad(c, "empty or non-finite box");
     if (n.parent == kLodNoParent) continue;
     if (n.parent <= c || n.parent >= lod.size())
       throw bad(c, "parent " + std::to_string(n.parent) + " is not a higher chunk of the tree");

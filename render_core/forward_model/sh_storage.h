@@ -12,7 +12,10 @@
 // colour of a Gaussian changes by at most 2^-11 * sum_k |Y_k(dir)| |c_k| per channel (Y_k the SH
 // basis); sh_storage_test and RESULTS.md state what this is on the real scenes. Magnitudes at or
 // beyond 65520 (which round to infinity in IEEE) saturate at the largest finite half, 65504,
-// instead: an absurd coefficient in a file must not make a colour inf or NaN (inf * 0).
+// instead: an absurd coefficient in a file must not make a colour inf or NaN (inf * 0). A NaN
+// coefficient (no reader lets one in, but a model can be handed to a core straight from memory)
+// is stored as 0, so it cannot turn its Gaussian's pixels into NaN (issue 49: 12% of a frame's
+// colour values were NaN, black after the 8-bit conversion).
 // Source of the format: IEEE 754-2008 sec. 3.6 (binary16: 1 sign, 5 exponent bits with bias 15,
 // 10 fraction bits).
 #pragma once
@@ -23,13 +26,13 @@
 
 namespace catgs::fm {
 
-// binary16 bits of `f`, rounded to nearest even, saturating at +/-65504; NaN -> quiet NaN.
+// binary16 bits of `f`, rounded to nearest even, saturating at +/-65504; NaN -> 0 (+-0).
 inline uint16_t half_bits(float f) {
   uint32_t x;
   std::memcpy(&x, &f, sizeof x);
   const uint32_t sign = (x >> 16) & 0x8000u;
   const uint32_t ax = x & 0x7fffffffu;
-  if (ax > 0x7f800000u) return static_cast<uint16_t>(sign | 0x7e00u);   // NaN
+  if (ax > 0x7f800000u) return static_cast<uint16_t>(sign);             // NaN: 0, see above
   if (ax >= 0x477ff000u) return static_cast<uint16_t>(sign | 0x7bffu);  // >= 65520 (and inf): saturate
   if (ax < 0x38800000u) {  // below 2^-14: a subnormal half m * 2^-24, m in [0, 1024]
     // The scaling by 2^24 is exact, and rint rounds to nearest even; m = 1024 is the smallest

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <string>
 
 namespace catgs {
@@ -59,6 +60,27 @@ Bounds GaussianModel::bounds() const {
   return b;
 }
 
+std::size_t first_non_finite(const float* v, std::size_t count) {
+  // A float is non-finite exactly when its 8 exponent bits are all ones. The largest exponent
+  // field of a run of values is an integer max the compiler vectorises, so the common all-finite
+  // case is a scan at memory speed; the index is looked up only in a run that holds one.
+  constexpr uint32_t kExponent = 0x7f800000u;
+  constexpr std::size_t kRun = 4096;
+  for (std::size_t at = 0; at < count; at += kRun) {
+    const std::size_t end = std::min(count, at + kRun);
+    uint32_t top = 0;
+    for (std::size_t k = at; k < end; ++k) {
+      uint32_t b;
+      std::memcpy(&b, v + k, sizeof b);  // the bits, without breaking aliasing rules
+      top = std::max(top, b & kExponent);
+    }
+    if (top != kExponent) continue;
+    for (std::size_t k = at; k < end; ++k)
+      if (!std::isfinite(v[k])) return k;
+  }
+  return count;
+}
+
 void GaussianModel::validate() const {
   const std::size_t n = size();
   if (sh_degree < 0 || sh_degree > kMaxShDegree)
@@ -71,10 +93,11 @@ void GaussianModel::validate() const {
   auto check = [](const std::vector<float>& v, std::size_t stride, const char* what) {
     constexpr std::size_t kBlock = 1 << 20;
     run_blocks((v.size() + kBlock - 1) / kBlock, 0, [&](uint64_t b) {
-      const std::size_t end = std::min(v.size(), (b + 1) * kBlock);
-      for (std::size_t k = b * kBlock; k < end; ++k)
-        if (!std::isfinite(v[k]))
-          throw std::runtime_error(std::string("non-finite ") + what + " of Gaussian " + std::to_string(k / stride));
+      const std::size_t begin = b * kBlock, count = std::min(v.size(), begin + kBlock) - begin;
+      const std::size_t k = first_non_finite(v.data() + begin, count);
+      if (k < count)
+        throw std::runtime_error(std::string("non-finite ") + what + " of Gaussian " +
+                                 std::to_string((begin + k) / stride));
     });
   };
   check(means, 3, "mean");

@@ -62,6 +62,12 @@ struct GaussianModel {
   void validate() const;
 };
 
+// The property names validate() and the scene cache use in their messages, by the number of
+// floats a Gaussian has of it: "mean", "log-scale", "rotation", "opacity", "SH coefficient".
+// Index of the first value of `v[0, count)` that is not finite (NaN or +-inf), or `count` when
+// every one is. A Gaussian's values are finite exactly when every scene reader accepts them.
+std::size_t first_non_finite(const float* v, std::size_t count);
+
 // Thrown for any unreadable or malformed scene file; what() names the file and the problem.
 class SceneFileError : public std::runtime_error {
  public:

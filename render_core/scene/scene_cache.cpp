@@ -160,6 +160,21 @@ void* float_section(GaussianModel& m, int s) {
   return const_cast<void*>(float_section(static_cast<const GaussianModel&>(m), s));
 }
 
+// The scene readers' own check (GaussianModel::validate: every value finite), on the block just
+// copied into `m` while it is in cache: the hashes prove a cache is intact, not that its writer
+// was this program (anyone can compute XXH3), so a forged cache must not let in what the scene's
+// loader refuses. Throws SceneCacheRejected naming the cache, the Gaussian and the property.
+void check_finite(const GaussianModel& m, const Block& b, const std::string& cache_path) {
+  static const char* const kWhat[] = {"mean", "log-scale", "rotation", "opacity", "SH coefficient"};
+  const std::size_t stride[] = {3, 3, 4, 1, static_cast<std::size_t>(m.sh_coeffs()) * 3};
+  const auto* v = static_cast<const float*>(float_section(m, b.section)) + b.begin / 4;
+  const std::size_t count = (b.end - b.begin) / 4, k = first_non_finite(v, count);
+  if (k < count)
+    throw SceneCacheRejected(cache_path, std::string("non-finite ") + kWhat[b.section] + " of Gaussian " +
+                                             std::to_string((b.begin / 4 + k) / stride[b.section]) +
+                                             " (a scene loader refuses it)");
+}
+
 }  // namespace
 
 std::string scene_cache_path(const std::string& scene_path) { return scene_path + ".catgs-cache"; }
@@ -215,6 +230,29 @@ void write_scene_cache(const GaussianModel& model, const std::string& scene_path
     ::unlink(tmp.c_str());
     throw SceneFileError(cache_path, std::string("cannot rename the written cache into place: ") + std::strerror(e));
   }
+}
+
+void reseal_scene_cache(std::string& bytes, const std::string& scene_path) {
+  CacheHeader h{};
+  if (bytes.size() < sizeof h) return;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  h.source = stamp(scene_path);
+  const uint64_t size = bytes.size();
+  auto inside = [size](uint64_t offset, uint64_t n) { return offset <= size && n <= size - offset; };
+  const uint64_t table_slots =
+      inside(h.hashes_offset, 0) ? std::min(h.hash_count, (size - h.hashes_offset) / 8) : uint64_t{0};
+  uint64_t slot = 0;
+  for (int s = 0; s < kSections && slot < table_slots; ++s)
+    for (uint64_t b = 0; b < h.bytes[s] && slot < table_slots; b += kCacheBlockBytes, ++slot) {
+      const uint64_t n = std::min(h.bytes[s] - b, kCacheBlockBytes);
+      if (!inside(h.offset[s], b) || !inside(h.offset[s] + b, n)) continue;
+      const uint64_t hash = XXH3_64bits(bytes.data() + h.offset[s] + b, n);
+      std::memcpy(&bytes[h.hashes_offset + 8 * slot], &hash, 8);
+    }
+  if (inside(h.hashes_offset, 8 * table_slots) && table_slots == h.hash_count)
+    h.hashes_hash = XXH3_64bits(bytes.data() + h.hashes_offset, 8 * h.hash_count);
+  h.header_hash = header_hash(h);
+  std::memcpy(bytes.data(), &h, sizeof h);
 }
 
 struct SceneCache::Impl {
@@ -310,8 +348,10 @@ GaussianModel SceneCache::read_model(int threads, const LoadProgress& progress) 
         if (XXH3_64bits(src, b.end - b.begin) != table[b.slot])
           throw SceneCacheRejected(c.path, std::string("checksum mismatch in section ") + kSectionNames[b.section] +
                                                " at byte " + std::to_string(b.begin));
-        if (void* dst = b.section == kLod ? static_cast<void*>(m.lod.data()) : float_section(m, b.section))
+        if (void* dst = b.section == kLod ? static_cast<void*>(m.lod.data()) : float_section(m, b.section)) {
           std::memcpy(static_cast<char*>(dst) + b.begin, src, b.end - b.begin);
+          if (b.section != kLod) check_finite(m, b, c.path);
+        }
         c.file.release(c.h.offset[b.section] + b.begin, c.h.offset[b.section] + b.end);
       },
       [&](uint64_t done) {

@@ -14,6 +14,13 @@
 //   cache of another version (or a file that is not a cache) is rejected;
 // - the bytes: the header carries its own XXH3 hash and every 4 MiB block of every section its
 //   own, checked as the block is copied out; a truncated file fails its size check.
+// - the values: XXH3 detects damage, not forgery (anyone can compute it), so a cache, and a LOD
+//   file's merged levels, are held to the scene readers' own check: a value a reader refuses (not
+//   finite, GaussianModel::validate) rejects the cache, checked as its block is copied out, and
+//   the LOD tree must pass fm::validate_lod (issue 49).
+// The sh_half and chunks sections are checked by hash only, not against the model: no renderer
+// reads them (DeviceScene derives both from the model); one that uploads them must prove them
+// first.
 // A rejected cache is rebuilt by load_scene_cached (SceneCacheMode::write), with a log line that
 // says why.
 //
@@ -56,7 +63,7 @@ std::string scene_cache_path(const std::string& scene_path);
 
 // Thrown when a cache cannot be used; what() names the cache file and says why (missing,
 // truncated, not a cache, another version, written for a different or changed source, a
-// checksum mismatch).
+// checksum mismatch, a value a scene loader refuses, a bad LOD tree).
 class SceneCacheRejected : public std::runtime_error {
  public:
   SceneCacheRejected(const std::string& cache_path, const std::string& why)
@@ -84,10 +91,11 @@ class SceneCache {
   bool has_lod() const;  // the model has a level of detail (a LOD file)
   // Checks every block's hash and copies the model out (the sections' pages leave this process's
   // memory behind the copy, so the load peaks near the model's size); name = scene_name(scene).
-  // The half SH and chunk sections are checked too. `progress` as load_scene's, on the calling
+  // Every value must be one a scene loader accepts (finite) and the LOD tree valid. The half SH
+  // and chunk sections are hash-checked too. `progress` as load_scene's, on the calling
   // thread. Throws SceneCacheRejected on a mismatch.
   GaussianModel read_model(int threads = 0, const LoadProgress& progress = {}) const;
-  // The upload layout, straight from the mapping (checked by read_model):
+  // The upload layout, straight from the mapping (hash-checked by read_model, not against the model):
   const uint16_t* sh_half() const;        // [N, K, 3] binary16 bits (fm::half_bits of sh)
   const fm::ChunkBounds* chunks() const;  // [fm::chunk_count(N)]
 
@@ -97,6 +105,14 @@ class SceneCache {
   explicit SceneCache(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
+
+// Forges a cache as an attacker with write access to a scene's folder could: recomputes, in the
+// cache file image `bytes`, the source stamp (from `scene_path`), every block hash, the hash
+// table's hash and the header hash from the header's own layout fields, whatever they say (a
+// block or table that would lie outside `bytes` is skipped; `bytes` shorter than a header is left
+// as it is). For the tests and the fuzz target (tests/fuzz/fuzz_scene_cache.cpp), so they reach
+// the checks behind the hashes. Throws SceneFileError when scene_path cannot be read.
+void reseal_scene_cache(std::string& bytes, const std::string& scene_path);
 
 enum class SceneCacheMode {
   off,    // load_scene, nothing else

@@ -11,9 +11,7 @@
 #include <stdexcept>
 #include <string>
 
-#include <glm/gtc/quaternion.hpp>
-
-#include "cpu/cpu_renderer.h"
+#include "render_small.h"
 #include "scene/ply_io.h"
 
 namespace {
@@ -22,19 +20,6 @@ namespace {
 const std::string& scratch_path() {
   static const std::string path = "/tmp/catgs-fuzz-scene-" + std::to_string(::getpid()) + ".bin";
   return path;
-}
-
-void render_small(const std::shared_ptr<const catgs::GaussianModel>& model) {
-  const catgs::Bounds b = model->bounds();
-  const glm::vec3 centre = 0.5f * (b.min + b.max);
-  const float extent = glm::length(b.max - b.min);
-  if (!(extent > 0.0f && extent < 1e6f)) return;
-  const glm::vec3 eye = centre - glm::vec3(0.0f, 0.0f, 1.5f * extent + 1e-3f);
-  catgs::RenderOptions options;
-  options.pipeline = catgs::Pipeline::exact;
-  catgs::cpu::CpuRenderer renderer(model, options);
-  catgs::Image image;
-  renderer.render(catgs::Camera::from_pose(eye, glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 16, 16), image);
 }
 
 }  // namespace
@@ -48,7 +33,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   try {
     auto model = std::make_shared<const catgs::GaussianModel>(catgs::load_scene(scratch_path()));
-    if (model->size() <= 4096) render_small(model);
+    if (model->size() <= 4096) {
+      catgs::RenderOptions options;
+      options.pipeline = catgs::Pipeline::exact;
+      catgs::Image image;
+      catgs::fuzz::render_small(model, options, image);
+    }
   } catch (const catgs::SceneFileError&) {
     // The loader's answer to bad bytes: a clear error naming the file.
   } catch (const std::length_error&) {

@@ -3,7 +3,7 @@
 // non-zero when any check fails.
 //
 //   catgs-gpu-tests --scenes DIR --traces DIR [--out table.md] [--quick] [--skip-large]
-//                   [--only budget|passes|lod]
+//                   [--only budget|passes|lod|hostile]
 //
 // DIR holds flowers_sh3.ply, biker.compressed.ply and tumblewood_sh2.compressed.ply (the compact
 // copy: the 85 MB original does not fit a GPU run's 64 MiB of files); TRACES holds
@@ -56,6 +56,11 @@
 //             key/sub-frame decisions on >= 95% of frames, >= 50 dB where they agree); CUDA exact
 //             at lod_error_px 0 on the LOD scene == CUDA exact on the scene without LOD (bit for
 //             bit), and fewer chunks kept at 4 px than without LOD.
+//  hostile    issue 49's hostile values (tests/common/hostile_values.h) in every 7th Gaussian of
+//             biker and flowers_sh3, straight to the CUDA core: vanilla, exact and catgs over 24
+//             orbit frames end in a clear error or a finite image; CUDA exact == CPU exact on the
+//             first view (>= 50 dB, the same list). `--only hostile [--quick]` (320x180) runs them
+//             alone, under compute-sanitizer memcheck with gpu_run.sh --sanitize.
 // catgs pipeline (paper sec. 3; issue 4), over real camera paths interpolated at 120 FPS:
 //  catgs=cpu  CUDA catgs vs the CPU reference's catgs, frame by frame: the same key/sub-frame
 //             decisions on >= 95% of frames, and where they agree PSNR >= 50 dB.
@@ -97,6 +102,7 @@
 #include "camera/trace.h"
 #include "colour/yuv420.h"
 #include "common/cli_args.h"
+#include "../common/hostile_values.h"
 
 namespace {
 
@@ -891,6 +897,69 @@ void budget_checks() {
   }
 }
 
+// 6d: hostile values (issue 49, tests/common/hostile_values.h) straight to the CUDA core, every 7th
+// Gaussian of biker (SH 0) and flowers_sh3 (SH 3): vanilla, exact and catgs over 24 frames of a
+// short orbit at WxH end in a clear error or a finite image on every frame (under
+// compute-sanitizer memcheck with --sanitize: no out-of-bounds access), and CUDA exact equals the
+// CPU's exact on the orbit's first view (>= 50 dB, the same list), so the two cores draw hostile
+// models alike.
+void hostile_checks(const Scenes& sc, int w, int h) {
+  std::vector<std::pair<std::string, std::string>> scenes{{"biker", sc.dir + "/biker.compressed.ply"},
+                                                          {"flowers_sh3", sc.dir + "/flowers_sh3.ply"}};
+  for (const auto& [name, path] : scenes) {
+    const auto base = load(path, 1.0f);
+    catgs::GeneratorParams g;
+    g.width = w;
+    g.height = h;
+    g.rate_hz = 60.0;
+    g.duration_s = 23.0 / 60.0;  // 24 frames
+    const auto rb = catgs::robust_bounds(*base);
+    const catgs::Trace orbit = catgs::make_orbit(rb, 1.5f * glm::length(rb.extent()), 0.0f, 30.0f, g);
+    for (const catgs::test::HostileCase& c : catgs::test::hostile_cases()) {
+      auto m = std::make_shared<GaussianModel>(*base);
+      catgs::test::apply_hostile(*m, c);
+      const auto dev = catgs::cuda::DeviceScene::upload(*m);
+      for (const Pipeline p : {Pipeline::vanilla, Pipeline::exact, Pipeline::catgs}) {
+        catgs::RenderOptions o;
+        o.pipeline = p;
+        Row row{"hostile", name, c.name, catgs::pipeline_name(p), 0, 0, 0, -1, -1, false, ""};
+        catgs::cuda::CudaRenderer gpu(dev, o);
+        Image img;
+        std::size_t frames = 0, bad = 0;
+        std::string error;
+        for (const catgs::TimedCamera& t : orbit) {
+          try {
+            gpu.render(t.camera, img);
+          } catch (const std::exception& e) {
+            error = e.what();
+            break;
+          }
+          ++frames;
+          bad += catgs::test::count_non_finite(img.rgb);
+        }
+        bool same = true;
+        if (p == Pipeline::exact && error.empty()) {
+          catgs::cpu::CpuRenderer cpu(m, o);
+          Image a, b;
+          cpu.render(orbit.front().camera, a);
+          gpu.render(orbit.front().camera, b);
+          const Diff d = compare(a, b);
+          row.psnr = d.psnr;
+          row.max_abs = d.max_abs;
+          row.max_abs8 = d.max_abs8;
+          row.list_ref = static_cast<long long>(cpu.last_stats().render_list_length);
+          row.list_gpu = static_cast<long long>(gpu.last_stats().render_list_length);
+          same = d.psnr >= 50.0 && row.list_ref == row.list_gpu;
+        }
+        row.pass = bad == 0 && same && (error.empty() || error.size() > 10);
+        row.note = std::to_string(frames) + " frames, " + std::to_string(bad) + " non-finite values" +
+                   (error.empty() ? std::string() : "; error: " + error);
+        add(row);
+      }
+    }
+  }
+}
+
 // 6c: the render-list budget's passes and narrowed windows (renderer.h, issue 35), CUDA as the CPU
 // core. A budget of `limit` entries a pass at any size (min_entries alone sets it).
 catgs::RenderListBudget pass_budget(std::uint64_t limit) {
@@ -1249,6 +1318,10 @@ int run(int argc, char** argv) {
     lod_checks(sc);
     return report(gpu, args.get("--out", "")) == 0 ? 0 : 1;
   }
+  if (args.get("--only", "") == "hostile") {  // hostile values (issue 49; biker and flowers_sh3)
+    hostile_checks(sc, sc.quick ? 320 : 1280, sc.quick ? 180 : 720);
+    return report(gpu, args.get("--out", "")) == 0 ? 0 : 1;
+  }
   if (args.get("--only", "") == "passes") {  // the budget's passes and narrowed windows (biker only)
     budget_checks();
     passes_checks(sc);
@@ -1261,6 +1334,7 @@ int run(int argc, char** argv) {
   if (!sc.quick) steady_checks(sc);
   if (!sc.quick) huge_checks();
   if (!sc.quick) budget_checks();
+  if (!sc.quick) hostile_checks(sc, sc.W, sc.H);
   if (!sc.quick) passes_checks(sc);
   if (!sc.quick) chunk_cull_checks(sc);
   if (!sc.quick) lod_checks(sc);
