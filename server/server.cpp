@@ -26,6 +26,7 @@ TransportOptions transport_options(const ServerOptions& options) {
   t.port = options.port;
   t.web_root = options.web_root;
   t.socket_send_buffer = options.socket_send_buffer;
+  t.notsent_lowat = options.notsent_lowat;
   t.origins = OriginPolicy(options.allowed_origins);
   t.max_per_ip = options.max_connections_per_ip;
   t.max_pre_hello = options.max_pre_hello;
@@ -52,8 +53,8 @@ void Server::ToManager::on_open(ConnId id) {
 void Server::ToManager::on_message(ConnId id, MessageKind kind, std::string bytes) {
   if (auto* m = manager.load()) m->on_message(id, kind, std::move(bytes));
 }
-void Server::ToManager::on_sent(ConnId id) {
-  if (auto* m = manager.load()) m->on_sent(id);
+void Server::ToManager::on_sent(ConnId id, const SocketSample& socket) {
+  if (auto* m = manager.load()) m->on_sent(id, socket);
 }
 void Server::ToManager::on_close(ConnId id) {
   if (auto* m = manager.load()) m->on_close(id);

@@ -86,7 +86,7 @@ class Server {
     ServerMetrics* metrics = nullptr;
     void on_open(ConnId id) override;
     void on_message(ConnId id, MessageKind kind, std::string bytes) override;
-    void on_sent(ConnId id) override;
+    void on_sent(ConnId id, const SocketSample& socket) override;
     void on_close(ConnId id) override;
     std::string metrics_text() override;
     int readiness(std::string& body) override;

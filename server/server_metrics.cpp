@@ -89,6 +89,12 @@ std::string ServerMetrics::prometheus_text() const {
       quality_down_total.load());
   put("catgs_quality_up_total", "counter", "Adaptive quality: a session stepped its resolution back up.",
       quality_up_total.load());
+  put("catgs_sessions_link_limited", "gauge",
+      "Sessions whose stream bitrate their link holds below the policy's rate now (--link-control).",
+      sessions_link_limited.load());
+  put("catgs_link_rate_decreases_total", "counter",
+      "Link control: a session's bitrate cut because its frames backed up or its round trip grew.",
+      link_rate_decreases_total.load());
   put("catgs_refine_frames_total", "counter", "Adaptive quality: full-size frames sent when the camera stopped.",
       refine_frames_total.load());
   put("catgs_scenes_loaded", "gauge", "Scenes in memory (--scene; loaded on first use).", scenes_loaded.load());

@@ -142,6 +142,12 @@ std::string server_usage() {
          "                        the client more than S pose intervals after its pose and a\n"
          "                        newer pose waits (default 2: 33 ms at 60 poses/s)\n"
          "  --socket-send-buffer BYTES  SO_SNDBUF per WebSocket (default 524288; 0 = kernel)\n"
+         "  --notsent-lowat BYTES  TCP_NOTSENT_LOWAT per WebSocket: bytes the kernel may hold\n"
+         "                        unsent (default 1024; 0 = kernel): frames wait in the session,\n"
+         "                        where the latest pose wins, not in the socket\n"
+         "  --link-control on|off  the stream's bitrate follows the link: lowered when frames\n"
+         "                        back up or the round trip grows, raised when they clear\n"
+         "                        (default on; session/link_rate.h has the rule)\n"
          "  --max-viewport WxH    largest viewport a client may ask for (default 3840x2160; a\n"
          "                        viewport fits when its pixels are at most W x H and its longer\n"
          "                        side at most max(W, H)); larger Hello/Resize: INVALID_ARGUMENT\n"
@@ -306,7 +312,12 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.max_frames_in_flight = parse_int(a, v, 1, 16);
     else if (a == "--socket-send-buffer")
       out.socket_send_buffer = parse_int(a, v, 0, 64 << 20);
-    else if (a == "--max-viewport")
+    else if (a == "--notsent-lowat")
+      out.notsent_lowat = parse_int(a, v, 0, 64 << 20);
+    else if (a == "--link-control") {
+      if (v != "on" && v != "off") throw std::invalid_argument("--link-control: on or off, not '" + v + "'");
+      out.link_control = v == "on";
+    } else if (a == "--max-viewport")
       parse_size(a, v, out.max_viewport_width, out.max_viewport_height);
     else if (a == "--max-pixels-in-flight")
       out.max_pixels_in_flight = parse_int(a, v, 0, 1 << 30);

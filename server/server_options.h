@@ -72,8 +72,12 @@ struct ServerOptions {
   double frame_deadline_slots = 2.0;
   int max_frames_in_flight = 2;         // frames queued to the transport but not yet written
   int socket_send_buffer = 512 * 1024;  // SO_SNDBUF of WebSocket sockets, bytes (0 = kernel's)
-  int max_viewport_width = 3840;        // --max-viewport WxH: larger Hello/Resize -> ERROR_INVALID_ARGUMENT
-  int max_viewport_height = 2160;       //   (pixel count and longer side; message_validation.h)
+  // TCP_NOTSENT_LOWAT of WebSocket sockets, bytes (0 = kernel's): the kernel's queue of bytes not
+  // yet sent; a frame waits in the session until the one before has nearly left (link_rate.h).
+  int notsent_lowat = 1024;
+  bool link_control = true;        // --link-control: the bitrate follows the link (session/link_rate.h)
+  int max_viewport_width = 3840;   // --max-viewport WxH: larger Hello/Resize -> ERROR_INVALID_ARGUMENT
+  int max_viewport_height = 2160;  //   (pixel count and longer side; message_validation.h)
   // Pixels of the renders running at once, server-wide (render_scheduler.h); 0 = two frames of
   // the largest viewport.
   long long max_pixels_in_flight = 0;

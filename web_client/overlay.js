@@ -125,6 +125,10 @@ export class Overlay {
       } else if (s) {
         lines.push(`server: render ${num(s.render_ms_mean)} ms  encode ${num(s.encode_ms_mean)} ms`);
         lines.push(`  ${num((s.bytes_per_second * 8) / 1e6)} Mbit/s  skipped ${s.poses_skipped || 0}`);
+        // The link's rate controller: what the link carried, its round trip, the cap it sets.
+        const cap = s.bitrate_cap_kbps ? `cap ${s.bitrate_cap_kbps} kbit/s` : 'not limited';
+        const level = s.quality_level ? `  size level ${s.quality_level}` : '';
+        lines.push(`  link ${s.link_kbps ? `${Math.round(s.link_kbps)} kbit/s` : '-'}  rtt ${num(s.rtt_ms || 0)} ms  ${cap}${level}`);
       }
     }
     this.statsEl.textContent = lines.join('\n');

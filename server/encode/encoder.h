@@ -80,6 +80,11 @@ class Encoder {
   // The global header (EncoderConfig::global_header): SPS and PPS as Annex B NAL units with start
   // codes, as libavcodec's extradata holds them; empty without global_header.
   virtual std::vector<std::uint8_t> extradata() const = 0;
+  // Sets the stream's maximum rate (EncoderConfig::bitrate_kbps) from the next picture on, the
+  // VBV keeping its size in ms, without an IDR. Returns false where the encoder cannot (NVENC
+  // here, or an x264 stream opened without a VBV: x264 cannot add one later); the caller then
+  // rebuilds it.
+  virtual bool set_max_bitrate_kbps(int kbps) = 0;
 };
 
 // Creates an encoder by name:

@@ -27,6 +27,12 @@ void AdaptiveQuality::on_pose(Clock::time_point now, bool replaced) {
   drop_old(now);
 }
 
+void AdaptiveQuality::on_link(bool limited, bool below_floor, bool fits_above) {
+  link_limited_ = limited;
+  link_below_floor_ = below_floor;
+  link_fits_above_ = fits_above;
+}
+
 void AdaptiveQuality::on_frame(int level, double cost_ms) {
   cost_ms_ = average(cost_ms_, cost_ms, level != cost_level_);
   cost_level_ = level;
@@ -63,9 +69,12 @@ int AdaptiveQuality::on_tick(Clock::time_point now) {
   const bool skipping =
       received >= 5 && static_cast<double>(replaced) > params_.down_skip_fraction * static_cast<double>(received);
   const bool late = frames_late();
-  if ((skipping || late) && level_ + 1 < kLevels) {
+  // A link that holds the bitrate down explains the skips and the lateness until it is below
+  // the floor (bitrate first, then resolution).
+  const bool host_behind = (skipping || late) && !link_limited_;
+  if ((host_behind || link_below_floor_) && level_ + 1 < kLevels) {
     step = -1;
-  } else if (level_ > 0 && received >= 1 && replaced == 0 && !late &&
+  } else if (level_ > 0 && received >= 1 && (replaced == 0 || link_limited_) && !late && link_fits_above_ &&
              (!have_change_ || now - changed_at_ >= params_.up_after) && cost_level_ == level_ &&
              pose_interval_ms_ > 0) {
     const double grow = kScales[level_ - 1] / kScales[level_];

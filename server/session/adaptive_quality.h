@@ -56,6 +56,12 @@ class AdaptiveQuality {
   void on_pose(Clock::time_point now, bool replaced);
   // The client reported at `now` that an earlier frame was shown `latency_ms` after its pose.
   void on_latency(Clock::time_point now, double latency_ms);
+  // The link's rate controller (link_rate.h, --link-control) after a frame was written: `limited`
+  // it holds the bitrate down; `below_floor` its cap is under link_floor_kbps of this level's
+  // size; `fits_above` its cap would carry the level above. While the link limits, poses skipped
+  // or frames late are the link's doing, which the bitrate answers first: the level steps down
+  // only below the floor, and steps up only where the level above fits.
+  void on_link(bool limited, bool below_floor, bool fits_above);
   // A frame rendered at `level` was handed off; `cost_ms` as above (not for refine frames).
   void on_frame(int level, double cost_ms);
   // The tick: applies the rule. Returns +1 (up), -1 (down) or 0.
@@ -94,6 +100,7 @@ class AdaptiveQuality {
   double cost_ms_ = 0;           // exponential average, at cost_level_
   int cost_level_ = -1;
   bool refined_ = false;  // the refine of the current stillness was taken
+  bool link_limited_ = false, link_below_floor_ = false, link_fits_above_ = true;
 };
 
 }  // namespace catgs::server

@@ -12,6 +12,7 @@
 
 #include "camera/camera.h"
 #include "encode/encoder_policy.h"
+#include "session/link_rate.h"
 
 namespace catgs::server {
 
@@ -40,6 +41,16 @@ void Session::maybe_start_render() {
           // Pipelined, the number is given at the encode (maybe_start_encode): a frame skipped
           // before its encode must leave no gap, as Frame sequences rise by one from 0.
           pipelined_ ? 0 : next_frame_sequence_++, last_send_ms_, max_bitrate_kbps_, level};
+  // The link's cap against the policy's rate at this size (link_rate.h), both in bits a second
+  // on the wire: the VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer
+  // frames a second sends that share of it.
+  const double fps_share = std::clamp(link_.frame_rate() / kStreamFps, 0.05, 1.0);
+  const int vbv_ceiling =
+      target_bitrate_kbps(shared_.options.encoder_policy, job.width, job.height, kStreamFps, max_bitrate_kbps_);
+  link_ceiling_kbps_ = vbv_ceiling > 0 ? std::max(1, static_cast<int>(vbv_ceiling * fps_share)) : 0;
+  if (shared_.options.link_control && link_.limited())
+    job.link_kbps =
+        std::max(1, static_cast<int>(link_.cap_kbps(link_ceiling_kbps_) * link_.encoder_gain() / fps_share));
   last_started_ = pending_;
   last_started_->full_size = false;
   pending_.reset();
@@ -147,15 +158,26 @@ void Session::ensure_encoder(const Job& job, bool& idr) {
   const EncoderPolicy& policy = shared_.options.encoder_policy;
   const int live = static_cast<int>(std::max<std::int64_t>(1, shared_.metrics.sessions_open.load()));
   const auto now = Clock::now();
+  // The link's cap follows the link frame by frame: x264 takes a new VBV rate without an IDR.
   if (encoder_ && encoder_->width() == job.width && encoder_->height() == job.height &&
-      encoder_bitrate_kbps_ == job.max_bitrate_kbps) {
+      encoder_bitrate_kbps_ == job.max_bitrate_kbps && encoder_link_kbps_ != job.link_kbps) {
+    const int client = job.max_bitrate_kbps;
+    const int cap = job.link_kbps > 0 && client > 0 ? std::min(client, job.link_kbps) : std::max(client, job.link_kbps);
+    const int rate = target_bitrate_kbps(policy, job.width, job.height, kStreamFps, cap);
+    if (rate > 0 && encoder_->set_max_bitrate_kbps(rate)) encoder_link_kbps_ = job.link_kbps;
+  }
+  if (encoder_ && encoder_->width() == job.width && encoder_->height() == job.height &&
+      encoder_bitrate_kbps_ == job.max_bitrate_kbps && encoder_link_kbps_ == job.link_kbps) {
     // The same stream: rebuilt only for a new share of the cores (x264's threads are fixed
     // when it opens; NVENC has none to share).
     const int wanted = encoder_threads(policy, job.width, job.height, live);
     if (encoder_->name() == "nvenc" || !should_rebuild(encoder_threads_, wanted, now - encoder_built_)) return;
     shared_.metrics.encoder_rebuilds_total++;
   }
-  EncoderConfig cfg = encoder_config(policy, job.width, job.height, kStreamFps, live, job.max_bitrate_kbps);
+  // A client's Quality and the link's cap both lower the policy's rate, never raise it.
+  const int client = job.max_bitrate_kbps;
+  const int cap = job.link_kbps > 0 && client > 0 ? std::min(client, job.link_kbps) : std::max(client, job.link_kbps);
+  EncoderConfig cfg = encoder_config(policy, job.width, job.height, kStreamFps, live, cap);
   // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
   cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
   cfg.cuda_device = std::max(gpu_, 0);
@@ -163,6 +185,7 @@ void Session::ensure_encoder(const Job& job, bool& idr) {
   bool fell_back = false;
   encoder_ = make_encoder(shared_.options.encoder, cfg, nullptr, &fell_back);
   encoder_bitrate_kbps_ = job.max_bitrate_kbps;
+  encoder_link_kbps_ = job.link_kbps;
   encoder_threads_ = cfg.threads;
   encoder_built_ = now;
   if (fell_back) shared_.metrics.encoder_fallbacks_total++;
@@ -282,9 +305,42 @@ void Session::on_job_done(JobResult result) {
     if (!result.refine) quality_.on_frame(result.quality_level, result.total_ms);
     last_frame_level_ = result.quality_level;
   }
-  handed_.push_back(Clock::now());
+  handed_.push_back({Clock::now(), result.message.size()});
   shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
   maybe_start_render();
+}
+
+void Session::on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket) {
+  if (!shared_.options.link_control) return;
+  const bool was_limited = link_.limited();
+  const int cuts = link_.decreases();
+  link_.on_written(frame.bytes, frame.at, written, socket, link_ceiling_kbps_);
+  ServerMetrics& m = shared_.metrics;
+  m.link_rate_decreases_total += static_cast<std::uint64_t>(link_.decreases() - cuts);
+  if (link_.limited() != was_limited) m.sessions_link_limited += link_.limited() ? 1 : -1;
+  // The kernel's buffer sized by the link while it limits (a tenth of a second of it, which the
+  // kernel doubles; at least its minimum, about 4.6 KB): TCP can then never put much more than
+  // that in front of the link, whatever the controller's estimate; the configured size once it
+  // no longer limits.
+  const int configured = shared_.options.socket_send_buffer;
+  const int wanted = link_.limited() && link_.link_kbps() > 0 && configured > 0
+                         ? std::clamp(static_cast<int>(link_.link_kbps() * 1000.0 / 8.0 * 0.1), 2048, configured)
+                         : configured;
+  if (wanted > 0 && (send_buffer_ == 0 || std::abs(wanted - send_buffer_) > send_buffer_ / 4 || wanted == configured) &&
+      wanted != send_buffer_) {
+    shared_.transport.set_send_buffer(id_, wanted);
+    send_buffer_ = wanted;
+  }
+  if (!shared_.options.adaptive_quality) return;
+  // The floor of this level's size and whether the cap would carry the level above.
+  const int level = quality_.level();
+  const int cap = link_.cap_kbps(link_ceiling_kbps_);
+  const int here =
+      link_floor_kbps(AdaptiveQuality::scaled_side(width_, level), AdaptiveQuality::scaled_side(height_, level));
+  const int above = level > 0 ? link_floor_kbps(AdaptiveQuality::scaled_side(width_, level - 1),
+                                                AdaptiveQuality::scaled_side(height_, level - 1))
+                              : 0;
+  quality_.on_link(link_.limited(), link_.limited() && cap < here, !link_.limited() || cap >= 2 * above);
 }
 
 void Session::adapt_quality(Clock::time_point now) {

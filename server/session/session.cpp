@@ -88,6 +88,7 @@ void Session::start() {
 
 Session::~Session() {
   shared_.metrics.connections_open--;
+  if (link_.limited()) shared_.metrics.sessions_link_limited--;
   if (gpu_ >= 0) shared_.gpus.release(gpu_);
 }
 
@@ -104,17 +105,19 @@ void Session::post_message(MessageKind kind, std::string bytes) {
   });
 }
 
-void Session::post_sent() {
+void Session::post_sent(const SocketSample& socket) {
   // Stamped here, on the transport thread: the strand handler may wait for a pool thread that
   // is busy rendering, and that wait is not send time.
   const auto written = Clock::now();
-  boost::asio::post(strand_, [self = shared_from_this(), written] {
+  boost::asio::post(strand_, [self = shared_from_this(), written, socket] {
     if (self->in_flight_ > 0) self->in_flight_--;
     self->last_progress_ = Clock::now();
     if (!self->handed_.empty()) {  // frames are written in the order they were queued
-      self->last_send_ms_ = ms_between(self->handed_.front(), written);
+      const Handed frame = self->handed_.front();
+      self->last_send_ms_ = ms_between(frame.at, written);
       self->handed_.pop_front();
       self->shared_.metrics.send_seconds.observe(self->last_send_ms_ / 1000.0);
+      self->on_link_sample(frame, written, socket);
     }
     self->maybe_start_render();
     if (self->export_ && self->export_->sending) self->send_export_chunks();
@@ -547,6 +550,10 @@ void Session::send_stats() {
   s->set_render_ms_mean(render_ms_sum_ / n);
   s->set_encode_ms_mean(encode_ms_sum_ / n);
   s->set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
+  s->set_link_kbps(link_.link_kbps());
+  s->set_rtt_ms(link_.rtt_ms());
+  if (link_.limited()) s->set_bitrate_cap_kbps(static_cast<std::uint32_t>(link_.cap_kbps(link_ceiling_kbps_)));
+  s->set_quality_level(static_cast<std::uint32_t>(shared_.options.adaptive_quality ? quality_.level() : 0));
   s->set_key_frames(render_key_frames_);
   s->set_sub_frames(render_sub_frames_);
   // Draining: the client learns when this session will end (the page says so), within a second of

@@ -42,6 +42,7 @@
 #include "session/frame_pacing.h"
 #include "session/message_validation.h"
 #include "session/first_view.h"
+#include "session/link_rate.h"
 #include "session/rate_limit.h"
 #include "session/scene_store.h"
 #include "session/video_export.h"
@@ -98,8 +99,9 @@ class Session : public std::enable_shared_from_this<Session> {
   void start();
   // Transport thread -> strand: a complete incoming message.
   void post_message(MessageKind kind, std::string bytes);
-  // Transport thread -> strand: a Frame left the queue (written to the socket layer).
-  void post_sent();
+  // Transport thread -> strand: a Frame left the queue (written to the socket layer); `socket`
+  // is the socket's TCP_INFO right after (link_rate.h).
+  void post_sent(const SocketSample& socket = {});
   // Transport thread -> strand: the connection is gone.
   void post_closed();
   // Server stopping (the drain's end): send ERROR_SHUTTING_DOWN with a retry hint and close.
@@ -124,7 +126,13 @@ class Session : public std::enable_shared_from_this<Session> {
     std::uint32_t frame_sequence = 0;
     double previous_send_ms = 0;  // FrameTimings.previous_send_ms
     int max_bitrate_kbps = 0;     // Quality.max_bitrate_kbps (0: the server's default)
+    int link_kbps = 0;            // the link's rate cap (link_rate.h; 0: not limiting)
     int quality_level = 0;        // AdaptiveQuality level the size was scaled to
+  };
+  // A frame handed to the transport.
+  struct Handed {
+    Clock::time_point at;  // when it went to the transport
+    std::size_t bytes;     // its message's size
   };
   // A rendered frame waiting for (or in) the encode stage.
   struct Rendered {
@@ -183,6 +191,9 @@ class Session : public std::enable_shared_from_this<Session> {
   void send_annotations();
   // --adaptive-quality, on the tick: applies AdaptiveQuality's rule and queues a refine frame.
   void adapt_quality(Clock::time_point now);
+  // A frame (handed at frame.at) was written at `written`: the link's rate controller and, with
+  // --adaptive-quality, the level's link input (link_rate.h, adaptive_quality.h).
+  void on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket);
   // Ends the session with Error{code, reason, retry_after_ms} (the last message) and closes;
   // retry_after_ms is the client's reconnect hint (0: none).
   void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false, std::uint32_t retry_after_ms = 0);
@@ -244,9 +255,12 @@ class Session : public std::enable_shared_from_this<Session> {
   std::optional<Rendered> rendered_;         // rendered, waiting for the encoder
   std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
   int in_flight_ = 0;                                      // frames queued to the transport, not yet written
-  std::deque<Clock::time_point> handed_;                   // when each in-flight frame went to the transport
-  double last_send_ms_ = 0;                                // send time of the last frame written
-  Clock::time_point last_progress_;                        // last time the transport wrote one of our frames
+  std::deque<Handed> handed_;                              // the in-flight frames, in order
+  LinkRate link_;                                          // the link's rate controller (--link-control)
+  int link_ceiling_kbps_ = 0;        // the policy's rate for the last job's size (link_rate.h's ceiling)
+  int send_buffer_ = 0;              // the socket's SO_SNDBUF as the session last set it (0: the transport's)
+  double last_send_ms_ = 0;          // send time of the last frame written
+  Clock::time_point last_progress_;  // last time the transport wrote one of our frames
   std::uint32_t next_frame_sequence_ = 0;
   Clock::time_point last_stats_;
   Clock::time_point last_message_;  // the client's latest message (--silent-timeout-ms)
@@ -279,6 +293,7 @@ class Session : public std::enable_shared_from_this<Session> {
   int gpu_ = -1;  // the CUDA device renderer_ renders on (shared_.gpus), -1: none (CPU renderer)
   std::unique_ptr<Encoder> encoder_;
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with (touched in jobs only)
+  int encoder_link_kbps_ = 0;     // the link cap it runs at (changed without a rebuild where it can)
   int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
   Clock::time_point encoder_built_{};
 };

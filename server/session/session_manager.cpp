@@ -24,8 +24,8 @@ void SessionManager::on_message(ConnId id, MessageKind kind, std::string bytes) 
   if (auto s = find(id)) s->post_message(kind, std::move(bytes));
 }
 
-void SessionManager::on_sent(ConnId id) {
-  if (auto s = find(id)) s->post_sent();
+void SessionManager::on_sent(ConnId id, const SocketSample& socket) {
+  if (auto s = find(id)) s->post_sent(socket);
 }
 
 void SessionManager::on_close(ConnId id) {

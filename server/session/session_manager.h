@@ -27,7 +27,7 @@ class SessionManager final : public TransportHandler {
   // TransportHandler (service thread): forward to the session's strand.
   void on_open(ConnId id) override;
   void on_message(ConnId id, MessageKind kind, std::string bytes) override;
-  void on_sent(ConnId id) override;
+  void on_sent(ConnId id, const SocketSample& socket) override;
   void on_close(ConnId id) override;
   std::string metrics_text() override;
   std::string scenes_json() override;

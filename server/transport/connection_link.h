@@ -15,6 +15,17 @@ namespace catgs::server {
 // Identifies one WebSocket connection for its lifetime (never reused).
 using ConnId = std::uint64_t;
 
+// TCP_INFO fields of a WebSocket's socket, read by the transport right after a frame's last byte
+// was written (TransportHandler::on_sent). valid false: not a TCP socket, or the read failed.
+struct SocketSample {
+  bool valid = false;
+  double rtt_ms = 0;              // smoothed round-trip time (tcpi_rtt)
+  double min_rtt_ms = 0;          // the smallest seen on this connection (tcpi_min_rtt)
+  double delivery_kbps = 0;       // the kernel's delivery-rate estimate (tcpi_delivery_rate)
+  bool app_limited = true;        // that estimate was taken while the sender had nothing to send
+  std::size_t notsent_bytes = 0;  // written by us, not yet sent by the kernel (tcpi_notsent_bytes)
+};
+
 class ConnectionLink {
  public:
   virtual ~ConnectionLink() = default;
@@ -31,6 +42,10 @@ class ConnectionLink {
   virtual void said_hello(ConnId id) = 0;
   // The client's address ("" for unknown ids).
   virtual std::string peer(ConnId id) const = 0;
+  // Sets the socket's kernel send buffer (SO_SNDBUF, bytes; the kernel doubles it and keeps at
+  // least its minimum): the bytes a connection may have sent but not acknowledged, plus unsent,
+  // bound how deep a queue it can build in front of a slow link (session/link_rate.h).
+  virtual void set_send_buffer(ConnId id, int bytes) = 0;
 };
 
 }  // namespace catgs::server

@@ -6,6 +6,8 @@
 #include <iostream>
 #include <stdexcept>
 
+#include <linux/tcp.h>  // struct tcp_info with the delivery rate (glibc's netinet/tcp.h lacks it)
+#include <netinet/in.h>
 #include <sys/socket.h>
 
 #include <libwebsockets.h>
@@ -27,6 +29,25 @@ thread_local Transport* g_starting = nullptr;
 // Outgoing WebSocket messages are written in fragments of this size: one lws_write per writable
 // callback keeps the service loop responsive with many connections and big key frames.
 constexpr std::size_t kFragmentBytes = 64 * 1024;
+
+// TCP_INFO of a WebSocket's socket (connection_link.h SocketSample); valid false where it cannot
+// be read (not TCP).
+SocketSample socket_sample(lws* wsi) {
+  SocketSample s;
+  const int fd = static_cast<int>(lws_get_socket_fd(wsi));
+  struct tcp_info info {};
+  socklen_t len = sizeof info;
+  if (fd < 0 || getsockopt(fd, IPPROTO_TCP, TCP_INFO, &info, &len) != 0) return s;
+  // Older kernels fill less; the fields used here are from Linux 4.9-4.10 (delivery rate).
+  if (len < offsetof(struct tcp_info, tcpi_delivery_rate) + sizeof info.tcpi_delivery_rate) return s;
+  s.valid = true;
+  s.rtt_ms = info.tcpi_rtt / 1000.0;
+  s.min_rtt_ms = info.tcpi_min_rtt / 1000.0;
+  s.delivery_kbps = static_cast<double>(info.tcpi_delivery_rate) * 8.0 / 1000.0;
+  s.app_limited = info.tcpi_delivery_rate_app_limited != 0;
+  s.notsent_bytes = info.tcpi_notsent_bytes;
+  return s;
+}
 
 // A request header as a string ("" when absent).
 std::string header(lws* wsi, lws_token_indexes token) {
@@ -256,6 +277,14 @@ void Transport::said_hello(ConnId id) {
   if (it == conns_.end() || it->second.said_hello) return;
   it->second.said_hello = true;
   pre_hello_--;
+}
+
+void Transport::set_send_buffer(ConnId id, int bytes) {
+  std::lock_guard<std::mutex> lock(mutex_);  // the entry, and so its socket, lives while held
+  auto it = conns_.find(id);
+  if (it == conns_.end() || !it->second.wsi) return;
+  const int fd = static_cast<int>(lws_get_socket_fd(it->second.wsi));
+  if (fd >= 0) setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &bytes, sizeof(bytes));
 }
 
 std::string Transport::peer(ConnId id) const {
@@ -495,6 +524,14 @@ int Transport::on_ws(lws* wsi, int reason, void* user, void* in, std::size_t len
         const int size = options_.socket_send_buffer;
         if (fd >= 0) setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &size, sizeof(size));
       }
+      // A small unsent queue in the kernel: the socket is writable again only when the frame
+      // before has nearly left, so on a slow link the next frame waits in the session (latest
+      // pose wins) and the send delay tells the link's rate (session/link_rate.h).
+      if (options_.notsent_lowat > 0) {
+        const int fd = static_cast<int>(lws_get_socket_fd(wsi));
+        const int bytes = options_.notsent_lowat;
+        if (fd >= 0) setsockopt(fd, IPPROTO_TCP, TCP_NOTSENT_LOWAT, &bytes, sizeof(bytes));
+      }
       handler_.on_open(id);
       return 0;
     }
@@ -626,7 +663,7 @@ int Transport::write_some(lws* wsi, ConnId id) {
     more = !c.queue.empty() || c.closing;
   }
   if (more) lws_callback_on_writable(wsi);
-  if (sent_counted) handler_.on_sent(id);
+  if (sent_counted) handler_.on_sent(id, socket_sample(wsi));
   return 0;
 }
 

@@ -66,8 +66,9 @@ class TransportHandler {
   // One complete message. For `oversize` the bytes are empty (the message exceeded the limit and
   // was discarded).
   virtual void on_message(ConnId id, MessageKind kind, std::string bytes) = 0;
-  // A message queued with send(..., counted = true) has been fully handed to the socket layer.
-  virtual void on_sent(ConnId id) = 0;
+  // A message queued with send(..., counted = true) has been fully handed to the socket layer;
+  // `socket` is its TCP_INFO right after (connection_link.h).
+  virtual void on_sent(ConnId id, const SocketSample& socket) = 0;
   // The connection is gone (closed by either side or dropped). No callbacks follow for `id`.
   virtual void on_close(ConnId id) = 0;
   // Body of GET /metrics (Prometheus text format).
@@ -96,6 +97,7 @@ struct TransportOptions {
   std::string web_root;                       // static files at "/"
   std::size_t max_message_bytes = 64 * 1024;  // incoming messages above this are `oversize`
   int socket_send_buffer = 512 * 1024;        // SO_SNDBUF of WebSocket sockets; 0 = kernel's
+  int notsent_lowat = 1024;                   // TCP_NOTSENT_LOWAT of WebSocket sockets; 0 = kernel's
   OriginPolicy origins;                       // pages allowed to open a WebSocket
   int max_per_ip = 128;                       // WebSocket connections per client address; 0 = no cap
   int max_pre_hello = 256;                    // connections that have not said Hello; 0 = no cap
@@ -145,6 +147,7 @@ class Transport final : public ConnectionLink {
   // Thread-safe. The client's address ("" for unknown ids): the TCP peer, or behind a trusted
   // proxy the address its X-Forwarded-For names (trusted_proxies.h).
   std::string peer(ConnId id) const override;
+  void set_send_buffer(ConnId id, int bytes) override;
 
  private:
   struct Outgoing {

@@ -75,6 +75,7 @@ class CheckingLink final : public ConnectionLink {
   }
   std::size_t queued(ConnId) const override { return unwritten_; }
   void said_hello(ConnId) override {}
+  void set_send_buffer(ConnId, int) override {}
   std::string peer(ConnId) const override { return "192.0.2.1"; }
 
   // Op 3: the oldest counted message was written; false when none is waiting.

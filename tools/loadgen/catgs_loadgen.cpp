@@ -52,6 +52,8 @@ const char* kUsage =
     "                           render of its pose (needs --scene; slows the client down)\n"
     "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
     "  --warmup N               first N frames of a session left out of the statistics (5)\n"
+    "  --warmup-s S             frames of the poses sent in a session's first S seconds left\n"
+    "                           out too (0; the settling time a slow link's controller gets)\n"
     "  --stale-ms MS            frames later than this count as stale (default 100)\n"
     "  --token T                Hello token\n"
     "  --json FILE              write the report (every ramp step) as JSON\n"
@@ -145,6 +147,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
   if (base.check_every > 0 && !args.has("--scene"))
     throw std::invalid_argument("--check-every needs --scene (the reference renders it)");
   base.warmup_frames = args.get_int("--warmup", 5);
+  base.warmup_s = args.get_double("--warmup-s", 0.0);
   base.stale_ms = args.get_double("--stale-ms", 100);
   if (args.get_double("--progress", 1) < 0) throw std::invalid_argument("--progress must be >= 0 seconds");
   if (args.has("--scene")) {
@@ -234,11 +237,11 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
 int main(int argc, char** argv) {
   try {
     const tools::Args args(
-        argc, argv,
-        {"--host",        "--port",           "--sessions",   "--size",     "--width",    "--height",  "--trace",
-         "--scene",       "--scene-name",     "--offset-s",   "--rate",     "--depth",    "--seconds", "--decode",
-         "--check-every", "--check-min-psnr", "--warmup",     "--stale-ms", "--token",    "--json",    "--ramp!",
-         "--ramp-step",   "--ramp-start",     "--max-p95-ms", "--min-fps",  "--progress", "--tls!",    "--help!"});
+        argc, argv, {"--host",       "--port",    "--sessions",    "--size",           "--width",     "--height",
+                     "--trace",      "--scene",   "--scene-name",  "--offset-s",       "--rate",      "--depth",
+                     "--seconds",    "--decode",  "--check-every", "--check-min-psnr", "--warmup",    "--warmup-s",
+                     "--stale-ms",   "--token",   "--json",        "--ramp!",          "--ramp-step", "--ramp-start",
+                     "--max-p95-ms", "--min-fps", "--progress",    "--tls!",           "--help!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

@@ -130,6 +130,9 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"poses_sent", s.poses_sent},
          {"frames", s.frames},
          {"idr_frames", s.idr_frames},
+         {"size_changes", s.size_changes},
+         {"min_width", s.min_width},
+         {"min_height", s.min_height},
          {"decoded", s.decoded},
          {"fps", session_fps(s)},
          {"bytes", s.bytes},
@@ -172,12 +175,12 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
   auto row = [&](const std::string& name, const std::string& size, std::uint64_t frames, double fps,
                  const LatencySummary& l, double kbps, std::uint64_t skipped, std::uint64_t dropped,
                  std::uint64_t stale, std::uint64_t errors) {
-    std::snprintf(line, sizeof(line), "%-8s %-10s %7llu %7.1f %8.1f %8.1f %8.1f %9.0f %7llu %7llu %6llu %6llu\n",
+    std::snprintf(line, sizeof(line), "%-8s %-18s %7llu %7.1f %8.1f %8.1f %8.1f %9.0f %7llu %7llu %6llu %6llu\n",
                   name.c_str(), size.c_str(), u(frames), fps, l.p50, l.p95, l.p99, kbps, u(skipped), u(dropped),
                   u(stale), u(errors));
     out += line;
   };
-  std::snprintf(line, sizeof(line), "%-8s %-10s %7s %7s %8s %8s %8s %9s %7s %7s %6s %6s\n", "session", "size", "frames",
+  std::snprintf(line, sizeof(line), "%-8s %-18s %7s %7s %8s %8s %8s %9s %7s %7s %6s %6s\n", "session", "size", "frames",
                 "FPS", "p50 ms", "p95 ms", "p99 ms", "kbit/s", "skipped", "dropped", "stale", "errors");
   out += line;
   for (const SessionResult& s : sessions) {
@@ -189,8 +192,11 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
       continue;
     }
     const double kbps = s.run_seconds > 0 ? 8.0 * static_cast<double>(s.bytes) / s.run_seconds / 1000.0 : 0.0;
-    row(std::to_string(s.index), std::to_string(s.width) + "x" + std::to_string(s.height), s.frames, session_fps(s),
-        summarize_latency(s.latency_ms), kbps, s.skipped, s.dropped, s.stale, s.errors);
+    // A stream whose size changed shows its smallest size too (adaptive quality).
+    std::string size = std::to_string(s.width) + "x" + std::to_string(s.height);
+    if (s.size_changes > 0) size += ">" + std::to_string(s.min_width) + "x" + std::to_string(s.min_height);
+    row(std::to_string(s.index), size, s.frames, session_fps(s), summarize_latency(s.latency_ms), kbps, s.skipped,
+        s.dropped, s.stale, s.errors);
   }
   const RunSummary t = summarize_run(sessions);
   row("total", "", t.frames, t.fps_total, t.latency, 8.0 * t.bytes_per_second / 1000.0, t.skipped, t.dropped, t.stale,

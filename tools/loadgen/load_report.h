@@ -28,9 +28,11 @@ struct StageSums {
 
 // What one session saw. Filled by run_load_session (load_session.h).
 struct SessionResult {
-  int index = 0;                                               // session number in the run, from 0
-  std::string trace;                                           // trace spec it replayed
-  int width = 0, height = 0;                                   // frame size the server streamed
+  int index = 0;                      // session number in the run, from 0
+  std::string trace;                  // trace spec it replayed
+  int width = 0, height = 0;          // frame size the Welcome named
+  int size_changes = 0;               // Frames whose size differed from the one before (adaptive quality)
+  int min_width = 0, min_height = 0;  // the smallest frame size seen
   std::string session_id, renderer, encoder, pipeline, scene;  // from Welcome
   double run_seconds = 0;                                      // poses were sent for this long
   std::uint64_t poses_sent = 0;

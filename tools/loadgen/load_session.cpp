@@ -185,6 +185,17 @@ class PoseLoop {
 
   void on_frame(const pb::Frame& f) {
     r_.frames++;
+    if (f.width() > 0 &&
+        (static_cast<int>(f.width()) != frame_width_ || static_cast<int>(f.height()) != frame_height_)) {
+      if (frame_width_ > 0) r_.size_changes++;
+      frame_width_ = static_cast<int>(f.width());
+      frame_height_ = static_cast<int>(f.height());
+      const std::int64_t pixels = static_cast<std::int64_t>(frame_width_) * frame_height_;
+      if (r_.min_width == 0 || pixels < static_cast<std::int64_t>(r_.min_width) * r_.min_height) {
+        r_.min_width = frame_width_;
+        r_.min_height = frame_height_;
+      }
+    }
     r_.bytes += f.payload().size();
     if (f.key_frame()) r_.idr_frames++;
     if (outstanding_ > 0) outstanding_--;
@@ -202,6 +213,7 @@ class PoseLoop {
       answered_++;
     }
     if (r_.frames <= static_cast<std::uint64_t>(cfg_.warmup_frames)) return;
+    if (cfg_.warmup_s > 0 && f.client_time_ms() - sent_at_.front() < 1000.0 * cfg_.warmup_s) return;
     r_.latency_ms.push_back(latency);
     add_server_timings(f.timings());
   }
@@ -211,8 +223,11 @@ class PoseLoop {
     try {
       const bool got = decoder_.decode(f.payload(), rgba_, w, h);
       if (got) r_.decoded++;
-      if (w != r_.width || h != r_.height)
-        note_error(r_, "frame decoded to " + std::to_string(w) + "x" + std::to_string(h));
+      // The server may change the size (adaptive quality: a slow host or link); every frame
+      // says its size, and the picture must have it.
+      if (got && (w != static_cast<int>(f.width()) || h != static_cast<int>(f.height())))
+        note_error(r_, "frame decoded to " + std::to_string(w) + "x" + std::to_string(h) + ", the Frame says " +
+                           std::to_string(f.width()) + "x" + std::to_string(f.height()));
       if (got && check_ && r_.frames % static_cast<std::uint64_t>(cfg_.check_every) == 0 &&
           f.pose_sequence() < sent_poses_.size())
         check_against_reference(f.pose_sequence(), w, h);
@@ -256,6 +271,7 @@ class PoseLoop {
   const Trace trace_;
   const bool check_;
   H264Decoder decoder_;
+  int frame_width_ = 0, frame_height_ = 0;  // the size of the last Frame
   std::vector<std::uint8_t> rgba_;
   std::vector<double> sent_at_;       // client time each pose was sent, by sequence
   std::vector<pb::Pose> sent_poses_;  // reference check: each pose as sent, by sequence

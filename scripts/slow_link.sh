@@ -1,0 +1,118 @@
+#!/usr/bin/env bash
+# A visitor on a slow link (issue 50): the server on this host, catgs-loadgen in a network
+# namespace of its own behind a veth pair whose host side is shaped with tc's token bucket
+# filter (this kernel has no netem). One session at a time: unshaped first, then links at the
+# fractions of the unshaped rate given; per link a row of FPS, pose-to-frame p50 / p95 / p99 /
+# max after the first WARMUP seconds, and the received rate; then, with --check, the issue's
+# bounds (exit 1 when one fails).
+#
+# usage: scripts/slow_link.sh BIN_DIR SCENE [--seconds 15] [--warmup 3] [--fractions 0.8,0.5,0.25]
+#          [--check] [--json OUT] [-- SERVER_ARGS...]
+#   SERVER_ARGS replace the default server settings after the scene (--renderer cpu --bitrate
+#   2000 --crf 8: a 640x360 stream of about 400 kbit/s at the CPU's 12 frames/s).
+# Needs root, ip netns and tc (iproute2); without them it prints SKIP and exits 77 (ctest's skip
+# code). Traffic goes only to addresses inside the namespace it makes; everything it made is
+# removed on exit.
+set -uo pipefail
+bin=$1 scene=$2
+shift 2
+seconds=15 warmup=3 fractions=0.8,0.5,0.25 check=0 json=""
+server_args=(--renderer cpu --bitrate 2000 --crf 8)
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --seconds) seconds=$2; shift 2 ;;
+    --warmup) warmup=$2; shift 2 ;;
+    --fractions) fractions=$2; shift 2 ;;
+    --check) check=1; shift ;;
+    --json) json=$2; shift 2 ;;
+    --) shift; server_args=("$@"); break ;;
+    *) echo "slow_link.sh: unknown argument $1" >&2; exit 2 ;;
+  esac
+done
+
+skip() { echo "SKIP: $*"; exit 77; }
+[ "$(id -u)" = 0 ] || skip "needs root for network namespaces (ip netns, tc)"
+command -v ip >/dev/null && command -v tc >/dev/null || skip "iproute2 (ip, tc) not installed"
+tag=$$
+ns=catgs_sl_$tag host_if=vsl${tag}a ns_if=vsl${tag}b
+net=10.234.$((tag % 250)).0
+host_ip=${net%.0}.1 ns_ip=${net%.0}.2
+port=$((18000 + tag % 2000))
+work=$(mktemp -d)
+server_pid=""
+cleanup() {
+  [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
+  ip link del "$host_if" 2>/dev/null
+  ip netns del "$ns" 2>/dev/null
+  [ -n "${KEEP_WORK:-}" ] || rm -rf "$work"; [ -n "${KEEP_WORK:-}" ] && echo "work: $work"
+}
+trap cleanup EXIT
+ip netns add "$ns" 2>/dev/null || skip "cannot make a network namespace here"
+ip link add "$host_if" type veth peer name "$ns_if" || skip "cannot make a veth pair here"
+ip link set "$ns_if" netns "$ns"
+ip addr add "$host_ip/24" dev "$host_if" && ip link set "$host_if" up
+ip netns exec "$ns" ip addr add "$ns_ip/24" dev "$ns_if"
+ip netns exec "$ns" ip link set "$ns_if" up
+ip netns exec "$ns" ip link set lo up
+
+"$bin/catgs-server" --scene "$scene" --bind "$host_ip" --port "$port" "${server_args[@]}" > "$work/server.log" 2>&1 &
+server_pid=$!
+for _ in $(seq 100); do
+  (exec 3<>"/dev/tcp/$host_ip/$port") 2>/dev/null && break
+  sleep 0.2
+done
+
+# run NAME RATE_KBIT|none: one session, its loadgen JSON in $work/NAME.json.
+run() {
+  local name=$1 rate=$2
+  tc qdisc del dev "$host_if" root 2>/dev/null
+  [ "$rate" = none ] || tc qdisc add dev "$host_if" root tbf rate "${rate}kbit" burst 16kb latency 300ms
+  ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions 1 --size 640x360 \
+    --trace orbit --rate 60 --decode 1 --seconds "$seconds" --warmup-s "$warmup" --json "$work/$name.json" \
+    > "$work/$name.txt" 2>&1
+}
+
+run unshaped none
+unshaped_kbps=$(python3 -c "import json;print(round(json.load(open('$work/unshaped.json'))['run']['sessions'][0]['bytes_per_second']*8/1000))")
+names=(unshaped) rates=(none)
+for f in ${fractions//,/ }; do
+  r=$(python3 -c "print(max(16, round($unshaped_kbps * $f)))")
+  run "link_$f" "$r"
+  names+=("link_$f") rates+=("$r")
+done
+tc qdisc del dev "$host_if" root 2>/dev/null
+
+python3 - "$work" "$check" "$json" "$warmup" "${names[*]}" "${rates[*]}" <<'PY'
+import json, sys
+work, check, out, warmup = sys.argv[1], sys.argv[2] == "1", sys.argv[3], float(sys.argv[4])
+names, rates = sys.argv[5].split(), sys.argv[6].split()
+rows = []
+for name, rate in zip(names, rates):
+    s = json.load(open(f"{work}/{name}.json"))["run"]["sessions"][0]
+    lat = s["latency"]
+    rows.append({"link": name, "rate_kbit": None if rate == "none" else int(rate), "fps": s["fps"],
+                 "p50_ms": lat["p50_ms"], "p95_ms": lat["p95_ms"], "p99_ms": lat["p99_ms"], "max_ms": lat["max_ms"],
+                 "received_kbit": s["bytes_per_second"] * 8 / 1000, "size_changes": s["size_changes"],
+                 "min_size": f'{s["min_width"]}x{s["min_height"]}' if s["size_changes"] else f'{s["width"]}x{s["height"]}',
+                 "errors": s["errors"], "first_error": s["first_error"]})
+print(f"| link | FPS | p50 / p95 / p99 / max ms (after {warmup:g} s) | kbit/s received | smallest size | errors |")
+print("|---|---|---|---|---|---|")
+for r in rows:
+    link = "unshaped" if r["rate_kbit"] is None else f'{r["rate_kbit"]} kbit/s ({r["link"][5:]})'
+    print(f'| {link} | {r["fps"]:.1f} | {r["p50_ms"]:.0f} / {r["p95_ms"]:.0f} / {r["p99_ms"]:.0f} / {r["max_ms"]:.0f} '
+          f'| {r["received_kbit"]:.0f} | {r["min_size"]} | {r["errors"]} {r["first_error"]} |')
+if out:
+    json.dump(rows, open(out, "w"), indent=1)
+failed = []
+base = rows[0]
+for r in rows[1:]:
+    if r["p95_ms"] > base["p95_ms"] + 300: failed.append(f'{r["link"]}: p95 {r["p95_ms"]:.0f} ms > unshaped {base["p95_ms"]:.0f} + 300')
+    if r["max_ms"] > 1000: failed.append(f'{r["link"]}: a frame {r["max_ms"]:.0f} ms after its pose (> 1 s)')
+    if r["fps"] < 0.4 * base["fps"]: failed.append(f'{r["link"]}: {r["fps"]:.1f} FPS < 40% of unshaped {base["fps"]:.1f}')
+    if r["received_kbit"] < 0.7 * r["rate_kbit"]:
+        failed.append(f'{r["link"]}: received {r["received_kbit"]:.0f} kbit/s < 70% of the link {r["rate_kbit"]}')
+for r in rows:
+    if r["errors"]: failed.append(f'{r["link"]}: {r["errors"]} errors ({r["first_error"]})')
+for f in failed: print("FAIL:", f)
+sys.exit(1 if check and failed else 0)
+PY

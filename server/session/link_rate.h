@@ -1,0 +1,114 @@
+// The stream's bitrate follows the visitor's link (issue 50): a per-session rate controller that
+// lowers the encoder's maximum rate when the link cannot carry the stream and raises it again
+// when it can, so frames wait in the session (where the latest pose wins) instead of piling up
+// in a socket buffer as seconds of lag.
+//
+// What it sees, per frame the transport finished writing (Session::post_sent):
+// - the send delay: frame handed to the transport -> its last byte accepted by the kernel. The
+//   server keeps the kernel's unsent queue small (TCP_NOTSENT_LOWAT, --notsent-lowat), so a
+//   socket only takes the next frame once the previous one has nearly left: on a link slower
+//   than the stream the delay grows by a frame's serialisation time per frame;
+// - TCP_INFO at that moment (SocketSample): the kernel's delivery-rate estimate (bytes acked per
+//   interval; not trusted when the kernel marks it application-limited, as it is whenever the
+//   stream is slower than the link) and the smoothed and minimum round-trip times. A queue in
+//   front of a slow link (a shaper, a Wi-Fi access point) shows as round-trip time above the
+//   minimum.
+// The rule (a delay-based AIMD, as WebRTC's and Selkies' congestion control do in spirit):
+// - congested: the send delay passes `delay_ms`, or the smoothed RTT passes the minimum by
+//   `rtt_rise_ms` (each at least 1.5 frame intervals: a frame's own time on the wire at a low
+//   frame rate is no queue). Then, at most once per `hold` (the previous cut must show in the queue first),
+//   the cap drops to `decrease` x the link's rate (the kernel's last estimate that was not
+//   application-limited, else the rate the frames leave at) or x the current cap,
+//   whichever is lower, less the rate that drains the queue standing on the path (RTT above its
+//   minimum, at the link's rate) within `drain`; at least `floor_kbps`.
+// - clear for `probe_after`: once the round trip is back near its minimum (the queue drained) the
+//   cap resumes at `resume` x the rate the link carried when it filled (the known rate), then
+//   grows by `increase_per_s` per second (multiplicatively), slowly (`increase_slow_per_s`) for
+//   `probe_slow` just above the known rate, where the link filled last time, and fast again past
+//   it (the link got faster: from a quarter of the rate back to the full rate in about 5 s), until
+//   it reaches the ceiling, the encoder policy's rate, where the controller stops limiting.
+// Pure: a function of the samples and the times given; tests drive it without sockets
+// (tests/unit/server/link_rate_test.cpp).
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+
+#include "transport/connection_link.h"
+
+namespace catgs::server {
+
+// The least rate worth streaming a width x height picture at before its size steps down
+// (adaptive_quality.h): 0.02 bits a pixel at 30 frames/s, at least 30 kbit/s (640x360: 138
+// kbit/s, 1280x720: 553, 1920x1080: 1244). Below it x264's picture falls apart faster than a
+// smaller picture scaled up by the page loses detail.
+int link_floor_kbps(int width, int height);
+
+class LinkRate {
+ public:
+  using Clock = std::chrono::steady_clock;
+  struct Params {
+    double delay_ms = 40.0;     // send delay that means the socket is backed up
+    double rtt_rise_ms = 40.0;  // RTT above the minimum that means a queue on the path
+    double decrease = 0.85;     // of the link's rate, on congestion
+    double increase_per_s = 0.5;
+    std::chrono::milliseconds hold{400};
+    std::chrono::milliseconds probe_after{500};
+    std::chrono::milliseconds drain{1000};  // a standing queue is emptied within this
+    double resume = 0.7;                    // of the known rate, once the queue has drained
+    double increase_slow_per_s = 0.05;      // just above the known rate
+    std::chrono::milliseconds probe_slow{3000};
+    int floor_kbps = 50;  // the cap never goes below this
+  };
+
+  LinkRate() = default;
+  explicit LinkRate(Params params) : params_(params) {}
+
+  // The ceiling used for a policy without one (crf alone): the largest Quality.max_bitrate_kbps.
+  static constexpr int kNoCeilingKbps = 100000;
+
+  // A frame of `bytes` handed to the transport at `handed` was fully written at `written`, with
+  // the socket's state `s` then; `ceiling_kbps` is the encoder policy's rate for the stream now
+  // (0: crf alone, taken as kNoCeilingKbps).
+  void on_written(std::size_t bytes, Clock::time_point handed, Clock::time_point written, const SocketSample& s,
+                  int ceiling_kbps);
+
+  // The encoder's maximum rate, kbit/s: `ceiling_kbps` while not limiting, else the controller's
+  // cap (below the ceiling).
+  int cap_kbps(int ceiling_kbps) const;
+  // The controller holds the stream below the policy's rate.
+  bool limited() const { return limited_; }
+  // Estimates, for /metrics and the page's stats (0 until known).
+  double link_kbps() const { return link_kbps_; }
+  double rtt_ms() const { return rtt_ms_; }
+  double send_delay_ms() const { return delay_ms_; }
+  int decreases() const { return decreases_; }
+  // Frames written per second (an exponential average of the intervals; 0 until two frames).
+  // The encoder's VBV counts its rate per frame at the stream's nominal 60 frames/s, so a stream
+  // that runs at fewer frames spends only rate x fps / 60: the session converts with it.
+  double frame_rate() const { return interval_ms_ > 0 ? 1000.0 / interval_ms_ : 0.0; }
+  // The encoder overshoots a low VBV rate (x264's frame sizes, the Frame message around each):
+  // the ratio of the cap to the rate the frames really left at, followed while limiting (1
+  // otherwise), by which the session scales the VBV rate it asks for.
+  double encoder_gain() const { return gain_; }
+
+ private:
+  bool congested(double delay_ms, const SocketSample& s) const;
+
+  Params params_;
+  bool limited_ = false;
+  double cap_ = 0;  // kbit/s while limited
+  double link_kbps_ = 0, rtt_ms_ = 0, delay_ms_ = 0;
+  Clock::time_point last_written_{}, last_cut_{}, last_congested_{}, last_grow_{};
+  bool have_written_ = false, have_cut_ = false;
+  double bytes_avg_ = 0;    // a frame's bytes (exponential average)
+  double stream_kbps_ = 0;  // the rate frames leave at: bytes_avg_ over interval_ms_
+  double interval_ms_ = 0;  // between frames written (exponential average)
+  double known_kbps_ = 0;   // the link's rate when it last filled (0: unknown)
+  double gain_ = 1.0;       // encoder_gain()
+  bool above_known_ = false;
+  Clock::time_point above_since_{};
+  int decreases_ = 0;
+};
+
+}  // namespace catgs::server

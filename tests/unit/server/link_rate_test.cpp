@@ -1,0 +1,156 @@
+// The link's rate controller (session/link_rate.h) against a simulated bottleneck: frames of the
+// cap's size leave a server at 12 frames/s into a FIFO link of a given rate with a deep buffer
+// (as tc's tbf with a large burst); a frame is written once the one before it has left (the
+// server's TCP_NOTSENT_LOWAT), the round trip is the minimum plus the queue ahead, and the
+// delivery rate is the link's while a queue stands (application-limited otherwise).
+// The end-to-end numbers on a real shaped link are scripts/slow_link.sh's (RESULTS.md).
+#include <algorithm>
+#include <cstdio>
+#include <chrono>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "session/link_rate.h"
+
+namespace catgs::server {
+namespace {
+
+using Clock = LinkRate::Clock;
+using ms = std::chrono::duration<double, std::milli>;
+
+struct Sim {
+  LinkRate link;
+  Clock::time_point t0 = Clock::now();
+  double link_kbps = 1000;  // the bottleneck's rate now
+  double busy_until = 0;    // ms: when the link has sent everything queued
+  double ceiling = 400;     // the policy's rate, kbit/s on the wire
+  double fps = 12;
+  double min_rtt = 20;
+  std::vector<double> delays;  // ms from a frame's hand-off to its last byte leaving the link
+  std::vector<double> caps;
+
+  Clock::time_point at(double t_ms) const { return t0 + std::chrono::duration_cast<Clock::duration>(ms(t_ms)); }
+  // Runs `seconds` of frames from `from_ms`; returns the time after them.
+  double run(double from_ms, double seconds) {
+    const double step = 1000.0 / fps;
+    double t = from_ms;
+    for (; t < from_ms + seconds * 1000.0; t += step) {
+      const double cap = link.cap_kbps(static_cast<int>(ceiling));
+      caps.push_back(cap);
+      const double bytes = cap * 1000.0 / 8.0 / fps;
+      // Written when the frame before has left (a small unsent queue), then sent at the link's rate.
+      const double written = std::max(t, busy_until - 1.0);
+      const double start = std::max(written, busy_until);
+      busy_until = start + bytes * 8.0 / link_kbps;  // kbit/s = bits per ms
+      delays.push_back(busy_until - t);
+      SocketSample s;
+      s.valid = true;
+      const double queue_ms = std::max(0.0, busy_until - written);
+      s.rtt_ms = min_rtt + queue_ms;
+      s.min_rtt_ms = min_rtt;
+      s.app_limited = queue_ms < 1000.0 / fps;
+      s.delivery_kbps = s.app_limited ? cap : link_kbps;
+      link.on_written(static_cast<std::size_t>(bytes), at(t), at(written), s, static_cast<int>(ceiling));
+    }
+    return t;
+  }
+  double p95_delay(std::size_t from) const {
+    std::vector<double> d(delays.begin() + static_cast<std::ptrdiff_t>(from), delays.end());
+    std::sort(d.begin(), d.end());
+    return d.empty() ? 0 : d[d.size() * 95 / 100];
+  }
+  double mean_cap(std::size_t from) const {
+    double sum = 0;
+    for (std::size_t k = from; k < caps.size(); ++k) sum += caps[k];
+    return caps.size() > from ? sum / static_cast<double>(caps.size() - from) : 0;
+  }
+};
+
+TEST(LinkRate, AFastLinkIsNeverLimited) {
+  Sim sim;
+  sim.link_kbps = 2000;  // five times the stream
+  sim.run(0, 20);
+  EXPECT_FALSE(sim.link.limited());
+  EXPECT_EQ(sim.link.decreases(), 0);
+  EXPECT_EQ(*std::min_element(sim.caps.begin(), sim.caps.end()), sim.ceiling);
+}
+
+// A link at 80%, 50% and 25% of the stream: after 3 s the frames' delay stays bounded and the
+// link is used (the mean cap at least half the link's rate, never far above it).
+TEST(LinkRate, ASlowLinkIsFollowedAndUsed) {
+  for (double share : {0.8, 0.5, 0.25}) {
+    Sim sim;
+    sim.link_kbps = share * sim.ceiling;
+    double t = sim.run(0, 3);
+    const std::size_t settled = sim.delays.size();
+    t = sim.run(t, 20);
+    EXPECT_TRUE(sim.link.limited()) << share;
+    EXPECT_LT(sim.p95_delay(settled), 500.0) << share;
+    EXPECT_GT(sim.mean_cap(settled), 0.5 * sim.link_kbps) << share;
+    EXPECT_LT(sim.mean_cap(settled), 1.1 * sim.link_kbps) << share;
+    std::printf("link %.0f%%: p95 delay %.0f ms, mean cap %.0f of %.0f kbit/s, %d cuts\n", 100 * share,
+                sim.p95_delay(settled), sim.mean_cap(settled), sim.link_kbps, sim.link.decreases());
+  }
+}
+
+// Unshaped -> 25% -> unshaped: the cap falls within a few seconds of the step down and is back
+// at the policy's rate within 5 s of the step up (the link got faster: probing speeds up past the
+// rate where it filled last time).
+TEST(LinkRate, StepsDownAndBackUp) {
+  Sim sim;
+  sim.link_kbps = 4 * sim.ceiling;
+  double t = sim.run(0, 5);
+  EXPECT_FALSE(sim.link.limited());
+  sim.link_kbps = 0.25 * sim.ceiling;
+  const std::size_t down = sim.delays.size();
+  t = sim.run(t, 10);
+  EXPECT_TRUE(sim.link.limited());
+  EXPECT_LT(sim.p95_delay(down + 36), 500.0);  // from 3 s after the step
+  sim.link_kbps = 4 * sim.ceiling;
+  const std::size_t up = sim.caps.size();
+  t = sim.run(t, 5);
+  EXPECT_FALSE(sim.link.limited()) << "still capped at " << sim.caps.back() << " 5 s after the step up";
+  EXPECT_GT(sim.caps.size(), up);
+}
+
+TEST(LinkRate, NeverBelowTheFloorAndTheGainFollowsTheEncoder) {
+  LinkRate::Params p;
+  p.floor_kbps = 80;
+  Sim sim;
+  sim.link = LinkRate(p);
+  sim.link_kbps = 20;  // far below the floor
+  sim.run(0, 10);
+  EXPECT_GE(*std::min_element(sim.caps.begin(), sim.caps.end()), 80.0);
+  // An encoder that overshoots the cap twice over: the gain asks it for less.
+  LinkRate l(p);
+  const auto t0 = Clock::now();
+  SocketSample congested;
+  congested.valid = true;
+  congested.rtt_ms = 500;
+  congested.min_rtt_ms = 10;
+  congested.app_limited = false;
+  congested.delivery_kbps = 200;
+  l.on_written(3000, t0, t0 + std::chrono::milliseconds(300), congested, 400);
+  ASSERT_TRUE(l.limited());
+  const double cap = l.cap_kbps(400);
+  SocketSample clear;
+  clear.valid = true;
+  clear.rtt_ms = 30;  // the queue has drained
+  clear.min_rtt_ms = 10;
+  for (int k = 1; k <= 10; ++k) {
+    const auto at = t0 + std::chrono::milliseconds(300 + 100 * k);
+    // Frames of twice the cap's share at 10 frames/s.
+    l.on_written(static_cast<std::size_t>(2 * cap * 1000 / 8 / 10), at, at, clear, 400);
+  }
+  EXPECT_LT(l.encoder_gain(), 0.8);
+}
+
+TEST(LinkRate, FloorOfASize) {
+  EXPECT_EQ(link_floor_kbps(640, 360), 138);
+  EXPECT_EQ(link_floor_kbps(1280, 720), 552);
+  EXPECT_EQ(link_floor_kbps(16, 16), 30);
+}
+
+}  // namespace
+}  // namespace catgs::server
