@@ -25,7 +25,11 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s) const {
   // a frame interval, and its last packets wait behind its first: that much delay and round
   // trip is the frame's own, not a queue.
   const double own = 1.5 * interval_ms_;
-  if (delay_ms > std::max(params_.delay_ms, own)) return true;
+  // A send delay is the link's only where the socket shows it full (bytes it has not sent, or a
+  // delivery rate the sender was not the limit of); a busy host delays the transport's thread
+  // too, on a link with room to spare.
+  const bool socket_full = !s.valid || s.notsent_bytes > 0 || !s.app_limited;
+  if (socket_full && delay_ms > std::max(params_.delay_ms, own)) return true;
   return s.valid && s.rtt_ms - s.min_rtt_ms > std::max(params_.rtt_rise_ms, own);
 }
 

@@ -126,8 +126,8 @@ class Session : public std::enable_shared_from_this<Session> {
     std::uint32_t frame_sequence = 0;
     double previous_send_ms = 0;  // FrameTimings.previous_send_ms
     int max_bitrate_kbps = 0;     // Quality.max_bitrate_kbps (0: the server's default)
-    int link_kbps = 0;            // the link's rate cap (link_rate.h; 0: not limiting)
     int quality_level = 0;        // AdaptiveQuality level the size was scaled to
+    int link_kbps = 0;            // the link's rate cap (link_rate.h; 0: not limiting; set after)
   };
   // A frame handed to the transport.
   struct Handed {

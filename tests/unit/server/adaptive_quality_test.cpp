@@ -46,6 +46,26 @@ TEST(AdaptiveQuality, FewSkipsDoNotStepDown) {
   EXPECT_EQ(q.level(), 0);
 }
 
+// Link control (link_rate.h): while the link holds the bitrate down, skips are its doing and the
+// bitrate answers them; the size steps down only once the link's cap is under the size's floor,
+// and climbs only where the cap carries the level above.
+TEST(AdaptiveQuality, ALimitingLinkStepsDownOnlyBelowTheFloor) {
+  AdaptiveQuality q;
+  q.on_link(/*limited=*/true, /*below_floor=*/false, /*fits_above=*/true);
+  Clock::time_point t = drive(q, Clock::time_point{}, 3000, 16, 2, 40.0);
+  EXPECT_EQ(q.level(), 0) << "half the poses skipped, but the link explains it";
+  q.on_link(true, true, false);
+  t = drive(q, t, 1100, 16, 2, 40.0);
+  EXPECT_EQ(q.level(), 1);
+  // Cheap frames and nothing skipped, but the cap would not carry full size: no climb.
+  q.on_link(true, false, false);
+  t = drive(q, t, 6000, 100, 0, 5.0);
+  EXPECT_EQ(q.level(), 1);
+  q.on_link(false, false, true);
+  t = drive(q, t, 3100, 100, 0, 5.0);
+  EXPECT_EQ(q.level(), 0);
+}
+
 TEST(AdaptiveQuality, ClimbsBackOnlyWhenTheCostWouldFit) {
   AdaptiveQuality q;
   Clock::time_point t = drive(q, Clock::time_point{}, 3500, 16, 2, 40.0);
