@@ -318,14 +318,19 @@ void Session::on_link_sample(const Handed& frame, Clock::time_point written, con
   ServerMetrics& m = shared_.metrics;
   m.link_rate_decreases_total += static_cast<std::uint64_t>(link_.decreases() - cuts);
   if (link_.limited() != was_limited) m.sessions_link_limited += link_.limited() ? 1 : -1;
-  // The kernel's buffer sized by the link while it limits (a tenth of a second of it, which the
-  // kernel doubles; at least its minimum, about 4.6 KB): TCP can then never put much more than
-  // that in front of the link, whatever the controller's estimate; the configured size once it
-  // no longer limits.
+  // The kernel's buffer sized by the link: TCP can never put much more than it in front of the
+  // link, whatever the controller's estimate. While it limits, a tenth of a second of the link
+  // (the kernel doubles it; at least its minimum, about 4.6 KB); otherwise the stream's rate over
+  // a tenth of a second or two round trips, whichever is longer (TCP needs a round trip's worth
+  // in flight to keep up), at least 8 KiB, so that a link that drops suddenly finds little in
+  // flight (the configured size caps both).
   const int configured = shared_.options.socket_send_buffer;
-  const int wanted = link_.limited() && link_.link_kbps() > 0 && configured > 0
-                         ? std::clamp(static_cast<int>(link_.link_kbps() * 1000.0 / 8.0 * 0.1), 2048, configured)
-                         : configured;
+  const double rate_kbps = link_.limited() ? link_.link_kbps() : link_.stream_kbps();
+  const double seconds = link_.limited() ? 0.1 : std::max(0.1, 2.0 * link_.min_rtt_ms() / 1000.0);
+  const int floor_bytes = link_.limited() ? 2048 : 8192;
+  const int wanted = rate_kbps > 0 && configured > 0 ? std::clamp(static_cast<int>(rate_kbps * 1000.0 / 8.0 * seconds),
+                                                                  std::min(floor_bytes, configured), configured)
+                                                     : configured;
   if (wanted > 0 && (send_buffer_ == 0 || std::abs(wanted - send_buffer_) > send_buffer_ / 4 || wanted == configured) &&
       wanted != send_buffer_) {
     shared_.transport.set_send_buffer(id_, wanted);

@@ -54,7 +54,10 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
     gain_ = 1.0;
   have_written_ = true;
   last_written_ = written;
-  if (s.valid) rtt_ms_ = s.rtt_ms;
+  if (s.valid) {
+    rtt_ms_ = s.rtt_ms;
+    min_rtt_ms_ = s.min_rtt_ms;
+  }
   if (s.valid && !s.app_limited && s.delivery_kbps > 0) {
     link_kbps_ = s.delivery_kbps;
     // The link was full: its rate now is the one to resume at (an older one may be stale).

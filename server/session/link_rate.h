@@ -82,6 +82,8 @@ class LinkRate {
   double link_kbps() const { return link_kbps_; }
   double rtt_ms() const { return rtt_ms_; }
   double send_delay_ms() const { return delay_ms_; }
+  double stream_kbps() const { return stream_kbps_; }  // the rate frames leave at
+  double min_rtt_ms() const { return min_rtt_ms_; }    // the connection's minimum round trip
   int decreases() const { return decreases_; }
   // Frames written per second (an exponential average of the intervals; 0 until two frames).
   // The encoder's VBV counts its rate per frame at the stream's nominal 60 frames/s, so a stream
@@ -98,7 +100,7 @@ class LinkRate {
   Params params_;
   bool limited_ = false;
   double cap_ = 0;  // kbit/s while limited
-  double link_kbps_ = 0, rtt_ms_ = 0, delay_ms_ = 0;
+  double link_kbps_ = 0, rtt_ms_ = 0, min_rtt_ms_ = 0, delay_ms_ = 0;
   Clock::time_point last_written_{}, last_cut_{}, last_congested_{}, last_grow_{};
   bool have_written_ = false, have_cut_ = false;
   double bytes_avg_ = 0;    // a frame's bytes (exponential average)

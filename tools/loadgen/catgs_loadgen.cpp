@@ -52,6 +52,7 @@ const char* kUsage =
     "                           render of its pose (needs --scene; slows the client down)\n"
     "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
     "  --warmup N               first N frames of a session left out of the statistics (5)\n"
+    "  --timeline               every frame's arrival time, latency, size and bytes in the JSON\n"
     "  --warmup-s S             frames of the poses sent in a session's first S seconds left\n"
     "                           out too (0; the settling time a slow link's controller gets)\n"
     "  --stale-ms MS            frames later than this count as stale (default 100)\n"
@@ -148,6 +149,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
     throw std::invalid_argument("--check-every needs --scene (the reference renders it)");
   base.warmup_frames = args.get_int("--warmup", 5);
   base.warmup_s = args.get_double("--warmup-s", 0.0);
+  base.timeline = args.has("--timeline");
   base.stale_ms = args.get_double("--stale-ms", 100);
   if (args.get_double("--progress", 1) < 0) throw std::invalid_argument("--progress must be >= 0 seconds");
   if (args.has("--scene")) {
@@ -241,7 +243,7 @@ int main(int argc, char** argv) {
                      "--trace",      "--scene",   "--scene-name",  "--offset-s",       "--rate",      "--depth",
                      "--seconds",    "--decode",  "--check-every", "--check-min-psnr", "--warmup",    "--warmup-s",
                      "--stale-ms",   "--token",   "--json",        "--ramp!",          "--ramp-step", "--ramp-start",
-                     "--max-p95-ms", "--min-fps", "--progress",    "--tls!",           "--help!"});
+                     "--max-p95-ms", "--min-fps", "--progress",    "--tls!",           "--help!",     "--timeline!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

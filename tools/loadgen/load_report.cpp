@@ -149,6 +149,11 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"psnr_mean_db", measured(s.psnr_mean, s.checked)},
          {"latency", latency_json(summarize_latency(s.latency_ms))},
          {"server", stages_json(s.server)}});
+    if (!s.timeline.empty()) {
+      nlohmann::json frames = nlohmann::json::array();
+      for (const auto& f : s.timeline) frames.push_back({f.t_s, f.latency_ms, f.width, f.height, f.bytes});
+      out["sessions"].back()["timeline"] = std::move(frames);  // [t_s, latency_ms, width, height, bytes]
+    }
   }
   const RunSummary t = summarize_run(sessions);
   out["total"] = {{"sessions", t.sessions},

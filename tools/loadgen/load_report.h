@@ -54,6 +54,14 @@ struct SessionResult {
   bool refused = false;
   std::string refusal;
   std::vector<double> latency_ms;  // pose sent -> frame received (decoded with --decode), after warm-up
+  // Every frame, warm-up included (LoadSessionConfig::timeline, --timeline): seconds from the
+  // session's first pose to the frame's arrival, its latency (ms), size and payload bytes.
+  struct FrameRecord {
+    double t_s, latency_ms;
+    int width, height;
+    std::size_t bytes;
+  };
+  std::vector<FrameRecord> timeline;
   // Reference check (LoadSessionConfig::check_every): decoded frames compared with the CPU
   // reference render of their pose, PSNR in dB over RGB.
   std::uint64_t checked = 0;

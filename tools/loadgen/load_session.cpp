@@ -202,6 +202,9 @@ class PoseLoop {
     if (cfg_.decode || check_) decode_and_check(f);
     const double latency = now_ms() - f.client_time_ms();
     unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
+    if (cfg_.timeline && !sent_at_.empty())
+      r_.timeline.push_back({(now_ms() - sent_at_.front()) / 1000.0, latency, static_cast<int>(f.width()),
+                             static_cast<int>(f.height()), f.payload().size()});
     const auto seq = static_cast<std::int64_t>(f.pose_sequence());
     if (seq >= sent()) {
       note_error(r_, "frame for a pose never sent (" + std::to_string(seq) + ")");
