@@ -12,6 +12,9 @@
 #   The bounds (issue 50's by default): after WARMUP s, p95 <= unshaped p95 + P95_MARGIN ms, no
 #   frame later than MAX_MS after its pose, FPS >= MIN_FPS x unshaped, received >= MIN_USE x the
 #   link.
+#   --beside N instead: N sessions from this host (not shaped) beside the namespace's session,
+#   once with its link unshaped and once at the last fraction: the N sessions' pooled p95 and FPS
+#   in both (a slow link must not slow the others).
 #   --step instead: one 30 s session on a link that steps unshaped -> the last fraction ->
 #   unshaped, 10 s each: p95 and max latency from 3 s after the step down to the step up, and
 #   when the received rate (1 s windows) is back at 90% of the unshaped run's after the step up.
@@ -24,6 +27,7 @@ set -uo pipefail
 bin=$1 scene=$2
 shift 2
 seconds=15 warmup=3 fractions=0.8,0.5,0.25 check=0 json="" p95_margin=300 min_use=0.7 step=0 max_ms=1000 min_fps=0.4
+beside=0
 server_args=(--renderer cpu --bitrate 2000 --crf 8)
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -32,6 +36,7 @@ while [ $# -gt 0 ]; do
     --fractions) fractions=$2; shift 2 ;;
     --check) check=1; shift ;;
     --step) step=1; shift ;;
+    --beside) beside=$2; shift 2 ;;
     --p95-margin) p95_margin=$2; shift 2 ;;
     --min-use) min_use=$2; shift 2 ;;
     --max-ms) max_ms=$2; shift 2 ;;
@@ -86,6 +91,32 @@ run() {
 
 run unshaped none
 unshaped_kbps=$(python3 -c "import json;print(round(json.load(open('$work/unshaped.json'))['run']['sessions'][0]['bytes_per_second']*8/1000))")
+if [ "$beside" -gt 0 ]; then
+  f=${fractions##*,}
+  r=$(python3 -c "print(max(16, round($unshaped_kbps * $f)))")
+  for rate in none "$r"; do
+    "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions "$beside" --size 640x360 --trace orbit \
+      --rate 60 --decode 1 --seconds "$seconds" --warmup-s "$warmup" --json "$work/beside_$rate.json" \
+      > "$work/beside_$rate.txt" 2>&1 &
+    fast=$!
+    run "slow_$rate" "$rate"
+    wait "$fast"
+  done
+  tc qdisc del dev "$host_if" root 2>/dev/null
+  python3 - "$work" "$r" "$beside" <<'PY'
+import json, sys
+work, rate, n = sys.argv[1], sys.argv[2], sys.argv[3]
+print(f"| namespace session's link | {n} sessions beside: p95 ms, FPS min / total | namespace session: p95 ms, FPS, kbit/s |")
+print("|---|---|---|")
+for r in ("none", rate):
+    t = json.load(open(f"{work}/beside_{r}.json"))["run"]["total"]
+    s = json.load(open(f"{work}/slow_{r}.json"))["run"]["sessions"][0]
+    link = "unshaped" if r == "none" else f"{r} kbit/s"
+    print(f'| {link} | {t["latency"]["p95_ms"]:.0f}, {t["fps_min"]:.1f} / {t["fps_total"]:.1f} | '
+          f'{s["latency"]["p95_ms"]:.0f}, {s["fps"]:.1f}, {s["bytes_per_second"] * 8 / 1000:.0f} |')
+PY
+  exit 0
+fi
 if [ "$step" = 1 ]; then
   f=${fractions##*,}
   r=$(python3 -c "print(max(16, round($unshaped_kbps * $f)))")
