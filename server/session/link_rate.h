@@ -49,7 +49,7 @@ class LinkRate {
   using Clock = std::chrono::steady_clock;
   struct Params {
     double delay_ms = 40.0;     // send delay that means the socket is backed up
-    double rtt_rise_ms = 40.0;  // RTT above the minimum that means a queue on the path
+    double rtt_rise_ms = 60.0;  // RTT above the minimum that means a queue (over a delayed ACK)
     double decrease = 0.85;     // of the link's rate, on congestion
     double increase_per_s = 0.5;
     std::chrono::milliseconds hold{400};
