@@ -14,8 +14,8 @@
 // beyond 65520 (which round to infinity in IEEE) saturate at the largest finite half, 65504,
 // instead: an absurd coefficient in a file must not make a colour inf or NaN (inf * 0). A NaN
 // coefficient (no reader lets one in, but a model can be handed to a core straight from memory)
-// is stored as 0, so it cannot turn its Gaussian's pixels into NaN (issue 49: 12% of a frame's
-// colour values were NaN, black after the 8-bit conversion).
+// is stored as 0, so it cannot turn its Gaussian's pixels into NaN, black after the 8-bit
+// conversion (issue 49).
 // Source of the format: IEEE 754-2008 sec. 3.6 (binary16: 1 sign, 5 exponent bits with bias 15,
 // 10 fraction bits).
 #pragma once

@@ -62,10 +62,10 @@ struct GaussianModel {
   void validate() const;
 };
 
-// The property names validate() and the scene cache use in their messages, by the number of
-// floats a Gaussian has of it: "mean", "log-scale", "rotation", "opacity", "SH coefficient".
 // Index of the first value of `v[0, count)` that is not finite (NaN or +-inf), or `count` when
-// every one is. A Gaussian's values are finite exactly when every scene reader accepts them.
+// every one is (v may be null when count is 0). The check behind validate() and the scene
+// cache's (scene_cache.h): a model's values are finite exactly when every scene reader accepts
+// them. Never throws.
 std::size_t first_non_finite(const float* v, std::size_t count);
 
 // Thrown for any unreadable or malformed scene file; what() names the file and the problem.

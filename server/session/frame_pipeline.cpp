@@ -319,20 +319,23 @@ void Session::on_link_sample(const Handed& frame, Clock::time_point written, con
   m.link_rate_decreases_total += static_cast<std::uint64_t>(link_.decreases() - cuts);
   if (link_.limited() != was_limited) m.sessions_link_limited += link_.limited() ? 1 : -1;
   // The kernel's buffer sized by the link: TCP can never put much more than it in front of the
-  // link, whatever the controller's estimate. While it limits, a tenth of a second of the link
-  // (the kernel doubles it; at least its minimum, about 4.6 KB); otherwise the stream's rate over
-  // a tenth of a second or two round trips, whichever is longer (TCP needs a round trip's worth
-  // in flight to keep up), at least 8 KiB, so that a link that drops suddenly finds little in
-  // flight (the configured size caps both).
+  // link, whatever the controller's estimate, so a link that drops suddenly finds little in
+  // flight. It holds a tenth of a second or two round trips, whichever is longer (TCP needs a
+  // round trip's worth in flight to keep up), of the link's rate while the link limits, else of
+  // the policy's rate (the most the stream may need; not the measured rate, which a small buffer
+  // would itself hold down on a long round trip). At least 2 KiB while limiting, 8 KiB otherwise;
+  // the configured size caps it, and is kept for a stream without a policy rate (crf alone).
   const int configured = shared_.options.socket_send_buffer;
-  const double rate_kbps = link_.limited() ? link_.link_kbps() : link_.stream_kbps();
-  const double seconds = link_.limited() ? 0.1 : std::max(0.1, 2.0 * link_.min_rtt_ms() / 1000.0);
-  const int floor_bytes = link_.limited() ? 2048 : 8192;
-  const int wanted = rate_kbps > 0 && configured > 0 ? std::clamp(static_cast<int>(rate_kbps * 1000.0 / 8.0 * seconds),
-                                                                  std::min(floor_bytes, configured), configured)
-                                                     : configured;
-  if (wanted > 0 && (send_buffer_ == 0 || std::abs(wanted - send_buffer_) > send_buffer_ / 4 || wanted == configured) &&
-      wanted != send_buffer_) {
+  const double rate_kbps = link_.limited() ? link_.link_kbps() : link_ceiling_kbps_;
+  const double seconds = std::max(0.1, 2.0 * link_.min_rtt_ms() / 1000.0);
+  const double floor_bytes = link_.limited() ? 2048 : 8192;  // the kernel keeps about 4.6 KB at least
+  const int wanted = rate_kbps > 0 && configured > 0
+                         ? static_cast<int>(std::clamp(rate_kbps * 1000.0 / 8.0 * seconds,
+                                                       std::min<double>(floor_bytes, configured), double(configured)))
+                         : configured;
+  // Set when it moves by over a quarter (or back to the configured size).
+  if (wanted > 0 && wanted != send_buffer_ &&
+      (send_buffer_ == 0 || wanted == configured || std::abs(wanted - send_buffer_) > send_buffer_ / 4)) {
     shared_.transport.set_send_buffer(id_, wanted);
     send_buffer_ = wanted;
   }

@@ -25,8 +25,8 @@
 //   cap resumes at `resume` x the rate the link carried when it filled (the known rate), then
 //   grows by `increase_per_s` per second (multiplicatively), slowly (`increase_slow_per_s`) for
 //   `probe_slow` just above the known rate, where the link filled last time, and fast again past
-//   it (the link got faster: from a quarter of the rate back to the full rate in about 5 s), until
-//   it reaches the ceiling, the encoder policy's rate, where the controller stops limiting.
+//   it (the link got faster), until it reaches the ceiling, the encoder policy's rate, where the
+//   controller stops limiting.
 // Pure: a function of the samples and the times given; tests drive it without sockets
 // (tests/unit/server/link_rate_test.cpp).
 #pragma once
