@@ -2,13 +2,14 @@
 """Markdown tables (issue 4's report) from the catgs-bench JSON files of one gpu_run.sh run.
 
 usage: scripts/bench_tables.py DIR    (DIR holds bench_*.json, e.g. bench.tar.gz unpacked, or
-                                       compare_*.json from --compare)
+                                       compare_*.json from --compare; .json.gz is read too)
 
 Prints: FPS per scene x path with the ratios to exact and vanilla (Tables 1/3), key vs
 sub-frames with render-list growth and sub-frame quality, the stages of key and sub-frames
 (Table 5) and, when bench_windows_*.json are there, the window table (Table 6).
 """
 import glob
+import gzip
 import json
 import os
 import sys
@@ -16,14 +17,20 @@ import sys
 SCENES = {"tumblewood": "tumblewood_sh2 x10 (542 k)", "city": "city (7.05 M)"}
 
 
+def open_json(path):
+    """A result JSON, plain or gzipped (name ending in .gz)."""
+    with (gzip.open(path, "rt") if path.endswith(".gz") else open(path)) as f:
+        return json.load(f)
+
+
 def load(directory):
     runs = []
-    for path in sorted(glob.glob(os.path.join(directory, "*.json"))):
-        stem = os.path.basename(path)[:-5]
+    paths = glob.glob(os.path.join(directory, "*.json")) + glob.glob(os.path.join(directory, "*.json.gz"))
+    for path in sorted(paths, key=lambda p: os.path.basename(p).removesuffix(".gz")):
+        stem = os.path.basename(path).removesuffix(".gz")[:-5]
         kind, _, rest = stem.partition("_")
         scene, _, trace = rest.partition("_")
-        with open(path) as f:
-            runs.append((kind, scene, trace, json.load(f)))
+        runs.append((kind, scene, trace, open_json(path)))
     return runs
 
 

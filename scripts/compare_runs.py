@@ -7,14 +7,19 @@
                                              mean and p99 frame times, per-frame render lists and
                                              snapshots (snap_{before,after}_SCENE_PATH/*.png),
                                              then the mean stage times before -> after
-Prints markdown tables.
+Prints markdown tables. Every file may be gzipped (name ending in .gz: BEFORE.md.gz, before_*.json.gz).
 """
-import filecmp, glob, json, os, sys
+import filecmp, glob, gzip, json, os, sys
+
+
+def open_text(path):
+    """A result file, plain or gzipped (name ending in .gz)."""
+    return gzip.open(path, 'rt') if path.endswith('.gz') else open(path)
 
 
 def table_rows(path):
     rows = {}
-    for line in open(path):
+    for line in open_text(path):
         cells = [c.strip() for c in line.strip().strip('|').split('|')]
         if len(cells) < 11 or cells[0] in ('test', '---') or cells[0].startswith('-'):
             continue
@@ -42,13 +47,15 @@ def bench(d):
     print('| scene, path | pipeline | before ms (p99) | after ms (p99) | after / before | pre-processing + keys ms, before -> after | lists | snapshot |')
     print('|---|---|---|---|---|---|---|---|')
     stage_rows = []
-    for fb in sorted(glob.glob(os.path.join(d, 'before_*.json'))):
-        tag = os.path.basename(fb)[len('before_'):-len('.json')]
+    for fb in sorted(glob.glob(os.path.join(d, 'before_*.json')) + glob.glob(os.path.join(d, 'before_*.json.gz')),
+                     key=lambda f: f.removesuffix('.gz')):
+        tag = os.path.basename(fb).removesuffix('.gz')[len('before_'):-len('.json')]
         fa = os.path.join(d, 'after_%s.json' % tag)
+        fa = fa if os.path.exists(fa) else fa + '.gz'
         if not os.path.exists(fa):
             print('| %s | (no after run) |' % tag)
             continue
-        jb, ja = json.load(open(fb)), json.load(open(fa))
+        jb, ja = json.load(open_text(fb)), json.load(open_text(fa))
         pa = {p['pipeline']: p for p in ja['pipelines']}
         for p in jb['pipelines']:
             name = p['pipeline']
@@ -56,7 +63,8 @@ def bench(d):
             if q is None:
                 continue
             mb, ma = p['frame_ms']['mean'], q['frame_ms']['mean']
-            lists = 'same' if p['per_frame_render_list'] == q['per_frame_render_list'] else '**differ**'
+            lists = ('-' if 'per_frame_render_list' not in p or 'per_frame_render_list' not in q  # stripped
+                     else 'same' if p['per_frame_render_list'] == q['per_frame_render_list'] else '**differ**')
             snaps = [f for f in glob.glob(os.path.join(d, 'snap_before_%s' % tag, '*%s.png' % name))]
             snap = '-'
             for sb in snaps:

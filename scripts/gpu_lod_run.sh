@@ -84,14 +84,15 @@ done
 
 # One table over the cities' JSONs (python3 is on the GPU machine).
 python3 - "$OUT" > "$OUT/lod_table.md" <<'PY' || status=1
-import glob, json, os, sys
-out = sys.argv[1]
+import glob, gzip, json, os, sys
+out = sys.argv[1]  # lod_cityN.json, or lod_cityN.json.gz as kept under tests/gpu/results
 print("| city | Gaussians (with LOD) | LOD build s | device MiB (scene) | variant | mean ms | p99 ms | "
       "visible | list | PSNR vs full detail mean / min dB | device MiB used | "
       "PSNR vs anti-aliased reference mean / min dB (full detail's) |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-for path in sorted(glob.glob(os.path.join(out, "lod_city*.json")), key=lambda p: int(p.split("city")[-1][:-5])):
-    j = json.load(open(path))
+for path in sorted(glob.glob(os.path.join(out, "lod_city*.json*")),
+                   key=lambda p: int(p.removesuffix(".gz").split("city")[-1][:-5])):
+    j = json.load(gzip.open(path, "rt") if path.endswith(".gz") else open(path))
     for p in j.get("pipelines", []):
         q = p.get("lod_quality_vs_full_detail", {})
         psnr = "%s / %s" % (("%.2f" % q["psnr_db_mean_finite"]) if q.get("compared", 0) > q.get("identical", 0) else "inf",
@@ -100,7 +101,7 @@ for path in sorted(glob.glob(os.path.join(out, "lod_city*.json")), key=lambda p:
         aa = ("%.2f / %.2f (%.2f / %.2f)" % (a["psnr_db_mean_finite"], a["psnr_db_min"],
                                             a["full_detail_psnr_db_mean_finite"], a["full_detail_psnr_db_min"])) if a else "-"
         print("| %s | %d | %.1f | %.0f | %s | %.3f | %.3f | %.0f | %.0f | %s | %.0f | %s |" % (
-            os.path.basename(path)[4:-5], j["gaussians"], j.get("lod", {}).get("build_s", 0),
+            os.path.basename(path).removesuffix(".gz")[4:-5], j["gaussians"], j.get("lod", {}).get("build_s", 0),
             j["scene_device_bytes"] / 2**20, p["pipeline"], p["frame_ms"]["mean"], p["frame_ms"]["p99"],
             p.get("visible_mean", 0), p["render_list"]["mean"], psnr, p.get("device_memory_used_bytes", 0) / 2**20, aa))
 PY

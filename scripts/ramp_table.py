@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Markdown table of gpu_server_run.sh ramps: one row per ramp (issue 35's table).
 
-usage: ramp_table.py DIR   (DIR/json holds ramp-NAME.meta and ramp-NAME_N.json per session count)
+usage: ramp_table.py DIR   (DIR/json, or DIR itself as in tests/gpu/results/ramps_run*, holds
+                           ramp-NAME.meta and ramp-NAME_N.json per session count; .json.gz is read too)
 
 Per ramp: the largest session count that held both bounds, the first step's (one session's)
 p95 / p99, and at the largest count held: the slowest session's FPS, pooled p95 / p99, Mbit/s and
@@ -9,19 +10,28 @@ bits a pixel per session, the server's mean render / encode / queue ms, CPU busy
 CPU (cores) and GPU utilisation; then what broke the next step and the stage that grew most.
 """
 import glob
+import gzip
 import json
 import os
 import sys
 
 
+def open_json(path):
+    """A result JSON, plain or gzipped (name ending in .gz)."""
+    with (gzip.open(path, "rt") if path.endswith(".gz") else open(path)) as f:
+        return json.load(f)
+
+
 def load(w):
     ramps = []
-    for meta in sorted(glob.glob(os.path.join(w, "json", "ramp-*.meta"))):
+    d = os.path.join(w, "json") if os.path.isdir(os.path.join(w, "json")) else w
+    for meta in sorted(glob.glob(os.path.join(d, "ramp-*.meta"))):
         m = json.load(open(meta))
         steps = []
-        for f in glob.glob(os.path.join(w, "json", f"ramp-{m['name']}_*.json")):
-            n = int(f.rsplit("_", 1)[1][:-5])
-            steps.append((n, json.load(open(f))))
+        for f in glob.glob(os.path.join(d, f"ramp-{m['name']}_*.json")) + glob.glob(
+                os.path.join(d, f"ramp-{m['name']}_*.json.gz")):
+            n = int(f.removesuffix(".gz").rsplit("_", 1)[1][:-5])
+            steps.append((n, open_json(f)))
         steps.sort(key=lambda s: s[0])
         ramps.append((m, steps))
     return ramps

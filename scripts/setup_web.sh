@@ -4,7 +4,8 @@
 #     the scene formats' reference in the unit tests; versions pinned by package-lock.json),
 #  2. vendors protobufjs's browser build into web_client/vendor/ (BSD-3-Clause, licence copied along),
 #  3. copies proto/catgs_stream.proto into web_client/ (the page loads the schema at run time) and
-#     writes its JSON descriptor beside it (a fallback for static servers that refuse .proto).
+#     writes its JSON descriptor beside it (a fallback for static servers that refuse .proto);
+#     both are generated, not committed (.gitignore).
 # Idempotent; run it after cloning and whenever proto/ or tests/e2e/package-lock.json changes.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Markdown table of a gpu_server_run.sh sweep: one row per (scene, size, sessions) loadgen JSON.
 
-usage: sweep_table.py DIR   (DIR holds json/SCENE_WxH_N.json, gpu.txt, cores.txt)
+usage: sweep_table.py DIR   (DIR holds json/SCENE_WxH_N.json (or .json.gz), gpu.txt, cores.txt)
 """
+import gzip
 import json
 import os
 import sys
@@ -13,8 +14,10 @@ def main(w):
     cores = open(os.path.join(w, "cores.txt")).read().strip()
     rows = []
     for f in os.listdir(os.path.join(w, "json")):
-        j = json.load(open(os.path.join(w, "json", f)))
-        scene, size, n = f[:-5].split("_")
+        path = os.path.join(w, "json", f)
+        with (gzip.open(path, "rt") if f.endswith(".gz") else open(path)) as fh:
+            j = json.load(fh)
+        scene, size, n = f.removesuffix(".gz")[:-5].split("_")
         rows.append((scene, int(size.split("x")[1]), int(n), size, j))
     rows.sort(key=lambda r: r[:3])
     s0 = rows[0][4]["run"]["sessions"][0] if rows else {}

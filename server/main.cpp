@@ -1,6 +1,6 @@
-// catgs-server: the CaT-GS Stream remote-rendering server (DESIGN.md "Server"). Exit codes: 0
-// after a clean shutdown (or --help), 2 for bad options, 1 for any other error (a scene, codec
-// or port that cannot be had). `--probe URL` only probes: 0 for a 2xx answer, 1 otherwise.
+// catgs-server: the CaT-GS Stream remote-rendering server (docs/DESIGN.md "Server"). Exit
+// codes: 0 after a clean shutdown (or --help), 2 for bad options, 1 for any other error (a scene,
+// codec or port that cannot be had). `--probe URL` only probes: 0 for a 2xx answer, 1 otherwise.
 #include <cstdlib>
 #include <iostream>
 

@@ -7,8 +7,8 @@
 #include <iostream>
 
 #include "encode/encoder.h"
-#include "session/message_validation.h"
-#include "session/first_view.h"
+#include "proto/message_validation.h"
+#include "process/first_view.h"
 #include "session/video_export.h"
 #include "scene/scene_cache.h"
 
@@ -82,7 +82,7 @@ int Server::ToManager::readiness(std::string& body) {
   return 503;
 }
 
-Server::Server(const ServerOptions& options) : options_(options) {
+Server::Server(const ServerOptions& options) : options_(options), session_settings_(session_settings(options)) {
   transport_ = std::make_unique<Transport>(transport_options(options_), to_manager_);
   to_manager_.transport = transport_.get();
   to_manager_.options = &options_;
@@ -158,7 +158,7 @@ void Server::load_model() {
   for (const std::string& file : options_.more_scenes) sources.push_back({file, ""});  // cameras found beside them
   scenes_ = std::make_unique<SceneStore>(std::move(sources), std::move(o));
   // The default scene now, so that its first session starts at once and a bad file or --cameras
-  // stops the start; the others on first use (session/scene_store.h).
+  // stops the start; the others on first use (process/scene_store.h).
   scenes_->load_now(0);
   if (scenes_->size() > 1)
     std::cout << "scenes: " << scenes_->names() << " (the first loaded; the others load on first use"
@@ -212,8 +212,9 @@ void Server::resolve_encoder() {
 }
 
 void Server::build_sessions() {
-  shared_ = std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, options_,
-                                                             *scenes_, render_options_, renderer_kind_, encoder_kind_});
+  shared_ =
+      std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, session_settings_,
+                                                       *scenes_, render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
   // Video export's files: a folder of their own, emptied of what an earlier run left there.
   if (video_export_built() && options_.export_limits.max_concurrent > 0) {

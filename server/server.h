@@ -1,6 +1,7 @@
-// The catgs-server process (DESIGN.md "Server"): the scene, the renderer and encoder chosen once
-// for every session, the worker pool, the render scheduler, the transport, the session manager,
-// the signal handling and the orderly shutdown. main.cpp parses the options and runs a Server.
+// The catgs-server process (docs/DESIGN.md "Server"): the scene, the renderer and encoder chosen
+// once for every session, the worker pool, the render scheduler, the transport, the session
+// manager, the signal handling and the orderly shutdown. main.cpp parses the options and runs a
+// Server.
 //
 // Threads: the constructor and run() belong to one thread (main's). run() starts the lws service
 // thread (Transport), ServerOptions::threads workers on one io_context (session strands, encode
@@ -42,11 +43,11 @@
 #include "renderer/renderer.h"
 #include "render/render_scheduler.h"
 #include "scene/gaussian_model.h"
-#include "server_metrics.h"
+#include "process/server_metrics.h"
 #include "server_options.h"
-#include "session/first_view.h"
+#include "process/first_view.h"
 #include "session/session.h"
-#include "session/scene_store.h"
+#include "process/scene_store.h"
 #include "session/session_manager.h"
 #include "transport/transport.h"
 
@@ -63,7 +64,7 @@ class Server {
 
   // Listens (printing "probes on http://ADDR:PORT/"), resolves the renderer once (an "auto"
   // choice happens here), lists every --scene and loads the first (the others load on first use:
-  // session/scene_store.h), resolves the encoder (the NVENC probe), printing the renderer, scene
+  // process/scene_store.h), resolves the encoder (the NVENC probe), printing the renderer, scene
   // and encoder lines; starts the pools, prints the "listening on" line
   // (from here sessions are admitted), blocks until SIGINT or SIGTERM, drains (see above), then
   // shuts down: remaining sessions get ERROR_SHUTTING_DOWN, the transport stops, the render
@@ -129,6 +130,7 @@ class Server {
   void print_totals() const;
 
   const ServerOptions& options_;
+  const SessionSettings session_settings_;  // the part of options_ sessions read
   ServerMetrics metrics_;
   RenderOptions render_options_;
   std::string renderer_kind_;  // "cpu" or "cuda"

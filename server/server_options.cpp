@@ -370,4 +370,27 @@ void resolve_access_tokens(ServerOptions& out, const char* env_token, std::ostre
   if (env_token && *env_token) out.tokens.add(env_token, Role::admin);
 }
 
+SessionSettings session_settings(const ServerOptions& o) {
+  SessionSettings s;
+  s.max_sessions = o.max_sessions;
+  s.full_retry_ms = o.full_retry_ms;
+  s.hello_timeout_ms = o.hello_timeout_ms;
+  s.silent_timeout_ms = o.silent_timeout_ms;
+  s.scene_load_timeout_ms = o.scene_load_timeout_ms;
+  s.slow_client_timeout_ms = o.slow_client_timeout_ms;
+  s.max_viewport_width = o.max_viewport_width;
+  s.max_viewport_height = o.max_viewport_height;
+  s.rate_limits = o.rate_limits;
+  s.tokens = o.tokens;
+  s.export_limits = o.export_limits;
+  s.frame.encoder = o.encoder;
+  s.frame.encoder_policy = o.encoder_policy;
+  s.frame.adaptive_quality = o.adaptive_quality;
+  s.frame.link_control = o.link_control;
+  s.frame.frame_deadline_slots = o.frame_deadline_slots;
+  s.frame.max_frames_in_flight = o.max_frames_in_flight;
+  s.frame.socket_send_buffer = o.socket_send_buffer;
+  return s;
+}
+
 }  // namespace catgs::server

@@ -7,8 +7,9 @@
 
 #include "encode/encoder_policy.h"
 #include "session/access_tokens.h"
-#include "session/message_validation.h"
+#include "proto/message_validation.h"
 #include "session/rate_limit.h"
+#include "session/session_settings.h"
 
 namespace catgs::server {
 
@@ -18,7 +19,7 @@ struct ServerOptions {
   std::vector<std::string> more_scenes;  // further --scene files (Hello.scene picks one by name)
   std::string cameras;                   // INRIA cameras.json of the scene's training views; "" = look beside it
   // --scene-memory-mb: host memory the loaded scenes' models may hold, MiB, before unused ones
-  // are unloaded (session/scene_store.h); 0: no budget, every scene stays once loaded.
+  // are unloaded (process/scene_store.h); 0: no budget, every scene stays once loaded.
   int scene_memory_mb = 0;
   // --scene-cache: "off", "read" (a valid cache beside the scene is used) or "write" (also
   // written after a plain load); scene/scene_cache.h.
@@ -111,6 +112,9 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out);
 // sub-folders holding a SOG meta.json (as SUB/meta.json), not deeper, sorted by path. Throws
 // std::invalid_argument naming the folder when it cannot be listed or holds no scene.
 std::vector<std::string> scenes_in_folder(const std::string& dir);
+
+// The part of `options` a session reads (session/session_settings.h).
+SessionSettings session_settings(const ServerOptions& options);
 
 // The usage text.
 std::string server_usage();

@@ -11,7 +11,8 @@
 //                       [--radius-sq 4] [--spacing 1.2] [--scale 10] [--seed N] [--up X,Y,Z]
 //                       [--no-sh-rotation] [--flyover-out F.trace] [--frames 600] [--rate 120]
 //                       [--width 1920 --height 1080] [--fov 60] [--altitude 0.75] [--pitch 24]
-//       The city recipe of DESIGN.md (13 copies, x10, fly-over at 0.75 extents pitched 24 deg).
+//       The city recipe of docs/DESIGN.md "Measuring" (13 copies, x10, fly-over at 0.75
+//       extents pitched 24 deg).
 //   catgs-scene trace   --scene S --cameras C.json --out T.trace [--scale 10] [--up X,Y,Z]
 //                       [--rate 120] [--seconds-per-view 0.5] [--distance 0.6] [--frames N]
 //                       [--width 1920 --height 1080]
@@ -115,8 +116,8 @@ int compact(const catgs::tools::Args& args) {
   std::printf("wrote %s: %zu Gaussians, SH degree %d\n", out.c_str(), copy->size(), copy->sh_degree);
   const int views = args.get_int("--check-views", 0);
   if (views <= 0) return 0;
-  // Both are rendered at --scale (default 10: the scale of the benchmark scenes, DESIGN.md), so
-  // the near plane (0.2) cuts as it will there.
+  // Both are rendered at --scale (default 10: the scale of the benchmark scenes, docs/DESIGN.md
+  // "Measuring"), so the near plane (0.2) cuts as it will there.
   const float scale = static_cast<float>(args.get_double("--scale", 10.0));
   catgs::GaussianModel m = original_model;
   catgs::scale_scene(m, scale);
@@ -323,7 +324,7 @@ int probe(const catgs::tools::Args& args) {
   const auto m = catgs::load_scene(args.require("--scene"));
   const int w = args.get_int("--width", 1280), h = args.get_int("--height", 720), grid = args.get_int("--grid", 8);
   const auto views = probe_views(args, m, w, h);
-  const auto chunks = catgs::fm::chunk_bounds(m);
+  const auto chunks = chunk_bounds_of(m);
   std::printf("%-16s %10s %-8s %6s %7s %6s %9s %9s %9s %9s\n", "scene", "gaussians", "culling", "views", "probes",
               "hits", "mean_ms", "median_ms", "p95_ms", "max_ms");
   nlohmann::json j = {{"scene", m.name}, {"gaussians", m.size()}, {"views", views.size()},

@@ -23,7 +23,7 @@ const $ = (id) => document.getElementById(id);
 const canvas = $('view');
 const ctx = canvas.getContext('2d', { alpha: false });
 const params = new URLSearchParams(location.search);
-const overlay = new Overlay($('stats'), $('messages'), { showStats: params.get('stats') === '1' });
+const overlay = new Overlay($('stats'), $('messages'), { showStats: params.get('stats') === '1', noticeEl: $('notice') });
 // ?scale=0.5 renders at half the device resolution (cheaper on a CPU renderer or a slow link);
 // the quality menu changes it.
 let renderScale = Math.min(Math.max(Number(params.get('scale')) || 1, 0.1), 4);
@@ -435,7 +435,11 @@ function onResize() {
 
 // ---- view controls: reset, link, fullscreen, help ----
 
+// A short notice: a line at the bottom centre (overlay.js), above the mouse hint while that
+// is still shown.
 function notice(text, level = 'info', ms = 2500) {
+  const hint = $('hint');
+  $('notice').style.bottom = hint.hidden ? '' : `${hint.offsetHeight + 10}px`;
   overlay.showMessage('notice', text, level);
   clearTimeout(notice.timer);
   notice.timer = setTimeout(() => overlay.clearMessage('notice'), ms);

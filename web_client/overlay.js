@@ -4,10 +4,14 @@
 // server interval says idle instead of "render 0.0 ms".
 
 export class Overlay {
-  // els: { stats, messages } elements; showStats: the developer stats are visible (?stats=1).
-  constructor(statsEl, messagesEl, { showStats = false } = {}) {
+  // els: { stats, messages } elements; showStats: the developer stats are visible (?stats=1);
+  // noticeEl: where the short notices (message id 'notice') go instead of the centred messages,
+  // a line at the bottom of the page, clear of the middle where the measured distance and the
+  // scene's subject usually are.
+  constructor(statsEl, messagesEl, { showStats = false, noticeEl = null } = {}) {
     this.statsEl = statsEl;
     this.messagesEl = messagesEl;
+    this.noticeEl = noticeEl;
     this.showStats = showStats;
     this.statsEl.hidden = !showStats;
     this.messages = new Map(); // id -> { text, level, actions }
@@ -136,6 +140,7 @@ export class Overlay {
 
   renderMessages() {
     this.messagesEl.replaceChildren();
+    if (this.noticeEl) this.noticeEl.replaceChildren();
     for (const [id, { text, level, actions }] of this.messages) {
       const div = document.createElement('div');
       div.className = `msg ${level}`;
@@ -155,9 +160,10 @@ export class Overlay {
           div.appendChild(b);
         }
       }
-      this.messagesEl.appendChild(div);
+      (id === 'notice' && this.noticeEl ? this.noticeEl : this.messagesEl).appendChild(div);
     }
-    this.messagesEl.hidden = this.messages.size === 0;
+    this.messagesEl.hidden = this.messagesEl.childElementCount === 0;
+    if (this.noticeEl) this.noticeEl.hidden = this.noticeEl.childElementCount === 0;
   }
 }
 

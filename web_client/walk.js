@@ -14,7 +14,8 @@ import { alongGround, walkStep } from './annotations.js';
 
 const PROBE_INTERVAL_MS = 200;
 const PROBE_SIZE = 64; // the probes' views: 64 x 64 pixels, the pixel at the centre
-const NEAR_PLANE = 0.2; // the renderer culls Gaussians nearer than this (DESIGN.md "Forward model")
+// The renderer culls Gaussians nearer than this (docs/DESIGN.md "Forward model").
+const NEAR_PLANE = 0.2;
 
 export class WalkMode {
   // app: { camera(), probePose(pose, width, height, x, y) -> Promise<DepthResult>, metresPerUnit(),

@@ -1,4 +1,4 @@
-// Pinhole camera with OpenCV/COLMAP axes (x right, y down, z forward) (DESIGN.md "Render core").
+// Pinhole camera, OpenCV/COLMAP axes: x right, y down, z forward (docs/DESIGN.md "Forward model").
 #pragma once
 
 #include <glm/gtc/quaternion.hpp>

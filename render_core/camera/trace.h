@@ -4,8 +4,8 @@
 #include <string>
 #include <vector>
 
+#include "base/bounds.h"
 #include "camera/camera.h"
-#include "scene/gaussian_model.h"
 
 namespace catgs {
 

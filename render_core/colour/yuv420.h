@@ -1,6 +1,6 @@
 // YUV 4:2:0 planes (I420: Y, then U = Cb, then V = Cr, 8-bit) in BT.709 limited range, the
 // format every encoder of the server consumes, and the CPU reference colour conversion from
-// RGBA8 (DESIGN.md "Data flow of a frame": the frame is converted where it was rendered).
+// RGBA8 (docs/DESIGN.md "Data flow of a frame": the frame is converted where it was rendered).
 //
 // The CUDA core converts a frame on the GPU with the same maths in double precision
 // (render_core/cuda/yuv420_convert.cu, checked code value for code value against the function

@@ -2,8 +2,8 @@
 // (mirrors rgba_to_yuv420_bt709 in colour/yuv420.cpp, same constants and double-precision
 // expressions, compiled without FMA contraction so every code value matches the CPU reference).
 // Runs after rasterization on the renderer's stream, so a frame that stays on the GPU never
-// crosses to the host as RGBA (DESIGN.md "Data flow of a frame"; issue 5).
-#include "cuda/cuda_check.h"
+// crosses to the host as RGBA (docs/DESIGN.md "Data flow of a frame"; issue 5).
+#include "base/cuda_check.h"
 #include "colour/yuv420_convert.h"
 
 namespace catgs::cuda::stages {

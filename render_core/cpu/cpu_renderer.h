@@ -6,7 +6,6 @@
 
 #include <chrono>
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <vector>
 
@@ -72,7 +71,7 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // Stage 1 (cpu/preprocess.cpp): frustum culling (z < near), 3D -> 2D covariance (EWA), conic,
 // SH colour, tile bounds and the number of tiles each Gaussian reaches: vanilla counts every tile of
 // its 3-sigma square; exact counts the tiles passing fm::ellipse_touches_tile (opacity-aware).
-// exact first skips whole chunks that cannot reach the image (`chunks`: fm::chunk_bounds(model),
+// exact first skips whole chunks that cannot reach the image (`chunks`: chunk_bounds_of(model),
 // forward_model/chunk_bounds.h); the result is the same with or without that step.
 // `region`: one pass of a frame drawn in passes (renderer/render_passes.h) counts only the tiles
 // of its region (fm::clip_tile_rect; every Gaussian is projected with the whole camera).
@@ -100,7 +99,7 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
 
 // catgs planner input: the largest screen motion (pixels) between cameras `a` and `b` of the
 // means of Gaussians visible in `a` deeper than `min_depth` (paper sec. 3.1, M). Chunks none of
-// whose means can count (fm::chunk_means_off_image, `chunks` as fm::chunk_bounds(model)) are
+// whose means can count (fm::chunk_means_off_image, `chunks` as chunk_bounds_of(model)) are
 // skipped, as the CUDA core does; the result is the same with or without that step. Throws
 // std::invalid_argument for chunk bounds of another scene. With LOD, only the chunks of the cut
 // at `a` (bound `lod_error_px`) count.
@@ -121,9 +120,9 @@ bool update_subframe_features(const GaussianModel& model, const std::vector<fm::
 // catgs sub-frame (cpu/subframe_features.cpp): does a Gaussian the key frame did not list
 // (tiles_touched == 0) reach a pixel at `camera` (fm::unlisted_reaches_image)? Such a Gaussian is
 // outside the frustum cache, so the sub-frame would miss it: the frame must be a key frame
-// (DESIGN.md 1: prediction error must never show as holes). Chunks outside the view
-// (fm::chunk_outside_view over `chunks`, fm::chunk_bounds(model)) hold none and are skipped, and
-// so are the chunks outside the key frame's LOD cut `key_cut` (their Gaussians are drawn by
+// (docs/DESIGN.md "Speculation" 2: prediction error must never show as holes). Chunks outside the
+// view (fm::chunk_outside_view over `chunks`, chunk_bounds_of(model)) hold none and are skipped,
+// and so are the chunks outside the key frame's LOD cut `key_cut` (their Gaussians are drawn by
 // another level; the default draws every chunk, right for a scene without LOD only).
 bool unlisted_reach_image(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                           const ProjectedGaussians& projected, const fm::LodCut& key_cut = {});
@@ -214,9 +213,6 @@ struct FrameBuffers {
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
                        const FrameBuffers& buffers, Image& out, FrameStats& stats);
-
-// Runs fn(i) for i in [0, n) on all hardware threads, dynamically scheduled in chunks of `grain`.
-void parallel_for(std::size_t n, std::size_t grain, const std::function<void(std::size_t)>& fn);
 
 // The CPU Renderer: the five stages, buffers reused across frames.
 class CpuRenderer final : public Renderer {

@@ -5,6 +5,7 @@
 
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
+#include "base/parallel_for.h"
 
 namespace catgs::cpu {
 

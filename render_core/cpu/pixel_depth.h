@@ -42,7 +42,7 @@ struct PixelDepth {
 // the probe samples at (x - 0.5, y - 0.5) there). The world point is camera centre + R^T (depth *
 // ((x - cx) / fx, (y - cy) / fy, 1)). Throws std::invalid_argument (what validate_camera throws,
 // or a pixel outside the image or not finite).
-// `chunks` (optional, fm::chunk_bounds(model)) skips whole chunks of 256 Gaussians that cannot
+// `chunks` (optional, chunk_bounds_of(model)) skips whole chunks of 256 Gaussians that cannot
 // reach the pixel, the renderer's own conservative chunk test: the answer is the same with or
 // without them, only faster on scenes in Morton order (catgs-scene compact). A scene with LOD
 // (forward_model/lod.h) is probed at full detail: its leaves only.

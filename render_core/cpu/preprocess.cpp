@@ -5,6 +5,7 @@
 
 #include "cpu/cpu_renderer.h"
 #include "forward_model/sh_storage.h"
+#include "base/parallel_for.h"
 
 namespace catgs::cpu {
 

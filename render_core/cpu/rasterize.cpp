@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "blend_tile.h"
+#include "base/parallel_for.h"
 
 namespace catgs::cpu {
 

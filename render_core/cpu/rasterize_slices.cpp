@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "blend_tile.h"
+#include "base/parallel_for.h"
 
 namespace catgs::cpu {
 

@@ -1,7 +1,8 @@
-// The catgs pipeline on the CPU (paper sec. 3; DESIGN.md 1-3): key frames pre-process a whole
-// speculation window once (trails, frustum cache, sorted list, tile ranges, slices); sub-frames
-// recompute only per-Gaussian features of the cached set at their own pose and rasterize from the
-// key frame's list. A sub-frame whose Gaussians leave their trails becomes a key frame.
+// The catgs pipeline on the CPU (paper sec. 3; docs/DESIGN.md "Speculation"): key frames
+// pre-process a whole speculation window once (trails, frustum cache, sorted list, tile ranges,
+// slices); sub-frames recompute only per-Gaussian features of the cached set at their own pose and
+// rasterize from the key frame's list. A sub-frame whose Gaussians leave their trails becomes a key
+// frame.
 #include <algorithm>
 #include <chrono>
 
@@ -12,7 +13,7 @@ namespace catgs::cpu {
 SpeculativeRenderer::SpeculativeRenderer(std::shared_ptr<const GaussianModel> model, const RenderOptions& options)
     : model_(std::move(model)) {
   if (!model_) throw std::invalid_argument("SpeculativeRenderer: null model");
-  chunks_ = fm::chunk_bounds(*model_);
+  chunks_ = chunk_bounds_of(*model_);
   set_options(options);
 }
 

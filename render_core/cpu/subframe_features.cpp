@@ -8,6 +8,7 @@
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 #include "forward_model/sh_storage.h"
+#include "base/parallel_for.h"
 
 namespace catgs::cpu {
 

@@ -1,13 +1,13 @@
-// The CUDA render core (DESIGN.md "Render core"): the CPU reference's stages on the GPU
+// The CUDA render core (docs/DESIGN.md "Render core"): the CPU reference's stages on the GPU
 // (render_core/cuda/, one .cu per stage), the vanilla, exact and catgs pipelines chosen at run time.
 //
-// catgs (paper sec. 3; DESIGN.md 1-3; render_core/cuda/render_catgs.cpp): the same decisions as
-// the CPU reference's cpu::SpeculativeRenderer (both use SpeculationPlanner). A key frame measures
-// M (one 4-byte readback), pre-processes the speculation window (trails), emits, sorts, ranges,
-// selects the frustum cache and plans the split tasks (the counts readback below); a sub-frame
-// recomputes the cached Gaussians' features at its pose and rasterizes the key frame's slices,
-// then reads back one flag: if an on-screen Gaussian left its trail, the frame is rendered again
-// as a key frame. Syncs: key frame 2 (1 without a window), sub-frame 1.
+// catgs (paper sec. 3; docs/DESIGN.md "Speculation"; render_core/cuda/render_catgs.cpp): the same
+// decisions as the CPU reference's cpu::SpeculativeRenderer (both use SpeculationPlanner). A key
+// frame measures M (one 4-byte readback), pre-processes the speculation window (trails), emits,
+// sorts, ranges, selects the frustum cache and plans the split tasks (the counts readback below); a
+// sub-frame recomputes the cached Gaussians' features at its pose and rasterizes the key frame's
+// slices, then reads back one flag: if an on-screen Gaussian left its trail, the frame is rendered
+// again as a key frame. Syncs: key frame 2 (1 without a window), sub-frame 1.
 //
 // Ownership: a DeviceScene holds one copy of a GaussianModel in device memory and is shared,
 // read-only, by any number of CudaRenderers (shared_ptr<const DeviceScene>). Each CudaRenderer
@@ -34,22 +34,13 @@
 #include <stdexcept>
 #include <string>
 
+#include "base/cuda_error.h"
 #include "forward_model/chunk_bounds.h"
 #include "renderer/renderer.h"
 
 struct CUstream_st;  // cudaStream_t without the CUDA headers
 
 namespace catgs::cuda {
-
-// A failed CUDA call: what() = "<call> failed at <file>:<line>: <cudaErrorName> (<code>): <text>".
-class CudaError : public std::runtime_error {
- public:
-  CudaError(const std::string& what, int code) : std::runtime_error(what), code_(code) {}
-  int code() const { return code_; }  // the cudaError_t value
-
- private:
-  int code_;
-};
 
 // True when a CUDA device of compute capability >= 7.0 can be used; `reason` receives the device
 // name and capability, or why not (no driver, no device, ...). Never throws.

@@ -17,7 +17,7 @@
 #include <thrust/iterator/permutation_iterator.h>
 #include <thrust/iterator/transform_iterator.h>
 
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "depth_order.h"
 #include "sort.h"
 #include "tunables.h"

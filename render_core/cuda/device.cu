@@ -1,25 +1,11 @@
-// Device queries and CUDA error reporting for the CUDA core.
+// Device queries for the CUDA core (cuda_renderer.h): usable device, description, memory.
 #include <cstdio>
 #include <string>
 
-#include "cuda_check.h"
+#include "base/cuda_check.h"
+#include "cuda/cuda_renderer.h"
 
 namespace catgs::cuda {
-
-namespace detail {
-
-void throw_cuda_error(cudaError_t err, const char* call, const char* file, int line) {
-  // Clear a non-sticky error so the next call does not report it again.
-  (void)cudaGetLastError();
-  const char* base = file;
-  for (const char* p = file; *p; ++p)
-    if (*p == '/') base = p + 1;
-  throw CudaError(std::string(call) + " failed at " + base + ":" + std::to_string(line) + ": " + cudaGetErrorName(err) +
-                      " (" + std::to_string(static_cast<int>(err)) + "): " + cudaGetErrorString(err),
-                  static_cast<int>(err));
-}
-
-}  // namespace detail
 
 namespace {
 // Probe: does this binary hold code the device can run (sm_90 SASS or compute_90 PTX)?

@@ -3,7 +3,7 @@
 #include <limits>
 #include <string>
 
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "forward_model/sh_storage.h"
 #include "scene/load_blocks.h"
 
@@ -66,7 +66,7 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
     for (std::size_t k = b * kBlock; k < end; ++k) sh_half[k] = fm::half_bits(model.sh[k]);
   });
   s->sh_ = upload_array(sh_half, &s->bytes_, "SH coefficients");
-  s->chunks_ = upload_array(fm::chunk_bounds(model), &s->bytes_, "chunk bounds");
+  s->chunks_ = upload_array(chunk_bounds_of(model), &s->bytes_, "chunk bounds");
   fm::validate_lod(model.lod, n);
   s->lod_ = upload_array(model.lod, &s->bytes_, "LOD nodes");  // nullptr without LOD
   return s;

@@ -1,6 +1,6 @@
 // Stage 2: render-list key emission (mirrors cpu/key_emission.cpp). Offsets come from a device
 // scan of the chunks' entry counts and a block scan within each chunk, so no Gaussian ever
-// touches a shared counter (DESIGN.md:
+// touches a shared counter (docs/DESIGN.md "Lessons kept from the founding design":
 // FlashGS's contended global atomicAdd per Gaussian is what slows it on the city). Built with
 // -fmad=false, like pre-processing, so the exact tile test here answers exactly as it did when
 // the tiles were counted.
@@ -11,7 +11,7 @@
 #include <cub/device/device_scan.cuh>
 #include <thrust/iterator/transform_iterator.h>
 
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "key_emission.h"
 #include "tile_test.cuh"
 #include "tunables.h"

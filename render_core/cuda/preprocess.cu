@@ -4,7 +4,7 @@
 // same answer here as in key emission.
 #include <cub/block/block_reduce.cuh>
 
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "splat.cuh"
 #include "preprocess.h"
 #include "tile_test.cuh"

@@ -11,8 +11,9 @@
 //   into shared memory: one coalesced read of the value array and 256 independent gathers in
 //   flight, instead of 256 threads each re-reading the same Gaussian from global memory. Every
 //   fetch is bounds-checked against `end` (a tile holding fewer entries than a round, one or two
-//   say, fetches only those: DESIGN.md's FlashGS lesson). Each gather reads the entry's 32-byte
-//   splat and its 16-byte colour: two sectors (stages.h Splat).
+//   say, fetches only those: the FlashGS lesson of docs/DESIGN.md "Lessons kept from the
+//   founding design"). Each gather reads the entry's 32-byte splat and its 16-byte colour: two
+//   sectors (stages.h Splat).
 // - When it stages an entry, the fetching thread also works out which sub-tiles the entry's
 //   ellipse can reach (the ellipse over each column of sub-tiles: blend.cuh subtile_mask), and
 //   each warp then walks only the round's entries that reach its sub-tile (it lists them first,
@@ -38,7 +39,7 @@
 // - Output: float RGB (C + T * background) and packed 8-bit RGBA, both in device memory, so a
 //   later encoder can read the frame without a host copy.
 #include "blend.cuh"
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "rasterize.h"
 #include "tunables.h"
 

@@ -42,7 +42,7 @@
 // to that end runs in full at that pixel. Without early termination nothing is skipped (that mode
 // exists to show split and unsplit agree to float rounding).
 #include "blend.cuh"
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "rasterize_slices.h"
 #include "tunables.h"
 

@@ -1,6 +1,6 @@
-// The catgs pipeline on the CUDA core (paper sec. 3; DESIGN.md 1-3): the host side of key frames
-// and sub-frames, mirroring cpu/speculative_renderer.cpp, with SpeculationPlanner taking the
-// same decisions from the same poses.
+// The catgs pipeline on the CUDA core (paper sec. 3; docs/DESIGN.md "Speculation"): the host side
+// of key frames and sub-frames, mirroring cpu/speculative_renderer.cpp, with SpeculationPlanner
+// taking the same decisions from the same poses.
 //
 // Key frame: M (max_screen_motion, one 4-byte readback) -> W -> speculative pre-processing over
 // the predicted path (trails, and each small trail's tile answers as a bit mask) -> the counts

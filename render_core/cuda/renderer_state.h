@@ -6,7 +6,7 @@
 #include <string>
 
 #include "speculation/speculation_planner.h"
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "stages.h"
 #include "tunables.h"
 

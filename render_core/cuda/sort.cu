@@ -7,7 +7,7 @@
 // bit_width(tiles) tile bits are sorted (2 passes at 1080p).
 #include <cub/device/device_radix_sort.cuh>
 
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "sort.h"
 
 namespace catgs::cuda::stages {

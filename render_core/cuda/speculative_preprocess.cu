@@ -7,7 +7,7 @@
 // trail against the CPU reference's, which only widens or narrows a trail by float rounding.
 #include "forward_model/chunk_bounds.h"
 #include "forward_model/trail.h"
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "splat.cuh"
 #include "preprocess.h"  // count_big_tiles
 #include "speculative_preprocess.h"

@@ -7,7 +7,7 @@
 #include <thrust/iterator/counting_iterator.h>
 
 #include "forward_model/trail.h"
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "splat.cuh"
 #include "subframe_features.h"
 #include "tunables.h"

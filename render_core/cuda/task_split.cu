@@ -12,7 +12,7 @@
 #include <cub/block/block_reduce.cuh>
 #include <cub/block/block_scan.cuh>
 
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "load_bucket.cuh"
 #include "task_split.h"
 #include "tunables.h"

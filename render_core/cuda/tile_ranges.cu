@@ -2,7 +2,7 @@
 // cpu/tile_ranges.cpp): an entry whose tile differs from its left (right) neighbour starts
 // (ends) that tile's range. Grid-stride, 64-bit indices: the list may pass 2^31 entries (the
 // renderer refuses lists past 2^32 - 1, the limit of the 32-bit ranges).
-#include "cuda_check.h"
+#include "base/cuda_check.h"
 #include "load_bucket.cuh"
 #include "tile_ranges.h"
 #include "tunables.h"

@@ -53,9 +53,10 @@ __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, u
 // The end of a pre-processing kernel (full or speculative), called by every thread of the block:
 // big Gaussians join the big list, huge ones (is_huge implies is_big) its huge end (one atomic
 // per warp holding any: they are few), and the visible count takes one atomic per block, not per
-// Gaussian (DESIGN.md: no contended atomics); the block's chunk `chunk` gets the sum of its tiles_touched
-// (Projected::chunk_total). Big Gaussians are counted visible, and added to their chunk's total,
-// by count_big_tiles once their tiles are known.
+// Gaussian (docs/DESIGN.md "Lessons kept from the founding design": no contended atomics); the
+// block's chunk `chunk` gets the sum of its tiles_touched (Projected::chunk_total). Big Gaussians
+// are counted visible, and added to their chunk's total, by count_big_tiles once their tiles are
+// known.
 __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_huge, uint32_t touched, uint64_t i,
                                                            uint64_t chunk, const BigList& big,
                                                            unsigned long long* visible, uint32_t* chunk_total) {

@@ -26,10 +26,6 @@
 
 #include "forward_model/forward_model.h"
 
-namespace catgs {
-struct GaussianModel;
-}
-
 namespace catgs::fm {
 
 // Gaussians per chunk: Gaussians [c * kChunkSize, (c + 1) * kChunkSize) form chunk c (the last
@@ -51,8 +47,11 @@ static_assert(sizeof(ChunkBounds) == 32, "two float4");
 // Number of chunks of n Gaussians.
 CATGS_HD std::size_t chunk_count(std::size_t n) { return (n + kChunkSize - 1) / kChunkSize; }
 
-// The bounds of every chunk of `model`, in chunk order (chunk_count(model.size()) entries).
-std::vector<ChunkBounds> chunk_bounds(const GaussianModel& model);
+// The bounds of every chunk of n Gaussians held as GaussianModel holds them (means [n, 3] world
+// units, log_scales [n, 3], opacity_logits [n]), in chunk order (chunk_count(n) entries).
+// scene/scene_bounds.h chunk_bounds_of(model) passes a model's arrays.
+std::vector<ChunkBounds> chunk_bounds(const float* means, const float* log_scales, const float* opacity_logits,
+                                      std::size_t n);
 
 // Where a chunk's means land in view `v`: `not_in_front` when every one lies behind the near
 // plane or past the far plane; `unbounded` when the bound cannot say (not finite, or the box

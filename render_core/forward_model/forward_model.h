@@ -1,5 +1,5 @@
-// The forward model of 3DGS, shared by the CPU reference and the CUDA core so both compute the
-// same numbers (DESIGN.md "Forward model"; Kerbl et al. 2023, EWA splatting, Zwicker et al. 2001).
+// The forward model of 3DGS, shared by the CPU reference and the CUDA core so both compute the same
+// numbers (docs/DESIGN.md "Forward model"; Kerbl et al. 2023, EWA splatting, Zwicker et al. 2001).
 // Every function is plain float maths, callable from host and device.
 //
 // Screen coordinates ("pixel units"): pixel (i, j) has its centre at (i, j); the projected mean

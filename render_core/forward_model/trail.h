@@ -1,7 +1,8 @@
-// Gaussian trails (paper sec. 3.1 "Fine-grained Intersection Detection"; DESIGN.md 1): the
-// geometry a catgs key frame lists a Gaussian by, shared by the CPU reference and the CUDA core.
-// A Gaussian's trail is the region its ellipse q <= q_trail sweeps when its centre moves along
-// the segment mean0 -> mean0 + motion (pixel units). Plain float maths, host and device.
+// Gaussian trails (paper sec. 3.1 "Fine-grained Intersection Detection"; docs/DESIGN.md
+// "Speculation" 1): the geometry a catgs key frame lists a Gaussian by, shared by the CPU reference
+// and the CUDA core. A Gaussian's trail is the region its ellipse q <= q_trail sweeps when its
+// centre moves along the segment mean0 -> mean0 + motion (pixel units). Plain float maths, host and
+// device.
 #pragma once
 
 #include "forward_model/forward_model.h"
@@ -18,10 +19,11 @@ CATGS_HD float min_quadratic_on_segment(glm::vec3 conic, glm::vec2 a, glm::vec2 
   return conic_quadratic(conic, d.x, d.y);
 }
 
-// A trail's tile test (DESIGN.md 1) with its per-Gaussian constants worked out once: the key
-// frame asks it for every tile of the trail's rectangle, so the divisions the minimisation needs
-// are done here, not per tile. conic: the trail's inverse 2D covariance (positive definite);
-// motion: mean0 -> end of the window, pixels; q_limit = q_trail + kExactQMargin.
+// A trail's tile test (docs/DESIGN.md "Speculation" 1) with its per-Gaussian constants worked out
+// once: the key frame asks it for every tile of the trail's rectangle, so the divisions the
+// minimisation needs are done here, not per tile. conic: the trail's inverse 2D covariance
+// (positive definite); motion: mean0 -> end of the window, pixels; q_limit = q_trail +
+// kExactQMargin.
 struct TrailTileTest {
   glm::vec2 mean0, motion;
   glm::vec3 conic;
@@ -191,8 +193,8 @@ CATGS_HD bool listed_tiles_cover(glm::vec2 mean0, glm::vec2 motion, glm::vec3 tr
 
 namespace catgs::fm {
 
-// A Gaussian's trail over a speculation window (DESIGN.md 1): its ellipse (covariance `cov`,
-// level q_trail) swept from mean0 along `motion`, all in pixel units.
+// A Gaussian's trail over a speculation window (docs/DESIGN.md "Speculation" 1): its ellipse
+// (covariance `cov`, level q_trail) swept from mean0 along `motion`, all in pixel units.
 struct Trail {
   glm::vec2 mean0;
   glm::vec2 motion;

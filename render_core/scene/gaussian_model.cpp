@@ -108,4 +108,8 @@ void GaussianModel::validate() const {
   fm::validate_lod(lod, n);
 }
 
+std::vector<fm::ChunkBounds> chunk_bounds_of(const GaussianModel& model) {
+  return fm::chunk_bounds(model.means.data(), model.log_scales.data(), model.opacity_logits.data(), model.size());
+}
+
 }  // namespace catgs

@@ -1,4 +1,4 @@
-// The Gaussian model: N 3D Gaussians as a structure of arrays (DESIGN.md "Render core").
+// The Gaussian model: N 3D Gaussians as a structure of arrays (docs/DESIGN.md "Scene formats").
 #pragma once
 
 #include <cstddef>
@@ -8,6 +8,8 @@
 
 #include <glm/glm.hpp>
 
+#include "base/bounds.h"
+#include "forward_model/chunk_bounds.h"
 #include "forward_model/lod.h"
 
 namespace catgs {
@@ -16,14 +18,6 @@ inline constexpr int kMaxShDegree = 3;
 
 // Number of SH coefficients per colour channel for a degree: (degree + 1)^2 (1, 4, 9 or 16).
 constexpr int sh_coeff_count(int degree) { return (degree + 1) * (degree + 1); }
-
-// Axis-aligned bounds, world units.
-struct Bounds {
-  glm::vec3 min{0.0f};
-  glm::vec3 max{0.0f};
-  glm::vec3 center() const { return 0.5f * (min + max); }
-  glm::vec3 extent() const { return max - min; }
-};
 
 // Opacity logits of +-inf (alpha exactly 1 or 0, as converters such as splat-transform write them)
 // are stored as +-kOpacityLogitLimit: in float, sigmoid(20) is 1.0f and sigmoid(-20) (2e-9) is far
@@ -37,8 +31,8 @@ inline constexpr float kOpacityLogitLimit = 20.0f;
 //   opacity_logits [N]     opacity = sigmoid(logit)
 //   sh             [N, K, 3] SH coefficients, K = sh_coeff_count(sh_degree), coefficient-major:
 //                  sh[(i * K + k) * 3 + c]; k = 0 is the DC term (INRIA f_dc), k >= 1 the rest.
-// (DESIGN.md says [N, 16, 3]; we keep only the K coefficients of the scene's degree so a 7 M
-// Gaussian degree-0 city does not carry 15 zero bands.)
+// (Not [N, 16, 3] whatever the degree: we keep only the K coefficients of the scene's degree so a
+// 7 M Gaussian degree-0 city does not carry 15 zero bands.)
 struct GaussianModel {
   std::string name;   // scene name for logs and the protocol (file stem)
   int sh_degree = 0;  // 0..3
@@ -73,5 +67,9 @@ class SceneFileError : public std::runtime_error {
  public:
   SceneFileError(const std::string& path, const std::string& problem) : std::runtime_error(path + ": " + problem) {}
 };
+
+// The chunk bounds of `model` (forward_model/chunk_bounds.h), chunk_count(model.size()) entries,
+// the culling both cores and the depth probe do before any per-Gaussian work.
+std::vector<fm::ChunkBounds> chunk_bounds_of(const GaussianModel& model);
 
 }  // namespace catgs

@@ -184,7 +184,7 @@ void write_scene_cache(const GaussianModel& model, const std::string& scene_path
   fm::validate_lod(model.lod, model.size());
   CacheHeader h = layout(model.size(), model.sh_degree, !model.lod.empty());
   h.source = stamp(scene_path);
-  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(model);
+  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(model);
   const std::string tmp = cache_path + ".tmp." + std::to_string(::getpid());
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw SceneFileError(cache_path, std::string("cannot create: ") + std::strerror(errno));

@@ -1,4 +1,4 @@
-// Motion predictor (paper sec. 3.1 "Motion Prediction"; DESIGN.md "Server", "Render core" 1):
+// Motion predictor (paper sec. 3.1 "Motion Prediction"; docs/DESIGN.md "Speculation" 1):
 // estimates the camera's linear and angular velocity from the timestamped poses seen so far and
 // predicts the pose a short time ahead. Never looks at future input.
 #pragma once

@@ -1,6 +1,6 @@
-// The parameters of the catgs pipeline (paper sec. 3.1 "Motion Adaptive Adjustment", sec. 3.2,
-// sec. 3.4; DESIGN.md 1-3), grouped by where they come from: the paper's own parameters, the
-// switches of its ablation tables, and margins tuned beyond the paper. Each tuned default was
+// The parameters of the catgs pipeline (paper sec. 3.1 "Motion Adaptive Adjustment", sec. 3.2, sec.
+// 3.4; docs/DESIGN.md "Speculation"), grouped by where they come from: the paper's own parameters,
+// the switches of its ablation tables, and margins tuned beyond the paper. Each tuned default was
 // chosen by a side-by-side measurement recorded in tests/gpu/RESULTS.md under the section named
 // beside it. Command lines set them by name (speculation/settings.h).
 #pragma once

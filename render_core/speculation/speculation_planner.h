@@ -1,5 +1,5 @@
 // The host-side decisions of the catgs pipeline (paper sec. 3.1 "Motion Prediction", "Motion
-// Adaptive Adjustment", sec. 3.2; DESIGN.md 1-2), shared by the CPU reference
+// Adaptive Adjustment", sec. 3.2; docs/DESIGN.md "Speculation" 2), shared by the CPU reference
 // (cpu::SpeculativeRenderer) and the CUDA renderer so both take the same key-frame / sub-frame
 // decisions from the same poses.
 //

@@ -1,6 +1,6 @@
-// H.264 through libavcodec's h264_nvenc (NVIDIA's hardware encoder) with DESIGN.md's
-// low-latency settings: preset p1, tune ull, zerolatency, delay 0, no B-frames, GOP of
-// INT_MAX frames (no periodic IDR; IDR on demand: pict_type I + forced-idr), CBR at
+// H.264 through libavcodec's h264_nvenc (NVIDIA's hardware encoder) with the low-latency settings
+// of docs/DESIGN.md "Encoder policy": preset p1, tune ull, zerolatency, delay 0, no B-frames, GOP
+// of INT_MAX frames (no periodic IDR; IDR on demand: pict_type I + forced-idr), CBR at
 // EncoderConfig::bitrate_kbps with a one-frame VBV (rc_buffer_size = bitrate / fps), Annex B with
 // SPS/PPS in band on every IDR, yuv420p BT.709 limited range signalled in the VUI.
 //

@@ -1,5 +1,5 @@
 // The render scheduler: the render lanes every session's renders share, taken by sessions in turn
-// (DESIGN.md "Server").
+// (docs/DESIGN.md "Server").
 //
 // Sessions post their render jobs here under their own key (the connection id); a fixed number of
 // "render lanes" (threads) run them. Fairness is per session, not per request: the lanes serve

@@ -9,7 +9,7 @@
 
 #include "forward_model/chunk_bounds.h"
 #include "scene/gaussian_model.h"
-#include "session/message_validation.h"
+#include "proto/message_validation.h"
 
 namespace catgs::server {
 

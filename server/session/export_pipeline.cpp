@@ -37,13 +37,13 @@ void Session::refuse_export(std::uint32_t export_id, const std::string& why) {
 }
 
 bool Session::may_export() const {
-  const ServerOptions& o = shared_.options;
+  const SessionSettings& o = shared_.settings;
   return video_export_built() && role_ >= Role::author && o.export_limits.max_concurrent > 0 &&
          !shared_.export_folder.empty();
 }
 
 void Session::handle_export(const pb::ExportVideoRequest& request) {
-  const ServerOptions& o = shared_.options;
+  const SessionSettings& o = shared_.settings;
   if (!within(export_bucket_, ServerMetrics::Limit::export_video, "ExportVideoRequests", o.rate_limits.export_video))
     return;
   const std::uint32_t id = request.export_id();
@@ -69,7 +69,7 @@ void Session::handle_export(const pb::ExportVideoRequest& request) {
   export_ = std::make_unique<Export>();
   export_->holds_slot = true;
   // x264 gets a quarter of the cores: live sessions' encoders keep the rest.
-  const int threads = std::max(1, o.encoder_policy.usable_cores / 4);
+  const int threads = std::max(1, o.frame.encoder_policy.usable_cores / 4);
   export_->video =
       std::make_shared<VideoExport>(std::move(plan), scene_->model, shared_.renderer_kind, shared_.render_options,
                                     std::max(gpu_, 0), threads, shared_.export_folder);

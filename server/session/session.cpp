@@ -15,7 +15,7 @@
 #include "camera/camera.h"
 #include "session/annotations.h"
 #include "session/depth_probe.h"
-#include "session/first_view.h"
+#include "process/first_view.h"
 
 namespace catgs::server {
 
@@ -55,10 +55,11 @@ Session::Session(ConnId id, SessionShared& shared)
       tick_(strand_),
       hello_timer_(strand_),
       peer_(shared.transport.peer(id)),
-      pacing_(shared.options.frame_deadline_slots) {
+      pacing_(shared_.settings.frame.frame_deadline_slots),
+      frames_(shared_.settings.frame, shared_.metrics) {
   shared_.metrics.connections_open++;
   const auto now = Clock::now();
-  const RateLimitSettings& r = shared_.options.rate_limits;
+  const RateLimitSettings& r = shared_.settings.rate_limits;
   ping_bucket_ = TokenBucket(r.ping, now);
   key_frame_bucket_ = TokenBucket(r.key_frame, now);
   resize_bucket_ = TokenBucket(r.resize, now);
@@ -76,12 +77,12 @@ void Session::start() {
   // connection can be, so a Hello always finds it armed.
   boost::asio::post(strand_, [self = shared_from_this()] {
     if (self->state_ != State::awaiting_hello) return;
-    self->hello_timer_.expires_after(std::chrono::milliseconds(self->shared_.options.hello_timeout_ms));
+    self->hello_timer_.expires_after(std::chrono::milliseconds(self->shared_.settings.hello_timeout_ms));
     self->hello_timer_.async_wait([self](const boost::system::error_code& ec) {
       if (ec || self->state_ != State::awaiting_hello) return;
       self->shared_.metrics.count(ServerMetrics::Timeout::hello);
       self->fail(pb::ERROR_TIMEOUT,
-                 "no Hello within " + std::to_string(self->shared_.options.hello_timeout_ms) + " ms");
+                 "no Hello within " + std::to_string(self->shared_.settings.hello_timeout_ms) + " ms");
     });
   });
 }
@@ -129,7 +130,7 @@ void Session::post_closed() {
   boost::asio::post(strand_, [self = shared_from_this()] {
     self->end_open_state();
     self->state_ = State::closed;
-    self->pending_.reset();
+    self->frames_.drop_pending();
     self->tick_.cancel();
     self->hello_timer_.cancel();
   });
@@ -142,12 +143,11 @@ void Session::post_shutdown() {
 }
 
 ViewportLimit Session::viewport_limit() const {
-  return {shared_.options.max_viewport_width, shared_.options.max_viewport_height};
+  return {shared_.settings.max_viewport_width, shared_.settings.max_viewport_height};
 }
 
 void Session::end_open_state() {
-  if (pending_) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
-  pending_.reset();
+  if (frames_.drop_pending()) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
   // A closed page gets no file: its rendering stops and its file goes.
   end_export(ServerMetrics::ExportEnd::cancelled);
   scene_use_.reset();  // the scene may be unloaded now (a wait for its load is withdrawn)
@@ -214,18 +214,18 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
     case pb::ClientMessage::kPose:
       return handle_pose(msg.pose(), received);
     case pb::ClientMessage::kResize: {
-      const RateLimitSettings& r = shared_.options.rate_limits;
+      const RateLimitSettings& r = shared_.settings.rate_limits;
       if (!within(resize_bucket_, ServerMetrics::Limit::resize, "Resizes", r.resize)) return;
       Viewport v;
       if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), viewport_limit(), v))
         return fail(bad->code, bad->reason);
       width_ = v.width;
       height_ = v.height;
-      force_idr_ = true;  // the encoder is rebuilt at the new size; its first frame is an IDR
+      frames_.request_idr();  // the encoder is rebuilt at the new size; its first frame is an IDR
       return;
     }
     case pb::ClientMessage::kPing: {
-      if (!within(ping_bucket_, ServerMetrics::Limit::ping, "Pings", shared_.options.rate_limits.ping)) return;
+      if (!within(ping_bucket_, ServerMetrics::Limit::ping, "Pings", shared_.settings.rate_limits.ping)) return;
       if (!std::isfinite(msg.ping().client_time_ms()))
         return fail(pb::ERROR_INVALID_ARGUMENT, "Ping time is NaN or Inf");
       pb::ServerMessage m;
@@ -237,17 +237,17 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
     case pb::ClientMessage::kKeyFrameRequest:
       // Each one makes the next frame an IDR (many times a P frame's bytes and encode time).
       if (!within(key_frame_bucket_, ServerMetrics::Limit::key_frame, "KeyFrameRequests",
-                  shared_.options.rate_limits.key_frame))
+                  shared_.settings.rate_limits.key_frame))
         return;
-      force_idr_ = true;
+      frames_.request_idr();
       return;
     case pb::ClientMessage::kQuality:
       if (!within(quality_bucket_, ServerMetrics::Limit::quality, "Quality messages",
-                  shared_.options.rate_limits.quality))
+                  shared_.settings.rate_limits.quality))
         return;
       if (auto bad = check_quality(msg.quality())) return fail(bad->code, bad->reason);
       max_bitrate_kbps_ = static_cast<int>(msg.quality().max_bitrate_kbps());
-      force_idr_ = true;  // the encoder is rebuilt with it; its first frame is an IDR
+      frames_.request_idr();  // the encoder is rebuilt with it; its first frame is an IDR
       return;
     case pb::ClientMessage::kDepthRequest:
       return handle_depth(msg.depth_request());
@@ -266,20 +266,20 @@ bool Session::admit(const pb::Hello& hello) {
   std::uint32_t retry_ms = 0;
   if (!shared_.peers.take_hello(peer_, retry_ms)) {
     shared_.metrics.count(ServerMetrics::Limit::hello);
-    fail(
-        pb::ERROR_RATE_LIMITED,
-        "too many Hellos from " + peer_ + " (limit " + describe(shared_.options.rate_limits.hello) + ", --rate-limits)",
-        false, retry_ms);
+    fail(pb::ERROR_RATE_LIMITED,
+         "too many Hellos from " + peer_ + " (limit " + describe(shared_.settings.rate_limits.hello) +
+             ", --rate-limits)",
+         false, retry_ms);
     return false;
   }
-  if (shared_.options.tokens.empty()) return true;
+  if (shared_.settings.tokens.empty()) return true;
   // The failure limit is checked before the token is: past it, a guess is not even compared.
   if (!shared_.peers.may_try_token(peer_, retry_ms)) {
     shared_.metrics.count(ServerMetrics::Limit::auth);
     fail(pb::ERROR_RATE_LIMITED, "too many wrong tokens from " + peer_ + " (--rate-limits auth)", false, retry_ms);
     return false;
   }
-  role_ = shared_.options.tokens.role_of(hello.token());
+  role_ = shared_.settings.tokens.role_of(hello.token());
   if (role_ == Role::none) {
     shared_.peers.token_failed(peer_);
     shared_.metrics.count(ServerMetrics::Unauthorized::hello);
@@ -306,12 +306,12 @@ void Session::handle_hello(const pb::Hello& hello) {
                                                 "' on this server (it has: " + shared_.scenes.names() + ")");
   if (shared_.draining)
     return fail(pb::ERROR_SHUTTING_DOWN, "server draining: connect again", false, jittered(kShuttingDownRetryMs));
-  if (++shared_.metrics.sessions_open > shared_.options.max_sessions) {
+  if (++shared_.metrics.sessions_open > shared_.settings.max_sessions) {
     shared_.metrics.sessions_open--;
     // A hint, not a promise: a page that waits this long (or a fresh connection that the Service
     // sends to another replica) is likely to get in.
-    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.options.max_sessions) + " sessions)",
-                false, jittered(static_cast<std::uint32_t>(shared_.options.full_retry_ms)));
+    return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.settings.max_sessions) + " sessions)",
+                false, jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
   }
   counted_open_ = true;
   shared_.metrics.sessions_total++;
@@ -338,13 +338,13 @@ void Session::handle_hello(const pb::Hello& hello) {
   // A load that hangs (a stalled network file system) must not hold this session for ever: the
   // Hello timer, idle since the Hello, bounds the wait (on_scene_ready cancels it). Ending the
   // session withdraws its wait (scene_use_); the load goes on for whoever asks next.
-  hello_timer_.expires_after(std::chrono::milliseconds(shared_.options.scene_load_timeout_ms));
+  hello_timer_.expires_after(std::chrono::milliseconds(shared_.settings.scene_load_timeout_ms));
   hello_timer_.async_wait([self](const boost::system::error_code& ec) {
     if (ec || self->state_ != State::loading) return;
     self->shared_.metrics.count(ServerMetrics::Timeout::scene_load);
     self->fail(pb::ERROR_TIMEOUT, "scene '" + self->shared_.scenes.name(self->scene_use_->index()) +
                                       "' did not load within " +
-                                      std::to_string(self->shared_.options.scene_load_timeout_ms) + " ms");
+                                      std::to_string(self->shared_.settings.scene_load_timeout_ms) + " ms");
   });
 }
 
@@ -370,14 +370,15 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
                 "scene '" + shared_.scenes.name(scene_use_->index()) + "' failed to load: " + error);
   scene_ = std::move(scene);
   if (shared_.renderer_kind == "cuda") gpu_ = shared_.gpus.acquire();  // the least busy GPU
+  std::unique_ptr<Renderer> renderer;
   try {
-    renderer_ = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));
+    renderer = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));
   } catch (const std::exception& e) {  // e.g. no device memory left for another scene copy
     return fail(pb::ERROR_INTERNAL, "renderer for scene '" + scene_->model->name + "': " + e.what());
   }
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
-  pipelined_ = !(shared_.encoder_kind == "nvenc" && renderer_->name() == "cuda");
-  for (int i = 0; pipelined_ && i < 2; ++i) free_planes_.push_back(std::make_unique<Yuv420Image>());
+  const bool pipelined = !(shared_.encoder_kind == "nvenc" && renderer->name() == "cuda");
+  frames_.open(std::move(renderer), gpu_, pipelined);
   state_ = State::open;
   session_id_ = random_session_id();
 
@@ -403,7 +404,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   w->set_codec(pb::CODEC_H264);
   w->set_width(static_cast<std::uint32_t>(width_));
   w->set_height(static_cast<std::uint32_t>(height_));
-  w->set_renderer(renderer_->name());
+  w->set_renderer(frames_.renderer_name());
   w->set_encoder(shared_.encoder_kind);
   w->set_pipeline(pipeline_name(shared_.render_options.pipeline));
   send(m);
@@ -425,22 +426,22 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   // The client's own end-to-end measurement of an earlier frame (0: nothing new).
   if (pose.shown_latency_ms() > 0) {
     shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
-    if (shared_.options.adaptive_quality) quality_.on_latency(received, pose.shown_latency_ms());
+    if (shared_.settings.frame.adaptive_quality) quality_.on_latency(received, pose.shown_latency_ms());
   }
-  const bool replaced = pending_.has_value();
+  const bool replaced = frames_.pending().has_value();
   if (replaced) {
     poses_skipped_++;                       // latest pose wins: the older one is never rendered
     shared_.metrics.poses_skipped_total++;  // a skip, not a drop: the newer pose is rendered instead
   }
-  if (shared_.options.adaptive_quality) quality_.on_pose(received, replaced);
+  if (shared_.settings.frame.adaptive_quality) quality_.on_pose(received, replaced);
   pacing_.on_pose(received);
-  pending_ = PendingPose{cam, pose.sequence(), pose.client_time_ms(), received};
+  frames_.offer({cam, pose.sequence(), pose.client_time_ms(), received});
   last_pose_ = cam;
   maybe_start_render();
 }
 
 void Session::handle_depth(const pb::DepthRequest& request) {
-  if (!within(depth_bucket_, ServerMetrics::Limit::depth, "DepthRequests", shared_.options.rate_limits.depth)) return;
+  if (!within(depth_bucket_, ServerMetrics::Limit::depth, "DepthRequests", shared_.settings.rate_limits.depth)) return;
   // A request that cannot be answered gets an answer that says why; the session goes on (a pixel
   // outside the view is the page's race with a Resize as often as a bug).
   auto refuse = [this, &request](const std::string& why) {
@@ -487,14 +488,14 @@ void Session::send_annotations() {
 }
 
 void Session::handle_save_annotations(const pb::SaveAnnotations& save) {
-  if (!within(save_bucket_, ServerMetrics::Limit::save, "SaveAnnotations", shared_.options.rate_limits.save)) return;
+  if (!within(save_bucket_, ServerMetrics::Limit::save, "SaveAnnotations", shared_.settings.rate_limits.save)) return;
   pb::ServerMessage m;
   pb::Annotations* a = m.mutable_annotations();
   a->set_can_save(role_ >= Role::author);
   // A server without tokens has no authors: anyone who reaches it could otherwise write files.
   if (!a->can_save()) {
-    a->set_error(shared_.options.tokens.empty() ? "this server saves no annotations (it has no author tokens)"
-                                                : "saving annotations needs an author or admin token");
+    a->set_error(shared_.settings.tokens.empty() ? "this server saves no annotations (it has no author tokens)"
+                                                 : "saving annotations needs an author or admin token");
   } else if (state_ != State::open) {
     a->set_error("the scene is not open yet");
   } else {
@@ -520,21 +521,21 @@ void Session::arm_tick() {
 void Session::on_tick() {
   if (state_ != State::open) return;
   const auto now = Clock::now();
-  const auto timeout = std::chrono::milliseconds(shared_.options.slow_client_timeout_ms);
+  const auto timeout = std::chrono::milliseconds(shared_.settings.slow_client_timeout_ms);
   if (in_flight_ > 0 && now - last_progress_ > timeout)
     return fail(pb::ERROR_TOO_SLOW,
-                "frames unread for " + std::to_string(shared_.options.slow_client_timeout_ms) + " ms",
+                "frames unread for " + std::to_string(shared_.settings.slow_client_timeout_ms) + " ms",
                 /*drop_queued=*/true);
   if (shared_.transport.queued(id_) > kMaxQueuedMessages)
     return fail(pb::ERROR_TOO_SLOW, "client does not read its messages", /*drop_queued=*/true);
   // A session that says nothing (no pose, no Ping) for this long holds a slot for nobody.
-  if (now - last_message_ > std::chrono::milliseconds(shared_.options.silent_timeout_ms)) {
+  if (now - last_message_ > std::chrono::milliseconds(shared_.settings.silent_timeout_ms)) {
     shared_.metrics.count(ServerMetrics::Timeout::silent);
-    return fail(pb::ERROR_TIMEOUT, "no message for " + std::to_string(shared_.options.silent_timeout_ms) + " ms");
+    return fail(pb::ERROR_TIMEOUT, "no message for " + std::to_string(shared_.settings.silent_timeout_ms) + " ms");
   }
   if (now - last_stats_ >= std::chrono::seconds(1)) send_stats();
   if (export_ && export_->sending) send_export_chunks();
-  if (shared_.options.adaptive_quality) adapt_quality(now);
+  if (shared_.settings.frame.adaptive_quality) adapt_quality(now);
   arm_tick();
 }
 
@@ -553,7 +554,7 @@ void Session::send_stats() {
   s->set_link_kbps(link_.link_kbps());
   s->set_rtt_ms(link_.rtt_ms());
   if (link_.limited()) s->set_bitrate_cap_kbps(static_cast<std::uint32_t>(link_.cap_kbps(link_ceiling_kbps_)));
-  s->set_quality_level(static_cast<std::uint32_t>(shared_.options.adaptive_quality ? quality_.level() : 0));
+  s->set_quality_level(static_cast<std::uint32_t>(shared_.settings.frame.adaptive_quality ? quality_.level() : 0));
   s->set_key_frames(render_key_frames_);
   s->set_sub_frames(render_sub_frames_);
   // Draining: the client learns when this session will end (the page says so), within a second of

@@ -1,19 +1,14 @@
-// One client session (DESIGN.md "Server"): protocol state machine, latest-pose-wins render
-// scheduling, encoder, flow control and statistics. The protocol state machine (Hello, scene
-// load, Welcome, messages, timeouts, Stats) is session.cpp; the frame pipeline (render job,
-// encode job, pacing, adaptive quality, the Frame message) is frame_pipeline.cpp.
+// One client session (docs/DESIGN.md "Server"): protocol state machine, latest-pose-wins render
+// scheduling, flow control and statistics. The protocol state machine (Hello, scene load,
+// Welcome, messages, timeouts, Stats) is session.cpp; the stream (when render and encode jobs
+// start, pacing, adaptive quality, the link, the Frame handed to the transport) is
+// session_stream.cpp; the frame's own state (pose slots, I420 buffers, renderer, encoder) is a
+// FramePipeline (frame_pipeline.h).
 //
 // Threading: every member below "strand state" is touched only on the session's strand. Renders
 // run as jobs on the render scheduler's lanes, encodes as jobs on the worker pool (never on the
 // strand, so poses keep arriving while a frame renders). Transport callbacks enter through the
 // post_* functions.
-//
-// Frame pipeline (host-fed encoders: x264): a render job renders and colour-converts frame n + 1
-// into one of two host I420 buffers while an encode job encodes frame n from the other, so a
-// session's frame rate is bounded by the slower stage, not by their sum. At most one render job
-// and one encode job run per session; the renderer is used only by render jobs, the encoder only
-// by encode jobs. NVENC (CUDA input): one job renders straight into the encoder's hw frame and
-// encodes it (no host buffer to overlap with).
 #pragma once
 
 #include <utility>  // Boost 1.74 Asio under C++20 needs std::exchange declared first
@@ -40,21 +35,18 @@
 #include "session/access_tokens.h"
 #include "session/adaptive_quality.h"
 #include "session/frame_pacing.h"
-#include "session/message_validation.h"
-#include "session/first_view.h"
+#include "session/frame_pipeline.h"
+#include "proto/message_validation.h"
+#include "process/first_view.h"
 #include "session/link_rate.h"
 #include "session/rate_limit.h"
-#include "session/scene_store.h"
+#include "session/session_settings.h"
+#include "process/scene_store.h"
 #include "session/video_export.h"
-#include "server_metrics.h"
-#include "server_options.h"
+#include "process/server_metrics.h"
 #include "transport/transport.h"
 
 namespace catgs::server {
-
-inline double ms_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
-  return std::chrono::duration<double, std::milli>(b - a).count();
-}
 
 // What all sessions share (owned by the Server; it outlives every session).
 struct SessionShared {
@@ -63,8 +55,8 @@ struct SessionShared {
   GpuAssignment& gpus;          // which GPU a session renders on (CUDA renderer; gpu_assignment.h)
   ConnectionLink& transport;    // the Transport (transport.h); a fake in tests/fuzz/fuzz_session.cpp
   ServerMetrics& metrics;
-  const ServerOptions& options;
-  SceneStore& scenes;  // every --scene, in order, the first the default; loaded on first use
+  const SessionSettings& settings;  // the server holds them for its lifetime
+  SceneStore& scenes;               // every --scene, in order, the first the default; loaded on first use
   RenderOptions render_options;
   std::string renderer_kind;  // resolved at start-up: "cpu" or "cuda"
   std::string encoder_kind;   // resolved at start-up: "x264" or "nvenc" (Welcome.encoder)
@@ -73,7 +65,7 @@ struct SessionShared {
   std::atomic<bool> draining{false};
   std::atomic<std::chrono::steady_clock::time_point> drain_deadline{};
   // Hello and failed-token limits per client address (a new connection per attempt).
-  PeerLimiter peers{options.rate_limits};
+  PeerLimiter peers{settings.rate_limits};
   // The folder of video exports' files (video_export.h export_folder(); set by the server at
   // start-up, empty when exports are off or not built). The exports rendering now, server-wide
   // (--export-max-concurrent), are metrics.exports_running.
@@ -90,7 +82,7 @@ constexpr std::uint32_t kShuttingDownRetryMs = 500;
 
 class Session : public std::enable_shared_from_this<Session> {
  public:
-  // A connection waiting for Hello. The session slot (options.max_sessions) is taken at Hello.
+  // A connection waiting for Hello. The session slot (settings.max_sessions) is taken at Hello.
   Session(ConnId id, SessionShared& shared);
   ~Session();
 
@@ -112,50 +104,11 @@ class Session : public std::enable_shared_from_this<Session> {
   // loading: past Hello, waiting for its scene to load (SceneStore::acquire); holds a session slot.
   enum class State { awaiting_hello, loading, open, closed };
 
-  struct PendingPose {
-    CameraPose pose;
-    std::uint32_t sequence = 0;
-    double client_time_ms = 0;
-    Clock::time_point received;  // arrival on the transport thread
-    bool full_size = false;      // a refine frame: full size whatever the adaptive level
-  };
-  struct Job {
-    PendingPose pose;
-    int width = 0, height = 0;
-    bool force_idr = false;
-    std::uint32_t frame_sequence = 0;
-    double previous_send_ms = 0;  // FrameTimings.previous_send_ms
-    int max_bitrate_kbps = 0;     // Quality.max_bitrate_kbps (0: the server's default)
-    int quality_level = 0;        // AdaptiveQuality level the size was scaled to
-    int link_kbps = 0;            // the link's rate cap (link_rate.h; 0: not limiting; set after)
-  };
+  using JobResult = FramePipeline::JobResult;
   // A frame handed to the transport.
   struct Handed {
     Clock::time_point at;  // when it went to the transport
     std::size_t bytes;     // its message's size
-  };
-  // A rendered frame waiting for (or in) the encode stage.
-  struct Rendered {
-    Job job;
-    std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
-    bool render_key_frame = true;
-    int speculation_window = 0;
-    double queue_ms = 0, render_ms = 0, convert_ms = 0;
-    std::string error;         // non-empty: the render failed
-    bool over_budget = false;  // it failed with RenderBudgetError (renderer.h): the view, not the server
-  };
-  struct JobResult {
-    std::string message;  // serialized ServerMessage{Frame}; empty on failure
-    std::string error;
-    bool over_budget = false;      // as Rendered::over_budget
-    bool key_frame = false;        // an IDR access unit
-    bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
-    int speculation_window = 0;
-    std::size_t payload_bytes = 0;
-    double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
-    double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
-    int quality_level = 0;
-    bool refine = false;  // an adaptive-quality refine frame
   };
 
   // `received`: when the transport thread handed the message over.
@@ -200,14 +153,6 @@ class Session : public std::enable_shared_from_this<Session> {
   void send(const pb::ServerMessage& message);
   void maybe_start_render();
   void maybe_start_encode();
-  // In a job: renders job's pose into `target` and fills r's render fields (timings, key frame,
-  // window). Throws what Renderer::render_yuv420_at throws.
-  void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
-  Rendered run_render(Job job, std::unique_ptr<Yuv420Image> planes);  // on a render lane
-  JobResult run_encode(Rendered& frame);                              // on the pool
-  JobResult run_render_and_encode(const Job& job);                    // on a render lane (NVENC's CUDA input)
-  void ensure_encoder(const Job& job, bool& idr);                     // in a job
-  JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
   void on_job_done(JobResult result);
   void arm_tick();
   void on_tick();
@@ -242,26 +187,17 @@ class Session : public std::enable_shared_from_this<Session> {
   std::string client_name_;                     // Hello.client_name (logs), at most 128 bytes
   int progress_sent_ = -1;                      // the last LoadProgress percent sent
   int width_ = 0, height_ = 0;
-  int max_bitrate_kbps_ = 0;  // the client's Quality
-  bool force_idr_ = true;
-  std::optional<PendingPose> pending_;
-  std::optional<PendingPose> last_started_;  // the pose of the last render started (refine frames)
-  AdaptiveQuality quality_;                  // --adaptive-quality
-  FramePacing pacing_;                       // --frame-deadline
-  int last_frame_level_ = 0;                 // the level of the last frame handed off
-  bool rendering_ = false;                   // a render (or render-and-encode) job is running
-  bool encoding_ = false;                    // an encode job is running
-  bool pipelined_ = true;                    // render and encode as separate stages (false: NVENC, one job)
-  std::optional<Rendered> rendered_;         // rendered, waiting for the encoder
-  std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
-  int in_flight_ = 0;                                      // frames queued to the transport, not yet written
-  std::deque<Handed> handed_;                              // the in-flight frames, in order
-  LinkRate link_;                                          // the link's rate controller (--link-control)
+  int max_bitrate_kbps_ = 0;         // the client's Quality
+  AdaptiveQuality quality_;          // --adaptive-quality
+  FramePacing pacing_;               // --frame-deadline
+  int last_frame_level_ = 0;         // the level of the last frame handed off
+  int in_flight_ = 0;                // frames queued to the transport, not yet written
+  std::deque<Handed> handed_;        // the in-flight frames, in order
+  LinkRate link_;                    // the link's rate controller (--link-control)
   int link_ceiling_kbps_ = 0;        // the policy's rate for the last job's size (link_rate.h's ceiling)
   int send_buffer_ = 0;              // the socket's SO_SNDBUF as the session last set it (0: the transport's)
   double last_send_ms_ = 0;          // send time of the last frame written
   Clock::time_point last_progress_;  // last time the transport wrote one of our frames
-  std::uint32_t next_frame_sequence_ = 0;
   Clock::time_point last_stats_;
   Clock::time_point last_message_;  // the client's latest message (--silent-timeout-ms)
   TokenBucket ping_bucket_, key_frame_bucket_, resize_bucket_, quality_bucket_;  // --rate-limits
@@ -288,14 +224,8 @@ class Session : public std::enable_shared_from_this<Session> {
   std::uint32_t frames_since_stats_ = 0;
   std::uint64_t bytes_since_stats_ = 0;
 
-  // --- render job state (one job at a time) ---
-  std::unique_ptr<Renderer> renderer_;
-  int gpu_ = -1;  // the CUDA device renderer_ renders on (shared_.gpus), -1: none (CPU renderer)
-  std::unique_ptr<Encoder> encoder_;
-  int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with (touched in jobs only)
-  int encoder_link_kbps_ = 0;     // the link cap it runs at (changed without a rebuild where it can)
-  int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
-  Clock::time_point encoder_built_{};
+  FramePipeline frames_;  // the frame's state: pose slots, I420 buffers, renderer, encoder
+  int gpu_ = -1;          // the CUDA device the session renders on (shared_.gpus), -1: none (CPU)
 };
 
 }  // namespace catgs::server

@@ -45,7 +45,7 @@ std::string SessionManager::metrics_text() { return shared_.metrics.prometheus_t
 std::string SessionManager::scenes_json() { return shared_.scenes.json(); }
 
 int SessionManager::metrics_access(const std::string& authorization) {
-  return metrics_access_status(shared_.options.tokens, authorization, shared_.metrics);
+  return metrics_access_status(shared_.settings.tokens, authorization, shared_.metrics);
 }
 
 void SessionManager::on_refused(Refusal why, const std::string& peer, const std::string& detail) {
@@ -69,7 +69,7 @@ void count_refusal(ServerMetrics& metrics, Refusal why, const std::string& peer,
 
 int SessionManager::readiness(std::string& body) {
   const std::int64_t open = open_sessions();
-  const int limit = shared_.options.max_sessions;
+  const int limit = shared_.settings.max_sessions;
   if (shared_.draining) {
     body = "draining (" + std::to_string(open) + " sessions left)\n";
     return 503;

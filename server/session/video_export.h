@@ -24,7 +24,7 @@
 
 #include "renderer/renderer.h"
 #include "scene/gaussian_model.h"
-#include "session/message_validation.h"
+#include "proto/message_validation.h"
 
 namespace catgs::server {
 

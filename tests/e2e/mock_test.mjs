@@ -32,7 +32,8 @@ const shot = async (page, name) => {
   if (shotsDir) await page.screenshot({ path: path.join(shotsDir, `${name}.png`) });
 };
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-const messageText = (page) => page.evaluate(() => document.getElementById('messages').textContent);
+// The page's words: the state messages in the middle and the short notices at the bottom.
+const messageText = (page) => page.evaluate(() => ['messages', 'notice'].map((id) => document.getElementById(id)?.textContent || '').filter(Boolean).join('\n'));
 async function waitText(page, re, timeoutMs = 8000) {
   const end = Date.now() + timeoutMs;
   while (Date.now() < end) {

@@ -1,11 +1,11 @@
 // Fuzz target: any bytes as a client WebSocket message: protobuf decode of ClientMessage, then
-// the server's validation of whichever body it holds (session/message_validation.h), as the
+// the server's validation of whichever body it holds (proto/message_validation.h), as the
 // session does before acting on a message. Violations are the expected answer; a crash, a
 // sanitizer report or an exception is a finding.
 #include <cstddef>
 #include <cstdint>
 
-#include "session/message_validation.h"
+#include "proto/message_validation.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   namespace pb = catgs::server::pb;

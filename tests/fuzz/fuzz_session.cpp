@@ -107,10 +107,10 @@ class CheckingLink final : public ConnectionLink {
 // scheduler. Neither runs threads: settle() runs their work on this thread.
 struct World {
   World() : work(io.get_executor()) {
-    options.max_viewport_width = kMaxSide;
-    options.max_viewport_height = kMaxSide;
-    options.encoder = "x264";
-    options.encoder_policy.threads = 1;
+    settings.max_viewport_width = kMaxSide;
+    settings.max_viewport_height = kMaxSide;
+    settings.frame.encoder = "x264";
+    settings.frame.encoder_policy.threads = 1;
     SceneStore::Options o;  // no log: the chunk loads once, quietly
     scenes = std::make_unique<SceneStore>(
         std::vector<SceneStore::Source>{
@@ -128,7 +128,7 @@ struct World {
   boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work;
   RenderScheduler renders;  // never started: poll() runs its jobs here
   GpuAssignment gpus{{}};
-  ServerOptions options;
+  SessionSettings settings;
   RenderOptions render_options;
   std::unique_ptr<SceneStore> scenes;
 };
@@ -160,7 +160,7 @@ void run_connection(const std::uint8_t* data, std::size_t size) {
   CheckingLink link;
   ServerMetrics metrics;
   // Fresh per input: the per-address Hello and token limits start empty.
-  SessionShared shared{w.io, w.renders, w.gpus, link, metrics, w.options, *w.scenes, w.render_options, "cpu", "x264"};
+  SessionShared shared{w.io, w.renders, w.gpus, link, metrics, w.settings, *w.scenes, w.render_options, "cpu", "x264"};
   static ConnId next_id = 1;
   auto session = std::make_shared<Session>(next_id++, shared);
   session->start();

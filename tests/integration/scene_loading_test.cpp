@@ -1,4 +1,4 @@
-// Scenes on demand (issue 20, "Scene choice"; server/session/scene_store.h), against the real
+// Scenes on demand (issue 20, "Scene choice"; server/process/scene_store.h), against the real
 // server on the CPU renderer: scenes past the first load on first use, once for all the sessions
 // that ask, with LoadProgress before Welcome; a bad file or a load that hangs ends only its own
 // sessions; a memory

@@ -18,7 +18,7 @@
 #include "cpu/cpu_renderer.h"
 #include "scene/ply_io.h"
 #include "camera/trace.h"
-#include "session/first_view.h"
+#include "process/first_view.h"
 #include "loadgen/h264_decoder.h"
 #include "good_client.h"
 #include "server_process.h"

@@ -1,6 +1,6 @@
-// An independent, slow, per-pixel oracle for the forward model of DESIGN.md, written apart from
-// render_core (double precision, no tiles, no sort keys): each pixel gathers every Gaussian that
-// reaches it, orders them by (view depth, index) and composites front to back.
+// An independent, slow, per-pixel oracle for the forward model (docs/DESIGN.md "Forward model"),
+// written apart from render_core (double precision, no tiles, no sort keys): each pixel gathers
+// every Gaussian that reaches it, orders them by (view depth, index) and composites front to back.
 #pragma once
 
 #include "camera/camera.h"

@@ -49,7 +49,7 @@ struct Counts {
 // Pre-processes `m` at every view with and without chunk culling and expects the same tile
 // counts; returns how many chunks the views culled.
 Counts expect_same_tiles(const GaussianModel& m) {
-  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(m), none = never_cull(m.size());
+  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(m), none = never_cull(m.size());
   Counts c;
   for (const Camera& cam : views_of(m, 320, 180)) {
     cpu::ProjectedGaussians culled, full;
@@ -113,7 +113,7 @@ TEST(ChunkCulling, NeverCullsAListedGaussian) {
   std::size_t culled_chunks = 0, checked = 0;
   for (int trial = 0; trial < 3000; ++trial) {
     random_chunk(m, per_chunk, v.tan_half_fov.x, 0.0f, rng);
-    const std::vector<fm::ChunkBounds> b = fm::chunk_bounds(m);
+    const std::vector<fm::ChunkBounds> b = chunk_bounds_of(m);
     ASSERT_EQ(b.size(), 1u);
     if (!fm::chunk_outside_view(b[0], v)) continue;
     ++culled_chunks;
@@ -129,7 +129,7 @@ TEST(ChunkCulling, NeverCullsAListedGaussian) {
 // The catgs key frame's form (fm::chunk_misses_path): speculative pre-processing over a path
 // of 3 poses gives the same tiles with and without it, on real scenes; returns the chunks culled.
 Counts expect_same_trail_tiles(const GaussianModel& m) {
-  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(m), none = never_cull(m.size());
+  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(m), none = never_cull(m.size());
   const std::vector<Camera> views = views_of(m, 320, 180);
   const TrailWidening widening{0.1f, 0.5f, 0.25f};
   Counts c;
@@ -182,7 +182,7 @@ TEST(ChunkCulling, PathTestNeverCullsAListedGaussian) {
       path.push_back(Camera::from_pose(t * move, glm::angleAxis(t * yaw, glm::vec3(0.0f, 1.0f, 0.0f)), 60.0f, 160, 90));
     }
     random_chunk(m, per_chunk, fm::view_of(path[0]).tan_half_fov.x, 0.2f, rng);
-    const std::vector<fm::ChunkBounds> b = fm::chunk_bounds(m);
+    const std::vector<fm::ChunkBounds> b = chunk_bounds_of(m);
     std::vector<fm::View> v;
     for (const Camera& cam : path) v.push_back(fm::view_of(cam));
     const auto view_at = [&](int j) -> const fm::View& { return v[static_cast<std::size_t>(j)]; };
@@ -202,7 +202,7 @@ TEST(ChunkCulling, PathTestNeverCullsAListedGaussian) {
 // nothing), on real scenes, for consecutive views and three depth thresholds; returns the
 // chunks skipped.
 Counts expect_same_motion(const GaussianModel& m) {
-  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(m), none = never_cull(m.size());
+  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(m), none = never_cull(m.size());
   const std::vector<Camera> views = views_of(m, 320, 180);
   Counts c;
   for (std::size_t k = 0; k + 1 < views.size(); ++k)
@@ -241,7 +241,7 @@ TEST(ChunkCulling, MotionSkipNeverDropsACountingMean) {
   for (int trial = 0; trial < 3000; ++trial) {
     random_chunk(m, per_chunk, v.tan_half_fov.x, 0.2f, rng);
     const float min_depth = 0.02f + 3.0f * u01(rng) * u01(rng);
-    if (!fm::chunk_means_off_image(fm::chunk_bounds(m)[0], v, min_depth)) {
+    if (!fm::chunk_means_off_image(chunk_bounds_of(m)[0], v, min_depth)) {
       ++kept;
       continue;
     }

@@ -71,7 +71,7 @@ Image render_sorted(const GaussianModel& m, const Camera& cam, const fm::DepthKe
   cpu::ProjectedGaussians proj;
   cpu::RenderList list;
   cpu::TileRanges ranges;
-  cpu::preprocess(m, fm::chunk_bounds(m), cam, Pipeline::exact, proj);
+  cpu::preprocess(m, chunk_bounds_of(m), cam, Pipeline::exact, proj);
   cpu::emit_keys(proj, grid, Pipeline::exact, {}, list);
   *used = packing ? *packing : cpu::single_sort_packing_of(list, grid);
   cpu::sort_render_list(list, *used);

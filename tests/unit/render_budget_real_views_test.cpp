@@ -123,7 +123,7 @@ void probe_scene(const char* scene, const GaussianModel& m, const std::vector<do
                  const std::vector<std::pair<int, int>>& full_sizes,
                  const std::vector<std::pair<int, int>>& catgs_sizes, Tally& tally) {
   const RenderListBudget budget;  // the defaults, as the server's
-  const auto chunks = fm::chunk_bounds(m);
+  const auto chunks = chunk_bounds_of(m);
   cpu::ProjectedGaussians pg;
   for (const Path& path : kPaths) {
     const std::string file = test::data_file(path.cameras);

@@ -196,7 +196,7 @@ TEST(SceneCache, CachedLoadEqualsThePlainLoadAndHoldsTheGpuLayout) {
     std::vector<uint16_t> half(plain.sh.size());
     for (std::size_t k = 0; k < half.size(); ++k) half[k] = fm::half_bits(plain.sh[k]);
     EXPECT_EQ(std::memcmp(cache->sh_half(), half.data(), 2 * half.size()), 0) << path;
-    const auto chunks = fm::chunk_bounds(plain);
+    const auto chunks = chunk_bounds_of(plain);
     EXPECT_EQ(std::memcmp(cache->chunks(), chunks.data(), chunks.size() * sizeof(fm::ChunkBounds)), 0) << path;
   }
 }

@@ -280,7 +280,7 @@ TEST(Speculation, KeyColoursStayAtTheKeyFramesValues) {
   const auto m = scene(scene_path);
   const auto views = load_inria_cameras(cams, 160, 106);
   const Trace trace = interpolate_views({views[1], views[2]}, 120.0, 1.0);
-  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(*m);
+  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(*m);
   const std::vector<Camera> path{trace[10].camera, trace[11].camera, trace[12].camera};
   cpu::ProjectedGaussians key;
   cpu::speculative_preprocess(*m, chunks, path, trail_widening(SpeculationParams{}, 2), key);
@@ -355,7 +355,7 @@ TEST(Speculation, WindowShrinksWithSpeedAndStopsAtTheLimit) {
     r->render_at(t[1].camera, t[1].time_s, img);
     ASSERT_TRUE(r->last_stats().key_frame);
     // The planner's rule on the motion it predicted (exact at constant speed).
-    const float M = cpu::max_screen_motion(*m, fm::chunk_bounds(*m), t[1].camera, t[2].camera, 0.4f);
+    const float M = cpu::max_screen_motion(*m, chunk_bounds_of(*m), t[1].camera, t[2].camera, 0.4f);
     EXPECT_EQ(r->last_stats().window, motion_adaptive_window(M, {})) << step_deg << " deg/frame, M " << M;
     windows.push_back(r->last_stats().window);
   }

@@ -145,7 +145,7 @@ TEST(TrailTest, SpeculativePreprocessListsEveryTileAlongThePath) {
       path.push_back(pose_between(p0, q0, p1, q1, 50.0f, 50.0f, static_cast<float>(k) / 4.0f));
     cpu::ProjectedGaussians out;
     const TrailWidening widening{0.1f, 0.5f, motion % 2 == 0 ? 0.0f : 0.25f};
-    cpu::speculative_preprocess(model, fm::chunk_bounds(model), path, widening, out);
+    cpu::speculative_preprocess(model, chunk_bounds_of(model), path, widening, out);
     for (std::size_t i = 0; i < n; ++i) {
       const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
       const fm::Cov3 S = fm::covariance_3d(

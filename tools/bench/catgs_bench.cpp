@@ -23,8 +23,9 @@
 // --renderer cpu (the default in a build without CUDA) times the CPU reference with the steady
 // clock around render_at() (pose in, 8-bit image in host memory out), with the same variants.
 //
-// --city builds DESIGN.md's city in memory from S (13 copies on a diamond grid, x10 scale; with
-// --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by --scale (default 1).
+// --city builds the city of docs/DESIGN.md "Measuring" in memory from S (13 copies on a diamond
+// grid, x10 scale; with --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by
+// --scale (default 1).
 // Level of detail (forward_model/lod.h): --lod builds it in memory after that
 // (scene_tools/lod_build.h; its build time and level sizes are printed and in the JSON);
 // --lod-file F reads S's LOD file (catgs-scene lod). Every variant draws the cut at --lod-error

@@ -11,7 +11,7 @@
 #include "scene_tools/city.h"
 #include "loadgen/h264_decoder.h"
 #include "loadgen/stream_client.h"
-#include "session/message_validation.h"
+#include "proto/message_validation.h"
 
 namespace catgs::loadgen {
 

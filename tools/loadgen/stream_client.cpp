@@ -3,7 +3,7 @@
 #include <chrono>
 #include <stdexcept>
 
-#include "session/message_validation.h"
+#include "proto/message_validation.h"
 
 namespace catgs::loadgen {
 

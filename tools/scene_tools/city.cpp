@@ -8,9 +8,9 @@
 
 #include <glm/gtc/quaternion.hpp>
 
-#include "cpu/cpu_renderer.h"  // parallel_for
 #include "scene/scene_bounds.h"
 #include "scene/sh_rotation.h"
+#include "base/parallel_for.h"
 
 namespace catgs {
 
@@ -86,7 +86,7 @@ GaussianModel tile_scene(const GaussianModel& base_in, const CityParams& p, City
     R[c] = glm::mat3_cast(Q[c]);
     S[c] = make_sh_rotation(p.rotate_sh ? base.sh_degree : 0, R[c]);
   }
-  cpu::parallel_for(copies * chunks_per_copy, 1, [&](std::size_t task) {
+  parallel_for(copies * chunks_per_copy, 1, [&](std::size_t task) {
     const std::size_t c = task / chunks_per_copy;
     const std::size_t begin = (task % chunks_per_copy) * kChunk, end = std::min(n, begin + kChunk);
     const glm::vec3 offset =

@@ -1,4 +1,4 @@
-// City-scale scenes and the traces that go with them (DESIGN.md "Measuring": large scenes are
+// City-scale scenes and the traces that go with them (docs/DESIGN.md "Measuring": large scenes are
 // built from real ones by tiling copies on a grid with per-copy yaw, then flown over at low
 // altitude), and real camera paths moved onto a scene. Tools only (catgs-scene, catgs-bench,
 // catgs-loadgen), with or without CUDA.
@@ -17,10 +17,10 @@ namespace catgs {
 // scale-free). Throws std::invalid_argument for s <= 0 or non-finite.
 void scale_scene(GaussianModel& model, float s);
 
-// The city recipe of DESIGN.md: copies of a scene on the cells (i, j) of a square grid with
-// i^2 + j^2 <= radius_sq (13 cells for 4: a diamond), `spacing` times the copy's horizontal
-// extent apart, each turned about the up axis by a yaw drawn from `seed` (deterministic), the
-// whole scaled by `scale`.
+// The city recipe of docs/DESIGN.md "Measuring": copies of a scene on the cells (i, j) of a
+// square grid with i^2 + j^2 <= radius_sq (13 cells for 4: a diamond), `spacing` times the copy's
+// horizontal extent apart, each turned about the up axis by a yaw drawn from `seed`
+// (deterministic), the whole scaled by `scale`.
 struct CityParams {
   int radius_sq = 4;
   float spacing = 1.2f;      // x the horizontal extent of one (scaled) copy

@@ -168,7 +168,7 @@ void phases(SceneResult& s, const LoadBenchOptions& o) {
       empty.resize(m.size());
     }
     lap();
-    const auto chunks = fm::chunk_bounds(m);
+    const auto chunks = chunk_bounds_of(m);
     lap();
     std::vector<uint16_t> half(m.sh.size());
     for (std::size_t i = 0; i < half.size(); ++i) half[i] = fm::half_bits(m.sh[i]);

@@ -9,11 +9,11 @@
 #include <stdexcept>
 #include <string>
 
-#include "cpu/cpu_renderer.h"  // parallel_for
 #include "forward_model/chunk_bounds.h"
 #include "scene_tools/lod_cluster.h"
 #include "scene_tools/lod_merge.h"
 #include "scene_tools/morton.h"
+#include "base/parallel_for.h"
 
 namespace catgs {
 
@@ -135,11 +135,11 @@ GaussianModel build_lod(const GaussianModel& scene, const LodBuildOptions& optio
   std::vector<uint32_t> order = morton_order(scene);
   bool reordered = false;
   for (std::size_t i = 0; i < order.size() && !reordered; ++i) reordered = order[i] != i;
-  cpu::parallel_for(nodes[0], 16, [&](std::size_t c) { build_leaf(scene, order, c, out); });
+  parallel_for(nodes[0], 16, [&](std::size_t c) { build_leaf(scene, order, c, out); });
   std::vector<uint32_t>().swap(order);
 
   for (std::size_t l = 1; l < nodes.size(); ++l)
-    cpu::parallel_for(nodes[l], 1, [&](std::size_t j) {
+    parallel_for(nodes[l], 1, [&](std::size_t j) {
       const std::size_t begin = first[l - 1] + b * j, end = first[l - 1] + std::min(b * j + b, nodes[l - 1]);
       build_node(out, first[l] + j, begin, end);
     });

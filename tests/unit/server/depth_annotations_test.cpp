@@ -21,8 +21,8 @@
 #include "renderer/renderer.h"
 #include "session/access_tokens.h"
 #include "session/annotations.h"
-#include "session/first_view.h"
-#include "session/message_validation.h"
+#include "process/first_view.h"
+#include "proto/message_validation.h"
 #include "session/rate_limit.h"
 #include "test_data.h"
 
@@ -163,7 +163,7 @@ TEST(PixelDepth, OpacityMatchesTheRenderersTransmittanceOnBiker) {
   opt.background = glm::vec3(1.0f);
   make_renderer("cpu", model, opt)->render(cam, white);
   int hits = 0;
-  const std::vector<fm::ChunkBounds> chunks = fm::chunk_bounds(*model);
+  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(*model);
   for (int y = 5; y < h; y += 11)
     for (int x = 3; x < w; x += 13) {
       const cpu::PixelDepth d = cpu::probe_pixel_depth(*model, cam, x + 0.5, y + 0.5);

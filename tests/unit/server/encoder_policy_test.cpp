@@ -15,7 +15,7 @@
 #include "encode/encoder_policy.h"
 #include "encode/x264_encoder.h"
 #include "loadgen/h264_decoder.h"
-#include "session/first_view.h"
+#include "process/first_view.h"
 #include "test_data.h"
 
 extern "C" {

@@ -12,7 +12,7 @@
 #include "cpu/cpu_renderer.h"
 #include "encode/encoder.h"
 #include "loadgen/h264_decoder.h"
-#include "session/first_view.h"
+#include "process/first_view.h"
 #include "test_data.h"
 #include "colour/yuv420.h"
 

@@ -1,4 +1,4 @@
-// The first view (server/session/first_view.h): the least-squares meeting point of optical axes,
+// The first view (server/process/first_view.h): the least-squares meeting point of optical axes,
 // the frame from training cameras, the dense content of real scenes, cameras.json discovery,
 // and, on the real scenes, that the first view and views orbited from it show what the training
 // cameras photographed.
@@ -20,7 +20,7 @@
 #include "common/image_io.h"
 #include "cpu/cpu_renderer.h"
 #include "scene/scene_bounds.h"
-#include "session/first_view.h"
+#include "process/first_view.h"
 #include "test_data.h"
 
 namespace {
@@ -339,8 +339,8 @@ ObjectPixels object_pixels(const Image& img, int threshold) {
 }
 
 // The first frame of an object capture without training cameras, rendered by the CPU core:
-// background on all four sides of the object (no object pixel in a border 2% of the picture
-// wide on any side), the object centred (the free space left and right, and above and below,
+// background on all four sides of the object (no object pixel in a border 5% of the picture
+// wide on any side: a guitar whose headstock sat 6 px from a 180 px picture's top failed it), the object centred (the free space left and right, and above and below,
 // differ by at most 10% of the picture) and large (its box spans at least 60% of the picture's
 // width or height). Landscape and portrait viewports alike. CATGS_FIRST_VIEW_SHOTS keeps the
 // renders. Object pixels: RGB sum above 30 of 765 (the black background is 0; the faint halo of
@@ -361,7 +361,7 @@ void expect_framed_whole_and_centred(const std::string& scene, const std::string
     std::cout << "  " << w << "x" << h << ": object box x " << o.left << ".." << o.right << ", y " << o.top << ".."
               << o.bottom << "; free left " << free_left << ", right " << free_right << ", top " << free_top
               << ", bottom " << free_bottom << " px\n";
-    const int border_x = std::max(1, w / 50), border_y = std::max(1, h / 50);
+    const int border_x = std::max(1, w / 20), border_y = std::max(1, h / 20);
     EXPECT_GE(free_left, border_x) << tag << " " << w << "x" << h << ": the object touches the left edge";
     EXPECT_GE(free_right, border_x) << tag << " " << w << "x" << h << ": the object touches the right edge";
     EXPECT_GE(free_top, border_y) << tag << " " << w << "x" << h << ": the object's top is cut off";

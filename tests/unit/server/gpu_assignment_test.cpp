@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "render/gpu_assignment.h"
-#include "server_metrics.h"
+#include "process/server_metrics.h"
 
 namespace catgs::server {
 namespace {

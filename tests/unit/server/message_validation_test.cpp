@@ -5,7 +5,7 @@
 #include <cmath>
 #include <limits>
 
-#include "session/message_validation.h"
+#include "proto/message_validation.h"
 
 namespace {
 

@@ -1,4 +1,4 @@
-// The parallel order statistics the first view uses (session/order_statistics.h) against
+// The parallel order statistics the first view uses (process/order_statistics.h) against
 // std::nth_element and std::sort, on random values and on a real scene's distances.
 #include <algorithm>
 #include <random>
@@ -7,7 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "scene/ply_io.h"
-#include "session/order_statistics.h"
+#include "process/order_statistics.h"
 #include "test_data.h"
 
 namespace catgs::server {

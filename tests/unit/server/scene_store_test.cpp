@@ -16,7 +16,7 @@
 
 #include "scene/ply_io.h"
 #include "server_options.h"
-#include "session/scene_store.h"
+#include "process/scene_store.h"
 #include "test_data.h"
 
 namespace {

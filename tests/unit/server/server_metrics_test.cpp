@@ -6,7 +6,7 @@
 #include <regex>
 #include <sstream>
 
-#include "server_metrics.h"
+#include "process/server_metrics.h"
 
 namespace {
 

@@ -6,8 +6,9 @@ A group is a run of frames with the same catgs list length (a key frame and its 
 When the key frame's list is over CAP times the exact list of the same pose, the key frame
 becomes a full frame (the exact frame's time plus half the speculative pre-processing's stage
 mean, already spent when the count comes back) and its sub-frames full frames too.
-Usage: sim_list_cap.py DIR (the unpacked compare_*.json)."""
+Usage: sim_list_cap.py DIR (the unpacked compare_*.json, or compare_*.json.gz)."""
 import glob
+import gzip
 import json
 import os
 import sys
@@ -31,8 +32,9 @@ def groups(lists):
         i = j
 
 
-for path in sorted(glob.glob(os.path.join(sys.argv[1], "compare_*.json"))):
-    runs = {p["pipeline"]: p for p in json.load(open(path))["pipelines"]}
+for path in sorted(glob.glob(os.path.join(sys.argv[1], "compare_*.json*")), key=lambda p: p.removesuffix(".gz")):
+    with (gzip.open(path, "rt") if path.endswith(".gz") else open(path)) as f:
+        runs = {p["pipeline"]: p for p in json.load(f)["pipelines"]}
     em, el = runs["exact"]["per_frame_ms"], runs["exact"]["per_frame_render_list"]
     cm, cl = runs["catgs"]["per_frame_ms"], runs["catgs"]["per_frame_render_list"]
     spent = 0.5 * runs["catgs"]["stages_ms_mean"]["preprocess"]
@@ -44,4 +46,4 @@ for path in sorted(glob.glob(os.path.join(sys.argv[1], "compare_*.json"))):
                 ms[i] = em[i] + spent
                 ms[i + 1:j] = em[i + 1:j]
         cells.append("%.2f / %.2f" % (sum(em) / sum(ms), p99(ms) / p99(em)))
-    print("| %s | %s |" % (os.path.basename(path)[8:-5], " | ".join(cells)))
+    print("| %s | %s |" % (os.path.basename(path).removesuffix(".gz")[8:-5], " | ".join(cells)))

@@ -1,0 +1,184 @@
+#include "process/server_metrics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <initializer_list>
+#include <sstream>
+#include <stdexcept>
+
+namespace catgs::server {
+
+Histogram::Histogram(std::vector<double> upper_bounds) : bounds_(std::move(upper_bounds)) {
+  for (std::size_t i = 0; i < bounds_.size(); ++i)
+    if (!std::isfinite(bounds_[i]) || (i > 0 && bounds_[i] <= bounds_[i - 1]))
+      throw std::invalid_argument("Histogram: bucket bounds must be finite and increasing");
+  counts_.assign(bounds_.size() + 1, 0);
+}
+
+std::vector<double> Histogram::stage_seconds() {
+  std::vector<double> b;
+  for (double s = 0.0005; s < 1.1; s *= 2) b.push_back(s);
+  return b;
+}
+
+void Histogram::observe(double value) {
+  // Bucket i holds bounds_[i - 1] < value <= bounds_[i] (Prometheus `le`).
+  const auto i = static_cast<std::size_t>(std::lower_bound(bounds_.begin(), bounds_.end(), value) - bounds_.begin());
+  std::lock_guard<std::mutex> lock(mutex_);
+  counts_[i]++;
+  sum_ += value;
+  count_++;
+}
+
+std::uint64_t Histogram::count() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return count_;
+}
+
+void Histogram::write(std::ostream& out, const std::string& name, const std::string& labels) const {
+  const std::string sep = labels.empty() ? "" : labels + ",";
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::uint64_t cumulative = 0;
+  for (std::size_t i = 0; i < bounds_.size(); ++i) {
+    cumulative += counts_[i];
+    out << name << "_bucket{" << sep << "le=\"" << bounds_[i] << "\"} " << cumulative << '\n';
+  }
+  out << name << "_bucket{" << sep << "le=\"+Inf\"} " << count_ << '\n';
+  const std::string braces = labels.empty() ? "" : "{" + labels + "}";
+  out << name << "_sum" << braces << ' ' << sum_ << '\n';
+  out << name << "_count" << braces << ' ' << count_ << '\n';
+}
+
+std::string ServerMetrics::prometheus_text() const {
+  std::ostringstream o;
+  o.precision(10);
+  auto head = [&o](const char* name, const char* type, const char* help) {
+    o << "# HELP " << name << ' ' << help << "\n# TYPE " << name << ' ' << type << '\n';
+  };
+  auto put = [&](const char* name, const char* type, const char* help, auto value) {
+    head(name, type, help);
+    o << name << ' ' << value << '\n';
+  };
+  head("catgs_info", "gauge", "What this server runs (value always 1).");
+  o << "catgs_info{renderer=\"" << renderer << "\",encoder=\"" << encoder << "\",pipeline=\"" << pipeline << "\"} 1\n";
+  put("catgs_connections", "gauge", "Open WebSocket connections.", connections_open.load());
+  put("catgs_sessions", "gauge", "Open sessions (after Hello).", sessions_open.load());
+  put("catgs_sessions_total", "counter", "Sessions opened.", sessions_total.load());
+  put("catgs_frames_total", "counter", "Frames sent.", frames_total.load());
+  put("catgs_key_frames_total", "counter", "IDR frames sent.", key_frames_total.load());
+  put("catgs_frame_bytes_total", "counter", "Encoded frame bytes sent.", bytes_total.load());
+  put("catgs_poses_total", "counter", "Poses received.", poses_total.load());
+  put("catgs_poses_skipped_total", "counter", "Poses replaced before rendering.", poses_skipped_total.load());
+  put("catgs_deadline_skips_total", "counter",
+      "Rendered frames dropped before encoding: past their display slot with a newer pose waiting.",
+      deadline_skips_total.load());
+  put("catgs_encoder_rebuilds_total", "counter", "Encoders rebuilt for a new thread share as sessions joined or left.",
+      encoder_rebuilds_total.load());
+  put("catgs_dropped_frames_total", "counter",
+      "Frames lost: rendered or being rendered for a session that ended or failed, or a pose pending "
+      "when its session ended (poses replaced by a newer one are catgs_poses_skipped_total).",
+      dropped_frames_total.load());
+  put("catgs_session_errors_total", "counter", "Sessions ended with an Error.", session_errors_total.load());
+  put("catgs_render_budget_refusals_total", "counter",
+      "Frames refused because their render list would exceed the budget (RenderListBudget); the "
+      "session ends with ERROR_INVALID_ARGUMENT.",
+      render_budget_refusals_total.load());
+  put("catgs_encoder_fallbacks_total", "counter",
+      "Encoders opened as x264 because --encoder auto found NVENC unusable.", encoder_fallbacks_total.load());
+  put("catgs_quality_down_total", "counter", "Adaptive quality: a session stepped its resolution down.",
+      quality_down_total.load());
+  put("catgs_quality_up_total", "counter", "Adaptive quality: a session stepped its resolution back up.",
+      quality_up_total.load());
+  put("catgs_sessions_link_limited", "gauge",
+      "Sessions whose stream bitrate their link holds below the policy's rate now (--link-control).",
+      sessions_link_limited.load());
+  put("catgs_link_rate_decreases_total", "counter",
+      "Link control: a session's bitrate cut because its frames backed up or its round trip grew.",
+      link_rate_decreases_total.load());
+  put("catgs_refine_frames_total", "counter", "Adaptive quality: full-size frames sent when the camera stopped.",
+      refine_frames_total.load());
+  put("catgs_scenes_loaded", "gauge", "Scenes in memory (--scene; loaded on first use).", scenes_loaded.load());
+  put("catgs_scene_bytes", "gauge", "Host bytes of the loaded scenes' models (each GPU holds a copy besides).",
+      scene_bytes.load());
+  put("catgs_scene_loads_total", "counter", "Scene loads that finished (start-up and first use).",
+      scene_loads_total.load());
+  put("catgs_scene_load_failures_total", "counter", "Scene loads that failed (their waiting sessions got an Error).",
+      scene_load_failures_total.load());
+  put("catgs_scene_unloads_total", "counter", "Unused scenes unloaded to stay within --scene-memory-mb.",
+      scene_unloads_total.load());
+  put("catgs_exports_running", "gauge", "Video exports rendering now (at most --export-max-concurrent).",
+      exports_running.load());
+  put("catgs_export_frames_total", "counter", "Frames rendered for video exports.", export_frames_total.load());
+  head("catgs_render_frames_total", "counter",
+       "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
+  o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'
+    << "catgs_render_frames_total{kind=\"sub\"} " << render_sub_frames_total.load() << '\n';
+
+  auto labelled = [&](const char* name, const char* help, const char* label, const auto& counters,
+                      std::initializer_list<const char*> values) {
+    head(name, "counter", help);
+    std::size_t i = 0;
+    for (const char* v : values) o << name << '{' << label << "=\"" << v << "\"} " << counters[i++].load() << '\n';
+  };
+  labelled("catgs_refused_upgrades_total",
+           "WebSocket upgrades refused before the handshake: version (not 13), origin (not allowed), per_ip "
+           "(--max-connections-per-ip), pre_hello (--max-pre-hello).",
+           "reason", refused_upgrades_total, {"version", "origin", "per_ip", "pre_hello"});
+  labelled("catgs_timeouts_total",
+           "Connections closed for silence: hello (no Hello in --hello-timeout-ms), silent (no message in "
+           "--silent-timeout-ms), scene_load (the scene not loaded in --scene-load-timeout-ms).",
+           "kind", timeouts_total, {"hello", "silent", "scene_load"});
+  labelled("catgs_rate_limited_total", "Hellos refused and sessions ended for going past a --rate-limits limit.",
+           "kind", rate_limited_total,
+           {"hello", "auth", "ping", "key_frame", "resize", "quality", "depth", "save", "export"});
+  labelled("catgs_exports_total",
+           "Video exports ended: sent (the file went to the page), failed, cancelled (Cancel, or the page closed), "
+           "refused (the request was refused).",
+           "result", exports_total, {"sent", "failed", "cancelled", "refused"});
+  labelled("catgs_unauthorized_total", "Wrong or missing tokens: in a Hello, or for /metrics.", "what",
+           unauthorized_total, {"hello", "metrics"});
+
+  head("catgs_queue_seconds", "histogram", "Pose received -> render start.");
+  queue_seconds.write(o, "catgs_queue_seconds");
+  head("catgs_render_seconds", "histogram", "Render time by kind (key frame or sub-frame).");
+  render_key_seconds.write(o, "catgs_render_seconds", "kind=\"key\"");
+  render_sub_seconds.write(o, "catgs_render_seconds", "kind=\"sub\"");
+  head("catgs_convert_seconds", "histogram", "RGB -> YUV 4:2:0 conversion.");
+  convert_seconds.write(o, "catgs_convert_seconds");
+  head("catgs_encode_seconds", "histogram", "Encoder time per frame.");
+  encode_seconds.write(o, "catgs_encode_seconds");
+  head("catgs_send_seconds", "histogram", "Frame handed to the transport -> written to the socket.");
+  send_seconds.write(o, "catgs_send_seconds");
+  head("catgs_speculation_window", "histogram", "Speculation window W of each rendered frame (0: no speculation).");
+  speculation_window.write(o, "catgs_speculation_window");
+  head("catgs_pose_to_frame_seconds", "histogram",
+       "End to end, as clients report it (Pose.shown_latency_ms): pose sent -> its frame shown.");
+  pose_to_frame_seconds.write(o, "catgs_pose_to_frame_seconds");
+  head("catgs_session_fps", "histogram", "Frames per second of each session over each Stats interval with frames.");
+  session_fps.write(o, "catgs_session_fps");
+  if (!gpu_devices_.empty()) {
+    const std::vector<std::int64_t> sessions = gpu_sessions_ ? gpu_sessions_() : std::vector<std::int64_t>{};
+    head("catgs_gpu_sessions", "gauge", "Open sessions rendering on each GPU (--gpus).");
+    for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+      o << "catgs_gpu_sessions{gpu=\"" << gpu_devices_[k] << "\"} " << (k < sessions.size() ? sessions[k] : 0) << '\n';
+    head("catgs_gpu_render_seconds", "histogram", "Render time per frame on each GPU (--gpus).");
+    for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+      gpu_render_seconds_[k]->write(o, "catgs_gpu_render_seconds", "gpu=\"" + std::to_string(gpu_devices_[k]) + "\"");
+  }
+  return o.str();
+}
+
+void ServerMetrics::set_gpus(std::vector<int> devices, std::function<std::vector<std::int64_t>()> sessions) {
+  gpu_devices_ = std::move(devices);
+  gpu_sessions_ = std::move(sessions);
+  gpu_render_seconds_.clear();
+  for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+    gpu_render_seconds_.push_back(std::make_unique<Histogram>(Histogram::stage_seconds()));
+}
+
+void ServerMetrics::observe_gpu_render(int device, double seconds) {
+  for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+    if (gpu_devices_[k] == device) return gpu_render_seconds_[k]->observe(seconds);
+}
+
+}  // namespace catgs::server

@@ -1,0 +1,154 @@
+// Process-wide metrics for /metrics (Prometheus text exposition format 0.0.4). Any thread.
+//
+// Names (all times in seconds, as Prometheus expects):
+//   catgs_info{renderer,encoder,pipeline} 1          what this server runs
+//   catgs_connections, catgs_sessions                 gauges
+//   catgs_*_total                                     counters (see prometheus_text)
+//   catgs_queue_seconds        pose received -> render start
+//   catgs_render_seconds{kind="key"|"sub"}            render of a key frame / cached sub-frame
+//   catgs_convert_seconds      RGB -> YUV 4:2:0 (0 when the frame arrives as YUV)
+//   catgs_encode_seconds       encoder
+//   catgs_send_seconds         frame handed to the transport -> fully written to the socket
+//   catgs_speculation_window   W of the speculation group of each rendered frame (0: none)
+//   catgs_pose_to_frame_seconds  end to end, client-reported (Pose.shown_latency_ms): pose sent ->
+//                              its frame shown, on the client's clock
+//   catgs_session_fps          each session's frame rate over each Stats interval (about 1 s)
+//                              that had frames (a histogram: no per-session label to grow)
+//   catgs_gpu_sessions{gpu}, catgs_gpu_render_seconds{gpu}   per GPU of --gpus (CUDA renderer):
+//                              sessions rendering there, and their render times
+//   catgs_refused_upgrades_total{reason}  WebSocket upgrades refused before the handshake
+//   catgs_timeouts_total{kind}            connections closed for silence: no Hello, or a silent session,
+//                                         or for a scene that did not load in time (scene_load)
+//   catgs_rate_limited_total{kind}        sessions ended (or Hellos refused) for going past a rate limit
+//   catgs_unauthorized_total{what}        wrong or missing tokens: Hello, /metrics
+//   catgs_scenes_loaded, catgs_scene_bytes  scenes in memory now and their models' host bytes
+//                              (process/scene_store.h; a GPU copy per device besides)
+//   catgs_scene_loads_total, catgs_scene_load_failures_total, catgs_scene_unloads_total
+//                              loads finished / failed, scenes unloaded for --scene-memory-mb
+//   catgs_exports_running      video exports rendering now (session/export_pipeline.cpp)
+//   catgs_exports_total{result}  exports ended: sent (the file went to the page), failed,
+//                              cancelled (Cancel, or the page closed), refused (ExportVideoRequest
+//                              refused: role, caps, one running)
+//   catgs_export_frames_total  frames rendered for exports
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <cstdint>
+#include <mutex>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace catgs::server {
+
+// A Prometheus histogram: cumulative buckets with upper bounds `le`, _sum and _count. A mutex
+// keeps one exposition consistent (the +Inf bucket always equals _count).
+class Histogram {
+ public:
+  // `upper_bounds`: increasing, finite. Throws std::invalid_argument otherwise.
+  explicit Histogram(std::vector<double> upper_bounds);
+  // Adds one sample (any unit; the stage histograms use seconds). Thread-safe.
+  void observe(double value);
+  // Writes the _bucket, _sum and _count series of `name`; `labels` is empty or `k="v",...`
+  // (no braces), placed before `le`.
+  void write(std::ostream& out, const std::string& name, const std::string& labels = "") const;
+  // Samples observed so far.
+  std::uint64_t count() const;
+
+  // Bucket bounds for stage times, seconds: 0.5 ms .. 1.024 s, doubling.
+  static std::vector<double> stage_seconds();
+
+ private:
+  std::vector<double> bounds_;
+  mutable std::mutex mutex_;
+  std::vector<std::uint64_t> counts_;  // per bucket, not cumulative; last = above every bound
+  double sum_ = 0;
+  std::uint64_t count_ = 0;
+};
+
+struct ServerMetrics {
+  // What the server runs (set once at start-up, before any session).
+  std::string renderer, encoder, pipeline;
+
+  std::atomic<std::int64_t> connections_open{0};  // WebSocket connections now
+  std::atomic<std::int64_t> sessions_open{0};     // connections past a valid Hello, now
+  std::atomic<std::uint64_t> sessions_total{0};
+  std::atomic<std::uint64_t> frames_total{0};      // frames handed to the transport
+  std::atomic<std::uint64_t> key_frames_total{0};  // IDR access units among them
+  std::atomic<std::uint64_t> bytes_total{0};       // Frame payload bytes
+  std::atomic<std::uint64_t> poses_total{0};
+  std::atomic<std::uint64_t> poses_skipped_total{0};  // replaced by a newer pose (latest wins)
+  // Rendered frames dropped before their encode: they would have missed their display slot and
+  // a newer pose was waiting (session/frame_pacing.h).
+  std::atomic<std::uint64_t> deadline_skips_total{0};
+  // Encoders rebuilt because the live sessions changed the threads they should get (an IDR each).
+  std::atomic<std::uint64_t> encoder_rebuilds_total{0};
+  // Frames lost: a pose pending, or a frame rendering or encoding, when its session ended or
+  // failed (a pose replaced by a newer one is a skip, poses_skipped_total, not a drop).
+  std::atomic<std::uint64_t> dropped_frames_total{0};
+  std::atomic<std::uint64_t> session_errors_total{0};          // sessions ended with an Error
+  std::atomic<std::uint64_t> render_budget_refusals_total{0};  // frames over the render-list budget
+  std::atomic<std::uint64_t> render_key_frames_total{0};       // full pre-process renders
+  std::atomic<std::uint64_t> render_sub_frames_total{0};       // catgs sub-frames from the caches
+  // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).
+  std::atomic<std::uint64_t> encoder_fallbacks_total{0};
+  // --adaptive-quality (session/adaptive_quality.h): level changes and refine frames.
+  std::atomic<std::uint64_t> quality_down_total{0}, quality_up_total{0}, refine_frames_total{0};
+  // --link-control (session/link_rate.h): sessions whose bitrate the link holds down now, and
+  // the cuts made.
+  std::atomic<std::int64_t> sessions_link_limited{0};
+  std::atomic<std::uint64_t> link_rate_decreases_total{0};
+
+  // Scenes (process/scene_store.h, kept by the store): loaded now, their host bytes, and loads
+  // that finished, loads that failed and unloads under --scene-memory-mb.
+  std::atomic<std::int64_t> scenes_loaded{0}, scene_bytes{0};
+  std::atomic<std::uint64_t> scene_loads_total{0}, scene_load_failures_total{0}, scene_unloads_total{0};
+
+  // Video export from the page: the render slots taken now (each export holds one while it
+  // renders; --export-max-concurrent bounds it), how exports ended, and their frames.
+  std::atomic<int> exports_running{0};
+  enum class ExportEnd { sent, failed, cancelled, refused };
+  std::atomic<std::uint64_t> exports_total[4]{};
+  std::atomic<std::uint64_t> export_frames_total{0};
+  void count(ExportEnd e) { exports_total[static_cast<int>(e)]++; }
+
+  // Hardening (issue 22). Each array is indexed by the enum named beside it.
+  std::atomic<std::uint64_t> refused_upgrades_total[4]{};  // transport.h Refusal
+  enum class Timeout { hello, silent, scene_load };
+  std::atomic<std::uint64_t> timeouts_total[3]{};
+  enum class Limit { hello, auth, ping, key_frame, resize, quality, depth, save, export_video };
+  std::atomic<std::uint64_t> rate_limited_total[9]{};
+  enum class Unauthorized { hello, metrics };
+  std::atomic<std::uint64_t> unauthorized_total[2]{};
+  void count(Timeout t) { timeouts_total[static_cast<int>(t)]++; }
+  void count(Limit l) { rate_limited_total[static_cast<int>(l)]++; }
+  void count(Unauthorized u) { unauthorized_total[static_cast<int>(u)]++; }
+
+  Histogram queue_seconds{Histogram::stage_seconds()};
+  Histogram render_key_seconds{Histogram::stage_seconds()};
+  Histogram render_sub_seconds{Histogram::stage_seconds()};
+  Histogram convert_seconds{Histogram::stage_seconds()};
+  Histogram encode_seconds{Histogram::stage_seconds()};
+  Histogram send_seconds{Histogram::stage_seconds()};
+  Histogram speculation_window{{0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32}};
+  Histogram pose_to_frame_seconds{Histogram::stage_seconds()};
+  Histogram session_fps{{1, 5, 10, 15, 20, 25, 30, 45, 60, 90, 120, 240}};
+
+  // Per GPU (set once at start-up, before any session, by set_gpus): the CUDA devices, their
+  // session counts (GpuAssignment::sessions, read at exposition) and render times.
+  void set_gpus(std::vector<int> devices, std::function<std::vector<std::int64_t>()> sessions);
+  // Adds a render time on `device` (one of set_gpus' devices; others are ignored). Thread-safe.
+  void observe_gpu_render(int device, double seconds);
+
+  // The Prometheus exposition text.
+  std::string prometheus_text() const;
+
+ private:
+  std::vector<int> gpu_devices_;
+  std::function<std::vector<std::int64_t>()> gpu_sessions_;
+  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;  // by index in gpu_devices_
+};
+
+}  // namespace catgs::server

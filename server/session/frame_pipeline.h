@@ -1,0 +1,182 @@
+// A session's frames from pose to Frame message (docs/DESIGN.md "Data flow of a frame"): the
+// newest pose waiting (latest wins), the render job that renders it and converts it to I420
+// where it was rendered, the rendered picture waiting for the encoder, the encode job that makes
+// it an H.264 access unit, and the serialized Frame. The unit owns the frame's state: the pose
+// slots, the two host I420 buffers, the session's renderer and its encoder. The Session
+// (session.h) decides when a stage may start (protocol state, frames in flight, pacing, adaptive
+// quality, the link's cap) and posts the jobs; session.cpp's frame half is frame_pipeline.cpp.
+//
+// Pipelined (host-fed encoders: x264): a render job renders and colour-converts frame n + 1 into
+// one of two host I420 buffers while an encode job encodes frame n from the other, so a session's
+// frame rate is bounded by the slower stage, not by their sum. NVENC with the CUDA renderer: one
+// job renders straight into the encoder's hw frame and encodes it (no host buffer to overlap).
+//
+// Threading: the functions under "strand" are called on the session's strand only; those under
+// "jobs" in a render job (a render lane) or an encode job (the worker pool), at most one of each
+// at a time, never on the strand. The renderer is used only by render jobs, the encoder only by
+// encode jobs (the one-job path: by its one job). Errors: the job functions never throw; a
+// failure comes back in the result's `error`.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "encode/encoder.h"
+#include "proto/message_validation.h"
+#include "renderer/renderer.h"
+#include "process/server_metrics.h"
+#include "session/session_settings.h"
+
+namespace catgs::server {
+
+// Milliseconds from a to b.
+inline double ms_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+// The stream's nominal frame rate: the browser's pose rate (its time base and the VBV's budget).
+inline constexpr int kStreamFps = 60;
+
+class FramePipeline {
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  // A validated pose waiting to be rendered.
+  struct PendingPose {
+    CameraPose pose;
+    std::uint32_t sequence = 0;
+    double client_time_ms = 0;
+    Clock::time_point received;  // arrival on the transport thread
+    bool full_size = false;      // a refine frame: full size whatever the adaptive level
+  };
+  // What a render job is asked for, as the session decided it.
+  struct JobShape {
+    int width = 0, height = 0;    // pixels, after adaptive quality's scaling
+    int quality_level = 0;        // AdaptiveQuality level the size was scaled to
+    int max_bitrate_kbps = 0;     // Quality.max_bitrate_kbps (0: the server's default)
+    int link_kbps = 0;            // the link's rate cap (link_rate.h; 0: not limiting)
+    double previous_send_ms = 0;  // FrameTimings.previous_send_ms
+  };
+  struct Job {
+    PendingPose pose;
+    JobShape shape;
+    bool force_idr = false;
+    std::uint32_t frame_sequence = 0;
+  };
+  // A rendered frame waiting for (or in) the encode stage.
+  struct Rendered {
+    Job job;
+    std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
+    bool render_key_frame = true;
+    int speculation_window = 0;
+    double queue_ms = 0, render_ms = 0, convert_ms = 0;
+    std::string error;         // non-empty: the render failed
+    bool over_budget = false;  // it failed with RenderBudgetError (renderer.h): the view, not the server
+  };
+  // A finished frame (or why there is none).
+  struct JobResult {
+    std::string message;  // serialized ServerMessage{Frame}; empty on failure
+    std::string error;
+    bool over_budget = false;      // as Rendered::over_budget
+    bool key_frame = false;        // an IDR access unit
+    bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
+    int speculation_window = 0;
+    std::size_t payload_bytes = 0;
+    double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
+    double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
+    int quality_level = 0;
+    bool refine = false;  // an adaptive-quality refine frame
+  };
+  // A render job to post: the job and, pipelined, the host buffer it renders into.
+  struct StartedRender {
+    Job job;
+    std::unique_ptr<Yuv420Image> planes;
+  };
+
+  // `settings` and `metrics` outlive the pipeline (the server holds them).
+  FramePipeline(const FrameSettings& settings, ServerMetrics& metrics) : settings_(settings), metrics_(metrics) {}
+
+  // --- strand ---
+  // At Welcome: the session's renderer, on CUDA device `gpu` (-1: the CPU renderer), and whether
+  // render and encode are two stages (false: NVENC takes the CUDA frame in one job).
+  void open(std::unique_ptr<Renderer> renderer, int gpu, bool pipelined);
+  std::string renderer_name() const { return renderer_ ? renderer_->name() : std::string(); }
+  bool pipelined() const { return pipelined_; }
+
+  // Latest pose wins: `pose` replaces any pose not yet started.
+  void offer(const PendingPose& pose) { pending_ = pose; }
+  const std::optional<PendingPose>& pending() const { return pending_; }
+  // Forgets the waiting pose; true when there was one (it will never be rendered).
+  bool drop_pending();
+  // The next frame is an IDR (a new size, a key-frame request, a new bitrate).
+  void request_idr() { force_idr_ = true; }
+  // Adaptive quality's refine frame: the last pose started, once more at full size, when no
+  // pose waits. can_refine() says whether there is one; refine() queues it.
+  bool can_refine() const { return !pending_ && last_started_; }
+  void refine(Clock::time_point now);
+
+  // Whether a render job may start: none running, the rendered slot empty, a pose waiting and,
+  // pipelined, a host buffer free.
+  bool can_start_render() const;
+  // Takes the waiting pose into a render job of `shape` (can_start_render() must hold).
+  StartedRender start_render(const JobShape& shape);
+  // Every render job's end, first thing on the strand.
+  void end_render() { rendering_ = false; }
+  // A render that failed: its buffer back, and the result that reports it.
+  JobResult take_failed(Rendered&& frame);
+  // A rendered frame into the slot the encode stage takes from.
+  void store_rendered(Rendered&& frame) { rendered_ = std::move(frame); }
+  bool encoding() const { return encoding_; }
+  const std::optional<Rendered>& rendered() const { return rendered_; }
+  // The rendered frame is not encoded (skipped, or nobody to send it to): its buffer back.
+  void drop_rendered();
+  // Takes the rendered frame into an encode job, numbered in encode (= send) order.
+  std::shared_ptr<Rendered> start_encode();
+  // An encode job's end: its buffer back.
+  void end_encode(Rendered& frame);
+
+  // --- jobs ---
+  // Renders `job` into `planes` (a render lane); `gone`: the session ended, skip the work.
+  Rendered render(Job job, std::unique_ptr<Yuv420Image> planes, bool gone);
+  // Encodes a rendered frame into a Frame message (the worker pool).
+  JobResult encode(Rendered& frame);
+  // The one-job path: renders into the encoder's input and encodes it (a render lane).
+  JobResult render_and_encode(const Job& job, bool gone);
+
+ private:
+  // Renders job's pose into `target` and fills r's render fields (timings, key frame, window).
+  // Throws what Renderer::render_yuv420_at throws.
+  void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
+  // Builds or reconfigures the encoder for `job`; sets `idr` when it was (re)built.
+  void ensure_encoder(const Job& job, bool& idr);
+  JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
+
+  const FrameSettings& settings_;
+  ServerMetrics& metrics_;
+
+  // --- strand state ---
+  std::optional<PendingPose> pending_;
+  std::optional<PendingPose> last_started_;  // the pose of the last render started (refine frames)
+  bool force_idr_ = true;
+  bool rendering_ = false;                                 // a render (or render-and-encode) job is running
+  bool encoding_ = false;                                  // an encode job is running
+  bool pipelined_ = true;                                  // render and encode as separate stages
+  std::optional<Rendered> rendered_;                       // rendered, waiting for the encoder
+  std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
+  std::uint32_t next_frame_sequence_ = 0;
+
+  // --- job state (one render job and one encode job at a time) ---
+  std::unique_ptr<Renderer> renderer_;
+  int gpu_ = -1;  // the CUDA device renderer_ renders on, -1: none (CPU renderer)
+  std::unique_ptr<Encoder> encoder_;
+  int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with
+  int encoder_link_kbps_ = 0;     // the link cap it runs at (changed without a rebuild where it can)
+  int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
+  Clock::time_point encoder_built_{};
+};
+
+}  // namespace catgs::server
