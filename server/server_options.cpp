@@ -137,6 +137,9 @@ std::string server_usage() {
          "                        the usable cores shared by the live sessions, at least what\n"
          "                        the viewport needs for 60 frames/s, at most what it gains\n"
          "                        from: encode/encoder_policy.h)\n"
+         "  --x264-preset P       x264 preset of the sessions' streams: auto (default: the\n"
+         "                        slowest of ultrafast, superfast, veryfast that half the\n"
+         "                        cores afford at the live session count) or an x264 preset\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
          "  --frame-deadline S|off  skip a rendered frame before encoding when it would reach\n"
          "                        the client more than S pose intervals after its pose and a\n"
@@ -306,7 +309,11 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.encoder_policy.intra_refresh_frames = parse_int(a, v, 0, 1000);
     else if (a == "--encoder-threads")
       out.encoder_policy.threads = parse_int(a, v, 0, 64);
-    else if (a == "--frame-deadline")
+    else if (a == "--x264-preset") {
+      if (v != "auto" && !is_x264_preset(v))
+        throw std::invalid_argument("--x264-preset: '" + v + "' is not auto or an x264 preset (ultrafast .. placebo)");
+      out.encoder_policy.x264_preset = v;
+    } else if (a == "--frame-deadline")
       out.frame_deadline_slots = v == "off" ? 0.0 : parse_double(a, v, 0.0, 100.0);
     else if (a == "--max-frames-in-flight")
       out.max_frames_in_flight = parse_int(a, v, 1, 16);

@@ -44,6 +44,30 @@ int encoder_threads(const EncoderPolicy& policy, int width, int height, int live
   return std::clamp(share, needed_threads(width, height), useful_threads(width, height));
 }
 
+double ultrafast_cpu_ms(int width, int height) { return 7.7e-6 * static_cast<double>(width) * height; }
+
+int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions) {
+  // CPU ms a second the encoders may use, and what one session's frames cost at each step.
+  const double budget_ms = kEncoderCpuShare * std::max(1, policy.usable_cores) * 1000.0;
+  const double per_session_ms = ultrafast_cpu_ms(width, height) * std::max(fps, 1) * std::max(1, live_sessions);
+  int step = 0;
+  for (int k = 1; k < kPresetSteps; ++k)
+    if (per_session_ms * kPresetLadder[k].cpu_factor <= budget_ms) step = k;
+  return step;
+}
+
+std::string encoder_preset(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions) {
+  if (policy.x264_preset != "auto") return policy.x264_preset;
+  return kPresetLadder[preset_step(policy, width, height, fps, live_sessions)].name;
+}
+
+bool is_x264_preset(const std::string& name) {
+  for (const char* p :
+       {"ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow", "placebo"})
+    if (name == p) return true;
+  return false;
+}
+
 EncoderConfig encoder_config(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions,
                              int client_max_kbps) {
   EncoderConfig c;
@@ -55,6 +79,7 @@ EncoderConfig encoder_config(const EncoderPolicy& policy, int width, int height,
   c.vbv_buffer_ms = policy.vbv_buffer_ms;
   c.intra_refresh_frames = policy.intra_refresh_frames;
   c.threads = encoder_threads(policy, width, height, live_sessions);
+  c.x264_preset = encoder_preset(policy, width, height, fps, live_sessions);
   return c;
 }
 

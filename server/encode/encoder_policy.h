@@ -14,9 +14,17 @@
 // keep 60 frames/s (needed_threads) and at most what it gains from (useful_threads). When
 // sessions join, a session's next encoder gets fewer threads; when they leave, more (the server
 // rebuilds an encoder only when its thread count should change, see should_rebuild()).
+//
+// Preset: x264's presets trade CPU time for quality at the same rate (a step from ultrafast to
+// superfast is worth about 3 dB on the city at 1080p for 1.44x the CPU; RESULTS.md, "x264 presets
+// by budget"). With --x264-preset auto a session's encoder takes the slowest preset of the ladder
+// whose CPU time a frame, at the live session count and the nominal frame rate, fits the share of
+// the host's cores the encoders may use (kEncoderCpuShare); as sessions join it steps down at
+// once, as they leave it steps up after kGrowDelay (an IDR each time).
 #pragma once
 
 #include <chrono>
+#include <string>
 
 #include "encode/encoder.h"
 
@@ -25,13 +33,14 @@ namespace catgs::server {
 struct EncoderPolicy {
   // --bitrate: < 0 (auto) target from bits_per_pixel; 0 (off) crf alone; > 0 that many kbit/s.
   int bitrate_kbps = -1;
-  double bits_per_pixel = 0.09;  // --bits-per-pixel: auto's bits per pixel per frame
-  int min_kbps = 1500;           // auto's floor (small viewports)
-  int crf = 23;                  // --crf: the quality floor
-  int vbv_buffer_ms = 100;       // --vbv-ms: the VBV's size in ms of the target rate
-  int intra_refresh_frames = 0;  // --intra-refresh N: refresh period in frames (0: off)
-  int threads = 0;               // --encoder-threads: > 0 fixed per session; 0 auto (above)
-  int usable_cores = 1;          // the cores this process may use (cpu_quota.h)
+  double bits_per_pixel = 0.09;      // --bits-per-pixel: auto's bits per pixel per frame
+  int min_kbps = 1500;               // auto's floor (small viewports)
+  int crf = 23;                      // --crf: the quality floor
+  int vbv_buffer_ms = 100;           // --vbv-ms: the VBV's size in ms of the target rate
+  int intra_refresh_frames = 0;      // --intra-refresh N: refresh period in frames (0: off)
+  int threads = 0;                   // --encoder-threads: > 0 fixed per session; 0 auto (above)
+  std::string x264_preset = "auto";  // --x264-preset: "auto" (the ladder above) or one x264 preset
+  int usable_cores = 1;              // the cores this process may use (cpu_quota.h)
 };
 
 // The VBV maximum rate in kbit/s for a width x height stream at `fps` frames/s; `client_max_kbps`
@@ -50,6 +59,35 @@ int needed_threads(int width, int height);
 // x264 threads for one session's encoder while `live_sessions` sessions share the host.
 int encoder_threads(const EncoderPolicy& policy, int width, int height, int live_sessions);
 
+// The x264 presets the policy chooses from, cheapest first, with the CPU time a frame each takes
+// relative to ultrafast's (the larger of the 720p and 1080p ratios; RESULTS.md, "x264 presets by
+// budget").
+struct PresetStep {
+  const char* name;
+  double cpu_factor;
+};
+inline constexpr PresetStep kPresetLadder[] = {{"ultrafast", 1.0}, {"superfast", 1.44}, {"veryfast", 1.92}};
+inline constexpr int kPresetSteps = static_cast<int>(sizeof(kPresetLadder) / sizeof(kPresetLadder[0]));
+
+// The share of the host's cores the sessions' encoders may use together: the rest render (the
+// CPU core), convert, send and serve the sessions' strands.
+inline constexpr double kEncoderCpuShare = 0.5;
+
+// x264 ultrafast's CPU time for one width x height frame, ms: 7.7 ms a megapixel, whatever the
+// thread count (RESULTS.md, "Encoder policy": about 16 ms at 1080p, 6-8 ms at 720p).
+double ultrafast_cpu_ms(int width, int height);
+
+// The ladder step (index into kPresetLadder) for one session's encoder at `fps` frames/s while
+// `live_sessions` sessions share the host: the slowest whose CPU time fits the encoders' share of
+// policy.usable_cores; 0 (ultrafast) when none does.
+int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);
+
+// The x264 preset for that session: policy.x264_preset unless it is "auto", else the ladder's.
+std::string encoder_preset(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);
+
+// Whether `name` is an x264 preset ("ultrafast" .. "placebo").
+bool is_x264_preset(const std::string& name);
+
 // The whole EncoderConfig for a session's encoder (size, fps, rate control, threads).
 EncoderConfig encoder_config(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions,
                              int client_max_kbps);
@@ -57,7 +95,8 @@ EncoderConfig encoder_config(const EncoderPolicy& policy, int width, int height,
 // Whether a running encoder with `current_threads` should be rebuilt for `wanted` threads. Fewer
 // threads take effect at once (sessions joined: the cores are oversubscribed now); more only
 // after `since_last_build` >= kGrowDelay (sessions left: no IDR storm while a tour group comes
-// and goes). A rebuild costs an IDR.
+// and goes). A rebuild costs an IDR. The same rule serves the preset's ladder step (a lower step
+// is cheaper).
 constexpr std::chrono::seconds kGrowDelay{5};
 bool should_rebuild(int current_threads, int wanted, std::chrono::steady_clock::duration since_last_build);
 

@@ -14,7 +14,7 @@ pb::DepthResult answer_depth(const GaussianModel& model, const std::vector<fm::C
   r.set_request_id(request_id);
   const auto start = std::chrono::steady_clock::now();
   try {
-    // The same camera as a frame of this pose and size (frame_pipeline.cpp).
+    // The same camera as a frame of this pose and size (FramePipeline::render_into, frame_pipeline.cpp).
     const Camera camera = Camera::from_pose(query.pose.position, query.pose.orientation, query.pose.vertical_fov_deg,
                                             query.width, query.height);
     const cpu::PixelDepth d = cpu::probe_pixel_depth(model, camera, query.x, query.y, chunks);

@@ -134,10 +134,13 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
     if (rate > 0 && encoder_->set_max_bitrate_kbps(rate)) encoder_link_kbps_ = s.link_kbps;
   }
   if (same_stream && encoder_link_kbps_ == s.link_kbps) {
-    // The same stream: rebuilt only for a new share of the cores (x264's threads are fixed
-    // when it opens; NVENC has none to share).
-    const int wanted = encoder_threads(policy, s.width, s.height, live);
-    if (encoder_->name() == "nvenc" || !should_rebuild(encoder_threads_, wanted, now - encoder_built_)) return;
+    // The same stream: rebuilt only for a new share of the cores (x264's threads and preset are
+    // fixed when it opens; NVENC has none to share).
+    const auto since = now - encoder_built_;
+    const bool threads = should_rebuild(encoder_threads_, encoder_threads(policy, s.width, s.height, live), since);
+    const bool preset = policy.x264_preset == "auto" &&
+                        should_rebuild(encoder_step_, preset_step(policy, s.width, s.height, kStreamFps, live), since);
+    if (encoder_->name() == "nvenc" || !(threads || preset)) return;
     metrics_.encoder_rebuilds_total++;
   }
   EncoderConfig cfg =
@@ -151,6 +154,7 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   encoder_bitrate_kbps_ = s.max_bitrate_kbps;
   encoder_link_kbps_ = s.link_kbps;
   encoder_threads_ = cfg.threads;
+  encoder_step_ = preset_step(policy, s.width, s.height, kStreamFps, live);
   encoder_built_ = now;
   if (fell_back) metrics_.encoder_fallbacks_total++;
   idr = true;

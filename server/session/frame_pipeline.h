@@ -4,7 +4,7 @@
 // it an H.264 access unit, and the serialized Frame. The unit owns the frame's state: the pose
 // slots, the two host I420 buffers, the session's renderer and its encoder. The Session
 // (session.h) decides when a stage may start (protocol state, frames in flight, pacing, adaptive
-// quality, the link's cap) and posts the jobs; session.cpp's frame half is frame_pipeline.cpp.
+// quality, the link's cap) and posts the jobs (session_stream.cpp).
 //
 // Pipelined (host-fed encoders: x264): a render job renders and colour-converts frame n + 1 into
 // one of two host I420 buffers while an encode job encodes frame n from the other, so a session's
@@ -176,6 +176,7 @@ class FramePipeline {
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with
   int encoder_link_kbps_ = 0;     // the link cap it runs at (changed without a rebuild where it can)
   int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
+  int encoder_step_ = 0;          // its preset's step of the ladder (encoder_policy.h, --x264-preset auto)
   Clock::time_point encoder_built_{};
 };
 

@@ -640,7 +640,7 @@ const adapter = parse(readFileSync(path.join(repo, 'deploy/k8s/prometheus-adapte
 const metric = hpa.spec.metrics[0].pods.metric.name;
 const rule = (adapter.rules?.custom || []).find((r) => r.name?.as === metric);
 check(`prometheus-adapter exposes the HPA metric ${metric}`, !!rule && rule.seriesQuery.startsWith(`${metric}{`));
-const metricsSrc = readFileSync(path.join(repo, 'server/server_metrics.cpp'), 'utf8');
+const metricsSrc = readFileSync(path.join(repo, 'server/process/server_metrics.cpp'), 'utf8');
 check(`the server exports ${metric}`, new RegExp(`\\b${metric}\\b`).test(metricsSrc));
 const compose = parse(readFileSync(path.join(repo, 'deploy/compose.yaml'), 'utf8'));
 check('compose.yaml parses', !!compose.services);

@@ -61,9 +61,13 @@ std::vector<RdSetting> parse_rd_settings(const std::string& spec, int usable_cor
         s.policy.threads = to_int(row, k, v, 0, 64);
       else if (k == "sessions")
         s.sessions = to_int(row, k, v, 1, 256);
-      else
+      else if (k == "preset") {
+        if (v != "auto" && !server::is_x264_preset(v))
+          throw std::invalid_argument("setting '" + row + "': preset must be auto or an x264 preset, got '" + v + "'");
+        s.policy.x264_preset = v;
+      } else
         throw std::invalid_argument("setting '" + row + "': unknown key '" + k +
-                                    "' (crf, bitrate, bpp, vbv, ir, threads, sessions)");
+                                    "' (crf, bitrate, bpp, vbv, ir, threads, preset, sessions)");
     }
     rows.push_back(s);
   }

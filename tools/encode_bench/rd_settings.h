@@ -17,7 +17,8 @@ struct RdSetting {
 
 // Parses "k=v,k=v;k=v,..." (a ';' between rows). Keys: crf (0..51), bitrate (kbit/s, "auto" or
 // "off"), bpp (auto's bits per pixel), vbv (ms), ir (intra refresh period, frames; 0 off),
-// threads (0: the policy's choice for `sessions` sessions on `usable_cores`), sessions (>= 1).
+// threads (0: the policy's choice for `sessions` sessions on `usable_cores`), preset ("auto": the
+// policy's ladder for `sessions` sessions, or an x264 preset), sessions (>= 1).
 // Keys left out keep the server's defaults (EncoderPolicy). Throws std::invalid_argument naming
 // the row and the key for anything else.
 std::vector<RdSetting> parse_rd_settings(const std::string& spec, int usable_cores);

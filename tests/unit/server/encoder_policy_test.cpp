@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <iostream>
 #include <vector>
 
 #include "common/image_io.h"
@@ -153,6 +154,61 @@ TEST(EncoderPolicy, CappedStreamHoldsItsCapAndCrfIsItsFloor) {
   c.bitrate_kbps = static_cast<int>(free.mean_kbps * 20);
   const Stream loose = encode_all(c, frames, raw);
   EXPECT_NEAR(loose.mean_kbps, free.mean_kbps, free.mean_kbps * 0.02);
+}
+
+// The ladder by hand: half of 16 cores is 8000 CPU ms a second; ultrafast at 1080p takes 7.7 ms
+// a megapixel x 2.07 MP x 60 frames = 958 ms a second a session, veryfast 1.92x that (1839: four
+// sessions fit, five do not), superfast 1.44x (1380: five fit, six do not). At 720p 426 a
+// session: veryfast 818 (nine fit), superfast 613 (thirteen fit).
+TEST(EncoderPolicy, PresetLadderSpendsTheEncodersShareOfTheCores) {
+  EncoderPolicy p;
+  p.usable_cores = 16;
+  const auto preset = [&](int w, int h, int live) { return encoder_preset(p, w, h, 60, live); };
+  for (int live : {1, 4}) EXPECT_EQ(preset(1920, 1080, live), "veryfast") << live;
+  EXPECT_EQ(preset(1920, 1080, 5), "superfast");
+  for (int live : {6, 9, 40}) EXPECT_EQ(preset(1920, 1080, live), "ultrafast") << live;
+  EXPECT_EQ(preset(1280, 720, 9), "veryfast");
+  EXPECT_EQ(preset(1280, 720, 10), "superfast");
+  EXPECT_EQ(preset(1280, 720, 13), "superfast");
+  EXPECT_EQ(preset(1280, 720, 14), "ultrafast");
+  // Never a slower step for more sessions, at any size.
+  for (const auto& [w, h] : {std::pair{640, 360}, std::pair{1280, 720}, std::pair{1920, 1080}, std::pair{3840, 2160}})
+    for (int live = 1; live < 64; ++live)
+      EXPECT_LE(preset_step(p, w, h, 60, live + 1), preset_step(p, w, h, 60, live)) << w << "x" << h << " " << live;
+  // Two cores (the build machine) afford no more than ultrafast at 1080p, even alone.
+  p.usable_cores = 2;
+  EXPECT_EQ(preset(1920, 1080, 1), "ultrafast");
+  // --x264-preset NAME wins; the config carries the choice.
+  p.usable_cores = 16;
+  EXPECT_EQ(encoder_config(p, 1920, 1080, 60, 1, 0).x264_preset, "veryfast");
+  p.x264_preset = "faster";
+  EXPECT_EQ(encoder_config(p, 1920, 1080, 60, 1, 0).x264_preset, "faster");
+  EXPECT_TRUE(is_x264_preset("superfast"));
+  EXPECT_FALSE(is_x264_preset("auto"));
+  EXPECT_FALSE(is_x264_preset("ultrafast "));
+}
+
+// What the ladder buys: at the same capped rate on real renders, each slower step of the ladder
+// decodes (libavcodec) to at least its faster neighbour's PSNR against the raw render, and
+// veryfast to more than ultrafast's.
+TEST(EncoderPolicy, SlowerPresetsGiveMoreQualityAtTheSameRate) {
+  std::vector<Image> raw;
+  const auto frames = biker_frames(320, 192, 48, &raw);
+  EncoderConfig c = small_config(320, 192);
+  c.crf = 12;            // a floor above what the cap allows: every preset spends the whole cap
+  c.bitrate_kbps = 250;  // and the preset decides the quality
+  c.vbv_buffer_ms = 100;
+  std::vector<double> psnr;
+  for (const PresetStep& step : kPresetLadder) {
+    c.x264_preset = step.name;
+    const Stream s = encode_all(c, frames, raw);
+    EXPECT_LE(s.mean_kbps, c.bitrate_kbps * (1 + 0.1 / 0.8) + 1) << step.name;
+    EXPECT_GE(s.mean_kbps, c.bitrate_kbps * 0.8) << step.name << ": under the cap, crf not the floor";
+    psnr.push_back(s.mean_psnr);
+    std::cout << "  " << step.name << ": " << s.mean_psnr << " dB at " << s.mean_kbps << " kbit/s\n";
+  }
+  for (std::size_t k = 1; k < psnr.size(); ++k) EXPECT_GE(psnr[k], psnr[k - 1] - 0.1) << kPresetLadder[k].name;
+  EXPECT_GT(psnr.back(), psnr.front());
 }
 
 TEST(EncoderPolicy, SlicedThreadsGiveEveryFrameAtOnceWithASlicePerThread) {
