@@ -8,8 +8,8 @@
 # with the full-detail exact render (PSNR), and with $CATGS_LOD_AA = F (default 0: off) also
 # with the anti-aliased reference (full detail at F times the size, box-filtered: catgs-bench
 # --aa-reference), the full-detail frames too; $CATGS_LOD_PIPES picks the pipelines (default
-# exact,catgs); and the GPU tests' LOD rows (catgs-gpu-tests --only lod: CUDA vs CPU on
-# the 13-copy city with its LOD).
+# exact,catgs); and the GPU tests' LOD rows (the gpu.Lod.* GoogleTest cases, tests/gpu/lod_test.cpp,
+# through ctest: CUDA vs CPU on the 13-copy city with its LOD).
 #
 # On the build machine, once (as for gpu_run.sh): scripts/gpu_run.sh prepare
 # On the GPU machine, carry [".carry"]:
@@ -56,6 +56,17 @@ fi
 S=$CARRY/scenes T=$CARRY/traces
 TUMBLE=$S/tumblewood_sh2.compressed.ply
 
+lod_tests() (  # the gpu.Lod.* tests -> $OUT/lod_tests.md (ctest; with --prebuilt, the binary alone)
+  local rows=$ROOT/build/lod_tests.rows
+  rm -f "$rows" "$OUT/lod_tests.md"
+  export CATGS_GPU_SCENES=$S CATGS_GPU_TRACES=$T CATGS_GPU_STRICT=1 CATGS_GPU_OUT=$OUT/lod_tests.md
+  if [ "$PREBUILT" = 1 ]; then
+    "$BIN/catgs-gpu-tests" --gtest_filter='Lod.*'
+  else
+    CATGS_GPU_ROWS=$rows ctest --test-dir "$ROOT/build/gpu" -L gpu -R '^gpu\.Lod\.' --output-on-failure
+  fi
+)
+
 city() {  # city NAME RADIUS_SQ
   "$BIN/catgs-bench" --scene "$TUMBLE" --city --radius-sq "$2" --up 0,-1,0 --lod --lod-error "$BOUNDS" \
     --trace flyover --width 1920 --height 1080 --pipeline "$PIPES" --warmup 30 --frames 300 \
@@ -73,7 +84,7 @@ for s in "${stages[@]}"; do
   fi
   t0=$SECONDS
   case "$s" in
-    tests) "$BIN/catgs-gpu-tests" --scenes "$S" --traces "$T" --only lod --out "$OUT/lod_tests.md" ;;
+    tests) lod_tests ;;
     city13) city city13 4 ;;
     city101) city city101 32 ;;
     city201) city city201 64 ;;

@@ -2,15 +2,22 @@
 # scripts/gpu_run.sh: the one entry point for the CUDA render core on a GPU machine.
 #
 # On the GPU machine (from the repository root, .carry/ carried):
-#   scripts/gpu_run.sh [--prebuilt] [--quick] [--no-tests] [--no-bench] [--sanitize] [--frames N]
-#                      [--compare LIST [--before DIR]]
+#   scripts/gpu_run.sh [--prebuilt] [--quick] [--skip-large] [--filter REGEX] [--no-tests] [--no-bench]
+#                      [--sanitize] [--frames N] [--compare LIST [--before DIR]]
 #     1. builds the CUDA core, catgs-bench, catgs-gpu-tests and catgs-scene (build/gpu/bin, from the
-#        carried GLM, nlohmann-json and stb), unless --prebuilt, which runs the binaries in
-#        .carry/bin instead (built on the build machine by `prepare`; they need nothing but the
-#        CUDA driver); a failed build falls back to those (when there) and exits non-zero;
-#     2. runs the GPU tests (CUDA vs the CPU reference) -> $OUT/gpu_tests.md (--quick: their
-#        quick subset; --no-tests: none); --sanitize first runs the quick subset and the hostile
-#        values' rows (issue 49) under compute-sanitizer memcheck;
+#        carried GLM, nlohmann-json, stb and GoogleTest source), unless --prebuilt, which runs the
+#        binaries in .carry/bin instead (built on the build machine by `prepare`; they need nothing
+#        but the CUDA driver); a failed build falls back to those (when there) and exits non-zero;
+#     2. runs the GPU tests (CUDA vs the CPU reference; GoogleTest cases, tests/gpu/*_test.cpp)
+#        through ctest: `ctest --test-dir build/gpu -L gpu --output-on-failure`, each test a
+#        process, their rows gathered into the table $OUT/gpu_tests.md (--quick: the quick subset,
+#        label gpu_quick, at its small sizes; --skip-large: without the label gpu_large (8192 px,
+#        2^31/2^32 entries, 49-copy city); --filter REGEX: ctest -R REGEX on the names
+#        gpu.SUITE.NAME, e.g. 'gpu\.(Budget|Passes)\.' or 'gpu\.Lod\.'; --no-tests: none). With
+#        --prebuilt (or a failed build) the binary runs them in one process instead (--filter then
+#        picks among all its tests). --sanitize first runs the quick subset and the hostile values'
+#        tests (issue 49; Hostile.*, 320x180) under compute-sanitizer memcheck, the binary directly
+#        (--gtest_filter), -> $OUT/gpu_hostile_memcheck.md;
 #     3. runs the benchmark (--no-bench: none) at 1920x1080, catgs-bench's 30 warm-up frames then
 #        --frames N timed frames (default 600) at 120 FPS, sub-frame quality on every 3rd frame:
 #        vanilla,exact,catgs,catgs-nocache,catgs-nosplit on tumblewood_sh2 (x10) and on the 13-copy
@@ -42,6 +49,9 @@
 #   .carry/deps/{include,share/cmake,lib}           ~8 MB   GLM, nlohmann-json, stb + libstb.a, zlib and
 #                                                            zstd (static, for .spz), xxhash.h,
 #                                                            a pkg-config shim for stb
+#   .carry/deps/googletest.tar.xz                   0.2 MB  GoogleTest 1.12.1's source (Debian's
+#                                                            /usr/src/googletest/googletest without
+#                                                            its tests; tests/gpu builds it there)
 #   .carry/bin/{catgs-bench,catgs-gpu-tests,catgs-scene}  prebuilt x86-64 (glibc 2.36), static
 #                                                            cudart; bin/lib/libstb.so.0
 # Run with the device tool: command "scripts/gpu_run.sh", carry [".carry"].
@@ -71,6 +81,9 @@ prepare() {
   cp -f /usr/include/tiny_gltf.h "$CARRY/deps/include/"
   # The scene cache's checksums: xxHash, header-only as render_core builds it.
   cp -f /usr/include/xxhash.h "$CARRY/deps/include/"
+  # GoogleTest for the GPU tests (tests/gpu/CMakeLists.txt builds it when find_package finds none).
+  tar -C /usr/src/googletest -cJf "$CARRY/deps/googletest.tar.xz" googletest/CMakeLists.txt googletest/cmake \
+    googletest/include googletest/src || return 1
   cat > "$CARRY/deps/lib/pkgconfig/stb.pc" <<'PC'
 prefix=${pcfiledir}/../..
 libdir=${prefix}/lib
@@ -122,11 +135,13 @@ if [ "${1:-}" = prepare ]; then
   exit $?
 fi
 
-PREBUILT=0 QUICK=0 TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 COMPARE= BEFORE=
+PREBUILT=0 QUICK=0 SKIP_LARGE=0 FILTER= TESTS=1 BENCH=1 SANITIZE=0 FRAMES=600 COMPARE= BEFORE=
 while [ $# -gt 0 ]; do
   case "$1" in
     --prebuilt) PREBUILT=1 ;;
     --quick) QUICK=1 ;;
+    --skip-large) SKIP_LARGE=1 ;;
+    --filter) FILTER=$2; shift ;;
     --no-tests) TESTS=0 ;;
     --no-bench) BENCH=0 ;;
     --sanitize) SANITIZE=1 ;;
@@ -175,25 +190,48 @@ fi
 S=$CARRY/scenes T=$CARRY/traces
 mkdir -p "$ROOT/build"
 status=${build_failed:-0}
+# The GPU tests' environment (tests/gpu/gpu_test_support.h): the carried scenes and traces; a
+# missing device or file fails a test rather than skipping it.
+export CATGS_GPU_SCENES=$S CATGS_GPU_TRACES=$T CATGS_GPU_STRICT=1
+unset CATGS_GPU_OUT CATGS_GPU_ROWS CATGS_GPU_QUICK
 if [ "$SANITIZE" = 1 ]; then
   echo "== compute-sanitizer memcheck (quick subset)"
-  compute-sanitizer --tool memcheck --error-exitcode 9 --print-limit 20 \
-    "$TEST_EXE" --scenes "$S" --traces "$T" --quick > "$ROOT/build/sanitizer.log" 2>&1
+  CATGS_GPU_QUICK=1 compute-sanitizer --tool memcheck --error-exitcode 9 --print-limit 20 \
+    "$TEST_EXE" --quick > "$ROOT/build/sanitizer.log" 2>&1
   rc=$?; echo "memcheck rc $rc"; tail -3 "$ROOT/build/sanitizer.log"
   [ $rc -eq 0 ] || { status=1; cp "$ROOT/build/sanitizer.log" "$OUT/"; }
   echo "== compute-sanitizer memcheck (hostile values, issue 49, 320x180)"
-  compute-sanitizer --tool memcheck --error-exitcode 9 --print-limit 20 \
-    "$TEST_EXE" --scenes "$S" --traces "$T" --only hostile --quick --out "$OUT/gpu_hostile_memcheck.md" \
-    > "$ROOT/build/sanitizer_hostile.log" 2>&1
+  CATGS_GPU_QUICK=1 CATGS_GPU_OUT="$OUT/gpu_hostile_memcheck.md" \
+    compute-sanitizer --tool memcheck --error-exitcode 9 --print-limit 20 \
+    "$TEST_EXE" --gtest_filter='Hostile.*' > "$ROOT/build/sanitizer_hostile.log" 2>&1
   rc=$?; echo "memcheck (hostile) rc $rc"; tail -3 "$ROOT/build/sanitizer_hostile.log"
   [ $rc -eq 0 ] || { status=1; cp "$ROOT/build/sanitizer_hostile.log" "$OUT/"; }
 fi
 if [ "$TESTS" = 1 ]; then
   echo "== GPU tests"
-  q=(); [ "$QUICK" = 1 ] && q=(--quick)
   t0=$(date +%s)
-  "$TEST_EXE" --scenes "$S" --traces "$T" --out "$OUT/gpu_tests.md" "${q[@]}"
-  rc=$?; echo "== GPU tests: rc $rc in $(( $(date +%s) - t0 )) s"; [ $rc -eq 0 ] || status=1
+  rows=$ROOT/build/gpu_tests.rows  # every test process appends its rows; the table holds them all
+  rm -f "$rows" "$OUT/gpu_tests.md"
+  quick=(); [ "$QUICK" = 1 ] && quick=(CATGS_GPU_QUICK=1)
+  if [ "$TEST_EXE" = "$ROOT/build/gpu/bin/catgs-gpu-tests" ]; then
+    sel=(-L gpu); [ "$QUICK" = 1 ] && sel=(-L gpu_quick)
+    [ "$SKIP_LARGE" = 1 ] && sel+=(-LE gpu_large)
+    [ -n "$FILTER" ] && sel+=(-R "$FILTER")
+    env "${quick[@]}" CATGS_GPU_OUT="$OUT/gpu_tests.md" CATGS_GPU_ROWS="$rows" \
+      ctest --test-dir "$ROOT/build/gpu" "${sel[@]}" --output-on-failure
+    rc=$?
+  else  # prebuilt: the binary runs the tests in one process
+    args=(); [ "$QUICK" = 1 ] && args+=(--quick); [ "$SKIP_LARGE" = 1 ] && args+=(--skip-large)
+    if [ -n "$FILTER" ]; then
+      names=$("$TEST_EXE" --gtest_list_tests | awk '/^[^ ]/ { s = $1 } /^  / { print "gpu." s $1 }' |
+        grep -E -- "$FILTER" | sed 's/^gpu\.//' | paste -sd:)
+      args=(--gtest_filter="${names:-NONE}")
+    fi
+    env "${quick[@]}" CATGS_GPU_OUT="$OUT/gpu_tests.md" "$TEST_EXE" "${args[@]}"
+    rc=$?
+  fi
+  [ -f "$OUT/gpu_tests.md" ] && tail -1 "$OUT/gpu_tests.md"
+  echo "== GPU tests: rc $rc in $(( $(date +%s) - t0 )) s"; [ $rc -eq 0 ] || status=1
 fi
 # real_paths PIPELINES PREFIX: PIPELINES side by side in one process per scene x path, on
 # tumblewood_sh2 (x10) and the ~7 M city over each real camera path at 120 FPS, sub-frame
@@ -230,7 +268,7 @@ if [ "$BENCH" = 1 ]; then
     --trace "real:$T/mipnerf360_bicycle.cameras.json" --width 1920 --height 1080 \
     --pipeline exact,catgs-w2,catgs,catgs-w8,catgs-w16 --frames "$FRAMES" --quality-every 3 \
     --json "$B/bench_windows_city.json" || status=1
-  echo "== bench: city fly-over (DESIGN.md's public-renderer table)"
+  echo "== bench: city fly-over (the public-renderer comparison; docs/DESIGN.md \"Measuring\")"
   "$BENCH_EXE" --scene "$S/tumblewood_sh2.compressed.ply" --city --up 0,-1,0 --trace flyover \
     --width 1920 --height 1080 --pipeline vanilla,exact,catgs --frames "$FRAMES" --quality-every 3 \
     --json "$B/bench_city_flyover.json" --snapshot-dir "$B" || status=1

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "base/cuda_check.h"
+#include "cuda/cuda_renderer.h"
 #include "forward_model/sh_storage.h"
 #include "scene/load_blocks.h"
 

@@ -7,6 +7,7 @@
 
 #include "speculation/speculation_planner.h"
 #include "base/cuda_check.h"
+#include "cuda/cuda_renderer.h"
 #include "stages.h"
 #include "tunables.h"
 

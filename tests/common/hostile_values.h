@@ -9,7 +9,7 @@
 //   all-zero quaternion, SH coefficients that overflow binary16 with opposite signs). The readers
 //   accept them; the render cores must draw a finite image (or end with a clear error), never NaN
 //   or an out-of-range tile range.
-// Header-only (the GPU tests build without GoogleTest or the unit tests' support files).
+// Header-only (the GPU tests share it without the unit tests' support files).
 #pragma once
 
 #include <cmath>
