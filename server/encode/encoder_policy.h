@@ -60,13 +60,14 @@ int needed_threads(int width, int height);
 int encoder_threads(const EncoderPolicy& policy, int width, int height, int live_sessions);
 
 // The x264 presets the policy chooses from, cheapest first, with the CPU time a frame each takes
-// relative to ultrafast's (the larger of the 720p and 1080p ratios; RESULTS.md, "x264 presets by
-// budget").
+// relative to ultrafast's: superfast took 2.26x at 1080p and 1.75x at 720p on the H100 host for
+// 2.0-2.1 dB more at the same rate; veryfast 3.3x / 2.3x for 0.01-0.05 dB more than superfast, so
+// it is not a step (RESULTS.md, "x264 presets by budget").
 struct PresetStep {
   const char* name;
   double cpu_factor;
 };
-inline constexpr PresetStep kPresetLadder[] = {{"ultrafast", 1.0}, {"superfast", 1.44}, {"veryfast", 1.92}};
+inline constexpr PresetStep kPresetLadder[] = {{"ultrafast", 1.0}, {"superfast", 2.3}};
 inline constexpr int kPresetSteps = static_cast<int>(sizeof(kPresetLadder) / sizeof(kPresetLadder[0]));
 
 // The share of the host's cores the sessions' encoders may use together: the rest render (the
@@ -74,7 +75,7 @@ inline constexpr int kPresetSteps = static_cast<int>(sizeof(kPresetLadder) / siz
 inline constexpr double kEncoderCpuShare = 0.5;
 
 // x264 ultrafast's CPU time for one width x height frame, ms: 7.7 ms a megapixel, whatever the
-// thread count (RESULTS.md, "Encoder policy": about 16 ms at 1080p, 6-8 ms at 720p).
+// thread count (RESULTS.md, "Encoder policy": 12.6-16 ms at 1080p, 6-8 ms at 720p; the upper end).
 double ultrafast_cpu_ms(int width, int height);
 
 // The ladder step (index into kPresetLadder) for one session's encoder at `fps` frames/s while
