@@ -1,6 +1,6 @@
 // WebCodecs decoding of the H.264 stream: Annex B chunks with no `description` (Chromium accepts
-// that, see TOOLCHAIN.md), configured from the SPS of the first IDR and reconfigured when a key
-// frame brings another codec string or frame size (e.g. after a Resize).
+// that: SPS and PPS travel in band on every IDR), configured from the SPS of the first IDR and
+// reconfigured when a key frame brings another codec string or frame size (e.g. after a Resize).
 
 import { inspectAccessUnit } from './h264.js';
 

@@ -47,7 +47,7 @@ struct ProjectedGaussians {
   std::vector<glm::vec3> color;         // [N] RGB from SH (+0.5, >= 0)
   std::vector<fm::TileRect> tile_rect;  // [N] tiles to test, [x0, x1) x [y0, y1)
   std::vector<uint32_t> tiles_touched;  // [N] render-list entries this Gaussian emits
-  // catgs key frames: the trail (forward_model.h fm::Trail) the tile test uses, pixel units.
+  // catgs key frames: the trail (forward_model/trail.h fm::Trail) the tile test uses, pixel units.
   std::vector<glm::vec2> trail_mean0;   // [N] projected mean at the key frame
   std::vector<glm::vec2> trail_motion;  // [N] to the end of the window
   std::vector<glm::vec3> trail_cov;     // [N] dominating 2D covariance

@@ -1,4 +1,4 @@
-// Stage 2a' (optional, CudaRenderer::set_depth_first_sort): the depth-first order of the render
+// Stage 2a' (optional, CudaOptions::depth_first_sort): the depth-first order of the render
 // list. The list must end up sorted by the plain [tile | depth] key, ties in Gaussian index order
 // (forward_model/key_packing.h, cpu/sort.cpp). Sorting its L entries on 64-bit keys visits 32 +
 // tile bits (6 radix passes at 1080p). Instead the V visible Gaussians are sorted by depth once (32-bit keys, V << L), each

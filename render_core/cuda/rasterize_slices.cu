@@ -4,7 +4,7 @@
 // `abandon` flag, set by the features and unlisted kernels queued before) is drawn again as a key
 // frame, so its slices and merge return at once instead of drawing an image nobody sees.
 //
-// Tile culling (on by default, CudaRenderer::set_tile_culling): catgs walks a key frame's trail
+// Tile culling (on by default, CudaOptions::tile_culling): catgs walks a key frame's trail
 // list, whose entries reach their tile somewhere along the window but not all at this pose, so
 // each round keeps only the entries whose ellipse reaches one of its sub-tiles now
 // (blend_range_culled): same image, less blending.

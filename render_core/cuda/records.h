@@ -132,7 +132,7 @@ struct BigList {
   __device__ uint32_t huge(unsigned h) const { return index[capacity - 1 - h]; }
 };
 
-// catgs key frames: each visible Gaussian's trail (forward_model.h fm::Trail), pixel units.
+// catgs key frames: each visible Gaussian's trail (forward_model/trail.h fm::Trail), pixel units.
 struct Trails {
   float4* mean0_motion;  // [N] (mean0.x, mean0.y, motion.x, motion.y)
   float4* conic_q;       // [N] (A, B, C) inverse of the trail covariance, q_trail

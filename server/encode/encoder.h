@@ -3,9 +3,10 @@
 // (input_target() + encode_input(): the render core's colour conversion writes there, host
 // planes for x264, CUDA device planes for NVENC with device_input: no extra copy).
 //
-// An Encoder is created for one frame size and used by one thread at a time (a session's render
-// job); a size change means a new Encoder. Implementations (libavcodec): `x264` (libx264, CPU)
-// and `nvenc` (h264_nvenc, fed host frames; see nvenc_encoder.h).
+// An Encoder is created for one frame size and used by one thread at a time (a session's encode
+// job, or its one render-and-encode job with NVENC); a size change means a new Encoder.
+// Implementations (libavcodec): `x264` (libx264, CPU) and `nvenc` (h264_nvenc, fed host frames
+// or, with the CUDA renderer, CUDA frames; see nvenc_encoder.h).
 #pragma once
 
 #include <cstdint>

@@ -2,9 +2,10 @@
 //
 // lws is not thread-safe: only its service thread touches lws objects. Other threads call send()
 // / close(), which queue under a mutex and wake the service thread with lws_cancel_service();
-// the service thread then asks for writable callbacks (TOOLCHAIN.md). Each connection has its own
-// outgoing queue; large messages are written in fragments so one slow socket never blocks the
-// loop. Handler callbacks run on the service thread and must return quickly (post work away).
+// the service thread then asks for writable callbacks (lws_cancel_service is the one lws call
+// that is safe from another thread). Each connection has its own outgoing queue; large messages
+// are written in fragments so one slow socket never blocks the loop. Handler callbacks run on the
+// service thread and must return quickly (post work away).
 //
 // HTTP: "/" serves the web root (static files, extra MIME types for .mjs/.proto/.js/.json/.wasm),
 // "/healthz" answers 200 "ok" whenever the process serves HTTP (liveness), "/readyz" answers

@@ -8,7 +8,7 @@ import net from 'node:net';
 import os from 'node:os';
 import path from 'node:path';
 
-// Flags that work for Debian's chromium as root (TOOLCHAIN.md); playwright-core's
+// Flags that work for Debian's chromium as root (checked on these machines); playwright-core's
 // launchPersistentContext takes the profile folder itself.
 export const CHROMIUM_ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
   '--disable-background-networking', '--disable-component-update', '--disable-sync'];

@@ -83,7 +83,7 @@ async function openPage(url, ctx = context) {
   return page;
 }
 
-// Headless Debian Chromium (TOOLCHAIN.md's flags) with a profile in `dir` and `options` on top.
+// Headless Debian Chromium (the flags of harness.mjs) with a profile in `dir` and `options` on top.
 const launch = (dir, options) => chromium.launchPersistentContext(dir, {
   executablePath: CHROMIUM,
   headless: true,
