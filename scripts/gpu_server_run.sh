@@ -27,7 +27,9 @@
 # The encoder policy's measurements (issue 35), carry [".carry_srv"] alone (it holds the compact
 # tumblewood scene): `unpack`, `scenes` (tumblewood x10, the 13-copy city, the real paths
 # fitted), `rd SCENE WxH SETTINGS` (catgs-encode-bench), `ramp NAME SCENE WxH PIPELINE START STEP
-# MAX P95_MS MIN_FPS [SERVER ARGS]` (sessions until a bound breaks; scripts/ramp_table.py).
+# MAX P95_MS MIN_FPS [SERVER ARGS]` (sessions until a bound breaks; scripts/ramp_table.py);
+# the level of detail in the server (issue 46): `bigcity R NAME` (49 or 101 copies) and
+# `firstframe NAME SCENE WxH [SERVER ARGS]` (start to listening, the first session's frames).
 # CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -88,13 +90,13 @@ start_server() {
     --encoder auto --threads 48 --max-sessions 64 --web-root "$ROOT/web_client" "$@" > "$log" 2>&1 &
   SERVER_PID=$!
   PORT=
-  for _ in $(seq 1 600); do
+  for _ in $(seq 1 1500); do
     PORT=$(sed -n 's|.*listening on http://[^:]*:\([0-9]*\)/.*|\1|p' "$log" | head -1)
     [ -n "$PORT" ] && return 0
     kill -0 "$SERVER_PID" 2>/dev/null || { echo "server exited:"; cat "$log"; return 1; }
     sleep 0.2
   done
-  echo "server did not listen in 120 s"; cat "$log"; return 1
+  echo "server did not listen in 300 s"; cat "$log"; return 1
 }
 
 stop_server() {
@@ -206,6 +208,40 @@ make_scenes() {
   done
 }
 
+# bigcity RADIUS_SQ NAME: a city of the compact tumblewood's copies on the cells i^2 + j^2 <=
+# RADIUS_SQ (16: 49 copies, 32: 101) and the three real paths fitted to it, in /tmp/catgs_sweep
+# (after `scenes`; once per machine).
+bigcity() {
+  local r=$1 name=$2 W=/tmp/catgs_sweep S=$ROOT/.carry_srv
+  export LD_LIBRARY_PATH=$SRV/lib
+  [ -f "$W/${name}_flowers_sh3.trace" ] && return 0
+  "$SRV/bin/catgs-scene" tile --scene "$W/tumblewood_sh2.compressed.ply" --scale 10 --radius-sq "$r" --up 0,-1,0 \
+    --out-compressed "$W/$name.compressed.ply" || return 1
+  for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+    "$SRV/bin/catgs-scene" trace --scene "$W/$name.compressed.ply" --cameras "$S/traces/$path.cameras.json" \
+      --out "$W/${name}_$path.trace" --up 0,-1,0 --frames 1200 || return 1
+  done
+}
+
+# firstframe NAME SCENE WxH [SERVER ARGS...]: seconds from starting catgs-server until it listens
+# with SCENE loaded (its LOD file read, or built and written), then one session's first frames
+# (catgs-loadgen, 3 s) -> $OUT/firstframe-NAME.log (the server's log and the session's report).
+firstframe() {
+  local name=$1 scene=$2 size=$3 W=/tmp/catgs_sweep
+  shift 3
+  export LD_LIBRARY_PATH=$SRV/lib
+  local t0 t1
+  t0=$(date +%s.%N)
+  start_server "$W/$scene.compressed.ply" "$W/server_first-$name.log" "$@" || return 1
+  t1=$(date +%s.%N)
+  "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions 1 --size "$size" --trace "$W/${scene}_mipnerf360_bicycle.trace" \
+    --rate 60 --seconds 3 --warmup 0 --json "$W/json/first-$name.json" > "$W/first_$name.txt" 2>&1
+  stop_server
+  { echo "== $name: listening with the scene loaded $(python3 -c "print('%.2f' % ($t1 - $t0))") s after start"
+    grep -E "scene|level of detail|LOD|uploaded|listening" "$W/server_first-$name.log" | head -12
+    tail -5 "$W/first_$name.txt"; } | tee "$OUT/firstframe-$name.log"
+}
+
 # rd SCENE WxH SETTINGS [FRAMES]: catgs-encode-bench on SCENE's bicycle path (CUDA renders, x264)
 # -> $OUT/rd_SCENE_WxH.json and its table.
 rd() {
@@ -279,6 +315,8 @@ case "${1:-}" in
   sweep) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; sweep "$@" ;;
   unpack) unpack ;;
   scenes) scenes ;;
+  bigcity) shift; bigcity "$@" ;;
+  firstframe) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; firstframe "$@" ;;
   rd) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; rd "$@" ;;
   ramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; ramp "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;

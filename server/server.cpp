@@ -9,6 +9,7 @@
 #include "encode/encoder.h"
 #include "proto/message_validation.h"
 #include "process/first_view.h"
+#include "process/scene_with_lod.h"
 #include "session/video_export.h"
 #include "scene/scene_cache.h"
 
@@ -126,24 +127,15 @@ void Server::load_model() {
   const SceneCacheMode mode = options_.scene_cache == "write"  ? SceneCacheMode::write
                               : options_.scene_cache == "read" ? SceneCacheMode::read
                                                                : SceneCacheMode::off;
-  // A LOD file beside the scene (SCENE.catgs-lod, forward_model/lod.h) is served instead of the
-  // scene; one that does not match it is logged and the scene read as usual.
-  o.loader = [mode](const std::string& path, const LoadProgress& progress) {
-    const std::string lod = path + ".catgs-lod";
-    if (::access(lod.c_str(), F_OK) == 0) {
-      try {
-        GaussianModel m = load_lod_file(lod, path, 0, progress);
-        std::cout << "scene " << path << ": level of detail from " << lod << " (" << m.size() << " Gaussians, "
-                  << m.lod.size() << " chunks)" << std::endl;
-        return m;
-      } catch (const SceneCacheRejected& e) {
-        std::cout << "scene " << path << ": LOD file not used: " << e.what() << std::endl;
-      }
-    }
-    CachedLoadOptions c;
-    c.mode = mode;
-    c.log = [](const std::string& line) { std::cout << line << std::endl; };
-    return load_scene_cached(path, c, progress);
+  // The scene with its level of detail (process/scene_with_lod.h): the LOD file beside it, or
+  // built (and written, --lod write) when that is missing or stale.
+  SceneWithLodOptions lod;
+  lod.cache = mode;
+  lod.lod = parse_lod_mode(options_.lod);
+  lod.log = [](const std::string& line) { std::cout << line << std::endl; };
+  lod.metrics = &metrics_;
+  o.loader = [lod](const std::string& path, const LoadProgress& progress) {
+    return load_scene_with_lod(path, lod, progress);
   };
   // One copy of each loaded scene per GPU, uploaded before its first session and dropped with it.
   o.prepare = [this](LoadedScene& scene) {

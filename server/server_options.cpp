@@ -1,6 +1,7 @@
 #include "server_options.h"
 
 #include "cpu_quota.h"
+#include "process/scene_with_lod.h"
 #include "speculation/settings.h"
 #include "transport/origin_policy.h"
 #include "transport/trusted_proxies.h"
@@ -71,11 +72,14 @@ std::string server_usage() {
          "                        for the scene as it is now (else the scene is read, the reason\n"
          "                        logged); write also writes it after a plain load (a folder that\n"
          "                        is not writable is logged and ignored) (default read)\n"
-         "  --lod-error PX        level of detail: a scene with a LOD file beside it (SCENE.catgs-lod,\n"
-         "                        written by `catgs-scene lod`) is served from it, each frame\n"
-         "                        drawing the cut of screen-space error PX pixels (0 = full\n"
-         "                        detail; default 1); a LOD file that does not match the scene is\n"
-         "                        logged and the scene read as usual\n"
+         "  --lod off|read|write  level of detail: each scene is served from its LOD file beside it\n"
+         "                        (SCENE.catgs-lod, as `catgs-scene lod` writes it) when that is\n"
+         "                        valid for the scene as it is now; else its level of detail is\n"
+         "                        built at load (progress in the log and /metrics) and, with write,\n"
+         "                        written there (a folder that is not writable is logged); off\n"
+         "                        serves full detail (default write)\n"
+         "  --lod-error PX        the cut's screen-space error bound in pixels (0 = full detail;\n"
+         "                        default 2, chosen against a supersampled render: RESULTS.md)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -241,6 +245,9 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       if (v != "off" && v != "read" && v != "write")
         throw std::invalid_argument("--scene-cache must be off, read or write, got '" + v + "'");
       out.scene_cache = v;
+    } else if (a == "--lod") {
+      (void)parse_lod_mode(v);  // refused here, with the option's name
+      out.lod = v;
     } else if (a == "--lod-error")
       out.lod_error_px = static_cast<float>(parse_double(a, v, 0.0, 1e6));
     else if (a == "--scene-memory-mb")

@@ -26,7 +26,7 @@
 //       Writes the scene cache (scene/scene_cache.h; default S.catgs-cache beside S): the next
 //       load of S through the cache (catgs-server --scene-cache) copies it instead of parsing.
 //   catgs-scene lod     --scene S --out O [--branching 8] [--threads N]
-//       Builds the scene's level of detail (scene_tools/lod_build.h) and writes it as a LOD file
+//       Builds the scene's level of detail (lod/lod_build.h) and writes it as a LOD file
 //       (scene/scene_cache.h; conventionally S.catgs-lod) keyed to S: catgs-bench, catgs-render
 //       and catgs-server draw it with --scene S --lod-file O.
 //   catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]
@@ -57,8 +57,8 @@
 #include "renderer/renderer.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
-#include "scene_tools/lod_build.h"
-#include "scene_tools/morton.h"
+#include "lod/lod_build.h"
+#include "scene/morton.h"
 #include "scene/sh_rotation.h"
 #include "camera/trace.h"
 #include "common/cli_args.h"
@@ -252,7 +252,9 @@ int lod(const catgs::tools::Args& args) {
   const int threads = args.get_int("--threads", 0);
   const auto m = catgs::load_scene(scene, catgs::LoadOptions{threads, false});
   catgs::LodBuildReport report;
-  const auto lod = catgs::build_lod(m, {args.get_int("--branching", 8)}, &report);
+  catgs::LodBuildOptions lod_options;
+  lod_options.branching = args.get_int("--branching", 8);
+  const auto lod = catgs::build_lod(m, lod_options, &report);
   catgs::write_scene_cache(lod, scene, out, threads);
   std::printf("wrote %s: %zu Gaussians (%zu leaves%s), levels of", out.c_str(), lod.size(), m.size(),
               report.reordered ? ", Morton-sorted" : "");

@@ -3,7 +3,7 @@
 // city costs a few merged chunks instead of every Gaussian it holds (Hierarchical 3DGS, Kerbl et
 // al., SIGGRAPH 2024, sec. 4: a hierarchy of merged Gaussians cut by projected size).
 //
-// Layout of a scene with LOD (tools/scene_tools/lod_build.h writes it): the original Gaussians
+// Layout of a scene with LOD (lod/lod_build.h writes it): the original Gaussians
 // (the leaves) first, padded with invisible Gaussians to a multiple of kChunkSize, then the
 // merged Gaussians of level 1, level 2, ... up to a level of one node; every node is exactly one
 // chunk of kChunkSize Gaussians (its last ones may be padding). GaussianModel::lod holds one

@@ -42,7 +42,7 @@ struct GaussianModel {
   std::vector<float> opacity_logits;
   std::vector<float> sh;
   // Level of detail (forward_model/lod.h): one node per chunk of kChunkSize Gaussians, or empty
-  // (no LOD: every Gaussian is drawn). Built by tools/scene_tools/lod_build.h.
+  // (no LOD: every Gaussian is drawn). Built by lod/lod_build.h.
   std::vector<fm::LodNode> lod;
 
   std::size_t size() const { return opacity_logits.size(); }

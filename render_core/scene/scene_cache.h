@@ -35,7 +35,7 @@
 //   (units and frames those of GaussianModel, gaussian_model.h).
 //
 // A LOD file (catgs-scene lod, conventionally S.catgs-lod) is such a cache of the LOD model
-// tools/scene_tools/lod_build.h makes from scene S, keyed to S: its N holds the leaves and the
+// lod/lod_build.h makes from scene S, keyed to S: its N holds the leaves and the
 // merged levels, its lod section the tree. It is our own derived file, not a PLY: another
 // viewer would draw every level on top of the others.
 #pragma once

@@ -10,6 +10,8 @@
 #include <glm/gtc/quaternion.hpp>
 
 #include "camera/trace.h"
+#include "forward_model/chunk_bounds.h"
+#include "forward_model/lod.h"
 #include "scene/load_blocks.h"
 #include "process/order_statistics.h"
 
@@ -19,6 +21,15 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 const glm::vec3 kMinusY(0.0f, -1.0f, 0.0f);  // the 3DGS convention's up (COLMAP frames, y down)
+
+// The Gaussians a scene's content is judged by: a model with a level of detail holds its leaves
+// first (lod/lod_build.h), and its merged levels would count the content again.
+// (Leaves first, error 0, then every merged node of error > 0: a binary search.)
+std::size_t content_count(const GaussianModel& m) {
+  if (m.lod.empty()) return m.size();
+  const auto end = std::partition_point(m.lod.begin(), m.lod.end(), [](const fm::LodNode& n) { return n.error == 0.0f; });
+  return std::min(m.size(), static_cast<std::size_t>(end - m.lod.begin()) * fm::kChunkSize);
+}
 
 // Eigenvalues of a symmetric 3x3 matrix, ascending (O. K. Smith, "Eigenvalues of a symmetric
 // 3x3 matrix", Communications of the ACM 4(4), 1961: the trigonometric solution of the
@@ -75,8 +86,8 @@ float scene_percentile(const std::vector<float>& v, double q) {
 
 // Into `d` (resized to N): reused across the mean-shift's iterations, so its pages fault once.
 void distances_from(const GaussianModel& m, glm::vec3 c, std::vector<float>& d) {
-  d.resize(m.size());
-  for_blocks(m.size(), [&](std::size_t begin, std::size_t end) {
+  d.resize(content_count(m));
+  for_blocks(content_count(m), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) d[i] = glm::distance(mean_at(m, i), c);
   });
 }
@@ -138,14 +149,15 @@ std::size_t most_central_camera(const std::vector<Camera>& cameras, glm::vec3 ce
 // The mean-shift density mode (dense_content's header): the opacity-weighted mean of the nearest
 // quarter of the Gaussians, repeated from the median until it stops moving.
 glm::vec3 density_mode(const GaussianModel& m) {
+  const std::size_t n = content_count(m);
   glm::vec3 c;
   for (int a = 0; a < 3; ++a) {
-    std::vector<float> v(m.size());
-    for (std::size_t i = 0; i < m.size(); ++i) v[i] = m.means[3 * i + a];
+    std::vector<float> v(n);
+    for (std::size_t i = 0; i < n; ++i) v[i] = m.means[3 * i + a];
     c[a] = scene_percentile(v, 0.5);
   }
-  std::vector<float> alpha(m.size());  // opacity(m, i), once
-  for_blocks(m.size(), [&](std::size_t begin, std::size_t end) {
+  std::vector<float> alpha(n);  // opacity(m, i), once
+  for_blocks(n, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) alpha[i] = opacity(m, i);
   });
   std::vector<float> d;
@@ -155,7 +167,7 @@ glm::vec3 density_mode(const GaussianModel& m) {
     // Serial on purpose: the sums' order, hence their rounding, is the one the tests know.
     glm::dvec3 sum(0.0);
     double weight = 0.0;
-    for (std::size_t i = 0; i < m.size(); ++i)
+    for (std::size_t i = 0; i < n; ++i)
       if (d[i] <= kernel) {
         sum += static_cast<double>(alpha[i]) * glm::dvec3(mean_at(m, i));
         weight += alpha[i];
@@ -197,14 +209,15 @@ struct BallMoments {
 
 BallMoments ball_moments(const GaussianModel& m, const std::vector<float>& d, float radius) {
   BallMoments b;
-  for (std::size_t i = 0; i < m.size(); ++i)
+  const std::size_t n = content_count(m);
+  for (std::size_t i = 0; i < n; ++i)
     if (d[i] <= radius) {
       b.mean += glm::dvec3(mean_at(m, i));
       ++b.count;
     }
   if (b.count == 0) return b;
   b.mean /= static_cast<double>(b.count);
-  for (std::size_t i = 0; i < m.size(); ++i)
+  for (std::size_t i = 0; i < n; ++i)
     if (d[i] <= radius) {
       const glm::dvec3 e = glm::dvec3(mean_at(m, i)) - b.mean;
       b.covariance += glm::outerProduct(e, e);
@@ -371,7 +384,8 @@ SceneFrame frame_from_content(const GaussianModel& model) {
   // content_up's), since the core's radius stops at the 98th percentile of distances from the
   // density mode and leaves out a tall object's far end (a guitar's headstock).
   std::vector<glm::vec3> ball, wide;
-  for (std::size_t i = 0; i < model.size(); ++i) {
+  const std::size_t n = content_count(model);
+  for (std::size_t i = 0; i < n; ++i) {
     const float r = glm::distance(mean_at(model, i), c.mode);
     if (r <= c.radius) ball.push_back(mean_at(model, i));
     if (r <= 1.5f * c.radius) wide.push_back(mean_at(model, i));

@@ -106,6 +106,14 @@ std::string ServerMetrics::prometheus_text() const {
       scene_load_failures_total.load());
   put("catgs_scene_unloads_total", "counter", "Unused scenes unloaded to stay within --scene-memory-mb.",
       scene_unloads_total.load());
+  put("catgs_lod_builds_running", "gauge", "Scenes whose level of detail is being built now (no valid LOD file).",
+      lod_builds_running.load());
+  put("catgs_lod_build_progress", "gauge", "The running level-of-detail build's progress, 0 to 1.",
+      static_cast<double>(lod_build_permille.load()) / 1000.0);
+  put("catgs_lod_builds_total", "counter", "Levels of detail built at load (the LOD file was missing or stale).",
+      lod_builds_total.load());
+  put("catgs_lod_files_written_total", "counter", "LOD files written beside their scenes (--lod write).",
+      lod_files_written_total.load());
   put("catgs_exports_running", "gauge", "Video exports rendering now (at most --export-max-concurrent).",
       exports_running.load());
   put("catgs_export_frames_total", "counter", "Frames rendered for video exports.", export_frames_total.load());

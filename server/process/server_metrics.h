@@ -25,6 +25,9 @@
 //                              (process/scene_store.h; a GPU copy per device besides)
 //   catgs_scene_loads_total, catgs_scene_load_failures_total, catgs_scene_unloads_total
 //                              loads finished / failed, scenes unloaded for --scene-memory-mb
+//   catgs_lod_builds_running, catgs_lod_build_progress  levels of detail being built at load (no
+//                              valid LOD file) and the running build's progress, 0 to 1
+//   catgs_lod_builds_total, catgs_lod_files_written_total  builds finished, LOD files written
 //   catgs_exports_running      video exports rendering now (session/export_pipeline.cpp)
 //   catgs_exports_total{result}  exports ended: sent (the file went to the page), failed,
 //                              cancelled (Cancel, or the page closed), refused (ExportVideoRequest
@@ -105,6 +108,10 @@ struct ServerMetrics {
   // that finished, loads that failed and unloads under --scene-memory-mb.
   std::atomic<std::int64_t> scenes_loaded{0}, scene_bytes{0};
   std::atomic<std::uint64_t> scene_loads_total{0}, scene_load_failures_total{0}, scene_unloads_total{0};
+  // Level of detail (process/scene_with_lod.h): builds running now and the running one's progress
+  // (per mille), builds finished, LOD files written beside their scenes.
+  std::atomic<std::int64_t> lod_builds_running{0}, lod_build_permille{0};
+  std::atomic<std::uint64_t> lod_builds_total{0}, lod_files_written_total{0};
 
   // Video export from the page: the render slots taken now (each export holds one while it
   // renders; --export-max-concurrent bounds it), how exports ended, and their frames.

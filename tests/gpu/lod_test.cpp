@@ -1,5 +1,5 @@
 // lod: level of detail (forward_model/lod.h): the cut both cores take, CUDA against the CPU, on 13
-// tumblewood copies with their level of detail (scene_tools/lod_build.h), along the fly-over at
+// tumblewood copies with their level of detail (lod/lod_build.h), along the fly-over at
 // 120 FPS:
 //  exact@1, exact@4  CUDA exact == CPU exact on the fly-over's views at the default
 //                    RenderOptions::lod_error_px and at 4 px (where many merged chunks are drawn;
@@ -14,8 +14,8 @@
 #include <string>
 
 #include "gpu_test_support.h"
-#include "scene_tools/lod_build.h"
-#include "scene_tools/morton.h"
+#include "lod/lod_build.h"
+#include "scene/morton.h"
 
 namespace catgs::gputest {
 namespace {

@@ -22,7 +22,7 @@
 #include "scene/ply_io.h"
 #include "scene/scene_bounds.h"
 #include "scene/scene_cache.h"
-#include "scene_tools/lod_build.h"
+#include "lod/lod_build.h"
 #include "test_data.h"
 
 namespace catgs {

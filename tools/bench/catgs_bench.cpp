@@ -27,7 +27,7 @@
 // grid, x10 scale; with --radius-sq, --spacing, --seed to vary it); otherwise S is scaled by
 // --scale (default 1).
 // Level of detail (forward_model/lod.h): --lod builds it in memory after that
-// (scene_tools/lod_build.h; its build time and level sizes are printed and in the JSON);
+// (lod/lod_build.h; its build time and level sizes are printed and in the JSON);
 // --lod-file F reads S's LOD file (catgs-scene lod). Every variant draws the cut at --lod-error
 // PX (default RenderOptions::lod_error_px; 0 = full detail; a list PX,PX... runs every variant
 // at each bound, named VARIANT@PX), and with --quality-every K every K-th frame of every variant,
@@ -71,7 +71,7 @@
 #include "scene/ply_io.h"
 #include "scene/scene_bounds.h"
 #include "scene/scene_cache.h"
-#include "scene_tools/lod_build.h"
+#include "lod/lod_build.h"
 #include "scene_tools/city.h"
 
 namespace {
@@ -134,7 +134,9 @@ BenchScene load_bench_scene(const Args& args) {
     if (glm::length(s.up) == 0.0f) s.up = catgs::estimate_up(s.model);
   }
   if (args.has("--lod")) {
-    s.model = catgs::build_lod(s.model, {args.get_int("--branching", 8)}, &s.lod);
+    catgs::LodBuildOptions lod_options;
+    lod_options.branching = args.get_int("--branching", 8);
+    s.model = catgs::build_lod(s.model, lod_options, &s.lod);
     std::fprintf(stderr, "LOD built in %.2f s: %zu Gaussians, chunks per level:", s.lod.seconds, s.model.size());
     for (std::size_t n : s.lod.level_nodes) std::fprintf(stderr, " %zu", n);
     std::fprintf(stderr, "\n");

@@ -1,5 +1,5 @@
 // Median kd clustering of a LOD node's Gaussians (lod_cluster.h).
-#include "scene_tools/lod_cluster.h"
+#include "lod/lod_cluster.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "scene_tools/morton.h"
+#include "scene/morton.h"
 
 #include <algorithm>
 #include <numeric>

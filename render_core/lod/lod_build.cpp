@@ -1,6 +1,6 @@
 // The LOD tree's build (lod_build.h): leaves in Morton order, then merged levels, each level's
 // nodes in parallel.
-#include "scene_tools/lod_build.h"
+#include "lod/lod_build.h"
 
 #include <algorithm>
 #include <chrono>
@@ -10,9 +10,9 @@
 #include <string>
 
 #include "forward_model/chunk_bounds.h"
-#include "scene_tools/lod_cluster.h"
-#include "scene_tools/lod_merge.h"
-#include "scene_tools/morton.h"
+#include "lod/lod_cluster.h"
+#include "lod/lod_merge.h"
+#include "scene/morton.h"
 #include "base/parallel_for.h"
 
 namespace catgs {
@@ -135,14 +135,31 @@ GaussianModel build_lod(const GaussianModel& scene, const LodBuildOptions& optio
   std::vector<uint32_t> order = morton_order(scene);
   bool reordered = false;
   for (std::size_t i = 0; i < order.size() && !reordered; ++i) reordered = order[i] != i;
+  // Progress counts input Gaussians: the leaves' copies, then every level's merged inputs (its
+  // children's chunks); reported from this thread between batches of a level's nodes.
+  uint64_t done = 0, total = 0;
+  for (std::size_t l = 0; l < nodes.size(); ++l) total += (l == 0 ? nodes[0] : nodes[l - 1]) * kChunk;
+  const auto tell = [&](uint64_t add) {
+    done += add;
+    if (options.progress) options.progress(std::min(done, total), total);
+  };
   parallel_for(nodes[0], 16, [&](std::size_t c) { build_leaf(scene, order, c, out); });
   std::vector<uint32_t>().swap(order);
+  tell(nodes[0] * kChunk);
 
-  for (std::size_t l = 1; l < nodes.size(); ++l)
-    parallel_for(nodes[l], 1, [&](std::size_t j) {
-      const std::size_t begin = first[l - 1] + b * j, end = first[l - 1] + std::min(b * j + b, nodes[l - 1]);
-      build_node(out, first[l] + j, begin, end);
-    });
+  for (std::size_t l = 1; l < nodes.size(); ++l) {
+    constexpr std::size_t kBatches = 16;  // progress reports a level
+    const std::size_t batch = (nodes[l] + kBatches - 1) / kBatches;
+    for (std::size_t lo = 0; lo < nodes[l]; lo += batch) {
+      const std::size_t hi = std::min(nodes[l], lo + batch);
+      parallel_for(hi - lo, 1, [&](std::size_t i) {
+        const std::size_t j = lo + i;
+        const std::size_t begin = first[l - 1] + b * j, end = first[l - 1] + std::min(b * j + b, nodes[l - 1]);
+        build_node(out, first[l] + j, begin, end);
+      });
+      tell((std::min(b * hi, nodes[l - 1]) - b * lo) * kChunk);
+    }
+  }
 
   if (report) {
     report->level_nodes = nodes;

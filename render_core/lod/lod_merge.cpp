@@ -1,5 +1,5 @@
 // Moment-matching merge and its eigen solver (lod_merge.h).
-#include "scene_tools/lod_merge.h"
+#include "lod/lod_merge.h"
 
 #include <algorithm>
 #include <cmath>

@@ -2,7 +2,7 @@
 // chunks forward_model/lod.h describes, made offline from any scene.
 //
 // Steps:
-// 1. The leaves: the scene's Gaussians in Morton order (scene_tools/morton.h; a scene that
+// 1. The leaves: the scene's Gaussians in Morton order (scene/morton.h; a scene that
 //    catgs-scene compact wrote already is and is left as it is), padded with invisible
 //    Gaussians (opacity logit -kOpacityLogitLimit, log-scale kLodPadLogScale, at the chunk's
 //    first mean) to a multiple of fm::kChunkSize. Leaf node boxes: their means.
@@ -29,11 +29,16 @@
 #include <vector>
 
 #include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
 
 namespace catgs {
 
 struct LodBuildOptions {
   int branching = 8;  // children per node, 2..64
+  // Called on the building thread with (input Gaussians processed, in all): the leaves' copies,
+  // then each level's merged inputs, in batches; rising, the last call (total, total). What it
+  // throws ends the build (a stopping server cancels so).
+  LoadProgress progress;
 };
 
 struct LodBuildReport {

@@ -1,0 +1,97 @@
+#include "process/scene_with_lod.h"
+
+#include <chrono>
+#include <sstream>
+#include <stdexcept>
+
+#include "lod/lod_build.h"
+
+namespace catgs::server {
+
+LodMode parse_lod_mode(const std::string& text) {
+  if (text == "off") return LodMode::off;
+  if (text == "read") return LodMode::read;
+  if (text == "write") return LodMode::write;
+  throw std::invalid_argument("--lod must be off, read or write, got '" + text + "'");
+}
+
+namespace {
+
+void say(const SceneWithLodOptions& o, const std::string& line) {
+  if (o.log) o.log(line);
+}
+
+// Builds the level of detail of `scene` (read from `path`), reporting into the second half of
+// `progress`, the log (every quarter) and the metrics.
+GaussianModel build_for(const std::string& path, const GaussianModel& scene, const SceneWithLodOptions& o,
+                        const LoadProgress& progress) {
+  ServerMetrics* m = o.metrics;
+  if (m) m->lod_builds_running++;
+  int quarter = 0;
+  LodBuildOptions b;
+  b.progress = [&](uint64_t done, uint64_t total) {
+    if (m && total) m->lod_build_permille = static_cast<std::int64_t>(done * 1000 / total);
+    if (total && done * 4 / total > static_cast<uint64_t>(quarter) && done < total) {
+      quarter = static_cast<int>(done * 4 / total);
+      say(o, "scene " + path + ": building its level of detail: " + std::to_string(quarter * 25) + "%");
+    }
+    if (progress) progress(total + done, 2 * total);
+  };
+  LodBuildReport report;
+  try {
+    GaussianModel lod = build_lod(scene, b, &report);
+    if (m) {
+      m->lod_builds_running--;
+      m->lod_builds_total++;
+    }
+    std::ostringstream line;
+    line << "scene " << path << ": level of detail built in " << static_cast<long>(report.seconds * 1000) << " ms ("
+         << scene.size() << " Gaussians + " << lod.size() - lod_leaf_gaussians(lod) << " merged, " << lod.lod.size()
+         << " chunks in " << report.level_nodes.size() << " levels)";
+    say(o, line.str());
+    return lod;
+  } catch (...) {
+    if (m) m->lod_builds_running--;
+    throw;
+  }
+}
+
+}  // namespace
+
+GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOptions& o,
+                                  const LoadProgress& progress) {
+  CachedLoadOptions c;
+  c.mode = o.cache;
+  c.log = o.log;
+  if (o.lod == LodMode::off) return load_scene_cached(path, c, progress);
+
+  const std::string lod_path = path + ".catgs-lod";
+  try {
+    GaussianModel m = load_lod_file(lod_path, path, 0, progress);
+    say(o, "scene " + path + ": level of detail from " + lod_path + " (" + std::to_string(m.size()) + " Gaussians, " +
+               std::to_string(m.lod.size()) + " chunks)");
+    return m;
+  } catch (const SceneCacheRejected& e) {
+    say(o, "scene " + path + ": LOD file not used (" + e.what() + "); building the level of detail");
+  }
+  // The read is the first half of the progress, the build the second.
+  const LoadProgress half = [&progress](uint64_t done, uint64_t total) {
+    if (progress) progress(done, 2 * total);
+  };
+  const GaussianModel scene = load_scene_cached(path, c, half);
+  GaussianModel lod = build_for(path, scene, o, progress);
+  if (o.lod == LodMode::write) {
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      write_scene_cache(lod, path, lod_path);
+      if (o.metrics) o.metrics->lod_files_written_total++;
+      const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0);
+      say(o, "scene " + path + ": LOD file written to " + lod_path + " in " + std::to_string(ms.count()) + " ms");
+    } catch (const std::exception& e) {
+      say(o, "scene " + path + ": LOD file not written (" + std::string(e.what()) + "); serving the built one");
+    }
+  }
+  return lod;
+}
+
+}  // namespace catgs::server

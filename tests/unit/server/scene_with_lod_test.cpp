@@ -1,0 +1,161 @@
+// The scene a server serves, with its level of detail (issue 46, process/scene_with_lod.h): a
+// missing LOD file is built and written, then read back instead of rebuilt; a stale or foreign
+// one is rebuilt, not trusted; read mode writes nothing; off serves the scene alone. On copies of
+// the bundled biker scene (always present). The built model's leaves are checked against the
+// scene read on its own (load_scene), the written file against a fresh build.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "lod/lod_build.h"
+#include "lod/lod_merge.h"
+#include "scene/ply_io.h"
+#include "process/scene_with_lod.h"
+#include "server_options.h"
+#include "test_data.h"
+
+namespace {
+
+using namespace catgs;
+using namespace catgs::server;
+namespace fs = std::filesystem;
+
+struct LoadRun {
+  std::vector<std::string> log;
+  std::vector<std::pair<uint64_t, uint64_t>> progress;
+  GaussianModel model;
+  bool said(const std::string& text) const {
+    for (const std::string& line : log)
+      if (line.find(text) != std::string::npos) return true;
+    return false;
+  }
+};
+
+LoadRun load(const std::string& path, LodMode mode, ServerMetrics* metrics) {
+  LoadRun r;
+  SceneWithLodOptions o;
+  o.lod = mode;
+  o.cache = SceneCacheMode::off;
+  o.metrics = metrics;
+  o.log = [&r](const std::string& line) { r.log.push_back(line); };
+  r.model = load_scene_with_lod(path, o, [&r](uint64_t done, uint64_t total) { r.progress.push_back({done, total}); });
+  return r;
+}
+
+std::string scene_copy(const std::string& dir, const std::string& name) {
+  const std::string path = dir + "/" + name + ".compressed.ply";
+  fs::copy_file(test::bundled_scene(), path, fs::copy_options::overwrite_existing);
+  return path;
+}
+
+// The leaves of a LOD model hold the scene's Gaussians (in Morton order, then padding): the same
+// multiset of means, compared as sorted triples.
+void expect_leaves_are(const GaussianModel& lod, const GaussianModel& scene) {
+  ASSERT_FALSE(lod.lod.empty());
+  const std::size_t leaves = lod_leaf_gaussians(lod);
+  ASSERT_GE(leaves, scene.size());
+  ASSERT_LT(leaves, scene.size() + 256);
+  auto sorted_means = [](const GaussianModel& m, std::size_t n) {
+    std::vector<std::array<float, 3>> v(n);
+    for (std::size_t i = 0; i < n; ++i) v[i] = {m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]};
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  // Padding (lod_build.h): opacity logit -kOpacityLogitLimit and log-scale kLodPadLogScale.
+  std::vector<std::array<float, 3>> got;
+  for (std::size_t i = 0; i < leaves; ++i)
+    if (!(lod.opacity_logits[i] == -kOpacityLogitLimit && lod.log_scales[3 * i] == kLodPadLogScale)) got.push_back({lod.means[3 * i], lod.means[3 * i + 1], lod.means[3 * i + 2]});
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, sorted_means(scene, scene.size()));
+}
+
+TEST(SceneWithLod, MissingFileIsBuiltWrittenThenRead) {
+  const std::string dir = test::temp_dir(), path = scene_copy(dir, "a");
+  ServerMetrics metrics;
+  const LoadRun first = load(path, LodMode::write, &metrics);
+  EXPECT_TRUE(first.said("LOD file not used")) << first.log.front();
+  EXPECT_TRUE(first.said("level of detail built"));
+  EXPECT_TRUE(fs::exists(path + ".catgs-lod"));
+  EXPECT_EQ(metrics.lod_builds_total.load(), 1u);
+  EXPECT_EQ(metrics.lod_files_written_total.load(), 1u);
+  EXPECT_EQ(metrics.lod_builds_running.load(), 0);
+  EXPECT_EQ(metrics.lod_build_permille.load(), 1000);
+  expect_leaves_are(first.model, load_scene(path));
+  // Progress rises to its end: the read is the first half, the build the second.
+  ASSERT_FALSE(first.progress.empty());
+  for (std::size_t i = 1; i < first.progress.size(); ++i) {
+    EXPECT_GE(first.progress[i].first * first.progress[i - 1].second,
+              first.progress[i - 1].first * first.progress[i].second)
+        << "progress fell at report " << i;
+  }
+  EXPECT_EQ(first.progress.back().first, first.progress.back().second);
+
+  const LoadRun second = load(path, LodMode::write, &metrics);
+  EXPECT_TRUE(second.said("level of detail from")) << second.log.front();
+  EXPECT_EQ(metrics.lod_builds_total.load(), 1u) << "a valid LOD file was rebuilt";
+  EXPECT_EQ(second.model.means, first.model.means);
+  EXPECT_EQ(second.model.sh, first.model.sh);
+  ASSERT_EQ(second.model.lod.size(), first.model.lod.size());
+  for (std::size_t c = 0; c < first.model.lod.size(); ++c) {
+    EXPECT_EQ(second.model.lod[c].error, first.model.lod[c].error) << "node " << c;
+    EXPECT_EQ(second.model.lod[c].parent, first.model.lod[c].parent) << "node " << c;
+  }
+}
+
+TEST(SceneWithLod, StaleOrForeignFileIsRebuiltNotTrusted) {
+  const std::string dir = test::temp_dir(), a = scene_copy(dir, "a"), b = dir + "/b.ply";
+  ServerMetrics metrics;
+  (void)load(a, LodMode::write, &metrics);
+  // The scene changes after its LOD file was written (a newer capture copied over it).
+  fs::last_write_time(a, fs::last_write_time(a) + std::chrono::hours(1));
+  const LoadRun stale = load(a, LodMode::write, &metrics);
+  EXPECT_TRUE(stale.said("LOD file not used")) << stale.log.front();
+  EXPECT_EQ(metrics.lod_builds_total.load(), 2u);
+  EXPECT_TRUE(load(a, LodMode::write, &metrics).said("level of detail from")) << "the rebuilt file was not kept";
+
+  // Another scene's LOD file put beside this one.
+  const GaussianModel other = load_scene(test::bundled_scene());
+  GaussianModel shifted = other;
+  for (float& m : shifted.means) m += 1.0f;
+  write_inria_ply(shifted, b);
+  fs::copy_file(a + ".catgs-lod", b + ".catgs-lod", fs::copy_options::overwrite_existing);
+  const LoadRun foreign = load(b, LodMode::write, &metrics);
+  EXPECT_TRUE(foreign.said("LOD file not used")) << foreign.log.front();
+  expect_leaves_are(foreign.model, load_scene(b));
+  EXPECT_EQ(metrics.lod_builds_total.load(), 3u);
+}
+
+TEST(SceneWithLod, ReadWritesNothingAndOffServesTheScene) {
+  const std::string dir = test::temp_dir(), path = scene_copy(dir, "a");
+  ServerMetrics metrics;
+  const LoadRun read = load(path, LodMode::read, &metrics);
+  EXPECT_FALSE(fs::exists(path + ".catgs-lod"));
+  EXPECT_EQ(metrics.lod_files_written_total.load(), 0u);
+  expect_leaves_are(read.model, load_scene(path));
+  const LoadRun off = load(path, LodMode::off, &metrics);
+  EXPECT_TRUE(off.model.lod.empty());
+  EXPECT_EQ(off.model.means, load_scene(path).means);
+}
+
+TEST(SceneWithLod, Options) {
+  EXPECT_EQ(parse_lod_mode("off"), LodMode::off);
+  EXPECT_EQ(parse_lod_mode("write"), LodMode::write);
+  EXPECT_THROW(parse_lod_mode("on"), std::invalid_argument);
+  const char* argv[] = {"catgs-server", "--lod", "sometimes"};
+  ServerOptions options;
+  EXPECT_EQ(options.lod, "write");
+  EXPECT_GT(options.lod_error_px, 0.0f);
+  try {
+    (void)parse_server_options(3, const_cast<char**>(argv), options);
+    ADD_FAILURE() << "--lod sometimes accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("--lod"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
