@@ -27,7 +27,8 @@ const glm::vec3 kMinusY(0.0f, -1.0f, 0.0f);  // the 3DGS convention's up (COLMAP
 // (Leaves first, error 0, then every merged node of error > 0: a binary search.)
 std::size_t content_count(const GaussianModel& m) {
   if (m.lod.empty()) return m.size();
-  const auto end = std::partition_point(m.lod.begin(), m.lod.end(), [](const fm::LodNode& n) { return n.error == 0.0f; });
+  const auto end =
+      std::partition_point(m.lod.begin(), m.lod.end(), [](const fm::LodNode& n) { return n.error == 0.0f; });
   return std::min(m.size(), static_cast<std::size_t>(end - m.lod.begin()) * fm::kChunkSize);
 }
 

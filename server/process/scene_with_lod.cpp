@@ -58,8 +58,7 @@ GaussianModel build_for(const std::string& path, const GaussianModel& scene, con
 
 }  // namespace
 
-GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOptions& o,
-                                  const LoadProgress& progress) {
+GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOptions& o, const LoadProgress& progress) {
   CachedLoadOptions c;
   c.mode = o.cache;
   c.log = o.log;

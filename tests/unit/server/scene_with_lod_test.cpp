@@ -69,7 +69,8 @@ void expect_leaves_are(const GaussianModel& lod, const GaussianModel& scene) {
   // Padding (lod_build.h): opacity logit -kOpacityLogitLimit and log-scale kLodPadLogScale.
   std::vector<std::array<float, 3>> got;
   for (std::size_t i = 0; i < leaves; ++i)
-    if (!(lod.opacity_logits[i] == -kOpacityLogitLimit && lod.log_scales[3 * i] == kLodPadLogScale)) got.push_back({lod.means[3 * i], lod.means[3 * i + 1], lod.means[3 * i + 2]});
+    if (!(lod.opacity_logits[i] == -kOpacityLogitLimit && lod.log_scales[3 * i] == kLodPadLogScale))
+      got.push_back({lod.means[3 * i], lod.means[3 * i + 1], lod.means[3 * i + 2]});
   std::sort(got.begin(), got.end());
   EXPECT_EQ(got, sorted_means(scene, scene.size()));
 }
