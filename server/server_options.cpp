@@ -77,7 +77,7 @@ std::string server_usage() {
          "                        valid for the scene as it is now; else its level of detail is\n"
          "                        built at load (progress in the log and /metrics) and, with write,\n"
          "                        written there (a folder that is not writable is logged); off\n"
-         "                        serves full detail (default write)\n"
+         "                        serves full detail (default off)\n"
          "  --lod-error PX        the cut's screen-space error bound in pixels (0 = full detail;\n"
          "                        default 2, chosen against a supersampled render: RESULTS.md)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
