@@ -26,8 +26,9 @@ struct ServerOptions {
   std::string scene_cache = "read";
   // --lod: the level of detail of each scene (process/scene_with_lod.h): "off", "read" (the LOD
   // file beside the scene, else built in memory) or "write" (also written beside the scene). Off
-  // by default: at small stream sizes the 2 px cut lost 1.8-15 dB against a supersampled render
-  // where full detail did not (RESULTS.md, "Level of detail in the server").
+  // by default: a bound in pixels is coarser at small stream sizes, where the 2 px cut fell
+  // further from a supersampled render than full detail (RESULTS.md, "Level of detail in the
+  // server").
   std::string lod = "off";
   // --lod-error: the level-of-detail bound in pixels (RenderOptions::lod_error_px; 0 = full
   // detail). The default is the coarsest bound measured within 0.5 dB of full detail's own PSNR

@@ -15,9 +15,8 @@
 // sessions join, a session's next encoder gets fewer threads; when they leave, more (the server
 // rebuilds an encoder only when its thread count should change, see should_rebuild()).
 //
-// Preset: x264's presets trade CPU time for quality at the same rate (a step from ultrafast to
-// superfast is worth about 3 dB on the city at 1080p for 1.44x the CPU; RESULTS.md, "x264 presets
-// by budget"). With --x264-preset auto a session's encoder takes the slowest preset of the ladder
+// Preset: x264's presets trade CPU time for quality at the same rate (what a step buys and costs:
+// RESULTS.md, "x264 presets by budget"). With --x264-preset auto a session's encoder takes the slowest preset of the ladder
 // whose CPU time a frame, at the live session count and the nominal frame rate, fits the share of
 // the host's cores the encoders may use (kEncoderCpuShare); as sessions join it steps down at
 // once, as they leave it steps up after kGrowDelay (an IDR each time).
@@ -60,9 +59,8 @@ int needed_threads(int width, int height);
 int encoder_threads(const EncoderPolicy& policy, int width, int height, int live_sessions);
 
 // The x264 presets the policy chooses from, cheapest first, with the CPU time a frame each takes
-// relative to ultrafast's: superfast took 2.26x at 1080p and 1.75x at 720p on the H100 host for
-// 2.0-2.1 dB more at the same rate; veryfast 3.3x / 2.3x for 0.01-0.05 dB more than superfast, so
-// it is not a step (RESULTS.md, "x264 presets by budget").
+// relative to ultrafast's, the larger of the factors measured at 1080p and 720p; veryfast bought
+// too little over superfast for its CPU to be a step (RESULTS.md, "x264 presets by budget").
 struct PresetStep {
   const char* name;
   double cpu_factor;
@@ -75,7 +73,7 @@ inline constexpr int kPresetSteps = static_cast<int>(sizeof(kPresetLadder) / siz
 inline constexpr double kEncoderCpuShare = 0.5;
 
 // x264 ultrafast's CPU time for one width x height frame, ms: 7.7 ms a megapixel, whatever the
-// thread count (RESULTS.md, "Encoder policy": 12.6-16 ms at 1080p, 6-8 ms at 720p; the upper end).
+// thread count (the upper end of what RESULTS.md, "Encoder policy", measured).
 double ultrafast_cpu_ms(int width, int height);
 
 // The ladder step (index into kPresetLadder) for one session's encoder at `fps` frames/s while
