@@ -77,9 +77,14 @@ std::string server_usage() {
          "                        valid for the scene as it is now; else its level of detail is\n"
          "                        built at load (progress in the log and /metrics) and, with write,\n"
          "                        written there (a folder that is not writable is logged); off\n"
-         "                        serves full detail (default off)\n"
-         "  --lod-error PX        the cut's screen-space error bound in pixels (0 = full detail;\n"
+         "                        serves full detail (default write)\n"
+         "  --lod-error PX        the cut's screen-space error bound in pixels at 720 lines, scaled\n"
+         "                        down with a smaller session's shorter side (0 = full detail;\n"
          "                        default 2, chosen against a supersampled render: RESULTS.md)\n"
+         "  --splat-budget N|auto|off  the most Gaussians a frame's LOD cut may hold: over it the\n"
+         "                        bound steps up (far detail merges first) and back down with\n"
+         "                        hysteresis; auto sizes it per CUDA session from the GPU's\n"
+         "                        measured throughput and the sessions sharing it (default auto)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -250,6 +255,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.lod = v;
     } else if (a == "--lod-error")
       out.lod_error_px = static_cast<float>(parse_double(a, v, 0.0, 1e6));
+    else if (a == "--splat-budget") {
+      out.auto_splat_budget = v == "auto";
+      out.splat_budget = v == "auto" || v == "off" ? 0 : static_cast<std::uint64_t>(parse_double(a, v, 0.0, 1e12));
+    }
     else if (a == "--scene-memory-mb")
       out.scene_memory_mb = parse_int(a, v, 0, 1 << 24);
     else if (a == "--port")
@@ -404,6 +413,9 @@ SessionSettings session_settings(const ServerOptions& o) {
   s.frame.frame_deadline_slots = o.frame_deadline_slots;
   s.frame.max_frames_in_flight = o.max_frames_in_flight;
   s.frame.socket_send_buffer = o.socket_send_buffer;
+  s.frame.lod.bound_px = o.lod_error_px;
+  s.frame.lod.splat_budget = o.splat_budget;
+  s.frame.lod.auto_budget = o.auto_splat_budget;
   return s;
 }
 

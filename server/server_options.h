@@ -2,6 +2,7 @@
 #pragma once
 
 #include <ostream>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -25,16 +26,17 @@ struct ServerOptions {
   // written after a plain load); scene/scene_cache.h.
   std::string scene_cache = "read";
   // --lod: the level of detail of each scene (process/scene_with_lod.h): "off", "read" (the LOD
-  // file beside the scene, else built in memory) or "write" (also written beside the scene). Off
-  // by default: a bound in pixels is coarser at small stream sizes, where the 2 px cut fell
-  // further from a supersampled render than full detail (RESULTS.md, "Level of detail in the
-  // server").
-  std::string lod = "off";
-  // --lod-error: the level-of-detail bound in pixels (RenderOptions::lod_error_px; 0 = full
-  // detail). The default is the coarsest bound measured within 0.5 dB of full detail's own PSNR
-  // against a 4x supersampled render on the city's real paths at 720p and 1080p (RESULTS.md,
-  // "Level of detail in the server").
+  // file beside the scene, else built in memory) or "write" (also written beside the scene).
+  std::string lod = "write";
+  // --lod-error: the level-of-detail bound in pixels at 720 lines, scaled down with a smaller
+  // session's shorter side (render/lod_bound.h; 0 = full detail). The default is the coarsest
+  // bound measured within 0.5 dB of full detail's own PSNR against a 4x supersampled render on
+  // the city's real paths (RESULTS.md, "Level of detail in the server").
   float lod_error_px = 2.0f;
+  // --splat-budget: Gaussians a frame's LOD cut may hold (render/lod_bound.h): N, 0 = none, or
+  // "auto" (the default; CUDA sessions only), sized from the GPU's measured throughput.
+  std::uint64_t splat_budget = 0;
+  bool auto_splat_budget = true;
   int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
   std::string bind = "0.0.0.0";    // interface address to listen on
   std::string renderer = "auto";   // "cpu" | "cuda" | "auto"

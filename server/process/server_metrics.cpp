@@ -172,6 +172,9 @@ std::string ServerMetrics::prometheus_text() const {
     head("catgs_gpu_render_seconds", "histogram", "Render time per frame on each GPU (--gpus).");
     for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
       gpu_render_seconds_[k]->write(o, "catgs_gpu_render_seconds", "gpu=\"" + std::to_string(gpu_devices_[k]) + "\"");
+    head("catgs_gpu_splats_per_second", "gauge", "The best Gaussians per second of render one frame showed on each GPU.");
+    for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+      o << "catgs_gpu_splats_per_second{gpu=\"" << gpu_devices_[k] << "\"} " << gpu_splats_per_ms_[k].load() * 1000 << '\n';
   }
   return o.str();
 }
@@ -182,11 +185,41 @@ void ServerMetrics::set_gpus(std::vector<int> devices, std::function<std::vector
   gpu_render_seconds_.clear();
   for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
     gpu_render_seconds_.push_back(std::make_unique<Histogram>(Histogram::stage_seconds()));
+  gpu_splats_per_ms_ = std::make_unique<std::atomic<std::int64_t>[]>(gpu_devices_.size());
+  for (std::size_t k = 0; k < gpu_devices_.size(); ++k) gpu_splats_per_ms_[k] = 0;
+}
+
+int ServerMetrics::gpu_index(int device) const {
+  for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
+    if (gpu_devices_[k] == device) return static_cast<int>(k);
+  return -1;
 }
 
 void ServerMetrics::observe_gpu_render(int device, double seconds) {
-  for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
-    if (gpu_devices_[k] == device) return gpu_render_seconds_[k]->observe(seconds);
+  const int k = gpu_index(device);
+  if (k >= 0) gpu_render_seconds_[k]->observe(seconds);
+}
+
+void ServerMetrics::observe_gpu_throughput(int device, std::uint64_t gaussians, double render_ms) {
+  const int k = gpu_index(device);
+  if (k < 0 || gaussians < 100000 || !(render_ms > 0.0)) return;
+  const auto rate = static_cast<std::int64_t>(static_cast<double>(gaussians) / render_ms);
+  std::atomic<std::int64_t>& best = gpu_splats_per_ms_[k];
+  std::int64_t seen = best.load();
+  while (rate > seen && !best.compare_exchange_weak(seen, rate)) {
+  }
+}
+
+double ServerMetrics::gpu_splats_per_ms(int device) const {
+  const int k = gpu_index(device);
+  return k < 0 ? 0.0 : static_cast<double>(gpu_splats_per_ms_[k].load());
+}
+
+std::int64_t ServerMetrics::gpu_sessions(int device) const {
+  const int k = gpu_index(device);
+  if (k < 0 || !gpu_sessions_) return 0;
+  const std::vector<std::int64_t> s = gpu_sessions_();
+  return static_cast<std::size_t>(k) < s.size() ? s[k] : 0;
 }
 
 }  // namespace catgs::server

@@ -16,6 +16,8 @@
 //                              that had frames (a histogram: no per-session label to grow)
 //   catgs_gpu_sessions{gpu}, catgs_gpu_render_seconds{gpu}   per GPU of --gpus (CUDA renderer):
 //                              sessions rendering there, and their render times
+//   catgs_gpu_splats_per_second{gpu}  the GPU's throughput the auto splat budget reads
+//                              (render/lod_bound.h): the best of any one frame, Gaussians/s
 //   catgs_refused_upgrades_total{reason}  WebSocket upgrades refused before the handshake
 //   catgs_timeouts_total{kind}            connections closed for silence: no Hello, or a silent session,
 //                                         or for a scene that did not load in time (scene_load)
@@ -148,6 +150,13 @@ struct ServerMetrics {
   void set_gpus(std::vector<int> devices, std::function<std::vector<std::int64_t>()> sessions);
   // Adds a render time on `device` (one of set_gpus' devices; others are ignored). Thread-safe.
   void observe_gpu_render(int device, double seconds);
+  // The GPU's throughput as the auto splat budget reads it (render/lod_bound.h): the most
+  // Gaussians per millisecond of render one frame on `device` has shown. Frames of under 100 k
+  // Gaussians are not counted (their fixed costs hide the rate). Thread-safe; 0 until known.
+  void observe_gpu_throughput(int device, std::uint64_t gaussians, double render_ms);
+  double gpu_splats_per_ms(int device) const;
+  // Sessions rendering on `device` now (GpuAssignment::sessions; 0 for one not in set_gpus).
+  std::int64_t gpu_sessions(int device) const;
 
   // The Prometheus exposition text.
   std::string prometheus_text() const;
@@ -156,6 +165,8 @@ struct ServerMetrics {
   std::vector<int> gpu_devices_;
   std::function<std::vector<std::int64_t>()> gpu_sessions_;
   std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;  // by index in gpu_devices_
+  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_splats_per_ms_;  // by index, rounded down
+  int gpu_index(int device) const;
 };
 
 }  // namespace catgs::server

@@ -20,8 +20,11 @@ int rate_cap_kbps(int client_kbps, int link_kbps) {
 
 }  // namespace
 
-void FramePipeline::open(std::unique_ptr<Renderer> renderer, int gpu, bool pipelined) {
+void FramePipeline::open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu,
+                         bool pipelined) {
   renderer_ = std::move(renderer);
+  model_ = std::move(model);
+  if (model_ && !model_->lod.empty()) cut_counter_ = std::make_unique<CutCounter>(*model_);
   gpu_ = gpu;
   pipelined_ = pipelined;
   for (int i = 0; pipelined_ && i < 2; ++i) free_planes_.push_back(std::make_unique<Yuv420Image>());
@@ -87,18 +90,38 @@ void FramePipeline::end_encode(Rendered& frame) {
   free_planes_.push_back(std::move(frame.planes));
 }
 
+float FramePipeline::set_lod_bound(const Camera& camera) {
+  if (!cut_counter_) return 0.0f;  // no LOD: the bound means nothing
+  const LodSettings& lod = settings_.lod;
+  const float base = size_scaled_lod_bound(lod.bound_px, camera.width, camera.height, lod.reference_lines);
+  std::uint64_t budget = lod.splat_budget;
+  if (budget == 0 && lod.auto_budget && gpu_ >= 0)
+    budget = auto_splat_budget(metrics_.gpu_splats_per_ms(gpu_), metrics_.gpu_sessions(gpu_));
+  const float tau = lod_bound_.choose(*cut_counter_, camera, base, budget);
+  if (renderer_->options().lod_error_px != tau) {
+    RenderOptions o = renderer_->options();
+    o.lod_error_px = tau;  // a catgs group closes: its key frame's cut is the group's
+    renderer_->set_options(o);
+  }
+  return tau;
+}
+
 void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
   const auto t_start = Clock::now();
   const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
                                           job.pose.pose.vertical_fov_deg, job.shape.width, job.shape.height);
+  r.lod_error_px = set_lod_bound(camera);
   // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
   // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
   r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
   r.render_key_frame = renderer_->last_stats().key_frame;
   r.speculation_window = renderer_->last_stats().window;
+  r.splats = renderer_->last_stats().visible;
   r.queue_ms = ms_between(job.pose.received, t_start);
   // Render time includes the plane download (GPU) but not the conversion itself.
   r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
+  // A sub-frame's time is not its Gaussians' (the caches skip the pre-process).
+  if (gpu_ >= 0 && r.render_key_frame) metrics_.observe_gpu_throughput(gpu_, r.splats, r.render_ms);
 }
 
 FramePipeline::Rendered FramePipeline::render(Job job, std::unique_ptr<Yuv420Image> planes, bool gone) {
@@ -209,6 +232,8 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_payload(enc.data.data(), enc.data.size());
   r.render_key_frame = rendered.render_key_frame;
   r.speculation_window = rendered.speculation_window;
+  r.lod_error_px = rendered.lod_error_px;
+  r.splats = rendered.splats;
   r.queue_ms = rendered.queue_ms;
   r.render_ms = rendered.render_ms;
   r.convert_ms = rendered.convert_ms;
@@ -221,6 +246,8 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_render_key_frame(r.render_key_frame);
   t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
   t->set_previous_send_ms(job.shape.previous_send_ms);
+  t->set_lod_error_px(r.lod_error_px);
+  t->set_splats(static_cast<std::uint32_t>(std::min<std::uint64_t>(r.splats, UINT32_MAX)));
   r.total_ms = ms_between(job.pose.received, Clock::now());
   r.quality_level = job.shape.quality_level;
   r.refine = job.pose.full_size;

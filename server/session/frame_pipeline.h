@@ -29,6 +29,7 @@
 #include "proto/message_validation.h"
 #include "renderer/renderer.h"
 #include "process/server_metrics.h"
+#include "render/lod_bound.h"
 #include "session/session_settings.h"
 
 namespace catgs::server {
@@ -73,6 +74,8 @@ class FramePipeline {
     std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
     bool render_key_frame = true;
     int speculation_window = 0;
+    float lod_error_px = 0;     // the LOD bound the frame drew at (0: full detail or no LOD)
+    std::uint64_t splats = 0;   // Gaussians that passed culling
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
     std::string error;         // non-empty: the render failed
     bool over_budget = false;  // it failed with RenderBudgetError (renderer.h): the view, not the server
@@ -85,6 +88,8 @@ class FramePipeline {
     bool key_frame = false;        // an IDR access unit
     bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
     int speculation_window = 0;
+    float lod_error_px = 0;       // as Rendered's
+    std::uint64_t splats = 0;
     std::size_t payload_bytes = 0;
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
     double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
@@ -101,9 +106,10 @@ class FramePipeline {
   FramePipeline(const FrameSettings& settings, ServerMetrics& metrics) : settings_(settings), metrics_(metrics) {}
 
   // --- strand ---
-  // At Welcome: the session's renderer, on CUDA device `gpu` (-1: the CPU renderer), and whether
-  // render and encode are two stages (false: NVENC takes the CUDA frame in one job).
-  void open(std::unique_ptr<Renderer> renderer, int gpu, bool pipelined);
+  // At Welcome: the session's renderer of `model` (which outlives the pipeline), on CUDA device
+  // `gpu` (-1: the CPU renderer), and whether render and encode are two stages (false: NVENC
+  // takes the CUDA frame in one job).
+  void open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu, bool pipelined);
   std::string renderer_name() const { return renderer_ ? renderer_->name() : std::string(); }
   bool pipelined() const { return pipelined_; }
 
@@ -151,6 +157,8 @@ class FramePipeline {
   // Renders job's pose into `target` and fills r's render fields (timings, key frame, window).
   // Throws what Renderer::render_yuv420_at throws.
   void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
+  // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed.
+  float set_lod_bound(const Camera& camera);
   // Builds or reconfigures the encoder for `job`; sets `idr` when it was (re)built.
   void ensure_encoder(const Job& job, bool& idr);
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
@@ -171,6 +179,9 @@ class FramePipeline {
 
   // --- job state (one render job and one encode job at a time) ---
   std::unique_ptr<Renderer> renderer_;
+  std::shared_ptr<const GaussianModel> model_;
+  std::unique_ptr<CutCounter> cut_counter_;  // built at open for a model with LOD
+  LodBoundChooser lod_bound_;
   int gpu_ = -1;  // the CUDA device renderer_ renders on, -1: none (CPU renderer)
   std::unique_ptr<Encoder> encoder_;
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with

@@ -6,6 +6,7 @@
 
 #include "encode/encoder_policy.h"
 #include "proto/message_validation.h"
+#include "render/lod_bound.h"
 #include "session/access_tokens.h"
 #include "session/rate_limit.h"
 
@@ -26,6 +27,8 @@ struct FrameSettings {
   double frame_deadline_slots = 2.0;
   int max_frames_in_flight = 2;         // frames queued to the transport but not yet written
   int socket_send_buffer = 512 * 1024;  // SO_SNDBUF the transport gives a socket, bytes (0: the kernel's)
+  // --lod-error, --splat-budget: each frame's level-of-detail bound (render/lod_bound.h).
+  LodSettings lod;
 };
 
 // A session's settings. Times are milliseconds.

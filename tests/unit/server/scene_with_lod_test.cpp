@@ -149,7 +149,7 @@ TEST(SceneWithLod, Options) {
   EXPECT_THROW(parse_lod_mode("on"), std::invalid_argument);
   const char* argv[] = {"catgs-server", "--lod", "sometimes"};
   ServerOptions options;
-  EXPECT_EQ(options.lod, "off");
+  EXPECT_EQ(options.lod, "write");
   EXPECT_GT(options.lod_error_px, 0.0f);
   try {
     (void)parse_server_options(3, const_cast<char**>(argv), options);

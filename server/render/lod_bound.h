@@ -1,0 +1,85 @@
+// The level-of-detail bound each frame of a session draws at (issue 46; the cut itself is
+// render_core/forward_model/lod.h, the same on both cores).
+//
+// Two things set it:
+// - The session's size. The bound is given in pixels of a picture whose shorter side is
+//   `reference_lines` (720) and scales with the session's shorter side below that: a session
+//   streaming 320x180 draws at a quarter of the bound, so the cut is as fine relative to its
+//   picture as at 720p (a fixed pixel bound lost 3.4 dB against a supersampled render at 320x180
+//   where it lost 0.15 dB at 720p; RESULTS.md "Level of detail in the server"). Above it the
+//   bound stays as given (the yardstick chose 2 px at 720p and at 1080p alike).
+// - A splat budget: at most that many Gaussians in a frame's cut, predicted from the LOD tree
+//   before the frame is drawn (CutCounter: the chunks of the cut whose boxes meet the view
+//   frustum, kChunkSize Gaussians each). Over it, the bound steps up a ladder of x sqrt(2) steps
+//   (at most 16x the size's bound); the screen-space error of a node falls with its distance, so
+//   each step merges far detail first. It steps back down one step a frame only when the finer
+//   step's count fits within 3/4 of the budget (hysteresis). The choice depends on the pose and
+//   the budget alone, never on timing: a camera standing still keeps its cut.
+// The budget is --splat-budget N a frame, or, for CUDA sessions by default (auto), sized from the
+// GPU's measured throughput: the best Gaussians per millisecond of render any frame on that GPU
+// has shown (ServerMetrics::gpu_splats_per_ms), times a 60 Hz frame slot, times 0.8, shared by the
+// sessions rendering on that GPU, rounded down to a power of sqrt(2) so small changes of the
+// estimate do not move the cut. A scene without LOD has no cut to coarsen: the bound is unused.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "camera/camera.h"
+#include "scene/gaussian_model.h"
+
+namespace catgs::server {
+
+struct LodSettings {
+  float bound_px = 2.0f;           // --lod-error: the bound at reference_lines; 0 = full detail
+  int reference_lines = 720;       // the shorter side at which the bound is bound_px
+  std::uint64_t splat_budget = 0;  // --splat-budget N: Gaussians a frame's cut (0: none)
+  bool auto_budget = true;         // --splat-budget auto (the default): from the GPU's throughput
+};
+
+// bound_px x min(1, shorter side / reference_lines). 0 stays 0 (full detail).
+float size_scaled_lod_bound(float bound_px, int width, int height, int reference_lines);
+
+// The auto budget (see above): Gaussians a frame for one of `sessions` sessions sharing a GPU
+// that draws `splats_per_ms`; 0 (no budget) while the throughput is not known yet.
+std::uint64_t auto_splat_budget(double splats_per_ms, std::int64_t sessions);
+
+// Counts the Gaussians of a LOD cut inside a view without visiting the nodes below the cut: the
+// tree from its roots down (children lists built once from LodNode::parent).
+class CutCounter {
+ public:
+  // `model` must outlive the counter; a model without LOD counts nothing (splats() is 0).
+  explicit CutCounter(const GaussianModel& model);
+  bool has_lod() const { return !roots_.empty(); }
+  // Gaussians (kChunkSize per drawn chunk, padding included) of the cut at bound `tau` pixels seen
+  // by `camera`, counting only chunks whose node box (of its leaves' means) meets the view frustum
+  // widened by 15% on each side.
+  std::uint64_t splats(const Camera& camera, float tau) const;
+
+ private:
+  const GaussianModel& model_;
+  std::vector<std::uint32_t> roots_;
+  std::vector<std::uint32_t> child_begin_;  // node c's children: children_[child_begin_[c] .. [c + 1])
+  std::vector<std::uint32_t> children_;
+};
+
+// One session's bound, frame by frame (the ladder and hysteresis above).
+class LodBoundChooser {
+ public:
+  static constexpr int kSteps = 8;  // ladder steps above the size's bound: up to x16
+
+  // The bound for a frame of `camera` whose size-scaled bound is `base` px under `budget`
+  // Gaussians (0: no budget, `base` itself).
+  float choose(const CutCounter& counter, const Camera& camera, float base, std::uint64_t budget);
+  int step() const { return step_; }
+  // The cut's predicted Gaussians at the chosen bound (0 when no budget was in force).
+  std::uint64_t predicted_splats() const { return predicted_; }
+
+  static float bound_at(float base, int step);
+
+ private:
+  int step_ = 0;
+  std::uint64_t predicted_ = 0;
+};
+
+}  // namespace catgs::server

@@ -1,0 +1,225 @@
+// Each frame's level-of-detail bound (issue 46, server/render/lod_bound.h): the bound scaled with
+// the session's size, judged by the yardstick that chose the 2 px default (full detail rendered
+// 4x larger each way and box-filtered down, as catgs-bench --aa-reference 4); the cut's predicted
+// count against the cut the CPU core draws; the splat budget's ladder, its hysteresis and its
+// determinism; the auto budget's sizing. On a 9-copy city of the real flowers_sh3 scene.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <vector>
+
+#include "camera/trace.h"
+#include "common/image_io.h"
+#include "forward_model/chunk_bounds.h"
+#include "lod/lod_build.h"
+#include "render/lod_bound.h"
+#include "renderer/renderer.h"
+#include "scene/morton.h"
+#include "scene_tools/city.h"
+#include "server_options.h"
+#include "test_data.h"
+
+namespace {
+
+using namespace catgs;
+using namespace catgs::server;
+
+struct City {
+  std::shared_ptr<const GaussianModel> full;  // in Morton order (the LOD's leaves without padding)
+  std::shared_ptr<const GaussianModel> lod;
+  std::vector<Camera> views;  // 320x180 fly-over poses from outside the city to its middle
+};
+
+const City& small_city() {
+  static const City city = [] {
+    City c;
+    const auto flowers = test::cached_scene(test::data_file("scenes/flowers_sh3.ply"));
+    CityParams p;
+    p.radius_sq = 2;  // 9 copies
+    p.up = glm::vec3(0.0f, -1.0f, 0.0f);
+    CityLayout layout;
+    const GaussianModel tiled = tile_scene(*flowers, p, &layout);
+    auto full = std::make_shared<GaussianModel>(permuted(tiled, morton_order(tiled)));
+    c.lod = std::make_shared<const GaussianModel>(build_lod(*full));
+    c.full = full;
+    GeneratorParams g;
+    g.width = 320;
+    g.height = 180;
+    g.rate_hz = 120.0;
+    g.duration_s = 1.0;
+    g.up = layout.up;
+    FlyoverParams far = {};
+    far.start_cells = -3.0f;
+    far.end_cells = 0.0f;
+    const Trace t = make_city_flyover(layout, far, g);
+    for (std::size_t k = 0; k < t.size(); k += t.size() / 8) c.views.push_back(t[k].camera);
+    return c;
+  }();
+  return city;
+}
+
+std::unique_ptr<Renderer> exact_cpu(std::shared_ptr<const GaussianModel> m, float tau) {
+  RenderOptions o;
+  o.pipeline = Pipeline::exact;
+  o.lod_error_px = tau;
+  return make_renderer("cpu", std::move(m), o);
+}
+
+TEST(LodBound, ScalesWithTheShorterSideBelowTheReference) {
+  EXPECT_FLOAT_EQ(size_scaled_lod_bound(2.0f, 1280, 720, 720), 2.0f);
+  EXPECT_FLOAT_EQ(size_scaled_lod_bound(2.0f, 1920, 1080, 720), 2.0f);  // never coarser than given
+  EXPECT_FLOAT_EQ(size_scaled_lod_bound(2.0f, 720, 1280, 720), 2.0f);   // portrait: the shorter side
+  EXPECT_FLOAT_EQ(size_scaled_lod_bound(2.0f, 320, 180, 720), 0.5f);
+  EXPECT_FLOAT_EQ(size_scaled_lod_bound(2.0f, 640, 360, 720), 1.0f);
+  EXPECT_EQ(size_scaled_lod_bound(0.0f, 320, 180, 720), 0.0f);  // full detail stays full
+  ServerOptions defaults;
+  EXPECT_EQ(defaults.lod, "write");  // on by default (issue 46)
+  EXPECT_FLOAT_EQ(defaults.lod_error_px, 2.0f);
+  EXPECT_TRUE(defaults.auto_splat_budget);
+}
+
+// The yardstick (issue 46): at the server's default bound scaled to the session's size, the cut
+// scores within 0.5 dB of full detail's own score against the supersampled render, mean over the
+// fly-over's views, and draws fewer Gaussians, at 320x180 and 640x360. (The unscaled 2 px at
+// 320x180 lost 3.4 dB here: RESULTS.md.)
+TEST(LodBound, DefaultBoundAtEachSizeWithinHalfADbOfFullDetailAgainstSupersampled) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const City& c = small_city();
+  const float bound = ServerOptions{}.lod_error_px;
+  constexpr int kFactor = 4;
+  for (const int scale : {1, 2}) {
+    double full_db = 0, cut_db = 0;
+    std::size_t full_visible = 0, cut_visible = 0, n = 0;
+    Image hi, f, l;
+    for (std::size_t k = 0; k < c.views.size(); k += 2 * scale, ++n) {
+      const Camera v = c.views[k].rescaled(c.views[k].width * scale, c.views[k].height * scale);
+      const float tau = size_scaled_lod_bound(bound, v.width, v.height, LodSettings{}.reference_lines);
+      auto full = exact_cpu(c.full, 0.0f);
+      auto cut = exact_cpu(c.lod, tau);
+      full->render(v.rescaled(v.width * kFactor, v.height * kFactor), hi);
+      const Image reference = box_downsample(hi, kFactor);
+      full->render(v, f);
+      full_visible += full->last_stats().visible;
+      cut->render(v, l);
+      cut_visible += cut->last_stats().visible;
+      const double fd = psnr_rgba8(f, reference), cd = psnr_rgba8(l, reference);
+      std::printf("%dx%d view %zu: full detail %.2f dB, cut at %.2f px %.2f dB against the supersampled render\n",
+                  v.width, v.height, k, fd, tau, cd);
+      full_db += fd;
+      cut_db += cd;
+    }
+    full_db /= static_cast<double>(n);
+    cut_db /= static_cast<double>(n);
+    EXPECT_GE(cut_db, full_db - 0.5) << "scale " << scale << ", mean over " << n << " views";
+    EXPECT_LT(cut_visible, full_visible) << "scale " << scale;
+  }
+}
+
+// The predicted count: at most the cut's chunks with no frustum at all (every drawn chunk, as
+// fm::lod_chunk_drawn says), all of them for a view that holds the whole city, and at least the
+// Gaussians the CPU core's culling lets through at that bound.
+TEST(LodBound, PredictedCountBracketsTheCutTheCoreDraws) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const City& c = small_city();
+  const CutCounter counter(*c.lod);
+  ASSERT_TRUE(counter.has_lod());
+  for (const float tau : {0.5f, 2.0f, 8.0f}) {
+    for (std::size_t k = 0; k < c.views.size(); ++k) {
+      const Camera& v = c.views[k];
+      const fm::LodCut cut = fm::lod_cut(
+          c.lod->lod, fm::View{v.R, v.t, v.fx, v.fy, v.cx, v.cy, v.width, v.height, v.near_plane, v.far_plane, {}},
+          tau);
+      std::uint64_t drawn = 0;
+      for (std::size_t ch = 0; ch < c.lod->lod.size(); ++ch) drawn += cut.drawn(ch) ? fm::kChunkSize : 0;
+      const std::uint64_t predicted = counter.splats(v, tau);
+      auto r = exact_cpu(c.lod, tau);
+      Image img;
+      r->render(v, img);
+      EXPECT_LE(predicted, drawn) << "tau " << tau << " view " << k;
+      EXPECT_GE(predicted, r->last_stats().visible) << "tau " << tau << " view " << k;
+      if (k == 0) {
+        EXPECT_EQ(predicted, drawn) << "the first view, outside the city, sees all of it";
+      }
+    }
+  }
+  // A view looking away from the city predicts nothing.
+  Camera away = c.views.front();
+  const glm::vec3 eye = away.position();
+  away.R = glm::mat3(-1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, -1.0f) * away.R;  // turned around
+  away.t = -(away.R * eye);
+  EXPECT_LT(counter.splats(away, 2.0f), counter.splats(c.views.front(), 2.0f) / 4);
+}
+
+TEST(LodBound, BudgetStepsUpUntilTheCutFitsAndDownWithHysteresis) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const City& c = small_city();
+  const CutCounter counter(*c.lod);
+  const Camera& v = c.views[2];
+  const float base = 0.5f;
+  const std::uint64_t at_base = counter.splats(v, base);
+  ASSERT_GT(at_base, 0u);
+
+  LodBoundChooser none;
+  EXPECT_EQ(none.choose(counter, v, base, 0), base);  // no budget: the size's bound
+  LodBoundChooser roomy;
+  EXPECT_EQ(roomy.choose(counter, v, base, at_base), base);  // fits: no step
+  EXPECT_EQ(roomy.predicted_splats(), at_base);
+
+  // Half the cut's count: the bound steps up until the prediction fits.
+  const std::uint64_t budget = at_base / 2;
+  LodBoundChooser tight;
+  const float tau = tight.choose(counter, v, base, budget);
+  ASSERT_GT(tight.step(), 0);
+  EXPECT_FLOAT_EQ(tau, LodBoundChooser::bound_at(base, tight.step()));
+  EXPECT_LE(tight.predicted_splats(), budget);
+  EXPECT_EQ(tight.predicted_splats(), counter.splats(v, tau));
+  EXPECT_GT(counter.splats(v, LodBoundChooser::bound_at(base, tight.step() - 1)), budget);  // the first that fits
+  // The same pose again: the same bound (a still camera keeps its cut).
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(tight.choose(counter, v, base, budget), tau);
+
+  // Hysteresis: a budget the finer step just fits does not step down; one with a quarter to spare does.
+  const std::uint64_t finer = counter.splats(v, LodBoundChooser::bound_at(base, tight.step() - 1));
+  const int step = tight.step();
+  EXPECT_EQ(tight.choose(counter, v, base, finer), tau);
+  EXPECT_EQ(tight.step(), step);
+  EXPECT_LT(tight.choose(counter, v, base, finer * 4 / 3 + 1), tau);
+  EXPECT_EQ(tight.step(), step - 1);
+
+  // A budget nothing fits: the top of the ladder, no further.
+  LodBoundChooser starved;
+  EXPECT_FLOAT_EQ(starved.choose(counter, v, base, 1), LodBoundChooser::bound_at(base, LodBoundChooser::kSteps));
+}
+
+TEST(LodBound, AutoBudgetSharesTheGpusThroughputInPowersOfSqrt2) {
+  EXPECT_EQ(auto_splat_budget(0.0, 1), 0u);  // not known yet: no budget
+  const std::uint64_t one = auto_splat_budget(2.0e6, 1), four = auto_splat_budget(2.0e6, 4);
+  // 2 M Gaussians a ms x 16.7 ms x 0.8 = 26.7 M, down to a power of sqrt(2).
+  EXPECT_LE(one, 26'666'667u);
+  EXPECT_GT(static_cast<double>(one), 26'666'667.0 / std::sqrt(2.0));
+  EXPECT_LE(four, one / 4 + 1);
+  EXPECT_GT(static_cast<double>(four), static_cast<double>(one) / 4.0 / std::sqrt(2.0));
+  // Rounded: 10% more throughput moves the budget by one step or not at all.
+  const double steps = std::log2(static_cast<double>(auto_splat_budget(2.2e6, 1)) / static_cast<double>(one)) * 2.0;
+  EXPECT_TRUE(std::abs(steps) < 1e-6 || std::abs(steps - 1.0) < 1e-6) << steps;
+}
+
+TEST(LodBound, SplatBudgetOption) {
+  const char* a1[] = {"catgs-server", "--splat-budget", "2000000"};
+  ServerOptions o1;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a1), o1));
+  EXPECT_EQ(o1.splat_budget, 2000000u);
+  EXPECT_FALSE(o1.auto_splat_budget);
+  EXPECT_EQ(session_settings(o1).frame.lod.splat_budget, 2000000u);
+  const char* a2[] = {"catgs-server", "--splat-budget", "off"};
+  ServerOptions o2;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a2), o2));
+  EXPECT_EQ(o2.splat_budget, 0u);
+  EXPECT_FALSE(session_settings(o2).frame.lod.auto_budget);
+  const char* a3[] = {"catgs-server", "--splat-budget", "lots"};
+  ServerOptions o3;
+  EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a3), o3), std::invalid_argument);
+}
+
+}  // namespace
