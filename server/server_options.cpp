@@ -258,8 +258,7 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else if (a == "--splat-budget") {
       out.auto_splat_budget = v == "auto";
       out.splat_budget = v == "auto" || v == "off" ? 0 : static_cast<std::uint64_t>(parse_double(a, v, 0.0, 1e12));
-    }
-    else if (a == "--scene-memory-mb")
+    } else if (a == "--scene-memory-mb")
       out.scene_memory_mb = parse_int(a, v, 0, 1 << 24);
     else if (a == "--port")
       out.port = parse_int(a, v, 0, 65535);

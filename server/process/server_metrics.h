@@ -164,7 +164,7 @@ struct ServerMetrics {
  private:
   std::vector<int> gpu_devices_;
   std::function<std::vector<std::int64_t>()> gpu_sessions_;
-  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;  // by index in gpu_devices_
+  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;      // by index in gpu_devices_
   std::unique_ptr<std::atomic<std::int64_t>[]> gpu_splats_per_ms_;  // by index, rounded down
   int gpu_index(int device) const;
 };

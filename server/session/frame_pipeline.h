@@ -74,8 +74,8 @@ class FramePipeline {
     std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
     bool render_key_frame = true;
     int speculation_window = 0;
-    float lod_error_px = 0;     // the LOD bound the frame drew at (0: full detail or no LOD)
-    std::uint64_t splats = 0;   // Gaussians that passed culling
+    float lod_error_px = 0;    // the LOD bound the frame drew at (0: full detail or no LOD)
+    std::uint64_t splats = 0;  // Gaussians that passed culling
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
     std::string error;         // non-empty: the render failed
     bool over_budget = false;  // it failed with RenderBudgetError (renderer.h): the view, not the server
@@ -88,7 +88,7 @@ class FramePipeline {
     bool key_frame = false;        // an IDR access unit
     bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
     int speculation_window = 0;
-    float lod_error_px = 0;       // as Rendered's
+    float lod_error_px = 0;  // as Rendered's
     std::uint64_t splats = 0;
     std::size_t payload_bytes = 0;
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
