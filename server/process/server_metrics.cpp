@@ -172,9 +172,11 @@ std::string ServerMetrics::prometheus_text() const {
     head("catgs_gpu_render_seconds", "histogram", "Render time per frame on each GPU (--gpus).");
     for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
       gpu_render_seconds_[k]->write(o, "catgs_gpu_render_seconds", "gpu=\"" + std::to_string(gpu_devices_[k]) + "\"");
-    head("catgs_gpu_splats_per_second", "gauge", "The best Gaussians per second of render one frame showed on each GPU.");
+    head("catgs_gpu_splats_per_second", "gauge",
+         "The best Gaussians per second of render one frame showed on each GPU.");
     for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
-      o << "catgs_gpu_splats_per_second{gpu=\"" << gpu_devices_[k] << "\"} " << gpu_splats_per_ms_[k].load() * 1000 << '\n';
+      o << "catgs_gpu_splats_per_second{gpu=\"" << gpu_devices_[k] << "\"} " << gpu_splats_per_ms_[k].load() * 1000
+        << '\n';
   }
   return o.str();
 }
@@ -206,8 +208,7 @@ void ServerMetrics::observe_gpu_throughput(int device, std::uint64_t gaussians, 
   const auto rate = static_cast<std::int64_t>(static_cast<double>(gaussians) / render_ms);
   std::atomic<std::int64_t>& best = gpu_splats_per_ms_[k];
   std::int64_t seen = best.load();
-  while (rate > seen && !best.compare_exchange_weak(seen, rate)) {
-  }
+  while (rate > seen && !best.compare_exchange_weak(seen, rate)) {}
 }
 
 double ServerMetrics::gpu_splats_per_ms(int device) const {
