@@ -29,7 +29,9 @@
 # fitted), `rd SCENE WxH SETTINGS` (catgs-encode-bench), `ramp NAME SCENE WxH PIPELINE START STEP
 # MAX P95_MS MIN_FPS [SERVER ARGS]` (sessions until a bound breaks; scripts/ramp_table.py);
 # the level of detail in the server (issue 46): `bigcity R NAME` (49 or 101 copies) and
-# `firstframe NAME SCENE WxH [SERVER ARGS]` (start to listening, the first session's frames).
+# `firstframe NAME SCENE WxH [SERVER ARGS]` (start to listening, the first session's frames),
+# `pictures SCENE WxH BOUNDS` (catgs-bench's yardstick and PNGs of full detail, the cut and the
+# supersampled render).
 # CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -40,9 +42,12 @@ prepare() {
   local build=${1:-build/cuda}
   local carry=$ROOT/.carry_srv
   rm -rf "$carry" && mkdir -p "$carry/stage/bin" "$carry/stage/lib"
+  # catgs-encode-bench (rd) and catgs-bench (pictures) only when asked: with the scene both
+  # would pass the carry's 64 MiB.
   local bins=("$build/bin/catgs-server" "$build/bin/catgs-loadgen" "$build/bin/catgs-scene"
-              "$build/bin/catgs-encode-bench"
               "$(find "$build" -type f -name catgs_server_unit_tests -perm -u+x | head -1)")
+  [ "${CATGS_CARRY_ENCODE_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-encode-bench")
+  [ "${CATGS_CARRY_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-bench")
   for b in "${bins[@]}"; do
     [ -x "$b" ] || { echo "prepare: $b missing (build $build with the server)" >&2; return 1; }
     cp -f "$b" "$carry/stage/bin/"
@@ -242,6 +247,19 @@ firstframe() {
     tail -5 "$W/first_$name.txt"; } | tee "$OUT/firstframe-$name.log"
 }
 
+# pictures SCENE WxH BOUNDS: catgs-bench (prepare with CATGS_CARRY_BENCH=1) on SCENE's bicycle
+# path, exact, LOD built, the bounds BOUNDS (e.g. 0,2) timed and scored against full detail and
+# a 4x supersampled render; PNGs of the middle pose (each bound, full detail, the supersampled
+# reference) -> $OUT/pictures/SCENE_WxH/, the JSON -> $OUT/yardstick_SCENE_WxH.json.
+pictures() {
+  local scene=$1 size=$2 bounds=$3 W=/tmp/catgs_sweep
+  export LD_LIBRARY_PATH=$SRV/lib
+  "$SRV/bin/catgs-bench" --scene "$W/$scene.compressed.ply" --lod --trace "$W/${scene}_mipnerf360_bicycle.trace" \
+    --renderer cuda --width "${size%x*}" --height "${size#*x}" --pipeline exact --lod-error "$bounds" \
+    --frames 120 --warmup 10 --quality-every 12 --aa-reference 4 --snapshot-dir "$OUT/pictures/${scene}_$size" \
+    --json "$OUT/yardstick_${scene}_$size.json"
+}
+
 # rd SCENE WxH SETTINGS [FRAMES]: catgs-encode-bench on SCENE's bicycle path (CUDA renders, x264)
 # -> $OUT/rd_SCENE_WxH.json and its table.
 rd() {
@@ -253,10 +271,11 @@ rd() {
 }
 
 # measure TAG N SIZE PORT TRACES SECONDS: one catgs-loadgen run of N sessions against the server
-# (SERVER_PID) with the host's CPU, the server's CPU and GPU utilisation -> $W/json/TAG.json.
+# (SERVER_PID) with the host's CPU, the server's CPU, GPU utilisation and the most device memory
+# in use -> $W/json/TAG.json.
 measure() {
   local tag=$1 n=$2 size=$3 port=$4 traces=$5 seconds=$6 W=/tmp/catgs_sweep
-  nvidia-smi --query-gpu=utilization.gpu --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
+  nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
   local smi=$! cpu0 srv0 cpu1 srv1
   cpu0=$(head -1 /proc/stat)
   srv0=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
@@ -272,10 +291,12 @@ path, c0, c1, s0, s1, gpu = sys.argv[1:]
 a = [int(x) for x in c0.split()[1:]]; b = [int(x) for x in c1.split()[1:]]
 d = [y - x for x, y in zip(a, b)]
 busy = 1 - (d[3] + d[4]) / max(1, sum(d))          # idle + iowait
-u = [float(x) for x in open(gpu).read().split() if x.strip()]
+rows = [[float(v) for v in line.split(",")] for line in open(gpu) if line.count(",") == 1]
+u = [r[0] for r in rows]; mem = [r[1] for r in rows]   # percent; MiB of device memory in use
 j = json.load(open(path))
 j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)) / 100.0,
-             "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u)}
+             "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u),
+             "gpu_memory_used_mib_max": max(mem) if mem else None}
 json.dump(j, open(path, "w"), indent=1)
 PY
   return $rc
@@ -318,6 +339,7 @@ case "${1:-}" in
   bigcity) shift; bigcity "$@" ;;
   firstframe) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; firstframe "$@" ;;
   rd) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; rd "$@" ;;
+  pictures) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; pictures "$@" ;;
   ramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; ramp "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
 esac

@@ -2,11 +2,12 @@
 """Markdown table of gpu_server_run.sh ramps: one row per ramp (issue 35's table).
 
 usage: ramp_table.py DIR   (DIR/json, or DIR itself as in tests/gpu/results/ramps_run*, holds
-                           ramp-NAME.meta and ramp-NAME_N.json per session count; .json.gz is read too)
+                           ramp-NAME.meta and ramp-NAME_N.json per session count; .gz is read too)
 
 Per ramp: the largest session count that held both bounds, the first step's (one session's)
 p95 / p99, and at the largest count held: the slowest session's FPS, pooled p95 / p99, Mbit/s and
-bits a pixel per session, the server's mean render / encode / queue ms, CPU busy, the server's
+bits a pixel per session, the server's mean render / encode / queue ms, the level of detail's
+bound (mean and largest, px) and Gaussians a frame where the JSON has them, CPU busy, the server's
 CPU (cores) and GPU utilisation; then what broke the next step and the stage that grew most.
 """
 import glob
@@ -25,8 +26,8 @@ def open_json(path):
 def load(w):
     ramps = []
     d = os.path.join(w, "json") if os.path.isdir(os.path.join(w, "json")) else w
-    for meta in sorted(glob.glob(os.path.join(d, "ramp-*.meta"))):
-        m = json.load(open(meta))
+    for meta in sorted(glob.glob(os.path.join(d, "ramp-*.meta")) + glob.glob(os.path.join(d, "ramp-*.meta.gz"))):
+        m = open_json(meta)
         steps = []
         for f in glob.glob(os.path.join(d, f"ramp-{m['name']}_*.json")) + glob.glob(
                 os.path.join(d, f"ramp-{m['name']}_*.json.gz")):
@@ -58,8 +59,9 @@ def limit(prev, broke):
 def main(w):
     print("| ramp | scene | size | pipeline | server flags | sessions held | one session p95 / p99 ms | "
           "at the largest held: FPS min, p95 / p99 ms | Mbit/s a session | bits a pixel | render / encode / "
-          "queue ms | CPU busy | server CPU (cores) | GPU util | next step broke by | stage that grew most |")
-    print("|" + "---|" * 16)
+          "queue ms | LOD bound px mean / max, M Gaussians a frame | CPU busy | server CPU (cores) | GPU util | "
+          "next step broke by | stage that grew most |")
+    print("|" + "---|" * 17)
     for m, steps in load(w):
         if not steps:
             continue
@@ -77,10 +79,12 @@ def main(w):
             at = (f"{t['fps_min']:.1f}, {t['latency']['p95_ms']:.1f} / {t['latency']['p99_ms']:.1f}", f"{mbps:.1f}",
                   f"{mbps * 1e6 / (w_ * h_ * 60):.3f}",
                   f"{srv['render_ms']:.2f} / {srv['encode_ms']:.2f} / {srv['queue_ms']:.2f}",
+                  (f"{srv['lod_error_px_mean']:.2f} / {srv['lod_error_px_max']:.2f}, {srv['splats_mean'] / 1e6:.2f}"
+                   if srv.get("lod_error_px_max") else "-"),
                   f"{100 * host.get('cpu_busy_fraction', 0):.0f}%", f"{host.get('server_cpu_seconds', 0) / secs:.1f}",
                   f"{host.get('gpu_util_mean') or 0:.0f}%")
         else:
-            at = ("none held",) + ("",) * 6
+            at = ("none held",) + ("",) * 7
         broke = ""
         if bad[1] is not None:
             t = bad[1]["run"]["total"]

@@ -141,9 +141,14 @@ void Server::load_model() {
   o.prepare = [this](LoadedScene& scene) {
     for (int d : gpus_->devices()) {
       const auto t0 = std::chrono::steady_clock::now();
+      const std::size_t before = cuda_device_memory_used(d);
       scene.residents.push_back(make_renderer("cuda", scene.model, render_options_, nullptr, d));
-      std::cout << "gpu " << d << ": scene " << scene.model->name << " uploaded in " << ms_since(t0) << " ms"
-                << std::endl;
+      // The device copy's size (issue 46: what a scene costs the GPU before any session).
+      const std::size_t after = cuda_device_memory_used(d);
+      const double mib = static_cast<double>(after - std::min(before, after)) / (1024.0 * 1024.0);
+      std::cout << "gpu " << d << ": scene " << scene.model->name << " uploaded in " << ms_since(t0) << " ms, "
+                << static_cast<long>(mib) << " MiB of device memory (with its LOD levels, "
+                << scene.model->lod.size() << " chunks)" << std::endl;
     }
   };
   std::vector<SceneStore::Source> sources{{options_.scene, options_.cameras}};

@@ -128,6 +128,10 @@ export class Overlay {
         lines.push('server: idle (no frame in the last second)');
       } else if (s) {
         lines.push(`server: render ${num(s.render_ms_mean)} ms  encode ${num(s.encode_ms_mean)} ms`);
+        // Level of detail: the cut's bound and the Gaussians a frame drew (a scene served with LOD).
+        if (s.lod_error_px_mean) {
+          lines.push(`  LOD ${num(s.lod_error_px_mean)} px  ${((s.splats_mean || 0) / 1e6).toFixed(2)} M splats`);
+        }
         lines.push(`  ${num((s.bytes_per_second * 8) / 1e6)} Mbit/s  skipped ${s.poses_skipped || 0}`);
         // The link's rate controller: what the link carried, its round trip, the cap it sets.
         const cap = s.bitrate_cap_kbps ? `cap ${s.bitrate_cap_kbps} kbit/s` : 'not limited';

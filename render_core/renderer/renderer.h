@@ -198,4 +198,8 @@ std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr
 // without a driver or device. Never throws.
 int cuda_device_count();
 
+// Device memory in use on CUDA device `gpu` (total - free, every process's), bytes; 0 when built
+// without CUDA or on error. Never throws.
+std::size_t cuda_device_memory_used(int gpu);
+
 }  // namespace catgs

@@ -49,4 +49,18 @@ int cuda_device_count() {
 #endif
 }
 
+std::size_t cuda_device_memory_used(int gpu) {
+#if CATGS_HAVE_CUDA
+  try {
+    const cuda::DeviceGuard on(gpu);
+    return cuda::device_memory_used();
+  } catch (const std::exception&) {
+    return 0;
+  }
+#else
+  (void)gpu;
+  return 0;
+#endif
+}
+
 }  // namespace catgs

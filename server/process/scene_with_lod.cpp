@@ -66,9 +66,11 @@ GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOpt
 
   const std::string lod_path = path + ".catgs-lod";
   try {
+    const auto t0 = std::chrono::steady_clock::now();
     GaussianModel m = load_lod_file(lod_path, path, 0, progress);
+    const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0);
     say(o, "scene " + path + ": level of detail from " + lod_path + " (" + std::to_string(m.size()) + " Gaussians, " +
-               std::to_string(m.lod.size()) + " chunks)");
+               std::to_string(m.lod.size()) + " chunks) in " + std::to_string(ms.count()) + " ms");
     return m;
   } catch (const SceneCacheRejected& e) {
     say(o, "scene " + path + ": LOD file not used (" + e.what() + "); building the level of detail");

@@ -550,6 +550,8 @@ void Session::send_stats() {
   const double n = frames_since_stats_ ? frames_since_stats_ : 1;
   s->set_render_ms_mean(render_ms_sum_ / n);
   s->set_encode_ms_mean(encode_ms_sum_ / n);
+  s->set_lod_error_px_mean(lod_error_px_sum_ / n);
+  s->set_splats_mean(splats_sum_ / n);
   s->set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
   s->set_link_kbps(link_.link_kbps());
   s->set_rtt_ms(link_.rtt_ms());
@@ -569,7 +571,7 @@ void Session::send_stats() {
   last_stats_ = now;
   frames_since_stats_ = 0;
   bytes_since_stats_ = 0;
-  render_ms_sum_ = encode_ms_sum_ = 0;
+  render_ms_sum_ = encode_ms_sum_ = lod_error_px_sum_ = splats_sum_ = 0;
 }
 
 }  // namespace catgs::server

@@ -113,6 +113,8 @@ void Session::on_job_done(JobResult result) {
   bytes_since_stats_ += result.payload_bytes;
   render_ms_sum_ += result.render_ms;
   encode_ms_sum_ += result.encode_ms;
+  lod_error_px_sum_ += result.lod_error_px;
+  splats_sum_ += static_cast<double>(result.splats);
   if (result.key_frame) key_frames_++;
   if (result.render_key_frame)
     render_key_frames_++;

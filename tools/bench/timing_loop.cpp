@@ -230,6 +230,18 @@ class QualityCheck {
     res.sub_max_abs.push_back(max_abs);
   }
 
+  // The references of `camera` beside a snapshot (as the CPU path writes them): full detail, and
+  // with --aa-reference its box-filtered large render. Written once per run (the first variant's).
+  void write_references(const Camera& camera, const std::string& base) {
+    if (references_written_) return;
+    references_written_ = true;
+    reference_.render(camera, full_);
+    write_png(full_, base + "full_detail.png");
+    if (!aa_reference_) return;
+    aa_reference_->render(aa_camera(camera, aa_factor_), hi_);
+    write_png(box_downsample(hi_, aa_factor_), base + "aa_reference.png");
+  }
+
  private:
   void download(const cuda::DeviceFrame& frame) {
     const std::size_t pixels = static_cast<std::size_t>(frame.width) * frame.height;
@@ -245,6 +257,7 @@ class QualityCheck {
   int aa_factor_;
   std::unique_ptr<cuda::CudaRenderer> aa_reference_;  // --aa-reference
   Image image_, full_, hi_;
+  bool references_written_ = false;
 };
 
 PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>& scene, const Variant& variant,
@@ -277,6 +290,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
     Image img;
     r.render(plan.camera_at(plan.warmup + plan.frames / 2), img);
     write_snapshot(img, plan.snapshot_dir, scene->name() + "_" + res.name, plan);
+    if (plan.lod) quality.write_references(plan.camera_at(plan.warmup + plan.frames / 2), plan.snapshot_dir + "/" + scene->name() + "_");
   }
   return res;
 }

@@ -31,6 +31,9 @@ void StageSums::add(const StageSums& o) {
   frames += o.frames;
   sends += o.sends;
   render_key += o.render_key;
+  lod_error_px += o.lod_error_px;
+  lod_error_px_max = std::max(lod_error_px_max, o.lod_error_px_max);
+  splats += o.splats;
 }
 
 LatencySummary summarize_latency(const std::vector<double>& v) {
@@ -105,6 +108,9 @@ nlohmann::json stages_json(const StageSums& s) {
           {"send_ms", mean(s.send, s.sends)},
           {"total_ms", mean(s.total, s.frames)},
           {"render_key_fraction", s.frames ? static_cast<double>(s.render_key) / static_cast<double>(s.frames) : 0.0},
+          {"lod_error_px_mean", mean(s.lod_error_px, s.frames)},
+          {"lod_error_px_max", s.lod_error_px_max},
+          {"splats_mean", mean(s.splats, s.frames)},
           {"frames", s.frames}};
 }
 
@@ -220,6 +226,11 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
                 mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends), mean(g.total, g.frames),
                 t.fps_min);
   out += line;
+  if (g.lod_error_px_max > 0) {
+    std::snprintf(line, sizeof(line), "level of detail: bound %.2f px mean, %.2f px max; %.2f M Gaussians a frame\n",
+                  mean(g.lod_error_px, g.frames), g.lod_error_px_max, mean(g.splats, g.frames) / 1e6);
+    out += line;
+  }
   for (const SessionResult& s : sessions)
     if (s.checked > 0) {
       std::snprintf(line, sizeof(line),

@@ -23,6 +23,8 @@ struct StageSums {
   std::uint64_t frames = 0;  // frames summed (send: frames with previous_send_ms > 0)
   std::uint64_t sends = 0;
   std::uint64_t render_key = 0;  // frames whose render was a key frame (catgs: full pre-process)
+  // Level of detail (FrameTimings.lod_error_px, .splats): sums over frames, and the largest bound.
+  double lod_error_px = 0, lod_error_px_max = 0, splats = 0;
   void add(const StageSums& o);
 };
 
