@@ -147,8 +147,8 @@ void Server::load_model() {
       const std::size_t after = cuda_device_memory_used(d);
       const double mib = static_cast<double>(after - std::min(before, after)) / (1024.0 * 1024.0);
       std::cout << "gpu " << d << ": scene " << scene.model->name << " uploaded in " << ms_since(t0) << " ms, "
-                << static_cast<long>(mib) << " MiB of device memory (with its LOD levels, "
-                << scene.model->lod.size() << " chunks)" << std::endl;
+                << static_cast<long>(mib) << " MiB of device memory (with its LOD levels, " << scene.model->lod.size()
+                << " chunks)" << std::endl;
     }
   };
   std::vector<SceneStore::Source> sources{{options_.scene, options_.cameras}};

@@ -273,6 +273,11 @@ async function run() {
   check(shot.overlay.includes(`frame ${width}x${height}`), `overlay shows the frame size ${width}x${height}`);
   check(shot.overlay.includes('renderer cpu') && shot.overlay.includes(`encoder ${welcome.encoder}`), 'overlay shows renderer and encoder');
   check(!/error/i.test(shot.overlay), 'overlay shows no error');
+  // The scene is served with its level of detail (--lod write, the default; issue 46): the stats
+  // say the bound the frames drew at and the Gaussians they drew.
+  const lodMatch = /LOD (\d+\.\d) px {2}(\d+\.\d\d) M splats/.exec(shot.overlay);
+  check(!!lodMatch && Number(lodMatch[1]) > 0 && Number(lodMatch[2]) > 0,
+    `overlay shows the LOD bound and Gaussians a frame (${lodMatch && lodMatch[0]})`);
   const decoderErrors = await page.evaluate(() => window.catgs.decoderErrors);
   check(decoderErrors === 0, `no decoder errors (${decoderErrors})`);
   check(foreign.length === 0, `no request outside the server (${foreign.join(', ') || 'none'})`);

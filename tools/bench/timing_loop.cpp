@@ -290,7 +290,9 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
     Image img;
     r.render(plan.camera_at(plan.warmup + plan.frames / 2), img);
     write_snapshot(img, plan.snapshot_dir, scene->name() + "_" + res.name, plan);
-    if (plan.lod) quality.write_references(plan.camera_at(plan.warmup + plan.frames / 2), plan.snapshot_dir + "/" + scene->name() + "_");
+    if (plan.lod)
+      quality.write_references(plan.camera_at(plan.warmup + plan.frames / 2),
+                               plan.snapshot_dir + "/" + scene->name() + "_");
   }
   return res;
 }
