@@ -51,11 +51,22 @@ void GaussianModel::resize(std::size_t n) {
 
 Bounds GaussianModel::bounds() const {
   if (size() == 0) throw std::logic_error("bounds of an empty Gaussian model");
+  // Per block on every core, then the blocks' boxes (min and max are exact in any order).
+  constexpr std::size_t kBlock = 1 << 18;
+  const std::size_t blocks = (size() + kBlock - 1) / kBlock;
+  std::vector<Bounds> part(blocks, Bounds{glm::vec3(INFINITY), glm::vec3(-INFINITY)});
+  run_blocks(blocks, 0, [&](uint64_t k) {
+    Bounds& b = part[k];
+    for (std::size_t i = k * kBlock; i < std::min(size(), (k + 1) * kBlock); ++i) {
+      const glm::vec3 p(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+      b.min = glm::min(b.min, p);
+      b.max = glm::max(b.max, p);
+    }
+  });
   Bounds b{glm::vec3(INFINITY), glm::vec3(-INFINITY)};
-  for (std::size_t i = 0; i < size(); ++i) {
-    const glm::vec3 p(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
-    b.min = glm::min(b.min, p);
-    b.max = glm::max(b.max, p);
+  for (const Bounds& p : part) {
+    b.min = glm::min(b.min, p.min);
+    b.max = glm::max(b.max, p.max);
   }
   return b;
 }

@@ -376,7 +376,27 @@ std::vector<glm::vec3> evenly_picked(const std::vector<glm::vec3>& points) {
   return picked;
 }
 
-SceneFrame frame_from_content(const GaussianModel& model) {
+// Every `stride`-th content Gaussian's mean and opacity (the only values the first view reads), as
+// a model without LOD: the sample frame_from_content judges a large model by.
+GaussianModel content_sample(const GaussianModel& m, std::size_t stride) {
+  const std::size_t n = (content_count(m) + stride - 1) / stride;
+  GaussianModel s;
+  s.means.resize(3 * n);
+  s.opacity_logits.resize(n);
+  for_blocks(n, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t j = begin; j < end; ++j) {
+      for (int a = 0; a < 3; ++a) s.means[3 * j + a] = m.means[3 * (j * stride) + a];
+      s.opacity_logits[j] = m.opacity_logits[j * stride];
+    }
+  });
+  return s;
+}
+
+SceneFrame frame_from_content(const GaussianModel& whole, std::size_t judged) {
+  const std::size_t stride = (content_count(whole) + judged - 1) / std::max<std::size_t>(judged, 1);
+  GaussianModel sample;
+  if (stride > 1) sample = content_sample(whole, stride);
+  const GaussianModel& model = stride > 1 ? sample : whole;
   const DenseContent c = dense_content(model);
   SceneFrame f;
   f.up = c.up;
@@ -408,7 +428,8 @@ SceneFrame frame_from_content(const GaussianModel& model) {
   f.source = "content: the densest " + std::to_string(static_cast<int>(std::lround(100.0 * c.share))) +
              "% of the Gaussians, radius " + std::to_string(c.radius) + ", up " +
              (c.up_from_content ? "from its flattest axis" : "-y (no flat layer near the y axis)") +
-             (object ? ", an object: framed whole by its percentile box" : ", a scene: its core framed");
+             (object ? ", an object: framed whole by its percentile box" : ", a scene: its core framed") +
+             (stride > 1 ? ", judged by 1 in " + std::to_string(stride) + " of the Gaussians" : std::string());
   return f;
 }
 

@@ -495,6 +495,39 @@ TEST(FirstViewRealScenes, TumblewoodUpIsLevel) {
   shot(render(*model, first_view_pose(frame, kW, kH)), "tumblewood_first");
 }
 
+// A model of more than kJudgedGaussians content Gaussians is judged by an even sample of them
+// (issue 46: the whole-scene passes were most of a large city's load). Three copies of tumblewood
+// side by side (1.6 M Gaussians, every 2nd judged): the sampled frame against the frame judged
+// by every Gaussian, the independent full computation. It can fail: a sample taken from one end
+// of the arrays (the first million) would see two copies and put the centre a copy away.
+TEST(FirstViewRealScenes, LargeModelJudgedBySampleAsByEveryGaussian) {
+  CATGS_REQUIRE_DATA(scene, "scenes/tumblewood_sh2.ply");
+  const auto one = test::cached_scene(scene);
+  const Bounds b = one->bounds();
+  const float step = 1.2f * glm::length(b.extent());
+  GaussianModel city;
+  city.sh_degree = one->sh_degree;
+  for (const glm::vec3 offset : {glm::vec3(0.0f), glm::vec3(step, 0.0f, 0.0f), glm::vec3(0.0f, 0.0f, step)}) {
+    for (std::size_t i = 0; i < one->size(); ++i)
+      for (int a = 0; a < 3; ++a) city.means.push_back(one->means[3 * i + a] + offset[a]);
+    city.opacity_logits.insert(city.opacity_logits.end(), one->opacity_logits.begin(), one->opacity_logits.end());
+  }
+  ASSERT_GT(city.opacity_logits.size(), kJudgedGaussians);
+  const SceneFrame sampled = frame_from_content(city);
+  const SceneFrame whole = frame_from_content(city, city.opacity_logits.size());
+  std::cout << "  sampled: " << sampled.source << "\n  whole:   " << whole.source << "\n  centre "
+            << glm::distance(sampled.orbit_centre, whole.orbit_centre) << " apart (radius " << whole.content_radius
+            << "), up " << degrees_between(sampled.up, whole.up) << " degrees, scene scale " << sampled.scene_scale
+            << " / " << whole.scene_scale << "\n";
+  EXPECT_NE(sampled.source.find("judged by 1 in 2 of the Gaussians"), std::string::npos) << sampled.source;
+  EXPECT_EQ(whole.source.find("judged by"), std::string::npos) << whole.source;
+  EXPECT_EQ(sampled.framed_share, whole.framed_share);  // the same object-or-scene decision
+  EXPECT_LT(glm::distance(sampled.orbit_centre, whole.orbit_centre), 0.02f * whole.content_radius);
+  EXPECT_NEAR(sampled.content_radius, whole.content_radius, 0.02f * whole.content_radius);
+  EXPECT_LT(degrees_between(sampled.up, whole.up), 1.0f);
+  EXPECT_NEAR(sampled.scene_scale, whole.scene_scale, 0.03f * whole.scene_scale);
+}
+
 // Every real scene with training cameras (flowers only, here): the up estimated from the content is
 // within 3 degrees of the cameras' mean up (measured 1.9; -y is 18.1 from it). The ground-plane
 // reference agrees with the cameras too (measured: its normal 1.5 degrees from their mean up),
