@@ -64,7 +64,8 @@ prepare() {
     grep -Ev '/(libc|libm|libdl|librt|libpthread|libresolv|libutil|libstdc\+\+|libgcc_s)\.so' |
     while read -r lib; do cp -fL "$lib" "$carry/stage/lib/"; done
   strip --strip-unneeded "$carry"/stage/lib/* 2>/dev/null || true
-  tar -C "$carry/stage" -cf - bin lib | xz -T2 -6 > "$carry/server.tar.xz"
+  # -9e: 1.5 MB smaller than -6 (1.5 min on 2 cores), room for catgs-bench under the 64 MiB.
+  tar -C "$carry/stage" -cf - bin lib | xz -T2 -9e > "$carry/server.tar.xz"
   rm -rf "$carry/stage"
   mkdir -p "$carry/traces"
   cp -f "${CATGS_DATA_DIR:-$ROOT/../shared/data}"/traces/*.cameras.json "$carry/traces/"

@@ -173,7 +173,7 @@ std::string ServerMetrics::prometheus_text() const {
     for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
       gpu_render_seconds_[k]->write(o, "catgs_gpu_render_seconds", "gpu=\"" + std::to_string(gpu_devices_[k]) + "\"");
     head("catgs_gpu_splats_per_second", "gauge",
-         "The best Gaussians per second of render one frame showed on each GPU.");
+         "The best Gaussians per second of render each GPU showed (a frame's, times the frames rendering with it).");
     for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
       o << "catgs_gpu_splats_per_second{gpu=\"" << gpu_devices_[k] << "\"} " << gpu_splats_per_ms_[k].load() * 1000
         << '\n';
@@ -188,7 +188,21 @@ void ServerMetrics::set_gpus(std::vector<int> devices, std::function<std::vector
   for (std::size_t k = 0; k < gpu_devices_.size(); ++k)
     gpu_render_seconds_.push_back(std::make_unique<Histogram>(Histogram::stage_seconds()));
   gpu_splats_per_ms_ = std::make_unique<std::atomic<std::int64_t>[]>(gpu_devices_.size());
-  for (std::size_t k = 0; k < gpu_devices_.size(); ++k) gpu_splats_per_ms_[k] = 0;
+  gpu_in_flight_ = std::make_unique<std::atomic<int>[]>(gpu_devices_.size());
+  for (std::size_t k = 0; k < gpu_devices_.size(); ++k) {
+    gpu_splats_per_ms_[k] = 0;
+    gpu_in_flight_[k] = 0;
+  }
+}
+
+int ServerMetrics::gpu_render_begin(int device) {
+  const int k = gpu_index(device);
+  return k < 0 ? 1 : gpu_in_flight_[k].fetch_add(1) + 1;
+}
+
+int ServerMetrics::gpu_render_end(int device) {
+  const int k = gpu_index(device);
+  return k < 0 ? 1 : gpu_in_flight_[k].fetch_sub(1);
 }
 
 int ServerMetrics::gpu_index(int device) const {
@@ -202,10 +216,10 @@ void ServerMetrics::observe_gpu_render(int device, double seconds) {
   if (k >= 0) gpu_render_seconds_[k]->observe(seconds);
 }
 
-void ServerMetrics::observe_gpu_throughput(int device, std::uint64_t gaussians, double render_ms) {
+void ServerMetrics::observe_gpu_throughput(int device, std::uint64_t gaussians, double render_ms, double in_flight) {
   const int k = gpu_index(device);
   if (k < 0 || gaussians < 100000 || !(render_ms > 0.0)) return;
-  const auto rate = static_cast<std::int64_t>(static_cast<double>(gaussians) / render_ms);
+  const auto rate = static_cast<std::int64_t>(static_cast<double>(gaussians) * std::max(1.0, in_flight) / render_ms);
   std::atomic<std::int64_t>& best = gpu_splats_per_ms_[k];
   std::int64_t seen = best.load();
   while (rate > seen && !best.compare_exchange_weak(seen, rate)) {}

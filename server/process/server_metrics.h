@@ -151,9 +151,18 @@ struct ServerMetrics {
   // Adds a render time on `device` (one of set_gpus' devices; others are ignored). Thread-safe.
   void observe_gpu_render(int device, double seconds);
   // The GPU's throughput as the auto splat budget reads it (render/lod_bound.h): the most
-  // Gaussians per millisecond of render one frame on `device` has shown. Frames of under 100 k
-  // Gaussians are not counted (their fixed costs hide the rate). Thread-safe; 0 until known.
-  void observe_gpu_throughput(int device, std::uint64_t gaussians, double render_ms);
+  // Gaussians per millisecond the GPU has shown, one frame's Gaussians over its render time times
+  // the frames that were rendering on the GPU with it (`in_flight`, itself included): render lanes
+  // share the GPU, so a frame that waited behind three others' kernels took about four times as
+  // long while the GPU drew four frames (without that factor a loaded GPU measured 4x slower
+  // than it is, and the auto budget collapsed to the ladder's top: RESULTS.md "Level of detail
+  // in the server"). Frames of under 100 k Gaussians are not counted (their fixed costs hide the
+  // rate). Thread-safe; 0 until known.
+  void observe_gpu_throughput(int device, std::uint64_t gaussians, double render_ms, double in_flight = 1.0);
+  // Frames rendering on `device` now: begin returns the count with this frame, end the count
+  // before it leaves (the mean of the two is the frame's in_flight above).
+  int gpu_render_begin(int device);
+  int gpu_render_end(int device);
   double gpu_splats_per_ms(int device) const;
   // Sessions rendering on `device` now (GpuAssignment::sessions; 0 for one not in set_gpus).
   std::int64_t gpu_sessions(int device) const;
@@ -166,6 +175,7 @@ struct ServerMetrics {
   std::function<std::vector<std::int64_t>()> gpu_sessions_;
   std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;      // by index in gpu_devices_
   std::unique_ptr<std::atomic<std::int64_t>[]> gpu_splats_per_ms_;  // by index, rounded down
+  std::unique_ptr<std::atomic<int>[]> gpu_in_flight_;               // by index
   int gpu_index(int device) const;
 };
 

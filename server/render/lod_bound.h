@@ -16,8 +16,9 @@
 //   step's count fits within 3/4 of the budget (hysteresis). The choice depends on the pose and
 //   the budget alone, never on timing: a camera standing still keeps its cut.
 // The budget is --splat-budget N a frame, or, for CUDA sessions by default (auto), sized from the
-// GPU's measured throughput: the best Gaussians per millisecond of render any frame on that GPU
-// has shown (ServerMetrics::gpu_splats_per_ms), times a 60 Hz frame slot, times 0.8, shared by the
+// GPU's measured throughput: the best Gaussians per millisecond that GPU has shown (a frame's
+// Gaussians over its render time, times the frames rendering with it; ServerMetrics::
+// gpu_splats_per_ms), times a 60 Hz frame slot, times 0.8, shared by the
 // sessions rendering on that GPU, rounded down to a power of sqrt(2) so small changes of the
 // estimate do not move the cut. A scene without LOD has no cut to coarsen: the bound is unused.
 #pragma once

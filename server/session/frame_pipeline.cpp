@@ -18,6 +18,28 @@ int rate_cap_kbps(int client_kbps, int link_kbps) {
   return link_kbps > 0 && client_kbps > 0 ? std::min(client_kbps, link_kbps) : std::max(client_kbps, link_kbps);
 }
 
+// A frame rendering on a GPU, counted in ServerMetrics' in-flight renders until it ends (also when
+// the render throws).
+class GpuRenderCount {
+ public:
+  GpuRenderCount(ServerMetrics& metrics, int gpu)
+      : metrics_(metrics), gpu_(gpu), begin_(gpu >= 0 ? metrics.gpu_render_begin(gpu) : 1) {}
+  ~GpuRenderCount() {
+    if (gpu_ >= 0 && !ended_) metrics_.gpu_render_end(gpu_);
+  }
+  // The frames that rendered with this one, itself included: the mean of the counts at its start and end.
+  double end() {
+    const int end = gpu_ >= 0 ? metrics_.gpu_render_end(gpu_) : 1;
+    ended_ = true;
+    return 0.5 * (begin_ + end);
+  }
+
+ private:
+  ServerMetrics& metrics_;
+  int gpu_, begin_;
+  bool ended_ = false;
+};
+
 }  // namespace
 
 void FramePipeline::open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu,
@@ -111,6 +133,7 @@ void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rend
   const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
                                           job.pose.pose.vertical_fov_deg, job.shape.width, job.shape.height);
   r.lod_error_px = set_lod_bound(camera);
+  GpuRenderCount in_flight(metrics_, gpu_);
   // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
   // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
   r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
@@ -121,7 +144,8 @@ void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rend
   // Render time includes the plane download (GPU) but not the conversion itself.
   r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
   // A sub-frame's time is not its Gaussians' (the caches skip the pre-process).
-  if (gpu_ >= 0 && r.render_key_frame) metrics_.observe_gpu_throughput(gpu_, r.splats, r.render_ms);
+  const double frames_with_it = in_flight.end();
+  if (gpu_ >= 0 && r.render_key_frame) metrics_.observe_gpu_throughput(gpu_, r.splats, r.render_ms, frames_with_it);
 }
 
 FramePipeline::Rendered FramePipeline::render(Job job, std::unique_ptr<Yuv420Image> planes, bool gone) {

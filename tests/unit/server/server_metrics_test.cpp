@@ -5,6 +5,7 @@
 #include <map>
 #include <regex>
 #include <sstream>
+#include <vector>
 
 #include "process/server_metrics.h"
 
@@ -97,6 +98,29 @@ TEST(ServerMetrics, ExpositionHasConsistentStageHistograms) {
   EXPECT_EQ(buckets["catgs_encode_seconds{}"].front(), 0);  // 7 ms is above 0.5 ms
   EXPECT_EQ(text.find("# TYPE catgs_render_seconds histogram"), text.rfind("# TYPE catgs_render_seconds histogram"))
       << "one TYPE line per family";
+}
+
+// The auto splat budget's throughput (render/lod_bound.h): a frame's Gaussians over its render
+// time, times the frames rendering on the GPU with it (four lanes sharing the GPU each take about
+// four times as long); the best seen is kept; other devices and small frames are not counted.
+TEST(ServerMetrics, GpuThroughputCountsTheFramesRenderingTogether) {
+  ServerMetrics m;
+  m.set_gpus({0, 3}, [] { return std::vector<std::int64_t>{0, 0}; });
+  EXPECT_EQ(m.gpu_splats_per_ms(3), 0.0);
+  EXPECT_EQ(m.gpu_render_begin(3), 1);
+  EXPECT_EQ(m.gpu_render_begin(3), 2);
+  EXPECT_EQ(m.gpu_render_begin(0), 1);  // another GPU's count
+  EXPECT_EQ(m.gpu_render_end(3), 2);
+  EXPECT_EQ(m.gpu_render_end(3), 1);
+  m.observe_gpu_throughput(3, 2000000, 2.0);  // alone: 1 M a ms
+  EXPECT_EQ(m.gpu_splats_per_ms(3), 1000000.0);
+  m.observe_gpu_throughput(3, 2000000, 4.0, 3.0);  // three together, each slower: 1.5 M a ms
+  EXPECT_EQ(m.gpu_splats_per_ms(3), 1500000.0);
+  m.observe_gpu_throughput(3, 2000000, 8.0, 2.0);  // slower: the best stays
+  m.observe_gpu_throughput(3, 99999, 0.01);        // too few Gaussians to say
+  m.observe_gpu_throughput(7, 2000000, 0.5);       // not a GPU of set_gpus
+  EXPECT_EQ(m.gpu_splats_per_ms(3), 1500000.0);
+  EXPECT_EQ(m.gpu_splats_per_ms(0), 0.0);
 }
 
 }  // namespace
