@@ -21,7 +21,7 @@ std::uint64_t auto_splat_budget(double splats_per_ms, std::int64_t sessions) {
   const double budget = splats_per_ms * kSlotMs * kShare / static_cast<double>(std::max<std::int64_t>(1, sessions));
   // Down to a power of sqrt(2): the estimate creeps up as faster frames are seen, the cut should not.
   const double steps = std::floor(std::log2(std::max(budget, 1.0)) * 2.0);
-  return static_cast<std::uint64_t>(std::exp2(steps / 2.0));
+  return std::max(kAutoBudgetFloor, static_cast<std::uint64_t>(std::exp2(steps / 2.0)));
 }
 
 CutCounter::CutCounter(const GaussianModel& model) : model_(model) {

@@ -41,8 +41,17 @@ struct LodSettings {
 // bound_px x min(1, shorter side / reference_lines). 0 stays 0 (full detail).
 float size_scaled_lod_bound(float bound_px, int width, int height, int reference_lines);
 
+// The auto budget never asks a frame for fewer Gaussians than this. Below about a million a
+// frame's cost is mostly fixed (the picture's tiles, the sort's passes), so a coarser cut saves
+// little and costs detail; and without a floor one slow early frame (a cold start on a small
+// scene) sized a budget under the 100 k Gaussians a throughput sample needs, and the cut stayed
+// at the ladder's top for good (the GPU check: biker at 32 px, 22 dB; RESULTS.md "Level of
+// detail in the server").
+inline constexpr std::uint64_t kAutoBudgetFloor = std::uint64_t{1} << 20;
+
 // The auto budget (see above): Gaussians a frame for one of `sessions` sessions sharing a GPU
-// that draws `splats_per_ms`; 0 (no budget) while the throughput is not known yet.
+// that draws `splats_per_ms`, at least kAutoBudgetFloor; 0 (no budget) while the throughput is
+// not known yet.
 std::uint64_t auto_splat_budget(double splats_per_ms, std::int64_t sessions);
 
 // Counts the Gaussians of a LOD cut inside a view without visiting the nodes below the cut: the

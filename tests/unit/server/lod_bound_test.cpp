@@ -203,6 +203,9 @@ TEST(LodBound, AutoBudgetSharesTheGpusThroughputInPowersOfSqrt2) {
   // Rounded: 10% more throughput moves the budget by one step or not at all.
   const double steps = std::log2(static_cast<double>(auto_splat_budget(2.2e6, 1)) / static_cast<double>(one)) * 2.0;
   EXPECT_TRUE(std::abs(steps) < 1e-6 || std::abs(steps - 1.0) < 1e-6) << steps;
+  // A slow GPU shared by many (or one slow first frame) asks no frame for fewer than the floor.
+  EXPECT_EQ(auto_splat_budget(2.8e3, 4), kAutoBudgetFloor);
+  EXPECT_GT(auto_splat_budget(2.0e6, 16), kAutoBudgetFloor);
 }
 
 TEST(LodBound, SplatBudgetOption) {
