@@ -148,7 +148,9 @@ std::string server_usage() {
          "                        from: encode/encoder_policy.h)\n"
          "  --x264-preset P       x264 preset of the sessions' streams: auto (default:\n"
          "                        superfast where half the cores afford it at the live\n"
-         "                        session count, else ultrafast) or an x264 preset\n"
+         "                        session count, else ultrafast) or an x264 preset,\n"
+         "                        with +cabac and +deblock to turn those tools back on\n"
+         "                        (e.g. ultrafast+cabac+deblock)\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
          "  --frame-deadline S|off  skip a rendered frame before encoding when it would reach\n"
          "                        the client more than S pose intervals after its pose and a\n"
@@ -326,7 +328,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.encoder_policy.threads = parse_int(a, v, 0, 64);
     else if (a == "--x264-preset") {
       if (v != "auto" && !is_x264_preset(v))
-        throw std::invalid_argument("--x264-preset: '" + v + "' is not auto or an x264 preset (ultrafast .. placebo)");
+        throw std::invalid_argument("--x264-preset: '" + v +
+                                    "' is not auto or an x264 preset (ultrafast .. placebo, +cabac, +deblock)");
       out.encoder_policy.x264_preset = v;
     } else if (a == "--frame-deadline")
       out.frame_deadline_slots = v == "off" ? 0.0 : parse_double(a, v, 0.0, 100.0);

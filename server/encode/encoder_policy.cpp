@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 namespace catgs::server {
 
@@ -61,11 +62,37 @@ std::string encoder_preset(const EncoderPolicy& policy, int width, int height, i
   return kPresetLadder[preset_step(policy, width, height, fps, live_sessions)].name;
 }
 
-bool is_x264_preset(const std::string& name) {
+X264Preset parse_x264_preset(const std::string& name) {
+  X264Preset out;
+  std::size_t at = name.find('+');
+  out.preset = name.substr(0, at);
+  bool known = false;
   for (const char* p :
        {"ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow", "placebo"})
-    if (name == p) return true;
-  return false;
+    known = known || out.preset == p;
+  if (!known) throw std::invalid_argument("not an x264 preset: '" + name + "'");
+  bool cabac = false, deblock = false;
+  while (at != std::string::npos) {
+    const std::size_t next = name.find('+', at + 1);
+    const std::string tool = name.substr(at + 1, next == std::string::npos ? std::string::npos : next - at - 1);
+    bool& on = tool == "cabac" ? cabac : deblock;
+    if ((tool != "cabac" && tool != "deblock") || on)
+      throw std::invalid_argument("x264 preset '" + name + "': '+" + tool + "' is not cabac or deblock, once each");
+    on = true;
+    at = next;
+  }
+  if (cabac) out.params = "cabac=1";
+  if (deblock) out.params += std::string(out.params.empty() ? "" : ":") + "deblock=1";
+  return out;
+}
+
+bool is_x264_preset(const std::string& name) {
+  try {
+    parse_x264_preset(name);
+    return true;
+  } catch (const std::invalid_argument&) {
+    return false;
+  }
 }
 
 EncoderConfig encoder_config(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions,

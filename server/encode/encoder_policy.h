@@ -84,8 +84,20 @@ int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int
 // The x264 preset for that session: policy.x264_preset unless it is "auto", else the ladder's.
 std::string encoder_preset(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);
 
-// Whether `name` is an x264 preset ("ultrafast" .. "placebo").
+// Whether `name` is an x264 preset ("ultrafast" .. "placebo"), alone or with coding tools the
+// preset leaves off turned back on: "ultrafast+cabac+deblock" (x264's CABAC entropy coder and
+// its in-loop deblocking filter, the two tools ultrafast drops that cost the least CPU; x264's
+// common/base.c presets, H.264 sections 9.3 and 8.7).
 bool is_x264_preset(const std::string& name);
+
+// The parts of such a name: the x264 preset, and the x264-params turning the tools on ("" for
+// none; "cabac=1:deblock=1" for the example above). Throws std::invalid_argument for a name
+// is_x264_preset refuses.
+struct X264Preset {
+  std::string preset;
+  std::string params;
+};
+X264Preset parse_x264_preset(const std::string& name);
 
 // The whole EncoderConfig for a session's encoder (size, fps, rate control, threads).
 EncoderConfig encoder_config(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions,

@@ -1,5 +1,7 @@
 #include "encode/x264_encoder.h"
 
+#include "encode/encoder_policy.h"
+
 #include <algorithm>
 #include <climits>
 #include <cstdint>
@@ -17,11 +19,13 @@ namespace {
 constexpr int kDefaultVbvMs = 250;
 
 // x264's own options, given as x264-params (libavcodec has no field for intra refresh's period).
+// The preset's tools turned back on (encoder_policy.h, parse_x264_preset) come first.
 std::string x264_params(const EncoderConfig& config) {
-  if (config.intra_refresh_frames <= 0) return "";
+  std::string params = parse_x264_preset(config.x264_preset).params;
+  if (config.intra_refresh_frames <= 0) return params;
   // keyint is the refresh period under intra refresh: a column of intra macroblocks crosses
   // the picture once every intra_refresh_frames frames; no IDR follows the first one.
-  return "intra-refresh=1:keyint=" + std::to_string(config.intra_refresh_frames);
+  return params + (params.empty() ? "" : ":") + "intra-refresh=1:keyint=" + std::to_string(config.intra_refresh_frames);
 }
 
 }  // namespace
@@ -33,7 +37,7 @@ X264Encoder::X264Encoder(const EncoderConfig& config)
         // frame's latency and add no frame of delay (frame threads would pipeline frames).
         // zerolatency picks them already; stated here so that no default can change it.
         ctx->thread_type = FF_THREAD_SLICE;
-        av_opt_set(ctx->priv_data, "preset", config.x264_preset.c_str(), 0);
+        av_opt_set(ctx->priv_data, "preset", parse_x264_preset(config.x264_preset).preset.c_str(), 0);
         av_opt_set(ctx->priv_data, "tune", "zerolatency", 0);
         av_opt_set_double(ctx->priv_data, "crf", config.crf, 0);
         av_opt_set_int(ctx->priv_data, "forced-idr", 1, 0);  // pict_type I -> IDR, not just I

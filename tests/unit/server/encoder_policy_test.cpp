@@ -243,4 +243,36 @@ TEST(EncoderPolicy, IntraRefreshSendsNoIdrAfterTheFirstUnlessForced) {
   EXPECT_GT(count(nal_types(enc.encode_yuv420(frames[2].planes(), true).data), 5), 0);  // a KeyFrameRequest
 }
 
+// A preset with tools turned back on (encoder_policy.h): the names parse, and the stream says so
+// itself: the picture parameter set's entropy_coding_mode_flag (H.264 7.3.2.2: after two ue(v)
+// ids, 0 and 0 here, each the single bit 1) is set with +cabac and clear for plain ultrafast.
+TEST(EncoderPolicy, PresetWithToolsTurnedBackOn) {
+  EXPECT_EQ(parse_x264_preset("ultrafast").params, "");
+  EXPECT_EQ(parse_x264_preset("ultrafast+cabac+deblock").preset, "ultrafast");
+  EXPECT_EQ(parse_x264_preset("ultrafast+cabac+deblock").params, "cabac=1:deblock=1");
+  EXPECT_EQ(parse_x264_preset("superfast+deblock").params, "deblock=1");
+  EXPECT_TRUE(is_x264_preset("ultrafast+deblock"));
+  EXPECT_FALSE(is_x264_preset("ultrafast+cabac+cabac"));
+  EXPECT_FALSE(is_x264_preset("ultrafast+trellis"));
+  EXPECT_FALSE(is_x264_preset("+cabac"));
+  EXPECT_FALSE(is_x264_preset("ultrafast+"));
+  std::vector<Image> raw;
+  const auto frames = biker_frames(320, 192, 4, &raw);
+  for (const std::string preset : {"ultrafast", "ultrafast+cabac", "ultrafast+cabac+deblock"}) {
+    EncoderConfig c = small_config(320, 192);
+    c.x264_preset = preset;
+    const Stream s = encode_all(c, frames, raw);
+    const std::vector<std::uint8_t>& d = s.frames[0].data;
+    int flag = -1;
+    for (std::size_t k = 0; k + 4 < d.size(); ++k)
+      if (d[k] == 0 && d[k + 1] == 0 && d[k + 2] == 1 && (d[k + 3] & 0x1f) == 8) {  // a PPS
+        ASSERT_EQ(d[k + 4] >> 6, 3) << "ids other than 0";
+        flag = (d[k + 4] >> 5) & 1;
+        break;
+      }
+    EXPECT_EQ(flag, preset == "ultrafast" ? 0 : 1) << preset;
+    EXPECT_GT(s.mean_psnr, 30.0) << preset;
+  }
+}
+
 }  // namespace
