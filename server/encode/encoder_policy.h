@@ -60,12 +60,15 @@ int encoder_threads(const EncoderPolicy& policy, int width, int height, int live
 
 // The x264 presets the policy chooses from, cheapest first, with the CPU time a frame each takes
 // relative to ultrafast's, the larger of the factors measured at 1080p and 720p; veryfast bought
-// too little over superfast for its CPU to be a step (RESULTS.md, "x264 presets by budget").
+// too little over superfast for its CPU to be a step. Between them, ultrafast with CABAC and
+// deblocking turned back on: most of superfast's gain for a third of its extra CPU (RESULTS.md,
+// "x264 presets by budget").
 struct PresetStep {
   const char* name;
   double cpu_factor;
 };
-inline constexpr PresetStep kPresetLadder[] = {{"ultrafast", 1.0}, {"superfast", 2.3}};
+inline constexpr PresetStep kPresetLadder[] = {
+    {"ultrafast", 1.0}, {"ultrafast+cabac+deblock", 1.4}, {"superfast", 2.3}};
 inline constexpr int kPresetSteps = static_cast<int>(sizeof(kPresetLadder) / sizeof(kPresetLadder[0]));
 
 // The share of the host's cores the sessions' encoders may use together: the rest render (the
