@@ -120,7 +120,7 @@ TEST(TourVideo, BadInputGetsAClearError) {
   expect_refused("--trace " + trace + out + " --width 641 --height 480", dir, "must be even");
   expect_refused("--trace " + trace + " --video " + dir + "/no/such/folder/x.mp4", dir,
                  dir + "/no/such/folder/x.mp4: cannot open for writing");
-  expect_refused("--trace " + trace + out + " --preset warpspeed", dir, "x264: cannot open libx264");
+  expect_refused("--trace " + trace + out + " --preset warpspeed", dir, "not an x264 preset: 'warpspeed'");
   // Two poses 10^7 s apart: 6 * 10^8 frames at 60 fps, refused before anything is allocated.
   std::ofstream(dir + "/long.trace") << "catgs-trace 1\n0 0 0 -5 1 0 0 0 50 50 32 24 64 48\n"
                                      << "10000000 0 0 -4 1 0 0 0 50 50 32 24 64 48\n";
