@@ -61,8 +61,8 @@ int encoder_threads(const EncoderPolicy& policy, int width, int height, int live
 // The x264 presets the policy chooses from, cheapest first, with the CPU time a frame each takes
 // relative to ultrafast's, the larger of the factors measured at 1080p and 720p; veryfast bought
 // too little over superfast for its CPU to be a step. Between them, ultrafast with CABAC and
-// deblocking turned back on: most of superfast's gain for a third of its extra CPU (RESULTS.md,
-// "x264 presets by budget").
+// deblocking turned back on: much of superfast's gain for less of its extra CPU (the rows that
+// chose it: RESULTS.md, "x264 presets by budget").
 struct PresetStep {
   const char* name;
   double cpu_factor;
