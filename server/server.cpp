@@ -167,6 +167,9 @@ void Server::load_model() {
 void Server::resolve_renderer() {
   render_options_.pipeline = parse_pipeline(options_.pipeline);
   if (options_.lod_error_px >= 0.0f) render_options_.lod_error_px = options_.lod_error_px;
+  // A session's catgs windows open only where its own measured frame costs say they repay
+  // (SpeculationParams::cost_model; --speculation cost=off for the paper's rule alone).
+  render_options_.speculation.cost_model = true;
   apply_speculation_settings(render_options_.speculation, options_.speculation);
   // Resolved once, before any scene loads, so every session uses the same core and the log says
   // why: over a one-Gaussian model (the choice does not depend on the scene).

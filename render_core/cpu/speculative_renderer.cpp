@@ -121,6 +121,13 @@ void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& 
   stats_.window = planner_.window();
   stats_.cached = stats_.visible = key_visible_;
   stats_.total_ms = ms_between(start, clock::now());
+  if (!stats_.subframe_rejected) {  // a rejected frame's time mixes the attempt and the key frame
+    using Kind = SpeculationPlanner::FrameKind;
+    planner_.record_cost(!stats_.key_frame    ? Kind::sub
+                         : stats_.window == 0 ? Kind::exact
+                                              : Kind::key,
+                         stats_.window, stats_.total_ms);
+  }
 }
 
 }  // namespace catgs::cpu

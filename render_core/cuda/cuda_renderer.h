@@ -217,6 +217,7 @@ class CudaRenderer final : public Renderer {
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp
+  void report_cost();  // the last catgs frame's time to the planner's cost model (render_catgs.cpp)
   // render_catgs.cpp; abandon: device flag, draw nothing when it is set (or null); trail_list:
   // the list is a key frame's trail list (tile-culled per pose), not an exact one.
   void catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon, bool trail_list);

@@ -29,6 +29,7 @@ namespace catgs::cuda {
 DeviceFrame CudaRenderer::render_catgs(const Camera& camera, double time_s) {
   validate_camera(camera);
   State& s = *state_;
+  report_cost();
   s.syncs = 0;
   stats_ = {};
   const bool candidate = s.planner.observe(camera, time_s);
@@ -47,7 +48,20 @@ DeviceFrame CudaRenderer::render_catgs(const Camera& camera, double time_s) {
   stats_.cached = stats_.visible = static_cast<std::size_t>(s.key_visible);
   stats_.render_list_length = static_cast<std::size_t>(s.key_entries);
   stats_ready_ = false;
+  s.cost_pending = options_.speculation.cost_model;
   return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
+}
+
+void CudaRenderer::report_cost() {
+  State& s = *state_;
+  if (!s.cost_pending) return;
+  s.cost_pending = false;
+  // cudaErrorNotReady is no error: the frame is still running, and this sample is skipped.
+  if (cudaEventQuery(s.events[kMerged]) != cudaSuccess) return;
+  const FrameStats& st = last_stats();
+  if (st.subframe_rejected) return;  // its time is the key frame's alone (kStart was recorded again)
+  using Kind = SpeculationPlanner::FrameKind;
+  s.planner.record_cost(!st.key_frame ? Kind::sub : st.window == 0 ? Kind::exact : Kind::key, st.window, st.total_ms);
 }
 
 void CudaRenderer::State::ensure_catgs_buffers(uint64_t n) {

@@ -148,6 +148,9 @@ struct CudaRenderer::State {
   cudaEvent_t catgs_readback = nullptr;  // M / outside flag copied to host_catgs
   cudaEvent_t plan_ready = nullptr;      // the key frame's slice totals copied to host_catgs
   SpeculationPlanner planner;
+  // The last catgs frame's time is still to be reported to the planner's cost model (read at the
+  // next frame's start, and only if its events are done: the report never waits on the GPU).
+  bool cost_pending = false;
   // render_yuv420_at (cuda_renderer.cpp): I420 planes for a host target, and the conversion's
   // timing events.
   GrowBuffer yuv;

@@ -88,11 +88,29 @@ bool MotionPredictor::add(const TimedPose& in) {
   }
   samples_.push_back(pose);
   while (samples_.size() > params_.max_samples) samples_.pop_front();
-  const double keep_s = std::max(params_.fit_window_s, params_.acceleration_window_s);
+  measure_interval();
+  const double keep_s =
+      std::max(effective_window_s(params_.fit_window_s), effective_window_s(params_.acceleration_window_s));
   while (samples_.size() > 2 && samples_.back().time_s - samples_.front().time_s > keep_s) samples_.pop_front();
   latest_ = pose;
   refit();
   return true;
+}
+
+void MotionPredictor::measure_interval() {
+  interval_s_ = 0.0;
+  if (samples_.size() < 2) return;
+  std::vector<double> gaps;
+  gaps.reserve(samples_.size() - 1);
+  for (std::size_t i = 1; i < samples_.size(); ++i) gaps.push_back(samples_[i].time_s - samples_[i - 1].time_s);
+  const auto middle = gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2);
+  std::nth_element(gaps.begin(), middle, gaps.end());
+  interval_s_ = *middle;
+}
+
+double MotionPredictor::effective_window_s(double window_s) const {
+  if (params_.reference_rate_hz <= 0.0 || interval_s_ <= 0.0) return window_s;
+  return std::max(window_s, (window_s * params_.reference_rate_hz + 0.5) * interval_s_);
 }
 
 void MotionPredictor::refit() {
@@ -108,12 +126,12 @@ void MotionPredictor::refit() {
     if (poses.size() < 2) poses = {&samples_[samples_.size() - 2], &last};  // a gap longer than the window
     return poses;
   };
-  const std::vector<const TimedPose*> recent = within(params_.fit_window_s);
+  const std::vector<const TimedPose*> recent = within(effective_window_s(params_.fit_window_s));
   // Position: a quadratic over the acceleration window when it holds enough poses to be
   // overdetermined (3 would interpolate the jitter), else a line over the fit window.
   bool quadratic = false;
   if (params_.acceleration_window_s > 0.0) {
-    const std::vector<const TimedPose*> longer = within(params_.acceleration_window_s);
+    const std::vector<const TimedPose*> longer = within(effective_window_s(params_.acceleration_window_s));
     quadratic = longer.size() >= 4 && fit_quadratic(longer, last.time_s, &velocity_, &acceleration_);
   }
   if (!quadratic) {

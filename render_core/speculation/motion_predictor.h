@@ -31,6 +31,13 @@ struct MotionPredictorParams {
   // jitter, hence its own window (RESULTS.md, "Constant acceleration").
   double acceleration_window_s = 0.1;
   std::size_t max_samples = 32;  // at most this many poses are kept
+  // The pose clock the two windows were tuned at (RESULTS.md sections above: 120 poses/s). On a
+  // slower clock (the measured pose interval, pose_interval_s()) each window widens to span as
+  // many pose intervals as it spans at this rate, so the fit sees as many poses: the same motion
+  // per pose then fits, and predicts a pose interval ahead, the same at 30, 60 or 120 poses/s
+  // (issue 48: at 60 poses/s a 0.1 s quadratic over 6 poses instead of 12 predicted worse).
+  // 0: the windows stay as given.
+  double reference_rate_hz = 120.0;
 };
 
 class MotionPredictor {
@@ -58,16 +65,26 @@ class MotionPredictor {
   const TimedPose& latest() const { return latest_; }
   bool empty() const { return samples_.empty(); }
 
+  // The pose clock's interval, seconds: the median gap between consecutive kept poses (robust to
+  // stamp jitter and to a pause); 0 with fewer than two poses.
+  double pose_interval_s() const { return interval_s_; }
+  // A fit window of `window_s` seconds as used on the measured clock: max(window_s, (window_s x
+  // reference_rate_hz + 1/2) pose intervals), the half interval keeping the last pose inside
+  // despite stamp rounding.
+  double effective_window_s(double window_s) const;
+
   // Predicted pose `dt_s` seconds after the newest one: position p + v dt + a dt^2 / 2 from the
   // newest pose (constant acceleration), orientation at a constant rotation rate.
   TimedPose predict(double dt_s) const;
 
  private:
   void refit();
+  void measure_interval();
 
   MotionPredictorParams params_;
   std::deque<TimedPose> samples_;
   TimedPose latest_;
+  double interval_s_ = 0.0;
   glm::vec3 velocity_{0.0f}, acceleration_{0.0f}, angular_velocity_{0.0f};
 };
 

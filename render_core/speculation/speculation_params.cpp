@@ -14,7 +14,7 @@ void validate(const SpeculationParams& p) {
   check(p.backoff.min_served >= 0 && p.backoff.min_served <= kMaxWindow,
         "sub-frames a group must serve must be in 0..32");
   check(p.min_slice_entries >= 0, "minimum slice length must not be negative");
-  check(p.target_fps > 0.0 && std::isfinite(p.target_fps), "target fps must be positive");
+  check(p.target_fps >= 0.0 && std::isfinite(p.target_fps), "target fps must be >= 0 (0: the pose clock's rate)");
   check(p.tile_size > 0.0f && std::isfinite(p.tile_size), "tile size l must be positive");
   check(p.depth_threshold >= 0.0f && std::isfinite(p.depth_threshold), "depth threshold d must be >= 0");
   check(p.trail.slack >= 0.0f && p.trail.margin_px >= 0.0f && p.trail.motion_margin >= 0.0f &&

@@ -33,6 +33,12 @@ struct TrailMargins {
 // up to 8x; a group that repays resets it. frames = 0: no backoff. (RESULTS.md, "Speculation
 // backoff" and "Issue 19, fourth round": 4 and 4 were faster than 2 and 2 on five of the six
 // real-path rows and equal on the sixth, once frames without a window cost what exact frames do.)
+// min_served is given for a group of W_initial sub-frames and scales with the group's window: a
+// group of W sub-frames must serve ceil(min_served x W / W_initial) (issue 48: a motion-narrowed
+// group of W = 2 could never serve 4, so every one was poor). With the cost model on
+// (SpeculationParams::cost_model) a group is poor when it served fewer than its measured
+// break-even count instead, and the doubling goes on to 32x, so a path where windows never pay
+// probes one in over a hundred frames.
 struct SpeculationBackoff {
   int frames = 4;
   int min_served = 4;
@@ -43,7 +49,12 @@ struct SpeculationParams {
   int initial_window = 4;        // W_initial: sub-frames after a key frame, 0..kMaxWindow
   float depth_threshold = 0.4f;  // d: only Gaussians deeper than this (world units) set M
   float tile_size = 16.0f;       // l, pixels
-  double target_fps = 120.0;     // F_target: the predicted path is sampled at k / F_target
+  // F_target: the predicted path is sampled at k / F_target, and sub-frame k of a group is the
+  // pose stamped nearest k / F_target after its key frame. 0 (the default): the pose clock's own
+  // rate, measured from the poses' stamps (MotionPredictor::pose_interval_s), so a session sending
+  // 60 poses/s speculates over 60 Hz steps (issue 48: a fixed 120 put sub-frames 3 and 4 of a
+  // 60 Hz session past the trail's end).
+  double target_fps = 0.0;
 
   // The paper's ablations (Tables 1 and 3).
   bool frustum_and_sort_cache = true;  // false (--no-cache): every frame is a key frame
@@ -55,6 +66,11 @@ struct SpeculationParams {
   // sub-frame's features, which are bound by DRAM (issue 36). The colour then lags the view
   // direction by at most a window's camera motion (RESULTS.md, "Issue 36, first round").
   bool subframe_key_colour = true;
+  // The cost model (the paper's future work; issue 48): each renderer reports its measured frame
+  // times (SpeculationPlanner::record_cost) and a window opens only as wide as the measured
+  // costs and the share of sub-frames recent groups served say it repays. Off in the core, where
+  // the same poses must give the same decisions on both cores (timings differ); on in the server.
+  bool cost_model = false;
   TrailMargins trail;
   SpeculationBackoff backoff;
   // Task splitting's slice length: the paper's average load l = L / t or this many entries,
@@ -72,7 +88,7 @@ struct SpeculationParams {
 };
 
 // Checks the parameters a planner accepts: a window in 0..kMaxWindow, a backoff in 0..1000
-// frames, min_served in 0..kMaxWindow, a non-negative slice floor, a finite positive F_target and
+// frames, min_served in 0..kMaxWindow, a non-negative slice floor, a finite F_target >= 0 and
 // l, a finite d >= 0, finite trail margins >= 0, a fit window in (0, 1] s and an acceleration
 // window in [0, 1] s. Throws std::invalid_argument naming the parameter.
 void validate(const SpeculationParams& params);

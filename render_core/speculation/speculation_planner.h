@@ -12,8 +12,11 @@
 //      measures M between the key camera and next_camera() and asks window_for(M); it pre-processes
 //      over path(key, W), and while that list is over the render-list budget pre-processes again
 //      with W = narrower_window(W) (W = 0: an exact frame); then it calls start_group(key, W).
+//   4. with the cost model on (SpeculationParams::cost_model), record_cost() with the frame's
+//      measured time once it is known.
 #pragma once
 
+#include <array>
 #include <vector>
 
 #include "camera/camera.h"
@@ -32,19 +35,32 @@ class SpeculationPlanner {
   const SpeculationParams& params() const { return params_; }
 
   // Adds the pose of `camera` at `time_s` (client clock, seconds) to the predictor. Returns true
-  // when this frame may be served as a sub-frame of the open group.
+  // when this frame may be served as a sub-frame of the open group: the group is open, the
+  // intrinsics are the key frame's, and the pose is stamped within the window's span after the key
+  // frame's, (W + 1/2) / F_target s (sub-frames are indexed by their time, not their count: a
+  // server that skips a pose under load does not serve the trail's end for a later pose).
   bool observe(const Camera& camera, double time_s);
 
-  // Seconds on the renderer's own clock for frames rendered without a time: 1 / F_target a call.
-  double advance_clock() { return clock_s_ += 1.0 / params_.target_fps; }
+  // Seconds on the renderer's own clock for frames rendered without a time: 1 / F_target a call
+  // (1 / 120 s with F_target = 0).
+  double advance_clock() { return clock_s_ += params_.target_fps > 0.0 ? 1.0 / params_.target_fps : 1.0 / 120.0; }
+  // 1 / F_target, seconds: the set F_target's, or the measured pose interval (F_target = 0; 1 / 120
+  // s before two poses).
+  double frame_interval_s() const;
 
   // Whether a key frame may speculate at all (caching on, W_initial > 0, a motion history, no
   // backoff under way: SpeculationParams::backoff).
   bool window_wanted() const;
   // The predicted camera 1 / F_target after the newest pose, with `key`'s intrinsics (M's pair).
   Camera next_camera(const Camera& key) const { return predicted_camera(key, 1); }
-  // W for the largest per-frame screen motion M (pixels): motion_adaptive_window().
-  int window_for(float max_motion_px) const { return motion_adaptive_window(max_motion_px, params_); }
+  // W for the largest per-frame screen motion M (pixels): motion_adaptive_window(); with the cost
+  // model on, the window up to that which the measured costs expect to repay most (0: none will,
+  // and the frame starts a backoff as a poor group would). The model's yardstick, an exact frame's
+  // cost, is measured by making a key frame exact (W = 0, no backoff) when it is not known or
+  // was last measured over kExactRefresh frames ago (an exact frame costs less than a key frame
+  // with a window, so the tail does not grow for it).
+  int window_for(float max_motion_px);
+  static constexpr int kExactRefresh = 120;
   // The window to plan a key frame with instead of `window`, whose list was over the render-list
   // budget (renderer.h RenderListBudget, issue 35): half of it, so a window's list shrinks
   // toward the exact list of W = 0, which the budget holds (in passes where it must). Both cores
@@ -64,13 +80,46 @@ class SpeculationPlanner {
 
   int window() const { return window_; }
 
+  // The cost model's measurements (SpeculationParams::cost_model), milliseconds a frame.
+  enum class FrameKind { exact, key, sub };
+  // A frame's measured time: an exact frame (a key frame with W = 0), a key frame that opened a
+  // group of `window` sub-frames, or a served sub-frame. Frames first tried as sub-frames and
+  // rejected are not reported (their time mixes both). The first report of each kind is dropped
+  // (a cold frame: its buffers were allocated in it); the rest are averaged, 1/8 a report.
+  // Ignored with the cost model off.
+  void record_cost(FrameKind kind, int window, double ms);
+  // What the model expects a group of `window` sub-frames to cost a frame, against exact_ms():
+  // (K(W) + n S + (1 - f) S) / (1 + n), with n = f W the sub-frames it is expected to serve (f:
+  // the recent groups' served share), K(W) the key frame's measured cost at W (linear in W from the
+  // nearest measured window when W itself was not), S a sub-frame's, and (1 - f) S the rejected
+  // attempt that closes a group early. Negative while a cost it needs is not measured yet.
+  double expected_frame_ms(int window) const;
+  double exact_ms() const { return cost_.exact_ms; }
+  double served_share() const { return cost_.served_share; }
+  // Sub-frames a group of `window` must serve to repay its key frame: (K(W) - E + S) / (E - S)
+  // from the measured costs (more than W where sub-frames do not save); with the cost model off,
+  // or before the costs are measured, the backoff's min_served scaled to W.
+  double break_even_served(int window) const;
+
  private:
   Camera predicted_camera(const Camera& intrinsics, int frames_ahead) const;
-  // The key frame now being planned closes an open group that served fewer than min_served
-  // sub-frames, with the backoff on: it renders in full, as the first frame of the backoff.
+  // The key frame now being planned closes an open group that served fewer than its break-even
+  // count, with the backoff on: it renders in full, as the first frame of the backoff.
   bool closes_poor_group() const {
-    return params_.backoff.frames > 0 && group_open_ && subframes_served_ < params_.backoff.min_served;
+    return params_.backoff.frames > 0 && group_open_ && subframes_served_ < break_even_served(window_);
   }
+  double key_ms(int window) const;
+  // The backoff's cap: 8x its frames, 32x with the cost model (SpeculationBackoff).
+  int most_backoff() const { return (params_.cost_model ? 32 : 8) * params_.backoff.frames; }
+
+  // Measured costs (exponential moving averages, ms) and the served share of recent groups.
+  struct Costs {
+    double exact_ms = 0.0, sub_ms = 0.0;
+    std::array<double, kMaxWindow + 1> key_ms{};  // by window; 0: not measured
+    double served_share = 1.0;                    // optimistic until a group closes
+    std::array<int, 3> reports{};                 // by FrameKind: the first is dropped
+    int frames_since_exact = 0;                   // observe() calls since the last exact report
+  };
 
   SpeculationParams params_;
   MotionPredictor predictor_;
@@ -78,7 +127,10 @@ class SpeculationPlanner {
   int window_ = 0, subframes_served_ = 0;
   int backoff_ = 0, full_frames_left_ = 0;  // the current backoff, and the full frames it still asks
   bool group_open_ = false;
+  bool declined_ = false;  // the cost model closed the window the motion allowed (window_for)
+  double key_time_s_ = 0.0;
   double clock_s_ = 0.0;
+  Costs cost_;
 };
 
 }  // namespace catgs

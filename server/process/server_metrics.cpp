@@ -121,6 +121,9 @@ std::string ServerMetrics::prometheus_text() const {
        "Frames rendered: kind=key (full pre-process) or sub (catgs sub-frame from the caches).");
   o << "catgs_render_frames_total{kind=\"key\"} " << render_key_frames_total.load() << '\n'
     << "catgs_render_frames_total{kind=\"sub\"} " << render_sub_frames_total.load() << '\n';
+  put("catgs_render_rekeys_total", "counter",
+      "catgs key frames first tried as sub-frames and rejected (a Gaussian left its trail).",
+      render_rekeys_total.load());
 
   auto labelled = [&](const char* name, const char* help, const char* label, const auto& counters,
                       std::initializer_list<const char*> values) {

@@ -138,6 +138,7 @@ void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rend
   // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
   r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
   r.render_key_frame = renderer_->last_stats().key_frame;
+  r.render_rekey = renderer_->last_stats().subframe_rejected;
   r.speculation_window = renderer_->last_stats().window;
   r.splats = renderer_->last_stats().visible;
   r.queue_ms = ms_between(job.pose.received, t_start);
@@ -255,6 +256,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_height(static_cast<std::uint32_t>(job.shape.height));
   f->set_payload(enc.data.data(), enc.data.size());
   r.render_key_frame = rendered.render_key_frame;
+  r.render_rekey = rendered.render_rekey;
   r.speculation_window = rendered.speculation_window;
   r.lod_error_px = rendered.lod_error_px;
   r.splats = rendered.splats;
@@ -268,6 +270,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_convert_ms(r.convert_ms);
   t->set_encode_ms(r.encode_ms);
   t->set_render_key_frame(r.render_key_frame);
+  t->set_render_rekey(r.render_rekey);
   t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
   t->set_previous_send_ms(job.shape.previous_send_ms);
   t->set_lod_error_px(r.lod_error_px);

@@ -15,7 +15,8 @@
 // in a shell); the table and the JSON name each variant as written; an unknown name or setting
 // is an error. Default: vanilla,exact.
 // catgs frames are posed at the trace's 120 FPS clock (render_device_at), so the motion predictor
-// sees the real timing. With --quality-every K (CUDA; default 1, 0 = off), every K-th frame of each
+// sees the real timing; --pose-rate HZ stamps the same frames at HZ instead (the same motion a
+// frame on a slower clock, as a session sending HZ poses a second). With --quality-every K (CUDA; default 1, 0 = off), every K-th frame of each
 // catgs variant is compared, after its timing, with a full `exact` render of the same pose by a
 // second renderer: sub-frames give the image quality (PSNR over 8-bit RGB, max abs error of the
 // float image), key frames the render-list growth (catgs key list / exact list, same pose).
@@ -51,6 +52,7 @@
 // prints the table and writes the JSON.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -90,6 +92,7 @@ const char* kUsage =
     "                   [--quality-every 1] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu] [--help]\n"
     "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]] [--aa-reference F]\n"
+    "                   [--pose-rate 120]\n"
     "       V: a pipeline variant, e.g. catgs{window=2,backoff=0} (default: vanilla,exact; --help\n"
     "          lists the variants and their settings)\n";
 
@@ -279,7 +282,7 @@ int run(int argc, char** argv) {
        "--trace",         "--width",        "--height",    "--pipeline",         "--frames",    "--warmup",
        "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance",  "--renderer",
        "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error", "--aa-reference",
-       "--help!"});
+       "--pose-rate",     "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;
@@ -312,6 +315,9 @@ int run(int argc, char** argv) {
   plan.warmup = c.warmup;
   plan.frames = c.frames;
   plan.quality_every = args.get_int("--quality-every", 1);
+  plan.pose_rate_hz = c.pose_rate_hz = args.get_double("--pose-rate", 120.0);
+  if (!(plan.pose_rate_hz > 0.0) || !std::isfinite(plan.pose_rate_hz))
+    throw std::invalid_argument("--pose-rate must be a positive number of poses a second");
   plan.lod = c.lod;
   plan.lod_error_px = c.lod_error_px;
   plan.aa_factor = args.get_int("--aa-reference", 0);

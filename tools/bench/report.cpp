@@ -48,6 +48,7 @@ nlohmann::json context_json(const BenchContext& c) {
   j["height"] = c.height;
   j["frames"] = c.frames;
   j["warmup"] = c.warmup;
+  j["pose_rate_hz"] = c.pose_rate_hz;
   if (c.lod) j["lod"] = {{"error_px", c.lod_error_px}, {"build_s", c.lod_build_s}, {"level_chunks", c.lod_levels}};
   j["timing"] = c.on_gpu
                     ? "CUDA events around render_device() on the renderer's stream; pose in, image in device memory out"

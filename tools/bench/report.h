@@ -22,6 +22,7 @@ struct BenchContext {
   std::size_t scene_device_bytes = 0;  // CUDA: the DeviceScene's bytes
   std::string trace;                   // --trace as given
   int width = 0, height = 0, frames = 0, warmup = 0;
+  double pose_rate_hz = 120.0;  // --pose-rate: the frames' clock
   // Level of detail (forward_model/lod.h): the scene has it (built by --lod or read by
   // --lod-file), the bound every variant drew with, the build time (--lod) and chunks per level.
   bool lod = false;

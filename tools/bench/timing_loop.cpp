@@ -89,11 +89,11 @@ PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& mode
   full_detail.lod_error_px = 0.0f;
   full_detail.list_budget = RenderListBudget::unlimited();
   const auto reference = plan.lod && plan.quality_every > 0 ? make_renderer("cpu", model, full_detail) : nullptr;
-  for (int k = 0; k < plan.warmup; ++k) r->render_at(plan.camera_at(k), TimingPlan::time_at(k), img);
+  for (int k = 0; k < plan.warmup; ++k) r->render_at(plan.camera_at(k), plan.time_at(k), img);
   for (int k = 0; k < plan.frames; ++k) {
     const int frame = plan.warmup + k;
     const auto t0 = std::chrono::steady_clock::now();
-    r->render_at(plan.camera_at(frame), TimingPlan::time_at(frame), img);
+    r->render_at(plan.camera_at(frame), plan.time_at(frame), img);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     record_frame(res, ms, r->last_stats());
     if (reference && k % plan.quality_every == 0) {
@@ -266,7 +266,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
   PipelineResult res = result_of(variant);
   EventTimer timer;
   for (int k = 0; k < plan.warmup; ++k) {
-    r.render_device_at(plan.camera_at(k), TimingPlan::time_at(k));
+    r.render_device_at(plan.camera_at(k), plan.time_at(k));
     (void)r.last_stats();
   }
   const bool compare = (variant.pipeline == Pipeline::catgs || plan.lod) && plan.quality_every > 0;
@@ -274,7 +274,7 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
   for (int k = 0; k < plan.frames; ++k) {
     const Camera cam = plan.camera_at(plan.warmup + k);
     timer.start(r.stream());
-    const cuda::DeviceFrame frame = r.render_device_at(cam, TimingPlan::time_at(plan.warmup + k));
+    const cuda::DeviceFrame frame = r.render_device_at(cam, plan.time_at(plan.warmup + k));
     const float ms = timer.stop(r.stream());
     const FrameStats stats = r.last_stats();
     record_frame(res, ms, stats);

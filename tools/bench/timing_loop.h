@@ -55,7 +55,9 @@ struct PipelineResult {
 void record_frame(PipelineResult& result, double ms, const FrameStats& stats);
 
 // The frames every variant renders: `warmup` untimed, then `frames` timed, frame k being the
-// trace's camera k (cycled) posed at k / 120 s, the trace's clock.
+// trace's camera k (cycled) posed at k / pose_rate_hz s (--pose-rate; the trace's own 120 FPS by
+// default: a lower rate keeps the motion a frame and stretches the clock, as a session sending
+// fewer poses a second over the same path per pose).
 struct TimingPlan {
   const Trace* trace = nullptr;
   int warmup = 30, frames = 600;
@@ -65,7 +67,8 @@ struct TimingPlan {
   int aa_factor = 0;         // >= 2 (with lod): those frames also against the anti-aliased reference
   std::string snapshot_dir;  // not empty: a PNG per variant there
   Camera camera_at(int k) const { return (*trace)[static_cast<std::size_t>(k) % trace->size()].camera; }
-  static double time_at(int k) { return k * (1.0 / 120.0); }
+  double pose_rate_hz = 120.0;
+  double time_at(int k) const { return k / pose_rate_hz; }
 };
 
 // The CPU reference over `model`; a snapshot is the last timed frame

@@ -31,6 +31,8 @@ void StageSums::add(const StageSums& o) {
   frames += o.frames;
   sends += o.sends;
   render_key += o.render_key;
+  render_rekey += o.render_rekey;
+  window += o.window;
   lod_error_px += o.lod_error_px;
   lod_error_px_max = std::max(lod_error_px_max, o.lod_error_px_max);
   splats += o.splats;
@@ -101,17 +103,22 @@ nlohmann::json latency_json(const LatencySummary& l) {
 nlohmann::json measured(double v, std::uint64_t n) { return n ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
 nlohmann::json stages_json(const StageSums& s) {
-  return {{"queue_ms", mean(s.queue, s.frames)},
-          {"render_ms", mean(s.render, s.frames)},
-          {"convert_ms", mean(s.convert, s.frames)},
-          {"encode_ms", mean(s.encode, s.frames)},
-          {"send_ms", mean(s.send, s.sends)},
-          {"total_ms", mean(s.total, s.frames)},
-          {"render_key_fraction", s.frames ? static_cast<double>(s.render_key) / static_cast<double>(s.frames) : 0.0},
-          {"lod_error_px_mean", mean(s.lod_error_px, s.frames)},
-          {"lod_error_px_max", s.lod_error_px_max},
-          {"splats_mean", mean(s.splats, s.frames)},
-          {"frames", s.frames}};
+  return {
+      {"queue_ms", mean(s.queue, s.frames)},
+      {"render_ms", mean(s.render, s.frames)},
+      {"convert_ms", mean(s.convert, s.frames)},
+      {"encode_ms", mean(s.encode, s.frames)},
+      {"send_ms", mean(s.send, s.sends)},
+      {"total_ms", mean(s.total, s.frames)},
+      {"render_key_fraction", s.frames ? static_cast<double>(s.render_key) / static_cast<double>(s.frames) : 0.0},
+      {"render_sub_fraction",
+       s.frames ? static_cast<double>(s.frames - s.render_key) / static_cast<double>(s.frames) : 0.0},
+      {"render_rekey_fraction", s.frames ? static_cast<double>(s.render_rekey) / static_cast<double>(s.frames) : 0.0},
+      {"speculation_window_mean", mean(s.window, s.frames)},
+      {"lod_error_px_mean", mean(s.lod_error_px, s.frames)},
+      {"lod_error_px_max", s.lod_error_px_max},
+      {"splats_mean", mean(s.splats, s.frames)},
+      {"frames", s.frames}};
 }
 
 }  // namespace
@@ -219,12 +226,13 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
   }
   const StageSums& g = t.server;
   std::snprintf(line, sizeof(line),
-                "server means (ms): queue %.2f  render %.2f (key frames %.0f%%)  convert %.2f  "
-                "encode %.2f  send %.2f  pose->handed %.2f;  slowest session %.1f FPS\n",
+                "server means (ms): queue %.2f  render %.2f (key frames %.0f%%, re-keys %.0f%%, W %.2f)  "
+                "convert %.2f  encode %.2f  send %.2f  pose->handed %.2f;  slowest session %.1f FPS\n",
                 mean(g.queue, g.frames), mean(g.render, g.frames),
                 g.frames ? 100.0 * static_cast<double>(g.render_key) / static_cast<double>(g.frames) : 0.0,
-                mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends), mean(g.total, g.frames),
-                t.fps_min);
+                g.frames ? 100.0 * static_cast<double>(g.render_rekey) / static_cast<double>(g.frames) : 0.0,
+                mean(g.window, g.frames), mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends),
+                mean(g.total, g.frames), t.fps_min);
   out += line;
   if (g.lod_error_px_max > 0) {
     std::snprintf(line, sizeof(line), "level of detail: bound %.2f px mean, %.2f px max; %.2f M Gaussians a frame\n",

@@ -266,6 +266,8 @@ class PoseLoop {
       r_.server.sends++;
     }
     if (t.render_key_frame()) r_.server.render_key++;
+    if (t.render_rekey()) r_.server.render_rekey++;
+    r_.server.window += t.speculation_window();
     r_.server.lod_error_px += t.lod_error_px();
     r_.server.lod_error_px_max = std::max<double>(r_.server.lod_error_px_max, t.lod_error_px());
     r_.server.splats += t.splats();
