@@ -37,8 +37,8 @@ struct TrailMargins {
 // group of W sub-frames must serve ceil(min_served x W / W_initial) (issue 48: a motion-narrowed
 // group of W = 2 could never serve 4, so every one was poor). With the cost model on
 // (SpeculationParams::cost_model) a group is poor when it served fewer than its measured
-// break-even count instead, and the doubling goes on to 32x, so a path where windows never pay
-// probes one in over a hundred frames.
+// break-even count instead; windows the model declines double the backoff on to 32x, so a path
+// where windows never pay probes one in over a hundred frames.
 struct SpeculationBackoff {
   int frames = 4;
   int min_served = 4;

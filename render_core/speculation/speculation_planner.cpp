@@ -70,7 +70,10 @@ void SpeculationPlanner::start_group(const Camera& key, int window) {
   }
   const bool poor = closes_poor_group() || (declined_ && params_.backoff.frames > 0);
   if (poor) {  // this frame is the first of the backoff's full frames
-    backoff_ = backoff_ == 0 ? params_.backoff.frames : std::min(2 * backoff_, most_backoff());
+    // A poor group is a local miss (the path turned): 8x at most. A window the cost model
+    // declined is a path where windows do not pay: up to 32x, then a probe (window_for).
+    const int most = declined_ ? most_backoff() : 8 * params_.backoff.frames;
+    backoff_ = backoff_ == 0 ? params_.backoff.frames : std::min(2 * backoff_, std::max(most, backoff_));
     full_frames_left_ = backoff_ - 1;
   } else if (group_open_) {  // the group repaid its key frame
     backoff_ = 0;

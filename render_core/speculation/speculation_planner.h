@@ -109,7 +109,8 @@ class SpeculationPlanner {
     return params_.backoff.frames > 0 && group_open_ && subframes_served_ < break_even_served(window_);
   }
   double key_ms(int window) const;
-  // The backoff's cap: 8x its frames, 32x with the cost model (SpeculationBackoff).
+  // The backoff's cap after declined windows: 8x its frames, 32x with the cost model
+  // (SpeculationBackoff; after a poor group it is 8x either way).
   int most_backoff() const { return (params_.cost_model ? 32 : 8) * params_.backoff.frames; }
 
   // Measured costs (exponential moving averages, ms) and the served share of recent groups.
