@@ -87,6 +87,8 @@ bool SpeculativeRenderer::key_frame(const Camera& camera, Image& out) {
   stats_.key_frame = true;
   stats_.planned_window = planned;
   stats_.window_narrowed = window < planned;
+  stats_.predicted_gain = planner_.predicted_gain();
+  stats_.measured_gain = planner_.take_measured_gain();
   return window == 0;
 }
 

@@ -166,6 +166,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   }
   s.key_frame = true;
   s.planner.start_group(camera, window);
+  stats_.predicted_gain = s.planner.predicted_gain();
+  stats_.measured_gain = s.planner.take_measured_gain();
 }
 
 bool CudaRenderer::catgs_sub_frame(const Camera& camera) {

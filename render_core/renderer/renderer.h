@@ -153,6 +153,11 @@ struct FrameStats {
   std::size_t longest_pass = 0;
   bool window_narrowed = false;
   int planned_window = 0;
+  // The catgs cost model (SpeculationParams::cost_model; SpeculationPlanner's figures, 0 where it
+  // has none): predicted_gain, on a key frame that opened a group, the exact frame's cost over
+  // the group's expected cost a frame; measured_gain, on the frame that closed a group, that
+  // group's measured exact-equivalent time over its own.
+  double predicted_gain = 0.0, measured_gain = 0.0;
 };
 
 class Renderer {

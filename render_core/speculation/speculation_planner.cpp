@@ -63,11 +63,18 @@ std::vector<Camera> SpeculationPlanner::path(const Camera& key, int window) cons
 }
 
 void SpeculationPlanner::start_group(const Camera& key, int window) {
+  // The gain the model expects of the window it chose (window_for saw the share before this close).
+  const double expected = params_.cost_model && window > 0 ? expected_frame_ms(window) : -1.0;
+  predicted_gain_ = expected > 0.0 && cost_.exact_ms > 0.0 ? cost_.exact_ms / expected : 0.0;
   if (group_open_) {  // the group closes: its served share feeds the cost model
     const double share = static_cast<double>(std::min(subframes_served_, window_)) / window_;
     // Half the last group's: a probe that finds a path slowed down reopens the window at once.
     cost_.served_share = 0.5 * cost_.served_share + 0.5 * share;
+    if (group_key_known_ && cost_.exact_ms > 0.0) measured_gain_ = (1 + group_subs_) * cost_.exact_ms / group_ms_;
   }
+  group_ms_ = 0.0;
+  group_subs_ = 0;
+  group_key_known_ = false;
   const bool poor = closes_poor_group() || (declined_ && params_.backoff.frames > 0);
   if (poor) {  // this frame is the first of the backoff's full frames
     // A poor group is a local miss (the path turned): 8x at most. A window the cost model
@@ -113,6 +120,13 @@ int SpeculationPlanner::window_for(float max_motion_px) {
 void SpeculationPlanner::record_cost(FrameKind kind, int window, double ms) {
   if (!params_.cost_model || !(ms > 0.0) || !std::isfinite(ms)) return;
   if (cost_.reports[static_cast<std::size_t>(kind)]++ == 0) return;  // the cold first frame
+  if (group_open_ && kind == FrameKind::key) {  // the open group's own key frame (reported after it opened)
+    group_ms_ = ms;
+    group_key_known_ = true;
+  } else if (group_open_ && kind == FrameKind::sub && group_key_known_) {
+    group_ms_ += ms;
+    ++group_subs_;
+  }
   if (kind == FrameKind::exact) cost_.frames_since_exact = 0;
   auto average = [ms](double& into) { into = into > 0.0 ? 0.875 * into + 0.125 * ms : ms; };
   switch (kind) {
@@ -144,9 +158,11 @@ double SpeculationPlanner::key_ms(int window) const {
 double SpeculationPlanner::expected_frame_ms(int window) const {
   if (window <= 0) return cost_.exact_ms > 0.0 ? cost_.exact_ms : -1.0;
   const double key = key_ms(window);
-  if (key < 0.0 || cost_.sub_ms <= 0.0) return -1.0;
-  const double f = cost_.served_share, n = f * window;
-  return (key + n * cost_.sub_ms + (1.0 - f) * cost_.sub_ms) / (1.0 + n);
+  if (key < 0.0) return -1.0;
+  // A sub-frame's cost not measured yet (none served) counts as 0, the optimistic bound: a window
+  // opens to measure it while groups are expected to serve, and closes once they serve none.
+  const double f = cost_.served_share, n = f * window, sub = std::max(0.0, cost_.sub_ms);
+  return (key + n * sub + (1.0 - f) * sub) / (1.0 + n);
 }
 
 double SpeculationPlanner::break_even_served(int window) const {

@@ -17,6 +17,7 @@
 #pragma once
 
 #include <array>
+#include <utility>
 #include <vector>
 
 #include "camera/camera.h"
@@ -92,9 +93,18 @@ class SpeculationPlanner {
   // (K(W) + n S + (1 - f) S) / (1 + n), with n = f W the sub-frames it is expected to serve (f:
   // the recent groups' served share), K(W) the key frame's measured cost at W (linear in W from the
   // nearest measured window when W itself was not), S a sub-frame's, and (1 - f) S the rejected
-  // attempt that closes a group early. Negative while a cost it needs is not measured yet.
+  // attempt that closes a group early (S counts as 0 before a sub-frame was served). Negative
+  // while the exact or a key frame's cost is not measured yet.
   double expected_frame_ms(int window) const;
   double exact_ms() const { return cost_.exact_ms; }
+  // The cost model's gain for the open group, as chosen: exact_ms() / expected_frame_ms(W) when
+  // start_group opened it (0: no group, or the model had no figures).
+  double predicted_gain() const { return predicted_gain_; }
+  // The measured gain of the group the last start_group() closed, from its own reported times:
+  // (1 + n) E / (K + S_1 + ... + S_n) for its key frame K and n served sub-frames S_i, E the
+  // exact frame's average; 0 when none closed with its key frame's time known. Reading it
+  // clears it, so each closed group is counted once.
+  double take_measured_gain() { return std::exchange(measured_gain_, 0.0); }
   double served_share() const { return cost_.served_share; }
   // Sub-frames a group of `window` must serve to repay its key frame: (K(W) - E + S) / (E - S)
   // from the measured costs (more than W where sub-frames do not save); with the cost model off,
@@ -132,6 +142,11 @@ class SpeculationPlanner {
   double key_time_s_ = 0.0;
   double clock_s_ = 0.0;
   Costs cost_;
+  // The open group's reported times (its key frame's, once known, plus its served sub-frames').
+  double group_ms_ = 0.0;
+  int group_subs_ = 0;
+  bool group_key_known_ = false;
+  double predicted_gain_ = 0.0, measured_gain_ = 0.0;
 };
 
 }  // namespace catgs

@@ -162,6 +162,11 @@ std::string ServerMetrics::prometheus_text() const {
   send_seconds.write(o, "catgs_send_seconds");
   head("catgs_speculation_window", "histogram", "Speculation window W of each rendered frame (0: no speculation).");
   speculation_window.write(o, "catgs_speculation_window");
+  head("catgs_speculation_gain", "histogram",
+       "catgs cost model: exact's frame time over a speculation group's, kind=predicted when the group "
+       "opened, kind=measured when it closed.");
+  speculation_predicted_gain.write(o, "catgs_speculation_gain", "kind=\"predicted\"");
+  speculation_measured_gain.write(o, "catgs_speculation_gain", "kind=\"measured\"");
   head("catgs_pose_to_frame_seconds", "histogram",
        "End to end, as clients report it (Pose.shown_latency_ms): pose sent -> its frame shown.");
   pose_to_frame_seconds.write(o, "catgs_pose_to_frame_seconds");

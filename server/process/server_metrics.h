@@ -10,6 +10,7 @@
 //   catgs_encode_seconds       encoder
 //   catgs_send_seconds         frame handed to the transport -> fully written to the socket
 //   catgs_speculation_window   W of the speculation group of each rendered frame (0: none)
+//   catgs_speculation_gain     the catgs cost model's predicted and measured gain a group
 //   catgs_pose_to_frame_seconds  end to end, client-reported (Pose.shown_latency_ms): pose sent ->
 //                              its frame shown, on the client's clock
 //   catgs_session_fps          each session's frame rate over each Stats interval (about 1 s)
@@ -143,6 +144,10 @@ struct ServerMetrics {
   Histogram encode_seconds{Histogram::stage_seconds()};
   Histogram send_seconds{Histogram::stage_seconds()};
   Histogram speculation_window{{0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32}};
+  // catgs cost model: each opened group's predicted gain and each closed group's measured one
+  // (FrameStats predicted_gain / measured_gain; exact's time over the group's).
+  Histogram speculation_predicted_gain{{0.5, 0.75, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0}};
+  Histogram speculation_measured_gain{{0.5, 0.75, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0}};
   Histogram pose_to_frame_seconds{Histogram::stage_seconds()};
   Histogram session_fps{{1, 5, 10, 15, 20, 25, 30, 45, 60, 90, 120, 240}};
 

@@ -139,6 +139,8 @@ void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rend
   r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
   r.render_key_frame = renderer_->last_stats().key_frame;
   r.render_rekey = renderer_->last_stats().subframe_rejected;
+  r.predicted_gain = renderer_->last_stats().predicted_gain;
+  r.measured_gain = renderer_->last_stats().measured_gain;
   r.speculation_window = renderer_->last_stats().window;
   r.splats = renderer_->last_stats().visible;
   r.queue_ms = ms_between(job.pose.received, t_start);
@@ -257,6 +259,8 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_payload(enc.data.data(), enc.data.size());
   r.render_key_frame = rendered.render_key_frame;
   r.render_rekey = rendered.render_rekey;
+  r.predicted_gain = rendered.predicted_gain;
+  r.measured_gain = rendered.measured_gain;
   r.speculation_window = rendered.speculation_window;
   r.lod_error_px = rendered.lod_error_px;
   r.splats = rendered.splats;
@@ -271,6 +275,8 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_encode_ms(r.encode_ms);
   t->set_render_key_frame(r.render_key_frame);
   t->set_render_rekey(r.render_rekey);
+  t->set_speculation_predicted_gain(static_cast<float>(r.predicted_gain));
+  t->set_speculation_measured_gain(static_cast<float>(r.measured_gain));
   t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
   t->set_previous_send_ms(job.shape.previous_send_ms);
   t->set_lod_error_px(r.lod_error_px);

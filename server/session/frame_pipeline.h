@@ -73,7 +73,8 @@ class FramePipeline {
     Job job;
     std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
     bool render_key_frame = true;
-    bool render_rekey = false;  // catgs: a key frame first tried as a sub-frame (a re-key)
+    bool render_rekey = false;                     // catgs: a key frame first tried as a sub-frame (a re-key)
+    double predicted_gain = 0, measured_gain = 0;  // catgs cost model (FrameStats)
     int speculation_window = 0;
     float lod_error_px = 0;    // the LOD bound the frame drew at (0: full detail or no LOD)
     std::uint64_t splats = 0;  // Gaussians that passed culling
@@ -89,6 +90,7 @@ class FramePipeline {
     bool key_frame = false;        // an IDR access unit
     bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
     bool render_rekey = false;     // as Rendered's
+    double predicted_gain = 0, measured_gain = 0;
     int speculation_window = 0;
     float lod_error_px = 0;  // as Rendered's
     std::uint64_t splats = 0;

@@ -126,6 +126,8 @@ void Session::on_job_done(JobResult result) {
   if (result.key_frame) m.key_frames_total++;
   (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
   if (result.render_rekey) m.render_rekeys_total++;
+  if (result.predicted_gain > 0) m.speculation_predicted_gain.observe(result.predicted_gain);
+  if (result.measured_gain > 0) m.speculation_measured_gain.observe(result.measured_gain);
   m.queue_seconds.observe(result.queue_ms / 1000.0);
   (result.render_key_frame ? m.render_key_seconds : m.render_sub_seconds).observe(result.render_ms / 1000.0);
   if (gpu_ >= 0) m.observe_gpu_render(gpu_, result.render_ms / 1000.0);

@@ -180,6 +180,35 @@ TEST(SpeculationCostModel, OpensWhereSubFramesRepayAndClosesWhereTheyCannot) {
             << miss_windows << " / " << miss_subs << ", dear sub-frames " << dear_windows << " / " << dear_subs << "\n";
 }
 
+// The figures the server reports (FrameStats predicted_gain / measured_gain): on a slow path whose
+// groups serve all 4 sub-frames, with an exact frame 1 ms, a key frame 1.5 and a sub-frame 0.4,
+// both are 5 x 1 / (1.5 + 4 x 0.4) = 1.61 once the costs are learnt.
+TEST(SpeculationCostModel, PredictedAndMeasuredGainsAgreeOnASteadyPath) {
+  SpeculationParams p;
+  p.cost_model = true;
+  SpeculationPlanner planner(p);
+  using Kind = SpeculationPlanner::FrameKind;
+  double predicted = 0.0, measured = 0.0;
+  for (int k = 0; k < 120; ++k) {
+    const double t = k / 60.0;
+    const Camera cam = moving_camera(t);
+    if (planner.observe(cam, t)) {
+      planner.subframe_served();
+      planner.record_cost(Kind::sub, planner.window(), 0.4);
+      continue;
+    }
+    const int w = planner.window_wanted() ? planner.window_for(4.0f) : 0;
+    planner.start_group(cam, w);
+    if (w > 0) predicted = planner.predicted_gain();
+    const double m = planner.take_measured_gain();
+    if (m > 0.0) measured = m;
+    EXPECT_EQ(planner.take_measured_gain(), 0.0);  // counted once
+    planner.record_cost(w == 0 ? Kind::exact : Kind::key, w, w == 0 ? 1.0 : 1.5);
+  }
+  EXPECT_NEAR(predicted, 5.0 / 3.1, 1e-6);
+  EXPECT_NEAR(measured, 5.0 / 3.1, 1e-6);
+}
+
 // The model's arithmetic: the expected cost a frame of a group and the break-even count, from
 // the measured costs (speculation_planner.h gives the formulas).
 TEST(SpeculationCostModel, ExpectedCostAndBreakEvenFollowTheMeasuredCosts) {

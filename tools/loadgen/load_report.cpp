@@ -33,6 +33,10 @@ void StageSums::add(const StageSums& o) {
   render_key += o.render_key;
   render_rekey += o.render_rekey;
   window += o.window;
+  predicted_gain += o.predicted_gain;
+  measured_gain += o.measured_gain;
+  predicted_groups += o.predicted_groups;
+  measured_groups += o.measured_groups;
   lod_error_px += o.lod_error_px;
   lod_error_px_max = std::max(lod_error_px_max, o.lod_error_px_max);
   splats += o.splats;
@@ -115,6 +119,10 @@ nlohmann::json stages_json(const StageSums& s) {
        s.frames ? static_cast<double>(s.frames - s.render_key) / static_cast<double>(s.frames) : 0.0},
       {"render_rekey_fraction", s.frames ? static_cast<double>(s.render_rekey) / static_cast<double>(s.frames) : 0.0},
       {"speculation_window_mean", mean(s.window, s.frames)},
+      {"speculation_predicted_gain_mean",
+       measured(s.predicted_gain / std::max<double>(1, s.predicted_groups), s.predicted_groups)},
+      {"speculation_measured_gain_mean",
+       measured(s.measured_gain / std::max<double>(1, s.measured_groups), s.measured_groups)},
       {"lod_error_px_mean", mean(s.lod_error_px, s.frames)},
       {"lod_error_px_max", s.lod_error_px_max},
       {"splats_mean", mean(s.splats, s.frames)},

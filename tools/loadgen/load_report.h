@@ -22,9 +22,11 @@ struct StageSums {
   double queue = 0, render = 0, convert = 0, encode = 0, send = 0, total = 0;
   std::uint64_t frames = 0;  // frames summed (send: frames with previous_send_ms > 0)
   std::uint64_t sends = 0;
-  std::uint64_t render_key = 0;    // frames whose render was a key frame (catgs: full pre-process)
-  std::uint64_t render_rekey = 0;  // catgs key frames first tried as sub-frames (re-keys)
-  double window = 0;               // sum of the frames' speculation windows W
+  std::uint64_t render_key = 0;                  // frames whose render was a key frame (catgs: full pre-process)
+  std::uint64_t render_rekey = 0;                // catgs key frames first tried as sub-frames (re-keys)
+  double window = 0;                             // sum of the frames' speculation windows W
+  double predicted_gain = 0, measured_gain = 0;  // sums over the groups that carried them
+  std::uint64_t predicted_groups = 0, measured_groups = 0;
   // Level of detail (FrameTimings.lod_error_px, .splats): sums over frames, and the largest bound.
   double lod_error_px = 0, lod_error_px_max = 0, splats = 0;
   void add(const StageSums& o);

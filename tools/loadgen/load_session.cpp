@@ -268,6 +268,14 @@ class PoseLoop {
     if (t.render_key_frame()) r_.server.render_key++;
     if (t.render_rekey()) r_.server.render_rekey++;
     r_.server.window += t.speculation_window();
+    if (t.speculation_predicted_gain() > 0) {
+      r_.server.predicted_gain += t.speculation_predicted_gain();
+      r_.server.predicted_groups++;
+    }
+    if (t.speculation_measured_gain() > 0) {
+      r_.server.measured_gain += t.speculation_measured_gain();
+      r_.server.measured_groups++;
+    }
     r_.server.lod_error_px += t.lod_error_px();
     r_.server.lod_error_px_max = std::max<double>(r_.server.lod_error_px_max, t.lod_error_px());
     r_.server.splats += t.splats();
