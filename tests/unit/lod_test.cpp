@@ -23,6 +23,7 @@
 #include "lod/lod_cluster.h"
 #include "lod/lod_merge.h"
 #include "scene/morton.h"
+#include "small_city.h"
 #include "test_data.h"
 
 namespace catgs {
@@ -315,46 +316,15 @@ TEST(LodTree, ValidateRefusesBrokenTrees) {
 
 // --- Renders: a small city of a real scene, the full model against its LOD --------------------
 
-struct City {
-  GaussianModel full;  // the city in Morton order (the LOD's leaves, without padding)
-  GaussianModel lod;
-  std::vector<Camera> views;  // fly-over poses, near to far
-};
-
-const City& small_city() {
-  static const City city = [] {
-    City c;
-    const auto flowers = test::cached_scene(test::data_file("scenes/flowers_sh3.ply"));
-    CityParams p;
-    p.radius_sq = 2;  // 9 copies: the cells with i^2 + j^2 <= 2
-    p.up = glm::vec3(0.0f, -1.0f, 0.0f);
-    CityLayout layout;
-    const GaussianModel city = tile_scene(*flowers, p, &layout);
-    c.full = permuted(city, morton_order(city));
-    c.lod = build_lod(c.full);
-    GeneratorParams g;
-    g.width = 320;
-    g.height = 180;
-    g.rate_hz = 120.0;
-    g.duration_s = 1.0;
-    g.up = layout.up;
-    FlyoverParams far = {};
-    far.start_cells = -3.0f;  // from outside the city towards its middle
-    far.end_cells = 0.0f;
-    const Trace t = make_city_flyover(layout, far, g);
-    for (std::size_t k = 0; k < t.size(); k += t.size() / 8) c.views.push_back(t[k].camera);
-    return c;
-  }();
-  return city;
-}
+using test::small_flowers_city;
 
 // Renders `views` of `model` with `pipeline` at `tau`, frame k posed at k / 120 s.
-std::vector<Image> render(const GaussianModel& model, Pipeline pipeline, float tau, const std::vector<Camera>& views,
-                          std::vector<std::size_t>* visible = nullptr) {
+std::vector<Image> render(std::shared_ptr<const GaussianModel> model, Pipeline pipeline, float tau,
+                          const std::vector<Camera>& views, std::vector<std::size_t>* visible = nullptr) {
   RenderOptions o;
   o.pipeline = pipeline;
   o.lod_error_px = tau;
-  auto r = make_renderer("cpu", std::make_shared<const GaussianModel>(model), o);
+  auto r = make_renderer("cpu", std::move(model), o);
   std::vector<Image> out(views.size());
   for (std::size_t k = 0; k < views.size(); ++k) {
     r->render_at(views[k], static_cast<double>(k) / 120.0, out[k]);
@@ -365,7 +335,7 @@ std::vector<Image> render(const GaussianModel& model, Pipeline pipeline, float t
 
 TEST(LodRender, FullDetailIsBitIdenticalAndTheDefaultKeeps35dB) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
-  const City& c = small_city();
+  const test::SmallCity& c = small_flowers_city();
   const float tau = RenderOptions{}.lod_error_px;
   ASSERT_GT(tau, 0.0f);
   for (Pipeline p : {Pipeline::exact, Pipeline::catgs}) {

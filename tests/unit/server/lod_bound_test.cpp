@@ -10,15 +10,12 @@
 #include <memory>
 #include <vector>
 
-#include "camera/trace.h"
 #include "common/image_io.h"
 #include "forward_model/chunk_bounds.h"
-#include "lod/lod_build.h"
 #include "render/lod_bound.h"
 #include "renderer/renderer.h"
-#include "scene/morton.h"
-#include "scene_tools/city.h"
 #include "server_options.h"
+#include "small_city.h"
 #include "test_data.h"
 
 namespace {
@@ -26,39 +23,7 @@ namespace {
 using namespace catgs;
 using namespace catgs::server;
 
-struct City {
-  std::shared_ptr<const GaussianModel> full;  // in Morton order (the LOD's leaves without padding)
-  std::shared_ptr<const GaussianModel> lod;
-  std::vector<Camera> views;  // 320x180 fly-over poses from outside the city to its middle
-};
-
-const City& small_city() {
-  static const City city = [] {
-    City c;
-    const auto flowers = test::cached_scene(test::data_file("scenes/flowers_sh3.ply"));
-    CityParams p;
-    p.radius_sq = 2;  // 9 copies
-    p.up = glm::vec3(0.0f, -1.0f, 0.0f);
-    CityLayout layout;
-    const GaussianModel tiled = tile_scene(*flowers, p, &layout);
-    auto full = std::make_shared<GaussianModel>(permuted(tiled, morton_order(tiled)));
-    c.lod = std::make_shared<const GaussianModel>(build_lod(*full));
-    c.full = full;
-    GeneratorParams g;
-    g.width = 320;
-    g.height = 180;
-    g.rate_hz = 120.0;
-    g.duration_s = 1.0;
-    g.up = layout.up;
-    FlyoverParams far = {};
-    far.start_cells = -3.0f;
-    far.end_cells = 0.0f;
-    const Trace t = make_city_flyover(layout, far, g);
-    for (std::size_t k = 0; k < t.size(); k += t.size() / 8) c.views.push_back(t[k].camera);
-    return c;
-  }();
-  return city;
-}
+using test::small_flowers_city;
 
 std::unique_ptr<Renderer> exact_cpu(std::shared_ptr<const GaussianModel> m, float tau) {
   RenderOptions o;
@@ -86,7 +51,7 @@ TEST(LodBound, ScalesWithTheShorterSideBelowTheReference) {
 // 320x180 lost 3.4 dB here: RESULTS.md.)
 TEST(LodBound, DefaultBoundAtEachSizeWithinHalfADbOfFullDetailAgainstSupersampled) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
-  const City& c = small_city();
+  const test::SmallCity& c = small_flowers_city();
   const float bound = ServerOptions{}.lod_error_px;
   constexpr int kFactor = 4;
   for (const int scale : {1, 2}) {
@@ -122,7 +87,7 @@ TEST(LodBound, DefaultBoundAtEachSizeWithinHalfADbOfFullDetailAgainstSupersample
 // Gaussians the CPU core's culling lets through at that bound.
 TEST(LodBound, PredictedCountBracketsTheCutTheCoreDraws) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
-  const City& c = small_city();
+  const test::SmallCity& c = small_flowers_city();
   const CutCounter counter(*c.lod);
   ASSERT_TRUE(counter.has_lod());
   for (const float tau : {0.5f, 2.0f, 8.0f}) {
@@ -154,7 +119,7 @@ TEST(LodBound, PredictedCountBracketsTheCutTheCoreDraws) {
 
 TEST(LodBound, BudgetStepsUpUntilTheCutFitsAndDownWithHysteresis) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
-  const City& c = small_city();
+  const test::SmallCity& c = small_flowers_city();
   const CutCounter counter(*c.lod);
   const Camera& v = c.views[2];
   const float base = 0.5f;
