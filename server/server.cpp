@@ -205,7 +205,8 @@ void Server::resolve_encoder() {
             << (options_.encoder_policy.bitrate_kbps < 0    ? "auto"
                 : options_.encoder_policy.bitrate_kbps == 0 ? "off"
                                                             : std::to_string(options_.encoder_policy.bitrate_kbps))
-            << ", " << options_.encoder_policy.usable_cores << " cores for encoders\n";
+            << ", " << options_.encoder_policy.usable_cores << " cores for encoders, AV1 "
+            << options_.encoder_policy.av1 << " (speed " << options_.encoder_policy.av1_speed << ")\n";
   metrics_.renderer = renderer_kind_;
   metrics_.encoder = encoder_kind_;
   metrics_.pipeline = pipeline_name(render_options_.pipeline);

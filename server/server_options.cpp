@@ -152,6 +152,11 @@ std::string server_usage() {
          "                        session count) or an x264 preset,\n"
          "                        with +cabac and +deblock to turn those tools back on\n"
          "                        (e.g. ultrafast+cabac+deblock)\n"
+         "  --av1 auto|on|off     AV1 (libaom realtime) for clients that decode it: auto\n"
+         "                        (default) while half the cores afford it at the live\n"
+         "                        session count and the link does not limit the stream,\n"
+         "                        on always, off never (H.264 only); x264 hosts only\n"
+         "  --av1-speed N         libaom's realtime cpu-used for AV1 streams, 5..10 (default 9)\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
          "  --frame-deadline S|off  skip a rendered frame before encoding when it would reach\n"
          "                        the client more than S pose intervals after its pose and a\n"
@@ -332,7 +337,13 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
         throw std::invalid_argument("--x264-preset: '" + v +
                                     "' is not auto or an x264 preset (ultrafast .. placebo, +cabac, +deblock)");
       out.encoder_policy.x264_preset = v;
-    } else if (a == "--frame-deadline")
+    } else if (a == "--av1") {
+      if (v != "auto" && v != "on" && v != "off")
+        throw std::invalid_argument("--av1: auto, on or off, got '" + v + "'");
+      out.encoder_policy.av1 = v;
+    } else if (a == "--av1-speed")
+      out.encoder_policy.av1_speed = parse_int(a, v, 5, 10);
+    else if (a == "--frame-deadline")
       out.frame_deadline_slots = v == "off" ? 0.0 : parse_double(a, v, 0.0, 100.0);
     else if (a == "--max-frames-in-flight")
       out.max_frames_in_flight = parse_int(a, v, 1, 16);

@@ -4,7 +4,7 @@
 import { OrbitCamera } from './camera.js';
 import { Connection, defaultWebSocketUrl, ERROR_SERVER_FULL, ERROR_SHUTTING_DOWN, ERROR_UNAUTHORIZED } from './connection.js';
 import { Controls } from './controls.js';
-import { StreamDecoder, hasWebCodecs } from './decoder.js';
+import { StreamDecoder, decodableCodecs, hasWebCodecs, CODEC_H264 } from './decoder.js';
 import { Overlay } from './overlay.js';
 import {
   LOADGEN_SECONDS_PER_VIEW, PathRecorder, fromInriaCameras, fromTraceFile, poseAtTime, resample, toInriaCameras,
@@ -33,6 +33,8 @@ const maxSize = parseMaxSize(params.get('max'));
 const linkView = parseView(params);
 // ?scene=NAME opens that scene of a server that serves several (GET /scenes lists them).
 const sceneParam = (params.get('scene') || '').slice(0, 128);
+// ?codec=h264: offer only H.264 (the page otherwise offers AV1 too where WebCodecs decodes it).
+const codecParam = params.get('codec') || '';
 const isTouch = (navigator.maxTouchPoints || 0) > 0 || matchMedia('(pointer: coarse)').matches;
 // Latency hiding (reproject.js): the last frame re-projected to the newest pose until its own
 // frame arrives. ?reproject=0 turns it off.
@@ -275,6 +277,7 @@ function onWelcome(w) {
   canvas.style.transform = '';
   state.connection.markHealthy();
   state.decoder.reset();
+  state.decoder.setWelcomeCodec(w.codec);
   overlay.setSession(w);
   // Export video only where the server would take it (an author's or admin's session on a server
   // with export built in); a viewer's request would be refused anyway.
@@ -1046,6 +1049,7 @@ async function main() {
     overlay.render();
     return;
   }
+  state.codecs = codecParam === 'h264' ? [CODEC_H264] : await decodableCodecs();
   state.decoder = new StreamDecoder({
     onFrame: drawFrame,
     onError: (e) => {
@@ -1063,6 +1067,7 @@ async function main() {
       const v = state.viewport;
       send(state.protocol.encodeHello({
         width: v.width, height: v.height, token: state.token, scene: sceneParam, loadProgress: true,
+        codecs: state.codecs,
       }));
     },
     onMessage,

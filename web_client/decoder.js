@@ -1,8 +1,48 @@
-// WebCodecs decoding of the H.264 stream: Annex B chunks with no `description` (Chromium accepts
-// that: SPS and PPS travel in band on every IDR), configured from the SPS of the first IDR and
-// reconfigured when a key frame brings another codec string or frame size (e.g. after a Resize).
+// WebCodecs decoding of the stream: H.264 as Annex B chunks with no `description` (Chromium
+// accepts that: SPS and PPS travel in band on every IDR), configured from the SPS of the first
+// IDR; AV1 as temporal units of low-overhead OBUs, configured from the sequence header OBU of its
+// key frames. Reconfigured when a key frame brings another codec (Frame.codec: the server moved the
+// session between H.264 and AV1), codec string or frame size (e.g. after a Resize).
 
 import { inspectAccessUnit } from './h264.js';
+import { inspectTemporalUnit } from './av1.js';
+
+// Frame.codec / Welcome.codec values (proto/catgs_stream.proto, enum Codec).
+export const CODEC_H264 = 1;
+export const CODEC_AV1 = 2;
+
+// A codec string of each kind for VideoDecoder.isConfigSupported: H.264 constrained baseline
+// level 4.0 (1080p), AV1 main profile level 4.0 (seq_level_idx 8), 8 bits.
+const PROBE_CONFIGS = [
+  [CODEC_AV1, 'av01.0.08M.08'],
+  [CODEC_H264, 'avc1.42E028'],
+];
+
+// The codecs this browser's WebCodecs decodes, for Hello.codecs, AV1 first (the server streams
+// it only where its host affords it). H.264 is always listed: the server may move any session to it.
+export async function decodableCodecs() {
+  const out = [];
+  for (const [codec, string] of PROBE_CONFIGS) {
+    try {
+      const r = await VideoDecoder.isConfigSupported({ codec: string, optimizeForLatency: true });
+      if (r.supported) out.push(codec);
+    } catch (_) {
+      // an unknown codec string: not decodable
+    }
+  }
+  if (!out.includes(CODEC_H264)) out.push(CODEC_H264);
+  return out;
+}
+
+// What a payload of `codec` says for the decoder: { codec string or null, key }.
+function inspectPayload(codec, payload) {
+  if (codec === CODEC_AV1) {
+    const info = inspectTemporalUnit(payload);
+    return { codec: info.codec, key: info.sequenceHeader !== null };
+  }
+  const info = inspectAccessUnit(payload);
+  return { codec: info.codec, key: info.hasIdr };
+}
 
 export const hasWebCodecs = () =>
   typeof globalThis.VideoDecoder === 'function' && typeof globalThis.EncodedVideoChunk === 'function';
@@ -22,6 +62,12 @@ export class StreamDecoder {
     this.meta = new Map(); // chunk timestamp -> Frame metadata, to pair outputs with their Frame
     this.lastKeyRequestMs = -Infinity;
     this.errors = 0;
+    this.streamCodec = CODEC_H264; // Welcome.codec: what a Frame without a codec carries
+  }
+
+  // A new session's Welcome.codec (0 from older servers: H.264).
+  setWelcomeCodec(codec) {
+    this.streamCodec = codec || CODEC_H264;
   }
 
   _create() {
@@ -78,14 +124,15 @@ export class StreamDecoder {
   decode(f) {
     const payload = f.payload;
     if (!payload || payload.length === 0) return;
+    const codec = f.codec || this.streamCodec;
     let info;
     try {
-      info = inspectAccessUnit(payload);
+      info = inspectPayload(codec, payload);
     } catch (e) {
       this._fail(e);
       return;
     }
-    const isKey = !!f.key_frame || info.hasIdr;
+    const isKey = !!f.key_frame || info.key;
     if (this.waitingForKey && !isKey) {
       this._askForKey(false);
       return; // a delta frame without its reference cannot be decoded
@@ -97,12 +144,13 @@ export class StreamDecoder {
           const want = { codec: info.codec, width: f.width, height: f.height };
           const c = this.config;
           if (!c || c.codec !== want.codec || c.width !== want.width || c.height !== want.height) {
-            // No description: the stream is Annex B with SPS/PPS in band on every IDR.
+            // No description: H.264 is Annex B with SPS/PPS in band on every IDR, AV1 carries
+            // its sequence header in band on every key frame.
             this.decoder.configure({ codec: want.codec, optimizeForLatency: true });
             this.config = want;
           }
         } else if (!this.config) {
-          this._askForKey(false); // an IDR without SPS cannot start a stream
+          this._askForKey(false); // a key frame without SPS (sequence header) cannot start a stream
           return;
         }
       }

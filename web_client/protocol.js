@@ -55,13 +55,17 @@ export function makeProtocol(root) {
 
     // `scene`: a scene name from GET /scenes ('' the server's first; servers before it ignore it).
     // `loadProgress`: ask for LoadProgress messages while the scene loads (before Welcome).
-    encodeHello({ width, height, token = '', clientName = 'catgs-web', scene = '', loadProgress = false }) {
+    // `codecs`: Codec values the page decodes, in order of preference (decoder.js decodableCodecs).
+    encodeHello({
+      width, height, token = '', clientName = 'catgs-web', scene = '', loadProgress = false,
+      codecs = [Codec.values.CODEC_H264],
+    }) {
       return encode({
         hello: {
           protocol_version: PROTOCOL_VERSION,
           viewport_width: width,
           viewport_height: height,
-          codecs: [Codec.values.CODEC_H264],
+          codecs,
           token,
           client_name: clientName,
           scene,

@@ -1,12 +1,14 @@
-// Video encoders: one H.264 Annex B access unit out per picture in, from BT.709 limited-range
+// Video encoders: one access unit out per picture in (H.264: Annex B; AV1: a temporal unit of
+// low-overhead OBUs, AV1 spec section 5), from BT.709 limited-range
 // I420 planes, or from a picture written straight into the encoder's own input planes
 // (input_target() + encode_input(): the render core's colour conversion writes there, host
 // planes for x264, CUDA device planes for NVENC with device_input: no extra copy).
 //
 // An Encoder is created for one frame size and used by one thread at a time (a session's encode
 // job, or its one render-and-encode job with NVENC); a size change means a new Encoder.
-// Implementations (libavcodec): `x264` (libx264, CPU) and `nvenc` (h264_nvenc, fed host frames
-// or, with the CUDA renderer, CUDA frames; see nvenc_encoder.h).
+// Implementations (libavcodec): `x264` (libx264, CPU), `nvenc` (h264_nvenc, fed host frames
+// or, with the CUDA renderer, CUDA frames; see nvenc_encoder.h) and `av1` (libaom-av1's realtime
+// mode, CPU; see av1_encoder.h).
 #pragma once
 
 #include <cstdint>
@@ -38,6 +40,8 @@ struct EncoderConfig {
   // x264's speed/size trade-off ("ultrafast" .. "veryslow"): streams take ultrafast, a video
   // file (catgs-render --video) a slower one for fewer bytes at the same crf. nvenc ignores it.
   std::string x264_preset = "ultrafast";
+  // av1: libaom's realtime speed (cpu-used, 5..10; higher is faster and coarser). Others ignore it.
+  int av1_speed = 9;
   // A container's global header: SPS/PPS once in extradata() (AV_CODEC_FLAG_GLOBAL_HEADER), not
   // in band on IDR pictures, as MP4 wants (its avcC box is made from it). Streams leave it off.
   bool global_header = false;
@@ -51,16 +55,19 @@ struct EncoderConfig {
 // One encoded access unit.
 struct EncodedFrame {
   std::vector<std::uint8_t> data;  // H.264 Annex B: start codes, SPS/PPS in band on IDR frames
-                                   // (unless global_header)
-  bool key_frame = false;          // IDR
+                                   // (unless global_header); AV1: one temporal unit, the
+                                   // sequence header OBU in band on key frames
+  bool key_frame = false;          // IDR (AV1: a key frame)
   double encode_ms = 0;            // encoder time (plane copy included)
 };
 
 class Encoder {
  public:
   virtual ~Encoder() = default;
-  // "x264" or "nvenc".
+  // "x264", "nvenc" or "av1".
   virtual std::string name() const = 0;
+  // The stream's codec: "h264" or "av1".
+  std::string codec() const { return name() == "av1" ? "av1" : "h264"; }
   virtual int width() const = 0;
   virtual int height() const = 0;
   // Encodes one picture given as BT.709 limited-range I420 planes of width x height (yuv420.h;
@@ -78,8 +85,9 @@ class Encoder {
   // Encodes the picture written into the last input_target(). IDR rules and encoder failures as
   // encode_yuv420(); throws std::logic_error without a preceding input_target().
   virtual EncodedFrame encode_input(bool force_idr) = 0;
-  // The global header (EncoderConfig::global_header): SPS and PPS as Annex B NAL units with start
-  // codes, as libavcodec's extradata holds them; empty without global_header.
+  // The global header (EncoderConfig::global_header): H.264's SPS and PPS as Annex B NAL units
+  // with start codes (AV1: the sequence header OBU), as libavcodec's extradata holds them; empty
+  // without global_header.
   virtual std::vector<std::uint8_t> extradata() const = 0;
   // Sets the stream's maximum rate (EncoderConfig::bitrate_kbps) from the next picture on, the
   // VBV keeping its size in ms, without an IDR. Returns false where the encoder cannot (NVENC
@@ -92,6 +100,7 @@ class Encoder {
 //  "x264"  libx264;
 //  "nvenc" h264_nvenc; throws std::runtime_error naming the reason when NVENC cannot be opened
 //          (no NVIDIA driver, no NVENC on the GPU: H100/H200 have none, session limit);
+//  "av1"   libaom-av1 (realtime);
 //  "auto"  NVENC when a probe could open it, else x264. The probe (a 256x256 NVENC encoder)
 //          runs once per process, on the first "auto" call; its verdict is reused.
 // `why` (optional) gets a one-line reason for the choice; `fell_back` (optional) is set true when

@@ -1,6 +1,7 @@
 #include <mutex>
 #include <stdexcept>
 
+#include "encode/av1_encoder.h"
 #include "encode/encoder.h"
 #include "encode/nvenc_encoder.h"
 #include "encode/x264_encoder.h"
@@ -44,6 +45,10 @@ std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConf
     if (why) *why = "nvenc requested";
     return std::make_unique<NvencEncoder>(config);
   }
+  if (kind == "av1") {
+    if (why) *why = "av1 requested";
+    return std::make_unique<Av1Encoder>(config);
+  }
   if (kind == "auto") {
     const NvencProbe& probe = nvenc_probe();
     if (probe.ok) {
@@ -61,7 +66,7 @@ std::unique_ptr<Encoder> make_encoder(const std::string& kind, const EncoderConf
     if (fell_back) *fell_back = true;
     return std::make_unique<X264Encoder>(config);
   }
-  throw std::invalid_argument("unknown encoder '" + kind + "' (nvenc, x264 or auto)");
+  throw std::invalid_argument("unknown encoder '" + kind + "' (nvenc, x264, av1 or auto)");
 }
 
 }  // namespace catgs::server

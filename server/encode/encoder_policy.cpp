@@ -57,6 +57,15 @@ int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int
   return step;
 }
 
+bool use_av1(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions, bool client_decodes_av1,
+             bool cpu_encoder, bool link_limited) {
+  if (!client_decodes_av1 || !cpu_encoder || link_limited || policy.av1 == "off") return false;
+  if (policy.av1 == "on") return true;
+  const double budget_ms = kEncoderCpuShare * std::max(1, policy.usable_cores) * 1000.0;
+  const double per_session_ms = ultrafast_cpu_ms(width, height) * std::max(fps, 1) * std::max(1, live_sessions);
+  return per_session_ms * kAv1CpuFactor <= budget_ms;
+}
+
 std::string encoder_preset(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions) {
   if (policy.x264_preset != "auto") return policy.x264_preset;
   return kPresetLadder[preset_step(policy, width, height, fps, live_sessions)].name;
@@ -107,6 +116,7 @@ EncoderConfig encoder_config(const EncoderPolicy& policy, int width, int height,
   c.intra_refresh_frames = policy.intra_refresh_frames;
   c.threads = encoder_threads(policy, width, height, live_sessions);
   c.x264_preset = encoder_preset(policy, width, height, fps, live_sessions);
+  c.av1_speed = policy.av1_speed;
   return c;
 }
 

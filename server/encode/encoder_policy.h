@@ -39,7 +39,11 @@ struct EncoderPolicy {
   int intra_refresh_frames = 0;      // --intra-refresh N: refresh period in frames (0: off)
   int threads = 0;                   // --encoder-threads: > 0 fixed per session; 0 auto (above)
   std::string x264_preset = "auto";  // --x264-preset: "auto" (the ladder above) or one x264 preset
-  int usable_cores = 1;              // the cores this process may use (cpu_quota.h)
+  int av1_speed = 9;                 // --av1-speed: libaom's realtime cpu-used for AV1 streams
+  // --av1: "auto" AV1 for a client that decodes it while the host affords it (use_av1), "on" for
+  // every such client, "off" never (H.264 only).
+  std::string av1 = "auto";
+  int usable_cores = 1;  // the cores this process may use (cpu_quota.h)
 };
 
 // The VBV maximum rate in kbit/s for a width x height stream at `fps` frames/s; `client_max_kbps`
@@ -83,6 +87,19 @@ double ultrafast_cpu_ms(int width, int height);
 // `live_sessions` sessions share the host: the slowest whose CPU time fits the encoders' share of
 // policy.usable_cores; 0 (ultrafast) when none does.
 int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);
+
+// AV1 (libaom realtime at policy.av1_speed) above the ladder: its CPU time a frame relative to x264
+// ultrafast's, the larger of the factors measured at 1080p and 720p on the H100 host (RESULTS.md,
+// "AV1 where the host affords it").
+inline constexpr double kAv1CpuFactor = 4.0;
+
+// Whether a session's stream is AV1: its client decodes AV1 (Hello.codecs), the encoders are on
+// the CPU (`cpu_encoder`: x264's host; NVENC hosts stream H.264 from the GPU), the link does not
+// limit the stream (`link_limited`: AV1's rate cannot follow the link without a key frame, x264's
+// can), and policy.av1 is "on", or "auto" and AV1's CPU time a frame at the live session count
+// fits the encoders' share of the cores, as the ladder's steps do (preset_step).
+bool use_av1(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions, bool client_decodes_av1,
+             bool cpu_encoder, bool link_limited);
 
 // The x264 preset for that session: policy.x264_preset unless it is "auto", else the ladder's.
 std::string encoder_preset(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);

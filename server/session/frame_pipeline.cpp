@@ -43,7 +43,8 @@ class GpuRenderCount {
 }  // namespace
 
 void FramePipeline::open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu,
-                         bool pipelined) {
+                         bool pipelined, bool av1_ok) {
+  av1_ok_ = av1_ok;
   renderer_ = std::move(renderer);
   model_ = std::move(model);
   if (model_ && !model_->lod.empty()) cut_counter_ = std::make_unique<CutCounter>(*model_);
@@ -170,6 +171,17 @@ FramePipeline::Rendered FramePipeline::render(Job job, std::unique_ptr<Yuv420Ima
   return r;
 }
 
+bool FramePipeline::stream_is_av1(const JobShape& shape, int live_sessions) const {
+  return use_av1(settings_.encoder_policy, shape.width, shape.height, kStreamFps, live_sessions, av1_ok_, true,
+                 shape.link_kbps > 0);
+}
+
+int FramePipeline::stream_step(const JobShape& s, int live) const {
+  if (stream_is_av1(s, live)) return kPresetSteps;
+  const EncoderPolicy& policy = settings_.encoder_policy;
+  return policy.x264_preset == "auto" ? preset_step(policy, s.width, s.height, kStreamFps, live) : 0;
+}
+
 void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   const EncoderPolicy& policy = settings_.encoder_policy;
   const JobShape& s = job.shape;
@@ -178,18 +190,21 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   const bool same_stream = encoder_ && encoder_->width() == s.width && encoder_->height() == s.height &&
                            encoder_bitrate_kbps_ == s.max_bitrate_kbps;
   // The link's cap follows the link frame by frame: x264 takes a new VBV rate without an IDR.
-  if (same_stream && encoder_link_kbps_ != s.link_kbps) {
+  // (An AV1 stream cannot; a limiting link moves it to H.264 below, use_av1.)
+  if (same_stream && encoder_link_kbps_ != s.link_kbps && encoder_->codec() == "h264") {
     const int rate =
         target_bitrate_kbps(policy, s.width, s.height, kStreamFps, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
     if (rate > 0 && encoder_->set_max_bitrate_kbps(rate)) encoder_link_kbps_ = s.link_kbps;
   }
-  if (same_stream && encoder_link_kbps_ == s.link_kbps) {
-    // The same stream: rebuilt only for a new share of the cores (x264's threads and preset are
-    // fixed when it opens; NVENC has none to share).
+  const int step = stream_step(s, live);
+  // An AV1 stream on a link that came to limit it: H.264 at once (its rate follows the link).
+  const bool leave_av1 = encoder_ && encoder_->codec() == "av1" && step != kPresetSteps && s.link_kbps > 0;
+  if (same_stream && !leave_av1 && (encoder_link_kbps_ == s.link_kbps || encoder_->codec() == "av1")) {
+    // The same stream: rebuilt only for a new share of the cores (x264's threads, preset and the
+    // codec are fixed when it opens; NVENC has none to share).
     const auto since = now - encoder_built_;
     const bool threads = should_rebuild(encoder_threads_, encoder_threads(policy, s.width, s.height, live), since);
-    const bool preset = policy.x264_preset == "auto" &&
-                        should_rebuild(encoder_step_, preset_step(policy, s.width, s.height, kStreamFps, live), since);
+    const bool preset = should_rebuild(encoder_step_, step, since);
     if (encoder_->name() == "nvenc" || !(threads || preset)) return;
     metrics_.encoder_rebuilds_total++;
   }
@@ -200,11 +215,11 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   cfg.cuda_device = std::max(gpu_, 0);
   // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
   bool fell_back = false;
-  encoder_ = make_encoder(settings_.encoder, cfg, nullptr, &fell_back);
+  encoder_ = make_encoder(step == kPresetSteps ? "av1" : settings_.encoder, cfg, nullptr, &fell_back);
   encoder_bitrate_kbps_ = s.max_bitrate_kbps;
   encoder_link_kbps_ = s.link_kbps;
   encoder_threads_ = cfg.threads;
-  encoder_step_ = preset_step(policy, s.width, s.height, kStreamFps, live);
+  encoder_step_ = step;
   encoder_built_ = now;
   if (fell_back) metrics_.encoder_fallbacks_total++;
   idr = true;
@@ -257,6 +272,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_width(static_cast<std::uint32_t>(job.shape.width));
   f->set_height(static_cast<std::uint32_t>(job.shape.height));
   f->set_payload(enc.data.data(), enc.data.size());
+  f->set_codec(encoder_->codec() == "av1" ? pb::CODEC_AV1 : pb::CODEC_H264);
   r.render_key_frame = rendered.render_key_frame;
   r.render_rekey = rendered.render_rekey;
   r.predicted_gain = rendered.predicted_gain;

@@ -1,7 +1,8 @@
 // A session's frames from pose to Frame message (docs/DESIGN.md "Data flow of a frame"): the
 // newest pose waiting (latest wins), the render job that renders it and converts it to I420
 // where it was rendered, the rendered picture waiting for the encoder, the encode job that makes
-// it an H.264 access unit, and the serialized Frame. The unit owns the frame's state: the pose
+// it an access unit (H.264, or AV1 for a client that decodes it where the encoder policy affords
+// it: encode/encoder_policy.h use_av1), and the serialized Frame. The unit owns the frame's state: the pose
 // slots, the two host I420 buffers, the session's renderer and its encoder. The Session
 // (session.h) decides when a stage may start (protocol state, frames in flight, pacing, adaptive
 // quality, the link's cap) and posts the jobs (session_stream.cpp).
@@ -111,9 +112,14 @@ class FramePipeline {
 
   // --- strand ---
   // At Welcome: the session's renderer of `model` (which outlives the pipeline), on CUDA device
-  // `gpu` (-1: the CPU renderer), and whether render and encode are two stages (false: NVENC
-  // takes the CUDA frame in one job).
-  void open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu, bool pipelined);
+  // `gpu` (-1: the CPU renderer), whether render and encode are two stages (false: NVENC
+  // takes the CUDA frame in one job), and whether the stream may be AV1 (`av1_ok`: the client
+  // decodes it and the server's encoders are x264's CPU ones).
+  void open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu, bool pipelined,
+            bool av1_ok);
+  // Whether a stream of `shape` at `live_sessions` sessions would be AV1 now (the encoder policy's
+  // use_av1): Welcome.codec before the first frame.
+  bool stream_is_av1(const JobShape& shape, int live_sessions) const;
   std::string renderer_name() const { return renderer_ ? renderer_->name() : std::string(); }
   bool pipelined() const { return pipelined_; }
 
@@ -163,6 +169,9 @@ class FramePipeline {
   void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
   // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed.
   float set_lod_bound(const Camera& camera);
+  // The step a stream of `shape` takes at `live` sessions: the x264 ladder's (preset_step; 0 for a
+  // fixed --x264-preset), or kPresetSteps (above the ladder) for AV1.
+  int stream_step(const JobShape& shape, int live) const;
   // Builds or reconfigures the encoder for `job`; sets `idr` when it was (re)built.
   void ensure_encoder(const Job& job, bool& idr);
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
@@ -177,6 +186,7 @@ class FramePipeline {
   bool rendering_ = false;                                 // a render (or render-and-encode) job is running
   bool encoding_ = false;                                  // an encode job is running
   bool pipelined_ = true;                                  // render and encode as separate stages
+  bool av1_ok_ = false;                                    // the stream may be AV1 (open)
   std::optional<Rendered> rendered_;                       // rendered, waiting for the encoder
   std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
   std::uint32_t next_frame_sequence_ = 0;
@@ -191,7 +201,7 @@ class FramePipeline {
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with
   int encoder_link_kbps_ = 0;     // the link cap it runs at (changed without a rebuild where it can)
   int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
-  int encoder_step_ = 0;          // its preset's step of the ladder (encoder_policy.h, --x264-preset auto)
+  int encoder_step_ = 0;          // its step (stream_step): the ladder's preset, or kPresetSteps for AV1
   Clock::time_point encoder_built_{};
 };
 

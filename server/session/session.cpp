@@ -296,8 +296,15 @@ void Session::handle_hello(const pb::Hello& hello) {
   if (!admit(hello)) return;
   if (hello.codecs_size() > 0) {
     bool h264 = false;
-    for (int c : hello.codecs()) h264 = h264 || c == pb::CODEC_H264;
-    if (!h264) return fail(pb::ERROR_INVALID_ARGUMENT, "client does not accept H.264");
+    for (int c : hello.codecs()) {
+      h264 = h264 || c == pb::CODEC_H264;
+      client_av1_ = client_av1_ || c == pb::CODEC_AV1;
+    }
+    // A stream may move to H.264 whenever AV1 stops paying (sessions join, the link limits it):
+    // an AV1-only client is served only where AV1 is forced on.
+    if (!h264 && !(client_av1_ && shared_.settings.frame.encoder_policy.av1 == "on" && shared_.encoder_kind == "x264"))
+      return fail(pb::ERROR_INVALID_ARGUMENT, client_av1_ ? "client does not accept H.264 (AV1 alone needs --av1 on)"
+                                                          : "client accepts no codec this server streams (H.264, AV1)");
   }
   const std::optional<std::size_t> scene = shared_.scenes.find(hello.scene());
   if (!scene)
@@ -378,7 +385,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   }
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
   const bool pipelined = !(shared_.encoder_kind == "nvenc" && renderer->name() == "cuda");
-  frames_.open(std::move(renderer), scene_->model, gpu_, pipelined);
+  frames_.open(std::move(renderer), scene_->model, gpu_, pipelined, client_av1_ && shared_.encoder_kind == "x264");
   state_ = State::open;
   session_id_ = random_session_id();
 
@@ -401,11 +408,16 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   set_vec3(w->mutable_up(), scene_->frame.up);
   w->set_scene_scale(scene_->frame.scene_scale);
   w->set_can_export(may_export());
-  w->set_codec(pb::CODEC_H264);
+  FramePipeline::JobShape first;
+  first.width = width_;
+  first.height = height_;
+  const int live = static_cast<int>(std::max<std::int64_t>(1, shared_.metrics.sessions_open.load()));
+  const bool av1 = frames_.stream_is_av1(first, live);
+  w->set_codec(av1 ? pb::CODEC_AV1 : pb::CODEC_H264);
   w->set_width(static_cast<std::uint32_t>(width_));
   w->set_height(static_cast<std::uint32_t>(height_));
   w->set_renderer(frames_.renderer_name());
-  w->set_encoder(shared_.encoder_kind);
+  w->set_encoder(av1 ? "av1" : shared_.encoder_kind);
   w->set_pipeline(pipeline_name(shared_.render_options.pipeline));
   send(m);
   std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_ << " scene '"

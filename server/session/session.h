@@ -184,6 +184,7 @@ class Session : public std::enable_shared_from_this<Session> {
   std::unique_ptr<SceneStore::Use> scene_use_;  // from Hello until the session ends: keeps it loaded
   std::shared_ptr<const LoadedScene> scene_;    // once loaded
   bool load_progress_ = false;                  // Hello.load_progress
+  bool client_av1_ = false;                     // Hello.codecs lists AV1
   std::string client_name_;                     // Hello.client_name (logs), at most 128 bytes
   int progress_sent_ = -1;                      // the last LoadProgress percent sent
   int width_ = 0, height_ = 0;

@@ -1,4 +1,4 @@
-// Unit tests of the web client's pure modules (camera maths, H.264 parsing, the protocol through
+// Unit tests of the web client's pure modules (camera maths, H.264 and AV1 parsing, the protocol through
 // protobufjs), run by node without a browser or a server:  node tests/e2e/unit_web.mjs
 // Exits 77 (ctest SKIP) when the npm dependencies are not installed (scripts/setup_web.sh).
 import assert from 'node:assert/strict';
@@ -21,6 +21,7 @@ const pb = require('protobufjs');
 const imp = (f) => import(pathToFileURL(path.join(web, f)).href);
 const cam = await imp('camera.js');
 const h264 = await imp('h264.js');
+const av1 = await imp('av1.js');
 const proto = await imp('protocol.js');
 const conn = await imp('connection.js');
 const tokens = await imp('token.js');
@@ -244,6 +245,62 @@ test('Annex B split, IDR detection and codec string', () => {
   // Emulation prevention bytes are removed before the header is read.
   assert.deepEqual([...h264.unescapeRbsp(new Uint8Array([0x67, 0, 0, 3, 1]))], [0x67, 0, 0, 1]);
   assert.throws(() => h264.parseSpsHeader(new Uint8Array(pps)));
+});
+
+// Bits most significant first, as the AV1 spec writes f(n).
+const bitsToBytes = (fields) => {
+  const bits = [];
+  for (const [value, n] of fields) for (let i = n - 1; i >= 0; i--) bits.push(Math.floor(value / 2 ** i) % 2);
+  while (bits.length % 8) bits.push(0);
+  const out = [];
+  for (let i = 0; i < bits.length; i += 8) out.push(bits.slice(i, i + 8).reduce((a, b) => a * 2 + b, 0));
+  return out;
+};
+
+test('AV1 temporal unit: OBUs split, sequence header read, codec string', () => {
+  // The first temporal unit libaom (realtime, 1920x1080) wrote, cut after its frame OBU's size:
+  // 0x12 0x00 a temporal delimiter (type 2, has_size, size 0); 0x0a 0x0b a sequence header (type 1)
+  // of 11 bytes; 0x32 a frame OBU (type 6), here 3 bytes. The header's first 4 bytes by hand:
+  // seq_profile 000, still_picture 0, reduced_still_picture_header 0, timing_info_present 0,
+  // initial_display_delay_present 0, operating_points_cnt_minus_1 00000, operating_point_idc[0]
+  // twelve 0s, then 0x4a = 01001 010: seq_level_idx[0] 9 (> 7, so seq_tier[0] follows: 0, Main).
+  const header = [0x00, 0x00, 0x00, 0x4a, 0xab, 0xbf, 0xc3, 0x77, 0x6b, 0xe4, 0x01];
+  const tu = new Uint8Array([0x12, 0x00, 0x0a, 0x0b, ...header, 0x32, 0x03, 0x10, 0x20, 0x30]);
+  const obus = av1.splitObus(tu);
+  assert.deepEqual(obus.map((o) => o.type), [2, 1, 6]);
+  assert.deepEqual([...obus[1].payload], header);
+  const info = av1.inspectTemporalUnit(tu);
+  assert.equal(info.codec, 'av01.0.09M.08');
+  assert.equal(info.hasFrame, true);
+  // A delta temporal unit: no sequence header, no codec string.
+  const delta = av1.inspectTemporalUnit(new Uint8Array([0x12, 0x00, 0x32, 0x02, 0x01, 0x02]));
+  assert.equal(delta.sequenceHeader, null);
+  assert.equal(delta.codec, null);
+});
+
+test('AV1 sequence header: timing info skipped, High tier, reduced still-picture header', () => {
+  // profile 2, timing_info_present with equal_picture_interval (num_ticks_per_picture_minus_1
+  // 2 as uvlc: 011), no decoder model; level 13 (5.1), tier 1.
+  const timed = bitsToBytes([
+    [2, 3], [0, 1], [0, 1], [1, 1], [1001, 32], [60000, 32], [1, 1], [0b011, 3], [0, 1],
+    [0, 1], [0, 5], [0, 12], [13, 5], [1, 1],
+  ]);
+  assert.deepEqual(av1.parseSequenceHeader(new Uint8Array(timed)), { profile: 2, level: 13, tier: 1 });
+  assert.equal(av1.codecStringFromSequenceHeader(new Uint8Array(timed)), 'av01.2.13H.08');
+  // profile 1, still_picture 1, reduced_still_picture_header 1: the level follows at once.
+  const still = bitsToBytes([[1, 3], [1, 1], [1, 1], [5, 5]]);
+  assert.equal(av1.codecStringFromSequenceHeader(new Uint8Array(still)), 'av01.1.05M.08');
+  // A level of 7 or less has no tier bit.
+  const low = bitsToBytes([[0, 3], [0, 1], [0, 1], [0, 1], [0, 1], [0, 5], [0, 12], [4, 5]]);
+  assert.equal(av1.codecStringFromSequenceHeader(new Uint8Array(low)), 'av01.0.04M.08');
+});
+
+test('AV1 temporal unit: malformed OBUs are refused', () => {
+  assert.throws(() => av1.splitObus(new Uint8Array([0x10, 0x00])), /without a size field/);
+  assert.throws(() => av1.splitObus(new Uint8Array([0x32, 0x05, 0x01])), /runs past/);
+  assert.throws(() => av1.splitObus(new Uint8Array([0x92, 0x00])), /forbidden/);
+  assert.throws(() => av1.splitObus(new Uint8Array([0x32, 0x80])), /runs past/);
+  assert.throws(() => av1.parseSequenceHeader(new Uint8Array([0x00])), /ends early/);
 });
 
 const protoText = readFileSync(path.join(repo, 'proto/catgs_stream.proto'), 'utf8');

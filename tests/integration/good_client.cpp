@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "camera/trace.h"
-#include "loadgen/h264_decoder.h"
+#include "loadgen/video_decoder.h"
 #include "stream_checks.h"
 
 namespace catgs::itest {
@@ -74,7 +74,7 @@ GoodClient::Clock::time_point GoodClient::ended_at() {
 void GoodClient::run() {
   try {
     const Trace orbit = biker_orbit(width_, height_, 24);
-    loadgen::H264Decoder dec;
+    loadgen::VideoDecoder dec;
     std::vector<std::uint8_t> rgba;
     std::uint32_t seq = 0;
     bool outstanding = false;

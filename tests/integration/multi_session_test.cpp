@@ -25,9 +25,9 @@ namespace {
 
 using namespace catgs;
 using namespace catgs::itest;
-using loadgen::H264Decoder;
 using loadgen::pose_from_camera;
 using loadgen::StreamClient;
+using loadgen::VideoDecoder;
 using Clock = std::chrono::steady_clock;
 
 const std::string kTrainCams = kDataDir + "/traces/tandt_train.cameras.json";
@@ -41,7 +41,7 @@ pb::Stats stream_and_check(int port, const std::string& name, const Trace& trace
   c.connect(port);
   const pb::Welcome welcome = c.hello(w, h);
   EXPECT_EQ(welcome.pipeline(), "catgs");
-  H264Decoder dec;
+  VideoDecoder dec;
   cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
   const double t0 = now_ms();
   double worst = 1e9;

@@ -20,7 +20,7 @@
 #include "scene/ply_io.h"
 #include "camera/trace.h"
 #include "process/first_view.h"
-#include "loadgen/h264_decoder.h"
+#include "loadgen/video_decoder.h"
 #include "good_client.h"
 #include "server_process.h"
 #include "stream_checks.h"
@@ -68,7 +68,7 @@ TEST(ServerIntegration, BikerOrbitFramesMatchCpuRender) {
   EXPECT_GT(w.scene_scale(), 0.0);
   EXPECT_NEAR(std::hypot(w.up().x(), w.up().y(), w.up().z()), 1.0, 1e-5);
 
-  H264Decoder dec;
+  VideoDecoder dec;
   cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
   // The initial pose must show the scene (not an empty image).
   {
@@ -111,7 +111,7 @@ TEST(ServerIntegration, CatgsPipelineServesSubFrames) {
   c.connect(server.port());
   const pb::Welcome w = c.hello(W, H);
   EXPECT_EQ(w.pipeline(), "catgs");
-  H264Decoder dec;
+  VideoDecoder dec;
   cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
   // A 120 Hz orbit at 30 deg/s, as a browser would send while the user drags slowly.
   const Bounds b = load_model(kBiker)->bounds();
@@ -154,7 +154,7 @@ TEST(ServerIntegration, FlowersCameraPathFramesMatchCpuRender) {
   StreamClient c;
   c.connect(server.port());
   c.hello(W, H);
-  H264Decoder dec;
+  VideoDecoder dec;
   cpu::CpuRenderer ref(load_model(kFlowers), RenderOptions{});
   for (std::uint32_t i = 0; i < path.size(); ++i) {
     const pb::Pose pose = pose_from_camera(path[i].camera, i, now_ms());
@@ -274,7 +274,7 @@ TEST(ServerIntegration, SeveralScenesPickedByName) {
   const pb::Welcome w = c.hello(W, H, "", 10000, "flowers_sh3");
   EXPECT_EQ(w.scene_name(), "flowers_sh3");
   std::vector<Camera> views = load_inria_cameras(kFlowersCams, W, H);
-  H264Decoder dec;
+  VideoDecoder dec;
   cpu::CpuRenderer ref(load_model(kFlowers), RenderOptions{});
   for (std::uint32_t i = 0; i < 2; ++i) {
     const pb::Pose pose = pose_from_camera(views[i], i, now_ms());
@@ -326,7 +326,7 @@ TEST(ServerIntegration, ResizeKeyFrameRequestPingAndStats) {
   EXPECT_EQ(f.height(), 100u);
   EXPECT_TRUE(f.key_frame());
   // The new stream decodes on its own.
-  H264Decoder dec;
+  VideoDecoder dec;
   std::vector<std::uint8_t> rgba;
   int w = 0, h = 0;
   EXPECT_TRUE(dec.decode(f.payload(), rgba, w, h));
@@ -342,6 +342,66 @@ TEST(ServerIntegration, ResizeKeyFrameRequestPingAndStats) {
   ASSERT_TRUE(stats);
   EXPECT_EQ(stats->stats().frames_sent(), 4u);
   EXPECT_EQ(stats->stats().poses_received(), 4u);
+}
+
+// Codec negotiation (Hello.codecs, issue 51): a client that lists AV1 gets AV1 from a server whose
+// policy affords it (--av1 on here), every Frame says so, key frames come on request, and the
+// temporal units decode with libavcodec's AV1 decoder (libdav1d) to the CPU render of their pose.
+// A client that lists only H.264 on the same server gets H.264; one that lists only AV1 is
+// refused with a reason where AV1 is not forced on (the policy may move any stream to H.264).
+TEST(ServerIntegration, Av1NegotiatedInHelloDecodesToTheCpuRender) {
+  const int W = 320, H = 240;
+  const Trace orbit = biker_orbit(W, H, 4);
+  cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
+  {
+    ServerProcess server(server_args(kBiker, {"--av1", "on"}));
+    StreamClient av1;
+    av1.connect(server.port());
+    const pb::Welcome w = av1.hello(W, H, "", 10000, "", nullptr, false, /*offer_av1=*/true);
+    EXPECT_EQ(w.codec(), pb::CODEC_AV1);
+    EXPECT_EQ(w.encoder(), "av1");
+    VideoDecoder dec("av1");
+    for (std::uint32_t i = 0; i < 4; ++i) {
+      if (i == 3) {
+        pb::ClientMessage kf;
+        kf.mutable_key_frame_request();
+        av1.send(kf);
+      }
+      const pb::Pose pose = pose_from_camera(orbit[i].camera, i, now_ms());
+      av1.send_pose(pose);
+      auto m = wait_for(av1, 20000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+      ASSERT_TRUE(m) << "no frame for pose " << i << "\n" << server.log();
+      const pb::Frame& f = m->frame();
+      EXPECT_EQ(f.codec(), pb::CODEC_AV1);
+      EXPECT_EQ(f.key_frame(), i == 0 || i == 3) << i;
+      const double psnr = frame_psnr(dec, ref, f, pose);
+      EXPECT_GE(psnr, 30.0) << "frame " << i;
+      std::cout << "[ info ] AV1 frame " << i << ": " << f.payload().size() << " bytes, PSNR " << psnr << " dB\n";
+    }
+    StreamClient h264;
+    h264.connect(server.port());
+    EXPECT_EQ(h264.hello(W, H).codec(), pb::CODEC_H264);
+    h264.send_pose(pose_from_camera(orbit[0].camera, 0, now_ms()));
+    auto m = wait_for(h264, 20000, [](const pb::ServerMessage& s) { return s.has_frame(); });
+    ASSERT_TRUE(m);
+    EXPECT_EQ(m->frame().codec(), pb::CODEC_H264);
+    VideoDecoder hdec("h264");
+    EXPECT_GE(frame_psnr(hdec, ref, m->frame(), pose_from_camera(orbit[0].camera, 0, now_ms())), 30.0);
+  }
+  ServerProcess server(server_args(kBiker));
+  StreamClient only_av1;
+  only_av1.connect(server.port());
+  pb::ClientMessage hello;
+  hello.mutable_hello()->set_protocol_version(1);
+  hello.mutable_hello()->set_viewport_width(W);
+  hello.mutable_hello()->set_viewport_height(H);
+  hello.mutable_hello()->add_codecs(pb::CODEC_AV1);
+  only_av1.send(hello);
+  auto e = wait_for(only_av1, 5000, [](const pb::ServerMessage& s) { return s.has_error() || s.has_welcome(); });
+  ASSERT_TRUE(e);
+  ASSERT_TRUE(e->has_error());
+  EXPECT_EQ(e->error().code(), pb::ERROR_INVALID_ARGUMENT);
+  EXPECT_NE(e->error().reason().find("--av1 on"), std::string::npos) << e->error().reason();
 }
 
 // Quality (the page's quality menu): a bitrate ceiling rebuilds the encoder (the next frame is an

@@ -66,7 +66,7 @@ double now_ms() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose) {
+double frame_psnr(loadgen::VideoDecoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose) {
   std::vector<std::uint8_t> rgba;
   int w = 0, h = 0;
   if (!dec.decode(f.payload(), rgba, w, h)) return -1;

@@ -11,7 +11,7 @@
 #include "cpu/cpu_renderer.h"
 #include "scene/gaussian_model.h"
 #include "camera/trace.h"
-#include "loadgen/h264_decoder.h"
+#include "loadgen/video_decoder.h"
 #include "loadgen/stream_client.h"
 
 namespace catgs::itest {
@@ -58,7 +58,7 @@ bool expect_closed(loadgen::StreamClient& c, int timeout_ms = 5000);
 
 // PSNR (dB) of frame `f` decoded by `dec` against `ref`'s render of `pose`; -1 when the decoder
 // gave no picture. Adds a failure when the decoded size differs from the Frame's.
-double frame_psnr(loadgen::H264Decoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose);
+double frame_psnr(loadgen::VideoDecoder& dec, cpu::CpuRenderer& ref, const pb::Frame& f, const pb::Pose& pose);
 
 // Value of the first sample of `series` (e.g. `catgs_sessions` or `x{kind="sub"}`) in the
 // Prometheus text `metrics`; -1 when absent.

@@ -4,6 +4,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include <stb_image.h>
 #include <stb_image_write.h>
@@ -25,6 +26,48 @@ double psnr_rgba8(const Image& a, const Image& b) {
   if (se == 0.0) return std::numeric_limits<double>::infinity();
   const double mse = se / (3.0 * static_cast<double>(pixels));
   return 10.0 * std::log10(255.0 * 255.0 / mse);
+}
+
+namespace {
+
+// BT.709 luma of every pixel of an 8-bit RGBA image, full range (0..255).
+std::vector<double> luma709(const Image& im) {
+  std::vector<double> y(static_cast<std::size_t>(im.width) * static_cast<std::size_t>(im.height));
+  for (std::size_t p = 0; p < y.size(); ++p)
+    y[p] = 0.2126 * im.rgba8[4 * p] + 0.7152 * im.rgba8[4 * p + 1] + 0.0722 * im.rgba8[4 * p + 2];
+  return y;
+}
+
+}  // namespace
+
+double ssim_luma_rgba8(const Image& a, const Image& b) {
+  if (a.width != b.width || a.height != b.height || a.rgba8.size() != b.rgba8.size())
+    throw std::invalid_argument("ssim: image sizes differ");
+  constexpr int kWin = 8, kStep = 4;
+  if (a.width < kWin || a.height < kWin) throw std::invalid_argument("ssim: images smaller than 8x8");
+  constexpr double c1 = (0.01 * 255) * (0.01 * 255), c2 = (0.03 * 255) * (0.03 * 255);
+  const std::vector<double> x = luma709(a), y = luma709(b);
+  double sum = 0;
+  long windows = 0;
+  for (int y0 = 0; y0 + kWin <= a.height; y0 += kStep)
+    for (int x0 = 0; x0 + kWin <= a.width; x0 += kStep) {
+      double sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0;
+      for (int j = 0; j < kWin; ++j)
+        for (int i = 0; i < kWin; ++i) {
+          const std::size_t p = static_cast<std::size_t>(y0 + j) * static_cast<std::size_t>(a.width) + (x0 + i);
+          sx += x[p];
+          sy += y[p];
+          sxx += x[p] * x[p];
+          syy += y[p] * y[p];
+          sxy += x[p] * y[p];
+        }
+      constexpr double n = kWin * kWin;
+      const double mx = sx / n, my = sy / n;
+      const double vx = sxx / n - mx * mx, vy = syy / n - my * my, cov = sxy / n - mx * my;
+      sum += (2 * mx * my + c1) * (2 * cov + c2) / ((mx * mx + my * my + c1) * (vx + vy + c2));
+      ++windows;
+    }
+  return sum / static_cast<double>(windows);
 }
 
 Image box_downsample(const Image& hi, int factor) {

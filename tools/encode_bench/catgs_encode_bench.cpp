@@ -9,10 +9,10 @@
 // BT.709 I420 planes (the server's conversion). Then, row by row, `sessions` encoders of the
 // row's policy (each a session's own stream, on its own thread) encode those frames paced at
 // `fps`, as a session's encoder is fed; the first session's access units are decoded by
-// libavcodec's h264 decoder and compared with the raw renders. Per row: encode ms (wall, p50 /
-// p95 / max over every session's frames), process CPU ms a frame, bytes (mean, max, first = the
-// IDR), bits a pixel, Mbit/s at fps, PSNR of the decoded frame against the raw render (mean,
-// min; 8-bit RGB). A table on stdout and JSON (with per-frame records). A benchmark: it reports,
+// libavcodec (h264, or AV1 for `encoder=av1` rows) and compared with the raw renders. Per row:
+// encode ms (wall, p50 / p95 / max over every session's frames), process CPU ms a frame, bytes
+// (mean, max, first = the IDR), bits a pixel, Mbit/s at fps, PSNR of the decoded frame against
+// the raw render (mean, worst 1%, min; 8-bit RGB) and SSIM of its luma (mean, worst 1%). A table on stdout and JSON (with per-frame records). A benchmark: it reports,
 // never fails on numbers.
 #include <time.h>
 
@@ -32,9 +32,9 @@
 #include "common/cli_args.h"
 #include "common/image_io.h"
 #include "encode/encoder_policy.h"
-#include "encode/x264_encoder.h"
+#include "encode/encoder.h"
 #include "encode_bench/rd_settings.h"
-#include "loadgen/h264_decoder.h"
+#include "loadgen/video_decoder.h"
 #include "renderer/renderer.h"
 #include "scene/ply_io.h"
 
@@ -60,10 +60,10 @@ struct Frame {
 
 struct Row {
   RdSetting setting;
-  catgs::server::EncoderConfig config;  // as the policy made it for `sessions` live sessions
-  std::vector<double> encode_ms;        // every session's frames
-  std::vector<double> bytes, psnr;      // the first session's frames
-  std::vector<int> key;                 // the first session's IDR flags
+  catgs::server::EncoderConfig config;    // as the policy made it for `sessions` live sessions
+  std::vector<double> encode_ms;          // every session's frames
+  std::vector<double> bytes, psnr, ssim;  // the first session's frames
+  std::vector<int> key;                   // the first session's IDR flags
   double cpu_ms_per_frame = 0;
 };
 
@@ -95,7 +95,7 @@ std::vector<Frame> render_frames(const catgs::tools::Args& args, int width, int 
   auto renderer = catgs::make_renderer(args.get("--renderer", "auto"), model, options, &why);
   std::cerr << "renderer: " << renderer->name() << " (" << why << "), " << model->size() << " Gaussians\n";
   std::vector<Frame> out(static_cast<std::size_t>(frames));
-  catgs::loadgen::H264Decoder converter;  // its I420 -> RGB: the 4:2:0 ceiling of a stream's PSNR
+  catgs::loadgen::VideoDecoder converter;  // its I420 -> RGB: the 4:2:0 ceiling of a stream's PSNR
   catgs::Image back;
   for (int k = 0; k < frames; ++k) {
     const catgs::Camera& c = trace[static_cast<std::size_t>(k) * step % trace.size()].camera;
@@ -116,10 +116,11 @@ std::vector<Frame> render_frames(const catgs::tools::Args& args, int width, int 
 }
 
 // One session's stream: frame k starts at start + k / fps, or as soon as frame k - 1 is done.
-void encode_session(const catgs::server::EncoderConfig& config, const std::vector<Frame>& frames, int fps,
-                    Clock::time_point start, std::vector<double>& encode_ms,
+void encode_session(const std::string& kind, const catgs::server::EncoderConfig& config,
+                    const std::vector<Frame>& frames, int fps, Clock::time_point start, std::vector<double>& encode_ms,
                     std::vector<std::vector<std::uint8_t>>* units) {
-  catgs::server::X264Encoder encoder(config);
+  const std::unique_ptr<catgs::server::Encoder> made = catgs::server::make_encoder(kind, config);
+  catgs::server::Encoder& encoder = *made;
   for (std::size_t k = 0; k < frames.size(); ++k) {
     std::this_thread::sleep_until(start +
                                   std::chrono::microseconds(static_cast<long>(static_cast<double>(k) * 1e6 / fps)));
@@ -139,12 +140,12 @@ Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int
   const auto start = Clock::now() + std::chrono::milliseconds(20);
   std::vector<std::thread> threads;
   for (int i = 0; i < s.sessions; ++i)
-    threads.emplace_back(encode_session, std::cref(row.config), std::cref(frames), fps, start, std::ref(times[i]),
-                         i == 0 ? &units : nullptr);
+    threads.emplace_back(encode_session, std::cref(s.encoder), std::cref(row.config), std::cref(frames), fps, start,
+                         std::ref(times[i]), i == 0 ? &units : nullptr);
   for (auto& t : threads) t.join();
   row.cpu_ms_per_frame = (process_cpu_ms() - cpu0) / static_cast<double>(frames.size() * s.sessions);
   for (const auto& t : times) row.encode_ms.insert(row.encode_ms.end(), t.begin(), t.end());
-  catgs::loadgen::H264Decoder decoder;
+  catgs::loadgen::VideoDecoder decoder(s.encoder == "av1" ? "av1" : "h264");
   catgs::Image decoded;
   for (std::size_t k = 0; k < units.size(); ++k) {
     const std::string au(units[k].begin(), units[k].end());
@@ -153,6 +154,7 @@ Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int
     if (!decoder.decode(au, decoded.rgba8, decoded.width, decoded.height))
       throw std::runtime_error("setting '" + s.label + "': frame " + std::to_string(k) + " did not decode");
     row.psnr.push_back(std::min(99.0, catgs::psnr_rgba8(decoded, frames[k].raw)));
+    row.ssim.push_back(catgs::ssim_luma_rgba8(decoded, frames[k].raw));
   }
   return row;
 }
@@ -163,7 +165,8 @@ nlohmann::json row_json(const Row& r, int width, int height, int fps) {
       {"label", r.setting.label},
       {"sessions", r.setting.sessions},
       {"threads", r.config.threads},
-      {"preset", r.config.x264_preset},
+      {"encoder", r.setting.encoder},
+      {"preset", r.setting.encoder == "av1" ? "speed " + std::to_string(r.config.av1_speed) : r.config.x264_preset},
       {"crf", r.config.crf},
       {"bitrate_kbps", r.config.bitrate_kbps},
       {"vbv_ms", r.config.vbv_buffer_ms},
@@ -178,13 +181,14 @@ nlohmann::json row_json(const Row& r, int width, int height, int fps) {
       {"bits_per_pixel", bpp},
       {"mbit_s", mean(r.bytes) * 8 * fps / 1e6},
       {"psnr_db", {{"mean", mean(r.psnr)}, {"worst_1pct", percentile(r.psnr, 0.01)}, {"min", percentile(r.psnr, 0.0)}}},
-      {"frames", {{"encode_ms", r.encode_ms}, {"bytes", r.bytes}, {"psnr_db", r.psnr}}}};
+      {"ssim", {{"mean", mean(r.ssim)}, {"worst_1pct", percentile(r.ssim, 0.01)}}},
+      {"frames", {{"encode_ms", r.encode_ms}, {"bytes", r.bytes}, {"psnr_db", r.psnr}, {"ssim", r.ssim}}}};
 }
 
 void print_table(const nlohmann::json& rows) {
   std::cout << "| setting | sessions | preset | threads | kbit/s cap | encode ms p50 / p95 / max | CPU ms a frame | "
-               "KiB mean / max / IDR | bits a pixel | Mbit/s | PSNR dB mean / worst 1% / min |\n"
-               "|---|---|---|---|---|---|---|---|---|---|---|\n"
+               "KiB mean / max / IDR | bits a pixel | Mbit/s | PSNR dB mean / worst 1% / min | SSIM mean / worst 1% |\n"
+               "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
             << std::fixed;
   for (const auto& r : rows) {
     std::cout << std::setprecision(2) << "| " << r["label"].get<std::string>() << " | " << r["sessions"] << " | "
@@ -195,7 +199,9 @@ void print_table(const nlohmann::json& rows) {
               << r["bytes"]["max"].get<double>() / 1024 << " / " << r["bytes"]["first"].get<double>() / 1024 << " | "
               << std::setprecision(4) << r["bits_per_pixel"].get<double>() << " | " << std::setprecision(2)
               << r["mbit_s"].get<double>() << " | " << r["psnr_db"]["mean"].get<double>() << " / "
-              << r["psnr_db"]["worst_1pct"].get<double>() << " / " << r["psnr_db"]["min"].get<double>() << " |\n";
+              << r["psnr_db"]["worst_1pct"].get<double>() << " / " << r["psnr_db"]["min"].get<double>() << " | "
+              << std::setprecision(4) << r["ssim"]["mean"].get<double>() << " / "
+              << r["ssim"]["worst_1pct"].get<double>() << " |\n";
   }
 }
 

@@ -59,7 +59,13 @@ std::vector<RdSetting> parse_rd_settings(const std::string& spec, int usable_cor
         s.policy.intra_refresh_frames = to_int(row, k, v, 0, 1000);
       else if (k == "threads")
         s.policy.threads = to_int(row, k, v, 0, 64);
-      else if (k == "sessions")
+      else if (k == "speed")
+        s.policy.av1_speed = to_int(row, k, v, 5, 10);
+      else if (k == "encoder") {
+        if (v != "x264" && v != "av1")
+          throw std::invalid_argument("setting '" + row + "': encoder must be x264 or av1, got '" + v + "'");
+        s.encoder = v;
+      } else if (k == "sessions")
         s.sessions = to_int(row, k, v, 1, 256);
       else if (k == "preset") {
         if (v != "auto" && !server::is_x264_preset(v))
@@ -67,7 +73,7 @@ std::vector<RdSetting> parse_rd_settings(const std::string& spec, int usable_cor
         s.policy.x264_preset = v;
       } else
         throw std::invalid_argument("setting '" + row + "': unknown key '" + k +
-                                    "' (crf, bitrate, bpp, vbv, ir, threads, preset, sessions)");
+                                    "' (crf, bitrate, bpp, vbv, ir, threads, preset, sessions, encoder, speed)");
     }
     rows.push_back(s);
   }

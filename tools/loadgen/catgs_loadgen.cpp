@@ -48,6 +48,8 @@ const char* kUsage =
     "  --depth D                closed loop: poses outstanding (default 1)\n"
     "  --seconds S              how long each run sends poses (default 10)\n"
     "  --decode 0|1             decode every frame with libavcodec (default 0)\n"
+    "  --av1                    offer AV1 in Hello (before H.264): the server streams it where\n"
+    "                           its policy affords it; frames of either codec are decoded\n"
     "  --check-every N          decode, and compare every Nth frame with the CPU reference\n"
     "                           render of its pose (needs --scene; slows the client down)\n"
     "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
@@ -143,6 +145,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
   base.depth = std::max(1, args.get_int("--depth", 1));
   base.seconds = args.get_double("--seconds", 10);
   base.decode = args.get("--decode", "0") == "1";
+  base.offer_av1 = args.has("--av1");
   base.check_every = std::max(0, args.get_int("--check-every", 0));
   base.check_min_psnr = args.get_double("--check-min-psnr", 30);
   if (base.check_every > 0 && !args.has("--scene"))
@@ -239,11 +242,12 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
 int main(int argc, char** argv) {
   try {
     const tools::Args args(
-        argc, argv, {"--host",       "--port",    "--sessions",    "--size",           "--width",     "--height",
-                     "--trace",      "--scene",   "--scene-name",  "--offset-s",       "--rate",      "--depth",
-                     "--seconds",    "--decode",  "--check-every", "--check-min-psnr", "--warmup",    "--warmup-s",
-                     "--stale-ms",   "--token",   "--json",        "--ramp!",          "--ramp-step", "--ramp-start",
-                     "--max-p95-ms", "--min-fps", "--progress",    "--tls!",           "--help!",     "--timeline!"});
+        argc, argv,
+        {"--host",        "--port",           "--sessions",   "--size",       "--width",    "--height",   "--trace",
+         "--scene",       "--scene-name",     "--offset-s",   "--rate",       "--depth",    "--seconds",  "--decode",
+         "--check-every", "--check-min-psnr", "--warmup",     "--warmup-s",   "--stale-ms", "--token",    "--json",
+         "--ramp!",       "--ramp-step",      "--ramp-start", "--max-p95-ms", "--min-fps",  "--progress", "--tls!",
+         "--help!",       "--timeline!",      "--av1!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

@@ -151,6 +151,8 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"poses_sent", s.poses_sent},
          {"frames", s.frames},
          {"idr_frames", s.idr_frames},
+         {"av1_frames", s.av1_frames},
+         {"codec_changes", s.codec_changes},
          {"size_changes", s.size_changes},
          {"min_width", s.min_width},
          {"min_height", s.min_height},

@@ -44,6 +44,8 @@ struct SessionResult {
   std::uint64_t poses_sent = 0;
   std::uint64_t frames = 0;      // Frame messages received
   std::uint64_t idr_frames = 0;  // among them, IDR access units
+  std::uint64_t av1_frames = 0;  // among them, AV1 temporal units (Frame.codec; the rest H.264)
+  int codec_changes = 0;         // Frames whose codec differed from the one before
   std::uint64_t decoded = 0;     // pictures the decoder produced (with --decode)
   std::uint64_t bytes = 0;       // payload bytes received
   // Poses sent that got no frame, in two kinds: `skipped`, replaced by a newer pose that did get

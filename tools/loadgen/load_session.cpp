@@ -9,7 +9,7 @@
 #include "cpu/cpu_renderer.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
-#include "loadgen/h264_decoder.h"
+#include "loadgen/video_decoder.h"
 #include "loadgen/stream_client.h"
 #include "proto/message_validation.h"
 
@@ -86,7 +86,8 @@ void note_error(SessionResult& r, const std::string& what) {
 pb::Welcome open_session(const LoadSessionConfig& cfg, StreamClient& client, SessionResult& r) {
   client.ws().use_tls(cfg.tls);
   client.connect(cfg.port, cfg.host);
-  const pb::Welcome welcome = client.hello(cfg.width, cfg.height, cfg.token, 10000, cfg.scene_name);
+  const pb::Welcome welcome =
+      client.hello(cfg.width, cfg.height, cfg.token, 10000, cfg.scene_name, nullptr, false, cfg.offer_av1);
   r.width = static_cast<int>(welcome.width());
   r.height = static_cast<int>(welcome.height());
   r.session_id = welcome.session_id();
@@ -198,6 +199,10 @@ class PoseLoop {
     }
     r_.bytes += f.payload().size();
     if (f.key_frame()) r_.idr_frames++;
+    const bool av1 = f.codec() == pb::CODEC_AV1;
+    if (av1) r_.av1_frames++;
+    if (r_.frames > 1 && av1 != last_av1_) r_.codec_changes++;
+    last_av1_ = av1;
     if (outstanding_ > 0) outstanding_--;
     if (cfg_.decode || check_) decode_and_check(f);
     const double latency = now_ms() - f.client_time_ms();
@@ -224,7 +229,10 @@ class PoseLoop {
   void decode_and_check(const pb::Frame& f) {
     int w = 0, h = 0;
     try {
-      const bool got = decoder_.decode(f.payload(), rgba_, w, h);
+      // The codec changes only on a key frame (Frame.codec): a decoder of the new one from there.
+      const std::string codec = f.codec() == pb::CODEC_AV1 ? "av1" : "h264";
+      if (!decoder_ || decoder_->codec() != codec) decoder_ = std::make_unique<VideoDecoder>(codec);
+      const bool got = decoder_->decode(f.payload(), rgba_, w, h);
       if (got) r_.decoded++;
       // The server may change the size (adaptive quality: a slow host or link); every frame
       // says its size, and the picture must have it.
@@ -286,7 +294,8 @@ class PoseLoop {
   StreamClient& client_;
   const Trace trace_;
   const bool check_;
-  H264Decoder decoder_;
+  std::unique_ptr<VideoDecoder> decoder_;   // of the last frame's codec, made by its first frame
+  bool last_av1_ = false;                   // the last Frame's codec was AV1
   int frame_width_ = 0, frame_height_ = 0;  // the size of the last Frame
   std::vector<std::uint8_t> rgba_;
   std::vector<double> sent_at_;       // client time each pose was sent, by sequence

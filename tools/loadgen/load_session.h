@@ -57,6 +57,7 @@ struct LoadSessionConfig {
   int depth = 1;
   double seconds = 10;     // how long poses are sent
   bool decode = false;     // decode every frame (latency then ends at the decoded picture)
+  bool offer_av1 = false;  // Hello.codecs lists AV1 (--av1): the server may stream it
   int warmup_frames = 5;   // frames left out of latency and server statistics
   double warmup_s = 0;     // frames of poses sent in the first warmup_s seconds left out too
   bool timeline = false;   // record every frame (SessionResult::timeline; the JSON's "timeline")

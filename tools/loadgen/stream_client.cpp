@@ -52,12 +52,13 @@ void StreamClient::send_pose(const pb::Pose& pose) {
 
 pb::Welcome StreamClient::hello(int width, int height, const std::string& token, int timeout_ms,
                                 const std::string& scene, std::vector<pb::ServerMessage>* before_welcome,
-                                bool load_progress) {
+                                bool load_progress, bool offer_av1) {
   pb::ClientMessage m;
   pb::Hello* h = m.mutable_hello();
   h->set_protocol_version(1);
   h->set_viewport_width(static_cast<std::uint32_t>(width));
   h->set_viewport_height(static_cast<std::uint32_t>(height));
+  if (offer_av1) h->add_codecs(pb::CODEC_AV1);
   h->add_codecs(pb::CODEC_H264);
   h->set_token(token);
   h->set_client_name("catgs-loadgen");

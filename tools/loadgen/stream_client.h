@@ -44,9 +44,10 @@ class StreamClient {
   // `scene`: Hello.scene (a name from GET /scenes; "" the server's first). `load_progress`: sets
   // Hello.load_progress (the server then sends LoadProgress while the scene loads).
   // `before_welcome`: when set, receives every message that came before Welcome, in order.
+  // `offer_av1`: Hello.codecs lists AV1 before H.264 (the server may then stream AV1).
   pb::Welcome hello(int width, int height, const std::string& token = "", int timeout_ms = 10000,
                     const std::string& scene = "", std::vector<pb::ServerMessage>* before_welcome = nullptr,
-                    bool load_progress = false);
+                    bool load_progress = false, bool offer_av1 = false);
   // Sends one ClientMessage.
   void send(const pb::ClientMessage& message);
   void send_pose(const pb::Pose& pose);

@@ -15,7 +15,7 @@
 #include "cpu/cpu_renderer.h"
 #include "encode/encoder_policy.h"
 #include "encode/x264_encoder.h"
-#include "loadgen/h264_decoder.h"
+#include "loadgen/video_decoder.h"
 #include "process/first_view.h"
 #include "test_data.h"
 
@@ -121,7 +121,7 @@ struct Stream {
 
 Stream encode_all(const EncoderConfig& c, const std::vector<Yuv420Image>& frames, const std::vector<Image>& raw) {
   X264Encoder enc(c);
-  loadgen::H264Decoder dec;
+  loadgen::VideoDecoder dec;
   Stream s;
   double bytes = 0;
   for (std::size_t k = 0; k < frames.size(); ++k) {
@@ -187,6 +187,34 @@ TEST(EncoderPolicy, PresetLadderSpendsTheEncodersShareOfTheCores) {
   EXPECT_TRUE(is_x264_preset("superfast"));
   EXPECT_FALSE(is_x264_preset("auto"));
   EXPECT_FALSE(is_x264_preset("ultrafast "));
+}
+
+// AV1 by hand: half of 16 cores is 8000 CPU ms a second; AV1 costs kAv1CpuFactor (4) x
+// ultrafast's 958 ms a second a 1080p session (3832): two sessions fit, three do not. At 720p
+// 4 x 426 = 1704: four fit, five do not.
+TEST(EncoderPolicy, Av1OnlyForClientsThatDecodeItWhileTheCoresAffordIt) {
+  EncoderPolicy p;
+  p.usable_cores = 16;
+  const auto av1 = [&](int w, int h, int live) { return use_av1(p, w, h, 60, live, true, true, false); };
+  EXPECT_TRUE(av1(1920, 1080, 1));
+  EXPECT_TRUE(av1(1920, 1080, 2));
+  EXPECT_FALSE(av1(1920, 1080, 3));
+  EXPECT_TRUE(av1(1280, 720, 4));
+  EXPECT_FALSE(av1(1280, 720, 5));
+  // Never AV1 for more sessions once a count is refused, at any size.
+  for (const auto& [w, h] : {std::pair{640, 360}, std::pair{1280, 720}, std::pair{1920, 1080}})
+    for (int live = 1; live < 64; ++live)
+      EXPECT_LE(av1(w, h, live + 1), av1(w, h, live)) << w << "x" << h << " " << live;
+  // A client that does not list it, an NVENC host, a link that limits the stream: H.264.
+  EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, false, true, false));
+  EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, true, false, false));
+  EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, true, true, true));
+  // --av1 on: whatever the count; off: never.
+  p.av1 = "on";
+  EXPECT_TRUE(av1(1920, 1080, 40));
+  EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, true, true, true)) << "a limiting link still leaves AV1";
+  p.av1 = "off";
+  EXPECT_FALSE(av1(640, 360, 1));
 }
 
 // What the ladder buys: at the same capped rate on real renders, each slower step of the ladder

@@ -1,7 +1,9 @@
 // Encoders: a picture converted with the reference BT.709 conversion and encoded from its I420
 // planes decodes back to the source, the conversion hits the standard's code values, IDR on
 // demand, and NVENC's failure path (no NVENC on this machine, or on H100/H200) with `auto`
-// falling back to x264 and saying why.
+// falling back to x264 and saying why. AV1 (libaom realtime): its temporal units follow the AV1
+// spec's low-overhead format (section 5, read here by hand) and decode with libavcodec's AV1
+// decoder (libdav1d: another project's decoder) to the source.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,8 +12,9 @@
 #include "common/image_io.h"
 #include "camera/camera.h"
 #include "cpu/cpu_renderer.h"
+#include "encode/av1_encoder.h"
 #include "encode/encoder.h"
-#include "loadgen/h264_decoder.h"
+#include "loadgen/video_decoder.h"
 #include "process/first_view.h"
 #include "test_data.h"
 #include "colour/yuv420.h"
@@ -39,7 +42,7 @@ Image biker_picture(int w, int h) {
 }
 
 Image decode(const EncodedFrame& f) {
-  loadgen::H264Decoder dec;
+  loadgen::VideoDecoder dec;
   Image out;
   EXPECT_TRUE(dec.decode(std::string(f.data.begin(), f.data.end()), out.rgba8, out.width, out.height));
   return out;
@@ -243,6 +246,144 @@ TEST(Encoder, RejectsUnknownKindAndBadSize) {
   EXPECT_THROW(make_encoder("vp9", config(64, 64)), std::invalid_argument);
   EXPECT_THROW(make_encoder("x264", config(63, 64)), std::invalid_argument);
   EXPECT_THROW(make_encoder("nvenc", config(8, 8)), std::invalid_argument);
+}
+
+// One OBU of a temporal unit (AV1 spec 5.3): its obu_type and payload size.
+struct Obu {
+  int type = 0;
+  std::size_t size = 0;
+};
+
+// The OBUs of a low-overhead temporal unit (AV1 spec 5.3.1-5.3.2, leb128 sizes 4.10.5); every
+// OBU must carry obu_has_size_field, as the format requires. Adds a failure and stops on
+// malformed data.
+std::vector<Obu> split_obus(const std::vector<std::uint8_t>& tu) {
+  std::vector<Obu> out;
+  std::size_t p = 0;
+  while (p < tu.size()) {
+    const std::uint8_t h = tu[p++];
+    EXPECT_EQ(h & 0x80, 0) << "obu_forbidden_bit";
+    const bool extension = (h & 0x04) != 0, has_size = (h & 0x02) != 0;
+    EXPECT_TRUE(has_size) << "every OBU of the low-overhead format has a size";
+    if (!has_size) return out;
+    p += extension ? 1 : 0;
+    std::size_t size = 0;
+    for (int i = 0; i < 8 && p < tu.size(); ++i) {
+      const std::uint8_t b = tu[p++];
+      size |= static_cast<std::size_t>(b & 0x7f) << (7 * i);
+      if (!(b & 0x80)) break;
+    }
+    EXPECT_LE(p + size, tu.size()) << "an OBU runs past its temporal unit";
+    if (p + size > tu.size()) return out;
+    out.push_back({(h >> 3) & 0x0f, size});
+    p += size;
+  }
+  return out;
+}
+
+constexpr int kObuSequenceHeader = 1, kObuTemporalDelimiter = 2, kObuFrame = 6;
+
+bool has_obu(const std::vector<Obu>& obus, int type) {
+  return std::any_of(obus.begin(), obus.end(), [type](const Obu& o) { return o.type == type; });
+}
+
+TEST(Av1Encoder, TemporalUnitsDecodeToTheSourceWithKeyFramesOnDemand) {
+  const int W = 256, H = 144;
+  const Image src = biker_picture(W, H);
+  auto enc = make_encoder("av1", config(W, H));
+  EXPECT_EQ(enc->name(), "av1");
+  EXPECT_EQ(enc->codec(), "av1");
+  loadgen::VideoDecoder dec("av1");
+  for (int k = 0; k < 4; ++k) {
+    SCOPED_TRACE(k);
+    const bool force = k == 3;
+    const EncodedFrame f = encode_rgba(*enc, src, force);
+    EXPECT_EQ(f.key_frame, k == 0 || force) << "a key frame first and on demand, none between";
+    const std::vector<Obu> obus = split_obus(f.data);
+    ASSERT_FALSE(obus.empty());
+    EXPECT_EQ(obus.front().type, kObuTemporalDelimiter) << "a temporal unit starts with its delimiter";
+    EXPECT_EQ(obus.front().size, 0u);
+    EXPECT_EQ(has_obu(obus, kObuSequenceHeader), f.key_frame) << "the sequence header in band on key frames only";
+    EXPECT_TRUE(has_obu(obus, kObuFrame) || has_obu(obus, 3)) << "a frame (or frame header) OBU";
+    Image out;
+    ASSERT_TRUE(dec.decode(std::string(f.data.begin(), f.data.end()), out.rgba8, out.width, out.height))
+        << "one picture out per temporal unit in: no frame of delay";
+    ASSERT_EQ(out.width, W);
+    ASSERT_EQ(out.height, H);
+    const double vs_source = psnr_rgba8(out, src);
+    std::cout << "[ info ] AV1 frame " << k << " vs source " << vs_source << " dB, " << f.data.size() << " bytes\n";
+    EXPECT_GE(vs_source, 35.0);
+  }
+  // A key frame starts a stream: a fresh decoder takes the forced one alone.
+  const EncodedFrame key = encode_rgba(*enc, src, true);
+  loadgen::VideoDecoder fresh("av1");
+  Image out;
+  EXPECT_TRUE(fresh.decode(std::string(key.data.begin(), key.data.end()), out.rgba8, out.width, out.height));
+}
+
+TEST(Av1Encoder, RateCapHoldsAndCqLevelFollowsCrf) {
+  // crf 0..51 onto cq-level 0..63 by the same share of the scale.
+  EXPECT_EQ(av1_cq_level(0), 0);
+  EXPECT_EQ(av1_cq_level(51), 63);
+  EXPECT_EQ(av1_cq_level(23), 28);  // 23 * 63 / 51 = 28.4
+  EXPECT_EQ(av1_cq_level(80), 63);
+  // Tile columns: log2(threads) at most, each column at least 256 pixels wide.
+  EXPECT_EQ(av1_tile_columns_log2(1920, 1), 0);
+  EXPECT_EQ(av1_tile_columns_log2(1920, 4), 2);
+  EXPECT_EQ(av1_tile_columns_log2(1920, 16), 2);  // 1920 / 8 = 240 < 256
+  EXPECT_EQ(av1_tile_columns_log2(640, 8), 1);
+  EXPECT_EQ(av1_tile_columns_log2(320, 8), 0);
+  // A capped stream of a moving view keeps near its cap; a tight cap costs quality.
+  const int W = 320, H = 192;
+  const auto model = test::cached_scene(test::bundled_scene());
+  const SceneFrame scene = frame_from_content(*model);
+  const CameraPose p = first_view_pose(scene, W, H);
+  cpu::CpuRenderer renderer(model, RenderOptions{});
+  std::vector<Image> frames(24);
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    // A pan of 1% of the viewing distance a frame: every frame brings new pixels.
+    const glm::vec3 step(0.01f * scene.scene_scale * static_cast<float>(k), 0.0f, 0.0f);
+    renderer.render(Camera::from_pose(p.position + step, p.orientation, p.vertical_fov_deg, W, H), frames[k]);
+  }
+  const auto stream = [&](int kbps, double& psnr) {
+    EncoderConfig c = config(W, H);
+    c.crf = 4;  // a floor far above what the cap allows
+    c.bitrate_kbps = kbps;
+    c.vbv_buffer_ms = 200;
+    Av1Encoder enc(c);
+    loadgen::VideoDecoder dec("av1");
+    double bytes = 0;
+    psnr = 0;
+    for (const Image& f : frames) {
+      const EncodedFrame e = encode_rgba(enc, f, false);
+      bytes += static_cast<double>(e.data.size());
+      Image out;
+      EXPECT_TRUE(dec.decode(std::string(e.data.begin(), e.data.end()), out.rgba8, out.width, out.height));
+      psnr += psnr_rgba8(out, f) / static_cast<double>(frames.size());
+    }
+    return bytes * 8 * c.fps / static_cast<double>(frames.size()) / 1000;  // kbit/s
+  };
+  double tight_psnr = 0, loose_psnr = 0;
+  const double tight = stream(150, tight_psnr), loose = stream(3000, loose_psnr);
+  std::cout << "[ info ] AV1 at a 150 kbit/s cap: " << tight << " kbit/s, " << tight_psnr << " dB; at 3000: " << loose
+            << " kbit/s, " << loose_psnr << " dB\n";
+  EXPECT_LE(tight, 150 * 1.5) << "the first key frame included";
+  EXPECT_GT(loose, tight);
+  EXPECT_GT(loose_psnr, tight_psnr);
+  EXPECT_GT(tight_psnr, 25.0);  // still the scene
+  // libaom cannot change a running encoder's rate: the session rebuilds it (a key frame).
+  Av1Encoder enc(config(W, H));
+  EXPECT_FALSE(enc.set_max_bitrate_kbps(500));
+}
+
+TEST(Av1Encoder, RefusesBadSpeedAndSize) {
+  EncoderConfig c = config(64, 64);
+  c.av1_speed = 4;
+  EXPECT_THROW(make_encoder("av1", c), std::invalid_argument);
+  c.av1_speed = 11;
+  EXPECT_THROW(make_encoder("av1", c), std::invalid_argument);
+  EXPECT_THROW(make_encoder("av1", config(63, 64)), std::invalid_argument);
+  EXPECT_THROW(loadgen::VideoDecoder("vp9"), std::invalid_argument);
 }
 
 }  // namespace

@@ -1,6 +1,8 @@
-// H.264 Annex B access units -> RGBA8 images, through libavcodec's h264 decoder (no delay:
-// single thread, low-delay flag; the server's streams have no B-frames). Colour: the stream's
-// BT.709 limited-range YUV 4:2:0 back to full-range RGB.
+// The server's video access units -> RGBA8 images, through libavcodec: H.264 Annex B access units
+// (its h264 decoder) or AV1 temporal units of low-overhead OBUs (its AV1 decoder: libdav1d where
+// libavcodec has it). No delay: one thread, the low-delay flag; the server's streams have no
+// B-frames and no reordering. Colour: the stream's BT.709 limited-range YUV 4:2:0 back to
+// full-range RGB.
 #pragma once
 
 #include <cstdint>
@@ -14,14 +16,17 @@ struct SwsContext;
 
 namespace catgs::loadgen {
 
-class H264Decoder {
+class VideoDecoder {
  public:
-  // Throws std::runtime_error when the decoder cannot be opened.
-  H264Decoder();
-  ~H264Decoder();
-  H264Decoder(const H264Decoder&) = delete;
-  H264Decoder& operator=(const H264Decoder&) = delete;
+  // `codec`: "h264" or "av1" (the names of encode/encoder.h's codecs). Throws
+  // std::invalid_argument for another name, std::runtime_error when libavcodec has no decoder
+  // for it or it cannot be opened.
+  explicit VideoDecoder(const std::string& codec = "h264");
+  ~VideoDecoder();
+  VideoDecoder(const VideoDecoder&) = delete;
+  VideoDecoder& operator=(const VideoDecoder&) = delete;
 
+  const std::string& codec() const { return codec_; }
   // Decodes one access unit. Returns true with `rgba` (width*height*4, row-major, top row
   // first) filled when a picture came out; false when the decoder produced none (e.g. P-frames
   // before the first IDR). Throws std::runtime_error for corrupt data.
@@ -33,6 +38,7 @@ class H264Decoder {
                std::vector<std::uint8_t>& rgba);
 
  private:
+  std::string codec_;
   AVCodecContext* ctx_ = nullptr;
   AVFrame* frame_ = nullptr;
   AVPacket* packet_ = nullptr;
