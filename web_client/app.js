@@ -912,6 +912,10 @@ function installTestHook() {
     get lastPoseSent() {
       return state.lastPoseSent ? { ...state.lastPoseSent } : null;
     },
+    // The codecs the page offered in Hello (decoder.js decodableCodecs, or ?codec=h264).
+    get codecs() {
+      return state.codecs ? [...state.codecs] : [];
+    },
     get welcome() {
       return state.welcome && state.protocol
         ? state.protocol.root.lookupType('catgs.stream.v1.Welcome').toObject(state.welcome, { defaults: true })

@@ -1,8 +1,9 @@
 // End-to-end test: the real catgs-server (CPU renderer, bundled biker scene) serves web_client/;
-// headless Debian Chromium (driven by playwright-core) loads the page, streams, decodes H.264 with
-// WebCodecs; the canvas at a fixed pose must match catgs-render's CPU image of that pose
-// (PSNR >= 25 dB: the stream is lossy H.264, the reference is exact). Then the viewer's features
-// against the real server: a shared link shows its view (compared with catgs-render of that
+// headless Debian Chromium (driven by playwright-core) loads the page, which offers AV1 where its
+// WebCodecs decodes it; the first server streams AV1 to it (--av1 on), and the canvas at a fixed
+// pose must match catgs-render's CPU image of that pose (PSNR >= 25 dB: the stream is lossy, the
+// reference is exact). Then the viewer's features against the real server: a shared link opened
+// with ?codec=h264 shows its view from an H.264 stream (compared with catgs-render of that
 // pose), a recorded path exported as cameras.json replays through catgs-loadgen (and its first
 // view, read back by catgs-render, is the pose the page sent), the same path exported as our
 // .trace is read by catgs-render (one image per pose; first and last pose as sent) and replayed by
@@ -168,7 +169,9 @@ async function startServer(extra = []) {
 
 async function run() {
   mkdirSync(outDir, { recursive: true });
-  const first = await startServer();
+  // AV1 forced on: the page's stream is AV1 whatever the machine's cores (the policy's auto would
+  // pick it by them); the shared link below asks for H.264, so both codecs are decoded here.
+  const first = await startServer(['--av1', 'on']);
   server = first.proc;
   const { port, base } = first;
 
@@ -196,6 +199,10 @@ async function run() {
   log(`welcome: scene=${welcome.scene_name} renderer=${welcome.renderer} encoder=${welcome.encoder} ` +
     `pipeline=${welcome.pipeline} ${welcome.width}x${welcome.height}`);
   check(welcome.renderer === 'cpu', `Welcome.renderer is cpu (${welcome.renderer})`);
+  const offered = await page.evaluate(() => window.catgs.codecs);
+  log(`codecs offered in Hello: ${JSON.stringify(offered)} (1 H.264, 2 AV1)`);
+  check(offered.includes(2) && offered.includes(1), 'headless Chromium\'s WebCodecs decodes AV1 and H.264: the page offers both');
+  check(welcome.codec === 2 && welcome.encoder === 'av1', `an AV1 stream to the page (Welcome codec ${welcome.codec}, encoder ${welcome.encoder})`);
   check(welcome.scene_scale > 0 && welcome.up && Math.abs(Math.hypot(welcome.up.x, welcome.up.y, welcome.up.z) - 1) < 1e-5,
     `Welcome carries the frame to navigate in (scale ${welcome.scene_scale}, up ${JSON.stringify(welcome.up)})`);
   const viewport = await page.evaluate(() => window.catgs.viewport);
@@ -271,6 +278,7 @@ async function run() {
   check(!!fpsMatch && Number(fpsMatch[1]) > 0, `overlay shows a positive FPS (${fpsMatch && fpsMatch[1]})`);
   check(/latency \d+ ms/.test(shot.overlay), 'overlay shows a latency in ms');
   check(shot.overlay.includes(`frame ${width}x${height}`), `overlay shows the frame size ${width}x${height}`);
+  check(/frame \d+x\d+ +av01\./.test(shot.overlay), 'overlay shows the AV1 codec string the decoder was configured with');
   check(shot.overlay.includes('renderer cpu') && shot.overlay.includes(`encoder ${welcome.encoder}`), 'overlay shows renderer and encoder');
   check(!/error/i.test(shot.overlay), 'overlay shows no error');
   // The scene is served with its level of detail (--lod write, the default; issue 46): the stats
@@ -290,8 +298,10 @@ async function run() {
   const shifted = p0.map((v, k) => v + 0.02 * scale * right[k]);
   const linkPage = await context.newPage();
   linkPage.on('console', (m) => pageLog.push(`link console.${m.type()}: ${m.text()}`));
-  await linkPage.goto(`${base}/?pos=${shifted.join(',')}&rot=${q0.join(',')}&fov=${fov0}`);
+  await linkPage.goto(`${base}/?codec=h264&pos=${shifted.join(',')}&rot=${q0.join(',')}&fov=${fov0}`);
   await linkPage.waitForFunction(() => window.catgs && window.catgs.connected, null, { timeout: 30000 });
+  const linkWelcome = await linkPage.evaluate(() => window.catgs.welcome);
+  check(linkWelcome.codec === 1, `?codec=h264 offers H.264 alone and gets an H.264 stream (Welcome codec ${linkWelcome.codec})`);
   const linkSeq = await linkPage.evaluate(() => window.catgs.requestKeyFrame());
   await linkPage.waitForFunction((s) => window.catgs.lastFrame && window.catgs.lastFrame.poseSequence >= s && window.catgs.lastFrame.keyFrame,
     linkSeq, { timeout: 30000 });

@@ -101,7 +101,7 @@ try {
     check(await moveUntil(page, (c) => c.framesDecoded >= 10), 'normal: 10 frames decoded');
     const hello = mock.received.find((r) => r.body === 'hello');
     check(!!hello && hello.msg.protocol_version === 1 && hello.msg.viewport_width === 320 && hello.msg.viewport_height === 240 &&
-      JSON.stringify(hello.msg.codecs) === '[1]', `normal: Hello ${JSON.stringify(hello && hello.msg)}`);
+      JSON.stringify(hello.msg.codecs) === '[2,1]', `normal: Hello (codecs AV1 then H.264: Debian's Chromium decodes both) ${JSON.stringify(hello && hello.msg)}`);
     const poses = mock.received.filter((r) => r.session === hello.session && r.body === 'pose').map((r) => r.msg);
     check(poses.length >= 10 && poses.every((p, i) => p.sequence === i + 1), 'normal: pose sequences count 1, 2, 3, ...');
     check(poses.every((p, i) => i === 0 || p.client_time_ms >= poses[i - 1].client_time_ms), 'normal: client_time_ms is monotonic');
