@@ -274,7 +274,7 @@ rd() {
 
 # measure TAG N SIZE PORT TRACES SECONDS: one catgs-loadgen run of N sessions against the server
 # (SERVER_PID) with the host's CPU, the server's CPU, GPU utilisation and the most device memory
-# in use -> $W/json/TAG.json.
+# in use -> $W/json/TAG.json. CATGS_LOADGEN_ARGS: more catgs-loadgen options (e.g. --av1).
 measure() {
   local tag=$1 n=$2 size=$3 port=$4 traces=$5 seconds=$6 W=/tmp/catgs_sweep
   nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
@@ -283,7 +283,7 @@ measure() {
   srv0=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
   local rc=0
   "$SRV/bin/catgs-loadgen" --port "$port" --sessions "$n" --size "$size" --trace "$traces" \
-    --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" > "$W/load_$tag.txt" 2>&1 || rc=1
+    --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" ${CATGS_LOADGEN_ARGS:-} > "$W/load_$tag.txt" 2>&1 || rc=1
   cpu1=$(head -1 /proc/stat)
   srv1=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
   kill "$smi" 2>/dev/null; wait "$smi" 2>/dev/null

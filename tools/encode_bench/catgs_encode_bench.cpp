@@ -1,8 +1,9 @@
 // catgs-encode-bench: the rate-distortion-latency table behind the encoder policy (issue 35).
 //
-//   catgs-encode-bench --scene S --trace T.trace --width 1920 --height 1080
+//   catgs-encode-bench --scene S --trace T.trace|cameras:C.json --width 1920 --height 1080
 //       [--renderer auto|cpu|cuda] [--pipeline exact] [--frames 240] [--step 2] [--fps 60]
 //       [--settings "crf=23,bitrate=off,threads=2;bitrate=auto,threads=4;..."] [--json OUT]
+//       [--dump-dir DIR]   (each row's first stream as files: dump_stream below)
 //
 // The trace's poses (every `step`-th: a 120 Hz trace at 60 poses/s) are rendered once, as the
 // server would (Camera::from_pose at the given size), keeping each raw 8-bit render and its
@@ -18,6 +19,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -85,9 +87,17 @@ double mean(const std::vector<double>& v) {
   return v.empty() ? 0 : std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
 }
 
+// `--trace`: a trace file, or `cameras:C.json`, a capture's own cameras (INRIA cameras.json)
+// interpolated at 120 Hz, half a second a view, as catgs-loadgen's `cameras:` paths.
+catgs::Trace bench_trace(const std::string& spec) {
+  if (spec.rfind("cameras:", 0) == 0)
+    return catgs::interpolate_views(catgs::load_inria_cameras(spec.substr(8)), 120.0, 0.5);
+  return catgs::read_trace(spec);
+}
+
 std::vector<Frame> render_frames(const catgs::tools::Args& args, int width, int height, int frames, int step) {
   auto model = std::make_shared<const catgs::GaussianModel>(catgs::load_scene(args.require("--scene")));
-  const catgs::Trace trace = catgs::read_trace(args.require("--trace"));
+  const catgs::Trace trace = bench_trace(args.require("--trace"));
   if (trace.empty()) throw std::invalid_argument("--trace holds no pose");
   catgs::RenderOptions options;
   options.pipeline = catgs::parse_pipeline(args.get("--pipeline", "exact"));
@@ -130,12 +140,13 @@ void encode_session(const std::string& kind, const catgs::server::EncoderConfig&
   }
 }
 
-Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int height, int fps) {
+Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int height, int fps,
+            std::vector<std::vector<std::uint8_t>>& units) {
   Row row;
   row.setting = s;
   row.config = catgs::server::encoder_config(s.policy, width, height, fps, s.sessions, 0);
   std::vector<std::vector<double>> times(static_cast<std::size_t>(s.sessions));
-  std::vector<std::vector<std::uint8_t>> units;
+  units.clear();
   const double cpu0 = process_cpu_ms();
   const auto start = Clock::now() + std::chrono::milliseconds(20);
   std::vector<std::thread> threads;
@@ -157,6 +168,31 @@ Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int
     row.ssim.push_back(catgs::ssim_luma_rgba8(decoded, frames[k].raw));
   }
   return row;
+}
+
+// The first session's stream of row `index` as files another tool can read: DIR/rowN.h264 (Annex
+// B: ffmpeg -f h264) or DIR/rowN.obu (AV1 low-overhead OBUs, one temporal unit after another:
+// ffmpeg -f obu), and DIR/rowN.json (its codec, size and each access unit's bytes, in order:
+// tests/e2e/decode_bench.mjs feeds them to WebCodecs).
+void dump_stream(const std::string& dir, std::size_t index, const Row& row,
+                 const std::vector<std::vector<std::uint8_t>>& units, int width, int height, int fps) {
+  const bool av1 = row.setting.encoder == "av1";
+  const std::string base = dir + "/row" + std::to_string(index);
+  std::ofstream bits(base + (av1 ? ".obu" : ".h264"), std::ios::binary);
+  std::vector<std::size_t> sizes;
+  for (const auto& u : units) {
+    bits.write(reinterpret_cast<const char*>(u.data()), static_cast<std::streamsize>(u.size()));
+    sizes.push_back(u.size());
+  }
+  if (!bits) throw std::runtime_error("cannot write " + base + (av1 ? ".obu" : ".h264"));
+  std::ofstream(base + ".json") << nlohmann::json{{"label", row.setting.label},
+                                                  {"codec", av1 ? "av1" : "h264"},
+                                                  {"width", width},
+                                                  {"height", height},
+                                                  {"fps", fps},
+                                                  {"sizes", sizes}}
+                                       .dump()
+                                << "\n";
 }
 
 nlohmann::json row_json(const Row& r, int width, int height, int fps) {
@@ -214,7 +250,7 @@ int main(int argc, char** argv) {
   try {
     const catgs::tools::Args args(argc, argv,
                                   {"--scene", "--trace", "--renderer", "--pipeline", "--width", "--height", "--frames",
-                                   "--step", "--fps", "--settings", "--json", "--cores"});
+                                   "--step", "--fps", "--settings", "--json", "--cores", "--dump-dir"});
     const int width = args.get_int("--width", 1920), height = args.get_int("--height", 1080);
     const int frames = args.get_int("--frames", 240), step = args.get_int("--step", 2), fps = args.get_int("--fps", 60);
     if (frames < 1 || step < 1 || fps < 1) throw std::invalid_argument("--frames, --step and --fps must be >= 1");
@@ -224,8 +260,12 @@ int main(int argc, char** argv) {
     std::vector<double> ceiling;
     for (const Frame& f : rendered) ceiling.push_back(f.ceiling_psnr);
     nlohmann::json rows = nlohmann::json::array();
+    if (args.has("--dump-dir")) std::filesystem::create_directories(args.get("--dump-dir"));
     for (const RdSetting& s : settings) {
-      rows.push_back(row_json(run_row(s, rendered, width, height, fps), width, height, fps));
+      std::vector<std::vector<std::uint8_t>> units;
+      const Row row = run_row(s, rendered, width, height, fps, units);
+      if (args.has("--dump-dir")) dump_stream(args.get("--dump-dir"), rows.size(), row, units, width, height, fps);
+      rows.push_back(row_json(row, width, height, fps));
       std::cerr << "done: " << s.label << "\n";
     }
     std::cout << "catgs-encode-bench " << width << "x" << height << " at " << fps << " frames/s, " << frames
