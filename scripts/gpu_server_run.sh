@@ -45,7 +45,9 @@ prepare() {
   # catgs-encode-bench (rd) and catgs-bench (pictures) only when asked: with the rest and the
   # scene they would pass the carry's 64 MiB.
   # CATGS_CARRY_TESTS=0 leaves the server's unit tests (`check`) out for room.
-  local bins=("$build/bin/catgs-server" "$build/bin/catgs-loadgen" "$build/bin/catgs-scene")
+  # CATGS_CARRY_SERVER=0 leaves the server and catgs-loadgen out (an `rd`-only carry).
+  local bins=("$build/bin/catgs-scene")
+  [ "${CATGS_CARRY_SERVER:-1}" = 1 ] && bins+=("$build/bin/catgs-server" "$build/bin/catgs-loadgen")
   [ "${CATGS_CARRY_TESTS:-1}" = 1 ] && bins+=("$(find "$build" -type f -name catgs_server_unit_tests -perm -u+x | head -1)")
   [ "${CATGS_CARRY_ENCODE_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-encode-bench")
   [ "${CATGS_CARRY_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-bench")
@@ -54,7 +56,7 @@ prepare() {
     cp -f "$b" "$carry/stage/bin/"
   done
   strip "$carry"/stage/bin/* 2>/dev/null || true
-  if ldd "$build/bin/catgs-server" | grep -q libavformat; then
+  if ldd "${bins[@]}" | grep -q libavformat; then
     echo "prepare: note: this catgs-server has video export (libavformat, +6.4 MB xz in the carry);" \
       "configure $build with -DCATGS_VIDEO_EXPORT=OFF for a smaller one" >&2
   fi

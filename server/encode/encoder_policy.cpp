@@ -63,7 +63,16 @@ bool use_av1(const EncoderPolicy& policy, int width, int height, int fps, int li
   if (policy.av1 == "on") return true;
   const double budget_ms = kEncoderCpuShare * std::max(1, policy.usable_cores) * 1000.0;
   const double per_session_ms = ultrafast_cpu_ms(width, height) * std::max(fps, 1) * std::max(1, live_sessions);
-  return per_session_ms * kAv1CpuFactor <= budget_ms;
+  const double interval_ms = 1000.0 / std::max(fps, 1);
+  return per_session_ms * kAv1CpuFactor <= budget_ms &&
+         av1_frame_ms(width, height, encoder_threads(policy, width, height, live_sessions)) <=
+             kAv1FrameIntervalShare * interval_ms;
+}
+
+double av1_frame_ms(int width, int height, int threads) {
+  const double t = std::clamp(threads, 1, 8);
+  const double speedup = 1.0 + (kAv1EightThreadSpeedup - 1.0) * (t - 1.0) / 7.0;
+  return ultrafast_cpu_ms(width, height) * kAv1CpuFactor / speedup;
 }
 
 std::string encoder_preset(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions) {

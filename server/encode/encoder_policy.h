@@ -89,15 +89,29 @@ double ultrafast_cpu_ms(int width, int height);
 int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);
 
 // AV1 (libaom realtime at policy.av1_speed) above the ladder: its CPU time a frame relative to x264
-// ultrafast's, the larger of the factors measured at 1080p and 720p on the H100 host (RESULTS.md,
-// "AV1 where the host affords it").
-inline constexpr double kAv1CpuFactor = 4.0;
+// ultrafast's, the larger of the factors measured at 1080p and 720p on the H100 host, rounded up
+// (RESULTS.md, "AV1 where the host affords it").
+inline constexpr double kAv1CpuFactor = 8.0;
+// How much sooner a frame is done with 8 threads (row-based threads, 4 tile columns) than with
+// one: the smaller of the speed-ups measured at 1080p and 720p (same section); fewer threads are
+// taken to gain linearly between 1 and that.
+inline constexpr double kAv1EightThreadSpeedup = 3.3;
+// An AV1 frame must be encoded within this share of the frame interval, or the stream could not
+// keep its frame rate (the rest is the render's and the wire's).
+inline constexpr double kAv1FrameIntervalShare = 0.8;
+
+// The wall time (ms) one AV1 frame of width x height is expected to take with `threads` threads:
+// ultrafast_cpu_ms x kAv1CpuFactor over the threads' speed-up.
+double av1_frame_ms(int width, int height, int threads);
 
 // Whether a session's stream is AV1: its client decodes AV1 (Hello.codecs), the encoders are on
 // the CPU (`cpu_encoder`: x264's host; NVENC hosts stream H.264 from the GPU), the link does not
 // limit the stream (`link_limited`: AV1's rate cannot follow the link without a key frame, x264's
-// can), and policy.av1 is "on", or "auto" and AV1's CPU time a frame at the live session count
-// fits the encoders' share of the cores, as the ladder's steps do (preset_step).
+// can), and policy.av1 is "on", or "auto" where (1) AV1's CPU time at the live session count fits
+// the encoders' share of the cores, as the ladder's steps do (preset_step), and (2) a frame, with
+// the threads the session would get (encoder_threads), is expected within kAv1FrameIntervalShare
+// of the frame interval (av1_frame_ms): on the H100 host's 16 cores not at 720p or 1080p at 60
+// frames/s, where x264 keeps the stream.
 bool use_av1(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions, bool client_decodes_av1,
              bool cpu_encoder, bool link_limited);
 

@@ -4,6 +4,7 @@
 //       [--renderer auto|cpu|cuda] [--pipeline exact] [--frames 240] [--step 2] [--fps 60]
 //       [--settings "crf=23,bitrate=off,threads=2;bitrate=auto,threads=4;..."] [--json OUT]
 //       [--dump-dir DIR]   (each row's first stream as files: dump_stream below)
+//       [--pictures DIR]   (the middle frame's centre crop: raw.png, and rowN_decoded.png a row)
 //
 // The trace's poses (every `step`-th: a 120 Hz trace at 60 poses/s) are rendered once, as the
 // server would (Camera::from_pose at the given size), keeping each raw 8-bit render and its
@@ -125,6 +126,21 @@ std::vector<Frame> render_frames(const catgs::tools::Args& args, int width, int 
   return out;
 }
 
+// The centre crop (a quarter of each side, at least 64 pixels) of an image: what the pictures show.
+catgs::Image centre_crop(const catgs::Image& im) {
+  const int w = std::min(im.width, std::max(64, im.width / 4)), h = std::min(im.height, std::max(64, im.height / 4));
+  const int x0 = (im.width - w) / 2, y0 = (im.height - h) / 2;
+  catgs::Image out;
+  out.width = w;
+  out.height = h;
+  out.rgba8.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * 4);
+  for (int y = 0; y < h; ++y)
+    std::copy_n(&im.rgba8[(static_cast<std::size_t>(y0 + y) * static_cast<std::size_t>(im.width) + x0) * 4],
+                static_cast<std::size_t>(w) * 4,
+                &out.rgba8[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) * 4]);
+  return out;
+}
+
 // One session's stream: frame k starts at start + k / fps, or as soon as frame k - 1 is done.
 void encode_session(const std::string& kind, const catgs::server::EncoderConfig& config,
                     const std::vector<Frame>& frames, int fps, Clock::time_point start, std::vector<double>& encode_ms,
@@ -140,8 +156,9 @@ void encode_session(const std::string& kind, const catgs::server::EncoderConfig&
   }
 }
 
+// `pictures`: where the middle frame's decoded centre crop goes (DIR/rowN_decoded.png; "" none).
 Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int height, int fps,
-            std::vector<std::vector<std::uint8_t>>& units) {
+            std::vector<std::vector<std::uint8_t>>& units, const std::string& pictures) {
   Row row;
   row.setting = s;
   row.config = catgs::server::encoder_config(s.policy, width, height, fps, s.sessions, 0);
@@ -166,6 +183,7 @@ Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int
       throw std::runtime_error("setting '" + s.label + "': frame " + std::to_string(k) + " did not decode");
     row.psnr.push_back(std::min(99.0, catgs::psnr_rgba8(decoded, frames[k].raw)));
     row.ssim.push_back(catgs::ssim_luma_rgba8(decoded, frames[k].raw));
+    if (!pictures.empty() && k == units.size() / 2) catgs::write_png(centre_crop(decoded), pictures + "_decoded.png");
   }
   return row;
 }
@@ -250,7 +268,7 @@ int main(int argc, char** argv) {
   try {
     const catgs::tools::Args args(argc, argv,
                                   {"--scene", "--trace", "--renderer", "--pipeline", "--width", "--height", "--frames",
-                                   "--step", "--fps", "--settings", "--json", "--cores", "--dump-dir"});
+                                   "--step", "--fps", "--settings", "--json", "--cores", "--dump-dir", "--pictures"});
     const int width = args.get_int("--width", 1920), height = args.get_int("--height", 1080);
     const int frames = args.get_int("--frames", 240), step = args.get_int("--step", 2), fps = args.get_int("--fps", 60);
     if (frames < 1 || step < 1 || fps < 1) throw std::invalid_argument("--frames, --step and --fps must be >= 1");
@@ -261,9 +279,15 @@ int main(int argc, char** argv) {
     for (const Frame& f : rendered) ceiling.push_back(f.ceiling_psnr);
     nlohmann::json rows = nlohmann::json::array();
     if (args.has("--dump-dir")) std::filesystem::create_directories(args.get("--dump-dir"));
+    const std::string pictures = args.get("--pictures", "");
+    if (!pictures.empty()) {
+      std::filesystem::create_directories(pictures);
+      catgs::write_png(centre_crop(rendered[rendered.size() / 2].raw), pictures + "/raw.png");
+    }
     for (const RdSetting& s : settings) {
       std::vector<std::vector<std::uint8_t>> units;
-      const Row row = run_row(s, rendered, width, height, fps, units);
+      const Row row = run_row(s, rendered, width, height, fps, units,
+                              pictures.empty() ? "" : pictures + "/row" + std::to_string(rows.size()));
       if (args.has("--dump-dir")) dump_stream(args.get("--dump-dir"), rows.size(), row, units, width, height, fps);
       rows.push_back(row_json(row, width, height, fps));
       std::cerr << "done: " << s.label << "\n";

@@ -189,27 +189,34 @@ TEST(EncoderPolicy, PresetLadderSpendsTheEncodersShareOfTheCores) {
   EXPECT_FALSE(is_x264_preset("ultrafast "));
 }
 
-// AV1 by hand: half of 16 cores is 8000 CPU ms a second; AV1 costs kAv1CpuFactor (4) x
-// ultrafast's 958 ms a second a 1080p session (3832): two sessions fit, three do not. At 720p
-// 4 x 426 = 1704: four fit, five do not.
+// AV1 by hand, 16 cores (8000 CPU ms a second for the encoders), 60 frames/s (13.3 ms is 0.8 of
+// the interval). 960x540: ultrafast 3.99 ms a frame, AV1 8x that = 31.9 ms on one thread, 9.7 ms
+// on 8 (speed-up 3.3) and 1916 CPU ms a second a session: four fit, five do not. 640x360: 1.77
+// ms, 851.6 a second: nine fit, ten do not. 720p: 56.8 ms / 3.3 = 17.2 ms a frame, over 13.3:
+// never AV1 at 60 frames/s, nor at 1080p (38.7 ms).
 TEST(EncoderPolicy, Av1OnlyForClientsThatDecodeItWhileTheCoresAffordIt) {
   EncoderPolicy p;
   p.usable_cores = 16;
   const auto av1 = [&](int w, int h, int live) { return use_av1(p, w, h, 60, live, true, true, false); };
-  EXPECT_TRUE(av1(1920, 1080, 1));
-  EXPECT_TRUE(av1(1920, 1080, 2));
-  EXPECT_FALSE(av1(1920, 1080, 3));
-  EXPECT_TRUE(av1(1280, 720, 4));
-  EXPECT_FALSE(av1(1280, 720, 5));
+  EXPECT_NEAR(av1_frame_ms(960, 540, 8), 7.7e-6 * 960 * 540 * 8 / 3.3, 1e-9);
+  EXPECT_NEAR(av1_frame_ms(960, 540, 1), 7.7e-6 * 960 * 540 * 8, 1e-9);
+  EXPECT_TRUE(av1(960, 540, 1));
+  EXPECT_TRUE(av1(960, 540, 4));
+  EXPECT_FALSE(av1(960, 540, 5));
+  EXPECT_TRUE(av1(640, 360, 9));
+  EXPECT_FALSE(av1(640, 360, 10));
+  EXPECT_FALSE(av1(1280, 720, 1)) << "a frame would take 17 ms of a 16.7 ms interval";
+  EXPECT_FALSE(av1(1920, 1080, 1));
+  EXPECT_TRUE(use_av1(p, 1280, 720, 30, 1, true, true, false)) << "at 30 frames/s a 720p frame fits";
   // Never AV1 for more sessions once a count is refused, at any size.
-  for (const auto& [w, h] : {std::pair{640, 360}, std::pair{1280, 720}, std::pair{1920, 1080}})
+  for (const auto& [w, h] : {std::pair{640, 360}, std::pair{960, 540}, std::pair{1280, 720}})
     for (int live = 1; live < 64; ++live)
       EXPECT_LE(av1(w, h, live + 1), av1(w, h, live)) << w << "x" << h << " " << live;
   // A client that does not list it, an NVENC host, a link that limits the stream: H.264.
-  EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, false, true, false));
-  EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, true, false, false));
-  EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, true, true, true));
-  // --av1 on: whatever the count; off: never.
+  EXPECT_FALSE(use_av1(p, 640, 360, 60, 1, false, true, false));
+  EXPECT_FALSE(use_av1(p, 640, 360, 60, 1, true, false, false));
+  EXPECT_FALSE(use_av1(p, 640, 360, 60, 1, true, true, true));
+  // --av1 on: whatever the count and size; off: never.
   p.av1 = "on";
   EXPECT_TRUE(av1(1920, 1080, 40));
   EXPECT_FALSE(use_av1(p, 1920, 1080, 60, 1, true, true, true)) << "a limiting link still leaves AV1";
