@@ -156,7 +156,7 @@ std::string server_usage() {
          "                        (default) while half the cores afford it at the live\n"
          "                        session count and the link does not limit the stream,\n"
          "                        on always, off never (H.264 only); x264 hosts only\n"
-         "  --av1-speed N         libaom's realtime cpu-used for AV1 streams, 5..10 (default 9)\n"
+         "  --av1-speed N         libaom's realtime cpu-used for AV1 streams, 5..10 (default 10)\n"
          "  --max-frames-in-flight N    frames queued but unwritten per session (default 2)\n"
          "  --frame-deadline S|off  skip a rendered frame before encoding when it would reach\n"
          "                        the client more than S pose intervals after its pose and a\n"

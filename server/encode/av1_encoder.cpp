@@ -32,6 +32,12 @@ int av1_tile_columns_log2(int width, int threads) {
   return log2;
 }
 
+int av1_tile_rows_log2(int height, int threads, int columns_log2) {
+  int log2 = 0;
+  while ((2 << (columns_log2 + log2)) <= threads && (height >> (log2 + 1)) >= 128 && log2 < 6) ++log2;
+  return log2;
+}
+
 Av1Encoder::Av1Encoder(const EncoderConfig& config)
     : LibavEncoder("av1", "libaom-av1", config, [&config](AVCodecContext* ctx) {
         if (config.av1_speed < 5 || config.av1_speed > 10)
@@ -43,7 +49,9 @@ Av1Encoder::Av1Encoder(const EncoderConfig& config)
         av_opt_set(ctx->priv_data, "usage", "realtime", 0);
         av_opt_set_int(ctx->priv_data, "lag-in-frames", 0, 0);  // no look-ahead: no frame of delay
         av_opt_set_int(ctx->priv_data, "row-mt", 1, 0);
-        av_opt_set_int(ctx->priv_data, "tile-columns", av1_tile_columns_log2(config.width, config.threads), 0);
+        const int columns = av1_tile_columns_log2(config.width, config.threads);
+        av_opt_set_int(ctx->priv_data, "tile-columns", columns, 0);
+        av_opt_set_int(ctx->priv_data, "tile-rows", av1_tile_rows_log2(config.height, config.threads, columns), 0);
         av_opt_set_int(ctx->priv_data, "crf", av1_cq_level(config.crf), 0);
         if (config.bitrate_kbps > 0) {
           ctx->bit_rate = static_cast<std::int64_t>(config.bitrate_kbps) * 1000;

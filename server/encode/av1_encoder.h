@@ -7,9 +7,9 @@
 //
 // Speed: EncoderConfig::av1_speed is libaom's cpu-used (realtime: 7 slowest used here .. 10
 // fastest; what each costs and buys: RESULTS.md, "AV1 where the host affords it"). Threads:
-// row-based multithreading and tile columns (log2 of the threads, up to what the width allows:
-// a tile column is at least 256 pixels wide, AV1 section A.3), so threads cut one frame's time
-// and add no frame of delay.
+// row-based multithreading and a tile per thread, columns first (up to what the width allows: a
+// tile column is at least 256 pixels wide, AV1 section A.3), then rows, so threads cut one
+// frame's time and add no frame of delay.
 //
 // Rate control, as EncoderConfig says for x264: constrained quality (libaom's end-usage cq):
 // `crf` (x264's scale, 0..51) maps to libaom's cq-level on its own 0..63 scale by the same share
@@ -36,5 +36,9 @@ int av1_cq_level(int x264_crf);
 // log2(threads), and each column at least 256 pixels wide (AV1 section A.3: MAX_TILE_WIDTH is 4096,
 // and tiles narrower than a few superblocks cost more than their threads gain).
 int av1_tile_columns_log2(int width, int threads);
+
+// log2 of the tile rows that, with 2^columns_log2 columns, give the threads a tile each: at most
+// log2(threads) - columns_log2, each row at least 128 pixels (two superblocks) tall.
+int av1_tile_rows_log2(int height, int threads, int columns_log2);
 
 }  // namespace catgs::server

@@ -41,7 +41,7 @@ struct EncoderConfig {
   // file (catgs-render --video) a slower one for fewer bytes at the same crf. nvenc ignores it.
   std::string x264_preset = "ultrafast";
   // av1: libaom's realtime speed (cpu-used, 5..10; higher is faster and coarser). Others ignore it.
-  int av1_speed = 9;
+  int av1_speed = 10;
   // A container's global header: SPS/PPS once in extradata() (AV_CODEC_FLAG_GLOBAL_HEADER), not
   // in band on IDR pictures, as MP4 wants (its avcC box is made from it). Streams leave it off.
   bool global_header = false;

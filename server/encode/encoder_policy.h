@@ -39,7 +39,7 @@ struct EncoderPolicy {
   int intra_refresh_frames = 0;      // --intra-refresh N: refresh period in frames (0: off)
   int threads = 0;                   // --encoder-threads: > 0 fixed per session; 0 auto (above)
   std::string x264_preset = "auto";  // --x264-preset: "auto" (the ladder above) or one x264 preset
-  int av1_speed = 9;                 // --av1-speed: libaom's realtime cpu-used for AV1 streams
+  int av1_speed = 10;                // --av1-speed: libaom's realtime cpu-used for AV1 streams
   // --av1: "auto" AV1 for a client that decodes it while the host affords it (use_av1), "on" for
   // every such client, "off" never (H.264 only).
   std::string av1 = "auto";
@@ -92,10 +92,10 @@ int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int
 // ultrafast's, the larger of the factors measured at 1080p and 720p on the H100 host, rounded up
 // (RESULTS.md, "AV1 where the host affords it").
 inline constexpr double kAv1CpuFactor = 8.0;
-// How much sooner a frame is done with 8 threads (row-based threads, 4 tile columns) than with
-// one: the smaller of the speed-ups measured at 1080p and 720p (same section); fewer threads are
+// How much sooner a frame is done with 8 threads (row-based threads, a tile each) than with one:
+// the smaller of the speed-ups measured at 1080p and 720p (same section); fewer threads are
 // taken to gain linearly between 1 and that.
-inline constexpr double kAv1EightThreadSpeedup = 3.3;
+inline constexpr double kAv1EightThreadSpeedup = 4.7;
 // An AV1 frame must be encoded within this share of the frame interval, or the stream could not
 // keep its frame rate (the rest is the render's and the wire's).
 inline constexpr double kAv1FrameIntervalShare = 0.8;
@@ -110,8 +110,8 @@ double av1_frame_ms(int width, int height, int threads);
 // can), and policy.av1 is "on", or "auto" where (1) AV1's CPU time at the live session count fits
 // the encoders' share of the cores, as the ladder's steps do (preset_step), and (2) a frame, with
 // the threads the session would get (encoder_threads), is expected within kAv1FrameIntervalShare
-// of the frame interval (av1_frame_ms): on the H100 host's 16 cores not at 720p or 1080p at 60
-// frames/s, where x264 keeps the stream.
+// of the frame interval (av1_frame_ms): on the H100 host's 16 cores at 60 frames/s 720p for up to
+// 2 sessions, never 1080p, where x264 keeps the stream.
 bool use_av1(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions, bool client_decodes_av1,
              bool cpu_encoder, bool link_limited);
 

@@ -190,24 +190,26 @@ TEST(EncoderPolicy, PresetLadderSpendsTheEncodersShareOfTheCores) {
 }
 
 // AV1 by hand, 16 cores (8000 CPU ms a second for the encoders), 60 frames/s (13.3 ms is 0.8 of
-// the interval). 960x540: ultrafast 3.99 ms a frame, AV1 8x that = 31.9 ms on one thread, 9.7 ms
-// on 8 (speed-up 3.3) and 1916 CPU ms a second a session: four fit, five do not. 640x360: 1.77
-// ms, 851.6 a second: nine fit, ten do not. 720p: 56.8 ms / 3.3 = 17.2 ms a frame, over 13.3:
-// never AV1 at 60 frames/s, nor at 1080p (38.7 ms).
+// the interval). 960x540: ultrafast 3.99 ms a frame, AV1 8x that = 31.9 ms on one thread, 6.8 ms
+// on 8 (speed-up 4.7) and 1916 CPU ms a second a session: four fit, five do not. 640x360: 1.77
+// ms, 851.6 a second: nine fit, ten do not. 720p: 56.8 ms / 4.7 = 12.1 ms a frame on 8 threads
+// and 3406 a second: two fit, three do not. 1080p: 127.7 / 4.7 = 27.2 ms: never at 60 frames/s.
 TEST(EncoderPolicy, Av1OnlyForClientsThatDecodeItWhileTheCoresAffordIt) {
   EncoderPolicy p;
   p.usable_cores = 16;
   const auto av1 = [&](int w, int h, int live) { return use_av1(p, w, h, 60, live, true, true, false); };
-  EXPECT_NEAR(av1_frame_ms(960, 540, 8), 7.7e-6 * 960 * 540 * 8 / 3.3, 1e-9);
+  EXPECT_NEAR(av1_frame_ms(960, 540, 8), 7.7e-6 * 960 * 540 * 8 / 4.7, 1e-9);
+  EXPECT_NEAR(av1_frame_ms(960, 540, 4), 7.7e-6 * 960 * 540 * 8 / (1 + 3.7 * 3 / 7), 1e-9);
   EXPECT_NEAR(av1_frame_ms(960, 540, 1), 7.7e-6 * 960 * 540 * 8, 1e-9);
   EXPECT_TRUE(av1(960, 540, 1));
   EXPECT_TRUE(av1(960, 540, 4));
   EXPECT_FALSE(av1(960, 540, 5));
   EXPECT_TRUE(av1(640, 360, 9));
   EXPECT_FALSE(av1(640, 360, 10));
-  EXPECT_FALSE(av1(1280, 720, 1)) << "a frame would take 17 ms of a 16.7 ms interval";
-  EXPECT_FALSE(av1(1920, 1080, 1));
-  EXPECT_TRUE(use_av1(p, 1280, 720, 30, 1, true, true, false)) << "at 30 frames/s a 720p frame fits";
+  EXPECT_TRUE(av1(1280, 720, 2));
+  EXPECT_FALSE(av1(1280, 720, 3));
+  EXPECT_FALSE(av1(1920, 1080, 1)) << "a frame would take 27 ms of a 16.7 ms interval";
+  EXPECT_TRUE(use_av1(p, 1280, 720, 30, 4, true, true, false)) << "at 30 frames/s four 720p sessions fit";
   // Never AV1 for more sessions once a count is refused, at any size.
   for (const auto& [w, h] : {std::pair{640, 360}, std::pair{960, 540}, std::pair{1280, 720}})
     for (int live = 1; live < 64; ++live)

@@ -333,6 +333,11 @@ TEST(Av1Encoder, RateCapHoldsAndCqLevelFollowsCrf) {
   EXPECT_EQ(av1_tile_columns_log2(1920, 16), 2);  // 1920 / 8 = 240 < 256
   EXPECT_EQ(av1_tile_columns_log2(640, 8), 1);
   EXPECT_EQ(av1_tile_columns_log2(320, 8), 0);
+  // Then rows, until every thread has a tile, each at least 128 pixels tall.
+  EXPECT_EQ(av1_tile_rows_log2(1080, 16, 2), 2);  // 4 x 4 tiles of 480 x 270
+  EXPECT_EQ(av1_tile_rows_log2(720, 8, 2), 1);    // 4 x 2 of 320 x 360
+  EXPECT_EQ(av1_tile_rows_log2(720, 4, 2), 0);    // the columns already give 4 threads a tile
+  EXPECT_EQ(av1_tile_rows_log2(240, 8, 0), 0);    // 120 pixels would be too short
   // A capped stream of a moving view keeps near its cap; a tight cap costs quality.
   const int W = 320, H = 192;
   const auto model = test::cached_scene(test::bundled_scene());
