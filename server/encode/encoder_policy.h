@@ -96,9 +96,10 @@ inline constexpr double kAv1CpuFactor = 8.0;
 // the smaller of the speed-ups measured at 1080p and 720p (same section); fewer threads are
 // taken to gain linearly between 1 and that.
 inline constexpr double kAv1EightThreadSpeedup = 4.7;
-// An AV1 frame must be encoded within this share of the frame interval, or the stream could not
-// keep its frame rate (the rest is the render's and the wire's).
-inline constexpr double kAv1FrameIntervalShare = 0.8;
+// An AV1 frame is expected (av1_frame_ms, a median) within this share of the frame interval, or
+// the stream could not keep its frame rate: AV1's tail is long (key frames, busy views), and 720p
+// at 60 frames/s, 12 ms expected, fell to 57.8 FPS with 2 sessions (RESULTS.md, same section).
+inline constexpr double kAv1FrameIntervalShare = 0.6;
 
 // The wall time (ms) one AV1 frame of width x height is expected to take with `threads` threads:
 // ultrafast_cpu_ms x kAv1CpuFactor over the threads' speed-up.
@@ -110,8 +111,8 @@ double av1_frame_ms(int width, int height, int threads);
 // can), and policy.av1 is "on", or "auto" where (1) AV1's CPU time at the live session count fits
 // the encoders' share of the cores, as the ladder's steps do (preset_step), and (2) a frame, with
 // the threads the session would get (encoder_threads), is expected within kAv1FrameIntervalShare
-// of the frame interval (av1_frame_ms): on the H100 host's 16 cores at 60 frames/s 720p for up to
-// 2 sessions, never 1080p, where x264 keeps the stream.
+// of the frame interval (av1_frame_ms): on the H100 host's 16 cores at 60 frames/s 540p for up to
+// 4 sessions, never 720p or 1080p, where x264 keeps the stream.
 bool use_av1(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions, bool client_decodes_av1,
              bool cpu_encoder, bool link_limited);
 
