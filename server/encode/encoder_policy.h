@@ -97,8 +97,8 @@ inline constexpr double kAv1CpuFactor = 8.0;
 // taken to gain linearly between 1 and that.
 inline constexpr double kAv1EightThreadSpeedup = 4.7;
 // An AV1 frame is expected (av1_frame_ms, a median) within this share of the frame interval, or
-// the stream could not keep its frame rate: AV1's tail is long (key frames, busy views), and 720p
-// at 60 frames/s, 12 ms expected, fell to 57.8 FPS with 2 sessions (RESULTS.md, same section).
+// the stream could not keep its frame rate: AV1's tail is long (key frames, busy views); a larger
+// share lost frames in a ramp (RESULTS.md, same section).
 inline constexpr double kAv1FrameIntervalShare = 0.6;
 
 // The wall time (ms) one AV1 frame of width x height is expected to take with `threads` threads:

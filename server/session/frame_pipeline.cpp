@@ -196,10 +196,10 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
         target_bitrate_kbps(policy, s.width, s.height, kStreamFps, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
     if (rate > 0 && encoder_->set_max_bitrate_kbps(rate)) encoder_link_kbps_ = s.link_kbps;
   }
+  // The ladder's step, AV1 above it. A link that comes to limit an AV1 stream lowers the step, so
+  // should_rebuild moves it to H.264 at once.
   const int step = stream_step(s, live);
-  // An AV1 stream on a link that came to limit it: H.264 at once (its rate follows the link).
-  const bool leave_av1 = encoder_ && encoder_->codec() == "av1" && step != kPresetSteps && s.link_kbps > 0;
-  if (same_stream && !leave_av1 && (encoder_link_kbps_ == s.link_kbps || encoder_->codec() == "av1")) {
+  if (same_stream && encoder_link_kbps_ == s.link_kbps) {
     // The same stream: rebuilt only for a new share of the cores (x264's threads, preset and the
     // codec are fixed when it opens; NVENC has none to share).
     const auto since = now - encoder_built_;

@@ -77,16 +77,17 @@ try {
       const times = [];
       for (let r = 0; r < repeat; r++) {
         let resolveOutput = null;
+        let rejectOutput = null;
         const decoder = new VideoDecoder({
           output: (frame) => {
             frame.close();
             if (resolveOutput) resolveOutput();
           },
-          error: (e) => { throw e; },
+          error: (e) => { if (rejectOutput) rejectOutput(e); }, // fails the run rather than waiting forever
         });
         decoder.configure({ codec: codecString, optimizeForLatency: true });
         for (let k = 0; k < bytes.length; k++) {
-          const out = new Promise((resolve) => { resolveOutput = resolve; });
+          const out = new Promise((resolve, reject) => { resolveOutput = resolve; rejectOutput = reject; });
           const t0 = performance.now();
           decoder.decode(new EncodedVideoChunk({ type: k === 0 ? 'key' : 'delta', timestamp: Math.round(k * 1e6 / fps), data: bytes[k] }));
           await out;
