@@ -82,6 +82,13 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
                 float lod_error_px = 0.0f);
 
+// Stage 1 of several views of one scene at once (the CUDA core's preprocess_batch; issue 47):
+// chunk by chunk, every view in turn, over the whole frame. outs[k] gets what preprocess() gives
+// cameras[k] alone. Throws std::invalid_argument where the counts differ or an output is null.
+void preprocess_batch(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
+                      const std::vector<Camera>& cameras, Pipeline pipeline,
+                      const std::vector<ProjectedGaussians*>& outs, float lod_error_px = 0.0f);
+
 // catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
 // every camera of the path; those visible at the key camera get the key frame's features (as

@@ -2,6 +2,8 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "cpu/cpu_renderer.h"
 #include "forward_model/sh_storage.h"
@@ -39,80 +41,133 @@ uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 c
 
 }  // namespace
 
+namespace {
+
+// One view's constants for stage 1, worked out once per frame.
+struct ViewPass {
+  const Camera& camera;
+  TileGrid grid;
+  glm::vec2 tan_half_fov;
+  glm::vec3 cam_pos;
+  fm::View view;
+  fm::LodCut lod;
+  bool exact;
+  fm::TileRect region;
+  ProjectedGaussians& out;
+
+  ViewPass(const GaussianModel& model, const Camera& c, Pipeline pipeline, ProjectedGaussians& o, const fm::TileRect& r,
+           float lod_error_px)
+      : camera(c),
+        grid(TileGrid::of(c.width, c.height)),
+        tan_half_fov(static_cast<float>(c.width) / (2.0f * c.fx), static_cast<float>(c.height) / (2.0f * c.fy)),
+        cam_pos(c.position()),
+        view(fm::view_of(c)),
+        lod(fm::lod_cut(model.lod, view, lod_error_px)),
+        exact(pipeline != Pipeline::vanilla),
+        region(r),
+        out(o) {}
+};
+
+// Gaussian i in view v: its projected features and tile count (0: not listed).
+void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::size_t i) {
+  const Camera& camera = v.camera;
+  ProjectedGaussians& out = v.out;
+  out.tiles_touched[i] = 0;
+  const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
+  const glm::vec3 p_cam = camera.R * mean + camera.t;
+  if (!(p_cam.z > camera.near_plane) || p_cam.z > camera.far_plane) return;  // frustum (near/far)
+
+  const float opacity = fm::sigmoid(model.opacity_logits[i]);
+  // alpha >= 1/255 only where q <= q_max; the rasterizer visits only those pixels (all
+  // pipelines). exact also drops a Gaussian that can never reach 1/255.
+  const float q_max = fm::opacity_aware_qmax(opacity);
+  if (v.exact && !(q_max > 0.0f)) return;
+
+  const fm::Cov3 cov3 = fm::covariance_3d(
+      {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
+      {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
+  const glm::vec3 cov2 = fm::covariance_2d(cov3, camera.R, p_cam, camera.fx, camera.fy, v.tan_half_fov);
+  glm::vec3 conic;
+  if (!fm::conic_from_cov2d(cov2, &conic)) return;
+
+  const glm::vec2 mean2d(camera.fx * p_cam.x / p_cam.z + camera.cx - 0.5f,
+                         camera.fy * p_cam.y / p_cam.z + camera.cy - 0.5f);
+  fm::TileRect rect;
+  uint32_t touched;
+  if (v.exact) {
+    rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height), v.region);
+    touched =
+        fm::tile_count(rect) == 0 ? 0u : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height);
+  } else {
+    const float radius = fm::three_sigma_radius(cov2);
+    rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, v.grid.tiles_x, v.grid.tiles_y), v.region);
+    touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
+  }
+  if (touched == 0) return;
+
+  const int K = model.sh_coeffs();
+  const glm::vec3 dir = glm::normalize(mean - v.cam_pos);
+  out.mean2d[i] = mean2d;
+  out.conic[i] = conic;
+  out.opacity[i] = opacity;
+  out.depth[i] = p_cam.z;
+  out.q_max[i] = q_max;
+  out.color[i] =
+      fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]}, dir);
+  out.tile_rect[i] = rect;
+  out.tiles_touched[i] = touched;
+}
+
+// Chunk c in view v, as the CUDA core takes a block per chunk: exact skips the chunks that cannot
+// reach the image (the CUDA core's cull_chunks_kernel, which lists the chunks kept for its later
+// stages). Their Gaussians get tiles_touched = 0 here; the CUDA core leaves them unwritten and
+// reads them as 0 through its chunk totals (cuda/records.h listed_tiles). Every pipeline skips the
+// chunks outside the LOD cut (lod.h): another level draws them.
+void preprocess_chunk(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const ViewPass& v,
+                      std::size_t c) {
+  const std::size_t begin = c * fm::kChunkSize, end = std::min(model.size(), begin + fm::kChunkSize);
+  const bool outside = (v.exact && fm::chunk_outside_view(chunks[c], v.view)) || !v.lod.drawn(c);
+  for (std::size_t i = begin; i < end; ++i) {
+    if (outside)
+      v.out.tiles_touched[i] = 0;
+    else
+      preprocess_gaussian(model, v, i);
+  }
+}
+
+void check_chunks(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const char* who) {
+  if (chunks.size() != fm::chunk_count(model.size()))
+    throw std::invalid_argument(std::string(who) + ": chunk bounds of another scene");
+}
+
+}  // namespace
+
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region, float lod_error_px) {
-  const std::size_t n = model.size();
-  out.resize(n);
-  const TileGrid grid = TileGrid::of(camera.width, camera.height);
-  const glm::vec2 tan_half_fov(static_cast<float>(camera.width) / (2.0f * camera.fx),
-                               static_cast<float>(camera.height) / (2.0f * camera.fy));
-  const glm::vec3 cam_pos = camera.position();
-  const int K = model.sh_coeffs();
-  const bool exact = pipeline != Pipeline::vanilla;
+  check_chunks(model, chunks, "preprocess");
+  out.resize(model.size());
+  const ViewPass v(model, camera, pipeline, out, region, lod_error_px);
+  parallel_for(chunks.size(), 16, [&](std::size_t c) { preprocess_chunk(model, chunks, v, c); });
+}
 
-  if (chunks.size() != fm::chunk_count(n)) throw std::invalid_argument("preprocess: chunk bounds of another scene");
-  const fm::View view = fm::view_of(camera);
-  const fm::LodCut lod = fm::lod_cut(model.lod, view, lod_error_px);
-
-  auto gaussian = [&](std::size_t i) {
-    out.tiles_touched[i] = 0;
-    const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
-    const glm::vec3 p_cam = camera.R * mean + camera.t;
-    if (!(p_cam.z > camera.near_plane) || p_cam.z > camera.far_plane) return;  // frustum (near/far)
-
-    const float opacity = fm::sigmoid(model.opacity_logits[i]);
-    // alpha >= 1/255 only where q <= q_max; the rasterizer visits only those pixels (all
-    // pipelines). exact also drops a Gaussian that can never reach 1/255.
-    const float q_max = fm::opacity_aware_qmax(opacity);
-    if (exact && !(q_max > 0.0f)) return;
-
-    const fm::Cov3 cov3 = fm::covariance_3d(
-        {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
-        {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2], model.rotations[4 * i + 3]});
-    const glm::vec3 cov2 = fm::covariance_2d(cov3, camera.R, p_cam, camera.fx, camera.fy, tan_half_fov);
-    glm::vec3 conic;
-    if (!fm::conic_from_cov2d(cov2, &conic)) return;
-
-    const glm::vec2 mean2d(camera.fx * p_cam.x / p_cam.z + camera.cx - 0.5f,
-                           camera.fy * p_cam.y / p_cam.z + camera.cy - 0.5f);
-    fm::TileRect rect;
-    uint32_t touched;
-    if (exact) {
-      rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height), region);
-      touched =
-          fm::tile_count(rect) == 0 ? 0u : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height);
-    } else {
-      const float radius = fm::three_sigma_radius(cov2);
-      rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, grid.tiles_x, grid.tiles_y), region);
-      touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
-    }
-    if (touched == 0) return;
-
-    const glm::vec3 dir = glm::normalize(mean - cam_pos);
-    out.mean2d[i] = mean2d;
-    out.conic[i] = conic;
-    out.opacity[i] = opacity;
-    out.depth[i] = p_cam.z;
-    out.q_max[i] = q_max;
-    out.color[i] =
-        fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]}, dir);
-    out.tile_rect[i] = rect;
-    out.tiles_touched[i] = touched;
-  };
-  // A chunk at a time, as the CUDA core takes a block per chunk; exact skips the chunks that
-  // cannot reach the image (the CUDA core's cull_chunks_kernel, which lists the chunks kept for
-  // its later stages). Their Gaussians get tiles_touched = 0 here; the CUDA core leaves them
-  // unwritten and reads them as 0 through its chunk totals (cuda/records.h listed_tiles). Every
-  // pipeline skips the chunks outside the LOD cut (lod.h): another level draws them.
+void preprocess_batch(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
+                      const std::vector<Camera>& cameras, Pipeline pipeline,
+                      const std::vector<ProjectedGaussians*>& outs, float lod_error_px) {
+  check_chunks(model, chunks, "preprocess_batch");
+  if (cameras.size() != outs.size())
+    throw std::invalid_argument("preprocess_batch: " + std::to_string(cameras.size()) + " cameras but " +
+                                std::to_string(outs.size()) + " outputs");
+  std::vector<ViewPass> views;
+  views.reserve(cameras.size());
+  for (std::size_t k = 0; k < cameras.size(); ++k) {
+    if (!outs[k]) throw std::invalid_argument("preprocess_batch: output " + std::to_string(k) + " is null");
+    outs[k]->resize(model.size());
+    views.emplace_back(model, cameras[k], pipeline, *outs[k], fm::kAllTiles, lod_error_px);
+  }
+  // Chunk-major, as the CUDA core's preprocess_batch_kernel: a chunk's Gaussians, still in cache,
+  // for every view in turn.
   parallel_for(chunks.size(), 16, [&](std::size_t c) {
-    const std::size_t begin = c * fm::kChunkSize, end = std::min(n, begin + fm::kChunkSize);
-    const bool outside = (exact && fm::chunk_outside_view(chunks[c], view)) || !lod.drawn(c);
-    for (std::size_t i = begin; i < end; ++i) {
-      if (outside)
-        out.tiles_touched[i] = 0;
-      else
-        gaussian(i);
-    }
+    for (const ViewPass& v : views) preprocess_chunk(model, chunks, v, c);
   });
 }
 

@@ -245,17 +245,20 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   validate_camera(camera);
   State& s = *state_;
   s.syncs = 0;
-  CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
+  // A camera preprocess_together pre-processed: kStart, stage 1 and kPreprocessed are queued.
+  const bool batched = take_batched(camera);
+  if (!batched) CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   stats_ = {};
   const bool exact = options_.pipeline != Pipeline::vanilla;
-  draw_full_frame(camera, exact, true, exact && depth_first_sort());
+  draw_full_frame(camera, exact, true, exact && depth_first_sort(), batched);
   s.width = camera.width;
   s.height = camera.height;
   stats_ready_ = false;
   return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
 }
 
-void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first) {
+void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first,
+                                   bool preprocessed) {
   State& s = *state_;
   const DeviceScene& scene = *scene_;
   const uint64_t n = scene.size();
@@ -275,10 +278,12 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
   // marks the whole frame's pre-processing (a frame in passes: the later stage times hold the
   // passes' pre-processing too; total_ms is the frame's).
   auto count = [&](const fm::TileRect& region, bool whole) {
-    CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-    stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
-                       counters + kReadDepthLowComplement, s.big_list(), s.stream);
-    if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
+    if (!(whole && preprocessed)) {  // the whole frame's may be a batch's (preprocess_together)
+      CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
+      stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
+                         counters + kReadDepthLowComplement, s.big_list(), s.stream);
+      if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
+    }
     return s.count_render_list(n, s.live_walk(n), cam, depth_first);
   };
   const State::ListCounts frame = count(fm::kAllTiles, true);

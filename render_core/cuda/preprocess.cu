@@ -3,6 +3,8 @@
 // decides culling and tile counts rounds as the CPU reference does, and so the tile test gives the
 // same answer here as in key emission.
 #include <cub/block/block_reduce.cuh>
+#include <stdexcept>
+#include <string>
 
 #include "base/cuda_check.h"
 #include "splat.cuh"
@@ -65,68 +67,105 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
                      c, count, chunk_total, live);
 }
 
-// One thread per Gaussian of chunk c (a block's thread x takes Gaussian c * kChunkSize + x): reads
-// its Gaussian once (SH only for visible Gaussians) and writes the projected features of visible
-// ones and tiles_touched of all, and the chunk's total. Every thread of the block calls it.
-__device__ __forceinline__ void preprocess_chunk(uint64_t c, const SceneView& scene, const CameraParams& cam,
-                                                 bool exact, const fm::TileRect& region, const Projected& out,
-                                                 unsigned long long* visible, unsigned long long* depth_range,
-                                                 const BigList& big) {
-  const uint64_t i = c * fm::kChunkSize + threadIdx.x;
+// A thread's Gaussian as every view of a batch reads it: its attributes once, and its 3D
+// covariance, worked out at the first view that needs it (a view culls most Gaussians before).
+struct LoadedGaussian {
+  glm::vec3 mean;
+  float opacity_logit;
+  bool have_cov = false;
+  fm::Cov3 cov3;
+  __device__ LoadedGaussian(const SceneView& scene, uint64_t i)
+      : mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]),
+        opacity_logit(scene.opacity_logits[i]) {}
+  __device__ const fm::Cov3& covariance(const SceneView& scene, uint64_t i) {
+    if (!have_cov) {
+      cov3 = fm::covariance_3d(
+          {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
+          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});
+      have_cov = true;
+    }
+    return cov3;
+  }
+};
+
+// What one Gaussian gave one view: its tile count (0: not listed), whether it is big or huge
+// (counted later by count_big_kernel), and its view depth where listed.
+struct GaussianInView {
   uint32_t touched = 0;
   bool is_big = false, is_huge = false;
   float depth = 0.0f;
-  if (i < scene.n) {
-    do {
-      const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
-      const glm::vec3 p_cam = cam.R * mean + cam.t;
-      if (!(p_cam.z > cam.near_plane) || p_cam.z > cam.far_plane) break;  // frustum (near/far)
+};
 
-      const float opacity = fm::sigmoid(scene.opacity_logits[i]);
-      const float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
-      if (exact && !(q_max > 0.0f)) break;                  // never reaches alpha 1/255 anywhere
-      const fm::Cov3 cov3 = fm::covariance_3d(
-          {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
-          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});
-      const glm::vec3 cov2 = fm::covariance_2d(cov3, cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
-      glm::vec3 conic;
-      if (!fm::conic_from_cov2d(cov2, &conic)) break;
+// Gaussian i (loaded as g) in one view: frustum culling, EWA 2D covariance, conic, tile bounds and
+// count, SH colour; writes the projected features of a visible one and returns its counts.
+__device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, LoadedGaussian& g, const SceneView& scene,
+                                                              const CameraParams& cam, bool exact,
+                                                              const fm::TileRect& region, const Projected& out) {
+  GaussianInView r;
+  const glm::vec3 p_cam = cam.R * g.mean + cam.t;
+  if (!(p_cam.z > cam.near_plane) || p_cam.z > cam.far_plane) return r;  // frustum (near/far)
 
-      const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f, cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
-      fm::TileRect rect;
-      if (exact) {
-        rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height), region);
-        const int area = fm::tile_count(rect);
-        is_big = area > tune::kBigRectTiles;    // counted by count_big_kernel, a warp each
-        is_huge = area > tune::kHugeRectTiles;  // or a block per part
-        const uint32_t mask =
-            area == 0 || is_big ? 0u : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height);
-        touched = static_cast<uint32_t>(__popc(mask));
-        if (touched > 0) out.tile_mask[i] = mask;
-      } else {
-        const float radius = fm::three_sigma_radius(cov2);
-        rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y), region);
-        touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
-        is_big = touched > static_cast<uint32_t>(tune::kBigRectTiles);  // emitted a warp each
-        is_huge = touched > static_cast<uint32_t>(tune::kHugeRectTiles);
-      }
-      if (touched == 0 && !is_big) break;
+  const float opacity = fm::sigmoid(g.opacity_logit);
+  const float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
+  if (exact && !(q_max > 0.0f)) return r;               // never reaches alpha 1/255 anywhere
+  const glm::vec3 cov2 = fm::covariance_2d(g.covariance(scene, i), cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
+  glm::vec3 conic;
+  if (!fm::conic_from_cov2d(cov2, &conic)) return r;
 
-      const glm::vec3 dir = glm::normalize(mean - cam.position);
-      const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), dir);
-      out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
-      out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
-      out.depth[i] = p_cam.z;
-      depth = p_cam.z;
-      out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
-                                 static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
-    } while (false);
-    out.tiles_touched[i] = touched;
+  const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f, cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
+  fm::TileRect rect;
+  if (exact) {
+    rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height), region);
+    const int area = fm::tile_count(rect);
+    r.is_big = area > tune::kBigRectTiles;    // counted by count_big_kernel, a warp each
+    r.is_huge = area > tune::kHugeRectTiles;  // or a block per part
+    const uint32_t mask =
+        area == 0 || r.is_big ? 0u : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height);
+    r.touched = static_cast<uint32_t>(__popc(mask));
+    if (r.touched > 0) out.tile_mask[i] = mask;
+  } else {
+    const float radius = fm::three_sigma_radius(cov2);
+    rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y), region);
+    r.touched = radius > 0.0f ? static_cast<uint32_t>(fm::tile_count(rect)) : 0u;
+    r.is_big = r.touched > static_cast<uint32_t>(tune::kBigRectTiles);  // emitted a warp each
+    r.is_huge = r.touched > static_cast<uint32_t>(tune::kHugeRectTiles);
   }
-  list_big_and_count_visible(is_big, is_huge, touched, i, c, big, visible, out.chunk_total);
+  if (r.touched == 0 && !r.is_big) return r;
+
+  const glm::vec3 dir = glm::normalize(g.mean - cam.position);
+  const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), dir);
+  out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
+  out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
+  out.depth[i] = p_cam.z;
+  r.depth = p_cam.z;
+  out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
+                             static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
+  return r;
+}
+
+// One thread per Gaussian of chunk c (a block's thread x takes Gaussian c * kChunkSize + x), one
+// view: writes the projected features of visible Gaussians (preprocess_gaussian) and
+// tiles_touched of all, and the chunk's total. Every thread of the block calls it.
+__device__ __forceinline__ void preprocess_chunk_view(uint64_t c, LoadedGaussian* g, const SceneView& scene,
+                                                      const CameraParams& cam, bool exact, const fm::TileRect& region,
+                                                      const Projected& out, unsigned long long* visible,
+                                                      unsigned long long* depth_range, const BigList& big) {
+  const uint64_t i = c * fm::kChunkSize + threadIdx.x;
+  GaussianInView r;
+  if (i < scene.n) {
+    r = preprocess_gaussian(i, *g, scene, cam, exact, region, out);
+    out.tiles_touched[i] = r.touched;
+  }
+  list_big_and_count_visible(r.is_big, r.is_huge, r.touched, i, c, big, visible, out.chunk_total);
   // Big Gaussians' depths count where count_big_kernel finds them entries: the range is over
   // the Gaussians with entries, as the CPU reference's sort works it out from its list.
-  record_depth_range(touched > 0, depth, depth_range);
+  record_depth_range(r.touched > 0, r.depth, depth_range);
+}
+
+// The thread's Gaussian of chunk c (nothing past the scene's end: it is never read).
+__device__ __forceinline__ LoadedGaussian load_gaussian(const SceneView& scene, uint64_t c) {
+  const uint64_t i = c * fm::kChunkSize + threadIdx.x;
+  return LoadedGaussian(scene, i < scene.n ? i : 0);
 }
 
 // A block per chunk that cull_chunks_kernel kept (grid-stride over the list: ChunkWalk).
@@ -137,8 +176,46 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
                       BigList big) {
   const uint64_t chunks = live.size();
   for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
-    preprocess_chunk(live.chunk(k), scene, cam, exact, region, out, visible, depth_range, big);
+    const uint64_t c = live.chunk(k);
+    LoadedGaussian g = load_gaussian(scene, c);
+    preprocess_chunk_view(c, &g, scene, cam, exact, region, out, visible, depth_range, big);
     __syncthreads();  // the shared words of the block reductions are rewritten next round
+  }
+}
+
+// Batch chunk culling, a thread per chunk: each view's culling as cull_chunks_kernel does it
+// (into that view's chunk_total and live list), and the chunks any view kept into `either`, with
+// the views that kept it as bits of view_mask[c].
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+    cull_chunks_batch_kernel(SceneView scene, uint64_t count, const BatchView* __restrict__ views, int view_count,
+                             bool exact, LiveChunks either, uint32_t* __restrict__ view_mask) {  // [count]
+  const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  uint32_t mask = 0;
+  for (int v = 0; v < view_count; ++v) {
+    const CameraParams& cam = views[v].cam;
+    const bool keep = c < count && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)) && lod_drawn(scene, c, cam);
+    keep_or_drop_chunk(keep, c, count, views[v].out.chunk_total, views[v].live);
+    mask |= keep ? 1u << v : 0u;
+  }
+  if (c < count) view_mask[c] = mask;
+  append_chunk(mask != 0u, c, either);
+}
+
+// A block per chunk that any view of the batch kept: each Gaussian is read once, then
+// pre-processed for every view that kept its chunk (preprocess_chunk_view, as preprocess_kernel
+// does it for one view), the views in order.
+__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
+    preprocess_batch_kernel(SceneView scene, bool exact, fm::TileRect region, const BatchView* __restrict__ views,
+                            ChunkWalk either, const uint32_t* __restrict__ view_mask) {
+  const uint64_t chunks = either.size();
+  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
+    const uint64_t c = either.chunk(k);
+    LoadedGaussian g = load_gaussian(scene, c);
+    for (uint32_t mask = view_mask[c]; mask != 0u; mask &= mask - 1u) {  // block-uniform
+      const BatchView& v = views[__ffs(static_cast<int>(mask)) - 1];
+      preprocess_chunk_view(c, &g, scene, v.cam, exact, region, v.out, v.visible, v.depth_range, v.big);
+      __syncthreads();  // the shared words of the block reductions are rewritten next view
+    }
   }
 }
 
@@ -228,6 +305,30 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};
   count_big_tiles(big, tests, out, visible, depth_range, stream);
+}
+
+void preprocess_batch(const SceneView& scene, bool exact, const BatchView* views_host, const BatchView* views,
+                      int view_count, const BatchChunks& either, cudaStream_t stream) {
+  if (view_count < 1 || view_count > kMaxBatchViews)
+    throw std::invalid_argument("preprocess_batch: " + std::to_string(view_count) + " views (1 to " +
+                                std::to_string(kMaxBatchViews) + ")");
+  if (scene.n == 0) return;
+  const uint64_t chunks = fm::chunk_count(scene.n);
+  const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
+  if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess_batch: too many Gaussians for one grid");
+  cull_chunks_batch_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
+      scene, chunks, views, view_count, exact, either.chunks, either.view_mask);
+  CATGS_CUDA_LAUNCHED("cull_chunks_batch_kernel");
+  const ChunkWalk walk = either.chunks.walk(chunks);
+  preprocess_batch_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
+      scene, exact, fm::kAllTiles, views, walk, either.view_mask);
+  CATGS_CUDA_LAUNCHED("preprocess_batch_kernel");
+  if (!exact) return;
+  for (int v = 0; v < view_count; ++v) {
+    const BatchView& bv = views_host[v];
+    const TileTests tests{TileTestKind::ellipse, bv.out.splat, {}, bv.cam.width, bv.cam.height};
+    count_big_tiles(bv.big, tests, bv.out, bv.visible, bv.depth_range, stream);
+  }
 }
 
 void count_big_tiles(const BigList& big, const TileTests& tests, const Projected& out, unsigned long long* visible,

@@ -84,13 +84,9 @@ __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_
   }
 }
 
-// Chunk culling's end (a thread per chunk c < count, every lane of the warp calls it): a dropped
-// chunk gets chunk_total = 0 and nothing else; a kept one is appended to `live` (one atomic per
-// warp that keeps any; the order is free: records.h ChunkWalk).
-__device__ __forceinline__ void keep_or_drop_chunk(bool keep, uint64_t c, uint64_t count, uint32_t* chunk_total,
-                                                   const LiveChunks& live) {
-  if (c < count && !keep) chunk_total[c] = 0u;
-  keep = keep && c < count;
+// Appends chunk c to `live` where `keep` (every lane of the warp calls it; one atomic per warp that
+// keeps any; the order is free: records.h ChunkWalk).
+__device__ __forceinline__ void append_chunk(bool keep, uint64_t c, const LiveChunks& live) {
   const unsigned lanes = __ballot_sync(0xffffffffu, keep);
   if (lanes == 0u) return;  // warp-uniform
   const int lane = static_cast<int>(threadIdx.x & 31u), leader = __ffs(lanes) - 1;
@@ -98,6 +94,14 @@ __device__ __forceinline__ void keep_or_drop_chunk(bool keep, uint64_t c, uint64
   if (lane == leader) base = atomicAdd(live.count, static_cast<unsigned>(__popc(lanes)));
   base = __shfl_sync(0xffffffffu, base, leader);
   if (keep) live.index[base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)))] = static_cast<uint32_t>(c);
+}
+
+// Chunk culling's end (a thread per chunk c < count, every lane of the warp calls it): a dropped
+// chunk gets chunk_total = 0 and nothing else; a kept one is appended to `live`.
+__device__ __forceinline__ void keep_or_drop_chunk(bool keep, uint64_t c, uint64_t count, uint32_t* chunk_total,
+                                                   const LiveChunks& live) {
+  if (c < count && !keep) chunk_total[c] = 0u;
+  append_chunk(keep && c < count, c, live);
 }
 
 // The parts a huge Gaussian (the h-th of the huge list, `area` rectangle tiles) is cut into
