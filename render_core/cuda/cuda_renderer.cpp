@@ -1,6 +1,7 @@
 // CudaRenderer: runs the five stages on its own stream over reusable device buffers.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <mutex>
 #include <string>
@@ -414,6 +415,21 @@ void CudaRenderer::render_at(const Camera& camera, double time_s, Image& out) {
   download(render_device_at(camera, time_s), out);
 }
 
+namespace {
+
+// `rows` rows of `width` bytes from `from` (pitch `from_pitch`) to `to` (pitch `to_pitch`).
+void copy_plane(const uint8_t* from, int from_pitch, uint8_t* to, int to_pitch, int width, int rows) {
+  if (from_pitch == width && to_pitch == width) {
+    std::memcpy(to, from, static_cast<std::size_t>(width) * rows);
+    return;
+  }
+  for (int r = 0; r < rows; ++r)
+    std::memcpy(to + static_cast<std::size_t>(r) * to_pitch, from + static_cast<std::size_t>(r) * from_pitch,
+                static_cast<std::size_t>(width));
+}
+
+}  // namespace
+
 double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
   check_yuv420_target("render_yuv420_at", out, camera.width, camera.height);
   const DeviceGuard on(scene_->device());
@@ -439,15 +455,21 @@ double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const
   stages::rgba8_to_yuv420(f.rgba8, w, h, planes, s.stream);
   CATGS_CUDA(cudaEventRecord(s.converted, s.stream));
   if (out.memory == MemoryKind::host) {
-    CATGS_CUDA(
-        cudaMemcpy2DAsync(out.y, out.y_stride, planes.y, planes.y_pitch, w, h, cudaMemcpyDeviceToHost, s.stream));
-    CATGS_CUDA(cudaMemcpy2DAsync(out.u, out.u_stride, planes.u, planes.u_pitch, w / 2, h / 2, cudaMemcpyDeviceToHost,
-                                 s.stream));
-    CATGS_CUDA(cudaMemcpy2DAsync(out.v, out.v_stride, planes.v, planes.v_pitch, w / 2, h / 2, cudaMemcpyDeviceToHost,
-                                 s.stream));
+    // The packed planes in one copy into page-locked memory (a copy into the target's pageable
+    // memory goes through the driver's staging, which the lanes' copies share), then to the
+    // target's strides on the host.
+    s.yuv_host.ensure(y_bytes + 2 * c_bytes);
+    CATGS_CUDA(cudaMemcpyAsync(s.yuv_host.data(), s.yuv.as<uint8_t>(), y_bytes + 2 * c_bytes, cudaMemcpyDeviceToHost,
+                               s.stream));
   }
   // The encoder reads the planes next, on its own stream or thread: the frame must be complete.
   CATGS_CUDA(cudaStreamSynchronize(s.stream));
+  if (out.memory == MemoryKind::host) {
+    const uint8_t* from = s.yuv_host.data();
+    copy_plane(from, w, out.y, out.y_stride, w, h);
+    copy_plane(from + y_bytes, w / 2, out.u, out.u_stride, w / 2, h / 2);
+    copy_plane(from + y_bytes + c_bytes, w / 2, out.v, out.v_stride, w / 2, h / 2);
+  }
   float ms = 0.0f;
   CATGS_CUDA(cudaEventElapsedTime(&ms, s.convert_start, s.converted));
   return ms;

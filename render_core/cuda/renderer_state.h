@@ -62,6 +62,32 @@ class GrowBuffer {
   std::size_t bytes_ = 0;
 };
 
+// Page-locked host memory that only grows: where a frame's I420 planes land from the device, so
+// the copy is a DMA at the link's rate rather than through the driver's pageable staging.
+class PinnedBuffer {
+ public:
+  PinnedBuffer() = default;
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  ~PinnedBuffer() {
+    if (ptr_) cudaFreeHost(ptr_);
+  }
+  // Room for `bytes` (contents lost when it grows); throws CudaError when the host refuses.
+  void ensure(std::size_t bytes) {
+    if (bytes <= bytes_) return;
+    if (ptr_) CATGS_CUDA(cudaFreeHost(ptr_));
+    ptr_ = nullptr;
+    bytes_ = 0;
+    CATGS_CUDA(cudaMallocHost(&ptr_, bytes));
+    bytes_ = bytes;
+  }
+  std::uint8_t* data() const { return static_cast<std::uint8_t*>(ptr_); }
+
+ private:
+  void* ptr_ = nullptr;
+  std::size_t bytes_ = 0;
+};
+
 // Slots of State::counters (64-bit, device): the running visible count, the frame's 32-byte
 // readback (render-list length, visible count, and the listed Gaussians' depth range as float
 // bits, the low end complemented so that both ends are running maxima from zero: the one copy
@@ -154,6 +180,7 @@ struct CudaRenderer::State {
   // render_yuv420_at (cuda_renderer.cpp): I420 planes for a host target, and the conversion's
   // timing events.
   GrowBuffer yuv;
+  PinnedBuffer yuv_host;  // the planes of a host target, on their way to it
   cudaEvent_t convert_start = nullptr, converted = nullptr;
   // preprocess_together (batch_preprocess.cpp): this renderer's view of a batch was pre-processed
   // for `batched_camera` (its next frame at that camera starts at the counts); the batch's join;

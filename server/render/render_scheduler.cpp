@@ -4,6 +4,12 @@
 
 namespace catgs::server {
 
+namespace {
+thread_local int this_lane = -1;  // the lane a job runs on (-1: not a lane thread)
+}  // namespace
+
+int RenderScheduler::current_lane() { return this_lane; }
+
 RenderScheduler::~RenderScheduler() {
   if (!lanes_.empty()) stop();
 }
@@ -20,7 +26,11 @@ void RenderScheduler::start(int lanes, std::int64_t max_pixels_in_flight) {
     max_pixels_in_flight_ = max_pixels_in_flight;
     lane_count_ = lanes;
   }
-  for (int i = 0; i < lanes; ++i) lanes_.emplace_back([this] { lane_loop(); });
+  for (int i = 0; i < lanes; ++i)
+    lanes_.emplace_back([this, i] {
+      this_lane = i;
+      lane_loop();
+    });
 }
 
 void RenderScheduler::enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task) {

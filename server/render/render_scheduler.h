@@ -73,6 +73,9 @@ class RenderScheduler {
   void start(int lanes, std::int64_t max_pixels_in_flight);
   // Lanes started.
   int lanes() const { return static_cast<int>(lanes_.size()); }
+  // The lane (0 .. lanes() - 1) running the calling thread's job, for the frame's timings
+  // (FrameTimings.render_lane); -1 outside a lane (poll() after stop(), another thread).
+  static int current_lane();
 
   // Thread-safe. Queues `job` (a void() callable, move-only allowed) of `pixels` pixels behind
   // `owner`'s earlier jobs; a lane runs it in `owner`'s turn. A job must not throw (a throw is

@@ -4,9 +4,11 @@
 #include "session/frame_pipeline.h"
 
 #include <algorithm>
+#include <iterator>
 
 #include "camera/camera.h"
 #include "encode/encoder_policy.h"
+#include "render/render_scheduler.h"
 
 namespace catgs::server {
 
@@ -138,6 +140,11 @@ void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rend
   // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
   // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
   r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
+  const FrameStats& stats = renderer_->last_stats();
+  const double stages[6] = {stats.total_ms, stats.preprocess_ms, stats.keys_ms,
+                            stats.sort_ms,  stats.ranges_ms,     stats.rasterize_ms};
+  std::copy(std::begin(stages), std::end(stages), std::begin(r.stage_ms));
+  r.render_lane = RenderScheduler::current_lane();
   r.render_key_frame = renderer_->last_stats().key_frame;
   r.render_rekey = renderer_->last_stats().subframe_rejected;
   r.predicted_gain = renderer_->last_stats().predicted_gain;
@@ -301,6 +308,13 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   r.quality_level = job.shape.quality_level;
   r.refine = job.pose.full_size;
   t->set_total_ms(r.total_ms);
+  t->set_stage_frame_ms(rendered.stage_ms[0]);
+  t->set_stage_preprocess_ms(rendered.stage_ms[1]);
+  t->set_stage_keys_ms(rendered.stage_ms[2]);
+  t->set_stage_sort_ms(rendered.stage_ms[3]);
+  t->set_stage_ranges_ms(rendered.stage_ms[4]);
+  t->set_stage_rasterize_ms(rendered.stage_ms[5]);
+  t->set_render_lane(static_cast<std::uint32_t>(std::max(0, rendered.render_lane)));
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();

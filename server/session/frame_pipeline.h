@@ -80,6 +80,10 @@ class FramePipeline {
     float lod_error_px = 0;    // the LOD bound the frame drew at (0: full detail or no LOD)
     std::uint64_t splats = 0;  // Gaussians that passed culling
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
+    // The renderer's own stage times (FrameStats: total, preprocess, keys, sort, ranges,
+    // rasterize) and the render lane that drew it (-1: none), for FrameTimings.
+    double stage_ms[6] = {};
+    int render_lane = -1;
     std::string error;         // non-empty: the render failed
     bool over_budget = false;  // it failed with RenderBudgetError (renderer.h): the view, not the server
   };

@@ -40,6 +40,11 @@ void StageSums::add(const StageSums& o) {
   lod_error_px += o.lod_error_px;
   lod_error_px_max = std::max(lod_error_px_max, o.lod_error_px_max);
   splats += o.splats;
+  for (int k = 0; k < 6; ++k) stage[k] += o.stage[k];
+  for (const auto& [lane, l] : o.lanes) {
+    lanes[lane].frames += l.frames;
+    lanes[lane].frame_ms += l.frame_ms;
+  }
 }
 
 LatencySummary summarize_latency(const std::vector<double>& v) {
@@ -106,6 +111,21 @@ nlohmann::json latency_json(const LatencySummary& l) {
 // A mean that was never measured is null, not 0.0 dB.
 nlohmann::json measured(double v, std::uint64_t n) { return n ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
+// The renderer's own stage times, means over frames (FrameTimings.stage_*_ms).
+nlohmann::json render_stages_json(const StageSums& s) {
+  nlohmann::json j = nlohmann::json::object();
+  for (int k = 0; k < 6; ++k) j[StageSums::kStageNames[k]] = mean(s.stage[k], s.frames);
+  return j;
+}
+
+// Per render lane: frames drawn and their mean frame time (the renderer's).
+nlohmann::json render_lanes_json(const StageSums& s) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& [lane, l] : s.lanes)
+    j.push_back({{"lane", lane}, {"frames", l.frames}, {"frame_ms_mean", mean(l.frame_ms, l.frames)}});
+  return j;
+}
+
 nlohmann::json stages_json(const StageSums& s) {
   return {
       {"queue_ms", mean(s.queue, s.frames)},
@@ -126,6 +146,8 @@ nlohmann::json stages_json(const StageSums& s) {
       {"lod_error_px_mean", mean(s.lod_error_px, s.frames)},
       {"lod_error_px_max", s.lod_error_px_max},
       {"splats_mean", mean(s.splats, s.frames)},
+      {"render_stages_ms", render_stages_json(s)},
+      {"render_lanes", render_lanes_json(s)},
       {"frames", s.frames}};
 }
 

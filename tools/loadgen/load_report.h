@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,15 @@ struct StageSums {
   std::uint64_t predicted_groups = 0, measured_groups = 0;
   // Level of detail (FrameTimings.lod_error_px, .splats): sums over frames, and the largest bound.
   double lod_error_px = 0, lod_error_px_max = 0, splats = 0;
+  // The renderer's own stage times (FrameTimings.stage_*_ms: frame, preprocess, keys, sort,
+  // ranges, rasterize), summed over frames, and per render lane its frames and frame times.
+  static constexpr const char* kStageNames[6] = {"frame", "preprocess", "keys", "sort", "ranges", "rasterize"};
+  double stage[6] = {};
+  struct Lane {
+    std::uint64_t frames = 0;
+    double frame_ms = 0;
+  };
+  std::map<int, Lane> lanes;
   void add(const StageSums& o);
 };
 

@@ -269,6 +269,12 @@ class PoseLoop {
     r_.server.encode += t.encode_ms();
     r_.server.total += t.total_ms();
     r_.server.frames++;
+    const double stages[6] = {t.stage_frame_ms(), t.stage_preprocess_ms(), t.stage_keys_ms(),
+                              t.stage_sort_ms(),  t.stage_ranges_ms(),     t.stage_rasterize_ms()};
+    for (int k = 0; k < 6; ++k) r_.server.stage[k] += stages[k];
+    StageSums::Lane& lane = r_.server.lanes[static_cast<int>(t.render_lane())];
+    lane.frames++;
+    lane.frame_ms += t.stage_frame_ms();
     if (t.previous_send_ms() > 0) {
       r_.server.send += t.previous_send_ms();
       r_.server.sends++;

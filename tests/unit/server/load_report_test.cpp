@@ -68,6 +68,21 @@ TEST(LoadReport, TotalsPoolSessions) {
 
   const std::string table = format_table(run);
   EXPECT_NE(table.find("total"), std::string::npos) << table;
+
+  // The renderer's stage times and lanes pool over sessions: frames 100 + 30 on lanes 0 and 1.
+  std::vector<SessionResult> staged = run;
+  staged[0].server.stage[2] = 100 * 0.5;  // keys 0.5 ms a frame
+  staged[1].server.stage[2] = 30 * 1.15;  // 1.15 ms
+  staged[0].server.lanes[0] = {60, 60 * 1.0};
+  staged[0].server.lanes[1] = {40, 40 * 2.0};
+  staged[1].server.lanes[1] = {30, 30 * 3.0};
+  const nlohmann::json js = run_json(staged)["total"]["server"];
+  EXPECT_DOUBLE_EQ(js["render_stages_ms"]["keys"].get<double>(), (50.0 + 34.5) / 130.0);
+  EXPECT_DOUBLE_EQ(js["render_stages_ms"]["sort"].get<double>(), 0.0);
+  ASSERT_EQ(js["render_lanes"].size(), 2u);
+  EXPECT_EQ(js["render_lanes"][1]["lane"].get<int>(), 1);
+  EXPECT_EQ(js["render_lanes"][1]["frames"].get<int>(), 70);
+  EXPECT_DOUBLE_EQ(js["render_lanes"][1]["frame_ms_mean"].get<double>(), (80.0 + 90.0) / 70.0);
   EXPECT_NE(table.find("64x48"), std::string::npos) << table;
   EXPECT_NE(table.find("80.0"), std::string::npos) << table;  // total FPS
 }

@@ -9,6 +9,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <thread>
 #include <vector>
 
@@ -37,6 +38,27 @@ TEST(RenderScheduler, SessionsTakeTurns) {
   ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
   s.stop();
   EXPECT_EQ(order, (std::vector<int>{1, 2, 3, 1, 2, 1, 1}));
+}
+
+// A job knows its lane (FrameTimings.render_lane): each of 3 lanes' index, never another, and
+// -1 on a thread that is not a lane.
+TEST(RenderScheduler, JobsKnowTheirLane) {
+  RenderScheduler s;
+  std::mutex mutex;
+  std::vector<int> seen;
+  for (int k = 0; k < 30; ++k)
+    s.post(static_cast<RenderScheduler::Owner>(k), 1, [&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));  // the lanes overlap
+      std::lock_guard<std::mutex> lock(mutex);
+      seen.push_back(RenderScheduler::current_lane());
+    });
+  s.start(3, 1000);
+  ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+  s.stop();
+  ASSERT_EQ(seen.size(), 30u);
+  for (int lane : seen) EXPECT_TRUE(lane >= 0 && lane < 3) << lane;
+  EXPECT_GT(std::set<int>(seen.begin(), seen.end()).size(), 1u) << "more than one lane ran";
+  EXPECT_EQ(RenderScheduler::current_lane(), -1);
 }
 
 // Video export frames (post_background) run only when no session's job is queued: posted first,
