@@ -72,6 +72,11 @@ bool FramePipeline::can_start_render() const {
   return !pipelined_ || !free_planes_.empty();  // both buffers busy (one rendering is excluded above)
 }
 
+Camera FramePipeline::camera_of(const Job& job) {
+  return Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation, job.pose.pose.vertical_fov_deg,
+                           job.shape.width, job.shape.height);
+}
+
 FramePipeline::StartedRender FramePipeline::start_render(const JobShape& shape) {
   StartedRender s;
   if (pipelined_) {
@@ -81,6 +86,13 @@ FramePipeline::StartedRender FramePipeline::start_render(const JobShape& shape) 
   // Pipelined, the number is given at the encode (start_encode): a frame skipped before its
   // encode must leave no gap, as Frame sequences rise by one from 0.
   s.job = Job{*pending_, shape, force_idr_, pipelined_ ? 0 : next_frame_sequence_++};
+  // No render of this session runs now (rendering_ is false): the renderer's options may change.
+  // A failure here is left to the lane, where the job reports it.
+  try {
+    s.job.lod_error_px = set_lod_bound(camera_of(s.job));
+  } catch (const std::exception&) {
+    s.job.lod_error_px = -1.0f;
+  }
   last_started_ = pending_;
   last_started_->full_size = false;
   pending_.reset();
@@ -133,9 +145,8 @@ float FramePipeline::set_lod_bound(const Camera& camera) {
 
 void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
   const auto t_start = Clock::now();
-  const Camera camera = Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation,
-                                          job.pose.pose.vertical_fov_deg, job.shape.width, job.shape.height);
-  r.lod_error_px = set_lod_bound(camera);
+  const Camera camera = camera_of(job);
+  r.lod_error_px = job.lod_error_px >= 0.0f ? job.lod_error_px : set_lod_bound(camera);
   GpuRenderCount in_flight(metrics_, gpu_);
   // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
   // target gets only the I420 planes). The client's clock drives the catgs motion predictor.

@@ -68,6 +68,10 @@ class FramePipeline {
     JobShape shape;
     bool force_idr = false;
     std::uint32_t frame_sequence = 0;
+    // The LOD bound chosen for the pose when the job was made (start_render, on the strand: the
+    // cut's count walks the LOD tree on the host, work a render lane need not wait for); < 0: the
+    // lane chooses it.
+    float lod_error_px = -1.0f;
   };
   // A rendered frame waiting for (or in) the encode stage.
   struct Rendered {
@@ -173,6 +177,8 @@ class FramePipeline {
   void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
   // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed.
   float set_lod_bound(const Camera& camera);
+  // The camera of a job's pose at its shape's size.
+  static Camera camera_of(const Job& job);
   // The step a stream of `shape` takes at `live` sessions: the x264 ladder's (preset_step; 0 for a
   // fixed --x264-preset), or kPresetSteps (above the ladder) for AV1.
   int stream_step(const JobShape& shape, int live) const;
