@@ -175,7 +175,9 @@ class FramePipeline {
   // Renders job's pose into `target` and fills r's render fields (timings, key frame, window).
   // Throws what Renderer::render_yuv420_at throws.
   void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
-  // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed.
+  // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed; called when
+  // the job is made (start_render, on the strand, no render of the session running), or by the
+  // lane where that failed.
   float set_lod_bound(const Camera& camera);
   // The camera of a job's pose at its shape's size.
   static Camera camera_of(const Job& job);
