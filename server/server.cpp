@@ -173,6 +173,9 @@ void Server::resolve_renderer() {
   apply_speculation_settings(render_options_.speculation, options_.speculation);
   // Resolved once, before any scene loads, so every session uses the same core and the log says
   // why: over a one-Gaussian model (the choice does not depend on the scene).
+  // Before any CUDA context exists: lanes waiting on a spinning core would take it from the
+  // encoders (RESULTS.md, "Many views of one scene").
+  if (options_.renderer != "cpu") set_cuda_blocking_waits(options_.gpu_wait == "block");
   auto probe = std::make_shared<GaussianModel>();
   probe->name = "probe";
   probe->resize(1);

@@ -95,6 +95,9 @@ std::string server_usage() {
          "  --gpus LIST           CUDA renderer: the GPUs sessions spread over, all or device\n"
          "                        numbers such as 0,1 (default all): one scene copy and 4 render\n"
          "                        lanes per GPU, each session on the GPU with the fewest sessions\n"
+         "  --gpu-wait W          CUDA renderer: how a render lane waits for its frame, block (the\n"
+         "                        default: the core goes to other work, e.g. x264) or spin (the\n"
+         "                        driver's default with fewer GPUs than cores)\n"
          "  --encoder K           nvenc | x264 | auto (default auto: NVENC if usable, else x264)\n"
          "  --pipeline P          vanilla | exact | catgs (default exact)\n"
          "  --speculation LIST    catgs settings, e.g. window=2,backoff=0 (see below)\n"
@@ -276,7 +279,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.renderer = v;
     else if (a == "--gpus")
       out.gpus = v;
-    else if (a == "--encoder")
+    else if (a == "--gpu-wait") {
+      if (v != "block" && v != "spin") throw std::invalid_argument("--gpu-wait: block or spin, got '" + v + "'");
+      out.gpu_wait = v;
+    } else if (a == "--encoder")
       out.encoder = v;
     else if (a == "--pipeline")
       out.pipeline = v;

@@ -41,6 +41,7 @@ struct ServerOptions {
   std::string bind = "0.0.0.0";    // interface address to listen on
   std::string renderer = "auto";   // "cpu" | "cuda" | "auto"
   std::string gpus = "all";        // CUDA devices sessions spread over: "all" or "0,1" (gpu_assignment.h)
+  std::string gpu_wait = "block";  // how render lanes wait for the GPU: "block" | "spin" (driver default)
   std::string encoder = "auto";    // "nvenc" | "x264" | "auto" (NVENC if it opens, else x264)
   std::string pipeline = "exact";  // "vanilla" | "exact" | "catgs"
   std::string speculation;         // catgs settings, "name=value,..." (speculation/settings.h)

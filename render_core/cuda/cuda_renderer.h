@@ -63,6 +63,13 @@ std::size_t device_memory_used();
 // driver or device. Never throws.
 int device_count();
 
+// How a host thread waits for every device this process sees (a stream or event sync): blocked
+// on a synchronisation primitive (cudaDeviceScheduleBlockingSync) with `blocking`, else the
+// driver's default (it spins on a core while the process has fewer contexts than cores). Set
+// before a device's first use where possible (later it overwrites that device's flags). Returns
+// false when a device refused. Never throws.
+bool set_blocking_waits(bool blocking);
+
 // Makes `device` the calling thread's current CUDA device for the guard's lifetime, and restores
 // the previous one after. Every CudaRenderer and DeviceScene call that touches the GPU holds one,
 // so a thread may drive renderers on several devices (the server's render lanes do). Throws

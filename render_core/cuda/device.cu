@@ -68,6 +68,24 @@ int device_count() {
   return count;
 }
 
+bool set_blocking_waits(bool blocking) {
+  int previous = 0;
+  if (cudaGetDevice(&previous) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return false;
+  }
+  bool ok = true;
+  for (int d = 0; d < device_count(); ++d) {
+    const bool set =
+        cudaSetDevice(d) == cudaSuccess &&
+        cudaSetDeviceFlags(blocking ? cudaDeviceScheduleBlockingSync : cudaDeviceScheduleAuto) == cudaSuccess;
+    if (!set) (void)cudaGetLastError();
+    ok = ok && set;
+  }
+  if (cudaSetDevice(previous) != cudaSuccess) (void)cudaGetLastError();
+  return ok;
+}
+
 DeviceGuard::DeviceGuard(int device) {
   CATGS_CUDA(cudaGetDevice(&previous_));
   if (device != previous_) {

@@ -49,6 +49,15 @@ int cuda_device_count() {
 #endif
 }
 
+bool set_cuda_blocking_waits(bool blocking) {
+#if CATGS_HAVE_CUDA
+  return cuda::set_blocking_waits(blocking);
+#else
+  (void)blocking;
+  return false;
+#endif
+}
+
 std::size_t cuda_device_memory_used(int gpu) {
 #if CATGS_HAVE_CUDA
   try {
