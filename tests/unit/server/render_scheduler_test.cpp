@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "render/render_scheduler.h"
+#include "server_options.h"
 
 namespace {
 
@@ -59,6 +60,21 @@ TEST(RenderScheduler, JobsKnowTheirLane) {
   for (int lane : seen) EXPECT_TRUE(lane >= 0 && lane < 3) << lane;
   EXPECT_GT(std::set<int>(seen.begin(), seen.end()).size(), 1u) << "more than one lane ran";
   EXPECT_EQ(RenderScheduler::current_lane(), -1);
+}
+
+// --gpu-wait: how a lane waits for its GPU; block by default, spin on request, nothing else.
+TEST(RenderScheduler, GpuWaitOption) {
+  const char* none[] = {"catgs-server"};
+  catgs::server::ServerOptions o0;
+  ASSERT_TRUE(catgs::server::parse_server_options(1, const_cast<char**>(none), o0));
+  EXPECT_EQ(o0.gpu_wait, "block");
+  const char* spin[] = {"catgs-server", "--gpu-wait", "spin"};
+  catgs::server::ServerOptions o1;
+  ASSERT_TRUE(catgs::server::parse_server_options(3, const_cast<char**>(spin), o1));
+  EXPECT_EQ(o1.gpu_wait, "spin");
+  const char* bad[] = {"catgs-server", "--gpu-wait", "yield"};
+  catgs::server::ServerOptions o2;
+  EXPECT_THROW((void)catgs::server::parse_server_options(3, const_cast<char**>(bad), o2), std::invalid_argument);
 }
 
 // Video export frames (post_background) run only when no session's job is queued: posted first,
