@@ -175,7 +175,7 @@ void Server::resolve_renderer() {
   // why: over a one-Gaussian model (the choice does not depend on the scene).
   // Before any CUDA context exists: lanes waiting on a spinning core would take it from the
   // encoders (RESULTS.md, "Many views of one scene").
-  if (options_.renderer != "cpu") set_cuda_blocking_waits(options_.gpu_wait == "block");
+  if (options_.renderer != "cpu") set_cuda_host_wait(options_.gpu_wait);
   auto probe = std::make_shared<GaussianModel>();
   probe->name = "probe";
   probe->resize(1);

@@ -63,12 +63,15 @@ std::size_t device_memory_used();
 // driver or device. Never throws.
 int device_count();
 
-// How a host thread waits for every device this process sees (a stream or event sync): blocked
-// on a synchronisation primitive (cudaDeviceScheduleBlockingSync) with `blocking`, else the
-// driver's default (it spins on a core while the process has fewer contexts than cores). Set
-// before a device's first use where possible (later it overwrites that device's flags). Returns
-// false when a device refused. Never throws.
-bool set_blocking_waits(bool blocking);
+// How a host thread waits for every device this process sees (a stream or event sync).
+enum class HostWait {
+  spin,   // the driver's default (cudaDeviceScheduleAuto: it spins while the process has fewer
+          // contexts than cores)
+  block,  // sleeps on a synchronisation primitive (cudaDeviceScheduleBlockingSync)
+};
+// Sets it on every device. Set before a device's first use where possible (later it overwrites
+// that device's flags). Returns false when a device refused. Never throws.
+bool set_host_wait(HostWait wait);
 
 // Makes `device` the calling thread's current CUDA device for the guard's lifetime, and restores
 // the previous one after. Every CudaRenderer and DeviceScene call that touches the GPU holds one,

@@ -68,7 +68,8 @@ int device_count() {
   return count;
 }
 
-bool set_blocking_waits(bool blocking) {
+bool set_host_wait(HostWait wait) {
+  const unsigned flags = wait == HostWait::block ? cudaDeviceScheduleBlockingSync : cudaDeviceScheduleAuto;
   int previous = 0;
   if (cudaGetDevice(&previous) != cudaSuccess) {
     (void)cudaGetLastError();
@@ -76,9 +77,7 @@ bool set_blocking_waits(bool blocking) {
   }
   bool ok = true;
   for (int d = 0; d < device_count(); ++d) {
-    const bool set =
-        cudaSetDevice(d) == cudaSuccess &&
-        cudaSetDeviceFlags(blocking ? cudaDeviceScheduleBlockingSync : cudaDeviceScheduleAuto) == cudaSuccess;
+    const bool set = cudaSetDevice(d) == cudaSuccess && cudaSetDeviceFlags(flags) == cudaSuccess;
     if (!set) (void)cudaGetLastError();
     ok = ok && set;
   }

@@ -203,10 +203,11 @@ std::unique_ptr<Renderer> make_renderer(const std::string& kind, std::shared_ptr
 // without a driver or device. Never throws.
 int cuda_device_count();
 
-// CUDA renderers' host threads wait for their GPU blocked (`blocking`: they leave the core to
-// other work, such as a host's encoders) or as the driver chooses (spinning); cuda::
-// set_blocking_waits. Returns false without CUDA or where a device refused. Never throws.
-bool set_cuda_blocking_waits(bool blocking);
+// How CUDA renderers' host threads wait for their GPU: "spin" (the driver's default) or "block"
+// (asleep until the GPU is done, leaving the core to other work such as a host's encoders);
+// cuda::set_host_wait. Returns false without CUDA, for another word, or where a device refused.
+// Never throws.
+bool set_cuda_host_wait(const std::string& wait);
 
 // Device memory in use on CUDA device `gpu` (total - free, every process's), bytes; 0 when built
 // without CUDA or on error. Never throws.

@@ -49,11 +49,13 @@ int cuda_device_count() {
 #endif
 }
 
-bool set_cuda_blocking_waits(bool blocking) {
+bool set_cuda_host_wait(const std::string& wait) {
 #if CATGS_HAVE_CUDA
-  return cuda::set_blocking_waits(blocking);
+  if (wait == "spin") return cuda::set_host_wait(cuda::HostWait::spin);
+  if (wait == "block") return cuda::set_host_wait(cuda::HostWait::block);
+  return false;
 #else
-  (void)blocking;
+  (void)wait;
   return false;
 #endif
 }
