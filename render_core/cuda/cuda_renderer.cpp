@@ -43,6 +43,7 @@ CudaRenderer::~CudaRenderer() {
 void CudaRenderer::set_options(const RenderOptions& options) {
   state_->planner.set_params(options.speculation);  // validates; closes the open group
   options_ = options;
+  state_->batched = false;  // a batch's stage 1 was for the old options (LOD bound, pipeline)
 }
 
 void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
@@ -55,6 +56,7 @@ void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
   scene_ = std::move(scene);
   state_->planner.set_params(options_.speculation);  // the caches index the old scene
+  state_->batched = false;                           // and so did a batch's stage 1
 }
 
 CUstream_st* CudaRenderer::stream() const { return state_->stream; }

@@ -193,11 +193,11 @@ class CudaRenderer final : public Renderer {
   // render_device(cameras[k]) (or render_device_at, render_yuv420_at) then starts at the render
   // list's counts, with the results preprocess() would have given it alone, bit for bit; its
   // preprocess_ms is the batch's (kStart is recorded on its stream before the batch). Another
-  // camera pre-processes again. The batch runs on renderers[0]'s stream after every renderer's
-  // queued work, and every renderer's stream waits for it. Throws std::invalid_argument where the
-  // renderers do not share one DeviceScene and LOD bound, are not all exact or all vanilla, a
-  // renderer appears twice, the counts differ or are out of range, or a camera is bad
-  // (validate_camera).
+  // camera, or set_options / set_scene before the frame, pre-processes again. The batch runs on
+  // renderers[0]'s stream after every renderer's queued work, and every renderer's stream waits
+  // for it. Throws std::invalid_argument where the renderers do not share one DeviceScene and LOD
+  // bound, are not all exact or all vanilla, a renderer appears twice, the counts differ or are
+  // out of range, or a camera is bad (validate_camera).
   static void preprocess_together(const std::vector<CudaRenderer*>& renderers, const std::vector<Camera>& cameras);
   // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).
   const FrameStats& last_stats() const override;

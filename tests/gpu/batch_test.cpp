@@ -121,8 +121,16 @@ TEST_F(Batch, Refusals) {
   Image x, y;
   a.render(cam, x);
   b.render(cam, y);
-  add({"batch", "biker", "refusals", "exact", 0, 0, 0, -1, -1, refused == 6 && same_image(x, y),
-       std::to_string(refused) + " of 6 bad batches refused; a good one after them draws"});
+  // New options drop a batch's stage 1: batched as exact, drawn as vanilla, it must be vanilla's.
+  R::preprocess_together({&a, &b}, {cam, cam});
+  a.set_options(vanilla);
+  Image switched, want;
+  a.render(cam, switched);
+  v.render(cam, want);
+  add({"batch", "biker", "refusals", "exact", 0, 0, 0, -1, -1,
+       refused == 6 && same_image(x, y) && same_image(switched, want),
+       std::to_string(refused) + " of 6 bad batches refused; a good one after them draws; a renderer whose "
+                                 "options changed after its batch draws as a fresh one"});
 }
 
 }  // namespace
