@@ -402,6 +402,10 @@ try {
     check(await page.evaluate(() => window.catgs.playing) === 'tour', 'tour: playing');
     await page.waitForFunction(() => window.catgs.playing === null, null, { timeout: 8000 });
     const s = hellos('/ws').at(-1).session;
+    // The page sends the last pose in the step that ends the tour; it may still be on its way to
+    // the mock server when `playing` reads null here.
+    const sentLast = (await page.evaluate(() => window.catgs.lastPoseSent)).sequence;
+    await waitFor(() => posesOf(s).some((p) => p.sequence >= sentLast), 3000);
     const tourPoses = posesOf(s).filter((p) => p.sequence > firstSeq);
     const last = tourPoses.at(-1);
     check(tourPoses.length > 20 && Math.abs(last.position.x - 2) < 1e-9 && Math.abs(last.position.z + 4) < 1e-9,
