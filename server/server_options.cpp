@@ -133,8 +133,10 @@ std::string server_usage() {
          "  --bitrate auto|off|KBPS  each stream's VBV maximum rate (capped CRF): auto (default)\n"
          "                        --bits-per-pixel x width x height x 60 frames/s, at least\n"
          "                        1500 kbit/s; off: --crf alone; a client's Quality lowers it\n"
-         "  --bits-per-pixel F    auto's bits per pixel per frame (default 0.09: 11.2 Mbit/s\n"
-         "                        at 1080p60, 5.0 at 720p60; RESULTS.md \"Encoder policy\")\n"
+         "  --bits-per-pixel auto|F  auto's bits per pixel per frame (default 0.09: 11.2 Mbit/s\n"
+         "                        at 1080p60, 5.0 at 720p60; RESULTS.md \"Encoder policy\");\n"
+         "                        auto: each scene and size from a probe of its own frames\n"
+         "                        (0.02..0.096; RESULTS.md \"Content-aware rate\")\n"
          "  --crf N               x264 quality floor, 0..51 (default 23): a simple view takes\n"
          "                        only the bits this quality needs\n"
          "  --vbv-ms N            the VBV's size in ms of the bitrate (default 100): how far one\n"
@@ -330,9 +332,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.encoder_policy.crf = parse_int(a, v, 0, 51);
     else if (a == "--bitrate")
       out.encoder_policy.bitrate_kbps = v == "auto" ? -1 : v == "off" ? 0 : parse_int(a, v, 100, 1000000);
-    else if (a == "--bits-per-pixel")
-      out.encoder_policy.bits_per_pixel = parse_double(a, v, 0.001, 10.0);
-    else if (a == "--vbv-ms")
+    else if (a == "--bits-per-pixel") {
+      out.encoder_policy.content_rate = v == "auto";
+      if (v != "auto") out.encoder_policy.bits_per_pixel = parse_double(a, v, 0.001, 10.0);
+    } else if (a == "--vbv-ms")
       out.encoder_policy.vbv_buffer_ms = parse_int(a, v, 1, 10000);
     else if (a == "--intra-refresh")
       out.encoder_policy.intra_refresh_frames = parse_int(a, v, 0, 1000);

@@ -32,7 +32,10 @@ namespace catgs::server {
 struct EncoderPolicy {
   // --bitrate: < 0 (auto) target from bits_per_pixel; 0 (off) crf alone; > 0 that many kbit/s.
   int bitrate_kbps = -1;
-  double bits_per_pixel = 0.09;      // --bits-per-pixel: auto's bits per pixel per frame
+  double bits_per_pixel = 0.09;  // --bits-per-pixel: auto's bits per pixel per frame
+  // --bits-per-pixel auto: each scene and size probes its own (content_rate.h); bits_per_pixel
+  // until its probe ends.
+  bool content_rate = false;
   int min_kbps = 1500;               // auto's floor (small viewports)
   int crf = 23;                      // --crf: the quality floor
   int vbv_buffer_ms = 100;           // --vbv-ms: the VBV's size in ms of the target rate

@@ -40,6 +40,7 @@
 #include <thread>
 #include <vector>
 
+#include "encode/content_rate.h"
 #include "forward_model/chunk_bounds.h"
 #include "renderer/renderer.h"
 #include "scene/gaussian_model.h"
@@ -61,6 +62,9 @@ struct LoadedScene {
   // Renderers held while the scene is loaded so each GPU keeps one copy of it between sessions
   // (filled by Options::prepare; empty on the CPU renderer).
   std::vector<std::unique_ptr<Renderer>> residents;
+  // The stream's rate cap by size, probed by the scene's sessions (--bits-per-pixel auto;
+  // encode/content_rate.h); the one part that changes after publication (it locks).
+  std::shared_ptr<ContentRates> content_rates = std::make_shared<ContentRates>();
 };
 
 // Host bytes of a model's arrays (means, scales, rotations, opacities, SH), as loaded.

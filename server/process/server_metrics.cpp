@@ -74,6 +74,9 @@ std::string ServerMetrics::prometheus_text() const {
       deadline_skips_total.load());
   put("catgs_encoder_rebuilds_total", "counter", "Encoders rebuilt for a new thread share as sessions joined or left.",
       encoder_rebuilds_total.load());
+  put("catgs_content_rate_probes_total", "counter",
+      "Content-aware rate probes ended (--bits-per-pixel auto): a scene's rate cap measured at a size.",
+      content_rate_probes_total.load());
   put("catgs_dropped_frames_total", "counter",
       "Frames lost: rendered or being rendered for a session that ended or failed, or a pose pending "
       "when its session ended (poses replaced by a newer one are catgs_poses_skipped_total).",

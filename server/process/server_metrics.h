@@ -91,6 +91,8 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> deadline_skips_total{0};
   // Encoders rebuilt because the live sessions changed the threads they should get (an IDR each).
   std::atomic<std::uint64_t> encoder_rebuilds_total{0};
+  // Content-aware rate probes ended (--bits-per-pixel auto: a scene and size measured).
+  std::atomic<std::uint64_t> content_rate_probes_total{0};
   // Frames lost: a pose pending, or a frame rendering or encoding, when its session ended or
   // failed (a pose replaced by a newer one is a skip, poses_skipped_total, not a drop).
   std::atomic<std::uint64_t> dropped_frames_total{0};

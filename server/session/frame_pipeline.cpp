@@ -4,6 +4,7 @@
 #include "session/frame_pipeline.h"
 
 #include <algorithm>
+#include <iostream>
 #include <iterator>
 
 #include "camera/camera.h"
@@ -44,9 +45,14 @@ class GpuRenderCount {
 
 }  // namespace
 
+FramePipeline::~FramePipeline() {
+  if (probe_ && content_rates_) content_rates_->release(probe_->width(), probe_->height());
+}
+
 void FramePipeline::open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu,
-                         bool pipelined, bool av1_ok) {
+                         bool pipelined, bool av1_ok, std::shared_ptr<ContentRates> content_rates) {
   av1_ok_ = av1_ok;
+  content_rates_ = std::move(content_rates);
   renderer_ = std::move(renderer);
   model_ = std::move(model);
   if (model_ && !model_->lod.empty()) cut_counter_ = std::make_unique<CutCounter>(*model_);
@@ -200,24 +206,36 @@ int FramePipeline::stream_step(const JobShape& s, int live) const {
   return policy.x264_preset == "auto" ? preset_step(policy, s.width, s.height, kStreamFps, live) : 0;
 }
 
+EncoderPolicy FramePipeline::policy_at(int width, int height) const {
+  EncoderPolicy policy = settings_.encoder_policy;
+  const double probed = policy.content_rate && content_rates_ ? content_rates_->bits_per_pixel(width, height) : 0;
+  if (probed > 0) policy.bits_per_pixel = probed;
+  return policy;
+}
+
+int FramePipeline::policy_bitrate_kbps(int width, int height, int fps, int client_max_kbps) const {
+  return target_bitrate_kbps(policy_at(width, height), width, height, fps, client_max_kbps);
+}
+
 void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
-  const EncoderPolicy& policy = settings_.encoder_policy;
   const JobShape& s = job.shape;
+  const EncoderPolicy policy = policy_at(s.width, s.height);
   const int live = static_cast<int>(std::max<std::int64_t>(1, metrics_.sessions_open.load()));
   const auto now = Clock::now();
   const bool same_stream = encoder_ && encoder_->width() == s.width && encoder_->height() == s.height &&
                            encoder_bitrate_kbps_ == s.max_bitrate_kbps;
-  // The link's cap follows the link frame by frame: x264 takes a new VBV rate without an IDR.
-  // (An AV1 stream cannot; a limiting link moves it to H.264 below, use_av1.)
-  if (same_stream && encoder_link_kbps_ != s.link_kbps && encoder_->codec() == "h264") {
-    const int rate =
-        target_bitrate_kbps(policy, s.width, s.height, kStreamFps, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
-    if (rate > 0 && encoder_->set_max_bitrate_kbps(rate)) encoder_link_kbps_ = s.link_kbps;
-  }
+  // The link's cap follows the link frame by frame, and a probed content rate takes effect when
+  // its probe ends: x264 takes a new VBV rate without an IDR. (An AV1 stream cannot: it is
+  // rebuilt below; a limiting link moves it to H.264, use_av1.)
+  const int rate =
+      target_bitrate_kbps(policy, s.width, s.height, kStreamFps, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
+  if (same_stream && encoder_rate_kbps_ != rate && encoder_->codec() == "h264" && rate > 0 &&
+      encoder_->set_max_bitrate_kbps(rate))
+    encoder_rate_kbps_ = rate;
   // The ladder's step, AV1 above it. A link that comes to limit an AV1 stream lowers the step, so
   // should_rebuild moves it to H.264 at once.
   const int step = stream_step(s, live);
-  if (same_stream && encoder_link_kbps_ == s.link_kbps) {
+  if (same_stream && encoder_rate_kbps_ == rate) {
     // The same stream: rebuilt only for a new share of the cores (x264's threads, preset and the
     // codec are fixed when it opens; NVENC has none to share).
     const auto since = now - encoder_built_;
@@ -235,7 +253,7 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   bool fell_back = false;
   encoder_ = make_encoder(step == kPresetSteps ? "av1" : settings_.encoder, cfg, nullptr, &fell_back);
   encoder_bitrate_kbps_ = s.max_bitrate_kbps;
-  encoder_link_kbps_ = s.link_kbps;
+  encoder_rate_kbps_ = cfg.bitrate_kbps;
   encoder_threads_ = cfg.threads;
   encoder_step_ = step;
   encoder_built_ = now;
@@ -248,12 +266,51 @@ FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
     bool idr = frame.job.force_idr;
     ensure_encoder(frame.job, idr);
     const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
+    probe_content_rate(frame.job, frame.planes->planes());
     return frame_message(frame.job, enc, frame);
   } catch (const std::exception& e) {
     JobResult r;
     r.error = e.what();
     return r;
   }
+}
+
+void FramePipeline::probe_content_rate(const Job& job, const Yuv420Planes& planes) {
+  const EncoderPolicy& policy = settings_.encoder_policy;
+  // --bitrate off or a fixed rate wins over the probe.
+  if (!policy.content_rate || policy.bitrate_kbps >= 0 || !content_rates_) return;
+  const int w = job.shape.width, h = job.shape.height;
+  if (probe_ && (probe_->width() != w || probe_->height() != h)) {  // a new size: its own probe
+    content_rates_->release(probe_->width(), probe_->height());
+    probe_.reset();
+  }
+  if (!probe_) {
+    if (!content_rates_->claim(w, h)) return;  // measured, or another session measures it
+    try {
+      // The stream's own x264 preset (the ladder's step now; an AV1 stream: the step below it).
+      const int live = static_cast<int>(std::max<std::int64_t>(1, metrics_.sessions_open.load()));
+      probe_ = std::make_unique<ContentRateProbe>(policy, w, h, std::max(1, encoder_threads_),
+                                                  encoder_preset(policy, w, h, kStreamFps, live));
+    } catch (const std::exception&) {
+      content_rates_->release(w, h);
+      return;
+    }
+    probe_last_pose_.reset();
+  }
+  // A still camera's frames say nothing about motion, and cost next to nothing: not counted.
+  const CameraPose& pose = job.pose.pose;
+  if (probe_last_pose_ && probe_last_pose_->position == pose.position &&
+      probe_last_pose_->orientation == pose.orientation && probe_last_pose_->vertical_fov_deg == pose.vertical_fov_deg)
+    return;
+  probe_last_pose_ = pose;
+  probe_->add(planes);
+  if (!probe_->done()) return;
+  const double crf_bpp = probe_->crf_bits_per_pixel(), bpp = content_bits_per_pixel(crf_bpp);
+  content_rates_->set(w, h, bpp);
+  metrics_.content_rate_probes_total++;
+  std::cerr << "content rate: scene '" << (model_ ? model_->name : std::string()) << "' at " << w << "x" << h
+            << ": crf " << policy.crf << " takes " << crf_bpp << " bits a pixel, the cap " << bpp << "\n";
+  probe_.reset();
 }
 
 FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool gone) {

@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "encode/content_rate.h"
 #include "encode/encoder.h"
 #include "proto/message_validation.h"
 #include "renderer/renderer.h"
@@ -117,14 +118,22 @@ class FramePipeline {
 
   // `settings` and `metrics` outlive the pipeline (the server holds them).
   FramePipeline(const FrameSettings& settings, ServerMetrics& metrics) : settings_(settings), metrics_(metrics) {}
+  // Gives back a content-rate probe's claim that did not end.
+  ~FramePipeline();
+  FramePipeline(const FramePipeline&) = delete;
+  FramePipeline& operator=(const FramePipeline&) = delete;
 
   // --- strand ---
   // At Welcome: the session's renderer of `model` (which outlives the pipeline), on CUDA device
   // `gpu` (-1: the CPU renderer), whether render and encode are two stages (false: NVENC
   // takes the CUDA frame in one job), and whether the stream may be AV1 (`av1_ok`: the client
-  // decodes it and the server's encoders are x264's CPU ones).
+  // decodes it and the server's encoders are x264's CPU ones), and the scene's probed rate caps
+  // (`content_rates`, the LoadedScene's; null: the policy's bits a pixel alone).
   void open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu, bool pipelined,
-            bool av1_ok);
+            bool av1_ok, std::shared_ptr<ContentRates> content_rates = nullptr);
+  // The policy's VBV maximum rate (kbit/s; target_bitrate_kbps) for a width x height stream at
+  // `fps`, with the scene's probed bits a pixel at that size where --bits-per-pixel auto has one.
+  int policy_bitrate_kbps(int width, int height, int fps, int client_max_kbps) const;
   // Whether a stream of `shape` at `live_sessions` sessions would be AV1 now (the encoder policy's
   // use_av1): Welcome.codec before the first frame.
   bool stream_is_av1(const JobShape& shape, int live_sessions) const;
@@ -187,6 +196,12 @@ class FramePipeline {
   // Builds or reconfigures the encoder for `job`; sets `idr` when it was (re)built.
   void ensure_encoder(const Job& job, bool& idr);
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
+  // The encoder policy at width x height: settings' with the scene's probed bits a pixel there.
+  EncoderPolicy policy_at(int width, int height) const;
+  // --bits-per-pixel auto: feeds an encoded frame's planes to this session's probe of the scene at
+  // the frame's size, when it holds the size's claim (or takes it) and the camera moved; stores
+  // the result once the probe is done (encode/content_rate.h).
+  void probe_content_rate(const Job& job, const Yuv420Planes& planes);
 
   const FrameSettings& settings_;
   ServerMetrics& metrics_;
@@ -211,10 +226,13 @@ class FramePipeline {
   int gpu_ = -1;  // the CUDA device renderer_ renders on, -1: none (CPU renderer)
   std::unique_ptr<Encoder> encoder_;
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with
-  int encoder_link_kbps_ = 0;     // the link cap it runs at (changed without a rebuild where it can)
+  int encoder_rate_kbps_ = 0;     // its VBV rate now (changed without a rebuild where it can)
   int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
   int encoder_step_ = 0;          // its step (stream_step): the ladder's preset, or kPresetSteps for AV1
   Clock::time_point encoder_built_{};
+  std::shared_ptr<ContentRates> content_rates_;  // the scene's (open)
+  std::unique_ptr<ContentRateProbe> probe_;      // this session's probe, holding its size's claim
+  std::optional<CameraPose> probe_last_pose_;    // the last pose it was fed
 };
 
 }  // namespace catgs::server

@@ -385,7 +385,8 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   }
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
   const bool pipelined = !(shared_.encoder_kind == "nvenc" && renderer->name() == "cuda");
-  frames_.open(std::move(renderer), scene_->model, gpu_, pipelined, client_av1_ && shared_.encoder_kind == "x264");
+  frames_.open(std::move(renderer), scene_->model, gpu_, pipelined, client_av1_ && shared_.encoder_kind == "x264",
+               scene_->content_rates);
   state_ = State::open;
   session_id_ = random_session_id();
 

@@ -31,8 +31,7 @@ void Session::maybe_start_render() {
   // on the wire: the VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer
   // frames a second sends that share of it.
   const double fps_share = std::clamp(link_.frame_rate() / kStreamFps, 0.05, 1.0);
-  const int vbv_ceiling =
-      target_bitrate_kbps(fs.encoder_policy, shape.width, shape.height, kStreamFps, max_bitrate_kbps_);
+  const int vbv_ceiling = frames_.policy_bitrate_kbps(shape.width, shape.height, kStreamFps, max_bitrate_kbps_);
   link_ceiling_kbps_ = vbv_ceiling > 0 ? std::max(1, static_cast<int>(vbv_ceiling * fps_share)) : 0;
   if (fs.link_control && link_.limited())
     shape.link_kbps =

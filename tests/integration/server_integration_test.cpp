@@ -19,6 +19,7 @@
 #include "lod/lod_build.h"
 #include "scene/ply_io.h"
 #include "camera/trace.h"
+#include "encode/content_rate.h"
 #include "process/first_view.h"
 #include "loadgen/video_decoder.h"
 #include "good_client.h"
@@ -455,6 +456,45 @@ TEST(ServerIntegration, QualityCapsTheBitrate) {
   auto e = expect_error(c);
   ASSERT_TRUE(e);
   EXPECT_EQ(e->code(), pb::ERROR_INVALID_ARGUMENT) << e->reason();
+}
+
+// --bits-per-pixel auto (encode/content_rate.h): the first session at a size probes the scene's
+// moving frames once, without an IDR; a second session at that size takes the result, a session
+// at another size probes that size.
+TEST(ServerIntegration, ContentRateProbesEachSizeOnce) {
+  ServerProcess server(server_args(kBiker, {"--bits-per-pixel", "auto"}));
+  const auto probes = [&] {
+    std::string body;
+    http_get(server.port(), "/metrics", body);
+    return metric_value(body, "catgs_content_rate_probes_total");
+  };
+  // `n` moving poses, each frame waited for; the IDRs after the stream's first frame.
+  const auto stream = [&](int w, int h, int n) {
+    StreamClient c;
+    c.connect(server.port());
+    c.hello(w, h);
+    const Trace orbit = biker_orbit(w, h, n);
+    int later_idrs = 0;
+    for (int i = 0; i < n; ++i) {
+      const auto seq = static_cast<std::uint32_t>(i);
+      c.send_pose(pose_from_camera(orbit[seq].camera, seq, now_ms()));
+      auto m = wait_for(c, 20000, [](const pb::ServerMessage& s) { return s.has_frame() || s.has_error(); });
+      if (!m || !m->has_frame()) {
+        ADD_FAILURE() << w << "x" << h << ": no frame for pose " << i;
+        break;
+      }
+      if (i > 0 && m->frame().key_frame()) later_idrs++;
+    }
+    return later_idrs;
+  };
+  const int probe_frames = catgs::server::kProbeFrames + 6;
+  EXPECT_EQ(probes(), 0.0);
+  EXPECT_EQ(stream(320, 240, probe_frames), 0) << "the probe's rate change is not an IDR";
+  EXPECT_EQ(probes(), 1.0);
+  stream(320, 240, probe_frames);
+  EXPECT_EQ(probes(), 1.0) << "a size is probed once";
+  stream(256, 192, probe_frames);
+  EXPECT_EQ(probes(), 2.0) << "another size is probed";
 }
 
 // Each bad input ends only its own session with the right Error; the good session streams on.

@@ -34,6 +34,7 @@
 #include "camera/trace.h"
 #include "common/cli_args.h"
 #include "common/image_io.h"
+#include "encode/content_rate.h"
 #include "encode/encoder_policy.h"
 #include "encode/encoder.h"
 #include "encode_bench/rd_settings.h"
@@ -68,6 +69,7 @@ struct Row {
   std::vector<double> bytes, psnr, ssim;  // the first session's frames
   std::vector<int> key;                   // the first session's IDR flags
   double cpu_ms_per_frame = 0;
+  double probe_crf_bpp = 0;  // bpp=auto: the content-rate probe's crf bits a pixel (0: no probe)
 };
 
 double process_cpu_ms() {
@@ -161,7 +163,17 @@ Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int
             std::vector<std::vector<std::uint8_t>>& units, const std::string& pictures) {
   Row row;
   row.setting = s;
-  row.config = catgs::server::encoder_config(s.policy, width, height, fps, s.sessions, 0);
+  catgs::server::EncoderPolicy policy = s.policy;
+  if (policy.content_rate && policy.bitrate_kbps < 0) {
+    // As a server session: the first kProbeFrames moving frames (after the probe's IDR) measured.
+    catgs::server::ContentRateProbe probe(policy, width, height,
+                                          catgs::server::encoder_threads(policy, width, height, s.sessions),
+                                          catgs::server::encoder_preset(policy, width, height, fps, s.sessions));
+    for (std::size_t k = 0; k < frames.size() && !probe.done(); ++k) probe.add(frames[k].yuv.planes());
+    row.probe_crf_bpp = probe.crf_bits_per_pixel();
+    policy.bits_per_pixel = catgs::server::content_bits_per_pixel(row.probe_crf_bpp);
+  }
+  row.config = catgs::server::encoder_config(policy, width, height, fps, s.sessions, 0);
   std::vector<std::vector<double>> times(static_cast<std::size_t>(s.sessions));
   units.clear();
   const double cpu0 = process_cpu_ms();
@@ -233,6 +245,9 @@ nlohmann::json row_json(const Row& r, int width, int height, int fps) {
       {"cpu_ms_per_frame", r.cpu_ms_per_frame},
       {"bytes", {{"mean", mean(r.bytes)}, {"max", percentile(r.bytes, 1.0)}, {"first", r.bytes.front()}}},
       {"bits_per_pixel", bpp},
+      {"cap_bits_per_pixel",
+       static_cast<double>(r.config.bitrate_kbps) * 1000.0 / (static_cast<double>(width) * height * fps)},
+      {"probe_crf_bits_per_pixel", r.probe_crf_bpp},
       {"mbit_s", mean(r.bytes) * 8 * fps / 1e6},
       {"psnr_db", {{"mean", mean(r.psnr)}, {"worst_1pct", percentile(r.psnr, 0.01)}, {"min", percentile(r.psnr, 0.0)}}},
       {"ssim", {{"mean", mean(r.ssim)}, {"worst_1pct", percentile(r.ssim, 0.01)}}},

@@ -45,6 +45,8 @@ std::vector<RdSetting> parse_rd_settings(const std::string& spec, int usable_cor
         s.policy.crf = to_int(row, k, v, 0, 51);
       else if (k == "bitrate")
         s.policy.bitrate_kbps = v == "auto" ? -1 : v == "off" ? 0 : to_int(row, k, v, 100, 1000000);
+      else if (k == "bpp" && v == "auto")
+        s.policy.content_rate = true;
       else if (k == "bpp") {
         try {
           s.policy.bits_per_pixel = std::stod(v);
@@ -52,7 +54,7 @@ std::vector<RdSetting> parse_rd_settings(const std::string& spec, int usable_cor
           s.policy.bits_per_pixel = -1;
         }
         if (!(s.policy.bits_per_pixel > 0 && s.policy.bits_per_pixel < 10))
-          throw std::invalid_argument("setting '" + row + "': bpp must be in (0, 10), got '" + v + "'");
+          throw std::invalid_argument("setting '" + row + "': bpp must be auto or in (0, 10), got '" + v + "'");
       } else if (k == "vbv")
         s.policy.vbv_buffer_ms = to_int(row, k, v, 1, 10000);
       else if (k == "ir")

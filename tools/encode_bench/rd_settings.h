@@ -17,7 +17,8 @@ struct RdSetting {
 };
 
 // Parses "k=v,k=v;k=v,..." (a ';' between rows). Keys: crf (0..51), bitrate (kbit/s, "auto" or
-// "off"), bpp (auto's bits per pixel), vbv (ms), ir (intra refresh period, frames; 0 off),
+// "off"), bpp (auto's bits per pixel, or "auto": the content-aware rate, probed on the row's
+// first frames as a server session would, encode/content_rate.h), vbv (ms), ir (intra refresh period, frames; 0 off),
 // threads (0: the policy's choice for `sessions` sessions on `usable_cores`), preset ("auto": the
 // policy's ladder for `sessions` sessions, or an x264 preset), sessions (>= 1), encoder (x264 or
 // av1), speed (av1's libaom cpu-used, 5..10).
