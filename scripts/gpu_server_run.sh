@@ -26,7 +26,7 @@
 #        -> $OUT/sweep.md (table), $OUT/sweep.tar.gz (every loadgen JSON), $OUT/sweep.log
 # The encoder policy's measurements (issue 35), carry [".carry_srv"] alone (it holds the compact
 # tumblewood scene): `unpack`, `scenes` (tumblewood x10, the 13-copy city, the real paths
-# fitted), `rd SCENE WxH SETTINGS` (catgs-encode-bench), `ramp NAME SCENE WxH PIPELINE START STEP
+# fitted), `rd SCENE WxH SETTINGS` (catgs-encode-bench), `captures` and `rdtrace FILE TRACE WxH SETTINGS FRAMES TAG` (the real captures, issue 51), `ramp NAME SCENE WxH PIPELINE START STEP
 # MAX P95_MS MIN_FPS [SERVER ARGS]` (sessions until a bound breaks; scripts/ramp_table.py);
 # the level of detail in the server (issue 46): `bigcity R NAME` (49 or 101 copies) and
 # `firstframe NAME SCENE WxH [SERVER ARGS]` (start to listening, the first session's frames),
@@ -274,6 +274,32 @@ rd() {
     --json "$OUT/rd_${scene}_$size.json"
 }
 
+# captures: the real captures beside the city for catgs-encode-bench (issue 51): tumblewood_sh2
+# alone (scale 1), biker and guitar (.carry_srv/scenes, or the bundled biker) with the bicycle
+# path fitted to each, flowers_sh3 (.carry_srv/scenes/flowers_sh3.ply.xz) on its own cameras.
+captures() {
+  local W=/tmp/catgs_sweep S=$ROOT/.carry_srv
+  export LD_LIBRARY_PATH=$SRV/lib
+  [ -f "$W/flowers_sh3.ply" ] || xz -dc "$S/scenes/flowers_sh3.ply.xz" > "$W/flowers_sh3.ply" || return 1
+  [ -f "$W/biker.compressed.ply" ] || cp -f "$ROOT/assets/scenes/biker.compressed.ply" "$W/" || return 1
+  [ -f "$W/guitar.compressed.ply" ] || cp -f "$S/scenes/guitar.compressed.ply" "$W/" || return 1
+  cp -f "$W/tumblewood_sh2.compressed.ply" "$W/tumblewood_sh2_1.compressed.ply" 2>/dev/null
+  for scene in tumblewood_sh2_1 biker guitar; do
+    [ -f "$W/${scene}_mipnerf360_bicycle.trace" ] && continue
+    "$SRV/bin/catgs-scene" trace --scene "$W/$scene.compressed.ply" --cameras "$S/traces/mipnerf360_bicycle.cameras.json" \
+      --out "$W/${scene}_mipnerf360_bicycle.trace" --scale 1 --frames 1200 || return 1
+  done
+}
+
+# rdtrace SCENE_FILE TRACE WxH SETTINGS FRAMES TAG: catgs-encode-bench of any scene and trace
+# (cameras:C.json for a capture's own) -> $OUT/rd_TAG.json and its table.
+rdtrace() {
+  local file=$1 trace=$2 size=$3 settings=$4 frames=$5 tag=$6
+  export LD_LIBRARY_PATH=$SRV/lib
+  "$SRV/bin/catgs-encode-bench" --scene "$file" --trace "$trace" --renderer cuda --width "${size%x*}" \
+    --height "${size#*x}" --frames "$frames" --settings "$settings" --json "$OUT/rd_$tag.json"
+}
+
 # measure TAG N SIZE PORT TRACES SECONDS: one catgs-loadgen run of N sessions against the server
 # (SERVER_PID) with the host's CPU, the server's CPU, GPU utilisation and the most device memory
 # in use -> $W/json/TAG.json. CATGS_LOADGEN_ARGS: more catgs-loadgen options (e.g. --av1).
@@ -343,6 +369,8 @@ case "${1:-}" in
   bigcity) shift; bigcity "$@" ;;
   firstframe) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; firstframe "$@" ;;
   rd) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; rd "$@" ;;
+  captures) captures ;;
+  rdtrace) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; rdtrace "$@" ;;
   pictures) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; pictures "$@" ;;
   ramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; ramp "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
