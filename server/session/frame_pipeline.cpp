@@ -303,7 +303,14 @@ void FramePipeline::probe_content_rate(const Job& job, const Yuv420Planes& plane
       probe_last_pose_->orientation == pose.orientation && probe_last_pose_->vertical_fov_deg == pose.vertical_fov_deg)
     return;
   probe_last_pose_ = pose;
-  probe_->add(planes);
+  try {
+    probe_->add(planes);
+  } catch (const std::exception& e) {  // the probe's failure is not the stream's: it keeps its cap
+    std::cerr << "content rate: probe at " << w << "x" << h << " failed: " << e.what() << "\n";
+    content_rates_->release(w, h);
+    probe_.reset();
+    return;
+  }
   if (!probe_->done()) return;
   const double crf_bpp = probe_->crf_bits_per_pixel(), bpp = content_bits_per_pixel(crf_bpp);
   content_rates_->set(w, h, bpp);
