@@ -306,8 +306,8 @@ void FramePipeline::probe_content_rate(const Job& job, const Yuv420Planes& plane
   try {
     probe_->add(planes);
   } catch (const std::exception& e) {  // the probe's failure is not the stream's: it keeps its cap
-    std::cerr << "content rate: probe at " << w << "x" << h << " failed: " << e.what() << "\n";
-    content_rates_->release(w, h);
+    std::cerr << "content rate: probe at " << w << "x" << h << " failed, the policy's rate kept: " << e.what() << "\n";
+    content_rates_->set(w, h, policy.bits_per_pixel);  // not tried again at this size
     probe_.reset();
     return;
   }
