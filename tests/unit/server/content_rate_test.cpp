@@ -15,6 +15,7 @@
 #include "encode/x264_encoder.h"
 #include "loadgen/video_decoder.h"
 #include "process/first_view.h"
+#include "server_options.h"
 #include "test_data.h"
 
 extern "C" {
@@ -133,6 +134,27 @@ TEST(ContentRate, ACapAtTheProbedRateKeepsCrfQuality) {
   EXPECT_GT(crf_alone, 28.0);  // the scene, decoded
   EXPECT_GE(capped, crf_alone - 0.5);
   EXPECT_LT(tight, crf_alone - 1.0);
+}
+
+// --bits-per-pixel: a number as before (the probe off), auto for the probe, nothing else.
+TEST(ContentRate, BitsPerPixelOption) {
+  const char* none[] = {"catgs-server"};
+  ServerOptions o0;
+  ASSERT_TRUE(parse_server_options(1, const_cast<char**>(none), o0));
+  EXPECT_FALSE(o0.encoder_policy.content_rate);  // the default stays 0.09 (RESULTS.md)
+  EXPECT_DOUBLE_EQ(o0.encoder_policy.bits_per_pixel, 0.09);
+  const char* fixed[] = {"catgs-server", "--bits-per-pixel", "0.05"};
+  ServerOptions o1;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(fixed), o1));
+  EXPECT_FALSE(o1.encoder_policy.content_rate);
+  EXPECT_DOUBLE_EQ(o1.encoder_policy.bits_per_pixel, 0.05);
+  const char* probed[] = {"catgs-server", "--bits-per-pixel", "auto"};
+  ServerOptions o2;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(probed), o2));
+  EXPECT_TRUE(o2.encoder_policy.content_rate);
+  const char* bad[] = {"catgs-server", "--bits-per-pixel", "lots"};
+  ServerOptions o3;
+  EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(bad), o3), std::invalid_argument);
 }
 
 TEST(ContentRates, OneProbeASizeAndItsResultShared) {

@@ -24,6 +24,8 @@ TEST(RdSettings, RowsKeepTheServerDefaultsForKeysLeftOut) {
   EXPECT_EQ(rows[1].sessions, 10);
   EXPECT_EQ(rows[1].policy.usable_cores, 16);
   EXPECT_EQ(parse_rd_settings("bitrate=auto,bpp=0.05", 2)[0].policy.bits_per_pixel, 0.05);
+  EXPECT_FALSE(parse_rd_settings("bitrate=auto,bpp=0.05", 2)[0].policy.content_rate);
+  EXPECT_TRUE(parse_rd_settings("bpp=auto", 2)[0].policy.content_rate);  // the content-aware rate
 }
 
 TEST(RdSettings, BadRowsNameTheRowAndTheKey) {
