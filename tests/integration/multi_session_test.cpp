@@ -362,9 +362,10 @@ TEST(MultiSession, LoadgenReferenceCheckAndFairRenderLanes) {
   const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
                            kBiker + " --size 160x120,128x96,96x96 --rate 0 --sessions 3" +
                            " --warmup 1 --check-every 3 --json " + json_path;
-  // 5 s: on a loaded 2-core machine (ctest -j 2 beside a build) 3 s gave one session too few
-  // frames to check one.
-  ASSERT_EQ(std::system((base + " --seconds 5 > /dev/null").c_str()), 0);
+  // 8 s: on a loaded 2-core machine (ctest -j 2 beside a build) 3 s gave one session too few
+  // frames to check one, and once 5 s did (CI: 18 frames in 5 s for the three). The exit status
+  // is checked after the sessions' own checks, which say which session and why.
+  const int status = std::system((base + " --seconds 8 > /dev/null").c_str());
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));
   ASSERT_EQ(j["run"]["sessions"].size(), 3u);
   int most = 0, fewest = 1 << 30;
@@ -375,8 +376,9 @@ TEST(MultiSession, LoadgenReferenceCheckAndFairRenderLanes) {
     most = std::max(most, s["frames"].get<int>());
     fewest = std::min(fewest, s["frames"].get<int>());
   }
-  std::cout << "[ info ] frames per session over 5 s with one render lane: " << fewest << " to " << most << "\n";
+  std::cout << "[ info ] frames per session over 8 s with one render lane: " << fewest << " to " << most << "\n";
   EXPECT_GE(2 * fewest, most) << "a session fell behind the others";
+  EXPECT_EQ(status, 0) << "catgs-loadgen's reference check failed";
   EXPECT_NE(std::system((base + " --seconds 1 --check-min-psnr 200 > /dev/null").c_str()), 0)
       << "a reference check nothing can pass must fail the run";
   std::filesystem::remove(json_path);
