@@ -26,7 +26,8 @@
 #        -> $OUT/sweep.md (table), $OUT/sweep.tar.gz (every loadgen JSON), $OUT/sweep.log
 # The encoder policy's measurements (issue 35), carry [".carry_srv"] alone (it holds the compact
 # tumblewood scene): `unpack`, `scenes` (tumblewood x10, the 13-copy city, the real paths
-# fitted), `rd SCENE WxH SETTINGS` (catgs-encode-bench), `captures` and `rdtrace FILE TRACE WxH SETTINGS FRAMES TAG` (the real captures, issue 51), `ramp NAME SCENE WxH PIPELINE START STEP
+# fitted), `rd SCENE WxH SETTINGS` (catgs-encode-bench), `captures` and `rdtrace FILE TRACE WxH
+# SETTINGS FRAMES TAG` (the real captures, issue 51), `ramp NAME SCENE WxH PIPELINE START STEP
 # MAX P95_MS MIN_FPS [SERVER ARGS]` (sessions until a bound breaks; scripts/ramp_table.py);
 # the level of detail in the server (issue 46): `bigcity R NAME` (49 or 101 copies) and
 # `firstframe NAME SCENE WxH [SERVER ARGS]` (start to listening, the first session's frames),

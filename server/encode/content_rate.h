@@ -12,7 +12,8 @@
 // kContentHeadroom (the VBV caps the rate, not each frame: a busy view and a quick turn go above
 // the mean), clamped to [kContentMinBitsPerPixel, kContentMaxBitsPerPixel], is the cap's bits a
 // pixel for that scene and size from then on (target_bitrate_kbps). The preset matters: at one
-// crf, ultrafast takes about 2-3x superfast's bits (its crf scale is not the same picture), so
+// crf, ultrafast takes several times superfast's bits (its crf scale is not the same picture;
+// ContentRate.ProbeCountsPFramesAndSeesMotion prints both), so
 // the probe codes as the stream it sizes does; a session on a cheaper step of the ladder later
 // (more sessions) gets a somewhat coarser picture at that cap, as it would at a fixed one. The
 // cost: the probing session's encode job encodes each of those frames twice (about 0.4 s of

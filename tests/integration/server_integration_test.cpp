@@ -459,8 +459,8 @@ TEST(ServerIntegration, QualityCapsTheBitrate) {
 }
 
 // --bits-per-pixel auto (encode/content_rate.h): the first session at a size probes the scene's
-// moving frames once, without an IDR; a second session at that size takes the result, a session
-// at another size probes that size.
+// moving frames once and its stream takes the new cap without an IDR; a second session at that
+// size takes the result, a session at another size probes that size.
 TEST(ServerIntegration, ContentRateProbesEachSizeOnce) {
   ServerProcess server(server_args(kBiker, {"--bits-per-pixel", "auto"}));
   const auto probes = [&] {
@@ -489,12 +489,27 @@ TEST(ServerIntegration, ContentRateProbesEachSizeOnce) {
   };
   const int probe_frames = catgs::server::kProbeFrames + 6;
   EXPECT_EQ(probes(), 0.0);
-  EXPECT_EQ(stream(320, 240, probe_frames), 0) << "the probe's rate change is not an IDR";
+  // 1280x720: large enough that the cap is above the policy's 1500 kbit/s floor either way, so the
+  // probe's result changes the running stream's rate (the log line says to what).
+  EXPECT_EQ(stream(1280, 720, probe_frames), 0) << "the probe's rate change is not an IDR";
   EXPECT_EQ(probes(), 1.0);
+  const std::string log = server.log();
+  const std::string tag = "at 1280x720: crf 23 takes ";
+  const auto at = log.find(tag);
+  ASSERT_NE(at, std::string::npos) << log;
+  const double cap = std::stod(log.substr(log.find("the cap ", at) + 8));
+  std::cout << "[ info ] the bundled biker's probed cap at 1280x720: " << cap << " bits a pixel\n";
+  EXPECT_GE(cap, catgs::server::kContentMinBitsPerPixel);
+  EXPECT_LE(cap, catgs::server::kContentMaxBitsPerPixel);
+  EXPECT_GT(std::abs(cap - 0.09) * 1280 * 720 * 60 / 1000, 100.0) << "the rate did not change: no rate change tested";
+  EXPECT_GT(cap * 1280 * 720 * 60 / 1000, 1500.0) << "the floor hides the probe's rate";
+  // The same size again, then another size.
   stream(320, 240, probe_frames);
-  EXPECT_EQ(probes(), 1.0) << "a size is probed once";
+  EXPECT_EQ(probes(), 2.0);
+  stream(320, 240, probe_frames);
+  EXPECT_EQ(probes(), 2.0) << "a size is probed once";
   stream(256, 192, probe_frames);
-  EXPECT_EQ(probes(), 2.0) << "another size is probed";
+  EXPECT_EQ(probes(), 3.0) << "another size is probed";
 }
 
 // Each bad input ends only its own session with the right Error; the good session streams on.
