@@ -44,7 +44,8 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
                            q.z(),
                            pose.vertical_fov_deg(),
                            pose.client_time_ms(),
-                           pose.shown_latency_ms()};
+                           pose.shown_latency_ms(),
+                           pose.received_ms()};
   for (double v : values)
     if (!std::isfinite(v)) return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose has NaN or Inf"};
   // Positions beyond float range would turn into Inf in the renderer.
@@ -62,6 +63,9 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
   if (!(pose.shown_latency_ms() >= 0 && pose.shown_latency_ms() <= kMaxShownLatencyMs))
     return Violation{pb::ERROR_INVALID_ARGUMENT,
                      "shown_latency_ms " + std::to_string(pose.shown_latency_ms()) + " outside 0..3600000"};
+  if (!(pose.received_ms() >= 0 && pose.received_ms() <= kMaxClientTimeMs))
+    return Violation{pb::ERROR_INVALID_ARGUMENT,
+                     "received_ms " + std::to_string(pose.received_ms()) + " outside 0..1e15"};
   out.position = glm::vec3(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
   out.orientation = glm::quat(static_cast<float>(q.w() / norm), static_cast<float>(q.x() / norm),
                               static_cast<float>(q.y() / norm), static_cast<float>(q.z() / norm));

@@ -22,6 +22,7 @@ inline constexpr double kMinFovDeg = 1.0;            // exclusive
 inline constexpr double kMaxFovDeg = 170.0;          // exclusive
 inline constexpr double kMaxPoseComponent = 1e30;    // |position| and |quaternion| components
 inline constexpr double kMaxShownLatencyMs = 3.6e6;  // Pose.shown_latency_ms: an hour
+inline constexpr double kMaxClientTimeMs = 1e15;     // Pose.received_ms: a clock ms, 30,000 years
 
 // A protocol violation: the code and reason sent to the client in Error.
 struct Violation {
@@ -59,7 +60,7 @@ struct CameraPose {
 // Validates Pose: position and orientation present, every number finite, position components
 // and quaternion components within +-1e30 (so neither float conversion nor the squared norm
 // overflows), quaternion not zero (it is normalised), fov in (1, 170) degrees, shown_latency_ms
-// in [0, 3600000].
+// in [0, 3600000], received_ms in [0, 1e15].
 // ERROR_INVALID_ARGUMENT otherwise.
 std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out);
 

@@ -74,8 +74,18 @@ ip netns exec "$ns" ip link set lo up
 
 "$bin/catgs-server" --scene "$scene" --bind "$host_ip" --port "$port" "${server_args[@]}" > "$work/server.log" 2>&1 &
 server_pid=$!
-for _ in $(seq 100); do
-  (exec 3<>"/dev/tcp/$host_ip/$port") 2>/dev/null && break
+# Ready once /readyz answers 200: the port opens while the scene still loads, and a session
+# then would be refused (SERVER_FULL, "the scene is loading").
+ready() {
+  exec 3<>"/dev/tcp/$host_ip/$port" || return 1
+  printf 'GET /readyz HTTP/1.0\r\nHost: %s\r\n\r\n' "$host_ip" >&3
+  local status
+  read -r -t 2 _ status _ <&3
+  exec 3<&-
+  [ "$status" = 200 ]
+}
+for _ in $(seq 150); do
+  ready 2>/dev/null && break
   sleep 0.2
 done
 

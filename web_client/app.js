@@ -71,6 +71,7 @@ const state = {
   urlSettleAt: 0,
   maxBitrateKbps: 0, // the quality menu's ceiling (0: the server's default); sent as Quality
   unreportedLatencyMs: 0, // the newest shown frame's pose-to-frame latency, for the next Pose
+  receipt: null, // { sequence, receivedMs }: the newest frame's arrival, for the next Pose
   depthRequests: new Map(), // request_id -> { resolve, reject } of DepthRequests awaiting DepthResult
   nextDepthId: 1,
   notes: null, // NotesUi: hotspots, measurement, scale
@@ -99,8 +100,12 @@ function sendPose() {
   const clientTimeMs = performance.now();
   // The newest shown frame's latency rides along to the server's /metrics (end to end).
   const shownLatencyMs = state.unreportedLatencyMs;
-  if (!send(state.protocol.encodePose({ sequence, clientTimeMs, shownLatencyMs, ...pose }))) return null;
+  // And the newest frame's arrival: the server's rate controller reads the queue on the link
+  // from these receipts (server/session/link_rate.h).
+  const receipt = state.receipt || { sequence: 0, receivedMs: 0 };
+  if (!send(state.protocol.encodePose({ sequence, clientTimeMs, shownLatencyMs, receipt, ...pose }))) return null;
   state.unreportedLatencyMs = 0;
+  state.receipt = null;
   state.sentVersion = cam.version;
   state.sentPoses.set(sequence, { position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg });
   state.lastPoseSent = { sequence, clientTimeMs, position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg };
@@ -375,6 +380,7 @@ function onMessage(kind, msg) {
       onWelcome(msg);
       break;
     case 'frame':
+      state.receipt = { sequence: msg.sequence, receivedMs: performance.now() };
       if (state.sessionOpen) state.decoder.decode(msg);
       break;
     case 'stats':

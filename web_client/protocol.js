@@ -74,7 +74,9 @@ export function makeProtocol(root) {
       });
     },
 
-    encodePose({ sequence, clientTimeMs, position, orientation, fovDeg, shownLatencyMs = 0 }) {
+    // receipt: the newest frame's { sequence, receivedMs } (receivedMs 0: none).
+    encodePose({ sequence, clientTimeMs, position, orientation, fovDeg, shownLatencyMs = 0,
+      receipt = { sequence: 0, receivedMs: 0 } }) {
       return encode({
         pose: {
           sequence,
@@ -83,6 +85,8 @@ export function makeProtocol(root) {
           orientation: quat(orientation),
           vertical_fov_deg: fovDeg,
           shown_latency_ms: shownLatencyMs,
+          received_frame_sequence: receipt.sequence,
+          received_ms: receipt.receivedMs,
         },
       });
     },

@@ -89,11 +89,12 @@ class Encoder {
   // with start codes (AV1: the sequence header OBU), as libavcodec's extradata holds them; empty
   // without global_header.
   virtual std::vector<std::uint8_t> extradata() const = 0;
-  // Sets the stream's maximum rate (EncoderConfig::bitrate_kbps) from the next picture on, the
-  // VBV keeping its size in ms, without an IDR. Returns false where the encoder cannot (NVENC
-  // here, or an x264 stream opened without a VBV: x264 cannot add one later); the caller then
-  // rebuilds it.
-  virtual bool set_max_bitrate_kbps(int kbps) = 0;
+  // Sets the stream's maximum rate (EncoderConfig::bitrate_kbps) from the next picture on,
+  // without an IDR. The VBV takes `vbv_buffer_ms` of the new rate (EncoderConfig's ms at the
+  // nominal fps), or keeps its size in ms where that is 0. Returns false where the encoder cannot
+  // (NVENC here, or an x264 stream opened without a VBV: x264 cannot add one later); the caller
+  // then rebuilds it.
+  virtual bool set_max_bitrate_kbps(int kbps, int vbv_buffer_ms) = 0;
 };
 
 // Creates an encoder by name:

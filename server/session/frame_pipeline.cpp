@@ -229,13 +229,19 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   // rebuilt below; a limiting link moves it to H.264, use_av1.)
   const int rate =
       target_bitrate_kbps(policy, s.width, s.height, kStreamFps, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
-  if (same_stream && encoder_rate_kbps_ != rate && encoder_->codec() == "h264" && rate > 0 &&
-      encoder_->set_max_bitrate_kbps(rate))
+  // While the link limits, the VBV holds two frames' share of the cap (kLinkVbvMs at the nominal
+  // fps): a frame may then take at most two frame intervals on the link, where the policy's
+  // buffer would let one take six, a latency spike of half a second on a slow link.
+  const int vbv_ms = s.link_kbps > 0 ? kLinkVbvMs : policy.vbv_buffer_ms;
+  if (same_stream && (encoder_rate_kbps_ != rate || encoder_vbv_ms_ != vbv_ms) && encoder_->codec() == "h264" &&
+      rate > 0 && encoder_->set_max_bitrate_kbps(rate, vbv_ms)) {
     encoder_rate_kbps_ = rate;
+    encoder_vbv_ms_ = vbv_ms;
+  }
   // The ladder's step, AV1 above it. A link that comes to limit an AV1 stream lowers the step, so
   // should_rebuild moves it to H.264 at once.
   const int step = stream_step(s, live);
-  if (same_stream && encoder_rate_kbps_ == rate) {
+  if (same_stream && encoder_rate_kbps_ == rate && encoder_vbv_ms_ == vbv_ms) {
     // The same stream: rebuilt only for a new share of the cores (x264's threads, preset and the
     // codec are fixed when it opens; NVENC has none to share).
     const auto since = now - encoder_built_;
@@ -246,6 +252,7 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   }
   EncoderConfig cfg =
       encoder_config(policy, s.width, s.height, kStreamFps, live, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
+  if (cfg.bitrate_kbps > 0) cfg.vbv_buffer_ms = vbv_ms;
   // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
   cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
   cfg.cuda_device = std::max(gpu_, 0);
@@ -254,6 +261,7 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   encoder_ = make_encoder(step == kPresetSteps ? "av1" : settings_.encoder, cfg, nullptr, &fell_back);
   encoder_bitrate_kbps_ = s.max_bitrate_kbps;
   encoder_rate_kbps_ = cfg.bitrate_kbps;
+  encoder_vbv_ms_ = vbv_ms;
   encoder_threads_ = cfg.threads;
   encoder_step_ = step;
   encoder_built_ = now;
@@ -393,6 +401,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();
+  r.frame_sequence = job.frame_sequence;
   return r;
 }
 

@@ -43,6 +43,9 @@ inline double ms_between(std::chrono::steady_clock::time_point a, std::chrono::s
 
 // The stream's nominal frame rate: the browser's pose rate (its time base and the VBV's budget).
 inline constexpr int kStreamFps = 60;
+// The VBV's size while the link limits the stream (link_rate.h): two frames at kStreamFps, which
+// the session's conversion of the cap by the measured frame rate makes two real frames' share.
+inline constexpr int kLinkVbvMs = 2000 / kStreamFps;
 
 class FramePipeline {
  public:
@@ -105,6 +108,7 @@ class FramePipeline {
     float lod_error_px = 0;  // as Rendered's
     std::uint64_t splats = 0;
     std::size_t payload_bytes = 0;
+    std::uint32_t frame_sequence = 0;  // Frame.sequence
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
     double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;
@@ -227,6 +231,7 @@ class FramePipeline {
   std::unique_ptr<Encoder> encoder_;
   int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with
   int encoder_rate_kbps_ = 0;     // its VBV rate now (changed without a rebuild where it can)
+  int encoder_vbv_ms_ = 0;        // and its VBV's size, ms of that rate
   int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
   int encoder_step_ = 0;          // its step (stream_step): the ladder's preset, or kPresetSteps for AV1
   Clock::time_point encoder_built_{};

@@ -20,7 +20,17 @@ int link_floor_kbps(int width, int height) {
   return std::max(30, static_cast<int>(0.02 * 30.0 * width * height / 1000.0));
 }
 
-bool LinkRate::congested(double delay_ms, const SocketSample& s) const {
+bool LinkRate::receipts_fresh(Clock::time_point now) const {
+  const double stale_ms = std::max(500.0, 4.0 * interval_ms_);
+  return have_receipt_ && ms_between(last_receipt_, now) < stale_ms;
+}
+
+double LinkRate::path_queue_ms(const SocketSample& s, Clock::time_point now) const {
+  if (receipts_fresh(now)) return queue_ms_;
+  return s.valid ? std::max(0.0, s.rtt_ms - s.min_rtt_ms) : 0.0;
+}
+
+bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_point now) const {
   // A stream near the link's rate at a low frame rate keeps each frame on the wire for most of
   // a frame interval, and its last packets wait behind its first: that much delay and round
   // trip is the frame's own, not a queue.
@@ -30,12 +40,59 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s) const {
   // too, on a link with room to spare.
   const bool socket_full = !s.valid || s.notsent_bytes > 0 || !s.app_limited;
   if (socket_full && delay_ms > std::max(params_.delay_ms, own)) return true;
+  // The client's receipts show the queue frame by frame (its own time on the wire taken out);
+  // TCP's round trip is smoothed over about eight ACKs and lags it by several frames.
+  // Above `queue_ms` and its own time; or above `queue_ms` and grown by a quarter of it since the
+  // receipt before: a queue building, seen before it stands as high as a frame's own time (a
+  // delay gradient, as GCC reads one; a token bucket's queue appears at once when its burst is
+  // spent).
+  if (receipts_fresh(now)) {
+    const bool building = queue_ms_ > params_.queue_ms && queue_ms_ > queue_before_ + params_.queue_ms / 4;
+    return building || queue_ms_ > params_.queue_ms + receipt_own_ms_;
+  }
   return s.valid && s.rtt_ms - s.min_rtt_ms > std::max(params_.rtt_rise_ms, own);
+}
+
+void LinkRate::on_receipt(std::uint32_t sequence, std::size_t bytes, Clock::time_point handed, double received_ms,
+                          Clock::time_point now, int ceiling_kbps) {
+  // The one-way delay up to the two clocks' offset, which the minimum takes out.
+  const double delay = received_ms - std::chrono::duration<double, std::milli>(handed.time_since_epoch()).count();
+  // The frame's own time on the wire at the link's rate is no queue (congested()). It is not
+  // taken out of the delay: a token bucket's burst sends a frame after a pause at the line's
+  // rate, and the base would fall below the path's real one.
+  receipt_own_ms_ = link_kbps_ > 0 ? std::min(static_cast<double>(bytes) * 8.0 / link_kbps_, 1.5 * interval_ms_) : 0.0;
+  receipt_handed_ = handed;
+  // The base: the least delay over the last one to two windows, so that the clocks' drift or a
+  // new route moves it within a window.
+  if (!have_receipt_ || now - base_since_ > params_.base_window) {
+    base_before_ = have_receipt_ ? base_now_ : delay;
+    base_now_ = delay;
+    base_since_ = now;
+  }
+  base_now_ = std::min(base_now_, delay);
+  queue_before_ = queue_ms_;
+  queue_ms_ = std::max(0.0, delay - std::min(base_now_, base_before_));
+  // A frame that waited behind the one before it (a queue, the two received in turn) arrived
+  // its own time on the wire after it: its bytes over that interval are the link's rate, the
+  // bottleneck's own (the kernel's estimate is taken at the sender, and a shaper's burst
+  // inflates it).
+  const double gap_ms = received_ms - last_received_ms_;
+  if (have_receipt_ && sequence == last_sequence_ + 1 && queue_ms_ > params_.queue_ms / 2 && gap_ms > 0) {
+    receipt_kbps_ = average(receipt_kbps_, static_cast<double>(bytes) * 8.0 / gap_ms);
+    receipt_kbps_at_ = now;
+    link_kbps_ = receipt_kbps_;
+    if (limited_) known_kbps_ = known_kbps_ > 0 ? average(known_kbps_, receipt_kbps_) : receipt_kbps_;
+  }
+  last_sequence_ = sequence;
+  last_received_ms_ = received_ms;
+  have_receipt_ = true;
+  last_receipt_ = now;
+  ++receipts_;
+  control(now, last_sample_, ceiling_kbps);
 }
 
 void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::time_point written, const SocketSample& s,
                           int ceiling_kbps) {
-  const double ceiling = ceiling_kbps > 0 ? ceiling_kbps : kNoCeilingKbps;
   delay_ms_ = std::max(0.0, ms_between(handed, written));
   // The rate the frames leave at: mean bytes a frame over the mean interval between writes
   // (a mean of per-frame rates would be ruled by the frames written back to back).
@@ -49,7 +106,7 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
   }
   // Steer the encoder onto the cap: a stream above it asks for less next time, one below for more.
   if (limited_ && stream_kbps_ > 0)
-    gain_ = std::clamp(gain_ * std::clamp(cap_ / stream_kbps_, 0.9, 1.1), 0.1, 2.0);
+    gain_ = std::clamp(gain_ * std::clamp(cap_ / stream_kbps_, 0.97, 1.03), 0.5, 1.0);
   else if (!limited_)
     gain_ = 1.0;
   have_written_ = true;
@@ -58,46 +115,56 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
     rtt_ms_ = s.rtt_ms;
     min_rtt_ms_ = s.min_rtt_ms;
   }
-  if (s.valid && !s.app_limited && s.delivery_kbps > 0) {
+  // The kernel's delivery rate where the receipts have given none for a while.
+  const bool receipts_rate = receipt_kbps_ > 0 && written - receipt_kbps_at_ < std::chrono::seconds(3);
+  if (s.valid && !s.app_limited && s.delivery_kbps > 0 && !receipts_rate) {
     link_kbps_ = s.delivery_kbps;
     // The link was full: its rate now is the one to resume at (an older one may be stale).
     if (limited_) known_kbps_ = known_kbps_ > 0 ? average(known_kbps_, s.delivery_kbps) : s.delivery_kbps;
   }
+  last_sample_ = s;
+  control(written, s, ceiling_kbps);
+}
 
-  if (congested(delay_ms_, s)) {
-    last_congested_ = written;
+void LinkRate::control(Clock::time_point now, const SocketSample& s, int ceiling_kbps) {
+  const double ceiling = ceiling_kbps > 0 ? ceiling_kbps : kNoCeilingKbps;
+  const double queue_ms = path_queue_ms(s, now);
+  if (congested(delay_ms_, s, now)) {
+    last_congested_ = now;
     // One cut per hold or round trip, whichever is longer: the last one must reach the queue first.
     const auto hold = std::max<Clock::duration>(
         params_.hold, std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(rtt_ms_)));
-    if (have_cut_ && written - last_cut_ < hold) return;
+    if (have_cut_ && now - last_cut_ < hold) return;
+    // With receipts, a second cut waits for a frame handed after the first to arrive: those
+    // before it were encoded at the old rate and say nothing of the new one.
+    if (have_cut_ && receipts_fresh(now) && receipt_handed_ <= last_cut_) return;
     const double estimate = link_kbps_ > 0 ? link_kbps_ : stream_kbps_;
     const double from = limited_ ? cap_ : ceiling;
     // Still congested a round trip after a cut: the queue is not draining, so the cap falls
     // below the link's estimate too (multiplicative decrease from where it is). And the queue
-    // standing on the path (the round trip above its minimum, at the link's rate) is drained
+    // standing on the path (the receipts' queue, else the round trip above its minimum; at the
+    // link's rate) is drained
     // within drain_ms: that much less for a while, so a shaper's deep buffer empties in about a
     // second instead of holding the frames behind it.
     double cap = params_.decrease * (estimate > 0 ? std::min(estimate, from) : from);
-    if (s.valid && estimate > 0) {
-      const double queue_ms = std::max(0.0, s.rtt_ms - s.min_rtt_ms);
-      cap -= estimate * queue_ms / static_cast<double>(params_.drain.count());
-    }
+    if (estimate > 0) cap -= estimate * queue_ms / static_cast<double>(params_.drain.count());
     cap_ = std::max<double>(params_.floor_kbps, cap);
     if (link_kbps_ > 0) known_kbps_ = link_kbps_;  // what the link carried when it filled
     above_known_ = false;
     limited_ = cap_ < ceiling;
     have_cut_ = true;
-    last_cut_ = written;
-    last_grow_ = written;
+    last_cut_ = now;
+    last_grow_ = now;
     ++decreases_;
     return;
   }
   if (!limited_) return;
   const auto probe_from = last_congested_ + params_.probe_after;
-  if (written < probe_from) return;
+  if (now < probe_from) return;
   // The queue has drained (the round trip is back near its minimum): straight back to a safe
   // share of what the link carried when it filled, instead of climbing there from the drain.
-  const bool drained = !s.valid || s.rtt_ms - s.min_rtt_ms < params_.rtt_rise_ms / 4;
+  const bool drained = receipts_fresh(now) ? queue_ms < params_.queue_ms / 2
+                                           : !s.valid || s.rtt_ms - s.min_rtt_ms < params_.rtt_rise_ms / 4;
   if (drained && known_kbps_ > 0 && cap_ < params_.resume * known_kbps_) cap_ = params_.resume * known_kbps_;
   // Growth: fast below the known rate; slow for `probe_slow` just above it (that is where the
   // link filled last time); fast again once past it with no congestion: the link got faster.
@@ -105,12 +172,12 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
   if (known_kbps_ > 0 && cap_ >= 0.9 * known_kbps_) {
     if (!above_known_) {
       above_known_ = true;
-      above_since_ = written;
+      above_since_ = now;
     }
-    if (written - above_since_ < params_.probe_slow) rate = params_.increase_slow_per_s;
+    if (now - above_since_ < params_.probe_slow) rate = params_.increase_slow_per_s;
   }
-  const double dt_s = ms_between(std::max(last_grow_, probe_from), written) / 1000.0;
-  last_grow_ = written;
+  const double dt_s = ms_between(std::max(last_grow_, probe_from), now) / 1000.0;
+  last_grow_ = now;
   cap_ *= 1.0 + rate * std::min(dt_s, 0.5);
   if (cap_ >= ceiling) limited_ = false;
 }

@@ -13,15 +13,28 @@
 //   stream is slower than the link) and the smoothed and minimum round-trip times. A queue in
 //   front of a slow link (a shaper, a Wi-Fi access point) shows as round-trip time above the
 //   minimum.
+// - the client's receipts (Pose.received_frame_sequence / received_ms, Session::handle_pose): when
+//   a frame arrived, on the client's clock. Less the time it was handed over, on the server's,
+//   that is the one-way delay up to the clocks' offset; above its least value of the last
+//   `base_window` or two it is the queue on the path, frame by frame. TCP's round trip is
+//   smoothed over about eight ACKs and shows the same queue several frames later; it stands in
+//   for clients that send no receipts. Two frames received in turn, the second behind a queue,
+//   arrived the second's time on the wire apart: its bytes over that gap are the bottleneck's
+//   rate (the kernel's delivery rate is the sender's view, and a shaper's burst inflates it).
 // The rule (a delay-based AIMD, as WebRTC's and Selkies' congestion control do in spirit):
-// - congested: the send delay passes `delay_ms`, or the smoothed RTT passes the minimum by
-//   `rtt_rise_ms` (each at least 1.5 frame intervals: a frame's own time on the wire at a low
-//   frame rate is no queue). Then, at most once per `hold` (the previous cut must show in the queue first),
-//   the cap drops to `decrease` x the link's rate (the kernel's last estimate that was not
-//   application-limited, else the rate the frames leave at) or x the current cap,
-//   whichever is lower, less the rate that drains the queue standing on the path (RTT above its
-//   minimum, at the link's rate) within `drain`; at least `floor_kbps`.
-// - clear for `probe_after`: once the round trip is back near its minimum (the queue drained) the
+// - congested: the send delay passes `delay_ms` (at least 1.5 frame intervals: a frame's own
+//   time on the wire at a low frame rate is no queue); or the receipts' queue passes `queue_ms`
+//   plus the frame's own time on the wire (at most 1.5 intervals), or passes `queue_ms` while
+//   still growing (by a quarter of it since the receipt before: a delay gradient, as GCC reads
+//   one; a token bucket's queue appears at once when its burst is spent); without receipts, the
+//   smoothed RTT passes the minimum by `rtt_rise_ms` (at least 1.5 frame intervals). Then, at
+//   most once per `hold` or round trip (the previous cut must show in the queue first) and, with
+//   receipts, only once a frame handed after the last cut has arrived, the cap drops to
+//   `decrease` x the link's rate (the receipts', else the kernel's last estimate that was not
+//   application-limited, else the rate the frames leave at) or x the current cap, whichever is
+//   lower, less the rate that drains the queue standing on the path (the receipts', else the RTT
+//   above its minimum; at the link's rate) within `drain`; at least `floor_kbps`.
+// - clear for `probe_after`: once the queue is back near nothing (drained) the
 //   cap resumes at `resume` x the rate the link carried when it filled (the known rate), then
 //   grows by `increase_per_s` per second (multiplicatively), slowly (`increase_slow_per_s`) for
 //   `probe_slow` just above the known rate, where the link filled last time, and fast again past
@@ -33,6 +46,7 @@
 
 #include <chrono>
 #include <cstddef>
+#include <cstdint>
 
 #include "transport/connection_link.h"
 
@@ -48,16 +62,18 @@ class LinkRate {
  public:
   using Clock = std::chrono::steady_clock;
   struct Params {
-    double delay_ms = 40.0;     // send delay that means the socket is backed up
-    double rtt_rise_ms = 60.0;  // RTT above the minimum that means a queue (over a delayed ACK)
-    double decrease = 0.85;     // of the link's rate, on congestion
+    double delay_ms = 40.0;                        // send delay that means the socket is backed up
+    double rtt_rise_ms = 60.0;                     // RTT above the minimum that means a queue (over a delayed ACK)
+    double queue_ms = 40.0;                        // the receipts' one-way delay above its base that means a queue
+    std::chrono::milliseconds base_window{10000};  // the receipts' base is the least of 1-2 of these
+    double decrease = 0.85;                        // of the link's rate, on congestion
     double increase_per_s = 0.5;
     std::chrono::milliseconds hold{400};
     std::chrono::milliseconds probe_after{500};
     std::chrono::milliseconds drain{1000};  // a standing queue is emptied within this
     double resume = 0.7;                    // of the known rate, once the queue has drained
     double increase_slow_per_s = 0.05;      // just above the known rate
-    std::chrono::milliseconds probe_slow{3000};
+    std::chrono::milliseconds probe_slow{1500};
     int floor_kbps = 50;  // the cap never goes below this
   };
 
@@ -73,29 +89,45 @@ class LinkRate {
   void on_written(std::size_t bytes, Clock::time_point handed, Clock::time_point written, const SocketSample& s,
                   int ceiling_kbps);
 
+  // The client received frame `sequence` (Frame.sequence) of `bytes`, handed to the transport at `handed` when its clock
+  // read `received_ms` (a receipt, taken at `now`); `ceiling_kbps` as above.
+  void on_receipt(std::uint32_t sequence, std::size_t bytes, Clock::time_point handed, double received_ms,
+                  Clock::time_point now, int ceiling_kbps);
+
   // The encoder's maximum rate, kbit/s: `ceiling_kbps` while not limiting, else the controller's
   // cap (below the ceiling).
   int cap_kbps(int ceiling_kbps) const;
   // The controller holds the stream below the policy's rate.
   bool limited() const { return limited_; }
-  // Estimates, for /metrics and the page's stats (0 until known).
+  // Estimates, for /metrics and the page's stats (0 until known). The link's rate: the receipts'
+  // bottleneck rate, else the kernel's delivery rate when it was not application-limited.
   double link_kbps() const { return link_kbps_; }
   double rtt_ms() const { return rtt_ms_; }
   double send_delay_ms() const { return delay_ms_; }
   double stream_kbps() const { return stream_kbps_; }  // the rate frames leave at
   double min_rtt_ms() const { return min_rtt_ms_; }    // the connection's minimum round trip
+  double queue_ms() const { return queue_ms_; }        // the newest receipt's queue (0 without)
+  int receipts() const { return receipts_; }
   int decreases() const { return decreases_; }
   // Frames written per second (an exponential average of the intervals; 0 until two frames).
   // The encoder's VBV counts its rate per frame at the stream's nominal 60 frames/s, so a stream
   // that runs at fewer frames spends only rate x fps / 60: the session converts with it.
   double frame_rate() const { return interval_ms_ > 0 ? 1000.0 / interval_ms_ : 0.0; }
   // The encoder overshoots a low VBV rate (x264's frame sizes, the Frame message around each):
-  // the ratio of the cap to the rate the frames really left at, followed while limiting (1
-  // otherwise), by which the session scales the VBV rate it asks for.
+  // the ratio of the cap to the rate the frames really left at, followed while limiting by at
+  // most 3% a frame within [0.5, 1] (1 otherwise), by which the session scales the VBV rate it
+  // asks for. Never above 1: a stream below its cap (the cap rising faster than x264 follows)
+  // must not wind it up into frames larger than the cap once x264 catches up.
   double encoder_gain() const { return gain_; }
 
  private:
-  bool congested(double delay_ms, const SocketSample& s) const;
+  // The cut or the growth, after a written frame or a receipt.
+  void control(Clock::time_point now, const SocketSample& s, int ceiling_kbps);
+  bool congested(double delay_ms, const SocketSample& s, Clock::time_point now) const;
+  // A receipt came within the last 500 ms or 4 frame intervals: the receipts speak for the path.
+  bool receipts_fresh(Clock::time_point now) const;
+  // The queue on the path now, ms: the receipts', else the round trip above its minimum.
+  double path_queue_ms(const SocketSample& s, Clock::time_point now) const;
 
   Params params_;
   bool limited_ = false;
@@ -111,6 +143,20 @@ class LinkRate {
   bool above_known_ = false;
   Clock::time_point above_since_{};
   int decreases_ = 0;
+  SocketSample last_sample_{};  // the newest written frame's, for a receipt's decision
+  // Receipts: the one-way delay's base (the least of this window and the one before), the newest
+  // one's queue above it.
+  bool have_receipt_ = false;
+  Clock::time_point last_receipt_{}, base_since_{};
+  double base_now_ = 0, base_before_ = 0, queue_ms_ = 0;
+  double queue_before_ = 0;             // the queue of the receipt before the newest
+  double receipt_own_ms_ = 0;           // the newest receipt's frame's own time on the wire
+  Clock::time_point receipt_handed_{};  // when that frame was handed to the transport
+  std::uint32_t last_sequence_ = 0;     // the newest receipt's frame and its arrival (client ms)
+  double last_received_ms_ = 0;
+  double receipt_kbps_ = 0;  // the link's rate from queued frames' arrivals (0: none yet)
+  Clock::time_point receipt_kbps_at_{};
+  int receipts_ = 0;
 };
 
 }  // namespace catgs::server

@@ -441,6 +441,7 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
     shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
     if (shared_.settings.frame.adaptive_quality) quality_.on_latency(received, pose.shown_latency_ms());
   }
+  if (pose.received_ms() > 0) on_receipt(pose.received_frame_sequence(), pose.received_ms(), received);
   const bool replaced = frames_.pending().has_value();
   if (replaced) {
     poses_skipped_++;                       // latest pose wins: the older one is never rendered

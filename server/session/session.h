@@ -107,8 +107,9 @@ class Session : public std::enable_shared_from_this<Session> {
   using JobResult = FramePipeline::JobResult;
   // A frame handed to the transport.
   struct Handed {
-    Clock::time_point at;  // when it went to the transport
-    std::size_t bytes;     // its message's size
+    Clock::time_point at;        // when it went to the transport
+    std::size_t bytes;           // its message's size
+    std::uint32_t sequence = 0;  // Frame.sequence
   };
 
   // `received`: when the transport thread handed the message over.
@@ -147,6 +148,12 @@ class Session : public std::enable_shared_from_this<Session> {
   // A frame (handed at frame.at) was written at `written`: the link's rate controller and, with
   // --adaptive-quality, the level's link input (link_rate.h, adaptive_quality.h).
   void on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket);
+  // The encoder's VBV rate for a width x height frame the link's cap sets now (link_rate.h), at
+  // the nominal kStreamFps; 0 where the link does not limit. Updates link_ceiling_kbps_.
+  int link_vbv_kbps(int width, int height);
+  // Pose.received_frame_sequence / received_ms: the client's receipt for a frame, to the link's
+  // controller.
+  void on_receipt(std::uint32_t sequence, double received_ms, Clock::time_point now);
   // Ends the session with Error{code, reason, retry_after_ms} (the last message) and closes;
   // retry_after_ms is the client's reconnect hint (0: none).
   void fail(pb::ErrorCode code, const std::string& reason, bool drop_queued = false, std::uint32_t retry_after_ms = 0);
@@ -188,14 +195,17 @@ class Session : public std::enable_shared_from_this<Session> {
   std::string client_name_;                     // Hello.client_name (logs), at most 128 bytes
   int progress_sent_ = -1;                      // the last LoadProgress percent sent
   int width_ = 0, height_ = 0;
-  int max_bitrate_kbps_ = 0;         // the client's Quality
-  AdaptiveQuality quality_;          // --adaptive-quality
-  FramePacing pacing_;               // --frame-deadline
-  int last_frame_level_ = 0;         // the level of the last frame handed off
-  int in_flight_ = 0;                // frames queued to the transport, not yet written
-  std::deque<Handed> handed_;        // the in-flight frames, in order
-  LinkRate link_;                    // the link's rate controller (--link-control)
-  int link_ceiling_kbps_ = 0;        // the policy's rate for the last job's size (link_rate.h's ceiling)
+  int max_bitrate_kbps_ = 0;                        // the client's Quality
+  AdaptiveQuality quality_;                         // --adaptive-quality
+  FramePacing pacing_;                              // --frame-deadline
+  int last_frame_level_ = 0;                        // the level of the last frame handed off
+  int in_flight_ = 0;                               // frames queued to the transport, not yet written
+  std::deque<Handed> handed_;                       // the in-flight frames, in order
+  static constexpr std::size_t kRecentFrames = 64;  // about a second at 60 frames/s
+  std::deque<Handed> recent_;                       // the last kRecentFrames handed, for the client's receipts
+  std::uint32_t last_receipt_ = UINT32_MAX;         // the newest receipt's frame (none yet)
+  LinkRate link_;                                   // the link's rate controller (--link-control)
+  int link_ceiling_kbps_ = 0;                       // the policy's rate for the last job's size (link_rate.h's ceiling)
   int send_buffer_ = 0;              // the socket's SO_SNDBUF as the session last set it (0: the transport's)
   double last_send_ms_ = 0;          // send time of the last frame written
   Clock::time_point last_progress_;  // last time the transport wrote one of our frames

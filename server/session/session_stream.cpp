@@ -27,15 +27,7 @@ void Session::maybe_start_render() {
   shape.height = AdaptiveQuality::scaled_side(height_, shape.quality_level);
   shape.max_bitrate_kbps = max_bitrate_kbps_;
   shape.previous_send_ms = last_send_ms_;
-  // The link's cap against the policy's rate at this size (link_rate.h), both in bits a second
-  // on the wire: the VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer
-  // frames a second sends that share of it.
-  const double fps_share = std::clamp(link_.frame_rate() / kStreamFps, 0.05, 1.0);
-  const int vbv_ceiling = frames_.policy_bitrate_kbps(shape.width, shape.height, kStreamFps, max_bitrate_kbps_);
-  link_ceiling_kbps_ = vbv_ceiling > 0 ? std::max(1, static_cast<int>(vbv_ceiling * fps_share)) : 0;
-  if (fs.link_control && link_.limited())
-    shape.link_kbps =
-        std::max(1, static_cast<int>(link_.cap_kbps(link_ceiling_kbps_) * link_.encoder_gain() / fps_share));
+  shape.link_kbps = link_vbv_kbps(shape.width, shape.height);  // set again at its encode
   FramePipeline::StartedRender started = frames_.start_render(shape);
   const std::int64_t pixels = static_cast<std::int64_t>(shape.width) * shape.height;
   if (!frames_.pipelined()) {
@@ -62,6 +54,19 @@ void Session::maybe_start_render() {
   });
 }
 
+int Session::link_vbv_kbps(int width, int height) {
+  // The link's cap against the policy's rate at this size (link_rate.h), both in bits a second
+  // on the wire: the VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer
+  // frames a second sends that share of it. At least 10 frames a second's share: frames written
+  // slowly because the link is jammed must not each get a larger share of the cap (a frame of
+  // half a second on the wire at 2 frames/s makes the jam worse).
+  const double fps_share = std::clamp(link_.frame_rate() / kStreamFps, 10.0 / kStreamFps, 1.0);
+  const int vbv_ceiling = frames_.policy_bitrate_kbps(width, height, kStreamFps, max_bitrate_kbps_);
+  link_ceiling_kbps_ = vbv_ceiling > 0 ? std::max(1, static_cast<int>(vbv_ceiling * fps_share)) : 0;
+  if (!shared_.settings.frame.link_control || !link_.limited()) return 0;
+  return std::max(1, static_cast<int>(link_.cap_kbps(link_ceiling_kbps_) * link_.encoder_gain() / fps_share));
+}
+
 void Session::maybe_start_encode() {
   if (frames_.encoding() || !frames_.rendered()) return;
   if (state_ != State::open) {  // nobody to send it to
@@ -81,6 +86,9 @@ void Session::maybe_start_encode() {
     return;
   }
   std::shared_ptr<FramePipeline::Rendered> frame = frames_.start_encode();
+  // The link's cap as it stands now, not when the render started: a cut must reach the next
+  // frame encoded, not one a render later (a frame's time on a slow link).
+  frame->job.shape.link_kbps = link_vbv_kbps(frame->job.shape.width, frame->job.shape.height);
   boost::asio::post(shared_.io, [self = shared_from_this(), frame] {
     JobResult result = self->frames_.encode(*frame);
     boost::asio::post(self->strand_, [self, frame, result = std::move(result)]() mutable {
@@ -137,7 +145,9 @@ void Session::on_job_done(JobResult result) {
     if (!result.refine) quality_.on_frame(result.quality_level, result.total_ms);
     last_frame_level_ = result.quality_level;
   }
-  handed_.push_back({Clock::now(), result.message.size()});
+  handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence});
+  recent_.push_back(handed_.back());
+  if (recent_.size() > kRecentFrames) recent_.pop_front();
   shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
   maybe_start_render();
 }
@@ -181,6 +191,16 @@ void Session::on_link_sample(const Handed& frame, Clock::time_point written, con
                                                 AdaptiveQuality::scaled_side(height_, level - 1))
                               : 0;
   quality_.on_link(link_.limited(), link_.limited() && cap < here, !link_.limited() || cap >= 2 * above);
+}
+
+void Session::on_receipt(std::uint32_t sequence, double received_ms, Clock::time_point now) {
+  if (!shared_.settings.frame.link_control || sequence == last_receipt_) return;
+  // Frames go out in sequence order; a receipt for one no longer in the window says nothing new.
+  for (auto it = recent_.rbegin(); it != recent_.rend(); ++it) {
+    if (it->sequence != sequence) continue;
+    last_receipt_ = sequence;
+    return link_.on_receipt(sequence, it->bytes, it->at, received_ms, now, link_ceiling_kbps_);
+  }
 }
 
 void Session::adapt_quality(Clock::time_point now) {

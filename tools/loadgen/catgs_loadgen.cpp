@@ -55,6 +55,8 @@ const char* kUsage =
     "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
     "  --warmup N               first N frames of a session left out of the statistics (5)\n"
     "  --timeline               every frame's arrival time, latency, size and bytes in the JSON\n"
+    "  --receipts 0|1           each pose carries the newest frame's arrival time, as the page's\n"
+    "                           do (the server's rate controller reads the queue from them; 1)\n"
     "  --warmup-s S             frames of the poses sent in a session's first S seconds left\n"
     "                           out too (0; the settling time a slow link's controller gets)\n"
     "  --stale-ms MS            frames later than this count as stale (default 100)\n"
@@ -153,6 +155,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
   base.warmup_frames = args.get_int("--warmup", 5);
   base.warmup_s = args.get_double("--warmup-s", 0.0);
   base.timeline = args.has("--timeline");
+  base.receipts = args.get_int("--receipts", 1) != 0;
   base.stale_ms = args.get_double("--stale-ms", 100);
   if (args.get_double("--progress", 1) < 0) throw std::invalid_argument("--progress must be >= 0 seconds");
   if (args.has("--scene")) {
@@ -247,7 +250,7 @@ int main(int argc, char** argv) {
          "--scene",       "--scene-name",     "--offset-s",   "--rate",       "--depth",    "--seconds",  "--decode",
          "--check-every", "--check-min-psnr", "--warmup",     "--warmup-s",   "--stale-ms", "--token",    "--json",
          "--ramp!",       "--ramp-step",      "--ramp-start", "--max-p95-ms", "--min-fps",  "--progress", "--tls!",
-         "--help!",       "--timeline!",      "--av1!"});
+         "--help!",       "--timeline!",      "--av1!",       "--receipts"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

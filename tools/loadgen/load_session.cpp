@@ -171,6 +171,12 @@ class PoseLoop {
     // As the web viewer does: the newest frame's latency rides on the next pose to /metrics.
     pose.set_shown_latency_ms(unreported_latency_ms_);
     unreported_latency_ms_ = 0;
+    // And the newest frame's receipt, for the server's rate controller (link_rate.h).
+    if (receipt_.arrived_ms > 0) {
+      pose.set_received_frame_sequence(receipt_.sequence);
+      pose.set_received_ms(receipt_.arrived_ms);
+      receipt_ = {};
+    }
     if (check_) sent_poses_.push_back(pose);
     client_.send_pose(pose);
     r_.poses_sent++;
@@ -185,6 +191,7 @@ class PoseLoop {
   }
 
   void on_frame(const pb::Frame& f) {
+    const double arrived_ms = now_ms();  // before the decode: the receipt is the network's
     r_.frames++;
     if (f.width() > 0 &&
         (static_cast<int>(f.width()) != frame_width_ || static_cast<int>(f.height()) != frame_height_)) {
@@ -207,6 +214,7 @@ class PoseLoop {
     if (cfg_.decode || check_) decode_and_check(f);
     const double latency = now_ms() - f.client_time_ms();
     unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
+    if (cfg_.receipts) receipt_ = {f.sequence(), arrived_ms};
     if (cfg_.timeline && !sent_at_.empty())
       r_.timeline.push_back({(now_ms() - sent_at_.front()) / 1000.0, latency, static_cast<int>(f.width()),
                              static_cast<int>(f.height()), f.payload().size()});
@@ -309,6 +317,10 @@ class PoseLoop {
   std::unique_ptr<cpu::CpuRenderer> reference_;
   double psnr_sum_ = 0;
   double unreported_latency_ms_ = 0;  // the newest frame's latency, for the next Pose
+  struct Receipt {
+    std::uint32_t sequence = 0;
+    double arrived_ms = 0;  // 0: none to send
+  } receipt_;               // the newest frame's arrival, for the next Pose
   std::int64_t newest_answered_ = -1;
   std::uint64_t answered_ = 0;  // distinct poses that got a frame
   int outstanding_ = 0;         // closed loop: poses not yet answered

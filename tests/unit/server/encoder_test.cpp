@@ -378,7 +378,7 @@ TEST(Av1Encoder, RateCapHoldsAndCqLevelFollowsCrf) {
   EXPECT_GT(tight_psnr, 25.0);  // still the scene
   // libaom cannot change a running encoder's rate: the session rebuilds it (a key frame).
   Av1Encoder enc(config(W, H));
-  EXPECT_FALSE(enc.set_max_bitrate_kbps(500));
+  EXPECT_FALSE(enc.set_max_bitrate_kbps(500, 0));
 }
 
 TEST(Av1Encoder, RefusesBadSpeedAndSize) {

@@ -2,9 +2,14 @@
 // cap's size leave a server at 12 frames/s into a FIFO link of a given rate with a deep buffer
 // (as tc's tbf with a large burst); a frame is written once the one before it has left (the
 // server's TCP_NOTSENT_LOWAT), the round trip is the minimum plus the queue ahead, and the
-// delivery rate is the link's while a queue stands (application-limited otherwise).
+// delivery rate is the link's while a queue stands (application-limited otherwise). With
+// receipts, the client (its clock offset by an arbitrary amount) reports each frame's arrival
+// (its last byte out of the link, plus half the minimum round trip) on its next pose, at 60 Hz,
+// which reaches the server another half round trip later.
 // The end-to-end numbers on a real shaped link are scripts/slow_link.sh's (RESULTS.md).
 #include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <chrono>
 #include <vector>
@@ -29,6 +34,27 @@ struct Sim {
   double min_rtt = 20;
   std::vector<double> delays;  // ms from a frame's hand-off to its last byte leaving the link
   std::vector<double> caps;
+  bool receipts = false;
+  double client_offset_ms = 987654.3;  // the client's clock minus the server's
+  struct Receipt {
+    double at_server, received_client, handed;
+    std::uint32_t sequence;
+    std::size_t bytes;
+  };
+  std::vector<Receipt> pending;  // sent by the client, not yet at the server
+  std::uint32_t sequence = 0;
+
+  // Receipts that reached the server by `t_ms`, in order.
+  void deliver_receipts(double t_ms) {
+    std::size_t k = 0;
+    for (; k < pending.size() && pending[k].at_server <= t_ms; ++k) {
+      const Receipt& r = pending[k];
+      const double server_ms = std::chrono::duration<double, std::milli>(at(r.handed).time_since_epoch()).count();
+      link.on_receipt(r.sequence, r.bytes, at(r.handed), server_ms - r.handed + r.received_client, at(r.at_server),
+                      static_cast<int>(ceiling));
+    }
+    pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(k));
+  }
 
   Clock::time_point at(double t_ms) const { return t0 + std::chrono::duration_cast<Clock::duration>(ms(t_ms)); }
   // Runs `seconds` of frames from `from_ms`; returns the time after them.
@@ -36,6 +62,7 @@ struct Sim {
     const double step = 1000.0 / fps;
     double t = from_ms;
     for (; t < from_ms + seconds * 1000.0; t += step) {
+      deliver_receipts(t);
       const double cap = link.cap_kbps(static_cast<int>(ceiling));
       caps.push_back(cap);
       const double bytes = cap * 1000.0 / 8.0 / fps;
@@ -52,6 +79,13 @@ struct Sim {
       s.app_limited = queue_ms < 1000.0 / fps;
       s.delivery_kbps = s.app_limited ? cap : link_kbps;
       link.on_written(static_cast<std::size_t>(bytes), at(t), at(written), s, static_cast<int>(ceiling));
+      if (receipts) {
+        const double arrived = busy_until + min_rtt / 2;
+        const double pose = std::ceil(arrived / (1000.0 / 60)) * (1000.0 / 60);  // the client's next pose
+        pending.push_back(
+            {pose + min_rtt / 2, arrived + client_offset_ms, t, sequence, static_cast<std::size_t>(bytes)});
+      }
+      ++sequence;
     }
     return t;
   }
@@ -80,7 +114,7 @@ TEST(LinkRate, AFastLinkIsNeverLimited) {
 // link is used (the mean cap at least half the link's rate, never far above it).
 TEST(LinkRate, ASlowLinkIsFollowedAndUsed) {
   for (double share : {0.8, 0.5, 0.25}) {
-    Sim sim;
+    Sim sim;  // no receipts: TCP_INFO alone
     sim.link_kbps = share * sim.ceiling;
     double t = sim.run(0, 3);
     const std::size_t settled = sim.delays.size();
@@ -94,24 +128,69 @@ TEST(LinkRate, ASlowLinkIsFollowedAndUsed) {
   }
 }
 
+// The same with the client's receipts: the queue is read from them (whatever the clocks' offset),
+// the delay stays lower still, and the link's rate is the one the receipts measure.
+TEST(LinkRate, ReceiptsReadTheQueueAndTheLinksRate) {
+  for (double share : {0.8, 0.5, 0.25}) {
+    Sim sim;
+    sim.receipts = true;
+    sim.link_kbps = share * sim.ceiling;
+    double t = sim.run(0, 3);
+    const std::size_t settled = sim.delays.size();
+    t = sim.run(t, 20);
+    EXPECT_GT(sim.link.receipts(), 200) << share;
+    EXPECT_TRUE(sim.link.limited()) << share;
+    EXPECT_LT(sim.p95_delay(settled), 350.0) << share;
+    EXPECT_GT(sim.mean_cap(settled), 0.6 * sim.link_kbps) << share;
+    EXPECT_LT(sim.mean_cap(settled), 1.1 * sim.link_kbps) << share;
+    EXPECT_NEAR(sim.link.link_kbps(), sim.link_kbps, 0.1 * sim.link_kbps) << share;
+    std::printf("receipts, link %.0f%%: p95 delay %.0f ms, mean cap %.0f of %.0f kbit/s, %d cuts\n", 100 * share,
+                sim.p95_delay(settled), sim.mean_cap(settled), sim.link_kbps, sim.link.decreases());
+  }
+}
+
+// A receipt's queue is its one-way delay above the least one seen: 0 on an idle path whatever the
+// clocks' offset, the wait of a frame that stood behind others.
+TEST(LinkRate, ReceiptQueueIsTheDelayAboveItsBase) {
+  LinkRate l;
+  const auto t0 = Clock::now();
+  const double offset = -5.0e6;  // the client's clock far behind the server's
+  auto server_ms = [](Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(t.time_since_epoch()).count();
+  };
+  for (std::uint32_t k = 0; k < 5; ++k) {
+    const auto handed = t0 + std::chrono::milliseconds(100 * k);
+    l.on_receipt(k, 1000, handed, server_ms(handed) + offset + 12.0, handed + std::chrono::milliseconds(20), 400);
+    EXPECT_NEAR(l.queue_ms(), 0.0, 1e-6) << k;
+  }
+  const auto handed = t0 + std::chrono::milliseconds(500);
+  l.on_receipt(5, 1000, handed, server_ms(handed) + offset + 12.0 + 200.0, handed + std::chrono::milliseconds(230),
+               400);
+  EXPECT_NEAR(l.queue_ms(), 200.0, 1e-6);
+  EXPECT_TRUE(l.limited()) << "a 200 ms queue is congestion";
+}
+
 // Unshaped -> 25% -> unshaped: the cap falls within a few seconds of the step down and is back
 // at the policy's rate within 5 s of the step up (the link got faster: probing speeds up past the
 // rate where it filled last time).
 TEST(LinkRate, StepsDownAndBackUp) {
-  Sim sim;
-  sim.link_kbps = 4 * sim.ceiling;
-  double t = sim.run(0, 5);
-  EXPECT_FALSE(sim.link.limited());
-  sim.link_kbps = 0.25 * sim.ceiling;
-  const std::size_t down = sim.delays.size();
-  t = sim.run(t, 10);
-  EXPECT_TRUE(sim.link.limited());
-  EXPECT_LT(sim.p95_delay(down + 36), 500.0);  // from 3 s after the step
-  sim.link_kbps = 4 * sim.ceiling;
-  const std::size_t up = sim.caps.size();
-  t = sim.run(t, 5);
-  EXPECT_FALSE(sim.link.limited()) << "still capped at " << sim.caps.back() << " 5 s after the step up";
-  EXPECT_GT(sim.caps.size(), up);
+  for (bool receipts : {false, true}) {
+    Sim sim;
+    sim.receipts = receipts;
+    sim.link_kbps = 4 * sim.ceiling;
+    double t = sim.run(0, 5);
+    EXPECT_FALSE(sim.link.limited()) << receipts;
+    sim.link_kbps = 0.25 * sim.ceiling;
+    const std::size_t down = sim.delays.size();
+    t = sim.run(t, 10);
+    EXPECT_TRUE(sim.link.limited()) << receipts;
+    EXPECT_LT(sim.p95_delay(down + 36), 500.0) << receipts;  // from 3 s after the step
+    sim.link_kbps = 4 * sim.ceiling;
+    const std::size_t up = sim.caps.size();
+    t = sim.run(t, 5);
+    EXPECT_FALSE(sim.link.limited()) << receipts << ": still capped at " << sim.caps.back() << " 5 s after the step up";
+    EXPECT_GT(sim.caps.size(), up);
+  }
 }
 
 TEST(LinkRate, NeverBelowTheFloorAndTheGainFollowsTheEncoder) {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 
 #include "proto/message_validation.h"
@@ -97,19 +98,31 @@ TEST(MessageValidation, QualityBitrateRange) {
   }
 }
 
-TEST(MessageValidation, ShownLatencyIsFiniteAndBounded) {
+// A Pose's time field: the values in `ok` pass, those in `bad` are INVALID_ARGUMENT.
+void expect_pose_time_bounds(void (pb::Pose::*set)(double), std::initializer_list<double> ok,
+                             std::initializer_list<double> bad) {
   CameraPose out;
   pb::Pose p = pose_with_orientation(1, 0, 0, 0);
-  for (double ok : {0.0, 16.7, 3.6e6}) {
-    p.set_shown_latency_ms(ok);
-    EXPECT_FALSE(check_pose(p, out).has_value()) << ok;
+  for (double v : ok) {
+    (p.*set)(v);
+    EXPECT_FALSE(check_pose(p, out).has_value()) << v;
   }
-  for (double bad : {-1.0, 3.6e6 + 1, std::nan(""), std::numeric_limits<double>::infinity()}) {
-    p.set_shown_latency_ms(bad);
-    const auto v = check_pose(p, out);
-    ASSERT_TRUE(v.has_value()) << bad;
-    EXPECT_EQ(v->code, pb::ERROR_INVALID_ARGUMENT);
+  for (double v : bad) {
+    (p.*set)(v);
+    const auto violation = check_pose(p, out);
+    ASSERT_TRUE(violation.has_value()) << v;
+    EXPECT_EQ(violation->code, pb::ERROR_INVALID_ARGUMENT);
   }
+}
+
+TEST(MessageValidation, ShownLatencyIsFiniteAndBounded) {
+  expect_pose_time_bounds(&pb::Pose::set_shown_latency_ms, {0.0, 16.7, 3.6e6},
+                          {-1.0, 3.6e6 + 1, std::nan(""), std::numeric_limits<double>::infinity()});
+}
+
+TEST(MessageValidation, FrameReceiptTimeIsFiniteAndBounded) {
+  expect_pose_time_bounds(&pb::Pose::set_received_ms, {0.0, 12345.678, 1e15},
+                          {-0.5, 1e15 * 1.01, std::nan(""), -std::numeric_limits<double>::infinity()});
 }
 
 // ---- ExportVideoRequest (issue 38: "Export video" from the page) ----
