@@ -8,7 +8,7 @@
 #
 # usage: scripts/slow_link.sh BIN_DIR SCENE [--seconds 15] [--warmup 3] [--fractions 0.8,0.5,0.25]
 #          [--check] [--p95-margin 300] [--max-ms 1000] [--min-fps 0.4] [--min-use 0.7] [--step]
-#          [--json OUT] [-- SERVER_ARGS...]
+#          [--no-receipts] [--json OUT] [-- SERVER_ARGS...]
 #   The bounds (issue 50's by default): after WARMUP s, p95 <= unshaped p95 + P95_MARGIN ms, no
 #   frame later than MAX_MS after its pose, FPS >= MIN_FPS x unshaped, received >= MIN_USE x the
 #   link.
@@ -18,6 +18,8 @@
 #   --step instead: one 30 s session on a link that steps unshaped -> the last fraction ->
 #   unshaped, 10 s each: p95 and max latency from 3 s after the step down to the step up, and
 #   when the received rate (1 s windows) is back at 90% of the unshaped run's after the step up.
+#   --no-receipts: the namespace's client sends no frame receipts (catgs-loadgen --receipts 0), so
+#   the server's rate controller reads the path from TCP_INFO alone, as for an older client.
 #   SERVER_ARGS replace the default server settings after the scene (--renderer cpu --bitrate
 #   2000 --crf 8: a 640x360 stream of about 400 kbit/s at the CPU's 12 frames/s).
 # Needs root, ip netns and tc (iproute2); without them it prints SKIP and exits 77 (ctest's skip
@@ -27,7 +29,7 @@ set -uo pipefail
 bin=$1 scene=$2
 shift 2
 seconds=15 warmup=3 fractions=0.8,0.5,0.25 check=0 json="" p95_margin=300 min_use=0.7 step=0 max_ms=1000 min_fps=0.4
-beside=0
+beside=0 receipts=1
 server_args=(--renderer cpu --bitrate 2000 --crf 8)
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -35,6 +37,7 @@ while [ $# -gt 0 ]; do
     --warmup) warmup=$2; shift 2 ;;
     --fractions) fractions=$2; shift 2 ;;
     --check) check=1; shift ;;
+    --no-receipts) receipts=0; shift ;;
     --step) step=1; shift ;;
     --beside) beside=$2; shift 2 ;;
     --p95-margin) p95_margin=$2; shift 2 ;;
@@ -95,8 +98,8 @@ run() {
   tc qdisc del dev "$host_if" root 2>/dev/null
   [ "$rate" = none ] || tc qdisc add dev "$host_if" root tbf rate "${rate}kbit" burst 16kb latency 300ms
   ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions 1 --size 640x360 \
-    --trace orbit --rate 60 --decode 1 --seconds "$seconds" --warmup-s "$warmup" --json "$work/$name.json" \
-    > "$work/$name.txt" 2>&1
+    --trace orbit --rate 60 --decode 1 --seconds "$seconds" --warmup-s "$warmup" --receipts "$receipts" \
+    --json "$work/$name.json" > "$work/$name.txt" 2>&1
 }
 
 run unshaped none
@@ -134,7 +137,8 @@ if [ "$step" = 1 ]; then
     sleep 10; tc qdisc del dev "$host_if" root ) &
   shaper=$!
   ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions 1 --size 640x360 \
-    --trace orbit --rate 60 --decode 1 --seconds 30 --timeline --json "$work/step.json" > "$work/step.txt" 2>&1
+    --trace orbit --rate 60 --decode 1 --seconds 30 --receipts "$receipts" --timeline --json "$work/step.json" \
+    > "$work/step.txt" 2>&1
   wait "$shaper"
   python3 - "$work" "$unshaped_kbps" "$r" "$json" <<'PY'
 import json, sys

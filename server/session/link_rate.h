@@ -67,11 +67,11 @@ class LinkRate {
     double queue_ms = 40.0;                        // the receipts' one-way delay above its base that means a queue
     std::chrono::milliseconds base_window{10000};  // the receipts' base is the least of 1-2 of these
     double decrease = 0.85;                        // of the link's rate, on congestion
-    double increase_per_s = 0.5;
+    double increase_per_s = 0.7;
     std::chrono::milliseconds hold{400};
     std::chrono::milliseconds probe_after{500};
     std::chrono::milliseconds drain{1000};  // a standing queue is emptied within this
-    double resume = 0.7;                    // of the known rate, once the queue has drained
+    double resume = 0.8;                    // of the known rate, once the queue has drained
     double increase_slow_per_s = 0.05;      // just above the known rate
     std::chrono::milliseconds probe_slow{1500};
     int floor_kbps = 50;  // the cap never goes below this
