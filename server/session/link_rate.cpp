@@ -40,9 +40,8 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   // too, on a link with room to spare.
   const bool socket_full = !s.valid || s.notsent_bytes > 0 || !s.app_limited;
   if (socket_full && delay_ms > std::max(params_.delay_ms, own)) return true;
-  // The client's receipts show the queue frame by frame (its own time on the wire taken out);
-  // TCP's round trip is smoothed over about eight ACKs and lags it by several frames.
-  // Above `queue_ms` and its own time; or above `queue_ms` and grown by a quarter of it since the
+  // The client's receipts show the queue frame by frame; TCP's round trip is smoothed over about
+  // eight ACKs and lags it by several frames. Congested: above `queue_ms` and the frame's own time; or above `queue_ms` and grown by a quarter of it since the
   // receipt before: a queue building, seen before it stands as high as a frame's own time (a
   // delay gradient, as GCC reads one; a token bucket's queue appears at once when its burst is
   // spent).
@@ -104,7 +103,8 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
       if (interval_ms_ > 0) stream_kbps_ = bytes_avg_ * 8.0 / interval_ms_;  // bits per ms = kbit/s
     }
   }
-  // Steer the encoder onto the cap: a stream above it asks for less next time, one below for more.
+  // Steer the encoder onto the cap: a stream above it asks for less next time, one below for more,
+  // up to the cap itself.
   if (limited_ && stream_kbps_ > 0)
     gain_ = std::clamp(gain_ * std::clamp(cap_ / stream_kbps_, 0.97, 1.03), 0.5, 1.0);
   else if (!limited_)
@@ -143,9 +143,8 @@ void LinkRate::control(Clock::time_point now, const SocketSample& s, int ceiling
     // Still congested a round trip after a cut: the queue is not draining, so the cap falls
     // below the link's estimate too (multiplicative decrease from where it is). And the queue
     // standing on the path (the receipts' queue, else the round trip above its minimum; at the
-    // link's rate) is drained
-    // within drain_ms: that much less for a while, so a shaper's deep buffer empties in about a
-    // second instead of holding the frames behind it.
+    // link's rate) is drained within drain_ms: that much less for a while, so a shaper's deep
+    // buffer empties in about a second instead of holding the frames behind it.
     double cap = params_.decrease * (estimate > 0 ? std::min(estimate, from) : from);
     if (estimate > 0) cap -= estimate * queue_ms / static_cast<double>(params_.drain.count());
     cap_ = std::max<double>(params_.floor_kbps, cap);
