@@ -8,7 +8,7 @@
 #
 # usage: scripts/slow_link.sh BIN_DIR SCENE [--seconds 15] [--warmup 3] [--fractions 0.8,0.5,0.25]
 #          [--check] [--p95-margin 300] [--max-ms 1000] [--min-fps 0.4] [--min-use 0.7] [--step]
-#          [--no-receipts] [--json OUT] [-- SERVER_ARGS...]
+#          [--beside N | --step | --ramp MAX] [--no-receipts] [--json OUT] [-- SERVER_ARGS...]
 #   The bounds (issue 50's by default): after WARMUP s, p95 <= unshaped p95 + P95_MARGIN ms, no
 #   frame later than MAX_MS after its pose, FPS >= MIN_FPS x unshaped, received >= MIN_USE x the
 #   link.
@@ -18,6 +18,9 @@
 #   --step instead: one 30 s session on a link that steps unshaped -> the last fraction ->
 #   unshaped, 10 s each: p95 and max latency from 3 s after the step down to the step up, and
 #   when the received rate (1 s windows) is back at 90% of the unshaped run's after the step up.
+#   --ramp MAX instead: catgs-loadgen --ramp (+1 a step, up to MAX sessions, bound p95 <= unshaped
+#   p95 + P95_MARGIN) in the namespace, all its sessions sharing one link shaped at the last
+#   fraction of MAX unshaped streams (a household or a classroom behind one slow line).
 #   --no-receipts: the namespace's client sends no frame receipts (catgs-loadgen --receipts 0), so
 #   the server's rate controller reads the path from TCP_INFO alone, as for an older client.
 #   SERVER_ARGS replace the default server settings after the scene (--renderer cpu --bitrate
@@ -29,7 +32,7 @@ set -uo pipefail
 bin=$1 scene=$2
 shift 2
 seconds=15 warmup=3 fractions=0.8,0.5,0.25 check=0 json="" p95_margin=300 min_use=0.7 step=0 max_ms=1000 min_fps=0.4
-beside=0 receipts=1
+beside=0 receipts=1 ramp=0
 server_args=(--renderer cpu --bitrate 2000 --crf 8)
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -38,6 +41,7 @@ while [ $# -gt 0 ]; do
     --fractions) fractions=$2; shift 2 ;;
     --check) check=1; shift ;;
     --no-receipts) receipts=0; shift ;;
+    --ramp) ramp=$2; shift 2; [[ "$ramp" =~ ^[0-9]+$ ]] || { echo "slow_link.sh: --ramp needs a count" >&2; exit 2; } ;;
     --step) step=1; shift ;;
     --beside) beside=$2; shift 2 ;;
     --p95-margin) p95_margin=$2; shift 2 ;;
@@ -77,20 +81,26 @@ ip netns exec "$ns" ip link set lo up
 
 "$bin/catgs-server" --scene "$scene" --bind "$host_ip" --port "$port" "${server_args[@]}" > "$work/server.log" 2>&1 &
 server_pid=$!
+# GET PATH from the server (HTTP/1.0): the response, status line first.
+get() {
+  exec 3<>"/dev/tcp/$host_ip/$port" || return 1
+  printf 'GET %s HTTP/1.0\r\nHost: %s\r\n\r\n' "$1" "$host_ip" >&3
+  timeout 2 cat <&3
+  exec 3<&-
+}
 # Ready once /readyz answers 200: the port opens while the scene still loads, and a session
 # then would be refused (SERVER_FULL, "the scene is loading").
 ready() {
-  exec 3<>"/dev/tcp/$host_ip/$port" || return 1
-  printf 'GET /readyz HTTP/1.0\r\nHost: %s\r\n\r\n' "$host_ip" >&3
   local status
-  read -r -t 2 _ status _ <&3
-  exec 3<&-
+  status=$(get /readyz | head -1 | cut -d' ' -f2)
   [ "$status" = 200 ]
 }
 for _ in $(seq 150); do
   ready 2>/dev/null && break
+  kill -0 "$server_pid" 2>/dev/null || { echo "slow_link.sh: the server exited:" >&2; cat "$work/server.log" >&2; exit 1; }
   sleep 0.2
 done
+ready 2>/dev/null || { echo "slow_link.sh: the server is not ready after 30 s" >&2; exit 1; }
 
 # run NAME RATE_KBIT|none: one session, its loadgen JSON in $work/NAME.json.
 run() {
@@ -166,6 +176,35 @@ if out:
 PY
   exit 0
 fi
+if [ "$ramp" -gt 0 ]; then
+  # One link shared by the ramp's sessions, at the last fraction of MAX unshaped streams: at MAX
+  # sessions each one's fair share is that fraction of its stream.
+  f=${fractions##*,}
+  r=$(python3 -c "print(max(16, round($unshaped_kbps * $f * $ramp)))")
+  bound=$(python3 -c "import json;print(round(json.load(open('$work/unshaped.json'))['run']['sessions'][0]['latency']['p95_ms'] + $p95_margin))")
+  tc qdisc add dev "$host_if" root tbf rate "${r}kbit" burst 16kb latency 300ms
+  ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions "$ramp" --ramp \
+    --ramp-step +1 --max-p95-ms "$bound" --min-fps 0 --size 640x360 --trace orbit --rate 60 --decode 1 \
+    --seconds "$seconds" --warmup-s "$warmup" --receipts "$receipts" --json "$work/ramp.json" > "$work/ramp.txt" 2>&1
+  tc qdisc del dev "$host_if" root 2>/dev/null
+  echo "one link of $r kbit/s shared by 1..$ramp sessions (bound: p95 <= unshaped + $p95_margin = $bound ms)"
+  grep -E "^ramp:" "$work/ramp.txt"
+  python3 - "$work" "$r" "$json" <<'PY'
+import json, sys
+work, rate, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+report = json.load(open(f"{work}/ramp.json"))
+print("| sessions | p95 / max ms | FPS min | kbit/s per session, min / total of the link |")
+print("|---|---|---|---|")
+for step in report["ramp"]:
+    t = step["total"]
+    kbps = [s["bytes_per_second"] * 8 / 1000 for s in step["sessions"]] or [0]
+    print(f'| {len(step["sessions"])} | {t["latency"]["p95_ms"]:.0f} / {t["latency"]["max_ms"]:.0f} | {t["fps_min"]:.1f} '
+          f'| {min(kbps):.0f} / {sum(kbps) / rate:.0%} |')
+if out:
+    json.dump(report, open(out, "w"))
+PY
+  exit 0
+fi
 names=(unshaped) rates=(none)
 for f in ${fractions//,/ }; do
   r=$(python3 -c "print(max(16, round($unshaped_kbps * $f)))")
@@ -173,12 +212,17 @@ for f in ${fractions//,/ }; do
   names+=("link_$f") rates+=("$r")
 done
 tc qdisc del dev "$host_if" root 2>/dev/null
+# The receipts the server read (catgs_frame_receipts_total): with them on, the controller must
+# have seen the client's; with --no-receipts, none.
+receipts_read=$(get /metrics | sed -n 's/^catgs_frame_receipts_total \([0-9]*\).*/\1/p')
 
-python3 - "$work" "$check" "$json" "$warmup" "${names[*]}" "${rates[*]}" "$p95_margin" "$min_use" "$max_ms" "$min_fps" <<'PY'
+python3 - "$work" "$check" "$json" "$warmup" "${names[*]}" "${rates[*]}" "$p95_margin" "$min_use" "$max_ms" "$min_fps" \
+  "$receipts" "${receipts_read:-missing}" <<'PY'
 import json, sys
 work, check, out, warmup = sys.argv[1], sys.argv[2] == "1", sys.argv[3], float(sys.argv[4])
 names, rates = sys.argv[5].split(), sys.argv[6].split()
 p95_margin, min_use, max_ms, min_fps = float(sys.argv[7]), float(sys.argv[8]), float(sys.argv[9]), float(sys.argv[10])
+receipts_on, receipts_read = sys.argv[11] == "1", sys.argv[12]
 rows = []
 for name, rate in zip(names, rates):
     s = json.load(open(f"{work}/{name}.json"))["run"]["sessions"][0]
@@ -208,6 +252,10 @@ for r in rows[1:]:
         failed.append(f'{r["link"]}: received {r["received_kbit"]:.0f} kbit/s < {100 * min_use:g}% of the link {r["rate_kbit"]}')
 for r in rows:
     if r["errors"]: failed.append(f'{r["link"]}: {r["errors"]} errors ({r["first_error"]})')
+frames = sum(json.load(open(f"{work}/{n}.json"))["run"]["sessions"][0]["frames"] for n in names)
+print(f"frame receipts the server read: {receipts_read} (of {frames} frames)")
+if not receipts_read.isdigit() or (int(receipts_read) < frames // 2 if receipts_on else int(receipts_read) != 0):
+    failed.append(f"catgs_frame_receipts_total {receipts_read} with receipts {'on' if receipts_on else 'off'}, {frames} frames")
 for f in failed: print("FAIL:", f)
 sys.exit(1 if check and failed else 0)
 PY

@@ -357,6 +357,7 @@ function rejectDepthRequests() {
 function onClose(info) {
   const { code, reason, retryInMs, error, permanent, reached } = info;
   state.sessionOpen = false;
+  state.receipt = null; // the next session's frames are numbered anew
   rejectDepthRequests();
   state.videoExport.onClosed();
   state.closeInfo = info;
@@ -380,8 +381,9 @@ function onMessage(kind, msg) {
       onWelcome(msg);
       break;
     case 'frame':
+      if (!state.sessionOpen) break;
       state.receipt = { sequence: msg.sequence, receivedMs: performance.now() };
-      if (state.sessionOpen) state.decoder.decode(msg);
+      state.decoder.decode(msg);
       break;
     case 'stats':
       overlay.setServerStats(msg);

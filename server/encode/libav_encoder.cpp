@@ -1,5 +1,6 @@
 #include "encode/libav_encoder.h"
 
+#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 
@@ -154,7 +155,10 @@ bool LibavEncoder::set_max_bitrate_kbps(int kbps, int vbv_buffer_ms) {
                            ? vbv_buffer_ms / 1000.0
                            : static_cast<double>(ctx_->rc_buffer_size) / static_cast<double>(ctx_->rc_max_rate);
   ctx_->rc_max_rate = static_cast<std::int64_t>(kbps) * 1000;
-  ctx_->rc_buffer_size = static_cast<int>(std::min<double>(static_cast<double>(ctx_->rc_max_rate) * vbv_s, INT_MAX));
+  // libavcodec hands x264 the buffer in whole kbit: at least one, or a low rate's small buffer
+  // would round to none.
+  ctx_->rc_buffer_size =
+      static_cast<int>(std::clamp<double>(static_cast<double>(ctx_->rc_max_rate) * vbv_s, 1000.0, INT_MAX));
   return true;
 }
 

@@ -96,8 +96,13 @@ std::string ServerMetrics::prometheus_text() const {
       "Sessions whose stream bitrate their link holds below the policy's rate now (--link-control).",
       sessions_link_limited.load());
   put("catgs_link_rate_decreases_total", "counter",
-      "Link control: a session's bitrate cut because its frames backed up or its round trip grew.",
+      "Link control: a session's bitrate cut because its frames backed up, its receipts showed a queue or its "
+      "round trip grew.",
       link_rate_decreases_total.load());
+  put("catgs_frame_receipts_total", "counter",
+      "Link control: clients' frame receipts (Pose.received_ms) matched to a frame sent and read by the rate "
+      "controller (0 while no client sends them: its round trip alone then).",
+      frame_receipts_total.load());
   put("catgs_refine_frames_total", "counter", "Adaptive quality: full-size frames sent when the camera stopped.",
       refine_frames_total.load());
   put("catgs_scenes_loaded", "gauge", "Scenes in memory (--scene; loaded on first use).", scenes_loaded.load());

@@ -105,10 +105,11 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> encoder_fallbacks_total{0};
   // --adaptive-quality (session/adaptive_quality.h): level changes and refine frames.
   std::atomic<std::uint64_t> quality_down_total{0}, quality_up_total{0}, refine_frames_total{0};
-  // --link-control (session/link_rate.h): sessions whose bitrate the link holds down now, and
-  // the cuts made.
+  // --link-control (session/link_rate.h): sessions whose bitrate the link holds down now, the
+  // cuts made, and the clients' frame receipts the controller read (Pose.received_ms).
   std::atomic<std::int64_t> sessions_link_limited{0};
   std::atomic<std::uint64_t> link_rate_decreases_total{0};
+  std::atomic<std::uint64_t> frame_receipts_total{0};
 
   // Scenes (process/scene_store.h, kept by the store): loaded now, their host bytes, and loads
   // that finished, loads that failed and unloads under --scene-memory-mb.

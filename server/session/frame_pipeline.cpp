@@ -402,6 +402,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();
   r.frame_sequence = job.frame_sequence;
+  r.link_read_at = job.shape.link_read_at;
   return r;
 }
 

@@ -61,11 +61,12 @@ class FramePipeline {
   };
   // What a render job is asked for, as the session decided it.
   struct JobShape {
-    int width = 0, height = 0;    // pixels, after adaptive quality's scaling
-    int quality_level = 0;        // AdaptiveQuality level the size was scaled to
-    int max_bitrate_kbps = 0;     // Quality.max_bitrate_kbps (0: the server's default)
-    int link_kbps = 0;            // the link's rate cap (link_rate.h; 0: not limiting)
-    double previous_send_ms = 0;  // FrameTimings.previous_send_ms
+    int width = 0, height = 0;                             // pixels, after adaptive quality's scaling
+    int quality_level = 0;                                 // AdaptiveQuality level the size was scaled to
+    int max_bitrate_kbps = 0;                              // Quality.max_bitrate_kbps (0: the server's default)
+    int link_kbps = 0;                                     // the link's rate cap (link_rate.h; 0: not limiting)
+    std::chrono::steady_clock::time_point link_read_at{};  // when link_kbps was read (at the encode)
+    double previous_send_ms = 0;                           // FrameTimings.previous_send_ms
   };
   struct Job {
     PendingPose pose;
@@ -108,7 +109,8 @@ class FramePipeline {
     float lod_error_px = 0;  // as Rendered's
     std::uint64_t splats = 0;
     std::size_t payload_bytes = 0;
-    std::uint32_t frame_sequence = 0;  // Frame.sequence
+    std::uint32_t frame_sequence = 0;                      // Frame.sequence
+    std::chrono::steady_clock::time_point link_read_at{};  // JobShape's: the rate it was encoded at
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
     double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;

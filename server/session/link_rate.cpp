@@ -2,6 +2,7 @@
 #include "session/link_rate.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace catgs::server {
 
@@ -25,8 +26,12 @@ bool LinkRate::receipts_fresh(Clock::time_point now) const {
   return have_receipt_ && ms_between(last_receipt_, now) < stale_ms;
 }
 
+bool LinkRate::network_busy(const SocketSample& s) const {
+  return !s.valid || s.rtt_ms - s.min_rtt_ms > params_.idle_rtt_ms;
+}
+
 double LinkRate::path_queue_ms(const SocketSample& s, Clock::time_point now) const {
-  if (receipts_fresh(now)) return queue_ms_;
+  if (receipts_fresh(now)) return network_busy(s) ? queue_ms_ : 0.0;
   return s.valid ? std::max(0.0, s.rtt_ms - s.min_rtt_ms) : 0.0;
 }
 
@@ -45,22 +50,26 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   // receipt before: a queue building, seen before it stands as high as a frame's own time (a
   // delay gradient, as GCC reads one; a token bucket's queue appears at once when its burst is
   // spent).
+  // Only while TCP sees the network busy: late receipts over an idle network are the client's own
+  // delay between reads, which a lower rate would not shorten.
   if (receipts_fresh(now)) {
+    if (!network_busy(s)) return false;
     const bool building = queue_ms_ > params_.queue_ms && queue_ms_ > queue_before_ + params_.queue_ms / 4;
     return building || queue_ms_ > params_.queue_ms + receipt_own_ms_;
   }
   return s.valid && s.rtt_ms - s.min_rtt_ms > std::max(params_.rtt_rise_ms, own);
 }
 
-void LinkRate::on_receipt(std::uint32_t sequence, std::size_t bytes, Clock::time_point handed, double received_ms,
-                          Clock::time_point now, int ceiling_kbps) {
+void LinkRate::on_receipt(const Receipt& r, Clock::time_point now, int ceiling_kbps) {
   // The one-way delay up to the two clocks' offset, which the minimum takes out.
-  const double delay = received_ms - std::chrono::duration<double, std::milli>(handed.time_since_epoch()).count();
+  const double delay = r.received_ms - std::chrono::duration<double, std::milli>(r.handed.time_since_epoch()).count();
+  if (!std::isfinite(delay)) return;
   // The frame's own time on the wire at the link's rate is no queue (congested()). It is not
   // taken out of the delay: a token bucket's burst sends a frame after a pause at the line's
   // rate, and the base would fall below the path's real one.
-  receipt_own_ms_ = link_kbps_ > 0 ? std::min(static_cast<double>(bytes) * 8.0 / link_kbps_, 1.5 * interval_ms_) : 0.0;
-  receipt_handed_ = handed;
+  receipt_own_ms_ =
+      link_kbps_ > 0 ? std::min(static_cast<double>(r.bytes) * 8.0 / link_kbps_, 1.5 * interval_ms_) : 0.0;
+  receipt_rate_at_ = r.rate_at;
   // The base: the least delay over the last one to two windows, so that the clocks' drift or a
   // new route moves it within a window.
   if (!have_receipt_ || now - base_since_ > params_.base_window) {
@@ -74,16 +83,22 @@ void LinkRate::on_receipt(std::uint32_t sequence, std::size_t bytes, Clock::time
   // A frame that waited behind the one before it (a queue, the two received in turn) arrived
   // its own time on the wire after it: its bytes over that interval are the link's rate, the
   // bottleneck's own (the kernel's estimate is taken at the sender, and a shaper's burst
-  // inflates it).
-  const double gap_ms = received_ms - last_received_ms_;
-  if (have_receipt_ && sequence == last_sequence_ + 1 && queue_ms_ > params_.queue_ms / 2 && gap_ms > 0) {
-    receipt_kbps_ = average(receipt_kbps_, static_cast<double>(bytes) * 8.0 / gap_ms);
-    receipt_kbps_at_ = now;
-    link_kbps_ = receipt_kbps_;
-    if (limited_) known_kbps_ = known_kbps_ > 0 ? average(known_kbps_, receipt_kbps_) : receipt_kbps_;
+  // inflates it). Gaps under a millisecond (a coarse client clock, messages read together) say
+  // nothing; a sample beyond four times the ceiling is not this stream's link.
+  const double gap_ms = r.received_ms - last_received_ms_;
+  const double ceiling = ceiling_kbps > 0 ? ceiling_kbps : kNoCeilingKbps;
+  if (have_receipt_ && r.sequence == last_sequence_ + 1 && queue_ms_ > params_.queue_ms / 2 && gap_ms >= 1.0 &&
+      network_busy(last_sample_)) {
+    const double sample = static_cast<double>(r.bytes) * 8.0 / gap_ms;
+    if (sample <= 4.0 * ceiling) {
+      receipt_kbps_ = average(receipt_kbps_, std::max<double>(params_.floor_kbps, sample));
+      receipt_kbps_at_ = now;
+      link_kbps_ = receipt_kbps_;
+      if (limited_) known_kbps_ = known_kbps_ > 0 ? average(known_kbps_, receipt_kbps_) : receipt_kbps_;
+    }
   }
-  last_sequence_ = sequence;
-  last_received_ms_ = received_ms;
+  last_sequence_ = r.sequence;
+  last_received_ms_ = r.received_ms;
   have_receipt_ = true;
   last_receipt_ = now;
   ++receipts_;
@@ -134,10 +149,13 @@ void LinkRate::control(Clock::time_point now, const SocketSample& s, int ceiling
     // One cut per hold or round trip, whichever is longer: the last one must reach the queue first.
     const auto hold = std::max<Clock::duration>(
         params_.hold, std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(rtt_ms_)));
-    if (have_cut_ && now - last_cut_ < hold) return;
-    // With receipts, a second cut waits for a frame handed after the first to arrive: those
-    // before it were encoded at the old rate and say nothing of the new one.
-    if (have_cut_ && receipts_fresh(now) && receipt_handed_ <= last_cut_) return;
+    // A cap above the link's measured rate can only grow the queue (a cut made before the link's
+    // rate was known, from the stream's own): it is cut again at once. Otherwise the last cut must
+    // show first: with receipts, a frame encoded at its rate must have arrived (those before it
+    // say nothing of it).
+    const bool above_link = limited_ && link_kbps_ > 0 && cap_ > link_kbps_;
+    if (!above_link && have_cut_ && now - last_cut_ < hold) return;
+    if (!above_link && have_cut_ && receipts_fresh(now) && receipt_rate_at_ <= last_cut_) return;
     const double estimate = link_kbps_ > 0 ? link_kbps_ : stream_kbps_;
     const double from = limited_ ? cap_ : ceiling;
     // Still congested a round trip after a cut: the queue is not draining, so the cap falls
@@ -162,7 +180,7 @@ void LinkRate::control(Clock::time_point now, const SocketSample& s, int ceiling
   if (now < probe_from) return;
   // The queue has drained (the round trip is back near its minimum): straight back to a safe
   // share of what the link carried when it filled, instead of climbing there from the drain.
-  const bool drained = receipts_fresh(now) ? queue_ms < params_.queue_ms / 2
+  const bool drained = receipts_fresh(now) ? queue_ms < params_.queue_ms / 2  // 0 on an idle network
                                            : !s.valid || s.rtt_ms - s.min_rtt_ms < params_.rtt_rise_ms / 4;
   if (drained && known_kbps_ > 0 && cap_ < params_.resume * known_kbps_) cap_ = params_.resume * known_kbps_;
   // Growth: fast below the known rate; slow for `probe_slow` just above it (that is where the

@@ -29,7 +29,8 @@
 //   one; a token bucket's queue appears at once when its burst is spent); without receipts, the
 //   smoothed RTT passes the minimum by `rtt_rise_ms` (at least 1.5 frame intervals). Then, at
 //   most once per `hold` or round trip (the previous cut must show in the queue first) and, with
-//   receipts, only once a frame handed after the last cut has arrived, the cap drops to
+//   receipts, only once a frame encoded at the rate the last cut set has arrived (at once while the
+//   cap stands above the link's measured rate: a first cut before the rate was known), the cap drops to
 //   `decrease` x the link's rate (the receipts', else the kernel's last estimate that was not
 //   application-limited, else the rate the frames leave at) or x the current cap, whichever is
 //   lower, less the rate that drains the queue standing on the path (the receipts', else the RTT
@@ -62,8 +63,12 @@ class LinkRate {
  public:
   using Clock = std::chrono::steady_clock;
   struct Params {
-    double delay_ms = 40.0;                        // send delay that means the socket is backed up
-    double rtt_rise_ms = 60.0;                     // RTT above the minimum that means a queue (over a delayed ACK)
+    double delay_ms = 40.0;     // send delay that means the socket is backed up
+    double rtt_rise_ms = 60.0;  // RTT above the minimum that means a queue (over a delayed ACK)
+    // TCP's round trip within this of its minimum: the network holds no queue, whatever the
+    // receipts say (a client busy between reads, rendering or decoding, stamps its receipts late;
+    // its kernel still acknowledges at once, so the round trip stays at its minimum).
+    double idle_rtt_ms = 2.0;
     double queue_ms = 40.0;                        // the receipts' one-way delay above its base that means a queue
     std::chrono::milliseconds base_window{10000};  // the receipts' base is the least of 1-2 of these
     double decrease = 0.85;                        // of the link's rate, on congestion
@@ -89,10 +94,17 @@ class LinkRate {
   void on_written(std::size_t bytes, Clock::time_point handed, Clock::time_point written, const SocketSample& s,
                   int ceiling_kbps);
 
-  // The client received frame `sequence` (Frame.sequence) of `bytes`, handed to the transport at `handed` when its clock
-  // read `received_ms` (a receipt, taken at `now`); `ceiling_kbps` as above.
-  void on_receipt(std::uint32_t sequence, std::size_t bytes, Clock::time_point handed, double received_ms,
-                  Clock::time_point now, int ceiling_kbps);
+  // A client's receipt: frame `sequence` (Frame.sequence) of `bytes`, encoded at the rate read at
+  // `rate_at` and handed to the transport at `handed`, arrived when the client's clock read
+  // `received_ms` (any finite value: a hostile one moves only this session's cap).
+  struct Receipt {
+    std::uint32_t sequence = 0;
+    std::size_t bytes = 0;
+    Clock::time_point handed{}, rate_at{};
+    double received_ms = 0;
+  };
+  // The receipt reached the server at `now`; `ceiling_kbps` as above.
+  void on_receipt(const Receipt& r, Clock::time_point now, int ceiling_kbps);
 
   // The encoder's maximum rate, kbit/s: `ceiling_kbps` while not limiting, else the controller's
   // cap (below the ceiling).
@@ -126,6 +138,8 @@ class LinkRate {
   bool congested(double delay_ms, const SocketSample& s, Clock::time_point now) const;
   // A receipt came within the last 500 ms or 4 frame intervals: the receipts speak for the path.
   bool receipts_fresh(Clock::time_point now) const;
+  // TCP's round trip shows a queue could stand on the network (above idle_rtt_ms; or no TCP_INFO).
+  bool network_busy(const SocketSample& s) const;
   // The queue on the path now, ms: the receipts', else the round trip above its minimum.
   double path_queue_ms(const SocketSample& s, Clock::time_point now) const;
 
@@ -149,10 +163,10 @@ class LinkRate {
   bool have_receipt_ = false;
   Clock::time_point last_receipt_{}, base_since_{};
   double base_now_ = 0, base_before_ = 0, queue_ms_ = 0;
-  double queue_before_ = 0;             // the queue of the receipt before the newest
-  double receipt_own_ms_ = 0;           // the newest receipt's frame's own time on the wire
-  Clock::time_point receipt_handed_{};  // when that frame was handed to the transport
-  std::uint32_t last_sequence_ = 0;     // the newest receipt's frame and its arrival (client ms)
+  double queue_before_ = 0;              // the queue of the receipt before the newest
+  double receipt_own_ms_ = 0;            // the newest receipt's frame's own time on the wire
+  Clock::time_point receipt_rate_at_{};  // when that frame's encoder rate was read
+  std::uint32_t last_sequence_ = 0;      // the newest receipt's frame and its arrival (client ms)
   double last_received_ms_ = 0;
   double receipt_kbps_ = 0;  // the link's rate from queued frames' arrivals (0: none yet)
   Clock::time_point receipt_kbps_at_{};

@@ -107,9 +107,10 @@ class Session : public std::enable_shared_from_this<Session> {
   using JobResult = FramePipeline::JobResult;
   // A frame handed to the transport.
   struct Handed {
-    Clock::time_point at;        // when it went to the transport
-    std::size_t bytes;           // its message's size
-    std::uint32_t sequence = 0;  // Frame.sequence
+    Clock::time_point at;         // when it went to the transport
+    std::size_t bytes;            // its message's size
+    std::uint32_t sequence = 0;   // Frame.sequence
+    Clock::time_point rate_at{};  // when its encoder's rate was read (JobShape::link_read_at)
   };
 
   // `received`: when the transport thread handed the message over.
@@ -151,6 +152,9 @@ class Session : public std::enable_shared_from_this<Session> {
   // The encoder's VBV rate for a width x height frame the link's cap sets now (link_rate.h), at
   // the nominal kStreamFps; 0 where the link does not limit. Updates link_ceiling_kbps_.
   int link_vbv_kbps(int width, int height);
+  // What a link update (a frame written, a receipt) changed: the metrics, the socket's send
+  // buffer, adaptive quality's view of the link.
+  void after_link_update(bool was_limited, int cuts);
   // Pose.received_frame_sequence / received_ms: the client's receipt for a frame, to the link's
   // controller.
   void on_receipt(std::uint32_t sequence, double received_ms, Clock::time_point now);
@@ -195,17 +199,17 @@ class Session : public std::enable_shared_from_this<Session> {
   std::string client_name_;                     // Hello.client_name (logs), at most 128 bytes
   int progress_sent_ = -1;                      // the last LoadProgress percent sent
   int width_ = 0, height_ = 0;
-  int max_bitrate_kbps_ = 0;                        // the client's Quality
-  AdaptiveQuality quality_;                         // --adaptive-quality
-  FramePacing pacing_;                              // --frame-deadline
-  int last_frame_level_ = 0;                        // the level of the last frame handed off
-  int in_flight_ = 0;                               // frames queued to the transport, not yet written
-  std::deque<Handed> handed_;                       // the in-flight frames, in order
-  static constexpr std::size_t kRecentFrames = 64;  // about a second at 60 frames/s
-  std::deque<Handed> recent_;                       // the last kRecentFrames handed, for the client's receipts
-  std::uint32_t last_receipt_ = UINT32_MAX;         // the newest receipt's frame (none yet)
-  LinkRate link_;                                   // the link's rate controller (--link-control)
-  int link_ceiling_kbps_ = 0;                       // the policy's rate for the last job's size (link_rate.h's ceiling)
+  int max_bitrate_kbps_ = 0;                         // the client's Quality
+  AdaptiveQuality quality_;                          // --adaptive-quality
+  FramePacing pacing_;                               // --frame-deadline
+  int last_frame_level_ = 0;                         // the level of the last frame handed off
+  int in_flight_ = 0;                                // frames queued to the transport, not yet written
+  std::deque<Handed> handed_;                        // the in-flight frames, in order
+  static constexpr std::size_t kRecentFrames = 256;  // about 4 s at 60 frames/s
+  std::deque<Handed> recent_;                        // the last kRecentFrames handed, for the client's receipts
+  std::uint32_t last_receipt_ = UINT32_MAX;          // the newest receipt's frame (none yet)
+  LinkRate link_;                                    // the link's rate controller (--link-control)
+  int link_ceiling_kbps_ = 0;        // the policy's rate for the last job's size (link_rate.h's ceiling)
   int send_buffer_ = 0;              // the socket's SO_SNDBUF as the session last set it (0: the transport's)
   double last_send_ms_ = 0;          // send time of the last frame written
   Clock::time_point last_progress_;  // last time the transport wrote one of our frames

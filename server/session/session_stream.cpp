@@ -28,6 +28,7 @@ void Session::maybe_start_render() {
   shape.max_bitrate_kbps = max_bitrate_kbps_;
   shape.previous_send_ms = last_send_ms_;
   shape.link_kbps = link_vbv_kbps(shape.width, shape.height);  // set again at its encode
+  shape.link_read_at = Clock::now();
   FramePipeline::StartedRender started = frames_.start_render(shape);
   const std::int64_t pixels = static_cast<std::int64_t>(shape.width) * shape.height;
   if (!frames_.pipelined()) {
@@ -89,6 +90,7 @@ void Session::maybe_start_encode() {
   // The link's cap as it stands now, not when the render started: a cut must reach the next
   // frame encoded, not one a render later (a frame's time on a slow link).
   frame->job.shape.link_kbps = link_vbv_kbps(frame->job.shape.width, frame->job.shape.height);
+  frame->job.shape.link_read_at = Clock::now();
   boost::asio::post(shared_.io, [self = shared_from_this(), frame] {
     JobResult result = self->frames_.encode(*frame);
     boost::asio::post(self->strand_, [self, frame, result = std::move(result)]() mutable {
@@ -145,7 +147,7 @@ void Session::on_job_done(JobResult result) {
     if (!result.refine) quality_.on_frame(result.quality_level, result.total_ms);
     last_frame_level_ = result.quality_level;
   }
-  handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence});
+  handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence, result.link_read_at});
   recent_.push_back(handed_.back());
   if (recent_.size() > kRecentFrames) recent_.pop_front();
   shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
@@ -157,6 +159,10 @@ void Session::on_link_sample(const Handed& frame, Clock::time_point written, con
   const bool was_limited = link_.limited();
   const int cuts = link_.decreases();
   link_.on_written(frame.bytes, frame.at, written, socket, link_ceiling_kbps_);
+  after_link_update(was_limited, cuts);
+}
+
+void Session::after_link_update(bool was_limited, int cuts) {
   ServerMetrics& m = shared_.metrics;
   m.link_rate_decreases_total += static_cast<std::uint64_t>(link_.decreases() - cuts);
   if (link_.limited() != was_limited) m.sessions_link_limited += link_.limited() ? 1 : -1;
@@ -199,7 +205,11 @@ void Session::on_receipt(std::uint32_t sequence, double received_ms, Clock::time
   for (auto it = recent_.rbegin(); it != recent_.rend(); ++it) {
     if (it->sequence != sequence) continue;
     last_receipt_ = sequence;
-    return link_.on_receipt(sequence, it->bytes, it->at, received_ms, now, link_ceiling_kbps_);
+    shared_.metrics.frame_receipts_total++;
+    const bool was_limited = link_.limited();
+    const int cuts = link_.decreases();
+    link_.on_receipt({sequence, it->bytes, it->at, it->rate_at, received_ms}, now, link_ceiling_kbps_);
+    return after_link_update(was_limited, cuts);
   }
 }
 

@@ -533,6 +533,10 @@ async function checkAdaptiveQuality() {
     return v > downBefore ? v : 0;
   }, 10000).catch(() => downBefore);
   check(downAfter > downBefore, `adaptive: /metrics catgs_quality_down_total rose (${downBefore} -> ${downAfter})`);
+  // Each pose carries a receipt for the newest frame the page received (Pose.received_ms): the
+  // server's rate controller matched them to frames it sent (protobufjs's field names and all).
+  const receipts = await metric(aq.base, 'catgs_frame_receipts_total');
+  check(receipts >= 3, `the page's poses carry frame receipts the server matched (catgs_frame_receipts_total ${receipts})`);
 
   // The camera stops: a refine frame of the last pose, at the viewport's size, follows.
   const last = await page.evaluate(() => window.catgsFlood.stop());

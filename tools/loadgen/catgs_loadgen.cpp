@@ -56,7 +56,8 @@ const char* kUsage =
     "  --warmup N               first N frames of a session left out of the statistics (5)\n"
     "  --timeline               every frame's arrival time, latency, size and bytes in the JSON\n"
     "  --receipts 0|1           each pose carries the newest frame's arrival time, as the page's\n"
-    "                           do (the server's rate controller reads the queue from them; 1)\n"
+    "                           do (the server's rate controller reads the queue from them; 1,\n"
+    "                           0 with --check-every: its renders between reads stamp them late)\n"
     "  --warmup-s S             frames of the poses sent in a session's first S seconds left\n"
     "                           out too (0; the settling time a slow link's controller gets)\n"
     "  --stale-ms MS            frames later than this count as stale (default 100)\n"
@@ -155,7 +156,9 @@ LoadSessionConfig base_config(const tools::Args& args) {
   base.warmup_frames = args.get_int("--warmup", 5);
   base.warmup_s = args.get_double("--warmup-s", 0.0);
   base.timeline = args.has("--timeline");
-  base.receipts = args.get_int("--receipts", 1) != 0;
+  // A reference check renders on the CPU between reads, so the frames that arrive meanwhile are
+  // stamped when it ends, as if they had queued on the link: no receipts unless asked for.
+  base.receipts = args.get_int("--receipts", base.check_every > 0 ? 0 : 1) != 0;
   base.stale_ms = args.get_double("--stale-ms", 100);
   if (args.get_double("--progress", 1) < 0) throw std::invalid_argument("--progress must be >= 0 seconds");
   if (args.has("--scene")) {

@@ -50,8 +50,8 @@ struct Sim {
     for (; k < pending.size() && pending[k].at_server <= t_ms; ++k) {
       const Receipt& r = pending[k];
       const double server_ms = std::chrono::duration<double, std::milli>(at(r.handed).time_since_epoch()).count();
-      link.on_receipt(r.sequence, r.bytes, at(r.handed), server_ms - r.handed + r.received_client, at(r.at_server),
-                      static_cast<int>(ceiling));
+      link.on_receipt({r.sequence, r.bytes, at(r.handed), at(r.handed), server_ms - r.handed + r.received_client},
+                      at(r.at_server), static_cast<int>(ceiling));
     }
     pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(k));
   }
@@ -160,14 +160,64 @@ TEST(LinkRate, ReceiptQueueIsTheDelayAboveItsBase) {
   };
   for (std::uint32_t k = 0; k < 5; ++k) {
     const auto handed = t0 + std::chrono::milliseconds(100 * k);
-    l.on_receipt(k, 1000, handed, server_ms(handed) + offset + 12.0, handed + std::chrono::milliseconds(20), 400);
+    l.on_receipt({k, 1000, handed, handed, server_ms(handed) + offset + 12.0}, handed + std::chrono::milliseconds(20),
+                 400);
     EXPECT_NEAR(l.queue_ms(), 0.0, 1e-6) << k;
   }
   const auto handed = t0 + std::chrono::milliseconds(500);
-  l.on_receipt(5, 1000, handed, server_ms(handed) + offset + 12.0 + 200.0, handed + std::chrono::milliseconds(230),
-               400);
+  l.on_receipt({5, 1000, handed, handed, server_ms(handed) + offset + 12.0 + 200.0},
+               handed + std::chrono::milliseconds(230), 400);
   EXPECT_NEAR(l.queue_ms(), 200.0, 1e-6);
   EXPECT_TRUE(l.limited()) << "a 200 ms queue is congestion";
+}
+
+// A client busy between reads (a reference render, a slow decode) stamps its receipts late: a
+// queue of 300 ms in them, while TCP's round trip stays at its minimum (its kernel acknowledged at
+// once), is not the network's, and no cut follows; the same receipts with the round trip risen are.
+TEST(LinkRate, LateReceiptsOverAnIdleNetworkAreNotCongestion) {
+  for (double rtt : {0.3, 40.0}) {
+    LinkRate l;
+    const auto t0 = Clock::now();
+    auto server_ms = [](Clock::time_point t) {
+      return std::chrono::duration<double, std::milli>(t.time_since_epoch()).count();
+    };
+    SocketSample s;
+    s.valid = true;
+    s.min_rtt_ms = 0.1;
+    s.rtt_ms = rtt;
+    for (std::uint32_t k = 0; k < 30; ++k) {
+      const auto handed = t0 + std::chrono::milliseconds(100 * k);
+      l.on_written(3000, handed, handed + std::chrono::milliseconds(1), s, 4000);
+      const double late = k < 5 ? 0.0 : 300.0;  // the client's reads fall behind from frame 5
+      l.on_receipt({k, 3000, handed, handed, server_ms(handed) + 5.0 + late}, handed + std::chrono::milliseconds(20),
+                   4000);
+    }
+    if (rtt < 1.0) {
+      EXPECT_EQ(l.decreases(), 0) << "late receipts over an idle network cut the rate";
+      EXPECT_FALSE(l.limited());
+    } else {
+      EXPECT_GT(l.decreases(), 0) << "receipts with the round trip risen are congestion";
+    }
+  }
+}
+
+// A hostile client's receipts (any finite time the protocol lets through, sequences in any
+// order) move only its own cap: it stays finite, within the floor and the ceiling, and so does the
+// link's estimate.
+TEST(LinkRate, HostileReceiptsKeepTheCapFinite) {
+  LinkRate l;
+  const auto t0 = Clock::now();
+  const double times[] = {1e15, 5e-324, 0.0, 1e15, 1.0, 1e15 - 1, 2.0, 1e-300, 7e14, 3.0};
+  for (int k = 0; k < 400; ++k) {
+    const auto at = t0 + std::chrono::milliseconds(10 * k);
+    const auto seq = static_cast<std::uint32_t>(k % 3 == 0 ? k : k + 1);
+    l.on_receipt({seq, static_cast<std::size_t>(k % 7 == 0 ? 1u << 20 : 500), at, at, times[k % 10]}, at, 400);
+    const int cap = l.cap_kbps(400);
+    ASSERT_GE(cap, LinkRate::Params{}.floor_kbps) << k;
+    ASSERT_LE(cap, 400) << k;
+    ASSERT_TRUE(std::isfinite(l.link_kbps()) && l.link_kbps() <= 4 * 400) << k << ": " << l.link_kbps();
+    ASSERT_TRUE(std::isfinite(l.queue_ms())) << k;
+  }
 }
 
 // Unshaped -> 25% -> unshaped: the cap falls within a few seconds of the step down and is back
