@@ -64,6 +64,11 @@ struct SessionResult {
   std::uint64_t skipped = 0;
   std::uint64_t dropped = 0;
   std::uint64_t server_skipped = 0;  // Stats.poses_skipped in the server's last Stats (a cross-check)
+  // The link (Stats.bitrate_cap_kbps, link_kbps): Stats messages that said the link held the
+  // stream below the policy's rate, and the lowest cap they gave (0: never limited).
+  int link_limited_stats = 0;
+  std::uint32_t link_cap_kbps_min = 0;
+  double link_kbps_last = 0;  // the server's last estimate of the link's rate (0: none)
   std::uint64_t stale = 0;           // frames later than the stale bound, or older than one shown
   std::uint64_t errors = 0;          // server Error, lost connection, undecodable frame
   std::string first_error;

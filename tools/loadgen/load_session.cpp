@@ -135,7 +135,7 @@ class PoseLoop {
         on_frame(msg->frame());
         if (progress) progress->frames++;
       }
-      if (msg->has_stats()) r_.server_skipped = msg->stats().poses_skipped();
+      if (msg->has_stats()) on_stats(msg->stats());
     }
     r_.run_seconds = std::chrono::duration<double>(std::min(Clock::now(), send_end_) - t0_).count();
     // Poses up to the newest answered one that got no frame were replaced by a newer pose (latest
@@ -188,6 +188,15 @@ class PoseLoop {
     if (!(sending && cfg_.rate_hz > 0)) return 20;
     return static_cast<int>(std::clamp<long long>(
         std::chrono::duration_cast<std::chrono::milliseconds>(next_pose_at_ - Clock::now()).count(), 0, 20));
+  }
+
+  void on_stats(const pb::Stats& s) {
+    r_.server_skipped = s.poses_skipped();
+    if (s.link_kbps() > 0) r_.link_kbps_last = s.link_kbps();
+    if (s.bitrate_cap_kbps() == 0) return;  // the link does not limit the stream
+    r_.link_limited_stats++;
+    r_.link_cap_kbps_min =
+        r_.link_cap_kbps_min ? std::min(r_.link_cap_kbps_min, s.bitrate_cap_kbps()) : s.bitrate_cap_kbps();
   }
 
   void on_frame(const pb::Frame& f) {
