@@ -231,13 +231,14 @@ for name, rate in zip(names, rates):
                  "p50_ms": lat["p50_ms"], "p95_ms": lat["p95_ms"], "p99_ms": lat["p99_ms"], "max_ms": lat["max_ms"],
                  "received_kbit": s["bytes_per_second"] * 8 / 1000, "size_changes": s["size_changes"],
                  "min_size": f'{s["min_width"]}x{s["min_height"]}' if s["size_changes"] else f'{s["width"]}x{s["height"]}',
-                 "errors": s["errors"], "first_error": s["first_error"]})
-print(f"| link | FPS | p50 / p95 / p99 / max ms (after {warmup:g} s) | kbit/s received | smallest size | errors |")
-print("|---|---|---|---|---|---|")
+                 "errors": s["errors"], "first_error": s["first_error"],
+                 "limited_stats": s["link_limited_stats"], "cap_min_kbit": s["link_cap_kbps_min"]})
+print(f"| link | FPS | p50 / p95 / p99 / max ms (after {warmup:g} s) | kbit/s received | link-limited Stats, lowest cap | smallest size | errors |")
+print("|---|---|---|---|---|---|---|")
 for r in rows:
     link = "unshaped" if r["rate_kbit"] is None else f'{r["rate_kbit"]} kbit/s ({r["link"][5:]})'
     print(f'| {link} | {r["fps"]:.1f} | {r["p50_ms"]:.0f} / {r["p95_ms"]:.0f} / {r["p99_ms"]:.0f} / {r["max_ms"]:.0f} '
-          f'| {r["received_kbit"]:.0f} | {r["min_size"]} | {r["errors"]} {r["first_error"]} |')
+          f'| {r["received_kbit"]:.0f} | {r["limited_stats"]}, {r["cap_min_kbit"]} | {r["min_size"]} | {r["errors"]} {r["first_error"]} |')
 if out:
     json.dump(rows, open(out, "w"), indent=1)
 failed = []
@@ -248,6 +249,7 @@ for r in rows[1:]:
     if r["max_ms"] > max_ms: failed.append(f'{r["link"]}: a frame {r["max_ms"]:.0f} ms after its pose (> {max_ms:g} ms)')
     if r["fps"] < min_fps * base["fps"]:
         failed.append(f'{r["link"]}: {r["fps"]:.1f} FPS < {100 * min_fps:g}% of unshaped {base["fps"]:.1f}')
+    if r["limited_stats"] == 0: failed.append(f'{r["link"]}: no Stats said the link limited the stream')
     if r["received_kbit"] < min_use * r["rate_kbit"]:
         failed.append(f'{r["link"]}: received {r["received_kbit"]:.0f} kbit/s < {100 * min_use:g}% of the link {r["rate_kbit"]}')
 for r in rows:
