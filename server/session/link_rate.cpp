@@ -46,12 +46,12 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   const bool socket_full = !s.valid || s.notsent_bytes > 0 || !s.app_limited;
   if (socket_full && delay_ms > std::max(params_.delay_ms, own)) return true;
   // The client's receipts show the queue frame by frame; TCP's round trip is smoothed over about
-  // eight ACKs and lags it by several frames. Congested: above `queue_ms` and the frame's own time; or above `queue_ms` and grown by a quarter of it since the
-  // receipt before: a queue building, seen before it stands as high as a frame's own time (a
-  // delay gradient, as GCC reads one; a token bucket's queue appears at once when its burst is
-  // spent).
-  // Only while TCP sees the network busy: late receipts over an idle network are the client's own
-  // delay between reads, which a lower rate would not shorten.
+  // eight ACKs and lags it by several frames. Congested: above `queue_ms` and the frame's own
+  // time; or above `queue_ms` and grown by a quarter of it since the receipt before: a queue
+  // building, seen before it stands as high as a frame's own time (a delay gradient, as GCC reads
+  // one; a token bucket's queue appears at once when its burst is spent). Only while TCP sees the
+  // network busy: late receipts over an idle network are the client's own delay between reads,
+  // which a lower rate would not shorten.
   if (receipts_fresh(now)) {
     if (!network_busy(s)) return false;
     const bool building = queue_ms_ > params_.queue_ms && queue_ms_ > queue_before_ + params_.queue_ms / 4;

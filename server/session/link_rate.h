@@ -29,9 +29,9 @@
 //   one; a token bucket's queue appears at once when its burst is spent); without receipts, the
 //   smoothed RTT passes the minimum by `rtt_rise_ms` (at least 1.5 frame intervals). Then, at
 //   most once per `hold` or round trip (the previous cut must show in the queue first) and, with
-//   receipts, only once a frame encoded at the rate the last cut set has arrived (at once while the
-//   cap stands above the link's measured rate: a first cut before the rate was known), the cap drops to
-//   `decrease` x the link's rate (the receipts', else the kernel's last estimate that was not
+//   receipts, only once a frame encoded at the rate the last cut set has arrived (at once while
+//   the cap stands above the link's measured rate: a first cut before the rate was known), the
+//   cap drops to `decrease` x the link's rate (the receipts', else the kernel's last estimate that was not
 //   application-limited, else the rate the frames leave at) or x the current cap, whichever is
 //   lower, less the rate that drains the queue standing on the path (the receipts', else the RTT
 //   above its minimum; at the link's rate) within `drain`; at least `floor_kbps`.
