@@ -535,8 +535,12 @@ async function checkAdaptiveQuality() {
   check(downAfter > downBefore, `adaptive: /metrics catgs_quality_down_total rose (${downBefore} -> ${downAfter})`);
   // Each pose carries a receipt for the newest frame the page received (Pose.received_ms): the
   // server's rate controller matched them to frames it sent (protobufjs's field names and all).
-  const receipts = await metric(aq.base, 'catgs_frame_receipts_total');
-  check(receipts >= 3, `the page's poses carry frame receipts the server matched (catgs_frame_receipts_total ${receipts})`);
+  // (At least one: a busy CI machine renders only a few frames of the flood.)
+  const receipts = await waitFor('catgs_frame_receipts_total to count a receipt', async () => {
+    const v = await metric(aq.base, 'catgs_frame_receipts_total');
+    return v >= 1 ? v : 0;
+  }, 10000).catch(() => 0);
+  check(receipts >= 1, `the page's poses carry frame receipts the server matched (catgs_frame_receipts_total ${receipts})`);
 
   // The camera stops: a refine frame of the last pose, at the viewport's size, follows.
   const last = await page.evaluate(() => window.catgsFlood.stop());
