@@ -217,9 +217,11 @@ struct FrameBuffers {
   TileRanges& ranges;
   std::vector<TileSlice>& slices;
 };
+// `preprocessed`: buffers.projected already holds the whole frame's stage 1 at `camera` with
+// these options (CpuRenderer::preprocess_together), which is not run again.
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
-                       const FrameBuffers& buffers, Image& out, FrameStats& stats);
+                       const FrameBuffers& buffers, Image& out, FrameStats& stats, bool preprocessed = false);
 
 // The CPU Renderer: the five stages, buffers reused across frames.
 class CpuRenderer final : public Renderer {
@@ -231,6 +233,11 @@ class CpuRenderer final : public Renderer {
   const FrameStats& last_stats() const override { return stats_; }
   const RenderOptions& options() const override { return options_; }
   void set_options(const RenderOptions& options) override;
+  // Stage 1 shared by several views (renderer.h; issue 47): CPU renderers of one model, pipeline
+  // and LOD bound; preprocess_batch writes each renderer's ProjectedGaussians, and its next
+  // render() of that camera starts at the counts.
+  bool shares_stage1_with(const Renderer& other) const override;
+  void preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras) override;
 
   // The intermediate state of the last frame (tests and tools).
   const ProjectedGaussians& projected() const { return projected_; }
@@ -238,6 +245,10 @@ class CpuRenderer final : public Renderer {
   const TileRanges& tile_ranges() const { return ranges_; }
 
  private:
+  // preprocess_together left projected_ at `batched_camera_` (cleared by the next render or set_options).
+  bool batched_ = false;
+  Camera batched_camera_;
+  int batched_views_ = 1;
   std::shared_ptr<const GaussianModel> model_;
   std::vector<fm::ChunkBounds> chunks_;  // of model_, for chunk culling
   RenderOptions options_;

@@ -9,11 +9,6 @@ namespace catgs::cuda {
 
 namespace {
 
-bool same_camera(const Camera& a, const Camera& b) {
-  return a.R == b.R && a.t == b.t && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy &&
-         a.width == b.width && a.height == b.height && a.near_plane == b.near_plane && a.far_plane == b.far_plane;
-}
-
 [[noreturn]] void refuse(const std::string& why) { throw std::invalid_argument("preprocess_together: " + why); }
 
 }  // namespace
@@ -97,7 +92,25 @@ void CudaRenderer::preprocess_together(const std::vector<CudaRenderer*>& rendere
     CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
     s.batched = true;
     s.batched_camera = cameras[k];
+    s.batched_views = static_cast<int>(views);
   }
+}
+
+bool CudaRenderer::shares_stage1_with(const Renderer& other) const {
+  const auto* o = dynamic_cast<const CudaRenderer*>(&other);
+  return o && o->scene_ == scene_ && options_.pipeline != Pipeline::catgs &&
+         o->options_.pipeline == options_.pipeline && o->options_.lod_error_px == options_.lod_error_px;
+}
+
+void CudaRenderer::preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras) {
+  std::vector<CudaRenderer*> views;
+  for (std::size_t k = 0; k < renderers.size(); ++k) {
+    auto* r = dynamic_cast<CudaRenderer*>(renderers[k]);
+    if (!r) refuse("renderer " + std::to_string(k) + " is not a CUDA renderer");
+    views.push_back(r);
+  }
+  if (views.empty() || views[0] != this) refuse("the batch's first renderer must be the one asked");
+  preprocess_together(views, cameras);
 }
 
 }  // namespace catgs::cuda

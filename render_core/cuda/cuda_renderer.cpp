@@ -252,6 +252,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   const bool batched = take_batched(camera);
   if (!batched) CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   stats_ = {};
+  stats_.stage1_views = batched ? s.batched_views : 1;
   const bool exact = options_.pipeline != Pipeline::vanilla;
   draw_full_frame(camera, exact, true, exact && depth_first_sort(), batched);
   s.width = camera.width;

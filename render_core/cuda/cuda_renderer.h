@@ -199,6 +199,10 @@ class CudaRenderer final : public Renderer {
   // bound, are not all exact or all vanilla, a renderer appears twice, the counts differ or are
   // out of range, or a camera is bad (validate_camera).
   static void preprocess_together(const std::vector<CudaRenderer*>& renderers, const std::vector<Camera>& cameras);
+  // The Renderer interface's (renderer.h): the same, for CUDA renderers that share this one's
+  // DeviceScene, pipeline (exact or vanilla) and LOD bound, this one first.
+  bool shares_stage1_with(const Renderer& other) const override;
+  void preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras) override;
   // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).
   const FrameStats& last_stats() const override;
   const RenderOptions& options() const override { return options_; }

@@ -188,6 +188,7 @@ struct CudaRenderer::State {
   // staging, rewritten only once `batch_copied` has passed) and the chunks any view kept.
   bool batched = false;
   Camera batched_camera;
+  int batched_views = 1;  // views in that batch (FrameStats::stage1_views)
   cudaEvent_t batch_join = nullptr, batch_copied = nullptr;
   stages::BatchView* host_batch_views = nullptr;  // pinned [stages::kMaxBatchViews]
   GrowBuffer batch_views, batch_chunks, batch_mask, batch_count;

@@ -31,28 +31,36 @@ void Session::maybe_start_render() {
   shape.link_read_at = Clock::now();
   FramePipeline::StartedRender started = frames_.start_render(shape);
   const std::int64_t pixels = static_cast<std::int64_t>(shape.width) * shape.height;
+  // The job holds this session, so the renderer it offers lives while the job is queued.
+  std::optional<RenderScheduler::Stage1Share> share = frames_.stage1_share(started.job);
   if (!frames_.pipelined()) {
-    shared_.renders.post(id_, pixels, [self = shared_from_this(), job = std::move(started.job)] {
-      JobResult result = self->frames_.render_and_encode(job, self->gone_);
-      boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
-        self->frames_.end_render();
-        self->on_job_done(std::move(result));
-      });
-    });
+    shared_.renders.post(
+        id_, pixels,
+        [self = shared_from_this(), job = std::move(started.job)] {
+          JobResult result = self->frames_.render_and_encode(job, self->gone_);
+          boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
+            self->frames_.end_render();
+            self->on_job_done(std::move(result));
+          });
+        },
+        std::move(share));
     return;
   }
-  shared_.renders.post(id_, pixels, [self = shared_from_this(), started = std::move(started)]() mutable {
-    FramePipeline::Rendered frame =
-        self->frames_.render(std::move(started.job), std::move(started.planes), self->gone_);
-    boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
-      self->frames_.end_render();
-      if (!frame.error.empty()) return self->on_job_done(self->frames_.take_failed(std::move(frame)));
-      self->pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
-      self->frames_.store_rendered(std::move(frame));
-      self->maybe_start_encode();
-      self->maybe_start_render();
-    });
-  });
+  shared_.renders.post(
+      id_, pixels,
+      [self = shared_from_this(), started = std::move(started)]() mutable {
+        FramePipeline::Rendered frame =
+            self->frames_.render(std::move(started.job), std::move(started.planes), self->gone_);
+        boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
+          self->frames_.end_render();
+          if (!frame.error.empty()) return self->on_job_done(self->frames_.take_failed(std::move(frame)));
+          self->pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
+          self->frames_.store_rendered(std::move(frame));
+          self->maybe_start_encode();
+          self->maybe_start_render();
+        });
+      },
+      std::move(share));
 }
 
 int Session::link_vbv_kbps(int width, int height) {
@@ -135,6 +143,7 @@ void Session::on_job_done(JobResult result) {
   if (result.key_frame) m.key_frames_total++;
   (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
   if (result.render_rekey) m.render_rekeys_total++;
+  if (result.stage1_views > 1) m.stage1_shared_frames_total++;
   if (result.predicted_gain > 0) m.speculation_predicted_gain.observe(result.predicted_gain);
   if (result.measured_gain > 0) m.speculation_measured_gain.observe(result.measured_gain);
   m.queue_seconds.observe(result.queue_ms / 1000.0);

@@ -113,5 +113,87 @@ TEST(BatchPreprocess, RefusesMismatchedOutputs) {
   EXPECT_THROW(cpu::preprocess_batch(*m, {}, {cam}, Pipeline::exact, {&out}), std::invalid_argument);
 }
 
+// The renderer-level path the server's lanes take (Renderer::preprocess_together): 3 CPU
+// renderers of one model, pre-processed together at 3 views of 2 sizes, then each renders its
+// view. Every image equals a lone renderer's of the same view bit for bit, and the stats say
+// the stage 1 was shared (3 views) or not (1).
+TEST(BatchPreprocess, RenderersSharingStage1DrawWhatTheyDrawAlone) {
+  const auto m = test::cached_scene(test::bundled_scene());
+  std::vector<Camera> views = spread(orbit_of(*m, 0.6f, 0.1f), 3);
+  views[2] = views[2].rescaled(160, 90);
+  RenderOptions o;
+  o.pipeline = Pipeline::exact;
+  cpu::CpuRenderer a(m, o), b(m, o), c(m, o), alone(m, o);
+  a.preprocess_together({&a, &b, &c}, views);
+  cpu::CpuRenderer* shared[3] = {&a, &b, &c};
+  for (std::size_t k = 0; k < 3; ++k) {
+    Image got, want;
+    shared[k]->render(views[k], got);
+    EXPECT_EQ(shared[k]->last_stats().stage1_views, 3) << "view " << k;
+    alone.render(views[k], want);
+    EXPECT_EQ(alone.last_stats().stage1_views, 1);
+    EXPECT_GT(alone.last_stats().visible, 0u) << "view " << k << " shows nothing: a weak test";
+    EXPECT_EQ(got.rgba8, want.rgba8) << "view " << k;
+    EXPECT_EQ(got.rgb, want.rgb) << "view " << k;
+    EXPECT_EQ(shared[k]->render_list().values, alone.render_list().values) << "view " << k;
+  }
+  // The mark is used once: the next frame pre-processes alone.
+  Image again;
+  a.render(views[0], again);
+  EXPECT_EQ(a.last_stats().stage1_views, 1);
+}
+
+// A batch made for other options or another camera is not used: the frame pre-processes again
+// (set_options clears it; a camera that differs in any field does not match).
+TEST(BatchPreprocess, RenderersPreprocessAgainForOtherOptionsOrCamera) {
+  const auto m = test::cached_scene(test::bundled_scene());
+  const std::vector<Camera> views = spread(orbit_of(*m, 0.6f, 0.1f), 2);
+  RenderOptions o;
+  o.pipeline = Pipeline::exact;
+  cpu::CpuRenderer a(m, o), b(m, o), alone(m, o);
+  a.preprocess_together({&a, &b}, views);
+  RenderOptions vanilla = o;
+  vanilla.pipeline = Pipeline::vanilla;
+  b.set_options(vanilla);  // the batch was exact's stage 1
+  alone.set_options(vanilla);
+  Image got, want;
+  b.render(views[1], got);
+  alone.render(views[1], want);
+  EXPECT_EQ(b.last_stats().stage1_views, 1);
+  EXPECT_EQ(got.rgba8, want.rgba8);
+  Camera moved = views[0];
+  moved.t.x += 1e-3f;
+  a.render(moved, got);
+  EXPECT_EQ(a.last_stats().stage1_views, 1);
+  alone.set_options(o);
+  alone.render(moved, want);
+  EXPECT_EQ(got.rgba8, want.rgba8);
+}
+
+// Who may share: one model, one pipeline, one LOD bound; refusals name the renderer.
+TEST(BatchPreprocess, RenderersShareOnlyOneSceneAndSettings) {
+  const auto m = test::cached_scene(test::bundled_scene());
+  const auto other = std::make_shared<const GaussianModel>(*m);  // the same content, another scene
+  RenderOptions o;
+  o.pipeline = Pipeline::exact;
+  RenderOptions coarser = o;
+  coarser.lod_error_px = 4.0f;
+  RenderOptions vanilla = o;
+  vanilla.pipeline = Pipeline::vanilla;
+  cpu::CpuRenderer a(m, o), b(m, o), c(other, o), d(m, coarser), e(m, vanilla);
+  EXPECT_TRUE(a.shares_stage1_with(b));
+  EXPECT_FALSE(a.shares_stage1_with(c)) << "two scenes never share a pass";
+  EXPECT_FALSE(a.shares_stage1_with(d));
+  EXPECT_FALSE(a.shares_stage1_with(e));
+  const std::vector<Camera> two = spread(orbit_of(*m, 0.6f, 0.1f), 2);
+  EXPECT_THROW(a.preprocess_together({&a, &c}, two), std::invalid_argument);
+  EXPECT_THROW(a.preprocess_together({&b, &a}, two), std::invalid_argument);  // `a` must lead
+  EXPECT_THROW(a.preprocess_together({&a, &a}, two), std::invalid_argument);
+  EXPECT_THROW(a.preprocess_together({&a, &b}, {two[0]}), std::invalid_argument);
+  Image img;
+  a.render(two[0], img);  // nothing was marked by the refusals
+  EXPECT_EQ(a.last_stats().stage1_views, 1);
+}
+
 }  // namespace
 }  // namespace catgs
