@@ -53,7 +53,7 @@
 #                                                            /usr/src/googletest/googletest without
 #                                                            its tests; tests/gpu builds it there)
 #   .carry/bin/{catgs-bench,catgs-gpu-tests,catgs-scene}  prebuilt x86-64 (glibc 2.36), static
-#                                                            cudart; bin/lib/libstb.so.0
+#                                                            cudart; bin/lib/: the libraries they link (libstb, libwebp, ...)
 # Run with the device tool: command "scripts/gpu_run.sh", carry [".carry"].
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -124,7 +124,11 @@ SHIM
   cp -f "$build/bin/catgs-bench" "$build/bin/catgs-gpu-tests" "$CARRY/bin/"
   cp -f "$build/bin/catgs-scene" "$CARRY/bin/"
   mkdir -p "$CARRY/bin/lib"
-  cp -fL /usr/lib/x86_64-linux-gnu/libstb.so.0 "$CARRY/bin/lib/"  # the prebuilt tools link it
+  # The libraries the prebuilt tools link beyond glibc and the C++ runtime (libstb; libwebp,
+  # libzip and their closure where this machine has them: the GPU image has none of them).
+  ldd "$CARRY"/bin/catgs-* | awk '/=> \//{print $3}' | sort -u |
+    grep -Ev '/(libc|libm|libdl|librt|libpthread|libresolv|libutil|libstdc\+\+|libgcc_s)\.so|/libcuda\.so' |
+    while read -r lib; do cp -fL "$lib" "$CARRY/bin/lib/"; done
   strip "$CARRY"/bin/* 2>/dev/null || true
   du -sh "$CARRY"
 }

@@ -1,5 +1,6 @@
-// CudaRenderer::preprocess_together: stage 1 of several renderers' next frames in one pass over
-// their scene (issue 47: the sessions on one scene share the reading of its Gaussians).
+// CudaRenderer::preprocess_batch (and the Renderer interface's preprocess_together over it):
+// stage 1 of several renderers' next frames in one pass over their scene (issue 47: the sessions
+// on one scene share the reading of its Gaussians).
 #include <stdexcept>
 #include <string>
 
@@ -9,7 +10,7 @@ namespace catgs::cuda {
 
 namespace {
 
-[[noreturn]] void refuse(const std::string& why) { throw std::invalid_argument("preprocess_together: " + why); }
+[[noreturn]] void refuse(const std::string& why) { throw std::invalid_argument("preprocess_batch: " + why); }
 
 }  // namespace
 
@@ -20,8 +21,7 @@ bool CudaRenderer::take_batched(const Camera& camera) {
   return same_camera(camera, s.batched_camera);
 }
 
-void CudaRenderer::preprocess_together(const std::vector<CudaRenderer*>& renderers,
-                                       const std::vector<Camera>& cameras) {
+void CudaRenderer::preprocess_batch(const std::vector<CudaRenderer*>& renderers, const std::vector<Camera>& cameras) {
   const std::size_t views = renderers.size();
   if (views == 0 || views > static_cast<std::size_t>(stages::kMaxBatchViews))
     refuse(std::to_string(views) + " renderers (1 to " + std::to_string(stages::kMaxBatchViews) + ")");
@@ -106,11 +106,13 @@ void CudaRenderer::preprocess_together(const std::vector<Renderer*>& renderers, 
   std::vector<CudaRenderer*> views;
   for (std::size_t k = 0; k < renderers.size(); ++k) {
     auto* r = dynamic_cast<CudaRenderer*>(renderers[k]);
-    if (!r) refuse("renderer " + std::to_string(k) + " is not a CUDA renderer");
+    if (!r)
+      throw std::invalid_argument("preprocess_together: renderer " + std::to_string(k) + " is not a CUDA renderer");
     views.push_back(r);
   }
-  if (views.empty() || views[0] != this) refuse("the batch's first renderer must be the one asked");
-  preprocess_together(views, cameras);
+  if (views.empty() || views[0] != this)
+    throw std::invalid_argument("preprocess_together: the batch's first renderer must be the one asked");
+  preprocess_batch(views, cameras);
 }
 
 }  // namespace catgs::cuda

@@ -198,9 +198,9 @@ class CudaRenderer final : public Renderer {
   // for it. Throws std::invalid_argument where the renderers do not share one DeviceScene and LOD
   // bound, are not all exact or all vanilla, a renderer appears twice, the counts differ or are
   // out of range, or a camera is bad (validate_camera).
-  static void preprocess_together(const std::vector<CudaRenderer*>& renderers, const std::vector<Camera>& cameras);
-  // The Renderer interface's (renderer.h): the same, for CUDA renderers that share this one's
-  // DeviceScene, pipeline (exact or vanilla) and LOD bound, this one first.
+  static void preprocess_batch(const std::vector<CudaRenderer*>& renderers, const std::vector<Camera>& cameras);
+  // The Renderer interface's (renderer.h): preprocess_batch, for CUDA renderers that share this
+  // one's DeviceScene, pipeline (exact or vanilla) and LOD bound, this one first.
   bool shares_stage1_with(const Renderer& other) const override;
   void preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras) override;
   // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).

@@ -1,4 +1,4 @@
-// batch: stage 1 of several renderers' frames in one pass (CudaRenderer::preprocess_together,
+// batch: stage 1 of several renderers' frames in one pass (CudaRenderer::preprocess_batch,
 // preprocess.cu preprocess_batch; issue 47). 16 views spread along a real camera path, each drawn
 // by a renderer of its own after one batched pre-processing, against the same views drawn one at
 // a time by a single renderer: the same image bit for bit (float RGB and RGBA8) and the same
@@ -52,7 +52,7 @@ void batch_check(const SharedScene& scene, const std::string& path, Pipeline pip
   // last renderer asked for another camera than its batched one.
   for (int round = 0; round < 2; ++round) {
     const std::vector<Camera> cams = spread(trace, views, round * 7, round == 0 ? 0 : 4);
-    catgs::cuda::CudaRenderer::preprocess_together(batch, cams);
+    catgs::cuda::CudaRenderer::preprocess_batch(batch, cams);
     int identical = 0, lists_equal = 0;
     std::string note;
     for (std::size_t k = 0; k < views; ++k) {
@@ -106,23 +106,23 @@ TEST_F(Batch, Refusals) {
   int refused = 0;
   auto refuses = [&](const std::vector<R*>& rs, const std::vector<Camera>& cs) {
     try {
-      R::preprocess_together(rs, cs);
+      R::preprocess_batch(rs, cs);
     } catch (const std::invalid_argument&) {
       ++refused;
     }
   };
-  refuses({&a, &a}, {cam, cam});                 // the same renderer twice
-  refuses({&a, &f}, {cam, cam});                 // another scene
-  refuses({&a, &v}, {cam, cam});                 // exact beside vanilla
-  refuses({&a, &c}, {cam, cam});                 // catgs
-  refuses({&a, &b}, {cam});                      // counts differ
-  refuses({}, {});                               // empty
-  R::preprocess_together({&a, &b}, {cam, cam});  // fine
+  refuses({&a, &a}, {cam, cam});              // the same renderer twice
+  refuses({&a, &f}, {cam, cam});              // another scene
+  refuses({&a, &v}, {cam, cam});              // exact beside vanilla
+  refuses({&a, &c}, {cam, cam});              // catgs
+  refuses({&a, &b}, {cam});                   // counts differ
+  refuses({}, {});                            // empty
+  R::preprocess_batch({&a, &b}, {cam, cam});  // fine
   Image x, y;
   a.render(cam, x);
   b.render(cam, y);
   // New options drop a batch's stage 1: batched as exact, drawn as vanilla, it must be vanilla's.
-  R::preprocess_together({&a, &b}, {cam, cam});
+  R::preprocess_batch({&a, &b}, {cam, cam});
   a.set_options(vanilla);
   Image switched, want;
   a.render(cam, switched);

@@ -49,7 +49,7 @@
 // views at a time, the B poses spread along the trace as B sessions on one path would be, each by
 // a renderer of its own: "V xB apart" (each view pre-processed alone, the streams overlapping)
 // and "V xB shared" (stage 1 of the B views in one pass over the scene:
-// CudaRenderer::preprocess_together). Their frame time is the batch's over B, steady clock from
+// CudaRenderer::preprocess_batch). Their frame time is the batch's over B, steady clock from
 // idle streams to every stream done (bench/timing_loop.h TimingPlan::batch).
 //
 // Each frame is timed with CUDA events on the renderer's stream around render_device(): pose in,

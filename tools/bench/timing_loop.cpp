@@ -315,7 +315,7 @@ PipelineResult time_cuda_batch(const std::shared_ptr<const cuda::DeviceScene>& s
     for (int k = 0; k < views; ++k) cams[static_cast<std::size_t>(k)] = plan.camera_at(first + k * stride);
     for (auto* r : renderers) check(cudaStreamSynchronize(r->stream()), "cudaStreamSynchronize");
     const auto t0 = std::chrono::steady_clock::now();
-    if (shared) cuda::CudaRenderer::preprocess_together(renderers, cams);
+    if (shared) cuda::CudaRenderer::preprocess_batch(renderers, cams);
     for (int k = 0; k < views; ++k)
       renderers[static_cast<std::size_t>(k)]->render_device(cams[static_cast<std::size_t>(k)]);
     for (auto* r : renderers) check(cudaStreamSynchronize(r->stream()), "cudaStreamSynchronize");

@@ -69,7 +69,7 @@ struct TimingPlan {
   // CUDA, --batch B (>= 2): each vanilla and exact variant also draws its frames B views at a
   // time, the B poses spread evenly along the trace (as B sessions on one path would be), each by
   // a renderer of its own: "V xB apart" (each view pre-processed alone, the B streams overlapping
-  // as the server's lanes do) and "V xB shared" (CudaRenderer::preprocess_together first). A
+  // as the server's lanes do) and "V xB shared" (CudaRenderer::preprocess_batch first). A
   // batch is timed with the steady clock from idle streams to every stream done; its frame time
   // is the batch's over B (ms a view).
   int batch = 0;
