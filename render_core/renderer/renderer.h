@@ -159,7 +159,10 @@ struct FrameStats {
   // group's measured exact-equivalent time over its own.
   double predicted_gain = 0.0, measured_gain = 0.0;
   // Views whose stage 1 ran in the same pass over the scene as this frame's
-  // (Renderer::preprocess_together; issue 47): 1 when it was pre-processed alone.
+  // (Renderer::preprocess_together; issue 47): 1 when it was pre-processed alone. When > 1, the
+  // stage times are not this frame's own cost: on the CUDA core preprocess_ms is the whole pass
+  // (every view's stage 1) and keys_ms holds the wait until a lane took this frame; the CPU core
+  // counts preprocess_ms near 0 (the pass ran before the frame).
   int stage1_views = 1;
 };
 
@@ -191,7 +194,7 @@ class Renderer {
   virtual const RenderOptions& options() const = 0;
   virtual void set_options(const RenderOptions& options) = 0;
 
-  // Stage 1 shared by several views of one scene (issue 47; docs/DESIGN.md "Server"): the render
+  // Stage 1 shared by several views of one scene (issue 47; docs/DESIGN.md "Stage 1 shared across sessions"): the render
   // lanes pre-process the next frames of the sessions queued on a scene in one pass over it, each
   // Gaussian read once for every view that may see it.
   // Whether this renderer's next frame may share a pass with `other`'s: the same core and scene
