@@ -10,6 +10,7 @@
 #include "proto/message_validation.h"
 #include "process/first_view.h"
 #include "process/scene_with_lod.h"
+#include "renderer/device_memory.h"
 #include "session/video_export.h"
 #include "scene/scene_cache.h"
 
@@ -139,6 +140,9 @@ void Server::load_model() {
   };
   // One copy of each loaded scene per GPU, uploaded before its first session and dropped with it.
   o.prepare = [this](LoadedScene& scene) {
+    // The CPU renderer's allowance counts the copy a GPU would hold (renderer/device_memory.h).
+    if (gpus_->devices().empty())
+      scene.device_memory_holds.push_back(gpus_->add_scene(-1, scene_device_bytes(*scene.model)));
     for (int d : gpus_->devices()) {
       const auto t0 = std::chrono::steady_clock::now();
       const std::size_t before = cuda_device_memory_used(d);
@@ -146,6 +150,10 @@ void Server::load_model() {
       // The device copy's size (issue 46: what a scene costs the GPU before any session).
       const std::size_t after = cuda_device_memory_used(d);
       const double mib = static_cast<double>(after - std::min(before, after)) / (1024.0 * 1024.0);
+      // The accounting holds what the copy took (a resident renderer's first buffers included),
+      // or the copy's own size where another process allocated meanwhile.
+      scene.device_memory_holds.push_back(gpus_->add_scene(
+          d, std::max<std::uint64_t>(scene_device_bytes(*scene.model), after - std::min(before, after))));
       std::cout << "gpu " << d << ": scene " << scene.model->name << " uploaded in " << ms_since(t0) << " ms, "
                 << static_cast<long>(mib) << " MiB of device memory (with its LOD levels, " << scene.model->lod.size()
                 << " chunks)" << std::endl;
@@ -166,6 +174,8 @@ void Server::load_model() {
 
 void Server::resolve_renderer() {
   render_options_.pipeline = parse_pipeline(options_.pipeline);
+  // A session's list buffers are bounded (issue 61): a longer list is drawn in passes.
+  render_options_.list_budget.max_bytes = static_cast<std::uint64_t>(options_.list_memory_mb) << 20;
   if (options_.lod_error_px >= 0.0f) render_options_.lod_error_px = options_.lod_error_px;
   // A session's catgs windows open only where its own measured frame costs say they repay
   // (SpeculationParams::cost_model; --speculation cost=off for the paper's rule alone).
@@ -190,8 +200,28 @@ void Server::resolve_renderer() {
 void Server::resolve_gpus() {
   std::vector<int> devices;
   if (renderer_kind_ == "cuda") devices = parse_gpus(options_.gpus, cuda_device_count());
-  gpus_ = std::make_unique<GpuAssignment>(devices);
+  // Each GPU's capacity: its memory less the reserve, or --device-memory-mb where smaller; the
+  // CPU renderer's host slot: the allowance (0: unlimited).
+  const std::uint64_t allowance = static_cast<std::uint64_t>(options_.device_memory_mb) << 20;
+  std::vector<std::uint64_t> capacity;
+  for (int d : devices) {
+    const std::uint64_t total = cuda_device_memory_total(d);
+    const std::uint64_t reserve = static_cast<std::uint64_t>(options_.device_memory_reserve_mb) << 20;
+    std::uint64_t c = total > reserve ? total - reserve : 1;
+    if (allowance > 0) c = std::min(c, allowance);
+    capacity.push_back(c);
+    std::cout << "gpu " << d << ": " << memory_text(c) << " for scenes and sessions (" << memory_text(total)
+              << " in all)" << std::endl;
+  }
+  if (devices.empty()) capacity.push_back(allowance);
+  gpus_ = std::make_unique<GpuAssignment>(devices, capacity);
   metrics_.set_gpus(devices, [g = gpus_.get()] { return g->sessions(); });
+  metrics_.device_memory = [g = gpus_.get()] {
+    std::vector<ServerMetrics::MemoryRow> rows;
+    for (const GpuAssignment::Memory& m : g->memory())
+      rows.push_back({m.device >= 0 ? std::to_string(m.device) : "host", m.capacity, m.scenes, m.reserved});
+    return rows;
+  };
 }
 
 void Server::resolve_encoder() {
@@ -220,6 +250,16 @@ void Server::build_sessions() {
       std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, session_settings_,
                                                        *scenes_, render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
+  // /readyz's memory test until the first visitor: a 1280x720 session of the default scene.
+  if (const auto first = scenes_->loaded(0)) {
+    SessionBufferShape shape;
+    shape.gaussians = first->model->size();
+    shape.width = 1280;
+    shape.height = 720;
+    shape.pipeline = render_options_.pipeline;
+    shape.list_entries = session_list_entries(render_options_.list_budget, 1280, 720);
+    shared_->next_session_bytes = session_device_bytes(shape);
+  }
   // Video export's files: a folder of their own, emptied of what an earlier run left there.
   if (video_export_built() && options_.export_limits.max_concurrent > 0) {
     shared_->export_folder = export_folder(options_.export_dir);

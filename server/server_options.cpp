@@ -67,6 +67,15 @@ std::string server_usage() {
          "  --scene-memory-mb N   keep the loaded scenes' models within N MiB of host memory:\n"
          "                        a load unloads scenes no session uses, least recently used\n"
          "                        first (default 0: no budget, scenes stay once loaded)\n"
+         "  --device-memory-mb N  device memory each GPU may hold of scenes and sessions' buffers,\n"
+         "                        MiB (default 0: the GPU's memory less --device-memory-reserve-mb);\n"
+         "                        a session is admitted only where its buffers fit, else refused\n"
+         "                        with ERROR_SERVER_FULL and /readyz answers 503. With the CPU\n"
+         "                        renderer: the allowance the same accounting uses (0: unlimited)\n"
+         "  --device-memory-reserve-mb N  kept free on each GPU for the CUDA context, the encoders\n"
+         "                        and the sort's scratch (default 2048)\n"
+         "  --list-memory-mb N    a session's render-list buffers, MiB (default 512): a view whose\n"
+         "                        list is longer is drawn in passes of tiles\n"
          "  --scene-cache off|read|write  the scene cache beside each scene (SCENE.catgs-cache,\n"
          "                        written by `catgs-scene cache`): read uses it when it is valid\n"
          "                        for the scene as it is now (else the scene is read, the reason\n"
@@ -276,6 +285,12 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.splat_budget = v == "auto" || v == "off" ? 0 : static_cast<std::uint64_t>(parse_double(a, v, 0.0, 1e12));
     } else if (a == "--scene-memory-mb")
       out.scene_memory_mb = parse_int(a, v, 0, 1 << 24);
+    else if (a == "--device-memory-mb")
+      out.device_memory_mb = parse_int(a, v, 0, 1 << 24);
+    else if (a == "--device-memory-reserve-mb")
+      out.device_memory_reserve_mb = parse_int(a, v, 0, 1 << 20);
+    else if (a == "--list-memory-mb")
+      out.list_memory_mb = parse_int(a, v, 16, 1 << 16);
     else if (a == "--port")
       out.port = parse_int(a, v, 0, 65535);
     else if (a == "--bind")

@@ -22,6 +22,14 @@ struct ServerOptions {
   // --scene-memory-mb: host memory the loaded scenes' models may hold, MiB, before unused ones
   // are unloaded (process/scene_store.h); 0: no budget, every scene stays once loaded.
   int scene_memory_mb = 0;
+  // Device memory (issue 61; gpu_assignment.h): --device-memory-mb bounds what each GPU may hold
+  // of scene copies and sessions' buffers, MiB (0: the GPU's memory less
+  // --device-memory-reserve-mb); with the CPU renderer it is the allowance the same accounting
+  // admits sessions against (0: unlimited). --list-memory-mb bounds a session's render-list
+  // buffers (RenderListBudget::max_bytes): a longer list is drawn in passes.
+  int device_memory_mb = 0;
+  int device_memory_reserve_mb = 2048;
+  int list_memory_mb = 512;
   // --scene-cache: "off", "read" (a valid cache beside the scene is used) or "write" (also
   // written after a plain load); scene/scene_cache.h.
   std::string scene_cache = "read";

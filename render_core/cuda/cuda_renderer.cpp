@@ -371,6 +371,8 @@ const FrameStats& CudaRenderer::last_stats() const {
   return stats_;
 }
 
+std::uint64_t CudaRenderer::device_buffer_bytes() const { return state_->bytes(); }
+
 CudaRenderer::Diagnostics CudaRenderer::diagnostics() const {
   const DeviceGuard on(scene_->device());
   const State& s = *state_;

@@ -58,6 +58,8 @@ inline constexpr std::uint64_t kBytesPerListEntry = 24;
 
 // Device memory in use on the current device (total - free), bytes. Throws CudaError.
 std::size_t device_memory_used();
+// Device memory of the current device in all, bytes. Throws CudaError.
+std::size_t device_memory_total();
 
 // CUDA devices visible to this process (CUDA_VISIBLE_DEVICES applies), 0 when there is no
 // driver or device. Never throws.
@@ -169,6 +171,7 @@ class CudaRenderer final : public Renderer {
   ~CudaRenderer() override;
 
   std::string name() const override { return "cuda"; }
+  std::uint64_t device_buffer_bytes() const override;
   // render_device() then a download into `out` (rgb and rgba8, as the CPU renderer fills them).
   void render(const Camera& camera, Image& out) override;
   // render_device_at() then a download into `out`.

@@ -103,4 +103,10 @@ std::size_t device_memory_used() {
   return total - free_bytes;
 }
 
+std::size_t device_memory_total() {
+  std::size_t free_bytes = 0, total = 0;
+  CATGS_CUDA(cudaMemGetInfo(&free_bytes, &total));
+  return total;
+}
+
 }  // namespace catgs::cuda

@@ -193,6 +193,11 @@ class Renderer {
   virtual const FrameStats& last_stats() const = 0;
   virtual const RenderOptions& options() const = 0;
   virtual void set_options(const RenderOptions& options) = 0;
+  // Device bytes this renderer's own buffers hold now (GrowBuffers: they only grow), not its
+  // scene's copy; 0 on the CPU core, whose buffers are host memory (renderer/device_memory.h
+  // estimates what they would take on a device). The server raises a session's memory
+  // reservation to it after each frame (issue 61).
+  virtual std::uint64_t device_buffer_bytes() const { return 0; }
 
   // Stage 1 shared by several views of one scene (issue 47; docs/DESIGN.md "Stage 1 shared across sessions"): the render
   // lanes pre-process the next frames of the sessions queued on a scene in one pass over it, each
@@ -236,5 +241,8 @@ bool set_cuda_host_wait(const std::string& wait);
 // Device memory in use on CUDA device `gpu` (total - free, every process's), bytes; 0 when built
 // without CUDA or on error. Never throws.
 std::size_t cuda_device_memory_used(int gpu);
+// Device memory of CUDA device `gpu` in all, bytes; 0 when built without CUDA or on error. Never
+// throws.
+std::size_t cuda_device_memory_total(int gpu);
 
 }  // namespace catgs

@@ -60,18 +60,28 @@ bool set_cuda_host_wait(const std::string& wait) {
 #endif
 }
 
-std::size_t cuda_device_memory_used(int gpu) {
+namespace {
+
+// Device memory of CUDA device `gpu`, in all (`total`) or in use, or 0 without CUDA or on error.
+std::size_t device_bytes(int gpu, bool total) {
 #if CATGS_HAVE_CUDA
   try {
     const cuda::DeviceGuard on(gpu);
-    return cuda::device_memory_used();
+    return total ? cuda::device_memory_total() : cuda::device_memory_used();
   } catch (const std::exception&) {
     return 0;
   }
 #else
   (void)gpu;
+  (void)total;
   return 0;
 #endif
 }
+
+}  // namespace
+
+std::size_t cuda_device_memory_used(int gpu) { return device_bytes(gpu, false); }
+
+std::size_t cuda_device_memory_total(int gpu) { return device_bytes(gpu, true); }
 
 }  // namespace catgs

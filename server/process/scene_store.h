@@ -62,6 +62,9 @@ struct LoadedScene {
   // Renderers held while the scene is loaded so each GPU keeps one copy of it between sessions
   // (filled by Options::prepare; empty on the CPU renderer).
   std::vector<std::unique_ptr<Renderer>> residents;
+  // The scene copies' device bytes held in the GPUs' memory accounting (GpuAssignment::add_scene,
+  // one per GPU, or the host slot's with the CPU renderer), given back when the scene unloads.
+  std::vector<std::shared_ptr<void>> device_memory_holds;
   // The stream's rate cap by size, probed by the scene's sessions (--bits-per-pixel auto;
   // encode/content_rate.h); the one part that changes after publication (it locks).
   std::shared_ptr<ContentRates> content_rates = std::make_shared<ContentRates>();

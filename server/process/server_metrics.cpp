@@ -86,6 +86,13 @@ std::string ServerMetrics::prometheus_text() const {
       "Frames refused because their render list would exceed the budget (RenderListBudget); the "
       "session ends with ERROR_INVALID_ARGUMENT.",
       render_budget_refusals_total.load());
+  put("catgs_memory_refusals_total", "counter",
+      "Visitors refused (ERROR_SERVER_FULL) because no GPU's memory could hold their session's buffers.",
+      memory_refusals_total.load());
+  put("catgs_render_out_of_memory_total", "counter",
+      "Frames dropped because a session's buffers could not grow (the session lives on; its list "
+      "budget is halved so later frames are drawn in passes).",
+      render_out_of_memory_total.load());
   put("catgs_encoder_fallbacks_total", "counter",
       "Encoders opened as x264 because --encoder auto found NVENC unusable.", encoder_fallbacks_total.load());
   put("catgs_quality_down_total", "counter", "Adaptive quality: a session stepped its resolution down.",
@@ -183,6 +190,25 @@ std::string ServerMetrics::prometheus_text() const {
   pose_to_frame_seconds.write(o, "catgs_pose_to_frame_seconds");
   head("catgs_session_fps", "histogram", "Frames per second of each session over each Stats interval with frames.");
   session_fps.write(o, "catgs_session_fps");
+  head("catgs_session_device_bytes", "histogram",
+       "Each session's device-memory reservation at each Stats: its estimate, or its buffers where more.");
+  session_device_bytes.write(o, "catgs_session_device_bytes");
+  if (device_memory) {
+    const std::vector<MemoryRow> rows = device_memory();
+    const std::pair<const char*, std::uint64_t MemoryRow::*> gauges[] = {
+        {"capacity", &MemoryRow::capacity}, {"scene", &MemoryRow::scenes}, {"session", &MemoryRow::reserved}};
+    for (const auto& [what, field] : gauges) {
+      const std::string name = "catgs_device_memory_" + std::string(what) + "_bytes";
+      const std::string help =
+          std::string("Device memory of each GPU (or the CPU renderer's allowance, slot=\"host\"): ") +
+          (field == &MemoryRow::capacity ? "what scenes and sessions may hold (0: unlimited)"
+           : field == &MemoryRow::scenes ? "its scene copies"
+                                         : "its sessions' reservations");
+      head(name.c_str(), "gauge", help.c_str());
+      for (const MemoryRow& r : rows)
+        o << "catgs_device_memory_" << what << "_bytes{slot=\"" << r.slot << "\"} " << r.*field << '\n';
+    }
+  }
   if (!gpu_devices_.empty()) {
     const std::vector<std::int64_t> sessions = gpu_sessions_ ? gpu_sessions_() : std::vector<std::int64_t>{};
     head("catgs_gpu_sessions", "gauge", "Open sessions rendering on each GPU (--gpus).");

@@ -98,6 +98,8 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> dropped_frames_total{0};
   std::atomic<std::uint64_t> session_errors_total{0};          // sessions ended with an Error
   std::atomic<std::uint64_t> render_budget_refusals_total{0};  // frames over the render-list budget
+  std::atomic<std::uint64_t> memory_refusals_total{0};         // visitors no GPU's memory could hold
+  std::atomic<std::uint64_t> render_out_of_memory_total{0};    // frames whose buffers could not grow
   std::atomic<std::uint64_t> render_key_frames_total{0};       // full pre-process renders
   std::atomic<std::uint64_t> render_sub_frames_total{0};       // catgs sub-frames from the caches
   std::atomic<std::uint64_t> render_rekeys_total{0};           // catgs key frames first tried as sub-frames
@@ -154,6 +156,16 @@ struct ServerMetrics {
   Histogram speculation_measured_gain{{0.5, 0.75, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0}};
   Histogram pose_to_frame_seconds{Histogram::stage_seconds()};
   Histogram session_fps{{1, 5, 10, 15, 20, 25, 30, 45, 60, 90, 120, 240}};
+  // Each session's device-memory reservation at each Stats, bytes (GpuAssignment).
+  Histogram session_device_bytes{{64.0 * (1 << 20), 128.0 * (1 << 20), 256.0 * (1 << 20), 512.0 * (1 << 20),
+                                  768.0 * (1 << 20), 1024.0 * (1 << 20), 1536.0 * (1 << 20), 2048.0 * (1 << 20),
+                                  3072.0 * (1 << 20), 4096.0 * (1 << 20), 6144.0 * (1 << 20), 8192.0 * (1 << 20)}};
+  // Each memory slot's accounting (the GPUs, or the CPU renderer's host slot), read at exposition.
+  struct MemoryRow {
+    std::string slot;                                      // "0", "1", ... a GPU; "host" the CPU renderer's allowance
+    std::uint64_t capacity = 0, scenes = 0, reserved = 0;  // bytes (capacity 0: unlimited)
+  };
+  std::function<std::vector<MemoryRow>()> device_memory;
 
   // Per GPU (set once at start-up, before any session, by set_gpus): the CUDA devices, their
   // session counts (GpuAssignment::sessions, read at exposition) and render times.

@@ -1,6 +1,7 @@
 #include "render/gpu_assignment.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <stdexcept>
 
 namespace catgs::server {
@@ -30,27 +31,115 @@ std::vector<int> parse_gpus(const std::string& spec, int visible) {
   return out;
 }
 
-GpuAssignment::GpuAssignment(std::vector<int> devices) : devices_(std::move(devices)), sessions_(devices_.size(), 0) {}
-
-int GpuAssignment::acquire() {
-  const std::lock_guard<std::mutex> lock(mutex_);
-  if (devices_.empty()) return -1;
-  const auto least = std::min_element(sessions_.begin(), sessions_.end()) - sessions_.begin();
-  ++sessions_[static_cast<std::size_t>(least)];
-  return devices_[static_cast<std::size_t>(least)];
+std::string memory_text(std::uint64_t bytes) {
+  char buf[64];
+  if (bytes >= (1ull << 30))
+    std::snprintf(buf, sizeof buf, "%.1f GiB", static_cast<double>(bytes) / (1ull << 30));
+  else
+    std::snprintf(buf, sizeof buf, "%llu MiB", static_cast<unsigned long long>(bytes >> 20));
+  return buf;
 }
 
-void GpuAssignment::release(int device) {
+std::uint64_t GpuAssignment::Memory::room() const {
+  if (capacity == 0) return UINT64_MAX;
+  const std::uint64_t used = scenes + reserved;
+  return used >= capacity ? 0 : capacity - used;
+}
+
+GpuAssignment::GpuAssignment(std::vector<int> devices, std::vector<std::uint64_t> capacity)
+    : devices_(std::move(devices)) {
+  const std::size_t n = std::max<std::size_t>(devices_.size(), 1);  // no GPUs: the host slot
+  slots_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    slots_[k].device = devices_.empty() ? -1 : devices_[k];
+    slots_[k].capacity = k < capacity.size() ? capacity[k] : 0;
+  }
+}
+
+int GpuAssignment::slot_of(int device) const {
+  for (std::size_t k = 0; k < slots_.size(); ++k)
+    if (slots_[k].device == device) return static_cast<int>(k);
+  return -1;
+}
+
+GpuAssignment::Placement GpuAssignment::place(std::uint64_t bytes) {
   const std::lock_guard<std::mutex> lock(mutex_);
-  const auto it = std::find(devices_.begin(), devices_.end(), device);
-  if (it == devices_.end()) return;
-  auto& n = sessions_[static_cast<std::size_t>(it - devices_.begin())];
-  if (n > 0) --n;
+  Placement p;
+  int best = -1;
+  for (std::size_t k = 0; k < slots_.size(); ++k)
+    if (slots_[k].room() >= bytes && (best < 0 || slots_[k].sessions < slots_[static_cast<std::size_t>(best)].sessions))
+      best = static_cast<int>(k);
+  if (best < 0) {
+    p.why = "no " + std::string(devices_.empty() ? "device-memory allowance" : "GPU") + " can hold another session (" +
+            memory_text(bytes) + " needed;";
+    for (const Memory& m : slots_)
+      p.why += (m.device >= 0 ? " gpu " + std::to_string(m.device) : std::string(" host")) + ": " +
+               memory_text(m.room()) + " free of " + memory_text(m.capacity) + ", " + std::to_string(m.sessions) +
+               " sessions;";
+    p.why.back() = ')';
+    p.device = slots_[0].device;
+    return p;
+  }
+  Memory& m = slots_[static_cast<std::size_t>(best)];
+  ++m.sessions;
+  m.reserved += bytes;
+  p.device = m.device;
+  p.placed = true;
+  return p;
+}
+
+void GpuAssignment::release(int device, std::uint64_t bytes) {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const int k = slot_of(device);
+  if (k < 0) return;
+  Memory& m = slots_[static_cast<std::size_t>(k)];
+  if (m.sessions > 0) --m.sessions;
+  m.reserved -= std::min(m.reserved, bytes);
+}
+
+bool GpuAssignment::update(int device, std::uint64_t from, std::uint64_t to) {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const int k = slot_of(device);
+  if (k < 0) return true;
+  Memory& m = slots_[static_cast<std::size_t>(k)];
+  m.reserved = m.reserved - std::min(m.reserved, from) + to;
+  return m.capacity == 0 || m.scenes + m.reserved <= m.capacity;
+}
+
+std::shared_ptr<void> GpuAssignment::add_scene(int device, std::uint64_t bytes) {
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    const int k = slot_of(device);
+    if (k < 0) return nullptr;
+    slots_[static_cast<std::size_t>(k)].scenes += bytes;
+  }
+  // The hold's deleter gives the bytes back; the assignment outlives every scene (Server order).
+  return std::shared_ptr<void>(nullptr, [this, device, bytes](void*) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    const int k = slot_of(device);
+    if (k >= 0)
+      slots_[static_cast<std::size_t>(k)].scenes -= std::min(slots_[static_cast<std::size_t>(k)].scenes, bytes);
+  });
 }
 
 std::vector<std::int64_t> GpuAssignment::sessions() const {
   const std::lock_guard<std::mutex> lock(mutex_);
-  return sessions_;
+  std::vector<std::int64_t> out;
+  if (devices_.empty()) return out;
+  for (const Memory& m : slots_) out.push_back(m.sessions);
+  return out;
+}
+
+std::vector<GpuAssignment::Memory> GpuAssignment::memory() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return slots_;
+}
+
+std::uint64_t GpuAssignment::largest_room() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  std::uint64_t best = 0;
+  for (const Memory& m : slots_) best = std::max(best, m.room());
+  return best;
 }
 
 }  // namespace catgs::server

@@ -1,11 +1,22 @@
-// Sessions spread over the server's GPUs (--gpus; issue 21 item 5): each session renders on one
-// GPU for its whole life (its renderer's buffers and the scene copy it reads live there), chosen
-// when its renderer is made as the GPU with the fewest sessions (the lowest index on a tie).
-// Sessions differ in cost, but a session's cost is not known when it starts, and balancing counts
-// keeps every GPU's share of the stream within one session of the others. Thread-safe.
+// Sessions spread over the server's GPUs (--gpus; issue 21 item 5) and held to their memory
+// (issue 61): each session renders on one GPU for its whole life (its renderer's buffers and the
+// scene copy it reads live there), chosen when its renderer is made as the GPU with the fewest
+// sessions among those whose memory can hold its buffers (the lowest index on a tie). Sessions
+// differ in cost, but a session's cost is not known when it starts, and balancing counts keeps
+// every GPU's share of the stream within one session of the others.
+//
+// Memory (docs/DESIGN.md "Device memory"): each GPU has a capacity (its memory less a reserve for
+// the CUDA context and the encoders, or --device-memory-mb), holds its scene copies (add_scene) and
+// the sessions' reservations (renderer/device_memory.h's estimate, raised to what a session's
+// buffers really grew to: update). A session is placed only where its reservation fits; where none
+// fits, place() says why and the server refuses the visitor at the door (ERROR_SERVER_FULL)
+// instead of ending a running session when an allocation fails. The CPU renderer has one slot,
+// the host (device -1), whose capacity is the --device-memory-mb allowance (0: unlimited), so the
+// same accounting runs and is tested without a GPU. Thread-safe.
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -19,22 +30,59 @@ std::vector<int> parse_gpus(const std::string& spec, int visible);
 
 class GpuAssignment {
  public:
-  // `devices`: the CUDA devices to use, in order; empty: no GPUs (the CPU renderer), where
-  // acquire() answers -1.
-  explicit GpuAssignment(std::vector<int> devices);
+  // One GPU's (or the host's) memory, bytes.
+  struct Memory {
+    int device = -1;
+    std::int64_t sessions = 0;
+    std::uint64_t capacity = 0;  // 0: unlimited
+    std::uint64_t scenes = 0;    // scene copies
+    std::uint64_t reserved = 0;  // sessions' reservations
+    // What another session may still reserve (UINT64_MAX when unlimited).
+    std::uint64_t room() const;
+  };
+  struct Placement {
+    int device = -1;  // the GPU (-1: the host, CPU renderer)
+    bool placed = false;
+    std::string why;  // when not placed: what each GPU has and the session needs
+  };
 
-  // The device of the GPU with the fewest sessions (counted from now on), or -1 without GPUs.
-  int acquire();
-  // A session on `device` ended (a device acquire() did not answer is ignored).
-  void release(int device);
+  // `devices`: the CUDA devices to use, in order; empty: no GPUs (the CPU renderer: one host
+  // slot, device -1). `capacity`: bytes per device in that order (missing or 0: unlimited);
+  // with no devices, capacity[0] is the host's allowance.
+  explicit GpuAssignment(std::vector<int> devices, std::vector<std::uint64_t> capacity = {});
+
+  // Places a session that needs `bytes`: the GPU with the fewest sessions among those with room
+  // (the lowest index on a tie), reserving them there. Not placed: nothing changes.
+  Placement place(std::uint64_t bytes);
+  // place(0).device: the device of the GPU with the fewest sessions, or -1 without GPUs.
+  int acquire() { return place(0).device; }
+  // A session on `device` that reserved `bytes` ended (a device place() did not answer is ignored).
+  void release(int device, std::uint64_t bytes = 0);
+  // A session's reservation on `device` changes from `from` to `to` bytes (its buffers grew, or
+  // its viewport changed). Applied even past the capacity (the buffers are already there);
+  // returns whether the device is still within it.
+  bool update(int device, std::uint64_t from, std::uint64_t to);
+  // A scene copy of `bytes` on `device` (-1: the host slot of the CPU renderer) until the
+  // returned hold is dropped.
+  std::shared_ptr<void> add_scene(int device, std::uint64_t bytes);
+
   // Sessions on each device, in the order of devices().
   std::vector<std::int64_t> sessions() const;
+  // Every slot's memory: the GPUs in the order of devices(), or the host slot.
+  std::vector<Memory> memory() const;
+  // The most any one slot may still reserve (UINT64_MAX when one is unlimited).
+  std::uint64_t largest_room() const;
   const std::vector<int>& devices() const { return devices_; }
 
  private:
+  int slot_of(int device) const;  // -1: not ours
+
   std::vector<int> devices_;
   mutable std::mutex mutex_;
-  std::vector<std::int64_t> sessions_;
+  std::vector<Memory> slots_;
 };
+
+// "12.3 GiB" / "512 MiB": for refusal reasons and logs.
+std::string memory_text(std::uint64_t bytes);
 
 }  // namespace catgs::server

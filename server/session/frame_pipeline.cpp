@@ -7,6 +7,7 @@
 #include <iostream>
 #include <iterator>
 
+#include "base/cuda_error.h"
 #include "camera/camera.h"
 #include "encode/encoder_policy.h"
 #include "render/render_scheduler.h"
@@ -14,6 +15,10 @@
 namespace catgs::server {
 
 namespace {
+
+// cudaErrorMemoryAllocation (driver_types.h), without the CUDA headers: a device buffer that
+// could not grow.
+constexpr int kCudaOutOfMemory = 2;
 
 // A client's Quality and the link's cap both lower the policy's rate, never raise it: the lower
 // of the two where both are set.
@@ -107,6 +112,13 @@ FramePipeline::StartedRender FramePipeline::start_render(const JobShape& shape) 
   return s;
 }
 
+std::uint64_t FramePipeline::halve_list_budget() {
+  RenderOptions o = renderer_->options();
+  o.list_budget.max_bytes = std::max<std::uint64_t>(o.list_budget.max_bytes / 2, kMinListBytes);
+  renderer_->set_options(o);
+  return o.list_budget.max_bytes;
+}
+
 std::optional<RenderScheduler::Stage1Share> FramePipeline::stage1_share(const Job& job) const {
   if (!renderer_ || renderer_->options().pipeline == Pipeline::catgs || job.lod_error_px < 0.0f) return std::nullopt;
   return RenderScheduler::Stage1Share{renderer_.get(), camera_of(job)};
@@ -117,6 +129,8 @@ FramePipeline::JobResult FramePipeline::take_failed(Rendered&& frame) {
   JobResult failed;
   failed.error = frame.error;
   failed.over_budget = frame.over_budget;
+  failed.out_of_memory = frame.out_of_memory;
+  failed.buffer_bytes = frame.buffer_bytes;
   return failed;
 }
 
@@ -174,6 +188,7 @@ void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rend
   r.measured_gain = renderer_->last_stats().measured_gain;
   r.speculation_window = renderer_->last_stats().window;
   r.splats = renderer_->last_stats().visible;
+  r.buffer_bytes = renderer_->device_buffer_bytes();
   r.queue_ms = ms_between(job.pose.received, t_start);
   // Render time includes the plane download (GPU) but not the conversion itself.
   r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
@@ -195,6 +210,10 @@ FramePipeline::Rendered FramePipeline::render(Job job, std::unique_ptr<Yuv420Ima
   } catch (const RenderBudgetError& e) {
     r.error = e.what();
     r.over_budget = true;
+  } catch (const cuda::CudaError& e) {
+    r.error = e.what();
+    r.out_of_memory = e.code() == kCudaOutOfMemory;
+    r.buffer_bytes = renderer_->device_buffer_bytes();
   } catch (const std::exception& e) {
     r.error = e.what();
   }
@@ -350,6 +369,10 @@ FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool g
   } catch (const RenderBudgetError& e) {
     failed.error = e.what();
     failed.over_budget = true;
+  } catch (const cuda::CudaError& e) {
+    failed.error = e.what();
+    failed.out_of_memory = e.code() == kCudaOutOfMemory;
+    failed.buffer_bytes = renderer_->device_buffer_bytes();
   } catch (const std::exception& e) {
     failed.error = e.what();
   }
@@ -359,6 +382,7 @@ FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool g
 FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const EncodedFrame& enc,
                                                       const Rendered& rendered) {
   JobResult r;
+  r.buffer_bytes = rendered.buffer_bytes;
   pb::ServerMessage m;
   pb::Frame* f = m.mutable_frame();
   f->set_sequence(job.frame_sequence);

@@ -94,18 +94,22 @@ class FramePipeline {
     // rasterize) and the render lane that drew it (-1: none), for FrameTimings.
     double stage_ms[6] = {};
     int render_lane = -1;
-    int stage1_views = 1;      // FrameStats::stage1_views
-    std::string error;         // non-empty: the render failed
-    bool over_budget = false;  // it failed with RenderBudgetError (renderer.h): the view, not the server
+    int stage1_views = 1;            // FrameStats::stage1_views
+    std::string error;               // non-empty: the render failed
+    bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
+    bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)
+    std::uint64_t buffer_bytes = 0;  // the renderer's device buffers after it (Renderer::device_buffer_bytes)
   };
   // A finished frame (or why there is none).
   struct JobResult {
     std::string message;  // serialized ServerMessage{Frame}; empty on failure
     std::string error;
-    bool over_budget = false;      // as Rendered::over_budget
-    bool key_frame = false;        // an IDR access unit
-    bool render_key_frame = true;  // catgs: a full pre-process (false: a cached sub-frame)
-    bool render_rekey = false;     // as Rendered's
+    bool over_budget = false;        // as Rendered::over_budget
+    bool out_of_memory = false;      // as Rendered's
+    std::uint64_t buffer_bytes = 0;  // as Rendered's
+    bool key_frame = false;          // an IDR access unit
+    bool render_key_frame = true;    // catgs: a full pre-process (false: a cached sub-frame)
+    bool render_rekey = false;       // as Rendered's
     double predicted_gain = 0, measured_gain = 0;
     int speculation_window = 0;
     float lod_error_px = 0;  // as Rendered's
@@ -172,6 +176,12 @@ class FramePipeline {
   std::optional<RenderScheduler::Stage1Share> stage1_share(const Job& job) const;
   // Every render job's end, first thing on the strand.
   void end_render() { rendering_ = false; }
+  // After a frame whose device buffers could not grow (issue 61): halves the renderer's
+  // render-list budget (RenderListBudget::max_bytes, at least kMinListBytes), so its later frames
+  // are drawn in passes within the list buffers it has. Returns the new budget, bytes. Only
+  // between render jobs.
+  static constexpr std::uint64_t kMinListBytes = 32ull << 20;
+  std::uint64_t halve_list_budget();
   // A render that failed: its buffer back, and the result that reports it.
   JobResult take_failed(Rendered&& frame);
   // A rendered frame into the slot the encode stage takes from.

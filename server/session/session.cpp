@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "camera/camera.h"
+#include "renderer/device_memory.h"
 #include "session/annotations.h"
 #include "session/depth_probe.h"
 #include "process/first_view.h"
@@ -90,7 +91,44 @@ void Session::start() {
 Session::~Session() {
   shared_.metrics.connections_open--;
   if (link_.limited()) shared_.metrics.sessions_link_limited--;
-  if (gpu_ >= 0) shared_.gpus.release(gpu_);
+  if (placed_) shared_.gpus.release(gpu_, memory_reserved_);
+}
+
+void Session::on_out_of_memory(const std::string& error) {
+  // The GPU's memory ran out while this session's buffers grew (the estimate admitted it, but
+  // another process, or a view far denser than the estimate, took the room): the frame is lost,
+  // not the session. Its later frames are drawn in passes within the list buffers it has, and
+  // the next pose renders as usual. Only a session that still cannot draw a frame after
+  // kMaxOutOfMemoryFrames in a row is ended, as full, with a retry hint.
+  shared_.metrics.render_out_of_memory_total++;
+  const std::uint64_t budget = frames_.halve_list_budget();
+  std::cerr << "[session " << id_ << "] out of device memory (" << error << "): frame dropped, list budget now "
+            << memory_text(budget) << "\n";
+  if (++out_of_memory_streak_ >= kMaxOutOfMemoryFrames)
+    return fail(pb::ERROR_SERVER_FULL,
+                "server full: its GPU's memory cannot hold this session's frames (" + error + ")", false,
+                jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
+  maybe_start_render();
+}
+
+std::uint64_t Session::memory_estimate(int width, int height) const {
+  SessionBufferShape shape;
+  shape.gaussians = scene_->model->size();
+  shape.width = width;
+  shape.height = height;
+  shape.pipeline = shared_.render_options.pipeline;
+  shape.list_entries = session_list_entries(shared_.render_options.list_budget, width, height);
+  return std::max(session_device_bytes(shape), memory_peak_);
+}
+
+void Session::update_memory(std::uint64_t buffer_bytes) {
+  memory_peak_ = std::max(memory_peak_, buffer_bytes);
+  const std::uint64_t want = memory_estimate(width_, height_);
+  if (!placed_ || want == memory_reserved_) return;
+  if (!shared_.gpus.update(gpu_, memory_reserved_, want))
+    std::cerr << "[session " << id_ << "] device memory: its buffers (" << memory_text(want)
+              << ") take its GPU past its capacity\n";
+  memory_reserved_ = want;
 }
 
 void Session::post_message(MessageKind kind, std::string bytes) {
@@ -221,7 +259,8 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
         return fail(bad->code, bad->reason);
       width_ = v.width;
       height_ = v.height;
-      frames_.request_idr();  // the encoder is rebuilt at the new size; its first frame is an IDR
+      if (state_ == State::open) update_memory(0);  // the estimate at the new size
+      frames_.request_idr();                        // the encoder is rebuilt at the new size; its first frame is an IDR
       return;
     }
     case pb::ClientMessage::kPing: {
@@ -376,7 +415,20 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
     return fail(pb::ERROR_INTERNAL,
                 "scene '" + shared_.scenes.name(scene_use_->index()) + "' failed to load: " + error);
   scene_ = std::move(scene);
-  if (shared_.renderer_kind == "cuda") gpu_ = shared_.gpus.acquire();  // the least busy GPU
+  // A GPU whose memory holds this session's buffers, the least busy of those (issue 61): a
+  // visitor no GPU can hold is refused here, at the door, rather than ended mid-tour when an
+  // allocation fails.
+  const std::uint64_t need = memory_estimate(width_, height_);
+  shared_.next_session_bytes = need;
+  const GpuAssignment::Placement place = shared_.gpus.place(need);
+  if (!place.placed) {
+    shared_.metrics.memory_refusals_total++;
+    return fail(pb::ERROR_SERVER_FULL, "server full: " + place.why, false,
+                jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
+  }
+  placed_ = true;
+  memory_reserved_ = need;
+  gpu_ = shared_.renderer_kind == "cuda" ? place.device : -1;
   std::unique_ptr<Renderer> renderer;
   try {
     renderer = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));
@@ -573,6 +625,7 @@ void Session::send_stats() {
   s->set_quality_level(static_cast<std::uint32_t>(shared_.settings.frame.adaptive_quality ? quality_.level() : 0));
   s->set_key_frames(render_key_frames_);
   s->set_sub_frames(render_sub_frames_);
+  s->set_device_memory_mib(static_cast<std::uint32_t>(memory_reserved_ >> 20));
   // Draining: the client learns when this session will end (the page says so), within a second of
   // SIGTERM, rather than only from the Error at the deadline.
   if (shared_.draining) {
@@ -582,6 +635,7 @@ void Session::send_stats() {
   send(m);
   // A still camera sends no poses and gets no frames: an idle interval has no frame rate to add.
   if (frames_since_stats_ > 0) shared_.metrics.session_fps.observe(frames_since_stats_ / seconds);
+  shared_.metrics.session_device_bytes.observe(static_cast<double>(memory_reserved_));
   last_stats_ = now;
   frames_since_stats_ = 0;
   bytes_since_stats_ = 0;

@@ -70,6 +70,9 @@ struct SessionShared {
   // start-up, empty when exports are off or not built). The exports rendering now, server-wide
   // (--export-max-concurrent), are metrics.exports_running.
   std::string export_folder = {};
+  // The device bytes the last visitor's session needed (set at each placement; the server sets
+  // the first scene's at 1280x720 at start-up): /readyz answers 503 while no GPU has that room.
+  std::atomic<std::uint64_t> next_session_bytes{0};
 };
 
 // Error.retry_after_ms hints, ms. Each Error carries base .. 2 x base, drawn uniformly, so the
@@ -242,6 +245,16 @@ class Session : public std::enable_shared_from_this<Session> {
 
   FramePipeline frames_;  // the frame's state: pose slots, I420 buffers, renderer, encoder
   int gpu_ = -1;          // the CUDA device the session renders on (shared_.gpus), -1: none (CPU)
+  // Device memory (issue 61; gpu_assignment.h): whether this session holds a place in
+  // shared_.gpus, and the bytes it reserves there: the estimate for its viewport
+  // (memory_estimate), raised to what its renderer's buffers grew to.
+  bool placed_ = false;
+  std::uint64_t memory_reserved_ = 0, memory_peak_ = 0;
+  std::uint64_t memory_estimate(int width, int height) const;
+  void update_memory(std::uint64_t buffer_bytes);
+  void on_out_of_memory(const std::string& error);
+  static constexpr int kMaxOutOfMemoryFrames = 64;
+  int out_of_memory_streak_ = 0;
 };
 
 }  // namespace catgs::server

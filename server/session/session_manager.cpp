@@ -78,6 +78,15 @@ int SessionManager::readiness(std::string& body) {
     body = "full (" + std::to_string(open) + "/" + std::to_string(limit) + " sessions)\n";
     return 503;
   }
+  // Device memory (issue 61): no GPU has room for a session like the last visitor's, so a load
+  // balancer sends the next one elsewhere.
+  const std::uint64_t need = shared_.next_session_bytes;
+  const std::uint64_t room = shared_.gpus.largest_room();
+  if (need > 0 && room < need) {
+    body = "full (no device memory for another session: " + memory_text(need) + " needed, " + memory_text(room) +
+           " free; " + std::to_string(open) + " sessions)\n";
+    return 503;
+  }
   body = "ready (" + std::to_string(open) + "/" + std::to_string(limit) + " sessions)\n";
   return 200;
 }

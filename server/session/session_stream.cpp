@@ -54,6 +54,7 @@ void Session::maybe_start_render() {
         boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
           self->frames_.end_render();
           if (!frame.error.empty()) return self->on_job_done(self->frames_.take_failed(std::move(frame)));
+          self->update_memory(frame.buffer_bytes);
           self->pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
           self->frames_.store_rendered(std::move(frame));
           self->maybe_start_encode();
@@ -113,6 +114,9 @@ void Session::maybe_start_encode() {
 void Session::on_job_done(JobResult result) {
   if (state_ != State::open || result.message.empty()) shared_.metrics.dropped_frames_total++;
   if (state_ != State::open) return;
+  update_memory(result.buffer_bytes);
+  if (result.message.empty() && result.out_of_memory) return on_out_of_memory(result.error);
+  if (!result.message.empty()) out_of_memory_streak_ = 0;
   // A view whose render list the renderer refused (RenderListBudget: a scene of giant Gaussians,
   // say) is the request's fault, not the server's: INVALID_ARGUMENT with the rule's message, so
   // that a client can tell it from a failure, and a counter for the operator.

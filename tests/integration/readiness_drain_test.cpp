@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "camera/trace.h"
+#include "scene/ply_io.h"
 #include "good_client.h"
 #include "loadgen/stream_client.h"
 #include "server_process.h"
@@ -216,6 +217,84 @@ TEST(ReadinessDrain, RendererCudaWithoutAGpuFailsFast) {
     EXPECT_EQ(log.find("listening on"), std::string::npos) << log;
   }
   EXPECT_LT(seconds_since(t0), 10.0);
+}
+
+// The value of one series in a /metrics text ("name{labels}"), or -1 when absent.
+double metric(const std::string& text, const std::string& series) {
+  const std::size_t at = text.find("\n" + series + " ");
+  return at == std::string::npos ? -1.0 : std::stod(text.substr(at + series.size() + 2));
+}
+
+// Device memory with the CPU renderer (issue 61): the server's --device-memory-mb allowance runs
+// the accounting a GPU's memory does. A server without one says what a session and the scene
+// take; one whose allowance holds the scene and two such sessions admits two, refuses the third
+// at the door (ERROR_SERVER_FULL, the reason, a retry hint; /readyz 503) while the two stream on,
+// and admits a visitor again once one leaves.
+TEST(ReadinessDrain, DeviceMemoryAllowanceRefusesAtTheDoorAndEndsNoSession) {
+  double scene = 0, session = 0;
+  {
+    ServerProcess server(server_args(kBiker));
+    GoodClient one(server.port(), 64, 64);
+    ASSERT_TRUE(one.wait_frames(2)) << one.error() << server.log();
+    std::string text;
+    ASSERT_EQ(http_get(server.port(), "/metrics", text), 200);
+    scene = metric(text, "catgs_device_memory_scene_bytes{slot=\"host\"}");
+    session = metric(text, "catgs_device_memory_session_bytes{slot=\"host\"}");
+    EXPECT_EQ(metric(text, "catgs_device_memory_capacity_bytes{slot=\"host\"}"), 0.0) << "no allowance: unlimited";
+    ASSERT_GT(scene, 0.0) << text;
+    ASSERT_GT(session, 0.0) << text;
+    // A scene copy holds at least its float32 means, scales, rotations and opacities.
+    const auto biker = load_scene(kBiker);
+    EXPECT_GE(scene, static_cast<double>(biker.size()) * 44.0);
+  }
+  const auto allowance_mb = static_cast<long>((scene + 2.5 * session) / (1 << 20)) + 1;
+  ServerProcess server(server_args(kBiker, {"--device-memory-mb", std::to_string(allowance_mb)}));
+  std::string body;
+  EXPECT_EQ(http_get(server.port(), "/readyz", body), 200) << body;
+  GoodClient first(server.port(), 64, 64), second(server.port(), 64, 64);
+  ASSERT_TRUE(first.wait_frames(2)) << first.error() << server.log();
+  ASSERT_TRUE(second.wait_frames(2)) << second.error() << server.log();
+  EXPECT_TRUE(readyz_becomes(server.port(), 503, body)) << body;
+  EXPECT_NE(body.find("no device memory for another session"), std::string::npos) << body;
+  {
+    StreamClient third;
+    third.connect(server.port());
+    auto err = hello_error(third);
+    ASSERT_TRUE(err) << "a third session admitted past the allowance\n" << server.log();
+    EXPECT_EQ(err->code(), pb::ERROR_SERVER_FULL);
+    EXPECT_NE(err->reason().find("no device-memory allowance can hold another session"), std::string::npos)
+        << err->reason();
+    EXPECT_GE(err->retry_after_ms(), 2000u);
+    EXPECT_LE(err->retry_after_ms(), 4000u);
+  }
+  // The refusal cost the running sessions nothing.
+  EXPECT_TRUE(first.wait_frames(3)) << first.error();
+  EXPECT_TRUE(second.wait_frames(3)) << second.error();
+  EXPECT_EQ(first.error(), "");
+  EXPECT_EQ(second.error(), "");
+  std::string text;
+  ASSERT_EQ(http_get(server.port(), "/metrics", text), 200);
+  EXPECT_EQ(metric(text, "catgs_memory_refusals_total"), 1.0);
+  EXPECT_LE(metric(text, "catgs_device_memory_scene_bytes{slot=\"host\"}") +
+                metric(text, "catgs_device_memory_session_bytes{slot=\"host\"}"),
+            static_cast<double>(allowance_mb) * (1 << 20));
+  // One leaves: the door opens again.
+  first.stop();
+  EXPECT_TRUE(readyz_becomes(server.port(), 200, body)) << body;
+  GoodClient fourth(server.port(), 64, 64);
+  EXPECT_TRUE(fourth.wait_frames(2)) << fourth.error() << server.log();
+}
+
+// Stats carry the session's device-memory reservation (MiB), which the ramp JSON reports.
+TEST(ReadinessDrain, StatsCarryTheSessionsDeviceMemory) {
+  ServerProcess server(server_args(kBiker));
+  StreamClient c;
+  c.connect(server.port());
+  c.hello(64, 64);
+  auto stats = wait_for(c, 5000, [](const pb::ServerMessage& m) { return m.has_stats(); });
+  ASSERT_TRUE(stats) << server.log();
+  // At least the list buffers of the budget's 16 M-entry floor (16 M x 28 bytes).
+  EXPECT_GE(stats->stats().device_memory_mib(), 400u);
 }
 
 }  // namespace

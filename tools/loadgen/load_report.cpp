@@ -191,6 +191,7 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"server_skipped", s.server_skipped},
          {"link_limited_stats", s.link_limited_stats},
          {"link_cap_kbps_min", s.link_cap_kbps_min},
+         {"device_memory_mib_max", s.device_memory_mib_max},
          {"link_kbps_last", s.link_kbps_last},
          {"stale", s.stale},
          {"errors", s.errors},

@@ -73,8 +73,10 @@ struct SessionResult {
   int link_limited_stats = 0;
   std::uint32_t link_cap_kbps_min = 0;
   double link_kbps_last = 0;  // the server's last estimate of the link's rate (0: none)
-  std::uint64_t stale = 0;    // frames later than the stale bound, or older than one shown
-  std::uint64_t errors = 0;   // server Error, lost connection, undecodable frame
+  // The most device memory the server's Stats said this session held (Stats.device_memory_mib).
+  std::uint32_t device_memory_mib_max = 0;
+  std::uint64_t stale = 0;   // frames later than the stale bound, or older than one shown
+  std::uint64_t errors = 0;  // server Error, lost connection, undecodable frame
   std::string first_error;
   // The server refused the Hello (Error instead of Welcome): no session ran. `refusal` names the
   // ErrorCode and reason.
