@@ -251,15 +251,9 @@ void Server::build_sessions() {
                                                        *scenes_, render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
   // /readyz's memory test until the first visitor: a 1280x720 session of the default scene.
-  if (const auto first = scenes_->loaded(0)) {
-    SessionBufferShape shape;
-    shape.gaussians = first->model->size();
-    shape.width = 1280;
-    shape.height = 720;
-    shape.pipeline = render_options_.pipeline;
-    shape.list_entries = session_list_entries(render_options_.list_budget, 1280, 720);
-    shared_->next_session_bytes = session_device_bytes(shape);
-  }
+  if (const auto first = scenes_->loaded(0))
+    shared_->next_session_bytes = first_session_device_bytes(first->model->size(), 1280, 720, render_options_.pipeline,
+                                                             render_options_.list_budget);
   // Video export's files: a folder of their own, emptied of what an earlier run left there.
   if (video_export_built() && options_.export_limits.max_concurrent > 0) {
     shared_->export_folder = export_folder(options_.export_dir);

@@ -80,8 +80,9 @@ void CudaRenderer::preprocess_batch(const std::vector<CudaRenderer*>& renderers,
                              cudaMemcpyHostToDevice, batch.stream));
   CATGS_CUDA(cudaEventRecord(batch.batch_copied, batch.stream));
   CATGS_CUDA(cudaMemsetAsync(batch.batch_count.as<void>(), 0, sizeof(unsigned), batch.stream));
-  const stages::BatchChunks either{{batch.batch_chunks.as<uint32_t>(), batch.batch_count.as<unsigned>()},
-                                   batch.batch_mask.as<uint32_t>()};
+  const stages::BatchChunks either{
+      {batch.batch_chunks.as<uint32_t>(), batch.batch_count.as<unsigned>(), nullptr, nullptr, 0, nullptr, 0},
+      batch.batch_mask.as<uint32_t>()};
   stages::preprocess_batch(scene_view(scene, lead.options_.lod_error_px), lead.options_.pipeline != Pipeline::vanilla,
                            batch.host_batch_views, views_device, static_cast<int>(views), either, batch.stream);
   CATGS_CUDA(cudaEventRecord(batch.batch_join, batch.stream));

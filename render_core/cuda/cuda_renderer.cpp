@@ -72,21 +72,14 @@ stages::CameraParams camera_params(const Camera& camera) {
 
 void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels) {
   std::size_t* allocs = &allocations;
-  splat.ensure(n * sizeof(stages::Splat), "splats", allocs);
-  color.ensure(n * sizeof(float4), "colours", allocs);
-  depth.ensure(n * sizeof(float), "depths", allocs);
-  rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs);
-  tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs);
-  tile_mask.ensure(n * sizeof(uint32_t), "tile masks", allocs);
-  ends.ensure((n + 1) * sizeof(uint64_t), "emission offsets", allocs);  // + depth_order's spare
-  big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs);
-  huge_part_count.ensure(static_cast<std::size_t>(tune::kHugeListed) * tune::kHugeParts * sizeof(uint32_t),
-                         "huge-Gaussian part counts", allocs);
   const std::size_t chunks = fm::chunk_count(n);
-  chunk_total.ensure(chunks * sizeof(uint32_t), "chunk entry counts", allocs);
-  chunk_start.ensure(chunks * sizeof(uint64_t), "chunk starts", allocs);
   live_chunks.ensure(chunks * sizeof(uint32_t), "kept chunks", allocs);
-  scan_temp.ensure(stages::scan_temp_bytes(chunks), "scan scratch", allocs);
+  live_keep.ensure(chunks * sizeof(uint32_t), "chunk cull answers", allocs);
+  live_slot.ensure(chunks * sizeof(uint32_t), "chunk slots", allocs);
+  live_scan_temp.ensure(stages::live_scan_temp_bytes(chunks), "chunk slot scan scratch", allocs);
+  // The first frame's slots, before any view was counted (fm::initial_slot_chunks); a view that
+  // keeps more is pre-processed again once the slots grew (count_render_list's overflow).
+  if (slot_chunks == 0) ensure_slots(fm::initial_slot_chunks(chunks), false);
   ranges.ensure(tiles * sizeof(uint2), "tile ranges", allocs);
   heaviest_tile.ensure(sizeof(uint32_t), "heaviest tile", allocs);
   tile_order.ensure(tiles * sizeof(uint32_t), "tile order", allocs);
@@ -94,17 +87,33 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
 }
 
-uint64_t CudaRenderer::State::build_render_list(uint64_t n, const stages::ChunkWalk& walk,
-                                                const stages::CameraParams& cam, const stages::TileTests& tests,
-                                                bool depth_first, const RenderListBudget& budget, uint64_t* visible) {
-  const ListCounts counts = count_render_list(n, walk, cam, depth_first);
-  *visible = counts.visible;
-  // The render-list budget (renderer.h; issue 22), as the CPU core checks it: a scene of giant
-  // Gaussians is refused here, before the list buffers grow, and not after gigabytes of them.
-  // Its cap also keeps the list within the 32-bit tile ranges.
-  budget.check(counts.entries, cam.width, cam.height, kBytesPerListEntry);
-  emit_render_list(n, walk, cam, tests, depth_first, counts.entries, counts.visible, counts.packing);
-  return counts.entries;
+void CudaRenderer::State::ensure_slots(uint64_t chunks, bool catgs) {
+  std::size_t* allocs = &allocations;
+  if (chunks > slot_chunks) {
+    // Slack on the count, not per buffer: every per-slot buffer holds the same slot chunks.
+    slot_chunks = std::max<uint64_t>(
+        chunks, slot_chunks == 0 ? chunks : static_cast<uint64_t>(static_cast<double>(chunks) * tune::kGrowthFactor));
+    catgs_sized = false;
+  }
+  const std::size_t n = slots();
+  splat.ensure(n * sizeof(stages::Splat), "splats", allocs, false);
+  color.ensure(n * sizeof(float4), "colours", allocs, false);
+  depth.ensure(n * sizeof(float), "depths", allocs, false);
+  rect.ensure(n * sizeof(ushort4), "tile rectangles", allocs, false);
+  tiles_touched.ensure(n * sizeof(uint32_t), "tile counts", allocs, false);
+  tile_mask.ensure(n * sizeof(uint32_t), "tile masks", allocs, false);
+  ends.ensure((n + 1) * sizeof(uint64_t), "emission offsets", allocs, false);  // + depth_order's spare
+  big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs, false);
+  huge_part_count.ensure(static_cast<std::size_t>(tune::kHugeListed) * tune::kHugeParts * sizeof(uint32_t),
+                         "huge-Gaussian part counts", allocs);
+  chunk_total.ensure(slot_chunks * sizeof(uint32_t), "chunk entry counts", allocs, false);
+  chunk_start.ensure(slot_chunks * sizeof(uint64_t), "chunk starts", allocs, false);
+  scan_temp.ensure(stages::scan_temp_bytes(slot_chunks), "scan scratch", allocs);
+  if (catgs && !catgs_sized) {
+    ensure_catgs_buffers();
+    catgs_sized = true;
+  }
+  note_peak();
 }
 
 CudaRenderer::State::ListCounts CudaRenderer::State::count_render_list(uint64_t n, const stages::ChunkWalk& walk,
@@ -131,6 +140,8 @@ CudaRenderer::State::ListCounts CudaRenderer::State::count_render_list(uint64_t 
   ListCounts c;
   c.entries = host_counts[0];
   c.visible = host_counts[1];
+  c.kept = host_counts[kLiveChunkCount - kReadListLength] & 0xffffffffull;  // its low 32 bits
+  c.overflow = c.kept > slot_chunks;
   // The single sort's key (forward_model/key_packing.h): 32-bit [tile | quantised depth] over the
   // listed depths' range, where pre-processing recorded one (preprocess; the speculative
   // pre-processing does not: its lists sort depth first, or with plain keys) and it fits.
@@ -178,7 +189,7 @@ void CudaRenderer::State::emit_render_list(uint64_t n, const stages::ChunkWalk& 
   // is timed with emission), then a stable sort on the tile bits alone. The 32-bit tile keys
   // live in the halves of the 64-bit key buffers.
   const int tile_bits = fm::tile_key_bits(tiles);
-  for (int h = 0; h < 2; ++h) {
+  for (int h = 0; h < 2; ++h) {  // n: the slots
     depth_index[h].ensure(n * sizeof(uint32_t), "depth order", &allocations);
     depth_keys[h].ensure(n * sizeof(uint32_t), "depth keys", &allocations);
   }
@@ -271,31 +282,39 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
   const std::size_t pixels = static_cast<std::size_t>(camera.width) * camera.height;
   s.ensure_frame_buffers(n, tiles, pixels);
   const stages::SceneView sv = scene_view(scene, options_.lod_error_px);
-  const stages::Projected proj = s.projected();
+  stages::Projected proj = s.projected();
   auto* counters = s.counters.as<unsigned long long>();
   const RenderListBudget& budget = options_.list_budget;
   const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-  const stages::TileTests tests{
+  stages::TileTests tests{
       exact ? stages::TileTestKind::ellipse : stages::TileTestKind::square, proj.splat, {}, cam.width, cam.height};
 
   // Stage 1 over `region` (every tile, or one pass's), then the counts readback. kPreprocessed
   // marks the whole frame's pre-processing (a frame in passes: the later stage times hold the
-  // passes' pre-processing too; total_ms is the frame's).
+  // passes' pre-processing too; total_ms is the frame's). A view that kept more chunks than the
+  // slots hold is pre-processed again once they grew (issue 61; records.h Projected).
   auto count = [&](const fm::TileRect& region, bool whole) {
-    if (!(whole && preprocessed)) {  // the whole frame's may be a batch's (preprocess_together)
-      CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-      stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
-                         counters + kReadDepthLowComplement, s.big_list(), s.stream);
-      if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
+    for (;;) {
+      if (!(whole && preprocessed)) {  // the whole frame's may be a batch's (preprocess_together)
+        CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
+        stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
+                           counters + kReadDepthLowComplement, s.big_list(), s.stream);
+        if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
+      }
+      const State::ListCounts c = s.count_render_list(s.slots(), s.live_walk(), cam, depth_first);
+      if (!c.overflow) return c;
+      s.ensure_slots(c.kept, false);
+      proj = s.projected();
+      tests.splat = proj.splat;
+      preprocessed = false;
     }
-    return s.count_render_list(n, s.live_walk(n), cam, depth_first);
   };
   const State::ListCounts frame = count(fm::kAllTiles, true);
 
   // Stages 2-5 of what was counted last (`c`), over tiles [first, end), sorted with the frame's
   // key and split with the frame's slice length.
   auto draw = [&](const State::ListCounts& c, uint32_t first, uint32_t end) {
-    s.emit_render_list(n, s.live_walk(n), cam, tests, depth_first, c.entries, c.visible, frame.packing);
+    s.emit_render_list(s.slots(), s.live_walk(), cam, tests, depth_first, c.entries, c.visible, frame.packing);
     if (exact) {
       // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the
       // average load is rasterized as slices by several blocks and merged, so a few heavy tiles do

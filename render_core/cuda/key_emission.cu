@@ -67,33 +67,32 @@ __global__ void __launch_bounds__(kCountThreads)
   if (blockIdx.x == 0) counts[1] = *visible;
 }
 
-// A block per chunk of the walk: each Gaussian's end in the list, its chunk's start + the
-// inclusive sum of tiles_touched over the chunk up to it. A chunk without entries (nothing
-// listed) is left alone: emission skips it too.
+// A block per slot chunk of the walk: each slot's end in the list, its slot chunk's start + the
+// inclusive sum of tiles_touched over the slot chunk up to it. A slot chunk without entries
+// (nothing listed) is left alone: emission skips it too.
 __global__ void __launch_bounds__(fm::kChunkSize)
-    gaussian_ends_kernel(const uint32_t* __restrict__ tiles_touched,  // [N]
-                         const uint32_t* __restrict__ chunk_total,    // [chunks]
-                         const uint64_t* __restrict__ chunk_start,    // [chunks]
+    gaussian_ends_kernel(const uint32_t* __restrict__ tiles_touched,  // [S]
+                         const uint32_t* __restrict__ chunk_total,    // [SC]
+                         const uint64_t* __restrict__ chunk_start,    // [SC]
                          uint64_t n, ChunkWalk walk,
-                         uint64_t* __restrict__ ends) {  // [N]
+                         uint64_t* __restrict__ ends) {  // [S]
   using Scan = cub::BlockScan<uint32_t, fm::kChunkSize>;
   __shared__ typename Scan::TempStorage scratch;
   const uint64_t chunks = walk.size();
   for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
-    const uint64_t c = walk.chunk(k);
-    if (chunk_total[c] == 0u) continue;  // block-uniform
-    const uint64_t i = c * fm::kChunkSize + threadIdx.x;
+    if (chunk_total[k] == 0u) continue;  // block-uniform
+    const uint64_t i = k * fm::kChunkSize + threadIdx.x;
     const uint32_t touched = i < n ? tiles_touched[i] : 0u;
     uint32_t upto = 0;
     Scan(scratch).InclusiveSum(touched, upto);
-    if (i < n) ends[i] = chunk_start[c] + upto;
+    if (i < n) ends[i] = chunk_start[k] + upto;
     __syncthreads();  // scratch is reused next round
   }
 }
 
 // Calls emit(j) for this thread's walk positions: with an `order`, the thread's index in the grid
-// (j indexes the order); without, thread x of each walked chunk that has entries (j = the
-// Gaussian, c * kChunkSize + x; the chunk test is block-uniform, so warps stay whole).
+// (j indexes the order); without, thread x of each walked slot chunk k that has entries (j = the
+// slot, k * kChunkSize + x; the chunk test is block-uniform, so warps stay whole).
 template <typename Emit>
 __device__ __forceinline__ void for_each_walked(const uint32_t* order, const ChunkWalk& walk,
                                                 const uint32_t* __restrict__ chunk_total, Emit&& emit) {
@@ -102,10 +101,8 @@ __device__ __forceinline__ void for_each_walked(const uint32_t* order, const Chu
     return;
   }
   const uint64_t chunks = walk.size();
-  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
-    const uint64_t c = walk.chunk(k);
-    if (chunk_total[c] != 0u) emit(c * fm::kChunkSize + threadIdx.x);
-  }
+  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x)
+    if (chunk_total[k] != 0u) emit(k * fm::kChunkSize + threadIdx.x);
 }
 
 // One thread per Gaussian writes its run of keys, testing each tile of its rectangle (vanilla

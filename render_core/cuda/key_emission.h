@@ -9,6 +9,8 @@
 
 namespace catgs::cuda::stages {
 
+// Every n below is the frame's slots (records.h Projected: its slot chunks x fm::kChunkSize), and
+// a "chunk" a slot chunk.
 // Stage 2a (key_emission.cu): the list length, the sum of the chunks' entry counts
 // (Projected::chunk_total), into counts[0] (zeroed by the caller) and *visible into counts[1], for
 // the frame's one readback; a few blocks of a grid-stride sum, so the readback can start before

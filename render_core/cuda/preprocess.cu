@@ -3,6 +3,7 @@
 // decides culling and tile counts rounds as the CPU reference does, and so the tile test gives the
 // same answer here as in key emission.
 #include <cub/block/block_reduce.cuh>
+#include <cub/device/device_scan.cuh>
 #include <stdexcept>
 #include <string>
 
@@ -59,12 +60,20 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
 // (fm::chunk_outside_view; vanilla keeps every chunk, as reference 3DGS culls only per Gaussian),
 // every pipeline the chunks outside the LOD cut (lod_drawn, cpu/preprocess.cpp's loop).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    cull_chunks_kernel(SceneView scene, uint64_t count, CameraParams cam, bool exact,
-                       uint32_t* __restrict__ chunk_total,  // [count]
-                       LiveChunks live) {                   // count zero on entry
+    cull_chunks_kernel(SceneView scene, uint64_t count, CameraParams cam, bool exact, LiveChunks live) {
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  keep_or_drop_chunk(c < count && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)) && lod_drawn(scene, c, cam),
-                     c, count, chunk_total, live);
+  mark_chunk(c < count && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)) && lod_drawn(scene, c, cam), c,
+             count, live);
+}
+
+// order_live_chunks' second launch, a thread per chunk (after slot = the exclusive sum of keep):
+// each kept chunk at its slot chunk of index[], and the count from the last chunk.
+__global__ void __launch_bounds__(tune::kGaussianThreads) list_live_chunks_kernel(uint64_t count, LiveChunks live) {
+  const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (c >= count) return;
+  const uint32_t kept = live.keep[c], at = live.slot[c];
+  if (kept) live.index[at] = static_cast<uint32_t>(c);
+  if (c + 1 == count) *live.count = at + kept;
 }
 
 // A thread's Gaussian as every view of a batch reads it: its attributes once, and its 3D
@@ -97,10 +106,12 @@ struct GaussianInView {
 };
 
 // Gaussian i (loaded as g) in one view: frustum culling, EWA 2D covariance, conic, tile bounds and
-// count, SH colour; writes the projected features of a visible one and returns its counts.
-__device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, LoadedGaussian& g, const SceneView& scene,
-                                                              const CameraParams& cam, bool exact,
-                                                              const fm::TileRect& region, const Projected& out) {
+// count, SH colour; writes the projected features of a visible one at its slot s and returns its
+// counts.
+__device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64_t s, LoadedGaussian& g,
+                                                              const SceneView& scene, const CameraParams& cam,
+                                                              bool exact, const fm::TileRect& region,
+                                                              const Projected& out) {
   GaussianInView r;
   const glm::vec3 p_cam = cam.R * g.mean + cam.t;
   if (!(p_cam.z > cam.near_plane) || p_cam.z > cam.far_plane) return r;  // frustum (near/far)
@@ -122,7 +133,7 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, Loaded
     const uint32_t mask =
         area == 0 || r.is_big ? 0u : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height);
     r.touched = static_cast<uint32_t>(__popc(mask));
-    if (r.touched > 0) out.tile_mask[i] = mask;
+    if (r.touched > 0) out.tile_mask[s] = mask;
   } else {
     const float radius = fm::three_sigma_radius(cov2);
     rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, cam.tiles_x, cam.tiles_y), region);
@@ -134,29 +145,29 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, Loaded
 
   const glm::vec3 dir = glm::normalize(g.mean - cam.position);
   const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), dir);
-  out.splat[i] = make_splat(mean2d, conic, opacity, q_max);
-  out.color[i] = make_float4(col.x, col.y, col.z, 0.0f);
-  out.depth[i] = p_cam.z;
+  out.splat[s] = make_splat(mean2d, conic, opacity, q_max);
+  out.color[s] = make_float4(col.x, col.y, col.z, 0.0f);
+  out.depth[s] = p_cam.z;
   r.depth = p_cam.z;
-  out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
+  out.rect[s] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
                              static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
   return r;
 }
 
-// One thread per Gaussian of chunk c (a block's thread x takes Gaussian c * kChunkSize + x), one
-// view: writes the projected features of visible Gaussians (preprocess_gaussian) and
-// tiles_touched of all, and the chunk's total. Every thread of the block calls it.
-__device__ __forceinline__ void preprocess_chunk_view(uint64_t c, LoadedGaussian* g, const SceneView& scene,
+// One thread per Gaussian of chunk c at slot chunk k (a block's thread x takes Gaussian
+// c * kChunkSize + x, slot k * kChunkSize + x), one view: writes the projected features of
+// visible Gaussians (preprocess_gaussian) and tiles_touched of every slot (0 past the scene's
+// end), and the slot chunk's total. Every thread of the block calls it.
+__device__ __forceinline__ void preprocess_chunk_view(uint64_t c, uint64_t k, LoadedGaussian* g, const SceneView& scene,
                                                       const CameraParams& cam, bool exact, const fm::TileRect& region,
                                                       const Projected& out, unsigned long long* visible,
                                                       unsigned long long* depth_range, const BigList& big) {
   const uint64_t i = c * fm::kChunkSize + threadIdx.x;
+  const uint64_t s = k * fm::kChunkSize + threadIdx.x;
   GaussianInView r;
-  if (i < scene.n) {
-    r = preprocess_gaussian(i, *g, scene, cam, exact, region, out);
-    out.tiles_touched[i] = r.touched;
-  }
-  list_big_and_count_visible(r.is_big, r.is_huge, r.touched, i, c, big, visible, out.chunk_total);
+  if (i < scene.n) r = preprocess_gaussian(i, s, *g, scene, cam, exact, region, out);
+  out.tiles_touched[s] = r.touched;
+  list_big_and_count_visible(r.is_big, r.is_huge, r.touched, s, k, big, visible, out.chunk_total);
   // Big Gaussians' depths count where count_big_kernel finds them entries: the range is over
   // the Gaussians with entries, as the CPU reference's sort works it out from its list.
   record_depth_range(r.touched > 0, r.depth, depth_range);
@@ -178,14 +189,14 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
   for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
     const uint64_t c = live.chunk(k);
     LoadedGaussian g = load_gaussian(scene, c);
-    preprocess_chunk_view(c, &g, scene, cam, exact, region, out, visible, depth_range, big);
+    preprocess_chunk_view(c, k, &g, scene, cam, exact, region, out, visible, depth_range, big);
     __syncthreads();  // the shared words of the block reductions are rewritten next round
   }
 }
 
 // Batch chunk culling, a thread per chunk: each view's culling as cull_chunks_kernel does it
-// (into that view's chunk_total and live list), and the chunks any view kept into `either`, with
-// the views that kept it as bits of view_mask[c].
+// (into that view's keep flags; order_live_chunks lists them), and the chunks any view kept into
+// `either`, with the views that kept it as bits of view_mask[c].
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     cull_chunks_batch_kernel(SceneView scene, uint64_t count, const BatchView* __restrict__ views, int view_count,
                              bool exact, LiveChunks either, uint32_t* __restrict__ view_mask) {  // [count]
@@ -194,7 +205,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   for (int v = 0; v < view_count; ++v) {
     const CameraParams& cam = views[v].cam;
     const bool keep = c < count && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)) && lod_drawn(scene, c, cam);
-    keep_or_drop_chunk(keep, c, count, views[v].out.chunk_total, views[v].live);
+    mark_chunk(keep, c, count, views[v].live);
     mask |= keep ? 1u << v : 0u;
   }
   if (c < count) view_mask[c] = mask;
@@ -202,8 +213,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
 }
 
 // A block per chunk that any view of the batch kept: each Gaussian is read once, then
-// pre-processed for every view that kept its chunk (preprocess_chunk_view, as preprocess_kernel
-// does it for one view), the views in order.
+// pre-processed for every view that kept its chunk at that view's slot chunk (preprocess_chunk_view,
+// as preprocess_kernel does it for one view; a slot chunk past the view's capacity is left for
+// its frame to draw again), the views in order.
 __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
     preprocess_batch_kernel(SceneView scene, bool exact, fm::TileRect region, const BatchView* __restrict__ views,
                             ChunkWalk either, const uint32_t* __restrict__ view_mask) {
@@ -213,7 +225,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
     LoadedGaussian g = load_gaussian(scene, c);
     for (uint32_t mask = view_mask[c]; mask != 0u; mask &= mask - 1u) {  // block-uniform
       const BatchView& v = views[__ffs(static_cast<int>(mask)) - 1];
-      preprocess_chunk_view(c, &g, scene, v.cam, exact, region, v.out, v.visible, v.depth_range, v.big);
+      const uint64_t k = v.live.slot[c];
+      if (k >= v.live.capacity) continue;  // block-uniform
+      preprocess_chunk_view(c, k, &g, scene, v.cam, exact, region, v.out, v.visible, v.depth_range, v.big);
       __syncthreads();  // the shared words of the block reductions are rewritten next view
     }
   }
@@ -288,6 +302,27 @@ __global__ void __launch_bounds__(tune::kBigThreads) count_big_kernel(BigList bi
 
 }  // namespace
 
+std::size_t live_scan_temp_bytes(uint64_t chunks) {
+  std::size_t bytes = 0;
+  CATGS_CUDA(cub::DeviceScan::ExclusiveSum(nullptr, bytes, static_cast<const uint32_t*>(nullptr),
+                                           static_cast<uint32_t*>(nullptr), static_cast<int64_t>(chunks)));
+  return bytes;
+}
+
+void order_live_chunks(const LiveChunks& live, uint64_t chunks, cudaStream_t stream) {
+  if (chunks == 0) return;
+  std::size_t temp_bytes = live.scan_temp_bytes;  // CUB takes it by reference
+  CATGS_CUDA(cub::DeviceScan::ExclusiveSum(live.scan_temp, temp_bytes, live.keep, live.slot,
+                                           static_cast<int64_t>(chunks), stream));
+  const auto blocks = static_cast<unsigned>((chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads);
+  list_live_chunks_kernel<<<blocks, tune::kGaussianThreads, 0, stream>>>(chunks, live);
+  CATGS_CUDA_LAUNCHED("list_live_chunks_kernel");
+}
+
+void clear_chunk_totals(const Projected& out, const LiveChunks& live, cudaStream_t stream) {
+  if (live.capacity > 0) CATGS_CUDA(cudaMemsetAsync(out.chunk_total, 0, live.capacity * sizeof(uint32_t), stream));
+}
+
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
                 const Projected& out, const LiveChunks& live, unsigned long long* visible,
                 unsigned long long* depth_range, const BigList& big, cudaStream_t stream) {
@@ -295,10 +330,12 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   const uint64_t chunks = fm::chunk_count(scene.n);
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
-  cull_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene, chunks, cam, exact, out.chunk_total, live);
+  clear_chunk_totals(out, live, stream);
+  cull_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(scene, chunks, cam,
+                                                                                                exact, live);
   CATGS_CUDA_LAUNCHED("cull_chunks_kernel");
-  const ChunkWalk walk = live.walk(chunks);
+  order_live_chunks(live, chunks, stream);
+  const ChunkWalk walk = live.walk();
   preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
       scene, cam, exact, region, out, walk, visible, depth_range, big);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
@@ -316,10 +353,12 @@ void preprocess_batch(const SceneView& scene, bool exact, const BatchView* views
   const uint64_t chunks = fm::chunk_count(scene.n);
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess_batch: too many Gaussians for one grid");
+  for (int v = 0; v < view_count; ++v) clear_chunk_totals(views_host[v].out, views_host[v].live, stream);
   cull_chunks_batch_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
       scene, chunks, views, view_count, exact, either.chunks, either.view_mask);
   CATGS_CUDA_LAUNCHED("cull_chunks_batch_kernel");
-  const ChunkWalk walk = either.chunks.walk(chunks);
+  for (int v = 0; v < view_count; ++v) order_live_chunks(views_host[v].live, chunks, stream);
+  const ChunkWalk walk{either.chunks.index, either.chunks.count, chunks};
   preprocess_batch_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
       scene, exact, fm::kAllTiles, views, walk, either.view_mask);
   CATGS_CUDA_LAUNCHED("preprocess_batch_kernel");

@@ -10,22 +10,33 @@
 namespace catgs::cuda::stages {
 
 // Stage 1 (preprocess.cu): chunk culling first (exact: fm::chunk_outside_view, a thread per
-// chunk; vanilla keeps every chunk), whose kept chunks go to `live` (records.h LiveChunks, its
-// count zero on entry; a culled chunk gets chunk_total = 0 and nothing else), then a block per
-// kept chunk: frustum culling, EWA 2D covariance, conic, SH colour, tile bounds and per-Gaussian
-// tile counts (vanilla: 3-sigma square; exact: opacity-aware ellipse-vs-tile test).
-// Adds the number of visible Gaussians to *visible (one atomic per block), and widens
-// depth_range[2] to the view depths of the Gaussians with entries (float bits; [0] complemented,
-// both running maxima: zero them first) for the single sort's key (fm::single_sort_packing). Big Gaussians are
-// appended to `big`, huge ones to its huge end (one atomic per warp that holds any); with
-// `exact`, their tiles are counted by a second kernel (count_big_tiles). `big.count` must be zero
-// on entry. Writes each chunk's entry count to out.chunk_total; tiles_touched only in kept chunks
-// (records.h listed_tiles). `region`: one pass of a frame drawn in passes (renderer/render_passes.h)
-// counts only that region's tiles (fm::clip_tile_rect; the camera stays the whole frame's), as
-// cpu::preprocess; fm::kAllTiles for a frame in one pass.
+// chunk; vanilla keeps every chunk), whose kept chunks `live` lists in index order
+// (order_live_chunks; records.h LiveChunks: the k-th kept chunk's Gaussians take slot chunk k of
+// `out`), then a block per kept chunk within live.capacity: frustum culling, EWA 2D covariance,
+// conic, SH colour, tile bounds and per-Gaussian tile counts (vanilla: 3-sigma square; exact:
+// opacity-aware ellipse-vs-tile test). Adds the number of visible Gaussians to *visible (one
+// atomic per block), and widens depth_range[2] to the view depths of the Gaussians with entries
+// (float bits; [0] complemented, both running maxima: zero them first) for the single sort's key
+// (fm::single_sort_packing). Big Gaussians' slots are appended to `big`, huge ones to its huge
+// end (one atomic per warp that holds any); with `exact`, their tiles are counted by a second
+// kernel (count_big_tiles). `big.count` must be zero on entry. Writes each slot chunk's entry
+// count to out.chunk_total (0 past the kept chunks). A frame whose kept chunks pass
+// live.capacity pre-processes only the first live.capacity (the caller reads the count and draws
+// it again with larger buffers). `region`: one pass of a frame drawn in passes
+// (renderer/render_passes.h) counts only that region's tiles (fm::clip_tile_rect; the camera
+// stays the whole frame's), as cpu::preprocess; fm::kAllTiles for a frame in one pass.
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
                 const Projected& out, const LiveChunks& live, unsigned long long* visible,
                 unsigned long long* depth_range, const BigList& big, cudaStream_t stream);
+
+// After a chunk cull has written live.keep[0, chunks): slot = the exclusive sum of keep, the kept
+// chunks into index[] in index order, and count (two launches: a CUB scan, a scatter).
+void order_live_chunks(const LiveChunks& live, uint64_t chunks, cudaStream_t stream);
+// Scratch bytes order_live_chunks' scan needs over `chunks` chunks (LiveChunks::scan_temp).
+std::size_t live_scan_temp_bytes(uint64_t chunks);
+// Zeroes out.chunk_total over live.capacity slot chunks (the slot chunks past the kept ones must
+// read as empty to the list's count and scan).
+void clear_chunk_totals(const Projected& out, const LiveChunks& live, cudaStream_t stream);
 
 // Stage 1 for a batch of views of one scene (preprocess.cu; the views of several sessions, or of
 // catgs-bench --batch): one view of the batch, its camera and where its results go, as

@@ -63,45 +63,54 @@ struct __align__(32) Splat {
   float4 c_opacity_q_log2;  // (C, opacity, q_max, log2_opacity)
 };
 
-// Stage 1 output, one entry per Gaussian (and one per chunk of fm::kChunkSize Gaussians);
-// tiles_touched == 0 marks a culled Gaussian whose other fields are left unwritten, and a culled
-// chunk (chunk_total == 0) leaves even its Gaussians' tiles_touched unwritten: read them through
-// listed_tiles where the chunk may have been culled.
+// Stage 1 output, one entry per slot and one per slot chunk (issue 61: the frame's buffers follow
+// the view, not the scene). Stage 1 culls whole chunks of fm::kChunkSize Gaussians first and
+// lists those it keeps in index order (LiveChunks); the k-th kept chunk's Gaussians take slots
+// [k * kChunkSize, (k + 1) * kChunkSize) of every per-Gaussian buffer, so the buffers hold the
+// chunks a view keeps (its frustum and LOD cut), not the scene. Slot order is Gaussian index order
+// over the kept chunks, so every order a stage derives from slots (emission, the sort's ties, the
+// depth-first order) is the one the CPU reference derives from Gaussian indices. [S] below: slots
+// (slot chunks x kChunkSize); [SC]: slot chunks. tiles_touched == 0 marks a culled Gaussian
+// whose other fields are left unwritten; a slot chunk past the kept ones has chunk_total 0 (read
+// tiles_touched through listed_tiles).
 struct Projected {
-  Splat* splat;             // [N] 2D mean, conic, opacity, q_max, log2(opacity)
-  float4* color;            // [N] (r, g, b, unused): 16-byte loads in the rasterizer
-  float* depth;             // [N] camera-space z
-  ushort4* rect;            // [N] tile rectangle [x0, x1) x [y0, y1)
-  uint32_t* tiles_touched;  // [N] render-list entries this Gaussian emits
-  // [N] exact pre-processing, Gaussians whose rectangle holds at most tune::kBigRectTiles tiles:
+  Splat* splat;             // [S] 2D mean, conic, opacity, q_max, log2(opacity)
+  float4* color;            // [S] (r, g, b, unused): 16-byte loads in the rasterizer
+  float* depth;             // [S] camera-space z
+  ushort4* rect;            // [S] tile rectangle [x0, x1) x [y0, y1)
+  uint32_t* tiles_touched;  // [S] render-list entries this Gaussian emits (0 past the scene's end)
+  // [S] exact pre-processing, Gaussians whose rectangle holds at most tune::kBigRectTiles tiles:
   // bit b set when the ellipse reaches the rectangle's b-th tile in row-major order, as counted,
   // so key emission reads the answers instead of testing every tile again (as Trails::tile_mask).
   uint32_t* tile_mask;
-  // [chunk_count(N)] the sum of tiles_touched over each chunk (its render-list entries): the
-  // list scan runs over chunks, and later stages skip a chunk with none (a culled one) without
-  // reading its Gaussians.
+  // [SC] the sum of tiles_touched over each slot chunk (its render-list entries): the list scan
+  // runs over slot chunks, and later stages skip one with none without reading its Gaussians.
   uint32_t* chunk_total;
 };
 
-// Gaussian i's render-list entries, where only the chunks stage 1 walked were written
-// (tiles_touched is left unwritten in a culled chunk, whose chunk_total is 0).
+// Slot s's render-list entries (0 in a slot chunk with none).
 __device__ __forceinline__ uint32_t listed_tiles(const uint32_t* tiles_touched, const uint32_t* chunk_total,
-                                                 uint64_t i) {
-  return chunk_total[i / fm::kChunkSize] != 0u ? tiles_touched[i] : 0u;
+                                                 uint64_t s) {
+  return chunk_total[s / fm::kChunkSize] != 0u ? tiles_touched[s] : 0u;
 }
 
-// The chunks (fm::kChunkSize Gaussians each) that a frame's per-Gaussian stages walk, a block
-// per chunk. Pre-processing culls whole chunks first (exact: cull_chunks_kernel, preprocess.cu;
-// catgs key frames: cull_path_chunks_kernel, speculative_preprocess.cu) and lists those left, in no particular order (each chunk's outputs do not depend on the order, and the
-// list is laid out by the chunks' scan in index order); the other stages then launch at most
-// tune::kChunkWalkBlocks blocks over that list, so a culled chunk costs a few bytes, not a block
-// and a write per Gaussian (issue 19: "cull whole chunks first"). A null `index` walks every
-// chunk in index order, a block each (no stage asks for that now: both pre-processings list).
+// The slot chunks a frame's per-Gaussian stages walk, a block per slot chunk: k from 0 to
+// size(), scene chunk chunk(k). Pre-processing culls whole chunks first (exact:
+// cull_chunks_kernel, preprocess.cu; catgs key frames: cull_path_chunks_kernel,
+// speculative_preprocess.cu) and lists those left in index order (order_live_chunks); the other
+// stages then launch at most tune::kChunkWalkBlocks blocks over that list, so a culled chunk
+// costs a few bytes, not a block and a write per Gaussian (issue 19: "cull whole chunks first").
+// A null `index` walks every chunk, slot chunk k = chunk k (a batch's scratch list, whose order
+// is free, is walked through its own index).
 struct ChunkWalk {
   const uint32_t* index;  // [chunks] or null
   const unsigned* count;  // [1] device: the chunks in index[]
-  uint64_t chunks;        // fm::chunk_count(N): every chunk, the most index[] can hold
-  __device__ uint64_t size() const { return index ? *count : chunks; }
+  uint64_t chunks;        // the slot chunks the buffers hold: the most a walk covers
+  __device__ uint64_t size() const {
+    if (!index) return chunks;
+    const uint64_t n = *count;
+    return n < chunks ? n : chunks;
+  }
   __device__ uint64_t chunk(uint64_t k) const { return index ? index[k] : k; }
   // Blocks of a launch that walks the chunks a block each (grid-stride past the cap).
   uint64_t blocks() const {
@@ -109,12 +118,20 @@ struct ChunkWalk {
   }
 };
 
-// Where stage 1 lists the chunks it keeps: index [chunk_count(N)] and count [1] (device, zero on
-// entry), read back by later stages as a ChunkWalk.
+// Where stage 1 lists the chunks it keeps. Chunk culling writes keep[c]; order_live_chunks
+// (preprocess.cu) turns that into slot[c] (the exclusive sum of keep: chunk c's slot chunk where
+// kept), index[] (the kept chunks in index order) and count. A frame whose count passes
+// `capacity` (the slot chunks its buffers hold) pre-processes only the first `capacity` and is
+// drawn again once the buffers grew (CudaRenderer::State::count_render_list).
 struct LiveChunks {
-  uint32_t* index;
-  unsigned* count;
-  ChunkWalk walk(uint64_t chunks) const { return {index, count, chunks}; }
+  uint32_t* index;    // [chunk_count(N)]
+  unsigned* count;    // [1]
+  uint32_t* keep;     // [chunk_count(N)]
+  uint32_t* slot;     // [chunk_count(N)]
+  uint64_t capacity;  // slot chunks
+  void* scan_temp;    // the keep -> slot scan's scratch (live_scan_temp_bytes)
+  std::size_t scan_temp_bytes;
+  ChunkWalk walk() const { return {index, count, capacity}; }
 };
 
 // Render-list sort keys (forward_model/key_packing.h): 64-bit plain [tile | depth bits], or the
@@ -127,17 +144,17 @@ using fm::DepthKeyPacking;
 struct BigList {
   uint32_t* index;       // [capacity]: big ones from index[0] up, huge ones from index[capacity - 1] down
   unsigned* count;       // [2]: big ones (not huge), huge ones
-  uint64_t capacity;     // N
+  uint64_t capacity;     // S
   uint32_t* part_count;  // [tune::kHugeListed * tune::kHugeParts]: entries of each part of a huge one
   __device__ uint32_t huge(unsigned h) const { return index[capacity - 1 - h]; }
 };
 
 // catgs key frames: each visible Gaussian's trail (forward_model/trail.h fm::Trail), pixel units.
 struct Trails {
-  float4* mean0_motion;  // [N] (mean0.x, mean0.y, motion.x, motion.y)
-  float4* conic_q;       // [N] (A, B, C) inverse of the trail covariance, q_trail
-  float4* cov;           // [N] (a, b, c, q_trail) trail covariance (sub-frame containment check)
-  // [N] Gaussians whose tile rectangle holds at most tune::kBigRectTiles tiles: bit b set when
+  float4* mean0_motion;  // [S] (mean0.x, mean0.y, motion.x, motion.y)
+  float4* conic_q;       // [S] (A, B, C) inverse of the trail covariance, q_trail
+  float4* cov;           // [S] (a, b, c, q_trail) trail covariance (sub-frame containment check)
+  // [S] Gaussians whose tile rectangle holds at most tune::kBigRectTiles tiles: bit b set when
   // the trail touches the rectangle's b-th tile in row-major order, as counted by the speculative
   // pre-processing, so key emission reads the answers instead of testing every tile again.
   uint32_t* tile_mask;
@@ -149,7 +166,7 @@ enum class TileTestKind { square, ellipse, trail };
 // The inputs of the tile test, read per Gaussian by tile_test.cuh.
 struct TileTests {
   TileTestKind kind;
-  const Splat* splat;  // [N] ellipse: mean, conic, q_max
+  const Splat* splat;  // [S] ellipse: mean, conic, q_max
   Trails trails;       // trail
   int width, height;   // pixels
 };

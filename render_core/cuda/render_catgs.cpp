@@ -5,7 +5,7 @@
 // Key frame: M (max_screen_motion, one 4-byte readback) -> W -> speculative pre-processing over
 // the predicted path (trails, and each small trail's tile answers as a bit mask) -> the counts
 // readback, key emission from those masks (big trails: the trail test), sort (depth first by
-// default), tile ranges (build_render_list) -> frustum cache (select_cached) -> split plan and
+// default), tile ranges (count_render_list, emit_render_list) -> frustum cache (select_cached) -> split plan and
 // slice order (plan_frame_slices) -> rasterize slices (tile-culled: only entries whose ellipse
 // reaches the tile at this pose are blended; the last slice of a split tile merges it). The slice total is copied back
 // asynchronously (plan_ready) so the group's sub-frames launch exactly one block per slice; the
@@ -64,8 +64,9 @@ void CudaRenderer::report_cost() {
   s.planner.record_cost(!st.key_frame ? Kind::sub : st.window == 0 ? Kind::exact : Kind::key, st.window, st.total_ms);
 }
 
-void CudaRenderer::State::ensure_catgs_buffers(uint64_t n) {
+void CudaRenderer::State::ensure_catgs_buffers() {
   std::size_t* allocs = &allocations;
+  const uint64_t n = slots();
   trail_mean0_motion.ensure(n * sizeof(float4), "trail means", allocs);
   trail_conic_q.ensure(n * sizeof(float4), "trail conics", allocs);
   trail_cov.ensure(n * sizeof(float4), "trail covariances", allocs);
@@ -96,7 +97,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   const stages::CameraParams cam = camera_params(camera);
   const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
   s.ensure_frame_buffers(n, tiles, static_cast<std::size_t>(camera.width) * camera.height);
-  s.ensure_catgs_buffers(n);
+  s.ensure_slots(0, true);  // the trails and frustum cache follow the slots
   const stages::SceneView sv = scene_view(*scene_, options_.lod_error_px);
 
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
@@ -104,9 +105,7 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   const int planned = s.planner.window_wanted()
                           ? s.measure_window(sv, cam, camera_params(s.planner.next_camera(camera)), sp.depth_threshold)
                           : 0;
-  const stages::Projected proj = s.projected();
   auto* counters = s.counters.as<unsigned long long>();
-  const stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
   const RenderListBudget& budget = options_.list_budget;
   const uint64_t limit = budget.max_entries(camera.width, camera.height, kBytesPerListEntry);
   // A window whose trail list is over the budget is narrowed (issue 35), as the CPU core does
@@ -118,10 +117,15 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
     stages::PathParams pp{};
     pp.count = static_cast<int>(path.size());
     for (std::size_t k = 0; k < path.size(); ++k) pp.cam[k] = camera_params(path[k]);
-    CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-    stages::speculative_preprocess(sv, pp, trail_widening(sp, window), proj, s.trails(), s.live_chunk_list(),
-                                   counters + kVisibleCount, s.big_list(), s.stream);
-    counts = s.count_render_list(n, s.live_walk(n), cam, depth_first_sort());
+    // A view that keeps more chunks than the slots hold is pre-processed again once they grew
+    // (issue 61; records.h Projected).
+    do {
+      if (counts.overflow) s.ensure_slots(counts.kept, true);
+      CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
+      stages::speculative_preprocess(sv, pp, trail_widening(sp, window), s.projected(), s.trails(), s.live_chunk_list(),
+                                     counters + kVisibleCount, s.big_list(), s.stream);
+      counts = s.count_render_list(s.slots(), s.live_walk(), cam, depth_first_sort());
+    } while (counts.overflow);
     if (counts.entries <= limit) break;
     budget.check_reach(counts.entries, counts.visible, camera.width, camera.height, kBytesPerListEntry);
   }
@@ -145,10 +149,12 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
     // The depth-first sort pays for a trail list, several times the exact one; an exact list sorts
     // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
     // the predictor and the depth-first sort bought").
-    s.emit_render_list(n, s.live_walk(n), cam, tests, depth_first_sort(), counts.entries, counts.visible,
+    const stages::Projected proj = s.projected();
+    const stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
+    s.emit_render_list(s.slots(), s.live_walk(), cam, tests, depth_first_sort(), counts.entries, counts.visible,
                        counts.packing);
     // the frustum cache, for the group's sub-frames
-    stages::select_cached(proj.tiles_touched, proj.chunk_total, n, s.cached.as<uint32_t>(), cc + kCachedCount,
+    stages::select_cached(proj.tiles_touched, proj.chunk_total, s.slots(), s.cached.as<uint32_t>(), cc + kCachedCount,
                           s.select_temp.as<void>(), s.select_temp.bytes(), s.stream);
     const uint64_t capacity = s.plan_frame_slices(tiles, counts.entries, sp);  // paper sec. 3.4
     // The group's sub-frames launch one block per slice: the totals come back while this frame
@@ -177,13 +183,13 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   CATGS_CUDA(cudaMemsetAsync(cc + kOutside, 0, sizeof(unsigned), s.stream));
   stages::update_subframe_features(scene_view(*scene_, options_.lod_error_px), camera_params(camera),
                                    s.cached.as<uint32_t>(), static_cast<uint32_t>(s.key_visible),
-                                   options_.speculation.subframe_key_colour, s.projected(), s.trails(), cc + kOutside,
-                                   s.stream);
+                                   s.live_chunks.as<uint32_t>(), options_.speculation.subframe_key_colour,
+                                   s.projected(), s.trails(), cc + kOutside, s.stream);
   // The group's LOD cut is its key frame's (the key camera's): a chunk outside it is drawn by
   // another level, so its unlisted Gaussians must not turn the frame into a key frame.
   stages::check_unlisted(scene_view(*scene_, options_.lod_error_px), camera_params(camera),
                          camera_params(s.planner.key_camera()), s.tiles_touched.as<uint32_t>(),
-                         s.chunk_total.as<uint32_t>(), cc + kOutside, s.stream);
+                         s.chunk_total.as<uint32_t>(), s.live_chunk_list(), cc + kOutside, s.stream);
   CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
   CATGS_CUDA(cudaEventSynchronize(s.plan_ready));  // the key frame's slice total, long since copied
   // Nothing is drawn if the check failed.

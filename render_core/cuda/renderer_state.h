@@ -26,9 +26,10 @@ class GrowBuffer {
   // Makes room for `bytes`; returns true when it had to reallocate (contents are then lost).
   // cudaFree waits for in-flight work on the device, so a buffer still read by an earlier frame
   // is never freed under it. Throws CudaError naming the size when device memory runs out.
-  bool ensure(std::size_t bytes, const char* what, std::size_t* allocations) {
+  // `slack`: take tune::kGrowthFactor times the need (false: the caller sized it with its own).
+  bool ensure(std::size_t bytes, const char* what, std::size_t* allocations, bool slack = true) {
     if (bytes <= bytes_) return false;
-    const auto want = static_cast<std::size_t>(static_cast<double>(bytes) * tune::kGrowthFactor) + 256;
+    const auto want = slack ? static_cast<std::size_t>(static_cast<double>(bytes) * tune::kGrowthFactor) + 256 : bytes;
     if (ptr_) CATGS_CUDA(cudaFree(ptr_));
     ptr_ = nullptr;
     bytes_ = 0;
@@ -88,21 +89,21 @@ class PinnedBuffer {
   std::size_t bytes_ = 0;
 };
 
-// Slots of State::counters (64-bit, device): the running visible count, the frame's 32-byte
-// readback (render-list length, visible count, and the listed Gaussians' depth range as float
-// bits, the low end complemented so that both ends are running maxima from zero: the one copy
-// build_render_list syncs on), the big-Gaussian count (stages::BigList::count, its low 32
-// bits; its high 32 bits: the huge ones') and the chunks pre-processing kept (stages::LiveChunks,
-// low 32 bits).
+// Slots of State::counters (64-bit, device): the running visible count, the frame's 48-byte
+// readback (render-list length, visible count, the listed Gaussians' depth range as float bits,
+// the low end complemented so that both ends are running maxima from zero, the big-Gaussian
+// count, and the chunks pre-processing kept: the one copy count_render_list syncs on), the
+// big-Gaussian count (stages::BigList::count, its low 32 bits; its high 32 bits: the huge ones')
+// and the chunks pre-processing kept (stages::LiveChunks, low 32 bits).
 enum CounterSlot {
   kVisibleCount = 0,
   kReadListLength = 1,
   kReadVisible = 2,
   kReadDepthLowComplement = 3,
   kReadDepthHigh = 4,
-  kReadSlots = 4,
   kBigCount = 5,
   kLiveChunkCount = 6,
+  kReadSlots = 6,  // slots 1..6
   kCounterSlots = 7
 };
 // Slots of State::catgs_counters (32-bit, device) and of its pinned host mirror host_catgs (the
@@ -148,11 +149,16 @@ struct CudaRenderer::State {
   int syncs = 0;
   int width = 0, height = 0;
 
-  // Per Gaussian.
+  // Per slot (records.h Projected: the Gaussians of the chunks a frame keeps, issue 61), for
+  // slot_chunks slot chunks; they grow only when a view keeps more chunks than any before.
   GrowBuffer splat, color, depth, rect, tiles_touched, tile_mask, ends, scan_temp, big, huge_part_count;
-  // Per chunk of fm::kChunkSize Gaussians: render-list entries, where the chunk's start, and the
-  // chunks exact pre-processing kept (stages::LiveChunks).
-  GrowBuffer chunk_total, chunk_start, live_chunks;
+  // Per slot chunk: render-list entries and where the slot chunk's start.
+  GrowBuffer chunk_total, chunk_start;
+  // Per scene chunk (4 bytes each: 1/64 of a Gaussian's bytes per chunk): the kept chunks
+  // (stages::LiveChunks: the list, the cull's answers, their slot chunks) and the ordering
+  // scan's scratch.
+  GrowBuffer live_chunks, live_keep, live_slot, live_scan_temp;
+  uint64_t slot_chunks = 0;  // the slot chunks the per-slot buffers hold
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // The depth-first sort (depth_order.cu): visible Gaussians and their depth keys (two halves
@@ -196,30 +202,34 @@ struct CudaRenderer::State {
   int window = 0;
   bool key_frame = true;
 
-  // Grows the buffers every frame of `n` Gaussians at this camera's size needs.
+  // Grows the buffers every frame of a scene of `n` Gaussians at this camera's size needs: the
+  // per-chunk lists for the scene, the per-slot buffers for slot_chunks (at first a guess:
+  // initial_slot_chunks), per tile and pixel.
   void ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels);
+  // Grows the per-slot buffers (and, with `catgs`, the trails and frustum cache) to hold at least
+  // `chunks` slot chunks, with tune::kGrowthFactor slack; contents are lost.
+  void ensure_slots(uint64_t chunks, bool catgs);
+  uint64_t slots() const { return slot_chunks * fm::kChunkSize; }
+  bool catgs_sized = false;  // the trails and frustum cache follow slot_chunks
 
-  // Stages 2-4 after pre-processing: sums the chunks' entry counts and reads back the list length
-  // and the visible count (the frame's counts sync; the chunks' scan and the Gaussians' ends run
-  // on the GPU meanwhile), grows the list buffers, emits keys with `tests`
-  // (records kKeysEmitted), sorts (sets sorted_values, records kSorted) and writes the tile
-  // ranges. With `depth_first` the list is ordered by the depth-first sort (depth_order.cu; the
-  // same list). Returns the list length. Throws RenderBudgetError (renderer.h) when the list is
-  // over `budget` for the camera's size (kBytesPerListEntry an entry; the 2^32 - 1 limit of the
-  // 32-bit tile ranges included), after the counts sync and before any list buffer grows, as the
-  // CPU core's emit_keys. `walk`: the chunks pre-processing kept (live_walk()).
-  uint64_t build_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
-                             const stages::TileTests& tests, bool depth_first, const RenderListBudget& budget,
-                             uint64_t* visible);
-  // build_render_list in two halves, for the frames that look at the counts before listing
-  // (issue 35: a catgs key frame narrows its window, a frame over the budget is drawn in passes).
-  // count_render_list: the counts readback (the frame's sync; with !depth_first the chunks'
-  // scan and the Gaussians' ends are queued behind it); emit_render_list: grows the list buffers
-  // for `counts.entries`, emits, sorts and writes the ranges with `packing` (a pass: its whole
-  // frame's single-sort key, so each tile's order is the single pass's), as build_render_list.
+  // Stages 2-4 after pre-processing, in two halves, for the frames that look at the counts before
+  // listing (issue 35: a catgs key frame narrows its window, a frame over the budget is drawn in
+  // passes; issue 61: a view that kept more chunks than the slots hold is pre-processed again).
+  // `n`: the slots (slots()); `walk`: the chunks pre-processing kept (live_walk()).
+  // count_render_list: the counts readback (the frame's sync; with !depth_first the chunks' scan
+  // and the Gaussians' ends are queued behind it); emit_render_list: grows the list buffers for
+  // `entries`, emits keys with `tests` (records kKeysEmitted), sorts (sets sorted_values, records
+  // kSorted) and writes the tile ranges with `packing` (a pass: its whole frame's single-sort key,
+  // so each tile's order is the single pass's). With `depth_first` the list is ordered by the
+  // depth-first sort (depth_order.cu; the same list). The caller checks the render-list budget
+  // (RenderBudgetError, renderer.h) between the two, before any list buffer grows.
+  // `overflow`: stage 1 kept more chunks (`kept`) than the per-slot buffers hold: the caller
+  // grows them (ensure_slots(kept)) and runs stage 1 again; nothing else of the frame is valid.
   struct ListCounts {
     uint64_t entries = 0, visible = 0;
     stages::DepthKeyPacking packing = fm::plain_key_packing();  // the single sort's, from the depths
+    uint64_t kept = 0;
+    bool overflow = false;
   };
   ListCounts count_render_list(uint64_t n, const stages::ChunkWalk& walk, const stages::CameraParams& cam,
                                bool depth_first);
@@ -238,7 +248,7 @@ struct CudaRenderer::State {
   // catgs key frames (render_catgs.cpp): grows the trail and frustum-cache buffers; measures M
   // between the key camera and the predicted next one (one 4-byte readback) and returns the
   // planner's W.
-  void ensure_catgs_buffers(uint64_t n);
+  void ensure_catgs_buffers();
   int measure_window(const stages::SceneView& scene, const stages::CameraParams& key, const stages::CameraParams& next,
                      float depth_threshold);
 
@@ -250,9 +260,14 @@ struct CudaRenderer::State {
   // Where preprocess lists the chunks it keeps, and the same list as later stages walk it.
   stages::LiveChunks live_chunk_list() const {
     return {live_chunks.as<uint32_t>(),
-            reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kLiveChunkCount)};
+            reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kLiveChunkCount),
+            live_keep.as<uint32_t>(),
+            live_slot.as<uint32_t>(),
+            slot_chunks,
+            live_scan_temp.as<void>(),
+            live_scan_temp.bytes()};
   }
-  stages::ChunkWalk live_walk(uint64_t n) const { return live_chunk_list().walk(fm::chunk_count(n)); }
+  stages::ChunkWalk live_walk() const { return live_chunk_list().walk(); }
   stages::BigList big_list() const {
     // The 64-bit counter slot holds both 32-bit counts (big, huge).
     return {big.as<uint32_t>(), reinterpret_cast<unsigned*>(counters.as<unsigned long long>() + kBigCount),
@@ -280,6 +295,9 @@ struct CudaRenderer::State {
                                 &chunk_total,
                                 &chunk_start,
                                 &live_chunks,
+                                &live_keep,
+                                &live_slot,
+                                &live_scan_temp,
                                 &ends,
                                 &scan_temp,
                                 &big,

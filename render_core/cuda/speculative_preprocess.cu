@@ -52,12 +52,14 @@ __device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 
 // hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory. Held to 64
 // registers (4 blocks of 256 per SM, 20 bytes of spill): the kernel is compute-bound, and at 72
 // registers (3 blocks) it was slower (tunables.h kPathKernelMinBlocks).
-// A block per chunk of the walk (thread x takes Gaussian c * kChunkSize + x); every thread calls it.
-__device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, const SceneView& scene,
+// A block per chunk of the walk (thread x takes Gaussian chunk * kChunkSize + x, and slot
+// k * kChunkSize + x of the outputs); every thread calls it.
+__device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, uint64_t k, const SceneView& scene,
                                                              const PathParams& path, const TrailWidening& widening,
                                                              const Projected& out, const Trails& trails,
                                                              unsigned long long* visible, const BigList& big) {
   const uint64_t i = chunk * fm::kChunkSize + threadIdx.x;
+  const uint64_t s = k * fm::kChunkSize + threadIdx.x;
   uint32_t touched = 0;
   bool is_big = false, is_huge = false;
   if (i < scene.n) {
@@ -113,19 +115,19 @@ __device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, con
       if (touched == 0 && !is_big) break;
 
       const glm::vec3 c = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), glm::normalize(mean - key.position));
-      out.splat[i] = make_splat(means[0], conic, opacity, q_max);
-      out.color[i] = make_float4(c.x, c.y, c.z, 0.0f);
-      out.depth[i] = key_depth;
-      out.rect[i] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
+      out.splat[s] = make_splat(means[0], conic, opacity, q_max);
+      out.color[s] = make_float4(c.x, c.y, c.z, 0.0f);
+      out.depth[s] = key_depth;
+      out.rect[s] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),
                                  static_cast<unsigned short>(rect.x1), static_cast<unsigned short>(rect.y1));
-      trails.mean0_motion[i] = make_float4(trail.mean0.x, trail.mean0.y, trail.motion.x, trail.motion.y);
-      trails.conic_q[i] = make_float4(trail_conic.x, trail_conic.y, trail_conic.z, trail.q_trail);
-      trails.cov[i] = make_float4(trail.cov.x, trail.cov.y, trail.cov.z, trail.q_trail);
-      trails.tile_mask[i] = mask;
+      trails.mean0_motion[s] = make_float4(trail.mean0.x, trail.mean0.y, trail.motion.x, trail.motion.y);
+      trails.conic_q[s] = make_float4(trail_conic.x, trail_conic.y, trail_conic.z, trail.q_trail);
+      trails.cov[s] = make_float4(trail.cov.x, trail.cov.y, trail.cov.z, trail.q_trail);
+      trails.tile_mask[s] = mask;
     } while (false);
-    out.tiles_touched[i] = touched;
   }
-  list_big_and_count_visible(is_big, is_huge, touched, i, chunk, big, visible, out.chunk_total);
+  out.tiles_touched[s] = touched;  // 0 past the scene's end
+  list_big_and_count_visible(is_big, is_huge, touched, s, k, big, visible, out.chunk_total);
 }
 
 __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBlocks)
@@ -135,7 +137,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
                                   BigList big) {
   const uint64_t chunks = live.size();
   for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
-    speculative_preprocess_chunk(live.chunk(k), scene, path, widening, out, trails, visible, big);
+    speculative_preprocess_chunk(live.chunk(k), k, scene, path, widening, out, trails, visible, big);
     __syncthreads();  // the block reduction's shared words are rewritten next round
   }
 }
@@ -144,15 +146,13 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPathKernelMinBl
 // Gaussians the per-Gaussian cull above would keep), and the chunks outside the LOD cut at the
 // key view (lod_drawn at path.cam[0]: the whole window draws the key frame's cut).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    cull_path_chunks_kernel(SceneView scene, uint64_t count, PathParams path, TrailWidening widening,
-                            uint32_t* __restrict__ chunk_total,  // [count]
-                            LiveChunks live) {                   // count zero on entry
+    cull_path_chunks_kernel(SceneView scene, uint64_t count, PathParams path, TrailWidening widening, LiveChunks live) {
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   const auto view_at = [&](int k) -> const fm::View& { return path.cam[k]; };
-  keep_or_drop_chunk(c < count && lod_drawn(scene, c, path.cam[0]) &&
-                         !fm::chunk_misses_path(scene.chunks[c], path.count, view_at, 1.0f + widening.slack,
-                                                widening.margin_px, widening.motion_margin),
-                     c, count, chunk_total, live);
+  mark_chunk(c < count && lod_drawn(scene, c, path.cam[0]) &&
+                 !fm::chunk_misses_path(scene.chunks[c], path.count, view_at, 1.0f + widening.slack, widening.margin_px,
+                                        widening.motion_margin),
+             c, count, live);
 }
 
 // M: a warp per chunk (grid-stride over the scene's chunks), the chunk skipped whole when none
@@ -197,10 +197,12 @@ void speculative_preprocess(const SceneView& scene, const PathParams& path, cons
   const uint64_t chunks = fm::chunk_count(scene.n);
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
   if (cull_blocks > 0x7fffffffull) throw std::length_error("speculative_preprocess: too many Gaussians for one grid");
+  clear_chunk_totals(out, live, stream);
   cull_path_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene, chunks, path, widening, out.chunk_total, live);
+      scene, chunks, path, widening, live);
   CATGS_CUDA_LAUNCHED("cull_path_chunks_kernel");
-  const ChunkWalk walk = live.walk(chunks);
+  order_live_chunks(live, chunks, stream);
+  const ChunkWalk walk = live.walk();
   speculative_preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
       scene, path, widening, out, trails, walk, visible, big);
   CATGS_CUDA_LAUNCHED("speculative_preprocess_kernel");

@@ -84,8 +84,9 @@ __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_
   }
 }
 
-// Appends chunk c to `live` where `keep` (every lane of the warp calls it; one atomic per warp that
-// keeps any; the order is free: records.h ChunkWalk).
+// Appends chunk c to a batch's scratch list where `keep` (every lane of the warp calls it; one
+// atomic per warp that keeps any; the order is free: the batch walks it, each view's slots come
+// from its own ordered list).
 __device__ __forceinline__ void append_chunk(bool keep, uint64_t c, const LiveChunks& live) {
   const unsigned lanes = __ballot_sync(0xffffffffu, keep);
   if (lanes == 0u) return;  // warp-uniform
@@ -96,12 +97,10 @@ __device__ __forceinline__ void append_chunk(bool keep, uint64_t c, const LiveCh
   if (keep) live.index[base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)))] = static_cast<uint32_t>(c);
 }
 
-// Chunk culling's end (a thread per chunk c < count, every lane of the warp calls it): a dropped
-// chunk gets chunk_total = 0 and nothing else; a kept one is appended to `live`.
-__device__ __forceinline__ void keep_or_drop_chunk(bool keep, uint64_t c, uint64_t count, uint32_t* chunk_total,
-                                                   const LiveChunks& live) {
-  if (c < count && !keep) chunk_total[c] = 0u;
-  append_chunk(keep && c < count, c, live);
+// Chunk culling's answer for chunk c < count (a thread per chunk): order_live_chunks lists the
+// kept ones in index order.
+__device__ __forceinline__ void mark_chunk(bool keep, uint64_t c, uint64_t count, const LiveChunks& live) {
+  if (c < count) live.keep[c] = keep ? 1u : 0u;
 }
 
 // The parts a huge Gaussian (the h-th of the huge list, `area` rectangle tiles) is cut into

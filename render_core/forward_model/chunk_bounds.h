@@ -47,6 +47,17 @@ static_assert(sizeof(ChunkBounds) == 32, "two float4");
 // Number of chunks of n Gaussians.
 CATGS_HD std::size_t chunk_count(std::size_t n) { return (n + kChunkSize - 1) / kChunkSize; }
 
+// The CUDA core's first slot chunks for a scene of `chunks` chunks, before it has counted a view
+// (cuda/records.h Projected; issue 61): a scene of up to kInitialSlotGaussians whole, a larger one
+// an eighth of its chunks but at least that many Gaussians'. The server's memory estimate starts
+// from it too (renderer/device_memory.h).
+inline constexpr std::size_t kInitialSlotGaussians = std::size_t{4} << 20;
+CATGS_HD std::size_t initial_slot_chunks(std::size_t chunks) {
+  const std::size_t floor = chunk_count(kInitialSlotGaussians), eighth = chunks / 8;
+  const std::size_t want = eighth > floor ? eighth : floor;
+  return want < chunks ? want : chunks;
+}
+
 // The bounds of every chunk of n Gaussians held as GaussianModel holds them (means [n, 3] world
 // units, log_scales [n, 3], opacity_logits [n]), in chunk order (chunk_count(n) entries).
 // scene/scene_bounds.h chunk_bounds_of(model) passes a model's arrays.

@@ -21,8 +21,8 @@ std::uint64_t scene_device_bytes(const GaussianModel& model);
 
 // What a session's buffers are sized by.
 struct SessionBufferShape {
-  std::uint64_t gaussians = 0;     // Gaussians its per-Gaussian buffers hold: the scene with its LOD levels
-  int width = 0, height = 0;       // the viewport, pixels
+  std::uint64_t gaussians = 0;  // Gaussians its per-Gaussian buffers hold: the scene with its LOD levels
+  int width = 0, height = 0;    // the viewport, pixels
   Pipeline pipeline = Pipeline::exact;
   std::uint64_t list_entries = 0;  // render-list entries the list buffers hold (one pass)
 };
@@ -54,6 +54,12 @@ struct BufferBytes {
 
 // Device bytes a session with buffers of `shape` takes at most, GrowBuffer's slack included.
 std::uint64_t session_device_bytes(const SessionBufferShape& shape);
+
+// A session's bytes before its renderer drew a frame: its buffers as the CUDA core first sizes
+// them for a scene of `scene_gaussians` (fm::initial_slot_chunks: the whole of a small scene, an
+// eighth of a large one) at width x height, its list buffers at `budget`'s one-pass maximum.
+std::uint64_t first_session_device_bytes(std::uint64_t scene_gaussians, int width, int height, Pipeline pipeline,
+                                         const RenderListBudget& budget);
 
 // The render-list entries a session's list buffers are sized for at width x height: the
 // list budget's one-pass maximum (RenderListBudget::max_entries with kPerListEntry), so a frame

@@ -65,6 +65,9 @@ struct LoadedScene {
   // The scene copies' device bytes held in the GPUs' memory accounting (GpuAssignment::add_scene,
   // one per GPU, or the host slot's with the CPU renderer), given back when the scene unloads.
   std::vector<std::shared_ptr<void>> device_memory_holds;
+  // The most device bytes any session's render buffers on this scene grew to (issue 61): a new
+  // session's memory estimate starts there (Session::memory_estimate). Changes after publication.
+  std::shared_ptr<std::atomic<std::uint64_t>> session_bytes_peak = std::make_shared<std::atomic<std::uint64_t>>(0);
   // The stream's rate cap by size, probed by the scene's sessions (--bits-per-pixel auto;
   // encode/content_rate.h); the one part that changes after publication (it locks).
   std::shared_ptr<ContentRates> content_rates = std::make_shared<ContentRates>();

@@ -112,17 +112,18 @@ void Session::on_out_of_memory(const std::string& error) {
 }
 
 std::uint64_t Session::memory_estimate(int width, int height) const {
-  SessionBufferShape shape;
-  shape.gaussians = scene_->model->size();
-  shape.width = width;
-  shape.height = height;
-  shape.pipeline = shared_.render_options.pipeline;
-  shape.list_entries = session_list_entries(shared_.render_options.list_budget, width, height);
-  return std::max(session_device_bytes(shape), memory_peak_);
+  // The CUDA core's buffers follow the chunks a view keeps (records.h Projected): its first
+  // guess of them, or what this scene's sessions' buffers grew to, or this session's own.
+  const std::uint64_t first = first_session_device_bytes(
+      scene_->model->size(), width, height, shared_.render_options.pipeline, shared_.render_options.list_budget);
+  return std::max({first, memory_peak_, scene_->session_bytes_peak->load()});
 }
 
 void Session::update_memory(std::uint64_t buffer_bytes) {
   memory_peak_ = std::max(memory_peak_, buffer_bytes);
+  std::atomic<std::uint64_t>& scene_peak = *scene_->session_bytes_peak;
+  for (std::uint64_t seen = scene_peak.load();
+       buffer_bytes > seen && !scene_peak.compare_exchange_weak(seen, buffer_bytes);) {}
   const std::uint64_t want = memory_estimate(width_, height_);
   if (!placed_ || want == memory_reserved_) return;
   if (!shared_.gpus.update(gpu_, memory_reserved_, want))
