@@ -133,6 +133,12 @@ void Server::load_model() {
   SceneWithLodOptions lod;
   lod.cache = mode;
   lod.lod = parse_lod_mode(options_.lod);
+  lod.min_gaussians = options_.lod_min_gaussians;
+  lod.cache_dir = options_.cache_dir == "beside" ? std::string()
+                  : options_.cache_dir.empty()   ? default_cache_folder()
+                                                 : options_.cache_dir;
+  std::cout << "derived files (scene caches, LOD files): "
+            << (lod.cache_dir.empty() ? std::string("beside each scene") : lod.cache_dir) << std::endl;
   lod.log = [](const std::string& line) { std::cout << line << std::endl; };
   lod.metrics = &metrics_;
   o.loader = [lod](const std::string& path, const LoadProgress& progress) {

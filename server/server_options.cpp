@@ -81,12 +81,20 @@ std::string server_usage() {
          "                        for the scene as it is now (else the scene is read, the reason\n"
          "                        logged); write also writes it after a plain load (a folder that\n"
          "                        is not writable is logged and ignored) (default read)\n"
-         "  --lod off|read|write  level of detail: each scene is served from its LOD file beside it\n"
-         "                        (SCENE.catgs-lod, as `catgs-scene lod` writes it) when that is\n"
-         "                        valid for the scene as it is now; else its level of detail is\n"
+         "  --lod off|read|write  level of detail: each scene is served from its LOD file (in the\n"
+         "                        cache folder, else SCENE.catgs-lod beside it as `catgs-scene lod`\n"
+         "                        writes it) when that is valid for the scene as it is now; else\n"
+         "                        a scene of --lod-min-gaussians or more has its level of detail\n"
          "                        built at load (progress in the log and /metrics) and, with write,\n"
-         "                        written there (a folder that is not writable is logged); off\n"
-         "                        serves full detail (default write)\n"
+         "                        written to the cache folder (one that cannot be written is\n"
+         "                        logged); off serves full detail (default write)\n"
+         "  --cache-dir DIR|beside  where scene caches and LOD files are read first and written,\n"
+         "                        named by each scene's content (default $XDG_CACHE_HOME/catgs or\n"
+         "                        ~/.cache/catgs; beside: next to each scene); one found beside a\n"
+         "                        scene is still read\n"
+         "  --lod-min-gaussians N a scene of fewer Gaussians is served at full detail without\n"
+         "                        building a level of detail (a LOD file for it is still used;\n"
+         "                        default 2000000: the threshold's table is in RESULTS.md)\n"
          "  --lod-error PX        the cut's screen-space error bound in pixels at 720 lines, scaled\n"
          "                        down with a smaller session's shorter side (0 = full detail;\n"
          "                        default 2, chosen against a supersampled render: RESULTS.md)\n"
@@ -275,6 +283,11 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       if (v != "off" && v != "read" && v != "write")
         throw std::invalid_argument("--scene-cache must be off, read or write, got '" + v + "'");
       out.scene_cache = v;
+    } else if (a == "--cache-dir") {
+      if (v.empty()) throw std::invalid_argument("--cache-dir needs a folder (or beside)");
+      out.cache_dir = v;
+    } else if (a == "--lod-min-gaussians") {
+      out.lod_min_gaussians = static_cast<std::uint64_t>(parse_double(a, v, 0.0, 1e12));
     } else if (a == "--lod") {
       (void)parse_lod_mode(v);  // refused here, with the option's name
       out.lod = v;

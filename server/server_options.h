@@ -36,6 +36,14 @@ struct ServerOptions {
   // --lod: the level of detail of each scene (process/scene_with_lod.h): "off", "read" (the LOD
   // file beside the scene, else built in memory) or "write" (also written beside the scene).
   std::string lod = "write";
+  // --cache-dir: where derived files (scene caches, LOD files) are read first and written, named
+  // by the scene's content (scene/scene_cache.h derived_file_path): "" until resolved, then the
+  // platform's cache folder ($XDG_CACHE_HOME/catgs or ~/.cache/catgs), a folder given, or
+  // "beside" (next to each scene, the behaviour before issue 61).
+  std::string cache_dir;
+  // --lod-min-gaussians: a scene of fewer Gaussians gets no level of detail built (one with a LOD
+  // file is still served from it).
+  std::uint64_t lod_min_gaussians = 2000000;
   // --lod-error: the level-of-detail bound in pixels at 720 lines, scaled down with a smaller
   // session's shorter side (render/lod_bound.h; 0 = full detail). The default is the coarsest
   // bound measured within 0.5 dB of full detail's own PSNR against a 4x supersampled render on

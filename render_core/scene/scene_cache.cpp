@@ -9,7 +9,10 @@
 #include <atomic>
 #include <cerrno>
 #include <cstddef>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <vector>
 
 #define XXH_INLINE_ALL  // header-only: nothing to link (the GPU machine's build carries the header)
@@ -178,6 +181,30 @@ void check_finite(const GaussianModel& m, const Block& b, const std::string& cac
 }  // namespace
 
 std::string scene_cache_path(const std::string& scene_path) { return scene_path + ".catgs-cache"; }
+
+std::string derived_file_path(const std::string& scene_path, const std::string& suffix, const std::string& folder) {
+  if (folder.empty()) return scene_path + suffix;
+  uint64_t key = 0;
+  try {
+    const SourceStamp s = stamp(scene_path);
+    const uint64_t parts[2] = {s.size, s.head_hash};
+    key = XXH3_64bits(parts, sizeof parts);
+  } catch (const SceneFileError&) {
+    key = XXH3_64bits(scene_path.data(), scene_path.size());
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(key));
+  const std::string name = std::filesystem::path(scene_path).filename().string();
+  return (std::filesystem::path(folder) / (name + "." + hex + suffix)).string();
+}
+
+std::string default_cache_folder() {
+  const char* xdg = std::getenv("XDG_CACHE_HOME");
+  if (xdg && *xdg == '/') return std::string(xdg) + "/catgs";  // the spec: relative values are ignored
+  const char* home = std::getenv("HOME");
+  if (home && *home) return std::string(home) + "/.cache/catgs";
+  return "";
+}
 
 void write_scene_cache(const GaussianModel& model, const std::string& scene_path, const std::string& cache_path,
                        int threads) {

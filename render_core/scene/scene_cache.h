@@ -61,6 +61,19 @@ inline constexpr uint64_t kCacheBlockBytes = 4ull << 20;
 // meta.json.catgs-cache in its folder).
 std::string scene_cache_path(const std::string& scene_path);
 
+// Where a file derived from a scene (its cache, ".catgs-cache"; its LOD file, ".catgs-lod") goes
+// in `folder` (issue 61: derived files in a cache folder, not beside the user's scene): the
+// scene's file name, a 16-hex-digit XXH3 of its size and first 64 KiB (the content, so two
+// scenes of one name in different folders never share a file, and a moved scene finds its own),
+// then `suffix`. An empty folder: beside the scene (scene_path + suffix). The file's own key
+// (size, modification time, head hash) still decides whether it is valid. A scene that cannot
+// be read is named by a hash of its path instead (its load then fails on its own terms).
+std::string derived_file_path(const std::string& scene_path, const std::string& suffix, const std::string& folder);
+
+// The folder derived files go to by default: $XDG_CACHE_HOME/catgs, else $HOME/.cache/catgs
+// (the XDG base directory convention), else empty (beside the scene).
+std::string default_cache_folder();
+
 // Thrown when a cache cannot be used; what() names the cache file and says why (missing,
 // truncated, not a cache, another version, written for a different or changed source, a
 // checksum mismatch, a value a scene loader refuses, a bad LOD tree).

@@ -1,6 +1,7 @@
 #include "process/scene_with_lod.h"
 
 #include <chrono>
+#include <filesystem>
 #include <sstream>
 #include <stdexcept>
 
@@ -56,15 +57,38 @@ GaussianModel build_for(const std::string& path, const GaussianModel& scene, con
   }
 }
 
+// The derived file to read for `path`: the cache folder's when it exists, else the one beside the
+// scene when that exists, else the cache folder's (where it will be written).
+std::string derived_to_read(const std::string& path, const std::string& suffix, const std::string& folder) {
+  const std::string in_folder = derived_file_path(path, suffix, folder);
+  std::error_code ec;
+  if (folder.empty() || std::filesystem::exists(in_folder, ec)) return in_folder;
+  return std::filesystem::exists(path + suffix, ec) ? path + suffix : in_folder;
+}
+
+// Makes `file`'s folder (a cache folder may not exist yet); false, with the reason logged, when
+// it cannot be made.
+bool make_folder_of(const std::string& file, const SceneWithLodOptions& o) {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(file).parent_path(), ec);
+  if (ec) say(o, "cache folder " + std::filesystem::path(file).parent_path().string() + ": " + ec.message());
+  return !ec;
+}
+
 }  // namespace
 
 GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOptions& o, const LoadProgress& progress) {
   CachedLoadOptions c;
   c.mode = o.cache;
   c.log = o.log;
+  // A cache found beside the scene is read there; one written goes to the cache folder.
+  c.cache_path = derived_to_read(path, ".catgs-cache", o.cache_dir);
+  if (o.cache == SceneCacheMode::write && c.cache_path == path + ".catgs-cache" && !o.cache_dir.empty())
+    c.cache_path = derived_file_path(path, ".catgs-cache", o.cache_dir);
+  if (o.cache == SceneCacheMode::write && !make_folder_of(c.cache_path, o)) c.mode = SceneCacheMode::read;
   if (o.lod == LodMode::off) return load_scene_cached(path, c, progress);
 
-  const std::string lod_path = path + ".catgs-lod";
+  const std::string lod_path = derived_to_read(path, ".catgs-lod", o.cache_dir);
   try {
     const auto t0 = std::chrono::steady_clock::now();
     GaussianModel m = load_lod_file(lod_path, path, 0, progress);
@@ -73,21 +97,29 @@ GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOpt
                std::to_string(m.lod.size()) + " chunks) in " + std::to_string(ms.count()) + " ms");
     return m;
   } catch (const SceneCacheRejected& e) {
-    say(o, "scene " + path + ": LOD file not used (" + e.what() + "); building the level of detail");
+    say(o, "scene " + path + ": LOD file not used (" + e.what() + ")");
   }
   // The read is the first half of the progress, the build the second.
   const LoadProgress half = [&progress](uint64_t done, uint64_t total) {
     if (progress) progress(done, 2 * total);
   };
-  const GaussianModel scene = load_scene_cached(path, c, half);
+  GaussianModel scene = load_scene_cached(path, c, half);
+  if (scene.size() < o.min_gaussians) {
+    say(o, "scene " + path + ": served without a level of detail (" + std::to_string(scene.size()) +
+               " Gaussians, under --lod-min-gaussians " + std::to_string(o.min_gaussians) + ")");
+    if (progress) progress(1, 1);
+    return scene;
+  }
   GaussianModel lod = build_for(path, scene, o, progress);
-  if (o.lod == LodMode::write) {
+  // Written to the cache folder (never over a file beside the scene that was refused).
+  const std::string lod_out = derived_file_path(path, ".catgs-lod", o.cache_dir);
+  if (o.lod == LodMode::write && make_folder_of(lod_out, o)) {
     const auto t0 = std::chrono::steady_clock::now();
     try {
-      write_scene_cache(lod, path, lod_path);
+      write_scene_cache(lod, path, lod_out);
       if (o.metrics) o.metrics->lod_files_written_total++;
       const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0);
-      say(o, "scene " + path + ": LOD file written to " + lod_path + " in " + std::to_string(ms.count()) + " ms");
+      say(o, "scene " + path + ": LOD file written to " + lod_out + " in " + std::to_string(ms.count()) + " ms");
     } catch (const std::exception& e) {
       say(o, "scene " + path + ": LOD file not written (" + std::string(e.what()) + "); serving the built one");
     }

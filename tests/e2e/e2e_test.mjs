@@ -145,7 +145,10 @@ const servers = [];
 // Starts catgs-server on a free port with `extra` arguments; resolves once it serves HTTP.
 async function startServer(extra = []) {
   const port = await freePort();
-  const serverArgs = ['--scene', scene, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot, ...extra];
+  // The bundled scene is under --lod-min-gaussians: its level of detail built all the same (the
+  // overlay's LOD check below); derived files in the test's own cache folder.
+  const serverArgs = ['--scene', scene, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot,
+    '--lod-min-gaussians', '0', '--cache-dir', path.join(os.tmpdir(), 'catgs-e2e-cache'), ...extra];
   log(`starting ${serverBin} ${serverArgs.join(' ')}`);
   const proc = spawn(serverBin, serverArgs, { stdio: ['ignore', 'pipe', 'pipe'] });
   servers.push(proc);

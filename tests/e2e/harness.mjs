@@ -91,7 +91,8 @@ export class BrowserTestRun {
   // answers HTTP.
   async startServer(serverArgs) {
     const port = await freePort();
-    const all = [...serverArgs, '--port', String(port), '--renderer', 'cpu', '--web-root', this.webRoot];
+    const all = [...serverArgs, '--port', String(port), '--renderer', 'cpu', '--web-root', this.webRoot,
+      '--cache-dir', path.join(os.tmpdir(), 'catgs-e2e-cache')];
     this.log(`starting catgs-server ${all.join(' ')}`);
     const proc = spawn(this.serverBin, all, { stdio: ['ignore', 'pipe', 'pipe'] });
     this.servers.push(proc);

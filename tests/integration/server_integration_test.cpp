@@ -235,7 +235,8 @@ TEST(ServerIntegration, WelcomeCarriesTheFirstViewFrame) {
     EXPECT_LT(nearest_camera, 1e-4f * farthest);
   }
   {
-    ServerProcess server(server_args(kFlowers));  // no cameras beside the scene: the content
+    // No cameras beside the scene: the content. Its level of detail built whatever its size.
+    ServerProcess server(server_args(kFlowers, {"--lod-min-gaussians", "0"}));
     StreamClient c;
     c.connect(server.port());
     const pb::Welcome w = c.hello(W, H);

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -13,18 +14,11 @@ namespace catgs::itest {
 
 std::vector<std::string> server_args(const std::string& scene, std::vector<std::string> extra) {
   // A short drain: a test that ends with a session still open must not wait the default 30 s.
-  std::vector<std::string> a = {"--scene",
-                                scene,
-                                "--renderer",
-                                "cpu",
-                                "--pipeline",
-                                "exact",
-                                "--threads",
-                                "4",
-                                "--slow-client-timeout-ms",
-                                "2000",
-                                "--drain-timeout-s",
-                                "3"};
+  std::vector<std::string> a = {"--scene", scene, "--renderer", "cpu", "--pipeline", "exact", "--threads", "4",
+                                "--slow-client-timeout-ms", "2000", "--drain-timeout-s", "3",
+                                // Derived files (LOD files, scene caches) in the tests' own folder,
+                                // not the user's cache folder nor beside ../shared's scenes.
+                                "--cache-dir", (std::filesystem::temp_directory_path() / "catgs-itest-cache").string()};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }

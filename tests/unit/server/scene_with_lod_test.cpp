@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -36,10 +37,13 @@ struct LoadRun {
   }
 };
 
-LoadRun load(const std::string& path, LodMode mode, ServerMetrics* metrics) {
+LoadRun load(const std::string& path, LodMode mode, ServerMetrics* metrics, const std::string& cache_dir = "",
+             std::uint64_t min_gaussians = 0) {
   LoadRun r;
   SceneWithLodOptions o;
   o.lod = mode;
+  o.cache_dir = cache_dir;
+  o.min_gaussians = min_gaussians;
   o.cache = SceneCacheMode::off;
   o.metrics = metrics;
   o.log = [&r](const std::string& line) { r.log.push_back(line); };
@@ -157,6 +161,78 @@ TEST(SceneWithLod, Options) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("--lod"), std::string::npos) << e.what();
   }
+}
+
+// Issue 61: derived files go to the cache folder, named by the scene's content, never beside
+// the user's scene; a LOD file beside it (catgs-scene lod's) is still served; a scene under
+// min_gaussians is served as it is, nothing built or written.
+TEST(SceneWithLod, DerivedFilesGoToTheCacheFolder) {
+  const std::string dir = test::temp_dir(), path = scene_copy(dir, "a"), cache = dir + "/cache/catgs";
+  ServerMetrics metrics;
+  const LoadRun first = load(path, LodMode::write, &metrics, cache);
+  const std::string in_folder = derived_file_path(path, ".catgs-lod", cache);
+  EXPECT_TRUE(first.said("LOD file written to " + in_folder)) << first.log.back();
+  EXPECT_TRUE(fs::exists(in_folder)) << "the folder was not made, or the file not written there";
+  EXPECT_FALSE(fs::exists(path + ".catgs-lod")) << "written beside the user's scene";
+  const LoadRun second = load(path, LodMode::write, &metrics, cache);
+  EXPECT_TRUE(second.said("level of detail from " + in_folder)) << second.log.front();
+  EXPECT_EQ(metrics.lod_builds_total.load(), 1u);
+
+  // The same content under another name in another folder: its own file (the name leads it);
+  // the same name with other content: another key.
+  const std::string other_dir = dir + "/other";
+  fs::create_directories(other_dir);
+  const std::string same_name = scene_copy(other_dir, "a");
+  const std::string p1 = derived_file_path(path, ".catgs-lod", cache),
+                    p2 = derived_file_path(same_name, ".catgs-lod", cache);
+  EXPECT_EQ(p1, p2) << "one content, one name: the same derived file";
+  const GaussianModel scene = load_scene(path);
+  GaussianModel shifted = scene;
+  for (float& m : shifted.means) m += 1.0f;
+  const std::string changed = other_dir + "/b.ply";
+  write_inria_ply(shifted, changed);
+  fs::copy_file(changed, other_dir + "/a.compressed.ply", fs::copy_options::overwrite_existing);
+  EXPECT_NE(derived_file_path(other_dir + "/a.compressed.ply", ".catgs-lod", cache), p1);
+  EXPECT_EQ(derived_file_path(path, ".catgs-lod", ""), path + ".catgs-lod") << "no folder: beside the scene";
+
+  // A LOD file beside a scene, the folder holding none: served from beside.
+  const std::string beside = scene_copy(dir, "c");
+  (void)load(beside, LodMode::write, &metrics);  // no folder: written beside
+  ASSERT_TRUE(fs::exists(beside + ".catgs-lod"));
+  const LoadRun from_beside = load(beside, LodMode::write, &metrics, cache);
+  EXPECT_TRUE(from_beside.said("level of detail from " + beside + ".catgs-lod")) << from_beside.log.front();
+}
+
+TEST(SceneWithLod, SmallSceneIsServedWithoutBuildingALevelOfDetail) {
+  const std::string dir = test::temp_dir(), path = scene_copy(dir, "a"), cache = dir + "/cache";
+  ServerMetrics metrics;
+  const GaussianModel scene = load_scene(path);
+  const LoadRun small = load(path, LodMode::write, &metrics, cache, scene.size() + 1);
+  EXPECT_TRUE(small.said("served without a level of detail")) << small.log.back();
+  EXPECT_TRUE(small.model.lod.empty());
+  EXPECT_EQ(small.model.means, scene.means);
+  EXPECT_EQ(metrics.lod_builds_total.load(), 0u);
+  EXPECT_FALSE(fs::exists(derived_file_path(path, ".catgs-lod", cache)));
+  EXPECT_FALSE(fs::exists(path + ".catgs-lod"));
+  ASSERT_FALSE(small.progress.empty());
+  EXPECT_EQ(small.progress.back().first, small.progress.back().second) << "progress ends at its end";
+  // At the threshold: built.
+  const LoadRun at = load(path, LodMode::write, &metrics, cache, scene.size());
+  EXPECT_FALSE(at.model.lod.empty());
+}
+
+TEST(SceneWithLod, DefaultCacheFolderFollowsXdg) {
+  const char* xdg = std::getenv("XDG_CACHE_HOME");
+  const std::string saved = xdg ? xdg : "";
+  ::setenv("XDG_CACHE_HOME", "/var/tmp/xdg", 1);
+  EXPECT_EQ(default_cache_folder(), "/var/tmp/xdg/catgs");
+  ::setenv("XDG_CACHE_HOME", "relative/ignored", 1);
+  const char* home = std::getenv("HOME");
+  if (home && *home) EXPECT_EQ(default_cache_folder(), std::string(home) + "/.cache/catgs");
+  if (xdg)
+    ::setenv("XDG_CACHE_HOME", saved.c_str(), 1);
+  else
+    ::unsetenv("XDG_CACHE_HOME");
 }
 
 }  // namespace
