@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "loadgen/stream_client.h"
+#include "scene/scene_cache.h"
 #include "server_process.h"
 #include "stream_checks.h"
 
@@ -246,20 +247,28 @@ TEST(SceneLoading, BudgetUnloadsUnusedScenesAndKeepsUsedOnes) {
 }  // namespace
 
 // --scene-cache (issue 37; --lod off: a LOD file, on by default, would be served before the cache):
-// `write` reads the scene and writes its cache beside it; the next server uses the cache (`read`, the default) and streams the same scene; a cache damaged
-// between the two is logged with its reason, the scene read, the server serving as before.
+// `write` reads the scene and writes its cache to the cache folder (--cache-dir, named by the
+// scene's content: issue 61), not beside the scene; the next server uses the cache (`read`, the
+// default) and streams the same scene; a cache damaged between the two is logged with its reason,
+// the scene read, the server serving as before.
 TEST(SceneLoading, SceneCacheWrittenThenUsedAndDamageLogged) {
   const auto files = biker_copies("cache", {"cached"});
-  const std::string cache = files[0] + ".catgs-cache";
+  const std::string folder = fs::path(files[0]).parent_path().string() + "/derived";
+  const std::string cache = derived_file_path(files[0], ".catgs-cache", folder);
+  auto args = [&folder](std::vector<std::string> extra) {
+    extra.insert(extra.end(), {"--cache-dir", folder});
+    return extra;
+  };
   {
-    ServerProcess server(server_args(files[0], {"--scene-cache", "write", "--lod", "off"}));
+    ServerProcess server(server_args(files[0], args({"--scene-cache", "write", "--lod", "off"})));
     EXPECT_NE(server.log().find("scene cache: " + cache + ": no cache file; reading the scene"), std::string::npos)
         << server.log();
     EXPECT_NE(server.log().find("scene cache: wrote " + cache), std::string::npos) << server.log();
   }
   ASSERT_TRUE(fs::exists(cache));
+  EXPECT_FALSE(fs::exists(files[0] + ".catgs-cache")) << "written beside the user's scene";
   {
-    ServerProcess server(server_args(files[0], {"--lod", "off"}));
+    ServerProcess server(server_args(files[0], args({"--lod", "off"})));
     EXPECT_NE(server.log().find("scene cache: " + cache + ": used"), std::string::npos) << server.log();
     StreamClient c;
     c.connect(server.port());
@@ -268,7 +277,7 @@ TEST(SceneLoading, SceneCacheWrittenThenUsedAndDamageLogged) {
   }
   fs::resize_file(cache, fs::file_size(cache) - 100);
   {
-    ServerProcess server(server_args(files[0], {"--scene-cache", "read", "--lod", "off"}));
+    ServerProcess server(server_args(files[0], args({"--scene-cache", "read", "--lod", "off"})));
     EXPECT_NE(server.log().find("truncated or extended"), std::string::npos) << server.log();
     EXPECT_EQ(server.log().find("scene cache: wrote"), std::string::npos) << "read never writes: " << server.log();
     StreamClient c;
