@@ -21,7 +21,7 @@ std::uint64_t scene_device_bytes(const GaussianModel& model);
 
 // What a session's buffers are sized by.
 struct SessionBufferShape {
-  std::uint64_t gaussians = 0;  // Gaussians its per-Gaussian buffers hold: the scene with its LOD levels
+  std::uint64_t gaussians = 0;  // Gaussians its per-Gaussian buffers hold: its slots (cuda/records.h Projected)
   int width = 0, height = 0;    // the viewport, pixels
   Pipeline pipeline = Pipeline::exact;
   std::uint64_t list_entries = 0;  // render-list entries the list buffers hold (one pass)

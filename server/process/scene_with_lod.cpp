@@ -81,7 +81,9 @@ GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOpt
   CachedLoadOptions c;
   c.mode = o.cache;
   c.log = o.log;
-  // A cache found beside the scene is read there; one written goes to the cache folder.
+  // A cache found beside the scene is read there; one written goes to the cache folder (so in
+  // --scene-cache write mode a cache beside the scene is passed over for the folder's: nothing
+  // is ever written beside the user's scene).
   c.cache_path = derived_to_read(path, ".catgs-cache", o.cache_dir);
   if (o.cache == SceneCacheMode::write && c.cache_path == path + ".catgs-cache" && !o.cache_dir.empty())
     c.cache_path = derived_file_path(path, ".catgs-cache", o.cache_dir);

@@ -63,9 +63,13 @@ TEST_F(DeviceMemory, EstimateBoundsTheBuffers) {
           used.list_entries = longest;
           const std::uint64_t floor = session_device_bytes(used) / 2;
           row.list_gpu = static_cast<long long>(longest);
-          row.pass = most <= estimate && most >= floor;
+          // The scene copy's bytes as the CPU-side accounting gives them, against what the upload
+          // allocated (DeviceScene::bytes).
+          const std::uint64_t scene_bytes = scene_device_bytes(*s->model);
+          row.pass = most <= estimate && most >= floor && scene_bytes == s->dev->bytes();
           row.note = "buffers " + std::to_string(most >> 20) + " MiB, estimate " + std::to_string(estimate >> 20) +
-                     " MiB, floor " + std::to_string(floor >> 20) + " MiB";
+                     " MiB, floor " + std::to_string(floor >> 20) + " MiB; scene " + std::to_string(scene_bytes) +
+                     " bytes, uploaded " + std::to_string(s->dev->bytes());
         } catch (const std::exception& e) {
           row.note = e.what();
         }

@@ -3,7 +3,6 @@
 // must do whatever the byte counts: follow each thing a session's buffers are sized by.
 #include <gtest/gtest.h>
 
-#include "forward_model/chunk_bounds.h"
 #include "renderer/device_memory.h"
 
 namespace catgs {
@@ -41,14 +40,6 @@ TEST(DeviceMemory, ListEntriesFollowTheBudget) {
   budget.max_bytes = 4ull << 30;
   EXPECT_EQ(session_list_entries(budget, 1280, 720), 80ull * 45 * 16384);
   EXPECT_EQ(session_list_entries(budget, 64, 64), 1ull << 24);  // the floor: a whole scene in a thumbnail
-}
-
-TEST(DeviceMemory, SceneBytesCountEveryDeviceArray) {
-  GaussianModel m;
-  m.sh_degree = 1;
-  m.resize(1000);
-  // 11 floats a Gaussian, 4 x 3 half SH, 4 chunk bounds.
-  EXPECT_EQ(scene_device_bytes(m), 1000u * 44 + 1000u * 12 * 2 + 4 * sizeof(fm::ChunkBounds));
 }
 
 }  // namespace

@@ -38,6 +38,18 @@ class FailingRenderer : public Renderer {
   RenderOptions options_;
 };
 
+// A pipeline over a one-Gaussian model and `renderer` (pipelined, CUDA device 0).
+struct TestPipeline {
+  FrameSettings settings;
+  ServerMetrics metrics;
+  FramePipeline frames{settings, metrics};
+  explicit TestPipeline(std::unique_ptr<Renderer> renderer) {
+    auto model = std::make_shared<GaussianModel>();
+    model->resize(1);
+    frames.open(std::move(renderer), model, 0, true, false);
+  }
+};
+
 FramePipeline::Rendered render_once(FramePipeline& frames) {
   FramePipeline::PendingPose pose;
   pose.pose.position = {0.0f, 0.0f, -3.0f};  // the identity orientation looks down +z at the origin
@@ -52,17 +64,13 @@ FramePipeline::Rendered render_once(FramePipeline& frames) {
 }
 
 TEST(FramePipelineMemory, OutOfMemoryIsReportedAndHalvesTheListBudget) {
-  FrameSettings settings;
-  ServerMetrics metrics;
-  FramePipeline frames(settings, metrics);
-  auto model = std::make_shared<GaussianModel>();
-  model->resize(1);
   auto renderer = std::make_unique<FailingRenderer>(2);  // cudaErrorMemoryAllocation
   FailingRenderer* r = renderer.get();
   RenderOptions o;
   o.list_budget.max_bytes = 512ull << 20;
   r->set_options(o);
-  frames.open(std::move(renderer), model, 0, true, false);
+  TestPipeline p(std::move(renderer));
+  FramePipeline& frames = p.frames;
   FramePipeline::Rendered oom = render_once(frames);
   EXPECT_TRUE(oom.out_of_memory);
   EXPECT_FALSE(oom.over_budget);
@@ -79,13 +87,8 @@ TEST(FramePipelineMemory, OutOfMemoryIsReportedAndHalvesTheListBudget) {
 }
 
 TEST(FramePipelineMemory, AnotherCudaErrorIsAFailure) {
-  FrameSettings settings;
-  ServerMetrics metrics;
-  FramePipeline frames(settings, metrics);
-  auto model = std::make_shared<GaussianModel>();
-  model->resize(1);
-  frames.open(std::make_unique<FailingRenderer>(700), model, 0, true, false);  // an illegal address
-  const FramePipeline::Rendered r = render_once(frames);
+  TestPipeline p(std::make_unique<FailingRenderer>(700));  // cudaErrorIllegalAddress
+  const FramePipeline::Rendered r = render_once(p.frames);
   EXPECT_FALSE(r.out_of_memory);
   EXPECT_FALSE(r.error.empty());
 }
