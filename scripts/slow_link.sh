@@ -8,7 +8,8 @@
 #
 # usage: scripts/slow_link.sh BIN_DIR SCENE [--seconds 15] [--warmup 3] [--fractions 0.8,0.5,0.25]
 #          [--check] [--p95-margin 300] [--max-ms 1000] [--min-fps 0.4] [--min-use 0.7] [--step]
-#          [--beside N | --step | --ramp MAX] [--no-receipts] [--json OUT] [-- SERVER_ARGS...]
+#          [--beside N | --step | --ramp MAX | --busy S | --still] [--no-receipts] [--json OUT]
+#          [-- SERVER_ARGS...]
 #   The bounds (issue 50's by default): after WARMUP s, p95 <= unshaped p95 + P95_MARGIN ms, no
 #   frame later than MAX_MS after its pose, FPS >= MIN_FPS x unshaped, received >= MIN_USE x the
 #   link.
@@ -21,6 +22,15 @@
 #   --ramp MAX instead: catgs-loadgen --ramp (+1 a step, up to MAX sessions, bound p95 <= unshaped
 #   p95 + P95_MARGIN) in the namespace, all its sessions sharing one link shaped at the last
 #   fraction of MAX unshaped streams (a household or a classroom behind one slow line).
+#   --busy S instead (issue 64): one S-second session on the unshaped link from a client that
+#   stalls 100-400 ms at random between reads (catgs-loadgen --read-stall-ms 100-400), as a busy
+#   page does; the rows say whether the controller ever capped it (it must not) and how many cuts
+#   /metrics counted.
+#   --still instead (issue 64): the camera stops after the path (catgs-loadgen --still-s 4); per
+#   link the PSNR of the picture shown 1 s and 3 s after the stop against the CPU reference render
+#   of its pose, beside the same still view from a second server that runs the stream's crf with no
+#   rate cap (--bitrate off --still-refine off), unshaped. The bound: within 1 dB of it after 1 s,
+#   after 3 s on the last (slowest) fraction.
 #   --no-receipts: the namespace's client sends no frame receipts (catgs-loadgen --receipts 0), so
 #   the server's rate controller reads the path from TCP_INFO alone, as for an older client.
 #   SERVER_ARGS replace the default server settings after the scene (--renderer cpu --bitrate
@@ -32,7 +42,7 @@ set -uo pipefail
 bin=$1 scene=$2
 shift 2
 seconds=15 warmup=3 fractions=0.8,0.5,0.25 check=0 json="" p95_margin=300 min_use=0.7 step=0 max_ms=1000 min_fps=0.4
-beside=0 receipts=1 ramp=0
+beside=0 receipts=1 ramp=0 busy=0 still=0
 server_args=(--renderer cpu --bitrate 2000 --crf 8)
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -43,6 +53,8 @@ while [ $# -gt 0 ]; do
     --no-receipts) receipts=0; shift ;;
     --ramp) ramp=$2; shift 2; [[ "$ramp" =~ ^[0-9]+$ ]] || { echo "slow_link.sh: --ramp needs a count" >&2; exit 2; } ;;
     --step) step=1; shift ;;
+    --busy) busy=$2; shift 2; [[ "$busy" =~ ^[0-9]+$ ]] || { echo "slow_link.sh: --busy needs seconds" >&2; exit 2; } ;;
+    --still) still=1; shift ;;
     --beside) beside=$2; shift 2 ;;
     --p95-margin) p95_margin=$2; shift 2 ;;
     --min-use) min_use=$2; shift 2 ;;
@@ -82,8 +94,8 @@ ip netns exec "$ns" ip link set lo up
 "$bin/catgs-server" --scene "$scene" --bind "$host_ip" --port "$port" "${server_args[@]}" > "$work/server.log" 2>&1 &
 server_pid=$!
 # GET PATH from the server (HTTP/1.0): the response, status line first.
-get() {
-  exec 3<>"/dev/tcp/$host_ip/$port" || return 1
+get() {  # PATH [PORT]
+  exec 3<>"/dev/tcp/$host_ip/${2:-$port}" || return 1
   printf 'GET %s HTTP/1.0\r\nHost: %s\r\n\r\n' "$1" "$host_ip" >&3
   timeout 2 cat <&3
   exec 3<&-
@@ -111,6 +123,91 @@ run() {
     --trace orbit --rate 60 --decode 1 --seconds "$seconds" --warmup-s "$warmup" --receipts "$receipts" \
     --json "$work/$name.json" > "$work/$name.txt" 2>&1
 }
+
+if [ "$busy" -gt 0 ]; then
+  # A busy client on the unshaped link: it reads every 100-400 ms.
+  cuts_before=$(get /metrics | sed -n 's/^catgs_link_rate_decreases_total \([0-9]*\).*/\1/p')
+  ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions 1 --size 640x360 \
+    --trace orbit --rate 60 --seconds "$busy" --warmup-s "$warmup" --read-stall-ms 100-400 --progress 0 \
+    --json "$work/busy.json" > "$work/busy.txt" 2>&1
+  cuts_after=$(get /metrics | sed -n 's/^catgs_link_rate_decreases_total \([0-9]*\).*/\1/p')
+  python3 - "$work" "$busy" "$check" "$json" "${cuts_before:-0}" "${cuts_after:-missing}" <<'PY'
+import json, sys
+work, seconds, check, out, before, after = sys.argv[1], sys.argv[2], sys.argv[3] == "1", sys.argv[4], sys.argv[5], sys.argv[6]
+s = json.load(open(f"{work}/busy.json"))["run"]["sessions"][0]
+cuts = int(after) - int(before) if after.isdigit() else None
+print(f"| busy client ({seconds} s, reads every 100-400 ms) | FPS | kbit/s received | link-limited Stats, lowest cap | link estimate kbit/s | cuts (/metrics) | errors |")
+print("|---|---|---|---|---|---|---|")
+print(f'| unshaped | {s["fps"]:.1f} | {s["bytes_per_second"] * 8 / 1000:.0f} | {s["link_limited_stats"]}, {s["link_cap_kbps_min"]} '
+      f'| {s["link_kbps_last"]:.0f} | {cuts} | {s["errors"]} |')
+if out:
+    json.dump({"seconds": int(seconds), "fps": s["fps"], "limited_stats": s["link_limited_stats"],
+               "cap_min_kbit": s["link_cap_kbps_min"], "cuts": cuts, "errors": s["errors"]}, open(out, "w"))
+failed = []
+if s["link_limited_stats"] or cuts != 0: failed.append(f'the controller capped a busy client on an unshaped link ({cuts} cuts)')
+if s["errors"] or s["frames"] == 0: failed.append(f'{s["errors"]} errors, {s["frames"]} frames ({s["first_error"]})')
+for f in failed: print("FAIL:", f)
+sys.exit(1 if check and failed else 0)
+PY
+  exit $?
+fi
+
+if [ "$still" = 1 ]; then
+  # The stream's crf with no rate cap, on a second server: the still picture to be within 1 dB of.
+  "$bin/catgs-server" --scene "$scene" --bind "$host_ip" --port $((port + 1)) "${server_args[@]}" --bitrate off \
+    --still-refine off > "$work/server_crf.log" 2>&1 &
+  crf_pid=$!
+  still_run() {  # NAME RATE_KBIT|none PORT
+    tc qdisc del dev "$host_if" root 2>/dev/null
+    [ "$2" = none ] || tc qdisc add dev "$host_if" root tbf rate "${2}kbit" burst 16kb latency 300ms
+    ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$3" --sessions 1 --size 640x360 \
+      --trace orbit --rate 60 --seconds "$seconds" --still-s 4 --scene "$scene" --receipts "$receipts" \
+      --progress 0 --json "$work/still_$1.json" > "$work/still_$1.txt" 2>&1
+  }
+  for _ in $(seq 300); do get /readyz $((port + 1)) 2>/dev/null | head -1 | grep -q " 200" && break; sleep 0.2; done
+  still_run crf none $((port + 1))
+  kill "$crf_pid" 2>/dev/null; wait "$crf_pid" 2>/dev/null
+  run unshaped none
+  unshaped_kbps=$(python3 -c "import json;print(round(json.load(open('$work/unshaped.json'))['run']['sessions'][0]['bytes_per_second']*8/1000))")
+  names=(unshaped) rates=(none)
+  still_run unshaped none "$port"
+  for f in ${fractions//,/ }; do
+    r=$(python3 -c "print(max(16, round($unshaped_kbps * $f)))")
+    still_run "link_$f" "$r" "$port"
+    names+=("link_$f") rates+=("$r")
+  done
+  tc qdisc del dev "$host_if" root 2>/dev/null
+  python3 - "$work" "$check" "$json" "${names[*]}" "${rates[*]}" <<'PY'
+import json, sys
+work, check, out = sys.argv[1], sys.argv[2] == "1", sys.argv[3]
+names, rates = sys.argv[4].split(), sys.argv[5].split()
+def still(name):
+    s = json.load(open(f"{work}/still_{name}.json"))["run"]["sessions"][0]
+    return s, s.get("still", {})
+_, base = still("crf")
+ref = base.get("psnr_end_db", 0)
+print(f"| link | moving kbit/s | still: PSNR dB 1 s / 3 s after the stop | bytes after the stop | frames after the stop |")
+print("|---|---|---|---|---|")
+print(f'| crf alone, no rate cap (unshaped) | - | {base.get("psnr_1s_db", 0):.2f} / {base.get("psnr_3s_db", 0):.2f} | {base.get("bytes", 0)} | {base.get("frames", 0)} |')
+rows, failed = [], []
+for k, (name, rate) in enumerate(zip(names, rates)):
+    s, st = still(name)
+    link = "unshaped" if rate == "none" else f"{rate} kbit/s ({name[5:]})"
+    print(f'| {link} | {s["bytes_per_second"] * 8 / 1000:.0f} | {st.get("psnr_1s_db", 0):.2f} / {st.get("psnr_3s_db", 0):.2f} '
+          f'| {st.get("bytes", 0)} | {st.get("frames", 0)} |')
+    rows.append({"link": name, "rate_kbit": None if rate == "none" else int(rate), **st})
+    last = k == len(names) - 1 and len(names) > 1
+    at = st.get("psnr_3s_db" if last else "psnr_1s_db", 0)
+    if at < ref - 1.0:
+        failed.append(f'{name}: {at:.2f} dB {"3" if last else "1"} s after the stop < {ref:.2f} - 1 (crf, no cap)')
+    if s["errors"]: failed.append(f'{name}: {s["errors"]} errors ({s["first_error"]})')
+if out:
+    json.dump({"crf_no_cap": base, "links": rows}, open(out, "w"), indent=1)
+for f in failed: print("FAIL:", f)
+sys.exit(1 if check and failed else 0)
+PY
+  exit $?
+fi
 
 run unshaped none
 unshaped_kbps=$(python3 -c "import json;print(round(json.load(open('$work/unshaped.json'))['run']['sessions'][0]['bytes_per_second']*8/1000))")

@@ -164,9 +164,11 @@ std::string server_usage() {
          "  --intra-refresh N     x264 periodic intra refresh over N frames instead of IDRs\n"
          "                        after the first (default 0: off)\n"
          "  --adaptive-quality on|off  lower a session's resolution (x0.75, x0.5) while the\n"
-         "                        server skips its poses, climb back when frames would fit,\n"
-         "                        and send a full-size frame when the camera stops (default off;\n"
-         "                        session/adaptive_quality.h has the rule)\n"
+         "                        server skips its poses, climb back when frames would fit\n"
+         "                        (default off; session/adaptive_quality.h has the rule)\n"
+         "  --still-refine on|off  when the camera stops on a frame held back (smaller, or\n"
+         "                        under a rate cap), draw its pose again at full size and the\n"
+         "                        crf with no rate cap (default on; session/still_refine.h)\n"
          "  --encoder-threads N   sliced threads per session's encoder (default 0: auto, twice\n"
          "                        the usable cores shared by the live sessions, at least what\n"
          "                        the viewport needs for 60 frames/s, at most what it gains\n"
@@ -393,7 +395,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.socket_send_buffer = parse_int(a, v, 0, 64 << 20);
     else if (a == "--notsent-lowat")
       out.notsent_lowat = parse_int(a, v, 0, 64 << 20);
-    else if (a == "--link-control") {
+    else if (a == "--still-refine") {
+      if (v != "on" && v != "off") throw std::invalid_argument("--still-refine: on or off, not '" + v + "'");
+      out.still_refine = v == "on";
+    } else if (a == "--link-control") {
       if (v != "on" && v != "off") throw std::invalid_argument("--link-control: on or off, not '" + v + "'");
       out.link_control = v == "on";
     } else if (a == "--max-viewport")
@@ -466,6 +471,7 @@ SessionSettings session_settings(const ServerOptions& o) {
   s.frame.encoder_policy = o.encoder_policy;
   s.frame.adaptive_quality = o.adaptive_quality;
   s.frame.link_control = o.link_control;
+  s.frame.still_refine = o.still_refine;
   s.frame.frame_deadline_slots = o.frame_deadline_slots;
   s.frame.max_frames_in_flight = o.max_frames_in_flight;
   s.frame.socket_send_buffer = o.socket_send_buffer;

@@ -104,6 +104,7 @@ struct ServerOptions {
   // yet sent; a frame waits in the session until the one before has nearly left (link_rate.h).
   int notsent_lowat = 1024;
   bool link_control = true;        // --link-control: the bitrate follows the link (session/link_rate.h)
+  bool still_refine = true;        // --still-refine: a still view ends sharp (session/still_refine.h)
   int max_viewport_width = 3840;   // --max-viewport WxH: larger Hello/Resize -> ERROR_INVALID_ARGUMENT
   int max_viewport_height = 2160;  //   (pixel count and longer side; message_validation.h)
   // Pixels of the renders running at once, server-wide (render_scheduler.h); 0 = two frames of

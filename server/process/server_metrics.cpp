@@ -110,7 +110,8 @@ std::string ServerMetrics::prometheus_text() const {
       "Link control: clients' frame receipts (Pose.received_ms) matched to a frame sent and read by the rate "
       "controller (0 while no client sends them: its round trip alone then).",
       frame_receipts_total.load());
-  put("catgs_refine_frames_total", "counter", "Adaptive quality: full-size frames sent when the camera stopped.",
+  put("catgs_refine_frames_total", "counter",
+      "Still views: the last pose drawn again at full size and the stream's crf when the camera stopped.",
       refine_frames_total.load());
   put("catgs_scenes_loaded", "gauge", "Scenes in memory (--scene; loaded on first use).", scenes_loaded.load());
   put("catgs_scene_bytes", "gauge", "Host bytes of the loaded scenes' models (each GPU holds a copy besides).",

@@ -22,7 +22,6 @@ void AdaptiveQuality::on_pose(Clock::time_point now, bool replaced) {
   }
   have_pose_ = true;
   last_pose_ = now;
-  refined_ = false;
   poses_.push_back({now, replaced});
   drop_old(now);
 }
@@ -87,12 +86,6 @@ int AdaptiveQuality::on_tick(Clock::time_point now) {
   poses_.clear();  // the next decision looks at the new level only
   latencies_.clear();
   return step;
-}
-
-bool AdaptiveQuality::take_refine(Clock::time_point now, int last_frame_level) {
-  if (refined_ || !have_pose_ || last_frame_level == 0 || now - last_pose_ < params_.refine_after) return false;
-  refined_ = true;
-  return true;
 }
 
 int AdaptiveQuality::scaled_side(int side, int level) {

@@ -1,7 +1,7 @@
 // Adaptive resolution for one session (--adaptive-quality): when the server cannot keep up with
 // the client's poses, the session streams at a lower resolution, and it climbs back when the
-// frames would fit again; when the camera stops at a reduced level, one full-size "refine" frame
-// of the last pose follows. Frames carry their size (Frame.width/height); clients scale them to
+// frames would fit again (when the camera stops at a reduced level, the still view's refine frame
+// is full size: still_refine.h). Frames carry their size (Frame.width/height); clients scale them to
 // their viewport, and every size change is an IDR (the encoder is rebuilt).
 //
 // The rule, evaluated on the session's tick (every 250 ms):
@@ -19,8 +19,6 @@
 // Down needs at least 5 poses in the window, so that one skipped pose of a quiet second does not
 // count.
 // - After a change, no other change for `hold` (hysteresis: a level must show what it does).
-// - Refine: the camera has been still (no pose) for `refine_after` and the last frame was
-//   rendered below full size: the last pose is rendered once more at full size.
 // Levels scale both sides: 1, 0.75, 0.5 (1, 0.56, 0.25 of the pixels).
 // The frame cost is the server's time for one frame from the pose's arrival to the frame's
 // hand-off (queue + render + convert + encode, FrameTimings.total_ms), an exponential average.
@@ -42,7 +40,6 @@ class AdaptiveQuality {
     Duration window{1000};
     Duration hold{2000};
     Duration up_after{3000};
-    Duration refine_after{500};
     double late_intervals = 4.0;
     Duration late_min{150};
   };
@@ -66,10 +63,6 @@ class AdaptiveQuality {
   void on_frame(int level, double cost_ms);
   // The tick: applies the rule. Returns +1 (up), -1 (down) or 0.
   int on_tick(Clock::time_point now);
-  // True once per still camera, when a refine frame is due (see above); `last_frame_level` is
-  // the level of the last frame rendered.
-  bool take_refine(Clock::time_point now, int last_frame_level);
-
   int level() const { return level_; }
   double scale() const { return kScales[level_]; }
   // An even side of at least 16 pixels: `side` (even) at `level`'s scale.
@@ -99,7 +92,6 @@ class AdaptiveQuality {
   double pose_interval_ms_ = 0;  // exponential average
   double cost_ms_ = 0;           // exponential average, at cost_level_
   int cost_level_ = -1;
-  bool refined_ = false;  // the refine of the current stillness was taken
   bool link_limited_ = false, link_below_floor_ = false, link_fits_above_ = true;
 };
 

@@ -74,7 +74,7 @@ bool FramePipeline::drop_pending() {
 
 void FramePipeline::refine(Clock::time_point now) {
   pending_ = last_started_;
-  pending_->full_size = true;
+  pending_->refine = true;
   pending_->received = now;
 }
 
@@ -105,7 +105,7 @@ FramePipeline::StartedRender FramePipeline::start_render(const JobShape& shape) 
     s.job.lod_error_px = -1.0f;
   }
   last_started_ = pending_;
-  last_started_->full_size = false;
+  last_started_->refine = false;
   pending_.reset();
   force_idr_ = false;
   rendering_ = true;
@@ -258,6 +258,16 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   // fps): a frame may then take at most two frame intervals on the link, where the policy's
   // buffer would let one take six, a latency spike of half a second on a slow link.
   const int vbv_ms = s.link_kbps > 0 ? kLinkVbvMs : policy.vbv_buffer_ms;
+  // The still view's refine frame: the stream's crf with no rate cap where x264 can take a new
+  // VBV rate for one frame (the next frame sets the stream's again); NVENC's and AV1's encoders
+  // would be rebuilt (an IDR each way), so they keep theirs: a still frame under CBR still gets
+  // the whole frame's budget for what is left to refine.
+  if (job.pose.refine && rate > 0 && same_stream && encoder_->name() == "x264" &&
+      encoder_->set_max_bitrate_kbps(kRefineKbps, kRefineVbvMs)) {
+    encoder_rate_kbps_ = kRefineKbps;
+    encoder_vbv_ms_ = kRefineVbvMs;
+    return;
+  }
   if (same_stream && (encoder_rate_kbps_ != rate || encoder_vbv_ms_ != vbv_ms) && encoder_->codec() == "h264" &&
       rate > 0 && encoder_->set_max_bitrate_kbps(rate, vbv_ms)) {
     encoder_rate_kbps_ = rate;
@@ -420,7 +430,8 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_splats(static_cast<std::uint32_t>(std::min<std::uint64_t>(r.splats, UINT32_MAX)));
   r.total_ms = ms_between(job.pose.received, Clock::now());
   r.quality_level = job.shape.quality_level;
-  r.refine = job.pose.full_size;
+  r.refine = job.pose.refine;
+  r.rate_capped = !job.pose.refine && encoder_rate_kbps_ > 0;
   t->set_total_ms(r.total_ms);
   t->set_stage_frame_ms(rendered.stage_ms[0]);
   t->set_stage_preprocess_ms(rendered.stage_ms[1]);

@@ -47,6 +47,10 @@ inline constexpr int kStreamFps = 60;
 // The VBV's size while the link limits the stream (link_rate.h): two frames at kStreamFps, which
 // the session's conversion of the cap by the measured frame rate makes two real frames' share.
 inline constexpr int kLinkVbvMs = 2000 / kStreamFps;
+// A refine frame's VBV (still_refine.h): x264 cannot switch its VBV off once on, so "no rate cap"
+// is a rate and buffer no frame reaches (100 Mbit/s, a buffer of one second of it).
+inline constexpr int kRefineKbps = 100000;
+inline constexpr int kRefineVbvMs = 1000;
 
 class FramePipeline {
  public:
@@ -58,7 +62,9 @@ class FramePipeline {
     std::uint32_t sequence = 0;
     double client_time_ms = 0;
     Clock::time_point received;  // arrival on the transport thread
-    bool full_size = false;      // a refine frame: full size whatever the adaptive level
+    // The still view's refine frame (still_refine.h): full size whatever the adaptive level,
+    // encoded at the stream's crf with no rate cap (kRefineKbps).
+    bool refine = false;
   };
   // What a render job is asked for, as the session decided it.
   struct JobShape {
@@ -121,7 +127,8 @@ class FramePipeline {
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
     double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;
-    bool refine = false;  // an adaptive-quality refine frame
+    bool refine = false;       // the still view's refine frame
+    bool rate_capped = false;  // encoded under a VBV rate (the policy's, a client's, the link's cap)
   };
   // A render job to post: the job and, pipelined, the host buffer it renders into.
   struct StartedRender {
@@ -160,7 +167,7 @@ class FramePipeline {
   bool drop_pending();
   // The next frame is an IDR (a new size, a key-frame request, a new bitrate).
   void request_idr() { force_idr_ = true; }
-  // Adaptive quality's refine frame: the last pose started, once more at full size, when no
+  // The still view's refine frame (still_refine.h): the last pose started, once more, when no
   // pose waits. can_refine() says whether there is one; refine() queues it.
   bool can_refine() const { return !pending_ && last_started_; }
   void refine(Clock::time_point now);

@@ -30,6 +30,11 @@ bool LinkRate::network_busy(const SocketSample& s) const {
   return !s.valid || s.rtt_ms - s.min_rtt_ms > params_.idle_rtt_ms;
 }
 
+bool LinkRate::receiver_held(Clock::time_point now) const {
+  const double recent_ms = std::max(500.0, 4.0 * interval_ms_);
+  return have_receiver_held_ && ms_between(receiver_held_at_, now) < recent_ms;
+}
+
 double LinkRate::path_queue_ms(const SocketSample& s, Clock::time_point now) const {
   if (receipts_fresh(now)) return network_busy(s) ? queue_ms_ : 0.0;
   return s.valid ? std::max(0.0, s.rtt_ms - s.min_rtt_ms) : 0.0;
@@ -44,14 +49,18 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   // delivery rate the sender was not the limit of); a busy host delays the transport's thread
   // too, on a link with room to spare.
   const bool socket_full = !s.valid || s.notsent_bytes > 0 || !s.app_limited;
-  if (socket_full && delay_ms > std::max(params_.delay_ms, own)) return true;
+  // And only where the network held the socket back: a client that reads late (a busy page)
+  // closes its receive window, and the frame waits for the client, not the link (a lower rate
+  // would not read it sooner).
+  if (socket_full && !receiver_held(now) && delay_ms > std::max(params_.delay_ms, own)) return true;
   // The client's receipts show the queue frame by frame; TCP's round trip is smoothed over about
   // eight ACKs and lags it by several frames. Congested: above `queue_ms` and the frame's own
   // time; or above `queue_ms` and grown by a quarter of it since the receipt before: a queue
   // building, seen before it stands as high as a frame's own time (a delay gradient, as GCC reads
   // one; a token bucket's queue appears at once when its burst is spent). Only while TCP sees the
   // network busy: late receipts over an idle network are the client's own delay between reads,
-  // which a lower rate would not shorten.
+  // which a lower rate would not shorten. (A client that knows it read a frame late sends no
+  // receipt for it: issue 64, web_client/app.js and catgs-loadgen.)
   if (receipts_fresh(now)) {
     if (!network_busy(s)) return false;
     const bool building = queue_ms_ > params_.queue_ms && queue_ms_ > queue_before_ + params_.queue_ms / 4;
@@ -124,6 +133,16 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
     gain_ = std::clamp(gain_ * std::clamp(cap_ / stream_kbps_, 0.97, 1.03), 0.5, 1.0);
   else if (!limited_)
     gain_ = 1.0;
+  // The receiver's window held the socket back for a good part of this frame's send: the client
+  // reads late. Its delays and delivery rate are the client's, not the link's.
+  // (TCP_INFO counts from the connection's start: the first frame's is all of it.)
+  if (s.valid) {
+    const double rwnd_ms = s.rwnd_limited_ms - (last_sample_.valid ? last_sample_.rwnd_limited_ms : 0.0);
+    if (rwnd_ms > 1.0 && rwnd_ms >= params_.rwnd_share_of_delay * delay_ms_) {
+      have_receiver_held_ = true;
+      receiver_held_at_ = written;
+    }
+  }
   have_written_ = true;
   last_written_ = written;
   if (s.valid) {
@@ -132,7 +151,7 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
   }
   // The kernel's delivery rate where the receipts have given none for a while.
   const bool receipts_rate = receipt_kbps_ > 0 && written - receipt_kbps_at_ < std::chrono::seconds(3);
-  if (s.valid && !s.app_limited && s.delivery_kbps > 0 && !receipts_rate) {
+  if (s.valid && !s.app_limited && s.delivery_kbps > 0 && !receipts_rate && !receiver_held(written)) {
     link_kbps_ = s.delivery_kbps;
     // The link was full: its rate now is the one to resume at (an older one may be stale).
     if (limited_) known_kbps_ = known_kbps_ > 0 ? average(known_kbps_, s.delivery_kbps) : s.delivery_kbps;

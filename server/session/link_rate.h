@@ -21,6 +21,11 @@
 //   for clients that send no receipts. Two frames received in turn, the second behind a queue,
 //   arrived the second's time on the wire apart: its bytes over that gap are the bottleneck's
 //   rate (the kernel's delivery rate is the sender's view, and a shaper's burst inflates it).
+// A client that reads late (a busy page, a busy host) is not a slow link (issue 64): a send the
+// receiver's window held back (tcpi_rwnd_limited) is not the network's delay, and its delivery
+// rate is the client's reading, not the link's. A receipt says when a frame arrived only if the
+// client was listening: the page and catgs-loadgen send none for a frame they read after their
+// thread was away (web_client/app.js, tools/loadgen), so late reads never look like a queue.
 // The rule (a delay-based AIMD, as WebRTC's and Selkies' congestion control do in spirit):
 // - congested: the send delay passes `delay_ms` (at least 1.5 frame intervals: a frame's own
 //   time on the wire at a low frame rate is no queue); or the receipts' queue passes `queue_ms`
@@ -69,6 +74,9 @@ class LinkRate {
     // receipts say (a client busy between reads, rendering or decoding, stamps its receipts late;
     // its kernel still acknowledges at once, so the round trip stays at its minimum).
     double idle_rtt_ms = 2.0;
+    // The receiver's window held the socket (tcpi_rwnd_limited) for at least this share of a
+    // frame's send delay: the client reads late, its delay is not the link's (issue 64).
+    double rwnd_share_of_delay = 0.25;
     double queue_ms = 40.0;                        // the receipts' one-way delay above its base that means a queue
     std::chrono::milliseconds base_window{10000};  // the receipts' base is the least of 1-2 of these
     double decrease = 0.85;                        // of the link's rate, on congestion
@@ -142,6 +150,8 @@ class LinkRate {
   bool network_busy(const SocketSample& s) const;
   // The queue on the path now, ms: the receipts', else the round trip above its minimum.
   double path_queue_ms(const SocketSample& s, Clock::time_point now) const;
+  // The receiver's window held a frame's send back within the last 500 ms or 4 frame intervals.
+  bool receiver_held(Clock::time_point now) const;
 
   Params params_;
   bool limited_ = false;
@@ -158,6 +168,8 @@ class LinkRate {
   Clock::time_point above_since_{};
   int decreases_ = 0;
   SocketSample last_sample_{};  // the newest written frame's, for a receipt's decision
+  bool have_receiver_held_ = false;
+  Clock::time_point receiver_held_at_{};  // the last frame whose send the client's window held
   // Receipts: the one-way delay's base (the least of this window and the one before), the newest
   // one's queue above it.
   bool have_receipt_ = false;

@@ -501,6 +501,7 @@ void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
     shared_.metrics.poses_skipped_total++;  // a skip, not a drop: the newer pose is rendered instead
   }
   if (shared_.settings.frame.adaptive_quality) quality_.on_pose(received, replaced);
+  still_.on_pose(received);
   pacing_.on_pose(received);
   frames_.offer({cam, pose.sequence(), pose.client_time_ms(), received});
   last_pose_ = cam;
@@ -603,6 +604,7 @@ void Session::on_tick() {
   if (now - last_stats_ >= std::chrono::seconds(1)) send_stats();
   if (export_ && export_->sending) send_export_chunks();
   if (shared_.settings.frame.adaptive_quality) adapt_quality(now);
+  if (shared_.settings.frame.still_refine) refine_still_view(now);
   arm_tick();
 }
 

@@ -41,6 +41,7 @@
 #include "session/link_rate.h"
 #include "session/rate_limit.h"
 #include "session/session_settings.h"
+#include "session/still_refine.h"
 #include "process/scene_store.h"
 #include "session/video_export.h"
 #include "process/server_metrics.h"
@@ -114,6 +115,7 @@ class Session : public std::enable_shared_from_this<Session> {
     std::size_t bytes;            // its message's size
     std::uint32_t sequence = 0;   // Frame.sequence
     Clock::time_point rate_at{};  // when its encoder's rate was read (JobShape::link_read_at)
+    bool refine = false;          // the still view's refine frame (still_refine.h)
   };
 
   // `received`: when the transport thread handed the message over.
@@ -147,8 +149,10 @@ class Session : public std::enable_shared_from_this<Session> {
   void end_export(ServerMetrics::ExportEnd how);
   // Annotations after Welcome: the file beside the scene, or its error (the scene opens anyway).
   void send_annotations();
-  // --adaptive-quality, on the tick: applies AdaptiveQuality's rule and queues a refine frame.
+  // --adaptive-quality, on the tick: applies AdaptiveQuality's rule.
   void adapt_quality(Clock::time_point now);
+  // On the tick: the still view's refine frame when it is due (still_refine.h).
+  void refine_still_view(Clock::time_point now);
   // A frame (handed at frame.at) was written at `written`: the link's rate controller and, with
   // --adaptive-quality, the level's link input (link_rate.h, adaptive_quality.h).
   void on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket);
@@ -205,7 +209,7 @@ class Session : public std::enable_shared_from_this<Session> {
   int max_bitrate_kbps_ = 0;                         // the client's Quality
   AdaptiveQuality quality_;                          // --adaptive-quality
   FramePacing pacing_;                               // --frame-deadline
-  int last_frame_level_ = 0;                         // the level of the last frame handed off
+  StillRefine still_;                                // the still view's refine frame
   int in_flight_ = 0;                                // frames queued to the transport, not yet written
   std::deque<Handed> handed_;                        // the in-flight frames, in order
   static constexpr std::size_t kRecentFrames = 256;  // about 4 s at 60 frames/s

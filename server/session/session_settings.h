@@ -22,6 +22,9 @@ struct FrameSettings {
   bool adaptive_quality = false;
   // --link-control: the bitrate follows the link (link_rate.h).
   bool link_control = true;
+  // --still-refine: the view a camera stops on is drawn again at full size and the stream's crf
+  // (still_refine.h).
+  bool still_refine = true;
   // --frame-deadline: a frame's display slot in pose intervals after its pose arrived
   // (frame_pacing.h); 0: never skip.
   double frame_deadline_slots = 2.0;

@@ -22,7 +22,7 @@ void Session::maybe_start_render() {
   if (state_ != State::open || admitted >= fs.max_frames_in_flight || !frames_.can_start_render()) return;
   // Adaptive quality scales the size (a refine frame is full size); a new size is an IDR.
   FramePipeline::JobShape shape;
-  shape.quality_level = fs.adaptive_quality && !frames_.pending()->full_size ? quality_.level() : 0;
+  shape.quality_level = fs.adaptive_quality && !frames_.pending()->refine ? quality_.level() : 0;
   shape.width = AdaptiveQuality::scaled_side(width_, shape.quality_level);
   shape.height = AdaptiveQuality::scaled_side(height_, shape.quality_level);
   shape.max_bitrate_kbps = max_bitrate_kbps_;
@@ -85,9 +85,9 @@ void Session::maybe_start_encode() {
     return;
   }
   // Past its display slot with a newer pose waiting: the encoder's time goes to the newer pose.
-  // A refine frame (adaptive quality) or a forced IDR is never skipped: nothing else carries it.
+  // A refine frame (still_refine.h) or a forced IDR is never skipped: nothing else carries it.
   const FramePipeline::Job& job = frames_.rendered()->job;
-  if (!job.pose.full_size && !job.force_idr &&
+  if (!job.pose.refine && !job.force_idr &&
       pacing_.skip_before_encode(job.pose.received, Clock::now(), frames_.pending().has_value())) {
     frames_.drop_rendered();
     poses_skipped_++;
@@ -156,11 +156,10 @@ void Session::on_job_done(JobResult result) {
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   m.speculation_window.observe(result.speculation_window);
-  if (shared_.settings.frame.adaptive_quality) {
-    if (!result.refine) quality_.on_frame(result.quality_level, result.total_ms);
-    last_frame_level_ = result.quality_level;
-  }
-  handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence, result.link_read_at});
+  if (shared_.settings.frame.adaptive_quality && !result.refine)
+    quality_.on_frame(result.quality_level, result.total_ms);
+  still_.on_frame(result.quality_level > 0 || result.rate_capped, result.refine);
+  handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence, result.link_read_at, result.refine});
   recent_.push_back(handed_.back());
   if (recent_.size() > kRecentFrames) recent_.pop_front();
   shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
@@ -168,7 +167,9 @@ void Session::on_job_done(JobResult result) {
 }
 
 void Session::on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket) {
-  if (!shared_.settings.frame.link_control) return;
+  // A refine frame is sent once, larger than the moving stream's share of the link: its time on
+  // the wire is its size, not a queue (still_refine.h).
+  if (!shared_.settings.frame.link_control || frame.refine) return;
   const bool was_limited = link_.limited();
   const int cuts = link_.decreases();
   link_.on_written(frame.bytes, frame.at, written, socket, link_ceiling_kbps_);
@@ -218,6 +219,7 @@ void Session::on_receipt(std::uint32_t sequence, double received_ms, Clock::time
   for (auto it = recent_.rbegin(); it != recent_.rend(); ++it) {
     if (it->sequence != sequence) continue;
     last_receipt_ = sequence;
+    if (it->refine) return;  // its arrival is its own size on the wire (on_link_sample)
     shared_.metrics.frame_receipts_total++;
     const bool was_limited = link_.limited();
     const int cuts = link_.decreases();
@@ -229,12 +231,15 @@ void Session::on_receipt(std::uint32_t sequence, double received_ms, Clock::time
 void Session::adapt_quality(Clock::time_point now) {
   const int step = quality_.on_tick(now);
   if (step != 0) (step > 0 ? shared_.metrics.quality_up_total : shared_.metrics.quality_down_total)++;
-  // The camera stopped on a reduced frame: its pose once more at full size.
-  if (frames_.can_refine() && quality_.take_refine(now, last_frame_level_)) {
-    frames_.refine(now);
-    shared_.metrics.refine_frames_total++;
-    maybe_start_render();
-  }
+}
+
+void Session::refine_still_view(Clock::time_point now) {
+  // The camera stopped on a frame held back (smaller, or under a rate cap): its pose once more,
+  // at full size and the stream's crf.
+  if (!frames_.can_refine() || !still_.take(now)) return;
+  frames_.refine(now);
+  shared_.metrics.refine_frames_total++;
+  maybe_start_render();
 }
 
 }  // namespace catgs::server

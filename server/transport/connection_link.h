@@ -24,6 +24,11 @@ struct SocketSample {
   double delivery_kbps = 0;       // the kernel's delivery-rate estimate (tcpi_delivery_rate)
   bool app_limited = true;        // that estimate was taken while the sender had nothing to send
   std::size_t notsent_bytes = 0;  // written by us, not yet sent by the kernel (tcpi_notsent_bytes)
+  // Since the connection opened (0 where the kernel has not them): the time the socket had data
+  // to send (tcpi_busy_time) and, of it, the time the receiver's advertised window held it back
+  // (tcpi_rwnd_limited): a client that reads late, not the network.
+  double busy_ms = 0;
+  double rwnd_limited_ms = 0;
 };
 
 class ConnectionLink {

@@ -46,6 +46,11 @@ SocketSample socket_sample(lws* wsi) {
   s.delivery_kbps = static_cast<double>(info.tcpi_delivery_rate) * 8.0 / 1000.0;
   s.app_limited = info.tcpi_delivery_rate_app_limited != 0;
   s.notsent_bytes = info.tcpi_notsent_bytes;
+  // Linux 4.10: the time the sender was busy and the part of it the receiver's window held it.
+  if (len >= offsetof(struct tcp_info, tcpi_rwnd_limited) + sizeof info.tcpi_rwnd_limited) {
+    s.busy_ms = static_cast<double>(info.tcpi_busy_time) / 1000.0;
+    s.rwnd_limited_ms = static_cast<double>(info.tcpi_rwnd_limited) / 1000.0;
+  }
   return s;
 }
 

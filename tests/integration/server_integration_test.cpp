@@ -459,6 +459,65 @@ TEST(ServerIntegration, QualityCapsTheBitrate) {
   EXPECT_EQ(e->code(), pb::ERROR_INVALID_ARGUMENT) << e->reason();
 }
 
+// The still view ends sharp (issue 64, session/still_refine.h): a stream held to 100 kbit/s moves
+// through an orbit, the camera stops, and the picture left on screen is within 1 dB of the one the
+// stream's crf gives with no rate cap (a second server, --bitrate off), decoded and compared with
+// the CPU render of its pose; the last moving frame, before the refine frames, is not (the cap
+// bound it). /metrics counts the two refine frames.
+TEST(ServerIntegration, StillViewEndsAtTheCrfsPicture) {
+  const int W = 320, H = 240;
+  const Trace orbit = biker_orbit(W, H, 24);
+  cpu::CpuRenderer ref(load_model(kBiker), RenderOptions{});
+  struct Still {
+    double moving_db = 0, still_db = 0;  // the last moving frame's picture, the one left on screen
+    double refines = 0;
+    std::uint32_t last_pose = 0;
+  };
+  auto stop_after_orbit = [&](const std::vector<std::string>& extra) {
+    ServerProcess server(server_args(kBiker, extra));
+    StreamClient c;
+    c.connect(server.port());
+    c.hello(W, H);
+    VideoDecoder dec;
+    std::vector<pb::Pose> poses;
+    Still s;
+    for (std::uint32_t seq = 0; seq < orbit.size(); ++seq) {
+      poses.push_back(pose_from_camera(orbit[seq].camera, seq, now_ms()));
+      c.send_pose(poses.back());
+      auto m = wait_for(c, 20000, [](const pb::ServerMessage& x) { return x.has_frame() || x.has_error(); });
+      if (!m || !m->has_frame()) {
+        ADD_FAILURE() << "no frame for pose " << seq;
+        return s;
+      }
+      s.moving_db = frame_psnr(dec, ref, m->frame(), poses[m->frame().pose_sequence()]);
+    }
+    // The camera stops: every frame that follows within 3 s is decoded; the last is what stays.
+    s.still_db = s.moving_db;
+    const double until = now_ms() + 3000;
+    while (now_ms() < until) {
+      auto m = wait_for(c, static_cast<int>(std::max(1.0, until - now_ms())),
+                        [](const pb::ServerMessage& x) { return x.has_frame(); });
+      if (!m) break;
+      s.last_pose = m->frame().pose_sequence();
+      s.still_db = frame_psnr(dec, ref, m->frame(), poses[s.last_pose]);
+    }
+    std::string metrics;
+    http_get(server.port(), "/metrics", metrics);
+    s.refines = metric_value(metrics, "catgs_refine_frames_total");
+    return s;
+  };
+  const Still crf = stop_after_orbit({"--crf", "18", "--bitrate", "off"});
+  const Still capped = stop_after_orbit({"--crf", "18", "--bitrate", "100", "--still-refine", "on"});
+  std::cout << "[ info ] still view: crf with no cap " << crf.still_db
+            << " dB; capped at 100 kbit/s: last moving frame " << capped.moving_db << " dB, after the stop "
+            << capped.still_db << " dB (" << capped.refines << " refine frames)\n";
+  EXPECT_EQ(crf.refines, 0) << "--still-refine off by default in these tests' servers";
+  EXPECT_EQ(capped.refines, 2);
+  EXPECT_EQ(capped.last_pose, orbit.size() - 1) << "the refine frames draw the last pose";
+  EXPECT_LT(capped.moving_db, crf.still_db - 1.0) << "the cap did not bind: the test shows nothing";
+  EXPECT_GE(capped.still_db, crf.still_db - 1.0);
+}
+
 // --bits-per-pixel auto (encode/content_rate.h): the first session at a size probes the scene's
 // moving frames once and its stream takes the new cap without an IDR; a second session at that
 // size takes the result, a session at another size probes that size.

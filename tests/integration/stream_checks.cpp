@@ -18,7 +18,11 @@ std::vector<std::string> server_args(const std::string& scene, std::vector<std::
                                 "--slow-client-timeout-ms", "2000", "--drain-timeout-s", "3",
                                 // Derived files (LOD files, scene caches) in the tests' own folder,
                                 // not the user's cache folder nor beside ../shared's scenes.
-                                "--cache-dir", (std::filesystem::temp_directory_path() / "catgs-itest-cache").string()};
+                                "--cache-dir", (std::filesystem::temp_directory_path() / "catgs-itest-cache").string(),
+                                // A test that sends a pose and waits for its frame reads one frame
+                                // a pose; on a slow machine the still view's refine frames (their
+                                // own test: StillViewEndsAtTheCrfsPicture) would come between.
+                                "--still-refine", "off"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }

@@ -61,6 +61,11 @@ const char* kUsage =
     "  --warmup-s S             frames of the poses sent in a session's first S seconds left\n"
     "                           out too (0; the settling time a slow link's controller gets)\n"
     "  --stale-ms MS            frames later than this count as stale (default 100)\n"
+    "  --read-stall-ms A-B      a busy client: after each read, stall a random A..B ms before\n"
+    "                           reading and sending again (as a page whose thread is busy)\n"
+    "  --still-s S              after --seconds the camera stops: no more poses, read on for S s,\n"
+    "                           and compare the picture shown 1 s, 3 s after and at the end with\n"
+    "                           the CPU reference render of its pose (needs --scene; decodes)\n"
     "  --token T                Hello token\n"
     "  --json FILE              write the report (every ramp step) as JSON\n"
     "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
@@ -160,6 +165,22 @@ LoadSessionConfig base_config(const tools::Args& args) {
   // stamped when it ends, as if they had queued on the link: no receipts unless asked for.
   base.receipts = args.get_int("--receipts", base.check_every > 0 ? 0 : 1) != 0;
   base.stale_ms = args.get_double("--stale-ms", 100);
+  if (args.has("--read-stall-ms")) {
+    const std::string range = args.get("--read-stall-ms");
+    const auto dash = range.find('-');
+    try {
+      base.read_stall_min_ms = std::stoi(range.substr(0, dash));
+      base.read_stall_max_ms = dash == std::string::npos ? base.read_stall_min_ms : std::stoi(range.substr(dash + 1));
+    } catch (const std::exception&) {
+      base.read_stall_min_ms = -1;
+    }
+    if (base.read_stall_min_ms < 0 || base.read_stall_max_ms < base.read_stall_min_ms)
+      throw std::invalid_argument("--read-stall-ms wants A-B milliseconds, 0 <= A <= B (got '" + range + "')");
+  }
+  base.still_s = args.get_double("--still-s", 0);
+  if (base.still_s < 0) throw std::invalid_argument("--still-s must be >= 0 seconds");
+  if (base.still_s > 0 && !args.has("--scene"))
+    throw std::invalid_argument("--still-s needs --scene (the reference renders the still pose)");
   if (args.get_double("--progress", 1) < 0) throw std::invalid_argument("--progress must be >= 0 seconds");
   if (args.has("--scene")) {
     base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
@@ -248,12 +269,12 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
 int main(int argc, char** argv) {
   try {
     const tools::Args args(
-        argc, argv,
-        {"--host",        "--port",           "--sessions",   "--size",       "--width",    "--height",   "--trace",
-         "--scene",       "--scene-name",     "--offset-s",   "--rate",       "--depth",    "--seconds",  "--decode",
-         "--check-every", "--check-min-psnr", "--warmup",     "--warmup-s",   "--stale-ms", "--token",    "--json",
-         "--ramp!",       "--ramp-step",      "--ramp-start", "--max-p95-ms", "--min-fps",  "--progress", "--tls!",
-         "--help!",       "--timeline!",      "--av1!",       "--receipts"});
+        argc, argv, {"--host",       "--port",     "--sessions",      "--size",           "--width",     "--height",
+                     "--trace",      "--scene",    "--scene-name",    "--offset-s",       "--rate",      "--depth",
+                     "--seconds",    "--decode",   "--check-every",   "--check-min-psnr", "--warmup",    "--warmup-s",
+                     "--stale-ms",   "--token",    "--json",          "--ramp!",          "--ramp-step", "--ramp-start",
+                     "--max-p95-ms", "--min-fps",  "--progress",      "--tls!",           "--help!",     "--timeline!",
+                     "--av1!",       "--receipts", "--read-stall-ms", "--still-s"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

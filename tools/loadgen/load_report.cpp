@@ -202,6 +202,12 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"psnr_mean_db", measured(s.psnr_mean, s.checked)},
          {"latency", latency_json(summarize_latency(s.latency_ms))},
          {"server", stages_json(s.server)}});
+    if (s.still_frames > 0 || s.still_psnr_end > 0)
+      out["sessions"].back()["still"] = {{"psnr_1s_db", s.still_psnr_1s},
+                                         {"psnr_3s_db", s.still_psnr_3s},
+                                         {"psnr_end_db", s.still_psnr_end},
+                                         {"frames", s.still_frames},
+                                         {"bytes", s.still_bytes}};
     if (!s.timeline.empty()) {
       nlohmann::json frames = nlohmann::json::array();
       for (const auto& f : s.timeline) frames.push_back({f.t_s, f.latency_ms, f.width, f.height, f.bytes});

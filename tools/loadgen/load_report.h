@@ -97,6 +97,11 @@ struct SessionResult {
   std::uint64_t check_failures = 0;    // checked frames below LoadSessionConfig::check_min_psnr
   double psnr_min = 0, psnr_mean = 0;  // meaningful only when checked > 0 (JSON: null otherwise)
   StageSums server;                    // after warm-up
+  // The camera stopped (LoadSessionConfig::still_s): PSNR (dB, RGB) of the picture shown 1 s and
+  // 3 s after the last pose and at the end, against the CPU reference render of the pose it
+  // answers (0: no picture by then); the frames and payload bytes received after the last pose.
+  double still_psnr_1s = 0, still_psnr_3s = 0, still_psnr_end = 0;
+  std::uint64_t still_frames = 0, still_bytes = 0;
 };
 
 struct LatencySummary {

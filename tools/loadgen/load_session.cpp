@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <random>
 #include <stdexcept>
+#include <thread>
 
 #include "cpu/cpu_renderer.h"
 #include "scene/scene_bounds.h"
@@ -105,28 +107,43 @@ class PoseLoop {
  public:
   PoseLoop(const LoadSessionConfig& cfg, SessionResult& r, StreamClient& client, Trace trace)
       : cfg_(cfg), r_(r), client_(client), trace_(std::move(trace)), check_(cfg.check_every > 0) {
-    if (check_) reference_ = std::make_unique<cpu::CpuRenderer>(cfg.scene, RenderOptions{});
+    if (check_ || cfg.still_s > 0) reference_ = std::make_unique<cpu::CpuRenderer>(cfg.scene, RenderOptions{});
     // The clock starts once everything is ready: set-up is not sending time.
     t0_ = Clock::now();
     send_end_ = t0_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(cfg.seconds));
-    drain_end_ = send_end_ +
-                 std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(cfg.drain_ms));
+    const double drain_ms = cfg.still_s > 0 ? 1000.0 * cfg.still_s : cfg.drain_ms;
+    drain_end_ =
+        send_end_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(drain_ms));
+    if (cfg.read_stall_max_ms > 0)
+      stall_ms_ = std::uniform_int_distribution<int>(cfg.read_stall_min_ms, cfg.read_stall_max_ms);
     period_ = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(cfg.rate_hz > 0 ? 1.0 / cfg.rate_hz : 0.0));
     next_pose_at_ = t0_;
   }
 
-  // Until the sending time is over and the last pose is answered (or drain_ms passed), or the
-  // server sends an Error. Closes the connection.
+  // Until the sending time is over and the last pose is answered (or drain_ms passed; with
+  // still_s, until still_s passed), or the server sends an Error. Closes the connection.
   void run() {
     Progress* progress = cfg_.progress;
+    const bool stalls = cfg_.read_stall_max_ms > 0;
     for (;;) {
       const auto now = Clock::now();
       const bool sending = now < send_end_;
-      if (!sending && (now >= drain_end_ || newest_answered_ + 1 == sent())) break;
+      const bool still = cfg_.still_s > 0;
+      if (!sending && (now >= drain_end_ || (!still && newest_answered_ + 1 == sent()))) break;
       if (sending) send_due_poses(now);
-      auto msg = client_.recv(wait_ms(sending));
-      if (!msg) continue;
+      if (still && !sending) take_still_marks(now);
+      // Away from the socket for longer than kLateReadMs (a stall, a slow decode): what it reads
+      // now may have waited, and its receipts would say so as if the link had queued it.
+      if (Clock::now() - last_read_end_ > kLateReadMs) late_read_ = true;
+      // A busy client reads what has arrived, then is away for a while (its thread busy).
+      auto msg = client_.recv(stalls ? 0 : wait_ms(sending));
+      last_read_end_ = Clock::now();
+      if (!msg) {
+        late_read_ = false;  // caught up: nothing was waiting
+        if (stalls) std::this_thread::sleep_for(std::chrono::milliseconds(stall_ms_(random_)));
+        continue;
+      }
       if (msg->has_error()) {
         note_error(r_, "server Error " + pb::ErrorCode_Name(msg->error().code()) + ": " + msg->error().reason());
         break;
@@ -137,6 +154,7 @@ class PoseLoop {
       }
       if (msg->has_stats()) on_stats(msg->stats());
     }
+    if (cfg_.still_s > 0 && r_.still_psnr_end == 0 && have_shown_) r_.still_psnr_end = shown_psnr();
     r_.run_seconds = std::chrono::duration<double>(std::min(Clock::now(), send_end_) - t0_).count();
     // Poses up to the newest answered one that got no frame were replaced by a newer pose (latest
     // wins); those after it were never answered at all.
@@ -177,7 +195,7 @@ class PoseLoop {
       pose.set_received_ms(receipt_.arrived_ms);
       receipt_ = {};
     }
-    if (check_) sent_poses_.push_back(pose);
+    if (reference_) sent_poses_.push_back(pose);
     client_.send_pose(pose);
     r_.poses_sent++;
     if (cfg_.progress) cfg_.progress->poses++;
@@ -221,10 +239,16 @@ class PoseLoop {
     if (r_.frames > 1 && av1 != last_av1_) r_.codec_changes++;
     last_av1_ = av1;
     if (outstanding_ > 0) outstanding_--;
-    if (cfg_.decode || check_) decode_and_check(f);
+    if (Clock::now() >= send_end_) {
+      r_.still_frames++;
+      r_.still_bytes += f.payload().size();
+    }
+    if (cfg_.decode || reference_) decode_and_check(f);
     const double latency = now_ms() - f.client_time_ms();
     unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
-    if (cfg_.receipts) receipt_ = {f.sequence(), arrived_ms};
+    // A receipt says when the frame arrived; one read after the client was away says when the
+    // client came back (the page does the same: web_client/app.js).
+    if (cfg_.receipts && !late_read_) receipt_ = {f.sequence(), arrived_ms};
     if (cfg_.timeline && !sent_at_.empty())
       r_.timeline.push_back({(now_ms() - sent_at_.front()) / 1000.0, latency, static_cast<int>(f.width()),
                              static_cast<int>(f.height()), f.payload().size()});
@@ -251,7 +275,11 @@ class PoseLoop {
       const std::string codec = f.codec() == pb::CODEC_AV1 ? "av1" : "h264";
       if (!decoder_ || decoder_->codec() != codec) decoder_ = std::make_unique<VideoDecoder>(codec);
       const bool got = decoder_->decode(f.payload(), rgba_, w, h);
-      if (got) r_.decoded++;
+      if (got) {
+        r_.decoded++;
+        shown_pose_ = f.pose_sequence();
+        have_shown_ = f.pose_sequence() < sent_poses_.size();
+      }
       // The server may change the size (adaptive quality: a slow host or link); every frame
       // says its size, and the picture must have it.
       if (got && (w != static_cast<int>(f.width()) || h != static_cast<int>(f.height())))
@@ -265,19 +293,37 @@ class PoseLoop {
     }
   }
 
-  // The decoded picture against the CPU reference render of the pose it answers.
-  void check_against_reference(std::uint32_t pose_sequence, int w, int h) {
+  // The decoded picture (rgba_, w x h) against the CPU reference render of the pose it answers.
+  double reference_psnr(std::uint32_t pose_sequence, int w, int h) {
     Image decoded_image, want;
     decoded_image.width = w;
     decoded_image.height = h;
     decoded_image.rgba8 = rgba_;
     reference_->render(camera_from_pose(sent_poses_[pose_sequence], w, h), want);
-    const double psnr = psnr_rgba8(decoded_image, want);
+    return psnr_rgba8(decoded_image, want);
+  }
+
+  void check_against_reference(std::uint32_t pose_sequence, int w, int h) {
+    const double psnr = reference_psnr(pose_sequence, w, h);
     r_.psnr_min = r_.checked == 0 ? psnr : std::min(r_.psnr_min, psnr);
     psnr_sum_ += psnr;
     r_.checked++;
     r_.psnr_mean = psnr_sum_ / static_cast<double>(r_.checked);
     if (!(psnr >= cfg_.check_min_psnr)) r_.check_failures++;
+  }
+
+  // The picture shown now (the newest decoded) against the reference of its pose.
+  double shown_psnr() {
+    const int w = frame_width_, h = frame_height_;
+    if (rgba_.size() != static_cast<std::size_t>(w) * h * 4) return 0;
+    return reference_psnr(shown_pose_, w, h);
+  }
+
+  // The camera stopped at send_end_: the picture shown 1 s and 3 s later.
+  void take_still_marks(Clock::time_point now) {
+    if (!have_shown_) return;
+    if (r_.still_psnr_1s == 0 && now >= send_end_ + std::chrono::seconds(1)) r_.still_psnr_1s = shown_psnr();
+    if (r_.still_psnr_3s == 0 && now >= send_end_ + std::chrono::seconds(3)) r_.still_psnr_3s = shown_psnr();
   }
 
   void add_server_timings(const pb::FrameTimings& t) {
@@ -325,9 +371,17 @@ class PoseLoop {
   bool last_av1_ = false;                   // the last Frame's codec was AV1
   int frame_width_ = 0, frame_height_ = 0;  // the size of the last Frame
   std::vector<std::uint8_t> rgba_;
-  std::vector<double> sent_at_;       // client time each pose was sent, by sequence
-  std::vector<pb::Pose> sent_poses_;  // reference check: each pose as sent, by sequence
-  std::unique_ptr<cpu::CpuRenderer> reference_;
+  std::vector<double> sent_at_;                  // client time each pose was sent, by sequence
+  std::vector<pb::Pose> sent_poses_;             // reference check: each pose as sent, by sequence
+  std::unique_ptr<cpu::CpuRenderer> reference_;  // reference checks and the still picture's
+  std::uint32_t shown_pose_ = 0;                 // the pose of the newest decoded picture
+  bool have_shown_ = false;
+  // Away from the socket longer than this: the frames read next arrived earlier than read.
+  static constexpr std::chrono::milliseconds kLateReadMs{50};
+  Clock::time_point last_read_end_ = Clock::now();
+  bool late_read_ = false;  // since the client came back from being away, nothing read was waiting
+  std::mt19937 random_{std::random_device{}()};
+  std::uniform_int_distribution<int> stall_ms_{0, 0};  // --read-stall-ms
   double psnr_sum_ = 0;
   double unreported_latency_ms_ = 0;  // the newest frame's latency, for the next Pose
   struct Receipt {

@@ -69,7 +69,16 @@ struct LoadSessionConfig {
   // (required). 0: off. The CPU render blocks this session's thread: latency and FPS of a
   // checking run are not the server's.
   int check_every = 0;
-  double check_min_psnr = 30;    // dB; frames below count in SessionResult::check_failures
+  double check_min_psnr = 30;  // dB; frames below count in SessionResult::check_failures
+  // A busy client (--read-stall-ms A-B, issue 64): after reading what has arrived, the session's
+  // thread stalls for a random time in [min, max] ms before it reads (and sends poses) again, as
+  // a page whose main thread is busy does. 0: never stalls.
+  int read_stall_min_ms = 0, read_stall_max_ms = 0;
+  // The camera stops (--still-s S, issue 64): after `seconds` of poses the session sends no more
+  // and reads on for still_s seconds, decoding every frame; the picture shown 1 s and 3 s after
+  // the last pose, and at the end, is compared with the CPU reference render of the pose it
+  // answers (SessionResult::still_psnr_db; needs `scene`). 0: off.
+  double still_s = 0;
   Progress* progress = nullptr;  // optional; outlives the session
 };
 

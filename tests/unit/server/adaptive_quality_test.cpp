@@ -107,19 +107,6 @@ TEST(AdaptiveQuality, LateFramesStepDownWithoutSkips) {
   EXPECT_EQ(late.level(), 1);
 }
 
-TEST(AdaptiveQuality, RefineOncePerStopBelowFullSize) {
-  AdaptiveQuality q;
-  Clock::time_point t = drive(q, Clock::time_point{}, 1100, 16, 2, 40.0);
-  ASSERT_EQ(q.level(), 1);
-  EXPECT_FALSE(q.take_refine(t + milliseconds(100), 1)) << "the camera only just stopped";
-  EXPECT_FALSE(q.take_refine(t + milliseconds(300), 1)) << "still for 312 ms, under 500";
-  EXPECT_TRUE(q.take_refine(t + milliseconds(600), 1));
-  EXPECT_FALSE(q.take_refine(t + milliseconds(900), 1)) << "once per stop";
-  q.on_pose(t + milliseconds(1000), false);
-  EXPECT_FALSE(q.take_refine(t + milliseconds(1600), 0)) << "the last frame was full size";
-  EXPECT_TRUE(q.take_refine(t + milliseconds(1600), 1));
-}
-
 TEST(AdaptiveQuality, ScaledSidesAreEvenAndAtLeast16) {
   EXPECT_EQ(AdaptiveQuality::scaled_side(1280, 0), 1280);
   EXPECT_EQ(AdaptiveQuality::scaled_side(1280, 1), 960);

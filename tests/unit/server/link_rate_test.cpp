@@ -201,6 +201,41 @@ TEST(LinkRate, LateReceiptsOverAnIdleNetworkAreNotCongestion) {
   }
 }
 
+// A client that reads late closes its receive window: the socket holds unsent bytes and a frame
+// waits 100-400 ms to be written, as on a slow link, but TCP_INFO says the receiver's window held
+// it (tcpi_rwnd_limited). No cut, and the reading rate is not taken for the link's; the same
+// delays with the window open (the network held it) are a slow link.
+TEST(LinkRate, AFrameTheReceiversWindowHeldIsNotCongestion) {
+  for (bool window_held : {true, false}) {
+    LinkRate l;
+    const auto t0 = Clock::now();
+    SocketSample s;
+    s.valid = true;
+    s.min_rtt_ms = 0.05;
+    s.rtt_ms = 0.1;
+    double t_ms = 0;
+    for (int k = 0; k < 60; ++k) {
+      const double delay = 100.0 + 300.0 * ((k * 37) % 11) / 10.0;
+      const auto handed = t0 + std::chrono::microseconds(static_cast<long>(t_ms * 1000));
+      s.notsent_bytes = 20000;
+      s.app_limited = false;
+      s.delivery_kbps = 300;  // what the client read at
+      s.busy_ms += delay;
+      if (window_held) s.rwnd_limited_ms += 0.9 * delay;
+      const auto written = handed + std::chrono::microseconds(static_cast<long>(delay * 1000));
+      l.on_written(30000, handed, written, s, 4000);
+      t_ms += delay + 16.0;
+    }
+    if (window_held) {
+      EXPECT_EQ(l.decreases(), 0) << "a late reader's window cut the rate";
+      EXPECT_FALSE(l.limited());
+      EXPECT_EQ(l.link_kbps(), 0) << "the client's reading rate taken for the link's";
+    } else {
+      EXPECT_GT(l.decreases(), 0) << "the network held the frames: a slow link";
+    }
+  }
+}
+
 // A hostile client's receipts (any finite time the protocol lets through, sequences in any
 // order) move only its own cap: it stays finite, within the floor and the ceiling, and so does the
 // link's estimate.

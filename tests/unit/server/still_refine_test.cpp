@@ -1,0 +1,50 @@
+// The still view's refine frames (session/still_refine.h): kFrames per stop, only after kAfter
+// with no pose, only when the last frame handed off was held back (smaller or under a rate cap),
+// each after the one before was handed off.
+#include <gtest/gtest.h>
+
+#include "session/still_refine.h"
+
+namespace catgs::server {
+namespace {
+
+using Clock = StillRefine::Clock;
+using std::chrono::milliseconds;
+
+TEST(StillRefine, TwoPerStopAfterTheCameraStoppedOnAHeldBackFrame) {
+  static_assert(StillRefine::kFrames == 2);
+  StillRefine r;
+  const Clock::time_point t{};
+  EXPECT_FALSE(r.take(t + milliseconds(5000))) << "no pose yet: nothing to refine";
+  r.on_pose(t);
+  r.on_frame(/*held_back=*/true, /*refine=*/false);
+  EXPECT_FALSE(r.take(t + milliseconds(100))) << "the camera only just stopped";
+  EXPECT_FALSE(r.take(t + StillRefine::kAfter - milliseconds(1))) << "a busy page's gap between poses";
+  EXPECT_TRUE(r.take(t + StillRefine::kAfter));
+  EXPECT_FALSE(r.take(t + milliseconds(600))) << "the first refine frame is not handed off yet";
+  r.on_frame(/*held_back=*/false, /*refine=*/true);
+  EXPECT_TRUE(r.take(t + milliseconds(700))) << "the second, once the first was handed off";
+  r.on_frame(false, /*refine=*/true);
+  EXPECT_FALSE(r.take(t + milliseconds(2000))) << "two per stop";
+  // The camera moves again and stops on a frame at the stream's best: nothing to refine.
+  r.on_pose(t + milliseconds(3000));
+  r.on_frame(/*held_back=*/false, false);
+  EXPECT_FALSE(r.take(t + milliseconds(4000))) << "the last frame was not held back";
+  // A held-back frame of the same stop comes later (frames in flight): now it is due.
+  r.on_frame(/*held_back=*/true, false);
+  EXPECT_TRUE(r.take(t + milliseconds(4000)));
+}
+
+TEST(StillRefine, ARefineFrameIsNeverHeldBack) {
+  StillRefine r;
+  const Clock::time_point t{};
+  r.on_pose(t);
+  r.on_frame(true, false);
+  ASSERT_TRUE(r.take(t + milliseconds(600)));
+  r.on_frame(/*held_back=*/true, /*refine=*/true);  // encoded with no cap, whatever it says
+  r.on_pose(t + milliseconds(700));                 // a new stop...
+  EXPECT_FALSE(r.take(t + milliseconds(1300))) << "...whose last frame is a refine frame";
+}
+
+}  // namespace
+}  // namespace catgs::server
