@@ -31,6 +31,8 @@
 #   of its pose, beside the same still view from a second server that runs the stream's crf with no
 #   rate cap (--bitrate off --still-refine off), unshaped. The bound: within 1 dB of it after 1 s,
 #   after 3 s on the last (slowest) fraction.
+#   --late-receipts: its client sends receipts for frames it read late too (catgs-loadgen
+#   --receipts 2), as clients did before issue 64.
 #   --no-receipts: the namespace's client sends no frame receipts (catgs-loadgen --receipts 0), so
 #   the server's rate controller reads the path from TCP_INFO alone, as for an older client.
 #   SERVER_ARGS replace the default server settings after the scene (--renderer cpu --bitrate
@@ -51,6 +53,7 @@ while [ $# -gt 0 ]; do
     --fractions) fractions=$2; shift 2 ;;
     --check) check=1; shift ;;
     --no-receipts) receipts=0; shift ;;
+    --late-receipts) receipts=2; shift ;;
     --ramp) ramp=$2; shift 2; [[ "$ramp" =~ ^[0-9]+$ ]] || { echo "slow_link.sh: --ramp needs a count" >&2; exit 2; } ;;
     --step) step=1; shift ;;
     --busy) busy=$2; shift 2; [[ "$busy" =~ ^[0-9]+$ ]] || { echo "slow_link.sh: --busy needs seconds" >&2; exit 2; } ;;
@@ -128,7 +131,7 @@ if [ "$busy" -gt 0 ]; then
   # A busy client on the unshaped link: it reads every 100-400 ms.
   cuts_before=$(get /metrics | sed -n 's/^catgs_link_rate_decreases_total \([0-9]*\).*/\1/p')
   ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions 1 --size 640x360 \
-    --trace orbit --rate 60 --seconds "$busy" --warmup-s "$warmup" --read-stall-ms 100-400 --progress 0 \
+    --trace orbit --rate 60 --seconds "$busy" --warmup-s "$warmup" --read-stall-ms 100-400 --receipts "$receipts" --progress 0 \
     --json "$work/busy.json" > "$work/busy.txt" 2>&1
   cuts_after=$(get /metrics | sed -n 's/^catgs_link_rate_decreases_total \([0-9]*\).*/\1/p')
   python3 - "$work" "$busy" "$check" "$json" "${cuts_before:-0}" "${cuts_after:-missing}" <<'PY'
@@ -319,7 +322,7 @@ import json, sys
 work, check, out, warmup = sys.argv[1], sys.argv[2] == "1", sys.argv[3], float(sys.argv[4])
 names, rates = sys.argv[5].split(), sys.argv[6].split()
 p95_margin, min_use, max_ms, min_fps = float(sys.argv[7]), float(sys.argv[8]), float(sys.argv[9]), float(sys.argv[10])
-receipts_on, receipts_read = sys.argv[11] == "1", sys.argv[12]
+receipts_on, receipts_read = sys.argv[11] != "0", sys.argv[12]
 rows = []
 for name, rate in zip(names, rates):
     s = json.load(open(f"{work}/{name}.json"))["run"]["sessions"][0]

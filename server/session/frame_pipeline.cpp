@@ -264,6 +264,9 @@ void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   // the whole frame's budget for what is left to refine.
   if (job.pose.refine && rate > 0 && same_stream && encoder_->name() == "x264" &&
       encoder_->set_max_bitrate_kbps(kRefineKbps, kRefineVbvMs)) {
+    // This frame lifts the stream's cap (not an earlier refine frame's): x264 plans it against
+    // the buffer's fill the capped frames left, which says nothing of the crf.
+    refine_lifted_cap_ = encoder_rate_kbps_ != kRefineKbps;
     encoder_rate_kbps_ = kRefineKbps;
     encoder_vbv_ms_ = kRefineVbvMs;
     return;
@@ -432,6 +435,8 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   r.quality_level = job.shape.quality_level;
   r.refine = job.pose.refine;
   r.rate_capped = !job.pose.refine && encoder_rate_kbps_ > 0;
+  r.refine_vbv_bound = job.pose.refine && refine_lifted_cap_;
+  refine_lifted_cap_ = false;
   t->set_total_ms(r.total_ms);
   t->set_stage_frame_ms(rendered.stage_ms[0]);
   t->set_stage_preprocess_ms(rendered.stage_ms[1]);

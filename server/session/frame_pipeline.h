@@ -129,6 +129,10 @@ class FramePipeline {
     int quality_level = 0;
     bool refine = false;       // the still view's refine frame
     bool rate_capped = false;  // encoded under a VBV rate (the policy's, a client's, the link's cap)
+    // A refine frame that lifted x264's VBV cap: x264 keeps the buffer's fill across a new rate,
+    // so it was planned against what the capped frames left; the next reaches the crf
+    // (still_refine.h).
+    bool refine_vbv_bound = false;
   };
   // A render job to post: the job and, pipelined, the host buffer it renders into.
   struct StartedRender {
@@ -255,11 +259,12 @@ class FramePipeline {
   LodBoundChooser lod_bound_;
   int gpu_ = -1;  // the CUDA device renderer_ renders on, -1: none (CPU renderer)
   std::unique_ptr<Encoder> encoder_;
-  int encoder_bitrate_kbps_ = 0;  // what encoder_ was built with
-  int encoder_rate_kbps_ = 0;     // its VBV rate now (changed without a rebuild where it can)
-  int encoder_vbv_ms_ = 0;        // and its VBV's size, ms of that rate
-  int encoder_threads_ = 0;       // its sliced threads (encoder_policy.h)
-  int encoder_step_ = 0;          // its step (stream_step): the ladder's preset, or kPresetSteps for AV1
+  int encoder_bitrate_kbps_ = 0;    // what encoder_ was built with
+  int encoder_rate_kbps_ = 0;       // its VBV rate now (changed without a rebuild where it can)
+  int encoder_vbv_ms_ = 0;          // and its VBV's size, ms of that rate
+  bool refine_lifted_cap_ = false;  // the frame being encoded is a refine frame that lifted a VBV cap
+  int encoder_threads_ = 0;         // its sliced threads (encoder_policy.h)
+  int encoder_step_ = 0;            // its step (stream_step): the ladder's preset, or kPresetSteps for AV1
   Clock::time_point encoder_built_{};
   std::shared_ptr<ContentRates> content_rates_;  // the scene's (open)
   std::unique_ptr<ContentRateProbe> probe_;      // this session's probe, holding its size's claim

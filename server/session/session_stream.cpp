@@ -158,7 +158,7 @@ void Session::on_job_done(JobResult result) {
   m.speculation_window.observe(result.speculation_window);
   if (shared_.settings.frame.adaptive_quality && !result.refine)
     quality_.on_frame(result.quality_level, result.total_ms);
-  still_.on_frame(result.quality_level > 0 || result.rate_capped, result.refine);
+  still_.on_frame(result.quality_level > 0 || result.rate_capped, result.refine, result.refine_vbv_bound);
   handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence, result.link_read_at, result.refine});
   recent_.push_back(handed_.back());
   if (recent_.size() > kRecentFrames) recent_.pop_front();

@@ -463,7 +463,7 @@ TEST(ServerIntegration, QualityCapsTheBitrate) {
 // through an orbit, the camera stops, and the picture left on screen is within 1 dB of the one the
 // stream's crf gives with no rate cap (a second server, --bitrate off), decoded and compared with
 // the CPU render of its pose; the last moving frame, before the refine frames, is not (the cap
-// bound it). /metrics counts the two refine frames.
+// bound it). /metrics counts the refine frames (two a stop).
 TEST(ServerIntegration, StillViewEndsAtTheCrfsPicture) {
   const int W = 320, H = 240;
   const Trace orbit = biker_orbit(W, H, 24);
@@ -512,7 +512,8 @@ TEST(ServerIntegration, StillViewEndsAtTheCrfsPicture) {
             << " dB; capped at 100 kbit/s: last moving frame " << capped.moving_db << " dB, after the stop "
             << capped.still_db << " dB (" << capped.refines << " refine frames)\n";
   EXPECT_EQ(crf.refines, 0) << "--still-refine off by default in these tests' servers";
-  EXPECT_EQ(capped.refines, 2);
+  // Two for the stop; a loaded machine's wait for a frame mid-orbit may be a stop too.
+  EXPECT_GE(capped.refines, 2);
   EXPECT_EQ(capped.last_pose, orbit.size() - 1) << "the refine frames draw the last pose";
   EXPECT_LT(capped.moving_db, crf.still_db - 1.0) << "the cap did not bind: the test shows nothing";
   EXPECT_GE(capped.still_db, crf.still_db - 1.0);

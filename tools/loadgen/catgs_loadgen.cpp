@@ -55,9 +55,11 @@ const char* kUsage =
     "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
     "  --warmup N               first N frames of a session left out of the statistics (5)\n"
     "  --timeline               every frame's arrival time, latency, size and bytes in the JSON\n"
-    "  --receipts 0|1           each pose carries the newest frame's arrival time, as the page's\n"
+    "  --receipts 0|1|2         each pose carries the newest frame's arrival time, as the page's\n"
     "                           do (the server's rate controller reads the queue from them; 1,\n"
-    "                           0 with --check-every: its renders between reads stamp them late)\n"
+    "                           0 with --check-every: its renders between reads stamp them late);\n"
+    "                           none for a frame read after 50 ms away from the socket, except\n"
+    "                           with 2 (as clients before issue 64: late reads look like a queue)\n"
     "  --warmup-s S             frames of the poses sent in a session's first S seconds left\n"
     "                           out too (0; the settling time a slow link's controller gets)\n"
     "  --stale-ms MS            frames later than this count as stale (default 100)\n"
@@ -163,7 +165,9 @@ LoadSessionConfig base_config(const tools::Args& args) {
   base.timeline = args.has("--timeline");
   // A reference check renders on the CPU between reads, so the frames that arrive meanwhile are
   // stamped when it ends, as if they had queued on the link: no receipts unless asked for.
-  base.receipts = args.get_int("--receipts", base.check_every > 0 ? 0 : 1) != 0;
+  const int receipts = args.get_int("--receipts", base.check_every > 0 ? 0 : 1);
+  base.receipts = receipts != 0;
+  base.late_receipts = receipts == 2;
   base.stale_ms = args.get_double("--stale-ms", 100);
   if (args.has("--read-stall-ms")) {
     const std::string range = args.get("--read-stall-ms");

@@ -248,7 +248,7 @@ class PoseLoop {
     unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
     // A receipt says when the frame arrived; one read after the client was away says when the
     // client came back (the page does the same: web_client/app.js).
-    if (cfg_.receipts && !late_read_) receipt_ = {f.sequence(), arrived_ms};
+    if (cfg_.receipts && (!late_read_ || cfg_.late_receipts)) receipt_ = {f.sequence(), arrived_ms};
     if (cfg_.timeline && !sent_at_.empty())
       r_.timeline.push_back({(now_ms() - sent_at_.front()) / 1000.0, latency, static_cast<int>(f.width()),
                              static_cast<int>(f.height()), f.payload().size()});

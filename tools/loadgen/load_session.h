@@ -62,6 +62,9 @@ struct LoadSessionConfig {
   double warmup_s = 0;     // frames of poses sent in the first warmup_s seconds left out too
   bool timeline = false;   // record every frame (SessionResult::timeline; the JSON's "timeline")
   bool receipts = true;    // each Pose carries the newest frame's receipt (Pose.received_ms)
+  // Receipts also for frames read after the client was away (--receipts 2), as clients before
+  // issue 64 sent them: a late read then looks like a queue on the link.
+  bool late_receipts = false;
   double stale_ms = 100;   // a frame later than this after its pose counts as stale
   double drain_ms = 1000;  // after the last pose, wait this long at most for its frame
   // Reference check (implies decode): every check_every-th frame is compared with the CPU
