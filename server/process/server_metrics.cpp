@@ -167,6 +167,10 @@ std::string ServerMetrics::prometheus_text() const {
            "result", exports_total, {"sent", "failed", "cancelled", "refused"});
   labelled("catgs_unauthorized_total", "Wrong or missing tokens: in a Hello, or for /metrics.", "what",
            unauthorized_total, {"hello", "metrics"});
+  labelled("catgs_link_rate_cuts_total",
+           "Link control's cuts (catgs_link_rate_decreases_total) by what read as congestion: send_delay (a frame "
+           "the socket held), receipts (the clients' receipts' queue), round_trip (TCP's round trip, no receipts).",
+           "cause", link_rate_cuts_total, {"send_delay", "receipts", "round_trip"});
 
   head("catgs_queue_seconds", "histogram", "Pose received -> render start.");
   queue_seconds.write(o, "catgs_queue_seconds");

@@ -24,6 +24,7 @@
 //                                         or for a scene that did not load in time (scene_load)
 //   catgs_rate_limited_total{kind}        sessions ended (or Hellos refused) for going past a rate limit
 //   catgs_unauthorized_total{what}        wrong or missing tokens: Hello, /metrics
+//   catgs_link_rate_cuts_total{cause}     link control's cuts by what read as congestion
 //   catgs_scenes_loaded, catgs_scene_bytes  scenes in memory now and their models' host bytes
 //                              (process/scene_store.h; a GPU copy per device besides)
 //   catgs_scene_loads_total, catgs_scene_load_failures_total, catgs_scene_unloads_total
@@ -112,6 +113,8 @@ struct ServerMetrics {
   // cuts made, and the clients' frame receipts the controller read (Pose.received_ms).
   std::atomic<std::int64_t> sessions_link_limited{0};
   std::atomic<std::uint64_t> link_rate_decreases_total{0};
+  // The same cuts by what read as congestion (LinkRate::Cause: send_delay, receipts, round_trip).
+  std::atomic<std::uint64_t> link_rate_cuts_total[3]{};
   std::atomic<std::uint64_t> frame_receipts_total{0};
 
   // Scenes (process/scene_store.h, kept by the store): loaded now, their host bytes, and loads

@@ -40,7 +40,7 @@ double LinkRate::path_queue_ms(const SocketSample& s, Clock::time_point now) con
   return s.valid ? std::max(0.0, s.rtt_ms - s.min_rtt_ms) : 0.0;
 }
 
-bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_point now) const {
+bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_point now, Cause& cause) const {
   // A stream near the link's rate at a low frame rate keeps each frame on the wire for most of
   // a frame interval, and its last packets wait behind its first: that much delay and round
   // trip is the frame's own, not a queue.
@@ -52,6 +52,7 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   // And only where the network held the socket back: a client that reads late (a busy page)
   // closes its receive window, and the frame waits for the client, not the link (a lower rate
   // would not read it sooner).
+  cause = Cause::send_delay;
   if (socket_full && !receiver_held(now) && delay_ms > std::max(params_.delay_ms, own)) return true;
   // The client's receipts show the queue frame by frame; TCP's round trip is smoothed over about
   // eight ACKs and lags it by several frames. Congested: above `queue_ms` and the frame's own
@@ -62,16 +63,18 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   // which a lower rate would not shorten. (A client that knows it read a frame late sends no
   // receipt for it: issue 64, web_client/app.js and catgs-loadgen.)
   if (receipts_fresh(now)) {
+    cause = Cause::receipts;
     if (!network_busy(s)) return false;
     const bool building = queue_ms_ > params_.queue_ms && queue_ms_ > queue_before_ + params_.queue_ms / 4;
     return building || queue_ms_ > params_.queue_ms + receipt_own_ms_;
   }
+  cause = Cause::round_trip;
   return s.valid && s.rtt_ms - s.min_rtt_ms > std::max(params_.rtt_rise_ms, own);
 }
 
 void LinkRate::on_receipt(const Receipt& r, Clock::time_point now, int ceiling_kbps) {
   // The one-way delay up to the two clocks' offset, which the minimum takes out.
-  const double delay = r.received_ms - std::chrono::duration<double, std::milli>(r.handed.time_since_epoch()).count();
+  const double delay = r.received_ms - std::chrono::duration<double, std::milli>(r.sent.time_since_epoch()).count();
   if (!std::isfinite(delay)) return;
   // The frame's own time on the wire at the link's rate is no queue (congested()). It is not
   // taken out of the delay: a token bucket's burst sends a frame after a pause at the line's
@@ -163,7 +166,8 @@ void LinkRate::on_written(std::size_t bytes, Clock::time_point handed, Clock::ti
 void LinkRate::control(Clock::time_point now, const SocketSample& s, int ceiling_kbps) {
   const double ceiling = ceiling_kbps > 0 ? ceiling_kbps : kNoCeilingKbps;
   const double queue_ms = path_queue_ms(s, now);
-  if (congested(delay_ms_, s, now)) {
+  Cause cause = Cause::send_delay;
+  if (congested(delay_ms_, s, now, cause)) {
     last_congested_ = now;
     // One cut per hold or round trip, whichever is longer: the last one must reach the queue first.
     const auto hold = std::max<Clock::duration>(
@@ -192,6 +196,7 @@ void LinkRate::control(Clock::time_point now, const SocketSample& s, int ceiling
     last_cut_ = now;
     last_grow_ = now;
     ++decreases_;
+    ++cuts_by_cause_[static_cast<int>(cause)];
     return;
   }
   if (!limited_) return;

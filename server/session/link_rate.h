@@ -103,12 +103,15 @@ class LinkRate {
                   int ceiling_kbps);
 
   // A client's receipt: frame `sequence` (Frame.sequence) of `bytes`, encoded at the rate read at
-  // `rate_at` and handed to the transport at `handed`, arrived when the client's clock read
-  // `received_ms` (any finite value: a hostile one moves only this session's cap).
+  // `rate_at`, left the server at `sent` and arrived when the client's clock read `received_ms`
+  // (any finite value: a hostile one moves only this session's cap). `sent` is when the kernel
+  // took its last byte (the session's written time; its hand-off to the transport while that is
+  // not known): a frame that waited in a busy server's transport is the server's delay, which
+  // the send delay (on_written) reads where the socket shows it, not the network's queue.
   struct Receipt {
     std::uint32_t sequence = 0;
     std::size_t bytes = 0;
-    Clock::time_point handed{}, rate_at{};
+    Clock::time_point sent{}, rate_at{};
     double received_ms = 0;
   };
   // The receipt reached the server at `now`; `ceiling_kbps` as above.
@@ -129,6 +132,11 @@ class LinkRate {
   double queue_ms() const { return queue_ms_; }        // the newest receipt's queue (0 without)
   int receipts() const { return receipts_; }
   int decreases() const { return decreases_; }
+  // What the cuts so far read as congestion: the send delay of a frame the socket held, the
+  // receipts' queue, the round trip alone (no fresh receipts). For /metrics.
+  enum class Cause { send_delay, receipts, round_trip };
+  static constexpr int kCauses = 3;
+  int decreases(Cause c) const { return cuts_by_cause_[static_cast<int>(c)]; }
   // Frames written per second (an exponential average of the intervals; 0 until two frames).
   // The encoder's VBV counts its rate per frame at the stream's nominal 60 frames/s, so a stream
   // that runs at fewer frames spends only rate x fps / 60: the session converts with it.
@@ -143,7 +151,8 @@ class LinkRate {
  private:
   // The cut or the growth, after a written frame or a receipt.
   void control(Clock::time_point now, const SocketSample& s, int ceiling_kbps);
-  bool congested(double delay_ms, const SocketSample& s, Clock::time_point now) const;
+  // Whether the path is congested now, and what says so.
+  bool congested(double delay_ms, const SocketSample& s, Clock::time_point now, Cause& cause) const;
   // A receipt came within the last 500 ms or 4 frame intervals: the receipts speak for the path.
   bool receipts_fresh(Clock::time_point now) const;
   // TCP's round trip shows a queue could stand on the network (above idle_rtt_ms; or no TCP_INFO).
@@ -167,6 +176,7 @@ class LinkRate {
   bool above_known_ = false;
   Clock::time_point above_since_{};
   int decreases_ = 0;
+  int cuts_by_cause_[kCauses] = {};
   SocketSample last_sample_{};  // the newest written frame's, for a receipt's decision
   bool have_receiver_held_ = false;
   Clock::time_point receiver_held_at_{};  // the last frame whose send the client's window held

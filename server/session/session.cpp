@@ -156,6 +156,12 @@ void Session::post_sent(const SocketSample& socket) {
       const Handed frame = self->handed_.front();
       self->last_send_ms_ = ms_between(frame.at, written);
       self->handed_.pop_front();
+      // The receipts' delays count from here (link_rate.h Receipt::sent).
+      for (auto it = self->recent_.rbegin(); it != self->recent_.rend(); ++it)
+        if (it->sequence == frame.sequence) {
+          it->written = written;
+          break;
+        }
       self->shared_.metrics.send_seconds.observe(self->last_send_ms_ / 1000.0);
       self->on_link_sample(frame, written, socket);
     }

@@ -116,6 +116,7 @@ class Session : public std::enable_shared_from_this<Session> {
     std::uint32_t sequence = 0;   // Frame.sequence
     Clock::time_point rate_at{};  // when its encoder's rate was read (JobShape::link_read_at)
     bool refine = false;          // the still view's refine frame (still_refine.h)
+    Clock::time_point written{};  // when the kernel took its last byte (post_sent; {} until then)
   };
 
   // `received`: when the transport thread handed the message over.
@@ -216,6 +217,7 @@ class Session : public std::enable_shared_from_this<Session> {
   std::deque<Handed> recent_;                        // the last kRecentFrames handed, for the client's receipts
   std::uint32_t last_receipt_ = UINT32_MAX;          // the newest receipt's frame (none yet)
   LinkRate link_;                                    // the link's rate controller (--link-control)
+  int cuts_by_cause_[LinkRate::kCauses] = {};        // link_'s cuts by cause, counted in /metrics
   int link_ceiling_kbps_ = 0;        // the policy's rate for the last job's size (link_rate.h's ceiling)
   int send_buffer_ = 0;              // the socket's SO_SNDBUF as the session last set it (0: the transport's)
   double last_send_ms_ = 0;          // send time of the last frame written

@@ -179,6 +179,11 @@ void Session::on_link_sample(const Handed& frame, Clock::time_point written, con
 void Session::after_link_update(bool was_limited, int cuts) {
   ServerMetrics& m = shared_.metrics;
   m.link_rate_decreases_total += static_cast<std::uint64_t>(link_.decreases() - cuts);
+  for (int c = 0; c < LinkRate::kCauses; ++c) {
+    const int now = link_.decreases(static_cast<LinkRate::Cause>(c));
+    m.link_rate_cuts_total[c] += static_cast<std::uint64_t>(now - cuts_by_cause_[c]);
+    cuts_by_cause_[c] = now;
+  }
   if (link_.limited() != was_limited) m.sessions_link_limited += link_.limited() ? 1 : -1;
   // The kernel's buffer sized by the link: TCP can never put much more than it in front of the
   // link, whatever the controller's estimate, so a link that drops suddenly finds little in
@@ -223,7 +228,8 @@ void Session::on_receipt(std::uint32_t sequence, double received_ms, Clock::time
     shared_.metrics.frame_receipts_total++;
     const bool was_limited = link_.limited();
     const int cuts = link_.decreases();
-    link_.on_receipt({sequence, it->bytes, it->at, it->rate_at, received_ms}, now, link_ceiling_kbps_);
+    const Clock::time_point sent = it->written != Clock::time_point{} ? it->written : it->at;
+    link_.on_receipt({sequence, it->bytes, sent, it->rate_at, received_ms}, now, link_ceiling_kbps_);
     return after_link_update(was_limited, cuts);
   }
 }

@@ -193,6 +193,8 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"link_cap_kbps_min", s.link_cap_kbps_min},
          {"device_memory_mib_max", s.device_memory_mib_max},
          {"link_kbps_last", s.link_kbps_last},
+         {"late_reads", s.late_reads},
+         {"receipts_sent", s.receipts_sent},
          {"stale", s.stale},
          {"errors", s.errors},
          {"first_error", s.first_error},

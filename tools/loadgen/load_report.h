@@ -73,6 +73,9 @@ struct SessionResult {
   int link_limited_stats = 0;
   std::uint32_t link_cap_kbps_min = 0;
   double link_kbps_last = 0;  // the server's last estimate of the link's rate (0: none)
+  // Frames read after the client was 50 ms or more away from its socket (no receipt for them
+  // unless --receipts 2), and receipts put on poses.
+  std::uint64_t late_reads = 0, receipts_sent = 0;
   // The most device memory the server's Stats said this session held (Stats.device_memory_mib).
   std::uint32_t device_memory_mib_max = 0;
   std::uint64_t stale = 0;   // frames later than the stale bound, or older than one shown

@@ -194,6 +194,7 @@ class PoseLoop {
       pose.set_received_frame_sequence(receipt_.sequence);
       pose.set_received_ms(receipt_.arrived_ms);
       receipt_ = {};
+      r_.receipts_sent++;
     }
     if (reference_) sent_poses_.push_back(pose);
     client_.send_pose(pose);
@@ -248,6 +249,7 @@ class PoseLoop {
     unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
     // A receipt says when the frame arrived; one read after the client was away says when the
     // client came back (the page does the same: web_client/app.js).
+    if (late_read_) r_.late_reads++;
     if (cfg_.receipts && (!late_read_ || cfg_.late_receipts)) receipt_ = {f.sequence(), arrived_ms};
     if (cfg_.timeline && !sent_at_.empty())
       r_.timeline.push_back({(now_ms() - sent_at_.front()) / 1000.0, latency, static_cast<int>(f.width()),
