@@ -10,7 +10,7 @@
 // camera-to-world quaternion [w, x, y, z]) with the intrinsics the server renders with
 // (camera.js intrinsicsFor: square pixels, principal point at the centre).
 
-import { cameraForward, intrinsicsFor, qnorm, qrotate, vadd, vdot, vlen, vscale, vsub } from './camera.js';
+import { cameraForward, intrinsicsFor, lookAt, qnorm, qrotate, vadd, vcross, vdot, vlen, vnorm, vscale, vsub } from './camera.js';
 
 export const LIMITS = { hotspots: 200, id: 64, title: 120, text: 2000, bytes: 32 * 1024 };
 
@@ -177,22 +177,253 @@ export function decodeNotes(value) {
   return { hotspots: clean.hotspots, measure: m, metresPerUnit: clean.metres_per_unit ?? null };
 }
 
-// ---- walk mode ----
+// ---- walk mode (issues 38 and 64) ----
+//
+// Walk mode senses the scene with the server's depth probe (DepthRequest: the median depth along
+// one pixel's ray of a view the page chooses; render_core/cpu/pixel_depth.h). Two things about
+// that probe decide how walk mode asks (issue 64):
+//  - The forward model adds 0.3 px^2 to every Gaussian's screen covariance (a low-pass filter),
+//    so the pixel of a coarse view is a cone about a pixel wide (sigma 0.55 px): the centre pixel
+//    of a 5-pixel view of 30 degrees probes a cone of about 3 degrees. Sparse leaves and thin
+//    stems add up to a surface in such a cone, where a fine ray (the centre of a 64-pixel view of
+//    30 degrees before) slips through a gap and reads the far side, or nothing. Too coarse, and
+//    every speck of dust becomes a solid blob as wide as the pixel: tumblewood_sh2's grass read
+//    0.22 units higher through a 10-degree pixel than through a 3-degree one, so the views up and
+//    down have 33 pixels (2.7 degrees).
+//  - The Jacobian is clamped to 1.3x the view's field of view, and the projection (EWA) is a
+//    linearisation at each Gaussian's centre. Looking down, a large flat Gaussian whose centre
+//    lies outside a narrow view (flowers_sh3's lawn under the camera is made of discs wider than
+//    the camera's height) is squashed and drops out, so the views up and down are 90 degrees.
+//    Looking level, a floor's discs near the feet, projected at a grazing angle, spread over the
+//    level ray within about twice their size (the synthetic room's floor read as a wall 0.25
+//    ahead at knee height); a narrow view clamps them, so the level views are 30 degrees.
+export const WALK_PROBE_FOV = 90; // the views up and down
+export const GROUND_PROBE_PIXELS = 33; // a pixel of 2.7 degrees
+export const LEVEL_PROBE_FOV = 30; // the level views
+export const LEVEL_PROBE_PIXELS = 5; // a pixel of 6 degrees
 
-// One walk step: the camera moves `move` (world units, along the ground) unless a wall is
-// nearer than `radius` ahead (`wallDistance`: the depth probe's distance along the move's
-// direction, Infinity for none), and its height above the ground under it (`groundDistance`
-// straight down along -up, Infinity for none) is eased towards `eyeHeight` (`ease` in 0..1 of the
-// difference a step). Returns the new position. Gravity: with no ground, the height stays.
-export function walkStep(position, move, up, { wallDistance = Infinity, groundDistance = Infinity, eyeHeight, radius, ease = 0.5 }) {
-  const len = vlen(move);
-  let p = position;
-  if (len > 0 && !(wallDistance < len + radius)) p = vadd(p, move);
-  if (Number.isFinite(groundDistance)) {
-    const dh = eyeHeight - groundDistance; // > 0: too low, rise
-    p = vadd(p, vscale(up, dh * ease));
+// Walk mode's sizes for an eye height `eye` (world units): how far short of an obstacle the eye
+// stops (`radius`; beyond the renderer's near plane, inside which a probe sees nothing), the
+// highest step up or down it takes (`step`: a tenth of the eye height, 16 cm for 1.6 m), the
+// height of the knee probe above the ground (`knee`, a quarter of the eye height: lower, its
+// cone meets a flat floor within a stop distance or two), how far ahead a look checks the
+// ground (`look`), and how near it checks when the ground ahead is missing or a step away
+// (`nearLook`: the camera comes that near an edge); `nearPlane` the renderer's.
+export function walkSizes(eye, nearPlane = 0.2) {
+  return { eye, radius: Math.max(0.25 * eye, 1.5 * nearPlane), step: 0.1 * eye, knee: 0.25 * eye, look: eye, nearLook: 0.25 * eye, nearPlane };
+}
+
+// One look: the probes to send from the eye at `position` (`up` the world's up). Options: `dir`
+// the way the camera walks (unit, along the ground; null when standing), `look` how far ahead the
+// ground is checked, `ground` the ground's height (up . point) under the eye when known (else the
+// eye is taken to be `sizes.eye` above it), `landing` while the height is still settling onto the
+// ground (the ground under and the room above only), `roll` which of the two rolls the vertical
+// views take (walkVerticalView; looks alternate). Each probe is { name, pose, size }: probe the
+// centre pixel (size / 2, size / 2) of a size x size view of pose.
+//   under  the ground under the eye (walkGroundProbe); landing, from a little above the eye
+//          (walkLift), so that the camera, wherever it was, sees all there is under the eye it
+//          is to be (tumblewood_sh2's first view is less than the near plane above the top of
+//          its grass and daffodils: from there the ground read 0.2 units too low);
+//   above  (landing) straight up from as far under the eye: how high the eye may rise without
+//          passing through something;
+//   ahead  the ground `look` ahead along dir (walkGroundProbe there, at the eye's height), or the
+//          top of what stands there;
+//   eye    level along dir from the eye: a wall, a trunk, leaves at head height;
+//   knee   level along dir from `knee` above the ground: a plant, a bed, a trunk (what is
+//          lower, but more than a step high, the ahead probe finds).
+export function walkProbes(position, up, sizes, { dir = null, look = sizes.look, ground = null, landing = false, roll = 0 } = {}) {
+  if (landing) {
+    const lift = vscale(up, walkLift(sizes));
+    return [
+      { name: 'under', ...walkGroundProbe(vadd(position, lift), up, sizes, roll) },
+      { name: 'above', pose: walkVerticalView(vsub(position, lift), up, up, roll), size: GROUND_PROBE_PIXELS },
+    ];
   }
-  return p;
+  const probes = [{ name: 'under', ...walkGroundProbe(position, up, sizes, roll) }];
+  if (!dir) return probes;
+  const h = vdot(position, up);
+  const kneeHeight = (ground ?? h - sizes.eye) + sizes.knee;
+  const knee = vadd(position, vscale(up, kneeHeight - h));
+  const level = (p) => ({ position: p, orientation: lookAt(p, vadd(p, dir), up), fovDeg: LEVEL_PROBE_FOV });
+  probes.push({ name: 'ahead', ...walkGroundProbe(vadd(position, vscale(dir, look)), up, sizes, roll) });
+  probes.push({ name: 'eye', pose: level(position), size: LEVEL_PROBE_PIXELS });
+  probes.push({ name: 'knee', pose: level(knee), size: LEVEL_PROBE_PIXELS });
+  return probes;
+}
+
+// How far above the eye a landing look's ground probe looks down from, and under it its up probe
+// looks up from: the near plane and a margin, so that what is just under or above the eye is
+// seen too.
+export const walkLift = (sizes) => 1.25 * sizes.nearPlane;
+
+// The probe of the ground under an eye at `position`: straight down from the eye, a 33-pixel view
+// of 90 degrees at `roll` (0 or 1, walkVerticalView). { pose, size }: the ground's height
+// (up . point) is up . position - the depth it answers. (What lies within the near plane under
+// the eye, it does not see: from just above the eye it would, but it would also read splats at
+// the eye's height, which flowers_sh3 has where a large background splat projects from far to
+// the side: seen from above, not from below.)
+export function walkGroundProbe(position, up, sizes, roll = 0) {
+  return { pose: walkVerticalView(position, vscale(up, -1), up, roll), size: GROUND_PROBE_PIXELS };
+}
+
+// The pose of a probe view from `p` looking along `d` (up or down) with one of two rolls fixed in
+// the world, whichever way the camera walks: its image's up along the world x axis on the ground
+// (y where up is near x) for `roll` 0, a quarter turn from that for 1.
+export function walkVerticalView(p, d, up, roll = 0) {
+  const a = Math.abs(up[0]) < 0.9 ? [1, 0, 0] : [0, 1, 0];
+  let along = vnorm(vsub(a, vscale(up, vdot(a, up))));
+  if (roll) along = vnorm(vcross(up, along));
+  return { position: p, orientation: lookAt(p, vadd(p, d), along), fovDeg: WALK_PROBE_FOV };
+}
+
+// What one look says: `answers` { under, ahead, eye, knee, above } are the DepthResults ({ hit,
+// depth }) of walkProbes(origin, up, sizes, { dir, look, roll, landing, ... }) (null: not asked or
+// failed), the options those of that look and `previous` the plan before (or null). Returns the
+// plan the camera walks by until the next look:
+//   { origin, dir, look, roll, ground0, ground1, underSeen, aheadSeen, ceiling, free, allowed,
+//     reason, confirmed, pending, pendingRoll, tries }
+//   ground0     the ground's height (up . point) under the origin: null when none is known;
+//   ground1     the ground's height `look` ahead, when it is within a step of ground0;
+//   underSeen, aheadSeen  what the down probes read there (null: no surface);
+//   ceiling     (a landing look) the height of what the up probe saw above the eye, or null;
+//   free        how far along dir the eye and knee probes saw nothing (Infinity: nothing);
+//   allowed     how far from the origin along dir the eye may go: never past what the level
+//               probes proved free (free - radius), never past `look` (the ground is known that
+//               far), and 0 when the ground ahead is missing ('edge': a cliff, the end of the
+//               scene's floor) or more than a step up or down ('step': a bed, a rock, a drop);
+//   reason      what limits `allowed` below `look`: '', 'obstacle', 'edge', 'step', 'check';
+//   confirmed   whether the height may follow ground0 ('check' while not).
+// Looks alternate between two rolls of the vertical views (`roll` 0 and 1, walkVerticalView):
+// a real surface reads the same at both, while a large splat of a coarse scene, projected from
+// far to the side, can show under one roll alone (flowers_sh3). So the ground under the camera
+// is known once a look at each roll saw it within a step of each other: till then 'check', the
+// camera holds still (one reading through a gap never pulls it down; after four looks without
+// two that agree, it takes the lower of the last two). From then on a reading within a step of
+// the known ground refines it; one further off, or none, is left out (the camera holds its
+// height) unless the next look, at the other roll, sees the same and it is no more than half an
+// eye height off: then the camera lands again there ('check': something stands under the eye
+// that the ahead probe missed between two looks, or the ground fell away). Further off it is
+// left out too: the camera never sinks more than half an eye height at once, and flowers_sh3
+// has a "floor" that shows under a camera only from above, 1.6 units over its lawn (a background
+// splat 60 units wide, projected from far to the side), which an eye raised by floaters at the
+// edge of its lawn would otherwise jump onto. Standing on nothing (no ground seen: a scene
+// without a floor) the camera walks level wherever the level probes see nothing, until ground
+// shows under it.
+export function walkPlan(origin, up, sizes, answers, { dir = null, look = sizes.look, previous = null, roll = 0, landing = false } = {}) {
+  const h = vdot(origin, up);
+  const depthOf = (a) => (a && a.hit && a.depth > 0 ? a.depth : null);
+  const under = depthOf(answers.under);
+  const ahead = depthOf(answers.ahead);
+  const underSeen = under === null ? null : h + (landing ? walkLift(sizes) : 0) - under;
+  const aheadSeen = ahead === null ? null : h - ahead;
+  const near = (a, b) => a !== null && b !== null && a !== undefined && b !== undefined && Math.abs(a - b) <= sizes.step;
+  const expected = previous && previous.confirmed ? walkGroundAt(previous, origin, up) : null;
+  let ground0 = underSeen;
+  let confirmed = true;
+  let pending = null;
+  let tries = 0;
+  if (expected !== null) {
+    if (near(underSeen, expected)) {
+      ground0 = underSeen;
+    } else if (underSeen !== null && previous.pendingRoll !== roll && near(underSeen, previous.pending) && Math.abs(underSeen - expected) <= sizes.eye / 2) {
+      confirmed = false; // both rolls saw the ground move by more than a step: land again there
+      tries = 1;
+    } else {
+      ground0 = expected; // left out, till the other roll sees it too
+      pending = underSeen;
+    }
+  } else if (underSeen !== null) {
+    const last = previous && !previous.confirmed && previous.ground0 !== null ? previous : null;
+    tries = last ? last.tries + 1 : 1;
+    if (last && last.roll !== roll && near(underSeen, last.ground0)) {
+      confirmed = true;
+    } else if (last && tries >= 4) {
+      ground0 = Math.min(underSeen, last.ground0);
+    } else {
+      confirmed = false;
+    }
+  }
+  const ground1 = ground0 !== null && near(aheadSeen, ground0) ? aheadSeen : null;
+  const above = depthOf(answers.above);
+  const ceiling = above === null ? null : h - walkLift(sizes) + above;
+  const plan = {
+    origin: origin.slice(), dir: dir ? dir.slice() : null, look, roll, ground0, ground1, underSeen, aheadSeen, ceiling,
+    free: Infinity, allowed: 0, reason: '', confirmed, pending, pendingRoll: pending === null ? null : roll, tries,
+  };
+  if (!dir) return plan;
+  for (const a of [answers.eye, answers.knee]) {
+    const d = depthOf(a);
+    if (d !== null) plan.free = Math.min(plan.free, d);
+  }
+  plan.allowed = Math.max(0, Math.min(look, plan.free - sizes.radius));
+  if (plan.free - sizes.radius < look) plan.reason = 'obstacle';
+  if (!confirmed) {
+    plan.allowed = 0;
+    plan.reason = 'check';
+  } else if (ground0 !== null && ground1 === null) {
+    plan.allowed = 0;
+    plan.reason = aheadSeen === null ? 'edge' : 'step';
+  }
+  return plan;
+}
+
+// The ground's height (up . point) a plan expects under world point `p`: from the ground under
+// its origin to the ground `look` ahead, by how far p is along its direction; null when it knows
+// none (or has not confirmed it).
+export function walkGroundAt(plan, p, up) {
+  const g0 = plan.ground0;
+  if (!plan.confirmed || g0 === null) return null;
+  if (!plan.dir || plan.ground1 === null) return g0;
+  const s = vdot(vsub(p, plan.origin), plan.dir);
+  const t = Math.max(0, Math.min(1, s / plan.look));
+  return g0 + (plan.ground1 - g0) * t;
+}
+
+// One walk step (an animation frame of dt seconds): the camera at `position` wants to move
+// `distance` along `dir` (unit, along the ground; null: standing). It moves only by what `plan`
+// allows: in its direction (within 15 degrees; another direction waits for its own look), until
+// its distance from the plan's origin along the plan's direction reaches `plan.allowed`, and not
+// while the height is still settling (more than a fifth of an eye height off). Its height eases
+// towards eye height above walkGroundAt (rising or falling at most 2 eye heights a second); an
+// unconfirmed plan, or no ground, holds the height.
+// Returns { position, moved (distance along the ground), blocked (a move was asked and the plan
+// stops it at an obstacle, edge or step), waiting (a move was asked and waits for a look) }.
+export function walkStep(position, dir, distance, up, sizes, plan, dt) {
+  let p = position;
+  let blocked = false;
+  let waiting = false;
+  let moved = 0;
+  const h = vdot(p, up);
+  const ground = plan ? walkGroundAt(plan, p, up) : null;
+  const settled = ground === null || Math.abs(h - ground - sizes.eye) <= 0.2 * sizes.eye;
+  if (dir && distance > 0) {
+    const cos = plan && plan.dir ? vdot(dir, plan.dir) : -1;
+    if (!plan || cos < Math.cos(Math.PI / 12) || !settled || plan.reason === 'check') {
+      waiting = true;
+    } else {
+      const room = plan.allowed - vdot(vsub(p, plan.origin), plan.dir);
+      let d = Math.max(0, Math.min(distance, room / cos));
+      if (d < 1e-9) d = 0;
+      if (d > 0) {
+        p = vadd(p, vscale(dir, d));
+        moved = d;
+      }
+      blocked = d < distance - 1e-12 && plan.reason !== '';
+      waiting = d < distance - 1e-12 && plan.reason === '';
+    }
+  }
+  const ground2 = plan ? walkGroundAt(plan, p, up) : null;
+  if (ground2 !== null) {
+    let target = ground2 + sizes.eye;
+    // Rising, never through what the up probe saw: stop short of it by the stop distance.
+    const h2 = vdot(p, up);
+    if (target > h2 && plan.ceiling !== null && plan.ceiling !== undefined) target = Math.max(h2, Math.min(target, plan.ceiling - sizes.radius));
+    const dh = target - h2;
+    const most = 2 * sizes.eye * dt;
+    // Within a ten-thousandth of the eye height it is there (no pose a frame for nothing).
+    if (Math.abs(dh) > 1e-4 * sizes.eye) p = vadd(p, vscale(up, Math.max(-most, Math.min(most, dh * Math.min(1, dt * 8)))));
+  }
+  return { position: p, moved, blocked, waiting };
 }
 
 // The part of `v` along the ground (perpendicular to `up`).

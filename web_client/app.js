@@ -2,7 +2,9 @@
 // and draws them. Wiring only; the pieces live in the modules imported below.
 
 import { OrbitCamera } from './camera.js';
-import { Connection, defaultWebSocketUrl, ERROR_SERVER_FULL, ERROR_SHUTTING_DOWN, ERROR_UNAUTHORIZED } from './connection.js';
+import {
+  Connection, defaultWebSocketUrl, ERROR_INVALID_ARGUMENT, ERROR_SERVER_FULL, ERROR_SHUTTING_DOWN, ERROR_UNAUTHORIZED,
+} from './connection.js';
 import { Controls } from './controls.js';
 import { StreamDecoder, decodableCodecs, hasWebCodecs, CODEC_H264 } from './decoder.js';
 import { Overlay } from './overlay.js';
@@ -11,7 +13,7 @@ import {
   TOUR_SECONDS_PER_VIEW, toTraceFile, tourDuration, tourPoseAt,
 } from './paths.js';
 import { loadProtocol } from './protocol.js';
-import { applyHomography, cssTransform, planeDepthFor, reprojection } from './reproject.js';
+import { applyHomography, cssTransform, edgeFill, planeDepthFor, reprojection } from './reproject.js';
 import { capViewport, parseMaxSize } from './viewport.js';
 import { NotesUi } from './notes_ui.js';
 import { WalkMode } from './walk.js';
@@ -248,7 +250,12 @@ function updateStateMessage() {
       overlay.showMessage('state', `server full, retrying ${when()}`, 'warn', retryButton);
       break;
     case 'restarting':
-      overlay.showMessage('state', `server restarting, reconnecting ${when()}`, 'warn', retryButton);
+    case 'stopping':
+      overlay.showMessage('state', `server ${state.status}, reconnecting ${when()}`, 'warn', retryButton);
+      break;
+    case 'no-scene':
+      // The scene picker, filled from GET /scenes, in the message: a plain choice, no retries.
+      overlay.showMessage('state', `There is no scene named '${sceneParam}' on this server. Choose one:`, 'warn', sceneChoice());
       break;
     case 'needs-token':
       tokenForm = tokenForm || makeTokenForm();
@@ -287,7 +294,7 @@ function onWelcome(w) {
   // Export video only where the server would take it (an author's or admin's session on a server
   // with export built in); a viewer's request would be refused anyway.
   $('export-controls').hidden = !w.can_export;
-  $('scene-picker').value = w.scene_name;
+  scenePicker.value = w.scene_name;
   // A page opened while the server was still starting got no scene list: ask again now.
   if (!scenePickerLoaded) loadScenePicker();
   // Keep the user's view across a reconnect to the same scene; start fresh otherwise.
@@ -324,6 +331,7 @@ function drawFrame(frame, meta) {
       canvas.height = h;
     }
     ctx.drawImage(frame, 0, 0, w, h);
+    backdrop.stale = true; // a new frame to continue around the re-projected one
     if (meta) {
       state.shownPose = state.sentPoses.get(meta.poseSequence) || null;
       for (const k of state.sentPoses.keys()) if (k < meta.poseSequence) state.sentPoses.delete(k);
@@ -366,14 +374,37 @@ function onClose(info) {
   overlay.clearMessage('drain'); // the state line says what happens next
   state.reconnectAt = performance.now() + (retryInMs || 0);
   let status = 'disconnected';
-  if (permanent) status = error && error.code === ERROR_UNAUTHORIZED ? 'needs-token' : 'refused';
+  // ?scene= names a scene the server does not have (session.cpp: "no scene 'X' on this server").
+  if (permanent && error && error.code === ERROR_INVALID_ARGUMENT && /^no scene '/.test(error.reason || '')) status = 'no-scene';
+  else if (permanent) status = error && error.code === ERROR_UNAUTHORIZED ? 'needs-token' : 'refused';
   else if (error && error.code === ERROR_SERVER_FULL) status = 'server-full';
-  else if (error && error.code === ERROR_SHUTTING_DOWN) status = 'restarting';
+  // A server stopping (SIGTERM, SIGINT) cannot tell whether it comes back: "restarting" only when
+  // its reason says so.
+  else if (error && error.code === ERROR_SHUTTING_DOWN) status = /restart/i.test(error.reason || '') ? 'restarting' : 'stopping';
   else if (!reached) status = 'unreachable';
   setStatus(status);
   console.info(`catgs: connection closed (${code}${reason ? `: ${reason}` : ''})` +
     (permanent ? ', not retrying' : `, retry in ${retryInMs} ms`));
 }
+
+// Whether the page's thread was busy (a long task) within the last moments: a heartbeat every
+// 20 ms that came more than 50 ms late, or none for 70 ms. Messages that waited behind the busy
+// thread are handled right after it, whichever task runs first.
+const pageBusy = {
+  beatMs: performance.now(),
+  busyUntilMs: 0,
+  start() {
+    setInterval(() => {
+      const now = performance.now();
+      if (now - this.beatMs > 70) this.busyUntilMs = now + 100;
+      this.beatMs = now;
+    }, 20);
+  },
+  recently() {
+    const now = performance.now();
+    return now - this.beatMs > 70 || now < this.busyUntilMs;
+  },
+};
 
 function onMessage(kind, msg) {
   switch (kind) {
@@ -382,7 +413,10 @@ function onMessage(kind, msg) {
       break;
     case 'frame':
       if (!state.sessionOpen) break;
-      state.receipt = { sequence: msg.sequence, receivedMs: performance.now() };
+      // A receipt tells the server's rate controller when the frame arrived; read after the
+      // page's thread was busy, it would say when the thread came back, and a busy page would
+      // look like a slow link (issue 64): none for such a frame.
+      if (!pageBusy.recently()) state.receipt = { sequence: msg.sequence, receivedMs: performance.now() };
       state.decoder.decode(msg);
       break;
     case 'stats':
@@ -390,7 +424,7 @@ function onMessage(kind, msg) {
       // The server is shutting down (a rollout, a scale-down): say when this stream ends; the
       // reconnect then finds another replica.
       if (msg.drain_ms_left > 0) {
-        overlay.showMessage('drain', `server restarting: this stream ends in ${Math.ceil(msg.drain_ms_left / 1000)} s, ` +
+        overlay.showMessage('drain', `server stopping: this stream ends in ${Math.ceil(msg.drain_ms_left / 1000)} s, ` +
           'then reconnects', 'warn');
       }
       keepAlive(); // message events still run when a hidden tab's timers are throttled
@@ -540,10 +574,47 @@ function togglePanel(id, buttonId, show) {
     $(p).hidden = p === id ? !open : true;
     $(b).setAttribute('aria-expanded', String(p === id && open));
   }
-  // Below the toolbar, which wraps to two rows on a narrow window.
-  if (open) panel.style.top = `${Math.ceil($('toolbar').getBoundingClientRect().bottom) + 4}px`;
+  if (open) placePanel();
   if (!open) canvas.focus();
   return open;
+}
+
+// The open panel sits below the toolbar (which wraps to two rows on a narrow window), and below
+// the stats (?stats=1) where they share columns, so that it never covers them; it scrolls within
+// the window. Again whenever the toolbar or the stats change size (wireUi).
+function placePanel() {
+  const panel = document.querySelector('.panel:not([hidden])');
+  if (!panel) return;
+  let top = Math.ceil($('toolbar').getBoundingClientRect().bottom) + 4;
+  const stats = $('stats');
+  if (!stats.hidden) {
+    const s = stats.getBoundingClientRect();
+    const p = panel.getBoundingClientRect();
+    if (s.left < p.right && p.left < s.right) top = Math.max(top, Math.ceil(s.bottom) + 4);
+  }
+  panel.style.top = `${top}px`;
+  panel.style.maxHeight = `calc(100vh - ${top + 6}px)`;
+}
+
+// A phone (a touch screen at most 600 CSS px wide, style.css): the toolbar keeps one row of
+// buttons a finger can hit, and Link, Paths, Quality and the scene picker go under More.
+function wireMenu() {
+  const bar = $('toolbar');
+  const setOpen = (open) => {
+    bar.classList.toggle('menu-open', open);
+    $('btn-menu').setAttribute('aria-expanded', String(open));
+  };
+  $('btn-menu').addEventListener('click', () => setOpen(!bar.classList.contains('menu-open')));
+  // A button of the menu closes it before its own action (capture: a panel opened by it is then
+  // placed below the one-row toolbar).
+  bar.addEventListener('click', (e) => e.target.closest('button.more') && setOpen(false), true);
+  canvas.addEventListener('pointerdown', () => setOpen(false));
+  window.addEventListener('keydown', (e) => e.key === 'Escape' && setOpen(false));
+  document.body.classList.toggle('touch', isTouch);
+  const observer = new ResizeObserver(placePanel);
+  observer.observe(bar);
+  observer.observe($('stats'));
+  window.addEventListener('resize', placePanel);
 }
 
 // ---- camera paths ----
@@ -727,6 +798,7 @@ function updateReprojection() {
   const w = canvas.width;
   const h = canvas.height;
   let transform = '';
+  let shown = null; // the homography shown
   if (reprojectOn && cam && from && w > 0 && h > 0) {
     const to = cam.pose();
     const same =
@@ -739,10 +811,53 @@ function updateReprojection() {
       const depth = state.walk.on ? state.walk.sceneDepth(cam) : planeDepthFor(from, cam.target, cam.sceneScale);
       const H = reprojection(from, to, depth, w, h);
       const corners = [[0, 0], [w, 0], [0, h], [w, h]].map(([x, y]) => applyHomography(H, x, y));
-      if (corners.every((c) => c !== null)) transform = cssTransform(H, w, h, canvas.clientWidth, canvas.clientHeight);
+      if (corners.every((c) => c !== null)) {
+        transform = cssTransform(H, w, h, canvas.clientWidth, canvas.clientHeight);
+        shown = H;
+      }
     }
   }
   if (canvas.style.transform !== transform) canvas.style.transform = transform;
+  fillBackdrop(shown);
+}
+
+// Where the re-projected frame no longer covers the window (a turn or pan uncovers an edge, a
+// zoom-out all four): the frame's nearest edge continued (reproject.js edgeFill), not black. A
+// small canvas behind the view (256 pixels across at most: about 1 ms a camera move) that CSS
+// stretches to the window.
+const backdrop = { el: $('backdrop'), ctx: null, out: null, small: null, src: null, stale: true };
+function fillBackdrop(H) {
+  const el = backdrop.el;
+  if (!H) {
+    el.hidden = true;
+    return;
+  }
+  const w = canvas.width;
+  const h = canvas.height;
+  const k = Math.min(1, 256 / Math.max(w, h));
+  const bw = Math.max(1, Math.round(w * k));
+  const bh = Math.max(1, Math.round(h * k));
+  if (!backdrop.ctx || el.width !== bw || el.height !== bh) {
+    el.width = bw;
+    el.height = bh;
+    backdrop.ctx = backdrop.ctx || el.getContext('2d');
+    backdrop.out = backdrop.ctx.createImageData(bw, bh);
+    backdrop.stale = true;
+  }
+  if (backdrop.stale) {
+    // The shown frame at that size, read once per frame (the canvas holds it).
+    if (!backdrop.small) {
+      backdrop.small = document.createElement('canvas');
+      backdrop.smallCtx = backdrop.small.getContext('2d', { willReadFrequently: true });
+    }
+    backdrop.small.width = bw;
+    backdrop.small.height = bh;
+    backdrop.smallCtx.drawImage(canvas, 0, 0, bw, bh);
+    backdrop.src = backdrop.smallCtx.getImageData(0, 0, bw, bh);
+    backdrop.stale = false;
+  }
+  if (edgeFill(H, w, h, backdrop.src, backdrop.out)) backdrop.ctx.putImageData(backdrop.out, 0, 0);
+  el.hidden = false;
 }
 
 function loop(now) {
@@ -752,7 +867,8 @@ function loop(now) {
 
 function onKey(e) {
   const t = e.target;
-  if (t && (t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.isContentEditable)) return;
+  // Keys typed into a field are its own, but Esc: it closes the form or panel the field is in.
+  if (t && (t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.isContentEditable) && e.key !== 'Escape') return;
   if (e.ctrlKey || e.metaKey || e.altKey) return;
   switch (e.key) {
     case 'r':
@@ -791,8 +907,9 @@ function onKey(e) {
       break;
     case 'Escape':
       stopPlayback();
-      if (state.notes.mode) state.notes.setMode(state.notes.mode); // off
-      togglePanel('paths', 'btn-paths', false);
+      // The new hotspot's form, or adding a hotspot or measuring, ends (the Notes panel comes
+      // back); else every panel closes.
+      if (!state.notes.escape()) togglePanel('paths', 'btn-paths', false);
       break;
     default:
       return;
@@ -810,9 +927,26 @@ function sceneLabel(s) {
 
 // A server with several scenes lists them at GET /scenes: the picker shows them, and choosing
 // one reopens the page on it (?scene=NAME; a view in the URL belongs to the old scene and goes).
-// Set once the picker holds the server's scenes (two or more); until then every Welcome asks.
+// Set once the picker holds the server's scenes (two or more, or one when the page asked for a
+// scene the server lacks); until then every Welcome asks.
 let scenePickerLoaded = false;
 let scenePickerAsking = false;
+let sceneMinimum = 2; // one scene is no choice, unless the page asked for another
+let sceneForm = null;
+const scenePicker = $('scene-picker'); // (held: it may be out of the page, moving to the message)
+
+// ?scene=NAME of a scene the server lacks: the picker, moved from the toolbar into the message
+// (in a form: the messages take no pointer otherwise), with every scene the server has.
+function sceneChoice() {
+  if (!sceneForm) {
+    sceneForm = document.createElement('form');
+    sceneForm.addEventListener('submit', (e) => e.preventDefault());
+    sceneForm.append(scenePicker);
+    sceneMinimum = 1;
+    if (!scenePickerLoaded && !scenePickerAsking) loadScenePicker();
+  }
+  return sceneForm;
+}
 
 async function loadScenePicker() {
   if (scenePickerLoaded || scenePickerAsking) return;
@@ -825,7 +959,7 @@ async function loadScenePicker() {
 }
 
 async function fillScenePicker() {
-  const picker = $('scene-picker');
+  const picker = scenePicker;
   let scenes = [];
   try {
     const res = await fetch(new URL('scenes', location.href), { cache: 'no-cache' });
@@ -833,30 +967,50 @@ async function fillScenePicker() {
   } catch {
     return; // an older server, or none: no picker
   }
-  if (!Array.isArray(scenes) || scenes.length < 2) return;
+  // (sceneMinimum is read after the answer: the no-scene message may have come meanwhile.)
+  if (!Array.isArray(scenes) || scenes.length < sceneMinimum) return;
+  picker.replaceChildren();
+  const current = (state.welcome && state.welcome.scene_name) || sceneParam || String(scenes[0].name);
+  if (!scenes.some((s) => String(s.name) === current)) {
+    // A scene the server lacks: no blank picker, an invitation to choose.
+    const o = new Option('choose a scene…', '', true, true);
+    o.disabled = true;
+    picker.append(o);
+  }
   for (const s of scenes) {
     const o = document.createElement('option');
     o.value = String(s.name);
     o.textContent = sceneLabel(s);
     picker.append(o);
   }
-  picker.value = (state.welcome && state.welcome.scene_name) || sceneParam || String(scenes[0].name);
+  if (scenes.some((s) => String(s.name) === current)) picker.value = current;
   picker.hidden = false;
   scenePickerLoaded = true;
-  picker.addEventListener('change', () => {
-    const url = new URL(withoutView(location.href));
-    url.searchParams.set('scene', picker.value);
-    location.assign(url.href);
-  });
+}
+
+function chooseScene() {
+  const picker = scenePicker;
+  if (!picker.value) return;
+  const url = new URL(withoutView(location.href));
+  url.searchParams.set('scene', picker.value);
+  location.assign(url.href);
+}
+
+// The hint line at the bottom: the controls of the mode the view is in (orbit or walk).
+function hintText(walking) {
+  if (walking) return isTouch ? 'pad: walk · 1 finger: look · Walk: leave walk' : 'drag: look · WASD: walk · Shift: run · G: leave walk';
+  return isTouch
+    ? '1 finger: orbit · 2 fingers: zoom, pan · ? help'
+    : 'drag: orbit · right-drag: pan · wheel: zoom · WASD: fly · H: help';
 }
 
 function wireUi() {
-  $('hint').textContent = isTouch
-    ? '1 finger: orbit · 2 fingers: zoom, pan · ? help'
-    : 'drag: orbit · right-drag: pan · wheel: zoom · WASD: fly · H: help';
+  $('hint').textContent = hintText(false);
   $('btn-reset').addEventListener('click', resetView);
   $('btn-link').addEventListener('click', copyLink);
+  scenePicker.addEventListener('change', chooseScene);
   loadScenePicker();
+  wireMenu();
   $('btn-fullscreen').addEventListener('click', toggleFullscreen);
   $('btn-help').addEventListener('click', () => togglePanel('helppanel', 'btn-help'));
   $('btn-paths').addEventListener('click', () => togglePanel('paths', 'btn-paths'));
@@ -995,6 +1149,7 @@ function installTestHook() {
     get walk() {
       return state.walk.snapshot();
     },
+    walkTrace: (on) => state.walk.takeTrace(on), // starts a trace of walk steps (on), or ends it: the steps
     // Export video: (options { size: 'WxH', fps, pipeline }) -> export id; its state.
     exportVideo: (options) => state.videoExport.start(options),
     cancelExport: () => state.videoExport.cancel(),
@@ -1008,11 +1163,18 @@ function toggleWalk() {
   stopPlayback();
   const on = state.walk.toggle();
   $('btn-walk').setAttribute('aria-pressed', String(on));
+  // The hint says walk mode's controls while it is on (shown again: they are new), then the
+  // orbit's again (hidden as it was before, if it had done its job).
+  const hint = $('hint');
+  if (on) state.hintHiddenBeforeWalk = hint.hidden;
+  hint.textContent = hintText(on);
+  hint.hidden = on ? false : !!state.hintHiddenBeforeWalk;
   notice(on ? 'walk mode: WASD / arrows walk, drag looks around, G leaves it' : 'walk mode off');
   return on;
 }
 
 async function main() {
+  pageBusy.start();
   state.notes = new NotesUi({
     camera: () => state.camera,
     probe: probeCss,
@@ -1022,6 +1184,7 @@ async function main() {
     save: (json) => state.sessionOpen && send(state.protocol.encodeSaveAnnotations(json)),
     linkChanged: notesLinkChanged,
     closePanel: () => togglePanel('notes', 'btn-notes', false),
+    openPanel: () => togglePanel('notes', 'btn-notes', true),
     clearNotice: () => overlay.clearMessage('notice'),
   });
   state.notes.fromLink(params.get('notes'));

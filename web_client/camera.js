@@ -98,6 +98,14 @@ export function intrinsicsFor(fovDeg, width, height) {
   return { fx: f, fy: f, cx: width / 2, cy: height / 2 };
 }
 
+// How far zooming out goes from the orbit target, in scene scales (Welcome.scene_scale: a typical
+// viewing distance, such as the training cameras' median distance from the orbit centre, or the
+// distance that frames an object whole): about 2.6 content radii of flowers_sh3 (its radius is
+// scene_scale tan(30 deg)), 3.2 of the biker. Looked at on flowers_sh3 from four sides: at 1.5 the
+// flower bed on its lawn from each; at 2 a haze of background Gaussians in front from one side;
+// at 2.5 brown mush from two (the camera among the trees the capture saw from inside).
+export const MAX_ORBIT_SCALES = 1.5;
+
 const finite3 = (v) => Array.isArray(v) && v.length === 3 && v.every(Number.isFinite);
 
 // Orbit camera: the pose plus a target it orbits around and a world up. Every change bumps
@@ -198,13 +206,25 @@ export class OrbitCamera {
     this._changed();
   }
 
+  // The farthest zoom-out: MAX_ORBIT_SCALES scene scales from the target. Farther out a trained
+  // scene is its background seen from outside (12 wheel notches out on flowers_sh3, 3.4 scales,
+  // filled the screen with brown mush).
+  get maxDistance() {
+    return this.sceneScale * MAX_ORBIT_SCALES;
+  }
+
   // factor < 1 moves towards the target. Near the target it dollies on (target moves too), so
-  // zooming never gets stuck.
+  // zooming never gets stuck. Zooming out stops at maxDistance (a camera put farther by setPose
+  // may zoom in, not out).
   zoom(factor) {
     if (!(factor > 0) || factor === 1) return;
     const rel = vsub(this.position, this.target);
     const dist = vlen(rel);
     const minDist = this.sceneScale * 1e-3;
+    if (factor > 1) {
+      if (dist >= this.maxDistance) return;
+      factor = Math.min(factor, this.maxDistance / dist);
+    }
     const newDist = dist * factor;
     if (newDist < minDist && factor < 1) {
       const step = vscale(cameraForward(this.orientation), Math.max(dist * (1 - factor), minDist));

@@ -1,6 +1,7 @@
 // The WebSocket to the server: binary frames, one protobuf message each (subprotocol catgs.v1),
 // and automatic reconnection: exponential backoff, or the server's Error.retry_after_ms hint;
-// no retry at all after a permanent error (a wrong token cannot get better by waiting).
+// no retry at all after a permanent error (a wrong token, or a Hello refused as invalid such as an
+// unknown scene, cannot get better by waiting).
 
 export const SUBPROTOCOL = 'catgs.v1';
 
@@ -19,6 +20,7 @@ export function backoffMs(attempt) {
 
 // ErrorCode values (proto/catgs_stream.proto) the reconnect logic cares about.
 export const ERROR_PROTOCOL = 2;
+export const ERROR_INVALID_ARGUMENT = 3;
 export const ERROR_UNAUTHORIZED = 4;
 export const ERROR_SERVER_FULL = 5;
 export const ERROR_SHUTTING_DOWN = 7;
@@ -32,9 +34,10 @@ export const ERROR_RATE_LIMITED = 9;
 export function retryPolicy(error, welcomed) {
   if (!error) return { permanent: false, delayMs: null };
   if (error.code === ERROR_UNAUTHORIZED) return { permanent: true };
-  // A refused Hello (unknown protocol version) is refused again: a page and server that do not
-  // match need a reload, not a loop.
-  if (error.code === ERROR_PROTOCOL && !welcomed) return { permanent: true };
+  // A refused Hello (unknown protocol version; a scene the server does not have, codecs it does
+  // not stream) is refused again: a page and server that do not match need a reload or another
+  // scene, not a loop.
+  if ((error.code === ERROR_PROTOCOL || error.code === ERROR_INVALID_ARGUMENT) && !welcomed) return { permanent: true };
   const hint = Number(error.retry_after_ms) || 0;
   // RATE_LIMITED's hint is when the server takes the next Hello from this address.
   const hinted = [ERROR_SERVER_FULL, ERROR_SHUTTING_DOWN, ERROR_RATE_LIMITED];

@@ -12,7 +12,7 @@ const $ = (id) => document.getElementById(id);
 export class NotesUi {
   // app: { camera() -> OrbitCamera|null, probe(cssX, cssY) -> Promise<DepthResult>,
   //        notice(text, level, ms), flyTo(pose), playTour(waypoints), save(json) -> bool,
-  //        clearNotice(), linkChanged(), closePanel() }
+  //        clearNotice(), linkChanged(), closePanel(), openPanel() }
   constructor(app) {
     this.app = app;
     this.server = { version: 1, hotspots: [] }; // the scene's file (Annotations)
@@ -23,6 +23,7 @@ export class NotesUi {
     this.ownScale = null; // metres per unit the viewer set (the share link)
     this.mode = null; // null | 'hotspot' | 'measure'
     this.pending = null; // the point a hotspot being written goes to
+    this.reopenPanel = false; // the panel was open when the mode began: it comes back at its end
     this.lastProbe = null;
     this.markers = new Map(); // id -> element
     this._wire();
@@ -112,10 +113,18 @@ export class NotesUi {
   // ---- actions ----
 
   setMode(mode) {
+    const was = this.mode;
     this.mode = this.mode === mode ? null : mode;
     if (this.mode === 'measure' && this.measurePoints.length === 2) this.measurePoints = [];
-    // The whole scene takes the clicks: the panel closes (it would cover much of a small screen).
+    // The whole scene takes the clicks: the panel closes (it would cover much of a small screen),
+    // and comes back when the action ends (placed, measured, cancelled, Esc).
     this.app.clearNotice();
+    if (this.mode !== 'hotspot' && this.pending) this._closeForm();
+    if (this.mode && !was) this.reopenPanel = !$('notes').hidden;
+    if (!this.mode && was && this.reopenPanel) {
+      this.reopenPanel = false;
+      this.app.openPanel();
+    }
     if (this.mode) {
       this.app.closePanel();
       this.showCard(null);
@@ -141,6 +150,7 @@ export class NotesUi {
       return null;
     }
     this.lastProbe = r;
+    if (this.mode !== mode) return r; // cancelled (Esc) while the server looked
     if (r.error) {
       this.app.notice(`depth: ${r.error}`, 'warn', 4000);
       return r;
@@ -181,12 +191,29 @@ export class NotesUi {
       h.view = { position: p.position, orientation: p.orientation, fov: p.fovDeg };
     }
     this.own.push(h);
-    this.pending = null;
-    $('hotspot-form').hidden = true;
+    this._closeForm();
     this.setMode(null);
     this.app.linkChanged();
     this._render();
     return h.id;
+  }
+
+  // Esc: ends what is under way (the new hotspot's form, adding a hotspot, measuring); false when
+  // nothing was.
+  escape() {
+    if (!this.mode && !this.pending) return false;
+    this._closeForm();
+    this.setMode(null);
+    return true;
+  }
+
+  // The new hotspot's form goes, with what was typed into it and the point it was for.
+  _closeForm() {
+    this.pending = null;
+    const form = $('hotspot-form');
+    if (form.contains(document.activeElement)) document.activeElement.blur();
+    form.hidden = true;
+    form.reset();
   }
 
   _viewFor(h) {
@@ -388,16 +415,11 @@ export class NotesUi {
     $('btn-clear-measure').addEventListener('click', () => this.clearMeasure());
     $('btn-hotspot-tour').addEventListener('click', () => this.tour());
     $('btn-save-notes').addEventListener('click', () => this.save());
-    $('btn-cancel-hotspot').addEventListener('click', () => {
-      this.pending = null;
-      $('hotspot-form').hidden = true;
-    });
+    $('btn-cancel-hotspot').addEventListener('click', () => this.escape());
     $('hotspot-form').addEventListener('submit', (e) => {
       e.preventDefault();
       try {
         this.addHotspot($('hotspot-title').value, $('hotspot-text').value, $('hotspot-keep-view').checked);
-        $('hotspot-title').value = '';
-        $('hotspot-text').value = '';
       } catch (err) {
         this.app.notice(err.message, 'warn');
       }

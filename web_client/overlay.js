@@ -133,10 +133,12 @@ export class Overlay {
           lines.push(`  LOD ${num(s.lod_error_px_mean)} px  ${((s.splats_mean || 0) / 1e6).toFixed(2)} M splats`);
         }
         lines.push(`  ${num((s.bytes_per_second * 8) / 1e6)} Mbit/s  skipped ${s.poses_skipped || 0}`);
-        // The link's rate controller: what the link carried, its round trip, the cap it sets.
+        // The link's rate controller: what the link carried (only when the server measured it
+        // on a full link: Stats.link_kbps 0 otherwise), its round trip, the cap it sets.
         const cap = s.bitrate_cap_kbps ? `cap ${s.bitrate_cap_kbps} kbit/s` : 'not limited';
         const level = s.quality_level ? `  size level ${s.quality_level}` : '';
-        lines.push(`  link ${s.link_kbps ? `${Math.round(s.link_kbps)} kbit/s` : '-'}  rtt ${num(s.rtt_ms || 0)} ms  ${cap}${level}`);
+        const link = s.link_kbps ? `link ${linkRate(s.link_kbps)}  ` : '';
+        lines.push(`  ${link}rtt ${num(s.rtt_ms || 0)} ms  ${cap}${level}`);
       }
     }
     this.statsEl.textContent = lines.join('\n');
@@ -173,3 +175,5 @@ export class Overlay {
 
 const fmtFps = (v) => (v >= 10 ? v.toFixed(0) : v.toFixed(1));
 const num = (v) => (Number.isFinite(v) ? v.toFixed(1) : '-');
+// A link rate for the stats: kbit/s below 10 Mbit/s, Mbit/s above.
+const linkRate = (kbps) => (kbps < 10000 ? `${Math.round(kbps)} kbit/s` : `${(kbps / 1000).toFixed(0)} Mbit/s`);

@@ -83,3 +83,87 @@ export function cssTransform(H, width, height, cssWidth, cssHeight) {
     m[0][2],
   )},${v(m[1][2])},0,${v(m[2][2])})`;
 }
+
+// The inverse of a 3x3 matrix (rows); null when singular.
+export function invert3(m) {
+  const [[a, b, c], [d, e, f], [g, h, i]] = m;
+  const A = e * i - f * h;
+  const B = f * g - d * i;
+  const C = d * h - e * g;
+  const det = a * A + b * B + c * C;
+  if (!(Math.abs(det) > 1e-300)) return null;
+  const s = 1 / det;
+  return [
+    [A * s, (c * h - b * i) * s, (b * f - c * e) * s],
+    [B * s, (a * i - c * g) * s, (c * d - a * f) * s],
+    [C * s, (b * g - a * h) * s, (a * e - b * d) * s],
+  ];
+}
+
+// What fills the view around the re-projected frame, where it does not reach (a turn or a pan
+// uncovers an edge, a zoom-out all four): the frame's edge, continued (clamp-to-edge), so that the
+// uncovered part goes on from the frame's nearest edge instead of showing black. Each view pixel
+// outside the frame's outline on screen (a convex quadrilateral: H of the frame's corners) takes
+// the colour of the outline's nearest point; inside, the frame's own pixel (the canvas covers
+// those; they keep the stretched edge smooth). Clamped on screen rather than in the frame's
+// coordinates, which near the horizon of a large turn's plane run off to a corner's colour, and
+// past it have none. `src` and `out` are RGBA pixels ({ data, width, height }, ImageData-like) of
+// the frame and of the view, both at a small size (app.js: at most 256 pixels across); H is the
+// re-projection of a width x height frame (reprojection()); out covers the same width x height.
+// Returns false (out untouched) when the frame's outline is not all in front (no transform then).
+export function edgeFill(H, width, height, src, out) {
+  const Hi = invert3(H);
+  const quad = [[0, 0], [width, 0], [width, height], [0, height]].map(([x, y]) => applyHomography(H, x, y));
+  if (!Hi || quad.some((q) => q === null)) return false;
+  // The outline's edges, and which side of them is inside (the quad's orientation).
+  const edges = quad.map((a, k) => {
+    const b = quad[(k + 1) % 4];
+    const d = [b[0] - a[0], b[1] - a[1]];
+    return { a, d, len2: d[0] * d[0] + d[1] * d[1] };
+  });
+  const area = edges.reduce((acc, e) => acc + e.a[0] * (e.a[1] + e.d[1]) - (e.a[0] + e.d[0]) * e.a[1], 0);
+  const sign = area >= 0 ? 1 : -1;
+  const sx = src.width / width;
+  const sy = src.height / height;
+  const ox = width / out.width;
+  const oy = height / out.height;
+  const sd = src.data;
+  const od = out.data;
+  for (let j = 0; j < out.height; j++) {
+    for (let i = 0; i < out.width; i++) {
+      let x = (i + 0.5) * ox;
+      let y = (j + 0.5) * oy;
+      if (edges.some((e) => sign * (e.d[0] * (y - e.a[1]) - e.d[1] * (x - e.a[0])) < 0)) {
+        // Outside: the nearest point of the outline.
+        let best = Infinity;
+        let nx = x;
+        let ny = y;
+        for (const e of edges) {
+          const t = e.len2 > 0 ? Math.min(Math.max(((x - e.a[0]) * e.d[0] + (y - e.a[1]) * e.d[1]) / e.len2, 0), 1) : 0;
+          const px = e.a[0] + t * e.d[0];
+          const py = e.a[1] + t * e.d[1];
+          const dist2 = (px - x) * (px - x) + (py - y) * (py - y);
+          if (dist2 < best) {
+            best = dist2;
+            nx = px;
+            ny = py;
+          }
+        }
+        x = nx;
+        y = ny;
+      }
+      const W = Hi[2][0] * x + Hi[2][1] * y + Hi[2][2];
+      const u = (Hi[0][0] * x + Hi[0][1] * y + Hi[0][2]) / W;
+      const v = (Hi[1][0] * x + Hi[1][1] * y + Hi[1][2]) / W;
+      const si = Math.min(Math.max(Math.floor(u * sx), 0), src.width - 1) || 0;
+      const sj = Math.min(Math.max(Math.floor(v * sy), 0), src.height - 1) || 0;
+      const s = (sj * src.width + si) * 4;
+      const o = (j * out.width + i) * 4;
+      od[o] = sd[s];
+      od[o + 1] = sd[s + 1];
+      od[o + 2] = sd[s + 2];
+      od[o + 3] = 255;
+    }
+  }
+  return true;
+}

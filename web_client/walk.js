@@ -1,21 +1,33 @@
-// Walk mode (issue 38): the camera stays at eye height above the ground under it and stops at
-// walls, both sensed with the server's depth probe (DepthRequest): one probe looks straight
-// down from the camera (the ground), one looks along the way the camera is walking (a wall).
-// Keys as in games: W/S or Up/Down walk forward/back, A/D or Left/Right step sideways, Shift runs;
-// dragging looks around (the orbit centre sits just in front of the camera); on touch the pad at
-// the bottom left walks (drag from its centre).
+// Walk mode (issues 38 and 64): the camera stays at eye height above the ground under it and
+// stops at obstacles (walls, trunks, plants) and at the edge of the ground, all sensed with the
+// server's depth probe (DepthRequest). Keys as in games: W/S or Up/Down walk forward/back, A/D or
+// Left/Right step sideways, Shift runs; dragging looks around (the orbit centre sits just in
+// front of the camera); on touch the pad at the bottom left walks (drag from its centre).
 //
 // Eye height: 1.6 m when the scene has a scale (metres per unit), else a tenth of Welcome's
-// scene_scale; at least 0.4 units (twice the near plane, which the probes cannot see within). The probes refresh about 5 times a second each while walking (10 DepthRequests a
-// second, within the server's default limit of 20): between answers the last distances hold.
+// scene_scale; at least 0.4 units (twice the near plane, which the probes cannot see within).
+//
+// While walking, a "look" (annotations.js walkProbes: the ground under the eye, the ground an eye
+// height ahead, level probes from the eye and from a quarter of the eye height above the ground,
+// along the way) goes out at most 4 times a second (16 DepthRequests a second, within the
+// server's default limit of 20; standing, the ground under the eye alone, twice a second; while
+// landing, the ground under and the room above). Its answers make a plan (walkPlan) and the
+// camera never goes further than the plan proved free: past what the level probes saw (less a
+// stop distance), past the ground the look checked, or at all while the ground ahead is missing
+// or more than a step up or down. A move in another direction, or further, waits for the next
+// look (before issue 64 a step went on the last answer, up to 200 ms old, or on none for a new
+// direction). Near an edge or a step, the next look checks the ground nearer (half as far, down
+// to a quarter of the eye height), so the camera comes up to it. Looks alternate between two
+// rolls of the views up and down, and the ground counts once both agree (walkPlan says why).
 
 import { cameraForward, cameraRight, lookAt, vadd, vdot, vlen, vnorm, vscale, vsub } from './camera.js';
-import { alongGround, walkStep } from './annotations.js';
+import { alongGround, walkGroundAt, walkPlan, walkProbes, walkSizes, walkStep } from './annotations.js';
 
-const PROBE_INTERVAL_MS = 200;
-const PROBE_SIZE = 64; // the probes' views: 64 x 64 pixels, the pixel at the centre
+const LOOK_INTERVAL_MS = 250; // walking: one look (4 probes) at most every 250 ms
+const IDLE_INTERVAL_MS = 500; // standing: the ground under the eye, twice a second
 // The renderer culls Gaussians nearer than this (docs/DESIGN.md "Forward model").
 const NEAR_PLANE = 0.2;
+const TRACE_MAX = 5000;
 
 export class WalkMode {
   // app: { camera(), probePose(pose, width, height, x, y) -> Promise<DepthResult>, metresPerUnit(),
@@ -23,14 +35,17 @@ export class WalkMode {
   constructor(app, pad) {
     this.app = app;
     this.on = false;
-    this.ground = Infinity; // distance to the ground below, world units (Infinity: none seen)
-    this.wall = Infinity; // distance to a wall ahead along the last walking direction
-    this.wallDir = null;
-    this.inFlight = 0;
-    this.lastProbeMs = -Infinity;
+    this.plan = null; // the last look's plan (annotations.js walkPlan)
+    this.inFlight = false;
+    this.generation = 0; // answers of a look from before the last toggle are dropped
+    this.lastLookMs = -Infinity;
+    this.looks = 0;
+    this.roll = 0; // the roll of the vertical probe views, alternating look by look
     this.pad = pad;
     this.padVector = [0, 0]; // touch pad: [right, forward] in -1..1
-    this.blocked = false; // the last step was stopped by a wall
+    this.blocked = false; // the last step was stopped by an obstacle, an edge or a step
+    this.waiting = false; // the last step waited for a look
+    this.trace = null; // an array of steps while the test hook traces
     if (pad) this._wirePad(pad);
   }
 
@@ -40,16 +55,25 @@ export class WalkMode {
     return Math.max(mpu ? 1.6 / mpu : cam.sceneScale * 0.1, 2 * NEAR_PLANE);
   }
 
-  // How far short of a wall the camera stops: a quarter of the eye height, and beyond the near
-  // plane (a wall nearer than it is culled, and the camera would walk through).
+  sizes(cam) {
+    return walkSizes(this.eyeHeight(cam), NEAR_PLANE);
+  }
+
+  // How far short of an obstacle the camera stops (annotations.js walkSizes).
   radius(cam) {
-    return Math.max(this.eyeHeight(cam) * 0.25, 1.5 * NEAR_PLANE);
+    return this.sizes(cam).radius;
   }
 
   toggle(force) {
     const cam = this.app.camera();
     this.on = force ?? !this.on;
     if (this.pad) this.pad.hidden = !this.on;
+    this.generation++;
+    this.plan = null;
+    this.inFlight = false;
+    this.lastLookMs = -Infinity;
+    this.blocked = false;
+    this.waiting = false;
     if (this.on && cam) {
       // Look level, around a point just in front of the camera (drag then turns the head).
       const f = alongGround(cameraForward(cam.orientation), cam.up);
@@ -59,37 +83,42 @@ export class WalkMode {
       }
       cam.target = vadd(cam.position, vscale(cameraForward(cam.orientation), cam.sceneScale * 0.01));
       cam.version++;
-      this.ground = Infinity;
-      this.wall = Infinity;
-      this.lastProbeMs = -Infinity;
     }
     return this.on;
   }
 
-  // Probes: ground straight down, wall along `dir` (unit, along the ground).
-  _probe(cam, now, dir) {
-    if (this.inFlight > 0 || now - this.lastProbeMs < PROBE_INTERVAL_MS) return;
-    this.lastProbeMs = now;
-    const c = PROBE_SIZE / 2;
-    const down = vscale(cam.up, -1);
-    // Looking down, the image's "up" is the camera's forward along the ground.
-    const ahead = vlen(alongGround(cameraForward(cam.orientation), cam.up)) > 1e-6
-      ? vnorm(alongGround(cameraForward(cam.orientation), cam.up)) : cameraRight(cam.orientation);
-    const groundPose = { position: cam.position, orientation: lookAt(cam.position, vadd(cam.position, down), ahead), fovDeg: 30 };
-    const at = dir || ahead;
-    const wallPose = { position: cam.position, orientation: lookAt(cam.position, vadd(cam.position, at), cam.up), fovDeg: 30 };
-    this.inFlight = 2;
-    const done = () => this.inFlight--;
-    // An answer describes the camera where it was when asked: the walk since then is taken off.
-    const from = cam.position.slice();
-    const since = (axis) => vdot(vsub(this.app.camera().position, from), axis);
-    this.app.probePose(groundPose, PROBE_SIZE, PROBE_SIZE, c, c).then((r) => {
-      this.ground = r && r.hit ? r.depth + since(cam.up) : Infinity;
-    }).catch(() => {}).finally(done);
-    this.app.probePose(wallPose, PROBE_SIZE, PROBE_SIZE, c, c).then((r) => {
-      this.wall = r && r.hit ? r.depth - since(at) : Infinity;
-      this.wallDir = at;
-    }).catch(() => {}).finally(done);
+  // A look along `dir` (unit, along the ground; null: the ground under the eye only).
+  _look(cam, now, dir, sizes) {
+    const last = this.plan;
+    const origin = cam.position.slice();
+    const ground = last ? walkGroundAt(last, origin, cam.up) : null;
+    // Landing: until two looks agree on the ground and the eye is near its height above it.
+    const landing = !last || !last.confirmed || (ground !== null && Math.abs(vdot(origin, cam.up) - ground - sizes.eye) > 0.2 * sizes.eye);
+    if (this.inFlight || now - this.lastLookMs < (dir || landing ? LOOK_INTERVAL_MS : IDLE_INTERVAL_MS)) return;
+    const sameWay = dir && last && last.dir && vdot(dir, last.dir) > 0.97;
+    // Near an edge or a step, look half as far each time (down to a quarter of the eye height).
+    let look = sizes.look;
+    if (sameWay && (last.reason === 'edge' || last.reason === 'step')) look = Math.max(sizes.nearLook, last.look / 2);
+    const way = landing ? null : dir;
+    const roll = (this.roll = 1 - this.roll); // alternate: see annotations.js walkPlan
+    const probes = walkProbes(origin, cam.up, sizes, { dir: way, look, ground, landing, roll });
+    this.inFlight = true;
+    this.lastLookMs = now;
+    const generation = this.generation;
+    const up = cam.up.slice();
+    const asked = performance.now();
+    Promise.all(probes.map((p) => this.app.probePose(p.pose, p.size, p.size, p.size / 2, p.size / 2).catch(() => null)))
+      .then((results) => {
+        if (generation !== this.generation) return;
+        const answers = {};
+        probes.forEach((p, i) => (answers[p.name] = results[i]));
+        this.plan = walkPlan(origin, up, sizes, answers, { dir: way, look, previous: this.plan, roll, landing });
+        this.plan.ms = performance.now() - asked;
+        this.looks++;
+      })
+      .finally(() => {
+        if (generation === this.generation) this.inFlight = false;
+      });
   }
 
   // One animation frame: keys (Controls.keys) and the pad move the camera along the ground.
@@ -101,46 +130,69 @@ export class WalkMode {
     const side = k('KeyD') + k('ArrowRight') - k('KeyA') - k('ArrowLeft') + this.padVector[0];
     const f = vnorm(alongGround(cameraForward(cam.orientation), cam.up));
     const r = vnorm(alongGround(cameraRight(cam.orientation), cam.up));
-    let move = vadd(vscale(f, Math.max(-1, Math.min(1, fwd))), vscale(r, Math.max(-1, Math.min(1, side))));
+    const move = vadd(vscale(f, Math.max(-1, Math.min(1, fwd))), vscale(r, Math.max(-1, Math.min(1, side))));
     const len = vlen(move);
     const dir = len > 1e-6 ? vscale(move, 1 / len) : null;
-    this._probe(cam, now, dir);
-    const eye = this.eyeHeight(cam);
-    const speed = eye * 1.0 * (shift ? 2.5 : 1); // about 1.6 m/s, running 4 m/s
-    move = dir ? vscale(dir, speed * Math.min(dt, 0.1)) : [0, 0, 0];
-    // The wall distance holds for the direction it was probed in; another direction is unknown
-    // until its probe answers (at most 200 ms of walking, a third of an eye height).
-    const sameDir = dir && this.wallDir && vdot(dir, this.wallDir) > 0.9;
+    const sizes = this.sizes(cam);
+    this._look(cam, now, dir, sizes);
+    const speed = sizes.eye * (shift ? 2.5 : 1); // about 1.6 m/s, running 4 m/s
+    const step = Math.min(dt, 0.1);
     const before = cam.position;
-    const next = walkStep(before, move, cam.up, {
-      wallDistance: sameDir ? this.wall : Infinity,
-      groundDistance: this.ground,
-      eyeHeight: eye,
-      radius: this.radius(cam),
-      ease: Math.min(1, dt * 5),
-    });
-    this.blocked = !!dir && vlen(alongGround(vsub(next, before), cam.up)) < 1e-9;
-    const delta = vsub(next, before);
+    const r2 = walkStep(before, dir, dir ? speed * step : 0, cam.up, sizes, this.plan, step);
+    this.blocked = r2.blocked;
+    this.waiting = r2.waiting;
+    const delta = vsub(r2.position, before);
     if (vlen(delta) > 0) {
-      cam.position = next;
+      cam.position = r2.position;
       cam.target = vadd(cam.target, delta);
       cam.version++;
-      // The probes' answers are up to a few hundred ms old: carry them along with the move, so a
-      // static floor and wall stay where they were measured until the next answer.
-      if (Number.isFinite(this.ground)) this.ground += vdot(delta, cam.up);
-      if (Number.isFinite(this.wall) && this.wallDir) this.wall -= vdot(delta, this.wallDir);
+    }
+    if (this.trace && (dir || r2.moved > 0) && this.trace.length < TRACE_MAX) {
+      const p = this.plan;
+      this.trace.push({
+        t: now, dir, position: r2.position, moved: r2.moved, blocked: r2.blocked, waiting: r2.waiting,
+        plan: p && { underSeen: p.underSeen, aheadSeen: p.aheadSeen, origin: p.origin, dir: p.dir, look: p.look, free: Number.isFinite(p.free) ? p.free : null, allowed: p.allowed, reason: p.reason, confirmed: p.confirmed, ground0: p.ground0, ground1: p.ground1, ms: p.ms, ceiling: p.ceiling, roll: p.roll, pending: p.pending },
+        progress: p && p.dir ? vdot(vsub(r2.position, p.origin), p.dir) : null,
+      });
     }
   }
 
-  // A depth for re-projecting the shown frame while walking: the wall ahead when one was seen,
-  // else the scene scale (the orbit centre sits just in front of the camera in walk mode).
+  // The test hook's trace of steps: starts a fresh one (on), or stops and returns it.
+  takeTrace(on) {
+    const t = this.trace || [];
+    this.trace = on ? [] : null;
+    return t;
+  }
+
+  // A depth for re-projecting the shown frame while walking: the obstacle ahead when one was
+  // seen, else the scene scale (the orbit centre sits just in front of the camera in walk mode).
   sceneDepth(cam) {
-    return Number.isFinite(this.wall) && this.wall > NEAR_PLANE ? this.wall : cam.sceneScale;
+    const w = this._wallLeft(cam);
+    return w !== null && w > NEAR_PLANE ? w : cam.sceneScale;
+  }
+
+  _wallLeft(cam) {
+    const p = this.plan;
+    if (!p || !p.dir || !Number.isFinite(p.free)) return null;
+    return p.free - vdot(vsub(cam.position, p.origin), p.dir);
   }
 
   snapshot() {
     const cam = this.app.camera();
-    return { on: this.on, eyeHeight: cam ? this.eyeHeight(cam) : null, radius: cam ? this.radius(cam) : null, ground: Number.isFinite(this.ground) ? this.ground : null, wall: Number.isFinite(this.wall) ? this.wall : null, blocked: this.blocked };
+    const sizes = cam ? this.sizes(cam) : null;
+    const g = cam && this.plan ? walkGroundAt(this.plan, cam.position, cam.up) : null;
+    return {
+      on: this.on,
+      eyeHeight: sizes && sizes.eye,
+      radius: sizes && sizes.radius,
+      step: sizes && sizes.step,
+      ground: g === null || !cam ? null : vdot(cam.position, cam.up) - g, // the eye's height above the ground under it
+      wall: cam ? this._wallLeft(cam) : null, // what the last look saw free ahead, from here
+      reason: this.plan ? this.plan.reason : '',
+      blocked: this.blocked,
+      waiting: this.waiting,
+      looks: this.looks,
+    };
   }
 
   _wirePad(pad) {

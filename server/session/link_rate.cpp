@@ -36,7 +36,7 @@ bool LinkRate::receiver_held(Clock::time_point now) const {
 }
 
 double LinkRate::path_queue_ms(const SocketSample& s, Clock::time_point now) const {
-  if (receipts_fresh(now)) return network_busy(s) ? queue_ms_ : 0.0;
+  if (receipts_fresh(now)) return network_busy(s) ? standing_ms_ : 0.0;
   return s.valid ? std::max(0.0, s.rtt_ms - s.min_rtt_ms) : 0.0;
 }
 
@@ -65,8 +65,8 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   if (receipts_fresh(now)) {
     cause = Cause::receipts;
     if (!network_busy(s)) return false;
-    const bool building = queue_ms_ > params_.queue_ms && queue_ms_ > queue_before_ + params_.queue_ms / 4;
-    return building || queue_ms_ > params_.queue_ms + receipt_own_ms_;
+    const bool building = standing_ms_ > params_.queue_ms && standing_ms_ > standing_before_ + params_.queue_ms / 4;
+    return building || standing_ms_ > params_.queue_ms + receipt_own_ms_;
   }
   cause = Cause::round_trip;
   return s.valid && s.rtt_ms - s.min_rtt_ms > std::max(params_.rtt_rise_ms, own);
@@ -90,8 +90,12 @@ void LinkRate::on_receipt(const Receipt& r, Clock::time_point now, int ceiling_k
     base_since_ = now;
   }
   base_now_ = std::min(base_now_, delay);
-  queue_before_ = queue_ms_;
+  const double previous = queue_ms_;
   queue_ms_ = std::max(0.0, delay - std::min(base_now_, base_before_));
+  // The queue standing on the path: the lesser of the last two receipts' (a queue on the network
+  // delays every frame; a host that ran the client or its browser late delays one here and there).
+  standing_before_ = standing_ms_;
+  standing_ms_ = have_receipt_ ? std::min(queue_ms_, previous) : queue_ms_;
   // A frame that waited behind the one before it (a queue, the two received in turn) arrived
   // its own time on the wire after it: its bytes over that interval are the link's rate, the
   // bottleneck's own (the kernel's estimate is taken at the sender, and a shaper's burst

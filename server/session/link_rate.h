@@ -23,7 +23,9 @@
 //   rate (the kernel's delivery rate is the sender's view, and a shaper's burst inflates it).
 // A client that reads late (a busy page, a busy host) is not a slow link (issue 64): a send the
 // receiver's window held back (tcpi_rwnd_limited) is not the network's delay, and its delivery
-// rate is the client's reading, not the link's. A receipt says when a frame arrived only if the
+// rate is the client's reading, not the link's; the receipts' queue is the lesser of the last two
+// (a host that ran the client late delays one frame here and there, a network queue every frame).
+// A receipt says when a frame arrived only if the
 // client was listening: the page and catgs-loadgen send none for a frame they read after their
 // thread was away (web_client/app.js, tools/loadgen), so late reads never look like a queue.
 // The rule (a delay-based AIMD, as WebRTC's and Selkies' congestion control do in spirit):
@@ -185,7 +187,8 @@ class LinkRate {
   bool have_receipt_ = false;
   Clock::time_point last_receipt_{}, base_since_{};
   double base_now_ = 0, base_before_ = 0, queue_ms_ = 0;
-  double queue_before_ = 0;              // the queue of the receipt before the newest
+  double standing_ms_ = 0;               // the lesser of the last two receipts' queues (on_receipt)
+  double standing_before_ = 0;           // the same one receipt before
   double receipt_own_ms_ = 0;            // the newest receipt's frame's own time on the wire
   Clock::time_point receipt_rate_at_{};  // when that frame's encoder rate was read
   std::uint32_t last_sequence_ = 0;      // the newest receipt's frame and its arrival (client ms)

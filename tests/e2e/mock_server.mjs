@@ -7,10 +7,14 @@
 // frames and closes; /ws-garbage sends an undecodable "key frame" as the 4th frame; /ws-token
 // wants Hello.token "sesame" (else Error(UNAUTHORIZED)); /ws-full refuses the first two Hellos
 // with Error(SERVER_FULL, retry_after_ms 2500); /ws-restart sends Error(SHUTTING_DOWN,
-// retry_after_ms 1200) after 5 frames; /ws-noframes welcomes but never sends a frame; /ws-hold
+// retry_after_ms 1200, "server restarting": a server that knows it comes back) after 5 frames,
+// /ws-stop the same with catgs-server's own reason on SIGTERM or SIGINT ("server shutting down",
+// which does not say whether it comes back); /ws-noframes welcomes but never sends a frame; /ws-hold
 // answers the first Pose only (the page keeps showing that frame, re-projected); /ws-drain sends
 // Stats.drain_ms_left 2600 (a draining server) right after Welcome and streams on. GET /scenes
-// lists three scenes, one with unknown counts (the page's picker). Every
+// lists three scenes, one with unknown counts (the page's picker); a Hello naming another scene is
+// refused as catgs-server refuses it (INVALID_ARGUMENT "no scene 'X' on this server (it has:
+// ...)"). A DepthRequest is answered with a hit 5 units ahead (the Notes panel's clicks). Every
 // session gets Stats once a second (frames_sent cumulative, means 0 when nothing was rendered, as
 // the server does). Under /noproto/ the page is served but .proto answers 415 (as libwebsockets
 // does without a MIME type).
@@ -25,6 +29,14 @@ const here = path.dirname(fileURLToPath(import.meta.url));
 const require = createRequire(import.meta.url);
 const WS_GUID = '258EAFA5-E914-47DA-95CA-C5AB0DC85B11';
 const MIME = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.json': 'application/json', '.proto': 'text/plain' };
+
+// Three scenes, as a server with three --scene files lists them (the WebSocket serves 'mock');
+// 'city' is not loaded yet and its format cannot be peeked, so its counts are null.
+const SCENES = [
+  { name: 'mock', gaussians: 152746, sh_degree: 0, bounds: { min: [-1, -1, -1], max: [1, 1, 1] }, file: 'mock.ply' },
+  { name: 'garden', gaussians: 5834784, sh_degree: 3, bounds: { min: [-9, -9, -9], max: [9, 9, 9] }, file: 'garden.ply' },
+  { name: 'city', gaussians: null, sh_degree: null, bounds: null, file: 'city.spz', loaded: false },
+];
 
 export function loadFixture(file = path.join(here, 'fixtures/stream_160x120.bin')) {
   const b = fs.readFileSync(file);
@@ -93,14 +105,7 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
   const server = http.createServer((req, res) => {
     let p = decodeURIComponent(new URL(req.url, 'http://x').pathname);
     if (p === '/scenes') {
-      // Three scenes, as a server with three --scene files lists them (the WebSocket serves
-      // 'mock'); 'city' is not loaded yet and its format cannot be peeked, so its counts are null.
-      const scenes = [
-        { name: 'mock', gaussians: 152746, sh_degree: 0, bounds: { min: [-1, -1, -1], max: [1, 1, 1] }, file: 'mock.ply' },
-        { name: 'garden', gaussians: 5834784, sh_degree: 3, bounds: { min: [-9, -9, -9], max: [9, 9, 9] }, file: 'garden.ply' },
-        { name: 'city', gaussians: null, sh_degree: null, bounds: null, file: 'city.spz', loaded: false },
-      ];
-      res.writeHead(200, { 'content-type': 'application/json' }).end(JSON.stringify(scenes));
+      res.writeHead(200, { 'content-type': 'application/json' }).end(JSON.stringify(SCENES));
       return;
     }
     const noProto = p.startsWith('/noproto/');
@@ -155,6 +160,9 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
         received.push({ session, path: scenario, body: msg.body, msg: msg[msg.body], at: Date.now() });
         if (msg.body === 'hello') {
           if (scenario === '/ws-token' && msg.hello.token !== 'sesame') return fail(4, 'wrong or missing token');
+          if (msg.hello.scene && !SCENES.some((x) => x.name === msg.hello.scene)) {
+            return fail(3, `no scene '${msg.hello.scene.slice(0, 64)}' on this server (it has: ${SCENES.map((x) => x.name).join(', ')})`);
+          }
           if (scenario === '/ws-full' && fullRefusals < 2) {
             fullRefusals++;
             return fail(5, 'server full (1 sessions)', 2500);
@@ -191,6 +199,9 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
             // A server draining (SIGTERM): its Stats say when the session will end.
             if (scenario === '/ws-drain') send({ stats: { frames_sent: 0, drain_ms_left: 2600 } });
           }
+        } else if (msg.body === 'depth_request') {
+          const d = msg.depth_request;
+          send({ depth_result: { request_id: d.request_id, hit: true, point: { x: 0, y: 0, z: 1 }, depth: 5, opacity: 1 } });
         } else if (msg.body === 'key_frame_request') {
           next = 0; // the fixture's first access unit is its IDR
         } else if (msg.body === 'pose') {
@@ -204,7 +215,8 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
           send({ frame: { sequence: sent++, pose_sequence: msg.pose.sequence, client_time_ms: msg.pose.client_time_ms,
             key_frame: fr.key, width: 160, height: 120, payload: fr.data } });
           if (scenario === '/ws-error' && sent === 5) return fail(8, 'mock: too slow');
-          if (scenario === '/ws-restart' && sent === 5) return fail(7, 'server shutting down', 1200);
+          if (scenario === '/ws-restart' && sent === 5) return fail(7, 'server restarting', 1200);
+          if (scenario === '/ws-stop' && sent === 5) return fail(7, 'server shutting down', 1200);
         }
       }
     });

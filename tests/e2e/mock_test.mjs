@@ -1,9 +1,11 @@
 // Browser test of the page's own behaviour against mock_server.mjs (no catgs-server needed):
 // handshake and Hello fields, pose flow, WebCodecs decoding, overlay, the JSON schema fallback,
 // server Error display + reconnect message + reconnect, decoder error recovery, Resize; the
-// viewer's states (first view, unreachable, wrong token, server full, restarting), stale stats,
-// reset, shared view links, help, fullscreen, camera paths and tours, latency hiding (the held
-// frame re-projected), the scene picker, and a phone at DPR 3.
+// viewer's states (first view, unreachable, wrong token, server full, stopping or restarting, a
+// scene the server lacks), stale stats, reset, shared view links, the zoom-out bound, help,
+// fullscreen, camera paths and tours, latency hiding (the held frame re-projected, its uncovered
+// part filled from its edge), the scene picker, Esc and the Notes panel, panels clear of the
+// stats, and a phone at DPR 3 (one row of 40 px toolbar buttons, More).
 // usage: node mock_test.mjs     Exit codes: 0 pass, 1 fail, 77 skipped (reason printed).
 import { existsSync, mkdtempSync, rmSync } from 'node:fs';
 import { createRequire } from 'node:module';
@@ -25,6 +27,7 @@ if (!existsSync(path.join(here, 'node_modules/playwright-core'))) {
 const require = createRequire(import.meta.url);
 const { chromium } = require('playwright-core');
 const { startMockServer } = await import('./mock_server.mjs');
+const { PNG } = require('pngjs');
 
 const log = (...m) => console.log('[mock]', ...m);
 const shotsDir = process.env.CATGS_MOCK_SHOTS || '';
@@ -120,6 +123,12 @@ try {
     const idle = await page.evaluate(() => window.catgs.overlayText());
     check(/server: idle/.test(idle) && !/render 0\.0 ms/.test(idle) && /FPS idle/.test(idle), `idle: no made-up numbers (${JSON.stringify(idle)})`);
     check(s.errs === 0, 'normal: no decoder errors');
+    // The mock's Stats measured no link rate (link_kbps 0): while frames come, the stats say
+    // nothing of a link, only the round trip and that nothing limits the stream (issue 64: "link"
+    // only for a rate measured on a full link).
+    await moveUntil(page, (c) => /not limited/.test(c.overlayText()));
+    const moving = await page.evaluate(() => window.catgs.overlayText());
+    check(/rtt [\d.]+ ms {2}not limited/.test(moving) && !/\blink\b/.test(moving), `stats: no link rate unless measured (${JSON.stringify(moving)})`);
 
     // Input: a mouse drag orbits (orientation changes, distance to the target is kept), the wheel
     // zooms, a held W flies forward; each goes out as Poses through the animation-frame loop.
@@ -147,6 +156,15 @@ try {
     await page.waitForTimeout(100);
     const afterFly = await page.evaluate(() => window.catgs.lastPoseSent);
     check(afterFly.sequence > afterWheel.sequence + 2 && dist(afterFly.position) < dist(afterWheel.position), 'input: W flies forward, a pose per frame');
+    // Zooming out stops at 1.5 scene scales from the orbit target (camera.js MAX_ORBIT_SCALES):
+    // from the reset view (5 units from the orbit centre (0, 0, 1), scene_scale 5), 30 notches out
+    // end 7.5 units away.
+    await page.keyboard.press('r');
+    await page.mouse.move(160, 120);
+    for (let i = 0; i < 30; i++) await page.mouse.wheel(0, 100);
+    await page.waitForTimeout(300);
+    const far = await page.evaluate(() => window.catgs.lastPoseSent.position);
+    check(Math.abs(Math.hypot(far[0], far[1], far[2] - 1) - 7.5) < 1e-6, `input: zoom out stops 1.5 scene scales from the orbit centre (${far.map((v) => v.toFixed(3))})`);
 
     // Resize: the page sends Resize with the new size in device pixels (even).
     await page.setViewportSize({ width: 401, height: 301 });
@@ -272,19 +290,24 @@ try {
     await page.close();
   }
 
-  // 9. Server restarting (SHUTTING_DOWN, retry_after_ms 1200): says so, comes back on its own.
-  {
-    const page = await openPage(`${base}/?ws=${wsUrl('/ws-restart')}`);
-    check(await moveUntil(page, (c) => /server restarting, reconnecting/.test(c.overlayText())), 'restart: "server restarting, reconnecting"');
-    check(await moveUntil(page, (c, n) => c.connected && n, true, 5000) && hellos('/ws-restart').length >= 2, 'restart: reconnected after the hint');
+  // 9. Server stopping (SHUTTING_DOWN, retry_after_ms 1200): "server stopping" when its reason
+  //    does not say more (catgs-server's on SIGTERM or SIGINT), "server restarting" only when it
+  //    says it restarts; both come back on their own.
+  for (const [scenario, word] of [['/ws-stop', 'stopping'], ['/ws-restart', 'restarting']]) {
+    const page = await openPage(`${base}/?ws=${wsUrl(scenario)}`);
+    const said = await moveUntil(page, (c, w) => new RegExp(`server ${w}, reconnecting`).test(c.overlayText()), word);
+    const text = await page.evaluate(() => window.catgs.overlayText());
+    check(said && !new RegExp(word === 'stopping' ? 'restarting' : 'stopping').test(text), `${word}: "server ${word}, reconnecting" (${JSON.stringify(text)})`);
+    if (word === 'stopping') await shot(page, 'server_stopping');
+    check(await moveUntil(page, (c, n) => c.connected && n, true, 5000) && hellos(scenario).length >= 2, `${word}: reconnected after the hint`);
     await page.close();
   }
 
   // 9b. A draining server's Stats (drain_ms_left): the page says when this stream ends.
   {
     const page = await openPage(`${base}/?ws=${wsUrl('/ws-drain')}`);
-    check(await moveUntil(page, (c) => /server restarting: this stream ends in 3 s/.test(c.overlayText())),
-      'drain: "server restarting: this stream ends in 3 s"');
+    check(await moveUntil(page, (c) => /server stopping: this stream ends in 3 s/.test(c.overlayText())),
+      'drain: "server stopping: this stream ends in 3 s" (a draining server cannot tell whether it comes back)');
     await shot(page, 'server_draining');
     await page.close();
   }
@@ -488,6 +511,37 @@ try {
     const rise = v.length === 16 ? (v[1] * cx + v[5] * cy + v[13]) / (v[3] * cx + v[7] * cy + v[15]) - cy : NaN;
     check(Math.abs(shift - want) < 0.05 * Math.abs(want) && Math.abs(rise) < 0.5,
       `reproject: a turn right moves the held frame's centre left by ${want.toFixed(1)} CSS px (${shift.toFixed(2)}, ${rise.toFixed(2)})`);
+    // A larger turn uncovers the window's right part: it continues the frame's right edge
+    // (clamp-to-edge, the backdrop behind the canvas), not black. Compared on screen: the
+    // uncovered strip's colour, row by row, against the frame's last column.
+    await turnRight(page, 0.3);
+    await sleep(300);
+    const png = (b64) => PNG.sync.read(Buffer.from(b64, 'base64'));
+    const screen = png((await page.screenshot()).toString('base64'));
+    const frame = png((await page.evaluate(() => window.catgs.snapshot())).split(',')[1]);
+    const px = (img, x, y) => [...img.data.subarray((y * img.width + x) * 4, (y * img.width + x) * 4 + 3)];
+    const rows = [105, 120, 135, 150, 165]; // between the toolbar and the hint
+    // The canvas's right edge on screen at these rows (where the matrix takes x = cssW).
+    const t2 = /^matrix3d\((.*)\)$/.exec(await transformOf(page))[1].split(',').map(Number);
+    const edgeX = (y) => (t2[0] * info.cssW + t2[4] * y + t2[12]) / (t2[3] * info.cssW + t2[7] * y + t2[15]);
+    const strip = rows.map((y) => {
+      const x0 = Math.ceil(Math.max(...rows.map(edgeX))) + 4;
+      const xs = Array.from({ length: info.cssW - 2 - x0 }, (_, i) => x0 + i);
+      const mean = [0, 1, 2].map((c) => xs.reduce((a, x) => a + px(screen, x, y)[c], 0) / xs.length);
+      // The frame's last column near that row (a turn about the camera's down axis stretches the
+      // edge's rows a little): the closest colour of it.
+      const fy = Math.round((y * frame.height) / info.cssH);
+      const near = Array.from({ length: 13 }, (_, k) => px(frame, frame.width - 1, Math.min(frame.height - 1, Math.max(0, fy - 6 + k))));
+      const diff = (e) => Math.max(...e.map((v, c) => Math.abs(v - mean[c])));
+      const edge = near.reduce((a, e) => (diff(e) < diff(a) ? e : a));
+      return { y, x0, mean: mean.map(Math.round), edge, off: Math.round(diff(edge)) };
+    });
+    const shown = await page.evaluate(() => !document.getElementById('backdrop').hidden);
+    const darkStrip = strip.every((r) => Math.max(...r.mean) < 8);
+    const matches = strip.filter((r) => r.off <= 30).length;
+    check(shown && strip[0].x0 < info.cssW - 20 && !darkStrip && matches >= rows.length - 1,
+      `reproject: the uncovered right part continues the frame's right edge, not black (${JSON.stringify(strip)})`);
+    await shot(page, 'reproject_edge_fill');
     await page.close();
     const off = await openPage(`${base}/?reproject=0&ws=${wsUrl('/ws-hold')}`);
     check(await firstFrame(off), 'reproject=0: first frame');
@@ -501,7 +555,8 @@ try {
     const end = Date.now() + 5000;
     while (Date.now() < end && (await live.evaluate(() => window.catgs.lastFrame.poseSequence)) !== seq) await sleep(50);
     await sleep(100);
-    check((await transformOf(live)) === '', 'reproject: the transform goes once the frame of the new pose is shown');
+    check((await transformOf(live)) === '' && (await live.evaluate(() => document.getElementById('backdrop').hidden)),
+      'reproject: the transform (and the edge behind it) goes once the frame of the new pose is shown');
     await live.close();
   }
 
@@ -529,6 +584,94 @@ try {
     await page.close();
   }
 
+  // 11e. ?scene= naming a scene the server does not have: a plain sentence and the scene picker
+  //      (filled from GET /scenes) in the message, no retry loop; choosing a scene opens it.
+  {
+    const page = await openPage(`${base}/?scene=nosuchscene&ws=${wsUrl('/ws')}`);
+    const tries = () => hellos('/ws').filter((h) => h.msg.scene === 'nosuchscene').length;
+    check(await waitText(page, /^There is no scene named 'nosuchscene' on this server\. Choose one:/), `no scene: said in words (${JSON.stringify(await messageText(page))})`);
+    await page.waitForFunction(() => document.querySelectorAll('#messages #scene-picker option').length >= 3, null, { timeout: 5000 }).catch(() => {});
+    const ui = await page.evaluate(() => {
+      const p = document.querySelector('#messages #scene-picker');
+      return p && { shown: !p.hidden && p.getBoundingClientRect().height > 0, value: p.value, label: p.selectedOptions[0]?.textContent,
+        names: [...p.options].filter((o) => o.value).map((o) => o.value), cls: p.closest('.msg').className };
+    });
+    check(!!ui && ui.shown && ui.names.join(',') === 'mock,garden,city' && ui.value === '' && /choose a scene/.test(ui.label),
+      `no scene: the picker in the message lists the server's scenes, none chosen (${JSON.stringify(ui)})`);
+    check(!!ui && !/error/.test(ui.cls) && !/reconnecting|rejected|it has:/.test(await messageText(page)), 'no scene: no red technical line, no countdown');
+    await shot(page, 'no_such_scene');
+    await sleep(3000);
+    check(tries() === 1, `no scene: no retries (${tries()} Hellos in 3 s)`);
+    await Promise.all([page.waitForNavigation(), page.selectOption('#scene-picker', 'garden')]);
+    check(new URL(page.url()).searchParams.get('scene') === 'garden', `no scene: choosing garden reopens the page on it (${page.url()})`);
+    await page.waitForFunction(() => window.catgs.connected, null, { timeout: 10000 });
+    await page.close();
+  }
+
+  // 11f. Notes: Esc closes the new hotspot's form (the next key is a key, not typed into it), and
+  //      the Notes panel, closed while a hotspot is placed or a distance measured, comes back when
+  //      that ends: placed, cancelled, Esc. Panels never cover the stats (?stats=1).
+  {
+    const page = await openPage(`${base}/?stats=1&ws=${wsUrl('/ws')}`);
+    check(await moveUntil(page, (c) => c.framesDecoded >= 2), 'notes: streams');
+    const vis = (id) => page.evaluate((i) => !document.getElementById(i).hidden, id);
+    await page.click('#btn-notes');
+    await page.click('#btn-add-hotspot');
+    check(!(await vis('notes')), 'notes: Add hotspot closes the panel (the scene takes the click)');
+    await page.mouse.click(100, 150);
+    await page.waitForSelector('#hotspot-form:not([hidden])', { timeout: 5000 });
+    await page.keyboard.type('Ti');
+    await shot(page, 'hotspot_form');
+    await page.keyboard.press('Escape');
+    check(!(await vis('hotspot-form')) && (await vis('notes')), 'notes: Esc in the new hotspot form closes it, the Notes panel is back');
+    await page.keyboard.press('m');
+    const after = await page.evaluate(() => ({ title: document.getElementById('hotspot-title').value, mode: window.catgs.notes.mode }));
+    check(after.title === '' && after.mode === 'measure', `notes: the next M measures, nothing typed into the form (${JSON.stringify(after)})`);
+    check(!(await vis('notes')), 'notes: measuring closes the panel');
+    await page.keyboard.press('Escape');
+    check((await vis('notes')) && (await page.evaluate(() => window.catgs.notes.mode)) === null, 'notes: Esc ends measuring, the panel is back');
+    await page.click('#btn-measure');
+    await page.mouse.click(100, 150);
+    await page.mouse.click(200, 100);
+    await page.waitForFunction(() => window.catgs.notes.mode === null, null, { timeout: 5000 }).catch(() => {});
+    check(await vis('notes'), 'notes: the panel is back once the two points are measured');
+    await page.click('#btn-add-hotspot');
+    await page.mouse.click(100, 150);
+    await page.waitForSelector('#hotspot-form:not([hidden])', { timeout: 5000 });
+    await page.click('#btn-cancel-hotspot');
+    check(!(await vis('hotspot-form')) && (await vis('notes')) && (await page.evaluate(() => window.catgs.notes.mode)) === null,
+      'notes: Cancel closes the form and ends adding, the panel is back');
+    await page.click('#btn-add-hotspot');
+    await page.mouse.click(100, 150);
+    await page.waitForSelector('#hotspot-form:not([hidden])', { timeout: 5000 });
+    await page.fill('#hotspot-title', 'Pole');
+    await page.click('#hotspot-form button[type=submit]');
+    const n = await page.evaluate(() => window.catgs.notes);
+    check(n.hotspots.length === 1 && n.hotspots[0].title === 'Pole' && (await vis('notes')), 'notes: a placed hotspot, the panel is back');
+    // Esc in another panel's field (the scale) closes that panel.
+    await page.focus('#scale-metres');
+    await page.keyboard.press('Escape');
+    check(!(await vis('notes')), 'notes: Esc in the scale field closes the Notes panel');
+    // No panel covers the stats box (a 320x240 window: they share columns).
+    await page.waitForFunction(() => /server:/.test(document.getElementById('stats').textContent), null, { timeout: 5000 }).catch(() => {});
+    const overlaps = [];
+    for (const [panel, open] of [['helppanel', 'h'], ['paths', 'p'], ['notes', 'n'], ['quality', null]]) {
+      if (open) await page.keyboard.press(open);
+      else await page.click('#btn-quality');
+      await sleep(100);
+      const r = await page.evaluate((id) => {
+        const box = (el) => { const b = el.getBoundingClientRect(); return { l: b.left, t: b.top, r: b.right, b: b.bottom }; };
+        return { panel: box(document.getElementById(id)), stats: box(document.getElementById('stats')), shown: !document.getElementById(id).hidden };
+      }, panel);
+      const over = r.panel.l < r.stats.r && r.stats.l < r.panel.r && r.panel.t < r.stats.b && r.stats.t < r.panel.b;
+      if (!r.shown || over || r.panel.b > 240) overlaps.push({ panel, ...r });
+      if (panel === 'notes') await shot(page, 'notes_panel_under_stats');
+      await page.keyboard.press('Escape');
+    }
+    check(overlaps.length === 0, `stats: help, paths, notes and quality open below the stats box, within the window (${JSON.stringify(overlaps)})`);
+    await page.close();
+  }
+
   // 12. A phone: 390x844 CSS pixels at DPR 3 with touch. The stream is capped (886x1920, not
   //     1170x2532), nothing on screen is cut off, and the hint speaks of fingers.
   {
@@ -544,7 +687,41 @@ try {
       check(v.width === 886 && v.height === 1920 && hello.viewport_width === 886 && hello.viewport_height === 1920,
         `phone: Hello asks for 886x1920 at DPR 3 (${hello.viewport_width}x${hello.viewport_height})`);
       await page.evaluate(() => window.catgs.importText('x.trace', 'junk')); // a long message too
+      // The toolbar: one row of buttons a finger can hit (40 CSS px tall at least); Link, Paths,
+      // Quality and the scene picker under More.
+      const bar = () => page.evaluate(() => {
+        const items = [...document.querySelectorAll('#toolbar > *')].filter((el) => getComputedStyle(el).display !== 'none')
+          .map((el) => { const r = el.getBoundingClientRect(); return { id: el.id, top: Math.round(r.top), h: Math.round(r.height * 10) / 10, right: r.right }; });
+        return { items, open: document.getElementById('toolbar').classList.contains('menu-open') };
+      });
+      const row = await bar();
+      const rowOk = row.items.length >= 5 && row.items.every((b) => b.h >= 40 && b.top === row.items[0].top && b.right <= 390) &&
+        row.items.some((b) => b.id === 'btn-menu') && !row.items.some((b) => ['btn-paths', 'btn-link', 'btn-quality'].includes(b.id));
+      check(rowOk, `phone: toolbar buttons at least 40 px tall, on one row (${JSON.stringify(row.items)})`);
+      const statsBox = () => page.evaluate(() => { const r = document.getElementById('stats').getBoundingClientRect(); return { l: r.left, t: r.top, r: r.right, b: r.bottom }; });
+      const panelClear = async (id) => {
+        const r = await page.evaluate((i) => { const b = document.getElementById(i).getBoundingClientRect(); return { l: b.left, t: b.top, r: b.right, b: b.bottom }; }, id);
+        const st = await statsBox();
+        const over = r.l < st.r && st.l < r.r && r.t < st.b && st.t < r.b;
+        return { ok: !over && r.b <= 844, panel: r, stats: st };
+      };
+      await page.tap('#btn-menu');
+      const menu = await bar();
+      check(menu.open && ['scene-picker', 'btn-link', 'btn-paths', 'btn-quality'].every((id) => menu.items.some((b) => b.id === id && b.h >= 40)),
+        `phone: More opens the menu: scenes, Link, Paths, Quality (${JSON.stringify(menu.items.map((b) => b.id))})`);
+      await shot(page, 'phone_dpr3_menu');
+      await page.tap('#btn-paths');
+      const paths = await panelClear('paths');
+      check(!(await bar()).open && (await page.isVisible('#paths')) && paths.ok, `phone: Paths from the menu opens its panel below the stats, the menu closed (${JSON.stringify(paths)})`);
+      await shot(page, 'phone_dpr3_paths');
+      // The stats grow once the server's Stats come (3 more lines): the open panel moves down.
+      await page.waitForFunction(() => /rtt/.test(document.getElementById('stats').textContent), null, { timeout: 5000 }).catch(() => {});
+      await sleep(100);
+      const grown = await panelClear('paths');
+      check(grown.ok && grown.stats.b - grown.stats.t > paths.stats.b - paths.stats.t - 1, `phone: as the stats grow, the open panel stays below them (${JSON.stringify(grown)})`);
       await page.tap('#btn-help');
+      const helpClear = await panelClear('helppanel');
+      check(helpClear.ok, `phone: the help panel does not cover the stats (${JSON.stringify(helpClear)})`);
       const boxes = await page.evaluate(() => [...document.querySelectorAll('.overlay:not([hidden])')].map((el) => {
         const r = el.getBoundingClientRect();
         return { id: el.id, left: r.left, top: r.top, right: r.right, bottom: r.bottom, sw: el.scrollWidth, cw: el.clientWidth };

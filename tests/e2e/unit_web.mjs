@@ -146,6 +146,35 @@ test('pan moves camera and target together; zoom scales the distance', () => {
   assert.ok(cam.vlen(cam.vsub(c.position, p)) > 0);
 });
 
+test('zoom out stops at MAX_ORBIT_SCALES scene scales from the target; zoom in goes on', () => {
+  // The camera starts 5.1 units from the orbit centre, about one scene scale (as a server's first
+  // view does).
+  const w = { ...welcome(), orbit_centre: { x: 0, y: 0, z: 0 }, up: { x: 0, y: -1, z: 0 }, scene_scale: 4.5 };
+  const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds, w);
+  const dist = () => cam.vlen(cam.vsub(c.position, c.target));
+  const dir0 = cam.vnorm(cam.vsub(c.position, c.target));
+  close([c.maxDistance], [4.5 * cam.MAX_ORBIT_SCALES], 1e-12);
+  assert.ok(cam.MAX_ORBIT_SCALES >= 1.25 && cam.MAX_ORBIT_SCALES <= 2, `short of the background (${cam.MAX_ORBIT_SCALES})`);
+  // 12 wheel notches out (100 px each: a factor e^0.1) and many more: the bound, not past it.
+  for (let i = 0; i < 40; i++) c.zoom(Math.exp(0.1));
+  close([dist()], [c.maxDistance], 1e-9);
+  close(cam.vnorm(cam.vsub(c.position, c.target)), dir0, 1e-9); // along the same line
+  const v = c.version;
+  c.zoom(2);
+  assert.equal(c.version, v, 'at the bound, zooming out is no change (no pose to send)');
+  c.zoom(0.5);
+  close([dist()], [c.maxDistance / 2], 1e-9);
+  // A camera that starts farther away may zoom in, and not further out.
+  const f = new cam.OrbitCamera({ position: [0, 0, -20], orientation: [1, 0, 0, 0], fovDeg: 50, target: [0, 0, 0], up: [0, -1, 0], sceneScale: 3 });
+  f.zoom(1.5);
+  close(f.position, [0, 0, -20], 1e-12);
+  f.zoom(0.9);
+  close(f.position, [0, 0, -18], 1e-9);
+  // An older server (scene_scale 0): the bounds' diagonal is the scale, so the bound is generous.
+  const legacy = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
+  close([legacy.maxDistance], [Math.sqrt(12) * cam.MAX_ORBIT_SCALES], 1e-12);
+});
+
 test('fly moves along forward/right/up; setPose validates and keeps the target distance', () => {
   const w = welcome();
   const c = cam.OrbitCamera.fromWelcome(w.initial_pose, w.scene_bounds);
@@ -214,6 +243,43 @@ test('re-projection: a pure rotation is exact at any depth; the same pose is the
   const I = reproject.reprojection(from, from, 3, 320, 240);
   close(I.flat(), [1, 0, 0, 0, 1, 0, 0, 0, 1], 1e-9);
   assert.equal(reproject.cssTransform(I, 320, 240, 640, 480), 'matrix3d(1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1)');
+});
+
+test('re-projection fill: where the moved frame does not reach, its nearest edge (clamp-to-edge), never black', () => {
+  close(reproject.invert3([[2, 0, 1], [0, 4, 0], [0, 0, 1]]).flat(), [0.5, 0, -0.5, 0, 0.25, 0, 0, 0, 1], 1e-12);
+  assert.equal(reproject.invert3([[1, 2, 3], [2, 4, 6], [0, 0, 1]]), null);
+  // A 40x20 frame whose pixel (x, y) has red 100 + x and green 100 + y (nothing black).
+  const img = (w, h, f) => {
+    const data = new Uint8ClampedArray(w * h * 4);
+    for (let y = 0; y < h; y++) for (let x = 0; x < w; x++) data.set([...f(x, y), 255], (y * w + x) * 4);
+    return { width: w, height: h, data };
+  };
+  const src = img(40, 20, (x, y) => [100 + x, 100 + y, 7]);
+  const at = (o, x, y) => [...o.data.subarray((y * o.width + x) * 4, (y * o.width + x) * 4 + 4)];
+  // Moved 10 px right and 5 down: the uncovered left columns repeat the frame's left edge, the
+  // top rows its top edge; the rest is the frame, moved.
+  const out = img(40, 20, () => [0, 0, 0]);
+  assert.ok(reproject.edgeFill([[1, 0, 10], [0, 1, 5], [0, 0, 1]], 40, 20, src, out));
+  assert.deepEqual(at(out, 3, 12), [100, 107, 7, 255]);
+  assert.deepEqual(at(out, 25, 2), [115, 100, 7, 255]);
+  assert.deepEqual(at(out, 0, 0), [100, 100, 7, 255]);
+  assert.deepEqual(at(out, 25, 12), [115, 107, 7, 255]);
+  // A half-size source: coordinates scale to it.
+  const small = img(20, 10, (x, y) => [100 + 2 * x, 100 + 2 * y, 7]);
+  const out2 = img(40, 20, () => [0, 0, 0]);
+  reproject.edgeFill([[1, 0, 10], [0, 1, 5], [0, 0, 1]], 40, 20, small, out2);
+  assert.deepEqual(at(out2, 25, 12), [114, 106, 7, 255]);
+  // A real turn (0.3 rad right, fov 50): the right part of the view is past the frame's right
+  // edge, the row of the frame's centre continues its last column there; no pixel stays black.
+  const p = [0, 0, -3];
+  const from = { position: p, orientation: cam.lookAt(p, [0, 0, 0], [0, -1, 0]), fovDeg: 50 };
+  const to = { position: p, orientation: cam.qmul(cam.qfromAxisAngle(cam.cameraDown(from.orientation), 0.3), from.orientation), fovDeg: 50 };
+  const H = reproject.reprojection(from, to, 3, 40, 20);
+  assert.ok(reproject.applyHomography(H, 39, 10)[0] < 30, 'the frame moves left');
+  const out3 = img(40, 20, () => [0, 0, 0]);
+  reproject.edgeFill(H, 40, 20, src, out3);
+  assert.deepEqual(at(out3, 39, 10), [139, 110, 7, 255]);
+  for (let i = 0; i < out3.data.length; i += 4) assert.ok(out3.data[i] >= 100, `pixel ${i / 4} is black`);
 });
 
 // A Baseline SPS (level 3.0) followed by PPS and an IDR slice header, as x264 would start an IDR.
@@ -391,7 +457,7 @@ const vp = await imp('viewport.js');
 const link = await imp('view_link.js');
 const paths = await imp('paths.js');
 
-test('retry policy: a wrong token stops; SERVER_FULL / SHUTTING_DOWN follow the hint; drops back off', () => {
+test('retry policy: a wrong token or a refused Hello stops; SERVER_FULL / SHUTTING_DOWN follow the hint; drops back off', () => {
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_UNAUTHORIZED, retry_after_ms: 5000 }, false), { permanent: true });
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_SERVER_FULL, retry_after_ms: 3000 }, false), { permanent: false, delayMs: 3000 });
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_SHUTTING_DOWN, retry_after_ms: 1 }, true), { permanent: false, delayMs: 250 });
@@ -400,6 +466,10 @@ test('retry policy: a wrong token stops; SERVER_FULL / SHUTTING_DOWN follow the 
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_SERVER_FULL, retry_after_ms: 0 }, false), { permanent: false, delayMs: null });
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_PROTOCOL }, false), { permanent: true });
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_PROTOCOL }, true), { permanent: false, delayMs: null });
+  // ?scene=nosuchscene: the server refuses the Hello (INVALID_ARGUMENT "no scene ..."), and would
+  // again; an INVALID_ARGUMENT later in a session (a bad pose) ends that session only.
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_INVALID_ARGUMENT, reason: "no scene 'x' on this server (it has: a)" }, false), { permanent: true });
+  assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_INVALID_ARGUMENT }, true), { permanent: false, delayMs: null });
   assert.deepEqual(conn.retryPolicy({ code: 8, retry_after_ms: 100 }, true), { permanent: false, delayMs: null });
   assert.deepEqual(conn.retryPolicy({ code: conn.ERROR_RATE_LIMITED, retry_after_ms: 1500 }, false), { permanent: false, delayMs: 1500 });
   assert.deepEqual(conn.retryPolicy(null, true), { permanent: false, delayMs: null });
@@ -655,18 +725,130 @@ test('annotations: the server\'s rules, ids, hotspot tours and the share link', 
   assert.throws(() => notes.decodeNotes(Buffer.from('{"version":1,"hotspots":[],"measure":[1]}').toString('base64url')), /measure/);
 });
 
-test('walk step: stops short of a wall, eases to eye height above the ground', () => {
+// ---- issues 38 and 64: walk mode (annotations.js) ----
+
+test('walk probes: wide views from the eye, one roll each in the world, lifted while landing', () => {
+  const up = [0, -1, 0]; // y down, as the synthetic room
+  const s = notes.walkSizes(1.6);
+  close([s.radius, s.step, s.look, s.nearLook], [0.4, 0.16, 1.6, 0.4], 1e-12);
+  assert.ok(Math.abs(notes.walkSizes(0.4).radius - 0.3) < 1e-12, 'at least 1.5 near planes');
+  const p = [1, -2, 3];
+  const fwd = (pose) => cam.cameraForward(pose.orientation);
+  // Standing: the ground under the eye only, straight down, a 9-pixel view of 90 degrees.
+  const idle = notes.walkProbes(p, up, s);
+  assert.deepEqual(idle.map((x) => x.name), ['under']);
+  close(idle[0].pose.position, p);
+  close(fwd(idle[0].pose), [0, 1, 0], 1e-12);
+  assert.equal(idle[0].size, notes.GROUND_PROBE_PIXELS);
+  assert.equal(idle[0].pose.fovDeg, notes.WALK_PROBE_FOV);
+  // Landing: under from the near plane and a margin above the eye, up from as far under it.
+  const land = notes.walkProbes(p, up, s, { landing: true, roll: 1 });
+  assert.deepEqual(land.map((x) => x.name), ['under', 'above']);
+  close(land[0].pose.position, [1, -2.25, 3]);
+  close(land[1].pose.position, [1, -1.75, 3]);
+  close(fwd(land[1].pose), up, 1e-12);
+  // Walking +z, the ground known at height 0.2 (y -0.2): the ground a look ahead, level probes
+  // along the way from the eye and from a quarter of the eye height above the ground.
+  const walk = notes.walkProbes(p, up, s, { dir: [0, 0, 1], look: 0.8, ground: 0.2 });
+  assert.deepEqual(walk.map((x) => x.name), ['under', 'ahead', 'eye', 'knee']);
+  close(walk[1].pose.position, [1, -2, 3.8]);
+  close(fwd(walk[2].pose), [0, 0, 1], 1e-12);
+  close(walk[3].pose.position, [1, -(0.2 + 0.4), 3]);
+  assert.equal(walk[2].size, notes.LEVEL_PROBE_PIXELS);
+  assert.equal(walk[2].pose.fovDeg, notes.LEVEL_PROBE_FOV);
+  // The two rolls: the same ray down, image axes a quarter turn apart, whichever way one walks.
+  const r0 = notes.walkVerticalView(p, [0, 1, 0], up, 0);
+  const r1 = notes.walkVerticalView(p, [0, 1, 0], up, 1);
+  close(fwd(r0), fwd(r1), 1e-12);
+  assert.ok(Math.abs(cam.vdot(cam.cameraRight(r0.orientation), cam.cameraRight(r1.orientation))) < 1e-12);
+  close(walk[0].pose.orientation, r0.orientation, 1e-12);
+});
+
+test('walk plan: the ground known from two rolls, what the level probes proved free, edges and steps', () => {
   const up = [0, -1, 0];
-  // Walking +z by 0.1 with a wall 1.0 ahead and a radius of 0.3: free.
-  let p = notes.walkStep([0, 0, 0], [0, 0, 0.1], up, { wallDistance: 1.0, groundDistance: Infinity, eyeHeight: 1.6, radius: 0.3 });
-  close(p, [0, 0, 0.1]);
-  // 0.35 ahead: the step would end within the radius: blocked.
-  p = notes.walkStep([0, 0, 0], [0, 0, 0.1], up, { wallDistance: 0.35, eyeHeight: 1.6, radius: 0.3 });
-  close(p, [0, 0, 0]);
-  // The ground 1.0 below with an eye height of 1.6: rise by half the difference (ease 0.5), i.e.
-  // along up (-y).
-  p = notes.walkStep([0, 0, 0], [0, 0, 0], up, { groundDistance: 1.0, eyeHeight: 1.6, radius: 0.3, ease: 0.5 });
-  close(p, [0, -0.3, 0]);
+  const s = notes.walkSizes(1.6);
+  const hit = (depth) => ({ hit: true, depth });
+  const miss = { hit: false };
+  const o = [0, -1.6, 0]; // the eye 1.6 above the ground at height 0
+  // Landing: one look is not enough; a second at the other roll that agrees is.
+  const a = notes.walkPlan(o, up, s, { under: hit(1.85), above: hit(1.0) }, { landing: true, roll: 0 });
+  assert.equal(a.confirmed, false);
+  assert.ok(Math.abs(a.ground0) < 1e-12 && Math.abs(a.ceiling - 2.35) < 1e-12, `${a.ground0} ${a.ceiling}`);
+  assert.equal(notes.walkGroundAt(a, o, up), null, 'no height to follow yet');
+  const same = notes.walkPlan(o, up, s, { under: hit(1.85) }, { landing: true, roll: 0, previous: a });
+  assert.equal(same.confirmed, false, 'the same roll again proves nothing');
+  const b = notes.walkPlan(o, up, s, { under: hit(1.85) }, { landing: true, roll: 1, previous: a });
+  assert.equal(b.confirmed, true);
+  // Two rolls that never agree: after four looks, the lower of the last two.
+  let q = null;
+  for (let k = 0; k < 4; k++) q = notes.walkPlan(o, up, s, { under: hit(k % 2 ? 1.35 : 1.85) }, { landing: true, roll: k % 2, previous: q });
+  assert.ok(q.confirmed && Math.abs(q.ground0) < 1e-12, `after ${q.tries} looks: ${q.ground0}`);
+  // Walking +z from b: the level probes saw a wall 3 ahead: free to the look (1.6).
+  const z = [0, 0, 1];
+  const go = (answers, previous = b, roll = 0) => notes.walkPlan(o, up, s, answers, { dir: z, look: 1.6, previous, roll });
+  let w = go({ under: hit(1.6), ahead: hit(1.62), eye: hit(3), knee: miss });
+  assert.deepEqual([w.reason, w.allowed, w.free], ['', 1.6, 3]);
+  assert.ok(Math.abs(w.ground1 + 0.02) < 1e-12);
+  // 1.5 ahead (the knee saw it): up to the stop distance short of it.
+  w = go({ under: hit(1.6), ahead: hit(1.6), eye: miss, knee: hit(1.5) });
+  assert.equal(w.reason, 'obstacle');
+  assert.ok(Math.abs(w.allowed - 1.1) < 1e-12);
+  // No ground a look ahead, or more than a step up or down: not a step.
+  assert.deepEqual([go({ under: hit(1.6), ahead: miss }).reason, go({ under: hit(1.6), ahead: miss }).allowed], ['edge', 0]);
+  w = go({ under: hit(1.6), ahead: hit(1.3) });
+  assert.deepEqual([w.reason, w.allowed], ['step', 0]);
+  assert.ok(Math.abs(w.aheadSeen - 0.3) < 1e-12);
+  // A reading far under the known ground (a gap) is left out: the height holds...
+  const gap = go({ under: hit(2.4), ahead: hit(1.6) });
+  assert.ok(gap.confirmed && Math.abs(gap.ground0) < 1e-12 && Math.abs(gap.pending + 0.8) < 1e-12);
+  // ...unless the other roll sees it too, within half an eye height: land again there.
+  const again = go({ under: hit(2.4), ahead: hit(2.4) }, gap, 1);
+  assert.deepEqual([again.confirmed, again.reason], [false, 'check']);
+  // More than half an eye height off (flowers_sh3's floor seen only from above): left out.
+  const far = go({ under: hit(0.3), ahead: hit(1.6) });
+  const far2 = go({ under: hit(0.3), ahead: hit(1.6) }, far, 1);
+  assert.ok(far2.confirmed && Math.abs(far2.ground0) < 1e-12, 'the known ground holds');
+  // No ground at all (a scene without a floor): walks level where the level probes see nothing.
+  const none = notes.walkPlan(o, up, s, { under: miss, ahead: miss, eye: miss, knee: miss }, { dir: z, look: 1.6 });
+  assert.deepEqual([none.confirmed, none.ground0, none.reason, none.allowed], [true, null, '', 1.6]);
+});
+
+test('walk step: never past what the plan allows, eases to eye height, rises only under the ceiling', () => {
+  const up = [0, -1, 0];
+  const s = notes.walkSizes(1.6);
+  const z = [0, 0, 1];
+  const plan = { origin: [0, -1.6, 0], dir: z, look: 1.6, ground0: 0, ground1: 0.16, allowed: 1.0, reason: 'obstacle', confirmed: true, ceiling: null };
+  // The ground between the origin and a look ahead: linear.
+  assert.ok(Math.abs(notes.walkGroundAt(plan, [0, 0, 0.8], up) - 0.08) < 1e-12);
+  assert.ok(Math.abs(notes.walkGroundAt(plan, [0, 0, 5], up) - 0.16) < 1e-12);
+  // 0.5 along: moves 0.5, and eases up towards 1.6 above the ground there (0.05).
+  let r = notes.walkStep([0, -1.6, 0], z, 0.5, up, s, plan, 0.05);
+  assert.equal(r.moved, 0.5);
+  assert.ok(r.position[1] < -1.6 && r.position[1] > -1.65, `${r.position}`);
+  // From 0.9 it may go 0.1 more: then blocked by the obstacle.
+  r = notes.walkStep([0, -1.6, 0.9], z, 0.5, up, s, plan, 0.05);
+  assert.ok(Math.abs(r.moved - 0.1) < 1e-12 && r.blocked && !r.waiting);
+  r = notes.walkStep(r.position, z, 0.5, up, s, plan, 0.05);
+  assert.deepEqual([r.moved, r.blocked], [0, true]);
+  // The look's end without an obstacle: waits for the next look, not blocked.
+  r = notes.walkStep([0, -1.6, 0.9], z, 0.5, up, s, { ...plan, reason: '' }, 0.05);
+  assert.ok(r.waiting && !r.blocked);
+  // Another direction (20 degrees off) waits for its own look.
+  const off = [Math.sin(0.35), 0, Math.cos(0.35)];
+  r = notes.walkStep([0, -1.6, 0], off, 0.5, up, s, plan, 0.05);
+  assert.deepEqual([r.moved, r.waiting], [0, true]);
+  // Standing at eye height: nothing moves (no pose a frame for nothing).
+  const flat = { ...plan, ground1: 0 };
+  r = notes.walkStep([0, -1.6, 0], null, 0, up, s, flat, 0.05);
+  assert.deepEqual(r.position, [0, -1.6, 0]);
+  // Landing 0.5 above the ground under a ceiling at 1.2: rises to 1.2 - 0.4, no higher.
+  const landing = { origin: [0, -0.5, 0], dir: null, look: 1.6, ground0: 0, ground1: null, confirmed: true, ceiling: 1.2, reason: '' };
+  let p = [0, -0.5, 0];
+  for (let k = 0; k < 200; k++) p = notes.walkStep(p, null, 0, up, s, landing, 0.05).position;
+  assert.ok(Math.abs(-p[1] - 0.8) < 1e-3, `${p}`);
+  // An unconfirmed plan holds the height.
+  r = notes.walkStep([0, -0.5, 0], null, 0, up, s, { ...landing, confirmed: false }, 0.05);
+  assert.deepEqual(r.position, [0, -0.5, 0]);
   close(notes.alongGround([1, 2, 3], up), [1, 0, 3]);
 });
 
