@@ -35,8 +35,14 @@ bool LinkRate::receiver_held(Clock::time_point now) const {
   return have_receiver_held_ && ms_between(receiver_held_at_, now) < recent_ms;
 }
 
+double LinkRate::network_queue_ms(const SocketSample& s) const {
+  if (!s.valid) return standing_ms_;
+  if (!network_busy(s)) return 0.0;
+  return std::min(standing_ms_, params_.rtt_slack * (s.rtt_ms - s.min_rtt_ms));
+}
+
 double LinkRate::path_queue_ms(const SocketSample& s, Clock::time_point now) const {
-  if (receipts_fresh(now)) return network_busy(s) ? standing_ms_ : 0.0;
+  if (receipts_fresh(now)) return network_queue_ms(s);
   return s.valid ? std::max(0.0, s.rtt_ms - s.min_rtt_ms) : 0.0;
 }
 
@@ -64,9 +70,9 @@ bool LinkRate::congested(double delay_ms, const SocketSample& s, Clock::time_poi
   // receipt for it: issue 64, web_client/app.js and catgs-loadgen.)
   if (receipts_fresh(now)) {
     cause = Cause::receipts;
-    if (!network_busy(s)) return false;
-    const bool building = standing_ms_ > params_.queue_ms && standing_ms_ > standing_before_ + params_.queue_ms / 4;
-    return building || standing_ms_ > params_.queue_ms + receipt_own_ms_;
+    const double queue = network_queue_ms(s);
+    const bool building = queue > params_.queue_ms && standing_ms_ > standing_before_ + params_.queue_ms / 4;
+    return building || queue > params_.queue_ms + receipt_own_ms_;
   }
   cause = Cause::round_trip;
   return s.valid && s.rtt_ms - s.min_rtt_ms > std::max(params_.rtt_rise_ms, own);

@@ -24,7 +24,8 @@
 // A client that reads late (a busy page, a busy host) is not a slow link (issue 64): a send the
 // receiver's window held back (tcpi_rwnd_limited) is not the network's delay, and its delivery
 // rate is the client's reading, not the link's; the receipts' queue is the lesser of the last two
-// (a host that ran the client late delays one frame here and there, a network queue every frame).
+// (a host that ran the client late delays one frame here and there, a network queue every frame),
+// and counts only up to twice the round trip's rise (a network queue delays the ACKs as well).
 // A receipt says when a frame arrived only if the
 // client was listening: the page and catgs-loadgen send none for a frame they read after their
 // thread was away (web_client/app.js, tools/loadgen), so late reads never look like a queue.
@@ -76,6 +77,11 @@ class LinkRate {
     // receipts say (a client busy between reads, rendering or decoding, stamps its receipts late;
     // its kernel still acknowledges at once, so the round trip stays at its minimum).
     double idle_rtt_ms = 2.0;
+    // A queue on the network delays TCP's acknowledgements as much as the frames: the receipts'
+    // queue counts up to this many times the round trip's rise (the smoothed round trip lags a
+    // building queue by a few ACKs). A host that runs the client or its browser late (their
+    // scheduling, not the wire) delays the receipts by far more than the round trip.
+    double rtt_slack = 2.0;
     // The receiver's window held the socket (tcpi_rwnd_limited) for at least this share of a
     // frame's send delay: the client reads late, its delay is not the link's (issue 64).
     double rwnd_share_of_delay = 0.25;
@@ -161,6 +167,9 @@ class LinkRate {
   bool network_busy(const SocketSample& s) const;
   // The queue on the path now, ms: the receipts', else the round trip above its minimum.
   double path_queue_ms(const SocketSample& s, Clock::time_point now) const;
+  // The receipts' queue as far as the network shows it: standing_ms_, up to rtt_slack x the round
+  // trip's rise (0 while the round trip is at its minimum; all of it without TCP_INFO).
+  double network_queue_ms(const SocketSample& s) const;
   // The receiver's window held a frame's send back within the last 500 ms or 4 frame intervals.
   bool receiver_held(Clock::time_point now) const;
 

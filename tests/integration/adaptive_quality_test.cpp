@@ -30,7 +30,7 @@ TEST(ServerIntegration, AdaptiveQualityStepsDownRefinesAndClimbsBack) {
   // beside it, stayed at 480 wide: its frames cost more than the 229 ms the rule allows at the
   // slowest pose rate below a stop (0.6 of 450 ms + the frame's own time, over 1.78x the pixels).
   constexpr int kW = 320, kH = 240;
-  ServerProcess server(server_args(kBiker, {"--adaptive-quality", "on"}));
+  ServerProcess server(server_args(kBiker, {"--adaptive-quality", "on", "--still-refine", "on"}));
   StreamClient c;
   c.connect(server.port());
   c.hello(kW, kH);

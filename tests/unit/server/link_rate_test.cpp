@@ -205,6 +205,34 @@ TEST(LinkRate, LateReceiptsOverAnIdleNetworkAreNotCongestion) {
   }
 }
 
+// A host that runs the client or its browser late (issue 64: a page under CPU load) delays every
+// receipt by 150 ms while TCP's round trip rises by 12 ms (the kernel acknowledged in time): not
+// a queue on the network, no cut. The same receipts with the round trip risen by 150 ms: cut.
+TEST(LinkRate, ReceiptsCountAsFarAsTheRoundTripRose) {
+  for (double rise : {12.0, 150.0}) {
+    LinkRate l;
+    const auto t0 = Clock::now();
+    auto server_ms = [](Clock::time_point t) {
+      return std::chrono::duration<double, std::milli>(t.time_since_epoch()).count();
+    };
+    SocketSample s;
+    s.valid = true;
+    s.min_rtt_ms = 0.05;
+    for (std::uint32_t k = 0; k < 40; ++k) {
+      const auto handed = t0 + std::chrono::milliseconds(100 * k);
+      s.rtt_ms = 0.05 + (k < 5 ? 0.0 : rise);
+      l.on_written(3000, handed, handed + std::chrono::milliseconds(1), s, 4000);
+      const double late = k < 5 ? 0.0 : 150.0;
+      l.on_receipt({k, 3000, handed, handed, server_ms(handed) + 3.0 + late}, handed + std::chrono::milliseconds(20),
+                   4000);
+    }
+    if (rise < 20.0)
+      EXPECT_EQ(l.decreases(), 0) << "receipts 150 ms late with the round trip up 12 ms cut the rate";
+    else
+      EXPECT_GT(l.decreases(), 0) << "a queue that raised the round trip as much is congestion";
+  }
+}
+
 // A client that reads late closes its receive window: the socket holds unsent bytes and a frame
 // waits 100-400 ms to be written, as on a slow link, but TCP_INFO says the receiver's window held
 // it (tcpi_rwnd_limited). No cut, and the reading rate is not taken for the link's; the same
