@@ -78,9 +78,10 @@ net=10.234.$((tag % 250)).0
 host_ip=${net%.0}.1 ns_ip=${net%.0}.2
 port=$((18000 + tag % 2000))
 work=$(mktemp -d)
-server_pid=""
+server_pid="" crf_pid=""
 cleanup() {
   [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
+  [ -n "$crf_pid" ] && kill "$crf_pid" 2>/dev/null && wait "$crf_pid" 2>/dev/null
   ip link del "$host_if" 2>/dev/null
   ip netns del "$ns" 2>/dev/null
   [ -n "${KEEP_WORK:-}" ] || rm -rf "$work"; [ -n "${KEEP_WORK:-}" ] && echo "work: $work"
