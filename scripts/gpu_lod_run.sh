@@ -32,7 +32,7 @@ CARRY=$ROOT/.carry
 OUT=${OUT:-$ROOT/out/gpu_lod}
 BUDGET=${CATGS_LOD_BUDGET_S:-540}
 # The bounds (1080p pixels) each city runs at: 0 (full detail), the default 1, and around 2,
-# where the kd-cluster build keeps 35 dB on the CPU fly-over (1 at 540p, RESULTS.md).
+# where the kd-cluster build keeps 35 dB on the CPU fly-over (1 at 540p, docs/history/level_of_detail.md).
 BOUNDS=${CATGS_LOD_BOUNDS:-0,1,1.5,2,2.5,4}
 AA=${CATGS_LOD_AA:-0}
 PIPES=${CATGS_LOD_PIPES:-exact,catgs}

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Markdown table of gpu_server_run.sh ramps: one row per ramp (issue 35's table).
 
-usage: ramp_table.py DIR   (DIR/json, or DIR itself as in tests/gpu/results/ramps_run*, holds
+usage: ramp_table.py DIR   (DIR/json, or DIR itself, as gpu_server_run.sh ramp writes it, holds
                            ramp-NAME.meta and ramp-NAME_N.json per session count; .gz is read too)
 
 Per ramp: the largest session count that held both bounds, the first step's (one session's)

@@ -190,7 +190,7 @@ void Server::resolve_renderer() {
   // Resolved once, before any scene loads, so every session uses the same core and the log says
   // why: over a one-Gaussian model (the choice does not depend on the scene).
   // Before any CUDA context exists: lanes waiting on a spinning core would take it from the
-  // encoders (RESULTS.md, "Many views of one scene").
+  // encoders (docs/history/sessions_per_host.md, "Lanes that block while they wait for the GPU").
   if (options_.renderer != "cpu") set_cuda_host_wait(options_.gpu_wait);
   auto probe = std::make_shared<GaussianModel>();
   probe->name = "probe";

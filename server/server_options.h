@@ -47,7 +47,7 @@ struct ServerOptions {
   // --lod-error: the level-of-detail bound in pixels at 720 lines, scaled down with a smaller
   // session's shorter side (render/lod_bound.h; 0 = full detail). The default is the coarsest
   // bound measured within 0.5 dB of full detail's own PSNR against a 4x supersampled render on
-  // the city's real paths (RESULTS.md, "Level of detail in the server").
+  // the city's real paths (RESULTS.md, "Level of detail").
   float lod_error_px = 2.0f;
   // --splat-budget: Gaussians a frame's LOD cut may hold (render/lod_bound.h): N, 0 = none, or
   // "auto" (the default; CUDA sessions only), sized from the GPU's measured throughput.

@@ -13,7 +13,7 @@
 // would need a second path for a one-pixel render). It visits every Gaussian once, serially (a
 // cheap screen-radius test first), or, given the chunk bounds, only the chunks that may reach the
 // pixel: made for a click or a few probes a second, not for every pixel of a frame; RESULTS.md
-// has its time.
+// ("Depth under a pixel") has its time.
 #pragma once
 
 #include <cstddef>

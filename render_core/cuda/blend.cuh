@@ -67,7 +67,8 @@ __device__ __forceinline__ float rough_sqrt(float x) { return x > 0.0f ? x * rsq
 // bit per warp (bit 2 row + column). A warp skips an entry only where every one of its pixels
 // would skip it, so the image is the same bit for bit. Tested against the ellipse itself, not
 // its bounding box: a thin Gaussian seen at a slant has a box far wider than itself, and a warp
-// walks every entry whose mask holds its bit (RESULTS.md, "Issue 19, seventh round").
+// walks every entry whose mask holds its bit (docs/history/render_core_rasterizer.md, "Sub-tile
+// masks from the ellipse; the mask decides catgs's tile cull").
 // For each column of sub-tiles (kSubTileW pixel columns, offsets dx in [a, b] from the mean), the
 // ellipse's y-extent over that column: at offset dx the ellipse
 // q(dx, dy) = A dx^2 + 2B dx dy + C dy^2 <= Q spans dy = c(dx) +- h(dx), c = -(B / C) dx,
@@ -203,7 +204,8 @@ __device__ __forceinline__ void blend_entry(const BlendBatch& batch, uint32_t of
 // masks at a time, each hit's slot from the popcount of the hits before it), then walks that list,
 // so an entry that misses the sub-tile costs its warp nothing, and a hit costs a one-byte load
 // and a counter instead of the find-first-set, clear and test of walking each ballot's set bits
-// (rasterization 1-7% faster, images the same: RESULTS.md, "Issue 19, eighth round"). A warp whose
+// (rasterization 1-7% faster, images the same: docs/history/render_core_rasterizer.md, "Warps
+// walk lists of their entries"). A warp whose
 // pixels are all done leaves (checked every 32 hits). Skipped entries are ones every pixel of the
 // sub-tile would skip (subtile_mask), so the pixel blends what a walk of every entry blends.
 __device__ __forceinline__ void blend_batch(BlendBatch& batch, uint32_t count, const TilePixel& at,
@@ -275,12 +277,15 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
 // that reach a sub-tile are compacted into shared memory, in list (depth) order. A dropped entry
 // would have been skipped by every pixel of the tile (alpha < 1/255 there), so the image is the
 // same bit for bit; what is saved is the blending of every entry that does not reach the tile
-// now (a trail list holds several times the exact list on the city's real paths: RESULTS.md,
-// "Where the tuned defaults come from"). Culled sub-frame Gaussians (q_max -inf) reach none.
+// now (a trail list holds several times the exact list on the city's real paths:
+// tests/gpu/RESULTS.md, "Where the tuned defaults come from"). Culled sub-frame Gaussians
+// (q_max -inf) reach none.
 // - The test reads only the entry's splat (one random 32-byte sector, stages.h Splat); the
 //   colour, a second sector, is gathered for the kept entries only. The mask serves both the cull
-//   and the warps' walk: one ellipse test per fetched entry (RESULTS.md, "Issue 19, seventh
-//   round": before, an exact tile test decided the cull and the mask was worked out after it).
+//   and the warps' walk: one ellipse test per fetched entry
+//   (docs/history/render_core_rasterizer.md, "Sub-tile masks from the ellipse; the mask decides
+//   catgs's tile cull": before, an exact tile test decided the cull and the mask was worked out
+//   after it).
 // Every thread of the block must call this (barriers inside); `skip.stop()` (block-uniform) ends
 // the run early.
 template <typename Skip>

@@ -318,7 +318,8 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
     if (exact) {
       // Load-aware task splitting (paper sec. 3.4), as catgs frames: a tile of over twice the
       // average load is rasterized as slices by several blocks and merged, so a few heavy tiles do
-      // not hold the frame's tail (RESULTS.md, "Issue 19, fourth round").
+      // not hold the frame's tail (docs/history/render_core_task_split.md, "Exact frames split
+      // heavy tiles; a one-block split plan; merges in the rasterizer").
       const uint64_t capacity = s.plan_frame_slices(tiles, c.entries, options_.speculation, frame.entries, first, end);
       CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
       const stages::SlicePlan plan = s.slice_plan();

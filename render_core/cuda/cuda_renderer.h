@@ -149,8 +149,8 @@ struct DeviceFrame {
 //   entry for entry, as a single sort on plain [tile | depth] keys (catgs key frames); exact
 //   lists' single sort uses the 32-bit key (forward_model/key_packing.h), which orders depths
 //   within its quantum by index instead, so the two differ there (>= 60 dB). Unset, it follows the pipeline: on for catgs, whose
-//   key-frame trail lists are long, off for exact, whose lists are short (RESULTS.md, "An
-//   earlier round: what the predictor and the depth-first sort bought"). vanilla, and catgs key
+//   key-frame trail lists are long, off for exact, whose lists are short (docs/history/
+//   render_core_sort_and_keys.md, "The depth-first sort"). vanilla, and catgs key
 //   frames without a window, always sort the single way.
 // - tile_culling: catgs rasterizers blend only the trail-list entries whose ellipse reaches the
 //   tile at this frame's pose (blend.cuh blend_range_culled); off blends every entry: the same

@@ -7,8 +7,8 @@
 // (depth, index) order is the plain [tile | depth] order with index ties: the same list, entry
 // for entry, as a single sort on plain keys (catgs key frames; GPU test row `depthsort`). The
 // exact pipeline's single sort uses the 32-bit key, which ties depths within its quantum. It pays where lists are long: a catgs key
-// frame's trail list is several times the exact list (RESULTS.md, "Where the tuned defaults come
-// from": the depth-first sort).
+// frame's trail list is several times the exact list (tests/gpu/RESULTS.md, "Where the tuned
+// defaults come from": the depth-first sort).
 #include <algorithm>
 
 #include <cub/device/device_scan.cuh>

@@ -59,7 +59,7 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
   // SH in half precision (sh_storage.h): rounded here, on the host, by the same function the CPU
   // reference rounds with, so both cores read the same coefficients.
   // In parallel blocks: one thread rounds ~6 ns a coefficient, 1.1 s for the 7 M city's 190 M
-  // (issue 37; RESULTS.md "Scene loading").
+  // (issue 37; docs/history/scene_loading.md).
   std::vector<uint16_t> sh_half(model.sh.size());
   constexpr std::size_t kBlock = 1 << 20;
   run_blocks((sh_half.size() + kBlock - 1) / kBlock, 0, [&](uint64_t b) {

@@ -178,8 +178,8 @@ __device__ __forceinline__ int nth_set_bit(uint32_t mask, uint32_t r) {
 // walk. Their runs are adjacent in the list
 // (ends is the running sum in walk order), so the warp writes its whole span with its lanes on
 // consecutive slots: each store is one coalesced line. A thread per Gaussian writing its own run
-// made every store touch 32 scattered sectors (ncu: RESULTS.md, "Where the tuned defaults come
-// from": coalesced key emission). Slot s belongs to the last lane whose
+// made every store touch 32 scattered sectors (ncu: tests/gpu/RESULTS.md, "Where the tuned
+// defaults come from": coalesced key emission). Slot s belongs to the last lane whose
 // run starts at or before s (a binary search over the lanes' run starts by shuffles); its rank
 // r = s - start picks the r-th set bit of that lane's mask, i.e. the r-th listed tile in
 // row-major order, as a per-Gaussian loop writes them. Big Gaussians' slots are left to

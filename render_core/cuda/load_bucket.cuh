@@ -3,7 +3,8 @@
 // bucket 4 floor(log2 L) + (the two bits of L below its leading one) + 1 (bucket 0: empty), and
 // the buckets are laid out from the highest down. A load at most 1.19x lighter than the one
 // before it costs nothing in a kernel's tail, and a histogram of 129 counts in shared memory is
-// far cheaper than a radix sort's launches (RESULTS.md, "Issue 19, second round").
+// far cheaper than a radix sort's launches (docs/history/render_core_task_split.md, "Tile order by
+// load buckets").
 #pragma once
 
 #include <cstdint>

@@ -19,7 +19,8 @@
 //   each warp then walks only the round's entries that reach its sub-tile (it lists them first,
 //   a ballot over 32 masks at a time, then walks its list: blend.cuh blend_batch).
 //   Small Gaussians reach a few of a tile's 8 sub-tiles, so most warps skip most entries at no
-//   cost, where before every pixel evaluated every entry (RESULTS.md, issue 19).
+//   cost, where before every pixel evaluated every entry (docs/history/render_core_rasterizer.md,
+//   "Sub-tile rasterization").
 // - After the barrier every thread blends the round's Gaussians in depth order, skipping those
 //   with power > 0 or alpha < 1/255, and stops before the Gaussian that would take T below 1e-4
 //   (the reference 3DGS rule, as on the CPU), without branches: alpha = 2^(log2(opacity) +
@@ -32,7 +33,7 @@
 // - One pixel per thread on purpose: blocks of 16 x 8 threads owning two pixels each, reading
 //   each shared-memory entry once for both, drew the same image but rasterized slower, likely
 //   because the blend loop is bound by latency and half the warps per SM were left to hide it
-//   (RESULTS.md, "This round (2026-11-22)": two pixels per thread tried and dropped).
+//   (docs/history/render_core_rasterizer.md, "Two pixels per thread (tried)").
 // - Shared memory: 257 x 48 bytes of entries (the last a null entry that pads the warps' walks),
 //   256 x 4 bytes of sub-tile masks and 8 x 256 x 2 bytes of warp lists = 17 KiB per block, so
 //   occupancy is set by registers, not shared memory.

@@ -147,8 +147,8 @@ void CudaRenderer::catgs_key_frame(const Camera& camera) {
   } else {
     CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
     // The depth-first sort pays for a trail list, several times the exact one; an exact list sorts
-    // faster in one radix sort, as the exact pipeline does (RESULTS.md, "An earlier round: what
-    // the predictor and the depth-first sort bought").
+    // faster in one radix sort, as the exact pipeline does (docs/history/
+    // render_core_sort_and_keys.md, "The depth-first sort").
     const stages::Projected proj = s.projected();
     const stages::TileTests tests{stages::TileTestKind::trail, nullptr, s.trails(), cam.width, cam.height};
     s.emit_render_list(s.slots(), s.live_walk(), cam, tests, depth_first_sort(), counts.entries, counts.visible,

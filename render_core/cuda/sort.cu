@@ -17,7 +17,8 @@ namespace {
 // CUB picks its offset type from num_items' width (cub/detail/choose_offset.cuh): 32-bit offsets
 // for a 32-bit count. On sm_90 its onesweep pass then takes 23 pairs of 32-bit keys and values a
 // thread instead of 17 with 64-bit offsets (tuning_radix_sort.cuh): fewer, larger tiles, which
-// suits lists of a few million entries (RESULTS.md, "Issue 19, sixth round"). Lists past 2^31 - 1
+// suits lists of a few million entries (docs/history/render_core_sort_and_keys.md, "32-bit sort
+// offsets, key emission past big runs, ..."). Lists past 2^31 - 1
 // entries keep 64-bit offsets (GPU test row list>2^31).
 bool narrow_offsets(uint64_t entries) { return entries <= 0x7fffffffull; }
 

@@ -41,8 +41,8 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
   // Once some Gaussian has left its trail the frame is drawn again as a key frame, which
   // recomputes every feature: the blocks that start after that have nothing useful to do. Read
   // through volatile (other blocks of this kernel write it); no barrier or warp collective
-  // follows, so threads may disagree. On the fast real paths many sub-frame attempts fail (RESULTS.md,
-  // "Where a speculative key frame's time goes").
+  // follows, so threads may disagree. On the fast real paths many sub-frame attempts fail
+  // (docs/history/render_core_profiles.md, "A speculative key frame on the city (after b016ea2)").
   if (*static_cast<volatile unsigned*>(outside) != 0u) return;
   const uint32_t slot = cached[c];
   // The slot's Gaussian: the key frame's k-th kept chunk's (records.h Projected).

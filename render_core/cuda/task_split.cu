@@ -6,7 +6,8 @@
 // Two launches of a block per 1024 tiles (plan_count_kernel, plan_place_kernel): they replaced
 // one block of 1024 threads that walked every tile twice (25-37 us at 1080p, ncu), which had
 // replaced two kernels, a device-wide scan, two memsets and a CUB radix sort of the slices,
-// whose launches cost more than the work (RESULTS.md, "Issue 19, fourth round" and "fifth").
+// whose launches cost more than the work (docs/history/render_core_task_split.md, "Exact frames
+// split heavy tiles; a one-block split plan; ..." and "The split plan in two wide launches").
 #include <algorithm>
 
 #include <cub/block/block_reduce.cuh>

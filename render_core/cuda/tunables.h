@@ -42,8 +42,9 @@ inline constexpr int kBigThreads = 256;
 // A big Gaussian whose rectangle holds more than this many tiles is "huge": the big-Gaussian
 // kernels hand it a whole block (kBigThreads tiles a round) after their warp-per-Gaussian pass,
 // in the same launch, instead of a warp: a near Gaussian that spans thousands of tiles held its
-// warp for hundreds of rounds while the rest of the GPU idled (RESULTS.md, "Issue 19, third
-// round": the ncu figures).
+// warp for hundreds of rounds while the rest of the GPU idled
+// (docs/history/render_core_profiles.md, "A tumblewood exact frame after half-precision SH": the
+// ncu figures).
 inline constexpr int kHugeRectTiles = kBigThreads;
 // A huge Gaussian's rectangle is cut into up to kHugeParts parts of about kHugePartTiles tiles
 // (row-major runs), a block each, so that the frame's largest Gaussians (thousands of tiles near
@@ -56,19 +57,21 @@ inline constexpr int kHugeListed = 16384;
 
 // Blocks per SM the rasterizers (rasterize.cu, rasterize_slices.cu) are built for: 8 x 256
 // threads fill an SM at 32 registers. The tile-culled slice kernel wants more and spills at 32,
-// which cost less than the occupancy gained (RESULTS.md, "The round before: ... the slice
+// which cost less than the occupancy gained (docs/history/render_core_rasterizer.md, "The slice
 // rasterizer at 8 blocks per SM"); the sub-tile walk (blend.cuh) made every rasterizer want a few
-// more (RESULTS.md, "Issue 19").
+// more (the same file, "Sub-tile rasterization").
 inline constexpr int kRasterMinBlocks = 8;
 // Blocks per SM of the kernels that loop over a speculation path per Gaussian (the speculative
 // pre-processing) and of the sub-frame features kernel: 4 x 256 threads, so at most 64 registers.
 // Both are compute- or DRAM-bound with long per-thread state; at 72 registers (3 blocks) each was
-// slower (RESULTS.md, "Two rounds before" and "Three rounds before").
+// slower (docs/history/render_core_speculation.md, "FMA in the speculative pre-processing; ..." and
+// "A sub-frame cull; ...").
 inline constexpr int kPathKernelMinBlocks = 4;
 // Blocks per SM the exact pre-processing kernel is built for: 5 x 256 threads, so at most 51
 // registers (unbounded it takes more and fits 3 blocks). The city's pre-processing, which reads
 // every Gaussian of a 7 M scene a frame, gained from the occupancy; 6 blocks spilled more and
-// lost it again (RESULTS.md, "Issue 19, sixth round").
+// lost it again (docs/history/render_core_sort_and_keys.md, "32-bit sort offsets, key emission past
+// big runs, pre-processing at 5 blocks per SM").
 inline constexpr int kPreprocessMinBlocks = 5;
 inline constexpr int kSubframeFeaturesMinBlocks = 4;
 

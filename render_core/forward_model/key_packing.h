@@ -13,7 +13,8 @@
 // about 2^(shift-23), e.g. 3e-5 for a range of 16 binades) tie, and ties keep Gaussian index
 // order (the sorts are stable and emission runs in index order), where the plain key orders them
 // by depth. The CPU reference sorts on the same key, so both cores draw the same list; what the
-// coarser order changes in the image is measured in RESULTS.md ("32-bit sort keys").
+// coarser order changes in the image is measured in docs/history/render_core_sort_and_keys.md
+// ("32-bit sort keys; huge Gaussians a block each").
 // When the range fits without dropping bits (shift = 0) the list equals the plain key's.
 #pragma once
 

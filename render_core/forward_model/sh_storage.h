@@ -5,12 +5,14 @@
 //
 // Why: a visible Gaussian's SH (27 floats at degree 2, 48 at degree 3) is most of the bytes that
 // pre-processing and a catgs sub-frame's features read from DRAM, and those kernels are bound by
-// DRAM (tests/gpu/RESULTS.md); half halves them and the scene's largest array.
+// DRAM (docs/history/render_core_precision.md, "SH in half precision"); half halves them and the
+// scene's largest array.
 //
 // Precision: round to nearest, ties to even, 11 significant bits, so each coefficient's relative
 // error is at most 2^-11; |x| < 2^-14 is kept as a subnormal (absolute error at most 2^-25). The
 // colour of a Gaussian changes by at most 2^-11 * sum_k |Y_k(dir)| |c_k| per channel (Y_k the SH
-// basis); sh_storage_test and RESULTS.md state what this is on the real scenes. Magnitudes at or
+// basis); sh_storage_test and docs/history/render_core_precision.md state what this is on the
+// real scenes. Magnitudes at or
 // beyond 65520 (which round to infinity in IEEE) saturate at the largest finite half, 65504,
 // instead: an absurd coefficient in a file must not make a colour inf or NaN (inf * 0). A NaN
 // coefficient (no reader lets one in, but a model can be handed to a core straight from memory)

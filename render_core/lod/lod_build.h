@@ -14,7 +14,7 @@
 //    its parent: set when level l + 2 is built. Levels stop at one node.
 //    (Equal runs of the Morton order, the first build, jumped between cells at the curve's
 //    seams and merged Gaussians metres apart; at the same number drawn the kd clusters keep
-//    more PSNR on the city fly-over: RESULTS.md, "Second round".)
+//    more PSNR on the city fly-over: docs/history/level_of_detail.md, "Second round".)
 // 3. A node's error (world units): the weighted RMS distance the means of its inputs moved in
 //    their merges (MergedGaussian::spread and weight over its clusters, weights as the merge's)
 //    plus the largest error of its children, floored at 1e-30 so a merge of singletons still
@@ -22,7 +22,7 @@
 //    node's coverage) detail moves on screen when the node stands for its leaves. RMS over the
 //    clusters and not the largest cluster's spread: one sparse cluster (floaters, a lone leaf)
 //    would keep its whole chunk at full detail (measured lower at the same number drawn:
-//    RESULTS.md, "Second round").
+//    docs/history/level_of_detail.md, "Second round").
 #pragma once
 
 #include <cstddef>

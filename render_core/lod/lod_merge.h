@@ -42,7 +42,7 @@ struct MergedGaussian {
 // - SH: the mean of the coefficients weighted by alpha_i alone (all 0: an equal mix). A merged
 //   Gaussian is drawn when its cluster is about a pixel wide (lod_build.h), where every child is
 //   a blob of the rasterizer's low-pass size whatever its own, so each adds to the pixel's colour
-//   by its opacity, not its area (measured on the far fly-over frame: RESULTS.md, "Second round");
+//   by its opacity, not its area (measured on the far fly-over frame: docs/history/level_of_detail.md, "Second round");
 // - scale and rotation: the covariance's eigen decomposition (symmetric_eigen3), eigenvalues
 //   floored at 1e-12 (a flat merge stays drawable);
 // - opacity: the optical depth tau = -ln(1 - alpha) integrated over a face-on cross-section is

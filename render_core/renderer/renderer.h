@@ -44,7 +44,8 @@ class RenderBudgetError : public std::length_error {
 // Rule: entries <= min(max(max_entries_per_tile x tiles, min_entries), max_bytes / bytes per entry,
 // 2^32 - 1), with tiles = ceil(W / 16) x ceil(H / 16) and the core's bytes per entry (CPU: 28, the
 // key, the value and the sort's pair). Defaults: 16384 entries a tile (134 M entries at 1080p:
-// 1.6x the 7 M city's largest default catgs key-frame list there, 83.5 M in tests/gpu/RESULTS.md),
+// 1.6x the 7 M city's largest default catgs key-frame list there, 83.5 M in the window table of
+// docs/history/render_core_speculation.md),
 // at least 16 M entries (a whole scene in a thumbnail lists every Gaussian in its few tiles) and
 // 4 GiB.
 //
@@ -110,7 +111,7 @@ struct RenderOptions {
   // through a scene's LOD tree; 0 = full detail (the leaves only). A scene without LOD ignores
   // it. The default is the largest bound measured that keeps >= 35 dB PSNR against full detail on
   // every compared frame (every 10th) of the 101- and 201-copy cities' 1080p fly-over
-  // (RESULTS.md, "Level of detail", issue 37).
+  // (docs/history/level_of_detail.md, "Second round", issue 37).
   float lod_error_px = 0.75f;
 };
 

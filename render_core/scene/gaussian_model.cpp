@@ -23,7 +23,7 @@ constexpr int kPopulateWrite = 23;  // Linux's value; older headers lack the nam
 
 // `v` as n zeros, its pages made resident first on every core (MADV_POPULATE_WRITE, Linux 5.14;
 // elsewhere a no-op): zeroing fresh memory page fault by page fault on one thread cost 0.9 s for
-// the 7 M city's 1 GB on the build machine, more than parsing it (issue 37, RESULTS.md).
+// the 7 M city's 1 GB on the build machine, more than parsing it (issue 37, docs/history/scene_loading.md).
 void assign_zeros(std::vector<float>& v, std::size_t n) {
   std::vector<float>().swap(v);
   v.reserve(n);

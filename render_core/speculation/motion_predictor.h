@@ -20,18 +20,19 @@ struct TimedPose {
 struct MotionPredictorParams {
   // The angular velocity (and, without an acceleration fit, the linear velocity) is fitted over
   // the poses of the last `fit_window_s`: a longer window averages out more of the input's stamp
-  // jitter, a shorter one lags less behind a changing velocity (RESULTS.md, "The motion
-  // predictor's fit window").
+  // jitter, a shorter one lags less behind a changing velocity (docs/history/
+  // render_core_speculation.md, "The motion predictor's fit window").
   double fit_window_s = 0.05;
   // The position is fitted as a quadratic in time (constant acceleration) over the poses of the
   // last `acceleration_window_s`; 0 keeps constant velocity (a line over fit_window_s). A line
   // fitted over a window estimates the velocity of the window's middle, which lags behind an
   // accelerating camera; the quadratic gives the velocity at the newest pose and the curvature
   // ahead. An acceleration needs a longer baseline than a velocity to stay steady under stamp
-  // jitter, hence its own window (RESULTS.md, "Constant acceleration").
+  // jitter, hence its own window (docs/history/render_core_speculation.md, "Constant
+  // acceleration").
   double acceleration_window_s = 0.1;
   std::size_t max_samples = 32;  // at most this many poses are kept
-  // The pose clock the two windows were tuned at (RESULTS.md sections above: 120 poses/s). On a
+  // The pose clock the two windows were tuned at (the history sections above: 120 poses/s). On a
   // slower clock (the measured pose interval, pose_interval_s()) each window widens to span as
   // many pose intervals as it spans at this rate, so the fit sees as many poses: the same motion
   // per pose then fits, and predicts a pose interval ahead, the same at 30, 60 or 120 poses/s

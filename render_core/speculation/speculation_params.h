@@ -1,8 +1,9 @@
 // The parameters of the catgs pipeline (paper sec. 3.1 "Motion Adaptive Adjustment", sec. 3.2, sec.
 // 3.4; docs/DESIGN.md "Speculation"), grouped by where they come from: the paper's own parameters,
 // the switches of its ablation tables, and margins tuned beyond the paper. Each tuned default was
-// chosen by a side-by-side measurement recorded in tests/gpu/RESULTS.md under the section named
-// beside it. Command lines set them by name (speculation/settings.h).
+// chosen by a side-by-side measurement recorded under the section named beside it: in
+// tests/gpu/RESULTS.md ("Where the tuned defaults come from") or, for how it was chosen,
+// docs/history/render_core_speculation.md. Command lines set them by name (speculation/settings.h).
 #pragma once
 
 #include <cstddef>
@@ -30,8 +31,9 @@ struct TrailMargins {
 // Speculation backoff (SpeculationPlanner::start_group): a group that closes having served fewer
 // than `min_served` sub-frames did not repay its speculative key frame, so the next `frames`
 // frames render in full (W = 0) before speculating again; each poor group in a row doubles that,
-// up to 8x; a group that repays resets it. frames = 0: no backoff. (RESULTS.md, "Speculation
-// backoff" and "Issue 19, fourth round": 4 and 4 were faster than 2 and 2 on five of the six
+// up to 8x; a group that repays resets it. frames = 0: no backoff. (tests/gpu/RESULTS.md,
+// "Speculation backoff", and docs/history/render_core_speculation.md, "Speculation backoff 4
+// frames / 4 sub-frames": 4 and 4 were faster than 2 and 2 on five of the six
 // real-path rows and equal on the sixth, once frames without a window cost what exact frames do.)
 // min_served is given for a group of W_initial sub-frames and scales with the group's window: a
 // group of W sub-frames must serve ceil(min_served x W / W_initial) (issue 48: a motion-narrowed
@@ -64,7 +66,8 @@ struct SpeculationParams {
   // A sub-frame keeps the colours its key frame evaluated (view direction from the key camera)
   // instead of evaluating the SH at its own pose: the SH coefficients are the largest read of the
   // sub-frame's features, which are bound by DRAM (issue 36). The colour then lags the view
-  // direction by at most a window's camera motion (RESULTS.md, "Issue 36, first round").
+  // direction by at most a window's camera motion (docs/history/render_core_speculation.md,
+  // "Sub-frames keep their key frame's colours, and what else was tried").
   bool subframe_key_colour = true;
   // The cost model (the paper's future work; issue 48): each renderer reports its measured frame
   // times (SpeculationPlanner::record_cost) and a window opens only as wide as the measured
@@ -78,8 +81,8 @@ struct SpeculationParams {
   // early at pixels an earlier, unfinished slice will saturate, so very short slices cost more
   // than they balance (RESULTS.md, "Slice floors"). 0: the paper's rule alone.
   int min_slice_entries = 2048;
-  // The motion predictor's fit windows (RESULTS.md, "The motion predictor's fit window",
-  // "Constant acceleration").
+  // The motion predictor's fit windows (docs/history/render_core_speculation.md, "The motion
+  // predictor's fit window", "Constant acceleration").
   MotionPredictorParams predictor;
 
   // A check, not a tuning: false blends every pixel to the end of its list (no stop at T < 1e-4),

@@ -6,7 +6,7 @@
 // range. Key frames on demand only (pict_type I -> AOM_EFLAG_FORCE_KF; no periodic ones).
 //
 // Speed: EncoderConfig::av1_speed is libaom's cpu-used (realtime: 7 slowest used here .. 10
-// fastest; what each costs and buys: RESULTS.md, "AV1 where the host affords it"). Threads:
+// fastest; what each costs and buys: docs/history/encoding.md, "AV1 where the host affords it"). Threads:
 // row-based multithreading and a tile per thread, columns first (up to what the width allows: a
 // tile column is at least 256 pixels wide, AV1 section A.3), then rows, so threads cut one
 // frame's time and add no frame of delay.

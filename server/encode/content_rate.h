@@ -22,7 +22,7 @@
 // The bounds: kContentMaxBitsPerPixel is the bandwidth bound for a 1080p60 stream
 // (12 Mbit/s; 5.3 Mbit/s at 720p60, under its 6); kContentMinBitsPerPixel keeps a margin for
 // views the probe did not see. What they give on real scenes, and why `auto` is not the default:
-// RESULTS.md, "Content-aware rate".
+// docs/history/encoding.md, "Content-aware rate".
 #pragma once
 
 #include <map>

@@ -20,7 +20,7 @@ int useful_threads(int width, int height) {
   // Sliced threads split the picture into bands of macroblock rows; past some count a band's
   // fixed cost (its slice header, prediction stopping at its edges, waking its thread) outweighs
   // the split. The counts are where catgs-encode-bench's encode time stopped falling for one
-  // session alone on the H100 host (RESULTS.md, "Encoder policy": 8 at 720p and 1080p, where 12
+  // session alone on the H100 host (docs/history/encoding.md, "Encoder policy": 8 at 720p and 1080p, where 12
   // was worse at p95); 640x360 and sizes past 1080p were not measured and take a neighbour's.
   const long pixels = static_cast<long>(width) * height;
   if (pixels <= 640L * 360) return 4;
@@ -30,7 +30,7 @@ int useful_threads(int width, int height) {
 
 int needed_threads(int width, int height) {
   // A thread per 1.5 M pixels: the rule that matches catgs-encode-bench's table on the H100 host
-  // (RESULTS.md, "Encoder policy": 720p within 12.5 ms at p95, 3/4 of a 60 Hz frame interval, on
+  // (docs/history/encoding.md, "Encoder policy": 720p within 12.5 ms at p95, 3/4 of a 60 Hz frame interval, on
   // one thread; 1080p on two, not on one). Past 1080p it is an extrapolation.
   const double pixels = static_cast<double>(width) * height;
   return std::clamp(static_cast<int>(std::ceil(pixels / 1.5e6)), 1, useful_threads(width, height));
@@ -39,7 +39,7 @@ int needed_threads(int width, int height) {
 int encoder_threads(const EncoderPolicy& policy, int width, int height, int live_sessions) {
   if (policy.threads > 0) return policy.threads;
   // A session's encoder is busy only part of each frame interval, and sliced threads cost about
-  // the same CPU a frame as one thread (RESULTS.md, "Encoder policy"), so the cores are shared at
+  // the same CPU a frame as one thread (docs/history/encoding.md, "Encoder policy"), so the cores are shared at
   // twice their count: the threads wait less for each other than the sessions do.
   const int share = std::max(1, 2 * policy.usable_cores / std::max(1, live_sessions));
   return std::clamp(share, needed_threads(width, height), useful_threads(width, height));

@@ -1,6 +1,6 @@
 // The encoder policy: how a session's H.264 stream is sized for the network and for the host,
 // instead of two fixed numbers (issue 35). Every default here comes from the rate-distortion-
-// latency table that catgs-encode-bench measured (RESULTS.md, "Encoder policy").
+// latency table that catgs-encode-bench measured (docs/history/encoding.md, "Encoder policy").
 //
 // Rate: a target bitrate by resolution and rate, target = bits_per_pixel x width x height x fps
 // (at least min_kbps: a small picture needs more bits a pixel for the same look), used as the
@@ -16,7 +16,7 @@
 // rebuilds an encoder only when its thread count should change, see should_rebuild()).
 //
 // Preset: x264's presets trade CPU time for quality at the same rate (what a step buys and costs:
-// RESULTS.md, "x264 presets by budget"). With --x264-preset auto a session's encoder takes the slowest preset of the ladder
+// docs/history/encoding.md, "x264 presets by budget"). With --x264-preset auto a session's encoder takes the slowest preset of the ladder
 // whose CPU time a frame, at the live session count and the nominal frame rate, fits the share of
 // the host's cores the encoders may use (kEncoderCpuShare); as sessions join it steps down at
 // once, as they leave it steps up after kGrowDelay (an IDR each time).
@@ -55,11 +55,11 @@ struct EncoderPolicy {
 int target_bitrate_kbps(const EncoderPolicy& policy, int width, int height, int fps, int client_max_kbps);
 
 // The most sliced threads a width x height picture gains from (the measured table in
-// RESULTS.md: beyond it a frame's encode time no longer falls).
+// docs/history/encoding.md: beyond it a frame's encode time no longer falls).
 int useful_threads(int width, int height);
 
 // The fewest sliced threads that encode a width x height frame within 3/4 of a 60 Hz frame
-// interval (the measured table in RESULTS.md): fewer and the session cannot hold 60 frames/s.
+// interval (the measured table in docs/history/encoding.md): fewer and the session cannot hold 60 frames/s.
 int needed_threads(int width, int height);
 
 // x264 threads for one session's encoder while `live_sessions` sessions share the host.
@@ -69,7 +69,7 @@ int encoder_threads(const EncoderPolicy& policy, int width, int height, int live
 // relative to ultrafast's, the larger of the factors measured at 1080p and 720p; veryfast bought
 // too little over superfast for its CPU to be a step. Between them, ultrafast with CABAC and
 // deblocking turned back on: much of superfast's gain for less of its extra CPU (the rows that
-// chose it: RESULTS.md, "x264 presets by budget").
+// chose it: docs/history/encoding.md, "x264 presets by budget").
 struct PresetStep {
   const char* name;
   double cpu_factor;
@@ -83,7 +83,7 @@ inline constexpr int kPresetSteps = static_cast<int>(sizeof(kPresetLadder) / siz
 inline constexpr double kEncoderCpuShare = 0.5;
 
 // x264 ultrafast's CPU time for one width x height frame, ms: 7.7 ms a megapixel, whatever the
-// thread count (the upper end of what RESULTS.md, "Encoder policy", measured).
+// thread count (the upper end of what docs/history/encoding.md, "Encoder policy", measured).
 double ultrafast_cpu_ms(int width, int height);
 
 // The ladder step (index into kPresetLadder) for one session's encoder at `fps` frames/s while
@@ -93,7 +93,7 @@ int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int
 
 // AV1 (libaom realtime at policy.av1_speed) above the ladder: its CPU time a frame relative to x264
 // ultrafast's, the larger of the factors measured at 1080p and 720p on the H100 host, rounded up
-// (RESULTS.md, "AV1 where the host affords it").
+// (docs/history/encoding.md, "AV1 where the host affords it").
 inline constexpr double kAv1CpuFactor = 8.0;
 // How much sooner a frame is done with 8 threads (row-based threads, a tile each) than with one:
 // the smaller of the speed-ups measured at 1080p and 720p (same section); fewer threads are
@@ -101,7 +101,7 @@ inline constexpr double kAv1CpuFactor = 8.0;
 inline constexpr double kAv1EightThreadSpeedup = 4.7;
 // An AV1 frame is expected (av1_frame_ms, a median) within this share of the frame interval, or
 // the stream could not keep its frame rate: AV1's tail is long (key frames, busy views); a larger
-// share lost frames in a ramp (RESULTS.md, same section).
+// share lost frames in a ramp (docs/history/encoding.md, same section).
 inline constexpr double kAv1FrameIntervalShare = 0.6;
 
 // The wall time (ms) one AV1 frame of width x height is expected to take with `threads` threads:

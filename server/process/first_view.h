@@ -133,7 +133,7 @@ inline constexpr double kFramedShare = 0.95;
 // (k = ceil(content / kJudgedGaussians)): the estimates are percentiles, a mean and a covariance,
 // which an even sample of a million Gaussians gives to well within the framing's own slack, and
 // the whole-scene passes over every Gaussian were most of a large city's load (issue 46;
-// RESULTS.md "Level of detail in the server").
+// docs/history/level_of_detail.md "Level of detail in the server").
 // (`judged`: that limit; tests pass a larger one to judge by every Gaussian.)
 inline constexpr std::size_t kJudgedGaussians = std::size_t{1} << 20;
 SceneFrame frame_from_content(const GaussianModel& model, std::size_t judged = kJudgedGaussians);

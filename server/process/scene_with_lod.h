@@ -37,7 +37,7 @@ struct SceneWithLodOptions {
   std::string cache_dir;
   // A scene of fewer Gaussians is served without a level of detail unless a LOD file for it
   // exists (the cut saves a small scene's frames little and its build costs every first start:
-  // RESULTS.md "Device memory that follows the view", the threshold's table).
+  // docs/history/level_of_detail.md "Where a level of detail pays", the threshold's table).
   std::uint64_t min_gaussians = 0;
   std::function<void(const std::string&)> log;  // one line per decision and progress step
   ServerMetrics* metrics = nullptr;             // LOD builds and their progress (may be null)

@@ -180,8 +180,8 @@ struct ServerMetrics {
   // the frames that were rendering on the GPU with it (`in_flight`, itself included): render lanes
   // share the GPU, so a frame that waited behind three others' kernels took about four times as
   // long while the GPU drew four frames (without that factor a loaded GPU measured slower than
-  // it is, and the auto budget collapsed to the ladder's top: RESULTS.md "Level of detail in the
-  // server"). Units: Gaussians, milliseconds, frames (in_flight >= 1). Frames of under 100 k Gaussians are not counted (their fixed costs hide the
+  // it is, and the auto budget collapsed to the ladder's top: docs/history/level_of_detail.md "Level
+  // of detail in the server"). Units: Gaussians, milliseconds, frames (in_flight >= 1). Frames of under 100 k Gaussians are not counted (their fixed costs hide the
   // rate). Thread-safe; 0 until known.
   void observe_gpu_throughput(int device, std::uint64_t gaussians, double render_ms, double in_flight = 1.0);
   // Frames rendering on `device` now: begin returns the count with this frame, end the count

@@ -6,7 +6,7 @@
 //   `reference_lines` (720) and scales with the session's shorter side below that: a session
 //   streaming 320x180 draws at a quarter of the bound, so the cut is as fine relative to its
 //   picture as at 720p (a fixed pixel bound lost far more against a supersampled render at
-//   320x180 than at 720p; RESULTS.md "Level of detail in the server"). Above it the
+//   320x180 than at 720p; docs/history/level_of_detail.md "Level of detail in the server"). Above it the
 //   bound stays as given (the yardstick chose 2 px at 720p and at 1080p alike).
 // - A splat budget: at most that many Gaussians in a frame's cut, predicted from the LOD tree
 //   before the frame is drawn (CutCounter: the chunks of the cut whose boxes meet the view
@@ -45,8 +45,8 @@ float size_scaled_lod_bound(float bound_px, int width, int height, int reference
 // frame's cost is mostly fixed (the picture's tiles, the sort's passes), so a coarser cut saves
 // little and costs detail; and without a floor one slow early frame (a cold start on a small
 // scene) sized a budget under the 100 k Gaussians a throughput sample needs, and the cut stayed
-// at the ladder's top for good (the GPU check on biker; RESULTS.md "Level of detail in the
-// server").
+// at the ladder's top for good (the GPU check on biker; docs/history/level_of_detail.md "Level of
+// detail in the server").
 inline constexpr std::uint64_t kAutoBudgetFloor = std::uint64_t{1} << 20;
 
 // The auto budget (see above): Gaussians a frame for one of `sessions` sessions sharing a GPU

@@ -103,7 +103,7 @@ TEST(ServerIntegration, BikerOrbitFramesMatchCpuRender) {
 // The catgs pipeline behind the server: the client's pose clock drives speculation, sub-frames
 // are served from the caches (counted in Stats) and every decoded frame still matches the full CPU
 // render of its pose. The cost model (on by default in the server) is off here: on the CPU core a
-// sub-frame costs nearly what a key frame does (RESULTS.md, "Speculation on the session's own pose
+// sub-frame costs nearly what a key frame does (docs/history/speculation.md, "The pose
 // clock"), so it would rightly keep most windows closed, and this test is about the caches' frames.
 TEST(ServerIntegration, CatgsPipelineServesSubFrames) {
   ServerProcess server(server_args(kBiker, {"--pipeline", "catgs", "--speculation", "cost=off"}));

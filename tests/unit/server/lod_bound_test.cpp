@@ -48,7 +48,7 @@ TEST(LodBound, ScalesWithTheShorterSideBelowTheReference) {
 // The yardstick (issue 46): at the server's default bound scaled to the session's size, the cut
 // scores within 0.5 dB of full detail's own score against the supersampled render, mean over the
 // fly-over's views, and draws fewer Gaussians, at 320x180 and 640x360. (The unscaled 2 px at
-// 320x180 lost 3.4 dB here: RESULTS.md.)
+// 320x180 lost 3.4 dB here: docs/history/level_of_detail.md.)
 TEST(LodBound, DefaultBoundAtEachSizeWithinHalfADbOfFullDetailAgainstSupersampled) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
   const test::SmallCity& c = small_flowers_city();
