@@ -1,5 +1,7 @@
 #include "colour/yuv420.h"
 
+#include "colour/bt709.h"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -8,13 +10,6 @@
 namespace catgs {
 
 namespace {
-
-// BT.709 luma weights and the chroma scale factors 2 (1 - Kb), 2 (1 - Kr). The CUDA kernel
-// (yuv420_convert.cu) spells out the same constants and expressions.
-constexpr double kKr = 0.2126, kKb = 0.0722, kKg = 1.0 - kKr - kKb;
-constexpr double kCbScale = 2.0 * (1.0 - kKb), kCrScale = 2.0 * (1.0 - kKr);
-
-std::uint8_t to_byte(double x) { return static_cast<std::uint8_t>(std::clamp(std::lround(x), 0L, 255L)); }
 
 std::string size_text(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
@@ -56,16 +51,15 @@ void rgba_to_yuv420_bt709(const std::uint8_t* rgba, int width, int height, int s
         for (int dc = 0; dc < 2; ++dc) {
           const std::uint8_t* p = row + static_cast<std::size_t>(c + dc) * 4;
           const double R = p[0] / 255.0, G = p[1] / 255.0, B = p[2] / 255.0;
-          y_row[c + dc] = to_byte(16.0 + 219.0 * (kKr * R + kKg * G + kKb * B));
+          y_row[c + dc] = bt709::luma(R, G, B);
           sum[0] += R;
           sum[1] += G;
           sum[2] += B;
         }
       }
       const double R = sum[0] / 4, G = sum[1] / 4, B = sum[2] / 4;
-      const double Y = kKr * R + kKg * G + kKb * B;
-      out.u[static_cast<std::size_t>(r / 2) * out.u_stride + c / 2] = to_byte(128.0 + 224.0 * (B - Y) / kCbScale);
-      out.v[static_cast<std::size_t>(r / 2) * out.v_stride + c / 2] = to_byte(128.0 + 224.0 * (R - Y) / kCrScale);
+      out.u[static_cast<std::size_t>(r / 2) * out.u_stride + c / 2] = bt709::cb(R, G, B);
+      out.v[static_cast<std::size_t>(r / 2) * out.v_stride + c / 2] = bt709::cr(R, G, B);
     }
   }
 }

@@ -1,22 +1,15 @@
 // Colour conversion of a rendered frame, RGBA8 -> BT.709 limited-range I420, on the GPU
-// (mirrors rgba_to_yuv420_bt709 in colour/yuv420.cpp, same constants and double-precision
-// expressions, compiled without FMA contraction so every code value matches the CPU reference).
+// (colour/bt709.h's formula, shared with rgba_to_yuv420_bt709 in colour/yuv420.cpp, compiled
+// without FMA contraction so every code value matches the CPU reference).
 // Runs after rasterization on the renderer's stream, so a frame that stays on the GPU never
 // crosses to the host as RGBA (docs/DESIGN.md "Data flow of a frame"; issue 5).
 #include "base/cuda_check.h"
+#include "colour/bt709.h"
 #include "colour/yuv420_convert.h"
 
 namespace catgs::cuda::stages {
 
 namespace {
-
-constexpr double kKr = 0.2126, kKb = 0.0722, kKg = 1.0 - kKr - kKb;
-constexpr double kCbScale = 2.0 * (1.0 - kKb), kCrScale = 2.0 * (1.0 - kKr);
-
-__device__ uint8_t to_byte(double x) {
-  const long long v = llround(x);  // halves away from zero, as std::lround
-  return static_cast<uint8_t>(v < 0 ? 0 : (v > 255 ? 255 : v));
-}
 
 // One thread per 2x2 block: four Y samples and one Cb, Cr pair.
 __global__ void rgba8_to_yuv420_kernel(const uint32_t* __restrict__ rgba8, int width, int height, Yuv420Pitched out) {
@@ -30,16 +23,15 @@ __global__ void rgba8_to_yuv420_kernel(const uint32_t* __restrict__ rgba8, int w
     for (int dc = 0; dc < 2; ++dc) {
       const uint32_t p = rgba8[static_cast<size_t>(r + dr) * width + c + dc];
       const double R = (p & 0xffu) / 255.0, G = ((p >> 8) & 0xffu) / 255.0, B = ((p >> 16) & 0xffu) / 255.0;
-      y_row[c + dc] = to_byte(16.0 + 219.0 * (kKr * R + kKg * G + kKb * B));
+      y_row[c + dc] = bt709::luma(R, G, B);
       sum[0] += R;
       sum[1] += G;
       sum[2] += B;
     }
   }
   const double R = sum[0] / 4, G = sum[1] / 4, B = sum[2] / 4;
-  const double Y = kKr * R + kKg * G + kKb * B;
-  out.u[static_cast<size_t>(by) * out.u_pitch + bx] = to_byte(128.0 + 224.0 * (B - Y) / kCbScale);
-  out.v[static_cast<size_t>(by) * out.v_pitch + bx] = to_byte(128.0 + 224.0 * (R - Y) / kCrScale);
+  out.u[static_cast<size_t>(by) * out.u_pitch + bx] = bt709::cb(R, G, B);
+  out.v[static_cast<size_t>(by) * out.v_pitch + bx] = bt709::cr(R, G, B);
 }
 
 }  // namespace

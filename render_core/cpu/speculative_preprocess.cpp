@@ -20,38 +20,6 @@ struct CameraTerms {
   glm::vec3 position;
 };
 
-// The cheap cull before any 2D covariance (mirrors path_misses_image in
-// cuda/speculative_preprocess.cu): true when Gaussian i, in front of the key camera, lies beyond
-// one same image edge at every camera of the path where it is in front, by more than
-// fm::edges_beyond's bound widened as its trail would be ((1 + slack) times, + margin_px, +
-// motion_margin times its centre's motion over the path). Its ellipse then reaches no pixel at
-// any sampled pose, nor between them (the region beyond an edge is a half-plane). A Gaussian
-// behind the key camera is not culled here (the caller drops it after projecting).
-bool path_misses_image(const GaussianModel& model, std::size_t i, glm::vec3 mean, float q_max,
-                       const std::vector<Camera>& path, const std::vector<CameraTerms>& terms,
-                       const TrailWidening& widening) {
-  const Camera& key = path.front();
-  const glm::vec3 p0 = key.R * mean + key.t;
-  if (!(p0.z > key.near_plane) || p0.z > key.far_plane) return false;
-  const Camera& last = path.back();
-  const glm::vec3 pw = last.R * mean + last.t;
-  float extra = widening.margin_px + 1.0f;
-  if (pw.z > last.near_plane && pw.z <= last.far_plane) {
-    const glm::vec2 u0(key.fx * p0.x / p0.z, key.fy * p0.y / p0.z);
-    const glm::vec2 uw(last.fx * pw.x / pw.z + last.cx - key.cx, last.fy * pw.y / pw.z + last.cy - key.cy);
-    extra += widening.motion_margin * glm::length(uw - u0);
-  }
-  const float max_scale = fm::max_scale_of(&model.log_scales[3 * i]);
-  unsigned beyond = 0xfu;
-  for (std::size_t k = 0; k < path.size() && beyond != 0u; ++k) {
-    const Camera& c = path[k];
-    const glm::vec3 p = c.R * mean + c.t;
-    if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
-    beyond &= fm::edges_beyond(p, max_scale, q_max, terms[k].view, 1.0f + widening.slack, extra);
-  }
-  return beyond != 0u;
-}
-
 }  // namespace
 
 float max_screen_motion(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& a,
@@ -103,7 +71,12 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
     const float q_max = fm::opacity_aware_qmax(opacity);
     if (!(q_max > 0.0f)) return;
     const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
-    if (path_misses_image(model, i, mean, q_max, path, terms, widening)) return;
+    // The cheap cull before any 2D covariance (forward_model.h, shared with the CUDA stage).
+    if (fm::path_misses_image(
+            mean, fm::max_scale_of(&model.log_scales[3 * i]), q_max, static_cast<int>(path.size()),
+            [&](int k) -> const fm::View& { return terms[static_cast<std::size_t>(k)].view; }, widening.slack,
+            widening.margin_px, widening.motion_margin))
+      return;
     const fm::Cov3 cov3 = fm::covariance_3d(
         {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
         {model.rotations[4 * i], model.rotations[4 * i + 1], model.rotations[4 * i + 2], model.rotations[4 * i + 3]});

@@ -18,35 +18,6 @@ namespace catgs::cuda::stages {
 
 namespace {
 
-// The cheap cull before any 2D covariance (mirrors path_misses_image in
-// cpu/speculative_preprocess.cpp): true when Gaussian i, in front of the key camera, lies
-// beyond one same image edge at every camera of the path where it is in front, by more than
-// fm::edges_beyond's bound widened as its trail would be. Its ellipse then reaches no pixel at
-// any sampled pose, nor between them (beyond an edge is a half-plane).
-__device__ bool path_misses_image(const SceneView& scene, uint64_t i, glm::vec3 mean, float q_max,
-                                  const PathParams& path, const TrailWidening& widening) {
-  const CameraParams& key = path.cam[0];
-  const glm::vec3 p0 = key.R * mean + key.t;
-  if (!(p0.z > key.near_plane) || p0.z > key.far_plane) return false;
-  const CameraParams& last = path.cam[path.count - 1];
-  const glm::vec3 pw = last.R * mean + last.t;
-  float extra = widening.margin_px + 1.0f;
-  if (pw.z > last.near_plane && pw.z <= last.far_plane) {
-    const glm::vec2 u0(key.fx * p0.x / p0.z, key.fy * p0.y / p0.z);
-    const glm::vec2 uw(last.fx * pw.x / pw.z + last.cx - key.cx, last.fy * pw.y / pw.z + last.cy - key.cy);
-    extra += widening.motion_margin * glm::length(uw - u0);
-  }
-  const float max_scale = fm::max_scale_of(scene.log_scales + 3 * i);
-  unsigned beyond = 0xfu;
-  for (int k = 0; k < path.count && beyond != 0u; ++k) {
-    const CameraParams& c = path.cam[k];
-    const glm::vec3 p = c.R * mean + c.t;
-    if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
-    beyond &= fm::edges_beyond(p, max_scale, q_max, c, 1.0f + widening.slack, extra);
-  }
-  return beyond != 0u;
-}
-
 // One thread per Gaussian: project at every camera of the path, build the trail (fm::build_trail),
 // count the tiles it touches (big trails are left to count_big_tiles, a warp each). Local arrays
 // hold the path's samples: 33 x 20 bytes per thread, in L1-cached local memory. Held to 64
@@ -68,7 +39,12 @@ __device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, uin
       const float q_max = fm::opacity_aware_qmax(opacity);
       if (!(q_max > 0.0f)) break;
       const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
-      if (path_misses_image(scene, i, mean, q_max, path, widening)) break;
+      // The cheap cull before any 2D covariance (forward_model.h, shared with the CPU core).
+      if (fm::path_misses_image(
+              mean, fm::max_scale_of(scene.log_scales + 3 * i), q_max, path.count,
+              [&](int k) -> const fm::View& { return path.cam[k]; }, widening.slack, widening.margin_px,
+              widening.motion_margin))
+        break;
       const fm::Cov3 cov3 = fm::covariance_3d(
           {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
           {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});

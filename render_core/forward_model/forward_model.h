@@ -301,7 +301,7 @@ CATGS_HD bool ellipse_reaches_image(glm::vec2 mean, glm::vec3 cov, glm::vec3 con
 // edges_beyond() gives the image edges the bound lies beyond, with the radius r widened to
 // widen * r + extra_px: bit 0 left (u + r < 0), 1 right (u - r > W - 1), 2 top, 3 bottom. The
 // speculative pre-processing culls a Gaussian that lies beyond one same edge at every sample of
-// its path (path_edges_beyond below).
+// its path (path_misses_image below).
 CATGS_HD unsigned edges_beyond(glm::vec3 p_cam, float max_scale, float q_max, const View& v, float widen = 1.0f,
                                float extra_px = 0.0f) {
   const float z = p_cam.z;
@@ -320,6 +320,40 @@ CATGS_HD bool may_reach_image(glm::vec3 p_cam, float max_scale, float q_max, con
 // Largest axis of a Gaussian, world units: exp of its largest log-scale.
 CATGS_HD float max_scale_of(const float* log_scale) {
   return expf(fmaxf(log_scale[0], fmaxf(log_scale[1], log_scale[2])));
+}
+
+// The speculative pre-processing's cheap cull before any 2D covariance (cpu/ and
+// cuda/speculative_preprocess): true when a Gaussian of centre `mean` (world) and largest scale
+// `max_scale`, in front of the key view view_at(0), lies beyond one same image edge at every view
+// view_at(0 .. count - 1) of the path where it is in front, by more than edges_beyond's bound
+// widened as its trail would be: (1 + slack) times, + margin_px + 1 px, + motion_margin times its
+// centre's motion on the image from the key view to the last. Its ellipse then reaches no pixel
+// at any sampled pose, nor between them (the region beyond an edge is a half-plane). A Gaussian
+// behind the key view is not culled here (the caller drops it after projecting).
+// `view_at`: k -> const View& (the CPU core's fm::view_of of its path's cameras; CUDA's
+// CameraParams are Views).
+template <class ViewAt>
+CATGS_HD bool path_misses_image(glm::vec3 mean, float max_scale, float q_max, int count, ViewAt view_at, float slack,
+                                float margin_px, float motion_margin) {
+  const View& key = view_at(0);
+  const glm::vec3 p0 = key.R * mean + key.t;
+  if (!(p0.z > key.near_plane) || p0.z > key.far_plane) return false;
+  const View& last = view_at(count - 1);
+  const glm::vec3 pw = last.R * mean + last.t;
+  float extra = margin_px + 1.0f;
+  if (pw.z > last.near_plane && pw.z <= last.far_plane) {
+    const glm::vec2 u0(key.fx * p0.x / p0.z, key.fy * p0.y / p0.z);
+    const glm::vec2 uw(last.fx * pw.x / pw.z + last.cx - key.cx, last.fy * pw.y / pw.z + last.cy - key.cy);
+    extra += motion_margin * glm::length(uw - u0);
+  }
+  unsigned beyond = 0xfu;
+  for (int k = 0; k < count && beyond != 0u; ++k) {
+    const View& c = view_at(k);
+    const glm::vec3 p = c.R * mean + c.t;
+    if (!(p.z > c.near_plane) || p.z > c.far_plane) continue;
+    beyond &= edges_beyond(p, max_scale, q_max, c, 1.0f + slack, extra);
+  }
+  return beyond != 0u;
 }
 
 // A Gaussian (mean [3], log-scales [3], rotation (w, x, y, z) [4], opacity logit; world) that

@@ -10,6 +10,7 @@
 #include "base/cuda_error.h"
 #include "camera/camera.h"
 #include "encode/encoder_policy.h"
+#include "encode/frame_encoding.h"
 #include "render/render_scheduler.h"
 
 namespace catgs::server {
@@ -19,12 +20,6 @@ namespace {
 // cudaErrorMemoryAllocation (driver_types.h), without the CUDA headers: a device buffer that
 // could not grow.
 constexpr int kCudaOutOfMemory = 2;
-
-// A client's Quality and the link's cap both lower the policy's rate, never raise it: the lower
-// of the two where both are set.
-int rate_cap_kbps(int client_kbps, int link_kbps) {
-  return link_kbps > 0 && client_kbps > 0 ? std::min(client_kbps, link_kbps) : std::max(client_kbps, link_kbps);
-}
 
 // A frame rendering on a GPU, counted in ServerMetrics' in-flight renders until it ends (also when
 // the render throws).
@@ -220,99 +215,97 @@ FramePipeline::Rendered FramePipeline::render(Job job, std::unique_ptr<Yuv420Ima
   return r;
 }
 
+FrameEncodeInputs FramePipeline::encode_inputs(const JobShape& shape, bool refine, int live_sessions) const {
+  FrameEncodeInputs in;
+  in.width = shape.width;
+  in.height = shape.height;
+  in.client_max_kbps = shape.max_bitrate_kbps;
+  in.link_kbps = shape.link_kbps;
+  in.refine = refine;
+  in.live_sessions = live_sessions;
+  in.av1_ok = av1_ok_;
+  in.probed_bits_per_pixel = content_rates_ ? content_rates_->bits_per_pixel(shape.width, shape.height) : 0;
+  return in;
+}
+
+int FramePipeline::live_sessions() const {
+  return static_cast<int>(std::max<std::int64_t>(1, metrics_.sessions_open.load()));
+}
+
 bool FramePipeline::stream_is_av1(const JobShape& shape, int live_sessions) const {
-  return use_av1(settings_.encoder_policy, shape.width, shape.height, kStreamFps, live_sessions, av1_ok_, true,
-                 shape.link_kbps > 0);
+  return frame_encoding(settings_.encoder_policy, encode_inputs(shape, false, live_sessions)).av1;
 }
 
-int FramePipeline::stream_step(const JobShape& s, int live) const {
-  if (stream_is_av1(s, live)) return kPresetSteps;
-  const EncoderPolicy& policy = settings_.encoder_policy;
-  return policy.x264_preset == "auto" ? preset_step(policy, s.width, s.height, kStreamFps, live) : 0;
+int FramePipeline::policy_bitrate_kbps(int width, int height, int client_max_kbps) const {
+  JobShape shape;
+  shape.width = width;
+  shape.height = height;
+  shape.max_bitrate_kbps = client_max_kbps;
+  return frame_encoding(settings_.encoder_policy, encode_inputs(shape, false, live_sessions())).rate_kbps;
 }
 
-EncoderPolicy FramePipeline::policy_at(int width, int height) const {
-  EncoderPolicy policy = settings_.encoder_policy;
-  const double probed = policy.content_rate && content_rates_ ? content_rates_->bits_per_pixel(width, height) : 0;
-  if (probed > 0) policy.bits_per_pixel = probed;
-  return policy;
-}
-
-int FramePipeline::policy_bitrate_kbps(int width, int height, int fps, int client_max_kbps) const {
-  return target_bitrate_kbps(policy_at(width, height), width, height, fps, client_max_kbps);
-}
-
-void FramePipeline::ensure_encoder(const Job& job, bool& idr) {
+FrameEncoding FramePipeline::ensure_encoder(const Job& job, bool& idr) {
+  const FrameEncoding e =
+      frame_encoding(settings_.encoder_policy, encode_inputs(job.shape, job.pose.refine, live_sessions()));
   const JobShape& s = job.shape;
-  const EncoderPolicy policy = policy_at(s.width, s.height);
-  const int live = static_cast<int>(std::max<std::int64_t>(1, metrics_.sessions_open.load()));
   const auto now = Clock::now();
   const bool same_stream = encoder_ && encoder_->width() == s.width && encoder_->height() == s.height &&
                            encoder_bitrate_kbps_ == s.max_bitrate_kbps;
-  // The link's cap follows the link frame by frame, and a probed content rate takes effect when
-  // its probe ends: x264 takes a new VBV rate without an IDR. (An AV1 stream cannot: it is
-  // rebuilt below; a limiting link moves it to H.264, use_av1.)
-  const int rate =
-      target_bitrate_kbps(policy, s.width, s.height, kStreamFps, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
-  // While the link limits, the VBV holds two frames' share of the cap (kLinkVbvMs at the nominal
-  // fps): a frame may then take at most two frame intervals on the link, where the policy's
-  // buffer would let one take six, a latency spike of half a second on a slow link.
-  const int vbv_ms = s.link_kbps > 0 ? kLinkVbvMs : policy.vbv_buffer_ms;
   // The still view's refine frame: the stream's crf with no rate cap where x264 can take a new
   // VBV rate for one frame (the next frame sets the stream's again); NVENC's and AV1's encoders
   // would be rebuilt (an IDR each way), so they keep theirs: a still frame under CBR still gets
   // the whole frame's budget for what is left to refine.
-  if (job.pose.refine && rate > 0 && same_stream && encoder_->name() == "x264" &&
+  if (e.lift_cap && same_stream && encoder_->name() == "x264" &&
       encoder_->set_max_bitrate_kbps(kRefineKbps, kRefineVbvMs)) {
     // This frame lifts the stream's cap (not an earlier refine frame's): x264 plans it against
     // the buffer's fill the capped frames left, which says nothing of the crf.
     refine_lifted_cap_ = encoder_rate_kbps_ != kRefineKbps;
     encoder_rate_kbps_ = kRefineKbps;
     encoder_vbv_ms_ = kRefineVbvMs;
-    return;
+    return e;
   }
-  if (same_stream && (encoder_rate_kbps_ != rate || encoder_vbv_ms_ != vbv_ms) && encoder_->codec() == "h264" &&
-      rate > 0 && encoder_->set_max_bitrate_kbps(rate, vbv_ms)) {
-    encoder_rate_kbps_ = rate;
-    encoder_vbv_ms_ = vbv_ms;
+  // The link's cap follows the link frame by frame, and a probed content rate takes effect when
+  // its probe ends: x264 takes a new VBV rate without an IDR. (An AV1 stream cannot: it is
+  // rebuilt below; a limiting link moves it to H.264, use_av1.)
+  if (same_stream && (encoder_rate_kbps_ != e.rate_kbps || encoder_vbv_ms_ != e.vbv_ms) &&
+      encoder_->codec() == "h264" && e.rate_kbps > 0 && encoder_->set_max_bitrate_kbps(e.rate_kbps, e.vbv_ms)) {
+    encoder_rate_kbps_ = e.rate_kbps;
+    encoder_vbv_ms_ = e.vbv_ms;
   }
-  // The ladder's step, AV1 above it. A link that comes to limit an AV1 stream lowers the step, so
-  // should_rebuild moves it to H.264 at once.
-  const int step = stream_step(s, live);
-  if (same_stream && encoder_rate_kbps_ == rate && encoder_vbv_ms_ == vbv_ms) {
+  if (same_stream && encoder_rate_kbps_ == e.rate_kbps && encoder_vbv_ms_ == e.vbv_ms) {
     // The same stream: rebuilt only for a new share of the cores (x264's threads, preset and the
-    // codec are fixed when it opens; NVENC has none to share).
+    // codec are fixed when it opens; NVENC has none to share). A link that comes to limit an AV1
+    // stream lowers the step, so should_rebuild moves it to H.264 at once.
     const auto since = now - encoder_built_;
-    const bool threads = should_rebuild(encoder_threads_, encoder_threads(policy, s.width, s.height, live), since);
-    const bool preset = should_rebuild(encoder_step_, step, since);
-    if (encoder_->name() == "nvenc" || !(threads || preset)) return;
+    const bool threads = should_rebuild(encoder_threads_, e.threads, since);
+    const bool preset = should_rebuild(encoder_step_, e.step, since);
+    if (encoder_->name() == "nvenc" || !(threads || preset)) return e;
     metrics_.encoder_rebuilds_total++;
   }
-  EncoderConfig cfg =
-      encoder_config(policy, s.width, s.height, kStreamFps, live, rate_cap_kbps(s.max_bitrate_kbps, s.link_kbps));
-  if (cfg.bitrate_kbps > 0) cfg.vbv_buffer_ms = vbv_ms;
+  EncoderConfig cfg = e.config;
   // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
   cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
   cfg.cuda_device = std::max(gpu_, 0);
   // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
   bool fell_back = false;
-  encoder_ = make_encoder(step == kPresetSteps ? "av1" : settings_.encoder, cfg, nullptr, &fell_back);
+  encoder_ = make_encoder(e.av1 ? "av1" : settings_.encoder, cfg, nullptr, &fell_back);
   encoder_bitrate_kbps_ = s.max_bitrate_kbps;
   encoder_rate_kbps_ = cfg.bitrate_kbps;
-  encoder_vbv_ms_ = vbv_ms;
+  encoder_vbv_ms_ = e.vbv_ms;
   encoder_threads_ = cfg.threads;
-  encoder_step_ = step;
+  encoder_step_ = e.step;
   encoder_built_ = now;
   if (fell_back) metrics_.encoder_fallbacks_total++;
   idr = true;
+  return e;
 }
 
 FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
   try {
     bool idr = frame.job.force_idr;
-    ensure_encoder(frame.job, idr);
+    const FrameEncoding settings = ensure_encoder(frame.job, idr);
     const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
-    probe_content_rate(frame.job, frame.planes->planes());
+    probe_content_rate(frame.job, settings, frame.planes->planes());
     return frame_message(frame.job, enc, frame);
   } catch (const std::exception& e) {
     JobResult r;
@@ -321,7 +314,7 @@ FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
   }
 }
 
-void FramePipeline::probe_content_rate(const Job& job, const Yuv420Planes& planes) {
+void FramePipeline::probe_content_rate(const Job& job, const FrameEncoding& settings, const Yuv420Planes& planes) {
   const EncoderPolicy& policy = settings_.encoder_policy;
   // --bitrate off or a fixed rate wins over the probe.
   if (!policy.content_rate || policy.bitrate_kbps >= 0 || !content_rates_) return;
@@ -334,9 +327,7 @@ void FramePipeline::probe_content_rate(const Job& job, const Yuv420Planes& plane
     if (!content_rates_->claim(w, h)) return;  // measured, or another session measures it
     try {
       // The stream's own x264 preset (the ladder's step now; an AV1 stream: the step below it).
-      const int live = static_cast<int>(std::max<std::int64_t>(1, metrics_.sessions_open.load()));
-      probe_ = std::make_unique<ContentRateProbe>(policy, w, h, std::max(1, encoder_threads_),
-                                                  encoder_preset(policy, w, h, kStreamFps, live));
+      probe_ = std::make_unique<ContentRateProbe>(policy, w, h, std::max(1, encoder_threads_), settings.preset);
     } catch (const std::exception&) {
       content_rates_->release(w, h);
       return;

@@ -28,6 +28,7 @@
 
 #include "encode/content_rate.h"
 #include "encode/encoder.h"
+#include "encode/frame_encoding.h"
 #include "proto/message_validation.h"
 #include "renderer/renderer.h"
 #include "process/server_metrics.h"
@@ -41,16 +42,6 @@ namespace catgs::server {
 inline double ms_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
-
-// The stream's nominal frame rate: the browser's pose rate (its time base and the VBV's budget).
-inline constexpr int kStreamFps = 60;
-// The VBV's size while the link limits the stream (link_rate.h): two frames at kStreamFps, which
-// the session's conversion of the cap by the measured frame rate makes two real frames' share.
-inline constexpr int kLinkVbvMs = 2000 / kStreamFps;
-// A refine frame's VBV (still_refine.h): x264 cannot switch its VBV off once on, so "no rate cap"
-// is a rate and buffer no frame reaches (100 Mbit/s, a buffer of one second of it).
-inline constexpr int kRefineKbps = 100000;
-inline constexpr int kRefineVbvMs = 1000;
 
 class FramePipeline {
  public:
@@ -155,9 +146,10 @@ class FramePipeline {
   // (`content_rates`, the LoadedScene's; null: the policy's bits a pixel alone).
   void open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu, bool pipelined,
             bool av1_ok, std::shared_ptr<ContentRates> content_rates = nullptr);
-  // The policy's VBV maximum rate (kbit/s; target_bitrate_kbps) for a width x height stream at
-  // `fps`, with the scene's probed bits a pixel at that size where --bits-per-pixel auto has one.
-  int policy_bitrate_kbps(int width, int height, int fps, int client_max_kbps) const;
+  // The policy's VBV maximum rate (kbit/s; frame_encoding's rate_kbps with no link cap) for a
+  // width x height stream at kStreamFps under the client's Quality, with the scene's probed bits
+  // a pixel at that size where --bits-per-pixel auto has one.
+  int policy_bitrate_kbps(int width, int height, int client_max_kbps) const;
   // Whether a stream of `shape` at `live_sessions` sessions would be AV1 now (the encoder policy's
   // use_av1): Welcome.codec before the first frame.
   bool stream_is_av1(const JobShape& shape, int live_sessions) const;
@@ -224,18 +216,17 @@ class FramePipeline {
   float set_lod_bound(const Camera& camera);
   // The camera of a job's pose at its shape's size.
   static Camera camera_of(const Job& job);
-  // The step a stream of `shape` takes at `live` sessions: the x264 ladder's (preset_step; 0 for a
-  // fixed --x264-preset), or kPresetSteps (above the ladder) for AV1.
-  int stream_step(const JobShape& shape, int live) const;
-  // Builds or reconfigures the encoder for `job`; sets `idr` when it was (re)built.
-  void ensure_encoder(const Job& job, bool& idr);
+  // What frame_encoding needs of a frame of `shape` (encode/frame_encoding.h).
+  FrameEncodeInputs encode_inputs(const JobShape& shape, bool refine, int live_sessions) const;
+  int live_sessions() const;  // sessions open on the server, at least 1
+  // Decides the frame's encoder settings (frame_encoding) and brings the encoder to them: a new
+  // VBV rate where x264 takes one, else a rebuild (sets `idr`). Returns the settings.
+  FrameEncoding ensure_encoder(const Job& job, bool& idr);
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
-  // The encoder policy at width x height: settings' with the scene's probed bits a pixel there.
-  EncoderPolicy policy_at(int width, int height) const;
   // --bits-per-pixel auto: feeds an encoded frame's planes to this session's probe of the scene at
   // the frame's size, when it holds the size's claim (or takes it) and the camera moved; stores
   // the result once the probe is done (encode/content_rate.h).
-  void probe_content_rate(const Job& job, const Yuv420Planes& planes);
+  void probe_content_rate(const Job& job, const FrameEncoding& settings, const Yuv420Planes& planes);
 
   const FrameSettings& settings_;
   ServerMetrics& metrics_;
@@ -264,7 +255,7 @@ class FramePipeline {
   int encoder_vbv_ms_ = 0;          // and its VBV's size, ms of that rate
   bool refine_lifted_cap_ = false;  // the frame being encoded is a refine frame that lifted a VBV cap
   int encoder_threads_ = 0;         // its sliced threads (encoder_policy.h)
-  int encoder_step_ = 0;            // its step (stream_step): the ladder's preset, or kPresetSteps for AV1
+  int encoder_step_ = 0;            // its step (FrameEncoding::step): the ladder's preset, or kPresetSteps for AV1
   Clock::time_point encoder_built_{};
   std::shared_ptr<ContentRates> content_rates_;  // the scene's (open)
   std::unique_ptr<ContentRateProbe> probe_;      // this session's probe, holding its size's claim

@@ -56,8 +56,8 @@ Session::Session(ConnId id, SessionShared& shared)
       tick_(strand_),
       hello_timer_(strand_),
       peer_(shared.transport.peer(id)),
-      pacing_(shared_.settings.frame.frame_deadline_slots),
-      frames_(shared_.settings.frame, shared_.metrics) {
+      stream_(shared_, id_, *this),
+      exports_(shared_, id_, *this) {
   shared_.metrics.connections_open++;
   const auto now = Clock::now();
   const RateLimitSettings& r = shared_.settings.rate_limits;
@@ -90,25 +90,24 @@ void Session::start() {
 
 Session::~Session() {
   shared_.metrics.connections_open--;
-  if (link_.limited()) shared_.metrics.sessions_link_limited--;
   if (placed_) shared_.gpus.release(gpu_, memory_reserved_);
 }
 
-void Session::on_out_of_memory(const std::string& error) {
+void Session::on_out_of_memory(const std::string& error, int streak) {
   // The GPU's memory ran out while this session's buffers grew (the estimate admitted it, but
   // another process, or a view far denser than the estimate, took the room): the frame is lost,
   // not the session. Its later frames are drawn in passes within the list buffers it has, and
   // the next pose renders as usual. Only a session that still cannot draw a frame after
   // kMaxOutOfMemoryFrames in a row is ended, as full, with a retry hint.
   shared_.metrics.render_out_of_memory_total++;
-  const std::uint64_t budget = frames_.halve_list_budget();
+  const std::uint64_t budget = stream_.halve_list_budget();
   std::cerr << "[session " << id_ << "] out of device memory (" << error << "): frame dropped, list budget now "
             << memory_text(budget) << "\n";
-  if (++out_of_memory_streak_ >= kMaxOutOfMemoryFrames)
+  if (streak >= kMaxOutOfMemoryFrames)
     return fail(pb::ERROR_SERVER_FULL,
                 "server full: its GPU's memory cannot hold this session's frames (" + error + ")", false,
                 jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
-  maybe_start_render();
+  stream_.admit();
 }
 
 std::uint64_t Session::memory_estimate(int width, int height) const {
@@ -124,7 +123,7 @@ void Session::update_memory(std::uint64_t buffer_bytes) {
   std::atomic<std::uint64_t>& scene_peak = *scene_->session_bytes_peak;
   for (std::uint64_t seen = scene_peak.load();
        buffer_bytes > seen && !scene_peak.compare_exchange_weak(seen, buffer_bytes);) {}
-  const std::uint64_t want = memory_estimate(width_, height_);
+  const std::uint64_t want = memory_estimate(stream_.width(), stream_.height());
   if (!placed_ || want == memory_reserved_) return;
   if (!shared_.gpus.update(gpu_, memory_reserved_, want))
     std::cerr << "[session " << id_ << "] device memory: its buffers (" << memory_text(want)
@@ -150,23 +149,8 @@ void Session::post_sent(const SocketSample& socket) {
   // is busy rendering, and that wait is not send time.
   const auto written = Clock::now();
   boost::asio::post(strand_, [self = shared_from_this(), written, socket] {
-    if (self->in_flight_ > 0) self->in_flight_--;
-    self->last_progress_ = Clock::now();
-    if (!self->handed_.empty()) {  // frames are written in the order they were queued
-      const Handed frame = self->handed_.front();
-      self->last_send_ms_ = ms_between(frame.at, written);
-      self->handed_.pop_front();
-      // The receipts' delays count from here (link_rate.h Receipt::sent).
-      for (auto it = self->recent_.rbegin(); it != self->recent_.rend(); ++it)
-        if (it->sequence == frame.sequence) {
-          it->written = written;
-          break;
-        }
-      self->shared_.metrics.send_seconds.observe(self->last_send_ms_ / 1000.0);
-      self->on_link_sample(frame, written, socket);
-    }
-    self->maybe_start_render();
-    if (self->export_ && self->export_->sending) self->send_export_chunks();
+    self->stream_.on_sent(written, socket);
+    self->exports_.pump();  // a file's next chunks once the queue has room
   });
 }
 
@@ -175,7 +159,7 @@ void Session::post_closed() {
   boost::asio::post(strand_, [self = shared_from_this()] {
     self->end_open_state();
     self->state_ = State::closed;
-    self->frames_.drop_pending();
+    self->stream_.drop_pending();
     self->tick_.cancel();
     self->hello_timer_.cancel();
   });
@@ -192,14 +176,18 @@ ViewportLimit Session::viewport_limit() const {
 }
 
 void Session::end_open_state() {
-  if (frames_.drop_pending()) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
+  if (stream_.drop_pending()) shared_.metrics.dropped_frames_total++;  // a pose that will never be rendered
   // A closed page gets no file: its rendering stops and its file goes.
-  end_export(ServerMetrics::ExportEnd::cancelled);
+  exports_.end(ServerMetrics::ExportEnd::cancelled);
   scene_use_.reset();  // the scene may be unloaded now (a wait for its load is withdrawn)
   if (counted_open_) {
     counted_open_ = false;
     shared_.metrics.sessions_open--;
   }
+}
+
+std::string Session::label() const {
+  return "[session " + std::to_string(id_) + (session_id_.empty() ? "" : " " + session_id_) + "]";
 }
 
 void Session::send(const pb::ServerMessage& message) {
@@ -264,10 +252,8 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
       Viewport v;
       if (auto bad = check_viewport(msg.resize().viewport_width(), msg.resize().viewport_height(), viewport_limit(), v))
         return fail(bad->code, bad->reason);
-      width_ = v.width;
-      height_ = v.height;
+      stream_.set_viewport(v.width, v.height);      // the encoder is rebuilt at the new size: an IDR
       if (state_ == State::open) update_memory(0);  // the estimate at the new size
-      frames_.request_idr();                        // the encoder is rebuilt at the new size; its first frame is an IDR
       return;
     }
     case pb::ClientMessage::kPing: {
@@ -285,15 +271,14 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
       if (!within(key_frame_bucket_, ServerMetrics::Limit::key_frame, "KeyFrameRequests",
                   shared_.settings.rate_limits.key_frame))
         return;
-      frames_.request_idr();
+      stream_.request_idr();
       return;
     case pb::ClientMessage::kQuality:
       if (!within(quality_bucket_, ServerMetrics::Limit::quality, "Quality messages",
                   shared_.settings.rate_limits.quality))
         return;
       if (auto bad = check_quality(msg.quality())) return fail(bad->code, bad->reason);
-      max_bitrate_kbps_ = static_cast<int>(msg.quality().max_bitrate_kbps());
-      frames_.request_idr();  // the encoder is rebuilt with it; its first frame is an IDR
+      stream_.set_max_bitrate(static_cast<int>(msg.quality().max_bitrate_kbps()));  // an IDR
       return;
     case pb::ClientMessage::kDepthRequest:
       return handle_depth(msg.depth_request());
@@ -302,7 +287,7 @@ void Session::handle_message(MessageKind kind, const std::string& bytes, Clock::
     case pb::ClientMessage::kExportVideo:
       return handle_export(msg.export_video());
     case pb::ClientMessage::kExportCancel:
-      return handle_export_cancel(msg.export_cancel());
+      return exports_.cancel(msg.export_cancel());
     default:
       return fail(pb::ERROR_MALFORMED, "unknown message");
   }
@@ -370,8 +355,7 @@ void Session::handle_hello(const pb::Hello& hello) {
   shared_.metrics.sessions_total++;
   shared_.transport.said_hello(id_);  // no longer counts against --max-pre-hello
   state_ = State::loading;
-  width_ = v.width;  // a Resize while the scene loads replaces it
-  height_ = v.height;
+  stream_.set_viewport(v.width, v.height);  // a Resize while the scene loads replaces it
   load_progress_ = hello.load_progress();
   client_name_ = hello.client_name().substr(0, 128);
   // The scene is there (ready is posted at once) or loads on a thread of its own: this strand
@@ -425,7 +409,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   // A GPU whose memory holds this session's buffers, the least busy of those (issue 61): a
   // visitor no GPU can hold is refused here, at the door, rather than ended mid-tour when an
   // allocation fails.
-  const std::uint64_t need = memory_estimate(width_, height_);
+  const std::uint64_t need = memory_estimate(stream_.width(), stream_.height());
   shared_.next_session_bytes = need;
   const GpuAssignment::Placement place = shared_.gpus.place(need);
   if (!place.placed) {
@@ -444,7 +428,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   }
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
   const bool pipelined = !(shared_.encoder_kind == "nvenc" && renderer->name() == "cuda");
-  frames_.open(std::move(renderer), scene_->model, gpu_, pipelined, client_av1_ && shared_.encoder_kind == "x264",
+  stream_.open(std::move(renderer), scene_->model, gpu_, pipelined, client_av1_ && shared_.encoder_kind == "x264",
                scene_->content_rates);
   state_ = State::open;
   session_id_ = random_session_id();
@@ -455,7 +439,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   w->set_scene_name(scene_->model->name);
   set_vec3(w->mutable_scene_bounds()->mutable_min(), scene_->bounds.min);
   set_vec3(w->mutable_scene_bounds()->mutable_max(), scene_->bounds.max);
-  const CameraPose start = first_view_pose(scene_->frame, width_, height_);
+  const CameraPose start = first_view_pose(scene_->frame, stream_.width(), stream_.height());
   pb::Pose* p = w->mutable_initial_pose();
   p->set_sequence(0);
   set_vec3(p->mutable_position(), start.position);
@@ -467,51 +451,31 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   set_vec3(w->mutable_orbit_centre(), scene_->frame.orbit_centre);
   set_vec3(w->mutable_up(), scene_->frame.up);
   w->set_scene_scale(scene_->frame.scene_scale);
-  w->set_can_export(may_export());
-  FramePipeline::JobShape first;
-  first.width = width_;
-  first.height = height_;
+  w->set_can_export(exports_.may_export(role_));
   const int live = static_cast<int>(std::max<std::int64_t>(1, shared_.metrics.sessions_open.load()));
-  const bool av1 = frames_.stream_is_av1(first, live);
+  const bool av1 = stream_.first_frame_av1(live);
   w->set_codec(av1 ? pb::CODEC_AV1 : pb::CODEC_H264);
-  w->set_width(static_cast<std::uint32_t>(width_));
-  w->set_height(static_cast<std::uint32_t>(height_));
-  w->set_renderer(frames_.renderer_name());
+  w->set_width(static_cast<std::uint32_t>(stream_.width()));
+  w->set_height(static_cast<std::uint32_t>(stream_.height()));
+  w->set_renderer(stream_.renderer_name());
   w->set_encoder(av1 ? "av1" : shared_.encoder_kind);
   w->set_pipeline(pipeline_name(shared_.render_options.pipeline));
   send(m);
-  std::cerr << "[session " << id_ << " " << session_id_ << "] open " << width_ << "x" << height_ << " scene '"
-            << scene_->model->name << "' client '" << client_name_ << "'\n";
+  std::cerr << label() << " open " << stream_.width() << "x" << stream_.height() << " scene '" << scene_->model->name
+            << "' client '" << client_name_ << "'\n";
   last_stats_ = Clock::now();
-  last_progress_ = last_stats_;
+  stream_.opened(last_stats_);
   last_message_ = last_stats_;  // a load's wait is not the client's silence
   send_annotations();
   arm_tick();
-  maybe_start_render();  // a Pose sent before Welcome
+  stream_.admit();  // a Pose sent before Welcome
 }
 
 void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   CameraPose cam;
   if (auto bad = check_pose(pose, cam)) return fail(bad->code, bad->reason);
-  poses_received_++;
-  shared_.metrics.poses_total++;
-  // The client's own end-to-end measurement of an earlier frame (0: nothing new).
-  if (pose.shown_latency_ms() > 0) {
-    shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
-    if (shared_.settings.frame.adaptive_quality) quality_.on_latency(received, pose.shown_latency_ms());
-  }
-  if (pose.received_ms() > 0) on_receipt(pose.received_frame_sequence(), pose.received_ms(), received);
-  const bool replaced = frames_.pending().has_value();
-  if (replaced) {
-    poses_skipped_++;                       // latest pose wins: the older one is never rendered
-    shared_.metrics.poses_skipped_total++;  // a skip, not a drop: the newer pose is rendered instead
-  }
-  if (shared_.settings.frame.adaptive_quality) quality_.on_pose(received, replaced);
-  still_.on_pose(received);
-  pacing_.on_pose(received);
-  frames_.offer({cam, pose.sequence(), pose.client_time_ms(), received});
   last_pose_ = cam;
-  maybe_start_render();
+  stream_.on_pose(pose, cam, received);
 }
 
 void Session::handle_depth(const pb::DepthRequest& request) {
@@ -526,7 +490,8 @@ void Session::handle_depth(const pb::DepthRequest& request) {
   };
   if (state_ != State::open) return refuse("the scene is not open yet");
   DepthQuery query;
-  if (auto bad = check_depth_request(request, last_pose_, Viewport{width_, height_}, query)) return refuse(bad->reason);
+  if (auto bad = check_depth_request(request, last_pose_, Viewport{stream_.width(), stream_.height()}, query))
+    return refuse(bad->reason);
   if (depths_in_flight_ >= kMaxDepthsInFlight)
     return refuse("already " + std::to_string(kMaxDepthsInFlight) + " DepthRequests in flight: wait for an answer");
   ++depths_in_flight_;
@@ -585,6 +550,13 @@ void Session::handle_save_annotations(const pb::SaveAnnotations& save) {
   send(m);
 }
 
+void Session::handle_export(const pb::ExportVideoRequest& request) {
+  if (!within(export_bucket_, ServerMetrics::Limit::export_video, "ExportVideoRequests",
+              shared_.settings.rate_limits.export_video))
+    return;
+  exports_.start(request, role_, state_ == State::open, scene_ ? scene_->model : nullptr, gpu_);
+}
+
 void Session::arm_tick() {
   tick_.expires_after(kTick);
   tick_.async_wait([self = shared_from_this()](const boost::system::error_code& ec) {
@@ -596,7 +568,7 @@ void Session::on_tick() {
   if (state_ != State::open) return;
   const auto now = Clock::now();
   const auto timeout = std::chrono::milliseconds(shared_.settings.slow_client_timeout_ms);
-  if (in_flight_ > 0 && now - last_progress_ > timeout)
+  if (stream_.unread_for(now, timeout))
     return fail(pb::ERROR_TOO_SLOW,
                 "frames unread for " + std::to_string(shared_.settings.slow_client_timeout_ms) + " ms",
                 /*drop_queued=*/true);
@@ -608,9 +580,8 @@ void Session::on_tick() {
     return fail(pb::ERROR_TIMEOUT, "no message for " + std::to_string(shared_.settings.silent_timeout_ms) + " ms");
   }
   if (now - last_stats_ >= std::chrono::seconds(1)) send_stats();
-  if (export_ && export_->sending) send_export_chunks();
-  if (shared_.settings.frame.adaptive_quality) adapt_quality(now);
-  if (shared_.settings.frame.still_refine) refine_still_view(now);
+  exports_.pump();
+  stream_.on_tick(now);
   arm_tick();
 }
 
@@ -619,21 +590,7 @@ void Session::send_stats() {
   const double seconds = std::max(1e-3, ms_between(last_stats_, now) / 1000.0);
   pb::ServerMessage m;
   pb::Stats* s = m.mutable_stats();
-  s->set_frames_sent(frames_sent_);
-  s->set_poses_received(poses_received_);
-  s->set_poses_skipped(poses_skipped_);
-  const double n = frames_since_stats_ ? frames_since_stats_ : 1;
-  s->set_render_ms_mean(render_ms_sum_ / n);
-  s->set_encode_ms_mean(encode_ms_sum_ / n);
-  s->set_lod_error_px_mean(lod_error_px_sum_ / n);
-  s->set_splats_mean(splats_sum_ / n);
-  s->set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
-  s->set_link_kbps(link_.link_kbps());
-  s->set_rtt_ms(link_.rtt_ms());
-  if (link_.limited()) s->set_bitrate_cap_kbps(static_cast<std::uint32_t>(link_.cap_kbps(link_ceiling_kbps_)));
-  s->set_quality_level(static_cast<std::uint32_t>(shared_.settings.frame.adaptive_quality ? quality_.level() : 0));
-  s->set_key_frames(render_key_frames_);
-  s->set_sub_frames(render_sub_frames_);
+  stream_.fill_stats(*s, seconds);
   s->set_device_memory_mib(static_cast<std::uint32_t>(memory_reserved_ >> 20));
   // Draining: the client learns when this session will end (the page says so), within a second of
   // SIGTERM, rather than only from the Error at the deadline.
@@ -642,13 +599,8 @@ void Session::send_stats() {
     s->set_drain_ms_left(static_cast<std::uint32_t>(std::clamp(left, 1.0, 3.6e6)));
   }
   send(m);
-  // A still camera sends no poses and gets no frames: an idle interval has no frame rate to add.
-  if (frames_since_stats_ > 0) shared_.metrics.session_fps.observe(frames_since_stats_ / seconds);
   shared_.metrics.session_device_bytes.observe(static_cast<double>(memory_reserved_));
   last_stats_ = now;
-  frames_since_stats_ = 0;
-  bytes_since_stats_ = 0;
-  render_ms_sum_ = encode_ms_sum_ = lod_error_px_sum_ = splats_sum_ = 0;
 }
 
 }  // namespace catgs::server

@@ -1,25 +1,80 @@
-// A session's stream (session.h): when the frame pipeline's stages may start (frame_pipeline.h;
-// latest pose wins, frames in flight, a rendered frame that would miss its display slot is
-// skipped before its encode: frame_pacing.h), the jobs posted to the render lanes and the worker
-// pool, each finished Frame handed to the transport and counted, and what the written frames
-// say about the link (link_rate.h) and the session's size (adaptive_quality.h). The protocol
-// state machine that feeds it is session.cpp.
-#include "session/session.h"
+// A session's stream (session_stream.h): the frame's way, stage by stage, and what the written
+// frames and the client's receipts say about the link (link_rate.h) and the session's size
+// (adaptive_quality.h).
+#include "session/session_stream.h"
 
 #include <boost/asio/post.hpp>
 
 #include <algorithm>
+#include <cstdlib>
 
-#include "encode/encoder_policy.h"
-#include "session/link_rate.h"
+#include "encode/frame_encoding.h"
 
 namespace catgs::server {
 
-void Session::maybe_start_render() {
+SessionStream::SessionStream(SessionShared& shared, ConnId id, SessionOwner& owner)
+    : shared_(shared),
+      id_(id),
+      owner_(owner),
+      frames_(shared.settings.frame, shared.metrics),
+      pacing_(shared.settings.frame.frame_deadline_slots) {}
+
+SessionStream::~SessionStream() {
+  if (link_.limited()) shared_.metrics.sessions_link_limited--;
+}
+
+void SessionStream::open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu,
+                         bool pipelined, bool av1_ok, std::shared_ptr<ContentRates> content_rates) {
+  gpu_ = gpu;
+  frames_.open(std::move(renderer), std::move(model), gpu, pipelined, av1_ok, std::move(content_rates));
+}
+
+bool SessionStream::first_frame_av1(int live_sessions) const {
+  FramePipeline::JobShape first;
+  first.width = width_;
+  first.height = height_;
+  return frames_.stream_is_av1(first, live_sessions);
+}
+
+void SessionStream::set_viewport(int width, int height) {
+  width_ = width;
+  height_ = height;
+  frames_.request_idr();  // the encoder is rebuilt at the new size; its first frame is an IDR
+}
+
+void SessionStream::set_max_bitrate(int kbps) {
+  max_bitrate_kbps_ = kbps;
+  frames_.request_idr();  // the encoder is rebuilt with it; its first frame is an IDR
+}
+
+void SessionStream::on_pose(const pb::Pose& pose, const CameraPose& cam, Clock::time_point received) {
+  poses_received_++;
+  shared_.metrics.poses_total++;
+  // The client's own end-to-end measurement of an earlier frame (0: nothing new).
+  if (pose.shown_latency_ms() > 0) {
+    shared_.metrics.pose_to_frame_seconds.observe(pose.shown_latency_ms() / 1000.0);
+    if (shared_.settings.frame.adaptive_quality) quality_.on_latency(received, pose.shown_latency_ms());
+  }
+  if (pose.received_ms() > 0) on_receipt(pose.received_frame_sequence(), pose.received_ms(), received);
+  const bool replaced = frames_.pending().has_value();
+  if (replaced) {
+    poses_skipped_++;                       // latest pose wins: the older one is never rendered
+    shared_.metrics.poses_skipped_total++;  // a skip, not a drop: the newer pose is rendered instead
+  }
+  if (shared_.settings.frame.adaptive_quality) quality_.on_pose(received, replaced);
+  still_.on_pose(received);
+  pacing_.on_pose(received);
+  frames_.offer({cam, pose.sequence(), pose.client_time_ms(), received});
+  admit();
+}
+
+// --- the stages ---
+
+void SessionStream::admit() {
   // Frames admitted but not yet written: those the transport holds and the one being encoded.
   const int admitted = in_flight_ + (frames_.encoding() ? 1 : 0);
   const FrameSettings& fs = shared_.settings.frame;
-  if (state_ != State::open || admitted >= fs.max_frames_in_flight || !frames_.can_start_render()) return;
+  if (!owner_.is_open() || admitted >= fs.max_frames_in_flight || !frames_.can_start_render()) return;
   // Adaptive quality scales the size (a refine frame is full size); a new size is an IDR.
   FramePipeline::JobShape shape;
   shape.quality_level = fs.adaptive_quality && !frames_.pending()->refine ? quality_.level() : 0;
@@ -31,55 +86,40 @@ void Session::maybe_start_render() {
   shape.link_read_at = Clock::now();
   FramePipeline::StartedRender started = frames_.start_render(shape);
   const std::int64_t pixels = static_cast<std::int64_t>(shape.width) * shape.height;
-  // The job holds this session, so the renderer it offers lives while the job is queued.
+  // The job holds the session, so the renderer it offers lives while the job is queued.
   std::optional<RenderScheduler::Stage1Share> share = frames_.stage1_share(started.job);
   if (!frames_.pipelined()) {
     shared_.renders.post(
-        id_, pixels,
-        [self = shared_from_this(), job = std::move(started.job)] {
-          JobResult result = self->frames_.render_and_encode(job, self->gone_);
-          boost::asio::post(self->strand_, [self, result = std::move(result)]() mutable {
-            self->frames_.end_render();
-            self->on_job_done(std::move(result));
-          });
-        },
+        id_, pixels, [keep = owner_.keep_alive(), this, job = std::move(started.job)] { render_and_encode(job); },
         std::move(share));
     return;
   }
   shared_.renders.post(
       id_, pixels,
-      [self = shared_from_this(), started = std::move(started)]() mutable {
-        FramePipeline::Rendered frame =
-            self->frames_.render(std::move(started.job), std::move(started.planes), self->gone_);
-        boost::asio::post(self->strand_, [self, frame = std::move(frame)]() mutable {
-          self->frames_.end_render();
-          if (!frame.error.empty()) return self->on_job_done(self->frames_.take_failed(std::move(frame)));
-          self->update_memory(frame.buffer_bytes);
-          self->pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
-          self->frames_.store_rendered(std::move(frame));
-          self->maybe_start_encode();
-          self->maybe_start_render();
-        });
-      },
+      [keep = owner_.keep_alive(), this, started = std::move(started)]() mutable { render(std::move(started)); },
       std::move(share));
 }
 
-int Session::link_vbv_kbps(int width, int height) {
-  // The link's cap against the policy's rate at this size (link_rate.h), both in bits a second
-  // on the wire: the VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer
-  // frames a second sends that share of it. At least 10 frames a second's share: frames written
-  // slowly because the link is jammed must not each get a larger share of the cap (a frame of
-  // half a second on the wire at 2 frames/s makes the jam worse).
-  const double fps_share = std::clamp(link_.frame_rate() / kStreamFps, 10.0 / kStreamFps, 1.0);
-  const int vbv_ceiling = frames_.policy_bitrate_kbps(width, height, kStreamFps, max_bitrate_kbps_);
-  link_ceiling_kbps_ = vbv_ceiling > 0 ? std::max(1, static_cast<int>(vbv_ceiling * fps_share)) : 0;
-  if (!shared_.settings.frame.link_control || !link_.limited()) return 0;
-  return std::max(1, static_cast<int>(link_.cap_kbps(link_ceiling_kbps_) * link_.encoder_gain() / fps_share));
+void SessionStream::render(FramePipeline::StartedRender started) {
+  FramePipeline::Rendered frame = frames_.render(std::move(started.job), std::move(started.planes), owner_.gone());
+  boost::asio::post(owner_.strand(), [keep = owner_.keep_alive(), this, frame = std::move(frame)]() mutable {
+    rendered(std::move(frame));
+  });
 }
 
-void Session::maybe_start_encode() {
+void SessionStream::rendered(FramePipeline::Rendered frame) {
+  frames_.end_render();
+  if (!frame.error.empty()) return hand_off(frames_.take_failed(std::move(frame)));
+  owner_.on_frame_buffers(frame.buffer_bytes);
+  pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
+  frames_.store_rendered(std::move(frame));
+  start_encode();
+  admit();
+}
+
+void SessionStream::start_encode() {
   if (frames_.encoding() || !frames_.rendered()) return;
-  if (state_ != State::open) {  // nobody to send it to
+  if (!owner_.is_open()) {  // nobody to send it to
     frames_.drop_rendered();
     shared_.metrics.dropped_frames_total++;
     return;
@@ -92,7 +132,7 @@ void Session::maybe_start_encode() {
     frames_.drop_rendered();
     poses_skipped_++;
     shared_.metrics.deadline_skips_total++;
-    maybe_start_render();
+    admit();
     return;
   }
   std::shared_ptr<FramePipeline::Rendered> frame = frames_.start_encode();
@@ -100,35 +140,58 @@ void Session::maybe_start_encode() {
   // frame encoded, not one a render later (a frame's time on a slow link).
   frame->job.shape.link_kbps = link_vbv_kbps(frame->job.shape.width, frame->job.shape.height);
   frame->job.shape.link_read_at = Clock::now();
-  boost::asio::post(shared_.io, [self = shared_from_this(), frame] {
-    JobResult result = self->frames_.encode(*frame);
-    boost::asio::post(self->strand_, [self, frame, result = std::move(result)]() mutable {
-      self->frames_.end_encode(*frame);
-      self->on_job_done(std::move(result));
-      self->maybe_start_encode();
-      self->maybe_start_render();  // the rendered slot may have just been freed
-    });
+  boost::asio::post(shared_.io, [keep = owner_.keep_alive(), this, frame] { encode(frame); });
+}
+
+void SessionStream::encode(const std::shared_ptr<FramePipeline::Rendered>& frame) {
+  JobResult result = frames_.encode(*frame);
+  boost::asio::post(owner_.strand(), [keep = owner_.keep_alive(), this, frame, result = std::move(result)]() mutable {
+    frames_.end_encode(*frame);
+    hand_off(std::move(result));
+    start_encode();
+    admit();  // the rendered slot may have just been freed
   });
 }
 
-void Session::on_job_done(JobResult result) {
-  if (state_ != State::open || result.message.empty()) shared_.metrics.dropped_frames_total++;
-  if (state_ != State::open) return;
-  update_memory(result.buffer_bytes);
-  if (result.message.empty() && result.out_of_memory) return on_out_of_memory(result.error);
+void SessionStream::render_and_encode(const FramePipeline::Job& job) {
+  JobResult result = frames_.render_and_encode(job, owner_.gone());
+  boost::asio::post(owner_.strand(), [keep = owner_.keep_alive(), this, result = std::move(result)]() mutable {
+    frames_.end_render();
+    hand_off(std::move(result));
+  });
+}
+
+void SessionStream::hand_off(JobResult result) {
+  if (!owner_.is_open() || result.message.empty()) shared_.metrics.dropped_frames_total++;
+  if (!owner_.is_open()) return;
+  owner_.on_frame_buffers(result.buffer_bytes);
+  if (result.message.empty() && result.out_of_memory)
+    return owner_.on_out_of_memory(result.error, ++out_of_memory_streak_);
   if (!result.message.empty()) out_of_memory_streak_ = 0;
   // A view whose render list the renderer refused (RenderListBudget: a scene of giant Gaussians,
   // say) is the request's fault, not the server's: INVALID_ARGUMENT with the rule's message, so
   // that a client can tell it from a failure, and a counter for the operator.
   if (result.message.empty() && result.over_budget) {
     shared_.metrics.render_budget_refusals_total++;
-    return fail(pb::ERROR_INVALID_ARGUMENT,
-                "this view cannot be rendered: " + result.error + " (a smaller viewport or another view may fit)");
+    return owner_.end_session(pb::ERROR_INVALID_ARGUMENT, "this view cannot be rendered: " + result.error +
+                                                              " (a smaller viewport or another view may fit)");
   }
-  if (result.message.empty()) return fail(pb::ERROR_INTERNAL, "render/encode failed: " + result.error);
+  if (result.message.empty()) return owner_.end_session(pb::ERROR_INTERNAL, "render/encode failed: " + result.error);
   pacing_.on_encode(result.encode_ms);
   if (in_flight_ == 0) last_progress_ = Clock::now();  // the slow-reader clock starts now
   in_flight_++;
+  count(result);
+  if (shared_.settings.frame.adaptive_quality && !result.refine)
+    quality_.on_frame(result.quality_level, result.total_ms);
+  still_.on_frame(result.quality_level > 0 || result.rate_capped, result.refine, result.refine_vbv_bound);
+  handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence, result.link_read_at, result.refine});
+  recent_.push_back(handed_.back());
+  if (recent_.size() > kRecentFrames) recent_.pop_front();
+  shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
+  admit();
+}
+
+void SessionStream::count(const JobResult& result) {
   frames_sent_++;
   frames_since_stats_++;
   bytes_since_stats_ += result.payload_bytes;
@@ -156,17 +219,84 @@ void Session::on_job_done(JobResult result) {
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   m.speculation_window.observe(result.speculation_window);
-  if (shared_.settings.frame.adaptive_quality && !result.refine)
-    quality_.on_frame(result.quality_level, result.total_ms);
-  still_.on_frame(result.quality_level > 0 || result.rate_capped, result.refine, result.refine_vbv_bound);
-  handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence, result.link_read_at, result.refine});
-  recent_.push_back(handed_.back());
-  if (recent_.size() > kRecentFrames) recent_.pop_front();
-  shared_.transport.send(id_, std::move(result.message), /*counted=*/true);
-  maybe_start_render();
 }
 
-void Session::on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket) {
+void SessionStream::on_sent(Clock::time_point written, const SocketSample& socket) {
+  if (in_flight_ > 0) in_flight_--;
+  last_progress_ = Clock::now();
+  if (!handed_.empty()) {  // frames are written in the order they were queued
+    const Handed frame = handed_.front();
+    last_send_ms_ = ms_between(frame.at, written);
+    handed_.pop_front();
+    // The receipts' delays count from here (link_rate.h Receipt::sent).
+    for (auto it = recent_.rbegin(); it != recent_.rend(); ++it)
+      if (it->sequence == frame.sequence) {
+        it->written = written;
+        break;
+      }
+    shared_.metrics.send_seconds.observe(last_send_ms_ / 1000.0);
+    on_link_sample(frame, written, socket);
+  }
+  admit();
+}
+
+bool SessionStream::unread_for(Clock::time_point now, std::chrono::milliseconds timeout) const {
+  return in_flight_ > 0 && now - last_progress_ > timeout;
+}
+
+void SessionStream::fill_stats(pb::Stats& s, double seconds) {
+  s.set_frames_sent(frames_sent_);
+  s.set_poses_received(poses_received_);
+  s.set_poses_skipped(poses_skipped_);
+  const double n = frames_since_stats_ ? frames_since_stats_ : 1;
+  s.set_render_ms_mean(render_ms_sum_ / n);
+  s.set_encode_ms_mean(encode_ms_sum_ / n);
+  s.set_lod_error_px_mean(lod_error_px_sum_ / n);
+  s.set_splats_mean(splats_sum_ / n);
+  s.set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
+  s.set_link_kbps(link_.link_kbps());
+  s.set_rtt_ms(link_.rtt_ms());
+  if (link_.limited()) s.set_bitrate_cap_kbps(static_cast<std::uint32_t>(link_.cap_kbps(link_ceiling_kbps_)));
+  s.set_quality_level(static_cast<std::uint32_t>(shared_.settings.frame.adaptive_quality ? quality_.level() : 0));
+  s.set_key_frames(render_key_frames_);
+  s.set_sub_frames(render_sub_frames_);
+  // A still camera sends no poses and gets no frames: an idle interval has no frame rate to add.
+  if (frames_since_stats_ > 0) shared_.metrics.session_fps.observe(frames_since_stats_ / seconds);
+  frames_since_stats_ = 0;
+  bytes_since_stats_ = 0;
+  render_ms_sum_ = encode_ms_sum_ = lod_error_px_sum_ = splats_sum_ = 0;
+}
+
+void SessionStream::on_tick(Clock::time_point now) {
+  if (shared_.settings.frame.adaptive_quality) {
+    const int step = quality_.on_tick(now);
+    if (step != 0) (step > 0 ? shared_.metrics.quality_up_total : shared_.metrics.quality_down_total)++;
+  }
+  // The camera stopped on a frame held back (smaller, or under a rate cap): its pose once more,
+  // at full size and the stream's crf.
+  if (shared_.settings.frame.still_refine && frames_.can_refine() && still_.take(now)) {
+    frames_.refine(now);
+    shared_.metrics.refine_frames_total++;
+    admit();
+  }
+}
+
+// --- the link ---
+
+int SessionStream::link_vbv_kbps(int width, int height) {
+  // The link's cap against the policy's rate at this size (link_rate.h), both in bits a second
+  // on the wire: the VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer
+  // frames a second sends that share of it. At least 10 frames a second's share: frames written
+  // slowly because the link is jammed must not each get a larger share of the cap (a frame of
+  // half a second on the wire at 2 frames/s makes the jam worse).
+  const double fps_share = std::clamp(link_.frame_rate() / kStreamFps, 10.0 / kStreamFps, 1.0);
+  const int vbv_ceiling = frames_.policy_bitrate_kbps(width, height, max_bitrate_kbps_);
+  link_ceiling_kbps_ = vbv_ceiling > 0 ? std::max(1, static_cast<int>(vbv_ceiling * fps_share)) : 0;
+  if (!shared_.settings.frame.link_control || !link_.limited()) return 0;
+  return std::max(1, static_cast<int>(link_.cap_kbps(link_ceiling_kbps_) * link_.encoder_gain() / fps_share));
+}
+
+void SessionStream::on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket) {
   // A refine frame is sent once, larger than the moving stream's share of the link: its time on
   // the wire is its size, not a queue (still_refine.h).
   if (!shared_.settings.frame.link_control || frame.refine) return;
@@ -176,7 +306,7 @@ void Session::on_link_sample(const Handed& frame, Clock::time_point written, con
   after_link_update(was_limited, cuts);
 }
 
-void Session::after_link_update(bool was_limited, int cuts) {
+void SessionStream::after_link_update(bool was_limited, int cuts) {
   ServerMetrics& m = shared_.metrics;
   m.link_rate_decreases_total += static_cast<std::uint64_t>(link_.decreases() - cuts);
   for (int c = 0; c < LinkRate::kCauses; ++c) {
@@ -218,7 +348,7 @@ void Session::after_link_update(bool was_limited, int cuts) {
   quality_.on_link(link_.limited(), link_.limited() && cap < here, !link_.limited() || cap >= 2 * above);
 }
 
-void Session::on_receipt(std::uint32_t sequence, double received_ms, Clock::time_point now) {
+void SessionStream::on_receipt(std::uint32_t sequence, double received_ms, Clock::time_point now) {
   if (!shared_.settings.frame.link_control || sequence == last_receipt_) return;
   // Frames go out in sequence order; a receipt for one no longer in the window says nothing new.
   for (auto it = recent_.rbegin(); it != recent_.rend(); ++it) {
@@ -232,20 +362,6 @@ void Session::on_receipt(std::uint32_t sequence, double received_ms, Clock::time
     link_.on_receipt({sequence, it->bytes, sent, it->rate_at, received_ms}, now, link_ceiling_kbps_);
     return after_link_update(was_limited, cuts);
   }
-}
-
-void Session::adapt_quality(Clock::time_point now) {
-  const int step = quality_.on_tick(now);
-  if (step != 0) (step > 0 ? shared_.metrics.quality_up_total : shared_.metrics.quality_down_total)++;
-}
-
-void Session::refine_still_view(Clock::time_point now) {
-  // The camera stopped on a frame held back (smaller, or under a rate cap): its pose once more,
-  // at full size and the stream's crf.
-  if (!frames_.can_refine() || !still_.take(now)) return;
-  frames_.refine(now);
-  shared_.metrics.refine_frames_total++;
-  maybe_start_render();
 }
 
 }  // namespace catgs::server

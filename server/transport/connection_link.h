@@ -15,6 +15,9 @@ namespace catgs::server {
 // Identifies one WebSocket connection for its lifetime (never reused).
 using ConnId = std::uint64_t;
 
+// What arrived in one complete WebSocket message (TransportHandler::on_message, transport.h).
+enum class MessageKind { binary, text, oversize };
+
 // TCP_INFO fields of a WebSocket's socket, read by the transport right after a frame's last byte
 // was written (TransportHandler::on_sent). valid false: not a TCP socket, or the read failed.
 struct SocketSample {

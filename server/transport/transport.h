@@ -51,9 +51,6 @@ struct lws_context;
 
 namespace catgs::server {
 
-// What arrived in one complete WebSocket message.
-enum class MessageKind { binary, text, oversize };
-
 // Why an upgrade was refused (TransportHandler::on_refused); also the /metrics label.
 enum class Refusal { version, origin, per_ip, pre_hello };
 inline constexpr int kRefusalKinds = 4;

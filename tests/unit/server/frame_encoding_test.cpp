@@ -1,0 +1,107 @@
+// A frame's encoder settings in one call (encode/frame_encoding.h), worked by hand from the
+// policy's rules (encoder_policy.h): auto's 0.09 bits a pixel at 60 frames/s, the client's and the
+// link's caps (the lower wins), the link's two-frame VBV, the probed bits a pixel, AV1 only where
+// the cores afford it and the link does not limit, and the refine frame's lifted cap.
+#include <gtest/gtest.h>
+
+#include "encode/frame_encoding.h"
+
+namespace {
+
+using namespace catgs::server;
+
+EncoderPolicy sixteen_cores() {
+  EncoderPolicy p;
+  p.usable_cores = 16;
+  return p;
+}
+
+FrameEncodeInputs frame(int w, int h) {
+  FrameEncodeInputs in;
+  in.width = w;
+  in.height = h;
+  return in;
+}
+
+TEST(FrameEncoding, CapsLowerTheRateAndTheLinkShrinksTheVbv) {
+  const EncoderPolicy p = sixteen_cores();
+  FrameEncodeInputs in = frame(1920, 1080);
+  FrameEncoding e = frame_encoding(p, in);
+  EXPECT_EQ(e.rate_kbps, 11197);  // 0.09 x 1920 x 1080 x 60 / 1000 = 11197.4, rounded
+  EXPECT_EQ(e.vbv_ms, p.vbv_buffer_ms);
+  in.client_max_kbps = 5000;
+  EXPECT_EQ(frame_encoding(p, in).rate_kbps, 5000);
+  EXPECT_EQ(frame_encoding(p, in).vbv_ms, p.vbv_buffer_ms) << "a client's cap keeps the policy's buffer";
+  in.link_kbps = 3000;
+  e = frame_encoding(p, in);
+  EXPECT_EQ(e.rate_kbps, 3000) << "the lower of the client's and the link's";
+  EXPECT_EQ(e.vbv_ms, 33) << "two frames at 60 frames/s while the link limits";
+  in.client_max_kbps = 2000;
+  EXPECT_EQ(frame_encoding(p, in).rate_kbps, 2000);
+  in.client_max_kbps = 50000;
+  in.link_kbps = 0;
+  EXPECT_EQ(frame_encoding(p, in).rate_kbps, 11197) << "a cap never raises the rate";
+}
+
+TEST(FrameEncoding, ProbedBitsAPixelCountOnlyWithContentRateOn) {
+  EncoderPolicy p = sixteen_cores();
+  FrameEncodeInputs in = frame(1920, 1080);
+  in.probed_bits_per_pixel = 0.045;
+  EXPECT_EQ(frame_encoding(p, in).rate_kbps, 11197) << "--bits-per-pixel auto is off";
+  p.content_rate = true;
+  const FrameEncoding e = frame_encoding(p, in);
+  EXPECT_EQ(e.rate_kbps, 5599);  // 0.045 x 1920 x 1080 x 60 / 1000 = 5598.7, rounded
+  EXPECT_DOUBLE_EQ(e.policy.bits_per_pixel, 0.045);
+  in.probed_bits_per_pixel = 0;  // no probe yet: the policy's own
+  EXPECT_EQ(frame_encoding(p, in).rate_kbps, 11197);
+}
+
+TEST(FrameEncoding, TheConfigCarriesTheSameDecision) {
+  const EncoderPolicy p = sixteen_cores();
+  FrameEncodeInputs in = frame(1280, 720);
+  in.live_sessions = 9;
+  in.link_kbps = 2500;
+  const FrameEncoding e = frame_encoding(p, in);
+  EXPECT_EQ(e.preset, "ultrafast+cabac+deblock");  // the ladder at nine 720p sessions
+  EXPECT_EQ(e.config.x264_preset, e.preset);
+  EXPECT_EQ(e.config.bitrate_kbps, e.rate_kbps);
+  EXPECT_EQ(e.config.vbv_buffer_ms, e.vbv_ms);
+  EXPECT_EQ(e.config.threads, e.threads);
+  EXPECT_EQ(e.step, preset_step(p, 1280, 720, kStreamFps, 9));
+  in.live_sessions = 8;
+  EXPECT_EQ(frame_encoding(p, in).preset, "superfast");
+}
+
+TEST(FrameEncoding, Av1WhereTheCoresAffordItAndTheLinkDoesNotLimit) {
+  const EncoderPolicy p = sixteen_cores();
+  FrameEncodeInputs in = frame(960, 540);
+  in.av1_ok = true;
+  FrameEncoding e = frame_encoding(p, in);
+  EXPECT_TRUE(e.av1);
+  EXPECT_EQ(e.step, kPresetSteps) << "AV1 is the step above the x264 ladder";
+  in.live_sessions = 5;
+  EXPECT_FALSE(frame_encoding(p, in).av1) << "five 540p AV1 streams do not fit 16 cores";
+  in.live_sessions = 1;
+  in.link_kbps = 1200;
+  e = frame_encoding(p, in);
+  EXPECT_FALSE(e.av1);
+  EXPECT_LT(e.step, kPresetSteps);
+  in.link_kbps = 0;
+  in.av1_ok = false;
+  EXPECT_FALSE(frame_encoding(p, in).av1);
+}
+
+TEST(FrameEncoding, ARefineFrameLiftsOnlyACappedStream) {
+  EncoderPolicy p = sixteen_cores();
+  FrameEncodeInputs in = frame(640, 360);
+  in.refine = true;
+  EXPECT_TRUE(frame_encoding(p, in).lift_cap);  // auto's floor of 1500 kbit/s caps it
+  in.refine = false;
+  EXPECT_FALSE(frame_encoding(p, in).lift_cap);
+  p.bitrate_kbps = 0;  // --bitrate off: crf alone, nothing to lift
+  in.refine = true;
+  EXPECT_EQ(frame_encoding(p, in).rate_kbps, 0);
+  EXPECT_FALSE(frame_encoding(p, in).lift_cap);
+}
+
+}  // namespace
