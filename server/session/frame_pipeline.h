@@ -3,9 +3,9 @@
 // where it was rendered, the rendered picture waiting for the encoder, the encode job that makes
 // it an access unit (H.264, or AV1 for a client that decodes it where the encoder policy affords
 // it: encode/encoder_policy.h use_av1), and the serialized Frame. The unit owns the frame's state: the pose
-// slots, the two host I420 buffers, the session's renderer and its encoder. The Session
-// (session.h) decides when a stage may start (protocol state, frames in flight, pacing, adaptive
-// quality, the link's cap) and posts the jobs (session_stream.cpp).
+// slots, the two host I420 buffers, the session's renderer and its encoder. The session's
+// stream (SessionStream, session_stream.h) decides when a stage may start (protocol state, frames
+// in flight, pacing, adaptive quality, the link's cap) and posts the jobs.
 //
 // Pipelined (host-fed encoders: x264): a render job renders and colour-converts frame n + 1 into
 // one of two host I420 buffers while an encode job encodes frame n from the other, so a session's

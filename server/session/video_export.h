@@ -3,7 +3,7 @@
 // (encode/tour_video.h), one frame per background job on the render lanes (render_scheduler.h:
 // live sessions' renders go first), into a temporary file that the session then sends to the
 // page in ExportChunk messages and deletes. The session's side (authorisation, caps, progress,
-// chunks, cancel) is session/export_pipeline.cpp; the request's checks are
+// chunks, cancel) is session/session_export.h; the request's checks are
 // check_export_request (message_validation.h).
 //
 // Why the file goes over the WebSocket rather than HTTP: the session is already authorised (its

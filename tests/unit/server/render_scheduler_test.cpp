@@ -79,7 +79,7 @@ TEST(RenderScheduler, GpuWaitOption) {
 
 // Video export frames (post_background) run only when no session's job is queued: posted first,
 // they still go after every live job, and an export that posts its next frame after each one
-// (as session/export_pipeline.cpp does) lets the live jobs queued meanwhile go first.
+// (as session/session_export.cpp does) lets the live jobs queued meanwhile go first.
 TEST(RenderScheduler, BackgroundJobsYieldToLiveJobs) {
   RenderScheduler s;
   std::mutex mutex;
