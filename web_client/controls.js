@@ -8,36 +8,45 @@ const FLY_KEYS = new Set(['KeyW', 'KeyA', 'KeyS', 'KeyD', 'KeyQ', 'KeyE', 'Arrow
 
 export class Controls {
   // getCamera(): the current OrbitCamera or null (before the first Welcome).
-  constructor(element, getCamera) {
+  // options: keyTarget: what listens for the fly keys (the window for a page that is all view;
+  //            the canvas itself where the view is a box among other things, so the keys work
+  //            while it has the focus and leave the host page's keys alone);
+  //          wheelOverPage: a wheel over the page's bare body zooms too (a page that is all view,
+  //            where the re-projected canvas may not cover the window);
+  //          focusOnPointer: a touch of the view gives it the focus (keys on the canvas);
+  //          signal: an AbortSignal that removes every listener (CatgsViewer.close()).
+  constructor(element, getCamera, { keyTarget = window, wheelOverPage = true, focusOnPointer = false, signal } = {}) {
     this.el = element;
     this.getCamera = getCamera;
+    this.focusOnPointer = focusOnPointer;
     this.pointers = new Map(); // pointerId -> { x, y, button, shift }
     this.pinch = null; // { dist, mid } of the previous two-finger event
     this.keys = new Set();
     this.shiftHeld = false;
 
-    element.addEventListener('pointerdown', (e) => this._down(e));
-    element.addEventListener('pointermove', (e) => this._move(e));
-    element.addEventListener('pointerup', (e) => this._up(e));
-    element.addEventListener('pointercancel', (e) => this._up(e));
-    element.addEventListener('wheel', (e) => this._wheel(e), { passive: false });
+    const on = (target, type, fn, opts = {}) => target.addEventListener(type, fn, { ...opts, signal });
+    on(element, 'pointerdown', (e) => this._down(e));
+    on(element, 'pointermove', (e) => this._move(e));
+    on(element, 'pointerup', (e) => this._up(e));
+    on(element, 'pointercancel', (e) => this._up(e));
+    on(element, 'wheel', (e) => this._wheel(e), { passive: false });
     // While the canvas is re-projected (a CSS transform until the next frame) it may not cover
     // the window: a wheel over the uncovered page zooms too.
-    window.addEventListener(
-      'wheel',
-      (e) => {
+    if (wheelOverPage) {
+      on(window, 'wheel', (e) => {
         if (e.target === document.body || e.target === document.documentElement) this._wheel(e);
-      },
-      { passive: false },
-    );
-    element.addEventListener('contextmenu', (e) => e.preventDefault()); // right-drag pans
-    window.addEventListener('keydown', (e) => this._key(e, true));
-    window.addEventListener('keyup', (e) => this._key(e, false));
-    // Keys released while the window had no focus never send keyup: forget them.
-    window.addEventListener('blur', () => this.keys.clear());
+      }, { passive: false });
+    }
+    on(element, 'contextmenu', (e) => e.preventDefault()); // right-drag pans
+    on(keyTarget, 'keydown', (e) => this._key(e, true));
+    on(keyTarget, 'keyup', (e) => this._key(e, false));
+    // Keys released while the window (or the view) had no focus never send keyup: forget them.
+    on(window, 'blur', () => this.keys.clear());
+    if (keyTarget !== window) on(keyTarget, 'blur', () => this.keys.clear());
   }
 
   _down(e) {
+    if (this.focusOnPointer) this.el.focus({ preventScroll: true });
     this.el.setPointerCapture(e.pointerId);
     this.pointers.set(e.pointerId, { x: e.clientX, y: e.clientY, button: e.button, shift: e.shiftKey });
     this.pinch = null;

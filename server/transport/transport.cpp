@@ -168,6 +168,9 @@ void Transport::start() {
   s.mount_root.def = "index.html";
   s.mount_root.origin_protocol = LWSMPRO_FILE;
   s.mount_root.extra_mimetypes = &s.mime[0];
+  // lws offers a file's answer to a protocol for extra headers (LWS_CALLBACK_ADD_HEADERS: CORS,
+  // on_add_headers) only when the mount names one; a file that is missing still goes to on_http.
+  s.mount_root.protocol = "http";
 
   lws_set_log_level(LLL_ERR, nullptr);
   lws_context_creation_info info;
@@ -395,6 +398,8 @@ int Transport::callback(lws* wsi, int reason, void* user, void* in, std::size_t 
       return self->on_upgrade(wsi, static_cast<const char*>(in));
     case LWS_CALLBACK_FILTER_HTTP_CONNECTION:
       return self->on_http_filter(wsi);
+    case LWS_CALLBACK_ADD_HEADERS:
+      return self->on_add_headers(wsi, in);
     case LWS_CALLBACK_HTTP:
     case LWS_CALLBACK_HTTP_WRITEABLE:
     case LWS_CALLBACK_CLOSED_HTTP:
@@ -454,6 +459,31 @@ int Transport::on_http_filter(lws* wsi) {
   lws_return_http_status(wsi, HTTP_STATUS_BAD_REQUEST,
                          twice ? "Content-Length given twice" : "both Transfer-Encoding and Content-Length");
   return 1;
+}
+
+// A page on another site embeds the viewer with <script type="module" src="https://this/viewer.js">:
+// module scripts (and the fetch of the schema beside them) are CORS requests, which the browser
+// lets the page read only with Access-Control-Allow-Origin. Given to the origins that may open a
+// session anyway (the page's own, localhost, --allowed-origins), never to every site: the files
+// are public, but the viewer would be of no use on a page the WebSocket refuses. The answer
+// varies with Origin, so caches must keep one per origin.
+int Transport::on_add_headers(lws* wsi, void* in) {
+  // lws asks here for the WebSocket handshake's 101 too: that answer needs no CORS.
+  if (lws_hdr_total_length(wsi, WSI_TOKEN_UPGRADE) > 0) return 0;
+  const std::string origin = header(wsi, WSI_TOKEN_ORIGIN);
+  if (origin.empty() || !options_.origins.allows(origin, header(wsi, WSI_TOKEN_HOST))) return 0;
+  auto* args = static_cast<lws_process_html_args*>(in);
+  auto* p = reinterpret_cast<unsigned char*>(args->p);
+  unsigned char* end = p + args->max_len;
+  auto add = [&](const char* name, const std::string& value) {
+    return lws_add_http_header_by_name(wsi, reinterpret_cast<const unsigned char*>(name),
+                                       reinterpret_cast<const unsigned char*>(value.data()),
+                                       static_cast<int>(value.size()), &p, end) == 0;
+  };
+  if (!add("access-control-allow-origin:", origin) || !add("vary:", "Origin")) return 1;
+  args->max_len -= static_cast<int>(p - reinterpret_cast<unsigned char*>(args->p));
+  args->p = reinterpret_cast<char*>(p);
+  return 0;
 }
 
 int Transport::on_http(lws* wsi, int reason, void* user, void* in, std::size_t len) {
@@ -642,7 +672,7 @@ int Transport::write_some(lws* wsi, ConnId id) {
       // then skip the closing handshake and shut the socket down at once, and the peer's answer
       // (its close frame, or messages it sent meanwhile) would meet a closed socket and draw an
       // RST, which can make the peer drop the Error and the close frame unread (a page then saw
-      // close code 1006 and no reason; RESULTS.md, "The closing handshake").
+      // close code 1006 and no reason; docs/history/fuzzing_and_soak.md, "The closing handshake").
       if (!c.closing || c.close_sent) return 0;
       c.close_sent = true;
       // Everything (including the final Error) is written: close with a normal close frame.

@@ -10,7 +10,9 @@
 // HTTP: "/" serves the web root (static files, extra MIME types for .mjs/.proto/.js/.json/.wasm),
 // "/healthz" answers 200 "ok" whenever the process serves HTTP (liveness), "/readyz" answers
 // Handler::readiness() (200, or 503 while the server cannot take a new session: routing),
-// "/metrics" answers Handler::metrics_text() (Prometheus text).
+// "/metrics" answers Handler::metrics_text() (Prometheus text). A static file asked for by a page
+// whose Origin may open a session (origin_policy.h) carries Access-Control-Allow-Origin for it,
+// so another site can import the viewer module (web_client/viewer.js) from this server.
 // WebSocket: subprotocol "catgs.v1" (or none) on any path.
 //
 // Upgrades are checked before the handshake (issue 22): Sec-WebSocket-Version must be 13 (else
@@ -176,6 +178,9 @@ class Transport final : public ConnectionLink {
   // refuses ambiguous message framing with 400 (issue 22 finding 8: request smuggling through a
   // proxy that reads the length differently). Non-zero closes the connection.
   int on_http_filter(lws* wsi);
+  // LWS_CALLBACK_ADD_HEADERS (a static file's answer): CORS for the origins that may open a
+  // session, so a module script or fetch from such a page may read the file. Non-zero fails it.
+  int on_add_headers(lws* wsi, void* in);
   // Appends one received fragment to its message; true when the message is complete (or known
   // to be oversize) and `kind` / `message` are set.
   bool take_fragment(lws* wsi, Conn& c, const void* in, std::size_t len, MessageKind& kind, std::string& message);

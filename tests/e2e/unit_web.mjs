@@ -903,3 +903,101 @@ test('ExportProgress and ExportChunk decode; chunks join in order; the bar\'s te
   assert.ok(Math.abs(s[s.length - 1].position[0] - 4) < 1e-9);
   assert.ok(s.length >= 40 && s.length <= 42);
 });
+
+// ---- issue 63: the embeddable viewer's pure parts (pose_input.js, page_busy.js, state_words.js) ----
+
+const poseInput = await imp('pose_input.js');
+const busyMod = await imp('page_busy.js');
+const words = await imp('state_words.js');
+
+test('setPose input: position and orientation (or rotation) kept; lookAt turns the camera to a point', () => {
+  const current = { position: [0, 0, 0], orientation: [1, 0, 0, 0], fovDeg: 50, up: [0, -1, 0] };
+  const p = poseInput.resolvePose({ position: [1, 2, 3], rotation: [0, 0, 1, 0] }, current);
+  assert.deepEqual(p, { position: [1, 2, 3], orientation: [0, 0, 1, 0], fovDeg: 50, target: null });
+  assert.equal(poseInput.resolvePose({ fovDeg: 70 }, current).fovDeg, 70);
+  assert.deepEqual(poseInput.resolvePose({}, current).position, [0, 0, 0]);
+  // Looking from (0, 0, -5) at the origin with up -y (OpenCV): forward +z, the camera unrotated.
+  const look = poseInput.resolvePose({ position: [0, 0, -5], lookAt: [0, 0, 0] }, current);
+  assert.ok(look.orientation.every((v, i) => Math.abs(v - [1, 0, 0, 0][i]) < 1e-9), String(look.orientation));
+  assert.deepEqual(look.target, [0, 0, 0]);
+  // From +x towards the origin: the camera's forward (its +z axis) points along -x.
+  const side = poseInput.resolvePose({ position: [4, 0, 0], lookAt: [0, 0, 0] }, current);
+  const fwd = cam.cameraForward(side.orientation);
+  assert.ok(Math.abs(fwd[0] + 1) < 1e-9 && Math.abs(fwd[1]) < 1e-9 && Math.abs(fwd[2]) < 1e-9, String(fwd));
+  assert.throws(() => poseInput.resolvePose({ position: [1, 2] }, current), /position must be 3/);
+  assert.throws(() => poseInput.resolvePose({ orientation: [1, 0, 0] }, current), /orientation must be 4/);
+  assert.throws(() => poseInput.resolvePose({ fovDeg: 180 }, current), /fovDeg/);
+  assert.throws(() => poseInput.resolvePose({ position: [1, 1, 1], lookAt: [1, 1, 1] }, current), /differ/);
+  assert.throws(() => poseInput.resolvePose(null, current), /object/);
+});
+
+test('playPath input: timed samples on their clock, waypoints as a tour (lookAt too), file text, bad paths refused', () => {
+  const q = [1, 0, 0, 0];
+  const current = { position: [9, 9, 9], orientation: q, fovDeg: 40, up: [0, -1, 0] };
+  const timed = [{ t: 0, position: [0, 0, 0], orientation: q, fovDeg: 50 }, { t: 2, position: [2, 0, 0], orientation: q, fovDeg: 50 }];
+  const a = poseInput.playbackOf(timed, 2, current);
+  assert.equal(a.duration, 2);
+  assert.equal(a.keys, null);
+  assert.ok(Math.abs(a.at(1).position[0] - 1) < 1e-9);
+  const keys = [[0, 0, 0], [1, 0, 0], [2, 0, 0]].map((position) => ({ position, orientation: q, hotspot: `h${position[0]}` }));
+  const tour = poseInput.playbackOf(keys, 0.5, current);
+  assert.equal(tour.duration, 1);
+  assert.equal(tour.at(0.5).fovDeg, 40); // a waypoint without fovDeg: the camera's
+  assert.ok(Math.abs(tour.at(0.5).position[0] - 1) < 1e-9);
+  assert.deepEqual(tour.keys.map((k) => k.hotspot), ['h0', 'h1', 'h2']); // a hotspot tour's cards
+  // Waypoints as setPose takes them: looking at the origin from two sides.
+  const looks = poseInput.playbackOf([{ position: [0, 0, -5], lookAt: [0, 0, 0] }, { position: [5, 0, 0], lookAt: [0, 0, 0] }], 1, current);
+  assert.ok(Math.abs(cam.cameraForward(looks.at(1).orientation)[0] + 1) < 1e-6);
+  // The files the Paths panel writes play too.
+  assert.equal(poseInput.playbackOf(paths.toTraceFile(timed, 64, 48), 2, current).duration, 2);
+  const cams = JSON.stringify(paths.toInriaCameras(keys.map((k) => ({ ...k, fovDeg: 50 })), 64, 48));
+  assert.equal(poseInput.playbackOf(cams, 2, current).keys.length, 3);
+  assert.throws(() => poseInput.playbackOf([keys[0]], 2, current), /at least 2 views/);
+  assert.throws(() => poseInput.playbackOf([], 2, current), /array of poses/);
+  assert.throws(() => poseInput.playbackOf([{ position: [0, 0] }, keys[1]], 2, current), /position/);
+  assert.throws(() => poseInput.playbackOf('catgs-trace 1\n1 2 3\n', 2, current));
+});
+
+test('busy page: a heartbeat over 50 ms late marks the page busy for 100 ms; none for 70 ms too', () => {
+  let now = 1000;
+  const b = new busyMod.PageBusy(() => now);
+  const beats = (n) => {
+    for (let i = 0; i < n; i++) {
+      now += 20;
+      b.beat();
+    }
+  };
+  beats(3);
+  assert.equal(b.recently(), false);
+  now += 60; // a beat 60 ms late (the 20 ms interval and 50 ms): not quite busy
+  b.beat();
+  assert.equal(b.recently(), false);
+  now += 80; // 60 ms late: busy now, and for 100 ms
+  b.beat();
+  assert.equal(b.recently(), true);
+  beats(4); // 80 ms on
+  assert.equal(b.recently(), true);
+  beats(1); // 100 ms on
+  assert.equal(b.recently(), false);
+  now += 70; // no beat for 70 ms: a long task is running
+  assert.equal(b.recently(), false);
+  now += 1;
+  assert.equal(b.recently(), true);
+});
+
+test('state words: each viewer status in words, with its action', () => {
+  const ui = { sceneParam: 'nope', retry: ['retry'], tokenForm: () => 'form', sceneChoice: () => 'picker' };
+  const v = (status, extra = {}) => words.stateMessage({ status, reconnectAt: 0, token: '', ...extra }, ui);
+  assert.equal(v('connecting').text, 'connecting to the server…');
+  assert.equal(v('loading-scene', { loadProgress: { scene_name: 'garden', percent: 40 } }).text, 'loading scene garden: 40%');
+  assert.equal(v('streaming'), null);
+  assert.equal(v('starting'), undefined);
+  assert.deepEqual(v('unreachable'), { text: 'cannot reach the server, retrying now', level: 'error', actions: ['retry'] });
+  assert.equal(v('no-scene').actions, 'picker');
+  assert.match(v('no-scene').text, /no scene named 'nope'/);
+  assert.equal(v('needs-token').text, 'this server needs an access token');
+  assert.equal(v('needs-token', { token: 'x' }).text, 'wrong token: enter the access token');
+  assert.equal(v('disconnected', { closeInfo: { error: { code: 8, reason: 'queue full' } } }).text,
+    'the connection was too slow for the stream (queue full); reconnecting now');
+  assert.equal(v('unsupported', { startError: 'no WebCodecs' }).text, 'no WebCodecs');
+});

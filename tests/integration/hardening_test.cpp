@@ -38,6 +38,10 @@ using namespace catgs::loadgen;
 using namespace catgs::itest;
 using Clock = std::chrono::steady_clock;
 
+// Sends the request `req` on a fresh connection; returns the answer's status code (-1: none) and
+// its head.
+int answer_status(int port, const std::string& req, std::string* head);
+
 // A WebSocket upgrade request to /ws with `headers` (lines ending in \r\n; Host and the version
 // are added unless given). Returns the answer's status code (-1: none) and its head.
 int upgrade_status(int port, std::string headers, std::string* head = nullptr) {
@@ -47,6 +51,10 @@ int upgrade_status(int port, std::string headers, std::string* head = nullptr) {
       "GET /ws HTTP/1.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
       "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n" +
       headers + "\r\n";
+  return answer_status(port, req, head);
+}
+
+int answer_status(int port, const std::string& req, std::string* head) {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in a{};
   a.sin_family = AF_INET;
@@ -109,6 +117,31 @@ TEST(Hardening, OriginCheckedAtTheUpgrade) {
   StreamClient c;
   c.connect(port);
   EXPECT_NO_THROW(c.hello(64, 64));
+}
+
+// A page on another site imports the viewer module from this server (web_client/viewer.js,
+// issue 63): its files carry Access-Control-Allow-Origin for the origins that may open a session
+// (listed, localhost, the page's own), and for no other site.
+TEST(Hardening, StaticFilesAllowCorsForAllowedOriginsOnly) {
+  ServerProcess server(server_args(kBiker, {"--allowed-origins", "https://app.example"}));
+  const int port = server.port();
+  // "STATUS ALLOWED-ORIGIN" of a GET of `path` from a page of `origin` ("": no Origin header).
+  auto cors = [&](const std::string& path, const std::string& origin) {
+    std::string req = "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) + "\r\n";
+    if (!origin.empty()) req += "Origin: " + origin + "\r\n";
+    std::string head;
+    const int status = answer_status(port, req + "Connection: close\r\n\r\n", &head);
+    const std::regex allow("access-control-allow-origin: *([^\r\n]*)", std::regex::icase);
+    std::smatch m;
+    return std::to_string(status) + " " + (std::regex_search(head, m, allow) ? m[1].str() : "");
+  };
+  EXPECT_EQ(cors("/viewer.js", "https://app.example"), "200 https://app.example");
+  EXPECT_EQ(cors("/catgs_stream.proto", "https://app.example"), "200 https://app.example");
+  EXPECT_EQ(cors("/viewer.js", "http://localhost:5173"), "200 http://localhost:5173");
+  EXPECT_EQ(cors("/viewer.js", "https://evil.example"), "200 ") << "a site that may not open a session";
+  EXPECT_EQ(cors("/viewer.js", ""), "200 ") << "no Origin: nothing to allow";
+  EXPECT_EQ(cors("/no-such-file.js", "https://app.example"), "404 ");
+  EXPECT_EQ(cors("/scenes", "https://app.example"), "200 ") << "only the static files";
 }
 
 // RFC 6455 4.2.2: only version 13; anything else is 426 naming the version the server speaks.
