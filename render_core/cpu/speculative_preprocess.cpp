@@ -73,7 +73,7 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
     const glm::vec3 mean(model.means[3 * i], model.means[3 * i + 1], model.means[3 * i + 2]);
     // The cheap cull before any 2D covariance (forward_model.h, shared with the CUDA stage).
     if (fm::path_misses_image(
-            mean, fm::max_scale_of(&model.log_scales[3 * i]), q_max, static_cast<int>(path.size()),
+            mean, &model.log_scales[3 * i], q_max, static_cast<int>(path.size()),
             [&](int k) -> const fm::View& { return terms[static_cast<std::size_t>(k)].view; }, widening.slack,
             widening.margin_px, widening.motion_margin))
       return;

@@ -41,9 +41,8 @@ __device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, uin
       const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
       // The cheap cull before any 2D covariance (forward_model.h, shared with the CPU core).
       if (fm::path_misses_image(
-              mean, fm::max_scale_of(scene.log_scales + 3 * i), q_max, path.count,
-              [&](int k) -> const fm::View& { return path.cam[k]; }, widening.slack, widening.margin_px,
-              widening.motion_margin))
+              mean, scene.log_scales + 3 * i, q_max, path.count, [&](int k) -> const fm::View& { return path.cam[k]; },
+              widening.slack, widening.margin_px, widening.motion_margin))
         break;
       const fm::Cov3 cov3 = fm::covariance_3d(
           {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},

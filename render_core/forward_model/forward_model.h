@@ -323,8 +323,8 @@ CATGS_HD float max_scale_of(const float* log_scale) {
 }
 
 // The speculative pre-processing's cheap cull before any 2D covariance (cpu/ and
-// cuda/speculative_preprocess): true when a Gaussian of centre `mean` (world) and largest scale
-// `max_scale`, in front of the key view view_at(0), lies beyond one same image edge at every view
+// cuda/speculative_preprocess): true when a Gaussian of centre `mean` (world) and log-scales
+// `log_scale` [3], in front of the key view view_at(0), lies beyond one same image edge at every view
 // view_at(0 .. count - 1) of the path where it is in front, by more than edges_beyond's bound
 // widened as its trail would be: (1 + slack) times, + margin_px + 1 px, + motion_margin times its
 // centre's motion on the image from the key view to the last. Its ellipse then reaches no pixel
@@ -333,8 +333,8 @@ CATGS_HD float max_scale_of(const float* log_scale) {
 // `view_at`: k -> const View& (the CPU core's fm::view_of of its path's cameras; CUDA's
 // CameraParams are Views).
 template <class ViewAt>
-CATGS_HD bool path_misses_image(glm::vec3 mean, float max_scale, float q_max, int count, ViewAt view_at, float slack,
-                                float margin_px, float motion_margin) {
+CATGS_HD bool path_misses_image(glm::vec3 mean, const float* log_scale, float q_max, int count, ViewAt view_at,
+                                float slack, float margin_px, float motion_margin) {
   const View& key = view_at(0);
   const glm::vec3 p0 = key.R * mean + key.t;
   if (!(p0.z > key.near_plane) || p0.z > key.far_plane) return false;
@@ -346,6 +346,7 @@ CATGS_HD bool path_misses_image(glm::vec3 mean, float max_scale, float q_max, in
     const glm::vec2 uw(last.fx * pw.x / pw.z + last.cx - key.cx, last.fy * pw.y / pw.z + last.cy - key.cy);
     extra += motion_margin * glm::length(uw - u0);
   }
+  const float max_scale = max_scale_of(log_scale);  // after the key view's test, as it culls most
   unsigned beyond = 0xfu;
   for (int k = 0; k < count && beyond != 0u; ++k) {
     const View& c = view_at(k);

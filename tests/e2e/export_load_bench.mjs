@@ -2,7 +2,7 @@
 // catgs-server (the bundled biker) streams to catgs-loadgen (one session, its orbit trace, frames
 // decoded) twice for the same time: once while a page (an author, headless Chromium) sits idle,
 // once while that page's Export video renders a path (the export's frames are background jobs on
-// the render lanes, session/export_pipeline.cpp). Prints a table and writes the JSON (both
+// the render lanes, session/session_export.cpp). Prints a table and writes the JSON (both
 // loadgen reports and the export's frames in each phase).
 //
 // usage: node tests/e2e/export_load_bench.mjs --server B/catgs-server --loadgen B/catgs-loadgen

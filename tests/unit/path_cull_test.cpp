@@ -26,12 +26,13 @@ fm::View view_at(glm::vec3 t) {
   return v;
 }
 
-constexpr float kScale = 0.01f, kQMax = 9.0f;  // a small Gaussian: a radius of a pixel or so
+constexpr float kQMax = 9.0f;
+const float kLogScale[3] = {-4.6f, -4.6f, -4.6f};  // scale 0.01: a radius of a pixel or so
 
 bool misses(const glm::vec3& mean, const std::vector<fm::View>& path, float motion_margin = 0.0f) {
   return fm::path_misses_image(
-      mean, kScale, kQMax, static_cast<int>(path.size()), [&](int k) -> const fm::View& { return path[k]; }, 0.0f, 0.0f,
-      motion_margin);
+      mean, kLogScale, kQMax, static_cast<int>(path.size()), [&](int k) -> const fm::View& { return path[k]; }, 0.0f,
+      0.0f, motion_margin);
 }
 
 TEST(PathCull, BeyondOneEdgeAtEveryViewIsCulled) {
