@@ -329,12 +329,16 @@ async function walkScenario(tmp) {
   await shot(page, 'walk_eye_height.png');
   check(!!settled, `walk mode: the camera settles at eye height ${eye.toFixed(3)} above the floor (y ${settled.position[1].toFixed(3)})`);
   await page.keyboard.down('w');
+  // Stopped: no move over three samples (1.2 s, about five looks) while walk mode says blocked. A
+  // camera waits for each look's answers before it moves on, and on a loaded machine one look
+  // took over 400 ms: a single unchanged sample once ended the walk 0.52 short of the wall.
   let last = null;
+  let still = 0;
   await waitFor('the walk to stop', async () => {
     const p = await hook(page, () => window.catgs.pose());
-    const stopped = last && Math.abs(p.position[2] - last.position[2]) < 1e-6;
+    still = last && Math.abs(p.position[2] - last.position[2]) < 1e-6 ? still + 1 : 0;
     last = p;
-    return stopped && p.position[2] > 0;
+    return still >= 3 && p.position[2] > 0 && (await hook(page, () => window.catgs.walk.blocked));
   }, 30000, 400);
   const w = await hook(page, () => window.catgs.walk); // still pushing forward
   await page.keyboard.up('w');
