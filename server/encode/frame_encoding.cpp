@@ -15,19 +15,20 @@ FrameEncoding frame_encoding(const EncoderPolicy& policy, const FrameEncodeInput
   if (policy.content_rate && in.probed_bits_per_pixel > 0) e.policy.bits_per_pixel = in.probed_bits_per_pixel;
   const int live = std::max(1, in.live_sessions);
   const int cap = rate_cap_kbps(in.client_max_kbps, in.link_kbps);
-  e.rate_kbps = target_bitrate_kbps(e.policy, in.width, in.height, kStreamFps, cap);
+  // The whole config first: its rate, preset and threads are the frame's.
+  e.config = encoder_config(e.policy, in.width, in.height, kStreamFps, live, cap);
+  e.rate_kbps = e.config.bitrate_kbps;
+  e.preset = e.config.x264_preset;
+  e.threads = e.config.threads;
   // While the link limits, the VBV holds two frames' share of the cap: a frame may then take at
   // most two frame intervals on the link, where the policy's buffer would let one take six, a
   // latency spike of half a second on a slow link.
   e.vbv_ms = in.link_kbps > 0 ? kLinkVbvMs : e.policy.vbv_buffer_ms;
+  if (e.rate_kbps > 0) e.config.vbv_buffer_ms = e.vbv_ms;
   // AV1 cannot follow the link's rate without a key frame: a limiting link keeps H.264.
   e.av1 = use_av1(e.policy, in.width, in.height, kStreamFps, live, in.av1_ok, true, in.link_kbps > 0);
   e.step = e.av1 ? kPresetSteps
                  : (e.policy.x264_preset == "auto" ? preset_step(e.policy, in.width, in.height, kStreamFps, live) : 0);
-  e.preset = encoder_preset(e.policy, in.width, in.height, kStreamFps, live);
-  e.config = encoder_config(e.policy, in.width, in.height, kStreamFps, live, cap);
-  if (e.config.bitrate_kbps > 0) e.config.vbv_buffer_ms = e.vbv_ms;
-  e.threads = e.config.threads;
   e.lift_cap = in.refine && e.rate_kbps > 0;
   return e;
 }
