@@ -317,13 +317,14 @@ void Server::start_pools() {
     lanes *= static_cast<int>(gpus_->devices().size());
   renders_.set_background_yield(std::chrono::milliseconds(options_.export_yield_ms));
   renders_.set_stage1_views(options_.shared_stage1);
+  renders_.set_frames_per_lane(RenderScheduler::default_frames_per_lane(options_.frames_per_lane, renderer_kind_));
   renders_.start(lanes, options_.max_pixels_in_flight);
 }
 
 void Server::print_listening() const {
   std::cout << "web root: " << options_.web_root << "\n"
             << "sessions: at most " << options_.max_sessions << ", " << options_.threads << " worker threads, "
-            << renders_.lanes() << " render lanes"
+            << renders_.lanes() << " render lanes of " << renders_.frames_per_lane() << " frame(s) in flight"
             << (gpus_->devices().empty() ? std::string() : ", " + std::to_string(gpus_->devices().size()) + " GPU(s)")
             << "\n"
             << "listening on " << url_scheme("http") << "://127.0.0.1:" << transport_->port() << "/ (WebSocket "

@@ -146,6 +146,9 @@ std::string server_usage() {
          "                        process may use, its affinity and cgroup CPU limit, at least 4)\n"
          "  --render-lanes N      renders at once, sessions in turn (default: 4 per GPU with the\n"
          "                        CUDA renderer, --threads with the CPU one)\n"
+         "  --frames-per-lane N   frames a render lane keeps on the GPU while it starts the next\n"
+         "                        session's (default: 2 with the CUDA renderer, 1 with the CPU\n"
+         "                        one; 1: each frame's planes before the next job; at most 16)\n"
          "  --shared-stage1 N     the most sessions on one scene whose frames a lane pre-processes\n"
          "                        in one pass over it (default 4; 1: each alone; at most 32;\n"
          "                        exact and vanilla only; render/render_scheduler.h)\n"
@@ -356,6 +359,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.threads = parse_int(a, v, 0, 256);
     else if (a == "--render-lanes")
       out.render_lanes = parse_int(a, v, 0, 256);
+    else if (a == "--frames-per-lane")
+      out.frames_per_lane = parse_int(a, v, 1, 16);
     else if (a == "--shared-stage1")
       out.shared_stage1 = parse_int(a, v, 1, 32);
     else if (a == "--slow-client-timeout-ms")

@@ -456,39 +456,62 @@ void copy_plane(const uint8_t* from, int from_pitch, uint8_t* to, int to_pitch, 
 }  // namespace
 
 double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
+  begin_yuv420_at(camera, time_s, out);
+  return finish_yuv420();
+}
+
+void CudaRenderer::begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
   check_yuv420_target("render_yuv420_at", out, camera.width, camera.height);
+  begin_frame();
+  try {
+    const DeviceGuard on(scene_->device());
+    const DeviceFrame f = render_device_at(camera, time_s);
+    State& s = *state_;
+    const int w = f.width, h = f.height;
+    const std::size_t y_bytes = static_cast<std::size_t>(w) * h, c_bytes = y_bytes / 4;
+    stages::Yuv420Pitched planes{};
+    if (out.memory == MemoryKind::device) {  // an NVENC hw frame: written in place
+      planes = {out.y, static_cast<size_t>(out.y_stride), out.u, static_cast<size_t>(out.u_stride),
+                out.v, static_cast<size_t>(out.v_stride)};
+    } else {  // converted here, then only the planes cross to the host
+      s.yuv.ensure(y_bytes + 2 * c_bytes, "YUV planes", &s.allocations);
+      auto* base = s.yuv.as<uint8_t>();
+      planes = {base,
+                static_cast<size_t>(w),
+                base + y_bytes,
+                static_cast<size_t>(w / 2),
+                base + y_bytes + c_bytes,
+                static_cast<size_t>(w / 2)};
+    }
+    CATGS_CUDA(cudaEventRecord(s.convert_start, s.stream));
+    stages::rgba8_to_yuv420(f.rgba8, w, h, planes, s.stream);
+    CATGS_CUDA(cudaEventRecord(s.converted, s.stream));
+    if (out.memory == MemoryKind::host) {
+      // The packed planes in one copy into page-locked memory (a copy into the target's pageable
+      // memory goes through the driver's staging, which the lanes' copies share), then, in
+      // finish, to the target's strides on the host.
+      s.yuv_host.ensure(y_bytes + 2 * c_bytes);
+      CATGS_CUDA(cudaMemcpyAsync(s.yuv_host.data(), s.yuv.as<uint8_t>(), y_bytes + 2 * c_bytes, cudaMemcpyDeviceToHost,
+                                 s.stream));
+    }
+    begun_target_ = out;
+    begun_width_ = w;
+    begun_height_ = h;
+  } catch (...) {
+    end_frame();  // nothing to finish
+    throw;
+  }
+}
+
+double CudaRenderer::finish_yuv420() {
+  end_frame();
   const DeviceGuard on(scene_->device());
-  const DeviceFrame f = render_device_at(camera, time_s);
   State& s = *state_;
-  const int w = f.width, h = f.height;
-  const std::size_t y_bytes = static_cast<std::size_t>(w) * h, c_bytes = y_bytes / 4;
-  stages::Yuv420Pitched planes{};
-  if (out.memory == MemoryKind::device) {  // an NVENC hw frame: written in place
-    planes = {out.y, static_cast<size_t>(out.y_stride), out.u, static_cast<size_t>(out.u_stride),
-              out.v, static_cast<size_t>(out.v_stride)};
-  } else {  // converted here, then only the planes cross to the host
-    s.yuv.ensure(y_bytes + 2 * c_bytes, "YUV planes", &s.allocations);
-    auto* base = s.yuv.as<uint8_t>();
-    planes = {base,
-              static_cast<size_t>(w),
-              base + y_bytes,
-              static_cast<size_t>(w / 2),
-              base + y_bytes + c_bytes,
-              static_cast<size_t>(w / 2)};
-  }
-  CATGS_CUDA(cudaEventRecord(s.convert_start, s.stream));
-  stages::rgba8_to_yuv420(f.rgba8, w, h, planes, s.stream);
-  CATGS_CUDA(cudaEventRecord(s.converted, s.stream));
-  if (out.memory == MemoryKind::host) {
-    // The packed planes in one copy into page-locked memory (a copy into the target's pageable
-    // memory goes through the driver's staging, which the lanes' copies share), then to the
-    // target's strides on the host.
-    s.yuv_host.ensure(y_bytes + 2 * c_bytes);
-    CATGS_CUDA(cudaMemcpyAsync(s.yuv_host.data(), s.yuv.as<uint8_t>(), y_bytes + 2 * c_bytes, cudaMemcpyDeviceToHost,
-                               s.stream));
-  }
   // The encoder reads the planes next, on its own stream or thread: the frame must be complete.
   CATGS_CUDA(cudaStreamSynchronize(s.stream));
+  const Yuv420Target& out = begun_target_;
+  const int w = begun_width_, h = begun_height_;
+  const std::size_t y_bytes = static_cast<std::size_t>(w) * h, c_bytes = y_bytes / 4;
   if (out.memory == MemoryKind::host) {
     const uint8_t* from = s.yuv_host.data();
     copy_plane(from, w, out.y, out.y_stride, w, h);

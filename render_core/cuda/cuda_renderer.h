@@ -182,6 +182,12 @@ class CudaRenderer final : public Renderer {
   // sync, so the planes are complete on return. Returns the conversion kernel's time (events).
   // Throws std::invalid_argument for a bad target; CudaError as render_device().
   double render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override;
+  // render_yuv420_at() in halves (renderer.h): begin queues the frame, its conversion and, for a
+  // host target, the planes' copy into page-locked memory (the frame's counts sync is its only
+  // wait); finish waits for the converted event (a device target) or the copy (a host one) and
+  // copies the planes to the target's strides.
+  void begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override;
+  double finish_yuv420() override;
   // Renders `camera` into this renderer's device image; one host-device sync (see above).
   // Throws std::invalid_argument for a bad camera, std::length_error for an oversized render
   // list, CudaError for CUDA failures.
@@ -257,6 +263,8 @@ class CudaRenderer final : public Renderer {
   void catgs_rasterize(const Camera& camera, uint32_t blocks, const unsigned* abandon, bool trail_list);
   void download(const DeviceFrame& frame, Image& out);
   std::shared_ptr<const DeviceScene> scene_;
+  Yuv420Target begun_target_{};  // begin_yuv420_at's target, for finish_yuv420
+  int begun_width_ = 0, begun_height_ = 0;
   RenderOptions options_;
   std::unique_ptr<State> state_;
   mutable FrameStats stats_;

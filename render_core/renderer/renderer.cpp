@@ -40,6 +40,31 @@ double Renderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
+void Renderer::begin_frame() {
+  if (frame_begun_) throw std::logic_error(name() + " renderer: a frame is begun already (finish_yuv420 first)");
+  frame_begun_ = true;
+}
+
+void Renderer::end_frame() {
+  if (!frame_begun_) throw std::logic_error(name() + " renderer: finish_yuv420 without begin_yuv420_at");
+  frame_begun_ = false;
+}
+
+void Renderer::begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
+  begin_frame();
+  try {
+    begun_convert_ms_ = render_yuv420_at(camera, time_s, out);
+  } catch (...) {
+    frame_begun_ = false;  // nothing to finish
+    throw;
+  }
+}
+
+double Renderer::finish_yuv420() {
+  end_frame();
+  return begun_convert_ms_;
+}
+
 void Renderer::preprocess_together(const std::vector<Renderer*>&, const std::vector<Camera>&) {
   throw std::invalid_argument("preprocess_together: the " + name() + " renderer pre-processes each view alone");
 }

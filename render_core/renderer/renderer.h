@@ -190,6 +190,17 @@ class Renderer {
   // NVENC hw frame path). Throws std::invalid_argument for a target of another size or with bad
   // planes, or a device target on a renderer that has no device; render errors as render().
   virtual double render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out);
+  // render_yuv420_at() in two halves, so that a render lane can queue one view's frame and start
+  // another's while the GPU draws it (server/render/render_scheduler.h, "Frames in flight"):
+  // begin_yuv420_at() queues the frame (it may wait for the frame's counts mid-frame, never for
+  // its planes); finish_yuv420() waits for the planes, writes them into the target begin was given
+  // and returns what render_yuv420_at() returns. Between the two the target and this renderer
+  // belong to the frame: no call but finish_yuv420() (then last_stats()). Either throws as
+  // render_yuv420_at() does; a begin that threw leaves nothing to finish. std::logic_error for a
+  // begin while a frame is begun, or a finish without one. This default draws the whole frame in
+  // begin (the CPU core has nothing to overlap) and finish returns its conversion time.
+  virtual void begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out);
+  virtual double finish_yuv420();
   // Stats of the last render().
   virtual const FrameStats& last_stats() const = 0;
   virtual const RenderOptions& options() const = 0;
@@ -218,8 +229,16 @@ class Renderer {
   // meanwhile. Throws std::invalid_argument where they cannot share (and for this default).
   virtual void preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras);
 
+ protected:
+  // begin_yuv420_at()'s bookkeeping, shared by the overrides: throws std::logic_error when a frame
+  // is begun already (begin_frame) or none is (end_frame).
+  void begin_frame();
+  void end_frame();
+
  private:
-  Image yuv_source_;  // the default render_yuv420_at()'s host frame, reused between frames
+  Image yuv_source_;               // the default render_yuv420_at()'s host frame, reused between frames
+  bool frame_begun_ = false;       // begin_yuv420_at() ran and finish_yuv420() has not
+  double begun_convert_ms_ = 0.0;  // the default begin's conversion time, for its finish
 };
 
 // Creates a renderer by name: "cpu", "cuda" or "auto" (CUDA if built and a device is usable, else

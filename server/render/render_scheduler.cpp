@@ -20,6 +20,11 @@ int RenderScheduler::default_lanes(int requested, const std::string& renderer_ki
   return renderer_kind == "cuda" ? 4 : threads;
 }
 
+int RenderScheduler::default_frames_per_lane(int requested, const std::string& renderer_kind) {
+  if (requested > 0) return requested;
+  return renderer_kind == "cuda" ? 2 : 1;
+}
+
 void RenderScheduler::start(int lanes, std::int64_t max_pixels_in_flight) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -107,22 +112,44 @@ bool RenderScheduler::take_next(Entry& out) {
   return true;
 }
 
-void RenderScheduler::run_task(Entry& e) {
+RenderScheduler::Finish RenderScheduler::run_task(Entry& e) {
+  Finish finish;
   try {
-    e.task->run();
+    finish = e.task->run();
   } catch (const std::exception& ex) {
     std::cerr << "render lane: a job threw: " << ex.what() << "\n";
   } catch (...) {
     std::cerr << "render lane: a job threw\n";
   }
   e.task.reset();  // the job's captures (a session, its buffers) go before the lane waits again
+  return finish;
+}
+
+void RenderScheduler::run_finish(Finish& finish) {
+  try {
+    finish();
+  } catch (const std::exception& ex) {
+    std::cerr << "render lane: a frame's finish threw: " << ex.what() << "\n";
+  } catch (...) {
+    std::cerr << "render lane: a frame's finish threw\n";
+  }
+  finish = Finish();  // its captures go now, as a job's
 }
 
 void RenderScheduler::lane_loop() {
+  // This lane's frames in flight, oldest first: each job's entry (running until its finish) and
+  // its finish.
+  std::deque<std::pair<Entry, Finish>> begun;
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
     Entry e;
-    while (!stopping_ && !take_next(e)) {
+    bool took = false;
+    while (!stopping_) {
+      if (static_cast<int>(begun.size()) < frames_per_lane_ && take_next(e)) {
+        took = true;
+        break;
+      }
+      if (!begun.empty()) break;  // finish the oldest frame rather than wait
       // A background job waiting for a gap in the live renders is due at its yield's end.
       const auto due = background_.empty() ? std::chrono::steady_clock::time_point::max()
                                            : background_.front().queued_at + background_yield_;
@@ -131,11 +158,25 @@ void RenderScheduler::lane_loop() {
       else
         changed_.wait(lock);
     }
-    if (!e.task) return;  // stopping
+    if (!took) {
+      if (begun.empty()) return;  // stopping, and no frame left to finish
+      auto [entry, finish] = std::move(begun.front());
+      begun.pop_front();
+      lock.unlock();
+      run_finish(finish);
+      lock.lock();
+      finished(entry);
+      changed_.notify_all();
+      continue;
+    }
     if (e.share && !e.stage1_queued && stage1_views_ > 1) share_stage1(e, lock);
     lock.unlock();
-    run_task(e);
+    Finish finish = run_task(e);
     lock.lock();
+    if (finish) {  // running until its finish
+      begun.emplace_back(std::move(e), std::move(finish));
+      continue;
+    }
     finished(e);
     // Room freed: any lane may now start the next owner's job; drain() may be waiting too.
     changed_.notify_all();
@@ -218,7 +259,8 @@ std::size_t RenderScheduler::poll() {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!take_next(e)) return ran;
     }
-    run_task(e);
+    Finish finish = run_task(e);
+    if (finish) run_finish(finish);
     {
       std::lock_guard<std::mutex> lock(mutex_);
       finished(e);

@@ -37,6 +37,16 @@
 // start at the counts. A job whose session left meanwhile runs as before (its render is skipped);
 // a pass that throws is logged and each frame pre-processes alone.
 //
+// Frames in flight (--frames-per-lane, default_frames_per_lane): a job may return a Finish, its
+// second half: the frame it queued on the GPU (Renderer::begin_yuv420_at), to be waited for and
+// handed on (Renderer::finish_yuv420). The lane keeps up to frames_per_lane such frames begun and
+// takes the next session's job while the GPU draws them, so a lane no longer holds the GPU idle
+// for the frame's length while the host waits for its planes; it runs the oldest finish when it
+// holds that many, or when no job may start. A job counts as running (the pixel cap, drain(),
+// background jobs' gaps) until its finish has run. A session's next job is posted only after its
+// frame's finish, so a renderer never has two frames begun. 1: each frame is finished before the
+// lane takes another (the CPU core's default: its begin draws the whole frame).
+//
 // Lane count (default_lanes): --render-lanes when given; otherwise 4 with the CUDA renderer (a
 // few renders in flight share one GPU) and --threads with the CPU renderer (a CPU render is CPU
 // work like the pool's, so it gets as many threads).
@@ -45,6 +55,7 @@
 // poll() belong to the thread that owns the server (start-up and shutdown), in that order.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
@@ -55,6 +66,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <optional>
 #include <utility>
 #include <vector>
@@ -78,6 +90,41 @@ class RenderScheduler {
   // The lane count for `requested` (ServerOptions::render_lanes; > 0 wins), the resolved
   // `renderer_kind` ("cpu" or "cuda") and the worker count `threads`.
   static int default_lanes(int requested, const std::string& renderer_kind, int threads);
+  // Frames a lane keeps begun (see above) for `requested` (ServerOptions::frames_per_lane; > 0
+  // wins) and the resolved `renderer_kind`: 2 with the CUDA renderer, 1 with the CPU one.
+  static int default_frames_per_lane(int requested, const std::string& renderer_kind);
+  // Set before start() (>= 1).
+  void set_frames_per_lane(int frames) { frames_per_lane_ = std::max(1, frames); }
+  int frames_per_lane() const { return frames_per_lane_; }
+
+  // A job's second half (see "Frames in flight"): a move-only void() callable, or empty. It must
+  // not throw (a throw is logged).
+  class Finish {
+   public:
+    Finish() = default;
+    template <class F>
+    static Finish of(F&& f) {
+      Finish out;
+      out.fn_ = std::make_unique<Holder<std::decay_t<F>>>(std::forward<F>(f));
+      return out;
+    }
+    explicit operator bool() const { return fn_ != nullptr; }
+    void operator()() { fn_->run(); }
+
+   private:
+    struct Base {
+      virtual ~Base() = default;
+      virtual void run() = 0;
+    };
+    template <class F>
+    struct Holder final : Base {
+      explicit Holder(F&& f) : fn(std::move(f)) {}
+      explicit Holder(const F& f) : fn(f) {}
+      void run() override { fn(); }
+      F fn;
+    };
+    std::unique_ptr<Base> fn_;
+  };
 
   // How long a background job waits for a moment when no live job runs (default 1000 ms; set
   // before start()). 0: it waits only for queued live jobs.
@@ -108,9 +155,9 @@ class RenderScheduler {
   // (FrameTimings.render_lane); -1 outside a lane (poll() after stop(), another thread).
   static int current_lane();
 
-  // Thread-safe. Queues `job` (a void() callable, move-only allowed) of `pixels` pixels behind
-  // `owner`'s earlier jobs; a lane runs it in `owner`'s turn. A job must not throw (a throw is
-  // logged and the job counts as done).
+  // Thread-safe. Queues `job` (a callable returning void or a Finish, move-only allowed) of
+  // `pixels` pixels behind `owner`'s earlier jobs; a lane runs it in `owner`'s turn. A job must not
+  // throw (a throw is logged and the job counts as done).
   // `share`: what the job offers to a shared stage 1 (none: it pre-processes alone).
   template <class Job>
   void post(Owner owner, std::int64_t pixels, Job&& job, std::optional<Stage1Share> share = std::nullopt) {
@@ -140,13 +187,20 @@ class RenderScheduler {
  private:
   struct TaskBase {
     virtual ~TaskBase() = default;
-    virtual void run() = 0;
+    virtual Finish run() = 0;
   };
   template <class F>
   struct Task final : TaskBase {
     explicit Task(F&& f) : fn(std::move(f)) {}
     explicit Task(const F& f) : fn(f) {}
-    void run() override { fn(); }
+    Finish run() override {
+      if constexpr (std::is_void_v<std::invoke_result_t<F&>>) {
+        fn();
+        return {};
+      } else {
+        return fn();
+      }
+    }
     F fn;
   };
   struct Entry {
@@ -170,7 +224,9 @@ class RenderScheduler {
   // `lock` held on entry and exit: queues the shared stage 1 of `lead` and the queued jobs that
   // may join it (see above), unlocking meanwhile.
   void share_stage1(const Entry& lead, std::unique_lock<std::mutex>& lock);
-  static void run_task(Entry& e);
+  // Runs e's job; returns its finish (empty: none, or the job threw).
+  static Finish run_task(Entry& e);
+  static void run_finish(Finish& finish);
 
   mutable std::mutex mutex_;
   std::condition_variable changed_;
@@ -180,6 +236,7 @@ class RenderScheduler {
   int lane_count_ = 0;                         // start()'s lanes (lanes_ is not read under the mutex)
   int live_running_ = 0;                       // sessions' jobs running now
   int stage1_views_ = 1;
+  int frames_per_lane_ = 1;
   Stage1Counts stage1_counts_;
   std::chrono::milliseconds background_yield_{1000};
   std::size_t queued_ = 0;

@@ -163,45 +163,62 @@ float FramePipeline::set_lod_bound(const Camera& camera) {
   return tau;
 }
 
-void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
-  const auto t_start = Clock::now();
+void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
+  r.render_started = Clock::now();
+  r.queue_ms = ms_between(job.pose.received, r.render_started);
+  r.render_lane = RenderScheduler::current_lane();
   const Camera camera = camera_of(job);
   r.lod_error_px = job.lod_error_px >= 0.0f ? job.lod_error_px : set_lod_bound(camera);
-  GpuRenderCount in_flight(metrics_, gpu_);
-  // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
-  // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
-  r.convert_ms = renderer_->render_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
+  // Frames on this GPU from the begin to the finish (the throughput model's sharing count).
+  r.gpu_frames_at_begin = gpu_ >= 0 ? metrics_.gpu_render_begin(gpu_) : 1;
+  try {
+    // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
+    // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
+    renderer_->begin_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
+  } catch (...) {
+    if (gpu_ >= 0) metrics_.gpu_render_end(gpu_);
+    throw;
+  }
+  r.render_begun = true;
+}
+
+void FramePipeline::finish_render_into(Rendered& r) {
+  r.render_begun = false;
+  double frames_with_it = 1.0;
+  try {
+    r.convert_ms = renderer_->finish_yuv420();
+  } catch (...) {
+    if (gpu_ >= 0) metrics_.gpu_render_end(gpu_);
+    throw;
+  }
+  if (gpu_ >= 0) frames_with_it = 0.5 * (r.gpu_frames_at_begin + metrics_.gpu_render_end(gpu_));
   const FrameStats& stats = renderer_->last_stats();
   const double stages[6] = {stats.total_ms, stats.preprocess_ms, stats.keys_ms,
                             stats.sort_ms,  stats.ranges_ms,     stats.rasterize_ms};
   std::copy(std::begin(stages), std::end(stages), std::begin(r.stage_ms));
-  r.render_lane = RenderScheduler::current_lane();
   r.stage1_views = stats.stage1_views;
-  r.render_key_frame = renderer_->last_stats().key_frame;
-  r.render_rekey = renderer_->last_stats().subframe_rejected;
-  r.predicted_gain = renderer_->last_stats().predicted_gain;
-  r.measured_gain = renderer_->last_stats().measured_gain;
-  r.speculation_window = renderer_->last_stats().window;
-  r.splats = renderer_->last_stats().visible;
+  r.render_key_frame = stats.key_frame;
+  r.render_rekey = stats.subframe_rejected;
+  r.predicted_gain = stats.predicted_gain;
+  r.measured_gain = stats.measured_gain;
+  r.speculation_window = stats.window;
+  r.splats = stats.visible;
   r.buffer_bytes = renderer_->device_buffer_bytes();
-  r.queue_ms = ms_between(job.pose.received, t_start);
-  // Render time includes the plane download (GPU) but not the conversion itself.
-  r.render_ms = std::max(0.0, ms_between(t_start, Clock::now()) - r.convert_ms);
+  // Render time includes the plane download (GPU) but not the conversion itself; with frames in
+  // flight, also the time the lane spent beginning other frames before this one's finish.
+  r.render_ms = std::max(0.0, ms_between(r.render_started, Clock::now()) - r.convert_ms);
   // A sub-frame's time is not its Gaussians' (the caches skip the pre-process).
-  const double frames_with_it = in_flight.end();
   if (gpu_ >= 0 && r.render_key_frame) metrics_.observe_gpu_throughput(gpu_, r.splats, r.render_ms, frames_with_it);
 }
 
-FramePipeline::Rendered FramePipeline::render(Job job, std::unique_ptr<Yuv420Image> planes, bool gone) {
-  Rendered r;
-  r.job = std::move(job);
-  r.planes = std::move(planes);
-  if (gone) {  // nobody to send it to: the lane moves on to the next session at once
-    r.error = "session gone";
-    return r;
-  }
+void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
+  begin_render_into(job, target, r);
+  finish_render_into(r);
+}
+
+void FramePipeline::note_failure(Rendered& r) {
   try {
-    render_into(r.job, r.planes->target(r.job.shape.width, r.job.shape.height), r);
+    throw;
   } catch (const RenderBudgetError& e) {
     r.error = e.what();
     r.over_budget = true;
@@ -211,8 +228,34 @@ FramePipeline::Rendered FramePipeline::render(Job job, std::unique_ptr<Yuv420Ima
     r.buffer_bytes = renderer_->device_buffer_bytes();
   } catch (const std::exception& e) {
     r.error = e.what();
+  } catch (...) {
+    r.error = "unknown error";
+  }
+}
+
+FramePipeline::Rendered FramePipeline::begin_render(Job job, std::unique_ptr<Yuv420Image> planes, bool gone) {
+  Rendered r;
+  r.job = std::move(job);
+  r.planes = std::move(planes);
+  if (gone) {  // nobody to send it to: the lane moves on to the next session at once
+    r.error = "session gone";
+    return r;
+  }
+  try {
+    begin_render_into(r.job, r.planes->target(r.job.shape.width, r.job.shape.height), r);
+  } catch (...) {
+    note_failure(r);
   }
   return r;
+}
+
+void FramePipeline::finish_render(Rendered& frame) {
+  if (!frame.render_begun) return;  // failed or skipped at its begin
+  try {
+    finish_render_into(frame);
+  } catch (...) {
+    note_failure(frame);
+  }
 }
 
 FrameEncodeInputs FramePipeline::encode_inputs(const JobShape& shape, bool refine, int live_sessions) const {

@@ -96,6 +96,10 @@ class FramePipeline {
     bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
     bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)
     std::uint64_t buffer_bytes = 0;  // the renderer's device buffers after it (Renderer::device_buffer_bytes)
+    // Between begin_render and finish_render: the frame is queued on the renderer.
+    bool render_begun = false;
+    Clock::time_point render_started{};  // when its lane began it
+    int gpu_frames_at_begin = 1;         // frames on its GPU then (ServerMetrics::gpu_render_begin)
   };
   // A finished frame (or why there is none).
   struct JobResult {
@@ -199,17 +203,28 @@ class FramePipeline {
   void end_encode(Rendered& frame);
 
   // --- jobs ---
-  // Renders `job` into `planes` (a render lane); `gone`: the session ended, skip the work.
-  Rendered render(Job job, std::unique_ptr<Yuv420Image> planes, bool gone);
+  // Begins rendering `job` into `planes` (a render lane; Renderer::begin_yuv420_at): the frame is
+  // queued on the renderer; `gone`: the session ended, skip the work. finish_render completes it,
+  // before any other use of this session's renderer.
+  Rendered begin_render(Job job, std::unique_ptr<Yuv420Image> planes, bool gone);
+  // Waits for a begun frame's planes and fills its render fields (timings, key frame, window); a
+  // frame that failed or was skipped at its begin is left as it is. A failure comes back in
+  // `frame.error`.
+  void finish_render(Rendered& frame);
   // Encodes a rendered frame into a Frame message (the worker pool).
   JobResult encode(Rendered& frame);
   // The one-job path: renders into the encoder's input and encodes it (a render lane).
   JobResult render_and_encode(const Job& job, bool gone);
 
  private:
-  // Renders job's pose into `target` and fills r's render fields (timings, key frame, window).
-  // Throws what Renderer::render_yuv420_at throws.
+  // Renders job's pose into `target` and fills r's render fields (timings, key frame, window):
+  // begin_render_into then finish_render_into. Throw what Renderer::render_yuv420_at throws.
   void render_into(const Job& job, const Yuv420Target& target, Rendered& r);
+  void begin_render_into(const Job& job, const Yuv420Target& target, Rendered& r);
+  void finish_render_into(Rendered& r);
+  // Inside a catch block: the exception in flight as r's error fields (over budget, out of
+  // device memory, other).
+  void note_failure(Rendered& r);
   // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed; called when
   // the job is made (start_render, on the strand, no render of the session running), or by the
   // lane where that failed.

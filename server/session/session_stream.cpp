@@ -96,14 +96,19 @@ void SessionStream::admit() {
   }
   shared_.renders.post(
       id_, pixels,
-      [keep = owner_.keep_alive(), this, started = std::move(started)]() mutable { render(std::move(started)); },
+      [keep = owner_.keep_alive(), this, started = std::move(started)]() mutable { return render(std::move(started)); },
       std::move(share));
 }
 
-void SessionStream::render(FramePipeline::StartedRender started) {
-  FramePipeline::Rendered frame = frames_.render(std::move(started.job), std::move(started.planes), owner_.gone());
-  boost::asio::post(owner_.strand(), [keep = owner_.keep_alive(), this, frame = std::move(frame)]() mutable {
-    rendered(std::move(frame));
+RenderScheduler::Finish SessionStream::render(FramePipeline::StartedRender started) {
+  FramePipeline::Rendered frame =
+      frames_.begin_render(std::move(started.job), std::move(started.planes), owner_.gone());
+  // The lane finishes the frame when it holds its most frames in flight or has nothing to start
+  // (render_scheduler.h "Frames in flight"); this session's next render waits for rendered().
+  return RenderScheduler::Finish::of([keep = owner_.keep_alive(), this, frame = std::move(frame)]() mutable {
+    frames_.finish_render(frame);
+    boost::asio::post(owner_.strand(),
+                      [keep, this, frame = std::move(frame)]() mutable { rendered(std::move(frame)); });
   });
 }
 

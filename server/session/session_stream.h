@@ -3,7 +3,10 @@
 //
 //   stage      runs on            does                                        next
 //   admit      the strand         latest pose wins; frames in flight bound    render
-//   render     a render lane      FramePipeline::render: draw, convert to I420 rendered
+//   render     a render lane      FramePipeline::begin_render: the frame queued rendered
+//                                 on the GPU; the lane's Finish (finish_render)
+//                                 waits for its I420 planes, as the lane sees fit
+//                                 (render_scheduler.h "Frames in flight")
 //   rendered   the strand         pacing, the rendered slot                   encode
 //   encode     the worker pool    FramePipeline::encode: the frame's encoder  hand_off
 //                                 settings (encode/frame_encoding.h), the
@@ -96,13 +99,13 @@ class SessionStream {
   };
 
   // The stages (the table above).
-  void render(FramePipeline::StartedRender started);                   // a render lane
-  void rendered(FramePipeline::Rendered frame);                        // the strand
-  void start_encode();                                                 // the strand
-  void encode(const std::shared_ptr<FramePipeline::Rendered>& frame);  // the worker pool
-  void render_and_encode(const FramePipeline::Job& job);               // a lane (NVENC's one job)
-  void hand_off(JobResult result);                                     // the strand
-  void count(const JobResult& result);                                 // Stats and /metrics
+  RenderScheduler::Finish render(FramePipeline::StartedRender started);  // a render lane
+  void rendered(FramePipeline::Rendered frame);                          // the strand
+  void start_encode();                                                   // the strand
+  void encode(const std::shared_ptr<FramePipeline::Rendered>& frame);    // the worker pool
+  void render_and_encode(const FramePipeline::Job& job);                 // a lane (NVENC's one job)
+  void hand_off(JobResult result);                                       // the strand
+  void count(const JobResult& result);                                   // Stats and /metrics
 
   // The encoder's VBV rate for a width x height frame the link's cap sets now (link_rate.h), at
   // the nominal kStreamFps; 0 where the link does not limit. Updates link_ceiling_kbps_.

@@ -35,7 +35,8 @@ void diff_plane(const std::uint8_t* got, int got_stride, const std::vector<std::
     }
 }
 
-// render_yuv420_at on the GPU vs the CPU conversion of the same frame, host and device targets.
+// render_yuv420_at on the GPU vs the CPU conversion of the same frame, host and device targets
+// (every third frame through begin_yuv420_at / finish_yuv420 with another frame drawn between).
 // `reference` renders the same frames as `converted` (same options, same cameras and times).
 void yuv420_check(const std::string& name, const std::string& view, catgs::cuda::CudaRenderer& reference,
                   catgs::cuda::CudaRenderer& converted, const std::vector<Camera>& cams) {
@@ -51,9 +52,6 @@ void yuv420_check(const std::string& name, const std::string& view, catgs::cuda:
   double convert_ms = 0;
   for (std::size_t i = 0; i < cams.size(); ++i) {
     const double t = static_cast<double>(i) / 120.0;
-    Image img;
-    reference.render_at(cams[i], t, img);
-    const catgs::Yuv420Image want = catgs::rgba_to_yuv420_bt709(img.rgba8.data(), w, h, w * 4);
     const bool to_device = i % 2 == 1;  // alternate the two targets over the frames
     catgs::Yuv420Target target{w,        h,          catgs::MemoryKind::host, y.data(), w + pad, u.data(), w / 2 + pad,
                                v.data(), w / 2 + pad};
@@ -67,7 +65,14 @@ void yuv420_check(const std::string& name, const std::string& view, catgs::cuda:
                 int(pitch),
                 dev + pitch * h + pitch * h / 2,
                 int(pitch)};
-    convert_ms += converted.render_yuv420_at(cams[i], t, target);
+    // Every third frame in halves, as a render lane with frames in flight draws it: begun, another
+    // renderer's frame drawn meanwhile (the lane's next session), then finished.
+    const bool in_halves = i % 3 == 2;
+    if (in_halves) converted.begin_yuv420_at(cams[i], t, target);
+    Image img;
+    reference.render_at(cams[i], t, img);
+    const catgs::Yuv420Image want = catgs::rgba_to_yuv420_bt709(img.rgba8.data(), w, h, w * 4);
+    convert_ms += in_halves ? converted.finish_yuv420() : converted.render_yuv420_at(cams[i], t, target);
     PlaneDiff& d = to_device ? device : host;
     if (to_device) {
       cudaMemcpy(dev_host.data(), dev, dev_host.size(), cudaMemcpyDeviceToHost);

@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <stdexcept>
 
 #include <gtest/gtest.h>
 
 #include "common/image_io.h"
 #include "brute_force_renderer.h"
+#include "colour/yuv420.h"
 #include "cpu/cpu_renderer.h"
 #include "scene/ply_io.h"
 #include "camera/trace.h"
@@ -170,6 +172,33 @@ TEST(CpuRenderer, DeterministicAcrossRunsAndReusedBuffers) {
   r.render(biker_view(*m, 320, 240, 10.0f), b);
   EXPECT_EQ(a.rgba8, b.rgba8);
   EXPECT_EQ(a.rgb, b.rgb);
+}
+
+// A frame in halves (renderer.h begin_yuv420_at / finish_yuv420): the planes of the CPU
+// conversion of the rendered frame; a second begin, or a finish without a begin, is refused; a
+// begin that threw leaves nothing to finish.
+TEST(CpuRenderer, AFrameInHalvesIsTheFrameAndOneAtATime) {
+  auto m = scene(test::bundled_scene());
+  cpu::CpuRenderer r(m, {});
+  const Camera cam = biker_view(*m, 64, 48, 10.0f);
+  Image img;
+  r.render(cam, img);
+  const Yuv420Image want = rgba_to_yuv420_bt709(img.rgba8.data(), 64, 48, 64 * 4);
+  Yuv420Image got;
+  const Yuv420Target target = got.target(64, 48);
+  r.begin_yuv420_at(cam, 0.0, target);
+  EXPECT_THROW(r.begin_yuv420_at(cam, 0.0, target), std::logic_error);
+  EXPECT_GE(r.finish_yuv420(), 0.0);
+  EXPECT_EQ(got.y, want.y);
+  EXPECT_EQ(got.u, want.u);
+  EXPECT_EQ(got.v, want.v);
+  EXPECT_THROW(r.finish_yuv420(), std::logic_error);
+  Camera bad = cam;
+  bad.t.x = NAN;
+  EXPECT_THROW(r.begin_yuv420_at(bad, 0.0, target), std::invalid_argument);
+  EXPECT_THROW(r.finish_yuv420(), std::logic_error);
+  r.begin_yuv420_at(cam, 0.0, target);  // a frame may begin again
+  (void)r.finish_yuv420();
 }
 
 TEST(CpuRenderer, RejectsBadCameras) {

@@ -18,12 +18,23 @@ namespace {
 using namespace catgs;
 using namespace catgs::server;
 
-// Throws CudaError `code` from every render; its buffers hold 123 MiB.
+// Throws CudaError `code` from every render, or, `at_finish`, from the frame's finish (a frame
+// begun on a lane, whose failure shows when its planes are waited for); its buffers hold 123 MiB.
 class FailingRenderer : public Renderer {
  public:
-  explicit FailingRenderer(int code) : code_(code) {}
+  explicit FailingRenderer(int code, bool at_finish = false) : code_(code), at_finish_(at_finish) {}
   std::string name() const override { return "cuda"; }
-  void render(const Camera&, Image&) override {
+  void render(const Camera&, Image&) override { fail(); }
+  void begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override {
+    if (!at_finish_) return Renderer::begin_yuv420_at(camera, time_s, out);
+    begin_frame();
+  }
+  double finish_yuv420() override {
+    if (!at_finish_) return Renderer::finish_yuv420();
+    end_frame();
+    fail();
+  }
+  [[noreturn]] void fail() const {
     throw cuda::CudaError("CUDA renderer: render-list keys buffer of 95073784 bytes: cudaMalloc failed: out of memory",
                           code_);
   }
@@ -34,6 +45,7 @@ class FailingRenderer : public Renderer {
 
  private:
   int code_;
+  bool at_finish_;
   FrameStats stats_;
   RenderOptions options_;
 };
@@ -58,9 +70,20 @@ FramePipeline::Rendered render_once(FramePipeline& frames) {
   shape.width = 64;
   shape.height = 64;
   FramePipeline::StartedRender started = frames.start_render(shape);
-  FramePipeline::Rendered r = frames.render(std::move(started.job), std::move(started.planes), false);
+  FramePipeline::Rendered r = frames.begin_render(std::move(started.job), std::move(started.planes), false);
+  frames.finish_render(r);
   frames.end_render();
   return r;
+}
+
+// The same when the frame was begun and its finish fails (render_scheduler.h "Frames in flight").
+TEST(FramePipelineMemory, OutOfMemoryAtTheFinishIsReported) {
+  TestPipeline p(std::make_unique<FailingRenderer>(2, /*at_finish=*/true));
+  FramePipeline::Rendered oom = render_once(p.frames);
+  EXPECT_TRUE(oom.out_of_memory);
+  EXPECT_FALSE(oom.render_begun);
+  EXPECT_NE(oom.error.find("out of memory"), std::string::npos) << oom.error;
+  EXPECT_EQ(oom.buffer_bytes, 123ull << 20);
 }
 
 TEST(FramePipelineMemory, OutOfMemoryIsReportedAndHalvesTheListBudget) {

@@ -10,6 +10,8 @@
 #include <memory>
 #include <mutex>
 #include <set>
+#include <stdexcept>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -75,6 +77,93 @@ TEST(RenderScheduler, GpuWaitOption) {
   const char* bad[] = {"catgs-server", "--gpu-wait", "yield"};
   catgs::server::ServerOptions o2;
   EXPECT_THROW((void)catgs::server::parse_server_options(3, const_cast<char**>(bad), o2), std::invalid_argument);
+}
+
+// Frames in flight: a job that returns a Finish leaves its frame begun; the lane takes the next
+// job while it holds fewer than frames_per_lane, and finishes the oldest first otherwise or when
+// nothing may start. `frames` 1 is the old lane: each job finished before the next.
+std::vector<std::string> lane_trace(int frames_per_lane, std::int64_t pixels, std::int64_t cap) {
+  RenderScheduler s;
+  s.set_frames_per_lane(frames_per_lane);
+  std::mutex mutex;
+  std::vector<std::string> trace;
+  auto note = [&](std::string what) {
+    std::lock_guard<std::mutex> lock(mutex);
+    trace.push_back(std::move(what));
+  };
+  for (int owner = 1; owner <= 3; ++owner)
+    s.post(static_cast<RenderScheduler::Owner>(owner), pixels, [&, owner] {
+      note("begin " + std::to_string(owner));
+      return RenderScheduler::Finish::of([&, owner] { note("finish " + std::to_string(owner)); });
+    });
+  s.start(1, cap);
+  EXPECT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+  s.stop();
+  return trace;
+}
+
+TEST(RenderScheduler, ALaneKeepsFramesInFlight) {
+  using V = std::vector<std::string>;
+  EXPECT_EQ(lane_trace(2, 10, 1000), (V{"begin 1", "begin 2", "finish 1", "begin 3", "finish 2", "finish 3"}));
+  EXPECT_EQ(lane_trace(3, 10, 1000), (V{"begin 1", "begin 2", "begin 3", "finish 1", "finish 2", "finish 3"}));
+  EXPECT_EQ(lane_trace(1, 10, 1000), (V{"begin 1", "finish 1", "begin 2", "finish 2", "begin 3", "finish 3"}));
+  // A begun frame's pixels count until its finish: two of 60 do not fit a cap of 100.
+  EXPECT_EQ(lane_trace(2, 60, 100), (V{"begin 1", "finish 1", "begin 2", "finish 2", "begin 3", "finish 3"}));
+}
+
+// drain() returns once every finish has run, and stop() finishes the frames a lane holds.
+TEST(RenderScheduler, DrainAndStopWaitForFinishes) {
+  for (const bool drain_first : {true, false}) {
+    RenderScheduler s;
+    s.set_frames_per_lane(4);
+    std::atomic<int> begun{0}, finished{0};
+    for (int owner = 1; owner <= 4; ++owner)
+      s.post(static_cast<RenderScheduler::Owner>(owner), 1, [&] {
+        ++begun;
+        return RenderScheduler::Finish::of([&] {
+          std::this_thread::sleep_for(std::chrono::milliseconds(20));
+          ++finished;
+        });
+      });
+    s.start(1, 1000);
+    if (drain_first) {
+      ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+      EXPECT_EQ(finished.load(), 4);
+    } else {
+      while (begun.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    s.stop();
+    EXPECT_EQ(finished.load(), begun.load()) << "drain first: " << drain_first;
+  }
+}
+
+// A finish that throws is logged; the lane goes on.
+TEST(RenderScheduler, AThrowingFinishLeavesTheLaneRunning) {
+  RenderScheduler s;
+  s.set_frames_per_lane(2);
+  std::atomic<int> ran{0};
+  s.post(1, 1, [] { return RenderScheduler::Finish::of([]() -> void { throw std::runtime_error("boom"); }); });
+  s.post(2, 1, [&] { ++ran; });
+  s.start(1, 1000);
+  ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
+  s.stop();
+  EXPECT_EQ(ran.load(), 1);
+}
+
+// --frames-per-lane: 2 with the CUDA renderer, 1 with the CPU one, a given count wins; 1 to 16.
+TEST(RenderScheduler, FramesPerLaneOption) {
+  EXPECT_EQ(RenderScheduler::default_frames_per_lane(0, "cuda"), 2);
+  EXPECT_EQ(RenderScheduler::default_frames_per_lane(0, "cpu"), 1);
+  EXPECT_EQ(RenderScheduler::default_frames_per_lane(3, "cpu"), 3);
+  const char* three[] = {"catgs-server", "--frames-per-lane", "3"};
+  catgs::server::ServerOptions o;
+  ASSERT_TRUE(catgs::server::parse_server_options(3, const_cast<char**>(three), o));
+  EXPECT_EQ(o.frames_per_lane, 3);
+  for (const char* v : {"0", "17"}) {
+    const char* bad[] = {"catgs-server", "--frames-per-lane", v};
+    catgs::server::ServerOptions ob;
+    EXPECT_THROW((void)catgs::server::parse_server_options(3, const_cast<char**>(bad), ob), std::invalid_argument) << v;
+  }
 }
 
 // Video export frames (post_background) run only when no session's job is queued: posted first,
