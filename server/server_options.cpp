@@ -146,9 +146,6 @@ std::string server_usage() {
          "                        process may use, its affinity and cgroup CPU limit, at least 4)\n"
          "  --render-lanes N      renders at once, sessions in turn (default: 4 per GPU with the\n"
          "                        CUDA renderer, --threads with the CPU one)\n"
-         "  --shared-stage1 N     the most sessions on one scene whose frames a lane pre-processes\n"
-         "                        in one pass over it (default 4; 1: each alone; at most 32;\n"
-         "                        exact and vanilla only; render/render_scheduler.h)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
          "  --bitrate auto|off|KBPS  each stream's VBV maximum rate (capped CRF): auto (default)\n"
          "                        --bits-per-pixel x width x height x 60 frames/s, at least\n"
@@ -356,8 +353,6 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.threads = parse_int(a, v, 0, 256);
     else if (a == "--render-lanes")
       out.render_lanes = parse_int(a, v, 0, 256);
-    else if (a == "--shared-stage1")
-      out.shared_stage1 = parse_int(a, v, 1, 32);
     else if (a == "--slow-client-timeout-ms")
       out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
     else if (a == "--adaptive-quality") {

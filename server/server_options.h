@@ -88,7 +88,6 @@ struct ServerOptions {
   RateLimitSettings rate_limits;       // --rate-limits
   int threads = 0;                     // Boost.Asio worker threads (strands, encoding); 0 = max(4, usable_cores())
   int render_lanes = 0;                // renders at once, sessions in rounds; 0 = 4 a GPU, `threads` for CPU
-  int shared_stage1 = 4;               // --shared-stage1: most views a shared stage 1 holds (1: none)
   int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
   bool adaptive_quality = false;       // --adaptive-quality (session/adaptive_quality.h)
   // --bitrate, --bits-per-pixel, --crf, --vbv-ms, --intra-refresh, --encoder-threads: how each
