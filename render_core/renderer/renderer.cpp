@@ -40,10 +40,6 @@ double Renderer::render_yuv420_at(const Camera& camera, double time_s, const Yuv
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-void Renderer::preprocess_together(const std::vector<Renderer*>&, const std::vector<Camera>&) {
-  throw std::invalid_argument("preprocess_together: the " + name() + " renderer pre-processes each view alone");
-}
-
 std::uint64_t RenderListBudget::max_entries(int width, int height, std::uint64_t bytes_per_entry) const {
   // Tile counts come from validated cameras (sides <= kMaxImageSide): the products fit 64 bits.
   const std::uint64_t tiles =
