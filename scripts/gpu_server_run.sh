@@ -17,7 +17,6 @@
 #        bundled biker scene and runs 4 catgs-loadgen sessions (different sizes and paths) that
 #        decode every frame and compare every 4th with the CPU reference render of its pose
 #        (PSNR >= 30 dB) -> $OUT/server_check.log, $OUT/check.json
-#      `sharedcheck`: the same kind of check with sessions sharing stage 1 (exact, one lane)
 #   2. within the machine's warm period, carry [".carry"] (scripts/gpu_run.sh prepare):
 #        scripts/gpu_server_run.sh sweep [--seconds S] [--counts "1 2 4 8 16"] [--sizes "..."]
 #          [--pipeline catgs|exact|vanilla] [--city-counts "..."] [--server-arg ARG]...
@@ -147,35 +146,6 @@ check() {
   stop_server
   echo "== server log (head)"; head -20 "$OUT/server_check_server.log"
   echo "check status: $status"
-  return $status
-}
-
-# sharedcheck: the shared stage 1 (issue 47, --shared-stage1) in the whole server on the GPU:
-# catgs-server --renderer cuda --pipeline exact with one render lane on the bundled biker, 8
-# sessions at 60 poses/s (their jobs queue behind each other, so the lane pre-processes them in
-# shared passes; closed-loop sessions on the GPU never queued together), every 6th frame decoded
-# and compared with the CPU reference render of its pose (>= 30 dB); the sessions' share of
-# frames from a shared pass is printed and must not be 0.
-# -> $OUT/sharedcheck.json, $OUT/sharedcheck_server.log
-sharedcheck() {
-  unpack || { echo "unpack failed"; return 1; }
-  export LD_LIBRARY_PATH=$SRV/lib
-  local scene=$ROOT/assets/scenes/biker.compressed.ply T=$ROOT/.carry_srv/traces status=0
-  start_server "$scene" "$OUT/sharedcheck_server.log" --pipeline exact --render-lanes 1 --shared-stage1 8 || return 1
-  "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions 8 --scene "$scene" --size 640x360,480x270,512x384,320x240 \
-    --trace "orbit,real:$T/tandt_train.cameras.json,real:$T/mipnerf360_bicycle.cameras.json,real:$T/flowers_sh3.cameras.json" \
-    --rate 60 --seconds 6 --check-every 6 --check-min-psnr 30 --json "$OUT/sharedcheck.json" || status=1
-  python3 - "$OUT/sharedcheck.json" <<'PY' || status=1
-import json, sys
-s = json.load(open(sys.argv[1]))["run"]["sessions"]
-for x in s:
-    print("session %d: %d frames, %d checked, PSNR min %.1f dB, shared %.0f%%, views %.2f" % (
-        x["index"], x["frames"], x["checked"], x["psnr_min_db"], 100 * x["server"]["stage1_shared_fraction"],
-        x["server"]["stage1_views_mean"]))
-sys.exit(0 if any(x["server"]["stage1_shared_fraction"] > 0 for x in s) else 1)
-PY
-  stop_server
-  echo "sharedcheck status: $status"
   return $status
 }
 
@@ -404,7 +374,6 @@ print('; '.join(bad))" "$W/json/ramp-${name}_$n.json" 2>&1)
 case "${1:-}" in
   prepare) shift; prepare "$@" ;;
   check) OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; check ;;
-  sharedcheck) OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; sharedcheck ;;
   sweep) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; sweep "$@" ;;
   unpack) unpack ;;
   scenes) scenes ;;

@@ -316,7 +316,6 @@ void Server::start_pools() {
   if (options_.render_lanes == 0 && !gpus_->devices().empty())  // the CUDA default is per GPU
     lanes *= static_cast<int>(gpus_->devices().size());
   renders_.set_background_yield(std::chrono::milliseconds(options_.export_yield_ms));
-  renders_.set_stage1_views(options_.shared_stage1);
   renders_.set_frames_per_lane(RenderScheduler::default_frames_per_lane(options_.frames_per_lane, renderer_kind_));
   renders_.start(lanes, options_.max_pixels_in_flight);
 }

@@ -149,9 +149,6 @@ std::string server_usage() {
          "  --frames-per-lane N   frames a render lane keeps on the GPU while it starts the next\n"
          "                        session's (default: 2 with the CUDA renderer, 1 with the CPU\n"
          "                        one; 1: each frame's planes before the next job; at most 16)\n"
-         "  --shared-stage1 N     the most sessions on one scene whose frames a lane pre-processes\n"
-         "                        in one pass over it (default 4; 1: each alone; at most 32;\n"
-         "                        exact and vanilla only; render/render_scheduler.h)\n"
          "  --slow-client-timeout-ms N  drop a client whose frames stay unread this long (10000)\n"
          "  --bitrate auto|off|KBPS  each stream's VBV maximum rate (capped CRF): auto (default)\n"
          "                        --bits-per-pixel x width x height x 60 frames/s, at least\n"
@@ -361,8 +358,6 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.render_lanes = parse_int(a, v, 0, 256);
     else if (a == "--frames-per-lane")
       out.frames_per_lane = parse_int(a, v, 1, 16);
-    else if (a == "--shared-stage1")
-      out.shared_stage1 = parse_int(a, v, 1, 32);
     else if (a == "--slow-client-timeout-ms")
       out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
     else if (a == "--adaptive-quality") {

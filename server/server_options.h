@@ -89,7 +89,6 @@ struct ServerOptions {
   int threads = 0;                     // Boost.Asio worker threads (strands, encoding); 0 = max(4, usable_cores())
   int render_lanes = 0;                // renders at once, sessions in rounds; 0 = 4 a GPU, `threads` for CPU
   int frames_per_lane = 0;             // --frames-per-lane: frames a lane keeps begun; 0 = 2 CUDA, 1 CPU
-  int shared_stage1 = 4;               // --shared-stage1: most views a shared stage 1 holds (1: none)
   int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
   bool adaptive_quality = false;       // --adaptive-quality (session/adaptive_quality.h)
   // --bitrate, --bits-per-pixel, --crf, --vbv-ms, --intra-refresh, --encoder-threads: how each

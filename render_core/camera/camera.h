@@ -38,12 +38,6 @@ struct Camera {
   Camera rescaled(int new_width, int new_height) const;
 };
 
-// Every field equal (bit for bit, as floats compare): the same view drawn the same way.
-inline bool same_camera(const Camera& a, const Camera& b) {
-  return a.R == b.R && a.t == b.t && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy &&
-         a.width == b.width && a.height == b.height && a.near_plane == b.near_plane && a.far_plane == b.far_plane;
-}
-
 // Checks a camera a renderer can draw: size in [1, kMaxImageSide], finite R, t and intrinsics,
 // fx, fy > 0, 0 < near < far. Throws std::invalid_argument saying what is wrong.
 void validate_camera(const Camera& camera);

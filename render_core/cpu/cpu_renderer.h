@@ -82,13 +82,6 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
                 float lod_error_px = 0.0f);
 
-// Stage 1 of several views of one scene at once (the CUDA core's preprocess_batch; issue 47):
-// chunk by chunk, every view in turn, over the whole frame. outs[k] gets what preprocess() gives
-// cameras[k] alone. Throws std::invalid_argument where the counts differ or an output is null.
-void preprocess_batch(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
-                      const std::vector<Camera>& cameras, Pipeline pipeline,
-                      const std::vector<ProjectedGaussians*>& outs, float lod_error_px = 0.0f);
-
 // catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
 // every camera of the path; those visible at the key camera get the key frame's features (as
@@ -217,11 +210,9 @@ struct FrameBuffers {
   TileRanges& ranges;
   std::vector<TileSlice>& slices;
 };
-// `preprocessed`: buffers.projected already holds the whole frame's stage 1 at `camera` with
-// these options (CpuRenderer::preprocess_together), which is not run again.
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
-                       const FrameBuffers& buffers, Image& out, FrameStats& stats, bool preprocessed = false);
+                       const FrameBuffers& buffers, Image& out, FrameStats& stats);
 
 // The CPU Renderer: the five stages, buffers reused across frames.
 class CpuRenderer final : public Renderer {
@@ -233,11 +224,6 @@ class CpuRenderer final : public Renderer {
   const FrameStats& last_stats() const override { return stats_; }
   const RenderOptions& options() const override { return options_; }
   void set_options(const RenderOptions& options) override;
-  // Stage 1 shared by several views (renderer.h; issue 47): CPU renderers of one model, pipeline
-  // and LOD bound; preprocess_batch writes each renderer's ProjectedGaussians, and its next
-  // render() of that camera starts at the counts.
-  bool shares_stage1_with(const Renderer& other) const override;
-  void preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras) override;
 
   // The intermediate state of the last frame (tests and tools).
   const ProjectedGaussians& projected() const { return projected_; }
@@ -245,10 +231,6 @@ class CpuRenderer final : public Renderer {
   const TileRanges& tile_ranges() const { return ranges_; }
 
  private:
-  // preprocess_together left projected_ at `batched_camera_` (cleared by the next render or set_options).
-  bool batched_ = false;
-  Camera batched_camera_;
-  int batched_views_ = 1;
   std::shared_ptr<const GaussianModel> model_;
   std::vector<fm::ChunkBounds> chunks_;  // of model_, for chunk culling
   RenderOptions options_;

@@ -11,14 +11,14 @@ namespace catgs::cpu {
 
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
-                       const FrameBuffers& buffers, Image& out, FrameStats& stats, bool preprocessed) {
+                       const FrameBuffers& buffers, Image& out, FrameStats& stats) {
   ProjectedGaussians& projected = buffers.projected;
   RenderList& list = buffers.list;
   const TileGrid grid = TileGrid::of(camera.width, camera.height);
   const SpeculationParams& sp = options.speculation;
   const auto start = clock::now();
   stats.preprocess_ms = stats.keys_ms = stats.sort_ms = stats.ranges_ms = stats.rasterize_ms = stats.merge_ms = 0;
-  if (!preprocessed) preprocess(model, chunks, camera, stages, projected, fm::kAllTiles, options.lod_error_px);
+  preprocess(model, chunks, camera, stages, projected, fm::kAllTiles, options.lod_error_px);
   stats.preprocess_ms += ms_between(start, clock::now());
   const std::uint64_t entries = count_entries(projected);
   stats.visible = static_cast<std::size_t>(

@@ -2,7 +2,6 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
-#include <string>
 #include <vector>
 
 #include "cpu/cpu_renderer.h"
@@ -135,40 +134,15 @@ void preprocess_chunk(const GaussianModel& model, const std::vector<fm::ChunkBou
   }
 }
 
-void check_chunks(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const char* who) {
-  if (chunks.size() != fm::chunk_count(model.size()))
-    throw std::invalid_argument(std::string(who) + ": chunk bounds of another scene");
-}
-
 }  // namespace
 
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region, float lod_error_px) {
-  check_chunks(model, chunks, "preprocess");
+  if (chunks.size() != fm::chunk_count(model.size()))
+    throw std::invalid_argument("preprocess: chunk bounds of another scene");
   out.resize(model.size());
   const ViewPass v(model, camera, pipeline, out, region, lod_error_px);
   parallel_for(chunks.size(), 16, [&](std::size_t c) { preprocess_chunk(model, chunks, v, c); });
-}
-
-void preprocess_batch(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks,
-                      const std::vector<Camera>& cameras, Pipeline pipeline,
-                      const std::vector<ProjectedGaussians*>& outs, float lod_error_px) {
-  check_chunks(model, chunks, "preprocess_batch");
-  if (cameras.size() != outs.size())
-    throw std::invalid_argument("preprocess_batch: " + std::to_string(cameras.size()) + " cameras but " +
-                                std::to_string(outs.size()) + " outputs");
-  std::vector<ViewPass> views;
-  views.reserve(cameras.size());
-  for (std::size_t k = 0; k < cameras.size(); ++k) {
-    if (!outs[k]) throw std::invalid_argument("preprocess_batch: output " + std::to_string(k) + " is null");
-    outs[k]->resize(model.size());
-    views.emplace_back(model, cameras[k], pipeline, *outs[k], fm::kAllTiles, lod_error_px);
-  }
-  // Chunk-major, as the CUDA core's preprocess_batch_kernel: a chunk's Gaussians, still in cache,
-  // for every view in turn.
-  parallel_for(chunks.size(), 16, [&](std::size_t c) {
-    for (const ViewPass& v : views) preprocess_chunk(model, chunks, v, c);
-  });
 }
 
 }  // namespace catgs::cpu

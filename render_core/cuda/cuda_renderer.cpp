@@ -43,7 +43,6 @@ CudaRenderer::~CudaRenderer() {
 void CudaRenderer::set_options(const RenderOptions& options) {
   state_->planner.set_params(options.speculation);  // validates; closes the open group
   options_ = options;
-  state_->batched = false;  // a batch's stage 1 was for the old options (LOD bound, pipeline)
 }
 
 void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
@@ -56,7 +55,6 @@ void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
   scene_ = std::move(scene);
   state_->planner.set_params(options_.speculation);  // the caches index the old scene
-  state_->batched = false;                           // and so did a batch's stage 1
 }
 
 CUstream_st* CudaRenderer::stream() const { return state_->stream; }
@@ -259,21 +257,17 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   validate_camera(camera);
   State& s = *state_;
   s.syncs = 0;
-  // A camera preprocess_together pre-processed: kStart, stage 1 and kPreprocessed are queued.
-  const bool batched = take_batched(camera);
-  if (!batched) CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
+  CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   stats_ = {};
-  stats_.stage1_views = batched ? s.batched_views : 1;
   const bool exact = options_.pipeline != Pipeline::vanilla;
-  draw_full_frame(camera, exact, true, exact && depth_first_sort(), batched);
+  draw_full_frame(camera, exact, true, exact && depth_first_sort());
   s.width = camera.width;
   s.height = camera.height;
   stats_ready_ = false;
   return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
 }
 
-void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first,
-                                   bool preprocessed) {
+void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first) {
   State& s = *state_;
   const DeviceScene& scene = *scene_;
   const uint64_t n = scene.size();
@@ -295,18 +289,15 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
   // slots hold is pre-processed again once they grew (issue 61; records.h Projected).
   auto count = [&](const fm::TileRect& region, bool whole) {
     for (;;) {
-      if (!(whole && preprocessed)) {  // the whole frame's may be a batch's (preprocess_together)
-        CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-        stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
-                           counters + kReadDepthLowComplement, s.big_list(), s.stream);
-        if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
-      }
+      CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
+      stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
+                         counters + kReadDepthLowComplement, s.big_list(), s.stream);
+      if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
       const State::ListCounts c = s.count_render_list(s.slots(), s.live_walk(), cam, depth_first);
       if (!c.overflow) return c;
       s.ensure_slots(c.kept, false);
       proj = s.projected();
       tests.splat = proj.splat;
-      preprocessed = false;
     }
   };
   const State::ListCounts frame = count(fm::kAllTiles, true);

@@ -33,7 +33,6 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
-#include <vector>
 
 #include "base/cuda_error.h"
 #include "forward_model/chunk_bounds.h"
@@ -196,22 +195,6 @@ class CudaRenderer final : public Renderer {
   // As render_device(), for a camera the client posed at `time_s` (seconds, client clock): the
   // catgs pipeline feeds its motion predictor with it; vanilla and exact ignore it.
   DeviceFrame render_device_at(const Camera& camera, double time_s);
-  // Stage 1 of `cameras[k]` for `renderers[k]`, 1 to 32 views of one scene (the frames several
-  // sessions are about to draw), in one pass over the scene (stages::preprocess_batch: each
-  // Gaussian is read once for every view that may see it). Each renderer's next
-  // render_device(cameras[k]) (or render_device_at, render_yuv420_at) then starts at the render
-  // list's counts, with the results preprocess() would have given it alone, bit for bit; its
-  // preprocess_ms is the batch's (kStart is recorded on its stream before the batch). Another
-  // camera, or set_options / set_scene before the frame, pre-processes again. The batch runs on
-  // renderers[0]'s stream after every renderer's queued work, and every renderer's stream waits
-  // for it. Throws std::invalid_argument where the renderers do not share one DeviceScene and LOD
-  // bound, are not all exact or all vanilla, a renderer appears twice, the counts differ or are
-  // out of range, or a camera is bad (validate_camera).
-  static void preprocess_batch(const std::vector<CudaRenderer*>& renderers, const std::vector<Camera>& cameras);
-  // The Renderer interface's (renderer.h): preprocess_batch, for CUDA renderers that share this
-  // one's DeviceScene, pipeline (exact or vanilla) and LOD bound, this one first.
-  bool shares_stage1_with(const Renderer& other) const override;
-  void preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras) override;
   // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).
   const FrameStats& last_stats() const override;
   const RenderOptions& options() const override { return options_; }
@@ -243,17 +226,13 @@ class CudaRenderer final : public Renderer {
  private:
   struct State;
   DeviceFrame render_full(const Camera& camera);  // vanilla, exact
-  // preprocess_together left this camera's stage 1 done (and clears the mark).
-  bool take_batched(const Camera& camera);
   // A whole frame through the exact (or vanilla) stages after kStart: pre-processing, counts, and
   // stages 2-5 in one pass, or, over the list budget, in passes of tiles (renderer/render_passes.h,
   // as cpu::render_full_frame), each sorted with the frame's key and split with its slice length.
   // Sets stats_'s visible, render_list_length, passes and longest_pass. Throws RenderBudgetError
   // as draw_in_passes. Used by render_full and by catgs key frames without a window (which sort
   // in one radix sort: depth_first false).
-  // `preprocessed`: the whole frame's stage 1 is queued already (preprocess_together).
-  void draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first,
-                       bool preprocessed = false);
+  void draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first);
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp

@@ -5,7 +5,6 @@
 #include <cub/block/block_reduce.cuh>
 #include <cub/device/device_scan.cuh>
 #include <stdexcept>
-#include <string>
 
 #include "base/cuda_check.h"
 #include "splat.cuh"
@@ -76,8 +75,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads) list_live_chunks_kerne
   if (c + 1 == count) *live.count = at + kept;
 }
 
-// A thread's Gaussian as every view of a batch reads it: its attributes once, and its 3D
-// covariance, worked out at the first view that needs it (a view culls most Gaussians before).
+// A thread's Gaussian: its mean and opacity, read as the block takes its chunk, and its 3D
+// covariance, worked out only where the Gaussian passes the frustum and opacity tests (most are
+// culled before).
 struct LoadedGaussian {
   glm::vec3 mean;
   float opacity_logit;
@@ -194,45 +194,6 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
   }
 }
 
-// Batch chunk culling, a thread per chunk: each view's culling as cull_chunks_kernel does it
-// (into that view's keep flags; order_live_chunks lists them), and the chunks any view kept into
-// `either`, with the views that kept it as bits of view_mask[c].
-__global__ void __launch_bounds__(tune::kGaussianThreads)
-    cull_chunks_batch_kernel(SceneView scene, uint64_t count, const BatchView* __restrict__ views, int view_count,
-                             bool exact, LiveChunks either, uint32_t* __restrict__ view_mask) {  // [count]
-  const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  uint32_t mask = 0;
-  for (int v = 0; v < view_count; ++v) {
-    const CameraParams& cam = views[v].cam;
-    const bool keep = c < count && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)) && lod_drawn(scene, c, cam);
-    mark_chunk(keep, c, count, views[v].live);
-    mask |= keep ? 1u << v : 0u;
-  }
-  if (c < count) view_mask[c] = mask;
-  append_chunk(mask != 0u, c, either);
-}
-
-// A block per chunk that any view of the batch kept: each Gaussian is read once, then
-// pre-processed for every view that kept its chunk at that view's slot chunk (preprocess_chunk_view,
-// as preprocess_kernel does it for one view; a slot chunk past the view's capacity is left for
-// its frame to draw again), the views in order.
-__global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
-    preprocess_batch_kernel(SceneView scene, bool exact, fm::TileRect region, const BatchView* __restrict__ views,
-                            ChunkWalk either, const uint32_t* __restrict__ view_mask) {
-  const uint64_t chunks = either.size();
-  for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
-    const uint64_t c = either.chunk(k);
-    LoadedGaussian g = load_gaussian(scene, c);
-    for (uint32_t mask = view_mask[c]; mask != 0u; mask &= mask - 1u) {  // block-uniform
-      const BatchView& v = views[__ffs(static_cast<int>(mask)) - 1];
-      const uint64_t k = v.live.slot[c];
-      if (k >= v.live.capacity) continue;  // block-uniform
-      preprocess_chunk_view(c, k, &g, scene, v.cam, exact, region, v.out, v.visible, v.depth_range, v.big);
-      __syncthreads();  // the shared words of the block reductions are rewritten next view
-    }
-  }
-}
-
 // Record of a big Gaussian's count, or of one part's of a huge one (one thread): adds n to its
 // tiles_touched (zero from pre-processing) and its chunk's total and, where it has entries and
 // depth_range is not null, keeps the depth range as record_depth_range does. Returns whether
@@ -342,32 +303,6 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};
   count_big_tiles(big, tests, out, visible, depth_range, stream);
-}
-
-void preprocess_batch(const SceneView& scene, bool exact, const BatchView* views_host, const BatchView* views,
-                      int view_count, const BatchChunks& either, cudaStream_t stream) {
-  if (view_count < 1 || view_count > kMaxBatchViews)
-    throw std::invalid_argument("preprocess_batch: " + std::to_string(view_count) + " views (1 to " +
-                                std::to_string(kMaxBatchViews) + ")");
-  if (scene.n == 0) return;
-  const uint64_t chunks = fm::chunk_count(scene.n);
-  const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
-  if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess_batch: too many Gaussians for one grid");
-  for (int v = 0; v < view_count; ++v) clear_chunk_totals(views_host[v].out, views_host[v].live, stream);
-  cull_chunks_batch_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(
-      scene, chunks, views, view_count, exact, either.chunks, either.view_mask);
-  CATGS_CUDA_LAUNCHED("cull_chunks_batch_kernel");
-  for (int v = 0; v < view_count; ++v) order_live_chunks(views_host[v].live, chunks, stream);
-  const ChunkWalk walk{either.chunks.index, either.chunks.count, chunks};
-  preprocess_batch_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
-      scene, exact, fm::kAllTiles, views, walk, either.view_mask);
-  CATGS_CUDA_LAUNCHED("preprocess_batch_kernel");
-  if (!exact) return;
-  for (int v = 0; v < view_count; ++v) {
-    const BatchView& bv = views_host[v];
-    const TileTests tests{TileTestKind::ellipse, bv.out.splat, {}, bv.cam.width, bv.cam.height};
-    count_big_tiles(bv.big, tests, bv.out, bv.visible, bv.depth_range, stream);
-  }
 }
 
 void count_big_tiles(const BigList& big, const TileTests& tests, const Projected& out, unsigned long long* visible,

@@ -38,36 +38,6 @@ std::size_t live_scan_temp_bytes(uint64_t chunks);
 // read as empty to the list's count and scan).
 void clear_chunk_totals(const Projected& out, const LiveChunks& live, cudaStream_t stream);
 
-// Stage 1 for a batch of views of one scene (preprocess.cu; the views of several sessions, or of
-// catgs-bench --batch): one view of the batch, its camera and where its results go, as
-// preprocess() takes them (the whole frame: fm::kAllTiles; its counters zero on entry).
-struct BatchView {
-  CameraParams cam;
-  Projected out;
-  LiveChunks live;
-  unsigned long long* visible;      // [1]
-  unsigned long long* depth_range;  // [2]
-  BigList big;
-};
-constexpr int kMaxBatchViews = 32;  // a chunk's views are the bits of one 32-bit mask
-
-// Scratch of a batch: the chunks any view kept (LiveChunks over chunk_count(N) slots, count zero
-// on entry) and, per chunk, the views that kept it (bit v: views[v]).
-struct BatchChunks {
-  LiveChunks chunks;
-  uint32_t* view_mask;  // [chunk_count(N)]
-};
-
-// Stage 1 for `view_count` (1 to kMaxBatchViews) views in one pass over the scene: each chunk is
-// culled against every view (each view's chunk_total and live list as preprocess() writes them),
-// then a block per chunk that any view kept reads each Gaussian once and pre-processes it for
-// every view that kept the chunk. Each view's results equal preprocess()'s for that view alone,
-// bit for bit (one device function does both; tests/gpu/batch_test.cpp). `views` is the array in
-// device memory, `views_host` the same array on the host (its big lists' launches read it);
-// throws std::invalid_argument on a view count out of range.
-void preprocess_batch(const SceneView& scene, bool exact, const BatchView* views_host, const BatchView* views,
-                      int view_count, const BatchChunks& either, cudaStream_t stream);
-
 // Stage 1, big Gaussians (preprocess.cu): a warp per big Gaussian of `big`, and a block per part
 // of a huge one (huge_parts, tile_test.cuh; each part's count into big.part_count), counts the
 // tiles of its rectangle (out.rect) passing `tests` into out.tiles_touched (zero on entry), adds them to its chunk's

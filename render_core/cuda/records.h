@@ -100,8 +100,8 @@ __device__ __forceinline__ uint32_t listed_tiles(const uint32_t* tiles_touched, 
 // speculative_preprocess.cu) and lists those left in index order (order_live_chunks); the other
 // stages then launch at most tune::kChunkWalkBlocks blocks over that list, so a culled chunk
 // costs a few bytes, not a block and a write per Gaussian (issue 19: "cull whole chunks first").
-// A null `index` walks every chunk, slot chunk k = chunk k (a batch's scratch list, whose order
-// is free, is walked through its own index).
+// A null `index` walks every chunk, slot chunk k = chunk k (no stage asks for that now: both
+// pre-processings list).
 struct ChunkWalk {
   const uint32_t* index;  // [chunks] or null
   const unsigned* count;  // [1] device: the chunks in index[]

@@ -188,16 +188,6 @@ struct CudaRenderer::State {
   GrowBuffer yuv;
   PinnedBuffer yuv_host;  // the planes of a host target, on their way to it
   cudaEvent_t convert_start = nullptr, converted = nullptr;
-  // preprocess_together (batch_preprocess.cpp): this renderer's view of a batch was pre-processed
-  // for `batched_camera` (its next frame at that camera starts at the counts); the batch's join;
-  // and, on a batch's first renderer, the batch's scratch: the views (device, and pinned host
-  // staging, rewritten only once `batch_copied` has passed) and the chunks any view kept.
-  bool batched = false;
-  Camera batched_camera;
-  int batched_views = 1;  // views in that batch (FrameStats::stage1_views)
-  cudaEvent_t batch_join = nullptr, batch_copied = nullptr;
-  stages::BatchView* host_batch_views = nullptr;  // pinned [stages::kMaxBatchViews]
-  GrowBuffer batch_views, batch_chunks, batch_mask, batch_count;
   uint64_t key_entries = 0, key_visible = 0, key_capacity = 0;  // the open group's key frame
   int window = 0;
   bool key_frame = true;
@@ -335,11 +325,7 @@ struct CudaRenderer::State {
                                 &slot_finished,
                                 &plan_scratch,
                                 &catgs_counters,
-                                &yuv,
-                                &batch_views,
-                                &batch_chunks,
-                                &batch_mask,
-                                &batch_count})
+                                &yuv})
       b += g->bytes();
     return b;
   }
@@ -348,9 +334,6 @@ struct CudaRenderer::State {
   ~State() {
     if (host_counts) cudaFreeHost(host_counts);
     if (host_catgs) cudaFreeHost(host_catgs);
-    if (host_batch_views) cudaFreeHost(host_batch_views);
-    if (batch_join) cudaEventDestroy(batch_join);
-    if (batch_copied) cudaEventDestroy(batch_copied);
     if (catgs_readback) cudaEventDestroy(catgs_readback);
     if (plan_ready) cudaEventDestroy(plan_ready);
     if (convert_start) cudaEventDestroy(convert_start);

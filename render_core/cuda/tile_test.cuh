@@ -84,19 +84,6 @@ __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_
   }
 }
 
-// Appends chunk c to a batch's scratch list where `keep` (every lane of the warp calls it; one
-// atomic per warp that keeps any; the order is free: the batch walks it, each view's slots come
-// from its own ordered list).
-__device__ __forceinline__ void append_chunk(bool keep, uint64_t c, const LiveChunks& live) {
-  const unsigned lanes = __ballot_sync(0xffffffffu, keep);
-  if (lanes == 0u) return;  // warp-uniform
-  const int lane = static_cast<int>(threadIdx.x & 31u), leader = __ffs(lanes) - 1;
-  unsigned base = 0;
-  if (lane == leader) base = atomicAdd(live.count, static_cast<unsigned>(__popc(lanes)));
-  base = __shfl_sync(0xffffffffu, base, leader);
-  if (keep) live.index[base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)))] = static_cast<uint32_t>(c);
-}
-
 // Chunk culling's answer for chunk c < count (a thread per chunk): order_live_chunks lists the
 // kept ones in index order.
 __device__ __forceinline__ void mark_chunk(bool keep, uint64_t c, uint64_t count, const LiveChunks& live) {

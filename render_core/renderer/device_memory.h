@@ -46,7 +46,7 @@ struct BufferBytes {
   static constexpr std::uint64_t kPerPixel = 26;
   // two key halves (8 each), two value halves (4 each) and the radix sort's scratch (about 4).
   static constexpr std::uint64_t kPerListEntry = 28;
-  // Fixed: events, counters, the batch scratch, CUB's small temporaries.
+  // Fixed: events, counters, CUB's small temporaries.
   static constexpr std::uint64_t kFixed = 1u << 20;
   // GrowBuffer's slack (cuda/tunables.h kGrowthFactor): a buffer holds up to 1.25 times its need.
   static constexpr double kGrowth = 1.25;

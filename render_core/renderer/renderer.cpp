@@ -65,10 +65,6 @@ double Renderer::finish_yuv420() {
   return begun_convert_ms_;
 }
 
-void Renderer::preprocess_together(const std::vector<Renderer*>&, const std::vector<Camera>&) {
-  throw std::invalid_argument("preprocess_together: the " + name() + " renderer pre-processes each view alone");
-}
-
 std::uint64_t RenderListBudget::max_entries(int width, int height, std::uint64_t bytes_per_entry) const {
   // Tile counts come from validated cameras (sides <= kMaxImageSide): the products fit 64 bits.
   const std::uint64_t tiles =

@@ -159,12 +159,6 @@ struct FrameStats {
   // the group's expected cost a frame; measured_gain, on the frame that closed a group, that
   // group's measured exact-equivalent time over its own.
   double predicted_gain = 0.0, measured_gain = 0.0;
-  // Views whose stage 1 ran in the same pass over the scene as this frame's
-  // (Renderer::preprocess_together; issue 47): 1 when it was pre-processed alone. When > 1, the
-  // stage times are not this frame's own cost: on the CUDA core preprocess_ms is the whole pass
-  // (every view's stage 1) and keys_ms holds the wait until a lane took this frame; the CPU core
-  // counts preprocess_ms near 0 (the pass ran before the frame).
-  int stage1_views = 1;
 };
 
 class Renderer {
@@ -210,24 +204,6 @@ class Renderer {
   // estimates what they would take on a device). The server raises a session's memory
   // reservation to it after each frame (issue 61).
   virtual std::uint64_t device_buffer_bytes() const { return 0; }
-
-  // Stage 1 shared by several views of one scene (issue 47; docs/DESIGN.md "Stage 1 shared across sessions"): the render
-  // lanes pre-process the next frames of the sessions queued on a scene in one pass over it, each
-  // Gaussian read once for every view that may see it.
-  // Whether this renderer's next frame may share a pass with `other`'s: the same core and scene
-  // data (one model, or one DeviceScene: the same GPU), the same pipeline, exact or vanilla (catgs
-  // pre-processes its key frames over a path of its own), the same LOD bound. Default: never.
-  virtual bool shares_stage1_with(const Renderer& other) const {
-    (void)other;
-    return false;
-  }
-  // Stage 1 of the next frame of `renderers[k]` at `cameras[k]` in one pass; `renderers[0]` is
-  // this one, and every other shares_stage1_with it. A renderer's next render of exactly that
-  // camera, with the same options, starts after stage 1 with what its own stage 1 would have
-  // given, bit for bit (set_options, or another camera, pre-processes again); its FrameStats
-  // stage1_views says how many views the pass held. None of the renderers may be rendering
-  // meanwhile. Throws std::invalid_argument where they cannot share (and for this default).
-  virtual void preprocess_together(const std::vector<Renderer*>& renderers, const std::vector<Camera>& cameras);
 
  protected:
   // begin_yuv420_at()'s bookkeeping, shared by the overrides: throws std::logic_error when a frame

@@ -140,9 +140,6 @@ std::string ServerMetrics::prometheus_text() const {
   put("catgs_render_rekeys_total", "counter",
       "catgs key frames first tried as sub-frames and rejected (a Gaussian left its trail).",
       render_rekeys_total.load());
-  put("catgs_stage1_shared_frames_total", "counter",
-      "Frames whose stage 1 ran in one pass over the scene with other sessions' frames (--shared-stage1).",
-      stage1_shared_frames_total.load());
 
   auto labelled = [&](const char* name, const char* help, const char* label, const auto& counters,
                       std::initializer_list<const char*> values) {

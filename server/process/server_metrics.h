@@ -104,7 +104,6 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> render_key_frames_total{0};       // full pre-process renders
   std::atomic<std::uint64_t> render_sub_frames_total{0};       // catgs sub-frames from the caches
   std::atomic<std::uint64_t> render_rekeys_total{0};           // catgs key frames first tried as sub-frames
-  std::atomic<std::uint64_t> stage1_shared_frames_total{0};    // frames whose stage 1 shared a pass (issue 47)
   // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).
   std::atomic<std::uint64_t> encoder_fallbacks_total{0};
   // --adaptive-quality (session/adaptive_quality.h): level changes and refine frames.

@@ -1,6 +1,5 @@
 #include "render/render_scheduler.h"
 
-#include <algorithm>
 #include <iostream>
 
 namespace catgs::server {
@@ -39,15 +38,12 @@ void RenderScheduler::start(int lanes, std::int64_t max_pixels_in_flight) {
     });
 }
 
-void RenderScheduler::enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task,
-                              std::optional<Stage1Share> share) {
+void RenderScheduler::enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     auto& q = queues_[owner];
     if (q.empty()) turn_.push_back(owner);  // joins the round at its end
-    Entry e{pixels, std::move(task)};
-    if (share && share->renderer) e.share = std::move(share);
-    q.push_back(std::move(e));
+    q.push_back(Entry{pixels, std::move(task)});
     ++queued_;
   }
   changed_.notify_all();  // drain() waits on the same condition: a lane must be among the woken
@@ -89,18 +85,14 @@ void RenderScheduler::finished(const Entry& e) {
 bool RenderScheduler::take_next(Entry& out) {
   // Live work first: a background job only when no session's job is queued.
   if (turn_.empty()) return take_background(out);
-  // The first owner in turn whose job is not held by a shared stage 1 (a held job keeps its
-  // place and is taken once released).
-  auto in_turn = std::find_if(turn_.begin(), turn_.end(), [&](Owner o) { return !queues_.at(o).front().held; });
-  if (in_turn == turn_.end()) return false;
-  const Owner owner = *in_turn;
+  const Owner owner = turn_.front();
   auto it = queues_.find(owner);
   const std::int64_t pixels = it->second.front().pixels;
   // The cap: room for this job, or nothing else running (a job over the cap runs alone).
   if (running_ > 0 && pixels_in_flight_ + pixels > max_pixels_in_flight_) return false;
   out = std::move(it->second.front());
   it->second.pop_front();
-  turn_.erase(in_turn);
+  turn_.pop_front();
   if (it->second.empty())
     queues_.erase(it);
   else
@@ -169,7 +161,6 @@ void RenderScheduler::lane_loop() {
       changed_.notify_all();
       continue;
     }
-    if (e.share && !e.stage1_queued && stage1_views_ > 1) share_stage1(e, lock);
     lock.unlock();
     Finish finish = run_task(e);
     lock.lock();
@@ -181,49 +172,6 @@ void RenderScheduler::lane_loop() {
     // Room freed: any lane may now start the next owner's job; drain() may be waiting too.
     changed_.notify_all();
   }
-}
-
-void RenderScheduler::share_stage1(const Entry& lead, std::unique_lock<std::mutex>& lock) {
-  Renderer& first = *lead.share->renderer;
-  std::vector<Owner> members;
-  std::vector<Renderer*> renderers{&first};
-  std::vector<Camera> cameras{lead.share->camera};
-  for (const Owner o : turn_) {
-    if (static_cast<int>(renderers.size()) >= stage1_views_) break;
-    Entry& q = queues_.at(o).front();
-    if (q.held || q.stage1_queued || !q.share || q.share->renderer == &first ||
-        !first.shares_stage1_with(*q.share->renderer))
-      continue;
-    q.held = true;
-    members.push_back(o);
-    renderers.push_back(q.share->renderer);
-    cameras.push_back(q.share->camera);
-  }
-  if (members.empty()) return;
-  lock.unlock();
-  bool shared = false;
-  try {
-    first.preprocess_together(renderers, cameras);
-    shared = true;
-  } catch (const std::exception& ex) {
-    std::cerr << "render lane: a shared stage 1 failed (each view pre-processes alone): " << ex.what() << "\n";
-  }
-  lock.lock();
-  for (const Owner o : members) {
-    Entry& q = queues_.at(o).front();
-    q.held = false;
-    q.stage1_queued = shared;
-  }
-  if (shared) {
-    ++stage1_counts_.passes;
-    stage1_counts_.views += renderers.size();
-  }
-  changed_.notify_all();  // the held jobs may start
-}
-
-RenderScheduler::Stage1Counts RenderScheduler::stage1_counts() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return stage1_counts_;
 }
 
 std::size_t RenderScheduler::queued() const {

@@ -26,17 +26,6 @@
 // and not at all while another lane is free. On a saturated server an export gets about one
 // frame per yield.
 //
-// Stage 1 shared across sessions (issue 47; Renderer::preprocess_together): a live job may offer
-// its renderer and camera (Stage1Share). A lane that takes such a job also takes the next
-// stage1_views - 1 queued live jobs, in turn order, whose renderers share the first's stage 1
-// (renderer.h shares_stage1_with: one scene and GPU, one pipeline, exact or vanilla, one LOD
-// bound; so two scenes' sessions never share; a job already in a pass joins no other), holds them (no lane takes a held job) while it
-// queues the views' stage 1 in one pass over the scene, then releases them where they stood in
-// the round and runs its own job. Only jobs already queued join: a batch waits for nothing. The
-// first job's frame waits for the whole pass (its stage 1 grows by the other views'); the others
-// start at the counts. A job whose session left meanwhile runs as before (its render is skipped);
-// a pass that throws is logged and each frame pre-processes alone.
-//
 // Frames in flight (--frames-per-lane, default_frames_per_lane): a job may return a Finish, its
 // second half: the frame it queued on the GPU (Renderer::begin_yuv420_at), to be waited for and
 // handed on (Renderer::finish_yuv420). The lane keeps up to frames_per_lane such frames begun and
@@ -67,12 +56,8 @@
 #include <string>
 #include <thread>
 #include <type_traits>
-#include <optional>
 #include <utility>
 #include <vector>
-
-#include "camera/camera.h"
-#include "renderer/renderer.h"
 
 namespace catgs::server {
 
@@ -130,22 +115,6 @@ class RenderScheduler {
   // before start()). 0: it waits only for queued live jobs.
   void set_background_yield(std::chrono::milliseconds yield) { background_yield_ = yield; }
 
-  // What a live job offers to share (see above): the renderer it will draw with and the camera.
-  // The renderer must stay alive while the job is queued (the job holds its owner) and be used
-  // by nobody else until the job has run.
-  struct Stage1Share {
-    Renderer* renderer = nullptr;
-    Camera camera;
-  };
-  // The most views one shared stage 1 holds (ServerOptions::shared_stage1; 1: none shared; at
-  // most 32, CudaRenderer's batch). Set before start().
-  void set_stage1_views(int views) { stage1_views_ = views; }
-  // Thread-safe: passes run so far and the views they held (metrics, tests).
-  struct Stage1Counts {
-    std::uint64_t passes = 0, views = 0;
-  };
-  Stage1Counts stage1_counts() const;
-
   // Starts `lanes` (>= 1) lane threads with a cap of `max_pixels_in_flight` (> 0) pixels rendering
   // at once. Jobs posted before start() wait in their queues.
   void start(int lanes, std::int64_t max_pixels_in_flight);
@@ -158,10 +127,9 @@ class RenderScheduler {
   // Thread-safe. Queues `job` (a callable returning void or a Finish, move-only allowed) of
   // `pixels` pixels behind `owner`'s earlier jobs; a lane runs it in `owner`'s turn. A job must not
   // throw (a throw is logged and the job counts as done).
-  // `share`: what the job offers to a shared stage 1 (none: it pre-processes alone).
   template <class Job>
-  void post(Owner owner, std::int64_t pixels, Job&& job, std::optional<Stage1Share> share = std::nullopt) {
-    enqueue(owner, pixels, std::make_unique<Task<std::decay_t<Job>>>(std::forward<Job>(job)), std::move(share));
+  void post(Owner owner, std::int64_t pixels, Job&& job) {
+    enqueue(owner, pixels, std::make_unique<Task<std::decay_t<Job>>>(std::forward<Job>(job)));
   }
 
   // Thread-safe. Queues a background job (see above), FIFO among background jobs; `owner` is for
@@ -208,12 +176,9 @@ class RenderScheduler {
     std::unique_ptr<TaskBase> task;
     bool background = false;
     std::chrono::steady_clock::time_point queued_at{};  // background jobs: when posted
-    std::optional<Stage1Share> share;                   // live jobs: see Stage1Share
-    bool held = false;                                  // in another lane's shared stage 1 now
-    bool stage1_queued = false;                         // its stage 1 is in a pass already
   };
 
-  void enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task, std::optional<Stage1Share> share);
+  void enqueue(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
   void enqueue_background(Owner owner, std::int64_t pixels, std::unique_ptr<TaskBase> task);
   // Under mutex_: a background job may start now (no live job queued, a lane left, room).
   bool take_background(Entry& out);
@@ -221,9 +186,6 @@ class RenderScheduler {
   void lane_loop();
   // Under mutex_: the next owner's next job when it may start now (nullopt-like empty Entry).
   bool take_next(Entry& out);
-  // `lock` held on entry and exit: queues the shared stage 1 of `lead` and the queued jobs that
-  // may join it (see above), unlocking meanwhile.
-  void share_stage1(const Entry& lead, std::unique_lock<std::mutex>& lock);
   // Runs e's job; returns its finish (empty: none, or the job threw).
   static Finish run_task(Entry& e);
   static void run_finish(Finish& finish);
@@ -235,9 +197,7 @@ class RenderScheduler {
   std::deque<Entry> background_;               // background jobs, FIFO
   int lane_count_ = 0;                         // start()'s lanes (lanes_ is not read under the mutex)
   int live_running_ = 0;                       // sessions' jobs running now
-  int stage1_views_ = 1;
   int frames_per_lane_ = 1;
-  Stage1Counts stage1_counts_;
   std::chrono::milliseconds background_yield_{1000};
   std::size_t queued_ = 0;
   int running_ = 0;

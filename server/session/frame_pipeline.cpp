@@ -114,11 +114,6 @@ std::uint64_t FramePipeline::halve_list_budget() {
   return o.list_budget.max_bytes;
 }
 
-std::optional<RenderScheduler::Stage1Share> FramePipeline::stage1_share(const Job& job) const {
-  if (!renderer_ || renderer_->options().pipeline == Pipeline::catgs || job.lod_error_px < 0.0f) return std::nullopt;
-  return RenderScheduler::Stage1Share{renderer_.get(), camera_of(job)};
-}
-
 FramePipeline::JobResult FramePipeline::take_failed(Rendered&& frame) {
   free_planes_.push_back(std::move(frame.planes));
   JobResult failed;
@@ -196,7 +191,6 @@ void FramePipeline::finish_render_into(Rendered& r) {
   const double stages[6] = {stats.total_ms, stats.preprocess_ms, stats.keys_ms,
                             stats.sort_ms,  stats.ranges_ms,     stats.rasterize_ms};
   std::copy(std::begin(stages), std::end(stages), std::begin(r.stage_ms));
-  r.stage1_views = stats.stage1_views;
   r.render_key_frame = stats.key_frame;
   r.render_rekey = stats.subframe_rejected;
   r.predicted_gain = stats.predicted_gain;
@@ -444,7 +438,6 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_codec(encoder_->codec() == "av1" ? pb::CODEC_AV1 : pb::CODEC_H264);
   r.render_key_frame = rendered.render_key_frame;
   r.render_rekey = rendered.render_rekey;
-  r.stage1_views = rendered.stage1_views;
   r.predicted_gain = rendered.predicted_gain;
   r.measured_gain = rendered.measured_gain;
   r.speculation_window = rendered.speculation_window;
@@ -481,7 +474,6 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_stage_ranges_ms(rendered.stage_ms[4]);
   t->set_stage_rasterize_ms(rendered.stage_ms[5]);
   t->set_render_lane(static_cast<std::uint32_t>(std::max(0, rendered.render_lane)));
-  t->set_stage1_views(static_cast<std::uint32_t>(std::max(1, rendered.stage1_views)));
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();

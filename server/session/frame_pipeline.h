@@ -33,7 +33,6 @@
 #include "renderer/renderer.h"
 #include "process/server_metrics.h"
 #include "render/lod_bound.h"
-#include "render/render_scheduler.h"
 #include "session/session_settings.h"
 
 namespace catgs::server {
@@ -91,7 +90,6 @@ class FramePipeline {
     // rasterize) and the render lane that drew it (-1: none), for FrameTimings.
     double stage_ms[6] = {};
     int render_lane = -1;
-    int stage1_views = 1;            // FrameStats::stage1_views
     std::string error;               // non-empty: the render failed
     bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
     bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)
@@ -115,7 +113,6 @@ class FramePipeline {
     int speculation_window = 0;
     float lod_error_px = 0;  // as Rendered's
     std::uint64_t splats = 0;
-    int stage1_views = 1;  // as Rendered's
     std::size_t payload_bytes = 0;
     std::uint32_t frame_sequence = 0;                      // Frame.sequence
     std::chrono::steady_clock::time_point link_read_at{};  // JobShape's: the rate it was encoded at
@@ -177,10 +174,6 @@ class FramePipeline {
   bool can_start_render() const;
   // Takes the waiting pose into a render job of `shape` (can_start_render() must hold).
   StartedRender start_render(const JobShape& shape);
-  // What a started job offers to a stage 1 shared with other sessions' (render_scheduler.h): this
-  // session's renderer and the job's camera, for an exact or vanilla job whose LOD bound
-  // start_render chose; nothing otherwise (catgs, or a bound left to the lane).
-  std::optional<RenderScheduler::Stage1Share> stage1_share(const Job& job) const;
   // Every render job's end, first thing on the strand.
   void end_render() { rendering_ = false; }
   // After a frame whose device buffers could not grow (issue 61): halves the renderer's

@@ -86,18 +86,14 @@ void SessionStream::admit() {
   shape.link_read_at = Clock::now();
   FramePipeline::StartedRender started = frames_.start_render(shape);
   const std::int64_t pixels = static_cast<std::int64_t>(shape.width) * shape.height;
-  // The job holds the session, so the renderer it offers lives while the job is queued.
-  std::optional<RenderScheduler::Stage1Share> share = frames_.stage1_share(started.job);
   if (!frames_.pipelined()) {
-    shared_.renders.post(
-        id_, pixels, [keep = owner_.keep_alive(), this, job = std::move(started.job)] { render_and_encode(job); },
-        std::move(share));
+    shared_.renders.post(id_, pixels,
+                         [keep = owner_.keep_alive(), this, job = std::move(started.job)] { render_and_encode(job); });
     return;
   }
-  shared_.renders.post(
-      id_, pixels,
-      [keep = owner_.keep_alive(), this, started = std::move(started)]() mutable { return render(std::move(started)); },
-      std::move(share));
+  shared_.renders.post(id_, pixels, [keep = owner_.keep_alive(), this, started = std::move(started)]() mutable {
+    return render(std::move(started));
+  });
 }
 
 RenderScheduler::Finish SessionStream::render(FramePipeline::StartedRender started) {
@@ -215,7 +211,6 @@ void SessionStream::count(const JobResult& result) {
   if (result.key_frame) m.key_frames_total++;
   (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
   if (result.render_rekey) m.render_rekeys_total++;
-  if (result.stage1_views > 1) m.stage1_shared_frames_total++;
   if (result.predicted_gain > 0) m.speculation_predicted_gain.observe(result.predicted_gain);
   if (result.measured_gain > 0) m.speculation_measured_gain.observe(result.measured_gain);
   m.queue_seconds.observe(result.queue_ms / 1000.0);

@@ -352,58 +352,6 @@ TEST(MultiSession, LoadgenReportsRefusedSessionsSkipsAndProgress) {
   for (const char* ext : {".json", ".out", ".err"}) std::filesystem::remove(stem + ext);
 }
 
-// Sessions on one scene share stage 1 (issue 47, --shared-stage1): with one render lane their
-// jobs queue, and the lane pre-processes the queued jobs of one scene in one pass. Biker's
-// sessions join and leave between the steps of a ramp (1, 2, 3 sessions) while, where the real
-// data is present, two sessions on flowers_sh3 stream beside them; every third frame of every
-// session is decoded and compared with the CPU reference render of its pose in its own scene (a
-// pass that mixed the scenes, or a frame drawn from another view's stage 1, would fail it). CRF
-// 10 without a rate cap: flowers at 160x120 codes to about 31 dB at CRF 18, under the bar with
-// or without sharing.
-TEST(MultiSession, SessionsOnOneSceneShareStage1) {
-  const std::string flowers = kDataDir + "/scenes/flowers_sh3.ply";
-  const std::string cams = kDataDir + "/traces/flowers_sh3.cameras.json";
-  const bool two_scenes = std::filesystem::exists(flowers) && std::filesystem::exists(cams);
-  if (!two_scenes) std::cout << "[ info ] real data not found under " << kDataDir << ": biker's sessions alone\n";
-  std::vector<std::string> extra = {"--render-lanes", "1",  "--threads", "3",  "--shared-stage1", "4",
-                                    "--crf",          "10", "--bitrate", "off"};
-  if (two_scenes) extra.insert(extra.end(), {"--scene", flowers});
-  ServerProcess server(server_args(kBiker, extra));
-  const std::string stem = "/tmp/catgs-itest-stage1-" + std::to_string(server.port());
-  const std::string loadgen = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
-                              " --size 160x120 --rate 0 --warmup 1 --check-every 3 --progress 0";
-  const std::string biker = loadgen + " --scene " + kBiker + " --scene-name biker" +
-                            " --sessions 3 --ramp --ramp-step +1 --seconds 3 --json " + stem + "-biker.json";
-  const std::string other = loadgen + " --scene " + flowers + " --scene-name flowers_sh3 --trace cameras:" + cams +
-                            " --sessions 2 --seconds 9 --json " + stem + "-flowers.json";
-  const std::string both = two_scenes ? "(" + other + " > /dev/null 2>&1) & " + biker + " > /dev/null 2>&1; wait"
-                                      : biker + " > /dev/null 2>&1";
-  ASSERT_EQ(std::system(("sh -c '" + both + "'").c_str()), 0);
-  int shared_sessions = 0;
-  const nlohmann::json ramp = nlohmann::json::parse(std::ifstream(stem + "-biker.json"));
-  ASSERT_EQ(ramp["ramp"].size(), 3u) << ramp.dump();
-  for (const auto& step : ramp["ramp"])
-    for (const auto& s : step["sessions"]) {
-      EXPECT_EQ(s["scene"].get<std::string>(), "biker");
-      EXPECT_GT(s["checked"].get<int>(), 0) << s.dump();
-      EXPECT_EQ(s["check_failures"].get<int>(), 0) << s.dump();
-      shared_sessions += s["server"]["stage1_shared_fraction"].get<double>() > 0.0 ? 1 : 0;
-    }
-  EXPECT_GT(shared_sessions, 0) << "no biker session's frame shared a pass: a weak test";
-  if (two_scenes) {
-    const nlohmann::json j = nlohmann::json::parse(std::ifstream(stem + "-flowers.json"));
-    for (const auto& s : j["run"]["sessions"]) {
-      EXPECT_EQ(s["scene"].get<std::string>(), "flowers_sh3");
-      EXPECT_GT(s["checked"].get<int>(), 0) << s.dump();
-      EXPECT_EQ(s["check_failures"].get<int>(), 0) << s.dump();
-    }
-  }
-  std::string metrics;
-  ASSERT_EQ(http_get(server.port(), "/metrics", metrics), 200);
-  EXPECT_GT(metric_value(metrics, "catgs_stage1_shared_frames_total"), 0.0) << metrics;
-  for (const char* name : {"-biker.json", "-flowers.json"}) std::filesystem::remove(stem + name);
-}
-
 // The GPU script's correctness run, on the CPU: catgs-loadgen decodes the frames of 3 sessions and
 // compares every 3rd with the CPU reference render of its pose (exit 0 only if all >= 30 dB and
 // every session checked some); an impossible bar must fail the run. One render lane serves the

@@ -45,13 +45,6 @@
 // are generated at 120 FPS; the first --warmup frames (default 30) are rendered untimed, then
 // --frames frames (default 600) are timed.
 //
-// --batch B (CUDA, 2 to 32; issue 47): every vanilla and exact variant also draws its frames B
-// views at a time, the B poses spread along the trace as B sessions on one path would be, each by
-// a renderer of its own: "V xB apart" (each view pre-processed alone, the streams overlapping)
-// and "V xB shared" (stage 1 of the B views in one pass over the scene:
-// CudaRenderer::preprocess_batch). Their frame time is the batch's over B, steady clock from
-// idle streams to every stream done (bench/timing_loop.h TimingPlan::batch).
-//
 // Each frame is timed with CUDA events on the renderer's stream around render_device(): pose in,
 // image in device memory out (pre-processing, the one host readback, key emission, sort, tile
 // ranges, rasterization), no disk I/O, no download. All pipelines share one DeviceScene and run in
@@ -99,7 +92,7 @@ const char* kUsage =
     "                   [--quality-every 1] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu] [--help]\n"
     "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]] [--aa-reference F]\n"
-    "                   [--pose-rate 120] [--batch B]\n"
+    "                   [--pose-rate 120]\n"
     "       V: a pipeline variant, e.g. catgs{window=2,backoff=0} (default: vanilla,exact; --help\n"
     "          lists the variants and their settings)\n";
 
@@ -289,7 +282,7 @@ int run(int argc, char** argv) {
        "--trace",         "--width",        "--height",    "--pipeline",         "--frames",    "--warmup",
        "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance",  "--renderer",
        "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error", "--aa-reference",
-       "--pose-rate",     "--batch",        "--help!"});
+       "--pose-rate",     "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;
@@ -337,9 +330,6 @@ int run(int argc, char** argv) {
                                 std::to_string(catgs::kMaxImageSide) + " pixels a side at " + std::to_string(c.width) +
                                 "x" + std::to_string(c.height));
   plan.snapshot_dir = args.get("--snapshot-dir");
-  plan.batch = args.get_int("--batch", 0);
-  if (plan.batch != 0 && (plan.batch < 2 || plan.batch > 32 || !c.on_gpu))
-    throw std::invalid_argument("--batch B needs 2 <= B <= 32 and the CUDA renderer");
 
   std::vector<PipelineResult> results;
 #if CATGS_HAVE_CUDA

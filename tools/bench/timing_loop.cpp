@@ -297,48 +297,6 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
   return res;
 }
 
-// --batch: the variant's frames B views at a time (TimingPlan::batch), `shared` pre-processing.
-PipelineResult time_cuda_batch(const std::shared_ptr<const cuda::DeviceScene>& scene, const Variant& variant,
-                               const TimingPlan& plan, bool shared, std::size_t used_before_scene) {
-  const int views = plan.batch;
-  std::vector<std::unique_ptr<cuda::CudaRenderer>> owned;
-  std::vector<cuda::CudaRenderer*> renderers;
-  for (int k = 0; k < views; ++k) {
-    owned.push_back(std::make_unique<cuda::CudaRenderer>(scene, options_of(variant, plan)));
-    renderers.push_back(owned.back().get());
-  }
-  PipelineResult res = result_of(variant);
-  res.name += " x" + std::to_string(views) + (shared ? " shared" : " apart");
-  const int stride = static_cast<int>(plan.trace->size()) / views;
-  std::vector<Camera> cams(static_cast<std::size_t>(views));
-  auto draw_batch = [&](int first) {
-    for (int k = 0; k < views; ++k) cams[static_cast<std::size_t>(k)] = plan.camera_at(first + k * stride);
-    for (auto* r : renderers) check(cudaStreamSynchronize(r->stream()), "cudaStreamSynchronize");
-    const auto t0 = std::chrono::steady_clock::now();
-    if (shared) cuda::CudaRenderer::preprocess_batch(renderers, cams);
-    for (int k = 0; k < views; ++k)
-      renderers[static_cast<std::size_t>(k)]->render_device(cams[static_cast<std::size_t>(k)]);
-    for (auto* r : renderers) check(cudaStreamSynchronize(r->stream()), "cudaStreamSynchronize");
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  };
-  for (int j = 0; j < std::max(2, plan.warmup / views); ++j) draw_batch(j);
-  std::size_t allocs_before = 0;
-  for (auto* r : renderers) allocs_before += r->diagnostics().allocations;
-  for (int j = 0; j < std::max(1, plan.frames / views); ++j) {
-    const double ms = draw_batch(plan.warmup + j);
-    for (auto* r : renderers) record_frame(res, ms / views, r->last_stats());
-  }
-  for (auto* r : renderers) {
-    const cuda::CudaRenderer::Diagnostics d = r->diagnostics();
-    res.allocations_timed += d.allocations;
-    res.peak_buffer_bytes += d.peak_buffer_bytes;
-    res.syncs = std::max(res.syncs, d.syncs_last_frame);
-  }
-  res.allocations_timed -= allocs_before;
-  res.device_used_bytes = cuda::device_memory_used() - used_before_scene;
-  return res;
-}
-
 }  // namespace
 
 std::vector<PipelineResult> time_on_cuda(const std::shared_ptr<const cuda::DeviceScene>& scene,
@@ -346,12 +304,8 @@ std::vector<PipelineResult> time_on_cuda(const std::shared_ptr<const cuda::Devic
                                          std::size_t used_before_scene) {
   QualityCheck quality(scene, plan.lod ? plan.aa_factor : 0);
   std::vector<PipelineResult> results;
-  for (const Variant& variant : variants) {
+  for (const Variant& variant : variants)
     results.push_back(time_cuda_variant(scene, variant, plan, quality, used_before_scene));
-    if (plan.batch < 2 || variant.pipeline == Pipeline::catgs) continue;
-    for (bool shared : {false, true})
-      results.push_back(time_cuda_batch(scene, variant, plan, shared, used_before_scene));
-  }
   return results;
 }
 #endif

@@ -66,13 +66,6 @@ struct TimingPlan {
   bool lod = false;          // the scene has LOD: every K-th frame of every variant, on both cores, against full detail
   int aa_factor = 0;         // >= 2 (with lod): those frames also against the anti-aliased reference
   std::string snapshot_dir;  // not empty: a PNG per variant there
-  // CUDA, --batch B (>= 2): each vanilla and exact variant also draws its frames B views at a
-  // time, the B poses spread evenly along the trace (as B sessions on one path would be), each by
-  // a renderer of its own: "V xB apart" (each view pre-processed alone, the B streams overlapping
-  // as the server's lanes do) and "V xB shared" (CudaRenderer::preprocess_batch first). A
-  // batch is timed with the steady clock from idle streams to every stream done; its frame time
-  // is the batch's over B (ms a view).
-  int batch = 0;
   Camera camera_at(int k) const { return (*trace)[static_cast<std::size_t>(k) % trace->size()].camera; }
   double pose_rate_hz = 120.0;
   double time_at(int k) const { return k / pose_rate_hz; }

@@ -40,8 +40,6 @@ void StageSums::add(const StageSums& o) {
   lod_error_px += o.lod_error_px;
   lod_error_px_max = std::max(lod_error_px_max, o.lod_error_px_max);
   splats += o.splats;
-  stage1_views += o.stage1_views;
-  stage1_shared += o.stage1_shared;
   for (int k = 0; k < 6; ++k) stage[k] += o.stage[k];
   for (const auto& [lane, l] : o.lanes) {
     lanes[lane].frames += l.frames;
@@ -148,8 +146,6 @@ nlohmann::json stages_json(const StageSums& s) {
       {"lod_error_px_mean", mean(s.lod_error_px, s.frames)},
       {"lod_error_px_max", s.lod_error_px_max},
       {"splats_mean", mean(s.splats, s.frames)},
-      {"stage1_views_mean", mean(s.stage1_views, s.frames)},
-      {"stage1_shared_fraction", mean(static_cast<double>(s.stage1_shared), s.frames)},
       {"render_stages_ms", render_stages_json(s)},
       {"render_lanes", render_lanes_json(s)},
       {"frames", s.frames}};

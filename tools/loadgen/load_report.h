@@ -30,10 +30,6 @@ struct StageSums {
   std::uint64_t predicted_groups = 0, measured_groups = 0;
   // Level of detail (FrameTimings.lod_error_px, .splats): sums over frames, and the largest bound.
   double lod_error_px = 0, lod_error_px_max = 0, splats = 0;
-  // Shared stage 1 (FrameTimings.stage1_views): the views summed over frames, and the frames
-  // whose stage 1 shared a pass with other sessions' (stage1_views > 1).
-  double stage1_views = 0;
-  std::uint64_t stage1_shared = 0;
   // The renderer's own stage times (FrameTimings.stage_*_ms: frame, preprocess, keys, sort,
   // ranges, rasterize), summed over frames, and per render lane its frames and frame times.
   static constexpr const char* kStageNames[6] = {"frame", "preprocess", "keys", "sort", "ranges", "rasterize"};

@@ -338,9 +338,6 @@ class PoseLoop {
     const double stages[6] = {t.stage_frame_ms(), t.stage_preprocess_ms(), t.stage_keys_ms(),
                               t.stage_sort_ms(),  t.stage_ranges_ms(),     t.stage_rasterize_ms()};
     for (int k = 0; k < 6; ++k) r_.server.stage[k] += stages[k];
-    // A server before FrameTimings.stage1_views sends 0: its frames were pre-processed alone.
-    r_.server.stage1_views += std::max<std::uint32_t>(1, t.stage1_views());
-    if (t.stage1_views() > 1) r_.server.stage1_shared++;
     StageSums::Lane& lane = r_.server.lanes[static_cast<int>(t.render_lane())];
     lane.frames++;
     lane.frame_ms += t.stage_frame_ms();

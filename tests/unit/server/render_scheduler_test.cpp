@@ -166,6 +166,14 @@ TEST(RenderScheduler, FramesPerLaneOption) {
   }
 }
 
+// The shared stage 1 was removed (docs/DESIGN.md "Render scheduler"): its --shared-stage1 is an
+// unknown option now, refused as any other.
+TEST(RenderScheduler, SharedStage1OptionIsGone) {
+  const char* shared[] = {"catgs-server", "--shared-stage1", "4"};
+  catgs::server::ServerOptions o;
+  EXPECT_THROW((void)catgs::server::parse_server_options(3, const_cast<char**>(shared), o), std::invalid_argument);
+}
+
 // Video export frames (post_background) run only when no session's job is queued: posted first,
 // they still go after every live job, and an export that posts its next frame after each one
 // (as session/session_export.cpp does) lets the live jobs queued meanwhile go first.
@@ -306,162 +314,6 @@ TEST(RenderScheduler, MoveOnlyJobsAndPollAfterStop) {
   EXPECT_EQ(s.queued(), 1u);
   EXPECT_EQ(s.poll(), 1u);
   EXPECT_EQ(seen, 7);
-}
-
-// A stand-in renderer for the shared stage 1 (Renderer::preprocess_together): renderers of one
-// `scene` id share; each pass is recorded (its renderers' ids), and a pass may be made to wait.
-struct PassLog {
-  std::mutex mutex;
-  std::vector<std::vector<int>> passes;
-  std::function<void()> during;  // called inside each pass (none: returns at once)
-};
-
-class SharingRenderer final : public catgs::Renderer {
- public:
-  SharingRenderer(int id, int scene, PassLog& log) : id_(id), scene_(scene), log_(log) {}
-  std::string name() const override { return "test"; }
-  void render(const catgs::Camera&, catgs::Image&) override {}
-  const catgs::FrameStats& last_stats() const override { return stats_; }
-  const catgs::RenderOptions& options() const override { return options_; }
-  void set_options(const catgs::RenderOptions& o) override { options_ = o; }
-  bool shares_stage1_with(const catgs::Renderer& other) const override {
-    const auto* o = dynamic_cast<const SharingRenderer*>(&other);
-    return o && o->scene_ == scene_;
-  }
-  void preprocess_together(const std::vector<catgs::Renderer*>& renderers,
-                           const std::vector<catgs::Camera>& cameras) override {
-    if (renderers.size() != cameras.size() || renderers[0] != this) throw std::invalid_argument("bad pass");
-    std::vector<int> ids;
-    for (catgs::Renderer* r : renderers) {
-      if (!shares_stage1_with(*r)) throw std::invalid_argument("two scenes in one pass");
-      ids.push_back(static_cast<SharingRenderer*>(r)->id_);
-    }
-    if (log_.during) log_.during();
-    std::lock_guard<std::mutex> lock(log_.mutex);
-    log_.passes.push_back(ids);
-  }
-  int id() const { return id_; }
-
- private:
-  int id_, scene_;
-  PassLog& log_;
-  catgs::FrameStats stats_;
-  catgs::RenderOptions options_;
-};
-
-RenderScheduler::Stage1Share share_of(SharingRenderer& r) { return {&r, catgs::Camera{}}; }
-
-// Queued jobs of one scene share a pass with the job a lane takes, at most stage1_views of them,
-// in turn order; the other scene's jobs and jobs that offer nothing never join it.
-TEST(RenderScheduler, QueuedJobsOfOneSceneShareStage1) {
-  PassLog log;
-  std::vector<std::unique_ptr<SharingRenderer>> r;
-  for (int k = 0; k < 7; ++k) r.push_back(std::make_unique<SharingRenderer>(k, k < 5 ? 0 : 1, log));  // 0-4 A, 5-6 B
-  RenderScheduler s;
-  s.set_stage1_views(3);
-  std::mutex mutex;
-  std::vector<int> ran;
-  auto job = [&](int k) {
-    return [&, k] {
-      std::lock_guard<std::mutex> lock(mutex);
-      ran.push_back(k);
-    };
-  };
-  // Turn order 0, 5, 1, 6, 2, 3, 4, 7 (7: scene A's renderer 0 again, offering nothing).
-  for (int k : {0, 5, 1, 6, 2, 3, 4}) s.post(static_cast<RenderScheduler::Owner>(k), 1, job(k), share_of(*r[k]));
-  s.post(7, 1, job(7));
-  s.start(1, 1000);
-  ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
-  s.stop();
-  // Job 0 leads {0, 1, 2} (the next A jobs in turn); 5 leads {5, 6}; 1, 6 and 2 are pre-processed
-  // already and lead nothing; 3 leads {3, 4} (7 offers nothing).
-  ASSERT_EQ(ran, (std::vector<int>{0, 5, 1, 6, 2, 3, 4, 7})) << "sharing must not change the order jobs run in";
-  std::lock_guard<std::mutex> lock(log.mutex);
-  ASSERT_FALSE(log.passes.empty());
-  for (const auto& pass : log.passes) {
-    EXPECT_LE(pass.size(), 3u);
-    const bool a = pass[0] < 5;
-    for (int id : pass) EXPECT_EQ(id < 5, a) << "a pass mixed the two scenes";
-  }
-  EXPECT_EQ(log.passes,
-            (std::vector<std::vector<int>>{std::vector<int>{0, 1, 2}, std::vector<int>{5, 6}, std::vector<int>{3, 4}}));
-  EXPECT_EQ(s.stage1_counts().passes, 3u);
-  EXPECT_EQ(s.stage1_counts().views, 7u);
-}
-
-// While a lane queues a pass, the jobs in it are held: another lane does not start them (their
-// renderers are in use), and runs the other jobs meanwhile; released, they run.
-TEST(RenderScheduler, JobsInASharedPassAreHeldUntilItIsQueued) {
-  PassLog log;
-  SharingRenderer lead(0, 0, log), member(1, 0, log), other(2, 1, log);
-  std::mutex mutex;
-  std::condition_variable cv;
-  bool in_pass = false, release = false, member_ran = false, other_ran = false;
-  log.during = [&] {
-    std::unique_lock<std::mutex> lock(mutex);
-    in_pass = true;
-    cv.notify_all();
-    cv.wait(lock, [&] { return release; });
-  };
-  // A job that raises `flag` under the test's mutex.
-  auto raise = [&](bool& flag) {
-    return [&] {
-      std::lock_guard<std::mutex> lock(mutex);
-      flag = true;
-      cv.notify_all();
-    };
-  };
-  RenderScheduler s;
-  s.set_stage1_views(4);
-  s.post(
-      0, 1, [] {}, share_of(lead));
-  s.post(1, 1, raise(member_ran), share_of(member));
-  s.post(2, 1, raise(other_ran), share_of(other));
-  s.start(2, 1000);
-  {
-    std::unique_lock<std::mutex> lock(mutex);
-    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return in_pass; }));
-    // The second lane skips the held member and runs the other scene's job.
-    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return other_ran; }));
-    EXPECT_FALSE(cv.wait_for(lock, std::chrono::milliseconds(100), [&] { return member_ran; }))
-        << "a held job ran while its renderer was in another lane's pass";
-    release = true;
-    cv.notify_all();
-  }
-  ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
-  s.stop();
-  EXPECT_TRUE(member_ran);
-  std::lock_guard<std::mutex> lock(log.mutex);
-  ASSERT_GE(log.passes.size(), 1u);
-  EXPECT_EQ(log.passes[0], (std::vector<int>{0, 1}));
-}
-
-// A pass that throws is logged and the jobs run as before; with stage1_views 1 nothing shares.
-TEST(RenderScheduler, AFailedPassOrNoSharingLeavesJobsAlone) {
-  PassLog log;
-  SharingRenderer a(0, 0, log), b(1, 0, log);
-  int ran = 0;
-  // Two jobs of one scene on one lane with `views` a pass; returns the passes counted.
-  auto run_two = [&](int views) {
-    RenderScheduler s;
-    s.set_stage1_views(views);
-    for (SharingRenderer* r : {&a, &b})
-      s.post(
-          static_cast<RenderScheduler::Owner>(r->id()), 1, [&] { ++ran; }, share_of(*r));
-    s.start(1, 1000);
-    EXPECT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
-    s.stop();
-    return s.stage1_counts().passes;
-  };
-  log.during = [] { throw std::runtime_error("device lost"); };
-  EXPECT_EQ(run_two(4), 0u);
-  EXPECT_EQ(ran, 2);
-  log.during = nullptr;
-  EXPECT_EQ(run_two(1), 0u);  // the scheduler's default
-  EXPECT_EQ(ran, 4);
-  EXPECT_TRUE(log.passes.empty());
-  EXPECT_EQ(run_two(4), 1u);  // and with sharing on, these two do share
-  EXPECT_EQ(ran, 6);
 }
 
 }  // namespace
