@@ -72,9 +72,12 @@ pb::Stats stream_and_check(int port, const std::string& name, const Trace& trace
 }
 
 // Three sessions at once: a slow orbit, a real camera path (tandt_train's cameras.json moved onto
-// the scene; a fly-over without real data) and a zoom, at three frame sizes.
-TEST(MultiSession, DifferentTracesAndSizesAllGetCorrectFrames) {
-  ServerProcess server(server_args(kBiker, {"--pipeline", "catgs", "--threads", "3"}));
+// the scene; a fly-over without real data) and a zoom, at three frame sizes; `extra`: more server
+// flags.
+void three_sessions_get_correct_frames(const std::vector<std::string>& extra) {
+  std::vector<std::string> flags = {"--pipeline", "catgs", "--threads", "3"};
+  flags.insert(flags.end(), extra.begin(), extra.end());
+  ServerProcess server(server_args(kBiker, flags));
   const auto model = load_model(kBiker);
   const Bounds rb = robust_bounds(*model);
   const float r = 1.4f * glm::length(model->bounds().extent());
@@ -138,6 +141,15 @@ TEST(MultiSession, DifferentTracesAndSizesAllGetCorrectFrames) {
     EXPECT_EQ(metric_value(metrics, h), frames) << h;
   EXPECT_NE(metrics.find("catgs_info{renderer=\"cpu\",encoder=\"x264\",pipeline=\"catgs\"} 1"), std::string::npos)
       << metrics;
+}
+
+TEST(MultiSession, DifferentTracesAndSizesAllGetCorrectFrames) { three_sessions_get_correct_frames({}); }
+
+// The same through one render lane that keeps two frames in flight (render_scheduler.h "Frames in
+// flight", the CUDA core's default): a frame begun for one session, the next session's begun
+// before it is finished, and every frame still answers its own pose with its own picture.
+TEST(MultiSession, ALaneWithTwoFramesInFlightServesEverySessionCorrectly) {
+  three_sessions_get_correct_frames({"--render-lanes", "1", "--frames-per-lane", "2"});
 }
 
 // 200 connect / Hello / pose / disconnect cycles (clean closes and abrupt drops, before and
