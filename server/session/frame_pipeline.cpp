@@ -92,6 +92,7 @@ FramePipeline::StartedRender FramePipeline::start_render(const JobShape& shape) 
   // Pipelined, the number is given at the encode (start_encode): a frame skipped before its
   // encode must leave no gap, as Frame sequences rise by one from 0.
   s.job = Job{*pending_, shape, force_idr_, pipelined_ ? 0 : next_frame_sequence_++};
+  s.job.posted_at = Clock::now();
   // No render of this session runs now (rendering_ is false): the renderer's options may change.
   // A failure here is left to the lane, where the job reports it.
   try {
@@ -161,6 +162,7 @@ float FramePipeline::set_lod_bound(const Camera& camera) {
 void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
   r.render_started = Clock::now();
   r.queue_ms = ms_between(job.pose.received, r.render_started);
+  r.lane_wait_ms = ms_between(job.posted_at, r.render_started);
   r.render_lane = RenderScheduler::current_lane();
   const Camera camera = camera_of(job);
   r.lod_error_px = job.lod_error_px >= 0.0f ? job.lod_error_px : set_lod_bound(camera);
@@ -444,11 +446,13 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   r.lod_error_px = rendered.lod_error_px;
   r.splats = rendered.splats;
   r.queue_ms = rendered.queue_ms;
+  r.lane_wait_ms = rendered.lane_wait_ms;
   r.render_ms = rendered.render_ms;
   r.convert_ms = rendered.convert_ms;
   r.encode_ms = enc.encode_ms;
   pb::FrameTimings* t = f->mutable_timings();
   t->set_queue_ms(r.queue_ms);
+  t->set_lane_wait_ms(r.lane_wait_ms);
   t->set_render_ms(r.render_ms);
   t->set_convert_ms(r.convert_ms);
   t->set_encode_ms(r.encode_ms);

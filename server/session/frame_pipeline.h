@@ -74,6 +74,7 @@ class FramePipeline {
     // cut's count walks the LOD tree on the host, work a render lane need not wait for); < 0: the
     // lane chooses it.
     float lod_error_px = -1.0f;
+    Clock::time_point posted_at{};  // when the job was made and posted to the render lanes
   };
   // A rendered frame waiting for (or in) the encode stage.
   struct Rendered {
@@ -86,6 +87,7 @@ class FramePipeline {
     float lod_error_px = 0;    // the LOD bound the frame drew at (0: full detail or no LOD)
     std::uint64_t splats = 0;  // Gaussians that passed culling
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
+    double lane_wait_ms = 0;  // of queue_ms: posted -> its lane began it (FrameTimings.lane_wait_ms)
     // The renderer's own stage times (FrameStats: total, preprocess, keys, sort, ranges,
     // rasterize) and the render lane that drew it (-1: none), for FrameTimings.
     double stage_ms[6] = {};
@@ -117,7 +119,8 @@ class FramePipeline {
     std::uint32_t frame_sequence = 0;                      // Frame.sequence
     std::chrono::steady_clock::time_point link_read_at{};  // JobShape's: the rate it was encoded at
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
-    double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
+    double lane_wait_ms = 0;  // as Rendered's
+    double total_ms = 0;      // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;
     bool refine = false;       // the still view's refine frame
     bool rate_capped = false;  // encoded under a VBV rate (the policy's, a client's, the link's cap)

@@ -274,6 +274,11 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
   EXPECT_GE(fps_count, 2);
   EXPECT_NEAR(fps_mean, client_fps, 0.3 * client_fps);
   EXPECT_EQ(j["run"]["sessions"][1]["trace"].get<std::string>(), second);
+  // The pose's wait before its render, and the part of it its job waited for a lane
+  // (FrameTimings.lane_wait_ms): a part, so at least 0 and at most the whole.
+  const nlohmann::json& srv = j["run"]["total"]["server"];
+  EXPECT_GE(srv["lane_wait_ms"].get<double>(), 0.0);
+  EXPECT_LE(srv["lane_wait_ms"].get<double>(), srv["queue_ms"].get<double>()) << srv.dump();
   ASSERT_EQ(std::system((base + " --sessions 2 --seconds 1.5 --ramp --trace orbit > /dev/null").c_str()), 0);
   const nlohmann::json ramp = nlohmann::json::parse(std::ifstream(json_path));
   ASSERT_EQ(ramp["ramp"].size(), 2u) << ramp.dump();  // 1 then 2 sessions, no bound to break

@@ -23,6 +23,7 @@ double percentile(std::vector<double> values, double p) {
 
 void StageSums::add(const StageSums& o) {
   queue += o.queue;
+  lane_wait += o.lane_wait;
   render += o.render;
   convert += o.convert;
   encode += o.encode;
@@ -129,6 +130,7 @@ nlohmann::json render_lanes_json(const StageSums& s) {
 nlohmann::json stages_json(const StageSums& s) {
   return {
       {"queue_ms", mean(s.queue, s.frames)},
+      {"lane_wait_ms", mean(s.lane_wait, s.frames)},
       {"render_ms", mean(s.render, s.frames)},
       {"convert_ms", mean(s.convert, s.frames)},
       {"encode_ms", mean(s.encode, s.frames)},
@@ -269,14 +271,15 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
     out += line;
   }
   const StageSums& g = t.server;
-  std::snprintf(line, sizeof(line),
-                "server means (ms): queue %.2f  render %.2f (key frames %.0f%%, re-keys %.0f%%, W %.2f)  "
-                "convert %.2f  encode %.2f  send %.2f  pose->handed %.2f;  slowest session %.1f FPS\n",
-                mean(g.queue, g.frames), mean(g.render, g.frames),
-                g.frames ? 100.0 * static_cast<double>(g.render_key) / static_cast<double>(g.frames) : 0.0,
-                g.frames ? 100.0 * static_cast<double>(g.render_rekey) / static_cast<double>(g.frames) : 0.0,
-                mean(g.window, g.frames), mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends),
-                mean(g.total, g.frames), t.fps_min);
+  std::snprintf(
+      line, sizeof(line),
+      "server means (ms): queue %.2f (for a lane %.2f)  render %.2f (key frames %.0f%%, re-keys %.0f%%, W %.2f)  "
+      "convert %.2f  encode %.2f  send %.2f  pose->handed %.2f;  slowest session %.1f FPS\n",
+      mean(g.queue, g.frames), mean(g.lane_wait, g.frames), mean(g.render, g.frames),
+      g.frames ? 100.0 * static_cast<double>(g.render_key) / static_cast<double>(g.frames) : 0.0,
+      g.frames ? 100.0 * static_cast<double>(g.render_rekey) / static_cast<double>(g.frames) : 0.0,
+      mean(g.window, g.frames), mean(g.convert, g.frames), mean(g.encode, g.frames), mean(g.send, g.sends),
+      mean(g.total, g.frames), t.fps_min);
   out += line;
   if (g.lod_error_px_max > 0) {
     std::snprintf(line, sizeof(line), "level of detail: bound %.2f px mean, %.2f px max; %.2f M Gaussians a frame\n",

@@ -21,6 +21,7 @@ double percentile(std::vector<double> values, double p);
 // Server-side stage times of a session's frames, from Frame.timings (ms): sums and a count.
 struct StageSums {
   double queue = 0, render = 0, convert = 0, encode = 0, send = 0, total = 0;
+  double lane_wait = 0;      // of queue: FrameTimings.lane_wait_ms
   std::uint64_t frames = 0;  // frames summed (send: frames with previous_send_ms > 0)
   std::uint64_t sends = 0;
   std::uint64_t render_key = 0;                  // frames whose render was a key frame (catgs: full pre-process)

@@ -330,6 +330,7 @@ class PoseLoop {
 
   void add_server_timings(const pb::FrameTimings& t) {
     r_.server.queue += t.queue_ms();
+    r_.server.lane_wait += t.lane_wait_ms();
     r_.server.render += t.render_ms();
     r_.server.convert += t.convert_ms();
     r_.server.encode += t.encode_ms();

@@ -40,6 +40,8 @@ SessionResult session(int index, std::uint64_t frames, double seconds, std::vect
   s.latency_ms = std::move(latency);
   s.server.frames = frames;
   s.server.render = 2.0 * static_cast<double>(frames);
+  s.server.queue = 3.0 * static_cast<double>(frames);
+  s.server.lane_wait = 1.0 * static_cast<double>(frames);
   s.server.render_key = frames / 2;
   return s;
 }
@@ -63,6 +65,8 @@ TEST(LoadReport, TotalsPoolSessions) {
   EXPECT_DOUBLE_EQ(j["sessions"][0]["fps"].get<double>(), 50.0);
   EXPECT_DOUBLE_EQ(j["sessions"][1]["latency"]["p50_ms"].get<double>(), 45.0);
   EXPECT_DOUBLE_EQ(j["total"]["server"]["render_ms"].get<double>(), 2.0);
+  EXPECT_DOUBLE_EQ(j["total"]["server"]["queue_ms"].get<double>(), 3.0);
+  EXPECT_DOUBLE_EQ(j["total"]["server"]["lane_wait_ms"].get<double>(), 1.0);
   EXPECT_DOUBLE_EQ(j["total"]["server"]["render_key_fraction"].get<double>(), 0.5);
   EXPECT_EQ(j["total"]["frames"].get<int>(), 130);
 
