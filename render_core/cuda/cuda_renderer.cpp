@@ -30,6 +30,7 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   s.catgs_counters.ensure(kCatgsCounterSlots * sizeof(unsigned), "catgs counters", &s.allocations);
   CATGS_CUDA(cudaEventCreate(&s.convert_start));
   CATGS_CUDA(cudaEventCreate(&s.converted));
+  CATGS_CUDA(cudaEventCreateWithFlags(&s.planes_ready, cudaEventDisableTiming));
 }
 
 CudaRenderer::~CudaRenderer() {
@@ -485,6 +486,7 @@ void CudaRenderer::begin_yuv420_at(const Camera& camera, double time_s, const Yu
       CATGS_CUDA(cudaMemcpyAsync(s.yuv_host.data(), s.yuv.as<uint8_t>(), y_bytes + 2 * c_bytes, cudaMemcpyDeviceToHost,
                                  s.stream));
     }
+    CATGS_CUDA(cudaEventRecord(s.planes_ready, s.stream));
     begun_target_ = out;
     begun_width_ = w;
     begun_height_ = h;
@@ -492,6 +494,14 @@ void CudaRenderer::begin_yuv420_at(const Camera& camera, double time_s, const Yu
     end_frame();  // nothing to finish
     throw;
   }
+}
+
+bool CudaRenderer::frame_ready() const {
+  const DeviceGuard on(scene_->device());
+  const cudaError_t e = cudaEventQuery(state_->planes_ready);
+  if (e == cudaErrorNotReady) return false;
+  CATGS_CUDA(e);  // a real error: finish_yuv420 will meet it too
+  return true;
 }
 
 double CudaRenderer::finish_yuv420() {

@@ -188,6 +188,7 @@ struct CudaRenderer::State {
   GrowBuffer yuv;
   PinnedBuffer yuv_host;  // the planes of a host target, on their way to it
   cudaEvent_t convert_start = nullptr, converted = nullptr;
+  cudaEvent_t planes_ready = nullptr;  // a begun frame's planes are where its target wants them
   uint64_t key_entries = 0, key_visible = 0, key_capacity = 0;  // the open group's key frame
   int window = 0;
   bool key_frame = true;
@@ -338,6 +339,7 @@ struct CudaRenderer::State {
     if (plan_ready) cudaEventDestroy(plan_ready);
     if (convert_start) cudaEventDestroy(convert_start);
     if (converted) cudaEventDestroy(converted);
+    if (planes_ready) cudaEventDestroy(planes_ready);
     for (cudaEvent_t& e : events)
       if (e) cudaEventDestroy(e);
     if (counts_ready) cudaEventDestroy(counts_ready);

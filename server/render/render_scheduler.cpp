@@ -137,6 +137,7 @@ void RenderScheduler::lane_loop() {
     Entry e;
     bool took = false;
     while (!stopping_) {
+      if (!begun.empty() && begun.front().second.ready()) break;  // done on the GPU: finish it first
       if (static_cast<int>(begun.size()) < frames_per_lane_ && take_next(e)) {
         took = true;
         break;

@@ -31,7 +31,8 @@
 // handed on (Renderer::finish_yuv420). The lane keeps up to frames_per_lane such frames begun and
 // takes the next session's job while the GPU draws them, so a lane no longer holds the GPU idle
 // for the frame's length while the host waits for its planes; it runs the oldest finish when it
-// holds that many, or when no job may start. A job counts as running (the pixel cap, drain(),
+// holds that many, when no job may start, or first thing when that frame is ready already
+// (Finish::ready: a frame done on the GPU does not wait behind the next one's begin). A job counts as running (the pixel cap, drain(),
 // background jobs' gaps) until its finish has run. A session's next job is posted only after its
 // frame's finish, so a renderer never has two frames begun. 1: each frame is finished before the
 // lane takes another (the CPU core's default: its begin draws the whole frame).
@@ -50,6 +51,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -82,19 +84,31 @@ class RenderScheduler {
   void set_frames_per_lane(int frames) { frames_per_lane_ = std::max(1, frames); }
   int frames_per_lane() const { return frames_per_lane_; }
 
-  // A job's second half (see "Frames in flight"): a move-only void() callable, or empty. It must
-  // not throw (a throw is logged).
+  // A job's second half (see "Frames in flight"): a move-only void() callable, or empty, and
+  // optionally `ready`, a bool() that says without waiting whether the callable would run without
+  // waiting (the frame's planes are done); a lane finishes a ready frame before it begins another.
+  // Without `ready` a frame counts as not ready. Neither may throw (a throw is logged; a `ready`
+  // that throws counts as ready, so that the finish meets the error).
   class Finish {
    public:
     Finish() = default;
     template <class F>
-    static Finish of(F&& f) {
+    static Finish of(F&& f, std::function<bool()> ready = {}) {
       Finish out;
       out.fn_ = std::make_unique<Holder<std::decay_t<F>>>(std::forward<F>(f));
+      out.ready_ = std::move(ready);
       return out;
     }
     explicit operator bool() const { return fn_ != nullptr; }
     void operator()() { fn_->run(); }
+    bool ready() const {
+      if (!ready_) return false;
+      try {
+        return ready_();
+      } catch (...) {
+        return true;
+      }
+    }
 
    private:
     struct Base {
@@ -109,6 +123,7 @@ class RenderScheduler {
       F fn;
     };
     std::unique_ptr<Base> fn_;
+    std::function<bool()> ready_;
   };
 
   // How long a background job waits for a moment when no live job runs (default 1000 ms; set

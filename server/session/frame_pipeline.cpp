@@ -245,6 +245,14 @@ FramePipeline::Rendered FramePipeline::begin_render(Job job, std::unique_ptr<Yuv
   return r;
 }
 
+bool FramePipeline::frame_ready() const {
+  try {
+    return renderer_->frame_ready();
+  } catch (...) {
+    return true;
+  }
+}
+
 void FramePipeline::finish_render(Rendered& frame) {
   if (!frame.render_begun) return;  // failed or skipped at its begin
   try {

@@ -207,6 +207,9 @@ class FramePipeline {
   // frame that failed or was skipped at its begin is left as it is. A failure comes back in
   // `frame.error`.
   void finish_render(Rendered& frame);
+  // Whether a begun frame's finish_render would not wait for the renderer (Renderer::frame_ready;
+  // an error reads as ready, for the finish to report). The lane's thread; no wait.
+  bool frame_ready() const;
   // Encodes a rendered frame into a Frame message (the worker pool).
   JobResult encode(Rendered& frame);
   // The one-job path: renders into the encoder's input and encodes it (a render lane).

@@ -101,11 +101,14 @@ RenderScheduler::Finish SessionStream::render(FramePipeline::StartedRender start
       frames_.begin_render(std::move(started.job), std::move(started.planes), owner_.gone());
   // The lane finishes the frame when it holds its most frames in flight or has nothing to start
   // (render_scheduler.h "Frames in flight"); this session's next render waits for rendered().
-  return RenderScheduler::Finish::of([keep = owner_.keep_alive(), this, frame = std::move(frame)]() mutable {
-    frames_.finish_render(frame);
-    boost::asio::post(owner_.strand(),
-                      [keep, this, frame = std::move(frame)]() mutable { rendered(std::move(frame)); });
-  });
+  const bool begun = frame.render_begun;
+  return RenderScheduler::Finish::of(
+      [keep = owner_.keep_alive(), this, frame = std::move(frame)]() mutable {
+        frames_.finish_render(frame);
+        boost::asio::post(owner_.strand(),
+                          [keep, this, frame = std::move(frame)]() mutable { rendered(std::move(frame)); });
+      },
+      [this, begun] { return !begun || frames_.frame_ready(); });
 }
 
 void SessionStream::rendered(FramePipeline::Rendered frame) {

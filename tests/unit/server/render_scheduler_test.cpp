@@ -81,8 +81,9 @@ TEST(RenderScheduler, GpuWaitOption) {
 
 // Frames in flight: a job that returns a Finish leaves its frame begun; the lane takes the next
 // job while it holds fewer than frames_per_lane, and finishes the oldest first otherwise or when
-// nothing may start. `frames` 1 is the old lane: each job finished before the next.
-std::vector<std::string> lane_trace(int frames_per_lane, std::int64_t pixels, std::int64_t cap) {
+// nothing may start. `frames` 1 is the old lane: each job finished before the next. `ready`: the
+// finishes say their frames are done already (Finish::ready), so each goes before the next begin.
+std::vector<std::string> lane_trace(int frames_per_lane, std::int64_t pixels, std::int64_t cap, bool ready = false) {
   RenderScheduler s;
   s.set_frames_per_lane(frames_per_lane);
   std::mutex mutex;
@@ -94,7 +95,8 @@ std::vector<std::string> lane_trace(int frames_per_lane, std::int64_t pixels, st
   for (int owner = 1; owner <= 3; ++owner)
     s.post(static_cast<RenderScheduler::Owner>(owner), pixels, [&, owner] {
       note("begin " + std::to_string(owner));
-      return RenderScheduler::Finish::of([&, owner] { note("finish " + std::to_string(owner)); });
+      return RenderScheduler::Finish::of([&, owner] { note("finish " + std::to_string(owner)); },
+                                         [ready] { return ready; });
     });
   s.start(1, cap);
   EXPECT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
@@ -109,6 +111,8 @@ TEST(RenderScheduler, ALaneKeepsFramesInFlight) {
   EXPECT_EQ(lane_trace(1, 10, 1000), (V{"begin 1", "finish 1", "begin 2", "finish 2", "begin 3", "finish 3"}));
   // A begun frame's pixels count until its finish: two of 60 do not fit a cap of 100.
   EXPECT_EQ(lane_trace(2, 60, 100), (V{"begin 1", "finish 1", "begin 2", "finish 2", "begin 3", "finish 3"}));
+  // A frame done on the GPU is finished before the next begins, however many the lane may hold.
+  EXPECT_EQ(lane_trace(3, 10, 1000, true), (V{"begin 1", "finish 1", "begin 2", "finish 2", "begin 3", "finish 3"}));
 }
 
 // drain() returns once every finish has run, and stop() finishes the frames a lane holds.
