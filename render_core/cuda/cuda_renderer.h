@@ -187,7 +187,8 @@ class CudaRenderer final : public Renderer {
   // copies the planes to the target's strides.
   void begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override;
   double finish_yuv420() override;
-  // Whether the begun frame's planes are done (an event query; no wait).
+  // Whether the begun frame's planes are done (an event query; no wait); CudaError on a device
+  // error.
   bool frame_ready() const override;
   // Renders `camera` into this renderer's device image; one host-device sync (see above).
   // Throws std::invalid_argument for a bad camera, std::length_error for an oversized render

@@ -195,8 +195,9 @@ class Renderer {
   // begin (the CPU core has nothing to overlap) and finish returns its conversion time.
   virtual void begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out);
   virtual double finish_yuv420();
-  // Whether finish_yuv420() would return without waiting for the device (a frame is begun); the
-  // default's begin drew the whole frame: true.
+  // Whether finish_yuv420() would return without waiting for the device (a frame is begun); no
+  // wait. The default's begin drew the whole frame: true. The CUDA core asks the frame's last event
+  // and throws CudaError where the device reports an error (finish_yuv420 would meet it too).
   virtual bool frame_ready() const { return true; }
   // Stats of the last render().
   virtual const FrameStats& last_stats() const = 0;

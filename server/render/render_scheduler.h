@@ -32,8 +32,8 @@
 // takes the next session's job while the GPU draws them, so a lane no longer holds the GPU idle
 // for the frame's length while the host waits for its planes; it runs the oldest finish when it
 // holds that many, when no job may start, or first thing when that frame is ready already
-// (Finish::ready: a frame done on the GPU does not wait behind the next one's begin). A job counts as running (the pixel cap, drain(),
-// background jobs' gaps) until its finish has run. A session's next job is posted only after its
+// (Finish::ready: a frame done on the GPU does not wait behind the next one's begin). A job
+// counts as running (the pixel cap, drain(), background jobs' gaps) until its finish has run. A session's next job is posted only after its
 // frame's finish, so a renderer never has two frames begun. 1: each frame is finished before the
 // lane takes another (the CPU core's default: its begin draws the whole frame).
 //
@@ -62,6 +62,30 @@
 #include <vector>
 
 namespace catgs::server {
+
+namespace detail {
+// A move-only callable returning R, behind one virtual call: the scheduler's jobs (R = its
+// Finish: a job returning void returns an empty one) and their finishes (R = void).
+template <class R>
+struct Callable {
+  virtual ~Callable() = default;
+  virtual R run() = 0;
+};
+template <class R, class F>
+struct CallableOf final : Callable<R> {
+  explicit CallableOf(F&& f) : fn(std::move(f)) {}
+  explicit CallableOf(const F& f) : fn(f) {}
+  R run() override {
+    if constexpr (std::is_void_v<R> || !std::is_void_v<std::invoke_result_t<F&>>) {
+      return fn();
+    } else {
+      fn();
+      return R{};
+    }
+  }
+  F fn;
+};
+}  // namespace detail
 
 class RenderScheduler {
  public:
@@ -95,7 +119,7 @@ class RenderScheduler {
     template <class F>
     static Finish of(F&& f, std::function<bool()> ready = {}) {
       Finish out;
-      out.fn_ = std::make_unique<Holder<std::decay_t<F>>>(std::forward<F>(f));
+      out.fn_ = std::make_unique<detail::CallableOf<void, std::decay_t<F>>>(std::forward<F>(f));
       out.ready_ = std::move(ready);
       return out;
     }
@@ -111,18 +135,7 @@ class RenderScheduler {
     }
 
    private:
-    struct Base {
-      virtual ~Base() = default;
-      virtual void run() = 0;
-    };
-    template <class F>
-    struct Holder final : Base {
-      explicit Holder(F&& f) : fn(std::move(f)) {}
-      explicit Holder(const F& f) : fn(f) {}
-      void run() override { fn(); }
-      F fn;
-    };
-    std::unique_ptr<Base> fn_;
+    std::unique_ptr<detail::Callable<void>> fn_;
     std::function<bool()> ready_;
   };
 
@@ -168,24 +181,9 @@ class RenderScheduler {
   std::size_t poll();
 
  private:
-  struct TaskBase {
-    virtual ~TaskBase() = default;
-    virtual Finish run() = 0;
-  };
+  using TaskBase = detail::Callable<Finish>;
   template <class F>
-  struct Task final : TaskBase {
-    explicit Task(F&& f) : fn(std::move(f)) {}
-    explicit Task(const F& f) : fn(f) {}
-    Finish run() override {
-      if constexpr (std::is_void_v<std::invoke_result_t<F&>>) {
-        fn();
-        return {};
-      } else {
-        return fn();
-      }
-    }
-    F fn;
-  };
+  using Task = detail::CallableOf<Finish, F>;
   struct Entry {
     std::int64_t pixels = 0;
     std::unique_ptr<TaskBase> task;

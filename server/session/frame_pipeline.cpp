@@ -115,14 +115,18 @@ std::uint64_t FramePipeline::halve_list_budget() {
   return o.list_budget.max_bytes;
 }
 
-FramePipeline::JobResult FramePipeline::take_failed(Rendered&& frame) {
-  free_planes_.push_back(std::move(frame.planes));
+FramePipeline::JobResult FramePipeline::failure_of(const Rendered& frame) {
   JobResult failed;
   failed.error = frame.error;
   failed.over_budget = frame.over_budget;
   failed.out_of_memory = frame.out_of_memory;
   failed.buffer_bytes = frame.buffer_bytes;
   return failed;
+}
+
+FramePipeline::JobResult FramePipeline::take_failed(Rendered&& frame) {
+  free_planes_.push_back(std::move(frame.planes));
+  return failure_of(frame);
 }
 
 void FramePipeline::drop_rendered() {
@@ -407,29 +411,21 @@ void FramePipeline::probe_content_rate(const Job& job, const FrameEncoding& sett
 }
 
 FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool gone) {
-  JobResult failed;
+  Rendered r;
   if (gone) {
-    failed.error = "session gone";
-    return failed;
+    r.error = "session gone";
+    return failure_of(r);
   }
   try {
     bool idr = job.force_idr;
     ensure_encoder(job, idr);
-    Rendered r;
     // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
     render_into(job, encoder_->input_target(), r);
     return frame_message(job, encoder_->encode_input(idr), r);
-  } catch (const RenderBudgetError& e) {
-    failed.error = e.what();
-    failed.over_budget = true;
-  } catch (const cuda::CudaError& e) {
-    failed.error = e.what();
-    failed.out_of_memory = e.code() == kCudaOutOfMemory;
-    failed.buffer_bytes = renderer_->device_buffer_bytes();
-  } catch (const std::exception& e) {
-    failed.error = e.what();
+  } catch (...) {
+    note_failure(r);
   }
-  return failed;
+  return failure_of(r);
 }
 
 FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const EncodedFrame& enc,

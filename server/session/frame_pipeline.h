@@ -224,6 +224,8 @@ class FramePipeline {
   // Inside a catch block: the exception in flight as r's error fields (over budget, out of
   // device memory, other).
   void note_failure(Rendered& r);
+  // A failed frame's result: its error fields.
+  static JobResult failure_of(const Rendered& frame);
   // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed; called when
   // the job is made (start_render, on the strand, no render of the session running), or by the
   // lane where that failed.
