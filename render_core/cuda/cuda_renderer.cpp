@@ -23,8 +23,6 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   // The readback event only orders the host; no timing needed.
   CATGS_CUDA(cudaEventCreateWithFlags(&s.counts_ready, cudaEventDisableTiming));
   CATGS_CUDA(cudaMallocHost(&s.host_counts, kReadSlots * sizeof(unsigned long long)));
-  CATGS_CUDA(cudaMallocHost(&s.host_after, sizeof(State::SizedAheadReadback)));
-  s.list_plan.ensure(sizeof(stages::ListPlan), "list plan", &s.allocations);
   s.counters.ensure(kCounterSlots * sizeof(unsigned long long), "counters", &s.allocations);
   CATGS_CUDA(cudaEventCreateWithFlags(&s.catgs_readback, cudaEventDisableTiming));
   CATGS_CUDA(cudaEventCreateWithFlags(&s.plan_ready, cudaEventDisableTiming));
@@ -215,8 +213,14 @@ void CudaRenderer::State::emit_render_list(uint64_t n, const stages::ChunkWalk& 
   stages::tile_ranges(k[half], fm::tile_only_packing(), entries, tiles, ranges.as<uint2>(), stream);
 }
 
-void CudaRenderer::State::ensure_slice_buffers(uint32_t tiles, uint64_t capacity, uint64_t slots) {
+uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp,
+                                                uint64_t frame_entries, uint32_t first_tile, uint32_t end_tile) {
   std::size_t* allocs = &allocations;
+  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
+  // The slice length of the whole frame (a pass splits its tiles as the single pass would).
+  const uint64_t avg = stages::split_average(tiles, std::max(entries, frame_entries), min_slice);
+  const uint64_t capacity = stages::pass_slice_capacity(tiles, entries, avg);
+  const uint64_t slots = entries / avg;
   slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
   slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
   tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
@@ -231,38 +235,11 @@ void CudaRenderer::State::ensure_slice_buffers(uint32_t tiles, uint64_t capacity
   if (slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs))
     CATGS_CUDA(cudaMemsetAsync(slot_finished.as<void>(), 0, slot_finished.bytes(), stream));
   note_peak();
-}
-
-uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp,
-                                                uint64_t frame_entries, uint32_t first_tile, uint32_t end_tile) {
-  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
-  // The slice length of the whole frame (a pass splits its tiles as the single pass would).
-  const uint64_t avg = stages::split_average(tiles, std::max(entries, frame_entries), min_slice);
-  const uint64_t capacity = stages::pass_slice_capacity(tiles, entries, avg);
-  ensure_slice_buffers(tiles, capacity, entries / avg);
   stages::plan_slices(ranges.as<uint2>(), tiles, avg, capacity, sp.task_splitting, slice_plan(),
                       plan_scratch.as<void>(), slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream,
                       first_tile, end_tile);
   heaviest = heaviest_tile.as<uint32_t>();  // the longest slice
   return capacity;
-}
-
-uint64_t CudaRenderer::State::sized_ahead_capacity(int frame_width, int frame_height) const {
-  if (recent_count == 0 || frame_width != history_width || frame_height != history_height) return 0;
-  uint64_t longest = 0;
-  for (int i = 0; i < recent_count; ++i) longest = std::max(longest, recent_entries[i]);
-  return static_cast<uint64_t>(static_cast<double>(longest) * tune::kSizedAheadHeadroom) + tune::kSizedAheadFloor;
-}
-
-void CudaRenderer::State::note_list_length(int frame_width, int frame_height, uint64_t entries) {
-  if (frame_width != history_width || frame_height != history_height) {
-    recent_count = recent_next = 0;
-    history_width = frame_width;
-    history_height = frame_height;
-  }
-  recent_entries[recent_next] = entries;
-  recent_next = (recent_next + 1) % kLengthHistory;
-  recent_count = std::min(recent_count + 1, kLengthHistory);
 }
 
 DeviceFrame CudaRenderer::render_device(const Camera& camera) {
@@ -284,123 +261,11 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   stats_ = {};
   const bool exact = options_.pipeline != Pipeline::vanilla;
-  const bool depth_first = exact && depth_first_sort();
-  // exact frames with the single sort are sized ahead once a frame at this size was counted, and
-  // while the capacity stays within the list budget (a frame over it is drawn in passes, which
-  // count first).
-  const uint64_t capacity =
-      exact && !depth_first && cuda_options_.sized_ahead ? s.sized_ahead_capacity(camera.width, camera.height) : 0;
-  if (capacity > 0 && capacity <= options_.list_budget.max_entries(camera.width, camera.height, kBytesPerListEntry)) {
-    draw_sized_ahead(camera, capacity);
-    if (!defer_settle_) settle_sized_ahead(camera);
-  } else {
-    draw_full_frame(camera, exact, true, depth_first);
-    if (exact && !depth_first) s.note_list_length(camera.width, camera.height, stats_.render_list_length);
-  }
+  draw_full_frame(camera, exact, true, exact && depth_first_sort());
   s.width = camera.width;
   s.height = camera.height;
   stats_ready_ = false;
   return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
-}
-
-void CudaRenderer::draw_sized_ahead(const Camera& camera, uint64_t capacity) {
-  State& s = *state_;
-  const DeviceScene& scene = *scene_;
-  const stages::CameraParams cam = camera_params(camera);
-  const auto tiles = static_cast<uint32_t>(cam.tiles_x * cam.tiles_y);
-  const std::size_t pixels = static_cast<std::size_t>(camera.width) * camera.height;
-  s.ensure_frame_buffers(scene.size(), tiles, pixels);
-  const SpeculationParams& sp = options_.speculation;
-  const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
-  std::size_t* allocs = &s.allocations;
-  for (int h = 0; h < 2; ++h) {
-    s.keys[h].ensure(capacity * sizeof(uint64_t), "render-list keys", allocs);
-    s.values[h].ensure(capacity * sizeof(uint32_t), "render-list values", allocs);
-  }
-  // room_packing's key: the tile id and the depth fill all 32 bits.
-  constexpr int kKeyBits = 32;
-  s.sort_temp.ensure(stages::sort_narrow_temp_bytes(capacity, kKeyBits), "sort scratch", allocs);
-  const uint64_t slices = tiles + stages::split_slots_bound(tiles, capacity, min_slice);
-  s.ensure_slice_buffers(tiles, slices, stages::split_slots_bound(tiles, capacity, min_slice));
-
-  const stages::SceneView sv = scene_view(scene, options_.lod_error_px);
-  const stages::Projected proj = s.projected();
-  auto* counters = s.counters.as<unsigned long long>();
-  auto* plan = s.list_plan.as<stages::ListPlan>();
-  const uint64_t n = s.slots();
-  const stages::ChunkWalk walk = s.live_walk();
-  const stages::TileTests tests{stages::TileTestKind::ellipse, proj.splat, {}, cam.width, cam.height};
-  const float3 bg = make_float3(options_.background.x, options_.background.y, options_.background.z);
-
-  // Stage 1 and the counts, as a frame counted first, but no readback: the device plans the key,
-  // the slice length and whether the frame must be drawn again (list_plan.h).
-  CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
-  stages::preprocess(sv, cam, true, fm::kAllTiles, proj, s.live_chunk_list(), counters + kVisibleCount,
-                     counters + kReadDepthLowComplement, s.big_list(), s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
-  stages::count_list(proj, n, counters + kVisibleCount, counters + kReadListLength, s.stream);
-  stages::plan_list(counters + kReadListLength, counters + kReadDepthLowComplement, counters + kReadDepthHigh,
-                    s.live_chunk_list().count, capacity, s.slot_chunks, tiles, min_slice, plan, s.stream);
-  stages::scan_chunks(proj, n, s.chunk_start.as<uint64_t>(), s.scan_temp.as<void>(), s.scan_temp.bytes(), s.stream);
-  stages::gaussian_ends(proj, n, walk, s.chunk_start.as<uint64_t>(), s.ends.as<uint64_t>(), s.stream);
-
-  // Stages 2-5 over `capacity` slots: the list, then sentinel keys to the end (sorted last,
-  // skipped by the tile ranges).
-  uint32_t* k32[2] = {s.keys[0].as<uint32_t>(), s.keys[1].as<uint32_t>()};
-  uint32_t* v[2] = {s.values[0].as<uint32_t>(), s.values[1].as<uint32_t>()};
-  const stages::DepthKeyPacking tile_at{0u, 32 - fm::tile_key_bits(tiles), 0};  // the tile's place
-  stages::pad_list(k32[0], counters + kReadListLength, capacity, s.stream);
-  stages::emit_keys(proj, s.ends.as<uint64_t>(), n, walk, cam, tests, s.big_list(), nullptr, k32[0], tile_at, v[0],
-                    nullptr, 0, s.stream, {capacity, &plan->packing});
-  CATGS_CUDA(cudaEventRecord(s.events[kKeysEmitted], s.stream));
-  const int half =
-      stages::sort_pairs_narrow(k32, v, capacity, kKeyBits, s.sort_temp.as<void>(), s.sort_temp.bytes(), s.stream);
-  s.sorted_values = v[half];
-  CATGS_CUDA(cudaEventRecord(s.events[kSorted], s.stream));
-  stages::tile_ranges(k32[half], tile_at, capacity, tiles, s.ranges.as<uint2>(), s.stream);
-  stages::plan_slices(s.ranges.as<uint2>(), tiles, min_slice, slices, sp.task_splitting, s.slice_plan(),
-                      s.plan_scratch.as<void>(), s.slice_order.as<uint32_t>(), s.heaviest_tile.as<uint32_t>(), s.stream,
-                      0, 0xffffffffu, &plan->avg);
-  s.heaviest = s.heaviest_tile.as<uint32_t>();
-  CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
-  stages::rasterize_slices(s.slice_plan(), s.slice_order.as<uint32_t>(), static_cast<uint32_t>(slices), s.sorted_values,
-                           proj, cam, true, false, bg, nullptr, s.partials.as<float4>(), s.rgb.as<float>(),
-                           s.rgba8.as<uint32_t>(), s.stream);
-  CATGS_CUDA(cudaEventRecord(s.events[kRasterized], s.stream));
-  // The plan and the counts come back with the frame, for settle_sized_ahead.
-  CATGS_CUDA(cudaMemcpyAsync(&s.host_after->plan, plan, sizeof(stages::ListPlan), cudaMemcpyDeviceToHost, s.stream));
-  CATGS_CUDA(cudaMemcpyAsync(s.host_after->counts, counters + kReadListLength, kReadSlots * sizeof(unsigned long long),
-                             cudaMemcpyDeviceToHost, s.stream));
-  CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
-  s.sized_capacity = capacity;
-  s.sized_pending = true;
-  ++s.sized_frames;
-}
-
-void CudaRenderer::fill_sized_stats() const {
-  const State& s = *state_;
-  const State::SizedAheadReadback& r = *s.host_after;
-  stats_.render_list_length = static_cast<std::size_t>(r.counts[0]);
-  stats_.visible = static_cast<std::size_t>(r.counts[kReadVisible - kReadListLength]);
-  stats_.passes = 1;
-  stats_.longest_pass = stats_.render_list_length;
-}
-
-bool CudaRenderer::settle_sized_ahead(const Camera& camera) {
-  State& s = *state_;
-  if (!s.sized_pending) return false;
-  s.sized_pending = false;
-  CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
-  ++s.syncs;
-  fill_sized_stats();
-  s.note_list_length(camera.width, camera.height, stats_.render_list_length);
-  if (s.host_after->plan.redo == 0) return false;
-  // The list did not fit its capacity (or the slots, or the 32-bit key): drawn again, counted
-  // first, after the same kStart (the frame's time holds both).
-  ++s.sized_redos;
-  stats_ = {};
-  draw_full_frame(camera, true, true, false);
-  return true;
 }
 
 void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first) {
@@ -495,7 +360,6 @@ const FrameStats& CudaRenderer::last_stats() const {
   const DeviceGuard on(scene_->device());
   const State& s = *state_;
   CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
-  if (s.sized_pending) fill_sized_stats();  // begun, not finished: the frame as it was planned
   auto ms = [&](Event a, Event b) {
     float t = 0.0f;
     CATGS_CUDA(cudaEventElapsedTime(&t, s.events[a], s.events[b]));
@@ -529,8 +393,6 @@ CudaRenderer::Diagnostics CudaRenderer::diagnostics() const {
   d.peak_buffer_bytes = s.peak_bytes;
   d.allocations = s.allocations;
   d.syncs_last_frame = s.syncs;
-  d.sized_ahead_frames = s.sized_frames;
-  d.sized_ahead_redos = s.sized_redos;
   if (s.heaviest && s.width > 0) {
     CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));
     uint32_t heaviest = 0;
@@ -593,57 +455,45 @@ double CudaRenderer::render_yuv420_at(const Camera& camera, double time_s, const
 void CudaRenderer::begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) {
   check_yuv420_target("render_yuv420_at", out, camera.width, camera.height);
   begin_frame();
-  State& s = *state_;
   try {
     const DeviceGuard on(scene_->device());
-    // A frame sized ahead is settled in finish_yuv420, so begin never waits on the GPU.
-    defer_settle_ = true;
     const DeviceFrame f = render_device_at(camera, time_s);
-    defer_settle_ = false;
-    begun_camera_ = camera;
+    State& s = *state_;
+    const int w = f.width, h = f.height;
+    const std::size_t y_bytes = static_cast<std::size_t>(w) * h, c_bytes = y_bytes / 4;
+    stages::Yuv420Pitched planes{};
+    if (out.memory == MemoryKind::device) {  // an NVENC hw frame: written in place
+      planes = {out.y, static_cast<size_t>(out.y_stride), out.u, static_cast<size_t>(out.u_stride),
+                out.v, static_cast<size_t>(out.v_stride)};
+    } else {  // converted here, then only the planes cross to the host
+      s.yuv.ensure(y_bytes + 2 * c_bytes, "YUV planes", &s.allocations);
+      auto* base = s.yuv.as<uint8_t>();
+      planes = {base,
+                static_cast<size_t>(w),
+                base + y_bytes,
+                static_cast<size_t>(w / 2),
+                base + y_bytes + c_bytes,
+                static_cast<size_t>(w / 2)};
+    }
+    CATGS_CUDA(cudaEventRecord(s.convert_start, s.stream));
+    stages::rgba8_to_yuv420(f.rgba8, w, h, planes, s.stream);
+    CATGS_CUDA(cudaEventRecord(s.converted, s.stream));
+    if (out.memory == MemoryKind::host) {
+      // The packed planes in one copy into page-locked memory (a copy into the target's pageable
+      // memory goes through the driver's staging, which the lanes' copies share), then, in
+      // finish, to the target's strides on the host.
+      s.yuv_host.ensure(y_bytes + 2 * c_bytes);
+      CATGS_CUDA(cudaMemcpyAsync(s.yuv_host.data(), s.yuv.as<uint8_t>(), y_bytes + 2 * c_bytes, cudaMemcpyDeviceToHost,
+                                 s.stream));
+    }
+    CATGS_CUDA(cudaEventRecord(s.planes_ready, s.stream));
     begun_target_ = out;
-    begun_width_ = f.width;
-    begun_height_ = f.height;
-    queue_planes(f);
+    begun_width_ = w;
+    begun_height_ = h;
   } catch (...) {
-    defer_settle_ = false;
-    s.sized_pending = false;
     end_frame();  // nothing to finish
     throw;
   }
-}
-
-void CudaRenderer::queue_planes(const DeviceFrame& f) {
-  State& s = *state_;
-  const Yuv420Target& out = begun_target_;
-  const int w = f.width, h = f.height;
-  const std::size_t y_bytes = static_cast<std::size_t>(w) * h, c_bytes = y_bytes / 4;
-  stages::Yuv420Pitched planes{};
-  if (out.memory == MemoryKind::device) {  // an NVENC hw frame: written in place
-    planes = {out.y, static_cast<size_t>(out.y_stride), out.u, static_cast<size_t>(out.u_stride),
-              out.v, static_cast<size_t>(out.v_stride)};
-  } else {  // converted here, then only the planes cross to the host
-    s.yuv.ensure(y_bytes + 2 * c_bytes, "YUV planes", &s.allocations);
-    auto* base = s.yuv.as<uint8_t>();
-    planes = {base,
-              static_cast<size_t>(w),
-              base + y_bytes,
-              static_cast<size_t>(w / 2),
-              base + y_bytes + c_bytes,
-              static_cast<size_t>(w / 2)};
-  }
-  CATGS_CUDA(cudaEventRecord(s.convert_start, s.stream));
-  stages::rgba8_to_yuv420(f.rgba8, w, h, planes, s.stream);
-  CATGS_CUDA(cudaEventRecord(s.converted, s.stream));
-  if (out.memory == MemoryKind::host) {
-    // The packed planes in one copy into page-locked memory (a copy into the target's pageable
-    // memory goes through the driver's staging, which the lanes' copies share), then, in
-    // finish, to the target's strides on the host.
-    s.yuv_host.ensure(y_bytes + 2 * c_bytes);
-    CATGS_CUDA(cudaMemcpyAsync(s.yuv_host.data(), s.yuv.as<uint8_t>(), y_bytes + 2 * c_bytes, cudaMemcpyDeviceToHost,
-                               s.stream));
-  }
-  CATGS_CUDA(cudaEventRecord(s.planes_ready, s.stream));
 }
 
 bool CudaRenderer::frame_ready() const {
@@ -660,11 +510,6 @@ double CudaRenderer::finish_yuv420() {
   State& s = *state_;
   // The encoder reads the planes next, on its own stream or thread: the frame must be complete.
   CATGS_CUDA(cudaStreamSynchronize(s.stream));
-  // A frame sized ahead whose list did not fit is drawn again now, and its planes with it.
-  if (settle_sized_ahead(begun_camera_)) {
-    queue_planes({begun_width_, begun_height_, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream});
-    CATGS_CUDA(cudaStreamSynchronize(s.stream));
-  }
   const Yuv420Target& out = begun_target_;
   const int w = begun_width_, h = begun_height_;
   const std::size_t y_bytes = static_cast<std::size_t>(w) * h, c_bytes = y_bytes / 4;

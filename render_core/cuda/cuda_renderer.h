@@ -14,14 +14,9 @@
 // owns a CUDA stream and reusable device buffers that grow when a frame needs more (by 1.25x) and
 // are never freed between frames: a steady trace allocates nothing.
 //
-// Host-device synchronisation per frame (vanilla, exact): ONE, in render_device(). A frame counted
-// first (vanilla; exact's first frame at a size, or with sized_ahead off) waits after the scan of
-// per-Gaussian tile counts for 48 bytes (render list length, visible count, depth range, kept
-// chunks), because CUB's radix sort takes its item count from the host and the list buffers may
-// have to grow first. An exact frame sized ahead (CudaOptions::sized_ahead, list_plan.h) sorts a
-// capacity taken from the last frames instead and waits only at its end, for its plan and counts;
-// one whose list outgrew the capacity is drawn again, counted first. begin_yuv420_at() does not
-// wait at all for such a frame: finish_yuv420() does.
+// Host-device synchronisation per frame (vanilla, exact): ONE, in render_device(): after the scan of per-Gaussian
+// tile counts, 16 bytes (render list length, visible count) come back to the host, because CUB's
+// radix sort takes its item count from the host and the list buffers may have to grow first.
 // render(camera, Image&) adds a second one, the download of the image to host memory.
 // last_stats() waits for the frame's last event (the caller chooses to pay for timing).
 //
@@ -159,15 +154,9 @@ struct DeviceFrame {
 // - tile_culling: catgs rasterizers blend only the trail-list entries whose ellipse reaches the
 //   tile at this frame's pose (blend.cuh blend_range_culled); off blends every entry: the same
 //   image, bit for bit.
-// - sized_ahead: exact frames with the single sort, once a frame at their size was counted, give
-//   their list a capacity from the last frames' lengths instead of reading the length back
-//   mid-frame (list_plan.h; docs/DESIGN.md "A frame sized ahead"): the same list and image, no
-//   host wait inside the frame; off reads the counts back every frame (the catgs-bench variant
-//   exact-readback, for the side-by-side tables).
 struct CudaOptions {
   std::optional<bool> depth_first_sort;
   bool tile_culling = true;
-  bool sized_ahead = true;
 };
 
 class CudaRenderer final : public Renderer {
@@ -193,10 +182,9 @@ class CudaRenderer final : public Renderer {
   // Throws std::invalid_argument for a bad target; CudaError as render_device().
   double render_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override;
   // render_yuv420_at() in halves (renderer.h): begin queues the frame, its conversion and, for a
-  // host target, the planes' copy into page-locked memory (no wait for an exact frame sized
-  // ahead; a frame counted first waits for its counts); finish waits for the stream, draws a
-  // sized-ahead frame whose list did not fit again (with its planes), and copies the planes to
-  // the target's strides.
+  // host target, the planes' copy into page-locked memory (the frame's counts sync is its only
+  // wait); finish waits for the converted event (a device target) or the copy (a host one) and
+  // copies the planes to the target's strides.
   void begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override;
   double finish_yuv420() override;
   // Whether the begun frame's planes are done (an event query; no wait); CudaError on a device
@@ -235,9 +223,6 @@ class CudaRenderer final : public Renderer {
     // (exact, vanilla, or a catgs key frame's speculative pre-processing), of `chunks`; a catgs
     // sub-frame reports its key frame's.
     std::size_t chunks_kept = 0, chunks = 0;
-    // exact frames drawn sized ahead since construction, and those of them drawn again, counted
-    // first, because their list outgrew its capacity (or the slots, or the 32-bit key).
-    std::size_t sized_ahead_frames = 0, sized_ahead_redos = 0;
   };
   Diagnostics diagnostics() const;
 
@@ -251,16 +236,6 @@ class CudaRenderer final : public Renderer {
   // as draw_in_passes. Used by render_full and by catgs key frames without a window (which sort
   // in one radix sort: depth_first false).
   void draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first);
-  // An exact frame sized ahead (list_plan.h): stages 1-5 queued with a list of `capacity` slots
-  // and no host read; its plan and counts are copied back behind it. settle_sized_ahead waits
-  // for it, sets stats_ and, when the list did not fit, draws the frame again counted first
-  // (draw_full_frame) and returns true; nothing pending: false. render_device() settles at once,
-  // begin_yuv420_at() in finish_yuv420().
-  void draw_sized_ahead(const Camera& camera, uint64_t capacity);
-  bool settle_sized_ahead(const Camera& camera);
-  void fill_sized_stats() const;  // stats_'s list length and visible count from the readback
-  // The conversion (and a host target's copy) of `frame` into begun_target_, then planes_ready.
-  void queue_planes(const DeviceFrame& frame);
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp
@@ -271,8 +246,6 @@ class CudaRenderer final : public Renderer {
   void download(const DeviceFrame& frame, Image& out);
   std::shared_ptr<const DeviceScene> scene_;
   Yuv420Target begun_target_{};  // begin_yuv420_at's target, for finish_yuv420
-  Camera begun_camera_{};        // and its camera (a frame sized ahead may be drawn again)
-  bool defer_settle_ = false;    // inside begin_yuv420_at: a frame sized ahead settles in finish
   int begun_width_ = 0, begun_height_ = 0;
   RenderOptions options_;
   std::unique_ptr<State> state_;

@@ -30,31 +30,20 @@ static_assert(tune::kGaussianThreads == fm::kChunkSize, "a block of the per-Gaus
 static_assert(static_cast<uint64_t>(fm::kChunkSize) * tune::kMaxTilesPerSide * tune::kMaxTilesPerSide < (1ull << 32),
               "a chunk's entry count (each Gaussian lists at most every tile once) fits Projected::chunk_total");
 
-// Where a key and its value go (forward_model/key_packing.h): the 64-bit key into `wide`, or the
-// 32-bit one into `narrow` when that is not null (the single sort's [tile | quantised depth], or
-// the tile id alone for the depth-first sort's second pass). The choice is uniform over a launch.
-// A frame sized ahead (list_plan.h) reads its packing from the device (`planned`, taken once per
-// thread by resolve()) and may come out longer than its buffers (`capacity` slots): writes past
-// them are dropped, and the frame, whose plan says so, is drawn again.
+// Where a key goes (forward_model/key_packing.h): the 64-bit key into `wide`, or the 32-bit one
+// into `narrow` when that is not null (the single sort's [tile | quantised depth], or the tile id
+// alone for the depth-first sort's second pass). The choice is uniform over a launch.
 struct KeyOut {
-  uint64_t* wide;    // [capacity]
-  uint32_t* narrow;  // [capacity] or null
+  uint64_t* wide;    // [L]
+  uint32_t* narrow;  // [L] or null
   DepthKeyPacking packing;
-  uint32_t* values;                // [capacity]: each entry's Gaussian index
-  uint64_t capacity;               // slots the key and value buffers hold
-  const DepthKeyPacking* planned;  // device, or null: `packing` as given
-  __device__ void resolve() {
-    if (planned) packing = *planned;
-  }
   // Tile-only keys (the depth-first sort's) read no depth.
   __device__ bool needs_depth() const { return packing.bits > 0; }
-  __device__ void put(uint64_t at, uint32_t tile, uint32_t depth_bits, uint32_t value) const {
-    if (at >= capacity) return;
+  __device__ void put(uint64_t at, uint32_t tile, uint32_t depth_bits) const {
     if (narrow)
       narrow[at] = packing.key32(tile, depth_bits);
     else
       wide[at] = packing.key64(tile, depth_bits);
-    values[at] = value;
   }
 };
 
@@ -128,7 +117,7 @@ __device__ __forceinline__ void emit_gaussian_keys(uint64_t j, const uint32_t* _
                                                    const uint32_t* __restrict__ tiles_touched,  // [N]
                                                    const uint64_t* __restrict__ ends,           // [N] end of each run
                                                    uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
-                                                   const KeyOut& keys) {
+                                                   const KeyOut& keys, uint32_t* __restrict__ values) {  // [L]
   if (j >= n) return;
   const uint64_t i = order ? order[j] : j;
   if (i >= gaussians || tiles_touched[i] == 0) return;  // (depth_order's padding index is N)
@@ -141,13 +130,17 @@ __device__ __forceinline__ void emit_gaussian_keys(uint64_t j, const uint32_t* _
   for (int ty = r.y; ty < r.w && at < end; ++ty) {
     for (int tx = r.x; tx < r.z && at < end; ++tx) {
       if (!hit(tx, ty)) continue;
-      keys.put(at, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits, static_cast<uint32_t>(i));
+      keys.put(at, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits);
+      values[at] = static_cast<uint32_t>(i);
       ++at;
     }
   }
   // Unfilled slots (counting said more than emission found: never expected) become sentinels.
   const auto sentinel = static_cast<uint32_t>(tiles_x * tiles_y);
-  for (; at < end; ++at) keys.put(at, sentinel, 0xffffffffu, static_cast<uint32_t>(i));
+  for (; at < end; ++at) {
+    keys.put(at, sentinel, 0xffffffffu);
+    values[at] = static_cast<uint32_t>(i);
+  }
 }
 
 // Thread j of the walk (`order` given) or of each walked chunk with entries (index order).
@@ -159,10 +152,10 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
                      const uint32_t* __restrict__ tiles_touched,  // [N]
                      const uint64_t* __restrict__ ends,           // [N] end of each Gaussian's run
                      const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
-                     ChunkWalk walk, uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys) {
-  keys.resolve();
+                     ChunkWalk walk, uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
+                     uint32_t* __restrict__ values) {  // [L]
   for_each_walked(order, walk, chunk_total, [&](uint64_t j) {
-    emit_gaussian_keys(j, order, tests, depth, rect, tiles_touched, ends, n, gaussians, tiles_x, tiles_y, keys);
+    emit_gaussian_keys(j, order, tests, depth, rect, tiles_touched, ends, n, gaussians, tiles_x, tiles_y, keys, values);
   });
 }
 
@@ -198,7 +191,7 @@ __device__ __forceinline__ void emit_mask_keys_warp(uint64_t j, const uint32_t* 
                                                     const uint32_t* __restrict__ tiles_touched,      // [N]
                                                     const uint64_t* __restrict__ ends,               // [N]
                                                     uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y,
-                                                    const KeyOut& keys) {
+                                                    const KeyOut& keys, uint32_t* __restrict__ values) {  // [L]
   constexpr unsigned kAll = 0xffffffffu;
   const auto lane = static_cast<int>(threadIdx.x & 31u);
   // This lane's run [start, end). Lanes past the walk (or the depth order's padding) get a run
@@ -258,10 +251,11 @@ __device__ __forceinline__ void emit_mask_keys_warp(uint64_t j, const uint32_t* 
       const int b = nth_set_bit(owner_mask, rank);
       const uint32_t tx = (owner_corner & 0xffffu) + static_cast<uint32_t>(b % owner_width);
       const uint32_t ty = (owner_corner >> 16) + static_cast<uint32_t>(b / owner_width);
-      keys.put(s, ty * static_cast<uint32_t>(tiles_x) + tx, owner_depth, owner_index);
+      keys.put(s, ty * static_cast<uint32_t>(tiles_x) + tx, owner_depth);
     } else {  // counting said more than the mask holds: never expected
-      keys.put(s, sentinel, 0xffffffffu, owner_index);
+      keys.put(s, sentinel, 0xffffffffu);
     }
+    values[s] = owner_index;
   }
 }
 
@@ -274,10 +268,11 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
                           const uint32_t* __restrict__ tiles_touched,  // [N]
                           const uint64_t* __restrict__ ends,           // [N]
                           const uint32_t* __restrict__ chunk_total,    // [chunks], with no order
-                          ChunkWalk walk, uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys) {
-  keys.resolve();
+                          ChunkWalk walk, uint64_t n, uint64_t gaussians, int tiles_x, int tiles_y, KeyOut keys,
+                          uint32_t* __restrict__ values) {  // [L]
   for_each_walked(order, walk, chunk_total, [&](uint64_t j) {
-    emit_mask_keys_warp(j, order, tile_mask, depth, rect, tiles_touched, ends, n, gaussians, tiles_x, tiles_y, keys);
+    emit_mask_keys_warp(j, order, tile_mask, depth, rect, tiles_touched, ends, n, gaussians, tiles_x, tiles_y, keys,
+                        values);
   });
 }
 
@@ -292,8 +287,8 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
                                                                      const ushort4* __restrict__ rect,            // [N]
                                                                      const uint32_t* __restrict__ tiles_touched,  // [N]
                                                                      const uint64_t* __restrict__ ends,           // [N]
-                                                                     int tiles_x, int tiles_y, KeyOut keys) {
-  keys.resolve();
+                                                                     int tiles_x, int tiles_y, KeyOut keys,
+                                                                     uint32_t* __restrict__ values) {  // [L]
   constexpr int kWarps = tune::kBigThreads / 32;
   __shared__ uint32_t warp_hits[kWarps];
   const unsigned lane = threadIdx.x & 31u, warp = threadIdx.x / 32u;
@@ -316,12 +311,14 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
       const unsigned hits = __ballot_sync(0xffffffffu, hit);
       const uint64_t slot = at + static_cast<uint64_t>(__popc(hits & ((1u << lane) - 1u)));
       if (hit && slot < end) {
-        keys.put(slot, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits, i);
+        keys.put(slot, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits);
+        values[slot] = i;
       }
       at += static_cast<uint64_t>(__popc(hits));
     }
     for (uint64_t s = at + lane; s < end; s += 32) {  // never expected, as in emit_keys_kernel
-      keys.put(s, sentinel, 0xffffffffu, i);
+      keys.put(s, sentinel, 0xffffffffu);
+      values[s] = i;
     }
   }
   const uint64_t items = static_cast<uint64_t>(big.count[1]) * tune::kHugeParts;  // (huge one, part)
@@ -359,13 +356,15 @@ __global__ void __launch_bounds__(tune::kBigThreads) emit_big_kernel(BigList big
       }
       const uint64_t slot = at + before + static_cast<uint64_t>(__popc(hits & ((1u << lane) - 1u)));
       if (hit && slot < end) {
-        keys.put(slot, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits, i);
+        keys.put(slot, static_cast<uint32_t>(ty * tiles_x + tx), depth_bits);
+        values[slot] = i;
       }
       at += round;
       __syncthreads();  // warp_hits is rewritten next round
     }
     for (uint64_t s = at + threadIdx.x; s < end; s += blockDim.x) {  // never expected
-      keys.put(s, sentinel, 0xffffffffu, i);
+      keys.put(s, sentinel, 0xffffffffu);
+      values[s] = i;
     }
   }
 }
@@ -409,9 +408,9 @@ void gaussian_ends(const Projected& p, uint64_t n, const ChunkWalk& walk, const 
 void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const ChunkWalk& chunks, const CameraParams& cam,
                const TileTests& tests, const BigList& big, uint64_t* wide_keys, uint32_t* narrow_keys,
                DepthKeyPacking packing, uint32_t* values, const uint32_t* order, uint64_t order_count,
-               cudaStream_t stream, const ListSlots& slots) {
+               cudaStream_t stream) {
   if (n == 0) return;
-  const KeyOut keys{wide_keys, narrow_keys, packing, values, slots.capacity, slots.planned};
+  const KeyOut keys{wide_keys, narrow_keys, packing};
   const uint64_t walk = order ? order_count : n;
   // A thread per Gaussian of the order, or a block per walked chunk.
   const uint64_t blocks = order ? (walk + tune::kGaussianThreads - 1) / tune::kGaussianThreads : chunks.blocks();
@@ -423,16 +422,16 @@ void emit_keys(const Projected& p, const uint64_t* ends, uint64_t n, const Chunk
   if (walk > 0 && mask) {
     emit_mask_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
         order, mask, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, chunks, walk, n, cam.tiles_x, cam.tiles_y,
-        keys);
+        keys, values);
     CATGS_CUDA_LAUNCHED("emit_mask_keys_kernel");
   } else if (walk > 0) {
     emit_keys_kernel<<<static_cast<unsigned>(blocks), tune::kGaussianThreads, 0, stream>>>(
         order, tests, p.depth, p.rect, p.tiles_touched, ends, p.chunk_total, chunks, walk, n, cam.tiles_x, cam.tiles_y,
-        keys);
+        keys, values);
     CATGS_CUDA_LAUNCHED("emit_keys_kernel");
   }
   emit_big_kernel<<<tune::kBigBlocks, tune::kBigThreads, 0, stream>>>(big, tests, p.depth, p.rect, p.tiles_touched,
-                                                                      ends, cam.tiles_x, cam.tiles_y, keys);
+                                                                      ends, cam.tiles_x, cam.tiles_y, keys, values);
   CATGS_CUDA_LAUNCHED("emit_big_kernel");
 }
 

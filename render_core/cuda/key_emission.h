@@ -39,16 +39,9 @@ void gaussian_ends(const Projected& projected, uint64_t n, const ChunkWalk& walk
 // 32-bit into it (the single sort's [tile | quantised depth]; the tile id alone for the
 // depth-first sort). `order` (or null: the Gaussians of the chunks of `chunks`, skipping chunks
 // without entries): the `order_count` Gaussians to walk, in that order (depth_order_ends's).
-// `slots`: a list counted first fills exactly its length; a list sized ahead (list_plan.h) has
-// `capacity` slots, writes past them are dropped (the frame is drawn again), and its keys take
-// the packing the device planned (`planned`, read instead of `packing`).
-struct ListSlots {
-  uint64_t capacity = ~0ull;
-  const DepthKeyPacking* planned = nullptr;
-};
 void emit_keys(const Projected& projected, const uint64_t* ends, uint64_t n, const ChunkWalk& chunks,
                const CameraParams& cam, const TileTests& tests, const BigList& big, uint64_t* wide_keys,
                uint32_t* narrow_keys, DepthKeyPacking packing, uint32_t* values, const uint32_t* order,
-               uint64_t order_count, cudaStream_t stream, const ListSlots& slots = {});
+               uint64_t order_count, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

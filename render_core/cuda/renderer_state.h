@@ -193,32 +193,6 @@ struct CudaRenderer::State {
   int window = 0;
   bool key_frame = true;
 
-  // Frames sized ahead (list_plan.h; CudaRenderer::draw_sized_ahead): the device's plan, its
-  // pinned host copy with the frame's counts (read once the frame is done), the list lengths of
-  // the last frames at this size (the next capacity), and whether a frame's readback is still
-  // to be settled (settle_sized_ahead).
-  struct SizedAheadReadback {
-    stages::ListPlan plan;
-    unsigned long long counts[kReadSlots];  // counters from kReadListLength on
-  };
-  GrowBuffer list_plan;
-  SizedAheadReadback* host_after = nullptr;  // pinned [1]
-  static constexpr int kLengthHistory = 4;
-  uint64_t recent_entries[kLengthHistory] = {};
-  int recent_count = 0, recent_next = 0;
-  int history_width = 0, history_height = 0;
-  uint64_t sized_capacity = 0;  // the pending frame's
-  bool sized_pending = false;
-  std::size_t sized_frames = 0, sized_redos = 0;
-  // The capacity for the next frame at `width` x `height` (0: no history, count it first):
-  // the longest of the last kLengthHistory lists with tune::kSizedAheadHeadroom.
-  uint64_t sized_ahead_capacity(int frame_width, int frame_height) const;
-  // Records a frame's list length at its size.
-  void note_list_length(int frame_width, int frame_height, uint64_t entries);
-  // Grows the split plan's buffers for `capacity` slices and `slots` partial slots (their
-  // per-tile state set once when allocated: task_split.h).
-  void ensure_slice_buffers(uint32_t tiles, uint64_t capacity, uint64_t slots);
-
   // Grows the buffers every frame of a scene of `n` Gaussians at this camera's size needs: the
   // per-chunk lists for the scene, the per-slot buffers for slot_chunks (at first a guess:
   // initial_slot_chunks), per tile and pixel.
@@ -352,7 +326,6 @@ struct CudaRenderer::State {
                                 &slot_finished,
                                 &plan_scratch,
                                 &catgs_counters,
-                                &list_plan,
                                 &yuv})
       b += g->bytes();
     return b;
@@ -361,7 +334,6 @@ struct CudaRenderer::State {
 
   ~State() {
     if (host_counts) cudaFreeHost(host_counts);
-    if (host_after) cudaFreeHost(host_after);
     if (host_catgs) cudaFreeHost(host_catgs);
     if (catgs_readback) cudaEventDestroy(catgs_readback);
     if (plan_ready) cudaEventDestroy(plan_ready);

@@ -8,7 +8,6 @@
 #include "speculative_preprocess.h"  // stage 1 (catgs key frames) and the motion M
 #include "subframe_features.h"       // catgs sub-frames: frustum cache, features, containment
 #include "key_emission.h"            // stage 2: scan, emission
-#include "list_plan.h"               // stage 2a of a frame sized ahead: its key, slice length, redo
 #include "depth_order.h"             // stage 2a': the depth-first sort's order
 #include "sort.h"                    // stage 3
 #include "tile_ranges.h"             // stage 4 and the heavy-first tile order (vanilla)

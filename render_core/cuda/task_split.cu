@@ -72,9 +72,8 @@ __device__ __forceinline__ unsigned long long slices_and_slots(uint32_t n) {
 // its slices and slots (a block reduction) and its longest first slice.
 __global__ void __launch_bounds__(kPlanThreads)
     plan_count_kernel(const uint2* __restrict__ ranges,  // [tiles]
-                      uint32_t tiles, uint32_t first_tile, uint32_t end_tile, uint64_t avg,
-                      const uint64_t* __restrict__ device_avg, bool split, PlanScratch scratch) {
-  if (device_avg) avg = *device_avg;
+                      uint32_t tiles, uint32_t first_tile, uint32_t end_tile, uint64_t avg, bool split,
+                      PlanScratch scratch) {
   using Reduce = cub::BlockReduce<unsigned long long, kPlanThreads>;
   __shared__ typename Reduce::TempStorage reduce_temp;
   __shared__ unsigned count[kGroups], most;
@@ -111,12 +110,10 @@ __global__ void __launch_bounds__(kPlanThreads)
 // block fills part of the order past the total with kNoSlice.
 __global__ void __launch_bounds__(kPlanThreads)
     plan_place_kernel(const uint2* __restrict__ ranges,  // [tiles]
-                      uint32_t tiles, uint32_t first_tile, uint32_t end_tile, uint64_t avg,
-                      const uint64_t* __restrict__ device_avg, bool split, uint64_t capacity, SlicePlan plan,
-                      PlanScratch scratch,
+                      uint32_t tiles, uint32_t first_tile, uint32_t end_tile, uint64_t avg, bool split,
+                      uint64_t capacity, SlicePlan plan, PlanScratch scratch,
                       uint32_t* __restrict__ order,      // [capacity]
                       uint32_t* __restrict__ longest) {  // [1]
-  if (device_avg) avg = *device_avg;
   using Scan = cub::BlockScan<unsigned long long, kPlanThreads>;
   __shared__ typename Scan::TempStorage scan_temp;
   __shared__ unsigned next[kGroups];
@@ -186,10 +183,6 @@ uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice) {
   return tiles + entries / split_average(tiles, entries, min_slice);
 }
 
-uint64_t split_slots_bound(uint32_t tiles, uint64_t bound, uint64_t min_slice) {
-  return std::min<uint64_t>(tiles, bound / std::max<uint64_t>(1, min_slice));
-}
-
 std::size_t plan_scratch_bytes(uint32_t tiles) {
   const uint64_t blocks = plan_blocks(tiles);
   return blocks * (sizeof(unsigned long long) + (kGroups + 1) * sizeof(unsigned));
@@ -197,14 +190,13 @@ std::size_t plan_scratch_bytes(uint32_t tiles) {
 
 void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t avg, uint64_t capacity, bool split,
                  const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream,
-                 uint32_t first_tile, uint32_t end_tile, const uint64_t* device_avg) {
+                 uint32_t first_tile, uint32_t end_tile) {
   const uint32_t blocks = plan_blocks(tiles);
   const PlanScratch s = plan_scratch(scratch, blocks);
-  plan_count_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, first_tile, end_tile, avg, device_avg, split,
-                                                         s);
+  plan_count_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, first_tile, end_tile, avg, split, s);
   CATGS_CUDA_LAUNCHED("plan_count_kernel");
-  plan_place_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, first_tile, end_tile, avg, device_avg, split,
-                                                         capacity, plan, s, order, longest);
+  plan_place_kernel<<<blocks, kPlanThreads, 0, stream>>>(ranges, tiles, first_tile, end_tile, avg, split, capacity,
+                                                         plan, s, order, longest);
   CATGS_CUDA_LAUNCHED("plan_place_kernel");
 }
 

@@ -41,11 +41,6 @@ uint64_t slice_capacity(uint32_t tiles, uint64_t entries, uint64_t min_slice);
 // frame's, avg = split_average(tiles, frame entries, min_slice), so its tiles split as in one pass;
 // its `entries` entries make at most tiles + entries / avg slices.
 inline uint64_t pass_slice_capacity(uint32_t tiles, uint64_t entries, uint64_t avg) { return tiles + entries / avg; }
-// A list sized ahead (list_plan.h) of at most `bound` entries, whose slice length the device
-// works out (split_average of its own length, >= max(min_slice, L / tiles)): its split tiles
-// have at most split_slots_bound(tiles, bound, min_slice) slices (L / avg <= min(L / min_slice,
-// tiles)), so tiles + that many bounds its slices.
-uint64_t split_slots_bound(uint32_t tiles, uint64_t bound, uint64_t min_slice);
 
 // order[] past the slice total (its blocks return at once).
 inline constexpr uint32_t kNoSlice = 0xffffffffu;
@@ -62,11 +57,9 @@ inline constexpr uint32_t kNoSlice = 0xffffffffu;
 // `avg`: the slice length (split_average; a pass's, its frame's), `capacity`: the order's length
 // (slice_capacity, or pass_slice_capacity for a pass). Only tiles [first_tile, end_tile) get
 // slices (a pass's region: the other tiles keep the other passes' pixels); the rest none.
-// `device_avg` (or null): the slice length read on the device instead of `avg` (a list sized
-// ahead: list_plan.h).
 std::size_t plan_scratch_bytes(uint32_t tiles);
 void plan_slices(const uint2* ranges, uint32_t tiles, uint64_t avg, uint64_t capacity, bool split,
                  const SlicePlan& plan, void* scratch, uint32_t* order, uint32_t* longest, cudaStream_t stream,
-                 uint32_t first_tile = 0, uint32_t end_tile = 0xffffffffu, const uint64_t* device_avg = nullptr);
+                 uint32_t first_tile = 0, uint32_t end_tile = 0xffffffffu);
 
 }  // namespace catgs::cuda::stages

@@ -85,13 +85,6 @@ inline constexpr uint64_t kChunkWalkBlocks = 4096;
 // creeps upwards does not reallocate every frame.
 inline constexpr double kGrowthFactor = 1.25;
 
-// A frame sized ahead (list_plan.h) gives its list the longest of the last frames' lengths at
-// its size times this, plus kSizedAheadFloor entries: the sort walks the headroom too (sentinel
-// keys), and a list that outgrows it is drawn again, counted first. The share of frames drawn
-// again and the sort's cost of the headroom are in tests/gpu/RESULTS.md ("Frames sized ahead").
-inline constexpr double kSizedAheadHeadroom = 1.125;
-inline constexpr uint64_t kSizedAheadFloor = 4096;
-
 static_assert(kRasterThreads == 256, "rasterizer assumes 16 x 16 tiles and 256-thread blocks");
 static_assert(kRasterBatch == kRasterThreads, "each thread fetches exactly one Gaussian per round");
 static_assert(kRasterThreads % 32 == 0, "rasterizer blocks are whole warps");

@@ -76,7 +76,7 @@ inline constexpr int kMaxDepthShift = 8;
 // 32 - tile_key_bits(tiles) bits with shift <= kMaxDepthShift (at 1920x1080: 19 bits, so depth
 // ranges up to 2^27 patterns, 16 binades, e.g. 0.1 to 6500 units), else the plain key. The
 // returned packing's bits < 32 says which: a 32-bit key. Nothing listed (low > high): plain.
-CATGS_KEY_HD DepthKeyPacking single_sort_packing(uint32_t low, uint32_t high, uint32_t tiles) {
+inline DepthKeyPacking single_sort_packing(uint32_t low, uint32_t high, uint32_t tiles) {
   if (low > high) return plain_key_packing();
   const int room = 32 - tile_key_bits(tiles);
   int need = 0;  // bits of high - low
@@ -84,18 +84,6 @@ CATGS_KEY_HD DepthKeyPacking single_sort_packing(uint32_t low, uint32_t high, ui
   if (need <= room) return {low, need, 0};
   if (need - room <= kMaxDepthShift) return {low, room, need - room};
   return plain_key_packing();
-}
-// The same key with the tile id at a fixed place, for a frame whose list is sized ahead (the host
-// picks the key's width before the depths are known: CudaRenderer's sized-ahead frames): every
-// bit the tile id leaves holds depth, {low, 32 - tile_key_bits(tiles), shift}. Wherever
-// single_sort_packing(low, high, tiles) is narrow this orders (tile, depth) pairs exactly as it
-// does (its depth codes are the same numbers, below 2^bits <= 2^(32 - tile bits)), so a stable
-// sort gives the same list; `*fits` is false where it is not (the plain key is needed).
-// Nothing listed (low > high): fits, any key will do.
-CATGS_KEY_HD DepthKeyPacking room_packing(uint32_t low, uint32_t high, uint32_t tiles, bool* fits) {
-  const DepthKeyPacking single = single_sort_packing(low, high, tiles);
-  *fits = low > high || single.bits < 32;
-  return {low > high ? 0u : single.base, 32 - tile_key_bits(tiles), single.bits < 32 ? single.shift : 0};
 }
 // Whether `p` makes 32-bit keys.
 constexpr bool is_narrow(const DepthKeyPacking& p) { return p.bits < 32; }

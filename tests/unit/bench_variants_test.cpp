@@ -34,17 +34,6 @@ TEST(BenchVariants, PipelineNamesTakeTheDefaults) {
   }
 }
 
-TEST(BenchVariants, ExactReadbackIsExactCountedFirst) {
-  const Variant readback = parse_variant("exact-readback");
-  EXPECT_EQ(readback.name, "exact-readback");
-  EXPECT_EQ(readback.pipeline, Pipeline::exact);
-  EXPECT_TRUE(readback.counts_readback);
-  EXPECT_FALSE(parse_variant("exact").counts_readback);
-  EXPECT_FALSE(parse_variant("catgs").counts_readback);
-  EXPECT_TRUE(contains(error_of("exact-readback{window=2}"), "takes no settings"));
-  EXPECT_TRUE(contains(error_of("exact-readbacks"), "unknown name"));
-}
-
 TEST(BenchVariants, PresetsExpandToTheirSettings) {
   const SpeculationParams defaults;
   const Variant nocache = parse_variant("catgs-nocache");

@@ -17,37 +17,6 @@
 namespace catgs {
 namespace {
 
-// A frame sized ahead (list_plan.h) keys with room_packing, the tile id at a fixed place: every
-// pair compares as under single_sort_packing's key (so a stable sort gives the same list), the
-// tile reads back, and it refuses exactly the ranges single_sort_packing gives the plain key.
-TEST(KeyPacking, RoomPackingOrdersAsTheSingleSortKey) {
-  std::mt19937 rng(23);
-  for (const uint32_t tiles : {920u, 3600u, 8160u, 40000u}) {
-    const int room = 32 - fm::tile_key_bits(tiles);
-    for (const auto& [near, far] : std::vector<std::pair<float, float>>{
-             {1.0f, 1.0f}, {1.0f, 1.0000001f}, {0.2f, 3.0f}, {0.01f, 100.0f}, {0.1f, 6000.0f}, {1e-6f, 3e38f}}) {
-      const uint32_t lo = fm::float_bits(near), hi = fm::float_bits(far);
-      const fm::DepthKeyPacking single = fm::single_sort_packing(lo, hi, tiles);
-      bool fits = false;
-      const fm::DepthKeyPacking p = fm::room_packing(lo, hi, tiles, &fits);
-      ASSERT_EQ(fits, fm::is_narrow(single)) << near << ".." << far;
-      if (!fits) continue;
-      ASSERT_EQ(p.bits, room);
-      std::uniform_int_distribution<uint32_t> depth(lo, hi), tile(0, tiles - 1);
-      for (int k = 0; k < 50000; ++k) {
-        const uint32_t ta = tile(rng), tb = (k & 1) ? ta : tile(rng), da = depth(rng), db = depth(rng);
-        const uint32_t ra = p.key32(ta, da), rb = p.key32(tb, db), sa = single.key32(ta, da), sb = single.key32(tb, db);
-        ASSERT_EQ(p.tile_of32(ra), ta);
-        ASSERT_EQ(ra < rb, sa < sb);
-        ASSERT_EQ(ra == rb, sa == sb);
-      }
-    }
-    bool fits = false;
-    (void)fm::room_packing(1u, 0u, tiles, &fits);  // nothing listed
-    EXPECT_TRUE(fits);
-  }
-}
-
 TEST(KeyPacking, NarrowKeysNeverInvertThePlainOrder) {
   std::mt19937 rng(19);
   const uint32_t tiles = 8160;  // 1920x1080

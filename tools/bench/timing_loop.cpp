@@ -262,9 +262,7 @@ class QualityCheck {
 
 PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>& scene, const Variant& variant,
                                  const TimingPlan& plan, QualityCheck& quality, std::size_t used_before_scene) {
-  cuda::CudaOptions cuda_options;
-  cuda_options.sized_ahead = !variant.counts_readback;
-  cuda::CudaRenderer r(scene, options_of(variant, plan), cuda_options);
+  cuda::CudaRenderer r(scene, options_of(variant, plan));
   PipelineResult res = result_of(variant);
   EventTimer timer;
   for (int k = 0; k < plan.warmup; ++k) {

@@ -16,7 +16,6 @@ struct Preset {
 };
 constexpr Preset kPresets[] = {{"catgs-nocache", "cache=off"}, {"catgs-nosplit", "split=off"}};
 const std::string kWindowPreset = "catgs-w";  // catgs-wN = catgs{window=N}
-const std::string kReadbackName = "exact-readback";
 
 std::invalid_argument bad_variant(const std::string& text, const std::string& why) {
   return std::invalid_argument("pipeline variant '" + text + "': " + why);
@@ -29,10 +28,6 @@ bool expand_name(const std::string& name, Pipeline& pipeline, std::string& setti
   settings.clear();
   if (name == "vanilla" || name == "exact" || name == "catgs") {
     pipeline = parse_pipeline(name);
-    return true;
-  }
-  if (name == kReadbackName) {
-    pipeline = Pipeline::exact;
     return true;
   }
   pipeline = Pipeline::catgs;
@@ -73,7 +68,6 @@ Variant parse_variant(const std::string& text) {
   split_braces(text, name, braced, braces);
   if (!expand_name(name, v.pipeline, v.settings))
     throw bad_variant(text, "unknown name '" + name + "'\n" + variant_syntax());
-  v.counts_readback = name == kReadbackName;
   if (braces && v.pipeline != Pipeline::catgs)
     throw bad_variant(text, std::string(pipeline_name(v.pipeline)) + " takes no settings (catgs only)");
   if (!braced.empty()) v.settings += (v.settings.empty() ? "" : ",") + braced;
@@ -111,7 +105,6 @@ std::string variant_syntax() {
   std::string out =
       "pipeline variants (--pipeline V[,V...]; commas inside braces belong to the braces):\n"
       "  vanilla | exact | catgs[{SETTINGS}]   SETTINGS: name=value[,name=value...], applied in order\n"
-      "  exact-readback: exact with the counts read back mid-frame (not sized ahead; CUDA)\n"
       "  presets (the paper's ablations), which take {SETTINGS} after them too:\n";
   for (const Preset& preset : kPresets)
     out += "    " + std::string(preset.name) + " = catgs{" + preset.settings + "}\n";

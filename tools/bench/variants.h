@@ -6,8 +6,6 @@
 // only. The paper's ablations are presets that expand to settings, and take braces too:
 //   catgs-nocache = catgs{cache=off}, catgs-nosplit = catgs{split=off}, catgs-wN = catgs{window=N},
 //   catgs-w2{backoff=0} = catgs{window=2,backoff=0}.
-// exact-readback is exact with its counts read back mid-frame (CudaOptions::sized_ahead off), for
-// the side-by-side tables of frames sized ahead (CUDA only; the CPU core has no readback).
 // Anything else is an error (std::invalid_argument) that lists this syntax.
 #pragma once
 
@@ -23,7 +21,6 @@ struct Variant {
   Pipeline pipeline = Pipeline::exact;
   std::string settings;           // the settings applied, presets expanded ("window=2,backoff=0"; "" for none)
   SpeculationParams speculation;  // the defaults with `settings` applied
-  bool counts_readback = false;   // exact-readback: every frame counted first (CudaOptions::sized_ahead off)
 };
 
 // One variant ("catgs-w2{backoff=0}"). Throws std::invalid_argument naming the variant: an unknown
