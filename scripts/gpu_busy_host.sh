@@ -25,7 +25,7 @@ traces="$W/city_mipnerf360_bicycle.trace,$W/city_tandt_train.trace,$W/city_flowe
 metrics() { python3 -c "import urllib.request;print(urllib.request.urlopen('http://127.0.0.1:18080/metrics').read().decode())"; }
 for v in $builds; do
   $SRV/$v/catgs-server --scene $W/city.compressed.ply --port 18080 --renderer cuda --pipeline exact --encoder auto \
-    --threads 48 --max-sessions 64 > "$OUT/server-$v.log" 2>&1 &
+    --max-sessions 64 > "$OUT/server-$v.log" 2>&1 &
   pid=$!
   for _ in $(seq 300); do
     python3 -c "import urllib.request,sys;sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:18080/readyz').status==200 else 1)" 2>/dev/null && break

@@ -106,8 +106,11 @@ unpack() {
 start_server() {
   local scene=$1 log=$2
   shift 2
+  # The worker pool at its default (one thread per usable core, server/cpu_quota.h), as a deployment
+  # runs it: 48 workers on 16 cores held 18 sessions at 720p where 16 held 26 (issue 62, RESULTS.md
+  # "Sessions per GPU host"). A --threads among the arguments wins.
   "$SRV/bin/catgs-server" --scene "$scene" --port 0 --renderer "${CATGS_RENDERER:-cuda}" --pipeline catgs \
-    --encoder auto --threads 48 --max-sessions 64 --web-root "$ROOT/web_client" "$@" > "$log" 2>&1 &
+    --encoder auto --max-sessions 64 --web-root "$ROOT/web_client" "$@" > "$log" 2>&1 &
   SERVER_PID=$!
   PORT=
   for _ in $(seq 1 1500); do
@@ -314,21 +317,38 @@ rdtrace() {
 # measure TAG N SIZE PORT TRACES SECONDS: one catgs-loadgen run of N sessions against the server
 # (SERVER_PID) with the host's CPU, the server's CPU, GPU utilisation and the most device memory
 # in use -> $W/json/TAG.json. CATGS_LOADGEN_ARGS: more catgs-loadgen options (e.g. --av1).
+# thread_times: the clock (seconds), then a line per thread of the server: TID NAME TICKS (user +
+# system clock ticks; a name may hold spaces: it is what stands between the parentheses).
+thread_times() {
+  date +%s.%N
+  local t line
+  for t in /proc/"$SERVER_PID"/task/*; do
+    line=$(cat "$t/stat" 2>/dev/null) || continue
+    local name=${line#*(}; name=${name%)*}
+    local rest=${line##*) }
+    read -r -a f <<< "$rest"
+    echo "${t##*/} ${name// /_} $((f[11] + f[12]))"
+  done
+}
+
 measure() {
   local tag=$1 n=$2 size=$3 port=$4 traces=$5 seconds=$6 W=/tmp/catgs_sweep
   nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader,nounits -lms 200 > "$W/gpu_$tag.txt" &
   local smi=$! cpu0 srv0 cpu1 srv1
   cpu0=$(head -1 /proc/stat)
   srv0=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
+  thread_times > "$W/threads0_$tag.txt"
   local rc=0
   "$SRV/bin/catgs-loadgen" --port "$port" --sessions "$n" --size "$size" --trace "$traces" \
     --rate 60 --seconds "$seconds" --warmup 30 --json "$W/json/$tag.json" ${CATGS_LOADGEN_ARGS:-} > "$W/load_$tag.txt" 2>&1 || rc=1
   cpu1=$(head -1 /proc/stat)
   srv1=$(awk '{print $14 + $15}' "/proc/$SERVER_PID/stat")
+  thread_times > "$W/threads1_$tag.txt"
   kill "$smi" 2>/dev/null; wait "$smi" 2>/dev/null
-  python3 - "$W/json/$tag.json" "$cpu0" "$cpu1" "$srv0" "$srv1" "$W/gpu_$tag.txt" <<'PY'
-import json, sys
-path, c0, c1, s0, s1, gpu = sys.argv[1:]
+  python3 - "$W/json/$tag.json" "$cpu0" "$cpu1" "$srv0" "$srv1" "$W/gpu_$tag.txt" "$W/threads0_$tag.txt" \
+    "$W/threads1_$tag.txt" <<'PY'
+import json, re, sys
+path, c0, c1, s0, s1, gpu, t0, t1 = sys.argv[1:]
 a = [int(x) for x in c0.split()[1:]]; b = [int(x) for x in c1.split()[1:]]
 d = [y - x for x, y in zip(a, b)]
 busy = 1 - (d[3] + d[4]) / max(1, sum(d))          # idle + iowait
@@ -338,6 +358,22 @@ j = json.load(open(path))
 j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)) / 100.0,
              "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u),
              "gpu_memory_used_mib_max": max(mem) if mem else None}
+# The server's threads (thread_times: the clock, then TID NAME TICKS lines): each one's share of
+# a core over the step, the busiest first, and per name family (digits dropped: catgs-lane,
+# catgs-pool, catgs-lws; x264's threads carry the name of the thread that opened the encoder).
+def times(f):
+    lines = open(f).read().split("\n")
+    return float(lines[0]), {l.split(" ", 1)[0]: l.split(" ", 1)[1].rsplit(" ", 1) for l in lines[1:] if l}
+w0, a = times(t0); w1, b = times(t1)
+hz, wall = 100.0, max(1e-3, w1 - w0)
+share = sorted(((name, (int(ticks) - int(a.get(tid, [name, ticks])[1])) / hz / wall) for tid, (name, ticks) in b.items()),
+               key=lambda x: -x[1])
+families = {}
+for name, f in share:
+    fam = families.setdefault(re.sub(r"\d+$", "", name), {"threads": 0, "cores": 0.0, "busiest": 0.0})
+    fam["threads"] += 1; fam["cores"] += f; fam["busiest"] = max(fam["busiest"], f)
+j["host"]["server_threads_busiest"] = [[n, round(f, 3)] for n, f in share[:8]]
+j["host"]["server_thread_families"] = families
 json.dump(j, open(path, "w"), indent=1)
 PY
   return $rc

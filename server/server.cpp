@@ -9,6 +9,7 @@
 #include "encode/encoder.h"
 #include "proto/message_validation.h"
 #include "process/first_view.h"
+#include "process/thread_name.h"
 #include "process/scene_with_lod.h"
 #include "renderer/device_memory.h"
 #include "session/video_export.h"
@@ -311,7 +312,11 @@ void Server::reload_tls() {
 
 void Server::start_pools() {
   work_.emplace(io_.get_executor());
-  for (int i = 0; i < options_.threads; ++i) workers_.emplace_back([this] { io_.run(); });
+  for (int i = 0; i < options_.threads; ++i)
+    workers_.emplace_back([this, i] {
+      name_this_thread("catgs-pool" + std::to_string(i));
+      io_.run();
+    });
   int lanes = RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads);
   if (options_.render_lanes == 0 && !gpus_->devices().empty())  // the CUDA default is per GPU
     lanes *= static_cast<int>(gpus_->devices().size());

@@ -2,6 +2,8 @@
 
 #include <iostream>
 
+#include "process/thread_name.h"
+
 namespace catgs::server {
 
 namespace {
@@ -34,6 +36,7 @@ void RenderScheduler::start(int lanes, std::int64_t max_pixels_in_flight) {
   for (int i = 0; i < lanes; ++i)
     lanes_.emplace_back([this, i] {
       this_lane = i;
+      name_this_thread("catgs-lane" + std::to_string(i));
       lane_loop();
     });
 }

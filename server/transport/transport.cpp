@@ -12,6 +12,8 @@
 
 #include <libwebsockets.h>
 
+#include "process/thread_name.h"
+
 namespace catgs::server {
 
 namespace {
@@ -208,7 +210,10 @@ void Transport::start() {
   lws_vhost* vhost = lws_get_vhost_by_name(context_, "default");
   port_ = vhost ? lws_get_vhost_listen_port(vhost) : options_.port;
   stopping_ = false;
-  thread_ = std::thread([this] { service_loop(); });
+  thread_ = std::thread([this] {
+    name_this_thread("catgs-lws");
+    service_loop();
+  });
 }
 
 void Transport::stop() {

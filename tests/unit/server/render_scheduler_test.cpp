@@ -13,9 +13,11 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <fstream>
 #include <vector>
 
 #include "render/render_scheduler.h"
+#include "process/thread_name.h"
 #include "server_options.h"
 
 namespace {
@@ -152,6 +154,41 @@ TEST(RenderScheduler, AThrowingFinishLeavesTheLaneRunning) {
   ASSERT_TRUE(s.drain(Clock::now() + std::chrono::seconds(10)));
   s.stop();
   EXPECT_EQ(ran.load(), 1);
+}
+
+// The kernel's name of the calling thread (/proc/thread-self/comm, without its newline).
+std::string kernel_thread_name() {
+  std::ifstream in("/proc/thread-self/comm");
+  std::string name;
+  std::getline(in, name);
+  return name;
+}
+
+// Each lane names its thread "catgs-laneN" (process/thread_name.h), as a host profile shows it;
+// a name past the kernel's 15 characters is cut, not refused.
+TEST(RenderScheduler, LanesAreNamedThreads) {
+  catgs::server::RenderScheduler s;
+  std::mutex m;
+  std::set<std::string> names;
+  for (int i = 0; i < 8; ++i)
+    s.post(static_cast<catgs::server::RenderScheduler::Owner>(i), 1, [&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      std::lock_guard<std::mutex> lock(m);
+      names.insert(kernel_thread_name());
+    });
+  s.start(2, 1 << 20);
+  ASSERT_TRUE(s.drain(std::chrono::steady_clock::now() + std::chrono::seconds(10)));
+  s.stop();
+  for (const std::string& n : names) EXPECT_TRUE(n == "catgs-lane0" || n == "catgs-lane1") << n;
+  EXPECT_FALSE(names.empty());
+
+  std::string cut;
+  std::thread t([&] {
+    catgs::server::name_this_thread("catgs-a-very-long-thread-name");
+    cut = kernel_thread_name();
+  });
+  t.join();
+  EXPECT_EQ(cut, "catgs-a-very-lo");
 }
 
 // --frames-per-lane: 2 with the CUDA renderer, 1 with the CPU one, a given count wins; 1 to 16.

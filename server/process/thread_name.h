@@ -1,0 +1,14 @@
+// Names the calling thread (Linux: /proc/PID/task/TID/comm, what top -H, perf and the GPU
+// machine's ramps show), so a host profile tells the server's threads apart: "catgs-lws" (the
+// transport's service thread), "catgs-lane3" (a render lane), "catgs-pool7" (an Asio worker).
+// Threads a named thread starts (x264's sliced threads inside an encoder) inherit its name.
+// Names past 15 characters are cut to 15 (the kernel's limit); elsewhere than Linux, nothing.
+#pragma once
+
+#include <string>
+
+namespace catgs::server {
+
+void name_this_thread(const std::string& name);
+
+}  // namespace catgs::server
