@@ -107,8 +107,8 @@ start_server() {
   local scene=$1 log=$2
   shift 2
   # The worker pool at its default (one thread per usable core, server/cpu_quota.h), as a deployment
-  # runs it: 48 workers on 16 cores held 18 sessions at 720p where 16 held 26 (issue 62, RESULTS.md
-  # "Sessions per GPU host"). A --threads among the arguments wins.
+  # runs it; more workers than cores cost sessions (RESULTS.md "Sessions per GPU host"). A
+  # --threads among the arguments wins.
   "$SRV/bin/catgs-server" --scene "$scene" --port 0 --renderer "${CATGS_RENDERER:-cuda}" --pipeline catgs \
     --encoder auto --max-sessions 64 --web-root "$ROOT/web_client" "$@" > "$log" 2>&1 &
   SERVER_PID=$!
@@ -347,7 +347,7 @@ measure() {
   kill "$smi" 2>/dev/null; wait "$smi" 2>/dev/null
   python3 - "$W/json/$tag.json" "$cpu0" "$cpu1" "$srv0" "$srv1" "$W/gpu_$tag.txt" "$W/threads0_$tag.txt" \
     "$W/threads1_$tag.txt" <<'PY'
-import json, re, sys
+import json, os, re, sys
 path, c0, c1, s0, s1, gpu, t0, t1 = sys.argv[1:]
 a = [int(x) for x in c0.split()[1:]]; b = [int(x) for x in c1.split()[1:]]
 d = [y - x for x, y in zip(a, b)]
@@ -355,7 +355,7 @@ busy = 1 - (d[3] + d[4]) / max(1, sum(d))          # idle + iowait
 rows = [[float(v) for v in line.split(",")] for line in open(gpu) if line.count(",") == 1]
 u = [r[0] for r in rows]; mem = [r[1] for r in rows]   # percent; MiB of device memory in use
 j = json.load(open(path))
-j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)) / 100.0,
+j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)) / os.sysconf("SC_CLK_TCK"),
              "gpu_util_mean": sum(u) / len(u) if u else None, "gpu_util_samples": len(u),
              "gpu_memory_used_mib_max": max(mem) if mem else None}
 # The server's threads (thread_times: the clock, then TID NAME TICKS lines): each one's share of
@@ -365,7 +365,7 @@ def times(f):
     lines = open(f).read().split("\n")
     return float(lines[0]), {l.split(" ", 1)[0]: l.split(" ", 1)[1].rsplit(" ", 1) for l in lines[1:] if l}
 w0, a = times(t0); w1, b = times(t1)
-hz, wall = 100.0, max(1e-3, w1 - w0)
+hz, wall = os.sysconf("SC_CLK_TCK"), max(1e-3, w1 - w0)
 share = sorted(((name, (int(ticks) - int(a.get(tid, [name, ticks])[1])) / hz / wall) for tid, (name, ticks) in b.items()),
                key=lambda x: -x[1])
 families = {}
