@@ -4,7 +4,6 @@
 #include <cstring>
 #include <map>
 #include <mutex>
-#include <stdexcept>
 #include <string>
 
 #include "renderer/render_passes.h"
@@ -65,8 +64,8 @@ stages::CameraParams camera_params(const Camera& camera) {
   stages::CameraParams cam{};
   static_cast<fm::View&>(cam) = fm::view_of(camera);
   cam.position = camera.position();
-  cam.tiles_x = (camera.width + fm::kTileSize - 1) / fm::kTileSize;  // the list's tiles
-  cam.tiles_y = (camera.height + fm::kTileSize - 1) / fm::kTileSize;
+  cam.tiles_x = (camera.width + tune::kTileSize - 1) / tune::kTileSize;
+  cam.tiles_y = (camera.height + tune::kTileSize - 1) / tune::kTileSize;
   return cam;
 }
 
@@ -215,8 +214,7 @@ void CudaRenderer::State::emit_render_list(uint64_t n, const stages::ChunkWalk& 
 }
 
 uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp,
-                                                uint64_t frame_entries, uint32_t first_tile, uint32_t end_tile,
-                                                const uint2* tile_ranges) {
+                                                uint64_t frame_entries, uint32_t first_tile, uint32_t end_tile) {
   std::size_t* allocs = &allocations;
   const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
   // The slice length of the whole frame (a pass splits its tiles as the single pass would).
@@ -237,7 +235,7 @@ uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries
   if (slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs))
     CATGS_CUDA(cudaMemsetAsync(slot_finished.as<void>(), 0, slot_finished.bytes(), stream));
   note_peak();
-  stages::plan_slices(tile_ranges ? tile_ranges : ranges.as<uint2>(), tiles, avg, capacity, sp.task_splitting, slice_plan(),
+  stages::plan_slices(ranges.as<uint2>(), tiles, avg, capacity, sp.task_splitting, slice_plan(),
                       plan_scratch.as<void>(), slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream,
                       first_tile, end_tile);
   heaviest = heaviest_tile.as<uint32_t>();  // the longest slice
@@ -314,32 +312,11 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
       // average load is rasterized as slices by several blocks and merged, so a few heavy tiles do
       // not hold the frame's tail (docs/history/render_core_task_split.md, "Exact frames split
       // heavy tiles; a one-block split plan; merges in the rasterizer").
-      // Experiment (list tiles coarser than raster tiles): each raster tile walks its list
-      // tile's range, tile-culled; the split plan runs over raster tiles. Exact frames only
-      // (vanilla and catgs are wrong in that build).
-      stages::CameraParams rcam = cam;
-      uint32_t rtiles = tiles, rfirst = first, rend = end;
-      uint64_t rentries = c.entries, rframe = frame.entries;
-      const uint2* rranges = nullptr;
-      constexpr int f = tune::kListTileFactor;
-      if constexpr (f > 1) {
-        if (first != 0 || end != tiles) throw std::runtime_error("list tiles > raster tiles: no passes");
-        rcam.tiles_x = (camera.width + tune::kTileSize - 1) / tune::kTileSize;
-        rcam.tiles_y = (camera.height + tune::kTileSize - 1) / tune::kTileSize;
-        rtiles = rend = static_cast<uint32_t>(rcam.tiles_x * rcam.tiles_y);
-        s.raster_ranges.ensure(rtiles * sizeof(uint2), "raster tile ranges", &s.allocations);
-        stages::expand_ranges(s.ranges.as<uint2>(), cam.tiles_x, rcam.tiles_x, rtiles, f, s.raster_ranges.as<uint2>(),
-                              s.stream);
-        rranges = s.raster_ranges.as<uint2>();
-        rentries *= f * f;
-        rframe *= f * f;
-      }
-      const uint64_t capacity =
-          s.plan_frame_slices(rtiles, rentries, options_.speculation, rframe, rfirst, rend, rranges);
+      const uint64_t capacity = s.plan_frame_slices(tiles, c.entries, options_.speculation, frame.entries, first, end);
       CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
       const stages::SlicePlan plan = s.slice_plan();
       stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values,
-                               proj, rcam, early_termination, f > 1, bg, nullptr, s.partials.as<float4>(),
+                               proj, cam, early_termination, false, bg, nullptr, s.partials.as<float4>(),
                                s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
     } else {
       // vanilla, the reference 3DGS: a block per tile, the heaviest tiles first

@@ -165,7 +165,7 @@ struct CudaRenderer::State {
   // each), its count and scratch.
   GrowBuffer depth_index[2], depth_keys[2], depth_count, depth_temp;
   // Per tile / pixel, and the small counters.
-  GrowBuffer ranges, raster_ranges, heaviest_tile, tile_order, rgb, rgba8, counters;
+  GrowBuffer ranges, heaviest_tile, tile_order, rgb, rgba8, counters;
   const uint32_t* sorted_values = nullptr;
   const uint32_t* heaviest = nullptr;  // device: entries of the heaviest tile (or slice)
 
@@ -234,8 +234,7 @@ struct CudaRenderer::State {
   // frame's list length as `frame_entries` (the slice length is the frame's) and plans tiles
   // [first_tile, end_tile) only.
   uint64_t plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp, uint64_t frame_entries = 0,
-                             uint32_t first_tile = 0, uint32_t end_tile = 0xffffffffu,
-                             const uint2* tile_ranges = nullptr);
+                             uint32_t first_tile = 0, uint32_t end_tile = 0xffffffffu);
 
   // catgs key frames (render_catgs.cpp): grows the trail and frustum-cache buffers; measures M
   // between the key camera and the predicted next one (one 4-byte readback) and returns the
@@ -306,7 +305,6 @@ struct CudaRenderer::State {
                                 &depth_count,
                                 &depth_temp,
                                 &ranges,
-                                &raster_ranges,
                                 &heaviest_tile,
                                 &tile_order,
                                 &rgb,

@@ -66,24 +66,6 @@ __global__ void __launch_bounds__(kOrderThreads) order_tiles_kernel(const uint2*
 
 }  // namespace
 
-namespace {
-__global__ void expand_ranges_kernel(const uint2* list_ranges, int list_tiles_x, int raster_tiles_x,
-                                     uint32_t raster_tiles, int factor, uint2* out) {
-  const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
-  if (t >= raster_tiles) return;
-  const int rx = static_cast<int>(t % static_cast<uint32_t>(raster_tiles_x));
-  const int ry = static_cast<int>(t / static_cast<uint32_t>(raster_tiles_x));
-  out[t] = list_ranges[(ry / factor) * list_tiles_x + rx / factor];
-}
-}  // namespace
-
-void expand_ranges(const uint2* list_ranges, int list_tiles_x, int raster_tiles_x, uint32_t raster_tiles, int factor,
-                   uint2* out, cudaStream_t stream) {
-  expand_ranges_kernel<<<(raster_tiles + 255) / 256, 256, 0, stream>>>(list_ranges, list_tiles_x, raster_tiles_x,
-                                                                       raster_tiles, factor, out);
-  CATGS_CUDA_LAUNCHED("expand_ranges_kernel");
-}
-
 void order_tiles(const uint2* ranges, uint32_t tiles, uint32_t* order, uint32_t* heaviest, cudaStream_t stream) {
   order_tiles_kernel<<<1, kOrderThreads, 0, stream>>>(ranges, tiles, order, heaviest);
   CATGS_CUDA_LAUNCHED("order_tiles_kernel");

@@ -17,10 +17,6 @@ void tile_ranges(const uint64_t* sorted_keys, DepthKeyPacking packing, uint64_t 
 void tile_ranges(const uint32_t* sorted_keys, DepthKeyPacking packing, uint64_t entries, uint32_t tiles, uint2* ranges,
                  cudaStream_t stream);
 
-// Experiment: each raster tile's range, its list tile's (list tiles `factor` raster tiles a side).
-void expand_ranges(const uint2* list_ranges, int list_tiles_x, int raster_tiles_x, uint32_t raster_tiles, int factor,
-                   uint2* out, cudaStream_t stream);
-
 // Stage 4b (tile_ranges.cu): tile ids by decreasing number of entries, to within a quarter of an
 // octave (one block: a histogram of the loads' leading bits, then a scatter), so the
 // rasterizer's blocks start on the heaviest tiles and the light ones fill in behind them

@@ -8,12 +8,8 @@
 
 namespace catgs::cuda::tune {
 
-// Rasterizer: one block per 16 x 16 tile, one thread per pixel. The render list may be binned
-// coarser (fm::kTileSize, the list tile: 32 in the experiment build); a raster tile then walks its
-// list tile's range with the tile cull (blend.cuh blend_range_culled).
-inline constexpr int kTileSize = 16;
-static_assert(fm::kTileSize % kTileSize == 0, "a list tile is whole raster tiles");
-inline constexpr int kListTileFactor = fm::kTileSize / kTileSize;
+// Rasterizer: one block per 16 x 16 tile, one thread per pixel.
+inline constexpr int kTileSize = fm::kTileSize;
 inline constexpr int kRasterThreads = kTileSize * kTileSize;
 // Gaussians fetched into shared memory per round of the rasterizer (one per thread).
 inline constexpr int kRasterBatch = kRasterThreads;

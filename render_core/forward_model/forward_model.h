@@ -23,10 +23,7 @@
 
 namespace catgs::fm {
 
-#ifndef CATGS_TILE_SIZE
-#define CATGS_TILE_SIZE 16
-#endif
-inline constexpr int kTileSize = CATGS_TILE_SIZE;  // list tiles of 16 x 16 pixels (32: experiment)
+inline constexpr int kTileSize = 16;               // tiles of 16 x 16 pixels
 inline constexpr float kMinAlpha = 1.0f / 255.0f;  // alpha below this is skipped
 inline constexpr float kMaxAlpha = 0.99f;          // alpha is clamped to this
 inline constexpr float kMinTransmittance = 1e-4f;  // a pixel stops before T would drop below
