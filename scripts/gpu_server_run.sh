@@ -366,7 +366,9 @@ def times(f):
     return float(lines[0]), {l.split(" ", 1)[0]: l.split(" ", 1)[1].rsplit(" ", 1) for l in lines[1:] if l}
 w0, a = times(t0); w1, b = times(t1)
 hz, wall = os.sysconf("SC_CLK_TCK"), max(1e-3, w1 - w0)
-share = sorted(((name, (int(ticks) - int(a.get(tid, [name, ticks])[1])) / hz / wall) for tid, (name, ticks) in b.items()),
+# A thread absent from the first snapshot started during the step (x264's sliced threads of the
+# step's new sessions): every tick of it is the step's.
+share = sorted(((name, (int(ticks) - int(a.get(tid, [name, 0])[1])) / hz / wall) for tid, (name, ticks) in b.items()),
                key=lambda x: -x[1])
 families = {}
 for name, f in share:
