@@ -102,6 +102,8 @@ std::string server_usage() {
          "                        bound steps up (far detail merges first) and back down with\n"
          "                        hysteresis; auto sizes it per CUDA session from the GPU's\n"
          "                        measured throughput and the sessions sharing it (default auto)\n"
+         "  --occlusion-cull on|off  exact frames skip the chunks the session's last frame found\n"
+         "                        wholly behind its saturated tiles (default on)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -295,7 +297,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.lod = v;
     } else if (a == "--lod-error")
       out.lod_error_px = static_cast<float>(parse_double(a, v, 0.0, 1e6));
-    else if (a == "--splat-budget") {
+    else if (a == "--occlusion-cull") {
+      if (v != "on" && v != "off") throw std::invalid_argument("--occlusion-cull must be on or off, got '" + v + "'");
+      out.occlusion_cull = v == "on";
+    } else if (a == "--splat-budget") {
       out.auto_splat_budget = v == "auto";
       out.splat_budget = v == "auto" || v == "off" ? 0 : static_cast<std::uint64_t>(parse_double(a, v, 0.0, 1e12));
     } else if (a == "--scene-memory-mb")

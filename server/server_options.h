@@ -53,6 +53,10 @@ struct ServerOptions {
   // "auto" (the default; CUDA sessions only), sized from the GPU's measured throughput.
   std::uint64_t splat_budget = 0;
   bool auto_splat_budget = true;
+  // --occlusion-cull on|off: exact frames skip the chunks that the session's last frame found
+  // wholly behind its saturated tiles (RenderOptions::occlusion_culling,
+  // render_core/forward_model/occlusion.h; issue 72). Default on.
+  bool occlusion_cull = true;
   int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
   std::string bind = "0.0.0.0";    // interface address to listen on
   std::string renderer = "auto";   // "cpu" | "cuda" | "auto"

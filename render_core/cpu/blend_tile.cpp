@@ -16,7 +16,8 @@ int clamped_int(float v, int lo, int hi) {
 }  // namespace
 
 void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uint32_t begin, uint32_t end, int tx,
-                int ty, const TileGrid& grid, bool early_termination, glm::vec3* C, float* T, bool* stopped) {
+                int ty, const TileGrid& grid, bool early_termination, glm::vec3* C, float* T, bool* stopped,
+                uint32_t* occluded_at, uint8_t* changed) {
   const int x0 = tx * fm::kTileSize, y0 = ty * fm::kTileSize;
   const int x1 = std::min(x0 + fm::kTileSize, grid.width) - 1;
   const int y1 = std::min(y0 + fm::kTileSize, grid.height) - 1;
@@ -50,11 +51,14 @@ void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uin
         if (early_termination && test_T < fm::kMinTransmittance) {
           done[p] = true;
           if (stopped) stopped[p] = true;
+          if (occluded_at && occluded_at[p] == UINT32_MAX) occluded_at[p] = k;
           --remaining;
           continue;
         }
+        if (changed && T[p] > fm::kOcclusionTransmittance) changed[k] = 1;
         C[p] += color * (alpha * T[p]);
         T[p] = test_T;
+        if (occluded_at && occluded_at[p] == UINT32_MAX && test_T < fm::kOcclusionTransmittance) occluded_at[p] = k;
       }
     }
   }

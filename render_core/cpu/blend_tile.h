@@ -14,8 +14,13 @@ inline constexpr int kTilePixels = fm::kTileSize * fm::kTileSize;
 // early_termination), but a Gaussian visits only the pixels of its q <= q_max box: outside it
 // alpha < 1/255 and the reference would skip it too, so the image is bit-identical.
 // `stopped` (null, or [16 * 16] set to false by the caller): true where a pixel stopped by early
-// termination (rasterize_slices: its composition ends with this slice).
+// termination (rasterize_slices: its composition ends with this slice). `occluded_at` (null, or
+// [16 * 16] set to UINT32_MAX by the caller): the list position of the entry at which the pixel
+// stopped or after which its T fell below fm::kOcclusionTransmittance (the occlusion map).
+// `changed` (null, or [list length]): set to 1 for each entry blended at some pixel while that
+// pixel's T was still above fm::kOcclusionTransmittance (issue 72's "changes any pixel").
 void blend_tile(const ProjectedGaussians& projected, const RenderList& list, uint32_t begin, uint32_t end, int tx,
-                int ty, const TileGrid& grid, bool early_termination, glm::vec3* C, float* T, bool* stopped = nullptr);
+                int ty, const TileGrid& grid, bool early_termination, glm::vec3* C, float* T, bool* stopped = nullptr,
+                uint32_t* occluded_at = nullptr, uint8_t* changed = nullptr);
 
 }  // namespace catgs::cpu

@@ -20,6 +20,7 @@ void CpuRenderer::set_options(const RenderOptions& options) {
   if (options.pipeline == Pipeline::catgs)
     throw std::invalid_argument("the catgs pipeline is not implemented in the CPU renderer yet");
   options_ = options;
+  occlusion_valid_ = false;  // a map of other options (a cut, a pipeline) says nothing now
 }
 
 void CpuRenderer::render(const Camera& camera, Image& out) {
@@ -27,8 +28,20 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   stats_ = {};
   // exact frames split heavy tiles (task splitting, as the CUDA core; renderer.h) and stop each
   // pixel early; vanilla blends a tile whole. Over the budget, in passes (cpu/full_frame.cpp).
-  render_full_frame(*model_, chunks_, camera, options_.pipeline, options_, true, {projected_, list_, ranges_, slices_},
-                    out, stats_);
+  FrameBuffers buffers{projected_, list_, ranges_, slices_};
+  const bool occlusion = options_.occlusion_culling && options_.pipeline == Pipeline::exact;
+  const fm::View view = fm::view_of(camera);
+  if (occlusion && occlusion_valid_) buffers.occlusion = fm::occlusion_map(occlusion_depth_.data(), occlusion_view_, view);
+  stats_.occlusion_map_used = buffers.occlusion.depth != nullptr;
+  if (occlusion) buffers.tile_depth = &occlusion_next_;
+  if (count_changes_) buffers.changed = &changed_;
+  occlusion_valid_ = false;  // until this frame has drawn its own
+  render_full_frame(*model_, chunks_, camera, options_.pipeline, options_, true, buffers, out, stats_);
+  if (occlusion) {
+    std::swap(occlusion_depth_, occlusion_next_);
+    occlusion_view_ = view;
+    occlusion_valid_ = true;
+  }
 }
 
 }  // namespace catgs::cpu

@@ -12,6 +12,7 @@
 #include <glm/glm.hpp>
 
 #include "forward_model/chunk_bounds.h"
+#include "forward_model/occlusion.h"
 #include "forward_model/lod.h"
 #include "forward_model/forward_model.h"
 #include "forward_model/key_packing.h"
@@ -77,10 +78,11 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // of its region (fm::clip_tile_rect; every Gaussian is projected with the whole camera).
 // A scene with LOD (model.lod) projects only the chunks of its cut at `camera` with bound
 // `lod_error_px` (fm::lod_chunk_drawn; 0: the leaves), in every pipeline; the others are skipped
-// as culled chunks are.
+// as culled chunks are. exact also skips the Gaussians `occlusion` (the last frame's map, null
+// depth: none) finds wholly behind that frame's opaque tiles (fm::gaussian_occluded, issue 72).
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
-                float lod_error_px = 0.0f);
+                float lod_error_px = 0.0f, const fm::OcclusionMap& occlusion = {});
 
 // catgs key frame, stage 1 (cpu/speculative_preprocess.cpp; paper sec. 3.1): `path` holds the
 // key camera and the predicted cameras of the window (W + 1 >= 1). Each Gaussian is projected at
@@ -145,10 +147,24 @@ void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split, 
 // consecutive and in list order (plan_slices); `out` becomes grid.width x grid.height (linear RGB
 // floats and RGBA8); `merge_ms`, if given, receives the merge's wall time in milliseconds.
 // Writes only tiles [first_tile, end_tile) (a pass of a frame drawn in passes; `out` keeps the
-// other passes' tiles).
+// other passes' tiles). `tile_opaque_at` (null, or [grid.tile_count()]): those tiles' opaque point
+// P (forward_model/occlusion.h: the list position by which every pixel of the tile had stopped or
+// fallen below fm::kOcclusionTransmittance; UINT32_MAX where a pixel never did), as the CUDA
+// core's rasterize_slices writes it. `changed` (null, or [list length]): blend_tile's measurement
+// of the entries that change a pixel (meaningful for tiles of one slice: a later slice starts its
+// own transmittance at 1).
 void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
                       const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out,
-                      double* merge_ms = nullptr, std::uint32_t first_tile = 0, std::uint32_t end_tile = UINT32_MAX);
+                      double* merge_ms = nullptr, std::uint32_t first_tile = 0, std::uint32_t end_tile = UINT32_MAX,
+                      std::uint32_t* tile_opaque_at = nullptr, std::uint8_t* changed = nullptr);
+
+// The occlusion map (cpu/occlusion_map.cpp; mirrors cuda/occlusion_map.cu): for tiles
+// [first_tile, end_tile), the depth of the entry before each tile's opaque point P
+// (rasterize_slices' tile_opaque_at) into tile_depth, +inf where P is UINT32_MAX. Returns the
+// render-list entries at or behind P over those tiles (FrameStats::entries_behind_opaque).
+std::uint64_t occlusion_map(const ProjectedGaussians& projected, const RenderList& list, const TileRanges& ranges,
+                            const std::uint32_t* tile_opaque_at, std::uint32_t first_tile, std::uint32_t end_tile,
+                            float* tile_depth);
 
 // Stage 2 (cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
 // its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
@@ -204,11 +220,20 @@ void rasterize(const ProjectedGaussians& projected, const RenderList& list, cons
 // draw_in_passes does. Sets stats' counts (visible, render_list_length: every pass's entries,
 // passes, longest_pass, slices: the last pass's) and stage times (summed over the passes, total
 // included); leaves the other fields. The buffers hold the last pass's state.
+// Occlusion culling (forward_model/occlusion.h; exact frames): `occlusion` is the last frame's
+// map, read by pre-processing; `tile_depth`, when given, receives this frame's (resized to the
+// grid's tiles; +inf everywhere without early termination).
 struct FrameBuffers {
   ProjectedGaussians& projected;
   RenderList& list;
   TileRanges& ranges;
   std::vector<TileSlice>& slices;
+  fm::OcclusionMap occlusion{};
+  std::vector<float>* tile_depth = nullptr;
+  // Measurement (issue 72): when given, the entries and Gaussians that change a pixel
+  // (blend_tile's `changed`) are counted into FrameStats; the frame is then drawn without task
+  // splitting, so every tile's transmittance is the composed one.
+  std::vector<std::uint8_t>* changed = nullptr;
 };
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
@@ -238,6 +263,19 @@ class CpuRenderer final : public Renderer {
   RenderList list_;
   TileRanges ranges_;
   std::vector<TileSlice> slices_;  // exact: the split plan
+  // The measurement of the entries and Gaussians that change a pixel (FrameStats, issue 72):
+  // slow, for benchmarks; off by default.
+ public:
+  void count_changes(bool on) { count_changes_ = on; }
+
+ private:
+  bool count_changes_ = false;
+  std::vector<std::uint8_t> changed_;
+  // Occlusion culling (RenderOptions::occlusion_culling): the last frame's map and where it was
+  // drawn (valid: a frame drew it with the current options), and the next frame's.
+  std::vector<float> occlusion_depth_, occlusion_next_;
+  fm::View occlusion_view_{};
+  bool occlusion_valid_ = false;
   FrameStats stats_;
 };
 

@@ -3,11 +3,25 @@
 // and its catgs key frames without a window (cuda_renderer.cpp), which run the same driver.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 #include "cpu/cpu_renderer.h"
 #include "renderer/render_passes.h"
 
 namespace catgs::cpu {
+
+namespace {
+// Adds the entries that changed a pixel and their distinct Gaussians to stats.
+void count_changes(const RenderList& list, const std::vector<std::uint8_t>& changed, FrameStats& stats) {
+  std::vector<std::uint32_t> gaussians;
+  for (std::size_t k = 0; k < changed.size(); ++k)
+    if (changed[k]) gaussians.push_back(list.values[k]);
+  stats.entries_changing_pixels += gaussians.size();
+  std::sort(gaussians.begin(), gaussians.end());
+  stats.gaussians_changing_pixels +=
+      static_cast<std::size_t>(std::unique(gaussians.begin(), gaussians.end()) - gaussians.begin());
+}
+}  // namespace
 
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
@@ -18,7 +32,14 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
   const SpeculationParams& sp = options.speculation;
   const auto start = clock::now();
   stats.preprocess_ms = stats.keys_ms = stats.sort_ms = stats.ranges_ms = stats.rasterize_ms = stats.merge_ms = 0;
-  preprocess(model, chunks, camera, stages, projected, fm::kAllTiles, options.lod_error_px);
+  preprocess(model, chunks, camera, stages, projected, fm::kAllTiles, options.lod_error_px, buffers.occlusion);
+  // This frame's occlusion map: the rasterizer's opaque points, then their depths.
+  std::vector<std::uint32_t> opaque_at;
+  if (buffers.tile_depth) {
+    buffers.tile_depth->assign(static_cast<std::size_t>(grid.tile_count()), INFINITY);
+    opaque_at.assign(static_cast<std::size_t>(grid.tile_count()), UINT32_MAX);
+  }
+  stats.entries_behind_opaque = 0;
   stats.preprocess_ms += ms_between(start, clock::now());
   const std::uint64_t entries = count_entries(projected);
   stats.visible = static_cast<std::size_t>(
@@ -40,11 +61,17 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
     stats.ranges_ms += ms_between(t, clock::now());
     t = clock::now();
     if (stages == Pipeline::exact) {
-      plan_slices(buffers.ranges, static_cast<std::size_t>(entries), sp.task_splitting, buffers.slices,
-                  static_cast<std::size_t>(sp.min_slice_entries), first, end);
+      plan_slices(buffers.ranges, static_cast<std::size_t>(entries), sp.task_splitting && !buffers.changed,
+                  buffers.slices, static_cast<std::size_t>(sp.min_slice_entries), first, end);
       double merge_ms = 0;
+      if (buffers.changed) buffers.changed->assign(list.values.size(), 0);
       rasterize_slices(projected, list, buffers.slices, grid, early_termination, options.background, out, &merge_ms,
-                       first, end);
+                       first, end, buffers.tile_depth ? opaque_at.data() : nullptr,
+                       buffers.changed ? buffers.changed->data() : nullptr);
+      if (buffers.changed) count_changes(list, *buffers.changed, stats);
+      if (buffers.tile_depth)
+        stats.entries_behind_opaque += occlusion_map(projected, list, buffers.ranges, opaque_at.data(), first, end,
+                                                     buffers.tile_depth->data());
       stats.merge_ms += merge_ms;
       stats.slices = buffers.slices.size();
     } else {
@@ -66,7 +93,7 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
         options.list_budget, camera.width, camera.height, kBytesPerListEntry, entries, stats.visible,
         [&](const fm::TileRect& region) {
           const auto t = clock::now();
-          preprocess(model, chunks, camera, stages, projected, region, options.lod_error_px);
+          preprocess(model, chunks, camera, stages, projected, region, options.lod_error_px, buffers.occlusion);
           stats.preprocess_ms += ms_between(t, clock::now());
           return count_entries(projected);
         },

@@ -52,10 +52,11 @@ struct ViewPass {
   fm::LodCut lod;
   bool exact;
   fm::TileRect region;
+  fm::OcclusionMap occlusion;
   ProjectedGaussians& out;
 
   ViewPass(const GaussianModel& model, const Camera& c, Pipeline pipeline, ProjectedGaussians& o, const fm::TileRect& r,
-           float lod_error_px)
+           float lod_error_px, const fm::OcclusionMap& occ)
       : camera(c),
         grid(TileGrid::of(c.width, c.height)),
         tan_half_fov(static_cast<float>(c.width) / (2.0f * c.fx), static_cast<float>(c.height) / (2.0f * c.fy)),
@@ -64,6 +65,7 @@ struct ViewPass {
         lod(fm::lod_cut(model.lod, view, lod_error_px)),
         exact(pipeline != Pipeline::vanilla),
         region(r),
+        occlusion(occ),
         out(o) {}
 };
 
@@ -81,6 +83,11 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   // pipelines). exact also drops a Gaussian that can never reach 1/255.
   const float q_max = fm::opacity_aware_qmax(opacity);
   if (v.exact && !(q_max > 0.0f)) return;
+  if (v.exact && v.occlusion.depth != nullptr) {  // behind the last frame's opaque tiles
+    const float max_log =
+        std::max(std::max(model.log_scales[3 * i], model.log_scales[3 * i + 1]), model.log_scales[3 * i + 2]);
+    if (fm::gaussian_occluded(mean, std::exp(max_log), q_max, v.occlusion)) return;
+  }
 
   const fm::Cov3 cov3 = fm::covariance_3d(
       {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
@@ -137,11 +144,12 @@ void preprocess_chunk(const GaussianModel& model, const std::vector<fm::ChunkBou
 }  // namespace
 
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
-                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region, float lod_error_px) {
+                Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region, float lod_error_px,
+                const fm::OcclusionMap& occlusion) {
   if (chunks.size() != fm::chunk_count(model.size()))
     throw std::invalid_argument("preprocess: chunk bounds of another scene");
   out.resize(model.size());
-  const ViewPass v(model, camera, pipeline, out, region, lod_error_px);
+  const ViewPass v(model, camera, pipeline, out, region, lod_error_px, occlusion);
   parallel_for(chunks.size(), 16, [&](std::size_t c) { preprocess_chunk(model, chunks, v, c); });
 }
 

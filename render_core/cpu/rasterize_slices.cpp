@@ -16,7 +16,8 @@ namespace catgs::cpu {
 
 void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
                       const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out, double* merge_ms,
-                      std::uint32_t first_tile, std::uint32_t end_tile) {
+                      std::uint32_t first_tile, std::uint32_t end_tile, std::uint32_t* tile_opaque_at,
+                      std::uint8_t* changed) {
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
@@ -25,6 +26,9 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
   // Partial results: [slices, 16 * 16] colour and transmittance.
   std::vector<glm::vec3> partial_color(slices.size() * kTilePixels);
   std::vector<float> partial_T(slices.size() * kTilePixels);
+  // Per slice and pixel: the list position at which it stopped or its T fell below
+  // fm::kOcclusionTransmittance (the occlusion map).
+  std::vector<uint32_t> stop_at(tile_opaque_at ? slices.size() * kTilePixels : 0, UINT32_MAX);
 
   parallel_for(slices.size(), 1, [&](std::size_t s) {
     const TileSlice& slice = slices[s];
@@ -34,7 +38,8 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
     std::fill(C, C + kTilePixels, glm::vec3(0.0f));
     std::fill(T, T + kTilePixels, 1.0f);
     bool stopped[kTilePixels] = {};
-    blend_tile(projected, list, slice.begin, slice.end, tx, ty, grid, early_termination, C, T, stopped);
+    blend_tile(projected, list, slice.begin, slice.end, tx, ty, grid, early_termination, C, T, stopped,
+               tile_opaque_at ? &stop_at[s * kTilePixels] : nullptr, changed);
     for (int p = 0; p < kTilePixels; ++p)
       if (stopped[p]) T[p] = -T[p];
   });
@@ -50,6 +55,10 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
   parallel_for(end > first ? end - first : 0, 1, [&](std::size_t k) {
     const std::size_t tile = first + k;
     const int tx = static_cast<int>(tile) % grid.tiles_x, ty = static_cast<int>(tile) / grid.tiles_x;
+    // The occlusion map's P (forward_model/occlusion.h): past every pixel's occluding position, 0
+    // while none is known, UINT32_MAX once a pixel has none.
+    const bool one_slice = first_slice[tile] + 1 >= slices.size() || slices[first_slice[tile] + 1].tile != tile;
+    uint32_t saturated_at = 0;
     for (int ly = 0; ly < fm::kTileSize; ++ly) {
       const int py = ty * fm::kTileSize + ly;
       if (py >= grid.height) break;
@@ -58,12 +67,25 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
         if (px >= grid.width) break;
         glm::vec3 C(0.0f);
         float T = 1.0f;
+        uint32_t ended_at = UINT32_MAX;
         for (std::size_t s = first_slice[tile]; s < slices.size() && slices[s].tile == tile; ++s) {
           const std::size_t at = s * kTilePixels + static_cast<std::size_t>(ly * fm::kTileSize + lx);
           C += T * partial_color[at];
           T *= std::fabs(partial_T[at]);
+          // A tile of one slice knows the entry, taken to the end of the GPU's round of
+          // fm::kOcclusionRound entries from the slice's start; a split tile, as the GPU's merge,
+          // the slice.
+          if (tile_opaque_at && ended_at == UINT32_MAX) {
+            if (one_slice && stop_at[at] != UINT32_MAX)
+              ended_at = std::min(slices[s].end, slices[s].begin + (stop_at[at] - slices[s].begin) /
+                                                                       fm::kOcclusionRound * fm::kOcclusionRound +
+                                                                   fm::kOcclusionRound);
+            else if (!one_slice && (partial_T[at] < 0.0f || T < fm::kOcclusionTransmittance))
+              ended_at = slices[s].end;
+          }
           if (early_termination && (partial_T[at] < 0.0f || T < fm::kMinTransmittance)) break;
         }
+        saturated_at = std::max(saturated_at, ended_at);
         C += T * background;
         const std::size_t p = static_cast<std::size_t>(py) * grid.width + px;
         for (int c = 0; c < 3; ++c) {
@@ -73,6 +95,7 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
         out.rgba8[4 * p + 3] = 255;
       }
     }
+    if (tile_opaque_at) tile_opaque_at[tile] = saturated_at == 0 ? UINT32_MAX : saturated_at;
   });
   if (merge_ms) *merge_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }

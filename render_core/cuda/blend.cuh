@@ -8,6 +8,7 @@
 
 #include "records.h"
 #include "tunables.h"
+#include "warp_reduce.cuh"
 
 namespace catgs::cuda::stages {
 
@@ -160,10 +161,16 @@ __device__ __forceinline__ float fast_exp2(float x) {
 }
 
 // Pixel state: colour C and transmittance T (start at 0 and 1); done stops the pixel.
+// occluded_from: the end of the round (fm::kOcclusionRound entries from the run's start) in which
+// the pixel stopped or its T fell below fm::kOcclusionTransmittance, kNoStop until then
+// (blend_range; the occlusion map, forward_model/occlusion.h).
+inline constexpr uint32_t kNoStop = 0xffffffffu;
+static_assert(tune::kRasterBatch == fm::kOcclusionRound, "the occlusion map's rounds are the rasterizer's");
 struct PixelState {
   float3 C;
   float T;
   bool done;
+  uint32_t occluded_from = kNoStop;
 };
 
 // Blends the batch entry at byte offset `offset` into the pixel at (fpx, fpy) by the reference
@@ -266,9 +273,23 @@ __device__ __forceinline__ void blend_range(uint32_t begin, uint32_t end,
     }
     __syncthreads();
     blend_batch(batch, min(static_cast<uint32_t>(tune::kRasterBatch), end - base), at, early_termination, px);
+    if (px.occluded_from == kNoStop && (px.done || px.T < fm::kOcclusionTransmittance))
+      px.occluded_from = min(end, base + static_cast<uint32_t>(tune::kRasterBatch));
     __syncthreads();  // shared memory is refilled next round
   }
 }
+
+// The largest `v` over the block (every thread of the block must call it; a barrier inside).
+__device__ __forceinline__ uint32_t block_max(uint32_t v, uint32_t& shared_slot) {
+  if (threadIdx.x == 0) shared_slot = 0u;
+  __syncthreads();
+  v = warp_max(v);
+  if ((threadIdx.x & 31u) == 0u) atomicMax(&shared_slot, v);
+  __syncthreads();
+  return shared_slot;
+}
+
+
 
 // As blend_range, for a list whose entries need not reach this tile at this pose (catgs: a key
 // frame's trail list, walked at the key pose or at a sub-frame's pose). Each round, the thread

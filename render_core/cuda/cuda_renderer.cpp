@@ -44,6 +44,8 @@ CudaRenderer::~CudaRenderer() {
 void CudaRenderer::set_options(const RenderOptions& options) {
   state_->planner.set_params(options.speculation);  // validates; closes the open group
   options_ = options;
+  state_->occlusion_valid = false;  // a map of other options (a cut, a pipeline) says nothing now
+  state_->occlusion_counted = false;
 }
 
 void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
@@ -56,6 +58,7 @@ void CudaRenderer::set_scene(std::shared_ptr<const DeviceScene> scene) {
   CATGS_CUDA(cudaStreamSynchronize(state_->stream));
   scene_ = std::move(scene);
   state_->planner.set_params(options_.speculation);  // the caches index the old scene
+  state_->occlusion_valid = false;
 }
 
 CUstream_st* CudaRenderer::stream() const { return state_->stream; }
@@ -261,14 +264,41 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   CATGS_CUDA(cudaEventRecord(s.events[kStart], s.stream));
   stats_ = {};
   const bool exact = options_.pipeline != Pipeline::vanilla;
-  draw_full_frame(camera, exact, true, exact && depth_first_sort());
+  // Occlusion culling (exact): read the last frame's map, write this frame's into the other
+  // buffer, filled first with the "never saturated" value for the tiles no slice draws.
+  const bool occlusion = exact && options_.occlusion_culling;
+  const fm::View view = fm::view_of(camera);
+  fm::OcclusionMap map{};
+  if (occlusion) {
+    if (s.occlusion_valid) map = fm::occlusion_map(s.occlusion_depth[s.occlusion_read].as<float>(), s.occlusion_view, view);
+    const stages::CameraParams cam = camera_params(camera);
+    const std::size_t tiles = static_cast<std::size_t>(cam.tiles_x) * cam.tiles_y;
+    GrowBuffer& next = s.occlusion_depth[1 - s.occlusion_read];
+    next.ensure(tiles * sizeof(float), "occlusion map", &s.allocations);
+    s.occlusion_opaque_at.ensure(tiles * sizeof(uint32_t), "opaque points", &s.allocations);
+    s.occlusion_behind.ensure(sizeof(unsigned long long), "entries behind opaque points", &s.allocations);
+    // The tiles no slice draws keep these: "never opaque", nothing behind.
+    CATGS_CUDA(cudaMemsetAsync(next.as<void>(), 0x7f, tiles * sizeof(float), s.stream));
+    CATGS_CUDA(cudaMemsetAsync(s.occlusion_opaque_at.as<void>(), 0xff, tiles * sizeof(uint32_t), s.stream));
+    CATGS_CUDA(cudaMemsetAsync(s.occlusion_behind.as<void>(), 0, sizeof(unsigned long long), s.stream));
+  }
+  s.occlusion_valid = false;  // until this frame has drawn its own
+  draw_full_frame(camera, exact, true, exact && depth_first_sort(), map, occlusion);
+  stats_.occlusion_map_used = map.depth != nullptr;
+  s.occlusion_counted = occlusion;
+  if (occlusion) {
+    s.occlusion_read = 1 - s.occlusion_read;
+    s.occlusion_view = view;
+    s.occlusion_valid = true;
+  }
   s.width = camera.width;
   s.height = camera.height;
   stats_ready_ = false;
   return {camera.width, camera.height, s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream};
 }
 
-void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first) {
+void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first,
+                                   const fm::OcclusionMap& occlusion, bool draw_map) {
   State& s = *state_;
   const DeviceScene& scene = *scene_;
   const uint64_t n = scene.size();
@@ -292,7 +322,7 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
     for (;;) {
       CATGS_CUDA(cudaMemsetAsync(counters, 0, kCounterSlots * sizeof(unsigned long long), s.stream));
       stages::preprocess(sv, cam, exact, region, proj, s.live_chunk_list(), counters + kVisibleCount,
-                         counters + kReadDepthLowComplement, s.big_list(), s.stream);
+                         counters + kReadDepthLowComplement, s.big_list(), s.stream, occlusion);
       if (whole) CATGS_CUDA(cudaEventRecord(s.events[kPreprocessed], s.stream));
       const State::ListCounts c = s.count_render_list(s.slots(), s.live_walk(), cam, depth_first);
       if (!c.overflow) return c;
@@ -317,7 +347,12 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
       const stages::SlicePlan plan = s.slice_plan();
       stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values,
                                proj, cam, early_termination, false, bg, nullptr, s.partials.as<float4>(),
-                               s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream);
+                               s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream,
+                               draw_map ? s.occlusion_opaque_at.as<uint32_t>() : nullptr);
+      if (draw_map)
+        stages::occlusion_map(s.occlusion_opaque_at.as<uint32_t>(), s.ranges.as<uint2>(), s.sorted_values, proj, first,
+                              end, s.occlusion_depth[1 - s.occlusion_read].as<float>(),
+                              s.occlusion_behind.as<unsigned long long>(), s.stream);
     } else {
       // vanilla, the reference 3DGS: a block per tile, the heaviest tiles first
       // (longest-processing-time-first scheduling of the raster blocks).
@@ -371,6 +406,11 @@ const FrameStats& CudaRenderer::last_stats() const {
   stats_.ranges_ms = ms(kSorted, kRanged);
   stats_.rasterize_ms = ms(kRanged, kRasterized);
   stats_.total_ms = ms(kStart, kMerged);
+  if (s.occlusion_counted) {  // after kMerged: the map's counter is final
+    unsigned long long behind = 0;
+    CATGS_CUDA(cudaMemcpy(&behind, s.occlusion_behind.as<void>(), sizeof behind, cudaMemcpyDeviceToHost));
+    stats_.entries_behind_opaque = static_cast<std::size_t>(behind);
+  }
   if (options_.pipeline == Pipeline::catgs) {
     if (!s.key_frame) {  // a sub-frame records no key emission, sort or ranges
       stats_.keys_ms = stats_.sort_ms = stats_.ranges_ms = 0.0;

@@ -36,6 +36,7 @@
 
 #include "base/cuda_error.h"
 #include "forward_model/chunk_bounds.h"
+#include "forward_model/occlusion.h"
 #include "renderer/renderer.h"
 
 struct CUstream_st;  // cudaStream_t without the CUDA headers
@@ -234,8 +235,11 @@ class CudaRenderer final : public Renderer {
   // as cpu::render_full_frame), each sorted with the frame's key and split with its slice length.
   // Sets stats_'s visible, render_list_length, passes and longest_pass. Throws RenderBudgetError
   // as draw_in_passes. Used by render_full and by catgs key frames without a window (which sort
-  // in one radix sort: depth_first false).
-  void draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first);
+  // in one radix sort: depth_first false). `occlusion`: the last frame's map for pre-processing
+  // (fm::chunk_occluded; null depth: none); `draw_map`: write this frame's map into
+  // State::occlusion_depth[1 - occlusion_read] (exact frames; buffers sized by the caller).
+  void draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first,
+                       const fm::OcclusionMap& occlusion = {}, bool draw_map = false);
   DeviceFrame render_catgs(const Camera& camera, double time_s);  // render_catgs.cpp
   void catgs_key_frame(const Camera& camera);                     // render_catgs.cpp
   bool catgs_sub_frame(const Camera& camera);                     // render_catgs.cpp

@@ -61,8 +61,9 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     cull_chunks_kernel(SceneView scene, uint64_t count, CameraParams cam, bool exact, LiveChunks live) {
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  mark_chunk(c < count && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)) && lod_drawn(scene, c, cam), c,
-             count, live);
+  mark_chunk(c < count && lod_drawn(scene, c, cam) &&
+                 !(exact && fm::chunk_outside_view(scene.chunks[c], cam)),
+             c, count, live);
 }
 
 // order_live_chunks' second launch, a thread per chunk (after slot = the exclusive sum of keep):
@@ -111,7 +112,7 @@ struct GaussianInView {
 __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64_t s, LoadedGaussian& g,
                                                               const SceneView& scene, const CameraParams& cam,
                                                               bool exact, const fm::TileRect& region,
-                                                              const Projected& out) {
+                                                              const Projected& out, const fm::OcclusionMap& occlusion) {
   GaussianInView r;
   const glm::vec3 p_cam = cam.R * g.mean + cam.t;
   if (!(p_cam.z > cam.near_plane) || p_cam.z > cam.far_plane) return r;  // frustum (near/far)
@@ -119,6 +120,10 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
   const float opacity = fm::sigmoid(g.opacity_logit);
   const float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
   if (exact && !(q_max > 0.0f)) return r;               // never reaches alpha 1/255 anywhere
+  if (exact && occlusion.depth != nullptr) {  // behind the last frame's opaque tiles (fm::gaussian_occluded)
+    const float max_log = fmaxf(fmaxf(scene.log_scales[3 * i], scene.log_scales[3 * i + 1]), scene.log_scales[3 * i + 2]);
+    if (fm::gaussian_occluded(g.mean, expf(max_log), q_max, occlusion)) return r;
+  }
   const glm::vec3 cov2 = fm::covariance_2d(g.covariance(scene, i), cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) return r;
@@ -161,11 +166,12 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
 __device__ __forceinline__ void preprocess_chunk_view(uint64_t c, uint64_t k, LoadedGaussian* g, const SceneView& scene,
                                                       const CameraParams& cam, bool exact, const fm::TileRect& region,
                                                       const Projected& out, unsigned long long* visible,
-                                                      unsigned long long* depth_range, const BigList& big) {
+                                                      unsigned long long* depth_range, const BigList& big,
+                                                      const fm::OcclusionMap& occlusion) {
   const uint64_t i = c * fm::kChunkSize + threadIdx.x;
   const uint64_t s = k * fm::kChunkSize + threadIdx.x;
   GaussianInView r;
-  if (i < scene.n) r = preprocess_gaussian(i, s, *g, scene, cam, exact, region, out);
+  if (i < scene.n) r = preprocess_gaussian(i, s, *g, scene, cam, exact, region, out, occlusion);
   out.tiles_touched[s] = r.touched;
   list_big_and_count_visible(r.is_big, r.is_huge, r.touched, s, k, big, visible, out.chunk_total);
   // Big Gaussians' depths count where count_big_kernel finds them entries: the range is over
@@ -184,12 +190,12 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBl
     preprocess_kernel(SceneView scene, CameraParams cam, bool exact, fm::TileRect region, Projected out, ChunkWalk live,
                       unsigned long long* visible,      // [1] running count of visible Gaussians
                       unsigned long long* depth_range,  // [2] listed depths (record_depth_range)
-                      BigList big) {
+                      BigList big, fm::OcclusionMap occlusion) {
   const uint64_t chunks = live.size();
   for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
     const uint64_t c = live.chunk(k);
     LoadedGaussian g = load_gaussian(scene, c);
-    preprocess_chunk_view(c, k, &g, scene, cam, exact, region, out, visible, depth_range, big);
+    preprocess_chunk_view(c, k, &g, scene, cam, exact, region, out, visible, depth_range, big, occlusion);
     __syncthreads();  // the shared words of the block reductions are rewritten next round
   }
 }
@@ -286,7 +292,8 @@ void clear_chunk_totals(const Projected& out, const LiveChunks& live, cudaStream
 
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
                 const Projected& out, const LiveChunks& live, unsigned long long* visible,
-                unsigned long long* depth_range, const BigList& big, cudaStream_t stream) {
+                unsigned long long* depth_range, const BigList& big, cudaStream_t stream,
+                const fm::OcclusionMap& occlusion) {
   if (scene.n == 0) return;
   const uint64_t chunks = fm::chunk_count(scene.n);
   const uint64_t cull_blocks = (chunks + tune::kGaussianThreads - 1) / tune::kGaussianThreads;
@@ -298,7 +305,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   order_live_chunks(live, chunks, stream);
   const ChunkWalk walk = live.walk();
   preprocess_kernel<<<static_cast<unsigned>(walk.blocks()), tune::kGaussianThreads, 0, stream>>>(
-      scene, cam, exact, region, out, walk, visible, depth_range, big);
+      scene, cam, exact, region, out, walk, visible, depth_range, big, occlusion);
   CATGS_CUDA_LAUNCHED("preprocess_kernel");
   if (!exact) return;
   const TileTests tests{TileTestKind::ellipse, out.splat, {}, cam.width, cam.height};

@@ -82,11 +82,14 @@ struct SaturatedSkip {
 // sec. 3.4); with early termination the sum ends after the first slice in which the pixel stopped
 // or after which prod T < 1e-4 (as SaturatedSkip::refresh and cpu::rasterize_slices). Partials
 // and saturated_from were written by other blocks: read from L2.
-__device__ __forceinline__ void merge_pixel(const SlicePlan& plan, uint32_t tile, uint4 tp, const float4* partials,
-                                            bool early_termination, int rank, float3 background, uint64_t p,
-                                            float* out_rgb, uint32_t* out_rgba8) {
+// Returns the end of the first slice after which the pixel had stopped or its composed T was
+// below fm::kOcclusionTransmittance (the occlusion map's P), kNoStop where there is none.
+__device__ __forceinline__ uint32_t merge_pixel(const SlicePlan& plan, uint32_t tile, uint4 tp,
+                                                const float4* partials, bool early_termination, int rank,
+                                                float3 background, uint64_t p, float* out_rgb, uint32_t* out_rgba8) {
   float3 C = make_float3(0.0f, 0.0f, 0.0f);
   float T = 1.0f;
+  uint32_t ended = kNoStop;
   const uint32_t last = min(tp.y - 1, __ldcg(plan.saturated_from + tile));
   for (uint32_t k = 0; k <= last; ++k) {
     const float4 q = __ldcg(&partials[static_cast<uint64_t>(tp.z + k) * tune::kRasterThreads + rank]);
@@ -94,9 +97,11 @@ __device__ __forceinline__ void merge_pixel(const SlicePlan& plan, uint32_t tile
     C.y += T * q.y;
     C.z += T * q.z;
     T *= fabsf(q.w);
+    if (ended == kNoStop && (q.w < 0.0f || T < fm::kOcclusionTransmittance)) ended = plan.slice_range[tp.x + k].y;
     if (early_termination && (q.w < 0.0f || T < fm::kMinTransmittance)) break;
   }
   write_pixel(p, C, T, background, out_rgb, out_rgba8);
+  return ended;
 }
 
 // kTileCull: blend_range_culled (a trail list) or blend_range (an exact list), as separate
@@ -113,8 +118,10 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
                             const unsigned* abandon,  // [1] or null: non-zero, draw nothing
                             float4* partials,         // [slots, 256] (C.rgb, T)
                             float* out_rgb,           // [H, W, 3]
-                            uint32_t* out_rgba8) {    // [H, W]
+                            uint32_t* out_rgba8,      // [H, W]
+                            uint32_t* tile_opaque_at) {  // [tiles] occlusion map's P, or null
   __shared__ BlendBatch batch;
+  __shared__ uint32_t saturated_at;  // block_max's slot
   if (abandon && *abandon) return;  // written by an earlier kernel: the same for every thread
   const uint32_t s = order ? order[blockIdx.x] : blockIdx.x;
   if (s == kNoSlice) return;  // a block past the slice total (block-uniform)
@@ -138,6 +145,12 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
   };
   if (tp.y == 1) {  // the tile's only slice
     blend(NoSkip{});
+    if (tile_opaque_at != nullptr) {  // block-uniform
+      // P: past every pixel's round (a pixel outside the image counts nothing, one that never got
+      // there makes it kNoStop).
+      const uint32_t P = block_max(inside ? state.occluded_from : 0u, saturated_at);
+      if (rank == 0) tile_opaque_at[tile_k.x] = P == 0u ? kNoStop : P;
+    }
     if (!inside) return;
     write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C, state.T,
                 background, out_rgb, out_rgba8);
@@ -175,10 +188,15 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
   __syncthreads();
   if (!last) return;
   __threadfence();  // the other slices' partials after their counts
+  uint32_t ended = 0u;
   if (inside)
-    merge_pixel(plan, tile_k.x, tp, partials, early_termination, rank, background,
-                static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), out_rgb,
-                out_rgba8);
+    ended = merge_pixel(plan, tile_k.x, tp, partials, early_termination, rank, background,
+                        static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), out_rgb,
+                        out_rgba8);
+  if (tile_opaque_at != nullptr) {  // block-uniform
+    const uint32_t P = block_max(ended, saturated_at);
+    if (rank == 0) tile_opaque_at[tile_k.x] = P == 0u ? kNoStop : P;
+  }
   __syncthreads();  // saturated_from read by every pixel's merge
   for (uint32_t k = static_cast<uint32_t>(rank); k < tp.y; k += tune::kRasterThreads) plan.slot_finished[tp.z + k] = 0u;
   if (rank == 0) {
@@ -192,12 +210,12 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
                       const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,
                       float3 background, const unsigned* abandon, float4* partials, float* out_rgb, uint32_t* out_rgba8,
-                      cudaStream_t stream) {
+                      cudaStream_t stream, uint32_t* tile_opaque_at) {
   if (blocks == 0) return;
   auto* kernel = tile_culling ? rasterize_slices_kernel<true> : rasterize_slices_kernel<false>;
   kernel<<<blocks, tune::kRasterThreads, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height,
                                                       cam.tiles_x, early_termination, background, abandon, partials,
-                                                      out_rgb, out_rgba8);
+                                                      out_rgb, out_rgba8, tile_opaque_at);
   CATGS_CUDA_LAUNCHED("rasterize_slices_kernel");
 }
 

@@ -14,6 +14,7 @@
 #include "forward_model/forward_model.h"
 #include "forward_model/key_packing.h"
 #include "forward_model/lod.h"
+#include "forward_model/occlusion.h"
 #include "speculation/speculation_params.h"
 #include "tunables.h"
 

@@ -173,6 +173,18 @@ struct CudaRenderer::State {
   // and the partial slices of split tiles.
   GrowBuffer slice_range, slice_tile, tile_plan, slice_order, partials, saturated_from, slices_done, slot_finished;
   GrowBuffer plan_scratch;  // task_split.cu: the counting pass's per-block results
+  // Occlusion culling (RenderOptions::occlusion_culling; forward_model/occlusion.h): the last
+  // exact frame's map (occlusion_depth[occlusion_read], drawn at occlusion_view; valid once a
+  // frame with the current options and scene drew it) and the other buffer, which the next frame
+  // writes while its pre-processing reads this one (two: a frame drawn in passes reads the old
+  // map after its first pass wrote the new one).
+  // occlusion_opaque_at: this frame's opaque point per tile (rasterize_slices), occlusion_behind:
+  // its entries behind them (FrameStats::entries_behind_opaque).
+  GrowBuffer occlusion_depth[2], occlusion_opaque_at, occlusion_behind;
+  int occlusion_read = 0;
+  fm::View occlusion_view{};
+  bool occlusion_valid = false;
+  bool occlusion_counted = false;  // the last frame drew a map (last_stats reads its counter)
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian) and its counters
   // (CatgsCounterSlot; the plan's totals among them).
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp, catgs_counters;

@@ -14,4 +14,5 @@
 #include "rasterize.h"               // stage 5 (vanilla: whole tiles)
 #include "task_split.h"              // exact, catgs: split tasks and their order
 #include "rasterize_slices.h"        // stage 5 with slices (exact, catgs), and the merge
+#include "occlusion_map.h"           // stage 5b: exact frames' occlusion map
 #include "colour/yuv420_convert.h"   // after stage 5: RGBA8 -> I420

@@ -113,6 +113,11 @@ struct RenderOptions {
   // every compared frame (every 10th) of the 101- and 201-copy cities' 1080p fly-over
   // (docs/history/level_of_detail.md, "Second round", issue 37).
   float lod_error_px = 0.75f;
+  // Occlusion culling (forward_model/occlusion.h; issue 72), exact frames only: a frame skips the
+  // chunks its renderer's last frame found wholly behind its saturated tiles. The renderer keeps
+  // one map (a session's last frame); set_options and a new scene drop it. Off here, so that a
+  // renderer draws each frame alone; the server turns it on (--occlusion-cull).
+  bool occlusion_culling = false;
 };
 
 // An image in host memory, row-major, top row first.
@@ -133,6 +138,15 @@ inline uint8_t to_unorm8(float v) {
 // Per-frame counters and stage times (milliseconds, wall clock on CPU, CUDA events on GPU).
 struct FrameStats {
   std::size_t visible = 0;             // Gaussians that passed culling
+  // Occlusion culling (RenderOptions::occlusion_culling): pre-processing read the last frame's
+  // map, and this frame's list entries at or behind their tile's opaque point (its map's P:
+  // entries that change no pixel by more than 1/255 in all; 0 without culling).
+  bool occlusion_map_used = false;
+  std::size_t entries_behind_opaque = 0;
+  // The CPU core's measurement (CpuRenderer::count_changes, issue 72): list entries blended at a
+  // pixel while its transmittance was above 1/255, and the Gaussians with such an entry (0 when
+  // not measured).
+  std::size_t entries_changing_pixels = 0, gaussians_changing_pixels = 0;
   std::size_t render_list_length = 0;  // Gaussian-tile pairs (keys) rasterized
   double preprocess_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, rasterize_ms = 0;
   double merge_ms = 0;  // catgs with task splitting: composing the slices

@@ -37,6 +37,11 @@
 // reference: full detail rendered F times larger each way and box-filtered down (a merged
 // Gaussian averages texture that full detail samples at one point a pixel; this says how much of
 // the LOD's loss against full detail is that).
+// Issue 72's measurement of where a frame's list goes: the JSON's entries_behind_opaque_mean
+// (exact-occlusion: entries at or behind their tile's opaque point, forward_model/occlusion.h),
+// and with --count-changes (--renderer cpu; slow) entries_changing_pixels_mean and
+// gaussians_changing_pixels_mean (entries blended at a pixel while its transmittance was above
+// 1/255, and their Gaussians; such frames are drawn without task splitting).
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "centre" (a slow pass
 // over the city's middle copy, 0.4 extents up, pitched down 70 deg: only the centre copies are in
 // view, however many the city has), "real:CAMERAS.json" (a
@@ -282,7 +287,7 @@ int run(int argc, char** argv) {
        "--trace",         "--width",        "--height",    "--pipeline",         "--frames",    "--warmup",
        "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance",  "--renderer",
        "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error", "--aa-reference",
-       "--pose-rate",     "--help!"});
+       "--pose-rate",     "--count-changes!", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;
@@ -320,6 +325,7 @@ int run(int argc, char** argv) {
     throw std::invalid_argument("--pose-rate must be a positive number of poses a second");
   plan.lod = c.lod;
   plan.lod_error_px = c.lod_error_px;
+  plan.count_changes = args.has("--count-changes");
   plan.aa_factor = args.get_int("--aa-reference", 0);
   if (plan.aa_factor != 0 && (plan.aa_factor < 2 || !plan.lod))
     throw std::invalid_argument("--aa-reference F needs F >= 2 and a scene with LOD (--lod or --lod-file)");

@@ -9,6 +9,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "cpu/cpu_renderer.h"
+
 #if CATGS_HAVE_CUDA
 #include <cuda_runtime.h>
 
@@ -27,6 +29,7 @@ RenderOptions options_of(const Variant& variant, const TimingPlan& plan) {
   o.lod_error_px = plan.lod_error_px;
   o.pipeline = variant.pipeline;
   o.speculation = variant.speculation;
+  o.occlusion_culling = variant.occlusion_culling;
   o.list_budget = RenderListBudget::unlimited();
   return o;
 }
@@ -82,6 +85,7 @@ Camera aa_camera(const Camera& c, int aa_factor) { return c.rescaled(c.width * a
 PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& model, const Variant& variant,
                                 const TimingPlan& plan) {
   auto r = make_renderer("cpu", model, options_of(variant, plan));
+  if (auto* core = dynamic_cast<cpu::CpuRenderer*>(r.get())) core->count_changes(plan.count_changes);
   PipelineResult res = result_of(variant);
   Image img, full, hi;
   // LOD against full detail (after timing): the exact pipeline at lod_error_px 0.
@@ -130,6 +134,9 @@ void record_frame(PipelineResult& res, double ms, const FrameStats& s) {
   res.raster.push_back(s.rasterize_ms);
   res.list.push_back(static_cast<double>(s.render_list_length));
   res.visible.push_back(static_cast<double>(s.visible));
+  res.behind_opaque.push_back(static_cast<double>(s.entries_behind_opaque));
+  res.changing_entries.push_back(static_cast<double>(s.entries_changing_pixels));
+  res.changing_gaussians.push_back(static_cast<double>(s.gaussians_changing_pixels));
   (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);
   if (s.key_frame)
     record_key_frame(res, ms, s);

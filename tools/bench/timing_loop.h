@@ -26,6 +26,10 @@ struct PipelineResult {
   std::string name;  // the variant as written
   Pipeline pipeline = Pipeline::exact;
   std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible, heaviest;
+  // Issue 72's measurement of where the list's work goes: entries behind their tile's opaque
+  // point (exact-occlusion), and with --count-changes (CPU) the entries and Gaussians that change
+  // a pixel.
+  std::vector<double> behind_opaque, changing_entries, changing_gaussians;
   std::vector<double> key_ms, sub_ms, window;  // catgs: key vs sub-frame times, W per key frame
   // catgs: key frames drawn after a rejected sub-frame, and key frames without a window (W = 0).
   std::vector<double> rejected_ms, full_ms;
@@ -65,6 +69,7 @@ struct TimingPlan {
   float lod_error_px = RenderOptions{}.lod_error_px;  // every variant's LOD bound (renderer.h)
   bool lod = false;          // the scene has LOD: every K-th frame of every variant, on both cores, against full detail
   int aa_factor = 0;         // >= 2 (with lod): those frames also against the anti-aliased reference
+  bool count_changes = false;  // CPU: measure the entries and Gaussians that change a pixel (slow)
   std::string snapshot_dir;  // not empty: a PNG per variant there
   Camera camera_at(int k) const { return (*trace)[static_cast<std::size_t>(k) % trace->size()].camera; }
   double pose_rate_hz = 120.0;

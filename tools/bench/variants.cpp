@@ -16,6 +16,8 @@ struct Preset {
 };
 constexpr Preset kPresets[] = {{"catgs-nocache", "cache=off"}, {"catgs-nosplit", "split=off"}};
 const std::string kWindowPreset = "catgs-w";  // catgs-wN = catgs{window=N}
+// exact with occlusion culling from the last frame (RenderOptions::occlusion_culling, issue 72).
+const std::string kOcclusionVariant = "exact-occlusion";
 
 std::invalid_argument bad_variant(const std::string& text, const std::string& why) {
   return std::invalid_argument("pipeline variant '" + text + "': " + why);
@@ -24,10 +26,11 @@ std::invalid_argument bad_variant(const std::string& text, const std::string& wh
 bool all_digits(const std::string& s) { return !s.empty() && s.find_first_not_of("0123456789") == std::string::npos; }
 
 // The pipeline and the preset settings of a name without braces; false for an unknown name.
-bool expand_name(const std::string& name, Pipeline& pipeline, std::string& settings) {
+bool expand_name(const std::string& name, Pipeline& pipeline, std::string& settings, bool& occlusion) {
   settings.clear();
-  if (name == "vanilla" || name == "exact" || name == "catgs") {
-    pipeline = parse_pipeline(name);
+  occlusion = name == kOcclusionVariant;
+  if (name == "vanilla" || name == "exact" || name == "catgs" || occlusion) {
+    pipeline = occlusion ? Pipeline::exact : parse_pipeline(name);
     return true;
   }
   pipeline = Pipeline::catgs;
@@ -66,7 +69,7 @@ Variant parse_variant(const std::string& text) {
   std::string name, braced;
   bool braces = false;
   split_braces(text, name, braced, braces);
-  if (!expand_name(name, v.pipeline, v.settings))
+  if (!expand_name(name, v.pipeline, v.settings, v.occlusion_culling))
     throw bad_variant(text, "unknown name '" + name + "'\n" + variant_syntax());
   if (braces && v.pipeline != Pipeline::catgs)
     throw bad_variant(text, std::string(pipeline_name(v.pipeline)) + " takes no settings (catgs only)");
@@ -105,6 +108,7 @@ std::string variant_syntax() {
   std::string out =
       "pipeline variants (--pipeline V[,V...]; commas inside braces belong to the braces):\n"
       "  vanilla | exact | catgs[{SETTINGS}]   SETTINGS: name=value[,name=value...], applied in order\n"
+      "  exact-occlusion                     exact, culling chunks behind the last frame's opaque tiles\n"
       "  presets (the paper's ablations), which take {SETTINGS} after them too:\n";
   for (const Preset& preset : kPresets)
     out += "    " + std::string(preset.name) + " = catgs{" + preset.settings + "}\n";

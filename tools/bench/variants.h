@@ -21,6 +21,7 @@ struct Variant {
   Pipeline pipeline = Pipeline::exact;
   std::string settings;           // the settings applied, presets expanded ("window=2,backoff=0"; "" for none)
   SpeculationParams speculation;  // the defaults with `settings` applied
+  bool occlusion_culling = false;  // exact-occlusion: exact with RenderOptions::occlusion_culling
 };
 
 // One variant ("catgs-w2{backoff=0}"). Throws std::invalid_argument naming the variant: an unknown
