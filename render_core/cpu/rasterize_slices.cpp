@@ -57,7 +57,6 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
     const int tx = static_cast<int>(tile) % grid.tiles_x, ty = static_cast<int>(tile) / grid.tiles_x;
     // The occlusion map's P (forward_model/occlusion.h): past every pixel's occluding position, 0
     // while none is known, UINT32_MAX once a pixel has none.
-    const bool one_slice = first_slice[tile] + 1 >= slices.size() || slices[first_slice[tile] + 1].tile != tile;
     uint32_t saturated_at = 0;
     for (int ly = 0; ly < fm::kTileSize; ++ly) {
       const int py = ty * fm::kTileSize + ly;
@@ -72,15 +71,15 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
           const std::size_t at = s * kTilePixels + static_cast<std::size_t>(ly * fm::kTileSize + lx);
           C += T * partial_color[at];
           T *= std::fabs(partial_T[at]);
-          // A tile of one slice knows the entry, taken to the end of the GPU's round of
-          // fm::kOcclusionRound entries from the slice's start; a split tile, as the GPU's merge,
-          // the slice.
+          // The first slice that makes the pixel opaque: where its own walk crossed, taken to the
+          // end of the GPU's round of fm::kOcclusionRound entries from the slice's start; else,
+          // opaque only with the slices before it, the slice's end (as the GPU's merge).
           if (tile_opaque_at && ended_at == UINT32_MAX) {
-            if (one_slice && stop_at[at] != UINT32_MAX)
+            if (stop_at[at] != UINT32_MAX)
               ended_at = std::min(slices[s].end, slices[s].begin + (stop_at[at] - slices[s].begin) /
                                                                        fm::kOcclusionRound * fm::kOcclusionRound +
                                                                    fm::kOcclusionRound);
-            else if (!one_slice && (partial_T[at] < 0.0f || T < fm::kOcclusionTransmittance))
+            else if (partial_T[at] < 0.0f || T < fm::kOcclusionTransmittance)
               ended_at = slices[s].end;
           }
           if (early_termination && (partial_T[at] < 0.0f || T < fm::kMinTransmittance)) break;

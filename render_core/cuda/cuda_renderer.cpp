@@ -230,6 +230,9 @@ uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries
   slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
   plan_scratch.ensure(stages::plan_scratch_bytes(tiles), "slice plan scratch", allocs);
   partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
+  if (occlusion_map_drawn)  // the split slices' own opaque points (rasterize_slices' OpaquePoints)
+    occlusion_partial.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(uint32_t),
+                             "partial opaque points", allocs);
   // The rasterizer's per-tile state starts as task_split.h says, once; its kernels keep it so.
   if (saturated_from.ensure(tiles * sizeof(unsigned), "tile saturation", allocs))
     CATGS_CUDA(cudaMemsetAsync(saturated_from.as<void>(), 0xff, saturated_from.bytes(), stream));
@@ -283,7 +286,9 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
     CATGS_CUDA(cudaMemsetAsync(s.occlusion_behind.as<void>(), 0, sizeof(unsigned long long), s.stream));
   }
   s.occlusion_valid = false;  // until this frame has drawn its own
+  s.occlusion_map_drawn = occlusion;
   draw_full_frame(camera, exact, true, exact && depth_first_sort(), map, occlusion);
+  s.occlusion_map_drawn = false;
   stats_.occlusion_map_used = map.depth != nullptr;
   s.occlusion_counted = occlusion;
   if (occlusion) {
@@ -348,7 +353,9 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
       stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values,
                                proj, cam, early_termination, false, bg, nullptr, s.partials.as<float4>(),
                                s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream,
-                               draw_map ? s.occlusion_opaque_at.as<uint32_t>() : nullptr);
+                               draw_map ? stages::OpaquePoints{s.occlusion_opaque_at.as<uint32_t>(),
+                                                               s.occlusion_partial.as<uint32_t>()}
+                                        : stages::OpaquePoints{});
       if (draw_map)
         stages::occlusion_map(s.occlusion_opaque_at.as<uint32_t>(), s.ranges.as<uint2>(), s.sorted_values, proj, first,
                               end, s.occlusion_depth[1 - s.occlusion_read].as<float>(),

@@ -82,11 +82,15 @@ struct SaturatedSkip {
 // sec. 3.4); with early termination the sum ends after the first slice in which the pixel stopped
 // or after which prod T < 1e-4 (as SaturatedSkip::refresh and cpu::rasterize_slices). Partials
 // and saturated_from were written by other blocks: read from L2.
-// Returns the end of the first slice after which the pixel had stopped or its composed T was
-// below fm::kOcclusionTransmittance (the occlusion map's P), kNoStop where there is none.
+// Returns the pixel's opaque point (the occlusion map's P): in the first slice that takes its
+// composed T below fm::kOcclusionTransmittance or stops it, the end of the round where its own
+// T crossed (`own`: [slots, 256], the slices' PixelState::occluded_from; null: not asked), else
+// that slice's end; kNoStop where there is none. The slices the merge reads were never ended for
+// this pixel by an earlier one, so `own` is their own walk's, whatever the timing.
 __device__ __forceinline__ uint32_t merge_pixel(const SlicePlan& plan, uint32_t tile, uint4 tp,
-                                                const float4* partials, bool early_termination, int rank,
-                                                float3 background, uint64_t p, float* out_rgb, uint32_t* out_rgba8) {
+                                                const float4* partials, const uint32_t* own, bool early_termination,
+                                                int rank, float3 background, uint64_t p, float* out_rgb,
+                                                uint32_t* out_rgba8) {
   float3 C = make_float3(0.0f, 0.0f, 0.0f);
   float T = 1.0f;
   uint32_t ended = kNoStop;
@@ -97,7 +101,13 @@ __device__ __forceinline__ uint32_t merge_pixel(const SlicePlan& plan, uint32_t 
     C.y += T * q.y;
     C.z += T * q.z;
     T *= fabsf(q.w);
-    if (ended == kNoStop && (q.w < 0.0f || T < fm::kOcclusionTransmittance)) ended = plan.slice_range[tp.x + k].y;
+    if (own != nullptr && ended == kNoStop) {
+      const uint32_t crossed = __ldcg(&own[static_cast<uint64_t>(tp.z + k) * tune::kRasterThreads + rank]);
+      if (crossed != kNoStop)
+        ended = crossed;
+      else if (q.w < 0.0f || T < fm::kOcclusionTransmittance)
+        ended = plan.slice_range[tp.x + k].y;
+    }
     if (early_termination && (q.w < 0.0f || T < fm::kMinTransmittance)) break;
   }
   write_pixel(p, C, T, background, out_rgb, out_rgba8);
@@ -119,7 +129,7 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
                             float4* partials,         // [slots, 256] (C.rgb, T)
                             float* out_rgb,           // [H, W, 3]
                             uint32_t* out_rgba8,      // [H, W]
-                            uint32_t* tile_opaque_at) {  // [tiles] occlusion map's P, or null
+                            OpaquePoints opaque) {    // the occlusion map's P, or none
   __shared__ BlendBatch batch;
   __shared__ uint32_t saturated_at;  // block_max's slot
   if (abandon && *abandon) return;  // written by an earlier kernel: the same for every thread
@@ -145,11 +155,11 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
   };
   if (tp.y == 1) {  // the tile's only slice
     blend(NoSkip{});
-    if (tile_opaque_at != nullptr) {  // block-uniform
+    if (opaque.tile != nullptr) {  // block-uniform
       // P: past every pixel's round (a pixel outside the image counts nothing, one that never got
       // there makes it kNoStop).
       const uint32_t P = block_max(inside ? state.occluded_from : 0u, saturated_at);
-      if (rank == 0) tile_opaque_at[tile_k.x] = P == 0u ? kNoStop : P;
+      if (rank == 0) opaque.tile[tile_k.x] = P == 0u ? kNoStop : P;
     }
     if (!inside) return;
     write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C, state.T,
@@ -173,6 +183,7 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
     if (inside)
       partials[slot * tune::kRasterThreads + rank] =
           make_float4(state.C.x, state.C.y, state.C.z, state.done ? -state.T : state.T);
+    if (inside && opaque.tile != nullptr) opaque.partial[slot * tune::kRasterThreads + rank] = state.occluded_from;
     if (early_termination) {
       __threadfence();  // every thread's partial before the flag (read by later slices of the tile)
       __syncthreads();
@@ -190,12 +201,13 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
   __threadfence();  // the other slices' partials after their counts
   uint32_t ended = 0u;
   if (inside)
-    ended = merge_pixel(plan, tile_k.x, tp, partials, early_termination, rank, background,
+    ended = merge_pixel(plan, tile_k.x, tp, partials, opaque.tile != nullptr ? opaque.partial : nullptr,
+                        early_termination, rank, background,
                         static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), out_rgb,
                         out_rgba8);
-  if (tile_opaque_at != nullptr) {  // block-uniform
+  if (opaque.tile != nullptr) {  // block-uniform
     const uint32_t P = block_max(ended, saturated_at);
-    if (rank == 0) tile_opaque_at[tile_k.x] = P == 0u ? kNoStop : P;
+    if (rank == 0) opaque.tile[tile_k.x] = P == 0u ? kNoStop : P;
   }
   __syncthreads();  // saturated_from read by every pixel's merge
   for (uint32_t k = static_cast<uint32_t>(rank); k < tp.y; k += tune::kRasterThreads) plan.slot_finished[tp.z + k] = 0u;
@@ -210,12 +222,12 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
                       const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,
                       float3 background, const unsigned* abandon, float4* partials, float* out_rgb, uint32_t* out_rgba8,
-                      cudaStream_t stream, uint32_t* tile_opaque_at) {
+                      cudaStream_t stream, OpaquePoints opaque) {
   if (blocks == 0) return;
   auto* kernel = tile_culling ? rasterize_slices_kernel<true> : rasterize_slices_kernel<false>;
   kernel<<<blocks, tune::kRasterThreads, 0, stream>>>(plan, order, sorted_values, projected, cam.width, cam.height,
                                                       cam.tiles_x, early_termination, background, abandon, partials,
-                                                      out_rgb, out_rgba8, tile_opaque_at);
+                                                      out_rgb, out_rgba8, opaque);
   CATGS_CUDA_LAUNCHED("rasterize_slices_kernel");
 }
 

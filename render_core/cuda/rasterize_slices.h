@@ -27,11 +27,17 @@ namespace catgs::cuda::stages {
 // frame's features (blend_range_culled; same image, for lists built for other poses too).
 // `abandon` (device, or null): when it holds non-zero at launch, draw nothing (a sub-frame
 // that failed its check and will be drawn again as a key frame).
-// `tile_opaque_at` (device [tiles], or null): each drawn tile's opaque point P
-// (forward_model/occlusion.h; as cpu::rasterize_slices), kNoStop (all ones) where a pixel never
-// got there; tiles without slices are left as they are (the caller fills it with all ones first).
+// `opaque` (tile null: none): the occlusion map's opaque points (forward_model/occlusion.h; as
+// cpu::rasterize_slices): tile [tiles] each drawn tile's P, all ones where a pixel never got
+// there (tiles without slices are left as they are: the caller fills it with all ones first);
+// partial [slots, 256] scratch beside `partials`: a split tile's slices' pixels' own crossings,
+// which the merge reads.
+struct OpaquePoints {
+  uint32_t* tile = nullptr;
+  uint32_t* partial = nullptr;
+};
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
                       const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,
                       float3 background, const unsigned* abandon, float4* partials, float* out_rgb, uint32_t* out_rgba8,
-                      cudaStream_t stream, uint32_t* tile_opaque_at = nullptr);
+                      cudaStream_t stream, OpaquePoints opaque = {});
 }  // namespace catgs::cuda::stages

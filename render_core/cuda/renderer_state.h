@@ -180,7 +180,8 @@ struct CudaRenderer::State {
   // map after its first pass wrote the new one).
   // occlusion_opaque_at: this frame's opaque point per tile (rasterize_slices), occlusion_behind:
   // its entries behind them (FrameStats::entries_behind_opaque).
-  GrowBuffer occlusion_depth[2], occlusion_opaque_at, occlusion_behind;
+  GrowBuffer occlusion_depth[2], occlusion_opaque_at, occlusion_behind, occlusion_partial;
+  bool occlusion_map_drawn = false;  // the frame being drawn writes a map (plan_frame_slices sizes occlusion_partial)
   int occlusion_read = 0;
   fm::View occlusion_view{};
   bool occlusion_valid = false;
@@ -338,6 +339,11 @@ struct CudaRenderer::State {
                                 &slot_finished,
                                 &plan_scratch,
                                 &catgs_counters,
+                                &occlusion_depth[0],
+                                &occlusion_depth[1],
+                                &occlusion_opaque_at,
+                                &occlusion_behind,
+                                &occlusion_partial,
                                 &yuv})
       b += g->bytes();
     return b;
