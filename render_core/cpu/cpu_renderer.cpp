@@ -31,7 +31,13 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   FrameBuffers buffers{projected_, list_, ranges_, slices_};
   const bool occlusion = options_.occlusion_culling && options_.pipeline == Pipeline::exact;
   const fm::View view = fm::view_of(camera);
-  if (occlusion && occlusion_valid_) buffers.occlusion = fm::occlusion_map(occlusion_depth_.data(), occlusion_view_, view);
+  if (occlusion && occlusion_valid_) {
+    buffers.occlusion = fm::occlusion_map(occlusion_depth_.data(), occlusion_view_, view);
+    const TileGrid grid = TileGrid::of(camera.width, camera.height);
+    occlusion_reproject(buffers.occlusion, view, grid, occlusion_now_);
+    buffers.occlusion.now_depth = occlusion_now_.data();
+    buffers.occlusion.now_tiles_x = grid.tiles_x;
+  }
   stats_.occlusion_map_used = buffers.occlusion.depth != nullptr;
   if (occlusion) buffers.tile_depth = &occlusion_next_;
   if (count_changes_) buffers.changed = &changed_;

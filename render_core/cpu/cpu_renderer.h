@@ -54,6 +54,11 @@ struct ProjectedGaussians {
   std::vector<glm::vec3> trail_cov;     // [N] dominating 2D covariance
   std::vector<glm::vec3> trail_conic;   // [N] its inverse
   std::vector<float> q_trail;           // [N] level
+  // Occlusion culling's per-entry test (forward_model/occlusion.h entry_hidden), exact frames with
+  // a map: the frame's reprojected tile depths ([tiles]; empty: none) and each Gaussian's depth in
+  // the map's view less the eye's move ([N]; -inf where its entries are all kept).
+  std::vector<float> hidden_depth;
+  std::vector<float> old_depth;
   void resize(std::size_t n);
 };
 
@@ -166,6 +171,11 @@ std::uint64_t occlusion_map(const ProjectedGaussians& projected, const RenderLis
                             const std::uint32_t* tile_opaque_at, std::uint32_t first_tile, std::uint32_t end_tile,
                             float* tile_depth);
 
+// The last frame's map reprojected onto `now`'s tiles (cpu/occlusion_map.cpp; mirrors
+// cuda/occlusion_map.cu): fm::reprojected_tile_depth of every tile of `grid`, into `out`.
+void occlusion_reproject(const fm::OcclusionMap& map, const fm::View& now, const TileGrid& grid,
+                         std::vector<float>& out);
+
 // Stage 2 (cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
 // its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
 // the trail test, exact the ellipse test, vanilla every tile of the rectangle.
@@ -273,7 +283,7 @@ class CpuRenderer final : public Renderer {
   std::vector<std::uint8_t> changed_;
   // Occlusion culling (RenderOptions::occlusion_culling): the last frame's map and where it was
   // drawn (valid: a frame drew it with the current options), and the next frame's.
-  std::vector<float> occlusion_depth_, occlusion_next_;
+  std::vector<float> occlusion_depth_, occlusion_next_, occlusion_now_;  // occlusion_now_: reprojected
   fm::View occlusion_view_{};
   bool occlusion_valid_ = false;
   FrameStats stats_;

@@ -3,6 +3,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "forward_model/occlusion.h"
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
 #include "base/parallel_for.h"
@@ -33,6 +34,8 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
   list.packing = fm::plain_key_packing();
   list.values.resize(total);
   const bool exact = pipeline == Pipeline::exact, trail = pipeline == Pipeline::catgs;
+  // Occlusion culling's per-entry test, as pre-processing counted (ProjectedGaussians::hidden_depth).
+  const bool hidden = exact && !projected.hidden_depth.empty();
 
   parallel_for(n, 4096, [&](std::size_t i) {
     if (projected.tiles_touched[i] == 0) return;
@@ -49,6 +52,7 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
           continue;
         if (trail && !fm::trail_touches_tile(trail_test, tx, ty, grid.width, grid.height)) continue;
         const auto tile = static_cast<uint32_t>(ty * grid.tiles_x + tx);
+        if (hidden && fm::entry_hidden(projected.hidden_depth[tile], projected.old_depth[i])) continue;
         list.keys[at] = fm::render_key(tile, projected.depth[i]);
         list.values[at] = static_cast<uint32_t>(i);
         ++at;

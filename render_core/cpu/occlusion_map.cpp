@@ -1,5 +1,6 @@
-// Stage 5b of exact frames with occlusion culling: the occlusion map from the rasterizer's opaque
-// points (forward_model/occlusion.h; mirrors cuda/occlusion_map.cu).
+// Occlusion culling's two small stages (forward_model/occlusion.h; mirror cuda/occlusion_map.cu):
+// after rasterization, the map from the rasterizer's opaque points; before pre-processing, the
+// last frame's map reprojected onto this frame's tiles.
 #include <algorithm>
 #include <cmath>
 
@@ -22,6 +23,14 @@ std::uint64_t occlusion_map(const ProjectedGaussians& projected, const RenderLis
     behind += ranges[t].y - P;
   }
   return behind;
+}
+
+void occlusion_reproject(const fm::OcclusionMap& map, const fm::View& now, const TileGrid& grid,
+                         std::vector<float>& out) {
+  out.resize(static_cast<std::size_t>(grid.tile_count()));
+  for (int ty = 0; ty < grid.tiles_y; ++ty)
+    for (int tx = 0; tx < grid.tiles_x; ++tx)
+      out[static_cast<std::size_t>(ty) * grid.tiles_x + tx] = fm::reprojected_tile_depth(map, now, tx, ty);
 }
 
 }  // namespace catgs::cpu

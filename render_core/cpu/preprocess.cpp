@@ -24,17 +24,23 @@ void ProjectedGaussians::resize(std::size_t n) {
   trail_cov.resize(n);
   trail_conic.resize(n);
   q_trail.resize(n);
+  old_depth.resize(n);
 }
 
 namespace {
 
 // Counts the tiles of `rect` that the opacity-aware ellipse reaches (exact pipeline).
+// The tiles of `rect` the ellipse reaches, less those whose entries occlusion culling hides
+// (`hidden`: the frame's reprojected tile depths, null for none; `old_depth`: fm::entry_hidden's).
 uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max, int width,
-                           int height) {
+                           int height, const float* hidden, int tiles_x, float old_depth) {
   uint32_t n = 0;
   for (int ty = rect.y0; ty < rect.y1; ++ty)
     for (int tx = rect.x0; tx < rect.x1; ++tx)
-      n += fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) ? 1u : 0u;
+      n += fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) &&
+                   !(hidden && fm::entry_hidden(hidden[ty * tiles_x + tx], old_depth))
+               ? 1u
+               : 0u;
   return n;
 }
 
@@ -102,8 +108,14 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   uint32_t touched;
   if (v.exact) {
     rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height), v.region);
-    touched =
-        fm::tile_count(rect) == 0 ? 0u : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height);
+    // Per-entry occlusion culling for a Gaussian of few tiles (fm::entry_hidden; as the CUDA core's
+    // tile masks).
+    const bool per_entry = v.occlusion.now_depth != nullptr && fm::tile_count(rect) <= fm::kOcclusionEntryTiles;
+    out.old_depth[i] = per_entry ? fm::occlusion_old_depth(mean, v.occlusion) : -INFINITY;
+    touched = fm::tile_count(rect) == 0
+                  ? 0u
+                  : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height,
+                                      per_entry ? v.occlusion.now_depth : nullptr, v.grid.tiles_x, out.old_depth[i]);
   } else {
     const float radius = fm::three_sigma_radius(cov2);
     rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, v.grid.tiles_x, v.grid.tiles_y), v.region);
@@ -149,6 +161,11 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
   if (chunks.size() != fm::chunk_count(model.size()))
     throw std::invalid_argument("preprocess: chunk bounds of another scene");
   out.resize(model.size());
+  if (occlusion.now_depth)  // for emission's per-entry test
+    out.hidden_depth.assign(occlusion.now_depth,
+                            occlusion.now_depth + static_cast<std::size_t>(TileGrid::of(camera.width, camera.height).tile_count()));
+  else
+    out.hidden_depth.clear();
   const ViewPass v(model, camera, pipeline, out, region, lod_error_px, occlusion);
   parallel_for(chunks.size(), 16, [&](std::size_t c) { preprocess_chunk(model, chunks, v, c); });
 }

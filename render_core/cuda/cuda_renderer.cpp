@@ -273,9 +273,15 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   const fm::View view = fm::view_of(camera);
   fm::OcclusionMap map{};
   if (occlusion) {
-    if (s.occlusion_valid) map = fm::occlusion_map(s.occlusion_depth[s.occlusion_read].as<float>(), s.occlusion_view, view);
     const stages::CameraParams cam = camera_params(camera);
     const std::size_t tiles = static_cast<std::size_t>(cam.tiles_x) * cam.tiles_y;
+    if (s.occlusion_valid) {  // the last map, and its depths over this frame's tiles
+      map = fm::occlusion_map(s.occlusion_depth[s.occlusion_read].as<float>(), s.occlusion_view, view);
+      s.occlusion_now.ensure(tiles * sizeof(float), "reprojected occlusion map", &s.allocations);
+      stages::occlusion_reproject(map, cam, s.occlusion_now.as<float>(), s.stream);
+      map.now_depth = s.occlusion_now.as<float>();
+      map.now_tiles_x = cam.tiles_x;
+    }
     GrowBuffer& next = s.occlusion_depth[1 - s.occlusion_read];
     next.ensure(tiles * sizeof(float), "occlusion map", &s.allocations);
     s.occlusion_opaque_at.ensure(tiles * sizeof(uint32_t), "opaque points", &s.allocations);

@@ -1,5 +1,7 @@
-// Stage 5b: the occlusion map from the rasterizer's opaque points (forward_model/occlusion.h;
-// mirrors cpu/occlusion_map.cpp). A thread per tile; one atomic per tile with entries behind.
+// Occlusion culling's two small stages (forward_model/occlusion.h; mirror cpu/occlusion_map.cpp),
+// a thread per tile: after rasterization, the map from the rasterizer's opaque points (one atomic
+// per tile with entries behind); before pre-processing, the last map reprojected onto this
+// frame's tiles.
 #include "base/cuda_check.h"
 #include "occlusion_map.h"
 #include "tunables.h"
@@ -27,7 +29,23 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
   if (range.y > P) atomicAdd(behind, static_cast<unsigned long long>(range.y - P));
 }
 
+__global__ void __launch_bounds__(tune::kGaussianThreads)
+    occlusion_reproject_kernel(fm::OcclusionMap map, fm::View now, int tiles_x, int tiles,
+                               float* __restrict__ now_depth) {
+  const int t = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (t >= tiles) return;
+  now_depth[t] = fm::reprojected_tile_depth(map, now, t % tiles_x, t / tiles_x);
+}
+
 }  // namespace
+
+void occlusion_reproject(const fm::OcclusionMap& map, const CameraParams& cam, float* now_depth, cudaStream_t stream) {
+  const int tiles = cam.tiles_x * cam.tiles_y;
+  if (tiles <= 0) return;
+  occlusion_reproject_kernel<<<(tiles + tune::kGaussianThreads - 1) / tune::kGaussianThreads, tune::kGaussianThreads, 0,
+                               stream>>>(map, static_cast<const fm::View&>(cam), cam.tiles_x, tiles, now_depth);
+  CATGS_CUDA_LAUNCHED("occlusion_reproject_kernel");
+}
 
 void occlusion_map(const uint32_t* opaque_at, const uint2* ranges, const uint32_t* values, const Projected& projected,
                    uint32_t first_tile, uint32_t end_tile, float* tile_depth, unsigned long long* behind,

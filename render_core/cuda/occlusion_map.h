@@ -1,4 +1,4 @@
-// Stage 5b of the CUDA core's exact frames with occlusion culling (occlusion_map.cu; mirrors
+// Occlusion culling's two small stages of the CUDA core's exact frames (occlusion_map.cu; mirror
 // cpu/occlusion_map.cpp). Raw device pointers and an explicit stream; the launcher checks its
 // launch (CudaError).
 #pragma once
@@ -17,5 +17,10 @@ namespace catgs::cuda::stages {
 void occlusion_map(const uint32_t* opaque_at, const uint2* ranges, const uint32_t* values, const Projected& projected,
                    uint32_t first_tile, uint32_t end_tile, float* tile_depth, unsigned long long* behind,
                    cudaStream_t stream);
+
+// Before pre-processing: the last frame's map reprojected onto this frame's tiles
+// (fm::reprojected_tile_depth, a thread per tile) into now_depth [cam.tiles_x * cam.tiles_y]
+// (mirrors cpu::occlusion_reproject). `map.depth` is the last frame's map.
+void occlusion_reproject(const fm::OcclusionMap& map, const CameraParams& cam, float* now_depth, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

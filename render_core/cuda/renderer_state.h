@@ -180,7 +180,8 @@ struct CudaRenderer::State {
   // map after its first pass wrote the new one).
   // occlusion_opaque_at: this frame's opaque point per tile (rasterize_slices), occlusion_behind:
   // its entries behind them (FrameStats::entries_behind_opaque).
-  GrowBuffer occlusion_depth[2], occlusion_opaque_at, occlusion_behind, occlusion_partial;
+  // occlusion_now: the last map's depths over this frame's tiles (occlusion_reproject).
+  GrowBuffer occlusion_depth[2], occlusion_opaque_at, occlusion_behind, occlusion_partial, occlusion_now;
   bool occlusion_map_drawn = false;  // the frame being drawn writes a map (plan_frame_slices sizes occlusion_partial)
   int occlusion_read = 0;
   fm::View occlusion_view{};
@@ -344,6 +345,7 @@ struct CudaRenderer::State {
                                 &occlusion_opaque_at,
                                 &occlusion_behind,
                                 &occlusion_partial,
+                                &occlusion_now,
                                 &yuv})
       b += g->bytes();
     return b;

@@ -49,6 +49,11 @@ struct OcclusionMap {
   View view{};                   // the frame the map was drawn at
   int tiles_x = 0, tiles_y = 0;  // that frame's tile grid
   float shift = 0.0f;            // |eye of this frame - eye of view|, world units
+  // Per tile of THIS frame's grid (row-major, now_tiles_x a row; null: none): the map's depth over
+  // the region of the last view that the tile sees (reprojected_tile_depth), against which each of
+  // a small Gaussian's entries is tested (entry_hidden).
+  const float* now_depth = nullptr;
+  int now_tiles_x = 0;
 };
 
 // The map drawn at view `drawn_at` (`depth`: its tiles' depths) as frame `now` reads it.
@@ -67,14 +72,16 @@ inline constexpr float kOcclusionDepthSlack = 1.0f + 1e-3f;  // the sort key's d
 inline constexpr float kOcclusionTransmittance = 1.0f / 255.0f;  // a pixel is opaque below it
 inline constexpr uint32_t kOcclusionRound = 256;  // entries a GPU rasterizer round stages (tune::kRasterBatch)
 
-// The largest depth of the map over the tiles covering pixel box [u0, u1] x [w0, w1] of its view,
-// with the smallest in *nearest; -1 where the box is not wholly on that image or a depth is NaN.
+// The largest depth of the map over the tiles holding the pixel centres of box [u0, u1] x [w0, w1]
+// of its view (pixel i's centre at i: pixels ceil(u0) .. floor(u1), at least the one at ceil(u0)),
+// with the smallest in *nearest; -1 where those pixels are not all on that image or a depth is NaN.
 CATGS_HD float occlusion_depth_over(const OcclusionMap& m, float u0, float u1, float w0, float w1, float* nearest) {
-  if (!(u0 >= 0.0f && w0 >= 0.0f && u1 <= static_cast<float>(m.view.width - 1) &&
-        w1 <= static_cast<float>(m.view.height - 1)))
+  if (!(u0 > -1.0f && w0 > -1.0f && u1 < static_cast<float>(m.view.width) && w1 < static_cast<float>(m.view.height)))
     return -1.0f;
-  const int tx0 = static_cast<int>(u0) / kTileSize, ty0 = static_cast<int>(w0) / kTileSize;
-  int tx1 = static_cast<int>(u1) / kTileSize, ty1 = static_cast<int>(w1) / kTileSize;
+  const int px0 = static_cast<int>(ceilf(u0)), py0 = static_cast<int>(ceilf(w0));
+  const int px1 = static_cast<int>(floorf(u1)), py1 = static_cast<int>(floorf(w1));
+  const int tx0 = px0 / kTileSize, ty0 = py0 / kTileSize;
+  int tx1 = (px1 > px0 ? px1 : px0) / kTileSize, ty1 = (py1 > py0 ? py1 : py0) / kTileSize;
   tx1 = tx1 < m.tiles_x - 1 ? tx1 : m.tiles_x - 1;
   ty1 = ty1 < m.tiles_y - 1 ? ty1 : m.tiles_y - 1;
   float deepest = 0.0f, near = INFINITY;
@@ -132,6 +139,61 @@ CATGS_HD bool gaussian_occluded(glm::vec3 mean, float max_scale, float q_max, co
   s.z_lo = p.z;
   const ChunkBounds b{mean, max_scale, mean, q_max};
   return box_occluded(s, chunk_half_extent(b, m.view, p.z) + chunk_rounding_slack(s), m);
+}
+
+// Per-entry culling (issue 72). The map's depth over what tile (tx, ty) of view `now` sees of the
+// map's view: the rays through the tile's corner pixels, as directions (far points), taken into
+// the map's view (a rotation maps the tile's edges to lines, so the box of its four corners holds
+// its pixels' rays), that box widened by the rounding slack and by the parallax of its nearest
+// occluder (shift * focal / depth, twice, as box_occluded), and the deepest map depth over it.
+// +inf where a corner looks behind the map's eye, or the box leaves its image (no data).
+CATGS_HD float reprojected_tile_depth(const OcclusionMap& m, const View& now, int tx, int ty) {
+  float u0 = INFINITY, u1 = -INFINITY, w0 = INFINITY, w1 = -INFINITY;
+  const int last_x = (tx + 1) * kTileSize - 1 < now.width - 1 ? (tx + 1) * kTileSize - 1 : now.width - 1;
+  const int last_y = (ty + 1) * kTileSize - 1 < now.height - 1 ? (ty + 1) * kTileSize - 1 : now.height - 1;
+  for (int k = 0; k < 4; ++k) {  // the tile's corner pixel centres
+    const float x = static_cast<float>((k & 1) ? last_x : tx * kTileSize);
+    const float y = static_cast<float>((k & 2) ? last_y : ty * kTileSize);
+    const glm::vec3 ray((x + 0.5f - now.cx) / now.fx, (y + 0.5f - now.cy) / now.fy, 1.0f);
+    const glm::vec3 d = m.view.R * (glm::transpose(now.R) * ray);  // world direction into the map's view
+    if (!(d.z > 1e-6f)) return INFINITY;
+    const float u = m.view.fx * d.x / d.z + m.view.cx - 0.5f, w = m.view.fy * d.y / d.z + m.view.cy - 0.5f;
+    u0 = fminf(u0, u);
+    u1 = fmaxf(u1, u);
+    w0 = fminf(w0, w);
+    w1 = fmaxf(w1, w);
+  }
+  // r0: the rounding of the corners' maths (a few ulps of a pixel coordinate), so that the same
+  // pose reads exactly its own tile.
+  const float focal = fmaxf(m.view.fx, m.view.fy);
+  const float r0 = 0.01f + 1e-6f * fmaxf(fmaxf(fabsf(u0), fabsf(u1)), fmaxf(fabsf(w0), fabsf(w1)));
+  float r = r0;
+  for (int pass = 0; pass < 2; ++pass) {
+    float nearest = 0.0f;
+    const float deepest = occlusion_depth_over(m, u0 - r, u1 + r, w0 - r, w1 + r, &nearest);
+    if (!(deepest >= 0.0f)) return INFINITY;
+    const float need = r0 + (m.shift > 0.0f ? m.shift * focal / nearest : 0.0f);
+    if (need <= r) return deepest;
+    r = need;
+  }
+  return INFINITY;
+}
+
+// A small Gaussian's (rect of at most kOcclusionEntryTiles tiles) entry in a tile whose
+// reprojected depth is `tile_depth`: hidden when its mean's depth in the map's view, less the eye's
+// move (`old_depth_less_shift`), lies behind it. In the map's own frame that entry sorted behind
+// every pixel's opaque point of the tile (see above); a Gaussian over more tiles keeps them all
+// (the CUDA core counts and emits those with a warp, from the ellipse alone).
+inline constexpr int kOcclusionEntryTiles = 32;  // the CUDA core's tune::kBigRectTiles
+CATGS_HD bool entry_hidden(float tile_depth, float old_depth_less_shift) {
+  return tile_depth * kOcclusionDepthSlack < old_depth_less_shift;
+}
+
+// The depth of `mean` in the map's view less the eye's move (entry_hidden's), -inf where there is
+// no map of this frame's tiles.
+CATGS_HD float occlusion_old_depth(glm::vec3 mean, const OcclusionMap& m) {
+  if (m.depth == nullptr || m.now_depth == nullptr) return -INFINITY;
+  return (m.view.R * mean + m.view.t).z - m.shift;
 }
 
 }  // namespace catgs::fm
