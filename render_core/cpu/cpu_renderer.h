@@ -83,8 +83,10 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // of its region (fm::clip_tile_rect; every Gaussian is projected with the whole camera).
 // A scene with LOD (model.lod) projects only the chunks of its cut at `camera` with bound
 // `lod_error_px` (fm::lod_chunk_drawn; 0: the leaves), in every pipeline; the others are skipped
-// as culled chunks are. exact also skips the Gaussians `occlusion` (the last frame's map, null
-// depth: none) finds wholly behind that frame's opaque tiles (fm::gaussian_occluded, issue 72).
+// as culled chunks are. exact also drops the entries that `occlusion` (the last frame's map with
+// its depths over this frame's tiles, now_depth; null: none) hides: a small Gaussian's each
+// (fm::entry_hidden; emit_keys drops the same), and the Gaussians wholly behind that frame's
+// opaque tiles before their covariance (fm::gaussian_occluded); issue 72.
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
                 float lod_error_px = 0.0f, const fm::OcclusionMap& occlusion = {});

@@ -1,5 +1,6 @@
-// Occlusion culling from the session's last frame (issue 72): a chunk that lay wholly behind
-// where the last frame's tiles became opaque is not pre-processed, listed or sorted this frame.
+// Occlusion culling from the session's last frame (issue 72): a render-list entry that lay behind
+// where the last frame's tile became opaque is not listed, sorted or blended this frame, and a
+// Gaussian wholly behind the last frame's opaque tiles is not pre-processed either.
 //
 // The occlusion map of a frame (written by the exact pipeline's rasterizer, both cores:
 // cpu/rasterize_slices.cpp, cuda/rasterize_slices.cu): per 16 x 16 tile of that frame's grid, the
@@ -11,30 +12,39 @@
 // some pixel never got there (it saw the background through the tile's Gaussians). P is
 // - a tile drawn as one slice: the end of the rasterizer's round of kOcclusionRound entries
 //   (counted from the tile's start, as the GPU walks them) in which its last pixel got there;
-// - a split tile (task splitting): the end of the slice after which its last pixel's composed
-//   transmittance got there (the merge's product), so slice-granular.
+// - a split tile (task splitting), per pixel as the merge composes it: in the first slice that
+//   makes it opaque, the end of the round where its own walk crossed, else (opaque only with the
+//   slices before) that slice's end; the tile's P is the largest.
 // Both cores compute P the same way from the same list; alpha's few-ulp rounding can move a
 // pixel's crossing by an entry, and so P by a round, where it falls on a round's edge.
 //
-// The test (chunk_occluded), per chunk of the new frame, in the map's own view: the chunk's box
-// of means projected there (chunk_on_screen), widened by its Gaussians' largest half extent
-// (chunk_half_extent) and the rounding slack, must lie wholly on that frame's image, and every
-// tile it covers must have become opaque in front of the chunk's nearest mean, with margins:
-// - depth ties of the 32-bit sort key (fm::single_sort_packing joins depths within 3.1e-5 of
-//   each other): the map's depth is taken 1e-3 deeper;
-// - the eye's move between the two frames, `shift` (world units): the chunk is taken `shift`
-//   nearer, and the widened box grows by the parallax of the nearest occluder it covers,
-//   shift * focal / depth pixels (a point at depth d moves on the image by at most that much
-//   against any point behind it when the eye moves by `shift`), worked out twice: with the box's
-//   own tiles, then with the tiles of the grown box, which must need no more.
-// A rotation alone changes no ray through the eye, so with shift = 0 the test holds up to the
-// margins: a culled chunk would have been sorted behind every pixel's opaque point, and the
-// picture differs from the unculled one by under 1/255 a pixel. A translation can open gaps
-// between thin occluders that one depth per tile cannot see; that is what the margins grow with
-// the move for, and what the benchmark measures (catgs-bench --occlusion-cull: every frame
-// against the unculled render). Where the map has no data (the chunk reaches past the last
-// image's edges, straddles its near plane or is not finite) the chunk is drawn. A culled chunk
-// that should have shown leaves its tiles less opaque this frame, so the next frame draws it.
+// The next frame reads the map in three steps (both cores):
+// - reprojection (reprojected_tile_depth), a small stage before pre-processing: for each tile of
+//   the new frame, the rays through its corner pixels taken into the map's view as directions
+//   (far points; a rotation maps the tile's edges to lines, so the box of the four holds the
+//   tile's rays), that box widened by the parallax of its nearest occluder when the eye moved by
+//   `shift` (world units): shift * focal / depth pixels, worked out twice (with the box's tiles,
+//   then with the grown box's, which must need no more); the deepest map depth over the box, or
+//   +inf where it leaves the last image or a corner looks behind its eye (no data: drawn);
+// - per entry (entry_hidden): a small Gaussian's entry in a tile is dropped when its mean's depth
+//   in the map's view, less `shift`, lies behind that tile's reprojected depth (taken 1e-3 deeper:
+//   the 32-bit sort key joins depths within 3.1e-5). In the map's own frame such an entry sorted
+//   behind every pixel's opaque point of the tile. A Gaussian over more than 32 tiles keeps them
+//   all (the CUDA core counts and emits those from the ellipse alone);
+// - per Gaussian (gaussian_occluded), before its covariance, in the map's own view: its mean
+//   projected there, the box of pixels its ellipse could reach (chunk_half_extent's bound and the
+//   rounding slack) widened by the parallax of the nearest occluder (as above), and every tile of
+//   that box opaque in front of its depth less `shift`. That spares the covariance, the SH colour
+//   and the tile tests of the Gaussians behind. (Asking the reprojected tiles instead, as the
+//   per-entry test does, culled less: each reprojected tile is the deepest of the two to four
+//   last tiles it straddles; docs/history/occlusion_culling.md.)
+// With the same pose (shift 0) a dropped entry would have sorted behind its tile's opaque point,
+// so the picture differs from the unculled one by under 1/255 a pixel. A rotation alone changes
+// no ray through the eye. A translation can open gaps between thin occluders that one depth per
+// tile cannot see; that is what the parallax margin is for, and what the benchmark measures
+// (catgs-bench exact-occlusion against exact on the same frames, both against the 4x supersampled
+// render). A dropped entry that should have shown leaves its tile less opaque in this frame's own
+// map, so the next frame draws it.
 #pragma once
 
 #include "forward_model/chunk_bounds.h"
@@ -116,16 +126,10 @@ CATGS_HD bool box_occluded(const ChunkOnScreen& s, float r0, const OcclusionMap&
   return false;
 }
 
-// Chunk `b` wholly behind the map's opaque tiles (see above).
-CATGS_HD bool chunk_occluded(const ChunkBounds& b, const OcclusionMap& m) {
-  if (m.depth == nullptr) return false;
-  const ChunkOnScreen s = chunk_on_screen(b, m.view);
-  return box_occluded(s, chunk_half_extent(b, m.view, s.z_lo) + chunk_rounding_slack(s), m);
-}
-
 // One Gaussian (mean in world units, its largest axis `max_scale` in world units, its q_max) wholly
-// behind the map's opaque tiles: chunk_occluded of the box of its one mean, worked out from one
-// projection instead of eight corners. Pre-processing asks it before the Gaussian's covariance.
+// behind the map's opaque tiles (see above): the box of its one mean, widened as a chunk's
+// (chunk_half_extent). Pre-processing asks it before the Gaussian's covariance. (The same test
+// over whole chunks' boxes removed few chunks of the city: docs/history/occlusion_culling.md.)
 CATGS_HD bool gaussian_occluded(glm::vec3 mean, float max_scale, float q_max, const OcclusionMap& m) {
   if (m.depth == nullptr) return false;
   const glm::vec3 p = m.view.R * mean + m.view.t;

@@ -10,93 +10,112 @@
 
 #include "cpu/cpu_renderer.h"
 #include "forward_model/occlusion.h"
+#include "renderer/renderer.h"
 #include "small_city.h"
 #include "test_data.h"
 
 namespace catgs {
 namespace {
 
-// A 320 x 180 camera at the origin looking down +z (identity pose).
-fm::View test_view() {
-  const Camera cam = Camera::from_pose(glm::vec3(0.0f), glm::quat(1.0f, 0.0f, 0.0f, 0.0f), 60.0f, 320, 180);
-  return fm::view_of(cam);
+// A 320 x 180 camera at `eye` looking down +z, turned by `yaw_deg` about +y.
+fm::View test_view(glm::vec3 eye = glm::vec3(0.0f), float yaw_deg = 0.0f) {
+  const glm::quat q = glm::angleAxis(glm::radians(yaw_deg), glm::vec3(0.0f, 1.0f, 0.0f));
+  return fm::view_of(Camera::from_pose(eye, q, 60.0f, 320, 180));
 }
 
-// A small chunk of Gaussians of scale `scale` around (x, y, z) in front of test_view().
-fm::ChunkBounds chunk_at(float x, float y, float z, float half, float scale = 0.01f) {
-  return {glm::vec3(x - half, y - half, z - half), scale, glm::vec3(x + half, y + half, z + half), 2.0f * std::log(255.0f)};
-}
-
+// A map drawn at test_view(): every tile opaque at `depth`; `now` reads it.
 struct Map {
-  std::vector<float> depth;
+  std::vector<float> depth, now_depth;
   fm::OcclusionMap map;
 };
-Map wall_at(float depth, float shift = 0.0f) {
+Map wall_at(float depth, const fm::View& now = test_view()) {
   Map m;
-  const fm::View v = test_view();
-  m.map = fm::occlusion_map(nullptr, v, v);
+  m.map = fm::occlusion_map(nullptr, test_view(), now);
   m.depth.assign(static_cast<std::size_t>(m.map.tiles_x) * m.map.tiles_y, depth);
   m.map.depth = m.depth.data();
-  m.map.shift = shift;
   return m;
 }
+// The map reprojected onto `now`'s tiles (as cpu::occlusion_reproject).
+void reproject(Map& m, const fm::View& now) {
+  cpu::occlusion_reproject(m.map, now, cpu::TileGrid::of(now.width, now.height), m.now_depth);
+  m.map.now_depth = m.now_depth.data();
+  m.map.now_tiles_x = cpu::TileGrid::of(now.width, now.height).tiles_x;
+}
+std::size_t tile_index(int tx, int ty) { return static_cast<std::size_t>(ty) * 20 + tx; }  // 320 / 16 tiles a row
 
-TEST(OcclusionCull, ChunkBehindAWallIsCulledOneInFrontOrOffTheImageIsNot) {
+TEST(OcclusionCull, SamePoseReadsEachTilesOwnDepth) {
   Map m = wall_at(5.0f);
-  EXPECT_TRUE(fm::chunk_occluded(chunk_at(0.0f, 0.0f, 10.0f, 0.2f), m.map));
-  EXPECT_FALSE(fm::chunk_occluded(chunk_at(0.0f, 0.0f, 4.0f, 0.2f), m.map));   // in front of the wall
-  EXPECT_FALSE(fm::chunk_occluded(chunk_at(0.0f, 0.0f, 5.2f, 0.2f), m.map));   // straddles it
-  EXPECT_FALSE(fm::chunk_occluded(chunk_at(12.0f, 0.0f, 10.0f, 0.2f), m.map)); // past the image's edge
-  EXPECT_FALSE(fm::chunk_occluded(chunk_at(0.0f, 0.0f, -10.0f, 0.2f), m.map)); // behind the eye
-  // A big Gaussian reaches past its box: widened beyond the image, it is drawn.
-  EXPECT_FALSE(fm::chunk_occluded(chunk_at(0.0f, 0.0f, 10.0f, 0.2f, 20.0f), m.map));
-  // No map: nothing is culled.
-  fm::OcclusionMap none;
-  EXPECT_FALSE(fm::chunk_occluded(chunk_at(0.0f, 0.0f, 10.0f, 0.2f), none));
-  // One Gaussian: the box of its one mean.
-  const float q = 2.0f * std::log(255.0f);
-  EXPECT_TRUE(fm::gaussian_occluded(glm::vec3(0.5f, -0.3f, 10.0f), 0.01f, q, m.map));
-  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(0.5f, -0.3f, 4.0f), 0.01f, q, m.map));
-  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(0.5f, -0.3f, 10.0f), 20.0f, q, m.map));
-  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(12.0f, 0.0f, 10.0f), 0.01f, q, m.map));
-  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(0.0f, 0.0f, 10.0f), 0.01f, q, none));
-  // It agrees with the chunk of that one mean.
-  for (float z : {4.9f, 5.1f, 6.0f, 30.0f})
-    EXPECT_EQ(fm::gaussian_occluded(glm::vec3(0.2f, 0.1f, z), 0.05f, q, m.map),
-              fm::chunk_occluded(fm::ChunkBounds{glm::vec3(0.2f, 0.1f, z), 0.05f, glm::vec3(0.2f, 0.1f, z), q}, m.map))
-        << z;
+  for (std::size_t t = 0; t < m.depth.size(); ++t) m.depth[t] = 1.0f + static_cast<float>(t);
+  reproject(m, test_view());
+  ASSERT_EQ(m.now_depth.size(), m.depth.size());
+  for (std::size_t t = 0; t < m.depth.size(); ++t) EXPECT_EQ(m.now_depth[t], m.depth[t]) << t;
 }
 
-TEST(OcclusionCull, OneUnsaturatedOrNanTileUnderTheChunkKeepsIt) {
+TEST(OcclusionCull, ATurnReadsTheTilesItTurnedTo) {
   Map m = wall_at(5.0f);
-  const fm::ChunkBounds c = chunk_at(0.0f, 0.0f, 10.0f, 0.2f);
-  ASSERT_TRUE(fm::chunk_occluded(c, m.map));
-  // The tile under the chunk's centre (the image centre, pixel (159.5, 89.5)).
-  const std::size_t centre = static_cast<std::size_t>(89 / fm::kTileSize) * m.map.tiles_x + 159 / fm::kTileSize;
-  m.depth[centre] = std::numeric_limits<float>::infinity();
-  EXPECT_FALSE(fm::chunk_occluded(c, m.map));
-  m.depth[centre] = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_FALSE(fm::chunk_occluded(c, m.map));
-  m.depth[centre] = 9.995f;  // saturated just in front of the chunk: within the depth slack
-  EXPECT_FALSE(fm::chunk_occluded(chunk_at(0.0f, 0.0f, 10.0f, 0.0f), m.map));
+  for (std::size_t t = 0; t < m.depth.size(); ++t) m.depth[t] = 1.0f + static_cast<float>(t % 20);  // by column
+  const fm::View turned = test_view(glm::vec3(0.0f), 10.0f);
+  reproject(m, turned);
+  // A turn to the side: the tiles now at the image's centre saw, last frame, columns to one side;
+  // the ones now at that edge saw past the last image's edge (no data).
+  const float centre = m.now_depth[tile_index(10, 5)];
+  EXPECT_TRUE(std::isfinite(centre));
+  EXPECT_NE(centre, m.depth[tile_index(10, 5)]);
+  int unknown = 0;
+  for (int tx = 0; tx < 20; ++tx) unknown += std::isinf(m.now_depth[tile_index(tx, 5)]) ? 1 : 0;
+  EXPECT_GE(unknown, 2);
+  EXPECT_LE(unknown, 8);
 }
 
-TEST(OcclusionCull, TheEyesMoveWidensTheMargins) {
-  // A wall with a hole of one tile: a chunk behind the wall next to the hole is culled while the
-  // eye stays, and drawn once the eye has moved enough for the hole to uncover it.
+TEST(OcclusionCull, TheEyesMoveWidensTheBoxByTheParallax) {
+  // A wall at 2 with one tile that never became opaque: the same pose reads it only there; once
+  // the eye has moved, the tiles beside it read it too (the nearer the wall, the wider).
   Map m = wall_at(2.0f);
-  const std::size_t hole = static_cast<std::size_t>(89 / fm::kTileSize) * m.map.tiles_x + 159 / fm::kTileSize + 2;
-  m.depth[hole] = std::numeric_limits<float>::infinity();
-  const fm::ChunkBounds c = chunk_at(0.0f, 0.0f, 10.0f, 0.05f);
-  EXPECT_TRUE(fm::chunk_occluded(c, m.map));
-  m.map.shift = 0.3f;  // at 2 m and fx = 156 px: 23 px of parallax, past the hole 13 px away
-  EXPECT_FALSE(fm::chunk_occluded(c, m.map));
-  // The eye's move also brings the chunk nearer: at shift >= its lead over the wall it is drawn.
-  Map near = wall_at(5.0f, 0.0f);
-  const fm::ChunkBounds d = chunk_at(0.0f, 0.0f, 6.0f, 0.05f);
-  EXPECT_TRUE(fm::chunk_occluded(d, near.map));
-  near.map.shift = 1.2f;
-  EXPECT_FALSE(fm::chunk_occluded(d, near.map));
+  m.depth[tile_index(10, 5)] = std::numeric_limits<float>::infinity();
+  reproject(m, test_view());
+  EXPECT_TRUE(std::isinf(m.now_depth[tile_index(10, 5)]));
+  EXPECT_EQ(m.now_depth[tile_index(12, 5)], 2.0f);
+  const fm::View moved = test_view(glm::vec3(0.25f, 0.0f, 0.0f));
+  Map n = wall_at(2.0f, moved);
+  n.depth = m.depth;
+  n.map.depth = n.depth.data();
+  ASSERT_NEAR(n.map.shift, 0.25f, 1e-6f);
+  reproject(n, moved);
+  EXPECT_TRUE(std::isinf(n.now_depth[tile_index(11, 5)]));  // 0.25 * 156 / 2 = 19 px of parallax
+  EXPECT_TRUE(std::isinf(n.now_depth[tile_index(9, 5)]));
+  EXPECT_EQ(n.now_depth[tile_index(14, 5)], 2.0f);
+  // NaN in the map: no data.
+  Map k = wall_at(2.0f);
+  k.depth[tile_index(3, 3)] = std::numeric_limits<float>::quiet_NaN();
+  reproject(k, test_view());
+  EXPECT_TRUE(std::isinf(k.now_depth[tile_index(3, 3)]));
+}
+
+TEST(OcclusionCull, AGaussianBehindTheWallIsCulledOneInFrontBigOrOffTheImageIsNot) {
+  Map m = wall_at(5.0f);
+  const float q = 2.0f * std::log(255.0f);
+  auto culled = [&](glm::vec3 mean, float scale) { return fm::gaussian_occluded(mean, scale, q, m.map); };
+  EXPECT_TRUE(culled(glm::vec3(0.5f, -0.3f, 10.0f), 0.01f));
+  EXPECT_FALSE(culled(glm::vec3(0.5f, -0.3f, 4.0f), 0.01f));    // in front of the wall
+  EXPECT_FALSE(culled(glm::vec3(0.5f, -0.3f, 5.002f), 0.01f));  // within the depth slack
+  EXPECT_FALSE(culled(glm::vec3(0.5f, -0.3f, 10.0f), 20.0f));   // reaches past the last image
+  EXPECT_FALSE(culled(glm::vec3(50.0f, 0.0f, 10.0f), 0.01f));   // off the last image: no data
+  EXPECT_FALSE(culled(glm::vec3(0.0f, 0.0f, -10.0f), 0.01f));   // behind the last eye
+  // One tile under it never became opaque, or holds a NaN.
+  m.depth[tile_index(9, 5)] = std::numeric_limits<float>::infinity();
+  EXPECT_FALSE(culled(glm::vec3(0.0f, -0.05f, 10.0f), 0.01f));
+  m.depth[tile_index(9, 5)] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(culled(glm::vec3(0.0f, -0.05f, 10.0f), 0.01f));
+  // The eye's move: the chunk is taken nearer by it, and the parallax widens the box.
+  Map n = wall_at(5.0f, test_view(glm::vec3(1.2f, 0.0f, 0.0f)));
+  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(0.0f, 0.0f, 6.0f), 0.01f, q, n.map));
+  // No map: nothing is culled.
+  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(0.5f, -0.3f, 10.0f), 0.01f, q, fm::OcclusionMap{}));
+  // The per-entry test over the reprojected tiles.
+  reproject(m, test_view());
+  EXPECT_TRUE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 10.0f));
+  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 4.0f));
+  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(9, 5)], 10.0f));
 }
 
 double psnr_rgba8(const Image& a, const Image& b) {
