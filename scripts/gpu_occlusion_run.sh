@@ -56,7 +56,7 @@ city() {  # city COPIES PATH
   "$BIN/catgs-bench" --scene "$S/tumblewood_sh2.compressed.ply" --city --radius-sq "$r" --up 0,-1,0 \
     --lod --lod-error 2 --trace "real:$T/$trace.cameras.json" --width 1280 --height 720 \
     --pipeline exact,exact-occlusion --warmup 10 --frames 96 --quality-every 12 --aa-reference 4 \
-    --json "$OUT/json/occ_city$1_$2.json"
+    --json "$OUT/json/occ_city$1_$2${CATGS_OCC_TAG:-}.json"
 }
 
 # changes COPIES PATH: where the list's work goes, measured by the CPU reference on the machine's

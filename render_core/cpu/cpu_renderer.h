@@ -85,8 +85,7 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // `lod_error_px` (fm::lod_chunk_drawn; 0: the leaves), in every pipeline; the others are skipped
 // as culled chunks are. exact also drops the entries that `occlusion` (the last frame's map with
 // its depths over this frame's tiles, now_depth; null: none) hides: a small Gaussian's each
-// (fm::entry_hidden; emit_keys drops the same), and the Gaussians wholly behind that frame's
-// opaque tiles before their covariance (fm::gaussian_occluded); issue 72.
+// (fm::entry_hidden; emit_keys drops the same); issue 72.
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
                 float lod_error_px = 0.0f, const fm::OcclusionMap& occlusion = {});

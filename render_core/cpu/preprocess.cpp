@@ -89,11 +89,6 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   // pipelines). exact also drops a Gaussian that can never reach 1/255.
   const float q_max = fm::opacity_aware_qmax(opacity);
   if (v.exact && !(q_max > 0.0f)) return;
-  if (v.exact && v.occlusion.depth != nullptr) {  // wholly behind the last frame's opaque tiles
-    const float max_log =
-        std::max(std::max(model.log_scales[3 * i], model.log_scales[3 * i + 1]), model.log_scales[3 * i + 2]);
-    if (fm::gaussian_occluded(mean, std::exp(max_log), q_max, v.occlusion)) return;
-  }
 
   const fm::Cov3 cov3 = fm::covariance_3d(
       {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},

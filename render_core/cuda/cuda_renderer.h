@@ -236,7 +236,7 @@ class CudaRenderer final : public Renderer {
   // Sets stats_'s visible, render_list_length, passes and longest_pass. Throws RenderBudgetError
   // as draw_in_passes. Used by render_full and by catgs key frames without a window (which sort
   // in one radix sort: depth_first false). `occlusion`: the last frame's map for pre-processing
-  // (fm::chunk_occluded; null depth: none); `draw_map`: write this frame's map into
+  // (with its depths over this frame's tiles: fm::entry_hidden; null: none); `draw_map`: write this frame's map into
   // State::occlusion_depth[1 - occlusion_read] (exact frames; buffers sized by the caller).
   void draw_full_frame(const Camera& camera, bool exact, bool early_termination, bool depth_first,
                        const fm::OcclusionMap& occlusion = {}, bool draw_map = false);

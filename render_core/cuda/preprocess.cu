@@ -120,10 +120,6 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
   const float opacity = fm::sigmoid(g.opacity_logit);
   const float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
   if (exact && !(q_max > 0.0f)) return r;               // never reaches alpha 1/255 anywhere
-  if (exact && occlusion.depth != nullptr) {  // wholly behind the last frame's opaque tiles (fm::gaussian_occluded)
-    const float max_log = fmaxf(fmaxf(scene.log_scales[3 * i], scene.log_scales[3 * i + 1]), scene.log_scales[3 * i + 2]);
-    if (fm::gaussian_occluded(g.mean, expf(max_log), q_max, occlusion)) return r;
-  }
   const glm::vec3 cov2 = fm::covariance_2d(g.covariance(scene, i), cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) return r;

@@ -25,10 +25,9 @@ namespace catgs::cuda::stages {
 // it again with larger buffers). `region`: one pass of a frame drawn in passes
 // (renderer/render_passes.h) counts only that region's tiles (fm::clip_tile_rect; the camera
 // stays the whole frame's), as cpu::preprocess; fm::kAllTiles for a frame in one pass.
-// `occlusion`: exact also drops the entries the last frame's map, reprojected onto this frame's
-// tiles (now_depth), hides (a small Gaussian's: fm::entry_hidden, its tile mask), and the
-// Gaussians wholly behind its opaque tiles before their covariance (fm::gaussian_occluded);
-// forward_model/occlusion.h. A null map (the default) drops none.
+// `occlusion`: exact also drops the entries of small Gaussians that the last frame's map,
+// reprojected onto this frame's tiles (now_depth), hides (fm::entry_hidden, from the tile mask;
+// forward_model/occlusion.h). A map without now_depth (the default) drops none.
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
                 const Projected& out, const LiveChunks& live, unsigned long long* visible,
                 unsigned long long* depth_range, const BigList& big, cudaStream_t stream,

@@ -1,6 +1,5 @@
 // Occlusion culling from the session's last frame (issue 72): a render-list entry that lay behind
-// where the last frame's tile became opaque is not listed, sorted or blended this frame, and a
-// Gaussian wholly behind the last frame's opaque tiles is not pre-processed either.
+// where the last frame's tile became opaque is not listed, sorted or blended this frame.
 //
 // The occlusion map of a frame (written by the exact pipeline's rasterizer, both cores:
 // cpu/rasterize_slices.cpp, cuda/rasterize_slices.cu): per 16 x 16 tile of that frame's grid, the
@@ -18,7 +17,7 @@
 // Both cores compute P the same way from the same list; alpha's few-ulp rounding can move a
 // pixel's crossing by an entry, and so P by a round, where it falls on a round's edge.
 //
-// The next frame reads the map in three steps (both cores):
+// The next frame reads the map in two steps (both cores):
 // - reprojection (reprojected_tile_depth), a small stage before pre-processing: for each tile of
 //   the new frame, the rays through its corner pixels taken into the map's view as directions
 //   (far points; a rotation maps the tile's edges to lines, so the box of the four holds the
@@ -31,13 +30,11 @@
 //   the 32-bit sort key joins depths within 3.1e-5). In the map's own frame such an entry sorted
 //   behind every pixel's opaque point of the tile. A Gaussian over more than 32 tiles keeps them
 //   all (the CUDA core counts and emits those from the ellipse alone);
-// - per Gaussian (gaussian_occluded), before its covariance, in the map's own view: its mean
-//   projected there, the box of pixels its ellipse could reach (chunk_half_extent's bound and the
-//   rounding slack) widened by the parallax of the nearest occluder (as above), and every tile of
-//   that box opaque in front of its depth less `shift`. That spares the covariance, the SH colour
-//   and the tile tests of the Gaussians behind. (Asking the reprojected tiles instead, as the
-//   per-entry test does, culled less: each reprojected tile is the deepest of the two to four
-//   last tiles it straddles; docs/history/occlusion_culling.md.)
+// - nothing per whole Gaussian: a test of each Gaussian before its covariance, in the last view
+//   (its mean projected there, the box its ellipse could reach widened by the parallax, every
+//   tile of it opaque in front), dropped 10-25% more entries but cost 0.14-0.17 ms of
+//   pre-processing on an H100, more than it saved (docs/history/occlusion_culling.md); a small
+//   Gaussian all of whose entries are dropped still skips its SH colour.
 // With the same pose (shift 0) a dropped entry would have sorted behind its tile's opaque point,
 // so the picture differs from the unculled one by under 1/255 a pixel. A rotation alone changes
 // no ray through the eye. A translation can open gaps between thin occluders that one depth per
@@ -104,45 +101,6 @@ CATGS_HD float occlusion_depth_over(const OcclusionMap& m, float u0, float u1, f
     }
   *nearest = near;
   return deepest;
-}
-
-// True when pixel box s of the map's view (the means' box, z_lo their nearest depth), widened by
-// r0, lies wholly behind the map's opaque tiles with the margins above; false whenever the map
-// cannot say.
-CATGS_HD bool box_occluded(const ChunkOnScreen& s, float r0, const OcclusionMap& m) {
-  if (s.kind != ChunkOnScreen::box) return false;
-  const float z = s.z_lo - m.shift;  // the nearest mean, as near as the move can bring it
-  const float focal = fmaxf(m.view.fx, m.view.fy);
-  float r = r0;
-  for (int pass = 0; pass < 2; ++pass) {
-    float nearest = 0.0f;
-    const float deepest = occlusion_depth_over(m, s.u_lo - r, s.u_hi + r, s.w_lo - r, s.w_hi + r, &nearest);
-    // Not on the last image, or some covered tile became opaque no nearer than the box.
-    if (!(deepest >= 0.0f && deepest * kOcclusionDepthSlack < z)) return false;
-    const float need = r0 + (m.shift > 0.0f ? m.shift * focal / nearest : 0.0f);
-    if (need <= r) return true;
-    r = need;
-  }
-  return false;
-}
-
-// One Gaussian (mean in world units, its largest axis `max_scale` in world units, its q_max) wholly
-// behind the map's opaque tiles (see above): the box of its one mean, widened as a chunk's
-// (chunk_half_extent). Pre-processing asks it before the Gaussian's covariance. (The same test
-// over whole chunks' boxes removed few chunks of the city: docs/history/occlusion_culling.md.)
-CATGS_HD bool gaussian_occluded(glm::vec3 mean, float max_scale, float q_max, const OcclusionMap& m) {
-  if (m.depth == nullptr) return false;
-  const glm::vec3 p = m.view.R * mean + m.view.t;
-  if (!(p.z > m.view.near_plane) || !chunk_finite(p.x) || !chunk_finite(p.y) || !chunk_finite(max_scale) ||
-      !chunk_finite(q_max))
-    return false;
-  ChunkOnScreen s;
-  s.kind = ChunkOnScreen::box;
-  s.u_lo = s.u_hi = m.view.fx * p.x / p.z + m.view.cx - 0.5f;
-  s.w_lo = s.w_hi = m.view.fy * p.y / p.z + m.view.cy - 0.5f;
-  s.z_lo = p.z;
-  const ChunkBounds b{mean, max_scale, mean, q_max};
-  return box_occluded(s, chunk_half_extent(b, m.view, p.z) + chunk_rounding_slack(s), m);
 }
 
 // Per-entry culling (issue 72). The map's depth over what tile (tx, ty) of view `now` sees of the

@@ -207,8 +207,15 @@ void FramePipeline::finish_render_into(Rendered& r) {
   // Render time includes the plane download (GPU) but not the conversion itself; with frames in
   // flight, also the time the lane spent beginning other frames before this one's finish.
   r.render_ms = std::max(0.0, ms_between(r.render_started, Clock::now()) - r.convert_ms);
-  // A sub-frame's time is not its Gaussians' (the caches skip the pre-process).
-  if (gpu_ >= 0 && r.render_key_frame) metrics_.observe_gpu_throughput(gpu_, r.splats, r.render_ms, frames_with_it);
+  // A sub-frame's time is not its Gaussians' (the caches skip the pre-process). With occlusion
+  // culling the frame draws fewer Gaussians than the cut holds, while the splat budget is held
+  // against the cut's prediction: the throughput is then counted in the prediction's Gaussians
+  // (render/lod_bound.h), else the budget would shrink with every Gaussian the culling saves.
+  const std::uint64_t throughput_splats = renderer_->options().occlusion_culling
+                                              ? std::max<std::uint64_t>(r.splats, lod_bound_.predicted_splats())
+                                              : r.splats;
+  if (gpu_ >= 0 && r.render_key_frame)
+    metrics_.observe_gpu_throughput(gpu_, throughput_splats, r.render_ms, frames_with_it);
 }
 
 void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {

@@ -91,31 +91,22 @@ TEST(OcclusionCull, TheEyesMoveWidensTheBoxByTheParallax) {
   EXPECT_TRUE(std::isinf(k.now_depth[tile_index(3, 3)]));
 }
 
-TEST(OcclusionCull, AGaussianBehindTheWallIsCulledOneInFrontBigOrOffTheImageIsNot) {
+TEST(OcclusionCull, AnEntryBehindTheTilesDepthIsHiddenOneInFrontOrUnderAnOpenTileIsNot) {
   Map m = wall_at(5.0f);
-  const float q = 2.0f * std::log(255.0f);
-  auto culled = [&](glm::vec3 mean, float scale) { return fm::gaussian_occluded(mean, scale, q, m.map); };
-  EXPECT_TRUE(culled(glm::vec3(0.5f, -0.3f, 10.0f), 0.01f));
-  EXPECT_FALSE(culled(glm::vec3(0.5f, -0.3f, 4.0f), 0.01f));    // in front of the wall
-  EXPECT_FALSE(culled(glm::vec3(0.5f, -0.3f, 5.002f), 0.01f));  // within the depth slack
-  EXPECT_FALSE(culled(glm::vec3(0.5f, -0.3f, 10.0f), 20.0f));   // reaches past the last image
-  EXPECT_FALSE(culled(glm::vec3(50.0f, 0.0f, 10.0f), 0.01f));   // off the last image: no data
-  EXPECT_FALSE(culled(glm::vec3(0.0f, 0.0f, -10.0f), 0.01f));   // behind the last eye
-  // One tile under it never became opaque, or holds a NaN.
-  m.depth[tile_index(9, 5)] = std::numeric_limits<float>::infinity();
-  EXPECT_FALSE(culled(glm::vec3(0.0f, -0.05f, 10.0f), 0.01f));
-  m.depth[tile_index(9, 5)] = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_FALSE(culled(glm::vec3(0.0f, -0.05f, 10.0f), 0.01f));
-  // The eye's move: the chunk is taken nearer by it, and the parallax widens the box.
-  Map n = wall_at(5.0f, test_view(glm::vec3(1.2f, 0.0f, 0.0f)));
-  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(0.0f, 0.0f, 6.0f), 0.01f, q, n.map));
-  // No map: nothing is culled.
-  EXPECT_FALSE(fm::gaussian_occluded(glm::vec3(0.5f, -0.3f, 10.0f), 0.01f, q, fm::OcclusionMap{}));
-  // The per-entry test over the reprojected tiles.
+  m.depth[tile_index(9, 5)] = std::numeric_limits<float>::infinity();  // a pixel saw the background
   reproject(m, test_view());
   EXPECT_TRUE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 10.0f));
-  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 4.0f));
+  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 4.0f));    // in front of the wall
+  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 5.002f));  // within the depth slack
   EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(9, 5)], 10.0f));
+  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], -INFINITY));  // no map: -inf
+  EXPECT_FALSE(fm::entry_hidden(std::numeric_limits<float>::quiet_NaN(), 10.0f));
+  // The old depth of a mean: in the map's view, less the eye's move.
+  Map n = wall_at(5.0f, test_view(glm::vec3(0.0f, 0.0f, 1.0f)));
+  reproject(n, test_view(glm::vec3(0.0f, 0.0f, 1.0f)));
+  EXPECT_NEAR(fm::occlusion_old_depth(glm::vec3(0.3f, 0.2f, 7.0f), n.map), 6.0f, 1e-5f);
+  fm::OcclusionMap none;
+  EXPECT_EQ(fm::occlusion_old_depth(glm::vec3(0.3f, 0.2f, 7.0f), none), -INFINITY);
 }
 
 double psnr_rgba8(const Image& a, const Image& b) {
@@ -138,8 +129,8 @@ RenderOptions exact_options(bool occlusion) {
   return o;
 }
 
-// The same pose twice: the second frame culls the Gaussians the first found hidden, and draws the same
-// picture (a culled Gaussian lies behind every pixel's opaque point: under 1/255 a pixel; the sort
+// The same pose twice: the second frame drops the entries the first found hidden, and draws the same
+// picture (a dropped entry lies behind every pixel's opaque point: under 1/255 a pixel; the sort
 // key's depth quantisation, over a shorter depth range, may reorder ties).
 TEST(OcclusionCull, SamePoseAgainCullsAndDrawsTheSamePicture) {
   CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
