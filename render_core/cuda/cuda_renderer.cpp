@@ -295,6 +295,12 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   s.occlusion_map_drawn = occlusion;
   draw_full_frame(camera, exact, true, exact && depth_first_sort(), map, occlusion);
   s.occlusion_map_drawn = false;
+  if (occlusion) {  // the entries behind the opaque points, for last_stats (after kMerged: recorded next)
+    s.occlusion_behind_host.ensure(sizeof(unsigned long long));
+    CATGS_CUDA(cudaMemcpyAsync(s.occlusion_behind_host.data(), s.occlusion_behind.as<void>(), sizeof(unsigned long long),
+                               cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
+  }
   stats_.occlusion_map_used = map.depth != nullptr;
   s.occlusion_counted = occlusion;
   if (occlusion) {
@@ -419,11 +425,9 @@ const FrameStats& CudaRenderer::last_stats() const {
   stats_.ranges_ms = ms(kSorted, kRanged);
   stats_.rasterize_ms = ms(kRanged, kRasterized);
   stats_.total_ms = ms(kStart, kMerged);
-  if (s.occlusion_counted) {  // after kMerged: the map's counter is final
-    unsigned long long behind = 0;
-    CATGS_CUDA(cudaMemcpy(&behind, s.occlusion_behind.as<void>(), sizeof behind, cudaMemcpyDeviceToHost));
-    stats_.entries_behind_opaque = static_cast<std::size_t>(behind);
-  }
+  if (s.occlusion_counted)  // copied before kMerged (render_full)
+    stats_.entries_behind_opaque =
+        static_cast<std::size_t>(*reinterpret_cast<const unsigned long long*>(s.occlusion_behind_host.data()));
   if (options_.pipeline == Pipeline::catgs) {
     if (!s.key_frame) {  // a sub-frame records no key emission, sort or ranges
       stats_.keys_ms = stats_.sort_ms = stats_.ranges_ms = 0.0;

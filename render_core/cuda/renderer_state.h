@@ -187,6 +187,9 @@ struct CudaRenderer::State {
   fm::View occlusion_view{};
   bool occlusion_valid = false;
   bool occlusion_counted = false;  // the last frame drew a map (last_stats reads its counter)
+  // occlusion_behind's copy, queued on the stream before kMerged (a synchronous cudaMemcpy in
+  // last_stats would take the legacy default stream, which waits for the process's other work).
+  PinnedBuffer occlusion_behind_host;
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian) and its counters
   // (CatgsCounterSlot; the plan's totals among them).
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp, catgs_counters;
