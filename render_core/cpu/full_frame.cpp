@@ -70,8 +70,8 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
                        buffers.changed ? buffers.changed->data() : nullptr);
       if (buffers.changed) count_changes(list, *buffers.changed, stats);
       if (buffers.tile_depth)
-        stats.entries_behind_opaque += occlusion_map(projected, list, buffers.ranges, opaque_at.data(), first, end,
-                                                     buffers.tile_depth->data());
+        stats.entries_behind_opaque +=
+            occlusion_map(projected, list, buffers.ranges, opaque_at.data(), first, end, buffers.tile_depth->data());
       stats.merge_ms += merge_ms;
       stats.slices = buffers.slices.size();
     } else {

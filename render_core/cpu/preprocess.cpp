@@ -157,8 +157,9 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
     throw std::invalid_argument("preprocess: chunk bounds of another scene");
   out.resize(model.size());
   if (occlusion.now_depth)  // for emission's per-entry test
-    out.hidden_depth.assign(occlusion.now_depth,
-                            occlusion.now_depth + static_cast<std::size_t>(TileGrid::of(camera.width, camera.height).tile_count()));
+    out.hidden_depth.assign(
+        occlusion.now_depth,
+        occlusion.now_depth + static_cast<std::size_t>(TileGrid::of(camera.width, camera.height).tile_count()));
   else
     out.hidden_depth.clear();
   const ViewPass v(model, camera, pipeline, out, region, lod_error_px, occlusion);

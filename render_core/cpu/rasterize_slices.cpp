@@ -76,9 +76,10 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
           // opaque only with the slices before it, the slice's end (as the GPU's merge).
           if (tile_opaque_at && ended_at == UINT32_MAX) {
             if (stop_at[at] != UINT32_MAX)
-              ended_at = std::min(slices[s].end, slices[s].begin + (stop_at[at] - slices[s].begin) /
-                                                                       fm::kOcclusionRound * fm::kOcclusionRound +
-                                                                   fm::kOcclusionRound);
+              ended_at = std::min(slices[s].end,
+                                  slices[s].begin +
+                                      (stop_at[at] - slices[s].begin) / fm::kOcclusionRound * fm::kOcclusionRound +
+                                      fm::kOcclusionRound);
             else if (partial_T[at] < 0.0f || T < fm::kOcclusionTransmittance)
               ended_at = slices[s].end;
           }

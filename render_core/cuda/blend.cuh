@@ -289,8 +289,6 @@ __device__ __forceinline__ uint32_t block_max(uint32_t v, uint32_t& shared_slot)
   return shared_slot;
 }
 
-
-
 // As blend_range, for a list whose entries need not reach this tile at this pose (catgs: a key
 // frame's trail list, walked at the key pose or at a sub-frame's pose). Each round, the thread
 // that fetches an entry works out its sub-tile mask (subtile_mask: the sub-tiles its ellipse

@@ -297,8 +297,8 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   s.occlusion_map_drawn = false;
   if (occlusion) {  // the entries behind the opaque points, for last_stats (after kMerged: recorded next)
     s.occlusion_behind_host.ensure(sizeof(unsigned long long));
-    CATGS_CUDA(cudaMemcpyAsync(s.occlusion_behind_host.data(), s.occlusion_behind.as<void>(), sizeof(unsigned long long),
-                               cudaMemcpyDeviceToHost, s.stream));
+    CATGS_CUDA(cudaMemcpyAsync(s.occlusion_behind_host.data(), s.occlusion_behind.as<void>(),
+                               sizeof(unsigned long long), cudaMemcpyDeviceToHost, s.stream));
     CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
   }
   stats_.occlusion_map_used = map.depth != nullptr;
@@ -362,12 +362,12 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
       const uint64_t capacity = s.plan_frame_slices(tiles, c.entries, options_.speculation, frame.entries, first, end);
       CATGS_CUDA(cudaEventRecord(s.events[kRanged], s.stream));
       const stages::SlicePlan plan = s.slice_plan();
-      stages::rasterize_slices(plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values,
-                               proj, cam, early_termination, false, bg, nullptr, s.partials.as<float4>(),
-                               s.rgb.as<float>(), s.rgba8.as<uint32_t>(), s.stream,
-                               draw_map ? stages::OpaquePoints{s.occlusion_opaque_at.as<uint32_t>(),
-                                                               s.occlusion_partial.as<uint32_t>()}
-                                        : stages::OpaquePoints{});
+      stages::rasterize_slices(
+          plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values, proj, cam,
+          early_termination, false, bg, nullptr, s.partials.as<float4>(), s.rgb.as<float>(), s.rgba8.as<uint32_t>(),
+          s.stream,
+          draw_map ? stages::OpaquePoints{s.occlusion_opaque_at.as<uint32_t>(), s.occlusion_partial.as<uint32_t>()}
+                   : stages::OpaquePoints{});
       if (draw_map)
         stages::occlusion_map(s.occlusion_opaque_at.as<uint32_t>(), s.ranges.as<uint2>(), s.sorted_values, proj, first,
                               end, s.occlusion_depth[1 - s.occlusion_read].as<float>(),

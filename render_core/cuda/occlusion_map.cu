@@ -10,7 +10,7 @@ namespace catgs::cuda::stages {
 
 namespace {
 
-constexpr uint32_t kNever = 0xffffffffu;       // rasterize_slices: no opaque point
+constexpr uint32_t kNever = 0xffffffffu;      // rasterize_slices: no opaque point
 constexpr float kNeverDepth = 3.3895314e38f;  // the largest finite float: nothing lies behind it
 
 __global__ void __launch_bounds__(tune::kGaussianThreads)

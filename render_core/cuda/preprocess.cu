@@ -61,9 +61,8 @@ __device__ void record_depth_range(bool listed, float depth, unsigned long long*
 __global__ void __launch_bounds__(tune::kGaussianThreads)
     cull_chunks_kernel(SceneView scene, uint64_t count, CameraParams cam, bool exact, LiveChunks live) {
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  mark_chunk(c < count && lod_drawn(scene, c, cam) &&
-                 !(exact && fm::chunk_outside_view(scene.chunks[c], cam)),
-             c, count, live);
+  mark_chunk(c < count && lod_drawn(scene, c, cam) && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)), c,
+             count, live);
 }
 
 // order_live_chunks' second launch, a thread per chunk (after slot = the exclusive sum of keep):

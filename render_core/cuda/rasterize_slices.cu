@@ -87,10 +87,9 @@ struct SaturatedSkip {
 // T crossed (`own`: [slots, 256], the slices' PixelState::occluded_from; null: not asked), else
 // that slice's end; kNoStop where there is none. The slices the merge reads were never ended for
 // this pixel by an earlier one, so `own` is their own walk's, whatever the timing.
-__device__ __forceinline__ uint32_t merge_pixel(const SlicePlan& plan, uint32_t tile, uint4 tp,
-                                                const float4* partials, const uint32_t* own, bool early_termination,
-                                                int rank, float3 background, uint64_t p, float* out_rgb,
-                                                uint32_t* out_rgba8) {
+__device__ __forceinline__ uint32_t merge_pixel(const SlicePlan& plan, uint32_t tile, uint4 tp, const float4* partials,
+                                                const uint32_t* own, bool early_termination, int rank,
+                                                float3 background, uint64_t p, float* out_rgb, uint32_t* out_rgba8) {
   float3 C = make_float3(0.0f, 0.0f, 0.0f);
   float T = 1.0f;
   uint32_t ended = kNoStop;
@@ -132,7 +131,7 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
                             OpaquePoints opaque) {    // the occlusion map's P, or none
   __shared__ BlendBatch batch;
   __shared__ uint32_t saturated_at;  // block_max's slot
-  if (abandon && *abandon) return;  // written by an earlier kernel: the same for every thread
+  if (abandon && *abandon) return;   // written by an earlier kernel: the same for every thread
   const uint32_t s = order ? order[blockIdx.x] : blockIdx.x;
   if (s == kNoSlice) return;  // a block past the slice total (block-uniform)
   const uint2 tile_k = plan.slice_tile[s];

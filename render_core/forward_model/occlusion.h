@@ -75,7 +75,7 @@ inline OcclusionMap occlusion_map(const float* depth, const View& drawn_at, cons
   return m;
 }
 
-inline constexpr float kOcclusionDepthSlack = 1.0f + 1e-3f;  // the sort key's depth ties, with room
+inline constexpr float kOcclusionDepthSlack = 1.0f + 1e-3f;      // the sort key's depth ties, with room
 inline constexpr float kOcclusionTransmittance = 1.0f / 255.0f;  // a pixel is opaque below it
 inline constexpr uint32_t kOcclusionRound = 256;  // entries a GPU rasterizer round stages (tune::kRasterBatch)
 

@@ -87,7 +87,8 @@ TEST_F(Occlusion, SamePoseTwice) {
     const auto l1 = static_cast<long long>(gpu.last_stats().render_list_length);
     const Diff d = compare(first, again);
     add({"occlusion", "tumblewood_sh2 x13 lod", "bicycle" + std::to_string(k), "still", d.psnr, d.max_abs, d.max_abs8,
-         l0, l1, d.psnr >= 48.0 && l1 <= l0 && gpu.last_stats().occlusion_map_used, "first frame vs the same pose culled"});
+         l0, l1, d.psnr >= 48.0 && l1 <= l0 && gpu.last_stats().occlusion_map_used,
+         "first frame vs the same pose culled"});
   }
 }
 

@@ -163,8 +163,8 @@ TEST(OcclusionCull, MovingAndTurningFramesMatchTheUnculledRender) {
     path.push_back(cam);
     // Then a 40-degree turn within one frame, and back.
     const glm::quat turn = glm::angleAxis(glm::radians(40.0f), glm::vec3(0.0f, 1.0f, 0.0f));
-    path.push_back(Camera::from_pose(cam.position(), turn * cam.orientation(), cam.vertical_fov_deg(), cam.width,
-                                     cam.height));
+    path.push_back(
+        Camera::from_pose(cam.position(), turn * cam.orientation(), cam.vertical_fov_deg(), cam.width, cam.height));
   }
   double worst = std::numeric_limits<double>::infinity();
   std::size_t culled_entries = 0, plain_entries = 0;

@@ -283,10 +283,10 @@ std::vector<PipelineResult> run_on_cpu(BenchScene& s, const std::vector<Variant>
 int run(int argc, char** argv) {
   const Args args(
       argc, argv,
-      {"--scene",         "--city!",        "--radius-sq", "--spacing",          "--seed",      "--scale",
-       "--trace",         "--width",        "--height",    "--pipeline",         "--frames",    "--warmup",
-       "--json",          "--snapshot-dir", "--up",        "--seconds-per-view", "--distance",  "--renderer",
-       "--quality-every", "--lod!",         "--branching", "--lod-file",         "--lod-error", "--aa-reference",
+      {"--scene",         "--city!",          "--radius-sq", "--spacing",          "--seed",      "--scale",
+       "--trace",         "--width",          "--height",    "--pipeline",         "--frames",    "--warmup",
+       "--json",          "--snapshot-dir",   "--up",        "--seconds-per-view", "--distance",  "--renderer",
+       "--quality-every", "--lod!",           "--branching", "--lod-file",         "--lod-error", "--aa-reference",
        "--pose-rate",     "--count-changes!", "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();

@@ -67,10 +67,10 @@ struct TimingPlan {
   int warmup = 30, frames = 600;
   int quality_every = 1;  // CUDA: compare every K-th timed catgs frame with exact (0: never)
   float lod_error_px = RenderOptions{}.lod_error_px;  // every variant's LOD bound (renderer.h)
-  bool lod = false;          // the scene has LOD: every K-th frame of every variant, on both cores, against full detail
-  int aa_factor = 0;         // >= 2 (with lod): those frames also against the anti-aliased reference
+  bool lod = false;   // the scene has LOD: every K-th frame of every variant, on both cores, against full detail
+  int aa_factor = 0;  // >= 2 (with lod): those frames also against the anti-aliased reference
   bool count_changes = false;  // CPU: measure the entries and Gaussians that change a pixel (slow)
-  std::string snapshot_dir;  // not empty: a PNG per variant there
+  std::string snapshot_dir;    // not empty: a PNG per variant there
   Camera camera_at(int k) const { return (*trace)[static_cast<std::size_t>(k) % trace->size()].camera; }
   double pose_rate_hz = 120.0;
   double time_at(int k) const { return k / pose_rate_hz; }

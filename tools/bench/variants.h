@@ -19,8 +19,8 @@ namespace catgs::bench {
 struct Variant {
   std::string name;  // as the user wrote it: the table's and the JSON's pipeline name
   Pipeline pipeline = Pipeline::exact;
-  std::string settings;           // the settings applied, presets expanded ("window=2,backoff=0"; "" for none)
-  SpeculationParams speculation;  // the defaults with `settings` applied
+  std::string settings;            // the settings applied, presets expanded ("window=2,backoff=0"; "" for none)
+  SpeculationParams speculation;   // the defaults with `settings` applied
   bool occlusion_culling = false;  // exact-occlusion: exact with RenderOptions::occlusion_culling
 };
 
