@@ -266,6 +266,10 @@ class CpuRenderer final : public Renderer {
   const RenderList& render_list() const { return list_; }
   const TileRanges& tile_ranges() const { return ranges_; }
 
+  // Measure each frame's entries and Gaussians that change a pixel into FrameStats (issue 72;
+  // slow, for benchmarks: such frames are drawn without task splitting). Off by default.
+  void count_changes(bool on) { count_changes_ = on; }
+
  private:
   std::shared_ptr<const GaussianModel> model_;
   std::vector<fm::ChunkBounds> chunks_;  // of model_, for chunk culling
@@ -274,14 +278,8 @@ class CpuRenderer final : public Renderer {
   RenderList list_;
   TileRanges ranges_;
   std::vector<TileSlice> slices_;  // exact: the split plan
-  // The measurement of the entries and Gaussians that change a pixel (FrameStats, issue 72):
-  // slow, for benchmarks; off by default.
- public:
-  void count_changes(bool on) { count_changes_ = on; }
-
- private:
   bool count_changes_ = false;
-  std::vector<std::uint8_t> changed_;
+  std::vector<std::uint8_t> changed_;  // count_changes: per list entry, it changed a pixel
   // Occlusion culling (RenderOptions::occlusion_culling): the last frame's map and where it was
   // drawn (valid: a frame drew it with the current options), and the next frame's.
   std::vector<float> occlusion_depth_, occlusion_next_, occlusion_now_;  // occlusion_now_: reprojected

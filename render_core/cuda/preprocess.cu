@@ -75,6 +75,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads) list_live_chunks_kerne
   if (c + 1 == count) *live.count = at + kept;
 }
 
+// Per-entry occlusion culling works from the tile masks of the Gaussians that are not big.
+static_assert(fm::kOcclusionEntryTiles == tune::kBigRectTiles, "occlusion.h: the CPU hides the same entries");
+
 // A thread's Gaussian: its mean and opacity, read as the block takes its chunk, and its 3D
 // covariance, worked out only where the Gaussian passes the frustum and opacity tests (most are
 // culled before).

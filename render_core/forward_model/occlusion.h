@@ -30,11 +30,10 @@
 //   the 32-bit sort key joins depths within 3.1e-5). In the map's own frame such an entry sorted
 //   behind every pixel's opaque point of the tile. A Gaussian over more than 32 tiles keeps them
 //   all (the CUDA core counts and emits those from the ellipse alone);
-// - nothing per whole Gaussian: a test of each Gaussian before its covariance, in the last view
-//   (its mean projected there, the box its ellipse could reach widened by the parallax, every
-//   tile of it opaque in front), dropped 10-25% more entries but cost 0.14-0.17 ms of
-//   pre-processing on an H100, more than it saved (docs/history/occlusion_culling.md); a small
-//   Gaussian all of whose entries are dropped still skips its SH colour.
+// - nothing per whole Gaussian: a test of each Gaussian before its covariance (in the last view)
+//   dropped more entries but cost more pre-processing than it saved (measured in
+//   docs/history/occlusion_culling.md); a small Gaussian all of whose entries are dropped still
+//   skips its SH colour.
 // With the same pose (shift 0) a dropped entry would have sorted behind its tile's opaque point,
 // so the picture differs from the unculled one by under 1/255 a pixel. A rotation alone changes
 // no ray through the eye. A translation can open gaps between thin occluders that one depth per
@@ -63,7 +62,9 @@ struct OcclusionMap {
   int now_tiles_x = 0;
 };
 
-// The map drawn at view `drawn_at` (`depth`: its tiles' depths) as frame `now` reads it.
+// The map drawn at view `drawn_at` as frame `now` reads it: `depth` ([tiles of drawn_at's grid], or
+// null; kept as a pointer, not copied), that grid, and `shift`, the eye's move in world units
+// (lod_eye of each view). now_depth is left null (the caller reprojects).
 inline OcclusionMap occlusion_map(const float* depth, const View& drawn_at, const View& now) {
   OcclusionMap m;
   m.depth = depth;
@@ -107,7 +108,9 @@ CATGS_HD float occlusion_depth_over(const OcclusionMap& m, float u0, float u1, f
 // map's view: the rays through the tile's corner pixels, as directions (far points), taken into
 // the map's view (a rotation maps the tile's edges to lines, so the box of its four corners holds
 // its pixels' rays), that box widened by the rounding slack and by the parallax of its nearest
-// occluder (shift * focal / depth, twice, as box_occluded), and the deepest map depth over it.
+// occluder (shift * focal / depth pixels: worked out with the box's tiles, then again with the
+// grown box's, which must need no more), and the deepest map depth over it (camera-space z of the
+// map's view, world units).
 // +inf where a corner looks behind the map's eye, or the box leaves its image (no data).
 CATGS_HD float reprojected_tile_depth(const OcclusionMap& m, const View& now, int tx, int ty) {
   float u0 = INFINITY, u1 = -INFINITY, w0 = INFINITY, w1 = -INFINITY;
@@ -146,7 +149,7 @@ CATGS_HD float reprojected_tile_depth(const OcclusionMap& m, const View& now, in
 // move (`old_depth_less_shift`), lies behind it. In the map's own frame that entry sorted behind
 // every pixel's opaque point of the tile (see above); a Gaussian over more tiles keeps them all
 // (the CUDA core counts and emits those with a warp, from the ellipse alone).
-inline constexpr int kOcclusionEntryTiles = 32;  // the CUDA core's tune::kBigRectTiles
+inline constexpr int kOcclusionEntryTiles = 32;  // the CUDA core's tune::kBigRectTiles (static_assert there)
 CATGS_HD bool entry_hidden(float tile_depth, float old_depth_less_shift) {
   return tile_depth * kOcclusionDepthSlack < old_depth_less_shift;
 }
