@@ -8,6 +8,7 @@ extern "C" {
 #include <libavutil/log.h>
 }
 
+#include "base/allocation_faults.h"
 #include "server.h"
 #include "server_options.h"
 #include "transport/probe.h"
@@ -39,6 +40,13 @@ int main(int argc, char** argv) {
     // From the environment rather than the command line: /proc/PID/environ is readable by this
     // user and root only, /proc/PID/cmdline by everyone.
     resolve_access_tokens(options, std::getenv("CATGS_TOKEN"), std::cerr);
+    // Fault injection for soak runs (issue 73; base/allocation_faults.h): renderer buffer
+    // allocations fail at random, as on a GPU another process fills.
+    if (catgs::AllocationFault fault = catgs::allocation_fault_from_environment()) {
+      std::cerr << "catgs-server: CATGS_FAIL_ALLOCATIONS=" << std::getenv("CATGS_FAIL_ALLOCATIONS")
+                << ": renderer buffer allocations fail at random (a fault-injection run)\n";
+      catgs::set_allocation_fault(std::move(fault));
+    }
   } catch (const std::exception& e) {
     std::cerr << "catgs-server: " << e.what() << "\n";
     return 2;

@@ -222,12 +222,17 @@ void Server::resolve_gpus() {
               << " in all)" << std::endl;
   }
   if (devices.empty()) capacity.push_back(allowance);
-  gpus_ = std::make_unique<GpuAssignment>(devices, capacity);
+  // What the driver reports free is read at the door (issue 73): another process may hold memory.
+  GpuAssignment::FreeMemory free_memory;
+  if (!devices.empty()) free_memory = [](int device) { return cuda_device_memory_free(device); };
+  gpus_ = std::make_unique<GpuAssignment>(devices, capacity, free_memory,
+                                          static_cast<std::uint64_t>(options_.device_memory_reserve_mb) << 20);
   metrics_.set_gpus(devices, [g = gpus_.get()] { return g->sessions(); });
   metrics_.device_memory = [g = gpus_.get()] {
     std::vector<ServerMetrics::MemoryRow> rows;
     for (const GpuAssignment::Memory& m : g->memory())
-      rows.push_back({m.device >= 0 ? std::to_string(m.device) : "host", m.capacity, m.scenes, m.reserved});
+      rows.push_back(
+          {m.device >= 0 ? std::to_string(m.device) : "host", m.capacity, m.scenes, m.reserved, m.held, m.driver_free});
     return rows;
   };
 }

@@ -1,5 +1,6 @@
 // The CPU Renderer: runs the five stages and times them.
 #include "cpu/cpu_renderer.h"
+#include "cpu/host_buffer.h"
 
 #include <algorithm>
 #include <cmath>
@@ -22,6 +23,32 @@ void CpuRenderer::set_options(const RenderOptions& options) {
   options_ = options;
   occlusion_valid_ = false;  // a map of other options (a cut, a pipeline) says nothing now
 }
+
+void reserve_frame_buffers(std::size_t gaussians, const BufferShape& shape, ProjectedGaussians& projected,
+                           RenderList& list) {
+  const std::size_t n_projected = projected.mean2d.size(), n_offsets = list.offsets.size();
+  const std::size_t n_keys = list.keys.size(), n_values = list.values.size();
+  projected.resize(gaussians);
+  grow_host(list.offsets, gaussians, "emission offsets");
+  grow_host(list.keys, static_cast<std::size_t>(shape.list_entries), "render-list keys");
+  grow_host(list.values, static_cast<std::size_t>(shape.list_entries), "render-list values");
+  // Held, not filled: the sizes stay what the last frame left.
+  projected.resize(n_projected);
+  list.offsets.resize(n_offsets);
+  list.keys.resize(n_keys);
+  list.values.resize(n_values);
+}
+
+BufferShape frame_buffer_shape(const ProjectedGaussians& projected, const RenderList& list) {
+  return {projected.mean2d.capacity(), std::min(list.keys.capacity(), list.values.capacity())};
+}
+
+void CpuRenderer::reserve_buffers(int width, int height, const BufferShape& shape) {
+  (void)width, (void)height;
+  reserve_frame_buffers(model_->size(), shape, projected_, list_);
+}
+
+BufferShape CpuRenderer::buffer_shape() const { return frame_buffer_shape(projected_, list_); }
 
 void CpuRenderer::render(const Camera& camera, Image& out) {
   validate_camera(camera);

@@ -250,6 +250,11 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
                        Pipeline stages, const RenderOptions& options, bool early_termination,
                        const FrameBuffers& buffers, Image& out, FrameStats& stats);
 
+// Renderer::reserve_buffers and buffer_shape of both CPU renderers, over their buffers.
+void reserve_frame_buffers(std::size_t gaussians, const BufferShape& shape, ProjectedGaussians& projected,
+                           RenderList& list);
+BufferShape frame_buffer_shape(const ProjectedGaussians& projected, const RenderList& list);
+
 // The CPU Renderer: the five stages, buffers reused across frames.
 class CpuRenderer final : public Renderer {
  public:
@@ -260,6 +265,11 @@ class CpuRenderer final : public Renderer {
   const FrameStats& last_stats() const override { return stats_; }
   const RenderOptions& options() const override { return options_; }
   void set_options(const RenderOptions& options) override;
+  // The pre-processed Gaussians (the whole scene: shape.gaussians is not used) and the render
+  // list of shape.list_entries, through the host slot (cpu/host_buffer.h). A frame that throws
+  // (OutOfMemoryError among others) leaves no occlusion map: the next frame draws unculled.
+  void reserve_buffers(int width, int height, const BufferShape& shape) override;
+  BufferShape buffer_shape() const override;
 
   // The intermediate state of the last frame (tests and tools).
   const ProjectedGaussians& projected() const { return projected_; }
@@ -300,8 +310,12 @@ class SpeculativeRenderer final : public Renderer {
   const FrameStats& last_stats() const override { return stats_; }
   const RenderOptions& options() const override { return options_; }
   void set_options(const RenderOptions& options) override;
+  void reserve_buffers(int width, int height, const BufferShape& shape) override;
+  BufferShape buffer_shape() const override;
 
  private:
+  // render_at() once the camera is valid; a frame that throws leaves its group to be closed.
+  void draw_at(const Camera& camera, double time_s, Image& out);
   // Plans and pre-processes a key frame, its window narrowed while its list is over the budget
   // (SpeculationPlanner::narrower_window); a frame left without a window is drawn into `out` here
   // (render_full_frame) and returns true, one with a window builds the group's caches.

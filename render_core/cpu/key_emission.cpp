@@ -6,6 +6,7 @@
 #include "forward_model/occlusion.h"
 #include "forward_model/trail.h"
 #include "cpu/cpu_renderer.h"
+#include "cpu/host_buffer.h"
 #include "base/parallel_for.h"
 
 namespace catgs::cpu {
@@ -19,7 +20,7 @@ std::uint64_t count_entries(const ProjectedGaussians& projected) {
 void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeline pipeline,
                const RenderListBudget& budget, RenderList& list) {
   const std::size_t n = projected.tiles_touched.size();
-  list.offsets.resize(n);
+  grow_host(list.offsets, n, "emission offsets");
   uint64_t total = 0;
   for (std::size_t i = 0; i < n; ++i) {  // exclusive scan
     list.offsets[i] = total;
@@ -30,9 +31,9 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
   if (total > std::numeric_limits<uint32_t>::max())
     throw std::length_error("render list of " + std::to_string(total) +
                             " entries exceeds the 32-bit range of tile ranges");
-  list.keys.resize(total);
+  grow_host(list.keys, total, "render-list keys");
+  grow_host(list.values, total, "render-list values");
   list.packing = fm::plain_key_packing();
-  list.values.resize(total);
   const bool exact = pipeline == Pipeline::exact, trail = pipeline == Pipeline::catgs;
   // Occlusion culling's per-entry test, as pre-processing counted (ProjectedGaussians::hidden_depth).
   const bool hidden = exact && !projected.hidden_depth.empty();

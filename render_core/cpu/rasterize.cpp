@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "blend_tile.h"
+#include "cpu/host_buffer.h"
 #include "base/parallel_for.h"
 
 namespace catgs::cpu {
@@ -13,8 +14,8 @@ void rasterize(const ProjectedGaussians& projected, const RenderList& list, cons
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
-  out.rgb.resize(pixels * 3);
-  out.rgba8.resize(pixels * 4);
+  grow_host(out.rgb, pixels * 3, "RGB image");
+  grow_host(out.rgba8, pixels * 4, "RGBA8 image");
 
   const std::size_t first = first_tile, end = std::min<std::size_t>(grid.tile_count(), end_tile);
   parallel_for(end > first ? end - first : 0, 1, [&](std::size_t k) {

@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "blend_tile.h"
+#include "cpu/host_buffer.h"
 #include "base/parallel_for.h"
 
 namespace catgs::cpu {
@@ -21,8 +22,8 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
-  out.rgb.resize(pixels * 3);
-  out.rgba8.resize(pixels * 4);
+  grow_host(out.rgb, pixels * 3, "RGB image");
+  grow_host(out.rgba8, pixels * 4, "RGBA8 image");
   // Partial results: [slices, 16 * 16] colour and transmittance.
   std::vector<glm::vec3> partial_color(slices.size() * kTilePixels);
   std::vector<float> partial_T(slices.size() * kTilePixels);

@@ -24,6 +24,13 @@ void SpeculativeRenderer::set_options(const RenderOptions& options) {
   options_ = options;
 }
 
+void SpeculativeRenderer::reserve_buffers(int width, int height, const BufferShape& shape) {
+  (void)width, (void)height;
+  reserve_frame_buffers(model_->size(), shape, projected_, list_);
+}
+
+BufferShape SpeculativeRenderer::buffer_shape() const { return frame_buffer_shape(projected_, list_); }
+
 void SpeculativeRenderer::render(const Camera& camera, Image& out) { render_at(camera, planner_.advance_clock(), out); }
 
 bool SpeculativeRenderer::key_frame(const Camera& camera, Image& out) {
@@ -94,6 +101,15 @@ bool SpeculativeRenderer::key_frame(const Camera& camera, Image& out) {
 
 void SpeculativeRenderer::render_at(const Camera& camera, double time_s, Image& out) {
   validate_camera(camera);
+  try {
+    draw_at(camera, time_s, out);
+  } catch (...) {
+    planner_.set_params(options_.speculation);  // the caches may be half made: the next frame is a key frame
+    throw;
+  }
+}
+
+void SpeculativeRenderer::draw_at(const Camera& camera, double time_s, Image& out) {
   const auto start = clock::now();
   stats_ = {};
   const bool candidate = planner_.observe(camera, time_s);

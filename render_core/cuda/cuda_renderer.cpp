@@ -91,13 +91,17 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
 
 void CudaRenderer::State::ensure_slots(uint64_t chunks, bool catgs) {
   std::size_t* allocs = &allocations;
-  if (chunks > slot_chunks) {
-    // Slack on the count, not per buffer: every per-slot buffer holds the same slot chunks.
-    slot_chunks = std::max<uint64_t>(
-        chunks, slot_chunks == 0 ? chunks : static_cast<uint64_t>(static_cast<double>(chunks) * tune::kGrowthFactor));
-    catgs_sized = false;
-  }
-  const std::size_t n = slots();
+  // Slack on the count, not per buffer: every per-slot buffer holds the same slot chunks. The
+  // count is recorded only once every buffer holds it (issue 73): a growth that fails part-way
+  // leaves slot_chunks at what all of them hold, and the next call grows the rest.
+  const uint64_t want =
+      chunks <= slot_chunks
+          ? slot_chunks
+          : std::max<uint64_t>(chunks, slot_chunks == 0
+                                           ? chunks
+                                           : static_cast<uint64_t>(static_cast<double>(chunks) * tune::kGrowthFactor));
+  if (want > slot_chunks) catgs_sized = false;
+  const std::size_t n = want * fm::kChunkSize;
   splat.ensure(n * sizeof(stages::Splat), "splats", allocs, false);
   color.ensure(n * sizeof(float4), "colours", allocs, false);
   depth.ensure(n * sizeof(float), "depths", allocs, false);
@@ -108,9 +112,10 @@ void CudaRenderer::State::ensure_slots(uint64_t chunks, bool catgs) {
   big.ensure(n * sizeof(uint32_t), "big-Gaussian list", allocs, false);
   huge_part_count.ensure(static_cast<std::size_t>(tune::kHugeListed) * tune::kHugeParts * sizeof(uint32_t),
                          "huge-Gaussian part counts", allocs);
-  chunk_total.ensure(slot_chunks * sizeof(uint32_t), "chunk entry counts", allocs, false);
-  chunk_start.ensure(slot_chunks * sizeof(uint64_t), "chunk starts", allocs, false);
-  scan_temp.ensure(stages::scan_temp_bytes(slot_chunks), "scan scratch", allocs);
+  chunk_total.ensure(want * sizeof(uint32_t), "chunk entry counts", allocs, false);
+  chunk_start.ensure(want * sizeof(uint64_t), "chunk starts", allocs, false);
+  scan_temp.ensure(stages::scan_temp_bytes(want), "scan scratch", allocs);
+  slot_chunks = want;
   if (catgs && !catgs_sized) {
     ensure_catgs_buffers();
     catgs_sized = true;
@@ -218,19 +223,28 @@ void CudaRenderer::State::emit_render_list(uint64_t n, const stages::ChunkWalk& 
 
 uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries, const SpeculationParams& sp,
                                                 uint64_t frame_entries, uint32_t first_tile, uint32_t end_tile) {
-  std::size_t* allocs = &allocations;
   const auto min_slice = static_cast<uint64_t>(sp.min_slice_entries);
   // The slice length of the whole frame (a pass splits its tiles as the single pass would).
   const uint64_t avg = stages::split_average(tiles, std::max(entries, frame_entries), min_slice);
   const uint64_t capacity = stages::pass_slice_capacity(tiles, entries, avg);
   const uint64_t slots = entries / avg;
+  ensure_slice_buffers(tiles, capacity, slots, occlusion_map_drawn);
+  stages::plan_slices(ranges.as<uint2>(), tiles, avg, capacity, sp.task_splitting, slice_plan(),
+                      plan_scratch.as<void>(), slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream,
+                      first_tile, end_tile);
+  heaviest = heaviest_tile.as<uint32_t>();  // the longest slice
+  return capacity;
+}
+
+void CudaRenderer::State::ensure_slice_buffers(uint32_t tiles, uint64_t capacity, uint64_t slots, bool opaque_points) {
+  std::size_t* allocs = &allocations;
   slice_range.ensure(capacity * sizeof(uint2), "slice ranges", allocs);
   slice_tile.ensure(capacity * sizeof(uint2), "slice tiles", allocs);
   tile_plan.ensure(tiles * sizeof(uint4), "tile plan", allocs);
   slice_order.ensure(capacity * sizeof(uint32_t), "slice order", allocs);
   plan_scratch.ensure(stages::plan_scratch_bytes(tiles), "slice plan scratch", allocs);
   partials.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(float4), "partial slices", allocs);
-  if (occlusion_map_drawn)  // the split slices' own opaque points (rasterize_slices' OpaquePoints)
+  if (opaque_points)  // the split slices' own opaque points (rasterize_slices' OpaquePoints)
     occlusion_partial.ensure(std::max<uint64_t>(1, slots) * tune::kRasterThreads * sizeof(uint32_t),
                              "partial opaque points", allocs);
   // The rasterizer's per-tile state starts as task_split.h says, once; its kernels keep it so.
@@ -241,23 +255,75 @@ uint64_t CudaRenderer::State::plan_frame_slices(uint32_t tiles, uint64_t entries
   if (slot_finished.ensure(std::max<uint64_t>(1, slots) * sizeof(unsigned), "finished slices", allocs))
     CATGS_CUDA(cudaMemsetAsync(slot_finished.as<void>(), 0, slot_finished.bytes(), stream));
   note_peak();
-  stages::plan_slices(ranges.as<uint2>(), tiles, avg, capacity, sp.task_splitting, slice_plan(),
-                      plan_scratch.as<void>(), slice_order.as<uint32_t>(), heaviest_tile.as<uint32_t>(), stream,
-                      first_tile, end_tile);
-  heaviest = heaviest_tile.as<uint32_t>();  // the longest slice
-  return capacity;
 }
 
 DeviceFrame CudaRenderer::render_device(const Camera& camera) {
   const DeviceGuard on(scene_->device());
-  if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, state_->planner.advance_clock());
-  return render_full(camera);
+  if (options_.pipeline != Pipeline::catgs) return render_device_at(camera, 0.0);
+  return render_device_at(camera, state_->planner.advance_clock());
 }
 
 DeviceFrame CudaRenderer::render_device_at(const Camera& camera, double time_s) {
   const DeviceGuard on(scene_->device());
-  if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, time_s);
-  return render_full(camera);
+  try {
+    if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, time_s);
+    return render_full(camera);
+  } catch (...) {
+    drop_inter_frame_state();
+    throw;
+  }
+}
+
+void CudaRenderer::drop_inter_frame_state() {
+  State& s = *state_;
+  s.planner.set_params(options_.speculation);  // closes the group: the next frame is a key frame
+  s.cost_pending = false;
+  s.key_frame = true;
+  s.occlusion_valid = false;
+  s.occlusion_counted = false;
+  s.occlusion_map_drawn = false;
+  stats_ready_ = true;  // no frame's events to wait for
+}
+
+void CudaRenderer::reserve_buffers(int width, int height, const BufferShape& shape) {
+  if (width <= 0 || height <= 0) throw std::invalid_argument("CudaRenderer::reserve_buffers: empty viewport");
+  const DeviceGuard on(scene_->device());
+  State& s = *state_;
+  drop_inter_frame_state();  // a buffer that grows loses what it held
+  const auto tiles = static_cast<uint32_t>(((width + tune::kTileSize - 1) / tune::kTileSize) *
+                                           ((height + tune::kTileSize - 1) / tune::kTileSize));
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
+  s.ensure_frame_buffers(scene_->size(), tiles, pixels);
+  s.ensure_slots((shape.gaussians + fm::kChunkSize - 1) / fm::kChunkSize, options_.pipeline == Pipeline::catgs);
+  const uint64_t entries = shape.list_entries;
+  if (entries > 0) {
+    for (int h = 0; h < 2; ++h) {
+      s.keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", &s.allocations);
+      s.values[h].ensure(entries * sizeof(uint32_t), "render-list values", &s.allocations);
+    }
+    // The widest key a single sort takes: the tile bits and a 32-bit depth.
+    s.sort_temp.ensure(stages::sort_temp_bytes(entries, fm::tile_key_bits(tiles) + 32), "sort scratch", &s.allocations);
+  }
+  // The split plan at its bound (task_split.h: at most tiles + entries / avg <= 2 tiles slices,
+  // entries / avg <= tiles partial slots), and the occlusion maps.
+  const bool occlusion = options_.occlusion_culling && options_.pipeline == Pipeline::exact;
+  s.ensure_slice_buffers(tiles, 2ull * tiles, tiles, occlusion);
+  if (occlusion) {
+    for (GrowBuffer& map : s.occlusion_depth) map.ensure(tiles * sizeof(float), "occlusion map", &s.allocations);
+    s.occlusion_now.ensure(tiles * sizeof(float), "reprojected occlusion map", &s.allocations);
+    s.occlusion_opaque_at.ensure(tiles * sizeof(uint32_t), "opaque points", &s.allocations);
+    s.occlusion_behind.ensure(sizeof(unsigned long long), "entries behind opaque points", &s.allocations);
+    s.occlusion_behind_host.ensure(sizeof(unsigned long long), "entries behind opaque points (host)");
+  }
+  const std::size_t planes = pixels + pixels / 2;
+  s.yuv.ensure(planes, "YUV planes", &s.allocations);
+  s.yuv_host.ensure(planes, "YUV planes (host)");
+  s.note_peak();
+}
+
+BufferShape CudaRenderer::buffer_shape() const {
+  const State& s = *state_;
+  return {s.slots(), std::min(s.keys[0].bytes(), s.keys[1].bytes()) / sizeof(uint64_t)};
 }
 
 DeviceFrame CudaRenderer::render_full(const Camera& camera) {
@@ -296,7 +362,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   draw_full_frame(camera, exact, true, exact && depth_first_sort(), map, occlusion);
   s.occlusion_map_drawn = false;
   if (occlusion) {  // the entries behind the opaque points, for last_stats (after kMerged: recorded next)
-    s.occlusion_behind_host.ensure(sizeof(unsigned long long));
+    s.occlusion_behind_host.ensure(sizeof(unsigned long long), "entries behind opaque points (host)");
     CATGS_CUDA(cudaMemcpyAsync(s.occlusion_behind_host.data(), s.occlusion_behind.as<void>(),
                                sizeof(unsigned long long), cudaMemcpyDeviceToHost, s.stream));
     CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
@@ -539,7 +605,7 @@ void CudaRenderer::begin_yuv420_at(const Camera& camera, double time_s, const Yu
       // The packed planes in one copy into page-locked memory (a copy into the target's pageable
       // memory goes through the driver's staging, which the lanes' copies share), then, in
       // finish, to the target's strides on the host.
-      s.yuv_host.ensure(y_bytes + 2 * c_bytes);
+      s.yuv_host.ensure(y_bytes + 2 * c_bytes, "YUV planes (host)");
       CATGS_CUDA(cudaMemcpyAsync(s.yuv_host.data(), s.yuv.as<uint8_t>(), y_bytes + 2 * c_bytes, cudaMemcpyDeviceToHost,
                                  s.stream));
     }
@@ -548,7 +614,8 @@ void CudaRenderer::begin_yuv420_at(const Camera& camera, double time_s, const Yu
     begun_width_ = w;
     begun_height_ = h;
   } catch (...) {
-    end_frame();  // nothing to finish
+    drop_inter_frame_state();  // the frame drew, but its planes did not come: as a frame that threw
+    end_frame();               // nothing to finish
     throw;
   }
 }

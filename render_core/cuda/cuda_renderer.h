@@ -172,6 +172,10 @@ class CudaRenderer final : public Renderer {
 
   std::string name() const override { return "cuda"; }
   std::uint64_t device_buffer_bytes() const override;
+  // The frame, per-slot (shape.gaussians rounded up to whole chunks), list and sort, and I420
+  // buffers of a width x height frame (renderer.h). Throws OutOfMemoryError as a frame would.
+  void reserve_buffers(int width, int height, const BufferShape& shape) override;
+  BufferShape buffer_shape() const override;
   // render_device() then a download into `out` (rgb and rgba8, as the CPU renderer fills them).
   void render(const Camera& camera, Image& out) override;
   // render_device_at() then a download into `out`.
@@ -193,7 +197,9 @@ class CudaRenderer final : public Renderer {
   bool frame_ready() const override;
   // Renders `camera` into this renderer's device image; one host-device sync (see above).
   // Throws std::invalid_argument for a bad camera, std::length_error for an oversized render
-  // list, CudaError for CUDA failures.
+  // list, OutOfMemoryError where a buffer cannot grow, CudaError for other CUDA failures. After
+  // any of them the renderer is whole (issue 73): the catgs group and the occlusion map are
+  // dropped, and the next frame renders as a key frame, unculled.
   // catgs: the renderer's own clock advances 1 / F_target a call (as render_device_at()).
   DeviceFrame render_device(const Camera& camera);
   // As render_device(), for a camera the client posed at `time_s` (seconds, client clock): the
@@ -230,6 +236,10 @@ class CudaRenderer final : public Renderer {
  private:
   struct State;
   DeviceFrame render_full(const Camera& camera);  // vanilla, exact
+  // After a frame that threw, or buffers that grew outside a frame (reserve_buffers): what the
+  // next frame must not trust (the catgs group and its caches, the occlusion map, a pending cost
+  // report) is dropped.
+  void drop_inter_frame_state();
   // A whole frame through the exact (or vanilla) stages after kStart: pre-processing, counts, and
   // stages 2-5 in one pass, or, over the list budget, in passes of tiles (renderer/render_passes.h,
   // as cpu::render_full_frame), each sorted with the frame's key and split with its slice length.

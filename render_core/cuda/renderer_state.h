@@ -6,6 +6,7 @@
 #include <string>
 
 #include "speculation/speculation_planner.h"
+#include "base/allocation_faults.h"
 #include "base/cuda_check.h"
 #include "cuda/cuda_renderer.h"
 #include "stages.h"
@@ -25,7 +26,9 @@ class GrowBuffer {
 
   // Makes room for `bytes`; returns true when it had to reallocate (contents are then lost).
   // cudaFree waits for in-flight work on the device, so a buffer still read by an earlier frame
-  // is never freed under it. Throws CudaError naming the size when device memory runs out.
+  // is never freed under it. Throws OutOfMemoryError naming the buffer and its size when device
+  // memory runs out (or the allocation-fault hook says so, base/allocation_faults.h); the buffer
+  // then holds nothing and bytes() says 0, so a later ensure allocates it again.
   // `slack`: take tune::kGrowthFactor times the need (false: the caller sized it with its own).
   bool ensure(std::size_t bytes, const char* what, std::size_t* allocations, bool slack = true) {
     if (bytes <= bytes_) return false;
@@ -33,19 +36,19 @@ class GrowBuffer {
     if (ptr_) CATGS_CUDA(cudaFree(ptr_));
     ptr_ = nullptr;
     bytes_ = 0;
+    if (allocation_fault(want, what)) throw_out_of_memory("CUDA renderer", what, bytes, "allocation fault injected");
     std::size_t got = want;
     if (cudaMalloc(&ptr_, want) != cudaSuccess) {
       // No room for the slack: take exactly what this frame needs (huge lists near the limit).
       (void)cudaGetLastError();
       ptr_ = nullptr;
       got = bytes;
-      try {
-        CATGS_CUDA(cudaMalloc(&ptr_, bytes));
-      } catch (const CudaError& e) {
+      const cudaError_t e = cudaMalloc(&ptr_, bytes);
+      if (e != cudaSuccess) {
+        (void)cudaGetLastError();
         ptr_ = nullptr;
-        throw CudaError(
-            std::string("CUDA renderer: ") + what + " buffer of " + std::to_string(bytes) + " bytes: " + e.what(),
-            e.code());
+        throw_out_of_memory("CUDA renderer", what, bytes,
+                            std::string("cudaMalloc failed: ") + cudaGetErrorName(e) + ": " + cudaGetErrorString(e));
       }
     }
     bytes_ = got;
@@ -73,13 +76,21 @@ class PinnedBuffer {
   ~PinnedBuffer() {
     if (ptr_) cudaFreeHost(ptr_);
   }
-  // Room for `bytes` (contents lost when it grows); throws CudaError when the host refuses.
-  void ensure(std::size_t bytes) {
+  // Room for `bytes` (contents lost when it grows); throws OutOfMemoryError when the host refuses
+  // (or the allocation-fault hook says so), holding nothing then.
+  void ensure(std::size_t bytes, const char* what) {
     if (bytes <= bytes_) return;
     if (ptr_) CATGS_CUDA(cudaFreeHost(ptr_));
     ptr_ = nullptr;
     bytes_ = 0;
-    CATGS_CUDA(cudaMallocHost(&ptr_, bytes));
+    if (allocation_fault(bytes, what)) throw_out_of_memory("CUDA renderer", what, bytes, "allocation fault injected");
+    const cudaError_t e = cudaMallocHost(&ptr_, bytes);
+    if (e != cudaSuccess) {
+      (void)cudaGetLastError();
+      ptr_ = nullptr;
+      throw_out_of_memory("CUDA renderer", what, bytes,
+                          std::string("cudaMallocHost failed: ") + cudaGetErrorName(e) + ": " + cudaGetErrorString(e));
+    }
     bytes_ = bytes;
   }
   std::uint8_t* data() const { return static_cast<std::uint8_t*>(ptr_); }
@@ -245,6 +256,10 @@ struct CudaRenderer::State {
                         const stages::TileTests& tests, bool depth_first, uint64_t entries, uint64_t visible,
                         const stages::DepthKeyPacking& packing);
 
+  // The split plan's buffers for `capacity` slices and `slots` partial slots over `tiles` tiles
+  // (with `opaque_points`: the slices' own opaque points, occlusion culling), the per-tile state
+  // set as task_split.h says where a buffer is new (plan_frame_slices; reserve_buffers).
+  void ensure_slice_buffers(uint32_t tiles, uint64_t capacity, uint64_t slots, bool opaque_points);
   // Plans the split tasks of a frame of `entries` list entries and their order (task_split.cu,
   // paper sec. 3.4; after the tile ranges) and returns the slice capacity, the blocks the frame's
   // rasterize_slices launches (cuda_renderer.cpp). A pass of a frame drawn in passes gives its

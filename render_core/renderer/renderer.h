@@ -175,6 +175,14 @@ struct FrameStats {
   double predicted_gain = 0.0, measured_gain = 0.0;
 };
 
+// What a renderer's buffers hold (issue 73): Gaussians for its per-Gaussian buffers (the CUDA
+// core's slots, records.h Projected; the CPU core's whole scene) and render-list entries for its
+// list buffers (one pass).
+struct BufferShape {
+  std::uint64_t gaussians = 0;
+  std::uint64_t list_entries = 0;
+};
+
 class Renderer {
  public:
   virtual ~Renderer() = default;
@@ -222,6 +230,15 @@ class Renderer {
   // estimates what they would take on a device). The server raises a session's memory
   // reservation to it after each frame (issue 61).
   virtual std::uint64_t device_buffer_bytes() const { return 0; }
+  // Allocates now what frames of width x height need, with room for `shape` (issue 73: a server
+  // session holds its buffers from the door, so its frames allocate only to grow past them).
+  // Throws OutOfMemoryError (base/allocation_faults.h) where they do not fit; what was allocated
+  // stays, and the renderer is whole. The default does nothing.
+  virtual void reserve_buffers(int width, int height, const BufferShape& shape) {
+    (void)width, (void)height, (void)shape;
+  }
+  // What the buffers hold now ({0, 0} by default).
+  virtual BufferShape buffer_shape() const { return {}; }
 
  protected:
   // begin_yuv420_at()'s bookkeeping, shared by the overrides: throws std::logic_error when a frame
@@ -258,5 +275,8 @@ std::size_t cuda_device_memory_used(int gpu);
 // Device memory of CUDA device `gpu` in all, bytes; 0 when built without CUDA or on error. Never
 // throws.
 std::size_t cuda_device_memory_total(int gpu);
+// Device memory the driver reports free on CUDA device `gpu` now (cudaMemGetInfo: what every
+// process leaves), bytes; UINT64_MAX (unknown) when built without CUDA or on error. Never throws.
+std::uint64_t cuda_device_memory_free(int gpu);
 
 }  // namespace catgs

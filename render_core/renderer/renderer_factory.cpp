@@ -84,4 +84,11 @@ std::size_t cuda_device_memory_used(int gpu) { return device_bytes(gpu, false); 
 
 std::size_t cuda_device_memory_total(int gpu) { return device_bytes(gpu, true); }
 
+std::uint64_t cuda_device_memory_free(int gpu) {
+  const std::size_t total = device_bytes(gpu, true);
+  if (total == 0) return UINT64_MAX;
+  const std::size_t used = device_bytes(gpu, false);
+  return used <= total ? total - used : 0;
+}
+
 }  // namespace catgs

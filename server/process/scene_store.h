@@ -68,6 +68,10 @@ struct LoadedScene {
   // The most device bytes any session's render buffers on this scene grew to (issue 61): a new
   // session's memory estimate starts there (Session::memory_estimate). Changes after publication.
   std::shared_ptr<std::atomic<std::uint64_t>> session_bytes_peak = std::make_shared<std::atomic<std::uint64_t>>(0);
+  // The largest buffers any session's renderer on this scene held (Renderer::buffer_shape: slots
+  // and list entries; issue 73): a new session reserves them at the door. Change after publication.
+  std::shared_ptr<std::atomic<std::uint64_t>> session_gaussians_peak = std::make_shared<std::atomic<std::uint64_t>>(0);
+  std::shared_ptr<std::atomic<std::uint64_t>> session_list_peak = std::make_shared<std::atomic<std::uint64_t>>(0);
   // The stream's rate cap by size, probed by the scene's sessions (--bits-per-pixel auto;
   // encode/content_rate.h); the one part that changes after publication (it locks).
   std::shared_ptr<ContentRates> content_rates = std::make_shared<ContentRates>();

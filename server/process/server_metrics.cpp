@@ -89,10 +89,18 @@ std::string ServerMetrics::prometheus_text() const {
   put("catgs_memory_refusals_total", "counter",
       "Visitors refused (ERROR_SERVER_FULL) because no GPU's memory could hold their session's buffers.",
       memory_refusals_total.load());
+  put("catgs_memory_refusals_driver_total", "counter",
+      "Of catgs_memory_refusals_total: those where what the driver reports free bound (another "
+      "process holds the GPU's memory), not the server's accounting.",
+      memory_refusals_driver_total.load());
   put("catgs_render_out_of_memory_total", "counter",
-      "Frames dropped because a session's buffers could not grow (the session lives on; its list "
-      "budget is halved so later frames are drawn in passes).",
+      "Frames dropped because a session's buffers could not grow, even in passes and at a coarser "
+      "cut (the session lives on).",
       render_out_of_memory_total.load());
+  put("catgs_render_memory_fallbacks_total", "counter",
+      "Frames drawn after a buffer could not grow: in passes within the list buffers held, or at a "
+      "coarser level-of-detail cut.",
+      render_memory_fallbacks_total.load());
   put("catgs_encoder_fallbacks_total", "counter",
       "Encoders opened as x264 because --encoder auto found NVENC unusable.", encoder_fallbacks_total.load());
   put("catgs_quality_down_total", "counter", "Adaptive quality: a session stepped its resolution down.",
@@ -197,19 +205,28 @@ std::string ServerMetrics::prometheus_text() const {
   session_device_bytes.write(o, "catgs_session_device_bytes");
   if (device_memory) {
     const std::vector<MemoryRow> rows = device_memory();
-    const std::pair<const char*, std::uint64_t MemoryRow::*> gauges[] = {
-        {"capacity", &MemoryRow::capacity}, {"scene", &MemoryRow::scenes}, {"session", &MemoryRow::reserved}};
+    const std::pair<const char*, std::uint64_t MemoryRow::*> gauges[] = {{"capacity", &MemoryRow::capacity},
+                                                                         {"scene", &MemoryRow::scenes},
+                                                                         {"session", &MemoryRow::reserved},
+                                                                         {"held", &MemoryRow::held}};
     for (const auto& [what, field] : gauges) {
       const std::string name = "catgs_device_memory_" + std::string(what) + "_bytes";
       const std::string help =
           std::string("Device memory of each GPU (or the CPU renderer's allowance, slot=\"host\"): ") +
           (field == &MemoryRow::capacity ? "what scenes and sessions may hold (0: unlimited)"
            : field == &MemoryRow::scenes ? "its scene copies"
+           : field == &MemoryRow::held   ? "what its sessions' render buffers hold now"
                                          : "its sessions' reservations");
       head(name.c_str(), "gauge", help.c_str());
       for (const MemoryRow& r : rows)
         o << "catgs_device_memory_" << what << "_bytes{slot=\"" << r.slot << "\"} " << r.*field << '\n';
     }
+    head("catgs_device_memory_driver_free_bytes", "gauge",
+         "What the driver reports free on each GPU (cudaMemGetInfo: every process's use counted), read "
+         "at exposition; absent for the CPU renderer.");
+    for (const MemoryRow& r : rows)
+      if (r.driver_free != UINT64_MAX)
+        o << "catgs_device_memory_driver_free_bytes{slot=\"" << r.slot << "\"} " << r.driver_free << '\n';
   }
   if (!gpu_devices_.empty()) {
     const std::vector<std::int64_t> sessions = gpu_sessions_ ? gpu_sessions_() : std::vector<std::int64_t>{};

@@ -101,9 +101,14 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> render_budget_refusals_total{0};  // frames over the render-list budget
   std::atomic<std::uint64_t> memory_refusals_total{0};         // visitors no GPU's memory could hold
   std::atomic<std::uint64_t> render_out_of_memory_total{0};    // frames whose buffers could not grow
-  std::atomic<std::uint64_t> render_key_frames_total{0};       // full pre-process renders
-  std::atomic<std::uint64_t> render_sub_frames_total{0};       // catgs sub-frames from the caches
-  std::atomic<std::uint64_t> render_rekeys_total{0};           // catgs key frames first tried as sub-frames
+  // Frames drawn anyway after a buffer could not grow (issue 73): in passes within the list
+  // buffers held, or at a coarser cut (FramePipeline's memory fallbacks).
+  std::atomic<std::uint64_t> render_memory_fallbacks_total{0};
+  // Visitors refused at the door because the driver's free memory, not the accounting, bound.
+  std::atomic<std::uint64_t> memory_refusals_driver_total{0};
+  std::atomic<std::uint64_t> render_key_frames_total{0};  // full pre-process renders
+  std::atomic<std::uint64_t> render_sub_frames_total{0};  // catgs sub-frames from the caches
+  std::atomic<std::uint64_t> render_rekeys_total{0};      // catgs key frames first tried as sub-frames
   // Encoders opened as x264 because --encoder auto found NVENC unusable (start-up + sessions).
   std::atomic<std::uint64_t> encoder_fallbacks_total{0};
   // --adaptive-quality (session/adaptive_quality.h): level changes and refine frames.
@@ -166,6 +171,8 @@ struct ServerMetrics {
   struct MemoryRow {
     std::string slot;                                      // "0", "1", ... a GPU; "host" the CPU renderer's allowance
     std::uint64_t capacity = 0, scenes = 0, reserved = 0;  // bytes (capacity 0: unlimited)
+    std::uint64_t held = 0;                                // what the sessions' buffers hold
+    std::uint64_t driver_free = UINT64_MAX;                // the driver's free bytes (UINT64_MAX: not read)
   };
   std::function<std::vector<MemoryRow>()> device_memory;
 

@@ -46,8 +46,16 @@ std::uint64_t GpuAssignment::Memory::room() const {
   return used >= capacity ? 0 : capacity - used;
 }
 
-GpuAssignment::GpuAssignment(std::vector<int> devices, std::vector<std::uint64_t> capacity)
-    : devices_(std::move(devices)) {
+std::uint64_t GpuAssignment::Memory::driver_room(std::uint64_t free_reserve) const {
+  if (driver_free == UINT64_MAX) return UINT64_MAX;
+  const std::uint64_t growth = reserved > held ? reserved - held : 0;
+  const std::uint64_t keep = free_reserve + growth;
+  return driver_free > keep ? driver_free - keep : 0;
+}
+
+GpuAssignment::GpuAssignment(std::vector<int> devices, std::vector<std::uint64_t> capacity, FreeMemory free_memory,
+                             std::uint64_t free_reserve)
+    : devices_(std::move(devices)), free_memory_(std::move(free_memory)), free_reserve_(free_reserve) {
   const std::size_t n = std::max<std::size_t>(devices_.size(), 1);  // no GPUs: the host slot
   slots_.resize(n);
   for (std::size_t k = 0; k < n; ++k) {
@@ -62,22 +70,37 @@ int GpuAssignment::slot_of(int device) const {
   return -1;
 }
 
+void GpuAssignment::probe_locked() const {
+  if (!free_memory_) return;
+  for (Memory& m : slots_) m.driver_free = free_memory_(m.device);
+}
+
 GpuAssignment::Placement GpuAssignment::place(std::uint64_t bytes) {
   const std::lock_guard<std::mutex> lock(mutex_);
+  probe_locked();
   Placement p;
   int best = -1;
   for (std::size_t k = 0; k < slots_.size(); ++k)
-    if (slots_[k].room() >= bytes && (best < 0 || slots_[k].sessions < slots_[static_cast<std::size_t>(best)].sessions))
+    if (room_locked(slots_[k]) >= bytes &&
+        (best < 0 || slots_[k].sessions < slots_[static_cast<std::size_t>(best)].sessions))
       best = static_cast<int>(k);
   if (best < 0) {
     p.why = "no " + std::string(devices_.empty() ? "device-memory allowance" : "GPU") + " can hold another session (" +
             memory_text(bytes) + " needed;";
-    for (const Memory& m : slots_)
+    for (const Memory& m : slots_) {
       p.why += (m.device >= 0 ? " gpu " + std::to_string(m.device) : std::string(" host")) + ": " +
-               memory_text(m.room()) + " free of " + memory_text(m.capacity) + ", " + std::to_string(m.sessions) +
-               " sessions;";
+               memory_text(m.room()) + " free of " + memory_text(m.capacity) + " by the server's accounting";
+      if (m.driver_free != UINT64_MAX)
+        p.why += ", " + memory_text(m.driver_room(free_reserve_)) + " by the driver (" + memory_text(m.driver_free) +
+                 " free, less the " + memory_text(free_reserve_) + " reserve and " +
+                 memory_text(m.reserved > m.held ? m.reserved - m.held : 0) + " its sessions may still take)" +
+                 (m.driver_room(free_reserve_) < m.room() ? ": the driver binds (another process holds memory)"
+                                                          : ": the accounting binds");
+      p.why += ", " + std::to_string(m.sessions) + " sessions;";
+    }
     p.why.back() = ')';
     p.device = slots_[0].device;
+    for (const Memory& m : slots_) p.driver_binds = p.driver_binds || m.room() >= bytes;
     return p;
   }
   Memory& m = slots_[static_cast<std::size_t>(best)];
@@ -88,13 +111,22 @@ GpuAssignment::Placement GpuAssignment::place(std::uint64_t bytes) {
   return p;
 }
 
-void GpuAssignment::release(int device, std::uint64_t bytes) {
+void GpuAssignment::release(int device, std::uint64_t bytes, std::uint64_t held) {
   const std::lock_guard<std::mutex> lock(mutex_);
   const int k = slot_of(device);
   if (k < 0) return;
   Memory& m = slots_[static_cast<std::size_t>(k)];
   if (m.sessions > 0) --m.sessions;
   m.reserved -= std::min(m.reserved, bytes);
+  m.held -= std::min(m.held, held);
+}
+
+void GpuAssignment::hold(int device, std::uint64_t from, std::uint64_t to) {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const int k = slot_of(device);
+  if (k < 0) return;
+  Memory& m = slots_[static_cast<std::size_t>(k)];
+  m.held = m.held - std::min(m.held, from) + to;
 }
 
 bool GpuAssignment::update(int device, std::uint64_t from, std::uint64_t to) {
@@ -132,13 +164,20 @@ std::vector<std::int64_t> GpuAssignment::sessions() const {
 
 std::vector<GpuAssignment::Memory> GpuAssignment::memory() const {
   const std::lock_guard<std::mutex> lock(mutex_);
+  probe_locked();
   return slots_;
 }
 
-std::uint64_t GpuAssignment::largest_room() const {
+std::uint64_t GpuAssignment::largest_room(std::string* binds) const {
   const std::lock_guard<std::mutex> lock(mutex_);
+  probe_locked();
   std::uint64_t best = 0;
-  for (const Memory& m : slots_) best = std::max(best, m.room());
+  for (const Memory& m : slots_) {
+    const std::uint64_t room = room_locked(m);
+    if (room < best || (room == best && best > 0)) continue;
+    best = room;
+    if (binds) *binds = m.driver_room(free_reserve_) < m.room() ? "driver" : "accounting";
+  }
   return best;
 }
 

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <iterator>
 
+#include "base/allocation_faults.h"
 #include "base/cuda_error.h"
 #include "camera/camera.h"
 #include "encode/encoder_policy.h"
@@ -54,6 +55,7 @@ void FramePipeline::open(std::unique_ptr<Renderer> renderer, std::shared_ptr<con
   av1_ok_ = av1_ok;
   content_rates_ = std::move(content_rates);
   renderer_ = std::move(renderer);
+  if (renderer_) server_list_budget_ = renderer_->options().list_budget;
   model_ = std::move(model);
   if (model_ && !model_->lod.empty()) cut_counter_ = std::make_unique<CutCounter>(*model_);
   gpu_ = gpu;
@@ -109,10 +111,50 @@ FramePipeline::StartedRender FramePipeline::start_render(const JobShape& shape) 
 }
 
 std::uint64_t FramePipeline::halve_list_budget() {
+  return limit_list_budget(renderer_->options().list_budget.max_bytes / 2);
+}
+
+std::uint64_t FramePipeline::limit_list_budget(std::uint64_t max_bytes) {
   RenderOptions o = renderer_->options();
-  o.list_budget.max_bytes = std::max<std::uint64_t>(o.list_budget.max_bytes / 2, kMinListBytes);
+  RenderListBudget& b = o.list_budget;
+  b.max_bytes = std::max(max_bytes, kMinListBytes);
+  // As many more passes as the budget is smaller than the server's: a view the server's budget
+  // draws is drawn still (in more, shorter passes), never refused as over the budget.
+  const std::uint64_t full = server_list_budget_.max_bytes;
+  const std::uint64_t times = full > b.max_bytes ? (full + b.max_bytes - 1) / b.max_bytes : 1;
+  b.max_passes = std::min<std::uint64_t>(server_list_budget_.max_passes * times, 4096);
   renderer_->set_options(o);
-  return o.list_budget.max_bytes;
+  frames_since_fallback_ = 0;
+  return b.max_bytes;
+}
+
+bool FramePipeline::out_of_memory_in_flight() {
+  try {
+    throw;
+  } catch (const OutOfMemoryError&) {
+    return true;
+  } catch (const cuda::CudaError& e) {
+    return e.code() == kCudaOutOfMemory;
+  } catch (...) {
+    return false;
+  }
+}
+
+float FramePipeline::fall_back_for_memory(int step, float lod_error_px) {
+  metrics_.render_memory_fallbacks_total += step == 1 ? 1 : 0;
+  if (step == 1) {
+    // The list buffers the renderer holds (the CUDA core's 24 bytes an entry, the fewer of the
+    // two cores': the list fits in them on both), so a frame's passes need no growth.
+    const std::uint64_t held = renderer_->buffer_shape().list_entries * 24;
+    limit_list_budget(std::min(held, renderer_->options().list_budget.max_bytes));
+    return lod_error_px;
+  }
+  if (!cut_counter_) return lod_error_px;  // no LOD: nothing coarser to draw
+  const float bound = std::max(lod_error_px, 1.0f) * 2.0f;
+  RenderOptions o = renderer_->options();
+  o.lod_error_px = bound;  // this frame only: the next job's set_lod_bound sets its own
+  renderer_->set_options(o);
+  return bound;
 }
 
 FramePipeline::JobResult FramePipeline::failure_of(const Rendered& frame) {
@@ -121,6 +163,7 @@ FramePipeline::JobResult FramePipeline::failure_of(const Rendered& frame) {
   failed.over_budget = frame.over_budget;
   failed.out_of_memory = frame.out_of_memory;
   failed.buffer_bytes = frame.buffer_bytes;
+  failed.buffer_shape = frame.buffer_shape;
   return failed;
 }
 
@@ -172,13 +215,35 @@ void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target
   r.lod_error_px = job.lod_error_px >= 0.0f ? job.lod_error_px : set_lod_bound(camera);
   // Frames on this GPU from the begin to the finish (the throughput model's sharing count).
   r.gpu_frames_at_begin = gpu_ >= 0 ? metrics_.gpu_render_begin(gpu_) : 1;
-  try {
-    // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
-    // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
-    renderer_->begin_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
-  } catch (...) {
-    if (gpu_ >= 0) metrics_.gpu_render_end(gpu_);
-    throw;
+  // The server's list budget again, a while after a memory fallback lowered it.
+  if (frames_since_fallback_ >= 0 && ++frames_since_fallback_ > kMemoryRestoreFrames) {
+    RenderOptions o = renderer_->options();
+    o.list_budget = server_list_budget_;
+    renderer_->set_options(o);
+    frames_since_fallback_ = -1;
+  }
+  for (int step = 0;; ++step) {
+    try {
+      // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
+      // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
+      renderer_->begin_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
+      break;
+    } catch (...) {
+      // A buffer that could not grow: the same frame again, in passes or coarser (issue 73). The
+      // renderer is whole after the throw (base/allocation_faults.h).
+      const bool retry = step < kMemoryFallbacks && out_of_memory_in_flight();
+      if (!retry) {
+        if (gpu_ >= 0) metrics_.gpu_render_end(gpu_);
+        throw;
+      }
+      try {
+        throw;
+      } catch (const std::exception& e) {
+        r.memory_note = e.what();
+      }
+      r.memory_fallback = step + 1;
+      r.lod_error_px = fall_back_for_memory(step + 1, r.lod_error_px);
+    }
   }
   r.render_begun = true;
 }
@@ -204,6 +269,7 @@ void FramePipeline::finish_render_into(Rendered& r) {
   r.speculation_window = stats.window;
   r.splats = stats.visible;
   r.buffer_bytes = renderer_->device_buffer_bytes();
+  r.buffer_shape = renderer_->buffer_shape();
   // Render time includes the plane download (GPU) but not the conversion itself; with frames in
   // flight, also the time the lane spent beginning other frames before this one's finish.
   r.render_ms = std::max(0.0, ms_between(r.render_started, Clock::now()) - r.convert_ms);
@@ -229,10 +295,16 @@ void FramePipeline::note_failure(Rendered& r) {
   } catch (const RenderBudgetError& e) {
     r.error = e.what();
     r.over_budget = true;
+  } catch (const OutOfMemoryError& e) {
+    r.error = e.what();
+    r.out_of_memory = true;
+    r.buffer_bytes = renderer_->device_buffer_bytes();
+    r.buffer_shape = renderer_->buffer_shape();
   } catch (const cuda::CudaError& e) {
     r.error = e.what();
     r.out_of_memory = e.code() == kCudaOutOfMemory;
     r.buffer_bytes = renderer_->device_buffer_bytes();
+    r.buffer_shape = renderer_->buffer_shape();
   } catch (const std::exception& e) {
     r.error = e.what();
   } catch (...) {
@@ -439,6 +511,9 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
                                                       const Rendered& rendered) {
   JobResult r;
   r.buffer_bytes = rendered.buffer_bytes;
+  r.buffer_shape = rendered.buffer_shape;
+  r.memory_fallback = rendered.memory_fallback;
+  r.memory_note = rendered.memory_note;
   pb::ServerMessage m;
   pb::Frame* f = m.mutable_frame();
   f->set_sequence(job.frame_sequence);

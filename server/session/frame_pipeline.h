@@ -96,6 +96,12 @@ class FramePipeline {
     bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
     bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)
     std::uint64_t buffer_bytes = 0;  // the renderer's device buffers after it (Renderer::device_buffer_bytes)
+    BufferShape buffer_shape;        // what they hold (Renderer::buffer_shape)
+    // A buffer could not grow and the frame was drawn anyway (issue 73; memory_fallback): in passes
+    // within the list buffers held (1), or also at a coarser cut (2, 3). 0: it fitted. The note
+    // says what could not grow.
+    int memory_fallback = 0;
+    std::string memory_note;
     // Between begin_render and finish_render: the frame is queued on the renderer.
     bool render_begun = false;
     Clock::time_point render_started{};  // when its lane began it
@@ -108,6 +114,9 @@ class FramePipeline {
     bool over_budget = false;        // as Rendered::over_budget
     bool out_of_memory = false;      // as Rendered's
     std::uint64_t buffer_bytes = 0;  // as Rendered's
+    BufferShape buffer_shape;        // as Rendered's
+    int memory_fallback = 0;         // as Rendered's
+    std::string memory_note;         // as Rendered's
     bool key_frame = false;          // an IDR access unit
     bool render_key_frame = true;    // catgs: a full pre-process (false: a cached sub-frame)
     bool render_rekey = false;       // as Rendered's
@@ -185,6 +194,13 @@ class FramePipeline {
   // between render jobs.
   static constexpr std::uint64_t kMinListBytes = 32ull << 20;
   std::uint64_t halve_list_budget();
+  // A frame whose buffer could not grow is drawn again within the same job, up to
+  // kMemoryFallbacks times (issue 73: a growth that fails drops no frame): first in passes within
+  // the list buffers the renderer holds, then at twice and four times the LOD bound (a scene with
+  // LOD). The lowered list budget stays for kMemoryRestoreFrames frames, then the server's budget
+  // is tried again.
+  static constexpr int kMemoryFallbacks = 3;
+  static constexpr int kMemoryRestoreFrames = 600;
   // A render that failed: its buffer back, and the result that reports it.
   JobResult take_failed(Rendered&& frame);
   // A rendered frame into the slot the encode stage takes from.
@@ -226,6 +242,16 @@ class FramePipeline {
   void note_failure(Rendered& r);
   // A failed frame's result: its error fields.
   static JobResult failure_of(const Rendered& frame);
+  // Inside a catch block: whether the exception in flight says a buffer could not grow
+  // (OutOfMemoryError, or a CudaError cudaErrorMemoryAllocation from elsewhere in the core).
+  static bool out_of_memory_in_flight();
+  // Memory fallback `step` (1..kMemoryFallbacks) for a frame at LOD bound `lod_error_px`: the list
+  // budget lowered to the list buffers held (step 1), then also the bound doubled (2) and doubled
+  // again (3) where the scene has LOD. Returns the bound the frame is drawn at.
+  float fall_back_for_memory(int step, float lod_error_px);
+  // The renderer's list budget set to `max_bytes` (at least kMinListBytes), its passes raised so
+  // that a frame the server's budget draws still fits in them. Returns the budget set.
+  std::uint64_t limit_list_budget(std::uint64_t max_bytes);
   // The frame's LOD bound (render/lod_bound.h) set on the renderer where it changed; called when
   // the job is made (start_render, on the strand, no render of the session running), or by the
   // lane where that failed.
@@ -264,7 +290,9 @@ class FramePipeline {
   std::shared_ptr<const GaussianModel> model_;
   std::unique_ptr<CutCounter> cut_counter_;  // built at open for a model with LOD
   LodBoundChooser lod_bound_;
-  int gpu_ = -1;  // the CUDA device renderer_ renders on, -1: none (CPU renderer)
+  RenderListBudget server_list_budget_;  // the renderer's at open; restored after a memory fallback
+  int frames_since_fallback_ = -1;       // frames since the list budget was lowered (-1: it is not)
+  int gpu_ = -1;                         // the CUDA device renderer_ renders on, -1: none (CPU renderer)
   std::unique_ptr<Encoder> encoder_;
   int encoder_bitrate_kbps_ = 0;    // what encoder_ was built with
   int encoder_rate_kbps_ = 0;       // its VBV rate now (changed without a rebuild where it can)

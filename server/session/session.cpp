@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/allocation_faults.h"
 #include "camera/camera.h"
 #include "renderer/device_memory.h"
 #include "session/annotations.h"
@@ -90,7 +91,7 @@ void Session::start() {
 
 Session::~Session() {
   shared_.metrics.connections_open--;
-  if (placed_) shared_.gpus.release(gpu_, memory_reserved_);
+  if (placed_) shared_.gpus.release(gpu_, memory_reserved_, memory_held_);
 }
 
 void Session::on_out_of_memory(const std::string& error, int streak) {
@@ -110,6 +111,26 @@ void Session::on_out_of_memory(const std::string& error, int streak) {
   stream_.admit();
 }
 
+bool Session::reserve_buffers(Renderer& renderer) {
+  // The buffers this scene's sessions grew to (none yet: the renderer's first guess), for this
+  // viewport: allocated now, so that the frames allocate only to grow past them, and a GPU that
+  // another process filled refuses the visitor here rather than mid-tour.
+  const BufferShape shape{scene_->session_gaussians_peak->load(), scene_->session_list_peak->load()};
+  try {
+    renderer.reserve_buffers(stream_.width(), stream_.height(), shape);
+  } catch (const OutOfMemoryError& e) {
+    shared_.metrics.memory_refusals_total++;
+    shared_.metrics.memory_refusals_driver_total++;
+    fail(pb::ERROR_SERVER_FULL,
+         std::string("server full: its GPU could not hold this session's buffers (") + e.what() +
+             "; another process may hold its memory)",
+         false, jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
+    return false;
+  }
+  update_memory(renderer.device_buffer_bytes(), renderer.buffer_shape());
+  return true;
+}
+
 std::uint64_t Session::memory_estimate(int width, int height) const {
   // The CUDA core's buffers follow the chunks a view keeps (records.h Projected): its first
   // guess of them, or what this scene's sessions' buffers grew to, or this session's own.
@@ -118,11 +139,22 @@ std::uint64_t Session::memory_estimate(int width, int height) const {
   return std::max({first, memory_peak_, scene_->session_bytes_peak->load()});
 }
 
-void Session::update_memory(std::uint64_t buffer_bytes) {
+namespace {
+// Raises `peak` to `value` where it is more (other sessions raise it too).
+void raise(std::atomic<std::uint64_t>& peak, std::uint64_t value) {
+  for (std::uint64_t seen = peak.load(); value > seen && !peak.compare_exchange_weak(seen, value);) {}
+}
+}  // namespace
+
+void Session::update_memory(std::uint64_t buffer_bytes, const BufferShape& shape) {
   memory_peak_ = std::max(memory_peak_, buffer_bytes);
-  std::atomic<std::uint64_t>& scene_peak = *scene_->session_bytes_peak;
-  for (std::uint64_t seen = scene_peak.load();
-       buffer_bytes > seen && !scene_peak.compare_exchange_weak(seen, buffer_bytes);) {}
+  raise(*scene_->session_bytes_peak, buffer_bytes);
+  raise(*scene_->session_gaussians_peak, shape.gaussians);
+  raise(*scene_->session_list_peak, shape.list_entries);
+  if (placed_ && buffer_bytes > 0 && buffer_bytes != memory_held_) {
+    shared_.gpus.hold(gpu_, memory_held_, buffer_bytes);
+    memory_held_ = buffer_bytes;
+  }
   const std::uint64_t want = memory_estimate(stream_.width(), stream_.height());
   if (!placed_ || want == memory_reserved_) return;
   if (!shared_.gpus.update(gpu_, memory_reserved_, want))
@@ -414,6 +446,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   const GpuAssignment::Placement place = shared_.gpus.place(need);
   if (!place.placed) {
     shared_.metrics.memory_refusals_total++;
+    if (place.driver_binds) shared_.metrics.memory_refusals_driver_total++;
     return fail(pb::ERROR_SERVER_FULL, "server full: " + place.why, false,
                 jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
   }
@@ -426,6 +459,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   } catch (const std::exception& e) {  // e.g. no device memory left for another scene copy
     return fail(pb::ERROR_INTERNAL, "renderer for scene '" + scene_->model->name + "': " + e.what());
   }
+  if (!reserve_buffers(*renderer)) return;
   // NVENC takes CUDA frames in one job; every other encoder gets the two-stage pipeline.
   const bool pipelined = !(shared_.encoder_kind == "nvenc" && renderer->name() == "cuda");
   stream_.open(std::move(renderer), scene_->model, gpu_, pipelined, client_av1_ && shared_.encoder_kind == "x264",

@@ -102,7 +102,9 @@ class Session : public std::enable_shared_from_this<Session>, private SessionOwn
   void send(const pb::ServerMessage& message) override;
   void end_session(pb::ErrorCode code, const std::string& reason) override { fail(code, reason); }
   bool is_open() const override { return state_ == State::open; }
-  void on_frame_buffers(std::uint64_t device_bytes) override { update_memory(device_bytes); }
+  void on_frame_buffers(std::uint64_t device_bytes, const BufferShape& shape) override {
+    update_memory(device_bytes, shape);
+  }
   void on_out_of_memory(const std::string& error, int streak) override;
 
   const ConnId id_;
@@ -140,10 +142,17 @@ class Session : public std::enable_shared_from_this<Session>, private SessionOwn
   // Device memory (issue 61; gpu_assignment.h): whether this session holds a place in
   // shared_.gpus, and the bytes it reserves there: the estimate for its viewport
   // (memory_estimate), raised to what its renderer's buffers grew to.
+  // memory_held_: what its renderer's buffers hold (GpuAssignment::hold: the driver's room counts
+  // the rest of its reservation as still to come).
   bool placed_ = false;
-  std::uint64_t memory_reserved_ = 0, memory_peak_ = 0;
+  std::uint64_t memory_reserved_ = 0, memory_peak_ = 0, memory_held_ = 0;
   std::uint64_t memory_estimate(int width, int height) const;
-  void update_memory(std::uint64_t buffer_bytes);
+  // After a frame (or the door's reservation): the buffers' bytes (0: none reported) and shape.
+  void update_memory(std::uint64_t buffer_bytes, const BufferShape& shape = {});
+  // At the door (issue 73): the renderer's buffers for the viewport and the scene's measured peak
+  // (LoadedScene::session_shape_peak) allocated now. False: they did not fit, and the visitor
+  // was refused (ERROR_SERVER_FULL, its reservation given back).
+  bool reserve_buffers(Renderer& renderer);
   static constexpr int kMaxOutOfMemoryFrames = 64;
 };
 

@@ -80,11 +80,15 @@ int SessionManager::readiness(std::string& body) {
   }
   // Device memory (issue 61): no GPU has room for a session like the last visitor's, so a load
   // balancer sends the next one elsewhere.
+  // The lesser of the accounting's room and the driver's (issue 73), read now; the body says which
+  // binds.
   const std::uint64_t need = shared_.next_session_bytes;
-  const std::uint64_t room = shared_.gpus.largest_room();
+  std::string binds;
+  const std::uint64_t room = shared_.gpus.largest_room(&binds);
   if (need > 0 && room < need) {
     body = "full (no device memory for another session: " + memory_text(need) + " needed, " + memory_text(room) +
-           " free; " + std::to_string(open) + " sessions)\n";
+           " free by the " + (binds == "driver" ? "driver (another process holds memory)" : "server's accounting") +
+           "; " + std::to_string(open) + " sessions)\n";
     return 503;
   }
   body = "ready (" + std::to_string(open) + "/" + std::to_string(limit) + " sessions)\n";

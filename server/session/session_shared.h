@@ -76,7 +76,7 @@ class SessionOwner {
   // The stream's frames and device memory (issue 61): the renderer's device buffers after a
   // frame (bytes; 0: none reported), and a frame lost because a buffer could not grow, the
   // `streak`-th in a row.
-  virtual void on_frame_buffers(std::uint64_t device_bytes) = 0;
+  virtual void on_frame_buffers(std::uint64_t device_bytes, const BufferShape& shape) = 0;
   virtual void on_out_of_memory(const std::string& error, int streak) = 0;
 
  protected:

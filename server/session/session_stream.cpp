@@ -114,7 +114,7 @@ RenderScheduler::Finish SessionStream::render(FramePipeline::StartedRender start
 void SessionStream::rendered(FramePipeline::Rendered frame) {
   frames_.end_render();
   if (!frame.error.empty()) return hand_off(frames_.take_failed(std::move(frame)));
-  owner_.on_frame_buffers(frame.buffer_bytes);
+  owner_.on_frame_buffers(frame.buffer_bytes, frame.buffer_shape);
   pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
   frames_.store_rendered(std::move(frame));
   start_encode();
@@ -168,7 +168,7 @@ void SessionStream::render_and_encode(const FramePipeline::Job& job) {
 void SessionStream::hand_off(JobResult result) {
   if (!owner_.is_open() || result.message.empty()) shared_.metrics.dropped_frames_total++;
   if (!owner_.is_open()) return;
-  owner_.on_frame_buffers(result.buffer_bytes);
+  owner_.on_frame_buffers(result.buffer_bytes, result.buffer_shape);
   if (result.message.empty() && result.out_of_memory)
     return owner_.on_out_of_memory(result.error, ++out_of_memory_streak_);
   if (!result.message.empty()) out_of_memory_streak_ = 0;
@@ -203,6 +203,10 @@ void SessionStream::count(const JobResult& result) {
   encode_ms_sum_ += result.encode_ms;
   lod_error_px_sum_ += result.lod_error_px;
   splats_sum_ += static_cast<double>(result.splats);
+  if (result.memory_fallback > 0) {
+    memory_fallbacks_++;
+    memory_note_ = result.memory_note;
+  }
   if (result.key_frame) key_frames_++;
   if (result.render_key_frame)
     render_key_frames_++;
@@ -256,6 +260,10 @@ void SessionStream::fill_stats(pb::Stats& s, double seconds) {
   s.set_encode_ms_mean(encode_ms_sum_ / n);
   s.set_lod_error_px_mean(lod_error_px_sum_ / n);
   s.set_splats_mean(splats_sum_ / n);
+  s.set_memory_fallback_frames(memory_fallbacks_);
+  s.set_memory_note(memory_note_);
+  memory_fallbacks_ = 0;
+  memory_note_.clear();
   s.set_bytes_per_second(static_cast<double>(bytes_since_stats_) / seconds);
   s.set_link_kbps(link_.link_kbps());
   s.set_rtt_ms(link_.rtt_ms());

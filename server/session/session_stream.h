@@ -143,6 +143,10 @@ class SessionStream {
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
   std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)
   double render_ms_sum_ = 0, encode_ms_sum_ = 0;
+  // The interval's frames drawn after a buffer could not grow (Stats.memory_fallback_frames) and
+  // the last one's reason.
+  std::uint32_t memory_fallbacks_ = 0;
+  std::string memory_note_;
   double lod_error_px_sum_ = 0, splats_sum_ = 0;  // the interval's frames' LOD bounds and Gaussians
   std::uint32_t frames_since_stats_ = 0;
   std::uint64_t bytes_since_stats_ = 0;

@@ -297,4 +297,114 @@ TEST(Soak, HealthySessionsKeepStreamingThroughChurnAndHostileClients) {
   }
 }
 
+// Issue 73's fault soak: the server's renderer buffer allocations fail at random
+// (CATGS_FAIL_ALLOCATIONS, the CPU core's host slot), as on a GPU another process fills. Sessions
+// come in at several viewports and resize every few frames, so their buffers grow mid-session.
+// What must hold: no admitted session ends (a visitor the door refuses, ERROR_SERVER_FULL with a
+// retry hint, tries again), every session keeps getting frames, the frames whose buffers could not
+// grow are drawn anyway (Stats.memory_fallback_frames, catgs_render_memory_fallbacks_total), and
+// the server's own counters agree. Length: CATGS_FAULT_SOAK_SECONDS (default 60), sessions:
+// CATGS_FAULT_SOAK_SESSIONS (default 10), the share of allocations that fail:
+// CATGS_FAULT_SOAK_P (default 0.25).
+TEST(Soak, AllocationsFailingAtRandomEndNoSession) {
+  const double seconds = env_number("CATGS_FAULT_SOAK_SECONDS", 60);
+  const int sessions = static_cast<int>(env_number("CATGS_FAULT_SOAK_SESSIONS", 10));
+  const double p = env_number("CATGS_FAULT_SOAK_P", 0.25);
+  setenv("CATGS_FAIL_ALLOCATIONS", (std::to_string(p) + ",73").c_str(), 1);
+  ServerProcess server(server_args(kBiker, {"--max-sessions", std::to_string(sessions + 4)}));
+  unsetenv("CATGS_FAIL_ALLOCATIONS");
+  ASSERT_NE(server.log().find("CATGS_FAIL_ALLOCATIONS"), std::string::npos) << server.log();
+  const int port = server.port();
+  const int sizes[][2] = {{64, 48}, {160, 96}, {96, 64}, {256, 144}, {128, 128}, {320, 180}};
+  struct Result {
+    int refusals = 0, frames = 0, resizes = 0, fallback_frames = 0;
+    std::string error;
+  };
+  std::vector<Result> results(static_cast<std::size_t>(sessions));
+  std::atomic<bool> stop{false};
+  std::vector<std::thread> threads;
+  for (int i = 0; i < sessions; ++i)
+    threads.emplace_back([&, i] {
+      Result& r = results[static_cast<std::size_t>(i)];
+      try {
+        std::unique_ptr<StreamClient> c;
+        int size = i % 6;
+        for (;;) {  // refused at the door: wait the hint, as a page does, and try again
+          try {
+            c = std::make_unique<StreamClient>();
+            c->connect(port);
+            c->hello(sizes[size][0], sizes[size][1]);
+            break;
+          } catch (const Refused& e) {
+            if (e.error().code() != pb::ERROR_SERVER_FULL || ++r.refusals > 50) throw;
+            std::this_thread::sleep_for(std::chrono::milliseconds(200));
+          }
+        }
+        const Trace orbit = biker_orbit(64, 48, 24);
+        std::uint32_t seq = 0;
+        bool outstanding = false;
+        while (!stop) {
+          if (!outstanding) {
+            const Camera& cam = orbit[seq % orbit.size()].camera;
+            c->send_pose(pose_from_camera(cam, seq++, now_ms()));
+            outstanding = true;
+          }
+          const auto m = c->recv(50);
+          if (!m) continue;
+          if (m->has_error()) throw std::runtime_error("session ended: " + m->error().reason());
+          if (m->has_stats()) r.fallback_frames += static_cast<int>(m->stats().memory_fallback_frames());
+          if (!m->has_frame()) continue;
+          if (m->frame().pose_sequence() + 1 == seq) outstanding = false;
+          if (++r.frames % 12 == 0) {  // a new viewport: its buffers grow, or not
+            size = (size + 1 + i) % 6;
+            pb::ClientMessage resize;
+            resize.mutable_resize()->set_viewport_width(static_cast<std::uint32_t>(sizes[size][0]));
+            resize.mutable_resize()->set_viewport_height(static_cast<std::uint32_t>(sizes[size][1]));
+            c->send(resize);
+            ++r.resizes;
+          }
+        }
+      } catch (const std::exception& e) {
+        r.error = e.what();
+      }
+    });
+  const auto t0 = Clock::now();
+  std::vector<int> frames_at_half(static_cast<std::size_t>(sessions), 0);
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds / 2));
+  for (int i = 0; i < sessions; ++i)
+    frames_at_half[static_cast<std::size_t>(i)] = results[static_cast<std::size_t>(i)].frames;
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds / 2));
+  std::string metrics;
+  ASSERT_EQ(http_get(port, "/metrics", metrics), 200);
+  stop = true;
+  for (auto& t : threads) t.join();
+  const double ran = std::chrono::duration<double>(Clock::now() - t0).count();
+
+  int refusals = 0, frames = 0, resizes = 0, fallback_frames = 0;
+  for (int i = 0; i < sessions; ++i) {
+    const Result& r = results[static_cast<std::size_t>(i)];
+    EXPECT_EQ(r.error, "") << "session " << i;
+    EXPECT_GT(r.frames, frames_at_half[static_cast<std::size_t>(i)]) << "session " << i << " stopped getting frames";
+    refusals += r.refusals;
+    frames += r.frames;
+    resizes += r.resizes;
+    fallback_frames += r.fallback_frames;
+  }
+  const double server_fallbacks = metric_value(metrics, "catgs_render_memory_fallbacks_total");
+  const double dropped = metric_value(metrics, "catgs_render_out_of_memory_total");
+  // Every Error the server sent was a refusal at the door.
+  EXPECT_EQ(metric_value(metrics, "catgs_session_errors_total"), static_cast<double>(refusals)) << metrics;
+  EXPECT_GT(server_fallbacks, 0.0) << "allocations failed mid-session and the frames were drawn anyway";
+  EXPECT_GT(fallback_frames, 0) << "Stats.memory_fallback_frames told the sessions";
+  EXPECT_LE(fallback_frames, server_fallbacks);
+  EXPECT_EQ(metric_value(metrics, "catgs_memory_refusals_total"), static_cast<double>(refusals));
+  EXPECT_LT(dropped, 0.05 * frames) << "frames lost after every fallback failed too";
+  std::cout << "[ fault soak ] " << ran << " s, " << sessions << " sessions (CPU renderer), allocations failing with p "
+            << p << ": " << frames << " frames, " << resizes << " resizes, " << server_fallbacks
+            << " frames drawn after an allocation failed (" << fallback_frames << " in the sessions' Stats), "
+            << dropped << " dropped after every fallback failed, " << refusals
+            << " visitors refused at the door (retried), 0 "
+            << "sessions ended\n";
+}
+
 }  // namespace

@@ -18,13 +18,22 @@ namespace {
 using namespace catgs;
 using namespace catgs::server;
 
-// Throws CudaError `code` from every render, or, `at_finish`, from the frame's finish (a frame
-// begun on a lane, whose failure shows when its planes are waited for); its buffers hold 123 MiB.
+// Throws CudaError `code` from its first `fail_times` renders (-1: every one), or, `at_finish`,
+// from the frame's finish (a frame begun on a lane, whose failure shows when its planes are
+// waited for); its buffers hold 123 MiB and a list of 2 M entries.
 class FailingRenderer : public Renderer {
  public:
-  explicit FailingRenderer(int code, bool at_finish = false) : code_(code), at_finish_(at_finish) {}
+  explicit FailingRenderer(int code, bool at_finish = false, int fail_times = -1)
+      : code_(code), at_finish_(at_finish), fail_times_(fail_times) {}
   std::string name() const override { return "cuda"; }
-  void render(const Camera&, Image&) override { fail(); }
+  void render(const Camera& camera, Image& out) override {  // then a black frame
+    ++renders;
+    if (fail_times_ < 0 || renders <= fail_times_) fail();
+    out.width = camera.width;
+    out.height = camera.height;
+    out.rgb.assign(static_cast<std::size_t>(camera.width) * camera.height * 3, 0.0f);
+    out.rgba8.assign(static_cast<std::size_t>(camera.width) * camera.height * 4, 0);
+  }
   void begin_yuv420_at(const Camera& camera, double time_s, const Yuv420Target& out) override {
     if (!at_finish_) return Renderer::begin_yuv420_at(camera, time_s, out);
     begin_frame();
@@ -42,10 +51,13 @@ class FailingRenderer : public Renderer {
   const RenderOptions& options() const override { return options_; }
   void set_options(const RenderOptions& o) override { options_ = o; }
   std::uint64_t device_buffer_bytes() const override { return 123ull << 20; }
+  BufferShape buffer_shape() const override { return {1000, 2'000'000}; }
+  int renders = 0;
 
  private:
   int code_;
   bool at_finish_;
+  int fail_times_;
   FrameStats stats_;
   RenderOptions options_;
 };
@@ -86,7 +98,10 @@ TEST(FramePipelineMemory, OutOfMemoryAtTheFinishIsReported) {
   EXPECT_EQ(oom.buffer_bytes, 123ull << 20);
 }
 
-TEST(FramePipelineMemory, OutOfMemoryIsReportedAndHalvesTheListBudget) {
+// A buffer that cannot grow, frame after frame: the frame is tried again kMemoryFallbacks times
+// (in passes within the list buffers held, then coarser), then reported as out of memory, with
+// the renderer's buffer bytes; halve_list_budget() halves the budget down to kMinListBytes.
+TEST(FramePipelineMemory, OutOfMemoryIsReportedAfterTheFallbacksAndHalvesTheListBudget) {
   auto renderer = std::make_unique<FailingRenderer>(2);  // cudaErrorMemoryAllocation
   FailingRenderer* r = renderer.get();
   RenderOptions o;
@@ -95,18 +110,43 @@ TEST(FramePipelineMemory, OutOfMemoryIsReportedAndHalvesTheListBudget) {
   TestPipeline p(std::move(renderer));
   FramePipeline& frames = p.frames;
   FramePipeline::Rendered oom = render_once(frames);
+  EXPECT_EQ(r->renders, 1 + FramePipeline::kMemoryFallbacks);
   EXPECT_TRUE(oom.out_of_memory);
   EXPECT_FALSE(oom.over_budget);
   EXPECT_NE(oom.error.find("out of memory"), std::string::npos) << oom.error;
   EXPECT_EQ(oom.buffer_bytes, 123ull << 20);
+  EXPECT_EQ(oom.buffer_shape.list_entries, 2'000'000u);
   const FramePipeline::JobResult failed = frames.take_failed(std::move(oom));
   EXPECT_TRUE(failed.out_of_memory);
   EXPECT_EQ(failed.buffer_bytes, 123ull << 20);
+  EXPECT_EQ(p.metrics.render_memory_fallbacks_total.load(), 1u);
 
-  EXPECT_EQ(frames.halve_list_budget(), 256ull << 20);
-  EXPECT_EQ(r->options().list_budget.max_bytes, 256ull << 20);
+  // The fallback's budget: the 2 M entries the list buffers hold, 24 bytes an entry.
+  EXPECT_EQ(r->options().list_budget.max_bytes, 48'000'000u);
+  EXPECT_EQ(frames.halve_list_budget(),
+            24'000'000u < FramePipeline::kMinListBytes ? FramePipeline::kMinListBytes : 24'000'000u);
   for (int k = 0; k < 8; ++k) frames.halve_list_budget();
   EXPECT_EQ(r->options().list_budget.max_bytes, FramePipeline::kMinListBytes) << "halved below its floor";
+  // As many more passes as the budget is smaller: what the server's budget drew, it draws still.
+  EXPECT_EQ(r->options().list_budget.max_passes, 16u * 16u);
+}
+
+// A buffer that cannot grow once: the frame is drawn again in the same job, in passes within the
+// list buffers held, and counts as a frame (issue 73: no frame dropped); Stats and /metrics say so.
+TEST(FramePipelineMemory, AFrameWhoseBufferCannotGrowIsDrawnInPasses) {
+  auto renderer = std::make_unique<FailingRenderer>(2, false, /*fail_times=*/1);
+  FailingRenderer* r = renderer.get();
+  TestPipeline p(std::move(renderer));
+  FramePipeline::Rendered drawn = render_once(p.frames);
+  EXPECT_EQ(r->renders, 2);
+  EXPECT_TRUE(drawn.error.empty()) << drawn.error;
+  EXPECT_FALSE(drawn.out_of_memory);
+  EXPECT_EQ(drawn.memory_fallback, 1);
+  EXPECT_NE(drawn.memory_note.find("render-list keys"), std::string::npos) << drawn.memory_note;
+  EXPECT_EQ(r->options().list_budget.max_bytes, 48'000'000u);
+  EXPECT_GT(r->options().list_budget.max_passes, RenderListBudget{}.max_passes);
+  EXPECT_EQ(p.metrics.render_memory_fallbacks_total.load(), 1u);
+  EXPECT_NE(p.metrics.prometheus_text().find("catgs_render_memory_fallbacks_total 1"), std::string::npos);
 }
 
 TEST(FramePipelineMemory, AnotherCudaErrorIsAFailure) {

@@ -64,10 +64,12 @@ TEST(Gpus, SessionsArePlacedOnlyWhereTheirMemoryFits) {
   EXPECT_EQ(b.device, 1);                               // fewest sessions with room
   const GpuAssignment::Placement c = g.place(2 * GiB);  // 1 GiB left on GPU 0, 0 on GPU 1
   EXPECT_FALSE(c.placed);
-  EXPECT_NE(c.why.find("no GPU can hold another session (2.0 GiB needed; gpu 0: 1.0 GiB free of 10.0 GiB, 1 sessions;"
-                       " gpu 1: 0 MiB free of 4.0 GiB, 1 sessions)"),
+  EXPECT_NE(c.why.find("no GPU can hold another session (2.0 GiB needed; gpu 0: 1.0 GiB free of 10.0 GiB by the "
+                       "server's accounting, 1 sessions; gpu 1: 0 MiB free of 4.0 GiB by the server's accounting, "
+                       "1 sessions)"),
             std::string::npos)
       << c.why;
+  EXPECT_FALSE(c.driver_binds) << "no probe: the accounting alone";
   EXPECT_EQ(g.sessions(), (std::vector<std::int64_t>{1, 1})) << "a refusal changes nothing";
   EXPECT_EQ(g.largest_room(), 1 * GiB);
   // A session's buffers grew past its estimate: applied, and said to be over the capacity.
@@ -82,6 +84,57 @@ TEST(Gpus, SessionsArePlacedOnlyWhereTheirMemoryFits) {
   g.release(0, 3 * GiB);
   EXPECT_EQ(g.memory()[0].reserved, 1 * GiB);
   EXPECT_EQ(g.memory()[0].sessions, 1);
+}
+
+// Another process holds memory (issue 73): the driver's free bytes, less the reserve and what
+// the sessions may still grow into (reservation less what their buffers hold), bound the room
+// where they are less than the accounting's; the refusal and largest_room say which binds.
+TEST(Gpus, WhatTheDriverReportsFreeBindsWhereAnotherProcessHoldsMemory) {
+  constexpr std::uint64_t GiB = 1ull << 30;
+  std::uint64_t free_bytes[2] = {70 * GiB, 70 * GiB};
+  int probes = 0;
+  GpuAssignment g(
+      {0, 1}, {78 * GiB, 78 * GiB},
+      [&](int device) {
+        ++probes;
+        return free_bytes[device];
+      },
+      2 * GiB);
+  auto scene = g.add_scene(0, 10 * GiB);
+  // Nothing else on the GPUs: the accounting binds on GPU 0 (68 GiB) and the driver on GPU 1
+  // (68 GiB too: 70 free less the reserve); placed by session count.
+  const GpuAssignment::Placement a = g.place(4 * GiB);
+  ASSERT_TRUE(a.placed);
+  EXPECT_GT(probes, 0) << "the door reads the driver";
+  EXPECT_EQ(g.memory()[0].driver_free, 70 * GiB);
+  // A hog takes GPU 1 down to 5 GiB free and GPU 0 to 9 GiB: the session on GPU 0 holds 1 GiB of
+  // its 4 GiB reservation, so 3 GiB of GPU 0's free memory is still its own.
+  free_bytes[0] = 9 * GiB;
+  free_bytes[1] = 5 * GiB;
+  g.hold(a.device, 0, 1 * GiB);
+  EXPECT_EQ(g.memory()[0].held, 1 * GiB);
+  EXPECT_EQ(g.memory()[0].driver_room(2 * GiB), 4 * GiB);  // 9 - 2 reserve - 3 still to come
+  EXPECT_EQ(g.memory()[1].driver_room(2 * GiB), 3 * GiB);
+  std::string binds;
+  EXPECT_EQ(g.largest_room(&binds), 4 * GiB);
+  EXPECT_EQ(binds, "driver");
+  const GpuAssignment::Placement b = g.place(5 * GiB);  // the accounting has 64 and 78 GiB
+  EXPECT_FALSE(b.placed);
+  EXPECT_TRUE(b.driver_binds);
+  EXPECT_NE(b.why.find("gpu 1: 78.0 GiB free of 78.0 GiB by the server's accounting, 3.0 GiB by the driver (5.0 GiB "
+                       "free, less the 2.0 GiB reserve and 0 MiB its sessions may still take): the driver binds"),
+            std::string::npos)
+      << b.why;
+  const GpuAssignment::Placement c = g.place(3 * GiB);  // fits GPU 1 by the driver
+  ASSERT_TRUE(c.placed);
+  EXPECT_EQ(c.device, 1);
+  // The hog leaves: the accounting binds again.
+  free_bytes[0] = free_bytes[1] = 80 * GiB;
+  EXPECT_EQ(g.largest_room(&binds), 78 * GiB - 3 * GiB);
+  EXPECT_EQ(binds, "accounting");
+  g.release(a.device, 4 * GiB, 1 * GiB);
+  EXPECT_EQ(g.memory()[0].held, 0u);
+  EXPECT_EQ(g.memory()[0].reserved, 0u);
 }
 
 TEST(Gpus, TheCpuRenderersHostSlotHoldsTheAllowance) {
