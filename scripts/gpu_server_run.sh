@@ -32,7 +32,8 @@
 # the level of detail in the server (issue 46): `bigcity R NAME` (49 or 101 copies) and
 # `firstframe NAME SCENE WxH [SERVER ARGS]` (start to listening, the first session's frames),
 # `pictures SCENE WxH BOUNDS` (catgs-bench's yardstick and PNGs of full detail, the cut and the
-# supersampled render).
+# supersampled render); `hogramp NAME SCENE WxH HOG_GIB START STEP MAX [SERVER ARGS]` (issue 73: the
+# ramp beside another process that holds HOG_GIB GiB of the GPU).
 # CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -52,6 +53,8 @@ prepare() {
   [ "${CATGS_CARRY_TESTS:-1}" = 1 ] && bins+=("$(find "$build" -type f -name catgs_server_unit_tests -perm -u+x | head -1)")
   [ "${CATGS_CARRY_ENCODE_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-encode-bench")
   [ "${CATGS_CARRY_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-bench")
+  # The other process of hogramp (built with the GPU tests), where built.
+  [ -x "$build/bin/catgs-memory-hog" ] && bins+=("$build/bin/catgs-memory-hog")
   for b in "${bins[@]}"; do
     [ -x "$b" ] || { echo "prepare: $b missing (build $build with the server)" >&2; return 1; }
     cp -f "$b" "$carry/stage/bin/"
@@ -409,6 +412,61 @@ print('; '.join(bad))" "$W/json/ramp-${name}_$n.json" 2>&1)
   stop_server
 }
 
+# hogramp NAME SCENE WxH HOG_GIB START STEP MAX [SERVER ARGS...] (issue 73): another process
+# (catgs-memory-hog, tests/gpu/memory_hog.cu) holds HOG_GIB GiB of the GPU while sessions ramp
+# START, START + STEP, ... MAX on the three real paths (6 s a step, as ramp). The ramp goes on past
+# refusals at the door (they are what it shows) and stops where a session fails. Per step: sessions
+# that streamed, were refused, failed; the slowest streamed session's FPS and the pooled p95; the
+# server's memory counters (/metrics) -> $W/json/hogramp-NAME_N.json and stdout.
+hogramp() {
+  local name=$1 scene=$2 size=$3 hog=$4 start=$5 step=$6 max=$7 W=/tmp/catgs_sweep
+  shift 7
+  export LD_LIBRARY_PATH=$SRV/lib
+  "$SRV/bin/catgs-memory-hog" "$hog" > "$W/hog-$name.txt" 2>&1 &
+  local hog_pid=$!
+  for _ in $(seq 1 240); do grep -q holding "$W/hog-$name.txt" && break; sleep 0.5; done
+  echo "hog: $(cat "$W/hog-$name.txt")"
+  start_server "$W/$scene.compressed.ply" "$W/server_hogramp-$name.log" --pipeline exact "$@" || {
+    kill "$hog_pid"
+    return 1
+  }
+  grep -E "^gpu |renderer:" "$W/server_hogramp-$name.log"
+  local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
+  for ((n = start; n <= max; n += step)); do
+    measure "hogramp-${name}_$n" "$n" "$size" "$PORT" "$traces" 6
+    local verdict
+    verdict=$(python3 - "$W/json/hogramp-${name}_$n.json" "$PORT" "$n" "$hog" <<'PY'
+import json, sys, urllib.request
+path, port, n, hog = sys.argv[1:]
+j = json.load(open(path)); t = j['run']['total']
+text = urllib.request.urlopen('http://127.0.0.1:%s/metrics' % port).read().decode()
+m = {l.split(' ')[0]: float(l.split(' ')[1]) for l in text.split('\n') if l and not l.startswith('#') and ' ' in l}
+keys = ['catgs_memory_refusals_total', 'catgs_memory_refusals_driver_total', 'catgs_render_out_of_memory_total',
+        'catgs_render_memory_fallbacks_total', 'catgs_session_errors_total',
+        'catgs_device_memory_driver_free_bytes{slot="0"}', 'catgs_device_memory_held_bytes{slot="0"}',
+        'catgs_device_memory_session_bytes{slot="0"}']
+j['server_metrics'] = {k: m.get(k) for k in keys}
+j['hog_gib'] = float(hog)
+json.dump(j, open(path, 'w'), indent=1)
+streamed = t['sessions'] - t['refused'] - t['failed']
+print('%s sessions asked: %d streamed, %d refused, %d failed; slowest %.1f FPS, p95 %.1f ms; server: %d refused at the door '
+      '(%d by the driver), %d frames drawn after a failed growth, %d dropped; driver free %.1f GiB' % (
+      n, streamed, t['refused'], t['failed'], t['fps_min'], t['latency']['p95_ms'],
+      m.get('catgs_memory_refusals_total', 0), m.get('catgs_memory_refusals_driver_total', 0),
+      m.get('catgs_render_memory_fallbacks_total', 0), m.get('catgs_render_out_of_memory_total', 0),
+      m.get('catgs_device_memory_driver_free_bytes{slot="0"}', 0) / 2**30))
+PY
+    )
+    echo "hogramp $name: $verdict"
+    python3 -c "import json,sys; sys.exit(1 if json.load(open(sys.argv[1]))['run']['total']['failed'] else 0)" \
+      "$W/json/hogramp-${name}_$n.json" || break
+  done
+  grep -E "ERROR|out of device memory" "$W/server_hogramp-$name.log" | head -5
+  stop_server
+  kill "$hog_pid" 2>/dev/null
+  wait "$hog_pid" 2>/dev/null
+}
+
 case "${1:-}" in
   prepare) shift; prepare "$@" ;;
   check) OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; check ;;
@@ -422,5 +480,6 @@ case "${1:-}" in
   rdtrace) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; rdtrace "$@" ;;
   pictures) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; pictures "$@" ;;
   ramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; ramp "$@" ;;
+  hogramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; hogramp "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
 esac

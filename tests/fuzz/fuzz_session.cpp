@@ -20,8 +20,13 @@
 //   op % 8 == 1  text message: the same layout (the session must refuse text)
 //   op % 8 == 2  oversize message (the transport discarded one above 64 KiB)
 //   op % 8 == 3  the transport wrote the oldest counted message not yet written (Frame)
+//   op % 8 == 5  the renderer's next buffer allocation fails (issue 73, base/allocation_faults.h);
+//                after one, a session that ends with "render/encode failed" is a finding (a
+//                failed allocation must leave the renderer whole: the frame is drawn in passes or
+//                coarser, or dropped, and the session goes on)
 //   otherwise    a pause: the queued work (strand handlers, render and encode jobs) runs
 // Seeds: corpus/session (make_session_seeds.py writes them from protobuf text).
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
@@ -38,6 +43,7 @@ extern "C" {
 #include <libavutil/log.h>
 }
 
+#include "base/allocation_faults.h"
 #include "session/session.h"
 
 namespace catgs::server {
@@ -72,7 +78,11 @@ class CheckingLink final : public ConnectionLink {
     pb::ServerMessage m;
     if (!m.ParseFromString(final_message) || !m.has_error() || m.error().code() == pb::ERROR_UNSPECIFIED)
       broken("a close without an Error as its last message");
+    if (fault_injected && m.error().code() == pb::ERROR_INTERNAL &&
+        m.error().reason().find("render/encode failed") != std::string::npos)
+      broken("a render failed after an allocation failed: " + m.error().reason());
   }
+  bool fault_injected = false;  // op 5 ran in this input
   std::size_t queued(ConnId) const override { return unwritten_; }
   void said_hello(ConnId) override {}
   void set_send_buffer(ConnId, int) override {}
@@ -102,6 +112,9 @@ class CheckingLink final : public ConnectionLink {
   std::optional<std::pair<std::uint32_t, std::uint32_t>> size_;
   std::size_t unwritten_ = 0;
 };
+
+// Op 5's one-shot fault: armed, the next allocation the renderer asks the hook about fails.
+std::atomic<bool> fault_armed{false};
 
 // What outlives one input: the scene (loaded once), the strands' io_context and the render
 // scheduler. Neither runs threads: settle() runs their work on this thread.
@@ -137,6 +150,7 @@ World& world() {
   static World* w = [] {
     std::cerr.rdbuf(nullptr);        // the sessions' "[session ...]" log lines; sanitizers write to fd 2
     av_log_set_level(AV_LOG_QUIET);  // x264's per-encoder summaries
+    set_allocation_fault([](std::uint64_t, const char*) { return fault_armed.exchange(false); });
     return new World();
   }();
   return *w;
@@ -176,6 +190,9 @@ void run_connection(const std::uint8_t* data, std::size_t size) {
       session->post_message(MessageKind::oversize, {});
     } else if (op == 3) {
       if (link.take_written()) session->post_sent();
+    } else if (op == 5) {
+      fault_armed = true;
+      link.fault_injected = true;
     } else {
       w.settle();
     }
@@ -184,6 +201,7 @@ void run_connection(const std::uint8_t* data, std::size_t size) {
   std::weak_ptr<Session> alive = session;
   session.reset();
   w.settle();
+  fault_armed = false;
   if (!alive.expired()) broken("the session outlived its connection and its work");
   if (metrics.connections_open != 0) broken("the connection count was not given back");
   if (metrics.sessions_open != 0) broken("the session slot was not given back");

@@ -13,7 +13,7 @@ HERE = pathlib.Path(__file__).resolve().parent
 PROTO_DIR = HERE.parent.parent / "proto"
 OUT = HERE / "corpus" / "session"
 
-BINARY, TEXT, OVERSIZE, WRITTEN, PAUSE = 0, 1, 2, 3, 4
+BINARY, TEXT, OVERSIZE, WRITTEN, PAUSE, FAULT = 0, 1, 2, 3, 4, 5
 
 
 def encode(text):
@@ -59,6 +59,10 @@ SEEDS = {
     # Poses faster than frames are written: latest pose wins, at most two frames in flight.
     "flood": connection(message(hello()), *[message(pose(i, -1.5 + 0.02 * i)) for i in range(1, 9)], PAUSE,
                         message(pose(9)), PAUSE, message(pose(10)), PAUSE, WRITTEN, PAUSE),
+    # Allocations that fail (issue 73): at the first frame, after a resize and at a larger one.
+    "fault": connection(message(hello()), PAUSE, FAULT, message(pose(1)), PAUSE, WRITTEN, FAULT,
+                        message(encode("resize { viewport_width: 64 viewport_height: 48 }")), message(pose(2)), PAUSE,
+                        WRITTEN, FAULT, message(pose(3)), PAUSE, WRITTEN, message(pose(4)), PAUSE, WRITTEN),
     "ping": connection(message(hello()), PAUSE, message(encode("ping { client_time_ms: 99 }")), PAUSE),
     # The disconnect while a render is queued.
     "gone_mid_render": connection(message(hello()), PAUSE, message(pose(1))),

@@ -190,6 +190,7 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"link_limited_stats", s.link_limited_stats},
          {"link_cap_kbps_min", s.link_cap_kbps_min},
          {"device_memory_mib_max", s.device_memory_mib_max},
+         {"memory_fallback_frames", s.memory_fallback_frames},
          {"link_kbps_last", s.link_kbps_last},
          {"late_reads", s.late_reads},
          {"receipts_sent", s.receipts_sent},

@@ -75,6 +75,9 @@ struct SessionResult {
   std::uint64_t late_reads = 0, receipts_sent = 0;
   // The most device memory the server's Stats said this session held (Stats.device_memory_mib).
   std::uint32_t device_memory_mib_max = 0;
+  // Frames the server drew after one of this session's buffers could not grow (the sum of
+  // Stats.memory_fallback_frames; issue 73).
+  std::uint64_t memory_fallback_frames = 0;
   std::uint64_t stale = 0;   // frames later than the stale bound, or older than one shown
   std::uint64_t errors = 0;  // server Error, lost connection, undecodable frame
   std::string first_error;

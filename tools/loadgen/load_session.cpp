@@ -212,6 +212,7 @@ class PoseLoop {
   void on_stats(const pb::Stats& s) {
     r_.server_skipped = s.poses_skipped();
     r_.device_memory_mib_max = std::max(r_.device_memory_mib_max, s.device_memory_mib());
+    r_.memory_fallback_frames += s.memory_fallback_frames();
     if (s.link_kbps() > 0) r_.link_kbps_last = s.link_kbps();
     if (s.bitrate_cap_kbps() == 0) return;  // the link does not limit the stream
     r_.link_limited_stats++;
