@@ -21,7 +21,10 @@ done
 [ -x "$loadgen" ] || { echo "demo_timing: --loadgen PATH/catgs-loadgen is required" >&2; exit 2; }
 command -v podman >/dev/null || { echo "demo_timing: podman is missing (install_deps.sh containers)" >&2; exit 2; }
 image=docker.io/library/debian:12
-podman image exists "$image" || image="$(bash "$root/scripts/container_base.sh")"
+# container_base.sh imports the image under that name and prints what it did (to the log, not
+# into $image).
+podman image exists "$image" || bash "$root/scripts/container_base.sh" >&2
+podman image exists "$image" || { echo "demo_timing: no $image after container_base.sh" >&2; exit 1; }
 
 work="$(mktemp -d)"
 name="catgs-demo-timing-$$"

@@ -9,6 +9,7 @@
 #include <stb_image.h>
 #include <stb_image_write.h>
 
+#include "colour/bt709.h"
 #include "common/image_io.h"
 
 namespace catgs {
@@ -34,7 +35,7 @@ namespace {
 std::vector<double> luma709(const Image& im) {
   std::vector<double> y(static_cast<std::size_t>(im.width) * static_cast<std::size_t>(im.height));
   for (std::size_t p = 0; p < y.size(); ++p)
-    y[p] = 0.2126 * im.rgba8[4 * p] + 0.7152 * im.rgba8[4 * p + 1] + 0.0722 * im.rgba8[4 * p + 2];
+    y[p] = bt709::kKr * im.rgba8[4 * p] + bt709::kKg * im.rgba8[4 * p + 1] + bt709::kKb * im.rgba8[4 * p + 2];
   return y;
 }
 

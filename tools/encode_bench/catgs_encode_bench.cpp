@@ -26,6 +26,7 @@
 #include <iomanip>
 #include <iostream>
 #include <numeric>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -278,8 +279,21 @@ int usable_cores() { return static_cast<int>(std::max(1u, std::thread::hardware_
 
 }  // namespace
 
+constexpr const char* kUsage =
+    "usage: catgs-encode-bench --scene S --trace T.trace|cameras:C.json --width 1920 --height 1080\n"
+    "    [--renderer auto|cpu|cuda] [--pipeline exact] [--frames 240] [--step 2] [--fps 60] [--cores N]\n"
+    "    [--settings \"crf=23,bitrate=off,threads=2;bitrate=auto,threads=4;...\"] [--json OUT]\n"
+    "    [--dump-dir DIR] (each row's first stream as files) [--pictures DIR] (the middle frame's centre crop)\n"
+    "Renders the trace once, encodes it with each row's settings paced at --fps, decodes and compares with\n"
+    "the raw render (PSNR, SSIM): a table on stdout, JSON with --json. tools/README.md says more.\n";
+
 int main(int argc, char** argv) {
   av_log_set_level(AV_LOG_ERROR);  // x264's banner and statistics per encoder
+  for (int i = 1; i < argc; ++i)
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
+      std::cout << kUsage;
+      return 0;
+    }
   try {
     const catgs::tools::Args args(argc, argv,
                                   {"--scene", "--trace", "--renderer", "--pipeline", "--width", "--height", "--frames",
