@@ -376,7 +376,8 @@ export class CatgsViewer extends EventTarget {
     this.closeInfo = info;
     this.decoder.reset();
     this.reconnectAt = performance.now() + (retryInMs || 0);
-    const status = closeStatus(info);
+    // A restarting server's later attempts say "restarting" still (closeStatus says "stopping").
+    const status = info.stopping && !error && this.status === 'restarting' ? 'restarting' : closeStatus(info);
     this._emit('disconnected', { code, reason, error, permanent, retryInMs, reached, status });
     this._setStatus(status);
     if (error) {
@@ -601,7 +602,7 @@ export class CatgsViewer extends EventTarget {
 }
 
 // The status a closed connection leaves (README.md "States").
-function closeStatus({ error, permanent, reached }) {
+function closeStatus({ error, permanent, reached, stopping }) {
   // A scene the server does not have (session.cpp: "no scene 'X' on this server").
   if (permanent && error && error.code === ERROR_INVALID_ARGUMENT && /^no scene '/.test(error.reason || '')) return 'no-scene';
   if (permanent) return error && error.code === ERROR_UNAUTHORIZED ? 'needs-token' : 'refused';
@@ -609,6 +610,8 @@ function closeStatus({ error, permanent, reached }) {
   // A server stopping (SIGTERM, SIGINT) cannot tell whether it comes back: "restarting" only when
   // its reason says so.
   if (error && error.code === ERROR_SHUTTING_DOWN) return /restart/i.test(error.reason || '') ? 'restarting' : 'stopping';
+  // The attempts after it that find the server gone (Connection's `stopping`): still stopping.
+  if (stopping) return 'stopping';
   if (!reached) return 'unreachable';
   return 'disconnected';
 }

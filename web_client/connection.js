@@ -18,6 +18,13 @@ export function backoffMs(attempt) {
   return Math.min(1000 * 2 ** attempt, 10000);
 }
 
+// After the server said it is stopping (ERROR_SHUTTING_DOWN), the attempts that find it gone are
+// not a network fault: they say "stopping" still and come this often, so the page streams again
+// within about a second of the server's return (a restart takes seconds, not the backoff's 8).
+// Up to STOPPING_RETRIES of them (two minutes), then the usual backoff.
+export const STOPPING_RETRY_MS = 1000;
+export const STOPPING_RETRIES = 120;
+
 // ErrorCode values (proto/catgs_stream.proto) the reconnect logic cares about.
 export const ERROR_PROTOCOL = 2;
 export const ERROR_INVALID_ARGUMENT = 3;
@@ -65,6 +72,8 @@ export class Connection {
     this.reached = false;
     this.lastError = null; // the server's Error on the current connection
     this.welcomed = false;
+    this.opened = false; // the current attempt's socket opened
+    this.stoppingRetries = -1; // >= 0: the server said it is stopping; attempts since (a new session resets)
   }
 
   get isOpen() {
@@ -78,6 +87,7 @@ export class Connection {
     let ws;
     this.lastError = null;
     this.welcomed = false;
+    this.opened = false;
     try {
       ws = new WebSocket(this.url, SUBPROTOCOL);
     } catch (e) {
@@ -89,6 +99,7 @@ export class Connection {
     this.ws = ws;
     ws.onopen = () => {
       this.reached = true;
+      this.opened = true;
       this.handlers.onOpen();
     };
     ws.onmessage = (ev) => {
@@ -130,13 +141,24 @@ export class Connection {
     this.healthySince = 0;
     const error = this.lastError;
     const policy = retryPolicy(error, this.welcomed);
-    const base = { code, reason, error, reached: this.reached };
+    // The server said it is stopping; an attempt that finds no server (its socket never opened)
+    // is the same stop, not a new fault. A socket that opens ends it.
+    if (error && error.code === ERROR_SHUTTING_DOWN) this.stoppingRetries = 0;
+    else if (this.opened) this.stoppingRetries = -1;
+    const stopping = this.stoppingRetries >= 0 && this.stoppingRetries < STOPPING_RETRIES;
+    const base = { code, reason, error, reached: this.reached, stopping };
     if (policy.permanent) {
       this.stopped = true;
       this.handlers.onClose({ ...base, retryInMs: null, permanent: true });
       return;
     }
-    const retryInMs = policy.delayMs ?? backoffMs(this.attempt++);
+    let retryInMs;
+    if (stopping && !error) {
+      retryInMs = STOPPING_RETRY_MS; // the backoff's count does not move meanwhile
+      this.stoppingRetries++;
+    } else {
+      retryInMs = policy.delayMs ?? backoffMs(this.attempt++);
+    }
     this.retryTimer = setTimeout(() => this.connect(), retryInMs);
     this.handlers.onClose({ ...base, retryInMs, permanent: false });
   }

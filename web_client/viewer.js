@@ -6,6 +6,7 @@
 //   <script type="module" src="https://stream.example/viewer.js"></script>
 
 import { CatgsViewer, VIEWER_EVENTS } from './catgs_viewer.js';
+import { statusText } from './status_text.js';
 
 export { CatgsViewer, VIEWER_EVENTS };
 
@@ -19,6 +20,12 @@ canvas.view { display: block; position: relative; width: 100%; height: 100%; tou
 canvas.view:active { cursor: grabbing; }
 canvas.backdrop { position: absolute; inset: 0; width: 100%; height: 100%; pointer-events: none; }
 canvas.backdrop[hidden] { display: none; }
+.message { position: absolute; left: 0; right: 0; top: 50%; transform: translateY(-50%); margin: 0 12px; padding: 8px 12px;
+  text-align: center; font: 14px/1.4 system-ui, sans-serif; color: #eee; background: rgba(0, 0, 0, 0.72);
+  border-radius: 4px; pointer-events: none; }
+.message[hidden] { display: none; }
+.message.warn { color: #ffd27a; }
+.message.error { color: #ff9a8a; }
 `;
 
 // Attributes the viewer is made with; a change makes a new one (the token: a new connection).
@@ -41,8 +48,17 @@ export class CatgsViewerElement extends HTMLElement {
     this.canvas.className = 'view';
     this.canvas.tabIndex = 0;
     this.canvas.setAttribute('aria-label', 'Streamed 3D Gaussian Splatting view');
-    root.append(style, this.backdrop, this.canvas);
+    // What the view says while it cannot stream (status_text.js; a host page replaces it with
+    // `messages`), over the view: role status, so a screen reader reads it too.
+    this.message = document.createElement('div');
+    this.message.className = 'message';
+    this.message.setAttribute('part', 'message');
+    this.message.setAttribute('role', 'status');
+    this.message.hidden = true;
+    root.append(style, this.backdrop, this.canvas, this.message);
     this.viewer = null;
+    this.messages = null;
+    this.messageTimer = null;
   }
 
   connectedCallback() {
@@ -80,12 +96,40 @@ export class CatgsViewerElement extends HTMLElement {
     for (const type of VIEWER_EVENTS) {
       this.viewer.addEventListener(type, (e) => this.dispatchEvent(new CustomEvent(type, { detail: e.detail })));
     }
-    this.viewer.start();
+    for (const type of ['status', 'disconnected', 'error']) this.viewer.addEventListener(type, () => this._showStatus());
+    // The countdowns ("retrying in 3 s") tick while it is not streaming.
+    this.messageTimer = setInterval(() => this._showStatus(), 500);
+    this.viewer.start().then(() => this._showStatus());
+    this._showStatus();
   }
 
   _close() {
     if (this.viewer) this.viewer.close();
     this.viewer = null;
+    clearInterval(this.messageTimer);
+    this.messageTimer = null;
+  }
+
+  // The status in words in the element's box (hidden while it streams). `messages`, where the
+  // host page set it, replaces the words: an object of texts by status ({ 'server-full': 'Busy,
+  // back soon' }) or a function (status, words) returning the text ('' hides it).
+  _showStatus() {
+    const v = this.viewer;
+    if (!v) return;
+    const words = statusText(v, this.getAttribute('scene') || '');
+    if (words === undefined) return;
+    let text = words ? words.text : '';
+    const own = this.messages;
+    if (words && typeof own === 'function') text = own(v.status, text) ?? text;
+    else if (words && own && typeof own[v.status] === 'string') text = own[v.status];
+    this.message.textContent = text;
+    this.message.className = `message ${words ? words.level : ''}`;
+    this.message.hidden = !text;
+  }
+
+  // The text the box shows now ('' when none).
+  get messageText() {
+    return this.message.hidden ? '' : this.message.textContent;
   }
 
   // ---- the viewer's API on the element ----

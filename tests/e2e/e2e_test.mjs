@@ -12,7 +12,9 @@
 // flood (catgs_quality_down_total rises), a full-size refine frame once the camera stops, and
 // full-size frames again under slow poses (catgs_quality_up_total rises); a fourth serves two
 // scenes (the bundled biker and flowers_sh3 from the data folder): the page's scene picker lists
-// both, and choosing the second reopens the page on it, showing that scene's render of the pose.
+// both, and choosing the second reopens the page on it, showing that scene's render of the pose;
+// a fifth is stopped with Ctrl-C and started again: the page says "server stopping" meanwhile and
+// streams again within 2 s of its return.
 //
 // usage: node e2e_test.mjs --server PATH/catgs-server --render PATH/catgs-render
 //                          [--loadgen PATH/catgs-loadgen] [--repo ROOT] [--data DIR]
@@ -142,9 +144,10 @@ const profileDir = mkdtempSync(path.join(os.tmpdir(), 'catgs-e2e-chromium-'));
 const pageLog = [];
 
 const servers = [];
-// Starts catgs-server on a free port with `extra` arguments; resolves once it serves HTTP.
-async function startServer(extra = []) {
-  const port = await freePort();
+// Starts catgs-server on `fixedPort` (0: a free port) with `extra` arguments; resolves once it
+// serves HTTP.
+async function startServer(extra = [], fixedPort = 0) {
+  const port = fixedPort || (await freePort());
   // The bundled scene is under --lod-min-gaussians: its level of detail built all the same (the
   // overlay's LOD check below); derived files in the test's own cache folder.
   const serverArgs = ['--scene', scene, '--port', String(port), '--renderer', 'cpu', '--web-root', webRoot,
@@ -385,6 +388,36 @@ async function run() {
 
   await checkAdaptiveQuality();
   await checkScenePicker();
+  await checkServerStop();
+}
+
+// A server stopped with Ctrl-C (SIGINT) and started again on its port (issue 75): the page says
+// "server stopping" until it streams again, never "disconnected" (a stop is not a network fault),
+// and streams again within 2 s of the server answering HTTP.
+async function checkServerStop() {
+  const first = await startServer();
+  const page = await context.newPage();
+  page.on('console', (m) => pageLog.push(`stop console.${m.type()}: ${m.text()}`));
+  await page.goto(`${first.base}/`);
+  await page.waitForFunction(() => window.catgs && window.catgs.framesDecoded > 0, null, { timeout: 30000 });
+  const msg = () => page.evaluate(() => document.getElementById('messages').textContent);
+  const exited = new Promise((r) => first.proc.once('exit', r));
+  first.proc.kill('SIGINT');
+  await exited;
+  const said = new Set();
+  for (const t0 = Date.now(); Date.now() - t0 < 5000; await sleep(150)) said.add(await msg());
+  const words = [...said].join(' | ');
+  check([...said].some((w) => /server stopping/.test(w)), `after Ctrl-C the page says "server stopping" (${words})`);
+  check(![...said].some((w) => /disconnected|cannot reach/.test(w)), `...and not "disconnected" while the server is away (${words})`);
+  const again = await startServer([], first.port);
+  const back = Date.now();
+  const before = await page.evaluate(() => window.catgs.framesDecoded);
+  const streamed = await waitFor('the page to stream again', async () => (await page.evaluate(() => window.catgs.framesDecoded)) > before, 15000)
+    .then(() => true, () => false);
+  const took = Date.now() - back;
+  check(streamed && took <= 2000, `the page streams again ${took} ms after the server's return (<= 2000 ms)`);
+  await page.screenshot({ path: path.join(outDir, 'server_back.png') });
+  await page.close();
 }
 
 // Runs a C++ tool; returns spawnSync's result with a one-line summary of why it failed.

@@ -9,7 +9,10 @@
 // camera through its views, the host page's layout intact (the box the page gave, its header and
 // sidebar where they were, none of the full page's toolbar or hook), keys on the host page left
 // to it, and `error` with the server's reason for a wrong token and for a scene the server lacks
-// (and the right token again streams). Screenshots: embed.png, embed_error.png.
+// (and the right token again streams). The element's own box says each in words (issue 75), as
+// it does for a browser without WebCodecs and for a server stopped with Ctrl-C, and a host page's
+// `messages` replace them. Screenshots: embed.png, embed_error.png, embed_unsupported.png,
+// embed_gone.png.
 //
 // usage: node embed_e2e_test.mjs --server PATH/catgs-server [--repo ROOT] [--out DIR]
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / server binary).
@@ -265,6 +268,7 @@ async function embedded(context, base, siteOrigin) {
   log(`wrong token: ${JSON.stringify(tokenError.detail)}`);
   check(tokenError.detail.name === 'ERROR_UNAUTHORIZED' && tokenError.detail.reason.length > 0 && tokenError.detail.status === 'needs-token',
     `a wrong token fires error with the server's reason (${tokenError.detail.name}: "${tokenError.detail.reason}")`);
+  check(/access token/.test(await boxText(page)), `...and the element's own box says so ("${await boxText(page)}")`);
   const connects = (await events(page, 'connected')).length;
   await page.evaluate((t) => document.getElementById('bike').setAttribute('token', t), TOKEN);
   await waitFor('connected again with the right token', async () => (await events(page, 'connected')).length > connects, 30000);
@@ -278,7 +282,51 @@ async function embedded(context, base, siteOrigin) {
   `a scene the server lacks fires error with the server's reason ("${sceneError.detail.reason}")`);
   const shown = await page.evaluate(() => document.getElementById('viewer-status').textContent);
   check(/no scene 'no-such-scene'/.test(shown), `the site's own script shows it ("${shown}")`);
+  check(/no scene named 'no-such-scene'/.test(await boxText(page)), `...and the element's box in words ("${await boxText(page)}")`);
   await run.shot(page, 'embed_error.png');
+  // The host page's own words for a status replace the element's.
+  await page.evaluate(() => {
+    document.getElementById('bike').messages = { 'no-scene': 'This tour is not on the server today.' };
+  });
+  await waitFor('the host page\'s words', async () => (await boxText(page)) === 'This tour is not on the server today.', 5000)
+    .then(() => check(true, 'a host page replaces the box\'s words (messages)'),
+      async () => check(false, `a host page replaces the box's words ("${await boxText(page)}")`));
+
+  // A browser without WebCodecs (an insecure page has none): the box says why.
+  const bare = await context.newPage();
+  await bare.addInitScript(() => {
+    delete window.VideoDecoder;
+  });
+  await bare.goto(`${siteOrigin}/`);
+  const unsupported = await waitFor('the box to say the browser cannot decode', async () => {
+    const t = await boxText(bare);
+    return /cannot decode/.test(t) ? t : false;
+  }, 15000).catch(() => boxText(bare));
+  check(/cannot decode/.test(unsupported), `no WebCodecs: the box says why ("${unsupported}")`);
+  await run.shot(bare, 'embed_unsupported.png');
+  await bare.close();
+
+  // The server gone: the box says it is stopping (then keeps retrying), not a blank box.
+  await page.evaluate((t) => {
+    const el = document.getElementById('bike');
+    el.messages = null;
+    el.setAttribute('scene', '');
+    el.setAttribute('token', t);
+  }, TOKEN);
+  await waitFor('connected again', async () => page.evaluate(() => document.getElementById('bike').connected), 30000);
+  const exited = Promise.all(run.servers.map((p) => new Promise((r) => p.once('exit', r))));
+  for (const p of run.servers) p.kill('SIGINT'); // Ctrl-C: its sessions end with ERROR_SHUTTING_DOWN
+  await exited;
+  const gone = await waitFor('the box to say the server is gone', async () => {
+    const t = await boxText(page);
+    return /server stopping|cannot reach/.test(t) ? t : false;
+  }, 15000).catch(() => boxText(page));
+  check(/server stopping|cannot reach/.test(gone), `the server stopped: the box says so ("${gone}")`);
+  await run.shot(page, 'embed_gone.png');
+  await page.close();
 }
+
+// The words the <catgs-viewer> shows in its own box ('' when none).
+const boxText = (page) => page.evaluate(() => document.getElementById('bike').messageText);
 
 process.exit(await main());

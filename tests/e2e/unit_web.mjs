@@ -444,6 +444,45 @@ test('server messages decode (the .proto and its JSON descriptor agree)', () => 
   }
 });
 
+// A server that said it is stopping (issue 75): the attempts that find it gone say "stopping"
+// still and come every second (not the backoff's 1, 2, 4, 8 s), without moving the backoff; a
+// socket that opens again ends it.
+test('after ERROR_SHUTTING_DOWN the page keeps saying stopping and retries every second', () => {
+  const sockets = [];
+  class FakeSocket {
+    constructor() { sockets.push(this); }
+    close() {}
+  }
+  const saved = globalThis.WebSocket;
+  globalThis.WebSocket = FakeSocket;
+  const closes = [];
+  const proto = { decodeServer: () => ({ kind: 'error', msg: { code: conn.ERROR_SHUTTING_DOWN, reason: 'server stopping', retry_after_ms: 500 } }) };
+  const c = new conn.Connection('ws://x/ws', proto, { onOpen() {}, onMessage() {}, onClose: (i) => closes.push(i), onProtocolError() {} });
+  try {
+    c.connect();
+    sockets[0].onopen();
+    sockets[0].onmessage({ data: new ArrayBuffer(1) });
+    sockets[0].onclose({ code: 1000, reason: '' });
+    assert.equal(closes[0].error.code, conn.ERROR_SHUTTING_DOWN);
+    assert.equal(closes[0].retryInMs, 500);
+    for (let k = 1; k <= 4; ++k) { // the server is gone: each attempt's socket closes unopened
+      c.connect();
+      sockets[k].onclose({ code: 1006, reason: '' });
+      assert.equal(closes[k].stopping, true, `attempt ${k}`);
+      assert.equal(closes[k].error, null);
+      assert.equal(closes[k].retryInMs, conn.STOPPING_RETRY_MS, `attempt ${k}`);
+    }
+    c.connect(); // it is back: the socket opens, then a plain drop backs off from the start
+    sockets[5].onopen();
+    sockets[5].onclose({ code: 1006, reason: '' });
+    assert.equal(closes[5].stopping, false);
+    assert.equal(closes[5].retryInMs, conn.backoffMs(0));
+  } finally {
+    c.close();
+    globalThis.WebSocket = saved;
+  }
+});
+
 test('reconnect backoff grows and is capped; the socket URL sits beside the page', () => {
   assert.deepEqual([0, 1, 2, 3, 4, 9].map(conn.backoffMs), [1000, 2000, 4000, 8000, 10000, 10000]);
   assert.equal(conn.defaultWebSocketUrl({ protocol: 'http:', host: '127.0.0.1:8080', search: '' }), 'ws://127.0.0.1:8080/ws');
@@ -983,6 +1022,27 @@ test('busy page: a heartbeat over 50 ms late marks the page busy for 100 ms; non
   assert.equal(b.recently(), false);
   now += 1;
   assert.equal(b.recently(), true);
+});
+
+// The viewer library (viewer.js and what it imports, directly or not) against the page built on it
+// (issue 75): the library imports nothing of the page's, and its modules are the ones
+// web_client/README.md's table marks "(library)".
+test('the viewer library imports nothing from the page', () => {
+  const importsOf = (f) => [...readFileSync(path.join(web, f), 'utf8').matchAll(/from '\.\/([a-z_0-9]+\.js)'/g)].map((m) => m[1]);
+  const library = new Set();
+  const visit = (f) => {
+    if (library.has(f)) return;
+    library.add(f);
+    importsOf(f).forEach(visit);
+  };
+  visit('viewer.js');
+  const page = ['app.js', 'overlay.js', 'notes_ui.js', 'walk.js', 'video_export.js', 'view_link.js', 'token.js',
+    'scene_picker.js', 'state_words.js', 'test_hook.js', 'annotations.js'];
+  for (const f of page) assert.ok(!library.has(f), `the library (viewer.js) reaches the page's ${f}`);
+  const readme = readFileSync(path.join(web, 'README.md'), 'utf8');
+  const marked = new Set([...readme.matchAll(/^\| ([a-z_0-9., ]+\.js) \(library\) \|/gm)].flatMap((m) => m[1].split(/, */)));
+  assert.deepEqual([...library].sort(), [...marked].sort(), 'README.md marks exactly the library\'s modules "(library)"');
+  for (const f of page) assert.ok(existsSync(path.join(web, f)), `${f} (a page module) exists`);
 });
 
 test('state words: each viewer status in words, with its action', () => {
