@@ -14,7 +14,21 @@ FrameEncoding frame_encoding(const EncoderPolicy& policy, const FrameEncodeInput
   e.policy = policy;
   if (policy.content_rate && in.probed_bits_per_pixel > 0) e.policy.bits_per_pixel = in.probed_bits_per_pixel;
   const int live = std::max(1, in.live_sessions);
-  const int cap = rate_cap_kbps(in.client_max_kbps, in.link_kbps);
+  // The link: its cap against the policy's rate at this size, both in bits a second on the wire.
+  // The VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer frames a second
+  // sends that share of it; at least 10 frames a second's share: frames written slowly because
+  // the link is jammed must not each get a larger share of the cap (a frame of half a second on
+  // the wire at 2 frames/s makes the jam worse).
+  const double fps_share = std::clamp(in.link.frame_rate / kStreamFps, 10.0 / kStreamFps, 1.0);
+  const int ceiling = encoder_config(e.policy, in.width, in.height, kStreamFps, live, in.client_max_kbps).bitrate_kbps;
+  e.link_ceiling_kbps = ceiling > 0 ? std::max(1, static_cast<int>(ceiling * fps_share)) : 0;
+  if (in.link.limiting) {
+    const double on_wire = e.link_ceiling_kbps > 0
+                               ? std::min(in.link.cap_kbps, static_cast<double>(e.link_ceiling_kbps))
+                               : in.link.cap_kbps;
+    e.link_kbps = std::max(1, static_cast<int>(on_wire * in.link.encoder_gain / fps_share));
+  }
+  const int cap = rate_cap_kbps(in.client_max_kbps, e.link_kbps);
   // The whole config first: its rate, preset and threads are the frame's.
   e.config = encoder_config(e.policy, in.width, in.height, kStreamFps, live, cap);
   e.rate_kbps = e.config.bitrate_kbps;
@@ -23,10 +37,10 @@ FrameEncoding frame_encoding(const EncoderPolicy& policy, const FrameEncodeInput
   // While the link limits, the VBV holds two frames' share of the cap: a frame may then take at
   // most two frame intervals on the link, where the policy's buffer would let one take six, a
   // latency spike of half a second on a slow link.
-  e.vbv_ms = in.link_kbps > 0 ? kLinkVbvMs : e.policy.vbv_buffer_ms;
+  e.vbv_ms = e.link_kbps > 0 ? kLinkVbvMs : e.policy.vbv_buffer_ms;
   if (e.rate_kbps > 0) e.config.vbv_buffer_ms = e.vbv_ms;
   // AV1 cannot follow the link's rate without a key frame: a limiting link keeps H.264.
-  e.av1 = use_av1(e.policy, in.width, in.height, kStreamFps, live, in.av1_ok, true, in.link_kbps > 0);
+  e.av1 = use_av1(e.policy, in.width, in.height, kStreamFps, live, in.av1_ok, true, e.link_kbps > 0);
   e.step = e.av1 ? kPresetSteps
                  : (e.policy.x264_preset == "auto" ? preset_step(e.policy, in.width, in.height, kStreamFps, live) : 0);
   e.lift_cap = in.refine && e.rate_kbps > 0;

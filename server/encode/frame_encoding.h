@@ -25,11 +25,23 @@ inline constexpr int kLinkVbvMs = 2000 / kStreamFps;
 inline constexpr int kRefineKbps = 100000;
 inline constexpr int kRefineVbvMs = 1000;
 
+// The link's state when the frame is encoded (session/link_rate.h LinkRate, read on the
+// session's strand): whether it limits the stream (with --link-control on), its cap on the wire
+// (LinkRate::cap_kbps before the stream's ceiling, kbit/s), what the encoder sends over what it
+// is asked (LinkRate::encoder_gain) and the frames a second it carries (LinkRate::frame_rate; 0:
+// not measured yet).
+struct LinkInputs {
+  bool limiting = false;
+  double cap_kbps = 0;
+  double encoder_gain = 1.0;
+  double frame_rate = 0;
+};
+
 // What a frame's encoder settings depend on.
 struct FrameEncodeInputs {
   int width = 0, height = 0;         // the frame's size, pixels
   int client_max_kbps = 0;           // Quality.max_bitrate_kbps (0: none)
-  int link_kbps = 0;                 // the link's rate cap for the encoder (link_rate.h; 0: not limiting)
+  LinkInputs link;                   // the link (a link that does not limit changes nothing)
   bool refine = false;               // the still view's refine frame (still_refine.h)
   int live_sessions = 1;             // sessions open on the server now (>= 1)
   bool av1_ok = false;               // the client decodes AV1 and the encoders are x264's CPU ones
@@ -49,6 +61,13 @@ struct FrameEncoding {
   // A refine frame on a capped stream: its encoder may lift the cap to kRefineKbps / kRefineVbvMs
   // for this frame alone (x264; others keep their rate).
   bool lift_cap = false;
+  // The link's share (session/link_rate.h): the stream's ceiling on the wire, the policy's rate
+  // under the client's cap times the frames a second the link carries over kStreamFps (at least
+  // 10 frames' share; 0: crf alone), which the link's controller caps; and the encoder's rate cap
+  // from the link (0: it does not limit): that cap over the same share, corrected by the
+  // encoder's gain, so that a frame gets the cap's share of a second.
+  int link_ceiling_kbps = 0;
+  int link_kbps = 0;
 };
 
 // The one place a frame's encoder settings are decided. `policy`: the server's

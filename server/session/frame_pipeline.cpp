@@ -350,7 +350,7 @@ FrameEncodeInputs FramePipeline::encode_inputs(const JobShape& shape, bool refin
   in.width = shape.width;
   in.height = shape.height;
   in.client_max_kbps = shape.max_bitrate_kbps;
-  in.link_kbps = shape.link_kbps;
+  in.link = shape.link;
   in.refine = refine;
   in.live_sessions = live_sessions;
   in.av1_ok = av1_ok_;
@@ -366,14 +366,6 @@ int FramePipeline::live_sessions() const {
 
 bool FramePipeline::stream_is_av1(const JobShape& shape, int live_sessions) const {
   return frame_encoding(settings_.encoder_policy, encode_inputs(shape, false, live_sessions)).av1;
-}
-
-int FramePipeline::policy_bitrate_kbps(int width, int height, int client_max_kbps) const {
-  JobShape shape;
-  shape.width = width;
-  shape.height = height;
-  shape.max_bitrate_kbps = client_max_kbps;
-  return frame_encoding(settings_.encoder_policy, encode_inputs(shape, false, live_sessions())).rate_kbps;
 }
 
 FrameEncoding FramePipeline::ensure_encoder(const Job& job, bool& idr) {
@@ -438,7 +430,9 @@ FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
     const FrameEncoding settings = ensure_encoder(frame.job, idr);
     const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
     probe_content_rate(frame.job, settings, frame.planes->planes());
-    return frame_message(frame.job, enc, frame);
+    JobResult result = frame_message(frame.job, enc, frame);
+    result.link_ceiling_kbps = settings.link_ceiling_kbps;
+    return result;
   } catch (const std::exception& e) {
     JobResult r;
     r.error = e.what();
@@ -497,10 +491,12 @@ FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool g
   }
   try {
     bool idr = job.force_idr;
-    ensure_encoder(job, idr);
+    const FrameEncoding settings = ensure_encoder(job, idr);
     // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
     render_into(job, encoder_->input_target(), r);
-    return frame_message(job, encoder_->encode_input(idr), r);
+    JobResult result = frame_message(job, encoder_->encode_input(idr), r);
+    result.link_ceiling_kbps = settings.link_ceiling_kbps;
+    return result;
   } catch (...) {
     note_failure(r);
   }

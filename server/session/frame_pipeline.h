@@ -61,8 +61,8 @@ class FramePipeline {
     int width = 0, height = 0;                             // pixels, after adaptive quality's scaling
     int quality_level = 0;                                 // AdaptiveQuality level the size was scaled to
     int max_bitrate_kbps = 0;                              // Quality.max_bitrate_kbps (0: the server's default)
-    int link_kbps = 0;                                     // the link's rate cap (link_rate.h; 0: not limiting)
-    std::chrono::steady_clock::time_point link_read_at{};  // when link_kbps was read (at the encode)
+    LinkInputs link;                                       // the link's state (link_rate.h; read again at the encode)
+    std::chrono::steady_clock::time_point link_read_at{};  // when `link` was read (at the encode)
     double previous_send_ms = 0;                           // FrameTimings.previous_send_ms
   };
   struct Job {
@@ -127,6 +127,7 @@ class FramePipeline {
     std::size_t payload_bytes = 0;
     std::uint32_t frame_sequence = 0;                      // Frame.sequence
     std::chrono::steady_clock::time_point link_read_at{};  // JobShape's: the rate it was encoded at
+    int link_ceiling_kbps = 0;  // the frame's FrameEncoding::link_ceiling_kbps (what the link's controller caps)
     double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
     double lane_wait_ms = 0;  // as Rendered's
     double total_ms = 0;      // pose received -> frame handed off (FrameTimings.total_ms)
@@ -159,10 +160,6 @@ class FramePipeline {
   // (`content_rates`, the LoadedScene's; null: the policy's bits a pixel alone).
   void open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu, bool pipelined,
             bool av1_ok, std::shared_ptr<ContentRates> content_rates = nullptr);
-  // The policy's VBV maximum rate (kbit/s; frame_encoding's rate_kbps with no link cap) for a
-  // width x height stream at kStreamFps under the client's Quality, with the scene's probed bits
-  // a pixel at that size where --bits-per-pixel auto has one.
-  int policy_bitrate_kbps(int width, int height, int client_max_kbps) const;
   // Whether a stream of `shape` at `live_sessions` sessions would be AV1 now (the encoder policy's
   // use_av1): Welcome.codec before the first frame.
   bool stream_is_av1(const JobShape& shape, int live_sessions) const;

@@ -82,7 +82,7 @@ void SessionStream::admit() {
   shape.height = AdaptiveQuality::scaled_side(height_, shape.quality_level);
   shape.max_bitrate_kbps = max_bitrate_kbps_;
   shape.previous_send_ms = last_send_ms_;
-  shape.link_kbps = link_vbv_kbps(shape.width, shape.height);  // set again at its encode
+  shape.link = link_inputs();  // read again at its encode
   shape.link_read_at = Clock::now();
   FramePipeline::StartedRender started = frames_.start_render(shape);
   const std::int64_t pixels = static_cast<std::int64_t>(shape.width) * shape.height;
@@ -142,7 +142,7 @@ void SessionStream::start_encode() {
   std::shared_ptr<FramePipeline::Rendered> frame = frames_.start_encode();
   // The link's cap as it stands now, not when the render started: a cut must reach the next
   // frame encoded, not one a render later (a frame's time on a slow link).
-  frame->job.shape.link_kbps = link_vbv_kbps(frame->job.shape.width, frame->job.shape.height);
+  frame->job.shape.link = link_inputs();
   frame->job.shape.link_read_at = Clock::now();
   boost::asio::post(shared_.io, [keep = owner_.keep_alive(), this, frame] { encode(frame); });
 }
@@ -168,6 +168,7 @@ void SessionStream::render_and_encode(const FramePipeline::Job& job) {
 void SessionStream::hand_off(JobResult result) {
   if (!owner_.is_open() || result.message.empty()) shared_.metrics.dropped_frames_total++;
   if (!owner_.is_open()) return;
+  if (!result.message.empty()) link_ceiling_kbps_ = result.link_ceiling_kbps;
   owner_.on_frame_buffers(result.buffer_bytes, result.buffer_shape);
   if (result.message.empty() && result.out_of_memory)
     return owner_.on_out_of_memory(result.error, ++out_of_memory_streak_);
@@ -294,17 +295,14 @@ void SessionStream::on_tick(Clock::time_point now) {
 
 // --- the link ---
 
-int SessionStream::link_vbv_kbps(int width, int height) {
-  // The link's cap against the policy's rate at this size (link_rate.h), both in bits a second
-  // on the wire: the VBV's rate is per frame at the nominal kStreamFps, so a stream at fewer
-  // frames a second sends that share of it. At least 10 frames a second's share: frames written
-  // slowly because the link is jammed must not each get a larger share of the cap (a frame of
-  // half a second on the wire at 2 frames/s makes the jam worse).
-  const double fps_share = std::clamp(link_.frame_rate() / kStreamFps, 10.0 / kStreamFps, 1.0);
-  const int vbv_ceiling = frames_.policy_bitrate_kbps(width, height, max_bitrate_kbps_);
-  link_ceiling_kbps_ = vbv_ceiling > 0 ? std::max(1, static_cast<int>(vbv_ceiling * fps_share)) : 0;
-  if (!shared_.settings.frame.link_control || !link_.limited()) return 0;
-  return std::max(1, static_cast<int>(link_.cap_kbps(link_ceiling_kbps_) * link_.encoder_gain() / fps_share));
+LinkInputs SessionStream::link_inputs() const {
+  // The link as it stands now (frame_encoding turns it into the frame's cap, encode/frame_encoding.h).
+  LinkInputs in;
+  in.limiting = shared_.settings.frame.link_control && link_.limited();
+  in.cap_kbps = link_.cap_kbps(0);  // before the stream's ceiling, which frame_encoding applies
+  in.encoder_gain = link_.encoder_gain();
+  in.frame_rate = link_.frame_rate();
+  return in;
 }
 
 void SessionStream::on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket) {

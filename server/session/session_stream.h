@@ -107,9 +107,9 @@ class SessionStream {
   void hand_off(JobResult result);                                       // the strand
   void count(const JobResult& result);                                   // Stats and /metrics
 
-  // The encoder's VBV rate for a width x height frame the link's cap sets now (link_rate.h), at
-  // the nominal kStreamFps; 0 where the link does not limit. Updates link_ceiling_kbps_.
-  int link_vbv_kbps(int width, int height);
+  // The link's state now, for the frame's encoder settings (frame_encoding's input, which turns it
+  // into the encoder's cap once a frame, at its encode).
+  LinkInputs link_inputs() const;
   // A frame (handed at frame.at) was written at `written`: the link's rate controller.
   void on_link_sample(const Handed& frame, Clock::time_point written, const SocketSample& socket);
   // What a link update (a frame written, a receipt) changed: the metrics, the socket's send
@@ -135,7 +135,7 @@ class SessionStream {
   std::uint32_t last_receipt_ = UINT32_MAX;          // the newest receipt's frame (none yet)
   LinkRate link_;                                    // the link's rate controller (--link-control)
   int cuts_by_cause_[LinkRate::kCauses] = {};        // link_'s cuts by cause, counted in /metrics
-  int link_ceiling_kbps_ = 0;        // the policy's rate for the last job's size (link_rate.h's ceiling)
+  int link_ceiling_kbps_ = 0;        // the last frame's FrameEncoding::link_ceiling_kbps (link_rate.h's ceiling)
   int send_buffer_ = 0;              // the socket's SO_SNDBUF as the stream last set it (0: the transport's)
   double last_send_ms_ = 0;          // send time of the last frame written
   Clock::time_point last_progress_;  // last time the transport wrote one of our frames

@@ -35,6 +35,7 @@
 #include "camera/trace.h"
 #include "common/cli_args.h"
 #include "common/image_io.h"
+#include "encode/frame_encoding.h"
 #include "encode/content_rate.h"
 #include "encode/encoder_policy.h"
 #include "encode/encoder.h"
@@ -164,17 +165,23 @@ Row run_row(const RdSetting& s, const std::vector<Frame>& frames, int width, int
             std::vector<std::vector<std::uint8_t>>& units, const std::string& pictures) {
   Row row;
   row.setting = s;
-  catgs::server::EncoderPolicy policy = s.policy;
-  if (policy.content_rate && policy.bitrate_kbps < 0) {
-    // As a server session: the first kProbeFrames moving frames (after the probe's IDR) measured.
-    catgs::server::ContentRateProbe probe(policy, width, height,
-                                          catgs::server::encoder_threads(policy, width, height, s.sessions),
-                                          catgs::server::encoder_preset(policy, width, height, fps, s.sessions));
+  // The row's settings as a server session's frame gets them (encode/frame_encoding.h, the one
+  // call the server makes): the row's policy, `sessions` live, no client or link cap; at the
+  // server's kStreamFps (--fps paces the frames only).
+  catgs::server::FrameEncodeInputs in;
+  in.width = width;
+  in.height = height;
+  in.live_sessions = s.sessions;
+  const catgs::server::FrameEncoding first = catgs::server::frame_encoding(s.policy, in);
+  if (s.policy.content_rate && s.policy.bitrate_kbps < 0) {
+    // As a server session: the first kProbeFrames moving frames (after the probe's IDR) measured,
+    // with the stream's preset and threads (FramePipeline::probe_content_rate).
+    catgs::server::ContentRateProbe probe(s.policy, width, height, std::max(1, first.threads), first.preset);
     for (std::size_t k = 0; k < frames.size() && !probe.done(); ++k) probe.add(frames[k].yuv.planes());
     row.probe_crf_bpp = probe.crf_bits_per_pixel();
-    policy.bits_per_pixel = catgs::server::content_bits_per_pixel(row.probe_crf_bpp);
+    in.probed_bits_per_pixel = catgs::server::content_bits_per_pixel(row.probe_crf_bpp);
   }
-  row.config = catgs::server::encoder_config(policy, width, height, fps, s.sessions, 0);
+  row.config = catgs::server::frame_encoding(s.policy, in).config;
   std::vector<std::vector<double>> times(static_cast<std::size_t>(s.sessions));
   units.clear();
   const double cpu0 = process_cpu_ms();

@@ -23,6 +23,43 @@ FrameEncodeInputs frame(int w, int h) {
   return in;
 }
 
+// A link that limits the stream at `cap_kbps` on the wire, carrying 60 frames a second, an
+// encoder that sends what it is asked.
+LinkInputs limiting_link(double cap_kbps, double frame_rate = 60.0, double gain = 1.0) {
+  LinkInputs l;
+  l.limiting = true;
+  l.cap_kbps = cap_kbps;
+  l.frame_rate = frame_rate;
+  l.encoder_gain = gain;
+  return l;
+}
+
+// The link's share (issue 75: frame_encoding takes the link's state, once a frame): the ceiling is
+// the policy's rate times the frames a second the link carries over 60 (at least 10 frames'
+// share), the encoder's cap the link's cap under that ceiling, over the same share, times the
+// encoder's gain.
+TEST(FrameEncoding, TheLinksShareOfTheRateFollowsItsFrameRate) {
+  const EncoderPolicy p = sixteen_cores();
+  FrameEncodeInputs in = frame(1920, 1080);
+  FrameEncoding e = frame_encoding(p, in);
+  EXPECT_EQ(e.link_ceiling_kbps, 11197 * 10 / 60) << "no frame rate measured yet: the 10 frames' floor";
+  EXPECT_EQ(e.link_kbps, 0) << "a link that does not limit";
+  in.link.frame_rate = 30;
+  EXPECT_EQ(frame_encoding(p, in).link_ceiling_kbps, 11197 / 2);
+  in.link = limiting_link(3000, 30);
+  e = frame_encoding(p, in);
+  EXPECT_EQ(e.link_kbps, 6000) << "3000 kbit/s at 30 frames/s: each frame the share of 60 frames'";
+  EXPECT_EQ(e.rate_kbps, 6000);
+  in.link = limiting_link(9000, 30);
+  EXPECT_EQ(frame_encoding(p, in).link_kbps, 11196) << "the cap under the ceiling (5598), over the share";
+  in.link = limiting_link(3000, 60, 0.8);
+  EXPECT_EQ(frame_encoding(p, in).link_kbps, 2400) << "an encoder that overshoots is asked for less";
+  in.link = limiting_link(1000, 2);
+  EXPECT_EQ(frame_encoding(p, in).link_kbps, 6000) << "a jammed link at 2 frames/s: the 10 frames' share, not 2";
+  in.client_max_kbps = 1200;
+  EXPECT_EQ(frame_encoding(p, in).link_ceiling_kbps, 200) << "the client's cap lowers the ceiling too";
+}
+
 TEST(FrameEncoding, CapsLowerTheRateAndTheLinkShrinksTheVbv) {
   const EncoderPolicy p = sixteen_cores();
   FrameEncodeInputs in = frame(1920, 1080);
@@ -32,14 +69,14 @@ TEST(FrameEncoding, CapsLowerTheRateAndTheLinkShrinksTheVbv) {
   in.client_max_kbps = 5000;
   EXPECT_EQ(frame_encoding(p, in).rate_kbps, 5000);
   EXPECT_EQ(frame_encoding(p, in).vbv_ms, p.vbv_buffer_ms) << "a client's cap keeps the policy's buffer";
-  in.link_kbps = 3000;
+  in.link = limiting_link(3000);
   e = frame_encoding(p, in);
   EXPECT_EQ(e.rate_kbps, 3000) << "the lower of the client's and the link's";
   EXPECT_EQ(e.vbv_ms, 33) << "two frames at 60 frames/s while the link limits";
   in.client_max_kbps = 2000;
   EXPECT_EQ(frame_encoding(p, in).rate_kbps, 2000);
   in.client_max_kbps = 50000;
-  in.link_kbps = 0;
+  in.link = {};
   EXPECT_EQ(frame_encoding(p, in).rate_kbps, 11197) << "a cap never raises the rate";
 }
 
@@ -60,7 +97,7 @@ TEST(FrameEncoding, TheConfigCarriesTheSameDecision) {
   const EncoderPolicy p = sixteen_cores();
   FrameEncodeInputs in = frame(1280, 720);
   in.live_sessions = 9;
-  in.link_kbps = 2500;
+  in.link = limiting_link(2500);
   const FrameEncoding e = frame_encoding(p, in);
   EXPECT_EQ(e.preset, "ultrafast+cabac+deblock");  // the ladder at nine 720p sessions
   EXPECT_EQ(e.rate_kbps, 2500) << "the link's cap under the policy's 4977";
@@ -81,11 +118,11 @@ TEST(FrameEncoding, Av1WhereTheCoresAffordItAndTheLinkDoesNotLimit) {
   in.live_sessions = 5;
   EXPECT_FALSE(frame_encoding(p, in).av1) << "five 540p AV1 streams do not fit 16 cores";
   in.live_sessions = 1;
-  in.link_kbps = 1200;
+  in.link = limiting_link(1200);
   e = frame_encoding(p, in);
   EXPECT_FALSE(e.av1);
   EXPECT_LT(e.step, kPresetSteps);
-  in.link_kbps = 0;
+  in.link = {};
   in.av1_ok = false;
   EXPECT_FALSE(frame_encoding(p, in).av1);
 }
