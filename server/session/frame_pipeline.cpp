@@ -159,11 +159,7 @@ float FramePipeline::fall_back_for_memory(int step, float lod_error_px) {
 
 FramePipeline::JobResult FramePipeline::failure_of(const Rendered& frame) {
   JobResult failed;
-  failed.error = frame.error;
-  failed.over_budget = frame.over_budget;
-  failed.out_of_memory = frame.out_of_memory;
-  failed.buffer_bytes = frame.buffer_bytes;
-  failed.buffer_shape = frame.buffer_shape;
+  static_cast<RenderRecord&>(failed) = frame;  // its error fields with the rest of its record
   return failed;
 }
 
@@ -506,10 +502,14 @@ FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool g
 FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const EncodedFrame& enc,
                                                       const Rendered& rendered) {
   JobResult r;
-  r.buffer_bytes = rendered.buffer_bytes;
-  r.buffer_shape = rendered.buffer_shape;
-  r.memory_fallback = rendered.memory_fallback;
-  r.memory_note = rendered.memory_note;
+  static_cast<RenderRecord&>(r) = rendered;  // the frame's record, whole
+  r.encode_ms = enc.encode_ms;
+  r.total_ms = ms_between(job.pose.received, Clock::now());
+  r.quality_level = job.shape.quality_level;
+  r.refine = job.pose.refine;
+  r.rate_capped = !job.pose.refine && encoder_rate_kbps_ > 0;
+  r.refine_vbv_bound = job.pose.refine && refine_lifted_cap_;
+  refine_lifted_cap_ = false;
   pb::ServerMessage m;
   pb::Frame* f = m.mutable_frame();
   f->set_sequence(job.frame_sequence);
@@ -520,46 +520,29 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_height(static_cast<std::uint32_t>(job.shape.height));
   f->set_payload(enc.data.data(), enc.data.size());
   f->set_codec(encoder_->codec() == "av1" ? pb::CODEC_AV1 : pb::CODEC_H264);
-  r.render_key_frame = rendered.render_key_frame;
-  r.render_rekey = rendered.render_rekey;
-  r.predicted_gain = rendered.predicted_gain;
-  r.measured_gain = rendered.measured_gain;
-  r.speculation_window = rendered.speculation_window;
-  r.lod_error_px = rendered.lod_error_px;
-  r.splats = rendered.splats;
-  r.queue_ms = rendered.queue_ms;
-  r.lane_wait_ms = rendered.lane_wait_ms;
-  r.render_ms = rendered.render_ms;
-  r.convert_ms = rendered.convert_ms;
-  r.encode_ms = enc.encode_ms;
+  // FrameTimings: the record's times and render outcome, here and nowhere else.
   pb::FrameTimings* t = f->mutable_timings();
   t->set_queue_ms(r.queue_ms);
   t->set_lane_wait_ms(r.lane_wait_ms);
   t->set_render_ms(r.render_ms);
   t->set_convert_ms(r.convert_ms);
   t->set_encode_ms(r.encode_ms);
+  t->set_total_ms(r.total_ms);
+  t->set_previous_send_ms(job.shape.previous_send_ms);
   t->set_render_key_frame(r.render_key_frame);
   t->set_render_rekey(r.render_rekey);
   t->set_speculation_predicted_gain(static_cast<float>(r.predicted_gain));
   t->set_speculation_measured_gain(static_cast<float>(r.measured_gain));
   t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
-  t->set_previous_send_ms(job.shape.previous_send_ms);
   t->set_lod_error_px(r.lod_error_px);
   t->set_splats(static_cast<std::uint32_t>(std::min<std::uint64_t>(r.splats, UINT32_MAX)));
-  r.total_ms = ms_between(job.pose.received, Clock::now());
-  r.quality_level = job.shape.quality_level;
-  r.refine = job.pose.refine;
-  r.rate_capped = !job.pose.refine && encoder_rate_kbps_ > 0;
-  r.refine_vbv_bound = job.pose.refine && refine_lifted_cap_;
-  refine_lifted_cap_ = false;
-  t->set_total_ms(r.total_ms);
-  t->set_stage_frame_ms(rendered.stage_ms[0]);
-  t->set_stage_preprocess_ms(rendered.stage_ms[1]);
-  t->set_stage_keys_ms(rendered.stage_ms[2]);
-  t->set_stage_sort_ms(rendered.stage_ms[3]);
-  t->set_stage_ranges_ms(rendered.stage_ms[4]);
-  t->set_stage_rasterize_ms(rendered.stage_ms[5]);
-  t->set_render_lane(static_cast<std::uint32_t>(std::max(0, rendered.render_lane)));
+  t->set_stage_frame_ms(r.stage_ms[0]);
+  t->set_stage_preprocess_ms(r.stage_ms[1]);
+  t->set_stage_keys_ms(r.stage_ms[2]);
+  t->set_stage_sort_ms(r.stage_ms[3]);
+  t->set_stage_ranges_ms(r.stage_ms[4]);
+  t->set_stage_rasterize_ms(r.stage_ms[5]);
+  t->set_render_lane(static_cast<std::uint32_t>(std::max(0, r.render_lane)));
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();

@@ -76,11 +76,11 @@ class FramePipeline {
     float lod_error_px = -1.0f;
     Clock::time_point posted_at{};  // when the job was made and posted to the render lanes
   };
-  // A rendered frame waiting for (or in) the encode stage.
-  struct Rendered {
-    Job job;
-    std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
-    bool render_key_frame = true;
+  // What rendering made of a frame (issue 75: the frame's record, carried whole from the render
+  // job to the encode job and to the strand, where Stats and /metrics read it; FrameTimings is
+  // filled from it in one place, frame_message).
+  struct RenderRecord {
+    bool render_key_frame = true;                  // catgs: a full pre-process (false: a cached sub-frame)
     bool render_rekey = false;                     // catgs: a key frame first tried as a sub-frame (a re-key)
     double predicted_gain = 0, measured_gain = 0;  // catgs cost model (FrameStats)
     int speculation_window = 0;
@@ -92,7 +92,7 @@ class FramePipeline {
     // rasterize) and the render lane that drew it (-1: none), for FrameTimings.
     double stage_ms[6] = {};
     int render_lane = -1;
-    std::string error;               // non-empty: the render failed
+    std::string error;               // non-empty: the render (or, in JobResult, the encode) failed
     bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
     bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)
     std::uint64_t buffer_bytes = 0;  // the renderer's device buffers after it (Renderer::device_buffer_bytes)
@@ -102,35 +102,26 @@ class FramePipeline {
     // says what could not grow.
     int memory_fallback = 0;
     std::string memory_note;
+  };
+  // A rendered frame waiting for (or in) the encode stage.
+  struct Rendered : RenderRecord {
+    Job job;
+    std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
     // Between begin_render and finish_render: the frame is queued on the renderer.
     bool render_begun = false;
     Clock::time_point render_started{};  // when its lane began it
     int gpu_frames_at_begin = 1;         // frames on its GPU then (ServerMetrics::gpu_render_begin)
   };
-  // A finished frame (or why there is none).
-  struct JobResult {
-    std::string message;  // serialized ServerMessage{Frame}; empty on failure
-    std::string error;
-    bool over_budget = false;        // as Rendered::over_budget
-    bool out_of_memory = false;      // as Rendered's
-    std::uint64_t buffer_bytes = 0;  // as Rendered's
-    BufferShape buffer_shape;        // as Rendered's
-    int memory_fallback = 0;         // as Rendered's
-    std::string memory_note;         // as Rendered's
-    bool key_frame = false;          // an IDR access unit
-    bool render_key_frame = true;    // catgs: a full pre-process (false: a cached sub-frame)
-    bool render_rekey = false;       // as Rendered's
-    double predicted_gain = 0, measured_gain = 0;
-    int speculation_window = 0;
-    float lod_error_px = 0;  // as Rendered's
-    std::uint64_t splats = 0;
+  // A finished frame (or why there is none): its render record and what the encode made of it.
+  struct JobResult : RenderRecord {
+    std::string message;     // serialized ServerMessage{Frame}; empty on failure
+    bool key_frame = false;  // an IDR access unit
     std::size_t payload_bytes = 0;
     std::uint32_t frame_sequence = 0;                      // Frame.sequence
     std::chrono::steady_clock::time_point link_read_at{};  // JobShape's: the rate it was encoded at
     int link_ceiling_kbps = 0;  // the frame's FrameEncoding::link_ceiling_kbps (what the link's controller caps)
-    double queue_ms = 0, render_ms = 0, convert_ms = 0, encode_ms = 0;
-    double lane_wait_ms = 0;  // as Rendered's
-    double total_ms = 0;      // pose received -> frame handed off (FrameTimings.total_ms)
+    double encode_ms = 0;
+    double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;
     bool refine = false;       // the still view's refine frame
     bool rate_capped = false;  // encoded under a VBV rate (the policy's, a client's, the link's cap)
