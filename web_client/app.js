@@ -550,7 +550,7 @@ function makeFeatures() {
     notice,
     flyTo,
     playTour: playHotspotTour,
-    save: (json) => viewer.connected && viewer.send(viewer.protocol.encodeSaveAnnotations(json)),
+    save: (json) => viewer.saveAnnotations(json),
     linkChanged: notesLinkChanged,
     closePanel: () => togglePanel('notes', 'btn-notes', false),
     openPanel: () => togglePanel('notes', 'btn-notes', true),
@@ -565,8 +565,8 @@ function makeFeatures() {
   }, isTouch ? $('walk-pad') : null); // the pad only where fingers walk; keys elsewhere
   viewer.reprojectDepth = (cam) => (state.walk.on ? state.walk.sceneDepth(cam) : null);
   state.videoExport = new VideoExportUi({
-    send: (bytes) => viewer.send(bytes),
-    protocol: () => viewer.protocol,
+    exportVideo: (request) => viewer.exportVideo(request),
+    cancelExport: (id) => viewer.cancelExport(id),
     // The recorded path, else the tour (the page's pace between views).
     samples: () => state.recording && state.recording.length >= 2
       ? state.recording

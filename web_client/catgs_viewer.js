@@ -472,6 +472,24 @@ export class CatgsViewer extends EventTarget {
   }
 
   // Asks for an IDR and sends the current pose again; returns that pose's sequence.
+  // The session's annotations document (SaveAnnotations, `json` its text; an author's or admin's
+  // session: the server refuses others'): false when not connected.
+  saveAnnotations(json) {
+    return this.connected && this.send(this.protocol.encodeSaveAnnotations(json));
+  }
+
+  // Asks the server to render `request` to a video (ExportVideoRequest: { exportId, path (the
+  // poses as floats, paths.js pathFloats), width, height, fps, pipeline }); its ExportProgress and
+  // ExportChunk messages come as `message` events. false when not connected.
+  exportVideo(request) {
+    return this.connected && this.send(this.protocol.encodeExportVideo(request));
+  }
+
+  // Cancels export `exportId` (ExportCancel); false when not connected.
+  cancelExport(exportId) {
+    return this.connected && this.send(this.protocol.encodeExportCancel(exportId));
+  }
+
   requestKeyFrame() {
     if (!this.sessionOpen) return null;
     this.send(this.protocol.encodeKeyFrameRequest());

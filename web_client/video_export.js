@@ -81,8 +81,8 @@ export class ChunkAssembler {
 
 // The panel's part: the button, the size and rate menus, the bar, Cancel and the link.
 export class VideoExportUi {
-  // app: { send(bytes) -> bool, protocol() -> the protocol, samples() -> the path to export
-  //        (timed samples) or null, notice(text, level, ms) }
+  // app: { exportVideo(request) -> bool, cancelExport(id) -> bool (CatgsViewer's), samples() ->
+  //        the path to export (timed samples) or null, notice(text, level, ms) }
   constructor(app) {
     this.app = app;
     this.nextId = 1;
@@ -110,10 +110,10 @@ export class VideoExportUi {
     const [w, h] = (options.size || $('export-size').value).split('x').map(Number);
     const fps = options.fps || Number($('export-fps').value);
     const id = this.nextId++;
-    const bytes = this.app.protocol().encodeExportVideo({
+    const sent = this.app.exportVideo({
       exportId: id, path: pathFloats(samples), width: w, height: h, fps, pipeline: options.pipeline || '',
     });
-    if (!this.app.send(bytes)) return null;
+    if (!sent) return null;
     if (options.alongside) {
       this.others.set(id, null);
       return id;
@@ -126,7 +126,7 @@ export class VideoExportUi {
 
   cancel() {
     if (!this.current) return false;
-    this.app.send(this.app.protocol().encodeExportCancel(this.current.id));
+    this.app.cancelExport(this.current.id);
     return true;
   }
 
