@@ -456,6 +456,11 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   std::unique_ptr<Renderer> renderer;
   try {
     renderer = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));
+  } catch (const OutOfMemoryError& e) {  // its first buffers: a full GPU, at the door
+    shared_.metrics.memory_refusals_total++;
+    return fail(pb::ERROR_SERVER_FULL,
+                std::string("server full: its GPU could not hold this session's renderer (") + e.what() + ")", false,
+                jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
   } catch (const std::exception& e) {  // e.g. no device memory left for another scene copy
     return fail(pb::ERROR_INTERNAL, "renderer for scene '" + scene_->model->name + "': " + e.what());
   }
