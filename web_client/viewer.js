@@ -122,8 +122,10 @@ export class CatgsViewerElement extends HTMLElement {
     const own = this.messages;
     if (words && typeof own === 'function') text = own(v.status, text) ?? text;
     else if (words && own && typeof own[v.status] === 'string') text = own[v.status];
+    const className = `message ${words ? words.level : ''}`;
+    if (this.message.textContent === text && this.message.className === className) return;  // the timer's ticks
     this.message.textContent = text;
-    this.message.className = `message ${words ? words.level : ''}`;
+    this.message.className = className;
     this.message.hidden = !text;
   }
 

@@ -5,8 +5,8 @@
 //
 // Which allocations pass through the hook: every growth of a CUDA renderer's device buffers
 // (cuda/renderer_state.h GrowBuffer, before its cudaMalloc) and every growth of the CPU core's
-// frame buffers (its host slot: the pre-processed Gaussians, the render list, the image; cpu/
-// grow_buffer.h). Allocations that keep their size are not allocations and never fail.
+// frame buffers (its host slot: the pre-processed Gaussians, the render list, the image;
+// cpu/host_buffer.h). Allocations that keep their size are not allocations and never fail.
 #pragma once
 
 #include <cstdint>

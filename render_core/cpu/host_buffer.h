@@ -11,7 +11,8 @@
 
 namespace catgs::cpu {
 
-// Whether vectors of `size` elements need an allocation to hold `n`: what the hook is asked about.
+// Whether `v` needs an allocation to hold `n` elements (a growth past its capacity): only those
+// growths are asked about.
 template <typename T>
 bool must_grow(const std::vector<T>& v, std::size_t n) {
   return n > v.capacity();

@@ -14,7 +14,7 @@ namespace catgs::cpu {
 void ProjectedGaussians::resize(std::size_t n) {
   // One growth of the host slot for them all (cpu/host_buffer.h): asked before any of them grows.
   constexpr std::uint64_t kBytes =
-      3 * sizeof(glm::vec2) + 4 * sizeof(glm::vec3) + 6 * sizeof(float) + sizeof(fm::TileRect) + sizeof(std::uint32_t);
+      3 * sizeof(glm::vec2) + 4 * sizeof(glm::vec3) + 5 * sizeof(float) + sizeof(fm::TileRect) + sizeof(std::uint32_t);
   if (must_grow(mean2d, n)) check_host_growth(n * kBytes, "pre-processed Gaussians");
   mean2d.resize(n);
   conic.resize(n);

@@ -297,9 +297,11 @@ void CudaRenderer::reserve_buffers(int width, int height, const BufferShape& sha
   s.ensure_slots((shape.gaussians + fm::kChunkSize - 1) / fm::kChunkSize, options_.pipeline == Pipeline::catgs);
   const uint64_t entries = shape.list_entries;
   if (entries > 0) {
+    // Exactly the shape, no growth slack: a shape read from another renderer (buffer_shape) holds
+    // its slack already, and a second slack would raise the scene's peak with every session.
     for (int h = 0; h < 2; ++h) {
-      s.keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", &s.allocations);
-      s.values[h].ensure(entries * sizeof(uint32_t), "render-list values", &s.allocations);
+      s.keys[h].ensure(entries * sizeof(uint64_t), "render-list keys", &s.allocations, false);
+      s.values[h].ensure(entries * sizeof(uint32_t), "render-list values", &s.allocations, false);
     }
     // The widest key a single sort takes: the tile bits and a 32-bit depth.
     s.sort_temp.ensure(stages::sort_temp_bytes(entries, fm::tile_key_bits(tiles) + 32), "sort scratch", &s.allocations);

@@ -20,7 +20,9 @@ FrameEncoding frame_encoding(const EncoderPolicy& policy, const FrameEncodeInput
   // the link is jammed must not each get a larger share of the cap (a frame of half a second on
   // the wire at 2 frames/s makes the jam worse).
   const double fps_share = std::clamp(in.link.frame_rate / kStreamFps, 10.0 / kStreamFps, 1.0);
-  const int ceiling = encoder_config(e.policy, in.width, in.height, kStreamFps, live, in.client_max_kbps).bitrate_kbps;
+  // The config under the client's cap alone: the frame's own where the link does not limit.
+  e.config = encoder_config(e.policy, in.width, in.height, kStreamFps, live, in.client_max_kbps);
+  const int ceiling = e.config.bitrate_kbps;
   e.link_ceiling_kbps = ceiling > 0 ? std::max(1, static_cast<int>(ceiling * fps_share)) : 0;
   if (in.link.limiting) {
     const double on_wire = e.link_ceiling_kbps > 0
@@ -28,9 +30,10 @@ FrameEncoding frame_encoding(const EncoderPolicy& policy, const FrameEncodeInput
                                : in.link.cap_kbps;
     e.link_kbps = std::max(1, static_cast<int>(on_wire * in.link.encoder_gain / fps_share));
   }
-  const int cap = rate_cap_kbps(in.client_max_kbps, e.link_kbps);
-  // The whole config first: its rate, preset and threads are the frame's.
-  e.config = encoder_config(e.policy, in.width, in.height, kStreamFps, live, cap);
+  // Where the link limits, the config under its cap too: its rate, preset and threads are the frame's.
+  if (e.link_kbps > 0)
+    e.config =
+        encoder_config(e.policy, in.width, in.height, kStreamFps, live, rate_cap_kbps(in.client_max_kbps, e.link_kbps));
   e.rate_kbps = e.config.bitrate_kbps;
   e.preset = e.config.x264_preset;
   e.threads = e.config.threads;

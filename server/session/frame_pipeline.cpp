@@ -141,11 +141,9 @@ bool FramePipeline::out_of_memory_in_flight() {
 }
 
 float FramePipeline::fall_back_for_memory(int step, float lod_error_px) {
-  metrics_.render_memory_fallbacks_total += step == 1 ? 1 : 0;
   if (step == 1) {
-    // The list buffers the renderer holds (the CUDA core's 24 bytes an entry, the fewer of the
-    // two cores': the list fits in them on both), so a frame's passes need no growth.
-    const std::uint64_t held = renderer_->buffer_shape().list_entries * 24;
+    // The list buffers the renderer holds, so a frame's passes need no growth.
+    const std::uint64_t held = renderer_->buffer_shape().list_entries * kListBytesPerEntry;
     limit_list_budget(std::min(held, renderer_->options().list_budget.max_bytes));
     return lod_error_px;
   }
@@ -241,6 +239,7 @@ void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target
       r.lod_error_px = fall_back_for_memory(step + 1, r.lod_error_px);
     }
   }
+  if (r.memory_fallback > 0) metrics_.render_memory_fallbacks_total++;  // drawn after all
   r.render_begun = true;
 }
 

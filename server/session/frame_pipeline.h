@@ -188,6 +188,9 @@ class FramePipeline {
   // LOD). The lowered list budget stays for kMemoryRestoreFrames frames, then the server's budget
   // is tried again.
   static constexpr int kMemoryFallbacks = 3;
+  // A list budget in bytes a core's list buffers of N entries hold at least: the fewer of the
+  // cores' bytes an entry (cuda/cuda_renderer.h kBytesPerListEntry 24, cpu/cpu_renderer.h 28).
+  static constexpr std::uint64_t kListBytesPerEntry = 24;
   static constexpr int kMemoryRestoreFrames = 600;
   // A render that failed: its buffer back, and the result that reports it.
   JobResult take_failed(Rendered&& frame);
