@@ -168,6 +168,13 @@ class FramePipeline {
   // pose waits. can_refine() says whether there is one; refine() queues it.
   bool can_refine() const { return !pending_ && last_started_; }
   void refine(Clock::time_point now);
+  // A frame lost because its buffers could not grow (issue 73): its pose waits again where no
+  // newer pose does, so a still camera gets its picture (it sends no other pose). Returns whether
+  // one waits now.
+  bool retry_lost() {
+    if (!pending_ && last_started_) pending_ = last_started_;
+    return pending_.has_value();
+  }
 
   // Whether a render job may start: none running, the rendered slot empty, a pose waiting and,
   // pipelined, a host buffer free.

@@ -108,6 +108,7 @@ void Session::on_out_of_memory(const std::string& error, int streak) {
     return fail(pb::ERROR_SERVER_FULL,
                 "server full: its GPU's memory cannot hold this session's frames (" + error + ")", false,
                 jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
+  stream_.retry_lost_frame();  // a still camera sends no other pose: its frame comes anyway
   stream_.admit();
 }
 

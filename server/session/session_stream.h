@@ -85,6 +85,8 @@ class SessionStream {
   bool drop_pending() { return frames_.drop_pending(); }
   // After a frame lost for device memory: the render list's budget halved (bytes now).
   std::uint64_t halve_list_budget() { return frames_.halve_list_budget(); }
+  // The lost frame's pose again where no newer one waits (FramePipeline::retry_lost).
+  void retry_lost_frame() { frames_.retry_lost(); }
 
  private:
   using JobResult = FramePipeline::JobResult;

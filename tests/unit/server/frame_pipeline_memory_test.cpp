@@ -149,6 +149,23 @@ TEST(FramePipelineMemory, AFrameWhoseBufferCannotGrowIsDrawnInPasses) {
   EXPECT_NE(p.metrics.prometheus_text().find("catgs_render_memory_fallbacks_total 1"), std::string::npos);
 }
 
+// A frame lost after every fallback: its pose waits again (a still camera sends no other pose),
+// unless a newer one already waits.
+TEST(FramePipelineMemory, ALostFramesPoseWaitsAgain) {
+  TestPipeline p(std::make_unique<FailingRenderer>(2));
+  FramePipeline::Rendered lost = render_once(p.frames);
+  ASSERT_TRUE(lost.out_of_memory);
+  ASSERT_FALSE(p.frames.pending().has_value());
+  EXPECT_TRUE(p.frames.retry_lost());
+  ASSERT_TRUE(p.frames.pending().has_value());
+  EXPECT_EQ(p.frames.pending()->sequence, lost.job.pose.sequence);
+  FramePipeline::PendingPose newer = *p.frames.pending();
+  newer.sequence += 5;
+  p.frames.offer(newer);
+  EXPECT_TRUE(p.frames.retry_lost());
+  EXPECT_EQ(p.frames.pending()->sequence, newer.sequence) << "a newer pose is not replaced by the lost one";
+}
+
 TEST(FramePipelineMemory, AnotherCudaErrorIsAFailure) {
   TestPipeline p(std::make_unique<FailingRenderer>(700));  // cudaErrorIllegalAddress
   const FramePipeline::Rendered r = render_once(p.frames);
