@@ -7,9 +7,9 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$root/scripts/install_deps.sh" build
-# The page loads the wire schema at run time (web_client/protocol.js): the .proto itself, which
+# The page loads the wire schema at run time (web_client/viewer/protocol.js): the .proto itself, which
 # needs no npm (setup_web.sh also writes a JSON copy for static servers that refuse .proto).
-cp "$root/proto/catgs_stream.proto" "$root/web_client/catgs_stream.proto"
+cp "$root/proto/catgs_stream.proto" "$root/web_client/viewer/catgs_stream.proto"
 cmake -S "$root" -B "$root/build/demo" -G Ninja -DCMAKE_BUILD_TYPE=Release -DWITH_CUDA=OFF \
   -DCATGS_BUILD_TESTS=OFF >/dev/null
 cmake --build "$root/build/demo" --target catgs-server -j "$(nproc)"

@@ -2,15 +2,15 @@
 # Sets up the browser client and its test tooling (no network at page run time):
 #  1. npm ci in tests/e2e (playwright-core, pngjs, protobufjs, and @playcanvas/splat-transform 2.7.1,
 #     the scene formats' reference in the unit tests; versions pinned by package-lock.json),
-#  2. vendors protobufjs's browser build into web_client/vendor/ (BSD-3-Clause, licence copied along),
-#  3. copies proto/catgs_stream.proto into web_client/ (the page loads the schema at run time) and
+#  2. vendors protobufjs's browser build into web_client/viewer/vendor/ (BSD-3-Clause, licence copied along),
+#  3. copies proto/catgs_stream.proto into web_client/viewer/ (the viewer library loads the schema at run time) and
 #     writes its JSON descriptor beside it (a fallback for static servers that refuse .proto);
 #     both are generated, not committed (.gitignore).
 # Idempotent; run it after cloning and whenever proto/ or tests/e2e/package-lock.json changes.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 e2e="$root/tests/e2e"
-web="$root/web_client"
+web="$root/web_client/viewer"
 
 if ! command -v npm >/dev/null; then
   echo "setup_web.sh: npm is missing (apt-get install nodejs npm)" >&2
@@ -34,4 +34,4 @@ cp "$root/proto/catgs_stream.proto" "$web/catgs_stream.proto"
   const root = pb.parse(readFileSync(src, "utf8"), { keepCase: true }).root;
   writeFileSync(dst, JSON.stringify(root.toJSON(), null, 1) + "\n");
 ' "$root/proto/catgs_stream.proto" "$web/catgs_stream.json")
-echo "setup_web.sh: web client ready (vendor/protobuf.min.js, catgs_stream.proto, catgs_stream.json)"
+echo "setup_web.sh: web client ready (web_client/viewer/: vendor/protobuf.min.js, catgs_stream.proto, catgs_stream.json)"

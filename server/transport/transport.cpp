@@ -466,17 +466,19 @@ int Transport::on_http_filter(lws* wsi) {
   return 1;
 }
 
-// A page on another site embeds the viewer with <script type="module" src="https://this/viewer.js">:
-// module scripts (and the fetch of the schema beside them) are CORS requests, which the browser
-// lets the page read only with Access-Control-Allow-Origin. Given to the origins that may open a
-// session anyway (the page's own, localhost, --allowed-origins), never to every site: the files
-// are public, but the viewer would be of no use on a page the WebSocket refuses. The answer
-// varies with Origin, so caches must keep one per origin.
+// A page on another site embeds the viewer with <script type="module"
+// src="https://this/viewer/viewer.js">: module scripts (and the fetch of the schema beside them)
+// are CORS requests, which the browser lets the page read only with Access-Control-Allow-Origin.
+// The files are public, so every origin may read them: a site that may not open a session still
+// gets the viewer, which then says why in its own box instead of staying an empty 0x0 element.
+// Such a site's answers carry `catgs-session-origin: refused` (exposed to the page), read by the
+// viewer's schema fetch (web_client/viewer/protocol.js). The answer varies with Origin, so caches
+// keep one per origin.
 int Transport::on_add_headers(lws* wsi, void* in) {
   // lws asks here for the WebSocket handshake's 101 too: that answer needs no CORS.
   if (lws_hdr_total_length(wsi, WSI_TOKEN_UPGRADE) > 0) return 0;
   const std::string origin = header(wsi, WSI_TOKEN_ORIGIN);
-  if (origin.empty() || !options_.origins.allows(origin, header(wsi, WSI_TOKEN_HOST))) return 0;
+  if (origin.empty()) return 0;
   auto* args = static_cast<lws_process_html_args*>(in);
   auto* p = reinterpret_cast<unsigned char*>(args->p);
   unsigned char* end = p + args->max_len;
@@ -486,6 +488,10 @@ int Transport::on_add_headers(lws* wsi, void* in) {
                                        static_cast<int>(value.size()), &p, end) == 0;
   };
   if (!add("access-control-allow-origin:", origin) || !add("vary:", "Origin")) return 1;
+  if (!options_.origins.allows(origin, header(wsi, WSI_TOKEN_HOST)) &&
+      (!add("catgs-session-origin:", "refused") || !add("access-control-expose-headers:", "catgs-session-origin"))) {
+    return 1;
+  }
   args->max_len -= static_cast<int>(p - reinterpret_cast<unsigned char*>(args->p));
   args->p = reinterpret_cast<char*>(p);
   return 0;

@@ -10,9 +10,10 @@
 // HTTP: "/" serves the web root (static files, extra MIME types for .mjs/.proto/.js/.json/.wasm),
 // "/healthz" answers 200 "ok" whenever the process serves HTTP (liveness), "/readyz" answers
 // Handler::readiness() (200, or 503 while the server cannot take a new session: routing),
-// "/metrics" answers Handler::metrics_text() (Prometheus text). A static file asked for by a page
-// whose Origin may open a session (origin_policy.h) carries Access-Control-Allow-Origin for it,
-// so another site can import the viewer module (web_client/viewer.js) from this server.
+// "/metrics" answers Handler::metrics_text() (Prometheus text). A static file asked for from a
+// page of another origin carries Access-Control-Allow-Origin for it, so another site can import
+// the viewer module (web_client/viewer/viewer.js) from this server; where that origin may not open
+// a session (origin_policy.h), also `catgs-session-origin: refused`, so the viewer can say so.
 // WebSocket: subprotocol "catgs.v1" (or none) on any path.
 //
 // Upgrades are checked before the handshake (issue 22): Sec-WebSocket-Version must be 13 (else

@@ -195,7 +195,7 @@ done
 check "/healthz 200 ok" test "$(curl -fsS "$base/healthz")" = "ok"
 check "/readyz 200 ready" grep -q '^ready (0/1 sessions)' <<<"$(curl -fsS "$base/readyz")"
 check "the page is served" grep -q '<canvas' <<<"$(curl -fsS "$base/")"
-check "the page's protobuf schema is served" curl -fsS -o /dev/null "$base/catgs_stream.proto"
+check "the page's protobuf schema is served" curl -fsS -o /dev/null "$base/viewer/catgs_stream.proto"
 check "/metrics 200" grep -q '^catgs_sessions 0' <<<"$(curl -fsS "$base/metrics")"
 check "HEALTHCHECK passes (podman healthcheck run)" podman healthcheck run "$name"
 check "runs as uid 10001" test "$(podman exec "$name" id -u)" = "10001"

@@ -1,7 +1,7 @@
 // Benchmark (not a test): how long headless Chromium's WebCodecs takes to decode the streams
 // catgs-encode-bench wrote with --dump-dir (rowN.h264 / rowN.obu and rowN.json: the codec, the
 // size and each access unit's bytes). Each stream is decoded as the page decodes the server's
-// (web_client/decoder.js: configured from the first key frame's SPS or sequence header by the
+// (web_client/viewer/decoder.js: configured from the first key frame's SPS or sequence header by the
 // page's own h264.js / av1.js, optimizeForLatency, no description), one access unit at a time:
 // a unit's time is from decode() to its VideoFrame's output, the delay a frame waits before it
 // can be drawn. Prints a table and writes JSON (per row: p50 / p95 / max ms, frames decoded).
@@ -70,8 +70,8 @@ try {
     }
     const result = await page.evaluate(async ([codec, units, fps, repeat]) => {
       const inspect = codec === 'av1'
-        ? (await import('/av1.js')).inspectTemporalUnit
-        : (await import('/h264.js')).inspectAccessUnit;
+        ? (await import('/viewer/av1.js')).inspectTemporalUnit
+        : (await import('/viewer/h264.js')).inspectAccessUnit;
       const bytes = units.map((u) => Uint8Array.from(atob(u), (c) => c.charCodeAt(0)));
       const codecString = inspect(bytes[0]).codec;
       const times = [];

@@ -71,7 +71,7 @@ if (!existsSync(path.join(here, 'node_modules/playwright-core')) || !existsSync(
 if (!serverBin || !existsSync(serverBin)) skip(`catgs-server binary not given or missing (${serverBin || '--server'})`);
 if (!renderBin || !existsSync(renderBin)) skip(`catgs-render binary not given or missing (${renderBin || '--render'})`);
 // These are the project's own files: their absence is a failure, not a skip.
-for (const f of ['index.html', 'app.js', 'vendor/protobuf.min.js', 'catgs_stream.proto']) {
+for (const f of ['index.html', 'app.js', 'viewer/vendor/protobuf.min.js', 'viewer/catgs_stream.proto']) {
   if (!existsSync(path.join(webRoot, f))) {
     console.error(`FAIL: web_client/${f} is missing (run scripts/setup_web.sh)`);
     process.exit(1);

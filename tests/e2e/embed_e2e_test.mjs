@@ -2,7 +2,8 @@
 // page (header, sidebar, article) with a <catgs-viewer> in a 480x300 box, served from another
 // origin (http://embed.test:PORT, a node static server here; Chromium maps the name to loopback)
 // than the real catgs-server, which runs with --allowed-origins for it and a viewer token. The
-// page imports viewer.js from the catgs server (a cross-origin module: the server's CORS header).
+// page imports viewer/viewer.js from the catgs server (a cross-origin module: the server's CORS
+// header).
 //
 // Checked, each of which could be false: the viewer's `connected` event, frames (frame events,
 // a canvas that is not blank), a `stats` event, setPose changes the picture, playPath moves the
@@ -10,9 +11,10 @@
 // sidebar where they were, none of the full page's toolbar or hook), keys on the host page left
 // to it, and `error` with the server's reason for a wrong token and for a scene the server lacks
 // (and the right token again streams). The element's own box says each in words (issue 75), as
-// it does for a browser without WebCodecs and for a server stopped with Ctrl-C, and a host page's
-// `messages` replace them. Screenshots: embed.png, embed_error.png, embed_unsupported.png,
-// embed_gone.png.
+// it does for a browser without WebCodecs, for the same page on a site --allowed-origins lacks
+// (http://other.test:PORT: the element keeps its box and says why) and for a server stopped with
+// Ctrl-C, and a host page's `messages` replace them. Screenshots: embed.png, embed_error.png,
+// embed_unsupported.png, embed_refused.png, embed_gone.png.
 //
 // usage: node embed_e2e_test.mjs --server PATH/catgs-server [--repo ROOT] [--out DIR]
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / server binary).
@@ -93,6 +95,7 @@ async function poseAndWait(page, spec) {
 async function main() {
   const sitePort = await freePort();
   const siteOrigin = `http://embed.test:${sitePort}`;
+  const otherOrigin = `http://other.test:${sitePort}`; // the same page on a site the server does not list
   const tokenFile = path.join(mkdtempSync(path.join(os.tmpdir(), 'catgs-embed-tok-')), 'tokens');
   writeFileSync(tokenFile, `viewer ${TOKEN}\n`);
   const scene = path.join(repo, 'assets/scenes/biker.compressed.ply');
@@ -100,23 +103,28 @@ async function main() {
     viewport: { width: 1000, height: 560 },
     // embed.test is loopback to Chromium; WebCodecs needs a secure context, which plain http on a
     // name other than localhost is not: this test's origin counts as one.
-    args: [...CHROMIUM_ARGS, `--host-resolver-rules=MAP embed.test 127.0.0.1`, `--unsafely-treat-insecure-origin-as-secure=${siteOrigin}`],
+    args: [...CHROMIUM_ARGS, '--host-resolver-rules=MAP embed.test 127.0.0.1, MAP other.test 127.0.0.1',
+      `--unsafely-treat-insecure-origin-as-secure=${siteOrigin},${otherOrigin}`],
   }, async (context) => {
     const base = await run.startServer(['--scene', scene, '--token-file', tokenFile, '--allowed-origins', siteOrigin]);
     const site = await startSite(sitePort, new URL(base).host);
     try {
-      await embedded(context, base, siteOrigin);
+      await embedded(context, base, siteOrigin, otherOrigin);
     } finally {
       site.close();
     }
   });
 }
 
-async function embedded(context, base, siteOrigin) {
-  // The server's side of the cross-origin import: CORS for this site, none for another.
-  const cors = async (origin) => (await fetch(`${base}/viewer.js`, { headers: { Origin: origin } })).headers.get('access-control-allow-origin');
-  check(await cors(siteOrigin) === siteOrigin && (await cors('http://evil.test')) === null,
-    `viewer.js carries Access-Control-Allow-Origin for ${siteOrigin} only (not for http://evil.test)`);
+async function embedded(context, base, siteOrigin, otherOrigin) {
+  // The server's side of the cross-origin import: CORS for every site (the files are public), and
+  // a site that may not open a session is told so.
+  const cors = async (origin) => {
+    const h = (await fetch(`${base}/viewer/viewer.js`, { headers: { Origin: origin } })).headers;
+    return `${h.get('access-control-allow-origin')} ${h.get('catgs-session-origin')}`;
+  };
+  check(await cors(siteOrigin) === `${siteOrigin} null` && (await cors(otherOrigin)) === `${otherOrigin} refused`,
+    `viewer/viewer.js carries Access-Control-Allow-Origin for ${siteOrigin} and for ${otherOrigin}, the latter with catgs-session-origin: refused`);
 
   const page = await context.newPage();
   page.on('console', (m) => run.pageLog.push(`console.${m.type()}: ${m.text()}`));
@@ -305,6 +313,28 @@ async function embedded(context, base, siteOrigin) {
   check(/cannot decode/.test(unsupported), `no WebCodecs: the box says why ("${unsupported}")`);
   await run.shot(bare, 'embed_unsupported.png');
   await bare.close();
+
+  // The same page on a site the server does not list: the element keeps the box the page gave it
+  // (not an undefined 0x0 element) and says why it cannot stream.
+  const other = await context.newPage();
+  await other.addInitScript(recordEvents);
+  await other.goto(`${otherOrigin}/`);
+  const refusedText = await waitFor('the box to say this site may not stream', async () => {
+    const t = await boxText(other).catch(() => '');
+    return /may not open a stream/.test(t) ? t : false;
+  }, 15000).catch(() => boxText(other).catch((e) => `(no element: ${e.message})`));
+  const otherBox = await other.evaluate(() => {
+    const el = document.getElementById('bike');
+    return { w: el.clientWidth, h: el.clientHeight, defined: !!customElements.get('catgs-viewer') };
+  });
+  const refusedError = (await events(other, 'error'))[0];
+  check(/may not open a stream/.test(refusedText) && refusedText.includes(otherOrigin) && /--allowed-origins/.test(refusedText),
+    `a site --allowed-origins lacks: the box says why ("${refusedText}")`);
+  check(otherBox.defined && otherBox.w === BOX.width && otherBox.h === BOX.height && refusedError &&
+    refusedError.detail.name === 'ORIGIN_REFUSED' && refusedError.detail.permanent === true,
+  `...in the box the page gave it (${otherBox.w}x${otherBox.h}), with an error event (${refusedError ? refusedError.detail.name : 'none'})`);
+  await run.shot(other, 'embed_refused.png');
+  await other.close();
 
   // The server gone: the box says it is stopping (then keeps retrying), not a blank box.
   await page.evaluate((t) => {

@@ -2,7 +2,7 @@
 // protobufjs), run by node without a browser or a server:  node tests/e2e/unit_web.mjs
 // Exits 77 (ctest SKIP) when the npm dependencies are not installed (scripts/setup_web.sh).
 import assert from 'node:assert/strict';
-import { existsSync, readFileSync } from 'node:fs';
+import { existsSync, readdirSync, readFileSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import path from 'node:path';
 import { test } from 'node:test';
@@ -18,7 +18,8 @@ if (!existsSync(path.join(here, 'node_modules/protobufjs'))) {
 }
 const require = createRequire(import.meta.url);
 const pb = require('protobufjs');
-const imp = (f) => import(pathToFileURL(path.join(web, f)).href);
+// The viewer library's modules are in web_client/viewer/, the page's in web_client/.
+const imp = (f) => import(pathToFileURL(path.join(web, existsSync(path.join(web, 'viewer', f)) ? 'viewer' : '', f)).href);
 const cam = await imp('camera.js');
 const h264 = await imp('h264.js');
 const av1 = await imp('av1.js');
@@ -371,11 +372,11 @@ test('AV1 temporal unit: malformed OBUs are refused', () => {
 
 const protoText = readFileSync(path.join(repo, 'proto/catgs_stream.proto'), 'utf8');
 
-test('web_client/catgs_stream.proto is identical to proto/catgs_stream.proto', () => {
-  const copy = path.join(web, 'catgs_stream.proto');
+test('web_client/viewer/catgs_stream.proto is identical to proto/catgs_stream.proto', () => {
+  const copy = path.join(web, 'viewer/catgs_stream.proto');
   assert.ok(existsSync(copy), 'run scripts/setup_web.sh');
   assert.equal(readFileSync(copy, 'utf8'), protoText, 'stale copy: run scripts/setup_web.sh');
-  const json = JSON.parse(readFileSync(path.join(web, 'catgs_stream.json'), 'utf8'));
+  const json = JSON.parse(readFileSync(path.join(web, 'viewer/catgs_stream.json'), 'utf8'));
   assert.deepEqual(json, JSON.parse(JSON.stringify(pb.parse(protoText, { keepCase: true }).root.toJSON())), 'stale JSON: run scripts/setup_web.sh');
 });
 
@@ -412,7 +413,7 @@ test('client messages encode as the protocol says', () => {
 
 test('server messages decode (the .proto and its JSON descriptor agree)', () => {
   const fromProto = proto.makeProtocol(pb.parse(protoText, { keepCase: true }).root);
-  const json = JSON.parse(readFileSync(path.join(web, 'catgs_stream.json'), 'utf8'));
+  const json = JSON.parse(readFileSync(path.join(web, 'viewer/catgs_stream.json'), 'utf8'));
   const fromJson = proto.makeProtocol(pb.Root.fromJSON(json));
   const frame = fromProto.encodeServer({
     frame: { sequence: 3, pose_sequence: 2, client_time_ms: 99.5, key_frame: true, width: 480, height: 360, payload: new Uint8Array([0, 0, 0, 1, 0x65]) },
@@ -1024,25 +1025,36 @@ test('busy page: a heartbeat over 50 ms late marks the page busy for 100 ms; non
   assert.equal(b.recently(), true);
 });
 
-// The viewer library (viewer.js and what it imports, directly or not) against the page built on it
-// (issue 75): the library imports nothing of the page's, and its modules are the ones
-// web_client/README.md's table marks "(library)".
+// The viewer library (web_client/viewer/) against the page built on it (web_client/*.js; issue 75):
+// nothing in the library imports a page module, everything viewer/viewer.js reaches is in the
+// library's folder, and README.md's table marks exactly the library's modules "(library)".
 test('the viewer library imports nothing from the page', () => {
-  const importsOf = (f) => [...readFileSync(path.join(web, f), 'utf8').matchAll(/from '\.\/([a-z_0-9]+\.js)'/g)].map((m) => m[1]);
-  const library = new Set();
+  const jsIn = (dir) => readdirSync(path.join(web, dir)).filter((f) => f.endsWith('.js')).map((f) => path.posix.join(dir, f));
+  // Every module specifier of `f` (static and dynamic imports, re-exports), resolved against it.
+  const importsOf = (f) => [...readFileSync(path.join(web, f), 'utf8').matchAll(/(?:from|import)\s*\(?\s*'([^']+)'/g)]
+    .map((m) => m[1]).filter((u) => u.startsWith('.')).map((u) => path.posix.normalize(path.posix.join(path.posix.dirname(f), u)));
+  const libraryFiles = jsIn('viewer');
+  const pageFiles = jsIn('.').map((f) => path.posix.normalize(f));
+  assert.ok(libraryFiles.length > 10 && pageFiles.includes('app.js'), 'the two folders are where this test looks');
+  for (const f of libraryFiles) {
+    for (const dep of importsOf(f)) {
+      assert.ok(dep.startsWith('viewer/'), `the library's ${f} imports ${dep}, outside web_client/viewer/`);
+      assert.ok(existsSync(path.join(web, dep)), `${f} imports ${dep}, which does not exist`);
+    }
+  }
+  const reached = new Set();
   const visit = (f) => {
-    if (library.has(f)) return;
-    library.add(f);
+    if (reached.has(f)) return;
+    reached.add(f);
     importsOf(f).forEach(visit);
   };
-  visit('viewer.js');
-  const page = ['app.js', 'overlay.js', 'notes_ui.js', 'walk.js', 'video_export.js', 'view_link.js', 'token.js',
-    'scene_picker.js', 'state_words.js', 'test_hook.js', 'annotations.js'];
-  for (const f of page) assert.ok(!library.has(f), `the library (viewer.js) reaches the page's ${f}`);
+  visit('viewer/viewer.js');
   const readme = readFileSync(path.join(web, 'README.md'), 'utf8');
-  const marked = new Set([...readme.matchAll(/^\| ([a-z_0-9., ]+\.js) \(library\) \|/gm)].flatMap((m) => m[1].split(/, */)));
-  assert.deepEqual([...library].sort(), [...marked].sort(), 'README.md marks exactly the library\'s modules "(library)"');
-  for (const f of page) assert.ok(existsSync(path.join(web, f)), `${f} (a page module) exists`);
+  const marked = new Set([...readme.matchAll(/^\| ([a-z_0-9.,/ ]+\.js) \(library\) \|/gm)].flatMap((m) => m[1].split(/, */)));
+  assert.deepEqual([...reached].sort(), [...marked].sort(), 'README.md marks exactly the library\'s modules "(library)"');
+  assert.deepEqual([...reached].sort(), [...libraryFiles].sort(), 'every module in viewer/ is reached from viewer/viewer.js');
+  // The old entry path re-exports the library and nothing else.
+  assert.deepEqual(importsOf('viewer.js'), ['viewer/viewer.js']);
 });
 
 test('state words: each viewer status in words, with its action', () => {

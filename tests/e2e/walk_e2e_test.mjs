@@ -67,7 +67,7 @@ function startPose(page, start) {
   return hook(page, async (s) => {
     const first = window.catgs.pose();
     if (!s) return first;
-    const cam = await import('/camera.js');
+    const cam = await import('/viewer/camera.js');
     const w = window.catgs.welcome;
     const up = [w.up.x, w.up.y, w.up.z];
     const c = [w.orbit_centre.x, w.orbit_centre.y, w.orbit_centre.z];
@@ -95,7 +95,7 @@ async function freshFrame(page) {
 // server's 20.
 function probePath(page, points, eye) {
   return hook(page, async ({ points: pts, eye: e }) => {
-    const cam = await import('/camera.js');
+    const cam = await import('/viewer/camera.js');
     const notes = await import('/annotations.js');
     const w = window.catgs.welcome;
     const up = [w.up.x, w.up.y, w.up.z];
@@ -192,7 +192,7 @@ async function walkRun(context, base, scene, { label, metresPerUnit, directions 
     const trace = await hook(page, () => window.catgs.walkTrace(false));
     // The screenshot looks down (scene.pitch) from where the walk ended, still in walk mode.
     await hook(page, async (pitch) => {
-      const cam = await import('/camera.js');
+      const cam = await import('/viewer/camera.js');
       const p = window.catgs.pose();
       const u = window.catgs.welcome.up;
       const up = [u.x, u.y, u.z];

@@ -119,29 +119,38 @@ TEST(Hardening, OriginCheckedAtTheUpgrade) {
   EXPECT_NO_THROW(c.hello(64, 64));
 }
 
-// A page on another site imports the viewer module from this server (web_client/viewer.js,
-// issue 63): its files carry Access-Control-Allow-Origin for the origins that may open a session
-// (listed, localhost, the page's own), and for no other site.
-TEST(Hardening, StaticFilesAllowCorsForAllowedOriginsOnly) {
+// A page on another site imports the viewer module from this server (web_client/viewer/viewer.js,
+// issues 63 and 75): its files carry Access-Control-Allow-Origin for every origin (they are
+// public), and `catgs-session-origin: refused` for an origin that may not open a session, which
+// the viewer reads to say why it cannot stream.
+TEST(Hardening, StaticFilesAllowCorsAndNameARefusedOrigin) {
   ServerProcess server(server_args(kBiker, {"--allowed-origins", "https://app.example"}));
   const int port = server.port();
-  // "STATUS ALLOWED-ORIGIN" of a GET of `path` from a page of `origin` ("": no Origin header).
+  // "STATUS ALLOWED-ORIGIN SESSION-ORIGIN EXPOSED" of a GET of `path` from a page of `origin`
+  // ("": no Origin header; "-": no such header in the answer).
   auto cors = [&](const std::string& path, const std::string& origin) {
     std::string req = "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) + "\r\n";
     if (!origin.empty()) req += "Origin: " + origin + "\r\n";
     std::string head;
     const int status = answer_status(port, req + "Connection: close\r\n\r\n", &head);
-    const std::regex allow("access-control-allow-origin: *([^\r\n]*)", std::regex::icase);
-    std::smatch m;
-    return std::to_string(status) + " " + (std::regex_search(head, m, allow) ? m[1].str() : "");
+    auto value = [&](const char* name) {
+      const std::regex re(std::string(name) + ": *([^\r\n]*)", std::regex::icase);
+      std::smatch m;
+      return std::regex_search(head, m, re) ? m[1].str() : std::string("-");
+    };
+    return std::to_string(status) + " " + value("access-control-allow-origin") + " " + value("catgs-session-origin") +
+           " " + value("access-control-expose-headers");
   };
-  EXPECT_EQ(cors("/viewer.js", "https://app.example"), "200 https://app.example");
-  EXPECT_EQ(cors("/catgs_stream.proto", "https://app.example"), "200 https://app.example");
-  EXPECT_EQ(cors("/viewer.js", "http://localhost:5173"), "200 http://localhost:5173");
-  EXPECT_EQ(cors("/viewer.js", "https://evil.example"), "200 ") << "a site that may not open a session";
-  EXPECT_EQ(cors("/viewer.js", ""), "200 ") << "no Origin: nothing to allow";
-  EXPECT_EQ(cors("/no-such-file.js", "https://app.example"), "404 ");
-  EXPECT_EQ(cors("/scenes", "https://app.example"), "200 ") << "only the static files";
+  EXPECT_EQ(cors("/viewer/viewer.js", "https://app.example"), "200 https://app.example - -");
+  EXPECT_EQ(cors("/viewer.js", "https://app.example"), "200 https://app.example - -") << "the old entry path";
+  EXPECT_EQ(cors("/viewer/catgs_stream.proto", "https://app.example"), "200 https://app.example - -");
+  EXPECT_EQ(cors("/viewer/viewer.js", "http://localhost:5173"), "200 http://localhost:5173 - -");
+  EXPECT_EQ(cors("/viewer/catgs_stream.proto", "https://evil.example"),
+            "200 https://evil.example refused catgs-session-origin")
+      << "a site that may not open a session reads the files and learns why";
+  EXPECT_EQ(cors("/viewer/viewer.js", ""), "200 - - -") << "no Origin: nothing to allow";
+  EXPECT_EQ(cors("/no-such-file.js", "https://app.example"), "404 - - -");
+  EXPECT_EQ(cors("/scenes", "https://app.example"), "200 - - -") << "only the static files";
 }
 
 // RFC 6455 4.2.2: only version 13; anything else is 426 naming the version the server speaks.

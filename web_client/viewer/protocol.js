@@ -9,20 +9,25 @@ const PKG = 'catgs.stream.v1';
 // vendor/protobuf.min.js in the page, the npm module in node). The .proto is served beside the
 // page; a static server that will not serve the .proto extension (libwebsockets answers 415 for
 // unknown types) is covered by the JSON descriptor that scripts/setup_web.sh generates from it.
+//
+// The result's `sessionOriginRefused` is true where the server answered the schema with
+// `catgs-session-origin: refused`: this page's origin may not open a session there (the server's
+// --allowed-origins; server/transport/transport.h).
 export async function loadProtocol(pb, baseUrl = '') {
   const errors = [];
+  const refused = (res) => res.headers.get('catgs-session-origin') === 'refused';
   try {
     const res = await fetch(`${baseUrl}catgs_stream.proto`, { cache: 'no-cache' });
     if (!res.ok) throw new Error(`HTTP ${res.status}`);
     const text = await res.text();
-    return makeProtocol(pb.parse(text, { keepCase: true }).root);
+    return { ...makeProtocol(pb.parse(text, { keepCase: true }).root), sessionOriginRefused: refused(res) };
   } catch (e) {
     errors.push(`catgs_stream.proto: ${e.message || e}`);
   }
   try {
     const res = await fetch(`${baseUrl}catgs_stream.json`, { cache: 'no-cache' });
     if (!res.ok) throw new Error(`HTTP ${res.status}`);
-    return makeProtocol(pb.Root.fromJSON(await res.json()));
+    return { ...makeProtocol(pb.Root.fromJSON(await res.json())), sessionOriginRefused: refused(res) };
   } catch (e) {
     errors.push(`catgs_stream.json: ${e.message || e}`);
   }

@@ -194,6 +194,12 @@ export class CatgsViewer extends EventTarget {
     } catch (e) {
       return this._fail('error', `cannot start: ${e.message}`);
     }
+    // The server would refuse the WebSocket of a page of this origin (403 at the handshake, which
+    // a page cannot read): say so rather than retrying as if the server were away.
+    if (this.protocol.sessionOriginRefused) {
+      return this._fail('origin-refused', `this site (${location.origin}) may not open a stream on this server: ` +
+        'the server\'s --allowed-origins must list it');
+    }
     this.codecs = this.codec === 'h264' ? [CODEC_H264] : await decodableCodecs();
     if (this.abort.signal.aborted) return false; // closed meanwhile
     this.decoder = new StreamDecoder({
@@ -217,7 +223,8 @@ export class CatgsViewer extends EventTarget {
   _fail(status, reason) {
     this.startError = reason;
     this._setStatus(status);
-    this._emit('error', { name: status === 'unsupported' ? 'UNSUPPORTED' : 'STARTUP', code: 0, reason, permanent: true, status });
+    const name = { unsupported: 'UNSUPPORTED', 'origin-refused': 'ORIGIN_REFUSED' }[status] || 'STARTUP';
+    this._emit('error', { name, code: 0, reason, permanent: true, status });
     return false;
   }
 

@@ -55,6 +55,7 @@ export function statusText(viewer, scene = '') {
       return { text: `${why}reconnecting ${when()}`, level: e ? 'error' : 'warn' };
     }
     case 'unsupported':
+    case 'origin-refused':
     case 'error':
       return { text: viewer.startError, level: 'error' };
     default:
