@@ -125,7 +125,7 @@ run() {
   [ "$rate" = none ] || tc qdisc add dev "$host_if" root tbf rate "${rate}kbit" burst 16kb latency 300ms
   ip netns exec "$ns" "$bin/catgs-loadgen" --host "$host_ip" --port "$port" --sessions 1 --size 640x360 \
     --trace orbit --rate 60 --decode 1 --seconds "$seconds" --warmup-s "$warmup" --receipts "$receipts" \
-    --json "$work/$name.json" > "$work/$name.txt" 2>&1
+    --timeline --json "$work/$name.json" > "$work/$name.txt" 2>&1
 }
 
 if [ "$busy" -gt 0 ]; then
@@ -328,18 +328,33 @@ rows = []
 for name, rate in zip(names, rates):
     s = json.load(open(f"{work}/{name}.json"))["run"]["sessions"][0]
     lat = s["latency"]
+    # Where the slowest frame of a pose sent after warm-up (as the latencies) spent its time: in the
+    # server (pose received -> handed to the transport: queue, render, convert, encode) or after it
+    # (the transport's queue, the link, the decode), and how long the link takes to carry its own
+    # bytes; the timeline is [t_s arrived, latency_ms, width, height, bytes, server_ms].
+    tl = [f for f in s.get("timeline", []) if f[0] - f[1] / 1000 >= warmup]
+    worst = max(tl, key=lambda f: f[1]) if tl else [0, 0, 0, 0, 0, 0]
+    server = sorted(f[5] for f in tl) or [0]
     rows.append({"link": name, "rate_kbit": None if rate == "none" else int(rate), "fps": s["fps"],
                  "p50_ms": lat["p50_ms"], "p95_ms": lat["p95_ms"], "p99_ms": lat["p99_ms"], "max_ms": lat["max_ms"],
                  "received_kbit": s["bytes_per_second"] * 8 / 1000, "size_changes": s["size_changes"],
                  "min_size": f'{s["min_width"]}x{s["min_height"]}' if s["size_changes"] else f'{s["width"]}x{s["height"]}',
                  "errors": s["errors"], "first_error": s["first_error"],
-                 "limited_stats": s["link_limited_stats"], "cap_min_kbit": s["link_cap_kbps_min"]})
-print(f"| link | FPS | p50 / p95 / p99 / max ms (after {warmup:g} s) | kbit/s received | link-limited Stats, lowest cap | smallest size | errors |")
-print("|---|---|---|---|---|---|---|")
+                 "limited_stats": s["link_limited_stats"], "cap_min_kbit": s["link_cap_kbps_min"],
+                 "slowest": {"latency_ms": worst[1], "server_ms": worst[5], "after_server_ms": worst[1] - worst[5],
+                             "bytes": worst[4], "at_s": worst[0],
+                             "own_bytes_ms": None if rate == "none" else worst[4] * 8 / int(rate)},
+                 "server_p95_ms": server[min(len(server) - 1, int(0.95 * len(server)))]})
+print(f"| link | FPS | p50 / p95 / p99 / max ms (after {warmup:g} s) | kbit/s received | link-limited Stats, lowest cap | "
+      "slowest frame: in the server / after it ms, bytes (the link carries them in ms) | server p95 ms | smallest size | errors |")
+print("|---|---|---|---|---|---|---|---|---|")
 for r in rows:
     link = "unshaped" if r["rate_kbit"] is None else f'{r["rate_kbit"]} kbit/s ({r["link"][5:]})'
     print(f'| {link} | {r["fps"]:.1f} | {r["p50_ms"]:.0f} / {r["p95_ms"]:.0f} / {r["p99_ms"]:.0f} / {r["max_ms"]:.0f} '
-          f'| {r["received_kbit"]:.0f} | {r["limited_stats"]}, {r["cap_min_kbit"]} | {r["min_size"]} | {r["errors"]} {r["first_error"]} |')
+          f'| {r["received_kbit"]:.0f} | {r["limited_stats"]}, {r["cap_min_kbit"]} '
+          f'| {r["slowest"]["server_ms"]:.0f} / {r["slowest"]["after_server_ms"]:.0f}, {r["slowest"]["bytes"]} '
+          f'({r["slowest"]["own_bytes_ms"] or 0:.0f}) '
+          f'| {r["server_p95_ms"]:.0f} | {r["min_size"]} | {r["errors"]} {r["first_error"]} |')
 if out:
     json.dump(rows, open(out, "w"), indent=1)
 failed = []

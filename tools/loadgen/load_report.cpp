@@ -211,8 +211,9 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
                                          {"bytes", s.still_bytes}};
     if (!s.timeline.empty()) {
       nlohmann::json frames = nlohmann::json::array();
-      for (const auto& f : s.timeline) frames.push_back({f.t_s, f.latency_ms, f.width, f.height, f.bytes});
-      out["sessions"].back()["timeline"] = std::move(frames);  // [t_s, latency_ms, width, height, bytes]
+      for (const auto& f : s.timeline) frames.push_back({f.t_s, f.latency_ms, f.width, f.height, f.bytes, f.server_ms});
+      // [t_s, latency_ms, width, height, bytes, server_ms]
+      out["sessions"].back()["timeline"] = std::move(frames);
     }
   }
   const RunSummary t = summarize_run(sessions);

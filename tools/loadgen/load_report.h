@@ -87,11 +87,14 @@ struct SessionResult {
   std::string refusal;
   std::vector<double> latency_ms;  // pose sent -> frame received (decoded with --decode), after warm-up
   // Every frame, warm-up included (LoadSessionConfig::timeline, --timeline): seconds from the
-  // session's first pose to the frame's arrival, its latency (ms), size and payload bytes.
+  // session's first pose to the frame's arrival, its latency (ms), size and payload bytes, and the
+  // part of the latency spent in the server (FrameTimings.total_ms: pose received -> frame handed
+  // to the transport; the rest is the way there, the transport's queue, the link and the decode).
   struct FrameRecord {
     double t_s, latency_ms;
     int width, height;
     std::size_t bytes;
+    double server_ms;
   };
   std::vector<FrameRecord> timeline;
   // Reference check (LoadSessionConfig::check_every): decoded frames compared with the CPU

@@ -254,7 +254,7 @@ class PoseLoop {
     if (cfg_.receipts && (!late_read_ || cfg_.late_receipts)) receipt_ = {f.sequence(), arrived_ms};
     if (cfg_.timeline && !sent_at_.empty())
       r_.timeline.push_back({(now_ms() - sent_at_.front()) / 1000.0, latency, static_cast<int>(f.width()),
-                             static_cast<int>(f.height()), f.payload().size()});
+                             static_cast<int>(f.height()), f.payload().size(), f.timings().total_ms()});
     const auto seq = static_cast<std::int64_t>(f.pose_sequence());
     if (seq >= sent()) {
       note_error(r_, "frame for a pose never sent (" + std::to_string(seq) + ")");
