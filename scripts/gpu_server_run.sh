@@ -417,17 +417,21 @@ print('; '.join(bad))" "$W/json/ramp-${name}_$n.json" 2>&1)
 # START, START + STEP, ... MAX on the three real paths (6 s a step, as ramp). The ramp goes on past
 # refusals at the door (they are what it shows) and stops where a session fails. Per step: sessions
 # that streamed, were refused, failed; the slowest streamed session's FPS and the pooled p95; the
-# server's memory counters (/metrics) -> $W/json/hogramp-NAME_N.json and stdout.
+# server's memory counters (/metrics) -> $W/json/hogramp-NAME_N.json and stdout. HOG_GIB 0: no other
+# process (a ramp that goes on past refusals: the splat budget's door, issue 72).
 hogramp() {
   local name=$1 scene=$2 size=$3 hog=$4 start=$5 step=$6 max=$7 W=/tmp/catgs_sweep
   shift 7
   export LD_LIBRARY_PATH=$SRV/lib
-  "$SRV/bin/catgs-memory-hog" "$hog" > "$W/hog-$name.txt" 2>&1 &
-  local hog_pid=$!
-  for _ in $(seq 1 240); do grep -q holding "$W/hog-$name.txt" && break; sleep 0.5; done
-  echo "hog: $(cat "$W/hog-$name.txt")"
+  local hog_pid=""
+  if [ "$hog" != 0 ]; then
+    "$SRV/bin/catgs-memory-hog" "$hog" > "$W/hog-$name.txt" 2>&1 &
+    hog_pid=$!
+    for _ in $(seq 1 240); do grep -q holding "$W/hog-$name.txt" && break; sleep 0.5; done
+    echo "hog: $(cat "$W/hog-$name.txt")"
+  fi
   start_server "$W/$scene.compressed.ply" "$W/server_hogramp-$name.log" --pipeline exact "$@" || {
-    kill "$hog_pid"
+    [ -n "$hog_pid" ] && kill "$hog_pid"
     return 1
   }
   grep -E "^gpu |renderer:" "$W/server_hogramp-$name.log"
@@ -444,17 +448,22 @@ m = {l.split(' ')[0]: float(l.split(' ')[1]) for l in text.split('\n') if l and 
 keys = ['catgs_memory_refusals_total', 'catgs_memory_refusals_driver_total', 'catgs_render_out_of_memory_total',
         'catgs_render_memory_fallbacks_total', 'catgs_session_errors_total',
         'catgs_device_memory_driver_free_bytes{slot="0"}', 'catgs_device_memory_held_bytes{slot="0"}',
-        'catgs_device_memory_session_bytes{slot="0"}']
+        'catgs_device_memory_session_bytes{slot="0"}', 'catgs_splat_budget_refusals_total',
+        'catgs_lod_over_budget_frames_total']
 j['server_metrics'] = {k: m.get(k) for k in keys}
 j['hog_gib'] = float(hog)
 json.dump(j, open(path, 'w'), indent=1)
 streamed = t['sessions'] - t['refused'] - t['failed']
+bounds = [s.get('lod_error_px_mean', 0) for s in j['run']['sessions'] if not s.get('refused')] or [0]
 print('%s sessions asked: %d streamed, %d refused, %d failed; slowest %.1f FPS, p95 %.1f ms; server: %d refused at the door '
-      '(%d by the driver), %d frames drawn after a failed growth, %d dropped; driver free %.1f GiB' % (
+      '(%d by the driver), %d frames drawn after a failed growth, %d dropped; driver free %.1f GiB; splat budget: %d refused, '
+      '%d frames over it at the ceiling; LOD bound px mean %.2f, max of session means %.2f' % (
       n, streamed, t['refused'], t['failed'], t['fps_min'], t['latency']['p95_ms'],
       m.get('catgs_memory_refusals_total', 0), m.get('catgs_memory_refusals_driver_total', 0),
       m.get('catgs_render_memory_fallbacks_total', 0), m.get('catgs_render_out_of_memory_total', 0),
-      m.get('catgs_device_memory_driver_free_bytes{slot="0"}', 0) / 2**30))
+      m.get('catgs_device_memory_driver_free_bytes{slot="0"}', 0) / 2**30,
+      m.get('catgs_splat_budget_refusals_total', 0), m.get('catgs_lod_over_budget_frames_total', 0),
+      sum(bounds) / len(bounds), max(bounds)))
 PY
     )
     echo "hogramp $name: $verdict"
@@ -463,8 +472,7 @@ PY
   done
   grep -E "ERROR|out of device memory" "$W/server_hogramp-$name.log" | head -5
   stop_server
-  kill "$hog_pid" 2>/dev/null
-  wait "$hog_pid" 2>/dev/null
+  [ -n "$hog_pid" ] && kill "$hog_pid" 2>/dev/null && wait "$hog_pid" 2>/dev/null
 }
 
 case "${1:-}" in

@@ -102,6 +102,10 @@ std::string server_usage() {
          "                        bound steps up (far detail merges first) and back down with\n"
          "                        hysteresis; auto sizes it per CUDA session from the GPU's\n"
          "                        measured throughput and the sessions sharing it (default auto)\n"
+         "  --lod-max-error PX|off  the coarsest bound the splat budget may raise a frame to, px at\n"
+         "                        720 lines (default 2.83: one step above 2 px, within 1 dB of its\n"
+         "                        picture); past it a GPU refuses the next visitor (server full)\n"
+         "                        instead of blurring every view; off: up to 16x --lod-error\n"
          "  --occlusion-cull on|off  exact frames skip the chunks the session's last frame found\n"
          "                        wholly behind its saturated tiles (default on)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
@@ -297,6 +301,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.lod = v;
     } else if (a == "--lod-error")
       out.lod_error_px = static_cast<float>(parse_double(a, v, 0.0, 1e6));
+    else if (a == "--lod-max-error")
+      out.lod_max_error_px = v == "off" ? 0.0f : static_cast<float>(parse_double(a, v, 0.0, 1e6));
     else if (a == "--occlusion-cull") {
       if (v != "on" && v != "off") throw std::invalid_argument("--occlusion-cull must be on or off, got '" + v + "'");
       out.occlusion_cull = v == "on";
@@ -483,6 +489,7 @@ SessionSettings session_settings(const ServerOptions& o) {
   s.frame.lod.bound_px = o.lod_error_px;
   s.frame.lod.splat_budget = o.splat_budget;
   s.frame.lod.auto_budget = o.auto_splat_budget;
+  s.frame.lod.max_bound_px = o.lod_max_error_px;
   return s;
 }
 

@@ -53,6 +53,9 @@ struct ServerOptions {
   // "auto" (the default; CUDA sessions only), sized from the GPU's measured throughput.
   std::uint64_t splat_budget = 0;
   bool auto_splat_budget = true;
+  // --lod-max-error: the coarsest bound the splat budget may raise a frame to (LodSettings::
+  // max_bound_px; 0 = off, the ladder's top). Past it the door refuses the GPU's next visitor.
+  float lod_max_error_px = 2.0f * 1.41421356f;
   // --occlusion-cull on|off: exact frames skip the chunks that the session's last frame found
   // wholly behind its saturated tiles (RenderOptions::occlusion_culling,
   // render_core/forward_model/occlusion.h; issue 72). Default on.

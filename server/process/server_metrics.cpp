@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <initializer_list>
 #include <sstream>
 #include <stdexcept>
@@ -93,6 +94,13 @@ std::string ServerMetrics::prometheus_text() const {
       "Of catgs_memory_refusals_total: those where what the driver reports free bound (another "
       "process holds the GPU's memory), not the server's accounting.",
       memory_refusals_driver_total.load());
+  put("catgs_lod_over_budget_frames_total", "counter",
+      "Frames drawn at --lod-max-error whose cut still held more Gaussians than the splat budget.",
+      lod_over_budget_frames_total.load());
+  put("catgs_splat_budget_refusals_total", "counter",
+      "Visitors refused (ERROR_SERVER_FULL) because their GPU's sessions already drew at --lod-max-error "
+      "over the splat budget.",
+      splat_budget_refusals_total.load());
   put("catgs_render_out_of_memory_total", "counter",
       "Frames dropped because a session's buffers could not grow, even in passes and at a coarser "
       "cut (the session lives on).",
@@ -188,6 +196,10 @@ std::string ServerMetrics::prometheus_text() const {
   encode_seconds.write(o, "catgs_encode_seconds");
   head("catgs_send_seconds", "histogram", "Frame handed to the transport -> written to the socket.");
   send_seconds.write(o, "catgs_send_seconds");
+  head("catgs_frame_lod_bound_px", "histogram",
+       "The level-of-detail bound each frame drew at, pixels (0: full detail or no LOD; the splat budget raises "
+       "it up to --lod-max-error).");
+  frame_lod_bound_px.write(o, "catgs_frame_lod_bound_px");
   head("catgs_speculation_window", "histogram", "Speculation window W of each rendered frame (0: no speculation).");
   speculation_window.write(o, "catgs_speculation_window");
   head("catgs_speculation_gain", "histogram",
@@ -253,9 +265,11 @@ void ServerMetrics::set_gpus(std::vector<int> devices, std::function<std::vector
     gpu_render_seconds_.push_back(std::make_unique<Histogram>(Histogram::stage_seconds()));
   gpu_splats_per_ms_ = std::make_unique<std::atomic<std::int64_t>[]>(gpu_devices_.size());
   gpu_in_flight_ = std::make_unique<std::atomic<int>[]>(gpu_devices_.size());
+  gpu_budget_short_at_ = std::make_unique<std::atomic<std::int64_t>[]>(gpu_devices_.size());
   for (std::size_t k = 0; k < gpu_devices_.size(); ++k) {
     gpu_splats_per_ms_[k] = 0;
     gpu_in_flight_[k] = 0;
+    gpu_budget_short_at_[k] = INT64_MIN;
   }
 }
 
@@ -287,6 +301,23 @@ void ServerMetrics::observe_gpu_throughput(int device, std::uint64_t gaussians, 
   std::atomic<std::int64_t>& best = gpu_splats_per_ms_[k];
   std::int64_t seen = best.load();
   while (rate > seen && !best.compare_exchange_weak(seen, rate)) {}
+}
+
+std::int64_t ServerMetrics::steady_now_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+void ServerMetrics::note_gpu_budget_short(int device, std::int64_t now_ms) {
+  const int k = gpu_index(device);
+  if (k >= 0) gpu_budget_short_at_[k] = now_ms;
+}
+
+bool ServerMetrics::gpu_budget_short(int device, std::int64_t now_ms, std::int64_t within_ms) const {
+  const int k = gpu_index(device);
+  if (k < 0) return false;
+  const std::int64_t at = gpu_budget_short_at_[k].load();
+  return at != INT64_MIN && now_ms - at <= within_ms;
 }
 
 double ServerMetrics::gpu_splats_per_ms(int device) const {

@@ -19,6 +19,10 @@
 //                              sessions rendering there, and their render times
 //   catgs_gpu_splats_per_second{gpu}  the GPU's throughput the auto splat budget reads
 //                              (render/lod_bound.h): the best of any one frame, Gaussians/s
+//   catgs_frame_lod_bound_px   the level-of-detail bound each frame drew at, px (issue 72)
+//   catgs_lod_over_budget_frames_total  frames drawn at --lod-max-error whose cut still passed the
+//                              splat budget; catgs_splat_budget_refusals_total  visitors refused
+//                              at the door for it (ERROR_SERVER_FULL)
 //   catgs_refused_upgrades_total{reason}  WebSocket upgrades refused before the handshake
 //   catgs_timeouts_total{kind}            connections closed for silence: no Hello, or a silent session,
 //                                         or for a scene that did not load in time (scene_load)
@@ -40,6 +44,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <cstdint>
@@ -157,6 +162,10 @@ struct ServerMetrics {
   Histogram encode_seconds{Histogram::stage_seconds()};
   Histogram send_seconds{Histogram::stage_seconds()};
   Histogram speculation_window{{0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32}};
+  // The LOD bound of each frame, px (0: full detail or no LOD): the ladder's x sqrt(2) steps of 2 px.
+  Histogram frame_lod_bound_px{{0, 1, 1.42, 2.01, 2.83, 4.01, 5.66, 8.01, 11.32, 16.01, 32.01}};
+  std::atomic<std::uint64_t> lod_over_budget_frames_total{0};
+  std::atomic<std::uint64_t> splat_budget_refusals_total{0};
   // catgs cost model: each opened group's predicted gain and each closed group's measured one
   // (FrameStats predicted_gain / measured_gain; exact's time over the group's).
   Histogram speculation_predicted_gain{{0.5, 0.75, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0}};
@@ -195,6 +204,12 @@ struct ServerMetrics {
   int gpu_render_begin(int device);
   int gpu_render_end(int device);
   double gpu_splats_per_ms(int device) const;
+  // A frame on `device` drew at the ceiling (--lod-max-error) over its splat budget at `now_ms`
+  // (a steady clock, ms); gpu_budget_short: one did within `within_ms` before `now_ms`, so the
+  // GPU holds no more visitors at the picture's floor (render/lod_bound.h). Thread-safe.
+  void note_gpu_budget_short(int device, std::int64_t now_ms);
+  static std::int64_t steady_now_ms();  // the clock those take
+  bool gpu_budget_short(int device, std::int64_t now_ms, std::int64_t within_ms) const;
   // Sessions rendering on `device` now (GpuAssignment::sessions; 0 for one not in set_gpus).
   std::int64_t gpu_sessions(int device) const;
 
@@ -204,9 +219,10 @@ struct ServerMetrics {
  private:
   std::vector<int> gpu_devices_;
   std::function<std::vector<std::int64_t>()> gpu_sessions_;
-  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;      // by index in gpu_devices_
-  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_splats_per_ms_;  // by index, rounded down
-  std::unique_ptr<std::atomic<int>[]> gpu_in_flight_;               // by index
+  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;        // by index in gpu_devices_
+  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_splats_per_ms_;    // by index, rounded down
+  std::unique_ptr<std::atomic<int>[]> gpu_in_flight_;                 // by index
+  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_budget_short_at_;  // by index: ms, INT64_MIN never
   int gpu_index(int device) const;
 };
 

@@ -99,16 +99,28 @@ std::uint64_t CutCounter::splats(const Camera& camera, float tau) const {
   return chunks * fm::kChunkSize;
 }
 
+int lod_max_steps(float bound_px, float max_bound_px) {
+  if (!(max_bound_px > 0.0f) || !(bound_px > 0.0f)) return LodBoundChooser::kSteps;
+  // Steps of x sqrt(2); a ceiling a hair under a step (2.828 for 2 x sqrt(2)) still reaches it.
+  const float steps = 2.0f * std::log2(max_bound_px / bound_px) + 1e-3f;
+  return std::clamp(static_cast<int>(std::floor(steps)), 0, LodBoundChooser::kSteps);
+}
+
 float LodBoundChooser::bound_at(float base, int step) { return base * std::exp2(0.5f * static_cast<float>(step)); }
 
-float LodBoundChooser::choose(const CutCounter& counter, const Camera& camera, float base, std::uint64_t budget) {
+float LodBoundChooser::choose(const CutCounter& counter, const Camera& camera, float base, std::uint64_t budget,
+                              int max_steps) {
+  over_budget_ = false;
   if (budget == 0 || !(base > 0.0f) || !counter.has_lod()) {
     step_ = 0;
     predicted_ = 0;
     return base;
   }
+  max_steps = std::clamp(max_steps, 0, kSteps);
+  step_ = std::min(step_, max_steps);
   predicted_ = counter.splats(camera, bound_at(base, step_));
-  while (predicted_ > budget && step_ < kSteps) predicted_ = counter.splats(camera, bound_at(base, ++step_));
+  while (predicted_ > budget && step_ < max_steps) predicted_ = counter.splats(camera, bound_at(base, ++step_));
+  over_budget_ = predicted_ > budget;
   if (predicted_ <= budget && step_ > 0) {
     const std::uint64_t finer = counter.splats(camera, bound_at(base, step_ - 1));
     if (finer * 4 <= budget * 3) {

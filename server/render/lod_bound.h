@@ -15,6 +15,12 @@
 //   each step merges far detail first. It steps back down one step a frame only when the finer
 //   step's count fits within 3/4 of the budget (hysteresis). The choice depends on the pose and
 //   the budget alone, never on timing: a camera standing still keeps its cut.
+// The ladder stops at a ceiling, --lod-max-error (issue 72): the coarsest bound the budget may
+// raise a frame to, at `reference_lines` and scaled with the size as the bound is (by default
+// one x sqrt(2) step above 2 px, the coarsest step within 1 dB of 2 px's picture on the
+// yardstick; RESULTS.md "Level of detail"). A frame whose cut at the ceiling still passes the
+// budget draws at the ceiling over budget (LodBoundChooser::over_budget), and the door refuses the
+// GPU's next visitor (ServerMetrics::gpu_budget_short) rather than blur every visitor's view.
 // The budget is --splat-budget N a frame, or, for CUDA sessions by default (auto), sized from the
 // GPU's measured throughput: the best Gaussians per millisecond that GPU has shown (a frame's
 // Gaussians over its render time, times the frames rendering with it; ServerMetrics::
@@ -36,7 +42,13 @@ struct LodSettings {
   int reference_lines = 720;       // the shorter side at which the bound is bound_px
   std::uint64_t splat_budget = 0;  // --splat-budget N: Gaussians a frame's cut (0: none)
   bool auto_budget = true;         // --splat-budget auto (the default): from the GPU's throughput
+  // --lod-max-error: the coarsest bound the budget may raise a frame to, px at reference_lines
+  // (0: the ladder's top, LodBoundChooser::kSteps above the bound).
+  float max_bound_px = 2.0f * 1.41421356f;
 };
+
+// The ladder steps above `bound_px` that stay within `max_bound_px` (0: LodBoundChooser::kSteps).
+int lod_max_steps(float bound_px, float max_bound_px);
 
 // bound_px x min(1, shorter side / reference_lines). 0 stays 0 (full detail).
 float size_scaled_lod_bound(float bound_px, int width, int height, int reference_lines);
@@ -79,17 +91,21 @@ class LodBoundChooser {
   static constexpr int kSteps = 8;  // ladder steps above the size's bound: up to x16
 
   // The bound for a frame of `camera` whose size-scaled bound is `base` px under `budget`
-  // Gaussians (0: no budget, `base` itself).
-  float choose(const CutCounter& counter, const Camera& camera, float base, std::uint64_t budget);
+  // Gaussians (0: no budget, `base` itself), at most `max_steps` steps above `base`.
+  float choose(const CutCounter& counter, const Camera& camera, float base, std::uint64_t budget,
+               int max_steps = kSteps);
   int step() const { return step_; }
   // The cut's predicted Gaussians at the chosen bound (0 when no budget was in force).
   std::uint64_t predicted_splats() const { return predicted_; }
+  // The last choice reached the ceiling and its cut still passes the budget.
+  bool over_budget() const { return over_budget_; }
 
   static float bound_at(float base, int step);
 
  private:
   int step_ = 0;
   std::uint64_t predicted_ = 0;
+  bool over_budget_ = false;
 };
 
 }  // namespace catgs::server

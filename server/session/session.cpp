@@ -112,6 +112,22 @@ void Session::on_out_of_memory(const std::string& error, int streak) {
   stream_.admit();
 }
 
+bool Session::splat_budget_full() {
+  const LodSettings& lod = shared_.settings.frame.lod;
+  if (gpu_ < 0 || !lod.auto_budget || lod.splat_budget > 0 ||
+      !shared_.metrics.gpu_budget_short(gpu_, ServerMetrics::steady_now_ms(), kBudgetShortMs))
+    return false;
+  shared_.metrics.splat_budget_refusals_total++;
+  char bound[32];
+  std::snprintf(bound, sizeof(bound), "%.2f",
+                LodBoundChooser::bound_at(lod.bound_px, lod_max_steps(lod.bound_px, lod.max_bound_px)));
+  fail(pb::ERROR_SERVER_FULL,
+       "server full: GPU " + std::to_string(gpu_) + "'s sessions already draw at the coarsest bound allowed (" + bound +
+           " px, --lod-max-error) over its splat budget",
+       false, jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
+  return true;
+}
+
 bool Session::reserve_buffers(Renderer& renderer) {
   // The buffers this scene's sessions grew to (none yet: the renderer's first guess), for this
   // viewport: allocated now, so that the frames allocate only to grow past them, and a GPU that
@@ -454,6 +470,7 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
   placed_ = true;
   memory_reserved_ = need;
   gpu_ = shared_.renderer_kind == "cuda" ? place.device : -1;
+  if (splat_budget_full()) return;
   std::unique_ptr<Renderer> renderer;
   try {
     renderer = make_renderer(shared_.renderer_kind, scene_->model, shared_.render_options, nullptr, std::max(gpu_, 0));

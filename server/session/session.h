@@ -149,6 +149,11 @@ class Session : public std::enable_shared_from_this<Session>, private SessionOwn
   std::uint64_t memory_estimate(int width, int height) const;
   // After a frame (or the door's reservation): the buffers' bytes (0: none reported) and shape.
   void update_memory(std::uint64_t buffer_bytes, const BufferShape& shape = {});
+  // The GPU's sessions drew at --lod-max-error over their splat budget within the last
+  // kBudgetShortMs (render/lod_bound.h, issue 72): another would slow them all or, without the
+  // ceiling, blur every view. Refuses this visitor (ERROR_SERVER_FULL) and returns true.
+  bool splat_budget_full();
+  static constexpr std::int64_t kBudgetShortMs = 2000;
   // At the door (issue 73): the renderer's buffers for the viewport and the scene's measured peak
   // (LoadedScene::session_shape_peak) allocated now. False: they did not fit, and the visitor
   // was refused (ERROR_SERVER_FULL, its reservation given back).

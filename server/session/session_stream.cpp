@@ -227,6 +227,7 @@ void SessionStream::count(const JobResult& result) {
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   m.speculation_window.observe(result.speculation_window);
+  m.frame_lod_bound_px.observe(result.lod_error_px);
 }
 
 void SessionStream::on_sent(Clock::time_point written, const SocketSample& socket) {

@@ -155,6 +155,45 @@ TEST(LodBound, BudgetStepsUpUntilTheCutFitsAndDownWithHysteresis) {
   // A budget nothing fits: the top of the ladder, no further.
   LodBoundChooser starved;
   EXPECT_FLOAT_EQ(starved.choose(counter, v, base, 1), LodBoundChooser::bound_at(base, LodBoundChooser::kSteps));
+  EXPECT_TRUE(starved.over_budget());
+  EXPECT_FALSE(tight.over_budget());
+}
+
+// --lod-max-error (issue 72): the ladder stops at the ceiling, and a cut that still passes the
+// budget there says so (the door then refuses the GPU's next visitor) rather than blurring on.
+TEST(LodBound, CeilingStopsTheLadderAndSaysWhenTheBudgetIsShort) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const test::SmallCity& c = small_flowers_city();
+  const CutCounter counter(*c.lod);
+  const Camera& v = c.views[2];
+  const float base = 0.5f;
+  LodBoundChooser free_ladder;
+  const std::uint64_t budget = counter.splats(v, base) / 2;
+  const float tau = free_ladder.choose(counter, v, base, budget);
+  const int needed = free_ladder.step();
+  ASSERT_GE(needed, 2) << "the test needs a budget two steps or more up the ladder";
+  // A ceiling one step short of what the budget asks: the frame draws there, over its budget.
+  LodBoundChooser held;
+  const float capped = held.choose(counter, v, base, budget, needed - 1);
+  EXPECT_FLOAT_EQ(capped, LodBoundChooser::bound_at(base, needed - 1));
+  EXPECT_LT(capped, tau);
+  EXPECT_TRUE(held.over_budget());
+  EXPECT_GT(held.predicted_splats(), budget);
+  // A ceiling at or above the step needed: as without one.
+  LodBoundChooser roomy;
+  EXPECT_FLOAT_EQ(roomy.choose(counter, v, base, budget, needed), tau);
+  EXPECT_FALSE(roomy.over_budget());
+  // A chooser that stood higher (a ceiling lowered since) comes down to it at once.
+  EXPECT_FLOAT_EQ(free_ladder.choose(counter, v, base, budget, 0), base);
+  EXPECT_TRUE(free_ladder.over_budget());
+  // The ceiling in steps: 2 px to 2.83 px is one x sqrt(2) step, 4 px two, 0 (off) the ladder's top.
+  EXPECT_EQ(lod_max_steps(2.0f, 2.83f), 1);
+  EXPECT_EQ(lod_max_steps(2.0f, 2.0f * std::sqrt(2.0f)), 1);
+  EXPECT_EQ(lod_max_steps(2.0f, 4.0f), 2);
+  EXPECT_EQ(lod_max_steps(2.0f, 2.5f), 0);
+  EXPECT_EQ(lod_max_steps(2.0f, 1.0f), 0);
+  EXPECT_EQ(lod_max_steps(2.0f, 0.0f), LodBoundChooser::kSteps);
+  EXPECT_EQ(lod_max_steps(2.0f, 1000.0f), LodBoundChooser::kSteps);
 }
 
 TEST(LodBound, AutoBudgetSharesTheGpusThroughputInPowersOfSqrt2) {
@@ -188,6 +227,19 @@ TEST(LodBound, SplatBudgetOption) {
   const char* a3[] = {"catgs-server", "--splat-budget", "lots"};
   ServerOptions o3;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a3), o3), std::invalid_argument);
+  // --lod-max-error: one step above 2 px by default, a value, or off (the ladder's top).
+  EXPECT_NEAR(session_settings(ServerOptions{}).frame.lod.max_bound_px, 2.828f, 1e-3f);
+  const char* a4[] = {"catgs-server", "--lod-max-error", "4"};
+  ServerOptions o4;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a4), o4));
+  EXPECT_EQ(session_settings(o4).frame.lod.max_bound_px, 4.0f);
+  const char* a5[] = {"catgs-server", "--lod-max-error", "off"};
+  ServerOptions o5;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a5), o5));
+  EXPECT_EQ(session_settings(o5).frame.lod.max_bound_px, 0.0f);
+  const char* a6[] = {"catgs-server", "--lod-max-error", "-1"};
+  ServerOptions o6;
+  EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a6), o6), std::invalid_argument);
 }
 
 }  // namespace

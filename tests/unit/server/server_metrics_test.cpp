@@ -123,4 +123,28 @@ TEST(ServerMetrics, GpuThroughputCountsTheFramesRenderingTogether) {
   EXPECT_EQ(m.gpu_splats_per_ms(0), 0.0);
 }
 
+// A GPU whose sessions drew at --lod-max-error over their splat budget (render/lod_bound.h) is
+// short for a while after the last such frame, and only that GPU; the bound of each frame is a
+// histogram.
+TEST(ServerMetrics, GpuBudgetShortForAWhileAfterTheLastFrameOverIt) {
+  ServerMetrics m;
+  m.set_gpus({0, 3}, [] { return std::vector<std::int64_t>{0, 0}; });
+  EXPECT_FALSE(m.gpu_budget_short(3, 0, 2000)) << "never short";
+  m.note_gpu_budget_short(3, 10000);
+  EXPECT_TRUE(m.gpu_budget_short(3, 10000, 2000));
+  EXPECT_TRUE(m.gpu_budget_short(3, 12000, 2000));
+  EXPECT_FALSE(m.gpu_budget_short(3, 12001, 2000)) << "no frame over it for longer than the window";
+  EXPECT_FALSE(m.gpu_budget_short(0, 10000, 2000)) << "another GPU";
+  m.note_gpu_budget_short(7, 10000);  // not a GPU of set_gpus: ignored
+  EXPECT_FALSE(m.gpu_budget_short(7, 10000, 2000));
+  m.frame_lod_bound_px.observe(2.0);
+  m.frame_lod_bound_px.observe(2.83);
+  m.lod_over_budget_frames_total++;
+  const std::string text = m.prometheus_text();
+  EXPECT_NE(text.find("catgs_frame_lod_bound_px_bucket{le=\"2.01\"} 1"), std::string::npos) << text;
+  EXPECT_NE(text.find("catgs_frame_lod_bound_px_bucket{le=\"2.83\"} 2"), std::string::npos);
+  EXPECT_NE(text.find("catgs_lod_over_budget_frames_total 1"), std::string::npos);
+  EXPECT_NE(text.find("catgs_splat_budget_refusals_total 0"), std::string::npos);
+}
+
 }  // namespace
