@@ -454,7 +454,7 @@ j['server_metrics'] = {k: m.get(k) for k in keys}
 j['hog_gib'] = float(hog)
 json.dump(j, open(path, 'w'), indent=1)
 streamed = t['sessions'] - t['refused'] - t['failed']
-bounds = [s.get('lod_error_px_mean', 0) for s in j['run']['sessions'] if not s.get('refused')] or [0]
+bounds = [s['server']['lod_error_px_mean'] for s in j['run']['sessions'] if s.get('server') and s['server'].get('lod_error_px_mean', 0) > 0] or [0]
 print('%s sessions asked: %d streamed, %d refused, %d failed; slowest %.1f FPS, p95 %.1f ms; server: %d refused at the door '
       '(%d by the driver), %d frames drawn after a failed growth, %d dropped; driver free %.1f GiB; splat budget: %d refused, '
       '%d frames over it at the ceiling; LOD bound px mean %.2f, max of session means %.2f' % (
