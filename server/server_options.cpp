@@ -106,6 +106,8 @@ std::string server_usage() {
          "                        720 lines (default 2.83: one step above 2 px, within 1 dB of its\n"
          "                        picture); past it a GPU refuses the next visitor (server full)\n"
          "                        instead of blurring every view; off: up to 16x --lod-error\n"
+         "  --splat-budget-share F  the share of a GPU's measured throughput (Gaussians a ms) the\n"
+         "                        auto budget hands out to its sessions, in (0, 1] (default 0.4)\n"
          "  --occlusion-cull on|off  exact frames skip the chunks the session's last frame found\n"
          "                        wholly behind its saturated tiles (default on)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
@@ -301,6 +303,8 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.lod = v;
     } else if (a == "--lod-error")
       out.lod_error_px = static_cast<float>(parse_double(a, v, 0.0, 1e6));
+    else if (a == "--splat-budget-share")
+      out.splat_budget_share = parse_double(a, v, 0.01, 1.0);
     else if (a == "--lod-max-error")
       out.lod_max_error_px = v == "off" ? 0.0f : static_cast<float>(parse_double(a, v, 0.0, 1e6));
     else if (a == "--occlusion-cull") {
@@ -490,6 +494,7 @@ SessionSettings session_settings(const ServerOptions& o) {
   s.frame.lod.splat_budget = o.splat_budget;
   s.frame.lod.auto_budget = o.auto_splat_budget;
   s.frame.lod.max_bound_px = o.lod_max_error_px;
+  s.frame.lod.budget_share = o.splat_budget_share;
   return s;
 }
 

@@ -56,6 +56,8 @@ struct ServerOptions {
   // --lod-max-error: the coarsest bound the splat budget may raise a frame to (LodSettings::
   // max_bound_px; 0 = off, the ladder's top). Past it the door refuses the GPU's next visitor.
   float lod_max_error_px = 2.0f * 1.41421356f;
+  // --splat-budget-share: the share of a GPU's measured throughput the auto budget hands out.
+  double splat_budget_share = 0.4;
   // --occlusion-cull on|off: exact frames skip the chunks that the session's last frame found
   // wholly behind its saturated tiles (RenderOptions::occlusion_culling,
   // render_core/forward_model/occlusion.h; issue 72). Default on.

@@ -266,10 +266,12 @@ void ServerMetrics::set_gpus(std::vector<int> devices, std::function<std::vector
   gpu_splats_per_ms_ = std::make_unique<std::atomic<std::int64_t>[]>(gpu_devices_.size());
   gpu_in_flight_ = std::make_unique<std::atomic<int>[]>(gpu_devices_.size());
   gpu_budget_short_at_ = std::make_unique<std::atomic<std::int64_t>[]>(gpu_devices_.size());
+  gpu_budget_short_sessions_ = std::make_unique<std::atomic<std::int64_t>[]>(gpu_devices_.size());
   for (std::size_t k = 0; k < gpu_devices_.size(); ++k) {
     gpu_splats_per_ms_[k] = 0;
     gpu_in_flight_[k] = 0;
     gpu_budget_short_at_[k] = INT64_MIN;
+    gpu_budget_short_sessions_[k] = 0;
   }
 }
 
@@ -310,14 +312,16 @@ std::int64_t ServerMetrics::steady_now_ms() {
 
 void ServerMetrics::note_gpu_budget_short(int device, std::int64_t now_ms) {
   const int k = gpu_index(device);
-  if (k >= 0) gpu_budget_short_at_[k] = now_ms;
+  if (k < 0) return;
+  gpu_budget_short_sessions_[k] = gpu_sessions(device);
+  gpu_budget_short_at_[k] = now_ms;
 }
 
 bool ServerMetrics::gpu_budget_short(int device, std::int64_t now_ms, std::int64_t within_ms) const {
   const int k = gpu_index(device);
   if (k < 0) return false;
   const std::int64_t at = gpu_budget_short_at_[k].load();
-  return at != INT64_MIN && now_ms - at <= within_ms;
+  return at != INT64_MIN && now_ms - at <= within_ms && gpu_sessions(device) >= gpu_budget_short_sessions_[k].load();
 }
 
 double ServerMetrics::gpu_splats_per_ms(int device) const {

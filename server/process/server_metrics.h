@@ -205,8 +205,10 @@ struct ServerMetrics {
   int gpu_render_end(int device);
   double gpu_splats_per_ms(int device) const;
   // A frame on `device` drew at the ceiling (--lod-max-error) over its splat budget at `now_ms`
-  // (a steady clock, ms); gpu_budget_short: one did within `within_ms` before `now_ms`, so the
-  // GPU holds no more visitors at the picture's floor (render/lod_bound.h). Thread-safe.
+  // (a steady clock, ms), with gpu_sessions(device) sessions there; gpu_budget_short: one did
+  // within `within_ms` before `now_ms` and the GPU has as many sessions now (visitors who left
+  // since made room), so it holds no more visitors at the picture's floor (render/lod_bound.h).
+  // Thread-safe.
   void note_gpu_budget_short(int device, std::int64_t now_ms);
   static std::int64_t steady_now_ms();  // the clock those take
   bool gpu_budget_short(int device, std::int64_t now_ms, std::int64_t within_ms) const;
@@ -219,10 +221,11 @@ struct ServerMetrics {
  private:
   std::vector<int> gpu_devices_;
   std::function<std::vector<std::int64_t>()> gpu_sessions_;
-  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;        // by index in gpu_devices_
-  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_splats_per_ms_;    // by index, rounded down
-  std::unique_ptr<std::atomic<int>[]> gpu_in_flight_;                 // by index
-  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_budget_short_at_;  // by index: ms, INT64_MIN never
+  std::vector<std::unique_ptr<Histogram>> gpu_render_seconds_;              // by index in gpu_devices_
+  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_splats_per_ms_;          // by index, rounded down
+  std::unique_ptr<std::atomic<int>[]> gpu_in_flight_;                       // by index
+  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_budget_short_at_;        // by index: ms, INT64_MIN never
+  std::unique_ptr<std::atomic<std::int64_t>[]> gpu_budget_short_sessions_;  // by index: sessions then
   int gpu_index(int device) const;
 };
 

@@ -15,10 +15,10 @@ float size_scaled_lod_bound(float bound_px, int width, int height, int reference
   return bound_px * std::min(1.0f, static_cast<float>(shorter) / static_cast<float>(reference_lines));
 }
 
-std::uint64_t auto_splat_budget(double splats_per_ms, std::int64_t sessions) {
+std::uint64_t auto_splat_budget(double splats_per_ms, std::int64_t sessions, double share) {
   if (!(splats_per_ms > 0.0)) return 0;
-  constexpr double kSlotMs = 1000.0 / 60.0, kShare = 0.8;
-  const double budget = splats_per_ms * kSlotMs * kShare / static_cast<double>(std::max<std::int64_t>(1, sessions));
+  constexpr double kSlotMs = 1000.0 / 60.0;
+  const double budget = splats_per_ms * kSlotMs * share / static_cast<double>(std::max<std::int64_t>(1, sessions));
   // Down to a power of sqrt(2): the estimate creeps up as faster frames are seen, the cut should not.
   const double steps = std::floor(std::log2(std::max(budget, 1.0)) * 2.0);
   return std::max(kAutoBudgetFloor, static_cast<std::uint64_t>(std::exp2(steps / 2.0)));
@@ -112,6 +112,7 @@ float LodBoundChooser::choose(const CutCounter& counter, const Camera& camera, f
                               int max_steps) {
   over_budget_ = false;
   if (budget == 0 || !(base > 0.0f) || !counter.has_lod()) {
+    over_budget_streak_ = 0;
     step_ = 0;
     predicted_ = 0;
     return base;
@@ -121,6 +122,7 @@ float LodBoundChooser::choose(const CutCounter& counter, const Camera& camera, f
   predicted_ = counter.splats(camera, bound_at(base, step_));
   while (predicted_ > budget && step_ < max_steps) predicted_ = counter.splats(camera, bound_at(base, ++step_));
   over_budget_ = predicted_ > budget;
+  over_budget_streak_ = over_budget_ ? over_budget_streak_ + 1 : 0;
   if (predicted_ <= budget && step_ > 0) {
     const std::uint64_t finer = counter.splats(camera, bound_at(base, step_ - 1));
     if (finer * 4 <= budget * 3) {

@@ -19,12 +19,14 @@
 // raise a frame to, at `reference_lines` and scaled with the size as the bound is (by default
 // one x sqrt(2) step above 2 px, the coarsest step within 1 dB of 2 px's picture on the
 // yardstick; RESULTS.md "Level of detail"). A frame whose cut at the ceiling still passes the
-// budget draws at the ceiling over budget (LodBoundChooser::over_budget), and the door refuses the
-// GPU's next visitor (ServerMetrics::gpu_budget_short) rather than blur every visitor's view.
+// budget draws at the ceiling over budget (LodBoundChooser::over_budget); after kShortStreak such
+// frames in a row of one session, the door refuses the GPU's next visitor
+// (ServerMetrics::gpu_budget_short) rather than blur or slow every visitor's view.
 // The budget is --splat-budget N a frame, or, for CUDA sessions by default (auto), sized from the
 // GPU's measured throughput: the best Gaussians per millisecond that GPU has shown (a frame's
 // Gaussians over its render time, times the frames rendering with it; ServerMetrics::
-// gpu_splats_per_ms), times a 60 Hz frame slot, times 0.8, shared by the
+// gpu_splats_per_ms), times a 60 Hz frame slot, times a share (--splat-budget-share, 0.4: the
+// best frame's rate overstates what a loaded GPU sustains; RESULTS.md "Level of detail"), shared by the
 // sessions rendering on that GPU, rounded down to a power of sqrt(2) so small changes of the
 // estimate do not move the cut. A scene without LOD has no cut to coarsen: the bound is unused.
 #pragma once
@@ -45,6 +47,8 @@ struct LodSettings {
   // --lod-max-error: the coarsest bound the budget may raise a frame to, px at reference_lines
   // (0: the ladder's top, LodBoundChooser::kSteps above the bound).
   float max_bound_px = 2.0f * 1.41421356f;
+  // --splat-budget-share: the share of the GPU's measured throughput the auto budget hands out.
+  double budget_share = 0.4;
 };
 
 // The ladder steps above `bound_px` that stay within `max_bound_px` (0: LodBoundChooser::kSteps).
@@ -62,9 +66,9 @@ float size_scaled_lod_bound(float bound_px, int width, int height, int reference
 inline constexpr std::uint64_t kAutoBudgetFloor = std::uint64_t{1} << 20;
 
 // The auto budget (see above): Gaussians a frame for one of `sessions` sessions sharing a GPU
-// that draws `splats_per_ms`, at least kAutoBudgetFloor; 0 (no budget) while the throughput is
-// not known yet.
-std::uint64_t auto_splat_budget(double splats_per_ms, std::int64_t sessions);
+// that draws `splats_per_ms`, `share` of it handed out, at least kAutoBudgetFloor; 0 (no budget)
+// while the throughput is not known yet.
+std::uint64_t auto_splat_budget(double splats_per_ms, std::int64_t sessions, double share = 0.4);
 
 // Counts the Gaussians of a LOD cut inside a view without visiting the nodes below the cut: the
 // tree from its roots down (children lists built once from LodNode::parent).
@@ -97,8 +101,12 @@ class LodBoundChooser {
   int step() const { return step_; }
   // The cut's predicted Gaussians at the chosen bound (0 when no budget was in force).
   std::uint64_t predicted_splats() const { return predicted_; }
-  // The last choice reached the ceiling and its cut still passes the budget.
+  // The last choice reached the ceiling and its cut still passes the budget; over_budget_streak:
+  // how many choices in a row did (one view, or a budget sized from a GPU's first frames, is no
+  // lack of room: the door reads a streak, kShortStreak).
   bool over_budget() const { return over_budget_; }
+  int over_budget_streak() const { return over_budget_streak_; }
+  static constexpr int kShortStreak = 30;  // half a second at 60 frames/s
 
   static float bound_at(float base, int step);
 
@@ -106,6 +114,7 @@ class LodBoundChooser {
   int step_ = 0;
   std::uint64_t predicted_ = 0;
   bool over_budget_ = false;
+  int over_budget_streak_ = 0;
 };
 
 }  // namespace catgs::server

@@ -44,6 +44,8 @@ const char* kUsage =
     "  --scene-name NAME        ask the server for this scene (a name from its GET /scenes;\n"
     "                           default: its first)\n"
     "  --offset-s S             session i starts i*S seconds into its trace (default 0.37)\n"
+    "  --arrive-every-ms MS     session i connects i*MS ms after the run starts (visitors\n"
+    "                           arriving one by one; default 0: all at once)\n"
     "  --rate HZ                poses per second per session (default 60; 0 = closed loop)\n"
     "  --depth D                closed loop: poses outstanding (default 1)\n"
     "  --seconds S              how long each run sends poses (default 10)\n"
@@ -120,6 +122,7 @@ std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConf
     LoadSessionConfig c = templates[static_cast<std::size_t>(i) % templates.size()];
     c.index = i;
     c.offset_s *= i;
+    c.arrive_after_s *= i;
     c.progress = &progress;
     threads.emplace_back([c, &results, i] { results[static_cast<std::size_t>(i)] = run_load_session(c); });
   }
@@ -152,6 +155,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
   base.token = args.get("--token");
   base.scene_name = args.get("--scene-name");
   base.offset_s = args.get_double("--offset-s", 0.37);
+  base.arrive_after_s = args.get_double("--arrive-every-ms", 0) / 1000.0;
   base.rate_hz = args.get_double("--rate", 60);
   base.depth = std::max(1, args.get_int("--depth", 1));
   base.seconds = args.get_double("--seconds", 10);
@@ -273,13 +277,15 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
 
 int main(int argc, char** argv) {
   try {
-    const tools::Args args(
-        argc, argv, {"--host",       "--port",     "--sessions",      "--size",           "--width",     "--height",
-                     "--trace",      "--scene",    "--scene-name",    "--offset-s",       "--rate",      "--depth",
-                     "--seconds",    "--decode",   "--check-every",   "--check-min-psnr", "--warmup",    "--warmup-s",
-                     "--stale-ms",   "--token",    "--json",          "--ramp!",          "--ramp-step", "--ramp-start",
-                     "--max-p95-ms", "--min-fps",  "--progress",      "--tls!",           "--help!",     "--timeline!",
-                     "--av1!",       "--receipts", "--read-stall-ms", "--still-s"});
+    const tools::Args args(argc, argv, {"--host",           "--port",          "--sessions",        "--size",
+                                        "--width",          "--height",        "--arrive-every-ms", "--trace",
+                                        "--scene",          "--scene-name",    "--offset-s",        "--rate",
+                                        "--depth",          "--seconds",       "--decode",          "--check-every",
+                                        "--check-min-psnr", "--warmup",        "--warmup-s",        "--stale-ms",
+                                        "--token",          "--json",          "--ramp!",           "--ramp-step",
+                                        "--ramp-start",     "--max-p95-ms",    "--min-fps",         "--progress",
+                                        "--tls!",           "--help!",         "--timeline!",       "--av1!",
+                                        "--receipts",       "--read-stall-ms", "--still-s"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;

@@ -406,6 +406,7 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
     throw std::invalid_argument("loadgen: the reference check needs the scene (--scene)");
   Progress* progress = cfg.progress;
   bool open = false;
+  if (cfg.arrive_after_s > 0) std::this_thread::sleep_for(std::chrono::duration<double>(cfg.arrive_after_s));
   try {
     StreamClient client;
     const pb::Welcome welcome = open_session(cfg, client, r);

@@ -53,6 +53,7 @@ struct LoadSessionConfig {
   std::string trace = "orbit";                 // make_load_trace spec
   std::shared_ptr<const GaussianModel> scene;  // optional; needed by "real:" traces
   double offset_s = 0;                         // start this far into the trace
+  double arrive_after_s = 0;                   // connect this long after the run starts (visitors arriving in turn)
   double rate_hz = 60;                         // poses per second; 0: closed loop (`depth` poses outstanding)
   int depth = 1;
   double seconds = 10;     // how long poses are sent

@@ -186,6 +186,18 @@ TEST(LodBound, CeilingStopsTheLadderAndSaysWhenTheBudgetIsShort) {
   // A chooser that stood higher (a ceiling lowered since) comes down to it at once.
   EXPECT_FLOAT_EQ(free_ladder.choose(counter, v, base, budget, 0), base);
   EXPECT_TRUE(free_ladder.over_budget());
+  // Over budget in a row: the streak the door reads; a frame within the budget ends it.
+  LodBoundChooser streak;
+  for (int k = 1; k <= 3; ++k) {
+    streak.choose(counter, v, base, budget, needed - 1);
+    EXPECT_EQ(streak.over_budget_streak(), k);
+  }
+  streak.choose(counter, v, base, budget, needed);
+  EXPECT_EQ(streak.over_budget_streak(), 0);
+  streak.choose(counter, v, base, budget, needed - 1);
+  EXPECT_EQ(streak.over_budget_streak(), 1);
+  streak.choose(counter, v, base, 0, needed - 1);  // no budget
+  EXPECT_EQ(streak.over_budget_streak(), 0);
   // The ceiling in steps: 2 px to 2.83 px is one x sqrt(2) step, 4 px two, 0 (off) the ladder's top.
   EXPECT_EQ(lod_max_steps(2.0f, 2.83f), 1);
   EXPECT_EQ(lod_max_steps(2.0f, 2.0f * std::sqrt(2.0f)), 1);
@@ -198,18 +210,23 @@ TEST(LodBound, CeilingStopsTheLadderAndSaysWhenTheBudgetIsShort) {
 
 TEST(LodBound, AutoBudgetSharesTheGpusThroughputInPowersOfSqrt2) {
   EXPECT_EQ(auto_splat_budget(0.0, 1), 0u);  // not known yet: no budget
-  const std::uint64_t one = auto_splat_budget(2.0e6, 1), four = auto_splat_budget(2.0e6, 4);
-  // 2 M Gaussians a ms x 16.7 ms x 0.8 = 26.7 M, down to a power of sqrt(2).
+  const std::uint64_t one = auto_splat_budget(2.0e6, 1, 0.8), four = auto_splat_budget(2.0e6, 4, 0.8);
+  // 2 M Gaussians a ms x 16.7 ms x a share of 0.8 = 26.7 M, down to a power of sqrt(2).
   EXPECT_LE(one, 26'666'667u);
   EXPECT_GT(static_cast<double>(one), 26'666'667.0 / std::sqrt(2.0));
   EXPECT_LE(four, one / 4 + 1);
   EXPECT_GT(static_cast<double>(four), static_cast<double>(one) / 4.0 / std::sqrt(2.0));
   // Rounded: 10% more throughput moves the budget by one step or not at all.
-  const double steps = std::log2(static_cast<double>(auto_splat_budget(2.2e6, 1)) / static_cast<double>(one)) * 2.0;
+  const double steps =
+      std::log2(static_cast<double>(auto_splat_budget(2.2e6, 1, 0.8)) / static_cast<double>(one)) * 2.0;
   EXPECT_TRUE(std::abs(steps) < 1e-6 || std::abs(steps - 1.0) < 1e-6) << steps;
   // A slow GPU shared by many (or one slow first frame) asks no frame for fewer than the floor.
   EXPECT_EQ(auto_splat_budget(2.8e3, 4), kAutoBudgetFloor);
-  EXPECT_GT(auto_splat_budget(2.0e6, 16), kAutoBudgetFloor);
+  EXPECT_GT(auto_splat_budget(2.0e6, 16, 0.8), kAutoBudgetFloor);
+  // Half the share, half the budget (to the power of sqrt(2) below).
+  const std::uint64_t half = auto_splat_budget(2.0e6, 1, 0.4);
+  EXPECT_LE(half, 13'333'334u);
+  EXPECT_GT(static_cast<double>(half), 13'333'334.0 / std::sqrt(2.0));
 }
 
 TEST(LodBound, SplatBudgetOption) {
@@ -240,6 +257,15 @@ TEST(LodBound, SplatBudgetOption) {
   const char* a6[] = {"catgs-server", "--lod-max-error", "-1"};
   ServerOptions o6;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a6), o6), std::invalid_argument);
+  // --splat-budget-share: 0.4 by default, in (0, 1].
+  EXPECT_EQ(session_settings(ServerOptions{}).frame.lod.budget_share, 0.4);
+  const char* a7[] = {"catgs-server", "--splat-budget-share", "0.5"};
+  ServerOptions o7;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a7), o7));
+  EXPECT_EQ(session_settings(o7).frame.lod.budget_share, 0.5);
+  const char* a8[] = {"catgs-server", "--splat-budget-share", "1.5"};
+  ServerOptions o8;
+  EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a8), o8), std::invalid_argument);
 }
 
 }  // namespace

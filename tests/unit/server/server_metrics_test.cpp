@@ -128,12 +128,17 @@ TEST(ServerMetrics, GpuThroughputCountsTheFramesRenderingTogether) {
 // histogram.
 TEST(ServerMetrics, GpuBudgetShortForAWhileAfterTheLastFrameOverIt) {
   ServerMetrics m;
-  m.set_gpus({0, 3}, [] { return std::vector<std::int64_t>{0, 0}; });
+  std::vector<std::int64_t> sessions{0, 10};
+  m.set_gpus({0, 3}, [&sessions] { return sessions; });
   EXPECT_FALSE(m.gpu_budget_short(3, 0, 2000)) << "never short";
-  m.note_gpu_budget_short(3, 10000);
+  m.note_gpu_budget_short(3, 10000);  // with 10 sessions on GPU 3
   EXPECT_TRUE(m.gpu_budget_short(3, 10000, 2000));
+  sessions[1] = 11;  // a visitor at the door counts as placed there
   EXPECT_TRUE(m.gpu_budget_short(3, 12000, 2000));
   EXPECT_FALSE(m.gpu_budget_short(3, 12001, 2000)) << "no frame over it for longer than the window";
+  sessions[1] = 9;  // a visitor left since: room for one
+  EXPECT_FALSE(m.gpu_budget_short(3, 11000, 2000));
+  sessions[1] = 10;
   EXPECT_FALSE(m.gpu_budget_short(0, 10000, 2000)) << "another GPU";
   m.note_gpu_budget_short(7, 10000);  // not a GPU of set_gpus: ignored
   EXPECT_FALSE(m.gpu_budget_short(7, 10000, 2000));
