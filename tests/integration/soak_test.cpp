@@ -246,14 +246,17 @@ TEST(Soak, HealthySessionsKeepStreamingThroughChurnAndHostileClients) {
   // A leak raises the floor of RSS; sessions that come and go move it by +-20 MiB from one 5 s
   // sample to the next (seen: 402, 385, 386, 385, 404, 388 MiB; and in CI a floor of 392 MiB in
   // the first half, 412 in the second), so comparing two single samples flakes. Compare the lowest
-  // sample of the second half with the lowest of the first: 32 MiB over half a run (about 45
-  // churn cycles) catches a leak of ~0.7 MiB a cycle, less than a session's renderer and encoder.
-  // Flatness over a long run is the 600 s soak's (RESULTS.md, CATGS_SOAK_SECONDS=600).
+  // sample of the second half with the lowest of the first. Since sessions reserve their buffers at
+  // the door (issue 73) the floors moved by -13 to +34 MiB between halves on the 2-core build
+  // machine (+34 with a build beside it; +42 with malloc_trim after each session, tried and not
+  // kept), so 32 MiB flaked (issue 75): 64 MiB over half a run (about 50 churn cycles) still
+  // catches a leak of ~1.3 MiB a cycle, less than a session's renderer and encoder. Flatness over
+  // a long run is the 600 s soak's (RESULTS.md, CATGS_SOAK_SECONDS=600).
   const std::size_t mid = samples.size() / 2;
   const auto by_rss = [](const Sample& a, const Sample& b) { return a.rss_kib < b.rss_kib; };
   const long floor_first = std::min_element(samples.begin(), samples.begin() + mid, by_rss)->rss_kib;
   const long floor_second = std::min_element(samples.begin() + mid, samples.end(), by_rss)->rss_kib;
-  EXPECT_LT(floor_second - floor_first, 32 * 1024)
+  EXPECT_LT(floor_second - floor_first, 64 * 1024)
       << "the lowest server RSS of the second half is above the first half's: it grew, a leak";
 
   // The report.
