@@ -15,8 +15,8 @@ namespace catgs::cuda {
 namespace {
 
 // Host -> device copies through two pinned staging buffers (issue 74). A cudaMemcpy from pageable
-// memory goes through the driver's own small staging area: the 197-copy city's 11.4 GiB took
-// 7.0 s, 1.6 GB/s. From pinned memory the copy is DMA at the bus's speed, and the host fills one
+// memory goes through the driver's own small staging area, a fraction of the bus's speed (the
+// rates before and after: RESULTS.md "Level of detail"). From pinned memory the copy is DMA, and the host fills one
 // buffer (in parallel blocks: one thread's memcpy is slower than the bus) while the other is on
 // the bus. Where the host refuses pinned memory, the same copies go from a pageable buffer.
 class StagedCopier {
