@@ -31,8 +31,10 @@
 # MAX P95_MS MIN_FPS [SERVER ARGS]` (sessions until a bound breaks; scripts/ramp_table.py);
 # the level of detail in the server (issue 46): `bigcity R NAME` (49 or 101 copies) and
 # `firstframe NAME SCENE WxH [SERVER ARGS]` (start to listening, the first session's frames),
-# `pictures SCENE WxH BOUNDS` (catgs-bench's yardstick and PNGs of full detail, the cut and the
-# supersampled render); `hogramp NAME SCENE WxH HOG_GIB START STEP MAX [SERVER ARGS]` (issue 73: the
+# `pictures SCENE WxH BOUNDS [BENCH ARGS]` (catgs-bench's yardstick and PNGs of full detail, the
+# cut and the supersampled render); the compact scene (issue 74): `compactcity R NAME`,
+# `compactcopy NAME`, `readrate FILE` (a scene NAME.catgs is served in place of
+# NAME.compressed.ply where it exists); `hogramp NAME SCENE WxH HOG_GIB START STEP MAX [SERVER ARGS]` (issue 73: the
 # ramp beside another process that holds HOG_GIB GiB of the GPU).
 # CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
@@ -106,6 +108,12 @@ unpack() {
 }
 
 # start_server SCENE LOG ARGS...: starts catgs-server on a free port, sets SERVER_PID and PORT.
+# The scene file of NAME under /tmp/catgs_sweep: NAME.catgs (a compact scene, issue 74) where it
+# exists, else NAME.compressed.ply.
+scene_file() {
+  local W=/tmp/catgs_sweep
+  if [ -f "$W/$1.catgs" ]; then echo "$W/$1.catgs"; else echo "$W/$1.compressed.ply"; fi
+}
 start_server() {
   local scene=$1 log=$2
   shift 2
@@ -258,27 +266,62 @@ firstframe() {
   export LD_LIBRARY_PATH=$SRV/lib
   local t0 t1
   t0=$(date +%s.%N)
-  start_server "$W/$scene.compressed.ply" "$W/server_first-$name.log" "$@" || return 1
+  start_server "$(scene_file "$scene")" "$W/server_first-$name.log" "$@" || return 1
   t1=$(date +%s.%N)
   "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions 1 --size "$size" --trace "$W/${scene}_mipnerf360_bicycle.trace" \
     --rate 60 --seconds 3 --warmup 0 --json "$W/json/first-$name.json" > "$W/first_$name.txt" 2>&1
   stop_server
   { echo "== $name: listening with the scene loaded $(python3 -c "print('%.2f' % ($t1 - $t0))") s after start"
-    grep -E "scene|level of detail|LOD|uploaded|listening" "$W/server_first-$name.log" | head -12
+    grep -E "scene|level of detail|LOD|uploaded|loaded|listening" "$W/server_first-$name.log" | head -12
     tail -5 "$W/first_$name.txt"; } | tee "$OUT/firstframe-$name.log"
 }
 
-# pictures SCENE WxH BOUNDS: catgs-bench (prepare with CATGS_CARRY_BENCH=1) on SCENE's bicycle
-# path, exact, LOD built, the bounds BOUNDS (e.g. 0,2) timed and scored against full detail and
-# a 4x supersampled render; PNGs of the middle pose (each bound, full detail, the supersampled
-# reference) -> $OUT/pictures/SCENE_WxH/, the JSON -> $OUT/yardstick_SCENE_WxH.json.
+# pictures SCENE WxH BOUNDS [BENCH ARGS]: catgs-bench (prepare with CATGS_CARRY_BENCH=1) on
+# SCENE's bicycle path, exact, LOD built, the bounds BOUNDS (e.g. 0,2) timed and scored against
+# full detail and a 4x supersampled render; PNGs of the middle pose (each bound, full detail, the
+# supersampled reference) -> $OUT/pictures/SCENE_WxH[_TAG]/, the JSON ->
+# $OUT/yardstick_SCENE_WxH[_TAG].json (TAG: $CATGS_PICTURES_TAG; e.g. `--compact`, issue 74).
+# The scene is SCENE.compressed.ply (not a compact copy: --compact measures the quantization).
 pictures() {
-  local scene=$1 size=$2 bounds=$3 W=/tmp/catgs_sweep
+  local scene=$1 size=$2 bounds=$3 W=/tmp/catgs_sweep tag=${CATGS_PICTURES_TAG:+_$CATGS_PICTURES_TAG}
+  shift 3
   export LD_LIBRARY_PATH=$SRV/lib
   "$SRV/bin/catgs-bench" --scene "$W/$scene.compressed.ply" --lod --trace "$W/${scene}_mipnerf360_bicycle.trace" \
     --renderer cuda --width "${size%x*}" --height "${size#*x}" --pipeline exact --lod-error "$bounds" \
-    --frames 120 --warmup 10 --quality-every 12 --aa-reference 4 --snapshot-dir "$OUT/pictures/${scene}_$size" \
-    --json "$OUT/yardstick_${scene}_$size.json"
+    --frames 120 --warmup 10 --quality-every 12 --aa-reference 4 --snapshot-dir "$OUT/pictures/${scene}_$size$tag" \
+    --json "$OUT/yardstick_${scene}_$size$tag.json" "$@"
+}
+
+# compactcity R NAME: the city of R (catgs-scene tile) written straight as a compact scene with
+# its level of detail, $W/NAME.catgs (issue 74: the 405-copy city fits the GPU machine's disk
+# only so), and its three real paths; peak memory and times -> $OUT/compactcity-NAME.log.
+compactcity() {
+  local r=$1 name=$2 W=/tmp/catgs_sweep S=$ROOT/.carry_srv
+  export LD_LIBRARY_PATH=$SRV/lib
+  [ -f "$W/${name}_flowers_sh3.trace" ] && return 0
+  { /usr/bin/time -f "tile: %e s, peak RSS %M KiB" "$SRV/bin/catgs-scene" tile \
+      --scene "$W/tumblewood_sh2.compressed.ply" --scale 10 --radius-sq "$r" --up 0,-1,0 --out-catgs "$W/$name.catgs" |
+      grep -v "^  copy"; } 2>&1 | tee "$OUT/compactcity-$name.log" || return 1
+  ls -l "$W/$name.catgs" | tee -a "$OUT/compactcity-$name.log"
+  for path in mipnerf360_bicycle tandt_train flowers_sh3; do
+    "$SRV/bin/catgs-scene" trace --scene "$W/$name.catgs" --cameras "$S/traces/$path.cameras.json" \
+      --out "$W/${name}_$path.trace" --up 0,-1,0 --frames 1200 || return 1
+  done
+}
+
+# compactcopy NAME: NAME's compact scene with its level of detail (catgs-scene lod of
+# NAME.compressed.ply; the server then serves it from then on) and the read rate of `dd` on it
+# -> $OUT/compactcopy-NAME.log.
+compactcopy() {
+  local name=$1 W=/tmp/catgs_sweep
+  export LD_LIBRARY_PATH=$SRV/lib
+  { "$SRV/bin/catgs-scene" lod --scene "$W/$name.compressed.ply" --out "$W/$name.catgs"
+    ls -l "$W/$name.compressed.ply" "$W/$name.catgs"; } 2>&1 | tee "$OUT/compactcopy-$name.log"
+}
+
+# readrate FILE: dd of FILE in 16 MiB pieces, page cache warm (as firstframe reads it) -> stdout.
+readrate() {
+  dd if="$1" of=/dev/null bs=16M 2>&1 | tail -1
 }
 
 # rd SCENE WxH SETTINGS [FRAMES]: catgs-encode-bench on SCENE's bicycle path (CUDA renders, x264)
@@ -392,7 +435,7 @@ ramp() {
   local name=$1 scene=$2 size=$3 pipeline=$4 start=$5 step=$6 max=$7 p95=$8 fps=$9 W=/tmp/catgs_sweep
   shift 9
   export LD_LIBRARY_PATH=$SRV/lib
-  start_server "$W/$scene.compressed.ply" "$W/server_ramp-$name.log" --pipeline "$pipeline" "$@" || return 1
+  start_server "$(scene_file "$scene")" "$W/server_ramp-$name.log" --pipeline "$pipeline" "$@" || return 1
   local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
   echo "{\"name\": \"$name\", \"scene\": \"$scene\", \"size\": \"$size\", \"pipeline\": \"$pipeline\", \"args\": \"$*\", \"p95_bound\": $p95, \"fps_bound\": $fps}" > "$W/json/ramp-${name}.meta"
   for ((n = start; n <= max; n += step)); do
@@ -430,7 +473,7 @@ hogramp() {
     for _ in $(seq 1 240); do grep -q holding "$W/hog-$name.txt" && break; sleep 0.5; done
     echo "hog: $(cat "$W/hog-$name.txt")"
   fi
-  start_server "$W/$scene.compressed.ply" "$W/server_hogramp-$name.log" --pipeline exact "$@" || {
+  start_server "$(scene_file "$scene")" "$W/server_hogramp-$name.log" --pipeline exact "$@" || {
     [ -n "$hog_pid" ] && kill "$hog_pid"
     return 1
   }
@@ -489,5 +532,8 @@ case "${1:-}" in
   pictures) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; pictures "$@" ;;
   ramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; ramp "$@" ;;
   hogramp) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; hogramp "$@" ;;
+  compactcity) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; compactcity "$@" ;;
+  compactcopy) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; compactcopy "$@" ;;
+  readrate) shift; readrate "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
 esac

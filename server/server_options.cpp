@@ -249,7 +249,7 @@ std::vector<std::string> scenes_in_folder(const std::string& dir) {
     if (e.is_directory(entry)) {
       if (fs::exists(p / "meta.json", entry)) found.push_back((p / "meta.json").string());
     } else if (e.is_regular_file(entry) && (ext == ".ply" || ext == ".spz" || ext == ".splat" || ext == ".glb" ||
-                                            ext == ".gltf" || ext == ".sog")) {
+                                            ext == ".gltf" || ext == ".sog" || ext == ".catgs")) {
       found.push_back(p.string());
     }
   }
@@ -257,7 +257,7 @@ std::vector<std::string> scenes_in_folder(const std::string& dir) {
   std::sort(found.begin(), found.end());
   if (found.empty())
     throw std::invalid_argument("--scene " + dir +
-                                ": no scene files in the folder (.ply, .spz, .splat, .glb, .gltf, .sog, or a "
+                                ": no scene files in the folder (.ply, .spz, .splat, .glb, .gltf, .sog, .catgs, or a "
                                 "folder with a SOG meta.json)");
   return found;
 }

@@ -4,15 +4,18 @@
 //   catgs-scene compact --scene S --out O.compressed.ply [--check-views N] [--width W --height H]
 //       Morton-sorts the Gaussians, writes SuperSplat compressed PLY, reads it back and (with
 //       --check-views) prints the PSNR of CPU renders of the copy against the original.
-//   catgs-scene convert --scene S --out O.(ply|compressed.ply|spz) [--spz-version 3|4]
+//   catgs-scene convert --scene S --out O.(ply|compressed.ply|spz|catgs) [--spz-version 3|4]
 //       Reads any scene format (ply_io.h) and writes INRIA PLY, SuperSplat compressed PLY (Morton
-//       order) or .spz (version 4 by default) by the output's extension.
-//   catgs-scene tile    --scene S (--out city.ply | --out-compressed city.compressed.ply)
+//       order), .spz (version 4 by default) or a compact scene (Morton order, or a compact
+//       scene's own order and levels) by the output's extension.
+//   catgs-scene tile    --scene S (--out city.ply | --out-compressed city.compressed.ply |
+//                       --out-catgs city.catgs [--branching 8])
 //                       [--radius-sq 4] [--spacing 1.2] [--scale 10] [--seed N] [--up X,Y,Z]
 //                       [--no-sh-rotation] [--flyover-out F.trace] [--frames 600] [--rate 120]
 //                       [--width 1920 --height 1080] [--fov 60] [--altitude 0.75] [--pitch 24]
 //       The city recipe of docs/DESIGN.md "Measuring" (13 copies, x10, fly-over at 0.75
-//       extents pitched 24 deg).
+//       extents pitched 24 deg). --out-catgs: the city with its level of detail as a compact
+//       scene (scene/compact_file.h), served alone.
 //   catgs-scene trace   --scene S --cameras C.json --out T.trace [--scale 10] [--up X,Y,Z]
 //                       [--rate 120] [--seconds-per-view 0.5] [--distance 0.6] [--frames N]
 //                       [--width 1920 --height 1080]
@@ -26,9 +29,10 @@
 //       Writes the scene cache (scene/scene_cache.h; default S.catgs-cache beside S): the next
 //       load of S through the cache (catgs-server --scene-cache) copies it instead of parsing.
 //   catgs-scene lod     --scene S --out O [--branching 8] [--threads N]
-//       Builds the scene's level of detail (lod/lod_build.h) and writes it as a LOD file
-//       (scene/scene_cache.h; conventionally S.catgs-lod) keyed to S: catgs-bench, catgs-render
-//       and catgs-server draw it with --scene S --lod-file O.
+//       Builds the scene's level of detail (lod/lod_build.h) and writes it as a compact scene
+//       (scene/compact_file.h, about 40 bytes a Gaussian): O ending in .catgs is served alone
+//       (--scene O); any other name is a LOD file keyed to S (conventionally S.catgs-lod):
+//       catgs-bench, catgs-render and catgs-server draw it with --scene S --lod-file O.
 //   catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]
 //                       [--cache-dir D] [--json OUT] [--upload]
 //       Load times, plain and cached, cold and warm page cache, with peak memory
@@ -42,6 +46,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <cstdio>
 #include <iostream>
@@ -51,6 +56,7 @@
 #include "common/image_io.h"
 #include "cpu/pixel_depth.h"
 #include "scene/ply_io.h"
+#include "scene/compact_file.h"
 #include "scene/scene_cache.h"
 #include "scene_tools/load_bench.h"
 #include "scene/spz_file.h"
@@ -69,8 +75,9 @@ const char* kUsage =
     "usage: catgs-scene info --scene S\n"
     "       catgs-scene compact --scene S --out O.compressed.ply [--check-views N] [--width W --height H]\n"
     "                   [--scale 10] [--up X,Y,Z] [--png-prefix P]\n"
-    "       catgs-scene convert --scene S --out O.(ply|compressed.ply|spz) [--spz-version 3|4]\n"
-    "       catgs-scene tile --scene S (--out F.ply | --out-compressed F.compressed.ply | --no-write)\n"
+    "       catgs-scene convert --scene S --out O.(ply|compressed.ply|spz|catgs) [--spz-version 3|4]\n"
+    "       catgs-scene tile --scene S (--out F.ply | --out-compressed F.compressed.ply |\n"
+    "                   --out-catgs F.catgs [--branching 8] | --no-write)\n"
     "                   [--radius-sq 4] [--spacing 1.2] [--scale 10] [--seed N] [--up X,Y,Z]\n"
     "                   [--no-sh-rotation] [--flyover-out F.trace] [--frames 600] [--rate 120]\n"
     "                   [--width 1920 --height 1080] [--fov 60] [--altitude 0.75] [--pitch 24]\n"
@@ -163,14 +170,38 @@ int convert(const catgs::tools::Args& args) {
   const auto m = catgs::load_scene(args.require("--scene"));
   if (ends_with(out, ".compressed.ply"))
     catgs::write_compressed_ply(catgs::permuted(m, catgs::morton_order(m)), out);
+  else if (ends_with(out, ".catgs") && !m.lod.empty())
+    catgs::write_compact_scene(m, out);
+  else if (ends_with(out, ".catgs"))
+    catgs::write_compact_scene(catgs::permuted(m, catgs::morton_order(m)), out);
   else if (ends_with(out, ".spz"))
     catgs::write_spz(m, out, args.get_int("--spz-version", 4));
   else if (ends_with(out, ".ply"))
     catgs::write_inria_ply(m, out);
   else
-    throw std::invalid_argument("--out must end in .ply, .compressed.ply or .spz: '" + out + "'");
+    throw std::invalid_argument("--out must end in .ply, .compressed.ply, .spz or .catgs: '" + out + "'");
   std::printf("wrote %s: %zu Gaussians, SH degree %d\n", out.c_str(), m.size(), m.sh_degree);
   return 0;
+}
+
+// Builds `m`'s level of detail and writes it as a compact scene at `out`: keyed to `keyed_to`
+// (a LOD file), or served alone when that is empty.
+void write_lod_scene(const catgs::GaussianModel& m, const std::string& out, const std::string& keyed_to, int branching,
+                     int threads = 0) {
+  catgs::LodBuildReport report;
+  catgs::LodBuildOptions lod_options;
+  lod_options.branching = branching;
+  const auto lod = catgs::build_lod(m, lod_options, &report);
+  const auto t0 = std::chrono::steady_clock::now();
+  catgs::write_compact_scene(lod, out, keyed_to, threads);
+  const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::error_code ec;
+  const auto bytes = std::filesystem::file_size(out, ec);
+  std::printf("wrote %s: %zu Gaussians (%zu leaves%s), %.1f bytes a Gaussian, levels of", out.c_str(), lod.size(),
+              m.size(), report.reordered ? ", Morton-sorted" : "",
+              static_cast<double>(bytes) / static_cast<double>(lod.size()));
+  for (std::size_t n : report.level_nodes) std::printf(" %zu", n);
+  std::printf(" chunks; built in %.2f s, written in %.2f s\n", report.seconds, write_s);
 }
 
 int tile(const catgs::tools::Args& args) {
@@ -194,6 +225,7 @@ int tile(const catgs::tools::Args& args) {
   if (args.has("--out")) catgs::write_inria_ply(city, args.get("--out"));
   if (args.has("--out-compressed"))
     catgs::write_compressed_ply(catgs::permuted(city, catgs::morton_order(city)), args.get("--out-compressed"));
+  if (args.has("--out-catgs")) write_lod_scene(city, args.get("--out-catgs"), "", args.get_int("--branching", 8));
   if (args.has("--flyover-out")) {
     catgs::GeneratorParams g;
     g.width = args.get_int("--width", 1920);
@@ -212,7 +244,7 @@ int tile(const catgs::tools::Args& args) {
 }
 
 int trace(const catgs::tools::Args& args) {
-  auto scene = catgs::load_scene(args.require("--scene"));
+  auto scene = catgs::lod_leaves(catgs::load_scene(args.require("--scene")));  // a compact scene's leaves
   const float scale = static_cast<float>(args.get_double("--scale", 1.0));
   if (scale != 1.0f) catgs::scale_scene(scene, scale);
   const glm::vec3 up = args.has("--up") ? parse_vec3(args.get("--up")) : catgs::estimate_up(scene);
@@ -251,15 +283,8 @@ int lod(const catgs::tools::Args& args) {
   const std::string scene = args.require("--scene"), out = args.require("--out");
   const int threads = args.get_int("--threads", 0);
   const auto m = catgs::load_scene(scene, catgs::LoadOptions{threads, false});
-  catgs::LodBuildReport report;
-  catgs::LodBuildOptions lod_options;
-  lod_options.branching = args.get_int("--branching", 8);
-  const auto lod = catgs::build_lod(m, lod_options, &report);
-  catgs::write_scene_cache(lod, scene, out, threads);
-  std::printf("wrote %s: %zu Gaussians (%zu leaves%s), levels of", out.c_str(), lod.size(), m.size(),
-              report.reordered ? ", Morton-sorted" : "");
-  for (std::size_t n : report.level_nodes) std::printf(" %zu", n);
-  std::printf(" chunks; built in %.2f s\n", report.seconds);
+  // F.catgs: the scene served alone; any other name: a LOD file keyed to the scene.
+  write_lod_scene(m, out, ends_with(out, ".catgs") ? "" : scene, args.get_int("--branching", 8), threads);
   return 0;
 }
 
@@ -350,7 +375,7 @@ int run(int argc, char** argv) {
        "--no-sh-rotation!", "--flyover-out", "--frames",           "--rate",          "--fov",         "--altitude",
        "--pitch",           "--cameras",     "--seconds-per-view", "--distance",      "--png-prefix",  "--spz-version",
        "--threads",         "--scenes",      "--repeat",           "--no-reference!", "--cache-dir",   "--json",
-       "--upload!",         "--grid"});
+       "--upload!",         "--grid",        "--out-catgs",        "--branching"});
   if (cmd == "info") return info(args);
   if (cmd == "compact") return compact(args);
   if (cmd == "convert") return convert(args);

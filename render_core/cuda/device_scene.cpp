@@ -101,8 +101,8 @@ T* device_array(std::size_t count, const char* what) {
 
 // `host` into new device memory through `copier` (the bytes counted in `bytes_total`);
 // nullptr for an empty array. The caller owns the pointer from its return, copied or not.
-template <typename T>
-T* upload_array(StagedCopier& copier, const std::vector<T>& host, std::size_t* bytes_total, const char* what) {
+template <typename T, typename A>
+T* upload_array(StagedCopier& copier, const std::vector<T, A>& host, std::size_t* bytes_total, const char* what) {
   if (host.empty()) return nullptr;
   T* d = device_array<T>(host.size(), what);
   *bytes_total += host.size() * sizeof(T);

@@ -175,4 +175,17 @@ std::size_t lod_leaf_gaussians(const GaussianModel& model) {
   return leaves * kChunk;
 }
 
+GaussianModel lod_leaves(GaussianModel model) {
+  if (model.lod.empty()) return model;
+  const std::size_t n = lod_leaf_gaussians(model);
+  const std::size_t K3 = static_cast<std::size_t>(model.sh_coeffs()) * 3;
+  model.means.resize(3 * n);
+  model.log_scales.resize(3 * n);
+  model.rotations.resize(4 * n);
+  model.opacity_logits.resize(n);
+  model.sh.resize(K3 * n);
+  model.lod.clear();
+  return model;
+}
+
 }  // namespace catgs

@@ -57,4 +57,9 @@ GaussianModel build_lod(const GaussianModel& scene, const LodBuildOptions& optio
 // error 0. 0 for a model without LOD.
 std::size_t lod_leaf_gaussians(const GaussianModel& model);
 
+// The leaves of a LOD model (its first lod_leaf_gaussians Gaussians, padding included, which
+// never draws) without the merged levels and the tree: the scene at full detail. A model without
+// LOD is returned as it is.
+GaussianModel lod_leaves(GaussianModel model);
+
 }  // namespace catgs

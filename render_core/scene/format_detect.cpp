@@ -6,6 +6,7 @@
 #include <fstream>
 #include <vector>
 
+#include "scene/compact_file.h"
 #include "scene/gltf_file.h"
 #include "scene/sog_file.h"
 #include "scene/splat_file.h"
@@ -21,6 +22,7 @@ SceneFormat detect_scene_format(const std::string& path) {
   head.resize(static_cast<std::size_t>(in.gcount()));
   if (head.size() >= 4 && head[0] == 'p' && head[1] == 'l' && head[2] == 'y') return SceneFormat::ply;
   if (looks_like_spz(head)) return SceneFormat::spz;
+  if (looks_like_compact(head)) return SceneFormat::compact;
   if (looks_like_gltf(head)) return SceneFormat::gltf;
   if (looks_like_sog_zip(head) || looks_like_sog_meta(head)) return SceneFormat::sog;
   std::error_code ec;

@@ -2,9 +2,6 @@
 
 #include "scene/load_blocks.h"
 
-#include <sys/mman.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -15,28 +12,18 @@ namespace catgs {
 
 namespace {
 
-#ifdef MADV_POPULATE_WRITE
-constexpr int kPopulateWrite = MADV_POPULATE_WRITE;
-#else
-constexpr int kPopulateWrite = 23;  // Linux's value; older headers lack the name
-#endif
-
-// `v` as n zeros, its pages made resident first on every core (MADV_POPULATE_WRITE, Linux 5.14;
-// elsewhere a no-op): zeroing fresh memory page fault by page fault on one thread cost 0.9 s for
-// the 7 M city's 1 GB on the build machine, more than parsing it (issue 37, docs/history/scene_loading.md).
-void assign_zeros(std::vector<float>& v, std::size_t n) {
-  std::vector<float>().swap(v);
-  v.reserve(n);
-  const auto page = static_cast<uintptr_t>(::sysconf(_SC_PAGESIZE));
-  const uintptr_t begin = (reinterpret_cast<uintptr_t>(v.data()) + page - 1) / page * page;
-  const uintptr_t end = (reinterpret_cast<uintptr_t>(v.data() + n)) / page * page;
-  constexpr uintptr_t kBlock = 64 << 20;
-  if (end > begin + kBlock)
-    run_blocks((end - begin + kBlock - 1) / kBlock, 0, [&](uint64_t b) {
-      const uintptr_t from = begin + b * kBlock, to = std::min(end, from + kBlock);
-      ::madvise(reinterpret_cast<void*>(from), to - from, kPopulateWrite);
-    });
-  v.resize(n);  // the zeros, now without faults
+// `v` as n zeros, every core zeroing (and so faulting in) its own blocks of the fresh memory:
+// one thread's page faults cost 0.9 s for the 7 M city's 1 GB on the build machine, more than
+// parsing it (issue 37), and MADV_POPULATE_WRITE before a serial memset still 4.1 s for 16 GiB on
+// the GPU machine against 0.73 s so (issue 74, docs/history/scene_loading.md).
+void assign_zeros(ModelArray& v, std::size_t n) {
+  ModelArray().swap(v);
+  v.resize(n);                              // UninitAllocator: nothing written yet
+  constexpr std::size_t kBlock = 16 << 20;  // floats: 64 MiB
+  run_blocks((n + kBlock - 1) / kBlock, 0, [&](uint64_t b) {
+    const std::size_t from = b * kBlock, to = std::min(n, from + kBlock);
+    std::memset(v.data() + from, 0, (to - from) * sizeof(float));
+  });
 }
 
 }  // namespace
@@ -101,7 +88,7 @@ void GaussianModel::validate() const {
     throw std::runtime_error("array sizes disagree with " + std::to_string(n) + " Gaussians");
   // In parallel blocks (load_blocks.h: the lowest failing block's error wins, so the first bad
   // value is named, as a serial walk would).
-  auto check = [](const std::vector<float>& v, std::size_t stride, const char* what) {
+  auto check = [](const ModelArray& v, std::size_t stride, const char* what) {
     constexpr std::size_t kBlock = 1 << 20;
     run_blocks((v.size() + kBlock - 1) / kBlock, 0, [&](uint64_t b) {
       const std::size_t begin = b * kBlock, count = std::min(v.size(), begin + kBlock) - begin;

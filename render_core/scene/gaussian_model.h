@@ -3,7 +3,9 @@
 
 #include <cstddef>
 #include <stdexcept>
+#include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -33,21 +35,46 @@ inline constexpr float kOpacityLogitLimit = 20.0f;
 //                  sh[(i * K + k) * 3 + c]; k = 0 is the DC term (INRIA f_dc), k >= 1 the rest.
 // (Not [N, 16, 3] whatever the degree: we keep only the K coefficients of the scene's degree so a
 // 7 M Gaussian degree-0 city does not carry 15 zero bands.)
+// std::allocator, except that value-initialising a float does nothing: resize() leaves new
+// elements as they are, so GaussianModel::resize can zero its arrays on every core, each thread
+// faulting in its own pages (issue 74: one thread's page faults and memset took 9.1 s for 16 GiB
+// on the GPU machine; every core first-touching, 0.73 s; docs/history/scene_loading.md).
+template <class T>
+struct UninitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitAllocator<U>;
+  };
+  UninitAllocator() = default;
+  template <class U>
+  UninitAllocator(const UninitAllocator<U>&) noexcept {}
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;  // default-initialised: no write
+  }
+};
+// One of a model's per-Gaussian arrays.
+using ModelArray = std::vector<float, UninitAllocator<float>>;
+
 struct GaussianModel {
   std::string name;   // scene name for logs and the protocol (file stem)
   int sh_degree = 0;  // 0..3
-  std::vector<float> means;
-  std::vector<float> log_scales;
-  std::vector<float> rotations;
-  std::vector<float> opacity_logits;
-  std::vector<float> sh;
+  ModelArray means;
+  ModelArray log_scales;
+  ModelArray rotations;
+  ModelArray opacity_logits;
+  ModelArray sh;
   // Level of detail (forward_model/lod.h): one node per chunk of kChunkSize Gaussians, or empty
   // (no LOD: every Gaussian is drawn). Built by lod/lod_build.h.
   std::vector<fm::LodNode> lod;
 
   std::size_t size() const { return opacity_logits.size(); }
   int sh_coeffs() const { return sh_coeff_count(sh_degree); }
-  // Resizes every array for n Gaussians (contents zeroed).
+  // Resizes every array for n Gaussians (contents zeroed, on every core).
   void resize(std::size_t n);
   // Bounds of the means. Throws std::logic_error on an empty model.
   Bounds bounds() const;

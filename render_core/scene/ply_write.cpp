@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "scene/ply_io.h"
+#include "scene/quantize.h"
 
 namespace catgs {
 
@@ -32,12 +33,8 @@ float sh_rest(const GaussianModel& m, std::size_t i, int rest_index) {
   return m.sh[(i * static_cast<std::size_t>(K) + static_cast<std::size_t>(k)) * 3 + static_cast<std::size_t>(c)];
 }
 
-uint32_t quantize(float t, int bits) {
-  const float mask = static_cast<float>((1u << bits) - 1u);
-  return static_cast<uint32_t>(std::lround(std::clamp(t, 0.0f, 1.0f) * mask));
-}
-
-float normalized(float v, float lo, float hi) { return hi > lo ? (v - lo) / (hi - lo) : 0.0f; }
+using quant::normalized;
+uint32_t quantize(float t, int bits) { return quant::unorm_bits(t, bits); }
 
 void finish(std::ofstream& out, const std::string& header, const std::string& body, const std::string& path) {
   out.write(header.data(), static_cast<std::streamsize>(header.size()));
@@ -124,26 +121,8 @@ void write_compressed_ply(const GaussianModel& m, const std::string& path) {
       }
       put(vertex_body, (bits[0][0] << 21) | (bits[0][1] << 11) | bits[0][2]);
       // Rotation: smallest-three over (rot_0..rot_3) = INRIA (w, x, y, z), SuperSplat's packRot
-      // order (the reader's comment has the layout); the largest |component| is dropped, made
-      // positive by flipping the whole quaternion (q and -q are the same rotation).
-      float q[4];
-      float len2 = 0;
-      for (int k = 0; k < 4; ++k) len2 += m.rotations[4 * i + k] * m.rotations[4 * i + k];
-      const float len = std::sqrt(len2);
-      int largest = 0;
-      for (int k = 0; k < 4; ++k) {
-        q[k] = len > 0 ? m.rotations[4 * i + k] / len : (k == 0 ? 1.0f : 0.0f);
-        if (std::fabs(q[k]) > std::fabs(q[largest])) largest = k;
-      }
-      const float sign = q[largest] < 0 ? -1.0f : 1.0f;
-      uint32_t packed = static_cast<uint32_t>(largest) << 30;
-      int shift = 20;
-      for (int k = 0; k < 4; ++k) {
-        if (k == largest) continue;
-        packed |= quantize(sign * q[k] * std::sqrt(0.5f) + 0.5f, 10) << shift;
-        shift -= 10;
-      }
-      put(vertex_body, packed);
+      // order (quantize.h).
+      put(vertex_body, quant::pack_rotation(&m.rotations[4 * i]));
       put(vertex_body, (bits[1][0] << 21) | (bits[1][1] << 11) | bits[1][2]);
       const float alpha = 1.0f / (1.0f + std::exp(-m.opacity_logits[i]));
       put(vertex_body, (bits[2][0] << 24) | (bits[2][1] << 16) | (bits[2][2] << 8) | quantize(alpha, 8));

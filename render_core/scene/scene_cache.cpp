@@ -19,6 +19,8 @@
 #include <xxhash.h>
 
 #include "forward_model/sh_storage.h"
+#include "scene/compact_file.h"
+#include "scene/file_write.h"
 #include "ply_format.h"
 #include "scene/load_blocks.h"
 #include "scene/scene_peek.h"
@@ -34,12 +36,6 @@ constexpr uint64_t kHeadBytes = 64 * 1024;  // of the source, hashed
 enum Section { kMeans, kLogScales, kRotations, kOpacity, kSh, kShHalf, kChunks, kLod, kSections };
 const char* const kSectionNames[kSections] = {"means", "log_scales", "rotations", "opacity",
                                               "sh",    "sh_half",    "chunks",    "lod"};
-
-struct SourceStamp {
-  uint64_t size = 0;
-  int64_t mtime_ns = 0;
-  uint64_t head_hash = 0;
-};
 
 struct CacheHeader {
   char magic[8];
@@ -64,8 +60,9 @@ static_assert(sizeof(CacheHeader) < kAlign, "the header fits its reserved page")
 uint64_t align_up(uint64_t x) { return (x + kAlign - 1) / kAlign * kAlign; }
 uint64_t blocks_of(uint64_t bytes) { return (bytes + kCacheBlockBytes - 1) / kCacheBlockBytes; }
 
-// The size, mtime and head hash of the source. Throws SceneFileError naming it.
-SourceStamp stamp(const std::string& path) {
+}  // namespace
+
+SourceStamp source_stamp(const std::string& path) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) throw SceneFileError(path, std::string("cannot stat: ") + std::strerror(errno));
   SourceStamp s;
@@ -81,6 +78,8 @@ SourceStamp stamp(const std::string& path) {
   s.head_hash = XXH3_64bits(head.data(), head.size());
   return s;
 }
+
+namespace {
 
 // The layout of a model's cache: section sizes and offsets, the hash table's place.
 CacheHeader layout(uint64_t n, int sh_degree, bool lod) {
@@ -132,17 +131,6 @@ std::vector<Block> blocks(const CacheHeader& h) {
   return out;
 }
 
-void write_all(int fd, const void* data, uint64_t bytes, uint64_t offset, const std::string& path) {
-  const auto* p = static_cast<const char*>(data);
-  while (bytes > 0) {
-    const ssize_t w = ::pwrite(fd, p, bytes, static_cast<off_t>(offset));
-    if (w <= 0) throw SceneFileError(path, std::string("cannot write: ") + std::strerror(errno));
-    p += w;
-    bytes -= static_cast<uint64_t>(w);
-    offset += static_cast<uint64_t>(w);
-  }
-}
-
 const void* float_section(const GaussianModel& m, int s) {
   switch (s) {
     case kMeans:
@@ -186,7 +174,7 @@ std::string derived_file_path(const std::string& scene_path, const std::string& 
   if (folder.empty()) return scene_path + suffix;
   uint64_t key = 0;
   try {
-    const SourceStamp s = stamp(scene_path);
+    const SourceStamp s = source_stamp(scene_path);
     const uint64_t parts[2] = {s.size, s.head_hash};
     key = XXH3_64bits(parts, sizeof parts);
   } catch (const SceneFileError&) {
@@ -210,14 +198,9 @@ void write_scene_cache(const GaussianModel& model, const std::string& scene_path
                        int threads) {
   fm::validate_lod(model.lod, model.size());
   CacheHeader h = layout(model.size(), model.sh_degree, !model.lod.empty());
-  h.source = stamp(scene_path);
+  h.source = source_stamp(scene_path);
   const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(model);
-  const std::string tmp = cache_path + ".tmp." + std::to_string(::getpid());
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw SceneFileError(cache_path, std::string("cannot create: ") + std::strerror(errno));
-  try {
-    if (::ftruncate(fd, static_cast<off_t>(h.file_size)) != 0)
-      throw SceneFileError(cache_path, std::string("cannot size: ") + std::strerror(errno));
+  write_replacing(cache_path, h.file_size, [&](int fd) {
     const std::vector<Block> bl = blocks(h);
     std::vector<uint64_t> hashes(bl.size());
     run_blocks(bl.size(), threads, [&](uint64_t k) {
@@ -246,24 +229,14 @@ void write_scene_cache(const GaussianModel& model, const std::string& scene_path
     std::vector<char> page(kAlign, 0);
     std::memcpy(page.data(), &h, sizeof h);
     write_all(fd, page.data(), page.size(), 0, cache_path);
-    if (::close(fd) != 0) throw SceneFileError(cache_path, std::string("cannot close: ") + std::strerror(errno));
-  } catch (...) {
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    throw;
-  }
-  if (::rename(tmp.c_str(), cache_path.c_str()) != 0) {
-    const int e = errno;
-    ::unlink(tmp.c_str());
-    throw SceneFileError(cache_path, std::string("cannot rename the written cache into place: ") + std::strerror(e));
-  }
+  });
 }
 
 void reseal_scene_cache(std::string& bytes, const std::string& scene_path) {
   CacheHeader h{};
   if (bytes.size() < sizeof h) return;
   std::memcpy(&h, bytes.data(), sizeof h);
-  h.source = stamp(scene_path);
+  h.source = source_stamp(scene_path);
   const uint64_t size = bytes.size();
   auto inside = [size](uint64_t offset, uint64_t n) { return offset <= size && n <= size - offset; };
   const uint64_t table_slots =
@@ -338,7 +311,7 @@ std::unique_ptr<SceneCache> SceneCache::open(const std::string& cache_path, cons
                  std::to_string(h.file_size));
   SourceStamp now;
   try {
-    now = stamp(scene_path);
+    now = source_stamp(scene_path);
   } catch (const std::exception& e) {
     throw reject(std::string("cannot check the source: ") + e.what());
   }
@@ -397,6 +370,15 @@ bool SceneCache::has_lod() const { return impl_->h.lod_nodes != 0; }
 
 GaussianModel load_lod_file(const std::string& lod_path, const std::string& scene_path, int threads,
                             const LoadProgress& progress) {
+  {
+    std::vector<uint8_t> head(8, 0);
+    std::FILE* f = std::fopen(lod_path.c_str(), "rb");
+    if (f) {
+      head.resize(std::fread(head.data(), 1, head.size(), f));
+      std::fclose(f);
+    }
+    if (looks_like_compact(head)) return read_compact_lod(lod_path, scene_path, threads, progress);
+  }
   const auto cache = SceneCache::open(lod_path, scene_path);
   if (!cache->has_lod())
     throw SceneCacheRejected(lod_path, "a scene cache without a level of detail (write one with catgs-scene lod)");

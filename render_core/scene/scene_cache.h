@@ -74,6 +74,16 @@ std::string derived_file_path(const std::string& scene_path, const std::string& 
 // (the XDG base directory convention), else empty (beside the scene).
 std::string default_cache_folder();
 
+// What a derived file records of its source (a cache, a LOD file): its size, modification time
+// (ns) and an XXH3-64 of its first 64 KiB (its header, for a PLY). Throws SceneFileError naming
+// `path` when it cannot be read.
+struct SourceStamp {
+  uint64_t size = 0;
+  int64_t mtime_ns = 0;
+  uint64_t head_hash = 0;
+};
+SourceStamp source_stamp(const std::string& path);
+
 // Thrown when a cache cannot be used; what() names the cache file and says why (missing,
 // truncated, not a cache, another version, written for a different or changed source, a
 // checksum mismatch, a value a scene loader refuses, a bad LOD tree).
@@ -148,7 +158,9 @@ struct CachedLoadReport {
   std::string why;       // why the cache was not used (empty when it was, or mode off)
 };
 
-// A LOD file (see above) of scene `scene_path`: the LOD model, lod filled and validated. Throws
+// A LOD file of scene `scene_path`, in either form: a compact scene keyed to it (compact_file.h
+// read_compact_lod, what catgs-scene lod and the server write) or a cache as above. The LOD
+// model, lod filled and validated. Throws
 // SceneCacheRejected naming lod_path (missing, truncated, foreign, of another version or
 // source, a checksum mismatch, a bad tree, or a plain cache without LOD).
 GaussianModel load_lod_file(const std::string& lod_path, const std::string& scene_path, int threads = 0,

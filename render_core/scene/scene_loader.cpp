@@ -9,9 +9,11 @@
 #include <string>
 
 #include "scene/ply_io.h"
+#include "scene/quantize.h"
 #include "ply_format.h"
 #include "scene/load_blocks.h"
 #include "scene/format_detect.h"
+#include "scene/compact_file.h"
 #include "scene/splat_file.h"
 #include "scene/gltf_file.h"
 #include "scene/scene_peek.h"
@@ -192,10 +194,7 @@ GaussianModel load_inria(const ply::File& f, const ply::Element& v, const LoadOp
   return m;
 }
 
-float unorm(uint32_t v, int bits) {
-  const uint32_t mask = (1u << bits) - 1u;
-  return static_cast<float>(v & mask) / static_cast<float>(mask);
-}
+using quant::unorm;
 
 // The property indices of a compressed PLY (chunk ranges, packed fields, SH codes).
 struct CompressedColumns {
@@ -234,17 +233,8 @@ void decode_compressed_row(const ply::File& f, const ply::Element& v, const ply:
                             ? kOpacityLogitLimit
                             : std::clamp(-std::log(1.0f / alpha - 1.0f), -kOpacityLogitLimit, kOpacityLogitLimit);
   // Smallest-three quaternion over (rot_0..rot_3) = INRIA (w, x, y, z), as SuperSplat's
-  // packRot(rot_0, rot_1, rot_2, rot_3) writes it and PlayCanvas's engine reads it: the top 2
-  // bits index the largest component, the other three follow in index order, 10 bits each,
-  // scaled by sqrt(2) (each lies in [-1/sqrt(2), 1/sqrt(2)]).
-  const float norm = std::sqrt(2.0f);
-  const float small[3] = {(unorm(rot >> 20, 10) - 0.5f) * norm, (unorm(rot >> 10, 10) - 0.5f) * norm,
-                          (unorm(rot, 10) - 0.5f) * norm};
-  const unsigned largest = rot >> 30;
-  float* quat = &m.rotations[4 * i];
-  quat[largest] = std::sqrt(std::fmax(0.0f, 1.0f - (small[0] * small[0] + small[1] * small[1] + small[2] * small[2])));
-  for (unsigned k = 0, s = 0; k < 4; ++k)
-    if (k != largest) quat[k] = small[s++];
+  // packRot(rot_0, rot_1, rot_2, rot_3) writes it and PlayCanvas's engine reads it (quantize.h).
+  quant::unpack_rotation(rot, &m.rotations[4 * i]);
   for (std::size_t j = 0; j < c.rest_idx.size(); ++j) {
     const auto q = static_cast<uint32_t>(f.value(*sh, i, c.rest_idx[j]));
     // Bucket centres, except that 0 and 255 decode to the range ends -4 and 4 (as splat-transform
@@ -338,6 +328,9 @@ GaussianModel load_scene(const std::string& path, const LoadOptions& options, co
       break;
     case SceneFormat::sog:
       m = read_sog(path, progress);
+      break;
+    case SceneFormat::compact:
+      m = read_compact_scene(path, progress, options.threads);
       break;
     case SceneFormat::ply:
       m = load_ply(path, options, progress);

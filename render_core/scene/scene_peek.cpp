@@ -5,6 +5,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "scene/compact_file.h"
 #include "scene/format_detect.h"
 #include "scene/gaussian_model.h"
 #include "scene/sog_file.h"
@@ -60,7 +61,7 @@ std::string scene_name(const std::string& path) {
   std::string name = p.filename().string();
   // An unbundled SOG scene is a folder: meta.json says nothing of the scene.
   if (name == "meta.json" && p.parent_path().has_filename()) return p.parent_path().filename().string();
-  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat", ".glb", ".gltf", ".sog"}) {
+  for (const char* suffix : {".compressed.ply", ".ply", ".spz", ".splat", ".glb", ".gltf", ".sog", ".catgs"}) {
     const std::string s = suffix;
     if (name.size() > s.size() && name.compare(name.size() - s.size(), s.size(), s) == 0) {
       name.resize(name.size() - s.size());
@@ -80,6 +81,13 @@ ScenePeek peek_scene(const std::string& path) {
     case SceneFormat::spz:
       out.format = "spz";
       break;
+    case SceneFormat::compact: {
+      const CompactSummary c = peek_compact(path);
+      out.format = "catgs";
+      out.gaussians = c.gaussians;
+      out.sh_degree = c.sh_degree;
+      break;
+    }
     case SceneFormat::gltf:
       out.format = "gltf";
       break;

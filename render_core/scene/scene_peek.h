@@ -12,12 +12,12 @@ namespace catgs {
 
 struct ScenePeek {
   std::string name;    // scene_name(path)
-  std::string format;  // "ply", "compressed_ply", "spz", "splat", "gltf" or "sog" (by content)
+  std::string format;  // "ply", "compressed_ply", "spz", "splat", "gltf", "sog" or "catgs" (by content)
   // Gaussians in the file: PLY (the vertex element's count), .splat (file size / 32), SOG
-  // (meta.json's count); unknown for .spz (gzip-compressed header) and glTF (accessor counts
+  // (meta.json's count), compact (its header's, merged levels included); unknown for .spz (gzip-compressed header) and glTF (accessor counts
   // inside the JSON / binary chunk).
   std::optional<std::uint64_t> gaussians;
-  // PLY (from the f_rest_* count), .splat (0), SOG (meta.json's shN bands; unknown for a version 1
+  // PLY (from the f_rest_* count), .splat (0), compact (its header), SOG (meta.json's shN bands; unknown for a version 1
   // file with SH, whose degree is the centroid image's width); unknown otherwise.
   std::optional<int> sh_degree;
 };
@@ -30,7 +30,7 @@ struct ScenePeek {
 ScenePeek peek_scene(const std::string& path);
 
 // The scene's name: the file name without its scene extension (.compressed.ply, .ply, .spz,
-// .splat, .glb, .gltf, .sog), or the folder's name for an unbundled SOG's meta.json, as load_scene
+// .splat, .glb, .gltf, .sog, .catgs), or the folder's name for an unbundled SOG's meta.json, as load_scene
 // sets GaussianModel::name.
 std::string scene_name(const std::string& path);
 

@@ -6,6 +6,8 @@
 #include <stdexcept>
 
 #include "lod/lod_build.h"
+#include "scene/compact_file.h"
+#include "scene/format_detect.h"
 
 namespace catgs::server {
 
@@ -78,34 +80,48 @@ bool make_folder_of(const std::string& file, const SceneWithLodOptions& o) {
 }  // namespace
 
 GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOptions& o, const LoadProgress& progress) {
+  // A compact scene is read as it is (no scene cache: it reads faster than one), with the level of
+  // detail it carries.
+  const bool compact = detect_scene_format(path) == SceneFormat::compact;
   CachedLoadOptions c;
-  c.mode = o.cache;
+  c.mode = compact ? SceneCacheMode::off : o.cache;
   c.log = o.log;
   // A cache found beside the scene is read there; one written goes to the cache folder (so in
   // --scene-cache write mode a cache beside the scene is passed over for the folder's: nothing
   // is ever written beside the user's scene).
   c.cache_path = derived_to_read(path, ".catgs-cache", o.cache_dir);
-  if (o.cache == SceneCacheMode::write && c.cache_path == path + ".catgs-cache" && !o.cache_dir.empty())
+  if (c.mode == SceneCacheMode::write && c.cache_path == path + ".catgs-cache" && !o.cache_dir.empty())
     c.cache_path = derived_file_path(path, ".catgs-cache", o.cache_dir);
-  if (o.cache == SceneCacheMode::write && !make_folder_of(c.cache_path, o)) c.mode = SceneCacheMode::read;
-  if (o.lod == LodMode::off) return load_scene_cached(path, c, progress);
+  if (c.mode == SceneCacheMode::write && !make_folder_of(c.cache_path, o)) c.mode = SceneCacheMode::read;
+  if (o.lod == LodMode::off) {
+    GaussianModel m = load_scene_cached(path, c, progress);
+    if (!m.lod.empty()) say(o, "scene " + path + ": served at full detail (--lod off), its merged levels left out");
+    if (!m.lod.empty()) m = lod_leaves(std::move(m));
+    return m;
+  }
 
   const std::string lod_path = derived_to_read(path, ".catgs-lod", o.cache_dir);
-  try {
-    const auto t0 = std::chrono::steady_clock::now();
-    GaussianModel m = load_lod_file(lod_path, path, 0, progress);
-    const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0);
-    say(o, "scene " + path + ": level of detail from " + lod_path + " (" + std::to_string(m.size()) + " Gaussians, " +
-               std::to_string(m.lod.size()) + " chunks) in " + std::to_string(ms.count()) + " ms");
-    return m;
-  } catch (const SceneCacheRejected& e) {
-    say(o, "scene " + path + ": LOD file not used (" + e.what() + ")");
-  }
+  if (!compact) try {
+      const auto t0 = std::chrono::steady_clock::now();
+      GaussianModel m = load_lod_file(lod_path, path, 0, progress);
+      const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0);
+      say(o, "scene " + path + ": level of detail from " + lod_path + " (" + std::to_string(m.size()) + " Gaussians, " +
+                 std::to_string(m.lod.size()) + " chunks) in " + std::to_string(ms.count()) + " ms");
+      return m;
+    } catch (const SceneCacheRejected& e) {
+      say(o, "scene " + path + ": LOD file not used (" + e.what() + ")");
+    }
   // The read is the first half of the progress, the build the second.
   const LoadProgress half = [&progress](uint64_t done, uint64_t total) {
     if (progress) progress(done, 2 * total);
   };
   GaussianModel scene = load_scene_cached(path, c, half);
+  if (!scene.lod.empty()) {
+    say(o, "scene " + path + ": level of detail from the compact scene (" + std::to_string(scene.size()) +
+               " Gaussians, " + std::to_string(scene.lod.size()) + " chunks)");
+    if (progress) progress(1, 1);
+    return scene;
+  }
   if (scene.size() < o.min_gaussians) {
     say(o, "scene " + path + ": served without a level of detail (" + std::to_string(scene.size()) +
                " Gaussians, under --lod-min-gaussians " + std::to_string(o.min_gaussians) + ")");
@@ -113,12 +129,15 @@ GaussianModel load_scene_with_lod(const std::string& path, const SceneWithLodOpt
     return scene;
   }
   GaussianModel lod = build_for(path, scene, o, progress);
-  // Written to the cache folder (never over a file beside the scene that was refused).
+  // Written to the cache folder (never over a file beside the scene that was refused) as a
+  // compact scene keyed to the source; served quantized as the file will give it from the next
+  // start on, so every start draws the same picture.
   const std::string lod_out = derived_file_path(path, ".catgs-lod", o.cache_dir);
   if (o.lod == LodMode::write && make_folder_of(lod_out, o)) {
     const auto t0 = std::chrono::steady_clock::now();
     try {
-      write_scene_cache(lod, path, lod_out);
+      quantize_compact(lod);
+      write_compact_scene(lod, lod_out, path);
       if (o.metrics) o.metrics->lod_files_written_total++;
       const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0);
       say(o, "scene " + path + ": LOD file written to " + lod_out + " in " + std::to_string(ms.count()) + " ms");

@@ -281,7 +281,7 @@ TEST(SogReference, Version1DecodedAsSplatTransformDoes) {
   EXPECT_EQ(ours.sh_degree, 1);
   EXPECT_EQ(theirs.sh_degree, 1);
   EXPECT_EQ(peek_scene(meta).gaussians, static_cast<std::uint64_t>(kCount));
-  auto expect_near = [](const std::vector<float>& a, const std::vector<float>& b, const char* what) {
+  auto expect_near = [](const ModelArray& a, const ModelArray& b, const char* what) {
     ASSERT_EQ(a.size(), b.size()) << what;
     for (std::size_t i = 0; i < a.size(); ++i)
       ASSERT_NEAR(a[i], b[i], 1e-5 * std::max(1.0f, std::fabs(b[i]))) << what << "[" << i << "]";

@@ -5,6 +5,7 @@
 //               --pipeline V[,V...] [--frames N] [--warmup N] [--json OUT.json]
 //               [--snapshot-dir DIR] [--up X,Y,Z] [--renderer cuda|cpu] [--quality-every K]
 //               [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]] [--aa-reference F]
+//               [--compact]
 //
 // Variants V (bench/variants.h; `catgs-bench --help` lists the settings): vanilla, exact, or
 // catgs optionally followed by SpeculationParams settings in braces, catgs{window=2,backoff=0},
@@ -36,7 +37,10 @@
 // compares those frames, and the full-detail render of the same pose, with an anti-aliased
 // reference: full detail rendered F times larger each way and box-filtered down (a merged
 // Gaussian averages texture that full detail samples at one point a pixel; this says how much of
-// the LOD's loss against full detail is that).
+// the LOD's loss against full detail is that). A compact scene (--scene F.catgs) brings its own
+// level of detail (--lod then builds nothing). --compact quantizes the scene as the compact scene
+// keeps it (scene/compact_file.h quantize_compact, after --lod) and draws both references from
+// the float scene, so the yardstick says what the quantization costs (issue 74).
 // Issue 72's measurement of where a frame's list goes: the JSON's entries_behind_opaque_mean
 // (exact-occlusion: entries at or behind their tile's opaque point, forward_model/occlusion.h),
 // and with --count-changes (--renderer cpu; slow) entries_changing_pixels_mean and
@@ -79,6 +83,7 @@
 #include "scene/scene_bounds.h"
 #include "scene/scene_cache.h"
 #include "lod/lod_build.h"
+#include "scene/compact_file.h"
 #include "scene_tools/city.h"
 
 namespace {
@@ -97,7 +102,7 @@ const char* kUsage =
     "                   [--quality-every 1] [--json OUT.json] [--snapshot-dir DIR] [--up X,Y,Z]\n"
     "                   [--seconds-per-view 0.5] [--distance 0.6] [--renderer cuda|cpu] [--help]\n"
     "                   [--lod [--branching 8] | --lod-file F] [--lod-error PX[,PX...]] [--aa-reference F]\n"
-    "                   [--pose-rate 120]\n"
+    "                   [--pose-rate 120] [--compact]\n"
     "       V: a pipeline variant, e.g. catgs{window=2,backoff=0} (default: vanilla,exact; --help\n"
     "          lists the variants and their settings)\n";
 
@@ -116,6 +121,8 @@ struct BenchScene {
   glm::vec3 up{0.0f};
   double load_s = 0;          // loading and building
   catgs::LodBuildReport lod;  // --lod
+  // --compact: the float scene, kept to draw the references the quantized one is compared with.
+  std::shared_ptr<const catgs::GaussianModel> reference;
 };
 
 BenchScene load_bench_scene(const Args& args) {
@@ -141,13 +148,19 @@ BenchScene load_bench_scene(const Args& args) {
     if (scale != 1.0f) catgs::scale_scene(s.model, scale);
     if (glm::length(s.up) == 0.0f) s.up = catgs::estimate_up(s.model);
   }
-  if (args.has("--lod")) {
+  if (args.has("--lod") && !s.model.lod.empty()) {
+    std::fprintf(stderr, "LOD from the compact scene: %zu Gaussians\n", s.model.size());
+  } else if (args.has("--lod")) {
     catgs::LodBuildOptions lod_options;
     lod_options.branching = args.get_int("--branching", 8);
     s.model = catgs::build_lod(s.model, lod_options, &s.lod);
     std::fprintf(stderr, "LOD built in %.2f s: %zu Gaussians, chunks per level:", s.lod.seconds, s.model.size());
     for (std::size_t n : s.lod.level_nodes) std::fprintf(stderr, " %zu", n);
     std::fprintf(stderr, "\n");
+  }
+  if (args.has("--compact")) {  // quantized as the compact scene keeps it (compact_file.h)
+    s.reference = std::make_shared<const catgs::GaussianModel>(s.model);
+    catgs::quantize_compact(s.model);
   }
   s.load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_load).count();
   return s;
@@ -246,6 +259,8 @@ std::vector<PipelineResult> run_on_cuda(BenchScene& s, const std::vector<Variant
   const std::size_t used_before_scene = catgs::cuda::device_memory_used();
   const auto scene = catgs::cuda::DeviceScene::upload(s.model);
   c.scene_device_bytes = scene->bytes();
+  const auto reference = s.reference ? catgs::cuda::DeviceScene::upload(*s.reference) : nullptr;
+  s.reference.reset();
   std::fprintf(stderr,
                "GPU: %s\nscene %s: %zu Gaussians (SH %d, %.0f MiB on device), built in %.1f s; "
                "trace %s: %zu cameras, %d warm-up + %d timed frames at %dx%d\n",
@@ -256,7 +271,7 @@ std::vector<PipelineResult> run_on_cuda(BenchScene& s, const std::vector<Variant
   std::vector<PipelineResult> results;
   for (float bound : bounds) {
     plan.lod_error_px = bound;
-    for (PipelineResult& r : catgs::bench::time_on_cuda(scene, variants, plan, used_before_scene))
+    for (PipelineResult& r : catgs::bench::time_on_cuda(scene, variants, plan, used_before_scene, reference))
       results.push_back(named_at(std::move(r), bound, bounds.size()));
   }
   return results;
@@ -274,20 +289,42 @@ std::vector<PipelineResult> run_on_cpu(BenchScene& s, const std::vector<Variant>
   std::vector<PipelineResult> results;
   for (float bound : bounds) {
     plan.lod_error_px = bound;
-    for (PipelineResult& r : catgs::bench::time_on_cpu(shared, variants, plan))
+    for (PipelineResult& r : catgs::bench::time_on_cpu(shared, variants, plan, s.reference))
       results.push_back(named_at(std::move(r), bound, bounds.size()));
   }
   return results;
 }
 
 int run(int argc, char** argv) {
-  const Args args(
-      argc, argv,
-      {"--scene",         "--city!",          "--radius-sq", "--spacing",          "--seed",      "--scale",
-       "--trace",         "--width",          "--height",    "--pipeline",         "--frames",    "--warmup",
-       "--json",          "--snapshot-dir",   "--up",        "--seconds-per-view", "--distance",  "--renderer",
-       "--quality-every", "--lod!",           "--branching", "--lod-file",         "--lod-error", "--aa-reference",
-       "--pose-rate",     "--count-changes!", "--help!"});
+  const Args args(argc, argv,
+                  {"--scene",
+                   "--city!",
+                   "--radius-sq",
+                   "--spacing",
+                   "--seed",
+                   "--scale",
+                   "--trace",
+                   "--width",
+                   "--height",
+                   "--pipeline",
+                   "--frames",
+                   "--warmup",
+                   "--json",
+                   "--snapshot-dir",
+                   "--up",
+                   "--seconds-per-view",
+                   "--distance",
+                   "--renderer",
+                   "--quality-every",
+                   "--lod!",
+                   "--branching",
+                   "--lod-file",
+                   "--lod-error",
+                   "--aa-reference",
+                   "--pose-rate",
+                   "--count-changes!",
+                   "--compact!",
+                   "--help!"});
   if (args.has("--help")) {
     std::cout << kUsage << "\n" << catgs::bench::variant_syntax();
     return 0;

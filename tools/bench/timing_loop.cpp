@@ -83,7 +83,7 @@ void record_aa_quality(PipelineResult& res, const Image& frame, const Image& ful
 Camera aa_camera(const Camera& c, int aa_factor) { return c.rescaled(c.width * aa_factor, c.height * aa_factor); }
 
 PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& model, const Variant& variant,
-                                const TimingPlan& plan) {
+                                const TimingPlan& plan, const std::shared_ptr<const GaussianModel>& reference_model) {
   auto r = make_renderer("cpu", model, options_of(variant, plan));
   if (auto* core = dynamic_cast<cpu::CpuRenderer*>(r.get())) core->count_changes(plan.count_changes);
   PipelineResult res = result_of(variant);
@@ -92,7 +92,8 @@ PipelineResult time_cpu_variant(const std::shared_ptr<const GaussianModel>& mode
   RenderOptions full_detail;
   full_detail.lod_error_px = 0.0f;
   full_detail.list_budget = RenderListBudget::unlimited();
-  const auto reference = plan.lod && plan.quality_every > 0 ? make_renderer("cpu", model, full_detail) : nullptr;
+  const auto reference =
+      plan.lod && plan.quality_every > 0 ? make_renderer("cpu", reference_model, full_detail) : nullptr;
   for (int k = 0; k < plan.warmup; ++k) r->render_at(plan.camera_at(k), plan.time_at(k), img);
   for (int k = 0; k < plan.frames; ++k) {
     const int frame = plan.warmup + k;
@@ -147,9 +148,11 @@ void record_frame(PipelineResult& res, double ms, const FrameStats& s) {
 }
 
 std::vector<PipelineResult> time_on_cpu(const std::shared_ptr<const GaussianModel>& model,
-                                        const std::vector<Variant>& variants, const TimingPlan& plan) {
+                                        const std::vector<Variant>& variants, const TimingPlan& plan,
+                                        const std::shared_ptr<const GaussianModel>& reference) {
   std::vector<PipelineResult> results;
-  for (const Variant& variant : variants) results.push_back(time_cpu_variant(model, variant, plan));
+  for (const Variant& variant : variants)
+    results.push_back(time_cpu_variant(model, variant, plan, reference ? reference : model));
   return results;
 }
 
@@ -308,8 +311,9 @@ PipelineResult time_cuda_variant(const std::shared_ptr<const cuda::DeviceScene>&
 
 std::vector<PipelineResult> time_on_cuda(const std::shared_ptr<const cuda::DeviceScene>& scene,
                                          const std::vector<Variant>& variants, const TimingPlan& plan,
-                                         std::size_t used_before_scene) {
-  QualityCheck quality(scene, plan.lod ? plan.aa_factor : 0);
+                                         std::size_t used_before_scene,
+                                         const std::shared_ptr<const cuda::DeviceScene>& reference) {
+  QualityCheck quality(reference ? reference : scene, plan.lod ? plan.aa_factor : 0);
   std::vector<PipelineResult> results;
   for (const Variant& variant : variants)
     results.push_back(time_cuda_variant(scene, variant, plan, quality, used_before_scene));

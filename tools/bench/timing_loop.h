@@ -78,8 +78,11 @@ struct TimingPlan {
 
 // The CPU reference over `model`; a snapshot is the last timed frame
 // (DIR/SCENE_cpu_VARIANT.png).
+// `reference` (null: `model`) draws the full-detail and anti-aliased references (catgs-bench
+// --compact: the float scene, against which the quantized one is timed and compared).
 std::vector<PipelineResult> time_on_cpu(const std::shared_ptr<const GaussianModel>& model,
-                                        const std::vector<Variant>& variants, const TimingPlan& plan);
+                                        const std::vector<Variant>& variants, const TimingPlan& plan,
+                                        const std::shared_ptr<const GaussianModel>& reference = nullptr);
 
 #if CATGS_HAVE_CUDA
 // The CUDA core over `scene`, one CudaRenderer per variant; device_used_bytes counts from
@@ -87,7 +90,8 @@ std::vector<PipelineResult> time_on_cpu(const std::shared_ptr<const GaussianMode
 // middle timed pose rendered again after timing (DIR/SCENE_VARIANT.png).
 std::vector<PipelineResult> time_on_cuda(const std::shared_ptr<const cuda::DeviceScene>& scene,
                                          const std::vector<Variant>& variants, const TimingPlan& plan,
-                                         std::size_t used_before_scene);
+                                         std::size_t used_before_scene,
+                                         const std::shared_ptr<const cuda::DeviceScene>& reference = nullptr);
 #endif
 
 }  // namespace catgs::bench

@@ -9,12 +9,14 @@
 #include <array>
 #include <chrono>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <string>
 #include <vector>
 
 #include "lod/lod_build.h"
 #include "lod/lod_merge.h"
+#include "scene/compact_file.h"
 #include "scene/ply_io.h"
 #include "process/scene_with_lod.h"
 #include "server_options.h"
@@ -79,6 +81,20 @@ void expect_leaves_are(const GaussianModel& lod, const GaussianModel& scene) {
   EXPECT_EQ(got, sorted_means(scene, scene.size()));
 }
 
+// A LOD the server wrote is served as its file will give it (compact_file.h): the build of
+// `scene`, quantized.
+void expect_quantized_build(const GaussianModel& served, const GaussianModel& scene) {
+  GaussianModel want = build_lod(scene);
+  quantize_compact(want);
+  EXPECT_EQ(served.means, want.means);
+  EXPECT_EQ(served.log_scales, want.log_scales);
+  EXPECT_EQ(served.rotations, want.rotations);
+  EXPECT_EQ(served.opacity_logits, want.opacity_logits);
+  EXPECT_EQ(served.sh, want.sh);
+  ASSERT_EQ(served.lod.size(), want.lod.size());
+  EXPECT_EQ(std::memcmp(served.lod.data(), want.lod.data(), want.lod.size() * sizeof(fm::LodNode)), 0);
+}
+
 TEST(SceneWithLod, MissingFileIsBuiltWrittenThenRead) {
   const std::string dir = test::temp_dir(), path = scene_copy(dir, "a");
   ServerMetrics metrics;
@@ -90,7 +106,7 @@ TEST(SceneWithLod, MissingFileIsBuiltWrittenThenRead) {
   EXPECT_EQ(metrics.lod_files_written_total.load(), 1u);
   EXPECT_EQ(metrics.lod_builds_running.load(), 0);
   EXPECT_EQ(metrics.lod_build_permille.load(), 1000);
-  expect_leaves_are(first.model, load_scene(path));
+  expect_quantized_build(first.model, load_scene(path));
   // Progress rises to its end: the read is the first half, the build the second.
   ASSERT_FALSE(first.progress.empty());
   for (std::size_t i = 1; i < first.progress.size(); ++i) {
@@ -131,7 +147,7 @@ TEST(SceneWithLod, StaleOrForeignFileIsRebuiltNotTrusted) {
   fs::copy_file(a + ".catgs-lod", b + ".catgs-lod", fs::copy_options::overwrite_existing);
   const LoadRun foreign = load(b, LodMode::write, &metrics);
   EXPECT_TRUE(foreign.said("LOD file not used")) << foreign.log.front();
-  expect_leaves_are(foreign.model, load_scene(b));
+  expect_quantized_build(foreign.model, load_scene(b));
   EXPECT_EQ(metrics.lod_builds_total.load(), 3u);
 }
 
@@ -145,6 +161,26 @@ TEST(SceneWithLod, ReadWritesNothingAndOffServesTheScene) {
   const LoadRun off = load(path, LodMode::off, &metrics);
   EXPECT_TRUE(off.model.lod.empty());
   EXPECT_EQ(off.model.means, load_scene(path).means);
+}
+
+// Issue 74: a compact scene with its level of detail is served alone: nothing built, cached or
+// written; --lod off serves its leaves.
+TEST(SceneWithLod, CompactSceneIsServedAlone) {
+  const std::string dir = test::temp_dir(), cache = dir + "/cache", path = dir + "/city.catgs";
+  GaussianModel lod = build_lod(load_scene(test::bundled_scene()));
+  write_compact_scene(lod, path);
+  quantize_compact(lod);
+  ServerMetrics metrics;
+  const LoadRun served = load(path, LodMode::write, &metrics, cache);
+  EXPECT_TRUE(served.said("level of detail from the compact scene")) << served.log.back();
+  EXPECT_EQ(served.model.means, lod.means);
+  EXPECT_EQ(served.model.lod.size(), lod.lod.size());
+  EXPECT_EQ(metrics.lod_builds_total.load(), 0u);
+  EXPECT_FALSE(fs::exists(cache)) << "a file was written for a compact scene";
+  const LoadRun off = load(path, LodMode::off, &metrics, cache);
+  EXPECT_TRUE(off.model.lod.empty());
+  EXPECT_EQ(off.model.size(), lod_leaf_gaussians(lod));
+  EXPECT_EQ(off.model.means, ModelArray(lod.means.begin(), lod.means.begin() + 3 * off.model.size()));
 }
 
 TEST(SceneWithLod, Options) {

@@ -1,0 +1,115 @@
+// The compact scene (issue 74): the scene as the server keeps it, with its level of detail, in
+// about 40 bytes a Gaussian (the LOD file of float32 arrays took 206 at SH degree 2, the INRIA PLY
+// 164). Our own format, quantized per chunk of fm::kChunkSize Gaussians, so that a chunk's range
+// serves both the cut's culling and the quantization. `catgs-scene lod --out F.catgs`, `convert`
+// and `tile` write it; load_scene reads it by its magic (it is served alone: --scene F.catgs);
+// the server writes its LOD files in it (scene_with_lod.h), keyed to their source.
+//
+// Layout (little endian; offsets from the file's start):
+//   0        CompactHeader (compact_file.cpp), 256 bytes: magic "CATGSCMP", version, byte order
+//            mark, N (Gaussians, padding of a LOD's chunks included), SH degree, chunk size (256),
+//            LOD nodes (0 or chunk_count(N)), the source stamp of a keyed file (size,
+//            modification time in ns, XXH3 of its first 64 KiB; all 0 in a file served alone),
+//            the sections' offsets, the file size, an XXH3 of the tables and of the header.
+//   tables   the chunk ranges [chunk_count(N)] (ChunkRanges below, 84 bytes), the LOD nodes
+//            [0 or chunk_count(N)] (fm::LodNode, 32 bytes), the XXH3-64 of each data block
+//            [blocks] (8 bytes)
+//   data     at a 4096-byte boundary: blocks of kCompactBlockGaussians Gaussians (the last one
+//            shorter), each its Gaussians' fields one after another (per Gaussian, in order):
+//              position  [3] u16: q / 65535 of the chunk's [lo, hi] per axis (the decode is
+//                        clamped to hi), steps of (hi - lo) / 65535
+//              rotation  u32: smallest three (quantize.h pack_rotation) over (w, x, y, z)
+//              scale     u32: the log scales, 11-10-11 bits (quantize.h) of the chunk's range
+//              colour    [4] u8: the DC coefficients (f_dc, not the colour) q / 255 of the chunk's
+//                        range per channel, then alpha = q / 255 (0 and 255 read as the opacity
+//                        logits -+kOpacityLogitLimit)
+//              sh rest   ceil(7 x 3 (K - 1) / 8) bytes: each coefficient k >= 1 of each channel
+//                        (the model's order: coefficient-major, channel inner) in 7 bits, LSB
+//                        first, value (q - 63) / 63 x the chunk's absolute bound of its band
+//                        (k 1-3: band 1, 4-8: band 2, 9-15: band 3); q 127 is never written
+//            So 6 + 4 + 4 + 4 + 21 = 39 bytes a Gaussian at SH degree 2 (18 + 8, 18 + 40 at 1, 3),
+//            plus 116 bytes a chunk (0.45 a Gaussian).
+// The tables' and the blocks' hashes detect damage, not forgery. What a forged file can still
+// say is checked as for every scene file: counts against the file's size before any allocation,
+// ranges finite with lo <= hi (so every decoded value is finite), the LOD tree
+// (fm::validate_lod). Every failure is a SceneFileError naming the file and what is wrong.
+//
+// Lossy, what write then read loses (quantize_compact applies exactly that to a model in memory):
+// positions to (hi - lo) / 131070 of their chunk's box, log scales to 1/4094 (x, z) and 1/2046 (y)
+// of their chunk's range, rotations as compressed PLY, DC coefficients to 1/510 of their chunk's
+// range, opacity to 1/510, SH rest to 1/126 of their band's bound. Where the picture lands is
+// measured by catgs-bench's yardstick (RESULTS.md "Compact scene").
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "scene/gaussian_model.h"
+#include "scene/load_progress.h"
+
+namespace catgs {
+
+inline constexpr uint32_t kCompactVersion = 1;
+inline constexpr uint64_t kCompactBlockGaussians = 65536;  // a data block: hashed and decoded by one thread
+
+// One chunk's quantization ranges (float32, 84 bytes): positions (world units), log scales and
+// DC coefficients per axis or channel, and the absolute bound of each SH band's coefficients
+// (0 past the scene's degree).
+struct ChunkRanges {
+  float pos_lo[3], pos_hi[3];
+  float scale_lo[3], scale_hi[3];
+  float dc_lo[3], dc_hi[3];
+  float band[3];
+};
+static_assert(sizeof(ChunkRanges) == 84, "21 floats");
+
+// Bytes a Gaussian takes in the data blocks at SH degree `degree` (0..3).
+uint64_t compact_record_bytes(int degree);
+
+// True when `head` (the first bytes of a file) starts with the compact scene's magic.
+bool looks_like_compact(const std::vector<uint8_t>& head);
+
+// Writes `model` (validated first; its Gaussians in chunk order as they are: sort a plain scene
+// spatially first, e.g. Morton order, for tight ranges; a LOD model is) as a compact scene at
+// `path`, through a temporary file renamed into place. `keyed_to` non-empty: the file records that
+// scene file's stamp (a LOD file in a cache folder, checked by read_compact_lod); empty: a file
+// served alone. `threads` as LoadOptions::threads. Throws SceneFileError naming the file (a model
+// over 2^31 Gaussians, a range whose width overflows float, keyed_to unreadable, a write
+// failure), std::runtime_error for an invalid model.
+void write_compact_scene(const GaussianModel& model, const std::string& path, const std::string& keyed_to = "",
+                         int threads = 0);
+
+// What a compact file's header says (its magic and header checksum checked, nothing else): for
+// listing scenes (scene_peek.h). Throws SceneFileError naming `path`.
+struct CompactSummary {
+  uint64_t gaussians = 0;  // merged levels included
+  int sh_degree = 0;
+  bool lod = false;
+};
+CompactSummary peek_compact(const std::string& path);
+
+// Reads a compact scene (load_scene calls it for a file with the magic): the model as written,
+// quantized, with its LOD tree when it has one; name = scene_name(path). Throws SceneFileError
+// naming `path` (see above). Memory: the file is mapped and its pages handed back block by block.
+GaussianModel read_compact_scene(const std::string& path, const LoadProgress& progress = {}, int threads = 0);
+
+// A LOD file in compact form (the server's cache folder, catgs-scene lod): as read_compact_scene,
+// and the file must be keyed to `scene_path` as that file is now and hold a LOD tree. Throws
+// SceneCacheRejected (scene_cache.h) naming `path` and why.
+GaussianModel read_compact_lod(const std::string& path, const std::string& scene_path, int threads = 0,
+                               const LoadProgress& progress = {});
+
+// Forges a compact file as an attacker with write access could: recomputes, in the file image
+// `bytes`, every data block's hash, the tables' hash and the header's, from the header's own
+// layout fields whatever they say (a block or table outside `bytes` is skipped; `bytes` shorter
+// than a header is left as it is). For the tests and the fuzz target, so they reach the checks
+// behind the hashes.
+void reseal_compact_scene(std::string& bytes);
+
+// Quantizes `model` in place exactly as write_compact_scene then read_compact_scene would (so the
+// server that builds a LOD draws on its first start what it draws from the file afterwards).
+// Throws as write_compact_scene does.
+void quantize_compact(GaussianModel& model, int threads = 0);
+
+}  // namespace catgs
