@@ -36,6 +36,7 @@
 
 #include "base/cuda_error.h"
 #include "forward_model/chunk_bounds.h"
+#include "forward_model/compact_codes.h"
 #include "forward_model/occlusion.h"
 #include "renderer/renderer.h"
 
@@ -118,6 +119,20 @@ class DeviceScene {
   const fm::ChunkBounds* chunks() const { return chunks_; }
   // [fm::chunk_count(N)] the LOD tree's nodes (forward_model/lod.h), nullptr without LOD.
   const fm::LodNode* lod() const { return lod_; }
+  // The compact layout (issue 74): where the model's GaussianModel::codes still match its arrays
+  // (compact_codes_match), the codes (forward_model/compact_codes.h) in place of log_scales,
+  // rotations, opacity_logits and sh (then null): rotation and log-scale codes [N] (uint32), colour
+  // codes [N, 4] (DC red, green, blue, alpha), SH rest codes [N, sh_code_bytes], the chunks'
+  // ranges, the 256 opacity logits of the alpha codes. 45 bytes a Gaussian at SH degree 2 with
+  // the float means, against 98. All null in the float layout.
+  bool compact() const { return rotation_codes_ != nullptr; }
+  const uint32_t* rotation_codes() const { return rotation_codes_; }
+  const uint32_t* scale_codes() const { return scale_codes_; }
+  const uint8_t* colour_codes() const { return colour_codes_; }
+  const uint8_t* sh_codes() const { return sh_codes_; }
+  uint32_t sh_code_bytes() const { return sh_code_bytes_; }
+  const fm::ChunkRanges* chunk_ranges() const { return chunk_ranges_; }
+  const float* opacity_lut() const { return opacity_lut_; }
 
  private:
   DeviceScene() = default;
@@ -131,6 +146,13 @@ class DeviceScene {
   uint16_t* sh_ = nullptr;
   fm::ChunkBounds* chunks_ = nullptr;
   fm::LodNode* lod_ = nullptr;
+  uint32_t* rotation_codes_ = nullptr;
+  uint32_t* scale_codes_ = nullptr;
+  uint8_t* colour_codes_ = nullptr;
+  uint8_t* sh_codes_ = nullptr;
+  uint32_t sh_code_bytes_ = 0;
+  fm::ChunkRanges* chunk_ranges_ = nullptr;
+  float* opacity_lut_ = nullptr;
 };
 
 // A rendered frame in device memory, valid until the renderer's next frame; ready once `stream`

@@ -8,6 +8,7 @@
 #include "cuda/cuda_renderer.h"
 #include "cuda/renderer_state.h"
 #include "forward_model/sh_storage.h"
+#include "scene/compact_file.h"
 #include "scene/load_blocks.h"
 
 namespace catgs::cuda {
@@ -135,14 +136,27 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
   // frees what was uploaded.
   StagedCopier copier;
   s->means_ = upload_array(copier, model.means, &s->bytes_, "means");
-  s->log_scales_ = upload_array(copier, model.log_scales, &s->bytes_, "log-scales");
-  s->rotations_ = upload_array(copier, model.rotations, &s->bytes_, "rotations");
-  s->opacity_logits_ = upload_array(copier, model.opacity_logits, &s->bytes_, "opacities");
+  const bool compact = compact_codes_match(model);  // the codes, where they still decode to the arrays
+  if (compact) {
+    const CompactCodes& c = *model.codes;
+    s->rotation_codes_ = upload_array(copier, c.rotation, &s->bytes_, "rotation codes");
+    s->scale_codes_ = upload_array(copier, c.scale, &s->bytes_, "log-scale codes");
+    s->colour_codes_ = upload_array(copier, c.colour, &s->bytes_, "colour codes");
+    s->sh_codes_ = upload_array(copier, c.sh, &s->bytes_, "SH codes");
+    if (!s->sh_codes_) s->sh_codes_ = device_array<uint8_t>(1, "SH codes");  // degree 0: non-null all the same
+    s->sh_code_bytes_ = c.sh_bytes;
+    s->chunk_ranges_ = upload_array(copier, c.ranges, &s->bytes_, "chunk ranges");
+    const std::vector<float> lut(c.opacity_logit, c.opacity_logit + 256);
+    s->opacity_lut_ = upload_array(copier, lut, &s->bytes_, "opacity table");
+  }
+  if (!compact) s->log_scales_ = upload_array(copier, model.log_scales, &s->bytes_, "log-scales");
+  if (!compact) s->rotations_ = upload_array(copier, model.rotations, &s->bytes_, "rotations");
+  if (!compact) s->opacity_logits_ = upload_array(copier, model.opacity_logits, &s->bytes_, "opacities");
   // SH in half precision (sh_storage.h): rounded on the host, by the same function the CPU
   // reference rounds with, so both cores read the same coefficients; straight into the staging
   // buffer, in parallel blocks (one thread rounds ~6 ns a coefficient, 1.1 s for the 7 M city's
   // 190 M: issue 37, docs/history/scene_loading.md).
-  if (!model.sh.empty()) {
+  if (!compact && !model.sh.empty()) {
     s->sh_ = device_array<uint16_t>(model.sh.size(), "SH coefficients");
     s->bytes_ += model.sh.size() * sizeof(uint16_t);
     const float* sh = model.sh.data();
@@ -170,6 +184,10 @@ DeviceScene::~DeviceScene() {
   for (float* p : {means_, log_scales_, rotations_, opacity_logits_})
     if (p) cudaFree(p);
   if (sh_) cudaFree(sh_);
+  for (void* p :
+       {static_cast<void*>(rotation_codes_), static_cast<void*>(scale_codes_), static_cast<void*>(colour_codes_),
+        static_cast<void*>(sh_codes_), static_cast<void*>(chunk_ranges_), static_cast<void*>(opacity_lut_)})
+    if (p) cudaFree(p);
   if (chunks_) cudaFree(chunks_);
   if (lod_) cudaFree(lod_);
   if (switched) (void)cudaSetDevice(previous);

@@ -88,12 +88,10 @@ struct LoadedGaussian {
   fm::Cov3 cov3;
   __device__ LoadedGaussian(const SceneView& scene, uint64_t i)
       : mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]),
-        opacity_logit(scene.opacity_logits[i]) {}
+        opacity_logit(opacity_logit_of(scene, i)) {}
   __device__ const fm::Cov3& covariance(const SceneView& scene, uint64_t i) {
     if (!have_cov) {
-      cov3 = fm::covariance_3d(
-          {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
-          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});
+      cov3 = covariance_of(scene, i);
       have_cov = true;
     }
     return cov3;

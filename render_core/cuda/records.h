@@ -11,6 +11,7 @@
 #include <glm/glm.hpp>
 
 #include "forward_model/chunk_bounds.h"
+#include "forward_model/compact_codes.h"
 #include "forward_model/forward_model.h"
 #include "forward_model/key_packing.h"
 #include "forward_model/lod.h"
@@ -30,15 +31,25 @@ struct CameraParams : fm::View {
 // The scene in device memory (layouts of GaussianModel).
 struct SceneView {
   const float* means;           // [N, 3]
-  const float* log_scales;      // [N, 3]
-  const float* rotations;       // [N, 4] (w, x, y, z)
-  const float* opacity_logits;  // [N]
+  const float* log_scales;      // [N, 3]        (null in the compact layout)
+  const float* rotations;       // [N, 4] (w, x, y, z)   (null in the compact layout)
+  const float* opacity_logits;  // [N]           (null in the compact layout)
   const __half* sh;             // [N, K, 3], K = (sh_degree + 1)^2, binary16 (forward_model/sh_storage.h)
   int sh_degree;
   uint64_t n;
   const fm::ChunkBounds* chunks;  // [chunk_count(N)] (forward_model/chunk_bounds.h)
   const fm::LodNode* lod;         // [chunk_count(N)] (forward_model/lod.h), nullptr: no LOD
   float lod_error_px;             // the cut's bound, pixels (RenderOptions::lod_error_px)
+  // The compact layout (issue 74; DeviceScene::compact): the codes of forward_model/compact_codes.h
+  // in place of log_scales, rotations, opacity_logits and sh, decoded where a Gaussian is read
+  // (scene_fields.cuh). rotation_codes null: the float layout above.
+  const uint32_t* rotation_codes;  // [N]
+  const uint32_t* scale_codes;     // [N]
+  const uchar4* colour_codes;      // [N]: DC red, green, blue codes, alpha code
+  const uint8_t* sh_codes;         // [N, sh_code_bytes]
+  uint32_t sh_code_bytes;
+  const fm::ChunkRanges* ranges;  // [chunk_count(N)]
+  const float* opacity_lut;       // [256] the opacity logit of each alpha code
 };
 
 // Is chunk c in the scene's LOD cut at view `at` (fm::lod_chunk_drawn; every chunk without LOD)?

@@ -148,7 +148,14 @@ inline stages::SceneView scene_view(const DeviceScene& scene, float lod_error_px
           scene.size(),
           scene.chunks(),
           scene.lod(),
-          lod_error_px};
+          lod_error_px,
+          scene.rotation_codes(),
+          scene.scale_codes(),
+          reinterpret_cast<const uchar4*>(scene.colour_codes()),
+          scene.sh_codes(),
+          scene.sh_code_bytes(),
+          scene.chunk_ranges(),
+          scene.opacity_lut()};
 }
 
 struct CudaRenderer::State {

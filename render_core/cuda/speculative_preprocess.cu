@@ -35,18 +35,21 @@ __device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, uin
   bool is_big = false, is_huge = false;
   if (i < scene.n) {
     do {
-      const float opacity = fm::sigmoid(scene.opacity_logits[i]);
+      const float opacity = fm::sigmoid(opacity_logit_of(scene, i));
       const float q_max = fm::opacity_aware_qmax(opacity);
       if (!(q_max > 0.0f)) break;
       const glm::vec3 mean(scene.means[3 * i], scene.means[3 * i + 1], scene.means[3 * i + 2]);
       // The cheap cull before any 2D covariance (forward_model.h, shared with the CPU core).
+      float log_scale[3];
+      log_scales_of(scene, i, log_scale);
       if (fm::path_misses_image(
-              mean, scene.log_scales + 3 * i, q_max, path.count, [&](int k) -> const fm::View& { return path.cam[k]; },
-              widening.slack, widening.margin_px, widening.motion_margin))
+              mean, log_scale, q_max, path.count, [&](int k) -> const fm::View& { return path.cam[k]; }, widening.slack,
+              widening.margin_px, widening.motion_margin))
         break;
-      const fm::Cov3 cov3 = fm::covariance_3d(
-          {scene.log_scales[3 * i], scene.log_scales[3 * i + 1], scene.log_scales[3 * i + 2]},
-          {scene.rotations[4 * i], scene.rotations[4 * i + 1], scene.rotations[4 * i + 2], scene.rotations[4 * i + 3]});
+      float rotation[4];
+      rotation_of(scene, i, rotation);
+      const fm::Cov3 cov3 = fm::covariance_3d({log_scale[0], log_scale[1], log_scale[2]},
+                                              {rotation[0], rotation[1], rotation[2], rotation[3]});
       glm::vec2 means[kMaxPathCameras];
       glm::vec3 covs[kMaxPathCameras];
       int seen = 0;

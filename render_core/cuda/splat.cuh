@@ -6,6 +6,7 @@
 
 #include "forward_model/forward_model.h"
 #include "records.h"
+#include "scene_fields.cuh"  // sh_of and the other fields, in either layout
 
 namespace catgs::cuda::stages {
 
@@ -22,18 +23,6 @@ __device__ __forceinline__ Splat make_splat(glm::vec2 mean, glm::vec3 conic, flo
 // log2(opacity) -inf (alpha 0 at every pixel), as make_splat gives at opacity 0.
 __device__ __forceinline__ Splat culled_splat() {
   return {make_float4(0.0f, 0.0f, 0.0f, 0.0f), make_float4(0.0f, 0.0f, -INFINITY, -INFINITY)};
-}
-
-// The SH coefficients of Gaussian i as fm::sh_to_color_from reads them: binary16 in device
-// memory (forward_model/sh_storage.h), widened to float exactly as the CPU reference's
-// fm::HalfRoundedSh gives them.
-struct HalfSh {
-  const __half* sh;
-  __device__ __forceinline__ float operator()(int j) const { return __half2float(sh[j]); }
-};
-__device__ __forceinline__ HalfSh sh_of(const SceneView& scene, uint64_t i) {
-  const uint64_t K = static_cast<uint64_t>(scene.sh_degree + 1) * static_cast<uint64_t>(scene.sh_degree + 1);
-  return {scene.sh + K * 3 * i};
 }
 
 }  // namespace catgs::cuda::stages

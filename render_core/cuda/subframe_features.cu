@@ -54,9 +54,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
     out.splat[slot] = culled;
     return;
   }
-  const fm::Cov3 cov3 = fm::covariance_3d(
-      {scene.log_scales[3 * g], scene.log_scales[3 * g + 1], scene.log_scales[3 * g + 2]},
-      {scene.rotations[4 * g], scene.rotations[4 * g + 1], scene.rotations[4 * g + 2], scene.rotations[4 * g + 3]});
+  const fm::Cov3 cov3 = covariance_of(scene, g);
   const glm::vec3 cov2 = fm::covariance_2d(cov3, cam.R, p, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) {
@@ -65,7 +63,7 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
   }
   const glm::vec2 mean2d(cam.fx * p.x / p.z + cam.cx - 0.5f, cam.fy * p.y / p.z + cam.cy - 0.5f);
   // The key frame's q_max (the opacity does not change), worked out again rather than read back.
-  const float opacity = fm::sigmoid(scene.opacity_logits[g]);
+  const float opacity = fm::sigmoid(opacity_logit_of(scene, g));
   const float q_max = fm::opacity_aware_qmax(opacity);
   if (fm::tile_count(fm::ellipse_tile_rect(mean2d, cov2, q_max + fm::kExactQMargin, cam.width, cam.height)) == 0) {
     out.splat[slot] = culled;
@@ -115,8 +113,10 @@ __global__ void __launch_bounds__(tune::kGaussianThreads)
     const uint64_t slot0 = static_cast<uint64_t>(live.slot[c]) * fm::kChunkSize;
     for (uint64_t i = c * fm::kChunkSize + lane; i < end; i += 32) {
       if (kept && listed_tiles(tiles_touched, chunk_total, slot0 + (i - c * fm::kChunkSize)) > 0) continue;
-      if (fm::unlisted_reaches_image(scene.means + 3 * i, scene.log_scales + 3 * i, scene.rotations + 4 * i,
-                                     scene.opacity_logits[i], cam))
+      float log_scale[3], rotation[4];
+      log_scales_of(scene, i, log_scale);
+      rotation_of(scene, i, rotation);
+      if (fm::unlisted_reaches_image(scene.means + 3 * i, log_scale, rotation, opacity_logit_of(scene, i), cam))
         *outside = 1u;
     }
   }

@@ -185,6 +185,7 @@ GaussianModel lod_leaves(GaussianModel model) {
   model.opacity_logits.resize(n);
   model.sh.resize(K3 * n);
   model.lod.clear();
+  model.codes.reset();  // the arrays are shorter: the codes no longer match
   return model;
 }
 

@@ -104,8 +104,7 @@ uint32_t get_u32(const uint8_t* p) {
   return v;
 }
 
-// The SH band (0: bands 1, 1: band 2, 2: band 3) of coefficient k >= 1.
-int band_of(int k) { return k < 4 ? 0 : k < 9 ? 1 : 2; }
+int band_of(int k) { return fm::compact_band_of(k); }
 
 float sigmoid(float x) { return 1.0f / (1.0f + std::exp(-x)); }
 
@@ -151,8 +150,6 @@ std::string bad_ranges(const ChunkRanges& r) {
   return "";
 }
 
-float dequantize(float lo, float hi, float t) { return lo + (hi - lo) * t; }
-
 // Gaussian i of `m` into slot j of `f`, with its chunk's ranges `r`.
 void encode_gaussian(const GaussianModel& m, uint64_t i, const ChunkRanges& r, const BlockFields& f, uint64_t j) {
   const int K = m.sh_coeffs();
@@ -182,34 +179,23 @@ void encode_gaussian(const GaussianModel& m, uint64_t i, const ChunkRanges& r, c
     }
 }
 
-// Slot j of `f` into Gaussian i of `m`, with its chunk's ranges `r`.
+// Slot j of `f` into Gaussian i of `m`, with its chunk's ranges `r` (forward_model/compact_codes.h:
+// the decode the CUDA core repeats on the codes it keeps).
 void decode_gaussian(const BlockFields& f, uint64_t j, const ChunkRanges& r, GaussianModel& m, uint64_t i) {
   const int K = m.sh_coeffs();
   for (int a = 0; a < 3; ++a) {
     uint16_t q;
     std::memcpy(&q, f.pos + 6 * j + 2 * a, 2);
-    m.means[3 * i + a] = std::min(r.pos_hi[a], dequantize(r.pos_lo[a], r.pos_hi[a], q / kPosLevels));
+    m.means[3 * i + a] = std::min(r.pos_hi[a], fm::compact_lerp(r.pos_lo[a], r.pos_hi[a], fm::compact_unorm(q, 16)));
   }
-  quant::unpack_rotation(get_u32(f.rot + 4 * j), &m.rotations[4 * i]);
-  float t[3];
-  quant::unpack_11_10_11(get_u32(f.scale + 4 * j), t);
-  for (int a = 0; a < 3; ++a) m.log_scales[3 * i + a] = dequantize(r.scale_lo[a], r.scale_hi[a], t[a]);
-  for (int a = 0; a < 3; ++a)
-    m.sh[i * K * 3 + a] = dequantize(r.dc_lo[a], r.dc_hi[a], quant::unorm(f.colour[4 * j + a], 8));
-  const uint8_t qa = f.colour[4 * j + 3];
-  const float alpha = quant::unorm(qa, 8);
-  m.opacity_logits[i] = qa == 0 ? -kOpacityLogitLimit
-                        : qa == 255
-                            ? kOpacityLogitLimit
-                            : std::clamp(std::log(alpha / (1.0f - alpha)), -kOpacityLogitLimit, kOpacityLogitLimit);
-  const uint8_t* in = f.sh + f.sh_bytes * j;
-  uint64_t bit = 0;
+  fm::compact_rotation(get_u32(f.rot + 4 * j), &m.rotations[4 * i]);
+  fm::compact_log_scales(get_u32(f.scale + 4 * j), r, &m.log_scales[3 * i]);
+  for (int a = 0; a < 3; ++a) m.sh[i * K * 3 + a] = fm::compact_dc(f.colour[4 * j + a], r, a);
+  m.opacity_logits[i] = compact_opacity_logit(f.colour[4 * j + 3]);
+  const uint8_t* codes = f.sh + f.sh_bytes * j;
+  int index = 0;
   for (int k = 1; k < K; ++k)
-    for (int ch = 0; ch < 3; ++ch, bit += kShBits) {
-      uint32_t q = 0;
-      for (int b = 0; b < kShBits; ++b) q |= static_cast<uint32_t>((in[(bit + b) / 8] >> ((bit + b) % 8)) & 1u) << b;
-      m.sh[(i * K + k) * 3 + ch] = static_cast<float>(static_cast<int>(q) - kShLevels) / kShLevels * r.band[band_of(k)];
-    }
+    for (int ch = 0; ch < 3; ++ch, ++index) m.sh[(i * K + k) * 3 + ch] = fm::compact_sh_rest(codes, index, r, k);
 }
 
 // Every chunk's ranges, checked writable (finite widths). Throws SceneFileError naming `path`.
@@ -229,9 +215,63 @@ void check_writable(const GaussianModel& model, const std::string& path) {
   if (model.size() > kMaxCompactGaussians) throw SceneFileError(path, "more than 2^31 Gaussians");
 }
 
+// XXH3 chained over block b's float arrays (means, log scales, rotations, opacity logits, SH).
+uint64_t block_fingerprint(const GaussianModel& m, uint64_t b) {
+  const uint64_t first = b * kCompactBlockGaussians, count = std::min(kCompactBlockGaussians, m.size() - first);
+  const uint64_t K3 = static_cast<uint64_t>(m.sh_coeffs()) * 3;
+  uint64_t h = 0;
+  auto add = [&h](const float* v, uint64_t n) { h = XXH3_64bits_withSeed(v, n * sizeof(float), h); };
+  add(m.means.data() + 3 * first, 3 * count);
+  add(m.log_scales.data() + 3 * first, 3 * count);
+  add(m.rotations.data() + 4 * first, 4 * count);
+  add(m.opacity_logits.data() + first, count);
+  add(m.sh.data() + K3 * first, K3 * count);
+  return h;
+}
+
+// Empty codes for `m` (ranges filled; the arrays sized, not written).
+std::shared_ptr<CompactCodes> new_codes(const GaussianModel& m, std::vector<ChunkRanges> ranges) {
+  auto c = std::make_shared<CompactCodes>();
+  c->gaussians = m.size();
+  c->sh_degree = m.sh_degree;
+  c->sh_bytes = static_cast<uint32_t>(sh_rest_bytes(m.sh_degree));
+  c->ranges = std::move(ranges);
+  c->rotation.resize(m.size());
+  c->scale.resize(m.size());
+  c->colour.resize(4 * m.size());
+  c->sh.resize(c->sh_bytes * m.size());
+  c->fingerprints.resize((m.size() + kCompactBlockGaussians - 1) / kCompactBlockGaussians);
+  for (uint32_t q = 0; q < 256; ++q) c->opacity_logit[q] = compact_opacity_logit(q);
+  return c;
+}
+
+// Gaussians [first, first + count) of `f` (slots 0..count) into `c`.
+void keep_codes(const BlockFields& f, uint64_t first, uint64_t count, CompactCodes& c) {
+  std::memcpy(c.rotation.data() + first, f.rot, 4 * count);
+  std::memcpy(c.scale.data() + first, f.scale, 4 * count);
+  std::memcpy(c.colour.data() + 4 * first, f.colour, 4 * count);
+  std::memcpy(c.sh.data() + c.sh_bytes * first, f.sh, c.sh_bytes * count);
+}
+
 }  // namespace
 
+float compact_opacity_logit(uint32_t code) {
+  const float alpha = fm::compact_unorm(code, 8);
+  return code == 0     ? -kOpacityLogitLimit
+         : code == 255 ? kOpacityLogitLimit
+                       : std::clamp(std::log(alpha / (1.0f - alpha)), -kOpacityLogitLimit, kOpacityLogitLimit);
+}
+
 uint64_t compact_record_bytes(int degree) { return 18 + sh_rest_bytes(degree); }
+
+bool compact_codes_match(const GaussianModel& m) {
+  const CompactCodes* c = m.codes.get();
+  if (!c || c->gaussians != m.size() || c->sh_degree != m.sh_degree || c->ranges.size() != fm::chunk_count(m.size()))
+    return false;
+  std::vector<uint8_t> same(c->fingerprints.size(), 0);
+  run_blocks(same.size(), 0, [&](uint64_t b) { same[b] = block_fingerprint(m, b) == c->fingerprints[b]; });
+  return std::all_of(same.begin(), same.end(), [](uint8_t v) { return v != 0; });
+}
 
 bool looks_like_compact(const std::vector<uint8_t>& head) {
   return head.size() >= sizeof kMagic && std::memcmp(head.data(), kMagic, sizeof kMagic) == 0;
@@ -366,6 +406,7 @@ GaussianModel decode(const OpenedCompact& o, const std::string& path, int thread
     throw bad(e.what());
   }
   const auto* hashes = o.file.data() + h.hashes_offset;
+  const std::shared_ptr<CompactCodes> codes = new_codes(m, ranges);
   run_blocks(
       h.blocks, threads,
       [&](uint64_t b) {
@@ -378,12 +419,15 @@ GaussianModel decode(const OpenedCompact& o, const std::string& path, int thread
         if (XXH3_64bits(data, bytes) != hash) throw bad("checksum mismatch in data block " + std::to_string(b));
         const BlockFields f(data, count, m.sh_degree);
         for (uint64_t j = 0; j < count; ++j) decode_gaussian(f, j, ranges[(first + j) / kChunk], m, first + j);
+        keep_codes(f, first, count, *codes);
+        codes->fingerprints[b] = block_fingerprint(m, b);
         o.file.release(begin, begin + bytes);
       },
       [&](uint64_t done) {
         if (progress && done < h.blocks) progress(done * kCompactBlockGaussians, h.gaussians);
       });
   if (progress) progress(h.gaussians, h.gaussians);
+  m.codes = codes;
   return m;
 }
 
@@ -434,15 +478,20 @@ GaussianModel read_compact_lod(const std::string& path, const std::string& scene
 
 void quantize_compact(GaussianModel& model, int threads) {
   check_writable(model, model.name);
-  const std::vector<ChunkRanges> ranges = all_ranges(model, model.name, threads);
-  const uint64_t record = compact_record_bytes(model.sh_degree);
-  run_blocks(ranges.size(), threads, [&](uint64_t c) {
-    const uint64_t first = c * kChunk, count = std::min<uint64_t>(kChunk, model.size() - first);
+  model.codes.reset();
+  std::vector<ChunkRanges> ranges = all_ranges(model, model.name, threads);
+  const std::shared_ptr<CompactCodes> codes = new_codes(model, std::move(ranges));
+  const uint64_t record = compact_record_bytes(model.sh_degree), n = model.size();
+  run_blocks(codes->fingerprints.size(), threads, [&](uint64_t b) {
+    const uint64_t first = b * kCompactBlockGaussians, count = std::min(kCompactBlockGaussians, n - first);
     std::vector<uint8_t> bytes(count * record);
     const BlockFields f(bytes.data(), count, model.sh_degree);
-    for (uint64_t j = 0; j < count; ++j) encode_gaussian(model, first + j, ranges[c], f, j);
-    for (uint64_t j = 0; j < count; ++j) decode_gaussian(f, j, ranges[c], model, first + j);
+    for (uint64_t j = 0; j < count; ++j) encode_gaussian(model, first + j, codes->ranges[(first + j) / kChunk], f, j);
+    for (uint64_t j = 0; j < count; ++j) decode_gaussian(f, j, codes->ranges[(first + j) / kChunk], model, first + j);
+    keep_codes(f, first, count, *codes);
+    codes->fingerprints[b] = block_fingerprint(model, b);
   });
+  model.codes = codes;
 }
 
 }  // namespace catgs

@@ -28,7 +28,9 @@
 //                        first, value (q - 63) / 63 x the chunk's absolute bound of its band
 //                        (k 1-3: band 1, 4-8: band 2, 9-15: band 3); q 127 is never written
 //            So 6 + 4 + 4 + 4 + 21 = 39 bytes a Gaussian at SH degree 2 (18 + 8, 18 + 40 at 1, 3),
-//            plus 116 bytes a chunk (0.45 a Gaussian).
+//            plus 116 bytes a chunk (0.45 a Gaussian). The decode's exact arithmetic (the
+//            fractions are q times the float nearest 1 / (2^bits - 1)): forward_model/compact_codes.h,
+//            which the CUDA core shares.
 // The tables' and the blocks' hashes detect damage, not forgery. What a forged file can still
 // say is checked as for every scene file: counts against the file's size before any allocation,
 // ranges finite with lo <= hi (so every decoded value is finite), the LOD tree
@@ -42,9 +44,11 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "forward_model/compact_codes.h"
 #include "scene/gaussian_model.h"
 #include "scene/load_progress.h"
 
@@ -53,16 +57,12 @@ namespace catgs {
 inline constexpr uint32_t kCompactVersion = 1;
 inline constexpr uint64_t kCompactBlockGaussians = 65536;  // a data block: hashed and decoded by one thread
 
-// One chunk's quantization ranges (float32, 84 bytes): positions (world units), log scales and
-// DC coefficients per axis or channel, and the absolute bound of each SH band's coefficients
-// (0 past the scene's degree).
-struct ChunkRanges {
-  float pos_lo[3], pos_hi[3];
-  float scale_lo[3], scale_hi[3];
-  float dc_lo[3], dc_hi[3];
-  float band[3];
-};
-static_assert(sizeof(ChunkRanges) == 84, "21 floats");
+using fm::ChunkRanges;  // forward_model/compact_codes.h: a chunk's ranges, and the decode both cores share
+
+// The opacity logit of an 8-bit alpha code q (alpha = q / 255; 0 and 255 give
+// -+kOpacityLogitLimit). The CUDA core reads these 256 values from a table (std::log differs
+// between host and device in its last bits).
+float compact_opacity_logit(uint32_t code);
 
 // Bytes a Gaussian takes in the data blocks at SH degree `degree` (0..3).
 uint64_t compact_record_bytes(int degree);
@@ -80,6 +80,30 @@ bool looks_like_compact(const std::vector<uint8_t>& head);
 void write_compact_scene(const GaussianModel& model, const std::string& path, const std::string& keyed_to = "",
                          int threads = 0);
 
+// A compact scene's codes as the CUDA core keeps them (cuda/cuda_renderer.h DeviceScene), beside
+// the float model they were decoded into: per Gaussian its rotation, log-scale, colour (DC and
+// alpha) and SH rest codes as in the file, per chunk its ranges, and per data block a fingerprint
+// of the block's float arrays (compact_codes_match). The means stay float on the GPU (the cut,
+// culling and depth read them for every Gaussian of a drawn chunk). 4 + 4 + 4 + 21 bytes a
+// Gaussian on the host at SH degree 2.
+struct CompactCodes {
+  template <class T>
+  using Array = std::vector<T, UninitAllocator<T>>;  // filled in parallel by the decode
+  uint64_t gaussians = 0;
+  int sh_degree = 0;
+  uint32_t sh_bytes = 0;               // a Gaussian's SH rest codes
+  std::vector<ChunkRanges> ranges;     // [chunk_count(N)]
+  Array<uint32_t> rotation, scale;     // [N]
+  Array<uint8_t> colour;               // [N, 4]: DC red, green, blue, alpha
+  Array<uint8_t> sh;                   // [N, sh_bytes]
+  std::vector<uint64_t> fingerprints;  // [blocks of kCompactBlockGaussians]
+  float opacity_logit[256] = {};       // compact_opacity_logit of each alpha code
+};
+
+// Whether `model.codes` still decode to `model`'s arrays: the same counts and every block's
+// fingerprint (an XXH3 over its floats) unchanged. Runs on every core; false without codes.
+bool compact_codes_match(const GaussianModel& model);
+
 // What a compact file's header says (its magic and header checksum checked, nothing else): for
 // listing scenes (scene_peek.h). Throws SceneFileError naming `path`.
 struct CompactSummary {
@@ -90,7 +114,8 @@ struct CompactSummary {
 CompactSummary peek_compact(const std::string& path);
 
 // Reads a compact scene (load_scene calls it for a file with the magic): the model as written,
-// quantized, with its LOD tree when it has one; name = scene_name(path). Throws SceneFileError
+// quantized, with its LOD tree when it has one and its codes (GaussianModel::codes); name =
+// scene_name(path). Throws SceneFileError
 // naming `path` (see above). Memory: the file is mapped and its pages handed back block by block.
 GaussianModel read_compact_scene(const std::string& path, const LoadProgress& progress = {}, int threads = 0);
 
@@ -107,8 +132,9 @@ GaussianModel read_compact_lod(const std::string& path, const std::string& scene
 // behind the hashes.
 void reseal_compact_scene(std::string& bytes);
 
-// Quantizes `model` in place exactly as write_compact_scene then read_compact_scene would (so the
-// server that builds a LOD draws on its first start what it draws from the file afterwards).
+// Quantizes `model` in place exactly as write_compact_scene then read_compact_scene would, codes
+// included (so the server that builds a LOD draws on its first start what it draws from the file
+// afterwards).
 // Throws as write_compact_scene does.
 void quantize_compact(GaussianModel& model, int threads = 0);
 

@@ -60,6 +60,8 @@ struct UninitAllocator : std::allocator<T> {
 // One of a model's per-Gaussian arrays.
 using ModelArray = std::vector<float, UninitAllocator<float>>;
 
+struct CompactCodes;  // scene/compact_file.h
+
 struct GaussianModel {
   std::string name;   // scene name for logs and the protocol (file stem)
   int sh_degree = 0;  // 0..3
@@ -71,6 +73,11 @@ struct GaussianModel {
   // Level of detail (forward_model/lod.h): one node per chunk of kChunkSize Gaussians, or empty
   // (no LOD: every Gaussian is drawn). Built by lod/lod_build.h.
   std::vector<fm::LodNode> lod;
+  // The compact scene's codes these arrays were decoded from (scene/compact_file.h: a compact
+  // scene's read, quantize_compact), or null. The CUDA core keeps them on the GPU in place of the
+  // floats (45 bytes a Gaussian against 98) while they still match the arrays (their
+  // fingerprints, compact_codes_match); whatever changes the arrays should drop them.
+  std::shared_ptr<const CompactCodes> codes;
 
   std::size_t size() const { return opacity_logits.size(); }
   int sh_coeffs() const { return sh_coeff_count(sh_degree); }

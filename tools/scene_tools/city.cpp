@@ -33,6 +33,7 @@ glm::quat arc(glm::vec3 a, glm::vec3 b) {
 void scale_scene(GaussianModel& model, float s) {
   if (!(s > 0.0f) || !std::isfinite(s)) throw std::invalid_argument("scale_scene: scale must be positive and finite");
   const float log_s = std::log(s);
+  model.codes.reset();  // compact codes (scene/compact_file.h) no longer match
   for (float& v : model.means) v *= s;
   for (float& v : model.log_scales) v += log_s;
 }
