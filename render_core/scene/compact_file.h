@@ -11,7 +11,7 @@
 //            LOD nodes (0 or chunk_count(N)), the source stamp of a keyed file (size,
 //            modification time in ns, XXH3 of its first 64 KiB; all 0 in a file served alone),
 //            the sections' offsets, the file size, an XXH3 of the tables and of the header.
-//   tables   the chunk ranges [chunk_count(N)] (ChunkRanges below, 84 bytes), the LOD nodes
+//   tables   the chunk ranges [chunk_count(N)] (fm::ChunkRanges, forward_model/compact_codes.h, 84 bytes), the LOD nodes
 //            [0 or chunk_count(N)] (fm::LodNode, 32 bytes), the XXH3-64 of each data block
 //            [blocks] (8 bytes)
 //   data     at a 4096-byte boundary: blocks of kCompactBlockGaussians Gaussians (the last one
@@ -115,8 +115,8 @@ CompactSummary peek_compact(const std::string& path);
 
 // Reads a compact scene (load_scene calls it for a file with the magic): the model as written,
 // quantized, with its LOD tree when it has one and its codes (GaussianModel::codes); name =
-// scene_name(path). Throws SceneFileError
-// naming `path` (see above). Memory: the file is mapped and its pages handed back block by block.
+// scene_name(path). Throws SceneFileError naming `path` (see above). Memory: the file is mapped
+// and its pages handed back block by block.
 GaussianModel read_compact_scene(const std::string& path, const LoadProgress& progress = {}, int threads = 0);
 
 // A LOD file in compact form (the server's cache folder, catgs-scene lod): as read_compact_scene,
@@ -134,8 +134,7 @@ void reseal_compact_scene(std::string& bytes);
 
 // Quantizes `model` in place exactly as write_compact_scene then read_compact_scene would, codes
 // included (so the server that builds a LOD draws on its first start what it draws from the file
-// afterwards).
-// Throws as write_compact_scene does.
+// afterwards). Throws as write_compact_scene does.
 void quantize_compact(GaussianModel& model, int threads = 0);
 
 }  // namespace catgs

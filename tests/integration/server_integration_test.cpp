@@ -17,6 +17,7 @@
 
 #include "cpu/cpu_renderer.h"
 #include "lod/lod_build.h"
+#include "scene/compact_file.h"
 #include "scene/ply_io.h"
 #include "camera/trace.h"
 #include "encode/content_rate.h"
@@ -241,8 +242,11 @@ TEST(ServerIntegration, WelcomeCarriesTheFirstViewFrame) {
     c.connect(server.port());
     const pb::Welcome w = c.hello(W, H);
     // The server serves the scene with its level of detail (--lod write, the default): its leaves
-    // in Morton order, which moves the content's mean shift in the last digits.
-    const server::SceneFrame f = server::frame_from_content(build_lod(*load_model(kFlowers)));
+    // in Morton order, which moves the content's mean shift in the last digits, quantized as the
+    // compact LOD file it writes keeps them (issue 74: every start draws the same).
+    GaussianModel served = build_lod(*load_model(kFlowers));
+    quantize_compact(served);
+    const server::SceneFrame f = server::frame_from_content(served);
     expect_welcome_frame(w, f, W, H);
     EXPECT_NE(server.log().find("first view: content"), std::string::npos) << server.log();
     std::cout << "[ info ] Welcome from the content: orbit centre (" << w.orbit_centre().x() << ", "
