@@ -98,6 +98,12 @@ struct BlockFields {
 };
 
 void put_u32(uint8_t* p, uint32_t v) { std::memcpy(p, &v, 4); }
+
+// memcpy of `n` bytes, nothing when n is 0 (an empty vector's data() may be null, which memcpy
+// may not be given even for 0 bytes: UBSan's finding on a scene without LOD).
+void copy_bytes(void* to, const void* from, std::size_t n) {
+  if (n > 0) std::memcpy(to, from, n);
+}
 uint32_t get_u32(const uint8_t* p) {
   uint32_t v;
   std::memcpy(&v, p, 4);
@@ -247,10 +253,10 @@ std::shared_ptr<CompactCodes> new_codes(const GaussianModel& m, std::vector<Chun
 
 // Gaussians [first, first + count) of `f` (slots 0..count) into `c`.
 void keep_codes(const BlockFields& f, uint64_t first, uint64_t count, CompactCodes& c) {
-  std::memcpy(c.rotation.data() + first, f.rot, 4 * count);
-  std::memcpy(c.scale.data() + first, f.scale, 4 * count);
-  std::memcpy(c.colour.data() + 4 * first, f.colour, 4 * count);
-  std::memcpy(c.sh.data() + c.sh_bytes * first, f.sh, c.sh_bytes * count);
+  copy_bytes(c.rotation.data() + first, f.rot, 4 * count);
+  copy_bytes(c.scale.data() + first, f.scale, 4 * count);
+  copy_bytes(c.colour.data() + 4 * first, f.colour, 4 * count);
+  copy_bytes(c.sh.data() + c.sh_bytes * first, f.sh, c.sh_bytes * count);  // none at SH degree 0
 }
 
 }  // namespace
@@ -288,8 +294,8 @@ void write_compact_scene(const GaussianModel& model, const std::string& path, co
   const std::vector<ChunkRanges> ranges = all_ranges(model, path, threads);
   // The tables, contiguous as in the file: ranges, LOD nodes, block hashes (filled below).
   std::vector<uint8_t> tables(h.data_offset - h.ranges_offset, 0);
-  std::memcpy(tables.data(), ranges.data(), ranges.size() * sizeof(ChunkRanges));
-  std::memcpy(tables.data() + (h.lod_offset - h.ranges_offset), model.lod.data(), h.lod_nodes * sizeof(fm::LodNode));
+  copy_bytes(tables.data(), ranges.data(), ranges.size() * sizeof(ChunkRanges));
+  copy_bytes(tables.data() + (h.lod_offset - h.ranges_offset), model.lod.data(), h.lod_nodes * sizeof(fm::LodNode));
   auto* hashes = tables.data() + (h.hashes_offset - h.ranges_offset);
 
   write_replacing(path, h.file_size, [&](int fd) {
@@ -389,7 +395,7 @@ GaussianModel decode(const OpenedCompact& o, const std::string& path, int thread
   auto bad = [&](const std::string& why) { return SceneFileError(path, "compact scene: " + why); };
   const uint64_t chunks = fm::chunk_count(h.gaussians);
   std::vector<ChunkRanges> ranges(chunks);
-  std::memcpy(ranges.data(), o.file.data() + h.ranges_offset, chunks * sizeof(ChunkRanges));
+  copy_bytes(ranges.data(), o.file.data() + h.ranges_offset, chunks * sizeof(ChunkRanges));
   for (uint64_t c = 0; c < chunks; ++c) {
     const std::string why = bad_ranges(ranges[c]);
     if (!why.empty()) throw bad("chunk " + std::to_string(c) + ": " + why);
@@ -399,7 +405,7 @@ GaussianModel decode(const OpenedCompact& o, const std::string& path, int thread
   m.sh_degree = static_cast<int>(h.sh_degree);
   m.resize(h.gaussians);
   m.lod.resize(h.lod_nodes);
-  std::memcpy(m.lod.data(), o.file.data() + h.lod_offset, h.lod_nodes * sizeof(fm::LodNode));
+  copy_bytes(m.lod.data(), o.file.data() + h.lod_offset, h.lod_nodes * sizeof(fm::LodNode));
   try {
     fm::validate_lod(m.lod, m.size());
   } catch (const std::exception& e) {
