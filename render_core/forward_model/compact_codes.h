@@ -29,7 +29,8 @@ inline constexpr int kCompactShLevels = 63;  // code - 63 in [-63, 63]
 
 // The low `bits` of q as the fraction q / (2^bits - 1), taken as q times the float nearest
 // 1 / (2^bits - 1) (a product, not a division: the decode runs in pre-processing for every
-// Gaussian of a drawn chunk, and a division there cost 12-15% of a frame on the GPU).
+// Gaussian of a drawn chunk, where divisions cost a measurable share of the frame: RESULTS.md
+// "Compact scene").
 CATGS_HD float compact_unorm(uint32_t q, int bits) {
   const uint32_t mask = (1u << bits) - 1u;
   return lod_mul(static_cast<float>(q & mask), 1.0f / static_cast<float>(mask));

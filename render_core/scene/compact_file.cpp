@@ -259,6 +259,15 @@ void keep_codes(const BlockFields& f, uint64_t first, uint64_t count, CompactCod
   copy_bytes(c.sh.data() + c.sh_bytes * first, f.sh, c.sh_bytes * count);  // none at SH degree 0
 }
 
+// keep_codes' inverse: Gaussians [first, first + count) of `c` into slots 0..count of `f` (the
+// positions are not codes: a decoded mean re-encodes to its own code within its chunk's box).
+void restore_codes(const CompactCodes& c, uint64_t first, uint64_t count, const BlockFields& f) {
+  copy_bytes(f.rot, c.rotation.data() + first, 4 * count);
+  copy_bytes(f.scale, c.scale.data() + first, 4 * count);
+  copy_bytes(f.colour, c.colour.data() + 4 * first, 4 * count);
+  copy_bytes(f.sh, c.sh.data() + c.sh_bytes * first, c.sh_bytes * count);
+}
+
 }  // namespace
 
 float compact_opacity_logit(uint32_t code) {
@@ -291,7 +300,11 @@ void write_compact_scene(const GaussianModel& model, const std::string& path, co
     h.source = source_stamp(keyed_to);
     h.keyed = 1;
   }
-  const std::vector<ChunkRanges> ranges = all_ranges(model, path, threads);
+  // A model that carries its codes (quantize_compact, a compact read) is written with them, so
+  // the file decodes to exactly the arrays it was written from: re-encoding decoded values with
+  // ranges taken from them anew could land a value on the next code.
+  const CompactCodes* codes = compact_codes_match(model) ? model.codes.get() : nullptr;
+  const std::vector<ChunkRanges> ranges = codes ? codes->ranges : all_ranges(model, path, threads);
   // The tables, contiguous as in the file: ranges, LOD nodes, block hashes (filled below).
   std::vector<uint8_t> tables(h.data_offset - h.ranges_offset, 0);
   copy_bytes(tables.data(), ranges.data(), ranges.size() * sizeof(ChunkRanges));
@@ -304,6 +317,7 @@ void write_compact_scene(const GaussianModel& model, const std::string& path, co
       std::vector<uint8_t> bytes(count * h.record_bytes);
       const BlockFields f(bytes.data(), count, model.sh_degree);
       for (uint64_t j = 0; j < count; ++j) encode_gaussian(model, first + j, ranges[(first + j) / kChunk], f, j);
+      if (codes) restore_codes(*codes, first, count, f);
       const uint64_t hash = XXH3_64bits(bytes.data(), bytes.size());
       std::memcpy(hashes + 8 * b, &hash, 8);
       write_all(fd, bytes.data(), bytes.size(), h.data_offset + first * h.record_bytes, path);

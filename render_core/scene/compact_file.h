@@ -1,6 +1,6 @@
 // The compact scene (issue 74): the scene as the server keeps it, with its level of detail, in
-// about 40 bytes a Gaussian (the LOD file of float32 arrays took 206 at SH degree 2, the INRIA PLY
-// 164). Our own format, quantized per chunk of fm::kChunkSize Gaussians, so that a chunk's range
+// 39 bytes a Gaussian at SH degree 2 plus its chunk's share (the layout below; sizes against the
+// float LOD file and the PLY: RESULTS.md "Compact scene"). Our own format, quantized per chunk of fm::kChunkSize Gaussians, so that a chunk's range
 // serves both the cut's culling and the quantization. `catgs-scene lod --out F.catgs`, `convert`
 // and `tile` write it; load_scene reads it by its magic (it is served alone: --scene F.catgs);
 // the server writes its LOD files in it (scene_with_lod.h), keyed to their source.

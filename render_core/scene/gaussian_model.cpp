@@ -14,8 +14,8 @@ namespace {
 
 // `v` as n zeros, every core zeroing (and so faulting in) its own blocks of the fresh memory:
 // one thread's page faults cost 0.9 s for the 7 M city's 1 GB on the build machine, more than
-// parsing it (issue 37), and MADV_POPULATE_WRITE before a serial memset still 4.1 s for 16 GiB on
-// the GPU machine against 0.73 s so (issue 74, docs/history/scene_loading.md).
+// parsing it (issue 37), and MADV_POPULATE_WRITE before a serial memset was still several times
+// slower on the GPU machine (issue 74, docs/history/scene_loading.md "The model's allocation").
 void assign_zeros(ModelArray& v, std::size_t n) {
   ModelArray().swap(v);
   v.resize(n);                              // UninitAllocator: nothing written yet

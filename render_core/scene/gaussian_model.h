@@ -37,8 +37,8 @@ inline constexpr float kOpacityLogitLimit = 20.0f;
 // 7 M Gaussian degree-0 city does not carry 15 zero bands.)
 // std::allocator, except that value-initialising a float does nothing: resize() leaves new
 // elements as they are, so GaussianModel::resize can zero its arrays on every core, each thread
-// faulting in its own pages (issue 74: one thread's page faults and memset took 9.1 s for 16 GiB
-// on the GPU machine; every core first-touching, 0.73 s; docs/history/scene_loading.md).
+// faulting in its own pages (issue 74: one thread's faults and memset were the read's bound;
+// docs/history/scene_loading.md "The model's allocation" has the times).
 template <class T>
 struct UninitAllocator : std::allocator<T> {
   template <class U>

@@ -144,6 +144,16 @@ TEST(CompactScene, EveryValueWithinItsDocumentedStep) {
     GaussianModel changed = got;
     changed.opacity_logits.back() += 1.0f;  // a change the codes do not carry
     EXPECT_FALSE(compact_codes_match(changed));
+    // Written again (the server quantizes its LOD, serves it, then writes it), the file gives
+    // back exactly what was served.
+    const std::string again = dir + "/" + want.name + "_again.catgs";
+    write_compact_scene(q, again);
+    const GaussianModel reread = load_scene(again);
+    EXPECT_EQ(reread.means, q.means);
+    EXPECT_EQ(reread.log_scales, q.log_scales);
+    EXPECT_EQ(reread.rotations, q.rotations);
+    EXPECT_EQ(reread.opacity_logits, q.opacity_logits);
+    EXPECT_EQ(reread.sh, q.sh);
   }
 }
 
