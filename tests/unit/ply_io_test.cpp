@@ -78,13 +78,7 @@ TEST(SceneWriter, InriaRoundTripIsExact) {
   const GaussianModel a = load_scene(path);
   const std::string out = test::temp_dir() + "/flowers.ply";
   write_inria_ply(a, out);
-  const GaussianModel b = load_scene(out);
-  EXPECT_EQ(b.sh_degree, a.sh_degree);
-  EXPECT_EQ(a.means, b.means);
-  EXPECT_EQ(a.sh, b.sh);
-  EXPECT_EQ(a.log_scales, b.log_scales);
-  EXPECT_EQ(a.rotations, b.rotations);
-  EXPECT_EQ(a.opacity_logits, b.opacity_logits);
+  test::expect_same_gaussians(load_scene(out), a);
 }
 
 // ASCII PLY with the properties in a shuffled order and as doubles reads the same Gaussians.

@@ -27,6 +27,30 @@ std::shared_ptr<const GaussianModel> cached_scene(const std::string& path);
 // box at the origin (seed 22).
 std::shared_ptr<const GaussianModel> giant_gaussians(std::size_t n, float log_scale);
 
+// Every per-Gaussian array of `got` (means, log-scales, rotations, opacity logits, SH) equals
+// `want`'s bit for bit, and so does the SH degree.
+inline void expect_same_gaussians(const GaussianModel& got, const GaussianModel& want) {
+  EXPECT_EQ(got.sh_degree, want.sh_degree);
+  EXPECT_EQ(got.means, want.means);
+  EXPECT_EQ(got.log_scales, want.log_scales);
+  EXPECT_EQ(got.rotations, want.rotations);
+  EXPECT_EQ(got.opacity_logits, want.opacity_logits);
+  EXPECT_EQ(got.sh, want.sh);
+}
+
+// `load()` must throw an E whose message names `file` and says `says` (a refused file names
+// itself and its fault).
+template <typename E, typename Load>
+void expect_refused(Load&& load, const std::string& file, const std::string& says) {
+  try {
+    load();
+    ADD_FAILURE() << file << ": accepted";
+  } catch (const E& e) {
+    EXPECT_NE(std::string(e.what()).find(file), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << file << ": " << e.what();
+  }
+}
+
 }  // namespace catgs::test
 
 // Skips the test with a visible reason when a real-data file is missing.

@@ -86,11 +86,7 @@ void expect_leaves_are(const GaussianModel& lod, const GaussianModel& scene) {
 void expect_quantized_build(const GaussianModel& served, const GaussianModel& scene) {
   GaussianModel want = build_lod(scene);
   quantize_compact(want);
-  EXPECT_EQ(served.means, want.means);
-  EXPECT_EQ(served.log_scales, want.log_scales);
-  EXPECT_EQ(served.rotations, want.rotations);
-  EXPECT_EQ(served.opacity_logits, want.opacity_logits);
-  EXPECT_EQ(served.sh, want.sh);
+  test::expect_same_gaussians(served, want);
   ASSERT_EQ(served.lod.size(), want.lod.size());
   EXPECT_EQ(std::memcmp(served.lod.data(), want.lod.data(), want.lod.size() * sizeof(fm::LodNode)), 0);
 }
