@@ -163,7 +163,7 @@ void Server::load_model() {
           d, std::max<std::uint64_t>(scene_device_bytes(*scene.model), after - std::min(before, after))));
       std::cout << "gpu " << d << ": scene " << scene.model->name << " uploaded in " << ms_since(t0) << " ms, "
                 << static_cast<long>(mib) << " MiB of device memory (with its LOD levels, " << scene.model->lod.size()
-                << " chunks)" << std::endl;
+                << " chunks; " << cuda_upload_report(*scene.residents.back()) << ")" << std::endl;
     }
   };
   std::vector<SceneStore::Source> sources{{options_.scene, options_.cameras}};

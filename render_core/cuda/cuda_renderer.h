@@ -133,6 +133,15 @@ class DeviceScene {
   uint32_t sh_code_bytes() const { return sh_code_bytes_; }
   const fm::ChunkRanges* chunk_ranges() const { return chunk_ranges_; }
   const float* opacity_lut() const { return opacity_lut_; }
+  // Where the upload's time went (wall clock, milliseconds), for the server's log and RESULTS.md
+  // "Compact scene": the compact codes' check against the arrays (compact_codes_match) and the
+  // chunk bounds on the host, then the copies to the device (cudaMalloc and the staged copies of
+  // `copied_bytes`, until the last arrived).
+  struct UploadTimes {
+    double check_ms = 0.0, bounds_ms = 0.0, copy_ms = 0.0;
+    std::size_t copied_bytes = 0;
+  };
+  const UploadTimes& upload_times() const { return upload_times_; }
 
  private:
   DeviceScene() = default;
@@ -153,6 +162,7 @@ class DeviceScene {
   uint32_t sh_code_bytes_ = 0;
   fm::ChunkRanges* chunk_ranges_ = nullptr;
   float* opacity_lut_ = nullptr;
+  UploadTimes upload_times_;
 };
 
 // A rendered frame in device memory, valid until the renderer's next frame; ready once `stream`

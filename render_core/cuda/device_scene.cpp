@@ -1,5 +1,6 @@
 // DeviceScene: one read-only copy of a GaussianModel in device memory, shared by renderers.
 #include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -134,9 +135,19 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
   s->sh_degree_ = model.sh_degree;
   // On a throw, the copier waits for its copies, then the partially filled scene's destructor
   // frees what was uploaded.
+  using Clock = std::chrono::steady_clock;
+  const auto since = [](Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+  };
+  auto t = Clock::now();
+  const bool compact = compact_codes_match(model);  // the codes, where they still decode to the arrays
+  s->upload_times_.check_ms = since(t);
+  t = Clock::now();
+  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(model);
+  s->upload_times_.bounds_ms = since(t);
+  t = Clock::now();
   StagedCopier copier;
   s->means_ = upload_array(copier, model.means, &s->bytes_, "means");
-  const bool compact = compact_codes_match(model);  // the codes, where they still decode to the arrays
   if (compact) {
     const CompactCodes& c = *model.codes;
     s->rotation_codes_ = upload_array(copier, c.rotation, &s->bytes_, "rotation codes");
@@ -168,11 +179,12 @@ std::shared_ptr<const DeviceScene> DeviceScene::upload(const GaussianModel& mode
       });
     });
   }
-  const std::vector<fm::ChunkBounds> chunks = chunk_bounds_of(model);
   s->chunks_ = upload_array(copier, chunks, &s->bytes_, "chunk bounds");
   fm::validate_lod(model.lod, n);
   s->lod_ = upload_array(copier, model.lod, &s->bytes_, "LOD nodes");  // nullptr without LOD
   copier.finish();
+  s->upload_times_.copy_ms = since(t);
+  s->upload_times_.copied_bytes = s->bytes_;
   return s;
 }
 

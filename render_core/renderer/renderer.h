@@ -278,5 +278,9 @@ std::size_t cuda_device_memory_total(int gpu);
 // Device memory the driver reports free on CUDA device `gpu` now (cudaMemGetInfo: what every
 // process leaves), bytes; UINT64_MAX (unknown) when built without CUDA or on error. Never throws.
 std::uint64_t cuda_device_memory_free(int gpu);
+// Where the upload of a CUDA renderer's scene went (cuda::DeviceScene::upload_times), one line for
+// a log: "codes check A ms, chunk bounds B ms, copies C ms (D GiB at E GB/s)"; empty for another
+// renderer or when built without CUDA. Never throws.
+std::string cuda_upload_report(const Renderer& renderer);
 
 }  // namespace catgs

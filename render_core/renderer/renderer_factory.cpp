@@ -1,4 +1,5 @@
 // Renderer selection by name ("cpu", "cuda", "auto").
+#include <cstdio>
 #include <stdexcept>
 
 #include "cpu/cpu_renderer.h"
@@ -83,6 +84,22 @@ std::size_t device_bytes(int gpu, bool total) {
 std::size_t cuda_device_memory_used(int gpu) { return device_bytes(gpu, false); }
 
 std::size_t cuda_device_memory_total(int gpu) { return device_bytes(gpu, true); }
+
+std::string cuda_upload_report(const Renderer& renderer) {
+#if CATGS_HAVE_CUDA
+  const auto* cuda = dynamic_cast<const cuda::CudaRenderer*>(&renderer);
+  if (!cuda || !cuda->scene()) return {};
+  const cuda::DeviceScene::UploadTimes& t = cuda->scene()->upload_times();
+  char line[160];
+  std::snprintf(line, sizeof line, "codes check %.0f ms, chunk bounds %.0f ms, copies %.0f ms (%.2f GiB at %.1f GB/s)",
+                t.check_ms, t.bounds_ms, t.copy_ms, static_cast<double>(t.copied_bytes) / (1u << 30),
+                t.copy_ms > 0.0 ? static_cast<double>(t.copied_bytes) / (t.copy_ms * 1e6) : 0.0);
+  return line;
+#else
+  (void)renderer;
+  return {};
+#endif
+}
 
 std::uint64_t cuda_device_memory_free(int gpu) {
   const std::size_t total = device_bytes(gpu, true);
