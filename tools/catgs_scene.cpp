@@ -6,8 +6,10 @@
 //       --check-views) prints the PSNR of CPU renders of the copy against the original.
 //   catgs-scene convert --scene S --out O.(ply|compressed.ply|spz|catgs) [--spz-version 3|4]
 //       Reads any scene format (ply_io.h) and writes INRIA PLY, SuperSplat compressed PLY (Morton
-//       order), .spz (version 4 by default) or a compact scene (Morton order, or a compact
-//       scene's own order and levels) by the output's extension.
+//       order), .spz (version 4 by default) or a compact scene (Morton order; a compact scene's
+//       own order and levels; a compressed PLY's own order, so that its chunks keep their grids
+//       and every code it held survives: compact_file_test CompressedPlySourceKeepsEveryCode) by
+//       the output's extension.
 //   catgs-scene tile    --scene S (--out city.ply | --out-compressed city.compressed.ply |
 //                       --out-catgs city.catgs [--branching 8])
 //                       [--radius-sq 4] [--spacing 1.2] [--scale 10] [--seed N] [--up X,Y,Z]
@@ -58,6 +60,7 @@
 #include "scene/ply_io.h"
 #include "scene/compact_file.h"
 #include "scene/scene_cache.h"
+#include "scene/scene_peek.h"
 #include "scene_tools/load_bench.h"
 #include "scene/spz_file.h"
 #include "renderer/renderer.h"
@@ -170,7 +173,8 @@ int convert(const catgs::tools::Args& args) {
   const auto m = catgs::load_scene(args.require("--scene"));
   if (ends_with(out, ".compressed.ply"))
     catgs::write_compressed_ply(catgs::permuted(m, catgs::morton_order(m)), out);
-  else if (ends_with(out, ".catgs") && !m.lod.empty())
+  else if (ends_with(out, ".catgs") &&
+           (!m.lod.empty() || catgs::peek_scene(args.require("--scene")).format == "compressed_ply"))
     catgs::write_compact_scene(m, out);
   else if (ends_with(out, ".catgs"))
     catgs::write_compact_scene(catgs::permuted(m, catgs::morton_order(m)), out);

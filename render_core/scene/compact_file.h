@@ -40,7 +40,12 @@
 // positions to (hi - lo) / 131070 of their chunk's box, log scales to 1/4094 (x, z) and 1/2046 (y)
 // of their chunk's range, rotations as compressed PLY, DC coefficients to 1/510 of their chunk's
 // range, opacity to 1/510, SH rest to 1/126 of their band's bound. Where the picture lands is
-// measured by catgs-bench's yardstick (RESULTS.md "Compact scene").
+// measured by catgs-bench's yardstick (RESULTS.md "Compact scene"). A SuperSplat compressed PLY
+// written in its own order (catgs-scene convert keeps it) loses none of its codes: each chunk's
+// ranges lie within the source chunk's, at no coarser steps (positions 16 against 11/10 bits, log
+// scales 11-10-11 and colours 8 bits of a range no wider), alpha is the same 8 bits and rotations
+// keep their words (quantize.h pack_rotation); its 8-bit SH rest would keep 7. Re-sorted (a LOD's
+// levels), a chunk mixes source chunks and a value moves by up to half its new step.
 #pragma once
 
 #include <cstdint>

@@ -29,7 +29,7 @@ inline float normalized(float v, float lo, float hi) { return hi > lo ? (v - lo)
 // rotation), the other three follow in index order in bits 29..20, 19..10, 9..0, each
 // q / 1023 - 0.5 scaled by sqrt(2) (they lie in [-1/sqrt(2), 1/sqrt(2)]: steps of sqrt(2) / 1023).
 // The quaternion is normalised first; a zero one packs as the identity.
-inline uint32_t pack_rotation(const float* q_in) {
+inline uint32_t pack_rotation_normalised(const float* q_in) {
   float q[4], len2 = 0.0f;
   for (int k = 0; k < 4; ++k) len2 += q_in[k] * q_in[k];
   const float len = std::sqrt(len2);
@@ -58,6 +58,31 @@ inline void unpack_rotation(uint32_t packed, float* q) {
   q[largest] = std::sqrt(std::fmax(0.0f, 1.0f - (small[0] * small[0] + small[1] * small[1] + small[2] * small[2])));
   for (unsigned k = 0, s = 0; k < 4; ++k)
     if (k != largest) q[k] = small[s++];
+}
+
+// pack_rotation_normalised, except that a quaternion some code decodes to (unpack_rotation) bit for
+// bit packs as that code: a decoded rotation written again (a compressed PLY or compact scene
+// read, then written in the compact form) keeps its code, so nothing the source held is lost
+// (issue 74). Re-packing a decoded quaternion can land elsewhere otherwise: it is not of unit
+// length once the small components are rounded (its length is renormalised away), and the
+// rounding can leave a small component larger than the recomputed largest one (another index).
+// Here each index is tried with the components as they are; where none decodes back, the
+// normalised packing.
+inline uint32_t pack_rotation(const float* q_in) {
+  for (uint32_t largest = 0; largest < 4; ++largest) {
+    if (!(q_in[largest] >= 0.0f)) continue;  // a decode's largest component is sqrt(...) >= 0
+    uint32_t packed = largest << 30;
+    int shift = 20;
+    for (uint32_t k = 0; k < 4; ++k) {
+      if (k == largest) continue;
+      packed |= unorm_bits(q_in[k] * std::sqrt(0.5f) + 0.5f, 10) << shift;
+      shift -= 10;
+    }
+    float back[4];
+    unpack_rotation(packed, back);
+    if (back[0] == q_in[0] && back[1] == q_in[1] && back[2] == q_in[2] && back[3] == q_in[3]) return packed;
+  }
+  return pack_rotation_normalised(q_in);
 }
 
 // Three values of [0, 1] in 11, 10 and 11 bits (bits 31..21, 20..11, 10..0), compressed PLY's
