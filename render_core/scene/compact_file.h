@@ -44,8 +44,9 @@
 // written in its own order (catgs-scene convert keeps it) loses none of its codes: each chunk's
 // ranges lie within the source chunk's, at no coarser steps (positions 16 against 11/10 bits, log
 // scales 11-10-11 and colours 8 bits of a range no wider), alpha is the same 8 bits and rotations
-// keep their words (quantize.h pack_rotation); its 8-bit SH rest would keep 7. Re-sorted (a LOD's
-// levels), a chunk mixes source chunks and a value moves by up to half its new step.
+// keep their words (quantize.h pack_rotation); its 8-bit SH rest buckets of [-4, 4] come back while
+// a chunk's band bound stays under about 2 (7 bits of it). Re-sorted (a LOD's levels), a chunk mixes
+// source chunks and a value moves by up to half its new step.
 #pragma once
 
 #include <cstdint>

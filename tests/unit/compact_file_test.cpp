@@ -210,6 +210,7 @@ TEST(CompactScene, BytesLieWhereTheLayoutSays) {
 struct CompressedPlyCodes {
   std::vector<std::map<std::string, float>> chunks;
   std::vector<std::array<uint32_t, 4>> packed;  // position, rotation, scale, colour
+  std::vector<std::vector<uint8_t>> sh;         // per vertex its f_rest_* bytes (INRIA order), if any
 };
 CompressedPlyCodes read_compressed_codes(const std::string& path) {
   const std::string bytes = read_bytes(path);
@@ -235,17 +236,20 @@ CompressedPlyCodes read_compressed_codes(const std::string& path) {
     for (std::size_t row = 0; row < e.count; ++row) {
       std::map<std::string, float> chunk;
       std::array<uint32_t, 4> packed{};
+      std::vector<uint8_t> rest;
       for (const auto& [type, name] : e.properties) {
         uint32_t word = 0;
         std::memcpy(&word, bytes.data() + at, width(type));
         at += width(type);
         if (e.name == "chunk") std::memcpy(&chunk[name], &word, 4);
+        if (e.name == "sh") rest.push_back(static_cast<uint8_t>(word));
         const char* kPacked[4] = {"packed_position", "packed_rotation", "packed_scale", "packed_color"};
         for (int k = 0; k < 4; ++k)
           if (e.name == "vertex" && name == kPacked[k]) packed[k] = word;
       }
       if (e.name == "chunk") out.chunks.push_back(chunk);
       if (e.name == "vertex") out.packed.push_back(packed);
+      if (e.name == "sh") out.sh.push_back(rest);
     }
   }
   return out;
@@ -256,16 +260,23 @@ CompressedPlyCodes read_compressed_codes(const std::string& path) {
 // source chunk's and its steps are no coarser, so every code the source held is recovered from
 // the compact decode: rounding each decoded value back onto the source's own grid (its chunk's
 // min/max and bit width, read from the file here) gives the source's code, and the rotation codes
-// are the source's words. The real compressed PLYs in the data (SH degree 0; compressed PLY's 8-bit
-// SH rest is not among them, and the compact file keeps 7 bits of it).
+// are the source's words. The SH rest's 8-bit buckets of [-4, 4] come back too while a chunk's
+// band bound stays under about 2 (the compact keeps 7 bits of it): no code was lost here. The real
+// compressed PLYs in the data (SH degree 0), and the real SH degree 2 scene written as compressed
+// PLY by write_compressed_ply (Morton order, as catgs-scene compact writes it).
 TEST(CompactScene, CompressedPlySourceKeepsEveryCode) {
   CATGS_REQUIRE_DATA(guitar, "scenes/guitar.compressed.ply");
-  for (const std::string& path : {test::bundled_scene(), guitar}) {
+  CATGS_REQUIRE_DATA(tumblewood, "scenes/tumblewood_sh2.ply");
+  const GaussianModel tw = load_scene(tumblewood);
+  const std::string tw_compressed = test::temp_dir() + "/tumblewood_sh2.compressed.ply";
+  write_compressed_ply(permuted(tw, morton_order(tw)), tw_compressed);
+  for (const std::string& path : {test::bundled_scene(), guitar, tw_compressed}) {
     SCOPED_TRACE(path);
     const CompressedPlyCodes source = read_compressed_codes(path);
     const GaussianModel m = load_scene(path);
     ASSERT_EQ(source.packed.size(), m.size());
     ASSERT_EQ(source.chunks.size(), fm::chunk_count(m.size()));
+    ASSERT_EQ(source.sh.size(), m.sh_degree > 0 ? m.size() : 0u);
     GaussianModel q = m;
     quantize_compact(q);
     ASSERT_TRUE(q.codes);
@@ -277,7 +288,7 @@ TEST(CompactScene, CompressedPlySourceKeepsEveryCode) {
     const int shift[3] = {21, 11, 0}, bits[3] = {11, 10, 11};
     const char* axis[3] = {"x", "y", "z"};
     const char* channel[3] = {"r", "g", "b"};
-    std::size_t checked = 0, lost[5] = {0, 0, 0, 0, 0};  // position, scale, colour, alpha, rotation
+    std::size_t checked = 0, sh_checked = 0, lost[6] = {};  // position, scale, colour, alpha, rotation, SH rest
     for (std::size_t i = 0; i < m.size(); ++i) {
       const std::map<std::string, float>& c = source.chunks[i / 256];
       const std::array<uint32_t, 4>& p = source.packed[i];
@@ -297,6 +308,12 @@ TEST(CompactScene, CompressedPlySourceKeepsEveryCode) {
         lost[2] += code(colour, lo, hi, 8) != ((p[3] >> (24 - 8 * a)) & 255u);
       }
       lost[3] += code(sigmoid(q.opacity_logits[i]), 0.0f, 1.0f, 8) != (p[3] & 255u);
+      const int rest = q.sh_coeffs() - 1;
+      for (std::size_t j = 0; i < source.sh.size() && j < source.sh[i].size(); ++j) {
+        const float v = q.sh[(i * q.sh_coeffs() + 1 + j % rest) * 3 + j / rest];  // f_rest[c * rest + k - 1]
+        lost[5] += std::clamp(std::lround(std::floor((double(v) + 4.0) * 32.0)), 0l, 255l) != source.sh[i][j];
+        ++sh_checked;
+      }
       lost[4] += q.codes->rotation[i] != p[1];  // the same smallest-three packing (quantize.h)
       ++checked;
     }
@@ -306,6 +323,8 @@ TEST(CompactScene, CompressedPlySourceKeepsEveryCode) {
     EXPECT_EQ(lost[2], 0u) << "colour codes not recovered";
     EXPECT_EQ(lost[3], 0u) << "alpha codes not recovered";
     EXPECT_EQ(lost[4], 0u) << "rotation codes changed";
+    EXPECT_EQ(lost[5], 0u) << "SH rest codes not recovered";
+    EXPECT_EQ(sh_checked, m.size() * std::size_t(3 * (m.sh_coeffs() - 1)));
     // Re-sorted first (Morton order, as convert does a plain scene), a chunk mixes the source's
     // grids: how many log-scale codes that loses, for the log (no bound asserted: a source already
     // in our Morton order loses none).
