@@ -1,6 +1,6 @@
-// upload_bench GIB: what bounds a scene's host -> device upload (issue 74: >= 10 GB/s asked; the
-// server's StagedCopier, render_core/cuda/device_scene.cpp, moved 6.9 GB/s). Standalone, on
-// purpose (the GPU machine has nvcc but not our dependencies):
+// upload_bench GIB: what bounds a scene's host -> device upload (issue 74: >= 10 GB/s asked;
+// the server's StagedCopier, render_core/cuda/device_scene.cpp; RESULTS.md "Compact scene").
+// Standalone, on purpose (the GPU machine has nvcc but not our dependencies):
 //   nvcc -O2 -std=c++17 -Xcompiler -pthread scripts/upload_bench.cu -o /tmp/upload_bench
 //   /tmp/upload_bench 8
 // Rows, each over GIB GiB of a touched pageable source array (as the decoded model is):
