@@ -59,14 +59,14 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
   const bool occlusion = options_.occlusion_culling && options_.pipeline == Pipeline::exact;
   const fm::View view = fm::view_of(camera);
   if (occlusion && occlusion_valid_) {
-    buffers.occlusion = fm::occlusion_map(occlusion_depth_.data(), occlusion_view_, view);
-    const TileGrid grid = TileGrid::of(camera.width, camera.height);
-    occlusion_reproject(buffers.occlusion, view, grid, occlusion_now_);
-    buffers.occlusion.now_depth = occlusion_now_.data();
-    buffers.occlusion.now_tiles_x = grid.tiles_x;
+    buffers.occlusion =
+        occlusion_reproject(occlusion_depth_.data(), occlusion_view_, view, occlusion_now_, occlusion_cells_);
   }
-  stats_.occlusion_map_used = buffers.occlusion.depth != nullptr;
-  if (occlusion) buffers.tile_depth = &occlusion_next_;
+  stats_.occlusion_map_used = buffers.occlusion.cells[0] != nullptr;
+  if (occlusion) {
+    buffers.tile_depth = &occlusion_tiles_;
+    buffers.pixel_depth = &occlusion_next_;
+  }
   if (count_changes_) buffers.changed = &changed_;
   occlusion_valid_ = false;  // until this frame has drawn its own
   render_full_frame(*model_, chunks_, camera, options_.pipeline, options_, true, buffers, out, stats_);

@@ -55,10 +55,9 @@ struct ProjectedGaussians {
   std::vector<glm::vec3> trail_conic;   // [N] its inverse
   std::vector<float> q_trail;           // [N] level
   // Occlusion culling's per-entry test (forward_model/occlusion.h entry_hidden), exact frames with
-  // a map: the frame's reprojected tile depths ([tiles]; empty: none) and each Gaussian's depth in
-  // the map's view less the eye's move ([N]; -inf where its entries are all kept).
-  std::vector<float> hidden_depth;
-  std::vector<float> old_depth;
+  // a map: the frame's reprojected map (its cells, owned by the renderer; cells[0] null: none),
+  // applied to the Gaussians of at most fm::kOcclusionEntryTiles tiles.
+  fm::OcclusionMap occlusion;
   void resize(std::size_t n);
 };
 
@@ -83,8 +82,8 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // of its region (fm::clip_tile_rect; every Gaussian is projected with the whole camera).
 // A scene with LOD (model.lod) projects only the chunks of its cut at `camera` with bound
 // `lod_error_px` (fm::lod_chunk_drawn; 0: the leaves), in every pipeline; the others are skipped
-// as culled chunks are. exact also drops the entries that `occlusion` (the last frame's map with
-// its depths over this frame's tiles, now_depth; null: none) hides: a small Gaussian's each
+// as culled chunks are. exact also drops the entries that `occlusion` (the last frame's map
+// reprojected onto this frame, occlusion_reproject; no cells: none) hides: a small Gaussian's each
 // (fm::entry_hidden; emit_keys drops the same); issue 72.
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
@@ -156,13 +155,16 @@ void plan_slices(const TileRanges& ranges, std::size_t list_length, bool split, 
 // other passes' tiles). `tile_opaque_at` (null, or [grid.tile_count()]): those tiles' opaque point
 // P (forward_model/occlusion.h: the list position by which every pixel of the tile had stopped or
 // fallen below fm::kOcclusionTransmittance; UINT32_MAX where a pixel never did), as the CUDA
-// core's rasterize_slices writes it. `changed` (null, or [list length]): blend_tile's measurement
+// core's rasterize_slices writes it; `pixel_depth` (null, or [grid pixels], with tile_opaque_at):
+// per pixel of those tiles the view depth of the entry before its own opaque point (+inf where it
+// has none): the per-pixel map (forward_model/occlusion.h). `changed` (null, or [list length]): blend_tile's measurement
 // of the entries that change a pixel (meaningful for tiles of one slice: a later slice starts its
 // own transmittance at 1).
 void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
                       const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out,
                       double* merge_ms = nullptr, std::uint32_t first_tile = 0, std::uint32_t end_tile = UINT32_MAX,
-                      std::uint32_t* tile_opaque_at = nullptr, std::uint8_t* changed = nullptr);
+                      std::uint32_t* tile_opaque_at = nullptr, std::uint8_t* changed = nullptr,
+                      float* pixel_depth = nullptr);
 
 // The occlusion map (cpu/occlusion_map.cpp; mirrors cuda/occlusion_map.cu): for tiles
 // [first_tile, end_tile), the depth of the entry before each tile's opaque point P
@@ -172,10 +174,19 @@ std::uint64_t occlusion_map(const ProjectedGaussians& projected, const RenderLis
                             const std::uint32_t* tile_opaque_at, std::uint32_t first_tile, std::uint32_t end_tile,
                             float* tile_depth);
 
-// The last frame's map reprojected onto `now`'s tiles (cpu/occlusion_map.cpp; mirrors
-// cuda/occlusion_map.cu): fm::reprojected_tile_depth of every tile of `grid`, into `out`.
-void occlusion_reproject(const fm::OcclusionMap& map, const fm::View& now, const TileGrid& grid,
-                         std::vector<float>& out);
+// Issue 72's bound on occlusion tests before pre-processing (cpu/hidden_count.cpp): adds to
+// stats' gaussians_preprocessed, gaussians_in_hidden_chunks(_tiles) and gaussians_hidden_alone
+// for the frame just drawn (one pass: `projected`, `list` and `ranges` of the whole frame).
+void count_hidden(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
+                  float lod_error_px, const ProjectedGaussians& projected, const RenderList& list,
+                  const TileRanges& ranges, FrameStats& stats);
+
+// The last frame's per-pixel map (`last_pixels`, drawn at `last`) reprojected onto `now`
+// (cpu/occlusion_map.cpp; mirrors cuda/occlusion_map.cu): fm::occlusion_quad of every 2 x 2 block
+// of last's pixels drawn with a depth test into `now_pixels` ([now's pixels], +inf where none
+// covers), then the deepest per cell into `cells` (fm::occlusion_cells' layout). Returns the map.
+fm::OcclusionMap occlusion_reproject(const float* last_pixels, const fm::View& last, const fm::View& now,
+                                     std::vector<float>& now_pixels, std::vector<float>& cells);
 
 // Stage 2 (cpu/key_emission.cpp): exclusive scan of tiles_touched, then each Gaussian writes
 // its keys at its offset (same order as the GPU: Gaussian index, then tile row-major). catgs uses
@@ -232,8 +243,10 @@ void rasterize(const ProjectedGaussians& projected, const RenderList& list, cons
 // passes, longest_pass, slices: the last pass's) and stage times (summed over the passes, total
 // included); leaves the other fields. The buffers hold the last pass's state.
 // Occlusion culling (forward_model/occlusion.h; exact frames): `occlusion` is the last frame's
-// map, read by pre-processing; `tile_depth`, when given, receives this frame's (resized to the
-// grid's tiles; +inf everywhere without early termination).
+// map reprojected onto this frame, read by pre-processing; `tile_depth`, when given, receives this
+// frame's per tile (resized to the grid's tiles; +inf everywhere without early termination) and
+// `pixel_depth` its map per pixel (the depth at each pixel's own opaque point; [pixels]), which
+// the next frame reprojects.
 struct FrameBuffers {
   ProjectedGaussians& projected;
   RenderList& list;
@@ -241,6 +254,7 @@ struct FrameBuffers {
   std::vector<TileSlice>& slices;
   fm::OcclusionMap occlusion{};
   std::vector<float>* tile_depth = nullptr;
+  std::vector<float>* pixel_depth = nullptr;
   // Measurement (issue 72): when given, the entries and Gaussians that change a pixel
   // (blend_tile's `changed`) are counted into FrameStats; the frame is then drawn without task
   // splitting, so every tile's transmittance is the composed one.
@@ -292,7 +306,9 @@ class CpuRenderer final : public Renderer {
   std::vector<std::uint8_t> changed_;  // count_changes: per list entry, it changed a pixel
   // Occlusion culling (RenderOptions::occlusion_culling): the last frame's map and where it was
   // drawn (valid: a frame drew it with the current options), and the next frame's.
-  std::vector<float> occlusion_depth_, occlusion_next_, occlusion_now_;  // occlusion_now_: reprojected
+  // Per pixel (the last frame's, this frame's), and the reprojection's pixels and cells.
+  std::vector<float> occlusion_depth_, occlusion_next_, occlusion_now_, occlusion_cells_;
+  std::vector<float> occlusion_tiles_;  // this frame's per tile (FrameStats::entries_behind_opaque)
   fm::View occlusion_view_{};
   bool occlusion_valid_ = false;
   FrameStats stats_;

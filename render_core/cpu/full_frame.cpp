@@ -39,6 +39,7 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
     buffers.tile_depth->assign(static_cast<std::size_t>(grid.tile_count()), INFINITY);
     opaque_at.assign(static_cast<std::size_t>(grid.tile_count()), UINT32_MAX);
   }
+  if (buffers.pixel_depth) buffers.pixel_depth->assign(static_cast<std::size_t>(grid.width) * grid.height, INFINITY);
   stats.entries_behind_opaque = 0;
   stats.preprocess_ms += ms_between(start, clock::now());
   const std::uint64_t entries = count_entries(projected);
@@ -67,8 +68,13 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
       if (buffers.changed) buffers.changed->assign(list.values.size(), 0);
       rasterize_slices(projected, list, buffers.slices, grid, early_termination, options.background, out, &merge_ms,
                        first, end, buffers.tile_depth ? opaque_at.data() : nullptr,
-                       buffers.changed ? buffers.changed->data() : nullptr);
-      if (buffers.changed) count_changes(list, *buffers.changed, stats);
+                       buffers.changed ? buffers.changed->data() : nullptr,
+                       buffers.tile_depth && buffers.pixel_depth ? buffers.pixel_depth->data() : nullptr);
+      if (buffers.changed) {
+        count_changes(list, *buffers.changed, stats);
+        if (first == 0 && end == static_cast<std::uint32_t>(grid.tile_count()))
+          count_hidden(model, chunks, camera, options.lod_error_px, projected, list, buffers.ranges, stats);
+      }
       if (buffers.tile_depth)
         stats.entries_behind_opaque +=
             occlusion_map(projected, list, buffers.ranges, opaque_at.data(), first, end, buffers.tile_depth->data());

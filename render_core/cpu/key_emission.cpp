@@ -35,8 +35,8 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
   grow_host(list.values, total, "render-list values");
   list.packing = fm::plain_key_packing();
   const bool exact = pipeline == Pipeline::exact, trail = pipeline == Pipeline::catgs;
-  // Occlusion culling's per-entry test, as pre-processing counted (ProjectedGaussians::hidden_depth).
-  const bool hidden = exact && !projected.hidden_depth.empty();
+  // Occlusion culling's per-entry test, as pre-processing counted (ProjectedGaussians::occlusion).
+  const bool hidden = exact && projected.occlusion.cells[0] != nullptr;
 
   parallel_for(n, 4096, [&](std::size_t i) {
     if (projected.tiles_touched[i] == 0) return;
@@ -45,6 +45,7 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
         trail ? fm::make_trail_tile_test(projected.trail_mean0[i], projected.trail_motion[i], projected.trail_conic[i],
                                          projected.q_trail[i])
               : fm::TrailTileTest{};
+    const bool per_entry = hidden && fm::tile_count(r) <= fm::kOcclusionEntryTiles;
     uint64_t at = list.offsets[i];
     for (int ty = r.y0; ty < r.y1; ++ty) {
       for (int tx = r.x0; tx < r.x1; ++tx) {
@@ -53,7 +54,9 @@ void emit_keys(const ProjectedGaussians& projected, const TileGrid& grid, Pipeli
           continue;
         if (trail && !fm::trail_touches_tile(trail_test, tx, ty, grid.width, grid.height)) continue;
         const auto tile = static_cast<uint32_t>(ty * grid.tiles_x + tx);
-        if (hidden && fm::entry_hidden(projected.hidden_depth[tile], projected.old_depth[i])) continue;
+        if (per_entry && fm::entry_hidden(projected.occlusion, projected.mean2d[i], projected.conic[i],
+                                          projected.q_max[i], projected.depth[i], tx, ty, grid.width, grid.height))
+          continue;
         list.keys[at] = fm::render_key(tile, projected.depth[i]);
         list.values[at] = static_cast<uint32_t>(i);
         ++at;

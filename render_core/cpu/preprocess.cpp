@@ -29,21 +29,20 @@ void ProjectedGaussians::resize(std::size_t n) {
   trail_cov.resize(n);
   trail_conic.resize(n);
   q_trail.resize(n);
-  old_depth.resize(n);
 }
 
 namespace {
 
-// Counts the tiles of `rect` that the opacity-aware ellipse reaches (exact pipeline).
-// The tiles of `rect` the ellipse reaches, less those whose entries occlusion culling hides
-// (`hidden`: the frame's reprojected tile depths, null for none; `old_depth`: fm::entry_hidden's).
+// The tiles of `rect` the opacity-aware ellipse reaches (exact pipeline), less those whose
+// entries occlusion culling hides (`hidden`: the frame's reprojected map, null for none; `depth`:
+// the Gaussian's view depth).
 uint32_t count_exact_tiles(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max, int width,
-                           int height, const float* hidden, int tiles_x, float old_depth) {
+                           int height, const fm::OcclusionMap* hidden, float depth) {
   uint32_t n = 0;
   for (int ty = rect.y0; ty < rect.y1; ++ty)
     for (int tx = rect.x0; tx < rect.x1; ++tx)
       n += fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) &&
-                   !(hidden && fm::entry_hidden(hidden[ty * tiles_x + tx], old_depth))
+                   !(hidden && fm::entry_hidden(*hidden, mean, conic, q_max, depth, tx, ty, width, height))
                ? 1u
                : 0u;
   return n;
@@ -110,12 +109,10 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
     rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, camera.width, camera.height), v.region);
     // Per-entry occlusion culling for a Gaussian of few tiles (fm::entry_hidden; as the CUDA core's
     // tile masks).
-    const bool per_entry = v.occlusion.now_depth != nullptr && fm::tile_count(rect) <= fm::kOcclusionEntryTiles;
-    out.old_depth[i] = per_entry ? fm::occlusion_old_depth(mean, v.occlusion) : -INFINITY;
-    touched = fm::tile_count(rect) == 0
-                  ? 0u
-                  : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height,
-                                      per_entry ? v.occlusion.now_depth : nullptr, v.grid.tiles_x, out.old_depth[i]);
+    const bool per_entry = v.occlusion.cells[0] != nullptr && fm::tile_count(rect) <= fm::kOcclusionEntryTiles;
+    touched = fm::tile_count(rect) == 0 ? 0u
+                                        : count_exact_tiles(rect, mean2d, conic, q_max, camera.width, camera.height,
+                                                            per_entry ? &v.occlusion : nullptr, p_cam.z);
   } else {
     const float radius = fm::three_sigma_radius(cov2);
     rect = fm::clip_tile_rect(fm::square_tile_rect(mean2d, radius, v.grid.tiles_x, v.grid.tiles_y), v.region);
@@ -161,12 +158,7 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
   if (chunks.size() != fm::chunk_count(model.size()))
     throw std::invalid_argument("preprocess: chunk bounds of another scene");
   out.resize(model.size());
-  if (occlusion.now_depth)  // for emission's per-entry test
-    out.hidden_depth.assign(
-        occlusion.now_depth,
-        occlusion.now_depth + static_cast<std::size_t>(TileGrid::of(camera.width, camera.height).tile_count()));
-  else
-    out.hidden_depth.clear();
+  out.occlusion = occlusion;  // for emission's per-entry test
   const ViewPass v(model, camera, pipeline, out, region, lod_error_px, occlusion);
   parallel_for(chunks.size(), 16, [&](std::size_t c) { preprocess_chunk(model, chunks, v, c); });
 }

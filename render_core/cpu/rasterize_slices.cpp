@@ -18,7 +18,7 @@ namespace catgs::cpu {
 void rasterize_slices(const ProjectedGaussians& projected, const RenderList& list, const std::vector<TileSlice>& slices,
                       const TileGrid& grid, bool early_termination, glm::vec3 background, Image& out, double* merge_ms,
                       std::uint32_t first_tile, std::uint32_t end_tile, std::uint32_t* tile_opaque_at,
-                      std::uint8_t* changed) {
+                      std::uint8_t* changed, float* pixel_depth) {
   out.width = grid.width;
   out.height = grid.height;
   const std::size_t pixels = static_cast<std::size_t>(grid.width) * grid.height;
@@ -89,6 +89,8 @@ void rasterize_slices(const ProjectedGaussians& projected, const RenderList& lis
         saturated_at = std::max(saturated_at, ended_at);
         C += T * background;
         const std::size_t p = static_cast<std::size_t>(py) * grid.width + px;
+        if (pixel_depth)
+          pixel_depth[p] = ended_at == UINT32_MAX ? INFINITY : projected.depth[list.values[ended_at - 1]];
         for (int c = 0; c < 3; ++c) {
           out.rgb[3 * p + c] = C[c];
           out.rgba8[4 * p + c] = to_unorm8(C[c]);

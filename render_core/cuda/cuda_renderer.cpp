@@ -311,8 +311,11 @@ void CudaRenderer::reserve_buffers(int width, int height, const BufferShape& sha
   const bool occlusion = options_.occlusion_culling && options_.pipeline == Pipeline::exact;
   s.ensure_slice_buffers(tiles, 2ull * tiles, tiles, occlusion);
   if (occlusion) {
-    for (GrowBuffer& map : s.occlusion_depth) map.ensure(tiles * sizeof(float), "occlusion map", &s.allocations);
-    s.occlusion_now.ensure(tiles * sizeof(float), "reprojected occlusion map", &s.allocations);
+    for (GrowBuffer& map : s.occlusion_depth) map.ensure(pixels * sizeof(float), "occlusion map", &s.allocations);
+    s.occlusion_now.ensure(pixels * sizeof(unsigned), "reprojected occlusion map", &s.allocations);
+    s.occlusion_cells.ensure(fm::occlusion_cell_count(width, height) * sizeof(float), "reprojected occlusion cells",
+                             &s.allocations);
+    s.occlusion_tiles.ensure(tiles * sizeof(float), "occlusion map per tile", &s.allocations);
     s.occlusion_opaque_at.ensure(tiles * sizeof(uint32_t), "opaque points", &s.allocations);
     s.occlusion_behind.ensure(sizeof(unsigned long long), "entries behind opaque points", &s.allocations);
     s.occlusion_behind_host.ensure(sizeof(unsigned long long), "entries behind opaque points (host)");
@@ -343,19 +346,21 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   if (occlusion) {
     const stages::CameraParams cam = camera_params(camera);
     const std::size_t tiles = static_cast<std::size_t>(cam.tiles_x) * cam.tiles_y;
-    if (s.occlusion_valid) {  // the last map, and its depths over this frame's tiles
-      map = fm::occlusion_map(s.occlusion_depth[s.occlusion_read].as<float>(), s.occlusion_view, view);
-      s.occlusion_now.ensure(tiles * sizeof(float), "reprojected occlusion map", &s.allocations);
-      stages::occlusion_reproject(map, cam, s.occlusion_now.as<float>(), s.stream);
-      map.now_depth = s.occlusion_now.as<float>();
-      map.now_tiles_x = cam.tiles_x;
+    const std::size_t pixels = static_cast<std::size_t>(camera.width) * camera.height;
+    if (s.occlusion_valid) {  // the last map, reprojected onto this frame
+      s.occlusion_now.ensure(pixels * sizeof(unsigned), "reprojected occlusion map", &s.allocations);
+      s.occlusion_cells.ensure(fm::occlusion_cell_count(camera.width, camera.height) * sizeof(float),
+                               "reprojected occlusion cells", &s.allocations);
+      map = stages::occlusion_reproject(s.occlusion_depth[s.occlusion_read].as<float>(), s.occlusion_view, view,
+                                        s.occlusion_now.as<unsigned>(), s.occlusion_cells.as<float>(), s.stream);
     }
     GrowBuffer& next = s.occlusion_depth[1 - s.occlusion_read];
-    next.ensure(tiles * sizeof(float), "occlusion map", &s.allocations);
+    next.ensure(pixels * sizeof(float), "occlusion map", &s.allocations);
+    s.occlusion_tiles.ensure(tiles * sizeof(float), "occlusion map per tile", &s.allocations);
     s.occlusion_opaque_at.ensure(tiles * sizeof(uint32_t), "opaque points", &s.allocations);
     s.occlusion_behind.ensure(sizeof(unsigned long long), "entries behind opaque points", &s.allocations);
-    // The tiles no slice draws keep these: "never opaque", nothing behind.
-    CATGS_CUDA(cudaMemsetAsync(next.as<void>(), 0x7f, tiles * sizeof(float), s.stream));
+    // The pixels and tiles no slice draws keep these: "never opaque", nothing behind.
+    CATGS_CUDA(cudaMemsetAsync(next.as<void>(), 0x7f, pixels * sizeof(float), s.stream));
     CATGS_CUDA(cudaMemsetAsync(s.occlusion_opaque_at.as<void>(), 0xff, tiles * sizeof(uint32_t), s.stream));
     CATGS_CUDA(cudaMemsetAsync(s.occlusion_behind.as<void>(), 0, sizeof(unsigned long long), s.stream));
   }
@@ -369,7 +374,7 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
                                sizeof(unsigned long long), cudaMemcpyDeviceToHost, s.stream));
     CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
   }
-  stats_.occlusion_map_used = map.depth != nullptr;
+  stats_.occlusion_map_used = map.cells[0] != nullptr;
   s.occlusion_counted = occlusion;
   if (occlusion) {
     s.occlusion_read = 1 - s.occlusion_read;
@@ -434,12 +439,13 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
           plan, s.slice_order.as<uint32_t>(), static_cast<uint32_t>(capacity), s.sorted_values, proj, cam,
           early_termination, false, bg, nullptr, s.partials.as<float4>(), s.rgb.as<float>(), s.rgba8.as<uint32_t>(),
           s.stream,
-          draw_map ? stages::OpaquePoints{s.occlusion_opaque_at.as<uint32_t>(), s.occlusion_partial.as<uint32_t>()}
+          draw_map ? stages::OpaquePoints{s.occlusion_opaque_at.as<uint32_t>(), s.occlusion_partial.as<uint32_t>(),
+                                          s.occlusion_depth[1 - s.occlusion_read].as<float>()}
                    : stages::OpaquePoints{});
       if (draw_map)
         stages::occlusion_map(s.occlusion_opaque_at.as<uint32_t>(), s.ranges.as<uint2>(), s.sorted_values, proj, first,
-                              end, s.occlusion_depth[1 - s.occlusion_read].as<float>(),
-                              s.occlusion_behind.as<unsigned long long>(), s.stream);
+                              end, s.occlusion_tiles.as<float>(), s.occlusion_behind.as<unsigned long long>(),
+                              s.stream);
     } else {
       // vanilla, the reference 3DGS: a block per tile, the heaviest tiles first
       // (longest-processing-time-first scheduling of the raster blocks).

@@ -18,9 +18,11 @@ void occlusion_map(const uint32_t* opaque_at, const uint2* ranges, const uint32_
                    uint32_t first_tile, uint32_t end_tile, float* tile_depth, unsigned long long* behind,
                    cudaStream_t stream);
 
-// Before pre-processing: the last frame's map reprojected onto this frame's tiles
-// (fm::reprojected_tile_depth, a thread per tile) into now_depth [cam.tiles_x * cam.tiles_y]
-// (mirrors cpu::occlusion_reproject). `map.depth` is the last frame's map.
-void occlusion_reproject(const fm::OcclusionMap& map, const CameraParams& cam, float* now_depth, cudaStream_t stream);
+// Before pre-processing: the last frame's per-pixel map (`last_pixels`, [last's pixels], drawn at
+// `last`) reprojected onto `now` (mirrors cpu::occlusion_reproject): every quad of fm::occlusion_quad
+// drawn with a depth test into `now_pixels` ([now's pixels], scratch), then the deepest per cell
+// into `cells` ([fm::occlusion_cell_count]). Returns the map over `cells`.
+fm::OcclusionMap occlusion_reproject(const float* last_pixels, const fm::View& last, const fm::View& now,
+                                     unsigned* now_pixels, float* cells, cudaStream_t stream);
 
 }  // namespace catgs::cuda::stages

@@ -132,12 +132,11 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
     r.is_big = area > tune::kBigRectTiles;    // counted by count_big_kernel, a warp each
     r.is_huge = area > tune::kHugeRectTiles;  // or a block per part
     uint32_t mask = area == 0 || r.is_big ? 0u : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height);
-    if (mask != 0u && occlusion.now_depth != nullptr) {  // per-entry occlusion culling (fm::entry_hidden)
-      const float old_depth = fm::occlusion_old_depth(g.mean, occlusion);
+    if (mask != 0u && occlusion.cells[0] != nullptr) {  // per-entry occlusion culling (fm::entry_hidden)
       uint32_t bit = 1;
       for (int ty = rect.y0; ty < rect.y1; ++ty)
         for (int tx = rect.x0; tx < rect.x1; ++tx, bit <<= 1)
-          if ((mask & bit) && fm::entry_hidden(occlusion.now_depth[ty * occlusion.now_tiles_x + tx], old_depth))
+          if ((mask & bit) && fm::entry_hidden(occlusion, mean2d, conic, q_max, p_cam.z, tx, ty, cam.width, cam.height))
             mask &= ~bit;
     }
     r.touched = static_cast<uint32_t>(__popc(mask));

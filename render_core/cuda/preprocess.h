@@ -26,8 +26,8 @@ namespace catgs::cuda::stages {
 // (renderer/render_passes.h) counts only that region's tiles (fm::clip_tile_rect; the camera
 // stays the whole frame's), as cpu::preprocess; fm::kAllTiles for a frame in one pass.
 // `occlusion`: exact also drops the entries of small Gaussians that the last frame's map,
-// reprojected onto this frame's tiles (now_depth), hides (fm::entry_hidden, from the tile mask;
-// forward_model/occlusion.h). A map without now_depth (the default) drops none.
+// reprojected onto this frame (its cells), hides (fm::entry_hidden, from the tile mask;
+// forward_model/occlusion.h). A map without cells (the default) drops none.
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
                 const Projected& out, const LiveChunks& live, unsigned long long* visible,
                 unsigned long long* depth_range, const BigList& big, cudaStream_t stream,

@@ -113,6 +113,14 @@ __device__ __forceinline__ uint32_t merge_pixel(const SlicePlan& plan, uint32_t 
   return ended;
 }
 
+// The per-pixel map (forward_model/occlusion.h): the depth of the entry before the pixel's own
+// opaque point `ended`, the largest finite float where it has none.
+__device__ __forceinline__ void write_pixel_depth(float* pixel_depth, int px, int py, int width, uint32_t ended,
+                                                  const uint32_t* values, const Projected& g) {
+  pixel_depth[static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px)] =
+      ended == kNoStop || ended == 0u ? 3.3895314e38f : g.depth[values[ended - 1u]];
+}
+
 // kTileCull: blend_range_culled (a trail list) or blend_range (an exact list), as separate
 // kernels so that each is built for its own registers (both at 32, with small spills).
 // Together they took 48, which capped the culled kernel at 5 blocks per SM (ncu, city bicycle
@@ -161,6 +169,7 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
       if (rank == 0) opaque.tile[tile_k.x] = P == 0u ? kNoStop : P;
     }
     if (!inside) return;
+    if (opaque.pixel != nullptr) write_pixel_depth(opaque.pixel, px, py, width, state.occluded_from, values, g);
     write_pixel(static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), state.C, state.T,
                 background, out_rgb, out_rgba8);
     return;
@@ -204,6 +213,7 @@ __global__ void __launch_bounds__(tune::kRasterThreads, tune::kRasterMinBlocks)
                         early_termination, rank, background,
                         static_cast<uint64_t>(py) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px), out_rgb,
                         out_rgba8);
+  if (inside && opaque.pixel != nullptr) write_pixel_depth(opaque.pixel, px, py, width, ended, values, g);
   if (opaque.tile != nullptr) {  // block-uniform
     const uint32_t P = block_max(ended, saturated_at);
     if (rank == 0) opaque.tile[tile_k.x] = P == 0u ? kNoStop : P;

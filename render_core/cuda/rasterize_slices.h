@@ -31,10 +31,13 @@ namespace catgs::cuda::stages {
 // cpu::rasterize_slices): tile [tiles] each drawn tile's P, all ones where a pixel never got
 // there (tiles without slices are left as they are: the caller fills it with all ones first);
 // partial [slots, 256] scratch beside `partials`: a split tile's slices' pixels' own crossings,
-// which the merge reads.
+// which the merge reads; pixel [H, W]: each drawn pixel's view depth of the entry before its own
+// opaque point, the largest finite float where it has none (the per-pixel map; the caller fills
+// the pixels of tiles without slices).
 struct OpaquePoints {
   uint32_t* tile = nullptr;
   uint32_t* partial = nullptr;
+  float* pixel = nullptr;
 };
 void rasterize_slices(const SlicePlan& plan, const uint32_t* order, uint32_t blocks, const uint32_t* sorted_values,
                       const Projected& projected, const CameraParams& cam, bool early_termination, bool tile_culling,

@@ -192,14 +192,17 @@ struct CudaRenderer::State {
   GrowBuffer slice_range, slice_tile, tile_plan, slice_order, partials, saturated_from, slices_done, slot_finished;
   GrowBuffer plan_scratch;  // task_split.cu: the counting pass's per-block results
   // Occlusion culling (RenderOptions::occlusion_culling; forward_model/occlusion.h): the last
-  // exact frame's map (occlusion_depth[occlusion_read], drawn at occlusion_view; valid once a
+  // exact frame's per-pixel map (occlusion_depth[occlusion_read], drawn at occlusion_view; valid once a
   // frame with the current options and scene drew it) and the other buffer, which the next frame
   // writes while its pre-processing reads this one (two: a frame drawn in passes reads the old
   // map after its first pass wrote the new one).
   // occlusion_opaque_at: this frame's opaque point per tile (rasterize_slices), occlusion_behind:
   // its entries behind them (FrameStats::entries_behind_opaque).
-  // occlusion_now: the last map's depths over this frame's tiles (occlusion_reproject).
+  // occlusion_tiles: the per-tile map of those points (occlusion_map). occlusion_now and
+  // occlusion_cells: the last map reprojected onto this frame, per pixel and per cell
+  // (occlusion_reproject).
   GrowBuffer occlusion_depth[2], occlusion_opaque_at, occlusion_behind, occlusion_partial, occlusion_now;
+  GrowBuffer occlusion_cells, occlusion_tiles;
   bool occlusion_map_drawn = false;  // the frame being drawn writes a map (plan_frame_slices sizes occlusion_partial)
   int occlusion_read = 0;
   fm::View occlusion_view{};
@@ -371,6 +374,8 @@ struct CudaRenderer::State {
                                 &occlusion_behind,
                                 &occlusion_partial,
                                 &occlusion_now,
+                                &occlusion_cells,
+                                &occlusion_tiles,
                                 &yuv})
       b += g->bytes();
     return b;

@@ -17,30 +17,33 @@
 // Both cores compute P the same way from the same list; alpha's few-ulp rounding can move a
 // pixel's crossing by an entry, and so P by a round, where it falls on a round's edge.
 //
-// The next frame reads the map in two steps (both cores):
-// - reprojection (reprojected_tile_depth), a small stage before pre-processing: for each tile of
-//   the new frame, the rays through its corner pixels taken into the map's view as directions
-//   (far points; a rotation maps the tile's edges to lines, so the box of the four holds the
-//   tile's rays), that box widened by the parallax of its nearest occluder when the eye moved by
-//   `shift` (world units): shift * focal / depth pixels, worked out twice (with the box's tiles,
-//   then with the grown box's, which must need no more); the deepest map depth over the box, or
-//   +inf where it leaves the last image or a corner looks behind its eye (no data: drawn);
-// - per entry (entry_hidden): a small Gaussian's entry in a tile is dropped when its mean's depth
-//   in the map's view, less `shift`, lies behind that tile's reprojected depth (taken 1e-3 deeper:
-//   the 32-bit sort key joins depths within 3.1e-5). In the map's own frame such an entry sorted
-//   behind every pixel's opaque point of the tile. A Gaussian over more than 32 tiles keeps them
-//   all (the CUDA core counts and emits those from the ellipse alone);
-// - nothing per whole Gaussian: a test of each Gaussian before its covariance (in the last view)
-//   dropped more entries but cost more pre-processing than it saved (measured in
-//   docs/history/occlusion_culling.md); a small Gaussian all of whose entries are dropped still
-//   skips its SH colour.
-// With the same pose (shift 0) a dropped entry would have sorted behind its tile's opaque point,
-// so the picture differs from the unculled one by under 1/255 a pixel. A rotation alone changes
-// no ray through the eye. A translation can open gaps between thin occluders that one depth per
-// tile cannot see; that is what the parallax margin is for, and what the benchmark measures
-// (catgs-bench exact-occlusion against exact on the same frames, both against the 4x supersampled
-// render). A dropped entry that should have shown leaves its tile less opaque in this frame's own
-// map, so the next frame draws it.
+// The rasterizer also writes the map per pixel: the view depth of the entry at the pixel's own P
+// - 1 (its round's end, as above), +inf (the GPU: the largest finite float) where it has none.
+//
+// The next frame reads the per-pixel map in two steps (both cores):
+// - forward reprojection (occlusion_quad, occlusion_cells), a small stage before pre-processing:
+//   each 2 x 2 block of neighbouring pixels of the last frame whose four depths are all finite is a
+//   quad between their opaque points (pixel centre rays at those depths), drawn into this frame
+//   at the deepest of its four corners' new view depths, with a depth test (the nearest quad wins
+//   a pixel centre, as surfaces occlude). A pixel no quad covers has no data (+inf): what the last
+//   frame did not see (a disocclusion, the image's new edge, a gap torn between two depths) is
+//   drawn. Then per cell of 4 x 4, 8 x 8 and 16 x 16 pixels the deepest of its pixels;
+// - per entry (entry_hidden): a small Gaussian's entry in a tile is dropped when its view depth
+//   lies behind (1e-3 deeper: the 32-bit sort key joins depths within 3.1e-5) the deepest cell
+//   over its q_max ellipse's pixel box within that tile (read at the finest level where the box
+//   spans at most 2 x 2 cells). A Gaussian over more than 32 tiles keeps them all (the CUDA core
+//   counts and emits those from the ellipse alone); a small Gaussian all of whose entries are
+//   dropped skips its SH colour.
+// With the same pose each quad covers exactly the pixel centres it was drawn from, so a dropped
+// entry lies behind its pixels' opaque points: the picture differs from the unculled one by under
+// 1/255 a pixel. A moving eye moves each quad by its own parallax; a quad spans the last frame's
+// surface between its four opaque points, so where the surface has a hole smaller than a pixel
+// that the new pose looks through, an entry may be dropped that shows (the benchmark measures it:
+// catgs-bench exact-occlusion against exact on the same frames, both against the 4x supersampled
+// render). A dropped entry that should have shown leaves its pixels less opaque in this frame's own
+// map, so the next frame draws it. (The first form, one depth per tile read back through a box
+// widened by the parallax of its nearest occluder, dropped 15% of the entries an exact per-pixel
+// map could: docs/history/occlusion_culling.md.)
 #pragma once
 
 #include "forward_model/chunk_bounds.h"
@@ -48,117 +51,109 @@
 
 namespace catgs::fm {
 
-// The last frame's map, as the next frame's pre-processing reads it. depth null: no map (the
-// first frame, a new scene or options): nothing is culled.
-struct OcclusionMap {
-  const float* depth = nullptr;  // [tiles_y * tiles_x], row-major, view units (+inf: not saturated)
-  View view{};                   // the frame the map was drawn at
-  int tiles_x = 0, tiles_y = 0;  // that frame's tile grid
-  float shift = 0.0f;            // |eye of this frame - eye of view|, world units
-  // Per tile of THIS frame's grid (row-major, now_tiles_x a row; null: none): the map's depth over
-  // the region of the last view that the tile sees (reprojected_tile_depth), against which each of
-  // a small Gaussian's entries is tested (entry_hidden).
-  const float* now_depth = nullptr;
-  int now_tiles_x = 0;
-};
-
-// The map drawn at view `drawn_at` as frame `now` reads it: `depth` ([tiles of drawn_at's grid], or
-// null; kept as a pointer, not copied), that grid, and `shift`, the eye's move in world units
-// (lod_eye of each view). now_depth is left null (the caller reprojects).
-inline OcclusionMap occlusion_map(const float* depth, const View& drawn_at, const View& now) {
-  OcclusionMap m;
-  m.depth = depth;
-  m.view = drawn_at;
-  m.tiles_x = (drawn_at.width + kTileSize - 1) / kTileSize;
-  m.tiles_y = (drawn_at.height + kTileSize - 1) / kTileSize;
-  const glm::vec3 move = lod_eye(now) - lod_eye(drawn_at);
-  m.shift = sqrtf(move.x * move.x + move.y * move.y + move.z * move.z);
-  return m;
-}
-
 inline constexpr float kOcclusionDepthSlack = 1.0f + 1e-3f;      // the sort key's depth ties, with room
 inline constexpr float kOcclusionTransmittance = 1.0f / 255.0f;  // a pixel is opaque below it
-inline constexpr uint32_t kOcclusionRound = 256;  // entries a GPU rasterizer round stages (tune::kRasterBatch)
+inline constexpr uint32_t kOcclusionRound = 256;   // entries a GPU rasterizer round stages (tune::kRasterBatch)
+inline constexpr int kOcclusionLevels = 3;         // cells of 4, 8 and 16 pixels a side
+inline constexpr int kOcclusionCell = 4;           // the finest cell's side, pixels
+inline constexpr float kOcclusionQuadMax = 64.0f;  // a quad wider or taller (pixels) is not drawn
 
-// The largest depth of the map over the tiles holding the pixel centres of box [u0, u1] x [w0, w1]
-// of its view (pixel i's centre at i: pixels ceil(u0) .. floor(u1), at least the one at ceil(u0)),
-// with the smallest in *nearest; -1 where those pixels are not all on that image or a depth is NaN.
-CATGS_HD float occlusion_depth_over(const OcclusionMap& m, float u0, float u1, float w0, float w1, float* nearest) {
-  if (!(u0 > -1.0f && w0 > -1.0f && u1 < static_cast<float>(m.view.width) && w1 < static_cast<float>(m.view.height)))
-    return -1.0f;
-  const int px0 = static_cast<int>(ceilf(u0)), py0 = static_cast<int>(ceilf(w0));
-  const int px1 = static_cast<int>(floorf(u1)), py1 = static_cast<int>(floorf(w1));
-  const int tx0 = px0 / kTileSize, ty0 = py0 / kTileSize;
-  int tx1 = (px1 > px0 ? px1 : px0) / kTileSize, ty1 = (py1 > py0 ? py1 : py0) / kTileSize;
-  tx1 = tx1 < m.tiles_x - 1 ? tx1 : m.tiles_x - 1;
-  ty1 = ty1 < m.tiles_y - 1 ? ty1 : m.tiles_y - 1;
-  float deepest = 0.0f, near = INFINITY;
-  for (int ty = ty0; ty <= ty1; ++ty)
-    for (int tx = tx0; tx <= tx1; ++tx) {
-      const float d = m.depth[ty * m.tiles_x + tx];
-      if (!(d >= 0.0f)) return -1.0f;
-      deepest = fmaxf(deepest, d);
-      near = fminf(near, d);
-    }
-  *nearest = near;
+// The cells' extent at level k of a width x height frame.
+CATGS_HD int occlusion_cells_x(int width, int k) { return (width + (kOcclusionCell << k) - 1) / (kOcclusionCell << k); }
+CATGS_HD int occlusion_cells_y(int height, int k) {
+  return (height + (kOcclusionCell << k) - 1) / (kOcclusionCell << k);
+}
+
+// The last frame's map as this frame's pre-processing reads it. cells[0] null: no map (the first
+// frame, a new scene or options): nothing is culled.
+struct OcclusionMap {
+  const float* cells[kOcclusionLevels] = {};  // per level, row-major, this frame's view depth (+inf: no data)
+  int cells_x[kOcclusionLevels] = {}, cells_y[kOcclusionLevels] = {};
+};
+
+// The map's levels over buffer `cells` (kOcclusionLevels runs, level k occlusion_cells_x(width, k)
+// x occlusion_cells_y(height, k) floats, one after another) of a width x height frame; null: none.
+inline OcclusionMap occlusion_cells(const float* cells, int width, int height) {
+  OcclusionMap m;
+  if (cells == nullptr) return m;
+  for (int k = 0; k < kOcclusionLevels; ++k) {
+    m.cells[k] = cells;
+    m.cells_x[k] = occlusion_cells_x(width, k);
+    m.cells_y[k] = occlusion_cells_y(height, k);
+    cells += static_cast<std::size_t>(m.cells_x[k]) * m.cells_y[k];
+  }
+  return m;
+}
+inline std::size_t occlusion_cell_count(int width, int height) {
+  std::size_t n = 0;
+  for (int k = 0; k < kOcclusionLevels; ++k)
+    n += static_cast<std::size_t>(occlusion_cells_x(width, k)) * occlusion_cells_y(height, k);
+  return n;
+}
+
+// The quad of last frame's pixels (x, y) .. (x + 1, y + 1) (`depth`: last's per-pixel map) drawn
+// into `now`: the pixel centres [*i0, *i1] x [*j0, *j1] of now it covers (pixel i's centre at i,
+// clamped to the image; empty when i0 > i1) and its depth *z, the deepest of its corners' view
+// depths in now. False where it draws nothing: a corner without depth, one at or behind now's
+// eye, or a quad over kOcclusionQuadMax pixels across.
+CATGS_HD bool occlusion_quad(const float* depth, const View& last, const View& now, int x, int y, int* i0, int* i1,
+                             int* j0, int* j1, float* z) {
+  const glm::mat3 to_now = now.R * glm::transpose(last.R);
+  const glm::vec3 t_now = now.t - to_now * last.t;
+  float u0 = INFINITY, u1 = -INFINITY, w0 = INFINITY, w1 = -INFINITY, deepest = 0.0f;
+  for (int k = 0; k < 4; ++k) {
+    const int px = x + (k & 1), py = y + (k >> 1);
+    const float d = depth[py * last.width + px];
+    if (!(d < 3.0e38f)) return false;  // +inf, the GPU's largest finite float, or NaN
+    const glm::vec3 p((static_cast<float>(px) + 0.5f - last.cx) / last.fx * d,
+                      (static_cast<float>(py) + 0.5f - last.cy) / last.fy * d, d);
+    const glm::vec3 q = to_now * p + t_now;
+    if (!(q.z > 1e-4f)) return false;
+    const float u = now.fx * q.x / q.z + now.cx - 0.5f, w = now.fy * q.y / q.z + now.cy - 0.5f;
+    u0 = fminf(u0, u), u1 = fmaxf(u1, u), w0 = fminf(w0, w), w1 = fmaxf(w1, w);
+    deepest = fmaxf(deepest, q.z);
+  }
+  if (!(u1 - u0 <= kOcclusionQuadMax && w1 - w0 <= kOcclusionQuadMax)) return false;
+  // Clamped as floats first: a quad off the image may not fit an int.
+  *i0 = static_cast<int>(ceilf(fmaxf(u0, 0.0f)));
+  *i1 = static_cast<int>(floorf(fminf(u1, static_cast<float>(now.width - 1))));
+  *j0 = static_cast<int>(ceilf(fmaxf(w0, 0.0f)));
+  *j1 = static_cast<int>(floorf(fminf(w1, static_cast<float>(now.height - 1))));
+  *z = deepest;
+  return *i0 <= *i1 && *j0 <= *j1;
+}
+
+// The deepest map depth over pixels [x0, x1] x [y0, y1] of this frame (x0 <= x1, y0 <= y1, within
+// the image), read at the finest level where the box spans at most 2 x 2 cells.
+CATGS_HD float occlusion_box_depth(const OcclusionMap& m, int x0, int x1, int y0, int y1) {
+  int k = 0, s = 2;  // s: log2 of level k's cell side
+  while (k + 1 < kOcclusionLevels && ((x1 >> s) - (x0 >> s) > 1 || (y1 >> s) - (y0 >> s) > 1)) ++k, ++s;
+  float deepest = 0.0f;
+  for (int cy = y0 >> s; cy <= (y1 >> s); ++cy)
+    for (int cx = x0 >> s; cx <= (x1 >> s); ++cx) deepest = fmaxf(deepest, m.cells[k][cy * m.cells_x[k] + cx]);
   return deepest;
 }
 
-// Per-entry culling (issue 72). The map's depth over what tile (tx, ty) of view `now` sees of the
-// map's view: the rays through the tile's corner pixels, as directions (far points), taken into
-// the map's view (a rotation maps the tile's edges to lines, so the box of its four corners holds
-// its pixels' rays), that box widened by the rounding slack and by the parallax of its nearest
-// occluder (shift * focal / depth pixels: worked out with the box's tiles, then again with the
-// grown box's, which must need no more), and the deepest map depth over it (camera-space z of the
-// map's view, world units).
-// +inf where a corner looks behind the map's eye, or the box leaves its image (no data).
-CATGS_HD float reprojected_tile_depth(const OcclusionMap& m, const View& now, int tx, int ty) {
-  float u0 = INFINITY, u1 = -INFINITY, w0 = INFINITY, w1 = -INFINITY;
-  const int last_x = (tx + 1) * kTileSize - 1 < now.width - 1 ? (tx + 1) * kTileSize - 1 : now.width - 1;
-  const int last_y = (ty + 1) * kTileSize - 1 < now.height - 1 ? (ty + 1) * kTileSize - 1 : now.height - 1;
-  for (int k = 0; k < 4; ++k) {  // the tile's corner pixel centres
-    const float x = static_cast<float>((k & 1) ? last_x : tx * kTileSize);
-    const float y = static_cast<float>((k & 2) ? last_y : ty * kTileSize);
-    const glm::vec3 ray((x + 0.5f - now.cx) / now.fx, (y + 0.5f - now.cy) / now.fy, 1.0f);
-    const glm::vec3 d = m.view.R * (glm::transpose(now.R) * ray);  // world direction into the map's view
-    if (!(d.z > 1e-6f)) return INFINITY;
-    const float u = m.view.fx * d.x / d.z + m.view.cx - 0.5f, w = m.view.fy * d.y / d.z + m.view.cy - 0.5f;
-    u0 = fminf(u0, u);
-    u1 = fmaxf(u1, u);
-    w0 = fminf(w0, w);
-    w1 = fmaxf(w1, w);
-  }
-  // r0: the rounding of the corners' maths (a few ulps of a pixel coordinate), so that the same
-  // pose reads exactly its own tile.
-  const float focal = fmaxf(m.view.fx, m.view.fy);
-  const float r0 = 0.01f + 1e-6f * fmaxf(fmaxf(fabsf(u0), fabsf(u1)), fmaxf(fabsf(w0), fabsf(w1)));
-  float r = r0;
-  for (int pass = 0; pass < 2; ++pass) {
-    float nearest = 0.0f;
-    const float deepest = occlusion_depth_over(m, u0 - r, u1 + r, w0 - r, w1 + r, &nearest);
-    if (!(deepest >= 0.0f)) return INFINITY;
-    const float need = r0 + (m.shift > 0.0f ? m.shift * focal / nearest : 0.0f);
-    if (need <= r) return deepest;
-    r = need;
-  }
-  return INFINITY;
-}
-
-// A small Gaussian's (rect of at most kOcclusionEntryTiles tiles) entry in a tile whose
-// reprojected depth is `tile_depth`: hidden when its mean's depth in the map's view, less the eye's
-// move (`old_depth_less_shift`), lies behind it. In the map's own frame that entry sorted behind
-// every pixel's opaque point of the tile (see above); a Gaussian over more tiles keeps them all
-// (the CUDA core counts and emits those with a warp, from the ellipse alone).
+// Per-entry culling: a small Gaussian's (rect of at most kOcclusionEntryTiles tiles) entry in tile
+// (tx, ty) of a width x height frame is hidden when its view depth lies behind the map's deepest
+// over its ellipse's pixel box (q <= q_max + kExactQMargin, as the rasterizer visits) within the
+// tile. A Gaussian over more tiles keeps them all (the CUDA core counts and emits those with a
+// warp, from the ellipse alone).
 inline constexpr int kOcclusionEntryTiles = 32;  // the CUDA core's tune::kBigRectTiles (static_assert there)
-CATGS_HD bool entry_hidden(float tile_depth, float old_depth_less_shift) {
-  return tile_depth * kOcclusionDepthSlack < old_depth_less_shift;
-}
-
-// The depth of `mean` in the map's view less the eye's move (entry_hidden's), -inf where there is
-// no map of this frame's tiles.
-CATGS_HD float occlusion_old_depth(glm::vec3 mean, const OcclusionMap& m) {
-  if (m.depth == nullptr || m.now_depth == nullptr) return -INFINITY;
-  return (m.view.R * mean + m.view.t).z - m.shift;
+CATGS_HD bool entry_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 conic, float q_max, float depth, int tx,
+                           int ty, int width, int height) {
+  const float det = conic.x * conic.z - conic.y * conic.y, q = q_max + kExactQMargin;
+  if (!(det > 0.0f && q > 0.0f)) return false;
+  const float hx = sqrtf(q * conic.z / det), hy = sqrtf(q * conic.x / det);
+  const float tx0 = static_cast<float>(tx * kTileSize), ty0 = static_cast<float>(ty * kTileSize);
+  const float tx1 = fminf(tx0 + (kTileSize - 1), static_cast<float>(width - 1));
+  const float ty1 = fminf(ty0 + (kTileSize - 1), static_cast<float>(height - 1));
+  const float x0 = fmaxf(floorf(mean2d.x - hx), tx0), x1 = fminf(ceilf(mean2d.x + hx), tx1);
+  const float y0 = fmaxf(floorf(mean2d.y - hy), ty0), y1 = fminf(ceilf(mean2d.y + hy), ty1);
+  if (!(x0 <= x1 && y0 <= y1)) return false;
+  const float d =
+      occlusion_box_depth(m, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(y0), static_cast<int>(y1));
+  return d * kOcclusionDepthSlack < depth;
 }
 
 }  // namespace catgs::fm

@@ -23,90 +23,101 @@ fm::View test_view(glm::vec3 eye = glm::vec3(0.0f), float yaw_deg = 0.0f) {
   return fm::view_of(Camera::from_pose(eye, q, 60.0f, 320, 180));
 }
 
-// A map drawn at test_view(): every tile opaque at `depth`; `now` reads it.
-struct Map {
-  std::vector<float> depth, now_depth;
+// A per-pixel map drawn at test_view(): every pixel opaque at `depth`.
+std::vector<float> wall_at(float depth) { return std::vector<float>(320 * 180, depth); }
+std::size_t pixel(int x, int y) { return static_cast<std::size_t>(y) * 320 + x; }
+
+// The map reprojected onto `now` (cpu::occlusion_reproject): its pixels, and the map of cells.
+struct Reprojected {
+  std::vector<float> pixels, cells;
   fm::OcclusionMap map;
 };
-Map wall_at(float depth, const fm::View& now = test_view()) {
-  Map m;
-  m.map = fm::occlusion_map(nullptr, test_view(), now);
-  m.depth.assign(static_cast<std::size_t>(m.map.tiles_x) * m.map.tiles_y, depth);
-  m.map.depth = m.depth.data();
-  return m;
-}
-// The map reprojected onto `now`'s tiles (as cpu::occlusion_reproject).
-void reproject(Map& m, const fm::View& now) {
-  cpu::occlusion_reproject(m.map, now, cpu::TileGrid::of(now.width, now.height), m.now_depth);
-  m.map.now_depth = m.now_depth.data();
-  m.map.now_tiles_x = cpu::TileGrid::of(now.width, now.height).tiles_x;
-}
-std::size_t tile_index(int tx, int ty) { return static_cast<std::size_t>(ty) * 20 + tx; }  // 320 / 16 tiles a row
-
-TEST(OcclusionCull, SamePoseReadsEachTilesOwnDepth) {
-  Map m = wall_at(5.0f);
-  for (std::size_t t = 0; t < m.depth.size(); ++t) m.depth[t] = 1.0f + static_cast<float>(t);
-  reproject(m, test_view());
-  ASSERT_EQ(m.now_depth.size(), m.depth.size());
-  for (std::size_t t = 0; t < m.depth.size(); ++t) EXPECT_EQ(m.now_depth[t], m.depth[t]) << t;
+Reprojected reproject(const std::vector<float>& last, const fm::View& now) {
+  Reprojected r;
+  r.map = cpu::occlusion_reproject(last.data(), test_view(), now, r.pixels, r.cells);
+  return r;
 }
 
-TEST(OcclusionCull, ATurnReadsTheTilesItTurnedTo) {
-  Map m = wall_at(5.0f);
-  for (std::size_t t = 0; t < m.depth.size(); ++t) m.depth[t] = 1.0f + static_cast<float>(t % 20);  // by column
-  const fm::View turned = test_view(glm::vec3(0.0f), 10.0f);
-  reproject(m, turned);
-  // A turn to the side: the tiles now at the image's centre saw, last frame, columns to one side;
-  // the ones now at that edge saw past the last image's edge (no data).
-  const float centre = m.now_depth[tile_index(10, 5)];
-  EXPECT_TRUE(std::isfinite(centre));
-  EXPECT_NE(centre, m.depth[tile_index(10, 5)]);
-  int unknown = 0;
-  for (int tx = 0; tx < 20; ++tx) unknown += std::isinf(m.now_depth[tile_index(tx, 5)]) ? 1 : 0;
-  EXPECT_GE(unknown, 2);
-  EXPECT_LE(unknown, 8);
+TEST(OcclusionCull, SamePoseDrawsEachPixelAtItsOwnDepth) {
+  std::vector<float> last = wall_at(5.0f);
+  for (int y = 0; y < 180; ++y)
+    for (int x = 0; x < 320; ++x) last[pixel(x, y)] = 4.0f + 0.001f * static_cast<float>(x);  // a slanted wall
+  const Reprojected r = reproject(last, test_view());
+  ASSERT_EQ(r.pixels.size(), last.size());
+  // A pixel centre is a corner of up to four quads, each at its deepest corner; the nearest wins:
+  // the pixel's own depth (the wall deepens to the right), or its right-hand neighbour's where the
+  // corner's rounding falls a hair left of the centre (only the quads to its right then cover it;
+  // always in the first column). Every pixel is covered.
+  for (int y = 0; y < 180; ++y)
+    for (int x = 0; x < 320; ++x) {
+      const float d = r.pixels[pixel(x, y)];
+      EXPECT_GE(d, last[pixel(x, y)] - 1e-5f) << x;
+      EXPECT_LE(d, last[pixel(std::min(x + 1, 319), y)] + 1e-5f) << x;
+    }
+  // The cells: the deepest of their pixels (4 x 4, 8 x 8, 16 x 16).
+  EXPECT_EQ(r.map.cells_x[0], 80);
+  EXPECT_EQ(r.map.cells_y[2], 12);  // 180 / 16, rounded up
+  auto deepest = [&](int x0, int x1, int y0, int y1) {
+    float d = 0.0f;
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) d = std::max(d, r.pixels[pixel(x, y)]);
+    return d;
+  };
+  EXPECT_EQ(r.map.cells[0][0], deepest(0, 3, 0, 3));
+  EXPECT_EQ(r.map.cells[1][40 + 2], deepest(16, 23, 8, 15));  // cell (2, 1) of 8 x 8
+  EXPECT_EQ(r.map.cells[2][3], deepest(48, 63, 0, 15));
+  EXPECT_GT(r.map.cells[2][3], r.map.cells[2][2]);
 }
 
-TEST(OcclusionCull, TheEyesMoveWidensTheBoxByTheParallax) {
-  // A wall at 2 with one tile that never became opaque: the same pose reads it only there; once
-  // the eye has moved, the tiles beside it read it too (the nearer the wall, the wider).
-  Map m = wall_at(2.0f);
-  m.depth[tile_index(10, 5)] = std::numeric_limits<float>::infinity();
-  reproject(m, test_view());
-  EXPECT_TRUE(std::isinf(m.now_depth[tile_index(10, 5)]));
-  EXPECT_EQ(m.now_depth[tile_index(12, 5)], 2.0f);
-  const fm::View moved = test_view(glm::vec3(0.25f, 0.0f, 0.0f));
-  Map n = wall_at(2.0f, moved);
-  n.depth = m.depth;
-  n.map.depth = n.depth.data();
-  ASSERT_NEAR(n.map.shift, 0.25f, 1e-6f);
-  reproject(n, moved);
-  EXPECT_TRUE(std::isinf(n.now_depth[tile_index(11, 5)]));  // 0.25 * 156 / 2 = 19 px of parallax
-  EXPECT_TRUE(std::isinf(n.now_depth[tile_index(9, 5)]));
-  EXPECT_EQ(n.now_depth[tile_index(14, 5)], 2.0f);
-  // NaN in the map: no data.
-  Map k = wall_at(2.0f);
-  k.depth[tile_index(3, 3)] = std::numeric_limits<float>::quiet_NaN();
-  reproject(k, test_view());
-  EXPECT_TRUE(std::isinf(k.now_depth[tile_index(3, 3)]));
+TEST(OcclusionCull, ATurnLeavesWhatTheLastFrameDidNotSeeWithoutData) {
+  std::vector<float> last = wall_at(5.0f);
+  const Reprojected r = reproject(last, test_view(glm::vec3(0.0f), 10.0f));
+  // A turn to the side: one edge of the new image looks past the last image's edge (no data), the
+  // other still at the wall.
+  int unknown = 0, known = 0;
+  for (int x = 0; x < 320; ++x) (std::isinf(r.pixels[pixel(x, 90)]) ? unknown : known) += 1;
+  EXPECT_GE(unknown, 20);
+  EXPECT_GE(known, 200);
+  EXPECT_TRUE(std::isinf(r.pixels[pixel(0, 90)]) != std::isinf(r.pixels[pixel(319, 90)]));
+  // A pixel that never became opaque (+inf) or NaN breaks the quads it is a corner of.
+  last[pixel(100, 50)] = std::numeric_limits<float>::infinity();
+  last[pixel(200, 50)] = std::numeric_limits<float>::quiet_NaN();
+  const Reprojected same = reproject(last, test_view());
+  EXPECT_TRUE(std::isinf(same.pixels[pixel(100, 50)]));
+  EXPECT_TRUE(std::isinf(same.pixels[pixel(200, 50)]));
+  EXPECT_FALSE(std::isinf(same.pixels[pixel(150, 50)]));
 }
 
-TEST(OcclusionCull, AnEntryBehindTheTilesDepthIsHiddenOneInFrontOrUnderAnOpenTileIsNot) {
-  Map m = wall_at(5.0f);
-  m.depth[tile_index(9, 5)] = std::numeric_limits<float>::infinity();  // a pixel saw the background
-  reproject(m, test_view());
-  EXPECT_TRUE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 10.0f));
-  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 4.0f));    // in front of the wall
-  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], 5.002f));  // within the depth slack
-  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(9, 5)], 10.0f));
-  EXPECT_FALSE(fm::entry_hidden(m.now_depth[tile_index(3, 3)], -INFINITY));  // no map: -inf
-  EXPECT_FALSE(fm::entry_hidden(std::numeric_limits<float>::quiet_NaN(), 10.0f));
-  // The old depth of a mean: in the map's view, less the eye's move.
-  Map n = wall_at(5.0f, test_view(glm::vec3(0.0f, 0.0f, 1.0f)));
-  reproject(n, test_view(glm::vec3(0.0f, 0.0f, 1.0f)));
-  EXPECT_NEAR(fm::occlusion_old_depth(glm::vec3(0.3f, 0.2f, 7.0f), n.map), 6.0f, 1e-5f);
-  fm::OcclusionMap none;
-  EXPECT_EQ(fm::occlusion_old_depth(glm::vec3(0.3f, 0.2f, 7.0f), none), -INFINITY);
+TEST(OcclusionCull, TheEyesMoveOpensTheGapBetweenTwoDepthsAtTheFartherOne) {
+  // A near wall (depth 2) over the left half, a far one (10) over the right; the eye moves right by
+  // 0.25, so (focal 156 px) the near wall slides left by 19.5 px and the far one by 3.9: a gap of
+  // about 16 px opens between them, which the last frame did not see. The quads across the edge
+  // span it at the farther depth: what lies behind the far wall there stays hidden, what lies
+  // between the walls is drawn. The far wall's 4 px at the right edge have no data.
+  std::vector<float> last = wall_at(10.0f);
+  for (int y = 0; y < 180; ++y)
+    for (int x = 0; x < 160; ++x) last[pixel(x, y)] = 2.0f;
+  const Reprojected r = reproject(last, test_view(glm::vec3(0.25f, 0.0f, 0.0f)));
+  for (int x = 0; x < 139; ++x) EXPECT_NEAR(r.pixels[pixel(x, 90)], 2.0f, 1e-4f) << x;
+  for (int x = 142; x < 315; ++x) EXPECT_NEAR(r.pixels[pixel(x, 90)], 10.0f, 1e-3f) << x;
+  for (int x = 317; x < 320; ++x) EXPECT_TRUE(std::isinf(r.pixels[pixel(x, 90)])) << x;
+}
+
+TEST(OcclusionCull, AnEntryBehindItsPixelsIsHiddenOneInFrontOrOverAnOpenPixelIsNot) {
+  std::vector<float> last = wall_at(5.0f);
+  last[pixel(150, 90)] = std::numeric_limits<float>::infinity();  // a pixel saw the background
+  const Reprojected r = reproject(last, test_view());
+  const glm::vec3 small(0.5f, 0.0f, 0.5f);  // conic of a Gaussian of about 1.4 px sigma
+  const float q_max = 4.0f;                 // its box: +-2.9 px
+  // Tile (3, 3): pixels 48..63.
+  EXPECT_TRUE(fm::entry_hidden(r.map, glm::vec2(55.0f, 55.0f), small, q_max, 10.0f, 3, 3, 320, 180));
+  EXPECT_FALSE(fm::entry_hidden(r.map, glm::vec2(55.0f, 55.0f), small, q_max, 4.0f, 3, 3, 320, 180));    // in front
+  EXPECT_FALSE(fm::entry_hidden(r.map, glm::vec2(55.0f, 55.0f), small, q_max, 5.002f, 3, 3, 320, 180));  // slack
+  // Beside the open pixel (150, 90): its quads have no data, so a box over them is kept.
+  EXPECT_FALSE(fm::entry_hidden(r.map, glm::vec2(151.0f, 91.0f), small, q_max, 10.0f, 9, 5, 320, 180));
+  EXPECT_TRUE(fm::entry_hidden(r.map, glm::vec2(140.0f, 84.0f), small, q_max, 10.0f, 8, 5, 320, 180));
+  // A degenerate conic tests nothing.
+  EXPECT_FALSE(fm::entry_hidden(r.map, glm::vec2(55.0f, 55.0f), glm::vec3(0.0f), q_max, 10.0f, 3, 3, 320, 180));
 }
 
 double psnr_rgba8(const Image& a, const Image& b) {
@@ -131,15 +142,18 @@ RenderOptions exact_options(bool occlusion) {
 
 // The same pose twice: the second frame drops the entries the first found hidden, and draws the same
 // picture (a dropped entry lies behind every pixel's opaque point: under 1/255 a pixel; the sort
-// key's depth quantisation, over a shorter depth range, may reorder ties).
+// key's depth quantisation, over a shorter depth range, may reorder ties). The first frame of each
+// view reads the last view's map, from another pose of the fly-over: the very first has none.
 TEST(OcclusionCull, SamePoseAgainCullsAndDrawsTheSamePicture) {
   CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
   const test::SmallCity& city = test::small_flowers_city();
   cpu::CpuRenderer culled(city.lod, exact_options(true)), plain(city.lod, exact_options(false));
   std::size_t fewer = 0;
-  for (const Camera& cam : city.views) {
+  for (std::size_t v = 0; v < city.views.size(); ++v) {
+    const Camera& cam = city.views[v];
     Image first, again, reference;
     culled.render(cam, first);
+    EXPECT_EQ(culled.last_stats().occlusion_map_used, v > 0);
     culled.render(cam, again);
     EXPECT_TRUE(culled.last_stats().occlusion_map_used);
     const std::size_t listed = culled.last_stats().render_list_length;
@@ -147,7 +161,7 @@ TEST(OcclusionCull, SamePoseAgainCullsAndDrawsTheSamePicture) {
     EXPECT_FALSE(plain.last_stats().occlusion_map_used);
     EXPECT_LE(listed, plain.last_stats().render_list_length);
     fewer += listed < plain.last_stats().render_list_length ? 1 : 0;
-    EXPECT_EQ(first.rgba8, reference.rgba8);  // the first frame has no map
+    if (v == 0) EXPECT_EQ(first.rgba8, reference.rgba8);  // no map
     EXPECT_GE(psnr_rgba8(again, reference), 60.0);
   }
   EXPECT_GE(fewer, city.views.size() / 2) << "the fly-over's views see copies behind copies";

@@ -87,6 +87,10 @@ nlohmann::json table_row(const PipelineResult& r, std::size_t scene_bytes) {
   p["entries_behind_opaque_mean"] = mean(r.behind_opaque);
   p["entries_changing_pixels_mean"] = mean(r.changing_entries);
   p["gaussians_changing_pixels_mean"] = mean(r.changing_gaussians);
+  p["gaussians_preprocessed_mean"] = mean(r.preprocessed);
+  p["gaussians_in_hidden_chunks_mean"] = mean(r.hidden_chunks);
+  p["gaussians_hidden_alone_mean"] = mean(r.hidden_alone);
+  p["entries_hidden_pixels_mean"] = mean(r.entries_hidden_px);
   p["heaviest_tile_entries"] = {{"mean", mean(r.heaviest)}, {"max", summarize(r.heaviest).max}};
   p["peak_buffer_bytes"] = r.peak_buffer_bytes;
   p["device_memory_used_bytes"] = r.device_used_bytes;

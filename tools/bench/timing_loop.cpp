@@ -138,6 +138,10 @@ void record_frame(PipelineResult& res, double ms, const FrameStats& s) {
   res.behind_opaque.push_back(static_cast<double>(s.entries_behind_opaque));
   res.changing_entries.push_back(static_cast<double>(s.entries_changing_pixels));
   res.changing_gaussians.push_back(static_cast<double>(s.gaussians_changing_pixels));
+  res.preprocessed.push_back(static_cast<double>(s.gaussians_preprocessed));
+  res.hidden_chunks.push_back(static_cast<double>(s.gaussians_in_hidden_chunks));
+  res.hidden_alone.push_back(static_cast<double>(s.gaussians_hidden_alone));
+  res.entries_hidden_px.push_back(static_cast<double>(s.entries_hidden_pixels));
   (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);
   if (s.key_frame)
     record_key_frame(res, ms, s);
