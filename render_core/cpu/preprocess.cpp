@@ -93,6 +93,14 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   // pipelines). exact also drops a Gaussian that can never reach 1/255.
   const float q_max = fm::opacity_aware_qmax(opacity);
   if (v.exact && !(q_max > 0.0f)) return;
+  const glm::vec2 mean2d(camera.fx * p_cam.x / p_cam.z + camera.cx - 0.5f,
+                         camera.fy * p_cam.y / p_cam.z + camera.cy - 0.5f);
+  // Occlusion culling, before the covariance: a small Gaussian behind the map over its whole box.
+  if (v.exact && v.occlusion.cells[0] != nullptr) {
+    const float max_scale =
+        std::exp(std::max({model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]}));
+    if (fm::gaussian_hidden(v.occlusion, mean2d, p_cam.z, max_scale, q_max, v.view)) return;
+  }
 
   const fm::Cov3 cov3 = fm::covariance_3d(
       {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},
@@ -100,9 +108,6 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   const glm::vec3 cov2 = fm::covariance_2d(cov3, camera.R, p_cam, camera.fx, camera.fy, v.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) return;
-
-  const glm::vec2 mean2d(camera.fx * p_cam.x / p_cam.z + camera.cx - 0.5f,
-                         camera.fy * p_cam.y / p_cam.z + camera.cy - 0.5f);
   fm::TileRect rect;
   uint32_t touched;
   if (v.exact) {

@@ -156,4 +156,29 @@ CATGS_HD bool entry_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 co
   return d * kOcclusionDepthSlack < depth;
 }
 
+// Before its covariance: a Gaussian of view depth `depth`, mean at mean2d, largest scale
+// `max_scale` (world units) and q_max in view v is hidden whole when the map's deepest over a box
+// that holds its q_max ellipse lies in front of it, so entry_hidden would drop each of its entries
+// (each entry's box lies within this box, and a box's depth at a coarser level is no nearer). The
+// box's half-width bounds sqrt(q * cov2d_xx) (and _yy): sqrt(q) (max_scale |J row| + sqrt(kLowPass))
+// with the Jacobian's rows clamped as covariance_2d clamps them (the bound of chunk_half_extent),
+// plus 1 px for rounding. Tested only for boxes of at most kOcclusionWholePx pixels a side, which
+// cover at most 3 x 3 tiles (so the Gaussian is small: kOcclusionEntryTiles) and read at most
+// 3 x 3 cells.
+inline constexpr float kOcclusionWholePx = 32.0f;
+CATGS_HD bool gaussian_hidden(const OcclusionMap& m, glm::vec2 mean2d, float depth, float max_scale, float q_max,
+                              const View& v) {
+  if (m.cells[0] == nullptr || !(depth > 0.0f)) return false;
+  const float cx = kFrustumClamp * v.tan_half_fov.x, cy = kFrustumClamp * v.tan_half_fov.y;
+  const float jf = sqrtf(v.fx * v.fx * (1.0f + cx * cx) + v.fy * v.fy * (1.0f + cy * cy)) / depth;
+  const float r = sqrtf(q_max + kExactQMargin) * (max_scale * jf + sqrtf(kLowPass)) + 1.0f;
+  if (!(2.0f * r <= kOcclusionWholePx)) return false;
+  const float x0 = fmaxf(floorf(mean2d.x - r), 0.0f), x1 = fminf(ceilf(mean2d.x + r), static_cast<float>(v.width - 1));
+  const float y0 = fmaxf(floorf(mean2d.y - r), 0.0f), y1 = fminf(ceilf(mean2d.y + r), static_cast<float>(v.height - 1));
+  if (!(x0 <= x1 && y0 <= y1)) return false;  // off the image: the tile rect is empty anyway
+  const float d =
+      occlusion_box_depth(m, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(y0), static_cast<int>(y1));
+  return d * kOcclusionDepthSlack < depth;
+}
+
 }  // namespace catgs::fm
