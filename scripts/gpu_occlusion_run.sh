@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # scripts/gpu_occlusion_run.sh: issue 72's occlusion-culling rows on the GPU machine, in one call.
-# exact and exact-occlusion (RenderOptions::occlusion_culling: chunks behind the last frame's
-# opaque tiles are skipped; render_core/forward_model/occlusion.h) side by side in one
+# exact and exact-occlusion (RenderOptions::occlusion_culling: list entries behind the last
+# frame's opaque pixels are dropped; render_core/forward_model/occlusion.h) side by side in one
 # catgs-bench process per city x real camera path, at the server's picture: 1280x720, the LOD at
 # 2 px, 10 warm-up + 96 timed frames at 120 FPS, every 12th frame against the 4x supersampled
 # full-detail render (--aa-reference 4: the issue's yardstick).
@@ -61,7 +61,8 @@ city() {  # city COPIES PATH
 
 # changes COPIES PATH: where the list's work goes, measured by the CPU reference on the machine's
 # cores (catgs-bench --renderer cpu --count-changes: entries and Gaussians that change a pixel,
-# entries behind their tile's opaque point), 2 + 4 frames, exact and exact-occlusion.
+# entries behind their tile's opaque point, and what the frame's own per-pixel map could drop at
+# best: whole chunks of the cut, whole Gaussians, entries), 2 + 4 frames, exact and exact-occlusion.
 changes() {
   local r trace
   case "$1" in 13) r=4 ;; 101) r=32 ;; 197) r=64 ;; *) echo "no city of $1 copies"; return 1 ;; esac
@@ -108,16 +109,21 @@ for path in sorted(glob.glob(os.path.join(sys.argv[1], "occ_city*.json"))):
 if changes:
     print()
     print("| city x path (CPU, 4 frames) | variant | list entries | entries changing a pixel | behind the tile's opaque point | "
-          "visible Gaussians | Gaussians changing a pixel |")
-    print("|---|---|---|---|---|---|---|")
+          "visible Gaussians | Gaussians changing a pixel | own per-pixel map: entries hidden | Gaussians hidden alone | "
+          "cut's Gaussians in view / in chunks hidden whole |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
 for path in changes:
     j = json.load(open(path))
     for p in j.get("pipelines", []):
         L, V = p["render_list"]["mean"], p.get("visible_mean", 0)
         ce, cg, b = p["entries_changing_pixels_mean"], p["gaussians_changing_pixels_mean"], p["entries_behind_opaque_mean"]
-        print("| %s | %s | %.2f M | %.2f M (%.1f%%) | %.2f M (%.1f%%) | %.2f M | %.2f M (%.1f%%) |" % (
+        eh, ga = p.get("entries_hidden_pixels_mean", 0), p.get("gaussians_hidden_alone_mean", 0)
+        gp, gc = p.get("gaussians_preprocessed_mean", 0), p.get("gaussians_in_hidden_chunks_mean", 0)
+        print("| %s | %s | %.2f M | %.2f M (%.1f%%) | %.2f M (%.1f%%) | %.2f M | %.2f M (%.1f%%) | %.2f M (%.1f%%) | "
+              "%.2f M (%.1f%%) | %.2f M / %.2f M (%.1f%%) |" % (
             os.path.basename(path)[8:-5], p["pipeline"], L / 1e6, ce / 1e6, 100 * ce / max(L, 1), b / 1e6,
-            100 * b / max(L, 1), V / 1e6, cg / 1e6, 100 * cg / max(V, 1)))
+            100 * b / max(L, 1), V / 1e6, cg / 1e6, 100 * cg / max(V, 1), eh / 1e6, 100 * eh / max(L, 1),
+            ga / 1e6, 100 * ga / max(V, 1), gp / 1e6, gc / 1e6, 100 * gc / max(gp, 1)))
 PY
 cat "$OUT/occlusion_table.md"
 (cd "$OUT" && tar czf occlusion.tar.gz json && rm -rf json)

@@ -58,8 +58,8 @@ struct ServerOptions {
   float lod_max_error_px = 2.0f * 1.41421356f;
   // --splat-budget-share: the share of a GPU's measured throughput the auto budget hands out.
   double splat_budget_share = 0.4;
-  // --occlusion-cull on|off: exact frames skip the chunks that the session's last frame found
-  // wholly behind its saturated tiles (RenderOptions::occlusion_culling,
+  // --occlusion-cull on|off: exact frames drop the list entries that the session's last frame
+  // found behind its opaque pixels (RenderOptions::occlusion_culling,
   // render_core/forward_model/occlusion.h; issue 72). Default on.
   bool occlusion_cull = true;
   int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)

@@ -113,8 +113,8 @@ struct RenderOptions {
   // every compared frame (every 10th) of the 101- and 201-copy cities' 1080p fly-over
   // (docs/history/level_of_detail.md, "Second round", issue 37).
   float lod_error_px = 0.75f;
-  // Occlusion culling (forward_model/occlusion.h; issue 72), exact frames only: a frame skips the
-  // chunks its renderer's last frame found wholly behind its saturated tiles. The renderer keeps
+  // Occlusion culling (forward_model/occlusion.h; issue 72), exact frames only: a frame drops the
+  // list entries that its renderer's last frame found behind its opaque pixels. The renderer keeps
   // one map (a session's last frame); set_options and a new scene drop it. Off here, so that a
   // renderer draws each frame alone; the server turns it on (--occlusion-cull).
   bool occlusion_culling = false;

@@ -1,4 +1,4 @@
-// occlusion: culling chunks behind the last frame's opaque tiles (forward_model/occlusion.h,
+// occlusion: culling list entries behind the last frame's opaque pixels (forward_model/occlusion.h,
 // issue 72), the CUDA core against the CPU reference, both with RenderOptions::occlusion_culling,
 // frame after frame along a real camera path (bicycle) on the 13-copy tumblewood city with its
 // level of detail at 2 px:

@@ -108,7 +108,7 @@ std::string variant_syntax() {
   std::string out =
       "pipeline variants (--pipeline V[,V...]; commas inside braces belong to the braces):\n"
       "  vanilla | exact | catgs[{SETTINGS}]   SETTINGS: name=value[,name=value...], applied in order\n"
-      "  exact-occlusion                     exact, culling chunks behind the last frame's opaque tiles\n"
+      "  exact-occlusion                     exact, culling entries behind the last frame's opaque pixels\n"
       "  presets (the paper's ablations), which take {SETTINGS} after them too:\n";
   for (const Preset& preset : kPresets)
     out += "    " + std::string(preset.name) + " = catgs{" + preset.settings + "}\n";
