@@ -19,9 +19,8 @@ namespace {
 struct DepthPyramid {
   std::vector<std::vector<float>> level;
   std::vector<int> w, h;
-  bool take_min = false;
 
-  explicit DepthPyramid(std::vector<float> base, int width, int height, bool minimum = false) : take_min(minimum) {
+  explicit DepthPyramid(std::vector<float> base, int width, int height) {
     level.push_back(std::move(base));
     w.push_back(width);
     h.push_back(height);
@@ -31,11 +30,10 @@ struct DepthPyramid {
       const std::vector<float>& prev = level.back();
       for (int y = 0; y < nh; ++y)
         for (int x = 0; x < nw; ++x) {
-          float d = take_min ? INFINITY : 0.0f;
+          float d = 0.0f;
           for (int k = 0; k < 4; ++k) {
             const int sx = std::min(2 * x + (k & 1), pw - 1), sy = std::min(2 * y + (k >> 1), ph - 1);
-            const float v = prev[static_cast<std::size_t>(sy) * pw + sx];
-            d = take_min ? std::min(d, v) : std::max(d, v);
+            d = std::max(d, prev[static_cast<std::size_t>(sy) * pw + sx]);
           }
           next[static_cast<std::size_t>(y) * nw + x] = d;
         }
@@ -56,12 +54,9 @@ struct DepthPyramid {
               y1 = static_cast<int>(std::min(H, std::ceil(fy1)));
     int k = min_level;
     while (k + 1 < static_cast<int>(level.size()) && ((x1 >> k) - (x0 >> k) > 3 || (y1 >> k) - (y0 >> k) > 3)) ++k;
-    float d = take_min ? INFINITY : 0.0f;
+    float d = 0.0f;
     for (int y = y0 >> k; y <= (y1 >> k); ++y)
-      for (int x = x0 >> k; x <= (x1 >> k); ++x) {
-        const float v = level[k][static_cast<std::size_t>(y) * w[k] + x];
-        d = take_min ? std::min(d, v) : std::max(d, v);
-      }
+      for (int x = x0 >> k; x <= (x1 >> k); ++x) d = std::max(d, level[k][static_cast<std::size_t>(y) * w[k] + x]);
     return d;
   }
 };

@@ -172,7 +172,7 @@ CATGS_HD bool gaussian_hidden(const OcclusionMap& m, glm::vec2 mean2d, float dep
   const float cx = kFrustumClamp * v.tan_half_fov.x, cy = kFrustumClamp * v.tan_half_fov.y;
   const float jf = sqrtf(v.fx * v.fx * (1.0f + cx * cx) + v.fy * v.fy * (1.0f + cy * cy)) / depth;
   const float r = sqrtf(q_max + kExactQMargin) * (max_scale * jf + sqrtf(kLowPass)) + 1.0f;
-  if (!(2.0f * r <= kOcclusionWholePx)) return false;
+  if (!(2.0f * r <= kOcclusionWholePx) || !(fabsf(mean2d.x) < 1e7f && fabsf(mean2d.y) < 1e7f)) return false;
   const float x0 = fmaxf(floorf(mean2d.x - r), 0.0f), x1 = fminf(ceilf(mean2d.x + r), static_cast<float>(v.width - 1));
   const float y0 = fmaxf(floorf(mean2d.y - r), 0.0f), y1 = fminf(ceilf(mean2d.y + r), static_cast<float>(v.height - 1));
   if (!(x0 <= x1 && y0 <= y1)) return false;  // off the image: the tile rect is empty anyway
