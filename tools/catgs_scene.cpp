@@ -34,7 +34,8 @@
 //       Builds the scene's level of detail (lod/lod_build.h) and writes it as a compact scene
 //       (scene/compact_file.h, about 40 bytes a Gaussian): O ending in .catgs is served alone
 //       (--scene O); any other name is a LOD file keyed to S (conventionally S.catgs-lod):
-//       catgs-bench, catgs-render and catgs-server draw it with --scene S --lod-file O.
+//       catgs-bench, catgs-render and catgs-server draw it with --scene S --lod-file O. A
+//       compressed PLY S keeps its order: its chunks are the leaves and keep their codes.
 //   catgs-scene load-bench --scenes A[,B...] [--threads N] [--repeat 3] [--no-reference]
 //                       [--cache-dir D] [--json OUT] [--upload]
 //       Load times, plain and cached, cold and warm page cache, with peak memory
@@ -190,11 +191,14 @@ int convert(const catgs::tools::Args& args) {
 
 // Builds `m`'s level of detail and writes it as a compact scene at `out`: keyed to `keyed_to`
 // (a LOD file), or served alone when that is empty.
+// A compressed PLY source keeps its order (catgs::LodBuildOptions::keep_order): its chunks stay
+// the leaf chunks and keep their codes.
 void write_lod_scene(const catgs::GaussianModel& m, const std::string& out, const std::string& keyed_to, int branching,
-                     int threads = 0) {
+                     int threads = 0, bool keep_order = false) {
   catgs::LodBuildReport report;
   catgs::LodBuildOptions lod_options;
   lod_options.branching = branching;
+  lod_options.keep_order = keep_order;
   const auto lod = catgs::build_lod(m, lod_options, &report);
   const auto t0 = std::chrono::steady_clock::now();
   catgs::write_compact_scene(lod, out, keyed_to, threads);
@@ -288,7 +292,8 @@ int lod(const catgs::tools::Args& args) {
   const int threads = args.get_int("--threads", 0);
   const auto m = catgs::load_scene(scene, catgs::LoadOptions{threads, false});
   // F.catgs: the scene served alone; any other name: a LOD file keyed to the scene.
-  write_lod_scene(m, out, ends_with(out, ".catgs") ? "" : scene, args.get_int("--branching", 8), threads);
+  write_lod_scene(m, out, ends_with(out, ".catgs") ? "" : scene, args.get_int("--branching", 8), threads,
+                  catgs::peek_scene(scene).format == "compressed_ply");
   return 0;
 }
 

@@ -48,8 +48,9 @@ void build_leaf(const GaussianModel& scene, const std::vector<uint32_t>& order, 
   fm::LodNode node{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}, 0.0f, fm::kLodNoParent};
   const std::size_t n = scene.size();
   for (std::size_t g = c * kChunk; g < (c + 1) * kChunk; ++g) {
-    if (g >= n) {
-      write_padding(out, g, &out.means[3 * c * kChunk]);
+    if (g >= n) {  // a copy of the chunk's first, never drawn: the chunk's ranges stay its Gaussians'
+      copy_gaussian(scene, order[c * kChunk], out, g);
+      out.opacity_logits[g] = -kOpacityLogitLimit;
       continue;
     }
     copy_gaussian(scene, order[g], out, g);
@@ -132,7 +133,13 @@ GaussianModel build_lod(const GaussianModel& scene, const LodBuildOptions& optio
   out.resize(chunks * kChunk);
   out.lod.resize(chunks);
 
-  std::vector<uint32_t> order = morton_order(scene);
+  std::vector<uint32_t> order;
+  if (options.keep_order) {
+    order.resize(scene.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<uint32_t>(i);
+  } else {
+    order = morton_order(scene);
+  }
   bool reordered = false;
   for (std::size_t i = 0; i < order.size() && !reordered; ++i) reordered = order[i] != i;
   // Progress counts input Gaussians: the leaves' copies, then every level's merged inputs (its

@@ -3,9 +3,12 @@
 //
 // Steps:
 // 1. The leaves: the scene's Gaussians in Morton order (scene/morton.h; a scene that
-//    catgs-scene compact wrote already is and is left as it is), padded with invisible
-//    Gaussians (opacity logit -kOpacityLogitLimit, log-scale kLodPadLogScale, at the chunk's
-//    first mean) to a multiple of fm::kChunkSize. Leaf node boxes: their means.
+//    catgs-scene compact wrote already is and is left as it is), or in the input's own order
+//    (keep_order: a SuperSplat compressed PLY's chunks, spatially sorted by its writer, then stay
+//    the leaf chunks, so a compact LOD file keeps every code the source had:
+//    scene/compact_file.h), padded to a multiple of fm::kChunkSize with invisible copies of the
+//    last chunk's first Gaussian (opacity logit -kOpacityLogitLimit; a copy, so the chunk's
+//    quantization ranges stay its Gaussians'). Leaf node boxes: their means.
 // 2. Level l + 1, node j: the `branching` consecutive nodes [b j, b j + b) of level l (all of them
 //    chunks), their visible Gaussians grouped into kChunkSize clusters by a median kd split
 //    (lod_cluster.h: about m / 256 each, every cluster a box of its own, so no cluster spans a
@@ -35,6 +38,8 @@ namespace catgs {
 
 struct LodBuildOptions {
   int branching = 8;  // children per node, 2..64
+  // The leaves in the input's order, not Morton-sorted (a compressed PLY source: see step 1).
+  bool keep_order = false;
   // Called on the building thread with (input Gaussians processed, in all): the leaves' copies,
   // then each level's merged inputs, in batches; rising, the last call (total, total). What it
   // throws ends the build (a stopping server cancels so).

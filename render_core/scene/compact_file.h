@@ -45,8 +45,10 @@
 // ranges lie within the source chunk's, at no coarser steps (positions 16 against 11/10 bits, log
 // scales 11-10-11 and colours 8 bits of a range no wider), alpha is the same 8 bits and rotations
 // keep their words (quantize.h pack_rotation); its 8-bit SH rest buckets of [-4, 4] come back while
-// a chunk's band bound stays under about 2 (7 bits of it). Re-sorted (a LOD's levels), a chunk mixes
-// source chunks and a value moves by up to half its new step.
+// a chunk's band bound stays under about 2 (7 bits of it). A LOD built in the source's order
+// (lod/lod_build.h keep_order: catgs-scene lod and the server do for a compressed PLY) keeps them
+// in its leaves too. Re-sorted, a chunk mixes source chunks and a value moves by up to half its
+// new step.
 #pragma once
 
 #include <cstdint>

@@ -8,6 +8,7 @@
 #include "lod/lod_build.h"
 #include "scene/compact_file.h"
 #include "scene/format_detect.h"
+#include "scene/scene_peek.h"
 
 namespace catgs::server {
 
@@ -32,6 +33,12 @@ GaussianModel build_for(const std::string& path, const GaussianModel& scene, con
   if (m) m->lod_builds_running++;
   int quarter = 0;
   LodBuildOptions b;
+  // A compressed PLY keeps its chunks as the leaves, so the LOD file keeps its codes.
+  try {
+    b.keep_order = peek_scene(path).format == "compressed_ply";
+  } catch (const std::exception&) {
+    b.keep_order = false;  // read already: a file that will not peek is not a compressed PLY
+  }
   b.progress = [&](uint64_t done, uint64_t total) {
     if (m && total) m->lod_build_permille = static_cast<std::int64_t>(done * 1000 / total);
     if (total && done * 4 / total > static_cast<uint64_t>(quarter) && done < total) {

@@ -277,9 +277,6 @@ TEST(CompactScene, CompressedPlySourceKeepsEveryCode) {
     ASSERT_EQ(source.packed.size(), m.size());
     ASSERT_EQ(source.chunks.size(), fm::chunk_count(m.size()));
     ASSERT_EQ(source.sh.size(), m.sh_degree > 0 ? m.size() : 0u);
-    GaussianModel q = m;
-    quantize_compact(q);
-    ASSERT_TRUE(q.codes);
     // The code of v on [lo, hi] in `bits` bits, as the source's writer rounds it.
     const auto code = [](float v, float lo, float hi, int bits) {
       const double top = double((1u << bits) - 1);
@@ -288,43 +285,62 @@ TEST(CompactScene, CompressedPlySourceKeepsEveryCode) {
     const int shift[3] = {21, 11, 0}, bits[3] = {11, 10, 11};
     const char* axis[3] = {"x", "y", "z"};
     const char* channel[3] = {"r", "g", "b"};
-    std::size_t checked = 0, sh_checked = 0, lost[6] = {};  // position, scale, colour, alpha, rotation, SH rest
-    for (std::size_t i = 0; i < m.size(); ++i) {
-      const std::map<std::string, float>& c = source.chunks[i / 256];
-      const std::array<uint32_t, 4>& p = source.packed[i];
-      for (int a = 0; a < 3; ++a) {
-        const uint32_t mask = (1u << bits[a]) - 1u, want_pos = (p[0] >> shift[a]) & mask;
-        const std::string x = axis[a];
-        if (c.at("max_" + x) > c.at("min_" + x))
-          lost[0] += code(q.means[3 * i + a], c.at("min_" + x), c.at("max_" + x), bits[a]) != want_pos;
-        const uint32_t want_scale = (p[2] >> shift[a]) & mask;
-        if (c.at("max_scale_" + x) > c.at("min_scale_" + x))
-          lost[1] +=
-              code(q.log_scales[3 * i + a], c.at("min_scale_" + x), c.at("max_scale_" + x), bits[a]) != want_scale;
-        const std::string ch = channel[a];
-        const float lo = c.count("min_" + ch) ? c.at("min_" + ch) : 0.0f;
-        const float hi = c.count("max_" + ch) ? c.at("max_" + ch) : 1.0f;
-        const float colour = 0.5f + 0.28209479177387814f * q.sh[3 * i * q.sh_coeffs() + a];
-        lost[2] += code(colour, lo, hi, 8) != ((p[3] >> (24 - 8 * a)) & 255u);
+    // The source's codes against q's first m.size() Gaussians (q quantized: the scene, or a LOD
+    // built from it whose leaves keep its order).
+    const auto expect_every_code = [&](const GaussianModel& q) {
+      ASSERT_TRUE(q.codes);
+      std::size_t checked = 0, sh_checked = 0, lost[6] = {};  // position, scale, colour, alpha, rotation, SH rest
+      for (std::size_t i = 0; i < m.size(); ++i) {
+        const std::map<std::string, float>& c = source.chunks[i / 256];
+        const std::array<uint32_t, 4>& p = source.packed[i];
+        for (int a = 0; a < 3; ++a) {
+          const uint32_t mask = (1u << bits[a]) - 1u, want_pos = (p[0] >> shift[a]) & mask;
+          const std::string x = axis[a];
+          if (c.at("max_" + x) > c.at("min_" + x))
+            lost[0] += code(q.means[3 * i + a], c.at("min_" + x), c.at("max_" + x), bits[a]) != want_pos;
+          const uint32_t want_scale = (p[2] >> shift[a]) & mask;
+          if (c.at("max_scale_" + x) > c.at("min_scale_" + x))
+            lost[1] +=
+                code(q.log_scales[3 * i + a], c.at("min_scale_" + x), c.at("max_scale_" + x), bits[a]) != want_scale;
+          const std::string ch = channel[a];
+          const float lo = c.count("min_" + ch) ? c.at("min_" + ch) : 0.0f;
+          const float hi = c.count("max_" + ch) ? c.at("max_" + ch) : 1.0f;
+          const float colour = 0.5f + 0.28209479177387814f * q.sh[3 * i * q.sh_coeffs() + a];
+          lost[2] += code(colour, lo, hi, 8) != ((p[3] >> (24 - 8 * a)) & 255u);
+        }
+        lost[3] += code(sigmoid(q.opacity_logits[i]), 0.0f, 1.0f, 8) != (p[3] & 255u);
+        const int rest = q.sh_coeffs() - 1;
+        for (std::size_t j = 0; i < source.sh.size() && j < source.sh[i].size(); ++j) {
+          const float v = q.sh[(i * q.sh_coeffs() + 1 + j % rest) * 3 + j / rest];  // f_rest[c * rest + k - 1]
+          lost[5] += std::clamp(std::lround(std::floor((double(v) + 4.0) * 32.0)), 0l, 255l) != source.sh[i][j];
+          ++sh_checked;
+        }
+        lost[4] += q.codes->rotation[i] != p[1];  // the same smallest-three packing (quantize.h)
+        ++checked;
       }
-      lost[3] += code(sigmoid(q.opacity_logits[i]), 0.0f, 1.0f, 8) != (p[3] & 255u);
-      const int rest = q.sh_coeffs() - 1;
-      for (std::size_t j = 0; i < source.sh.size() && j < source.sh[i].size(); ++j) {
-        const float v = q.sh[(i * q.sh_coeffs() + 1 + j % rest) * 3 + j / rest];  // f_rest[c * rest + k - 1]
-        lost[5] += std::clamp(std::lround(std::floor((double(v) + 4.0) * 32.0)), 0l, 255l) != source.sh[i][j];
-        ++sh_checked;
-      }
-      lost[4] += q.codes->rotation[i] != p[1];  // the same smallest-three packing (quantize.h)
-      ++checked;
+      EXPECT_EQ(checked, m.size());
+      EXPECT_EQ(lost[0], 0u) << "position codes not recovered";
+      EXPECT_EQ(lost[1], 0u) << "log-scale codes not recovered";
+      EXPECT_EQ(lost[2], 0u) << "colour codes not recovered";
+      EXPECT_EQ(lost[3], 0u) << "alpha codes not recovered";
+      EXPECT_EQ(lost[4], 0u) << "rotation codes changed";
+      EXPECT_EQ(lost[5], 0u) << "SH rest codes not recovered";
+      EXPECT_EQ(sh_checked, m.size() * std::size_t(3 * (m.sh_coeffs() - 1)));
+    };
+    GaussianModel q = m;
+    quantize_compact(q);
+    expect_every_code(q);
+    {
+      // A level of detail built with the source's order (catgs-scene lod and the server do so for
+      // a compressed PLY): its leaves are the source's chunks and keep every code too.
+      SCOPED_TRACE("LOD");
+      LodBuildOptions keep;
+      keep.keep_order = true;
+      GaussianModel lod = build_lod(m, keep);
+      ASSERT_GE(lod.size(), m.size());
+      quantize_compact(lod);
+      expect_every_code(lod);
     }
-    EXPECT_EQ(checked, m.size());
-    EXPECT_EQ(lost[0], 0u) << "position codes not recovered";
-    EXPECT_EQ(lost[1], 0u) << "log-scale codes not recovered";
-    EXPECT_EQ(lost[2], 0u) << "colour codes not recovered";
-    EXPECT_EQ(lost[3], 0u) << "alpha codes not recovered";
-    EXPECT_EQ(lost[4], 0u) << "rotation codes changed";
-    EXPECT_EQ(lost[5], 0u) << "SH rest codes not recovered";
-    EXPECT_EQ(sh_checked, m.size() * std::size_t(3 * (m.sh_coeffs() - 1)));
     // Re-sorted first (Morton order, as convert does a plain scene), a chunk mixes the source's
     // grids and codes are lost: why convert keeps a compressed PLY's order.
     const std::vector<uint32_t> order = morton_order(m);

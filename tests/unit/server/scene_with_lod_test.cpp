@@ -15,9 +15,9 @@
 #include <vector>
 
 #include "lod/lod_build.h"
-#include "lod/lod_merge.h"
 #include "scene/compact_file.h"
 #include "scene/ply_io.h"
+#include "scene/scene_peek.h"
 #include "process/scene_with_lod.h"
 #include "server_options.h"
 #include "test_data.h"
@@ -59,8 +59,8 @@ std::string scene_copy(const std::string& dir, const std::string& name) {
   return path;
 }
 
-// The leaves of a LOD model hold the scene's Gaussians (in Morton order, then padding): the same
-// multiset of means, compared as sorted triples.
+// The leaves of a LOD model hold the scene's Gaussians (in Morton order or the scene's own, then
+// padding): the same multiset of means, compared as sorted triples.
 void expect_leaves_are(const GaussianModel& lod, const GaussianModel& scene) {
   ASSERT_FALSE(lod.lod.empty());
   const std::size_t leaves = lod_leaf_gaussians(lod);
@@ -72,19 +72,27 @@ void expect_leaves_are(const GaussianModel& lod, const GaussianModel& scene) {
     std::sort(v.begin(), v.end());
     return v;
   };
-  // Padding (lod_build.h): opacity logit -kOpacityLogitLimit and log-scale kLodPadLogScale.
+  // Padding (lod_build.h): after the scene's Gaussians, invisible (opacity logit
+  // -kOpacityLogitLimit).
   std::vector<std::array<float, 3>> got;
-  for (std::size_t i = 0; i < leaves; ++i)
-    if (!(lod.opacity_logits[i] == -kOpacityLogitLimit && lod.log_scales[3 * i] == kLodPadLogScale))
-      got.push_back({lod.means[3 * i], lod.means[3 * i + 1], lod.means[3 * i + 2]});
+  for (std::size_t i = 0; i < leaves; ++i) {
+    if (i >= scene.size()) {
+      EXPECT_EQ(lod.opacity_logits[i], -kOpacityLogitLimit) << i;
+      continue;
+    }
+    got.push_back({lod.means[3 * i], lod.means[3 * i + 1], lod.means[3 * i + 2]});
+  }
   std::sort(got.begin(), got.end());
   EXPECT_EQ(got, sorted_means(scene, scene.size()));
 }
 
 // A LOD the server wrote is served as its file will give it (compact_file.h): the build of
-// `scene`, quantized.
-void expect_quantized_build(const GaussianModel& served, const GaussianModel& scene) {
-  GaussianModel want = build_lod(scene);
+// `scene` (read from `path`), quantized; a compressed PLY is built in its own order.
+void expect_quantized_build(const GaussianModel& served, const std::string& path) {
+  const GaussianModel scene = load_scene(path);
+  LodBuildOptions o;
+  o.keep_order = peek_scene(path).format == "compressed_ply";
+  GaussianModel want = build_lod(scene, o);
   quantize_compact(want);
   test::expect_same_gaussians(served, want);
   ASSERT_EQ(served.lod.size(), want.lod.size());
@@ -102,7 +110,7 @@ TEST(SceneWithLod, MissingFileIsBuiltWrittenThenRead) {
   EXPECT_EQ(metrics.lod_files_written_total.load(), 1u);
   EXPECT_EQ(metrics.lod_builds_running.load(), 0);
   EXPECT_EQ(metrics.lod_build_permille.load(), 1000);
-  expect_quantized_build(first.model, load_scene(path));
+  expect_quantized_build(first.model, path);
   // Progress rises to its end: the read is the first half, the build the second.
   ASSERT_FALSE(first.progress.empty());
   for (std::size_t i = 1; i < first.progress.size(); ++i) {
@@ -143,7 +151,7 @@ TEST(SceneWithLod, StaleOrForeignFileIsRebuiltNotTrusted) {
   fs::copy_file(a + ".catgs-lod", b + ".catgs-lod", fs::copy_options::overwrite_existing);
   const LoadRun foreign = load(b, LodMode::write, &metrics);
   EXPECT_TRUE(foreign.said("LOD file not used")) << foreign.log.front();
-  expect_quantized_build(foreign.model, load_scene(b));
+  expect_quantized_build(foreign.model, b);
   EXPECT_EQ(metrics.lod_builds_total.load(), 3u);
 }
 
