@@ -42,8 +42,7 @@
 // catgs-bench exact-occlusion against exact on the same frames, both against the 4x supersampled
 // render). A dropped entry that should have shown leaves its pixels less opaque in this frame's own
 // map, so the next frame draws it. (The first form, one depth per tile read back through a box
-// widened by the parallax of its nearest occluder, dropped 15% of the entries an exact per-pixel
-// map could: docs/history/occlusion_culling.md.)
+// widened by the parallax of its nearest occluder, dropped far fewer: docs/history/occlusion_culling.md.)
 #pragma once
 
 #include "forward_model/chunk_bounds.h"

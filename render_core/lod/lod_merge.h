@@ -11,8 +11,10 @@
 
 namespace catgs {
 
-// Log-scale of the invisible Gaussians that pad a LOD chunk (opacity logit -kOpacityLogitLimit):
-// a std dev of 2e-9 world units, so a padding Gaussian neither widens a chunk's bounds nor draws.
+// Log-scale of the invisible Gaussians that pad a merged level's chunk (an empty cluster; opacity
+// logit -kOpacityLogitLimit): a std dev of 2e-9 world units, so a padding Gaussian neither widens a
+// chunk's bounds nor draws. A leaf chunk's padding is an invisible copy of its first Gaussian
+// instead (lod_build.h), so that the chunk's quantization ranges stay its Gaussians'.
 inline constexpr float kLodPadLogScale = -20.0f;
 
 // A Gaussian that pads a chunk (lod_build.h): opacity logit at or below -kOpacityLogitLimit.
