@@ -92,18 +92,20 @@ done
 
 python3 - "$OUT/json" > "$OUT/occlusion_table.md" <<'PY' || status=1
 import glob, json, os, sys
-print("| city x path | variant | ms a frame mean / p99 | pre / keys / sort / ranges / raster ms | list entries | "
-      "visible Gaussians | PSNR vs 4x supersampled mean / min dB |")
-print("|---|---|---|---|---|---|---|")
+print("| city x path | variant | ms a frame mean / p99 | pre / keys / sort / ranges / raster ms | chunks pre-processed | "
+      "list entries | visible Gaussians | PSNR vs 4x supersampled mean / min dB |")
+print("|---|---|---|---|---|---|---|---|")
 changes = sorted(glob.glob(os.path.join(sys.argv[1], "changes_city*.json")))
 for path in sorted(glob.glob(os.path.join(sys.argv[1], "occ_city*.json"))):
     j = json.load(open(path))
     for p in j.get("pipelines", []):
         st = p["stages_ms_mean"]
         a = p.get("quality_vs_aa_reference") or {}
-        print("| %s | %s | %.3f / %.3f | %.2f / %.2f / %.2f / %.2f / %.2f | %.2f M | %.2f M | %s |" % (
+        chunks = p.get("chunks_preprocessed_mean")
+        print("| %s | %s | %.3f / %.3f | %.2f / %.2f / %.2f / %.2f / %.2f | %s | %.2f M | %.2f M | %s |" % (
             os.path.basename(path)[4:-5], p["pipeline"], p["frame_ms"]["mean"], p["frame_ms"]["p99"],
             st["preprocess"], st["keys"], st["sort"], st["tile_ranges"], st["rasterize"],
+            "%.1f k" % (chunks / 1e3) if chunks is not None else "-",
             p["render_list"]["mean"] / 1e6, p.get("visible_mean", 0) / 1e6,
             ("%.2f / %.2f" % (a["psnr_db_mean_finite"], a["psnr_db_min"])) if a else "-"))
 if changes:

@@ -58,6 +58,7 @@ struct ProjectedGaussians {
   // a map: the frame's reprojected map (its cells, owned by the renderer; cells[0] null: none),
   // applied to the Gaussians of at most fm::kOcclusionEntryTiles tiles.
   fm::OcclusionMap occlusion;
+  std::size_t chunks_kept = 0;  // chunks pre-processed (the cut's, less those chunk culling dropped)
   void resize(std::size_t n);
 };
 
@@ -83,8 +84,9 @@ using TileRanges = std::vector<glm::uvec2>;  // [tiles]
 // A scene with LOD (model.lod) projects only the chunks of its cut at `camera` with bound
 // `lod_error_px` (fm::lod_chunk_drawn; 0: the leaves), in every pipeline; the others are skipped
 // as culled chunks are. exact also drops the entries that `occlusion` (the last frame's map
-// reprojected onto this frame, occlusion_reproject; no cells: none) hides: a small Gaussian's each
-// (fm::entry_hidden; emit_keys drops the same); issue 72.
+// reprojected onto this frame, occlusion_reproject; no cells: none) hides: chunks whole
+// (fm::chunk_hidden) and a small Gaussian's each entry (fm::entry_hidden; emit_keys drops the
+// same); issue 72.
 void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                 Pipeline pipeline, ProjectedGaussians& out, const fm::TileRect& region = fm::kAllTiles,
                 float lod_error_px = 0.0f, const fm::OcclusionMap& occlusion = {});

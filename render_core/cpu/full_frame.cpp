@@ -46,6 +46,7 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
   stats.visible = static_cast<std::size_t>(
       std::count_if(projected.tiles_touched.begin(), projected.tiles_touched.end(), [](uint32_t n) { return n > 0; }));
   stats.render_list_length = static_cast<std::size_t>(entries);
+  stats.chunks_preprocessed = projected.chunks_kept;
 
   // Stages 2-5 over the tiles [first, end) of what was pre-processed last, sorted with `packing`.
   // The split length comes from the whole frame's list (`entries` over every tile), so a pass

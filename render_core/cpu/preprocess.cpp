@@ -1,5 +1,6 @@
 // Stage 1: per-Gaussian pre-processing (mirrors the CUDA preprocess kernel).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 #include <vector>
@@ -141,18 +142,23 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
 // Chunk c in view v, as the CUDA core takes a block per chunk: exact skips the chunks that cannot
 // reach the image (the CUDA core's cull_chunks_kernel, which lists the chunks kept for its later
 // stages). Their Gaussians get tiles_touched = 0 here; the CUDA core leaves them unwritten and
-// reads them as 0 through its chunk totals (cuda/records.h listed_tiles). Every pipeline skips the
+// reads them as 0 through its chunk totals (cuda/records.h listed_tiles); with occlusion culling,
+// also the chunks the last frame's map hides whole (fm::chunk_hidden). Every pipeline skips the
 // chunks outside the LOD cut (lod.h): another level draws them.
-void preprocess_chunk(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const ViewPass& v,
+// Returns whether it was pre-processed.
+bool preprocess_chunk(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const ViewPass& v,
                       std::size_t c) {
   const std::size_t begin = c * fm::kChunkSize, end = std::min(model.size(), begin + fm::kChunkSize);
-  const bool outside = (v.exact && fm::chunk_outside_view(chunks[c], v.view)) || !v.lod.drawn(c);
+  const bool outside =
+      !v.lod.drawn(c) ||
+      (v.exact && (fm::chunk_outside_view(chunks[c], v.view) || fm::chunk_hidden(v.occlusion, chunks[c], v.view)));
   for (std::size_t i = begin; i < end; ++i) {
     if (outside)
       v.out.tiles_touched[i] = 0;
     else
       preprocess_gaussian(model, v, i);
   }
+  return !outside;
 }
 
 }  // namespace
@@ -165,7 +171,11 @@ void preprocess(const GaussianModel& model, const std::vector<fm::ChunkBounds>& 
   out.resize(model.size());
   out.occlusion = occlusion;  // for emission's per-entry test
   const ViewPass v(model, camera, pipeline, out, region, lod_error_px, occlusion);
-  parallel_for(chunks.size(), 16, [&](std::size_t c) { preprocess_chunk(model, chunks, v, c); });
+  std::atomic<std::size_t> kept{0};
+  parallel_for(chunks.size(), 16, [&](std::size_t c) {
+    if (preprocess_chunk(model, chunks, v, c)) kept.fetch_add(1, std::memory_order_relaxed);
+  });
+  out.chunks_kept = kept.load();
 }
 
 }  // namespace catgs::cpu

@@ -461,6 +461,7 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
   };
 
   stats_.visible = static_cast<std::size_t>(frame.visible);
+  stats_.chunks_preprocessed = static_cast<std::size_t>(frame.kept);
   stats_.render_list_length = static_cast<std::size_t>(frame.entries);
   if (frame.entries <= budget.max_entries(camera.width, camera.height, kBytesPerListEntry)) {
     draw(frame, 0, tiles);

@@ -28,41 +28,44 @@ __device__ uint32_t exact_tile_mask(const fm::TileRect& rect, glm::vec2 mean, gl
   return mask;
 }
 
-// The block's listed Gaussians' depth range into depth_range[0] (complemented float bits of the
-// nearest) and depth_range[1] (float bits of the farthest), both running maxima from zero:
-// positive floats order as their bit patterns. One read, and an atomic only where the block
-// widens the range, so the two shared words see few atomics (most blocks lie inside the range
-// found by earlier ones, or hold no listed Gaussian).
-__device__ void record_depth_range(bool listed, float depth, unsigned long long* depth_range) {
-  __shared__ unsigned warp_low[tune::kGaussianThreads / 32], warp_high[tune::kGaussianThreads / 32];
-  const unsigned bits = __float_as_uint(depth);
-  const unsigned low = warp_max(listed ? ~bits : 0u);
-  const unsigned high = warp_max(listed ? bits : 0u);
-  const unsigned warp = threadIdx.x / 32u;
-  if ((threadIdx.x & 31u) == 0u) {
-    warp_low[warp] = low;
-    warp_high[warp] = high;
+// What a warp found over its walk of the chunks, published once at the kernel's end (so the
+// walk needs no block barrier): its Gaussians with entries, and its listed depths' range as
+// running maxima from zero of the complemented float bits of the nearest (low) and the float bits
+// of the farthest (high): positive floats order as their bit patterns.
+struct WarpTally {
+  unsigned long long visible = 0;
+  unsigned low = 0, high = 0;  // this lane's; reduced over the warp in publish
+  __device__ void add_depth(bool listed, float depth) {
+    const unsigned bits = __float_as_uint(depth);
+    low = max(low, listed ? ~bits : 0u);
+    high = max(high, listed ? bits : 0u);
   }
-  __syncthreads();
-  if (threadIdx.x != 0) return;  // the caller's next barrier keeps warp_low/high until thread 0 read them
-  unsigned block_low = 0, block_high = 0;
-  for (unsigned w = 0; w < blockDim.x / 32u; ++w) {
-    block_low = max(block_low, warp_low[w]);
-    block_high = max(block_high, warp_high[w]);
+  // Into *visible and depth_range[2] (record_big_count's too): one read, and an atomic only where
+  // the warp widens the range, so the two shared words see few atomics. Every lane calls it.
+  __device__ void publish(unsigned long long* visible_count, unsigned long long* depth_range) const {
+    const unsigned warp_low = warp_max(low), warp_high = warp_max(high);
+    if ((threadIdx.x & 31u) != 0u) return;
+    if (visible > 0) atomicAdd(visible_count, visible);
+    const volatile unsigned long long* seen = depth_range;
+    if (warp_low > seen[0]) atomicMax(depth_range, static_cast<unsigned long long>(warp_low));
+    if (warp_high > seen[1]) atomicMax(depth_range + 1, static_cast<unsigned long long>(warp_high));
   }
-  const volatile unsigned long long* seen = depth_range;
-  if (block_low > seen[0]) atomicMax(depth_range, static_cast<unsigned long long>(block_low));
-  if (block_high > seen[1]) atomicMax(depth_range + 1, static_cast<unsigned long long>(block_high));
-}
+};
 
 // Chunk culling, a thread per chunk: exact drops the chunks that cannot reach the image
-// (fm::chunk_outside_view; vanilla keeps every chunk, as reference 3DGS culls only per Gaussian),
-// every pipeline the chunks outside the LOD cut (lod_drawn, cpu/preprocess.cpp's loop).
+// (fm::chunk_outside_view; vanilla keeps every chunk, as reference 3DGS culls only per Gaussian)
+// and, with occlusion culling, those the last frame's map hides whole (fm::chunk_hidden); every
+// pipeline the chunks outside the LOD cut (lod_drawn, cpu/preprocess.cpp's loop).
 __global__ void __launch_bounds__(tune::kGaussianThreads)
-    cull_chunks_kernel(SceneView scene, uint64_t count, CameraParams cam, bool exact, LiveChunks live) {
+    cull_chunks_kernel(SceneView scene, uint64_t count, CameraParams cam, bool exact, LiveChunks live,
+                       fm::OcclusionMap occlusion) {
   const uint64_t c = static_cast<uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  mark_chunk(c < count && lod_drawn(scene, c, cam) && !(exact && fm::chunk_outside_view(scene.chunks[c], cam)), c,
-             count, live);
+  bool keep = c < count && lod_drawn(scene, c, cam);
+  if (keep && exact) {
+    const fm::ChunkBounds b = scene.chunks[c];
+    keep = !fm::chunk_outside_view(b, cam) && !fm::chunk_hidden(occlusion, b, cam);
+  }
+  mark_chunk(keep, c, count, live);
 }
 
 // order_live_chunks' second launch, a thread per chunk (after slot = the exclusive sum of keep):
@@ -170,21 +173,21 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
 // One thread per Gaussian of chunk c at slot chunk k (a block's thread x takes Gaussian
 // c * kChunkSize + x, slot k * kChunkSize + x), one view: writes the projected features of
 // visible Gaussians (preprocess_gaussian) and tiles_touched of every slot (0 past the scene's
-// end), and the slot chunk's total. Every thread of the block calls it.
+// end), adds the warp's entries to the slot chunk's total and its counts to `tally`. Every
+// thread of the block calls it.
 __device__ __forceinline__ void preprocess_chunk_view(uint64_t c, uint64_t k, LoadedGaussian* g, const SceneView& scene,
                                                       const CameraParams& cam, bool exact, const fm::TileRect& region,
-                                                      const Projected& out, unsigned long long* visible,
-                                                      unsigned long long* depth_range, const BigList& big,
+                                                      const Projected& out, WarpTally& tally, const BigList& big,
                                                       const fm::OcclusionMap& occlusion) {
   const uint64_t i = c * fm::kChunkSize + threadIdx.x;
   const uint64_t s = k * fm::kChunkSize + threadIdx.x;
   GaussianInView r;
   if (i < scene.n) r = preprocess_gaussian(i, s, *g, scene, cam, exact, region, out, occlusion);
   out.tiles_touched[s] = r.touched;
-  list_big_and_count_visible(r.is_big, r.is_huge, r.touched, s, k, big, visible, out.chunk_total);
+  tally.visible += list_big_and_count_warp(r.is_big, r.is_huge, r.touched, s, k, big, out.chunk_total);
   // Big Gaussians' depths count where count_big_kernel finds them entries: the range is over
   // the Gaussians with entries, as the CPU reference's sort works it out from its list.
-  record_depth_range(r.touched > 0, r.depth, depth_range);
+  tally.add_depth(r.touched > 0, r.depth);
 }
 
 // The thread's Gaussian of chunk c (nothing past the scene's end: it is never read).
@@ -197,20 +200,21 @@ __device__ __forceinline__ LoadedGaussian load_gaussian(const SceneView& scene, 
 __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kPreprocessMinBlocks)
     preprocess_kernel(SceneView scene, CameraParams cam, bool exact, fm::TileRect region, Projected out, ChunkWalk live,
                       unsigned long long* visible,      // [1] running count of visible Gaussians
-                      unsigned long long* depth_range,  // [2] listed depths (record_depth_range)
+                      unsigned long long* depth_range,  // [2] listed depths (WarpTally)
                       BigList big, fm::OcclusionMap occlusion) {
   const uint64_t chunks = live.size();
+  WarpTally tally;
   for (uint64_t k = blockIdx.x; k < chunks; k += gridDim.x) {
     const uint64_t c = live.chunk(k);
     LoadedGaussian g = load_gaussian(scene, c);
-    preprocess_chunk_view(c, k, &g, scene, cam, exact, region, out, visible, depth_range, big, occlusion);
-    __syncthreads();  // the shared words of the block reductions are rewritten next round
+    preprocess_chunk_view(c, k, &g, scene, cam, exact, region, out, tally, big, occlusion);
   }
+  tally.publish(visible, depth_range);
 }
 
 // Record of a big Gaussian's count, or of one part's of a huge one (one thread): adds n to its
 // tiles_touched (zero from pre-processing) and its chunk's total and, where it has entries and
-// depth_range is not null, keeps the depth range as record_depth_range does. Returns whether
+// depth_range is not null, keeps the depth range as WarpTally does. Returns whether
 // this made the Gaussian visible (its first entries), so that each counts once.
 __device__ bool record_big_count(uint32_t i, uint32_t n, const float* depth, uint32_t* tiles_touched,
                                  uint32_t* chunk_total, unsigned long long* depth_range) {
@@ -308,7 +312,7 @@ void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, con
   if (cull_blocks > 0x7fffffffull) throw std::length_error("preprocess: too many Gaussians for one grid");
   clear_chunk_totals(out, live, stream);
   cull_chunks_kernel<<<static_cast<unsigned>(cull_blocks), tune::kGaussianThreads, 0, stream>>>(scene, chunks, cam,
-                                                                                                exact, live);
+                                                                                                exact, live, occlusion);
   CATGS_CUDA_LAUNCHED("cull_chunks_kernel");
   order_live_chunks(live, chunks, stream);
   const ChunkWalk walk = live.walk();

@@ -9,24 +9,25 @@
 
 namespace catgs::cuda::stages {
 
-// Stage 1 (preprocess.cu): chunk culling first (exact: fm::chunk_outside_view, a thread per
-// chunk; vanilla keeps every chunk), whose kept chunks `live` lists in index order
-// (order_live_chunks; records.h LiveChunks: the k-th kept chunk's Gaussians take slot chunk k of
-// `out`), then a block per kept chunk within live.capacity: frustum culling, EWA 2D covariance,
-// conic, SH colour, tile bounds and per-Gaussian tile counts (vanilla: 3-sigma square; exact:
-// opacity-aware ellipse-vs-tile test). Adds the number of visible Gaussians to *visible (one
-// atomic per block), and widens depth_range[2] to the view depths of the Gaussians with entries
-// (float bits; [0] complemented, both running maxima: zero them first) for the single sort's key
-// (fm::single_sort_packing). Big Gaussians' slots are appended to `big`, huge ones to its huge
-// end (one atomic per warp that holds any); with `exact`, their tiles are counted by a second
-// kernel (count_big_tiles). `big.count` must be zero on entry. Writes each slot chunk's entry
-// count to out.chunk_total (0 past the kept chunks). A frame whose kept chunks pass
-// live.capacity pre-processes only the first live.capacity (the caller reads the count and draws
-// it again with larger buffers). `region`: one pass of a frame drawn in passes
-// (renderer/render_passes.h) counts only that region's tiles (fm::clip_tile_rect; the camera
-// stays the whole frame's), as cpu::preprocess; fm::kAllTiles for a frame in one pass.
-// `occlusion`: exact also drops the entries of small Gaussians that the last frame's map,
-// reprojected onto this frame (its cells), hides (fm::entry_hidden, from the tile mask;
+// Stage 1 (preprocess.cu): chunk culling first (exact: fm::chunk_outside_view, a thread per chunk;
+// vanilla keeps every chunk), whose kept chunks `live` lists in index order (order_live_chunks;
+// records.h LiveChunks: the k-th kept chunk's Gaussians take slot chunk k of `out`), then a block
+// per kept chunk within live.capacity: frustum culling, EWA 2D covariance, conic, SH colour, tile
+// bounds and per-Gaussian tile counts (vanilla: 3-sigma square; exact: opacity-aware
+// ellipse-vs-tile test). Adds the number of visible Gaussians to *visible (one atomic per warp, at
+// the end of its walk: no block barrier), and widens depth_range[2] to the view depths of the
+// Gaussians with entries (float bits; [0] complemented, both running maxima: zero them first) for
+// the single sort's key (fm::single_sort_packing). Big Gaussians' slots are appended to `big`, huge
+// ones to its huge end (one atomic per warp that holds any); with `exact`, their tiles are counted
+// by a second kernel (count_big_tiles). `big.count` must be zero on entry. Each slot chunk's entry
+// count ends in out.chunk_total (zeroed first, then an atomic per warp with entries; 0 past the
+// kept chunks). A frame whose kept chunks pass live.capacity pre-processes only the first
+// live.capacity (the caller reads the count and draws it again with larger buffers). `region`: one
+// pass of a frame drawn in passes (renderer/render_passes.h) counts only that region's tiles
+// (fm::clip_tile_rect; the camera stays the whole frame's), as cpu::preprocess; fm::kAllTiles for a
+// frame in one pass. `occlusion`: exact also drops the chunks that the last frame's map,
+// reprojected onto this frame (its cells), hides whole (fm::chunk_hidden, in the chunk cull) and
+// the entries of small Gaussians it hides (fm::entry_hidden, from the tile mask;
 // forward_model/occlusion.h). A map without cells (the default) drops none.
 void preprocess(const SceneView& scene, const CameraParams& cam, bool exact, const fm::TileRect& region,
                 const Projected& out, const LiveChunks& live, unsigned long long* visible,

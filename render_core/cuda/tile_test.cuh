@@ -50,17 +50,9 @@ __device__ __forceinline__ GaussianTileTest load_tile_test(const TileTests& t, u
   return g;
 }
 
-// The end of a pre-processing kernel (full or speculative), called by every thread of the block:
-// big Gaussians join the big list, huge ones (is_huge implies is_big) its huge end (one atomic
-// per warp holding any: they are few), and the visible count takes one atomic per block, not per
-// Gaussian (docs/DESIGN.md "Lessons kept from the founding design": no contended atomics); the
-// block's chunk `chunk` gets the sum of its tiles_touched (Projected::chunk_total). Big Gaussians
-// are counted visible, and added to their chunk's total, by count_big_tiles once their tiles are
-// known.
-__device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_huge, uint32_t touched, uint64_t i,
-                                                           uint64_t chunk, const BigList& big,
-                                                           unsigned long long* visible, uint32_t* chunk_total) {
-  __shared__ uint32_t warp_total[tune::kGaussianThreads / 32];
+// Big Gaussians join the big list, huge ones (is_huge implies is_big) its huge end: one atomic
+// per warp holding any (they are few). Called by every lane of the warp.
+__device__ __forceinline__ void list_big(bool is_big, bool is_huge, uint64_t i, const BigList& big) {
   const int lane = static_cast<int>(threadIdx.x & 31u);
   for (int list = 0; list < 2; ++list) {  // 0: big (not huge), 1: huge
     const bool mine = list == 0 ? is_big && !is_huge : is_huge;
@@ -73,6 +65,33 @@ __device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_
     const uint64_t at = base + static_cast<unsigned>(__popc(lanes & ((1u << lane) - 1u)));
     if (mine) big.index[list == 0 ? at : big.capacity - 1 - at] = static_cast<uint32_t>(i);
   }
+}
+
+// The warp's share of its chunk, without a block barrier (exact pre-processing: its warps then
+// never wait for the block's slowest, which tests occlusion and colours the most Gaussians):
+// list_big, and the warp's tiles_touched added to chunk `chunk`'s Projected::chunk_total (one
+// atomic per warp with entries, onto the zeros of clear_chunk_totals). Returns the warp's
+// Gaussians with entries (every lane), which the caller adds up over its walk and publishes once.
+// Called by every lane of the warp.
+__device__ __forceinline__ uint32_t list_big_and_count_warp(bool is_big, bool is_huge, uint32_t touched, uint64_t i,
+                                                            uint64_t chunk, const BigList& big, uint32_t* chunk_total) {
+  list_big(is_big, is_huge, i, big);
+  const uint32_t total = warp_sum(touched);
+  if ((threadIdx.x & 31u) == 0u && total > 0u) atomicAdd(chunk_total + chunk, total);
+  return static_cast<uint32_t>(__popc(__ballot_sync(0xffffffffu, touched > 0)));
+}
+
+// The end of the speculative pre-processing kernel, called by every thread of the block: list_big,
+// and the visible count takes one atomic per block, not per Gaussian (docs/DESIGN.md "Lessons
+// kept from the founding design": no contended atomics); the block's chunk `chunk` gets the sum of
+// its tiles_touched (Projected::chunk_total). Big Gaussians are counted visible, and added to their
+// chunk's total, by count_big_tiles once their tiles are known.
+__device__ __forceinline__ void list_big_and_count_visible(bool is_big, bool is_huge, uint32_t touched, uint64_t i,
+                                                           uint64_t chunk, const BigList& big,
+                                                           unsigned long long* visible, uint32_t* chunk_total) {
+  __shared__ uint32_t warp_total[tune::kGaussianThreads / 32];
+  const int lane = static_cast<int>(threadIdx.x & 31u);
+  list_big(is_big, is_huge, i, big);
   const uint32_t total = warp_sum(touched);
   if (lane == 0) warp_total[threadIdx.x / 32u] = total;
   const int block_visible = __syncthreads_count(touched > 0);

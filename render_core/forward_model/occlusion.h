@@ -32,8 +32,8 @@
 //   lies behind (1e-3 deeper: the 32-bit sort key joins depths within 3.1e-5) the deepest cell
 //   over its q_max ellipse's pixel box within that tile (read at the finest level where the box
 //   spans at most 2 x 2 cells). A Gaussian over more than 32 tiles keeps them all (the CUDA core
-//   counts and emits those from the ellipse alone); a small Gaussian all of whose entries are
-//   dropped skips its SH colour.
+//   counts and emits those from the ellipse alone) unless its chunk goes whole (chunk_hidden); a
+//   small Gaussian all of whose entries are dropped skips its SH colour.
 // With the same pose each quad covers exactly the pixel centres it was drawn from, so a dropped
 // entry lies behind its pixels' opaque points: the picture differs from the unculled one by under
 // 1/255 a pixel. A moving eye moves each quad by its own parallax; a quad spans the last frame's
@@ -123,13 +123,18 @@ CATGS_HD bool occlusion_quad(const float* depth, const View& last, const View& n
 }
 
 // The deepest map depth over pixels [x0, x1] x [y0, y1] of this frame (x0 <= x1, y0 <= y1, within
-// the image), read at the finest level where the box spans at most 2 x 2 cells.
+// the image), read at the finest level where the box spans at most 2 x 2 cells. The level's
+// array is picked by branches, not indexed by k: a runtime index into the map's arrays would put
+// the kernel parameter in local memory (the GPU's pre-processing profile showed its loads).
+static_assert(kOcclusionLevels == 3, "occlusion_box_depth picks one of three levels");
 CATGS_HD float occlusion_box_depth(const OcclusionMap& m, int x0, int x1, int y0, int y1) {
   int k = 0, s = 2;  // s: log2 of level k's cell side
   while (k + 1 < kOcclusionLevels && ((x1 >> s) - (x0 >> s) > 1 || (y1 >> s) - (y0 >> s) > 1)) ++k, ++s;
+  const float* cells = k == 0 ? m.cells[0] : k == 1 ? m.cells[1] : m.cells[2];
+  const int cells_x = k == 0 ? m.cells_x[0] : k == 1 ? m.cells_x[1] : m.cells_x[2];
   float deepest = 0.0f;
   for (int cy = y0 >> s; cy <= (y1 >> s); ++cy)
-    for (int cx = x0 >> s; cx <= (x1 >> s); ++cx) deepest = fmaxf(deepest, m.cells[k][cy * m.cells_x[k] + cx]);
+    for (int cx = x0 >> s; cx <= (x1 >> s); ++cx) deepest = fmaxf(deepest, cells[cy * cells_x + cx]);
   return deepest;
 }
 
@@ -137,7 +142,7 @@ CATGS_HD float occlusion_box_depth(const OcclusionMap& m, int x0, int x1, int y0
 // (tx, ty) of a width x height frame is hidden when its view depth lies behind the map's deepest
 // over its ellipse's pixel box (q <= q_max + kExactQMargin, as the rasterizer visits) within the
 // tile. A Gaussian over more tiles keeps them all (the CUDA core counts and emits those with a
-// warp, from the ellipse alone).
+// warp, from the ellipse alone), unless chunk_hidden drops its chunk whole.
 inline constexpr int kOcclusionEntryTiles = 32;  // the CUDA core's tune::kBigRectTiles (static_assert there)
 CATGS_HD bool entry_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 conic, float q_max, float depth, int tx,
                            int ty, int width, int height) {
@@ -178,6 +183,42 @@ CATGS_HD bool gaussian_hidden(const OcclusionMap& m, glm::vec2 mean2d, float dep
   const float d =
       occlusion_box_depth(m, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(y0), static_cast<int>(y1));
   return d * kOcclusionDepthSlack < depth;
+}
+
+// Chunk culling by the map, before any per-Gaussian work (the cull stage: cpu/preprocess.cpp's
+// chunk loop, cuda/preprocess.cu cull_chunks_kernel): chunk `b` is hidden whole in view v when its
+// box of means lies in front of the near plane and the map's deepest over a pixel box that holds
+// every ellipse of its Gaussians lies in front of its nearest corner. That box is the means' pixel
+// box (chunk_on_screen) widened by the ellipse bound at q_max + kExactQMargin (chunk_half_extent,
+// as gaussian_hidden bounds one Gaussian) and chunk_outside_view's rounding slack; every mean lies
+// no nearer than that corner (z is linear over the box; 1e-5 of the terms of z covers its
+// rounding, as chunk_means_off_image allows). So every entry of
+// each of its Gaussians, small or big, lies behind the deepest over its own box (a sub-box, read
+// no nearer): what entry_hidden guarantees for an entry it drops. Tested only where the box spans
+// at most kOcclusionChunkCells cells of the coarsest level a side (a chunk near the eye, which
+// the map seldom hides whole, reads no more than that).
+inline constexpr int kOcclusionChunkCells = 12;
+CATGS_HD bool chunk_hidden(const OcclusionMap& m, const ChunkBounds& b, const View& v) {
+  if (m.cells[0] == nullptr) return false;
+  const ChunkOnScreen s = chunk_on_screen(b, v);
+  if (s.kind != ChunkOnScreen::box) return false;
+  ChunkBounds with_margin = b;
+  with_margin.q_max = fmaxf(b.q_max, 0.0f) + kExactQMargin;
+  const float r = chunk_half_extent(with_margin, v, s.z_lo) + chunk_rounding_slack(s);
+  if (!(r < 1e7f && fabsf(s.u_lo) < 1e7f && fabsf(s.u_hi) < 1e7f && fabsf(s.w_lo) < 1e7f && fabsf(s.w_hi) < 1e7f))
+    return false;
+  const float x0 = fmaxf(floorf(s.u_lo - r), 0.0f), x1 = fminf(ceilf(s.u_hi + r), static_cast<float>(v.width - 1));
+  const float y0 = fmaxf(floorf(s.w_lo - r), 0.0f), y1 = fminf(ceilf(s.w_hi + r), static_cast<float>(v.height - 1));
+  if (!(x0 <= x1 && y0 <= y1)) return false;  // off the image: chunk_outside_view culls it
+  const int coarsest = kOcclusionCell << (kOcclusionLevels - 1);
+  if (static_cast<int>(x1) / coarsest - static_cast<int>(x0) / coarsest >= kOcclusionChunkCells ||
+      static_cast<int>(y1) / coarsest - static_cast<int>(y0) / coarsest >= kOcclusionChunkCells)
+    return false;
+  const float d =
+      occlusion_box_depth(m, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(y0), static_cast<int>(y1));
+  const float terms = fmaxf(fabsf(b.lo.x), fabsf(b.hi.x)) + fmaxf(fabsf(b.lo.y), fabsf(b.hi.y)) +
+                      fmaxf(fabsf(b.lo.z), fabsf(b.hi.z)) + fabsf(v.t.z) + fabsf(s.z_lo);
+  return d * kOcclusionDepthSlack < s.z_lo - 1e-5f * terms;
 }
 
 }  // namespace catgs::fm

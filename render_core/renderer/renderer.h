@@ -138,6 +138,10 @@ inline uint8_t to_unorm8(float v) {
 // Per-frame counters and stage times (milliseconds, wall clock on CPU, CUDA events on GPU).
 struct FrameStats {
   std::size_t visible = 0;  // Gaussians that passed culling
+  // Chunks pre-processed (exact and vanilla frames of both cores; catgs frames report 0): those of
+  // the LOD cut that chunk culling kept (exact: in view, and not hidden whole by the last frame's
+  // map).
+  std::size_t chunks_preprocessed = 0;
   // Occlusion culling (RenderOptions::occlusion_culling): pre-processing read the last frame's
   // map, and this frame's list entries at or behind their tile's opaque point (its map's P:
   // entries that change no pixel by more than 1/255 in all; 0 without culling).

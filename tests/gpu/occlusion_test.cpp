@@ -7,6 +7,8 @@
 //                the lists may differ by a few chunks' entries) and the lists within 2%;
 //  unculled      CUDA with culling against CUDA without, the same frames (>= 40 dB: the picture
 //                the culling must keep), and fewer entries in all than without (it culls);
+//  chunks        the chunks pre-processed, summed over the path: CUDA == CPU within 0.5% (the
+//                chunks the map hides whole), and fewer than without culling;
 //  still         the same pose twice: the second frame (culled) against the first (unculled map)
 //                >= 48 dB (under one 8-bit level a pixel, with the sort's ties).
 #include <cmath>
@@ -52,7 +54,7 @@ TEST_F(Occlusion, CudaAgainstCpuAlongARealPath) {
   const OcclusionCity& c = occlusion_city();
   catgs::cpu::CpuRenderer cpu(c.lod, occlusion_options(true));
   catgs::cuda::CudaRenderer gpu(c.dev, occlusion_options(true)), plain(c.dev, occlusion_options(false));
-  long long culled = 0, unculled = 0;
+  long long culled = 0, unculled = 0, chunks_cpu = 0, chunks_gpu = 0, chunks_plain = 0;
   double worst = INFINITY;
   for (std::size_t k = 0; k < c.trace.size(); ++k) {
     Image a, b, p;
@@ -64,6 +66,9 @@ TEST_F(Occlusion, CudaAgainstCpuAlongARealPath) {
     worst = std::fmin(worst, compare(b, p).psnr);
     // The CPU draws every frame (its map must follow the path) and is compared every 8th.
     cpu.render(cam, a);
+    chunks_cpu += static_cast<long long>(cpu.last_stats().chunks_preprocessed);
+    chunks_gpu += static_cast<long long>(gpu.last_stats().chunks_preprocessed);
+    chunks_plain += static_cast<long long>(plain.last_stats().chunks_preprocessed);
     if (k % 8 != 0) continue;
     const Diff d = compare(a, b);
     const auto lc = static_cast<long long>(cpu.last_stats().render_list_length);
@@ -73,6 +78,11 @@ TEST_F(Occlusion, CudaAgainstCpuAlongARealPath) {
   }
   add({"occlusion", "tumblewood_sh2 x13 lod", "bicycle all", "exact-occlusion/exact", worst, 0, 0, unculled, culled,
        worst >= 40.0 && culled < unculled, "worst frame; lists summed over the path"});
+  // Chunks the map hides whole (fm::chunk_hidden) are not pre-processed: the cores agree on them
+  // (each from its own map) and some go.
+  add({"occlusion", "tumblewood_sh2 x13 lod", "bicycle all", "chunks cpu/cuda", 0, 0, 0, chunks_cpu, chunks_gpu,
+       std::llabs(chunks_cpu - chunks_gpu) <= chunks_cpu / 200 + 4 && chunks_gpu < chunks_plain,
+       "chunks pre-processed summed over the path; unculled " + std::to_string(chunks_plain)});
 }
 
 TEST_F(Occlusion, SamePoseTwice) {

@@ -1,9 +1,10 @@
-// Occlusion culling from the last frame (forward_model/occlusion.h, issue 72): the chunk test on
-// hand-made maps, and the CPU core's frames with it against the same frames drawn without it on
-// a real city (the oracle: the unculled render of the same pose).
+// Occlusion culling from the last frame (forward_model/occlusion.h, issue 72): the reprojection and
+// the entry and chunk tests on hand-made maps, and the CPU core's frames with it against the same
+// frames drawn without it on a real city (the oracle: the unculled render of the same pose).
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -118,6 +119,95 @@ TEST(OcclusionCull, AnEntryBehindItsPixelsIsHiddenOneInFrontOrOverAnOpenPixelIsN
   EXPECT_TRUE(fm::entry_hidden(r.map, glm::vec2(140.0f, 84.0f), small, q_max, 10.0f, 8, 5, 320, 180));
   // A degenerate conic tests nothing.
   EXPECT_FALSE(fm::entry_hidden(r.map, glm::vec2(55.0f, 55.0f), glm::vec3(0.0f), q_max, 10.0f, 3, 3, 320, 180));
+}
+
+// A chunk's bound over hand-placed means (every Gaussian of scale `scale` and opacity logit 2).
+fm::ChunkBounds chunk_of(glm::vec3 lo, glm::vec3 hi, float scale = 0.01f) {
+  const std::vector<float> means = {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
+  const std::vector<float> log_scales(6, std::log(scale)), opacity_logits(2, 2.0f);
+  return fm::chunk_bounds(means.data(), log_scales.data(), opacity_logits.data(), 2)[0];
+}
+
+TEST(OcclusionCull, AChunkBehindTheMapIsHiddenWholeOneInFrontAcrossOrOverAnOpenPixelIsNot) {
+  std::vector<float> last = wall_at(5.0f);
+  const Reprojected r = reproject(last, test_view());
+  const fm::View v = test_view();
+  // A small chunk at depth 10 straight ahead: its box (means +-3 px, ellipses +-4 px) lies behind.
+  EXPECT_TRUE(fm::chunk_hidden(r.map, chunk_of({-0.2f, -0.2f, 9.8f}, {0.2f, 0.2f, 10.2f}), v));
+  EXPECT_FALSE(fm::chunk_hidden(r.map, chunk_of({-0.2f, -0.2f, 4.0f}, {0.2f, 0.2f, 4.5f}), v));   // in front
+  EXPECT_FALSE(fm::chunk_hidden(r.map, chunk_of({-0.2f, -0.2f, 4.99f}, {0.2f, 0.2f, 10.f}), v));  // its near corner
+  EXPECT_FALSE(fm::chunk_hidden(r.map, chunk_of({-0.2f, -0.2f, 5.002f}, {0.2f, 0.2f, 6.f}), v));  // within the slack
+  // A chunk as wide as the image reads no more than kOcclusionChunkCells cells a side: kept.
+  EXPECT_FALSE(fm::chunk_hidden(r.map, chunk_of({-8.0f, -0.2f, 9.8f}, {8.0f, 0.2f, 10.2f}), v));
+  // Straddling the near plane, or without a map: kept.
+  EXPECT_FALSE(fm::chunk_hidden(r.map, chunk_of({-0.2f, -0.2f, -1.0f}, {0.2f, 0.2f, 10.2f}), v));
+  EXPECT_FALSE(fm::chunk_hidden(fm::OcclusionMap{}, chunk_of({-0.2f, -0.2f, 9.8f}, {0.2f, 0.2f, 10.2f}), v));
+  // One pixel that saw the background under the chunk's box (the image centre is (159.5, 89.5)).
+  last[pixel(162, 92)] = std::numeric_limits<float>::infinity();
+  const Reprojected open = reproject(last, test_view());
+  EXPECT_FALSE(fm::chunk_hidden(open.map, chunk_of({-0.2f, -0.2f, 9.8f}, {0.2f, 0.2f, 10.2f}), v));
+  // Its largest Gaussian widens the box: 60 px left of the open pixel (means at u 94-103), a chunk
+  // of scale 0.01 (bound +-5 px) is hidden; the same chunk of scale 0.5 is not (its ellipse bound,
+  // about 58 px at q_max 10.8 with the clamped Jacobian, reaches the cell of 16 px over the pixel).
+  EXPECT_TRUE(fm::chunk_hidden(open.map, chunk_of({-4.1f, -0.2f, 9.8f}, {-3.7f, 0.2f, 10.2f}), v));
+  EXPECT_FALSE(fm::chunk_hidden(open.map, chunk_of({-4.1f, -0.2f, 9.8f}, {-3.7f, 0.2f, 10.2f}, 0.5f), v));
+}
+
+// The chunk test against the per-entry one (the oracle it must not outrun): over a rough, moved map,
+// every entry of every Gaussian of a chunk that chunk_hidden drops is one that entry_hidden drops.
+TEST(OcclusionCull, AHiddenChunksEveryEntryIsHiddenByTheEntryTest) {
+  std::vector<float> last(320 * 180);
+  for (int y = 0; y < 180; ++y)
+    for (int x = 0; x < 320; ++x)
+      last[pixel(x, y)] =
+          6.0f + 1.5f * std::sin(0.11f * static_cast<float>(x)) * std::cos(0.07f * static_cast<float>(y));
+  const fm::View v = test_view(glm::vec3(0.05f, 0.02f, 0.0f), 2.0f);
+  const Reprojected r = reproject(last, v);
+  std::mt19937 rng(72);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  int hidden = 0, kept = 0, entries = 0;
+  for (int c = 0; c < 4000; ++c) {
+    const glm::vec3 centre((u(rng) - 0.5f) * 10.0f, (u(rng) - 0.5f) * 6.0f, 4.0f + 10.0f * u(rng));
+    const float size = 0.05f + 0.6f * u(rng);
+    constexpr int kCount = 64;
+    std::vector<float> means, log_scales, logits, rotations;
+    for (int i = 0; i < kCount; ++i) {
+      for (int k = 0; k < 3; ++k) means.push_back(centre[k] + size * (u(rng) - 0.5f));
+      for (int k = 0; k < 3; ++k) log_scales.push_back(std::log(0.002f + 0.08f * u(rng) * u(rng)));
+      logits.push_back(-3.0f + 8.0f * u(rng));
+      for (int k = 0; k < 4; ++k) rotations.push_back(u(rng) - 0.5f);
+    }
+    const fm::ChunkBounds b = fm::chunk_bounds(means.data(), log_scales.data(), logits.data(), kCount)[0];
+    if (!fm::chunk_hidden(r.map, b, v)) {
+      ++kept;
+      continue;
+    }
+    ++hidden;
+    for (int i = 0; i < kCount; ++i) {
+      const glm::vec3 mean(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
+      const glm::vec3 p_cam = v.R * mean + v.t;
+      const float q_max = fm::opacity_aware_qmax(fm::sigmoid(logits[i]));
+      if (!(q_max > 0.0f)) continue;
+      const glm::vec2 mean2d(v.fx * p_cam.x / p_cam.z + v.cx - 0.5f, v.fy * p_cam.y / p_cam.z + v.cy - 0.5f);
+      const fm::Cov3 cov3 =
+          fm::covariance_3d({log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]},
+                            {rotations[4 * i], rotations[4 * i + 1], rotations[4 * i + 2], rotations[4 * i + 3]});
+      const glm::vec3 cov2 = fm::covariance_2d(cov3, v.R, p_cam, v.fx, v.fy, v.tan_half_fov);
+      glm::vec3 conic;
+      if (!fm::conic_from_cov2d(cov2, &conic)) continue;
+      const fm::TileRect rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, v.width, v.height);
+      for (int ty = rect.y0; ty < rect.y1; ++ty)
+        for (int tx = rect.x0; tx < rect.x1; ++tx) {
+          if (!fm::ellipse_touches_tile(mean2d, conic, q_max, tx, ty, v.width, v.height)) continue;
+          ++entries;
+          EXPECT_TRUE(fm::entry_hidden(r.map, mean2d, conic, q_max, p_cam.z, tx, ty, v.width, v.height))
+              << "chunk " << c << " Gaussian " << i << " tile " << tx << "," << ty;
+        }
+    }
+  }
+  EXPECT_GE(hidden, 200) << "chunks behind the rough wall";
+  EXPECT_GE(kept, 200) << "chunks in front of it, across it or off the image";
+  EXPECT_GE(entries, 2000);
 }
 
 double psnr_rgba8(const Image& a, const Image& b) {

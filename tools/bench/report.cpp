@@ -84,6 +84,7 @@ nlohmann::json table_row(const PipelineResult& r, std::size_t scene_bytes) {
                          {"rasterize", mean(r.raster)}};
   p["render_list"] = {{"mean", L.mean}, {"median", L.median}, {"min", L.min}, {"max", L.max}};
   p["visible_mean"] = mean(r.visible);
+  p["chunks_preprocessed_mean"] = mean(r.chunks);
   p["entries_behind_opaque_mean"] = mean(r.behind_opaque);
   p["entries_changing_pixels_mean"] = mean(r.changing_entries);
   p["gaussians_changing_pixels_mean"] = mean(r.changing_gaussians);

@@ -135,6 +135,7 @@ void record_frame(PipelineResult& res, double ms, const FrameStats& s) {
   res.raster.push_back(s.rasterize_ms);
   res.list.push_back(static_cast<double>(s.render_list_length));
   res.visible.push_back(static_cast<double>(s.visible));
+  res.chunks.push_back(static_cast<double>(s.chunks_preprocessed));
   res.behind_opaque.push_back(static_cast<double>(s.entries_behind_opaque));
   res.changing_entries.push_back(static_cast<double>(s.entries_changing_pixels));
   res.changing_gaussians.push_back(static_cast<double>(s.gaussians_changing_pixels));

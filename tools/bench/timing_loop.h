@@ -26,6 +26,7 @@ struct PipelineResult {
   std::string name;  // the variant as written
   Pipeline pipeline = Pipeline::exact;
   std::vector<double> frame_ms, pre, keys, sort, ranges, raster, list, visible, heaviest;
+  std::vector<double> chunks;  // chunks pre-processed (FrameStats::chunks_preprocessed)
   // Issue 72's measurement of where the list's work goes: entries behind their tile's opaque
   // point (exact-occlusion), and with --count-changes (CPU) the entries and Gaussians that change
   // a pixel.
