@@ -112,7 +112,7 @@ if changes:
     print()
     print("| city x path (CPU, 4 frames) | variant | list entries | entries changing a pixel | behind the tile's opaque point | "
           "visible Gaussians | Gaussians changing a pixel | own per-pixel map: entries hidden | Gaussians hidden alone | "
-          "cut's Gaussians in view / in chunks hidden whole |")
+          "cut's Gaussians in view / in chunks hidden whole / in runs of 32 hidden whole |")
     print("|---|---|---|---|---|---|---|---|---|---|")
 for path in changes:
     j = json.load(open(path))
@@ -121,11 +121,13 @@ for path in changes:
         ce, cg, b = p["entries_changing_pixels_mean"], p["gaussians_changing_pixels_mean"], p["entries_behind_opaque_mean"]
         eh, ga = p.get("entries_hidden_pixels_mean", 0), p.get("gaussians_hidden_alone_mean", 0)
         gp, gc = p.get("gaussians_preprocessed_mean", 0), p.get("gaussians_in_hidden_chunks_mean", 0)
+        gg = p.get("gaussians_in_hidden_groups_mean", 0)
         print("| %s | %s | %.2f M | %.2f M (%.1f%%) | %.2f M (%.1f%%) | %.2f M | %.2f M (%.1f%%) | %.2f M (%.1f%%) | "
-              "%.2f M (%.1f%%) | %.2f M / %.2f M (%.1f%%) |" % (
+              "%.2f M (%.1f%%) | %.2f M / %.2f M (%.1f%%) / %.2f M (%.1f%%) |" % (
             os.path.basename(path)[8:-5], p["pipeline"], L / 1e6, ce / 1e6, 100 * ce / max(L, 1), b / 1e6,
             100 * b / max(L, 1), V / 1e6, cg / 1e6, 100 * cg / max(V, 1), eh / 1e6, 100 * eh / max(L, 1),
-            ga / 1e6, 100 * ga / max(V, 1), gp / 1e6, gc / 1e6, 100 * gc / max(gp, 1)))
+            ga / 1e6, 100 * ga / max(V, 1), gp / 1e6, gc / 1e6, 100 * gc / max(gp, 1), gg / 1e6,
+            100 * gg / max(gp, 1)))
 PY
 cat "$OUT/occlusion_table.md"
 (cd "$OUT" && tar czf occlusion.tar.gz json && rm -rf json)

@@ -177,8 +177,9 @@ std::uint64_t occlusion_map(const ProjectedGaussians& projected, const RenderLis
                             float* tile_depth);
 
 // Issue 72's bound on occlusion tests before pre-processing (cpu/hidden_count.cpp): adds to
-// stats' gaussians_preprocessed, gaussians_in_hidden_chunks(_tiles) and gaussians_hidden_alone
-// for the frame just drawn (one pass: `projected`, `list` and `ranges` of the whole frame).
+// stats' gaussians_preprocessed, gaussians_in_hidden_chunks, gaussians_in_hidden_groups,
+// gaussians_hidden_alone and entries_hidden_pixels for the frame just drawn (one pass:
+// `projected`, `list` and `ranges` of the whole frame).
 void count_hidden(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                   float lod_error_px, const ProjectedGaussians& projected, const RenderList& list,
                   const TileRanges& ranges, FrameStats& stats);

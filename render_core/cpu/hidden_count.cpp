@@ -87,6 +87,18 @@ std::vector<float> opaque_depth_per_pixel(const ProjectedGaussians& projected, c
   return depth;
 }
 
+// Whether bound b's screen box (its means' box widened by its largest ellipse, as fm::chunk_hidden)
+// lies behind the pyramid, in front of its nearest mean.
+bool box_hidden(const DepthPyramid& pyramid, const fm::ChunkBounds& b, const fm::View& view) {
+  const fm::ChunkOnScreen s = fm::chunk_on_screen(b, view);
+  if (s.kind != fm::ChunkOnScreen::box) return false;
+  const float r = fm::chunk_half_extent(b, view, s.z_lo) + fm::chunk_rounding_slack(s);
+  const float fine = pyramid.deepest(s.u_lo - r, s.u_hi + r, s.w_lo - r, s.w_hi + r, 0);
+  return fine >= 0.0f && fine < s.z_lo * (1.0f - 1e-5f);
+}
+
+constexpr std::size_t kGroupGaussians = 32;
+
 }  // namespace
 
 void count_hidden(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
@@ -100,12 +112,14 @@ void count_hidden(const GaussianModel& model, const std::vector<fm::ChunkBounds>
     if (!cut.drawn(c) || fm::chunk_outside_view(chunks[c], view)) continue;
     const std::size_t begin = c * fm::kChunkSize, end = std::min(model.size(), begin + fm::kChunkSize);
     stats.gaussians_preprocessed += end - begin;
-    const fm::ChunkOnScreen s = fm::chunk_on_screen(chunks[c], view);
-    if (s.kind == fm::ChunkOnScreen::box) {
-      const float r = fm::chunk_half_extent(chunks[c], view, s.z_lo) + fm::chunk_rounding_slack(s);
-      const float z = s.z_lo * (1.0f - 1e-5f);
-      const float fine = pyramid.deepest(s.u_lo - r, s.u_hi + r, s.w_lo - r, s.w_hi + r, 0);
-      if (fine >= 0.0f && fine < z) stats.gaussians_in_hidden_chunks += end - begin;
+    if (box_hidden(pyramid, chunks[c], view)) stats.gaussians_in_hidden_chunks += end - begin;
+    // The same test per run of kGroupGaussians (a warp's share of the chunk), with the run's own
+    // bound: what a bound per warp would add.
+    for (std::size_t g = begin; g < end; g += kGroupGaussians) {
+      const std::size_t n = std::min(end - g, kGroupGaussians);
+      const fm::ChunkBounds b =
+          fm::chunk_bounds(&model.means[3 * g], &model.log_scales[3 * g], &model.opacity_logits[g], n)[0];
+      if (box_hidden(pyramid, b, view)) stats.gaussians_in_hidden_groups += n;
     }
     for (std::size_t i = begin; i < end; ++i) {
       if (projected.tiles_touched[i] == 0) continue;

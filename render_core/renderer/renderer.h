@@ -153,10 +153,11 @@ struct FrameStats {
   std::size_t entries_changing_pixels = 0, gaussians_changing_pixels = 0;
   // The same measurement's bound on what a map can drop (cpu/hidden_count.cpp): against this
   // frame's own per-pixel map, the Gaussians of the cut's chunks in view and those in chunks whose
-  // screen box lies behind it, the listed Gaussians whose own ellipse box does, and the list
-  // entries whose box within their tile does.
-  std::size_t gaussians_preprocessed = 0, gaussians_in_hidden_chunks = 0, gaussians_hidden_alone = 0,
-              entries_hidden_pixels = 0;
+  // screen box lies behind it, those in runs of 32 (a warp's share of a chunk) whose own bound's
+  // box does, the listed Gaussians whose own ellipse box does, and the list entries whose box
+  // within their tile does.
+  std::size_t gaussians_preprocessed = 0, gaussians_in_hidden_chunks = 0, gaussians_in_hidden_groups = 0,
+              gaussians_hidden_alone = 0, entries_hidden_pixels = 0;
   std::size_t render_list_length = 0;  // Gaussian-tile pairs (keys) rasterized
   double preprocess_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, rasterize_ms = 0;
   double merge_ms = 0;  // catgs with task splitting: composing the slices

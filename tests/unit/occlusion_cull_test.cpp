@@ -257,6 +257,32 @@ TEST(OcclusionCull, SamePoseAgainCullsAndDrawsTheSamePicture) {
   EXPECT_GE(fewer, city.views.size() / 2) << "the fly-over's views see copies behind copies";
 }
 
+// The CPU's bound on what a map could drop before pre-processing (cpu::count_hidden, the frame's
+// own per-pixel map): runs of 32 carry tighter bounds than their chunk (a nearer-or-equal box, a
+// farther-or-equal nearest mean), so they hide at least what the chunks hide, and no more than the
+// cut's Gaussians in view; entries hidden and changing pixels are parts of the list.
+TEST(OcclusionCull, TheOwnMapsBoundsNestFromChunksToRunsToTheCut) {
+  CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");
+  const test::SmallCity& city = test::small_flowers_city();
+  cpu::CpuRenderer counted(city.lod, exact_options(false));
+  counted.count_changes(true);
+  std::size_t groups = 0, chunks = 0;
+  for (std::size_t v = 0; v < city.views.size(); v += 2) {
+    Image out;
+    counted.render(city.views[v], out);
+    const FrameStats& s = counted.last_stats();
+    EXPECT_LE(s.gaussians_in_hidden_chunks, s.gaussians_in_hidden_groups) << v;
+    EXPECT_LE(s.gaussians_in_hidden_groups, s.gaussians_preprocessed) << v;
+    EXPECT_LE(s.gaussians_hidden_alone, s.visible) << v;
+    EXPECT_LE(s.entries_hidden_pixels, s.render_list_length) << v;
+    EXPECT_LE(s.entries_changing_pixels, s.render_list_length) << v;
+    EXPECT_GT(s.entries_changing_pixels, 0u) << v;
+    groups += s.gaussians_in_hidden_groups;
+    chunks += s.gaussians_in_hidden_chunks;
+  }
+  EXPECT_GT(groups, chunks) << "some runs of 32 lie behind nearer copies where their chunk does not";
+}
+
 // A moving eye, and a fast turn: every frame against the unculled render of its pose.
 TEST(OcclusionCull, MovingAndTurningFramesMatchTheUnculledRender) {
   CATGS_REQUIRE_DATA(flowers, "scenes/flowers_sh3.ply");

@@ -47,7 +47,8 @@
 // gaussians_changing_pixels_mean (entries blended at a pixel while its transmittance was above
 // 1/255, and their Gaussians; such frames are drawn without task splitting), and what this frame's
 // own per-pixel map could drop at best (cpu::count_hidden): gaussians_preprocessed_mean (of the
-// cut's chunks in view), gaussians_in_hidden_chunks_mean, gaussians_hidden_alone_mean and
+// cut's chunks in view), gaussians_in_hidden_chunks_mean, gaussians_in_hidden_groups_mean (runs of
+// 32), gaussians_hidden_alone_mean and
 // entries_hidden_pixels_mean. Every variant: chunks_preprocessed_mean (FrameStats).
 // T: "flyover" (the city fly-over: 0.75 extents up, pitched down 24 deg), "centre" (a slow pass
 // over the city's middle copy, 0.4 extents up, pitched down 70 deg: only the centre copies are in

@@ -90,6 +90,7 @@ nlohmann::json table_row(const PipelineResult& r, std::size_t scene_bytes) {
   p["gaussians_changing_pixels_mean"] = mean(r.changing_gaussians);
   p["gaussians_preprocessed_mean"] = mean(r.preprocessed);
   p["gaussians_in_hidden_chunks_mean"] = mean(r.hidden_chunks);
+  p["gaussians_in_hidden_groups_mean"] = mean(r.hidden_groups);
   p["gaussians_hidden_alone_mean"] = mean(r.hidden_alone);
   p["entries_hidden_pixels_mean"] = mean(r.entries_hidden_px);
   p["heaviest_tile_entries"] = {{"mean", mean(r.heaviest)}, {"max", summarize(r.heaviest).max}};

@@ -141,6 +141,7 @@ void record_frame(PipelineResult& res, double ms, const FrameStats& s) {
   res.changing_gaussians.push_back(static_cast<double>(s.gaussians_changing_pixels));
   res.preprocessed.push_back(static_cast<double>(s.gaussians_preprocessed));
   res.hidden_chunks.push_back(static_cast<double>(s.gaussians_in_hidden_chunks));
+  res.hidden_groups.push_back(static_cast<double>(s.gaussians_in_hidden_groups));
   res.hidden_alone.push_back(static_cast<double>(s.gaussians_hidden_alone));
   res.entries_hidden_px.push_back(static_cast<double>(s.entries_hidden_pixels));
   (s.key_frame ? res.key_ms : res.sub_ms).push_back(ms);

@@ -31,7 +31,8 @@ struct PipelineResult {
   // point (exact-occlusion), and with --count-changes (CPU) the entries and Gaussians that change
   // a pixel.
   std::vector<double> behind_opaque, changing_entries, changing_gaussians;
-  std::vector<double> preprocessed, hidden_chunks, hidden_alone, entries_hidden_px;  // cpu::count_hidden's
+  std::vector<double> preprocessed, hidden_chunks, hidden_groups, hidden_alone,
+      entries_hidden_px;                       // cpu::count_hidden's
   std::vector<double> key_ms, sub_ms, window;  // catgs: key vs sub-frame times, W per key frame
   // catgs: key frames drawn after a rejected sub-frame, and key frames without a window (W = 0).
   std::vector<double> rejected_ms, full_ms;
