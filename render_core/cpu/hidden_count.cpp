@@ -118,7 +118,7 @@ void count_hidden(const GaussianModel& model, const std::vector<fm::ChunkBounds>
     for (std::size_t g = begin; g < end; g += kGroupGaussians) {
       const std::size_t n = std::min(end - g, kGroupGaussians);
       const fm::ChunkBounds b =
-          fm::chunk_bounds(&model.means[3 * g], &model.log_scales[3 * g], &model.opacity_logits[g], n)[0];
+          fm::run_bound(model.means.data(), model.log_scales.data(), model.opacity_logits.data(), g, g + n);
       if (box_hidden(pyramid, b, view)) stats.gaussians_in_hidden_groups += n;
     }
     for (std::size_t i = begin; i < end; ++i) {

@@ -63,6 +63,10 @@ CATGS_HD std::size_t initial_slot_chunks(std::size_t chunks) {
 // scene/scene_bounds.h chunk_bounds_of(model) passes a model's arrays.
 std::vector<ChunkBounds> chunk_bounds(const float* means, const float* log_scales, const float* opacity_logits,
                                       std::size_t n);
+// The bound of Gaussians [begin, end) of the same arrays (chunk_bounds' per chunk; an empty run
+// gives the empty box: lo +inf, hi -inf).
+ChunkBounds run_bound(const float* means, const float* log_scales, const float* opacity_logits, std::size_t begin,
+                      std::size_t end);
 
 // Where a chunk's means land in view `v`: `not_in_front` when every one lies behind the near
 // plane or past the far plane; `unbounded` when the bound cannot say (not finite, or the box
