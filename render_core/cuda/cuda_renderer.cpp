@@ -75,6 +75,7 @@ stages::CameraParams camera_params(const Camera& camera) {
 void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels) {
   std::size_t* allocs = &allocations;
   const std::size_t chunks = fm::chunk_count(n);
+  scene_chunks = chunks;
   live_chunks.ensure(chunks * sizeof(uint32_t), "kept chunks", allocs);
   live_keep.ensure(chunks * sizeof(uint32_t), "chunk cull answers", allocs);
   live_slot.ensure(chunks * sizeof(uint32_t), "chunk slots", allocs);
@@ -89,17 +90,21 @@ void CudaRenderer::State::ensure_frame_buffers(uint64_t n, uint32_t tiles, std::
   rgba8.ensure(pixels * sizeof(uint32_t), "RGBA8 image", allocs);
 }
 
-void CudaRenderer::State::ensure_slots(uint64_t chunks, bool catgs) {
+void CudaRenderer::State::ensure_slots(uint64_t chunks, bool catgs, bool slack) {
   std::size_t* allocs = &allocations;
   // Slack on the count, not per buffer: every per-slot buffer holds the same slot chunks. The
   // count is recorded only once every buffer holds it (issue 73): a growth that fails part-way
-  // leaves slot_chunks at what all of them hold, and the next call grows the rest.
-  const uint64_t want =
+  // leaves slot_chunks at what all of them hold, and the next call grows the rest. No view keeps
+  // more chunks than the scene has: the slack stops there. A reservation (`slack` false) takes
+  // the count as given: the shape it copies (another session's) holds its slack already, and
+  // adding it again made each new session's slots 1.25x the last one's.
+  uint64_t want =
       chunks <= slot_chunks
           ? slot_chunks
-          : std::max<uint64_t>(chunks, slot_chunks == 0
+          : std::max<uint64_t>(chunks, slot_chunks == 0 || !slack
                                            ? chunks
                                            : static_cast<uint64_t>(static_cast<double>(chunks) * tune::kGrowthFactor));
+  if (scene_chunks > 0) want = std::min(want, std::max(scene_chunks, slot_chunks));
   if (want > slot_chunks) catgs_sized = false;
   const std::size_t n = want * fm::kChunkSize;
   splat.ensure(n * sizeof(stages::Splat), "splats", allocs, false);
@@ -294,7 +299,7 @@ void CudaRenderer::reserve_buffers(int width, int height, const BufferShape& sha
                                            ((height + tune::kTileSize - 1) / tune::kTileSize));
   const std::size_t pixels = static_cast<std::size_t>(width) * height;
   s.ensure_frame_buffers(scene_->size(), tiles, pixels);
-  s.ensure_slots((shape.gaussians + fm::kChunkSize - 1) / fm::kChunkSize, options_.pipeline == Pipeline::catgs);
+  s.ensure_slots((shape.gaussians + fm::kChunkSize - 1) / fm::kChunkSize, options_.pipeline == Pipeline::catgs, false);
   const uint64_t entries = shape.list_entries;
   if (entries > 0) {
     // Exactly the shape, no growth slack: a shape read from another renderer (buffer_shape) holds

@@ -176,7 +176,8 @@ struct CudaRenderer::State {
   // (stages::LiveChunks: the list, the cull's answers, their slot chunks) and the ordering
   // scan's scratch.
   GrowBuffer live_chunks, live_keep, live_slot, live_scan_temp;
-  uint64_t slot_chunks = 0;  // the slot chunks the per-slot buffers hold
+  uint64_t slot_chunks = 0;   // the slot chunks the per-slot buffers hold
+  uint64_t scene_chunks = 0;  // the scene's chunks (ensure_frame_buffers): the most a view keeps
   // Per render-list entry (two halves each, for the radix sort's double buffer).
   GrowBuffer keys[2], values[2], sort_temp;
   // The depth-first sort (depth_order.cu): visible Gaussians and their depth keys (two halves
@@ -236,8 +237,9 @@ struct CudaRenderer::State {
   // initial_slot_chunks), per tile and pixel.
   void ensure_frame_buffers(uint64_t n, uint32_t tiles, std::size_t pixels);
   // Grows the per-slot buffers (and, with `catgs`, the trails and frustum cache) to hold at least
-  // `chunks` slot chunks, with tune::kGrowthFactor slack; contents are lost.
-  void ensure_slots(uint64_t chunks, bool catgs);
+  // `chunks` slot chunks, with tune::kGrowthFactor slack (`slack` false: exactly), never more than
+  // the scene's chunks; contents are lost.
+  void ensure_slots(uint64_t chunks, bool catgs, bool slack = true);
   uint64_t slots() const { return slot_chunks * fm::kChunkSize; }
   bool catgs_sized = false;  // the trails and frustum cache follow slot_chunks
 

@@ -187,5 +187,31 @@ TEST_F(AllocationFaults, ReservedBuffersDrawTheFirstFramesWithoutAllocating) {
   add(row);
 }
 
+// A reservation takes the shape it is given, never more than the scene: a server session
+// reserves the largest shape its scene's sessions grew to (which holds their growth slack
+// already), so slack added again compounded, each new visitor's slots 1.25x the last one's,
+// until the GPU refused visitors it had room for (the 101-copy city at 18 sessions).
+TEST_F(AllocationFaults, ReservedSlotsAreTheShapeNeverPastTheScene) {
+  CATGS_GPU_REQUIRE({"tumblewood_sh2"}, {"mipnerf360_bicycle"});
+  const FaultCity& c = fault_city();
+  const catgs::RenderOptions o = fault_options(Pipeline::exact, true);
+  const std::uint64_t scene_slots = catgs::fm::chunk_count(c.lod->size()) * catgs::fm::kChunkSize;
+  const int w = c.path[0].width, h = c.path[0].height;
+  // Three quarters of the scene: more than a renderer's first guess (fm::initial_slot_chunks).
+  const catgs::BufferShape asked{scene_slots / 4 * 3 / catgs::fm::kChunkSize * catgs::fm::kChunkSize, 0};
+  catgs::cuda::CudaRenderer first(c.dev, o), next(c.dev, o), over(c.dev, o);
+  first.reserve_buffers(w, h, asked);
+  const catgs::BufferShape first_held = first.buffer_shape();
+  next.reserve_buffers(w, h, first_held);  // the next visitor at the door
+  over.reserve_buffers(w, h, {scene_slots * 4, 0});
+  Row row{"AllocationFaults.reserved_slots", "tumblewood_sh2 x13 LOD", "", "exact"};
+  row.pass = first_held.gaussians == asked.gaussians && next.buffer_shape().gaussians == first_held.gaussians &&
+             over.buffer_shape().gaussians == scene_slots;
+  row.note = "asked " + std::to_string(asked.gaussians) + " slots: held " + std::to_string(first_held.gaussians) +
+             ", the next " + std::to_string(next.buffer_shape().gaussians) + "; asked 4x the scene's " +
+             std::to_string(scene_slots) + ": held " + std::to_string(over.buffer_shape().gaussians);
+  add(row);
+}
+
 }  // namespace
 }  // namespace catgs::gputest
