@@ -94,8 +94,7 @@ GpuAssignment::Placement GpuAssignment::place(std::uint64_t bytes) {
         p.why += ", " + memory_text(m.driver_room(free_reserve_)) + " by the driver (" + memory_text(m.driver_free) +
                  " free, less the " + memory_text(free_reserve_) + " reserve and " +
                  memory_text(m.reserved > m.held ? m.reserved - m.held : 0) + " its sessions may still take)" +
-                 (m.driver_room(free_reserve_) < m.room() ? ": the driver binds (another process holds memory)"
-                                                          : ": the accounting binds");
+                 (m.driver_room(free_reserve_) < m.room() ? ": the driver binds" : ": the accounting binds");
       p.why += ", " + std::to_string(m.sessions) + " sessions;";
     }
     p.why.back() = ')';

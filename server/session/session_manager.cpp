@@ -87,8 +87,8 @@ int SessionManager::readiness(std::string& body) {
   const std::uint64_t room = shared_.gpus.largest_room(&binds);
   if (need > 0 && room < need) {
     body = "full (no device memory for another session: " + memory_text(need) + " needed, " + memory_text(room) +
-           " free by the " + (binds == "driver" ? "driver (another process holds memory)" : "server's accounting") +
-           "; " + std::to_string(open) + " sessions)\n";
+           " free by the " + (binds == "driver" ? "driver" : "server's accounting") + "; " + std::to_string(open) +
+           " sessions)\n";
     return 503;
   }
   body = "ready (" + std::to_string(open) + "/" + std::to_string(limit) + " sessions)\n";
