@@ -241,8 +241,10 @@ class Renderer {
   // estimates what they would take on a device). The server raises a session's memory
   // reservation to it after each frame (issue 61).
   virtual std::uint64_t device_buffer_bytes() const { return 0; }
-  // Allocates now what frames of width x height need, with room for `shape` (issue 73: a server
-  // session holds its buffers from the door, so its frames allocate only to grow past them).
+  // Allocates now what frames of width x height need, with room for `shape` as given, no growth
+  // slack added (a shape read from buffer_shape holds its slack already) and never more
+  // Gaussians than the scene has (issue 73: a server session holds its buffers from the door, so
+  // its frames allocate only to grow past them).
   // Throws OutOfMemoryError (base/allocation_faults.h) where they do not fit; what was allocated
   // stays, and the renderer is whole. The default does nothing.
   virtual void reserve_buffers(int width, int height, const BufferShape& shape) {

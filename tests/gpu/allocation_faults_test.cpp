@@ -199,6 +199,9 @@ TEST_F(AllocationFaults, ReservedSlotsAreTheShapeNeverPastTheScene) {
   const int w = c.path[0].width, h = c.path[0].height;
   // Three quarters of the scene: more than a renderer's first guess (fm::initial_slot_chunks).
   const catgs::BufferShape asked{scene_slots / 4 * 3 / catgs::fm::kChunkSize * catgs::fm::kChunkSize, 0};
+  ASSERT_GT(asked.gaussians,
+            catgs::fm::initial_slot_chunks(catgs::fm::chunk_count(c.lod->size())) * catgs::fm::kChunkSize)
+      << "the reservation must ask for more than the renderer's first guess, or it tests nothing";
   catgs::cuda::CudaRenderer first(c.dev, o), next(c.dev, o), over(c.dev, o);
   first.reserve_buffers(w, h, asked);
   const catgs::BufferShape first_held = first.buffer_shape();
