@@ -100,7 +100,7 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   if (v.exact && v.occlusion.cells[0] != nullptr) {
     const float max_scale =
         std::exp(std::max({model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]}));
-    if (fm::gaussian_hidden(v.occlusion, mean2d, p_cam.z, max_scale, q_max, v.view)) return;
+    if (fm::gaussian_hidden(v.occlusion, mean2d, p_cam, max_scale, q_max, v.view)) return;
   }
 
   const fm::Cov3 cov3 = fm::covariance_3d(

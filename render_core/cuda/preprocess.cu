@@ -18,13 +18,20 @@ namespace catgs::cuda::stages {
 namespace {
 
 // Tiles of `rect` (at most 32) the opacity-aware ellipse reaches (exact pipeline), bit b for the
-// rectangle's b-th tile in row-major order; their number is count_exact_tiles's on the CPU.
+// rectangle's b-th tile in row-major order; their number is count_exact_tiles's on the CPU. With
+// an occlusion map, less the entries it hides (fm::entry_hidden, tested only where the ellipse
+// reaches the tile, with the ellipse's box worked out once).
 __device__ uint32_t exact_tile_mask(const fm::TileRect& rect, glm::vec2 mean, glm::vec3 conic, float q_max, int width,
-                                    int height) {
+                                    int height, const fm::OcclusionMap& occlusion, float depth) {
+  glm::vec2 half;
+  const bool per_entry = occlusion.cells[0] != nullptr && fm::entry_half_widths(conic, q_max, &half);
   uint32_t mask = 0, bit = 1;
   for (int ty = rect.y0; ty < rect.y1; ++ty)
     for (int tx = rect.x0; tx < rect.x1; ++tx, bit <<= 1)
-      mask |= fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) ? bit : 0u;
+      mask |= fm::ellipse_touches_tile(mean, conic, q_max, tx, ty, width, height) &&
+                      !(per_entry && fm::entry_box_hidden(occlusion, mean, half, depth, tx, ty, width, height))
+                  ? bit
+                  : 0u;
   return mask;
 }
 
@@ -129,7 +136,7 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
     float s[3];
     log_scales_of(scene, i, s);
     const float max_scale = expf(fmaxf(s[0], fmaxf(s[1], s[2])));
-    if (fm::gaussian_hidden(occlusion, mean2d, p_cam.z, max_scale, q_max, cam)) return r;
+    if (fm::gaussian_hidden(occlusion, mean2d, p_cam, max_scale, q_max, cam)) return r;
   }
   const glm::vec3 cov2 = fm::covariance_2d(g.covariance(scene, i), cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
@@ -140,14 +147,9 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
     const int area = fm::tile_count(rect);
     r.is_big = area > tune::kBigRectTiles;    // counted by count_big_kernel, a warp each
     r.is_huge = area > tune::kHugeRectTiles;  // or a block per part
-    uint32_t mask = area == 0 || r.is_big ? 0u : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height);
-    if (mask != 0u && occlusion.cells[0] != nullptr) {  // per-entry occlusion culling (fm::entry_hidden)
-      uint32_t bit = 1;
-      for (int ty = rect.y0; ty < rect.y1; ++ty)
-        for (int tx = rect.x0; tx < rect.x1; ++tx, bit <<= 1)
-          if ((mask & bit) && fm::entry_hidden(occlusion, mean2d, conic, q_max, p_cam.z, tx, ty, cam.width, cam.height))
-            mask &= ~bit;
-    }
+    const uint32_t mask = area == 0 || r.is_big
+                              ? 0u
+                              : exact_tile_mask(rect, mean2d, conic, q_max, cam.width, cam.height, occlusion, p_cam.z);
     r.touched = static_cast<uint32_t>(__popc(mask));
     if (r.touched > 0) out.tile_mask[s] = mask;
   } else {

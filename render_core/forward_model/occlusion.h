@@ -132,9 +132,16 @@ CATGS_HD float occlusion_box_depth(const OcclusionMap& m, int x0, int x1, int y0
   while (k + 1 < kOcclusionLevels && ((x1 >> s) - (x0 >> s) > 1 || (y1 >> s) - (y0 >> s) > 1)) ++k, ++s;
   const float* cells = k == 0 ? m.cells[0] : k == 1 ? m.cells[1] : m.cells[2];
   const int cells_x = k == 0 ? m.cells_x[0] : k == 1 ? m.cells_x[1] : m.cells_x[2];
+  const int cx0 = x0 >> s, cx1 = x1 >> s, cy0 = y0 >> s, cy1 = y1 >> s;
   float deepest = 0.0f;
-  for (int cy = y0 >> s; cy <= (y1 >> s); ++cy)
-    for (int cx = x0 >> s; cx <= (x1 >> s); ++cx) deepest = fmaxf(deepest, cells[cy * cells_x + cx]);
+  if (cx1 - cx0 <= 1 &&
+      cy1 - cy0 <= 1) {  // at most 2 x 2 cells: four reads, no loop (a cell read twice where one spans)
+    const float* row0 = cells + cy0 * cells_x;
+    const float* row1 = cells + cy1 * cells_x;
+    return fmaxf(fmaxf(fmaxf(deepest, row0[cx0]), fmaxf(row0[cx1], row1[cx0])), row1[cx1]);
+  }
+  for (int cy = cy0; cy <= cy1; ++cy)  // the coarsest level under a larger box
+    for (int cx = cx0; cx <= cx1; ++cx) deepest = fmaxf(deepest, cells[cy * cells_x + cx]);
   return deepest;
 }
 
@@ -144,41 +151,61 @@ CATGS_HD float occlusion_box_depth(const OcclusionMap& m, int x0, int x1, int y0
 // tile. A Gaussian over more tiles keeps them all (the CUDA core counts and emits those with a
 // warp, from the ellipse alone), unless chunk_hidden drops its chunk whole.
 inline constexpr int kOcclusionEntryTiles = 32;  // the CUDA core's tune::kBigRectTiles (static_assert there)
-CATGS_HD bool entry_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 conic, float q_max, float depth, int tx,
-                           int ty, int width, int height) {
+
+// The half-widths (pixels) of the box of the ellipse q <= q_max + kExactQMargin from its conic,
+// sqrt(q cov_xx) and sqrt(q cov_yy) with cov = conic^-1: entry_hidden's box, worked out once per
+// Gaussian where its tiles are tested in a loop. False (nothing hidden) for a degenerate conic.
+CATGS_HD bool entry_half_widths(glm::vec3 conic, float q_max, glm::vec2* half) {
   const float det = conic.x * conic.z - conic.y * conic.y, q = q_max + kExactQMargin;
   if (!(det > 0.0f && q > 0.0f)) return false;
-  const float hx = sqrtf(q * conic.z / det), hy = sqrtf(q * conic.x / det);
+  *half = glm::vec2(sqrtf(q * conic.z / det), sqrtf(q * conic.x / det));
+  return true;
+}
+// entry_hidden with the half-widths given (entry_half_widths).
+CATGS_HD bool entry_box_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec2 half, float depth, int tx, int ty,
+                               int width, int height) {
   const float tx0 = static_cast<float>(tx * kTileSize), ty0 = static_cast<float>(ty * kTileSize);
   const float tx1 = fminf(tx0 + (kTileSize - 1), static_cast<float>(width - 1));
   const float ty1 = fminf(ty0 + (kTileSize - 1), static_cast<float>(height - 1));
-  const float x0 = fmaxf(floorf(mean2d.x - hx), tx0), x1 = fminf(ceilf(mean2d.x + hx), tx1);
-  const float y0 = fmaxf(floorf(mean2d.y - hy), ty0), y1 = fminf(ceilf(mean2d.y + hy), ty1);
+  const float x0 = fmaxf(floorf(mean2d.x - half.x), tx0), x1 = fminf(ceilf(mean2d.x + half.x), tx1);
+  const float y0 = fmaxf(floorf(mean2d.y - half.y), ty0), y1 = fminf(ceilf(mean2d.y + half.y), ty1);
   if (!(x0 <= x1 && y0 <= y1)) return false;
   const float d =
       occlusion_box_depth(m, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(y0), static_cast<int>(y1));
   return d * kOcclusionDepthSlack < depth;
 }
+CATGS_HD bool entry_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 conic, float q_max, float depth, int tx,
+                           int ty, int width, int height) {
+  glm::vec2 half;
+  return entry_half_widths(conic, q_max, &half) && entry_box_hidden(m, mean2d, half, depth, tx, ty, width, height);
+}
 
-// Before its covariance: a Gaussian of view depth `depth`, mean at mean2d, largest scale
+// Before its covariance: a Gaussian at camera-space p_cam, mean at mean2d, largest scale
 // `max_scale` (world units) and q_max in view v is hidden whole when the map's deepest over a box
 // that holds its q_max ellipse lies in front of it, so entry_hidden would drop each of its entries
 // (each entry's box lies within this box, and a box's depth at a coarser level is no nearer). The
-// box's half-width bounds sqrt(q * cov2d_xx) (and _yy): sqrt(q) (max_scale |J row| + sqrt(kLowPass))
-// with the Jacobian's rows clamped as covariance_2d clamps them (the bound of chunk_half_extent),
-// plus 1 px for rounding. Tested only for boxes of at most kOcclusionWholePx pixels a side, which
-// cover at most 3 x 3 tiles (so the Gaussian is small: kOcclusionEntryTiles) and read at most
-// 3 x 3 cells.
+// box's half-widths bound sqrt(q * cov2d_xx) and sqrt(q * cov2d_yy): cov2d_xx = j0 W Sigma W^T j0^T
+// + kLowPass <= (max_scale |j0|)^2 + kLowPass, with the Jacobian's row |j0| = fx / z sqrt(1 + tx^2)
+// at the mean's own x / z clamped as covariance_2d clamps it (tx), and likewise for y; plus 1 px for
+// rounding. Tested only for boxes of at most kOcclusionWholePx pixels a side, which cover at most
+// 3 x 3 tiles (so the Gaussian is small: kOcclusionEntryTiles) and read at most 3 x 3 cells.
 inline constexpr float kOcclusionWholePx = 32.0f;
-CATGS_HD bool gaussian_hidden(const OcclusionMap& m, glm::vec2 mean2d, float depth, float max_scale, float q_max,
+CATGS_HD bool gaussian_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 p_cam, float max_scale, float q_max,
                               const View& v) {
+  const float depth = p_cam.z;
   if (m.cells[0] == nullptr || !(depth > 0.0f)) return false;
-  const float cx = kFrustumClamp * v.tan_half_fov.x, cy = kFrustumClamp * v.tan_half_fov.y;
-  const float jf = sqrtf(v.fx * v.fx * (1.0f + cx * cx) + v.fy * v.fy * (1.0f + cy * cy)) / depth;
-  const float r = sqrtf(q_max + kExactQMargin) * (max_scale * jf + sqrtf(kLowPass)) + 1.0f;
-  if (!(2.0f * r <= kOcclusionWholePx) || !(fabsf(mean2d.x) < 1e7f && fabsf(mean2d.y) < 1e7f)) return false;
-  const float x0 = fmaxf(floorf(mean2d.x - r), 0.0f), x1 = fminf(ceilf(mean2d.x + r), static_cast<float>(v.width - 1));
-  const float y0 = fmaxf(floorf(mean2d.y - r), 0.0f), y1 = fminf(ceilf(mean2d.y + r), static_cast<float>(v.height - 1));
+  const float tx = fminf(kFrustumClamp * v.tan_half_fov.x, fabsf(p_cam.x / depth));
+  const float ty = fminf(kFrustumClamp * v.tan_half_fov.y, fabsf(p_cam.y / depth));
+  const float sq = sqrtf(q_max + kExactQMargin), low = sqrtf(kLowPass);
+  const float rx = sq * (max_scale * v.fx * sqrtf(1.0f + tx * tx) / depth + low) + 1.0f;
+  const float ry = sq * (max_scale * v.fy * sqrtf(1.0f + ty * ty) / depth + low) + 1.0f;
+  if (!(2.0f * rx <= kOcclusionWholePx && 2.0f * ry <= kOcclusionWholePx) ||
+      !(fabsf(mean2d.x) < 1e7f && fabsf(mean2d.y) < 1e7f))
+    return false;
+  const float x0 = fmaxf(floorf(mean2d.x - rx), 0.0f),
+              x1 = fminf(ceilf(mean2d.x + rx), static_cast<float>(v.width - 1));
+  const float y0 = fmaxf(floorf(mean2d.y - ry), 0.0f),
+              y1 = fminf(ceilf(mean2d.y + ry), static_cast<float>(v.height - 1));
   if (!(x0 <= x1 && y0 <= y1)) return false;  // off the image: the tile rect is empty anyway
   const float d =
       occlusion_box_depth(m, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(y0), static_cast<int>(y1));

@@ -153,16 +153,49 @@ TEST(OcclusionCull, AChunkBehindTheMapIsHiddenWholeOneInFrontAcrossOrOverAnOpenP
   EXPECT_FALSE(fm::chunk_hidden(open.map, chunk_of({-4.1f, -0.2f, 9.8f}, {-3.7f, 0.2f, 10.2f}, 0.5f), v));
 }
 
-// The chunk test against the per-entry one (the oracle it must not outrun): over a rough, moved map,
-// every entry of every Gaussian of a chunk that chunk_hidden drops is one that entry_hidden drops.
-TEST(OcclusionCull, AHiddenChunksEveryEntryIsHiddenByTheEntryTest) {
+// The entries of one Gaussian in view v (tiles its ellipse reaches) and how many of them
+// entry_hidden drops against map m: the oracle the whole-chunk and whole-Gaussian tests must not
+// outrun.
+struct EntriesHidden {
+  int entries = 0, hidden = 0;
+};
+EntriesHidden entries_hidden(const fm::OcclusionMap& m, const fm::View& v, const float* mean3, const float* log_scale,
+                             const float* rotation, float logit) {
+  EntriesHidden e;
+  const glm::vec3 p_cam = v.R * glm::vec3(mean3[0], mean3[1], mean3[2]) + v.t;
+  const float q_max = fm::opacity_aware_qmax(fm::sigmoid(logit));
+  if (!(q_max > 0.0f) || !(p_cam.z > v.near_plane)) return e;
+  const glm::vec2 mean2d(v.fx * p_cam.x / p_cam.z + v.cx - 0.5f, v.fy * p_cam.y / p_cam.z + v.cy - 0.5f);
+  const fm::Cov3 cov3 = fm::covariance_3d({log_scale[0], log_scale[1], log_scale[2]},
+                                          {rotation[0], rotation[1], rotation[2], rotation[3]});
+  const glm::vec3 cov2 = fm::covariance_2d(cov3, v.R, p_cam, v.fx, v.fy, v.tan_half_fov);
+  glm::vec3 conic;
+  if (!fm::conic_from_cov2d(cov2, &conic)) return e;
+  const fm::TileRect rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, v.width, v.height);
+  for (int ty = rect.y0; ty < rect.y1; ++ty)
+    for (int tx = rect.x0; tx < rect.x1; ++tx) {
+      if (!fm::ellipse_touches_tile(mean2d, conic, q_max, tx, ty, v.width, v.height)) continue;
+      ++e.entries;
+      e.hidden += fm::entry_hidden(m, mean2d, conic, q_max, p_cam.z, tx, ty, v.width, v.height) ? 1 : 0;
+    }
+  return e;
+}
+
+// A rough map (a wall between depth 4.5 and 7.5), drawn from the last pose and read from v.
+Reprojected rough_wall_map(const fm::View& v) {
   std::vector<float> last(320 * 180);
   for (int y = 0; y < 180; ++y)
     for (int x = 0; x < 320; ++x)
       last[pixel(x, y)] =
           6.0f + 1.5f * std::sin(0.11f * static_cast<float>(x)) * std::cos(0.07f * static_cast<float>(y));
+  return reproject(last, v);
+}
+
+// The chunk test against the per-entry one: over a rough, moved map, every entry of every
+// Gaussian of a chunk that chunk_hidden drops is one that entry_hidden drops.
+TEST(OcclusionCull, AHiddenChunksEveryEntryIsHiddenByTheEntryTest) {
   const fm::View v = test_view(glm::vec3(0.05f, 0.02f, 0.0f), 2.0f);
-  const Reprojected r = reproject(last, v);
+  const Reprojected r = rough_wall_map(v);
   std::mt19937 rng(72);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   int hidden = 0, kept = 0, entries = 0;
@@ -184,30 +217,61 @@ TEST(OcclusionCull, AHiddenChunksEveryEntryIsHiddenByTheEntryTest) {
     }
     ++hidden;
     for (int i = 0; i < kCount; ++i) {
-      const glm::vec3 mean(means[3 * i], means[3 * i + 1], means[3 * i + 2]);
-      const glm::vec3 p_cam = v.R * mean + v.t;
-      const float q_max = fm::opacity_aware_qmax(fm::sigmoid(logits[i]));
-      if (!(q_max > 0.0f)) continue;
-      const glm::vec2 mean2d(v.fx * p_cam.x / p_cam.z + v.cx - 0.5f, v.fy * p_cam.y / p_cam.z + v.cy - 0.5f);
-      const fm::Cov3 cov3 =
-          fm::covariance_3d({log_scales[3 * i], log_scales[3 * i + 1], log_scales[3 * i + 2]},
-                            {rotations[4 * i], rotations[4 * i + 1], rotations[4 * i + 2], rotations[4 * i + 3]});
-      const glm::vec3 cov2 = fm::covariance_2d(cov3, v.R, p_cam, v.fx, v.fy, v.tan_half_fov);
-      glm::vec3 conic;
-      if (!fm::conic_from_cov2d(cov2, &conic)) continue;
-      const fm::TileRect rect = fm::ellipse_tile_rect(mean2d, cov2, q_max, v.width, v.height);
-      for (int ty = rect.y0; ty < rect.y1; ++ty)
-        for (int tx = rect.x0; tx < rect.x1; ++tx) {
-          if (!fm::ellipse_touches_tile(mean2d, conic, q_max, tx, ty, v.width, v.height)) continue;
-          ++entries;
-          EXPECT_TRUE(fm::entry_hidden(r.map, mean2d, conic, q_max, p_cam.z, tx, ty, v.width, v.height))
-              << "chunk " << c << " Gaussian " << i << " tile " << tx << "," << ty;
-        }
+      const EntriesHidden e = entries_hidden(r.map, v, &means[3 * i], &log_scales[3 * i], &rotations[4 * i], logits[i]);
+      entries += e.entries;
+      EXPECT_EQ(e.hidden, e.entries) << "chunk " << c << " Gaussian " << i;
     }
   }
   EXPECT_GE(hidden, 200) << "chunks behind the rough wall";
   EXPECT_GE(kept, 200) << "chunks in front of it, across it or off the image";
   EXPECT_GE(entries, 2000);
+}
+
+// The whole-Gaussian test before the covariance against the per-entry one: every Gaussian
+// gaussian_hidden drops (its box from the largest scale and the Jacobian's rows at its own
+// position) has each of its entries dropped by entry_hidden. The map: near blocks (depth 5) of 24
+// px with far gaps (depth 12) of 8 px between them, drawn from the last pose and read from a moved
+// one; the Gaussians lie between the two depths, a few pixels to some tens across, so whether one
+// is hidden turns on how far its box reaches. Thin, long and round ones (the bound is tight for
+// round ones), near the image's edges too (where the Jacobian's clamp binds).
+TEST(OcclusionCull, AHiddenGaussiansEveryEntryIsHiddenByTheEntryTest) {
+  std::vector<float> last(320 * 180);
+  for (int y = 0; y < 180; ++y)
+    for (int x = 0; x < 320; ++x) last[pixel(x, y)] = x % 64 < 56 && y % 64 < 56 ? 5.0f : 12.0f;
+  const fm::View v = test_view(glm::vec3(0.05f, 0.02f, 0.0f), 2.0f);
+  const Reprojected r = reproject(last, v);
+  std::mt19937 rng(73);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  int hidden = 0, kept = 0, entries = 0, entries_of_kept = 0, hidden_entries_of_kept = 0;
+  for (int i = 0; i < 100000; ++i) {
+    const float z = 6.0f + 5.0f * u(rng);
+    const float mean[3] = {(u(rng) - 0.5f) * 1.6f * z, (u(rng) - 0.5f) * 1.0f * z, z};
+    float log_scale[3];
+    for (float& l : log_scale) l = std::log(0.002f + 0.1f * u(rng) * u(rng));
+    if (i % 2 == 0) log_scale[1] = log_scale[2] = log_scale[0];
+    const float rotation[4] = {u(rng) - 0.5f, u(rng) - 0.5f, u(rng) - 0.5f, u(rng) - 0.5f};
+    const float logit = -3.0f + 8.0f * u(rng);
+    const glm::vec3 p_cam = v.R * glm::vec3(mean[0], mean[1], mean[2]) + v.t;
+    const float q_max = fm::opacity_aware_qmax(fm::sigmoid(logit));
+    if (!(q_max > 0.0f) || !(p_cam.z > v.near_plane)) continue;
+    const glm::vec2 mean2d(v.fx * p_cam.x / p_cam.z + v.cx - 0.5f, v.fy * p_cam.y / p_cam.z + v.cy - 0.5f);
+    const EntriesHidden e = entries_hidden(r.map, v, mean, log_scale, rotation, logit);
+    if (fm::gaussian_hidden(r.map, mean2d, p_cam, fm::max_scale_of(log_scale), q_max, v)) {
+      ++hidden;
+      entries += e.entries;
+      EXPECT_EQ(e.hidden, e.entries) << "Gaussian " << i << " at " << mean2d.x << "," << mean2d.y;
+    } else {
+      ++kept;
+      entries_of_kept += e.entries;
+      hidden_entries_of_kept += e.hidden;
+    }
+  }
+  EXPECT_GE(hidden, 5000) << "Gaussians behind the near blocks";
+  EXPECT_GE(kept, 5000) << "over the far gaps, large or off the image";
+  EXPECT_GE(entries, 5000);
+  // The test is a bound: some entries it keeps are hidden one by one.
+  EXPECT_GT(hidden_entries_of_kept, 0);
+  EXPECT_LT(hidden_entries_of_kept, entries_of_kept);
 }
 
 double psnr_rgba8(const Image& a, const Image& b) {
