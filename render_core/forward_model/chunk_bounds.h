@@ -115,6 +115,20 @@ CATGS_HD float chunk_half_extent(const ChunkBounds& b, const View& v, float z_lo
   const float jf = sqrtf(v.fx * v.fx * (1.0f + cx * cx) + v.fy * v.fy * (1.0f + cy * cy)) / z_lo;
   return sqrtf(fmaxf(b.q_max, 0.0f)) * (b.max_scale * jf + sqrtf(kLowPass));
 }
+// The same bound per image axis, for a chunk whose means land in the pixel box s (kind box): the
+// half extents along u and w, sqrt(q_max) (max_scale |J row| + sqrt(0.3)), each row of J at the
+// box's largest |x / z| (|y / z|: the ratio's extremes over the box of means lie at its corners,
+// as u's and w's do), clamped as covariance_2d clamps it, and at z_lo. Tighter than
+// chunk_half_extent's norm at the clamp limits (a chunk near the image's centre: about 1.85x a
+// side at 16:9); the occlusion test reads the map over this box (occlusion.h chunk_hidden).
+CATGS_HD glm::vec2 chunk_half_extents(const ChunkBounds& b, const ChunkOnScreen& s, const View& v) {
+  const float ax = fmaxf(fabsf(s.u_lo + 0.5f - v.cx), fabsf(s.u_hi + 0.5f - v.cx)) / v.fx;
+  const float ay = fmaxf(fabsf(s.w_lo + 0.5f - v.cy), fabsf(s.w_hi + 0.5f - v.cy)) / v.fy;
+  const float tx = fminf(kFrustumClamp * v.tan_half_fov.x, ax), ty = fminf(kFrustumClamp * v.tan_half_fov.y, ay);
+  const float sq = sqrtf(fmaxf(b.q_max, 0.0f)), low = sqrtf(kLowPass);
+  return glm::vec2(sq * (b.max_scale * v.fx * sqrtf(1.0f + tx * tx) / s.z_lo + low),
+                   sq * (b.max_scale * v.fy * sqrtf(1.0f + ty * ty) / s.z_lo + low));
+}
 CATGS_HD float chunk_rounding_slack(const ChunkOnScreen& s) {
   return 2.0f + 1e-5f * fmaxf(fmaxf(fabsf(s.u_lo), fabsf(s.u_hi)), fmaxf(fabsf(s.w_lo), fabsf(s.w_hi)));
 }

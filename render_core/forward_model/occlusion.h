@@ -231,11 +231,12 @@ CATGS_HD bool chunk_hidden(const OcclusionMap& m, const ChunkBounds& b, const Vi
   if (s.kind != ChunkOnScreen::box) return false;
   ChunkBounds with_margin = b;
   with_margin.q_max = fmaxf(b.q_max, 0.0f) + kExactQMargin;
-  const float r = chunk_half_extent(with_margin, v, s.z_lo) + chunk_rounding_slack(s);
-  if (!(r < 1e7f && fabsf(s.u_lo) < 1e7f && fabsf(s.u_hi) < 1e7f && fabsf(s.w_lo) < 1e7f && fabsf(s.w_hi) < 1e7f))
+  const glm::vec2 r = chunk_half_extents(with_margin, s, v) + chunk_rounding_slack(s);
+  if (!(r.x < 1e7f && r.y < 1e7f && fabsf(s.u_lo) < 1e7f && fabsf(s.u_hi) < 1e7f && fabsf(s.w_lo) < 1e7f &&
+        fabsf(s.w_hi) < 1e7f))
     return false;
-  const float x0 = fmaxf(floorf(s.u_lo - r), 0.0f), x1 = fminf(ceilf(s.u_hi + r), static_cast<float>(v.width - 1));
-  const float y0 = fmaxf(floorf(s.w_lo - r), 0.0f), y1 = fminf(ceilf(s.w_hi + r), static_cast<float>(v.height - 1));
+  const float x0 = fmaxf(floorf(s.u_lo - r.x), 0.0f), x1 = fminf(ceilf(s.u_hi + r.x), static_cast<float>(v.width - 1));
+  const float y0 = fmaxf(floorf(s.w_lo - r.y), 0.0f), y1 = fminf(ceilf(s.w_hi + r.y), static_cast<float>(v.height - 1));
   if (!(x0 <= x1 && y0 <= y1)) return false;  // off the image: chunk_outside_view culls it
   const int coarsest = kOcclusionCell << (kOcclusionLevels - 1);
   if (static_cast<int>(x1) / coarsest - static_cast<int>(x0) / coarsest >= kOcclusionChunkCells ||

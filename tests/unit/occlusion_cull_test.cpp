@@ -147,10 +147,13 @@ TEST(OcclusionCull, AChunkBehindTheMapIsHiddenWholeOneInFrontAcrossOrOverAnOpenP
   const Reprojected open = reproject(last, test_view());
   EXPECT_FALSE(fm::chunk_hidden(open.map, chunk_of({-0.2f, -0.2f, 9.8f}, {0.2f, 0.2f, 10.2f}), v));
   // Its largest Gaussian widens the box: 60 px left of the open pixel (means at u 94-103), a chunk
-  // of scale 0.01 (bound +-5 px) is hidden; the same chunk of scale 0.5 is not (its ellipse bound,
-  // about 58 px at q_max 10.8 with the clamped Jacobian, reaches the cell of 16 px over the pixel).
+  // of scale 0.01 (bound +-5 px) is hidden, and so is one of scale 0.5 (its ellipse bound, about
+  // 32 px at q_max 10.8 with the Jacobian's row at the box's own x / z, ends short of the cell of
+  // 16 px over the pixel; the norm of both rows at the clamp, 58 px, reached it); one of scale 1.2
+  // (about 72 px) is not.
   EXPECT_TRUE(fm::chunk_hidden(open.map, chunk_of({-4.1f, -0.2f, 9.8f}, {-3.7f, 0.2f, 10.2f}), v));
-  EXPECT_FALSE(fm::chunk_hidden(open.map, chunk_of({-4.1f, -0.2f, 9.8f}, {-3.7f, 0.2f, 10.2f}, 0.5f), v));
+  EXPECT_TRUE(fm::chunk_hidden(open.map, chunk_of({-4.1f, -0.2f, 9.8f}, {-3.7f, 0.2f, 10.2f}, 0.5f), v));
+  EXPECT_FALSE(fm::chunk_hidden(open.map, chunk_of({-4.1f, -0.2f, 9.8f}, {-3.7f, 0.2f, 10.2f}, 1.2f), v));
 }
 
 // The entries of one Gaussian in view v (tiles its ellipse reaches) and how many of them
@@ -191,55 +194,77 @@ Reprojected rough_wall_map(const fm::View& v) {
   return reproject(last, v);
 }
 
-// The chunk test against the per-entry one: over a rough, moved map, every entry of every
-// Gaussian of a chunk that chunk_hidden drops is one that entry_hidden drops.
-TEST(OcclusionCull, AHiddenChunksEveryEntryIsHiddenByTheEntryTest) {
-  const fm::View v = test_view(glm::vec3(0.05f, 0.02f, 0.0f), 2.0f);
-  const Reprojected r = rough_wall_map(v);
-  std::mt19937 rng(72);
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+// Chunks of 64 random Gaussians (within up to `spread` of a centre in view between depths z0 and
+// z0 + z_span, scales up to about scale_max) tested by chunk_hidden against map m, each Gaussian of a hidden one checked
+// against the per-entry test (every entry hidden, or the chunk test outran its oracle).
+struct ChunkOracle {
   int hidden = 0, kept = 0, entries = 0;
+};
+ChunkOracle check_hidden_chunks(const fm::OcclusionMap& m, const fm::View& v, float z0, float z_span, float spread,
+                                float scale_max, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  ChunkOracle o;
   for (int c = 0; c < 4000; ++c) {
-    const glm::vec3 centre((u(rng) - 0.5f) * 10.0f, (u(rng) - 0.5f) * 6.0f, 4.0f + 10.0f * u(rng));
-    const float size = 0.05f + 0.6f * u(rng);
+    const glm::vec3 centre((u(rng) - 0.5f) * 10.0f, (u(rng) - 0.5f) * 6.0f, z0 + z_span * u(rng));
+    const float size = 0.05f + spread * u(rng);
     constexpr int kCount = 64;
     std::vector<float> means, log_scales, logits, rotations;
     for (int i = 0; i < kCount; ++i) {
       for (int k = 0; k < 3; ++k) means.push_back(centre[k] + size * (u(rng) - 0.5f));
-      for (int k = 0; k < 3; ++k) log_scales.push_back(std::log(0.002f + 0.08f * u(rng) * u(rng)));
+      for (int k = 0; k < 3; ++k) log_scales.push_back(std::log(0.002f + scale_max * u(rng) * u(rng)));
       logits.push_back(-3.0f + 8.0f * u(rng));
       for (int k = 0; k < 4; ++k) rotations.push_back(u(rng) - 0.5f);
     }
     const fm::ChunkBounds b = fm::chunk_bounds(means.data(), log_scales.data(), logits.data(), kCount)[0];
-    if (!fm::chunk_hidden(r.map, b, v)) {
-      ++kept;
+    if (!fm::chunk_hidden(m, b, v)) {
+      ++o.kept;
       continue;
     }
-    ++hidden;
+    ++o.hidden;
     for (int i = 0; i < kCount; ++i) {
-      const EntriesHidden e = entries_hidden(r.map, v, &means[3 * i], &log_scales[3 * i], &rotations[4 * i], logits[i]);
-      entries += e.entries;
+      const EntriesHidden e = entries_hidden(m, v, &means[3 * i], &log_scales[3 * i], &rotations[4 * i], logits[i]);
+      o.entries += e.entries;
       EXPECT_EQ(e.hidden, e.entries) << "chunk " << c << " Gaussian " << i;
     }
   }
-  EXPECT_GE(hidden, 200) << "chunks behind the rough wall";
-  EXPECT_GE(kept, 200) << "chunks in front of it, across it or off the image";
-  EXPECT_GE(entries, 2000);
+  return o;
+}
+
+// Near blocks (depth 5) of 56 px with far gaps (depth 12) of 8 px between them, drawn from the
+// last pose and read from v: whether what lies between the two depths is hidden turns on how far
+// its box reaches.
+Reprojected block_wall_map(const fm::View& v) {
+  std::vector<float> last(320 * 180);
+  for (int y = 0; y < 180; ++y)
+    for (int x = 0; x < 320; ++x) last[pixel(x, y)] = x % 64 < 56 && y % 64 < 56 ? 5.0f : 12.0f;
+  return reproject(last, v);
+}
+
+// The chunk test against the per-entry one: over a rough, moved map (small Gaussians, behind or
+// across the wall) and over the blocks and gaps (larger ones, between the two depths), every
+// entry of every Gaussian of a chunk that chunk_hidden drops is one that entry_hidden drops.
+TEST(OcclusionCull, AHiddenChunksEveryEntryIsHiddenByTheEntryTest) {
+  const fm::View v = test_view(glm::vec3(0.05f, 0.02f, 0.0f), 2.0f);
+  const ChunkOracle rough = check_hidden_chunks(rough_wall_map(v).map, v, 4.0f, 10.0f, 0.6f, 0.08f, 72);
+  EXPECT_GE(rough.hidden, 200) << "chunks behind the rough wall";
+  EXPECT_GE(rough.kept, 200) << "chunks in front of it, across it or off the image";
+  EXPECT_GE(rough.entries, 2000);
+  const Reprojected blocks = block_wall_map(v);
+  const ChunkOracle gaps = check_hidden_chunks(blocks.map, v, 6.0f, 5.0f, 0.2f, 0.2f, 74);
+  EXPECT_GE(gaps.hidden, 50) << "chunks behind the near blocks";
+  EXPECT_GE(gaps.kept, 200) << "over the gaps, across them or off the image";
+  EXPECT_GE(gaps.entries, 5000);
 }
 
 // The whole-Gaussian test before the covariance against the per-entry one: every Gaussian
 // gaussian_hidden drops (its box from the largest scale and the Jacobian's rows at its own
-// position) has each of its entries dropped by entry_hidden. The map: near blocks (depth 5) of 24
-// px with far gaps (depth 12) of 8 px between them, drawn from the last pose and read from a moved
-// one; the Gaussians lie between the two depths, a few pixels to some tens across, so whether one
-// is hidden turns on how far its box reaches. Thin, long and round ones (the bound is tight for
+// position) has each of its entries dropped by entry_hidden, over the blocks and gaps; the
+// Gaussians lie between the two depths, a few pixels to some tens across. Thin, long and round ones (the bound is tight for
 // round ones), near the image's edges too (where the Jacobian's clamp binds).
 TEST(OcclusionCull, AHiddenGaussiansEveryEntryIsHiddenByTheEntryTest) {
-  std::vector<float> last(320 * 180);
-  for (int y = 0; y < 180; ++y)
-    for (int x = 0; x < 320; ++x) last[pixel(x, y)] = x % 64 < 56 && y % 64 < 56 ? 5.0f : 12.0f;
   const fm::View v = test_view(glm::vec3(0.05f, 0.02f, 0.0f), 2.0f);
-  const Reprojected r = reproject(last, v);
+  const Reprojected r = block_wall_map(v);
   std::mt19937 rng(73);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   int hidden = 0, kept = 0, entries = 0, entries_of_kept = 0, hidden_entries_of_kept = 0;
