@@ -134,8 +134,8 @@ CATGS_HD float occlusion_box_depth(const OcclusionMap& m, int x0, int x1, int y0
   const int cells_x = k == 0 ? m.cells_x[0] : k == 1 ? m.cells_x[1] : m.cells_x[2];
   const int cx0 = x0 >> s, cx1 = x1 >> s, cy0 = y0 >> s, cy1 = y1 >> s;
   float deepest = 0.0f;
-  if (cx1 - cx0 <= 1 &&
-      cy1 - cy0 <= 1) {  // at most 2 x 2 cells: four reads, no loop (a cell read twice where one spans)
+  // At most 2 x 2 cells: four reads, no loop (a cell is read twice where the box spans one).
+  if (cx1 - cx0 <= 1 && cy1 - cy0 <= 1) {
     const float* row0 = cells + cy0 * cells_x;
     const float* row1 = cells + cy1 * cells_x;
     return fmaxf(fmaxf(fmaxf(deepest, row0[cx0]), fmaxf(row0[cx1], row1[cx0])), row1[cx1]);
