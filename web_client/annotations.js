@@ -251,6 +251,15 @@ export function walkProbes(position, up, sizes, { dir = null, look = sizes.look,
   return probes;
 }
 
+// How far ahead a look along `dir` checks the ground, after the plan `last` (or null): an eye
+// height (sizes.look); near an edge or a step the last look of the same way (within 14 degrees)
+// saw, half as far as that look, down to sizes.nearLook, so that the camera comes up to it.
+export function walkLookDistance(last, dir, sizes) {
+  const sameWay = dir && last && last.dir && vdot(dir, last.dir) > 0.97;
+  if (sameWay && (last.reason === 'edge' || last.reason === 'step')) return Math.max(sizes.nearLook, last.look / 2);
+  return sizes.look;
+}
+
 // How far above the eye a landing look's ground probe looks down from, and under it its up probe
 // looks up from: the near plane and a margin, so that what is just under or above the eye is
 // seen too.
@@ -292,7 +301,11 @@ export function walkVerticalView(p, d, up, roll = 0) {
 //               far), and 0 when the ground ahead is missing ('edge': a cliff, the end of the
 //               scene's floor) or more than a step up or down ('step': a bed, a rock, a drop);
 //   reason      what limits `allowed` below `look`: '', 'obstacle', 'edge', 'step', 'check';
-//   confirmed   whether the height may follow ground0 ('check' while not).
+//   confirmed   whether the height may follow ground0 ('check' while not);
+//   steps       the points ({ point, reason }) where this look or an earlier one of the same way
+//               saw the ground ahead missing or more than a step off (walkSteps): the camera
+//               stops a near look (sizes.nearLook) short of each, whatever a longer look saw
+//               beyond it.
 // Looks alternate between two rolls of the vertical views (`roll` 0 and 1, walkVerticalView):
 // a real surface reads the same at both, while a large splat of a coarse scene, projected from
 // far to the side, can show under one roll alone (flowers_sh3). So the ground under the camera
@@ -348,7 +361,7 @@ export function walkPlan(origin, up, sizes, answers, { dir = null, look = sizes.
   const ceiling = above === null ? null : h - walkLift(sizes) + above;
   const plan = {
     origin: origin.slice(), dir: dir ? dir.slice() : null, look, roll, ground0, ground1, underSeen, aheadSeen, ceiling,
-    free: Infinity, allowed: 0, reason: '', confirmed, pending, pendingRoll: pending === null ? null : roll, tries,
+    free: Infinity, allowed: 0, reason: '', confirmed, pending, pendingRoll: pending === null ? null : roll, tries, steps: [],
   };
   if (!dir) return plan;
   for (const a of [answers.eye, answers.knee]) {
@@ -364,7 +377,44 @@ export function walkPlan(origin, up, sizes, answers, { dir = null, look = sizes.
     plan.allowed = 0;
     plan.reason = aheadSeen === null ? 'edge' : 'step';
   }
+  plan.steps = walkSteps(plan, previous, up, sizes);
+  for (const { point, reason } of plan.steps) {
+    const room = Math.max(0, vdot(vsub(point, origin), dir) - sizes.nearLook);
+    if (confirmed && room < plan.allowed) {
+      plan.allowed = room;
+      plan.reason = reason;
+    }
+  }
   return plan;
+}
+
+// The steps and edges a walk remembers (walkPlan's `steps`): those of the previous plan while the
+// way stays the same (within 14 degrees) that still lie ahead, within the stop distance of the
+// line walked; this look's ahead point when it saw the ground missing or more than a step off; and
+// none within a step of this look's ahead point when it saw the ground there (the other roll saw
+// what one roll alone showed: walkPlan). Why: one look checks the ground at one point, `look`
+// ahead. Stopped short of a bed of flowers a metre high, 1.4 units deep, whose sides the level
+// probes see through (flowers_sh3), a fresh look from the right spot lands beyond the bed and sees
+// the lawn; without this the camera then walked over the bed at lawn eye height (CI, 2026-11-28:
+// 0.24 of the eye height above the flowers). At most the 16 nearest are kept.
+function walkSteps(plan, previous, up, sizes) {
+  const { origin, dir } = plan;
+  const ahead = vadd(origin, vscale(dir, plan.look));
+  const flat = (v) => vsub(v, vscale(up, vdot(v, up)));
+  const sameWay = previous && previous.dir && previous.steps && vdot(previous.dir, dir) > 0.97;
+  const kept = (sameWay ? previous.steps : []).filter(({ point }) => {
+    const d = flat(vsub(point, origin));
+    const along = vdot(d, dir);
+    return along > 0 && vlen(vsub(d, vscale(dir, along))) <= sizes.radius;
+  });
+  let steps = kept;
+  if (plan.ground0 !== null && plan.ground1 !== null) {
+    steps = kept.filter(({ point }) => vlen(flat(vsub(point, ahead))) > sizes.step);
+  } else if (plan.ground0 !== null && plan.confirmed) {
+    steps = [...kept, { point: ahead, reason: plan.aheadSeen === null ? 'edge' : 'step' }];
+  }
+  const along = ({ point }) => vdot(vsub(point, origin), dir);
+  return steps.sort((a, b) => along(a) - along(b)).slice(0, 16);
 }
 
 // The ground's height (up . point) a plan expects under world point `p`: from the ground under

@@ -21,7 +21,7 @@
 // rolls of the views up and down, and the ground counts once both agree (walkPlan says why).
 
 import { cameraForward, cameraRight, lookAt, vadd, vdot, vlen, vnorm, vscale, vsub } from './viewer/camera.js';
-import { alongGround, walkGroundAt, walkPlan, walkProbes, walkSizes, walkStep } from './annotations.js';
+import { alongGround, walkGroundAt, walkLookDistance, walkPlan, walkProbes, walkSizes, walkStep } from './annotations.js';
 
 const LOOK_INTERVAL_MS = 250; // walking: one look (4 probes) at most every 250 ms
 const IDLE_INTERVAL_MS = 500; // standing: the ground under the eye, twice a second
@@ -95,10 +95,8 @@ export class WalkMode {
     // Landing: until two looks agree on the ground and the eye is near its height above it.
     const landing = !last || !last.confirmed || (ground !== null && Math.abs(vdot(origin, cam.up) - ground - sizes.eye) > 0.2 * sizes.eye);
     if (this.inFlight || now - this.lastLookMs < (dir || landing ? LOOK_INTERVAL_MS : IDLE_INTERVAL_MS)) return;
-    const sameWay = dir && last && last.dir && vdot(dir, last.dir) > 0.97;
     // Near an edge or a step, look half as far each time (down to a quarter of the eye height).
-    let look = sizes.look;
-    if (sameWay && (last.reason === 'edge' || last.reason === 'step')) look = Math.max(sizes.nearLook, last.look / 2);
+    const look = walkLookDistance(last, dir, sizes);
     const way = landing ? null : dir;
     const roll = (this.roll = 1 - this.roll); // alternate: see annotations.js walkPlan
     const probes = walkProbes(origin, cam.up, sizes, { dir: way, look, ground, landing, roll });

@@ -838,6 +838,19 @@ test('walk plan: the ground known from two rolls, what the level probes proved f
   w = go({ under: hit(1.6), ahead: hit(1.3) });
   assert.deepEqual([w.reason, w.allowed], ['step', 0]);
   assert.ok(Math.abs(w.aheadSeen - 0.3) < 1e-12);
+  // A step once seen stays: a longer look of the same way that lands beyond it (flowers_sh3's bed
+  // of flowers, 1.4 units deep) stops a near look (0.4) short of it, from wherever it started...
+  const bed = go({ under: hit(1.6), ahead: hit(0.6) });
+  assert.equal(bed.steps.length, 1);
+  w = notes.walkPlan([0, -1.6, 0.3], up, s, { under: hit(1.6), ahead: hit(1.6), eye: miss, knee: miss }, { dir: z, look: 3.2, previous: bed, roll: 1 });
+  assert.equal(w.reason, 'step');
+  assert.ok(Math.abs(w.allowed - (1.6 - 0.3 - 0.4)) < 1e-12, `${w.allowed}`);
+  // ...unless a look at that very point sees the ground (one roll's stray splat), or the way turns.
+  w = go({ under: hit(1.6), ahead: hit(1.6), eye: miss, knee: miss }, bed, 1);
+  assert.deepEqual([w.reason, w.allowed, w.steps.length], ['', 1.6, 0]);
+  const x = [1, 0, 0];
+  w = notes.walkPlan(o, up, s, { under: hit(1.6), ahead: hit(1.6), eye: miss, knee: miss }, { dir: x, look: 1.6, previous: bed, roll: 1 });
+  assert.deepEqual([w.reason, w.allowed, w.steps.length], ['', 1.6, 0]);
   // A reading far under the known ground (a gap) is left out: the height holds...
   const gap = go({ under: hit(2.4), ahead: hit(1.6) });
   assert.ok(gap.confirmed && Math.abs(gap.ground0) < 1e-12 && Math.abs(gap.pending + 0.8) < 1e-12);
@@ -851,6 +864,52 @@ test('walk plan: the ground known from two rolls, what the level probes proved f
   // No ground at all (a scene without a floor): walks level where the level probes see nothing.
   const none = notes.walkPlan(o, up, s, { under: miss, ahead: miss, eye: miss, knee: miss }, { dir: z, look: 1.6 });
   assert.deepEqual([none.confirmed, none.ground0, none.reason, none.allowed], [true, null, '', 1.6]);
+});
+
+// Walk mode's loop (walk.js) along +z over made-up ground, in steps of 1/60 s: a look every 250
+// ms whose answers come `latencyMs` later (the ground under, the ground `walkLookDistance` ahead:
+// exact depths of `groundAt`; the level probes see nothing), walkStep at an eye height a second.
+// Returns the furthest z the camera reached in `seconds`.
+function walkAlong(groundAt, { z0, latencyMs, seconds = 10 }) {
+  const up = [0, -1, 0];
+  const s = notes.walkSizes(1.6);
+  const z = [0, 0, 1];
+  const down = (p) => ({ hit: true, depth: -p[1] - groundAt(p[2]) });
+  let pos = [0, -1.6 - groundAt(z0), z0];
+  let plan = { origin: pos.slice(), dir: null, look: s.look, ground0: groundAt(z0), ground1: null, confirmed: true, reason: '', steps: [] };
+  let inFlight = null;
+  let lastLook = -Infinity;
+  let roll = 0;
+  let furthest = z0;
+  for (let t = 0; t < seconds * 1000; t += 1000 / 60) {
+    if (inFlight && t >= inFlight.at) {
+      plan = notes.walkPlan(inFlight.origin, up, s, inFlight.answers, { dir: z, look: inFlight.look, previous: plan, roll: inFlight.roll });
+      inFlight = null;
+    }
+    if (!inFlight && t - lastLook >= 250) {
+      const look = notes.walkLookDistance(plan, z, s);
+      roll = 1 - roll;
+      const answers = { under: down(pos), ahead: down(cam.vadd(pos, [0, 0, look])), eye: { hit: false }, knee: { hit: false } };
+      inFlight = { at: t + latencyMs, origin: pos.slice(), look, roll, answers };
+      lastLook = t;
+    }
+    pos = notes.walkStep(pos, z, 1.6 / 60, up, s, plan, 1 / 60).position;
+    furthest = Math.max(furthest, pos[2]);
+  }
+  return furthest;
+}
+
+test('walk mode never walks over a bed it once saw a step up onto (flowers_sh3 in CI, 2026-11-28)', () => {
+  // A bed 0.7 eye heights high from z = 3 to 4.4: shorter than a look (1.6), so from 2.8 to 3
+  // a full look lands on the ground beyond it. Every start and answer time stops short of it.
+  const bed = (zz) => (zz >= 3 && zz <= 4.4 ? 1.12 : 0);
+  let worst = -Infinity;
+  for (let z0 = 0; z0 < 1.6; z0 += 0.05) {
+    for (const latencyMs of [5, 30, 90, 160]) worst = Math.max(worst, walkAlong(bed, { z0, latencyMs }));
+  }
+  assert.ok(worst < 3, `the camera reached z = ${worst.toFixed(3)} (the bed starts at 3)`);
+  // On flat ground it walks on (the loop moves at all).
+  assert.ok(walkAlong(() => 0, { z0: 0, latencyMs: 30, seconds: 3 }) > 3, 'walks on flat ground');
 });
 
 test('walk step: never past what the plan allows, eases to eye height, rises only under the ceiling', () => {

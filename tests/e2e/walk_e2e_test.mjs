@@ -157,7 +157,8 @@ async function walkRun(context, base, scene, { label, metresPerUnit, directions 
   const hint = () => page.textContent('#hint');
   const orbitHint = await hint();
   const rows = [];
-  for (const direction of directions) {
+  // CATGS_WALK_DIRECTION=NAME walks one direction (while working on it).
+  for (const direction of directions.filter((d) => !process.env.CATGS_WALK_DIRECTION || d === process.env.CATGS_WALK_DIRECTION)) {
     const key = KEYS[direction];
     await hook(page, (p) => window.catgs.setPose(p.position, p.orientation, p.fovDeg), start);
     await sleep(200);
