@@ -255,10 +255,13 @@ export function walkProbes(position, up, sizes, { dir = null, look = sizes.look,
 // height (sizes.look); near an edge or a step the last look of the same way (within 14 degrees)
 // saw, half as far as that look, down to sizes.nearLook, so that the camera comes up to it.
 export function walkLookDistance(last, dir, sizes) {
-  const sameWay = dir && last && last.dir && vdot(dir, last.dir) > 0.97;
-  if (sameWay && (last.reason === 'edge' || last.reason === 'step')) return Math.max(sizes.nearLook, last.look / 2);
+  if (walkSameWay(last, dir) && (last.reason === 'edge' || last.reason === 'step')) return Math.max(sizes.nearLook, last.look / 2);
   return sizes.look;
 }
+
+// Whether a walk along unit `dir` goes the way of plan `last` (within 14 degrees): its look
+// distance and the steps it remembers carry over (walkLookDistance, walkPlan's steps).
+const walkSameWay = (last, dir) => Boolean(dir && last && last.dir && vdot(dir, last.dir) > 0.97);
 
 // How far above the eye a landing look's ground probe looks down from, and under it its up probe
 // looks up from: the near plane and a margin, so that what is just under or above the eye is
@@ -393,16 +396,16 @@ export function walkPlan(origin, up, sizes, answers, { dir = null, look = sizes.
 // line walked; this look's ahead point when it saw the ground missing or more than a step off; and
 // none within a step of this look's ahead point when it saw the ground there (the other roll saw
 // what one roll alone showed: walkPlan). Why: one look checks the ground at one point, `look`
-// ahead. Stopped short of a bed of flowers a metre high, 1.4 units deep, whose sides the level
-// probes see through (flowers_sh3), a fresh look from the right spot lands beyond the bed and sees
-// the lawn; without this the camera then walked over the bed at lawn eye height (CI, 2026-11-28:
-// 0.24 of the eye height above the flowers). At most the 16 nearest are kept.
+// ahead. Stopped short of a bed shallower than a look whose sides the level probes see through
+// (flowers_sh3's flower bed), a fresh look from the right spot lands beyond the bed and sees the
+// lawn; without this the camera then walked over the bed at lawn eye height
+// (docs/history/depth_probe.md, "Walk mode over flowers_sh3's flower bed"). At most the 16
+// nearest are kept.
 function walkSteps(plan, previous, up, sizes) {
   const { origin, dir } = plan;
   const ahead = vadd(origin, vscale(dir, plan.look));
   const flat = (v) => vsub(v, vscale(up, vdot(v, up)));
-  const sameWay = previous && previous.dir && previous.steps && vdot(previous.dir, dir) > 0.97;
-  const kept = (sameWay ? previous.steps : []).filter(({ point }) => {
+  const kept = (walkSameWay(previous, dir) && previous.steps ? previous.steps : []).filter(({ point }) => {
     const d = flat(vsub(point, origin));
     const along = vdot(d, dir);
     return along > 0 && vlen(vsub(d, vscale(dir, along))) <= sizes.radius;

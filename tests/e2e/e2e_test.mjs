@@ -394,8 +394,8 @@ async function run() {
 // A server stopped with Ctrl-C (SIGINT) and started again on its port (issue 75): the page says
 // "server stopping" until it streams again, never "disconnected" (a stop is not a network fault),
 // is connected again within 2 s of the server answering HTTP (it retries every second) and then
-// streams. (The first frame's time after that is the machine's load, not the retry: CI at
-// bd5e2a6 took 2.8 s to the first frame beside an 18 GB benchmark, so it is bounded loosely.)
+// streams. (The first frame's time after that is the machine's load, not the retry: a
+// clean-clone run at bd5e2a6 beside an 18 GB benchmark took 2.8 s to it, so it is not bounded.)
 async function checkServerStop() {
   const first = await startServer();
   const page = await context.newPage();
