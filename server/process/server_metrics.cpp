@@ -7,6 +7,10 @@
 #include <sstream>
 #include <stdexcept>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 namespace catgs::server {
 
 Histogram::Histogram(std::vector<double> upper_bounds) : bounds_(std::move(upper_bounds)) {
@@ -49,6 +53,22 @@ void Histogram::write(std::ostream& out, const std::string& name, const std::str
   out << name << "_sum" << braces << ' ' << sum_ << '\n';
   out << name << "_count" << braces << ' ' << count_ << '\n';
 }
+
+namespace {
+
+// Bytes the C library's allocator has handed out and not had back, over all arenas (glibc's
+// mallinfo2: in-use chunks plus mmapped ones); -1 where unknown. Unlike RSS it does not keep the
+// pages an arena grew into and did not give back, so its floor rises only with what is still held.
+std::int64_t heap_in_use_bytes() {
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 33))
+  const struct mallinfo2 m = mallinfo2();
+  return static_cast<std::int64_t>(m.uordblks + m.hblkhd);
+#else
+  return -1;
+#endif
+}
+
+}  // namespace
 
 std::string ServerMetrics::prometheus_text() const {
   std::ostringstream o;
@@ -146,6 +166,9 @@ std::string ServerMetrics::prometheus_text() const {
       lod_builds_total.load());
   put("catgs_lod_files_written_total", "counter", "LOD files written beside their scenes (--lod write).",
       lod_files_written_total.load());
+  put("catgs_heap_in_use_bytes", "gauge",
+      "Bytes the C library's allocator holds for the server now, all arenas (glibc mallinfo2; -1: unknown).",
+      heap_in_use_bytes());
   put("catgs_exports_running", "gauge", "Video exports rendering now (at most --export-max-concurrent).",
       exports_running.load());
   put("catgs_export_frames_total", "counter", "Frames rendered for video exports.", export_frames_total.load());

@@ -36,6 +36,9 @@
 //   catgs_lod_builds_running, catgs_lod_build_progress  levels of detail being built at load (no
 //                              valid LOD file) and the running build's progress, 0 to 1
 //   catgs_lod_builds_total, catgs_lod_files_written_total  builds finished, LOD files written
+//   catgs_heap_in_use_bytes    what the C library's allocator holds for the server now (glibc
+//                              mallinfo2, all arenas; -1 elsewhere): a leak raises its floor, as
+//                              RSS's (which keeps pages the allocator did not give back) may not
 //   catgs_exports_running      video exports rendering now (session/session_export.h)
 //   catgs_exports_total{result}  exports ended: sent (the file went to the page), failed,
 //                              cancelled (Cancel, or the page closed), refused (ExportVideoRequest
