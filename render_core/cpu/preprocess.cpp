@@ -61,6 +61,7 @@ struct ViewPass {
   glm::vec3 cam_pos;
   fm::View view;
   fm::LodCut lod;
+  const fm::LodNode* lod_nodes;  // null: no LOD
   bool exact;
   fm::TileRect region;
   fm::OcclusionMap occlusion;
@@ -74,6 +75,7 @@ struct ViewPass {
         cam_pos(c.position()),
         view(fm::view_of(c)),
         lod(fm::lod_cut(model.lod, view, lod_error_px)),
+        lod_nodes(model.lod.empty() ? nullptr : model.lod.data()),
         exact(pipeline != Pipeline::vanilla),
         region(r),
         occlusion(occ),
@@ -89,10 +91,10 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   const glm::vec3 p_cam = camera.R * mean + camera.t;
   if (!(p_cam.z > camera.near_plane) || p_cam.z > camera.far_plane) return;  // frustum (near/far)
 
-  const float opacity = fm::sigmoid(model.opacity_logits[i]);
+  float opacity = fm::sigmoid(model.opacity_logits[i]);
   // alpha >= 1/255 only where q <= q_max; the rasterizer visits only those pixels (all
   // pipelines). exact also drops a Gaussian that can never reach 1/255.
-  const float q_max = fm::opacity_aware_qmax(opacity);
+  float q_max = fm::opacity_aware_qmax(opacity);
   if (v.exact && !(q_max > 0.0f)) return;
   const glm::vec2 mean2d(camera.fx * p_cam.x / p_cam.z + camera.cx - 0.5f,
                          camera.fy * p_cam.y / p_cam.z + camera.cy - 0.5f);
@@ -109,6 +111,13 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   const glm::vec3 cov2 = fm::covariance_2d(cov3, camera.R, p_cam, camera.fx, camera.fy, v.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) return;
+  // A merged Gaussian keeps its coverage under the low-pass (fm::drawn_opacity): a lower peak,
+  // and so a tighter q_max. The culls above read the undrawn opacity's, which is no smaller.
+  if (fm::lod_chunk_merged(v.lod_nodes, i / fm::kChunkSize)) {
+    opacity = fm::drawn_opacity(opacity, cov2, true);
+    q_max = fm::opacity_aware_qmax(opacity);
+    if (v.exact && !(q_max > 0.0f)) return;
+  }
   fm::TileRect rect;
   uint32_t touched;
   if (v.exact) {

@@ -65,6 +65,7 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
   if (chunks.size() != fm::chunk_count(n))
     throw std::invalid_argument("speculative_preprocess: chunk bounds of another scene");
 
+  const fm::LodNode* lod_nodes = model.lod.empty() ? nullptr : model.lod.data();
   auto gaussian = [&](std::size_t i) {
     out.tiles_touched[i] = 0;
     const float opacity = fm::sigmoid(model.opacity_logits[i]);
@@ -118,7 +119,9 @@ void speculative_preprocess(const GaussianModel& model, const std::vector<fm::Ch
     if (touched == 0) return;
     out.mean2d[i] = means[0];
     out.conic[i] = conic;
-    out.opacity[i] = opacity;
+    // Drawn at the key view (fm::drawn_opacity); q_max stays the undrawn opacity's, which is no
+    // smaller, so the trail's tiles still hold every pixel the sub-frames blend.
+    out.opacity[i] = fm::drawn_opacity(opacity, covs[0], fm::lod_chunk_merged(lod_nodes, i / fm::kChunkSize));
     out.q_max[i] = q_max;
     out.color[i] =
         fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]},

@@ -19,6 +19,7 @@ bool update_subframe_features(const GaussianModel& model, const std::vector<fm::
                                static_cast<float>(camera.height) / (2.0f * camera.fy));
   const glm::vec3 cam_pos = camera.position();
   const int K = model.sh_coeffs();
+  const fm::LodNode* lod_nodes = model.lod.empty() ? nullptr : model.lod.data();
   std::atomic<bool> inside{true};
   parallel_for(cached.size(), 4096, [&](std::size_t c) {
     const uint32_t i = cached[c];
@@ -49,7 +50,8 @@ bool update_subframe_features(const GaussianModel& model, const std::vector<fm::
       inside.store(false, std::memory_order_relaxed);
     out.mean2d[i] = mean2d;
     out.conic[i] = conic;
-    out.opacity[i] = fm::sigmoid(model.opacity_logits[i]);
+    out.opacity[i] = fm::drawn_opacity(fm::sigmoid(model.opacity_logits[i]), cov2,
+                                       fm::lod_chunk_merged(lod_nodes, i / fm::kChunkSize));
     if (key_colour) return;  // the key frame's, as listed (speculative_preprocess)
     out.color[i] =
         fm::sh_to_color_from(model.sh_degree, fm::HalfRoundedSh{&model.sh[static_cast<std::size_t>(K) * 3 * i]},

@@ -127,9 +127,9 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
   const glm::vec3 p_cam = cam.R * g.mean + cam.t;
   if (!(p_cam.z > cam.near_plane) || p_cam.z > cam.far_plane) return r;  // frustum (near/far)
 
-  const float opacity = fm::sigmoid(g.opacity_logit);
-  const float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
-  if (exact && !(q_max > 0.0f)) return r;               // never reaches alpha 1/255 anywhere
+  float opacity = fm::sigmoid(g.opacity_logit);
+  float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
+  if (exact && !(q_max > 0.0f)) return r;         // never reaches alpha 1/255 anywhere
   const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f, cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
   // Occlusion culling, before the covariance: a small Gaussian behind the map over its whole box.
   if (exact && occlusion.cells[0] != nullptr) {
@@ -141,6 +141,13 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
   const glm::vec3 cov2 = fm::covariance_2d(g.covariance(scene, i), cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) return r;
+  // A merged Gaussian keeps its coverage under the low-pass (fm::drawn_opacity): a lower peak,
+  // and so a tighter q_max. The culls above read the undrawn opacity's, which is no smaller.
+  if (fm::lod_chunk_merged(scene.lod, i / fm::kChunkSize)) {
+    opacity = fm::drawn_opacity(opacity, cov2, true);
+    q_max = fm::opacity_aware_qmax(opacity);
+    if (exact && !(q_max > 0.0f)) return r;
+  }
   fm::TileRect rect;
   if (exact) {
     rect = fm::clip_tile_rect(fm::ellipse_tile_rect(mean2d, cov2, q_max, cam.width, cam.height), region);

@@ -93,7 +93,10 @@ __device__ __forceinline__ void speculative_preprocess_chunk(uint64_t chunk, uin
       if (touched == 0 && !is_big) break;
 
       const glm::vec3 c = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, i), glm::normalize(mean - key.position));
-      out.splat[s] = make_splat(means[0], conic, opacity, q_max);
+      // Drawn at the key view (fm::drawn_opacity); q_max stays the undrawn opacity's, no smaller,
+      // so the trail's tiles still hold every pixel the sub-frames blend.
+      const float drawn = fm::drawn_opacity(opacity, covs[0], fm::lod_chunk_merged(scene.lod, i / fm::kChunkSize));
+      out.splat[s] = make_splat(means[0], conic, drawn, q_max);
       out.color[s] = make_float4(c.x, c.y, c.z, 0.0f);
       out.depth[s] = key_depth;
       out.rect[s] = make_ushort4(static_cast<unsigned short>(rect.x0), static_cast<unsigned short>(rect.y0),

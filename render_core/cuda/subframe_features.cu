@@ -82,7 +82,9 @@ __global__ void __launch_bounds__(tune::kGaussianThreads, tune::kSubframeFeature
         *outside = 1u;  // any writer will do: one flag for the frame
     }
   }
-  out.splat[slot] = make_splat(mean2d, conic, opacity, q_max);
+  // Drawn at this pose (fm::drawn_opacity; q_max stays the undrawn opacity's, no smaller).
+  const float drawn = fm::drawn_opacity(opacity, cov2, fm::lod_chunk_merged(scene.lod, g / fm::kChunkSize));
+  out.splat[slot] = make_splat(mean2d, conic, drawn, q_max);
   if (key_colour) return;  // the key frame's colour stays (SpeculationParams::subframe_key_colour)
   const glm::vec3 col = fm::sh_to_color_from(scene.sh_degree, sh_of(scene, g), glm::normalize(mean - cam.position));
   out.color[slot] = make_float4(col.x, col.y, col.z, 0.0f);

@@ -29,6 +29,12 @@ namespace catgs::fm {
 
 inline constexpr uint32_t kLodNoParent = 0xffffffffu;  // LodNode::parent of a root
 
+// The rule that made a LOD's merged levels and that draws them (lod/lod_merge.h, drawn_opacity
+// below), recorded in a compact LOD file (scene/compact_file.h): a keyed LOD file of another rule
+// is rebuilt. 1 (recorded as 0): optical depth kept, drawn as the leaves; 2: fitted to the
+// children's drawing, coverage kept under the low-pass.
+inline constexpr uint32_t kLodMergeRule = 2;
+
 // One chunk's node, 32 bytes (two float4 loads on the GPU).
 // - lo, hi: the box of the means of every LEAF Gaussian below the node (itself for a leaf), world
 //   units; a parent's box contains its children's.
@@ -81,6 +87,27 @@ CATGS_HD float lod_error_px(const LodNode& n, glm::vec3 eye, float focal) {
   }
   const float d = sqrtf(d2);
   return d > 0.0f ? lod_mul(n.error, focal) / d : INFINITY;
+}
+
+// Is chunk c a merged level's (error > 0)? Its Gaussians are drawn with their coverage kept
+// (merged_opacity below). `nodes`: the scene's LodNode array, null for a scene without LOD.
+CATGS_HD bool lod_chunk_merged(const LodNode* nodes, uint64_t c) { return nodes != nullptr && nodes[c].error > 0.0f; }
+
+// The peak opacity a Gaussian is drawn with, from its opacity and its 2D covariance `cov`
+// (covariance_2d's, the low-pass kLowPass px^2 on its diagonal). A leaf keeps its opacity: the
+// reference 3DGS widens a splat by the low-pass and keeps its peak, as its training did, so a
+// sub-pixel leaf covers more than it is. A merged Gaussian (lod_chunk_merged) was fitted to what
+// its children cover (lod/lod_fit.h), not trained, so its peak is lowered as the low-pass widens
+// it and its alpha integrated over the image stays opacity x 2 pi sqrt(det(cov - kLowPass I)) at
+// any distance: sqrt(det(cov - kLowPass I) / det(cov)), the normalisation of Mip-Splatting's 2D
+// filter (Yu et al., CVPR 2024, eq. 9). Without it a round merged Gaussian of one pixel's std dev
+// covers 1.3 times what it stands for, of half a pixel's 2.2 times (docs/history/level_of_detail.md,
+// "Fitted merges").
+CATGS_HD float drawn_opacity(float opacity, glm::vec3 cov, bool merged) {
+  if (!merged) return opacity;
+  const float det = cov.x * cov.z - cov.y * cov.y;
+  const float det_own = (cov.x - kLowPass) * (cov.z - kLowPass) - cov.y * cov.y;
+  return det > 0.0f ? opacity * sqrtf(fmaxf(det_own, 0.0f) / det) : opacity;
 }
 
 // Is chunk c drawn in view v at bound tau (pixels)? `nodes`: the scene's LodNode array (see

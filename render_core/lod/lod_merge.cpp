@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "forward_model/forward_model.h"
+#include "lod/lod_fit.h"
 
 namespace catgs {
 
@@ -99,24 +100,21 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
             1.0};
   }
   // Weights: opacity x the area of the largest cross-section (see the header).
-  double w[64];
-  std::vector<double> w_heap;
-  double* weight = w;
-  if (count > 64) {
-    w_heap.resize(static_cast<std::size_t>(count));
-    weight = w_heap.data();
-  }
-  double w_sum = 0.0, depth = 0.0;  // depth: the optical depth integral, sum tau_i a_i
-  double alpha_sum = 0.0;           // the colour's weights (see the header)
+  std::vector<double> weight(static_cast<std::size_t>(count));
+  std::vector<LodFitChild> children(static_cast<std::size_t>(count));
+  double w_sum = 0.0;
   for (int k = 0; k < count; ++k) {
     const uint32_t i = index[k];
     const double alpha = fm::sigmoid(m.opacity_logits[i]);
-    alpha_sum += alpha;
     const double area = two_largest(std::exp(m.log_scales[3 * i]), std::exp(m.log_scales[3 * i + 1]),
                                     std::exp(m.log_scales[3 * i + 2]));
     weight[k] = alpha * area;
     w_sum += weight[k];
-    depth += -std::log1p(-std::min(alpha, 0.999999)) * area;
+    const fm::Cov3 s =
+        fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
+                          {m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3]});
+    children[static_cast<std::size_t>(k)] = {mean_of(i),
+                                             glm::dmat3(s.xx, s.xy, s.xz, s.xy, s.yy, s.yz, s.xz, s.yz, s.zz), alpha};
   }
   if (!(w_sum > 0.0)) {  // every input transparent or flat: an equal mix
     for (int k = 0; k < count; ++k) weight[k] = 1.0;
@@ -128,32 +126,34 @@ MergedGaussian merge_gaussians(const GaussianModel& m, const uint32_t* index, in
   glm::dmat3 cov(0.0);
   double spread_sq = 0.0;
   for (int k = 0; k < count; ++k) {
-    const uint32_t i = index[k];
-    const fm::Cov3 s =
-        fm::covariance_3d({m.log_scales[3 * i], m.log_scales[3 * i + 1], m.log_scales[3 * i + 2]},
-                          {m.rotations[4 * i], m.rotations[4 * i + 1], m.rotations[4 * i + 2], m.rotations[4 * i + 3]});
-    const glm::dvec3 d = mean_of(i) - mean;
-    const glm::dmat3 own(s.xx, s.xy, s.xz, s.xy, s.yy, s.yz, s.xz, s.yz, s.zz);
-    cov += weight[k] * (own + glm::outerProduct(d, d));
+    const glm::dvec3 d = children[static_cast<std::size_t>(k)].mean - mean;
+    cov += weight[k] * (children[static_cast<std::size_t>(k)].cov + glm::outerProduct(d, d));
     spread_sq += weight[k] * glm::dot(d, d);
   }
   cov /= w_sum;
-  for (std::size_t c = 0; c < K3; ++c) {
-    double sum = 0.0;
-    if (alpha_sum > 0.0) {
-      for (int k = 0; k < count; ++k) sum += fm::sigmoid(m.opacity_logits[index[k]]) * m.sh[index[k] * K3 + c];
-      sh_out[c] = static_cast<float>(sum / alpha_sum);
-    } else {
-      for (int k = 0; k < count; ++k) sum += m.sh[index[k] * K3 + c];
-      sh_out[c] = static_cast<float>(sum / count);
-    }
-  }
   glm::dvec3 lambda;
   glm::dmat3 axes;
   symmetric_eigen3(cov, lambda, axes);
   glm::dvec3 sigma;
   for (int a = 0; a < 3; ++a) sigma[a] = std::sqrt(std::max(lambda[a], 1e-12));
-  const double alpha = std::min(0.99, -std::expm1(-depth / (sigma[0] * sigma[1])));  // sigma descending
+  // The merged shape's floored eigenvalues: what is drawn, so what the fit compares with.
+  const glm::dmat3 drawn = axes *
+                           glm::dmat3(sigma[0] * sigma[0], 0, 0, 0, sigma[1] * sigma[1], 0, 0, 0, sigma[2] * sigma[2]) *
+                           glm::transpose(axes);
+  const LodFit fit = fit_to_children(children.data(), count, mean, drawn, axes);
+  double colour_sum = 0.0;
+  for (double c : fit.colour_weight) colour_sum += c;
+  for (std::size_t c = 0; c < K3; ++c) {
+    double sum = 0.0;
+    if (colour_sum > 0.0) {
+      for (int k = 0; k < count; ++k) sum += fit.colour_weight[static_cast<std::size_t>(k)] * m.sh[index[k] * K3 + c];
+      sh_out[c] = static_cast<float>(sum / colour_sum);
+    } else {  // nothing drawn (every child below 1/255): an equal mix
+      for (int k = 0; k < count; ++k) sum += m.sh[index[k] * K3 + c];
+      sh_out[c] = static_cast<float>(sum / count);
+    }
+  }
+  const double alpha = fit.opacity;
   // Floored above the padding's logit (is_lod_padding): a merge is never taken for padding.
   const double floor = 1.0 - kOpacityLogitLimit;
   const double logit = alpha > 0.0 ? std::max(std::log(alpha / (1.0 - alpha)), floor) : floor;

@@ -1,5 +1,6 @@
 // Merging Gaussians for level of detail (issue 37): moment matching, the merge of Hierarchical
-// 3DGS (Kerbl et al., SIGGRAPH 2024, sec. 4), and the 3x3 eigen solver it needs to turn the
+// 3DGS (Kerbl et al., SIGGRAPH 2024, sec. 4) for the shape, a fit to the children's drawing for the
+// opacity and colour (lod_fit.h), and the 3x3 eigen solver it needs to turn the
 // merged covariance back into a scale and a rotation. lod_build.h builds the tree with it.
 #pragma once
 
@@ -41,20 +42,16 @@ struct MergedGaussian {
 //   face-on, the H3DGS weight (opacity times surface); all weights 0 falls back to equal ones;
 // - mean = sum w_i mu_i / sum w_i; covariance = sum w_i (Sigma_i + (mu_i - mu)(mu_i - mu)^T) /
 //   sum w_i (the moments of the weighted mixture);
-// - SH: the mean of the coefficients weighted by alpha_i alone (all 0: an equal mix). A merged
-//   Gaussian is drawn when its cluster is about a pixel wide (lod_build.h), where every child is
-//   a blob of the rasterizer's low-pass size whatever its own, so each adds to the pixel's colour
-//   by its opacity, not its area (measured on the far fly-over frame: docs/history/level_of_detail.md, "Second round");
+// - SH: the mean of the coefficients weighted by each child's share of what the children draw
+//   (lod_fit.h colour_weight: its alpha times the transmittance in front of it, over seven view
+//   directions both ways; nothing drawn: an equal mix);
 // - scale and rotation: the covariance's eigen decomposition (symmetric_eigen3), eigenvalues
 //   floored at 1e-12 (a flat merge stays drawable);
-// - opacity: the optical depth tau = -ln(1 - alpha) integrated over a face-on cross-section is
-//   kept: tau = sum tau_i a_i / a, alpha = min(0.99, 1 - exp(-tau)), a the merged area as above.
-//   Optical depths add along a ray (Beer-Lambert), so two identical Gaussians merge into one of
-//   alpha 1 - (1 - alpha_i)^2, what the pair composites to, and Gaussians side by side spread
-//   their depth over the merged area: a far cluster neither darkens nor fades when it turns into
-//   one Gaussian. (Summing alpha x area instead would double the opacity of a stacked pair.
-//   H3DGS goes on to optimise the merged opacities against the training images; we have none,
-//   so this rule is ours.)
+// - opacity: the peak alpha whose Gaussian covers what the children's composite covers, over the
+//   same directions (lod_fit.h opacity), drawn with its integral kept at any distance
+//   (fm::merged_opacity). The rule before it kept optical depth over the merged area, which
+//   spreads a child's depth over the gaps between children: merges far too opaque (measured:
+//   docs/history/level_of_detail.md, "Fitted merges").
 // One input returns that Gaussian unchanged (spread 0). Throws std::invalid_argument for count
 // < 1.
 MergedGaussian merge_gaussians(const GaussianModel& model, const uint32_t* index, int count, float* sh_out);

@@ -14,6 +14,7 @@
 #define XXH_INLINE_ALL  // header-only, as scene_cache.cpp
 #include <xxhash.h>
 
+#include "forward_model/lod.h"
 #include "ply_format.h"
 #include "scene/file_write.h"
 #include "scene/load_blocks.h"
@@ -45,7 +46,7 @@ struct CompactHeader {
   uint64_t lod_nodes;  // 0 or chunk_count(gaussians)
   SourceStamp source;  // all 0 unless keyed
   uint32_t keyed;
-  uint32_t reserved;
+  uint32_t lod_rule;  // fm::kLodMergeRule of the build that made its merged levels; 0: none, or before it
   uint64_t block_gaussians;
   uint64_t record_bytes;
   uint64_t ranges_offset, lod_offset, hashes_offset, data_offset;
@@ -71,6 +72,7 @@ CompactHeader layout(uint64_t n, int degree, bool lod) {
   h.chunk_size = static_cast<uint32_t>(kChunk);
   const uint64_t chunks = fm::chunk_count(n);
   h.lod_nodes = lod ? chunks : 0;
+  h.lod_rule = lod ? fm::kLodMergeRule : 0;
   h.block_gaussians = kCompactBlockGaussians;
   h.record_bytes = compact_record_bytes(degree);
   h.blocks = (n + kCompactBlockGaussians - 1) / kCompactBlockGaussians;
@@ -479,6 +481,9 @@ GaussianModel read_compact_lod(const std::string& path, const std::string& scene
   }
   if (!o.h.keyed) throw SceneCacheRejected(path, "a compact scene served alone, not keyed to a source");
   if (o.h.lod_nodes == 0) throw SceneCacheRejected(path, "a compact scene without a level of detail");
+  if (o.h.lod_rule != fm::kLodMergeRule)
+    throw SceneCacheRejected(path, "merged levels of merge rule " + std::to_string(o.h.lod_rule) +
+                                       ", this build's is " + std::to_string(fm::kLodMergeRule));
   SourceStamp now;
   try {
     now = source_stamp(scene_path);

@@ -10,6 +10,8 @@
 //            mark, N (Gaussians, padding of a LOD's chunks included), SH degree, chunk size (256),
 //            LOD nodes (0 or chunk_count(N)), the source stamp of a keyed file (size,
 //            modification time in ns, XXH3 of its first 64 KiB; all 0 in a file served alone),
+//            the rule its merged levels were made by (fm::kLodMergeRule; 0 before rule 2: a keyed
+//            LOD file of another rule is rebuilt, a file served alone draws its merges as they are),
 //            the sections' offsets, the file size, an XXH3 of the tables and of the header.
 //   tables   the chunk ranges [chunk_count(N)] (fm::ChunkRanges, forward_model/compact_codes.h, 84 bytes), the LOD nodes
 //            [0 or chunk_count(N)] (fm::LodNode, 32 bytes), the XXH3-64 of each data block

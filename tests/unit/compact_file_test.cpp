@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include "common/image_io.h"
+#include "forward_model/lod.h"
 #include "lod/lod_build.h"
 #include "renderer/renderer.h"
 #include "scene/compact_file.h"
@@ -440,6 +441,18 @@ TEST(CompactScene, KeyedLodFileFollowsItsSource) {
   const std::string alone = dir + "/alone.catgs";
   write_compact_scene(lod, alone);
   rejected(alone, "not keyed");
+  // Merged levels of another merge rule (a build before rule 2 wrote 0 there): rebuilt. The rule
+  // sits at byte 68 of the header, after the source stamp and the keyed flag.
+  std::string bytes = read_bytes(out);
+  uint32_t rule = 0;
+  std::memcpy(&rule, bytes.data() + 68, 4);
+  EXPECT_EQ(rule, fm::kLodMergeRule);
+  const uint32_t old_rule = 0;
+  std::memcpy(&bytes[68], &old_rule, 4);
+  reseal_compact_scene(bytes);
+  const std::string older = dir + "/tw_old_rule.ply.catgs-lod";
+  write_bytes(older, bytes);
+  rejected(older, "merge rule 0, this build's is " + std::to_string(fm::kLodMergeRule));
   fs::last_write_time(scene, fs::last_write_time(scene) + std::chrono::hours(1));
   rejected(out, "the source changed");
   // Full detail from a compact scene with levels: the leaves alone.
