@@ -7,7 +7,7 @@
 //   streaming 320x180 draws at a quarter of the bound, so the cut is as fine relative to its
 //   picture as at 720p (a fixed pixel bound lost far more against a supersampled render at
 //   320x180 than at 720p; docs/history/level_of_detail.md "Level of detail in the server"). Above it the
-//   bound stays as given (the yardstick chose one bound at 720p and at 1080p alike).
+//   bound stays as given (the yardstick chose 2 px at 720p and at 1080p alike).
 // - A splat budget: at most that many Gaussians in a frame's cut, predicted from the LOD tree
 //   before the frame is drawn (CutCounter: the chunks of the cut whose boxes meet the view
 //   frustum, kChunkSize Gaussians each). Over it, the bound steps up a ladder of x sqrt(2) steps
@@ -17,8 +17,9 @@
 //   the budget alone, never on timing: a camera standing still keeps its cut.
 // The ladder stops at a ceiling, --lod-max-error (issue 72): the coarsest bound the budget may
 // raise a frame to, at `reference_lines` and scaled with the size as the bound is (by default
-// one x sqrt(2) step above the default 4 px, within 1 dB of 4 px's picture on the yardstick's
-// three real paths; RESULTS.md "Level of detail"). A frame whose cut at the ceiling still passes the
+// three x sqrt(2) steps above the default 2 px: with the merged levels fitted to their children
+// (issue 72), the coarsest step within 1 dB of 2 px's picture on the yardstick's three real
+// paths; RESULTS.md "Level of detail"). A frame whose cut at the ceiling still passes the
 // budget draws at the ceiling over budget (LodBoundChooser::over_budget); after kShortStreak such
 // frames in a row of one session, the door refuses the GPU's next visitor
 // (ServerMetrics::gpu_budget_short) rather than blur or slow every visitor's view.

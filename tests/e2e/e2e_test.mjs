@@ -393,9 +393,11 @@ async function run() {
 
 // A server stopped with Ctrl-C (SIGINT) and started again on its port (issue 75): the page says
 // "server stopping" until it streams again, never "disconnected" (a stop is not a network fault),
-// is connected again within 2 s of the server answering HTTP (it retries every second) and then
-// streams. (The first frame's time after that is the machine's load, not the retry: a
-// clean-clone run at bd5e2a6 beside an 18 GB benchmark took 2.8 s to it, so it is not bounded.)
+// is connected again within 3.5 s of the server answering HTTP and then streams. The page retries
+// every second; an attempt that lands while the scene still loads is told "server starting ...
+// retry after 2000 ms" (seen: connected after 2177 ms so), hence 1 s + 2 s + margin. (The first
+// frame's time after that is the machine's load, not the retry: a clean-clone run at bd5e2a6
+// beside an 18 GB benchmark took 2.8 s to it, so it is not bounded.)
 async function checkServerStop() {
   const first = await startServer();
   const page = await context.newPage();
@@ -420,7 +422,7 @@ async function checkServerStop() {
   const streamed = await waitFor('the page to stream again', async () => (await page.evaluate(() => window.catgs.framesDecoded)) > before, 15000)
     .then(() => true, () => false);
   const took = Date.now() - back;
-  check(connected && tookConnect <= 2000, `the page is connected again ${tookConnect} ms after the server's return (<= 2000 ms)`);
+  check(connected && tookConnect <= 3500, `the page is connected again ${tookConnect} ms after the server's return (<= 3500 ms)`);
   check(streamed, `...and streams again (${took} ms after the server's return)`);
   await page.screenshot({ path: path.join(outDir, 'server_back.png') });
   await page.close();

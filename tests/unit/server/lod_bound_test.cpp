@@ -1,5 +1,5 @@
 // Each frame's level-of-detail bound (issue 46, server/render/lod_bound.h): the bound scaled with
-// the session's size, judged by the yardstick that chose the 4 px default (full detail rendered
+// the session's size, judged by the yardstick that chose the 2 px default (full detail rendered
 // 4x larger each way and box-filtered down, as catgs-bench --aa-reference 4); the cut's predicted
 // count against the cut the CPU core draws; the splat budget's ladder, its hysteresis and its
 // determinism; the auto budget's sizing. On a 9-copy city of the real flowers_sh3 scene.
@@ -41,7 +41,7 @@ TEST(LodBound, ScalesWithTheShorterSideBelowTheReference) {
   EXPECT_EQ(size_scaled_lod_bound(0.0f, 320, 180, 720), 0.0f);  // full detail stays full
   ServerOptions defaults;
   EXPECT_EQ(defaults.lod, "write");  // on by default (issue 46)
-  EXPECT_FLOAT_EQ(defaults.lod_error_px, 4.0f);
+  EXPECT_FLOAT_EQ(defaults.lod_error_px, 2.0f);
   EXPECT_TRUE(defaults.auto_splat_budget);
 }
 
@@ -244,7 +244,7 @@ TEST(LodBound, SplatBudgetOption) {
   const char* a3[] = {"catgs-server", "--splat-budget", "lots"};
   ServerOptions o3;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a3), o3), std::invalid_argument);
-  // --lod-max-error: one step above the 4 px default, a value, or off (the ladder's top).
+  // --lod-max-error: three steps above the 2 px default, a value, or off (the ladder's top).
   EXPECT_NEAR(session_settings(ServerOptions{}).frame.lod.max_bound_px, 5.657f, 1e-3f);
   const char* a4[] = {"catgs-server", "--lod-max-error", "4"};
   ServerOptions o4;
