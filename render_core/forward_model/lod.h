@@ -90,7 +90,7 @@ CATGS_HD float lod_error_px(const LodNode& n, glm::vec3 eye, float focal) {
 }
 
 // Is chunk c a merged level's (error > 0)? Its Gaussians are drawn with their coverage kept
-// (merged_opacity below). `nodes`: the scene's LodNode array, null for a scene without LOD.
+// (drawn_opacity below). `nodes`: the scene's LodNode array, null for a scene without LOD.
 CATGS_HD bool lod_chunk_merged(const LodNode* nodes, uint64_t c) { return nodes != nullptr && nodes[c].error > 0.0f; }
 
 // The peak opacity a Gaussian is drawn with, from its opacity and its 2D covariance `cov`

@@ -52,7 +52,8 @@ struct MergedGaussian {
 //   (fm::merged_opacity). The rule before it kept optical depth over the merged area, which
 //   spreads a child's depth over the gaps between children: merges far too opaque (measured:
 //   docs/history/level_of_detail.md, "Fitted merges").
-// One input returns that Gaussian unchanged (spread 0). Throws std::invalid_argument for count
+// One input returns that Gaussian unchanged (spread 0); in a merged level it is still drawn with
+// its coverage kept (fm::drawn_opacity), as the supersampled reference covers it. Throws std::invalid_argument for count
 // < 1.
 MergedGaussian merge_gaussians(const GaussianModel& model, const uint32_t* index, int count, float* sh_out);
 
