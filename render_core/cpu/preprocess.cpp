@@ -112,10 +112,12 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) return;
   // A merged Gaussian keeps its coverage under the low-pass (fm::drawn_opacity): a lower peak,
-  // and so a tighter q_max. The culls above read the undrawn opacity's, which is no smaller.
+  // and so a tighter q_max (fm::drawn_qmax, a bound of IEEE operations only, so both cores list
+  // the same tiles). The culls above read the undrawn opacity's, which is no smaller.
   if (fm::lod_chunk_merged(v.lod_nodes, i / fm::kChunkSize)) {
-    opacity = fm::drawn_opacity(opacity, cov2, true);
-    q_max = fm::opacity_aware_qmax(opacity);
+    const float scale = fm::drawn_scale(cov2, true);
+    opacity *= scale;
+    q_max = fm::drawn_qmax(q_max, scale);
     if (v.exact && !(q_max > 0.0f)) return;
   }
   fm::TileRect rect;

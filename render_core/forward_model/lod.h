@@ -102,12 +102,28 @@ CATGS_HD bool lod_chunk_merged(const LodNode* nodes, uint64_t c) { return nodes 
 // any distance: sqrt(det(cov - kLowPass I) / det(cov)), the normalisation of Mip-Splatting's 2D
 // filter (Yu et al., CVPR 2024, eq. 9). Without it a round merged Gaussian of one pixel's std dev
 // covers 1.3 times what it stands for, of half a pixel's 2.2 times (docs/history/level_of_detail.md,
-// "Fitted merges").
-CATGS_HD float drawn_opacity(float opacity, glm::vec3 cov, bool merged) {
-  if (!merged) return opacity;
+// "Fitted merges"). drawn_scale is that factor (1 for a leaf), drawn_opacity the product.
+CATGS_HD float drawn_scale(glm::vec3 cov, bool merged) {
+  if (!merged) return 1.0f;
   const float det = cov.x * cov.z - cov.y * cov.y;
   const float det_own = (cov.x - kLowPass) * (cov.z - kLowPass) - cov.y * cov.y;
-  return det > 0.0f ? opacity * sqrtf(fmaxf(det_own, 0.0f) / det) : opacity;
+  return det > 0.0f ? sqrtf(fmaxf(det_own, 0.0f) / det) : 1.0f;
+}
+CATGS_HD float drawn_opacity(float opacity, glm::vec3 cov, bool merged) {
+  return opacity * drawn_scale(cov, merged);
+}
+
+// The q_max (opacity_aware_qmax) of a Gaussian drawn at opacity x `scale` (drawn_scale, in
+// (0, 1]), from the undrawn opacity's `q_max`, never smaller than the exact 2 ln(255 opacity
+// scale): 2 ln(scale) = 8 ln(scale^(1/4)) <= 8 (scale^(1/4) - 1), as ln x <= x - 1. Only
+// correctly rounded operations (sqrt, products, sums that never fuse), so the CPU and every CUDA
+// kernel list the same tiles: CUDA's logf is within 1 ulp, not correctly rounded, and with a
+// second logf per merged Gaussian the two cores' lists differed by one entry of 1.36 M
+// (gpu.Compact, 13-copy city at 4 px, H200). A larger q_max lists a few more tiles; the rasterizers still blend only
+// alpha >= 1/255. scale 1 (a leaf) gives q_max itself.
+CATGS_HD float drawn_qmax(float q_max, float scale) {
+  if (!(scale < 1.0f)) return q_max;
+  return lod_add(q_max, lod_mul(8.0f, lod_add(sqrtf(sqrtf(scale)), -1.0f)));
 }
 
 // Is chunk c drawn in view v at bound tau (pixels)? `nodes`: the scene's LodNode array (see

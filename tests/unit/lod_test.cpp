@@ -212,6 +212,23 @@ TEST(LodDraw, MergedGaussianCoversWhatItIsAtAnySize) {
   }
 }
 
+// fm::drawn_qmax bounds the drawn Gaussian's q_max from above without a second logarithm: never
+// below 2 ln(255 opacity scale) (else a tile the Gaussian blends in would go unlisted), within
+// 0.3 of it while the drawn peak keeps a third of the undrawn one (else the bound lists needless
+// tiles), and exact for a leaf.
+TEST(LodDraw, DrawnQmaxBoundsTheDrawnPeaksFromAbove) {
+  for (float opacity : {0.01f, 0.1f, 0.5f, 0.99f}) {
+    const float q_max = fm::opacity_aware_qmax(opacity);
+    EXPECT_EQ(fm::drawn_qmax(q_max, 1.0f), q_max);
+    for (float scale = 1e-4f; scale < 1.0f; scale *= 1.05f) {
+      const double exact = 2.0 * std::log(255.0 * opacity * scale);
+      const float bound = fm::drawn_qmax(q_max, scale);
+      EXPECT_GE(bound, exact - 1e-5) << opacity << " x " << scale;
+      if (scale >= 1.0f / 3.0f) EXPECT_LE(bound, exact + 0.3) << opacity << " x " << scale;
+    }
+  }
+}
+
 TEST(LodMerge, EigenSolverReconstructsItsInput) {
   std::mt19937 rng(37);
   std::uniform_real_distribution<double> u(-2.0, 2.0);
