@@ -45,19 +45,19 @@ struct ServerOptions {
   // file is still served from it).
   std::uint64_t lod_min_gaussians = 2000000;
   // --lod-error: the level-of-detail bound in pixels at 720 lines, scaled down with a smaller
-  // session's shorter side (render/lod_bound.h; 0 = full detail). The default is the coarsest
-  // bound measured within 0.5 dB of full detail's own PSNR against a 4x supersampled render on
-  // the city's real paths (RESULTS.md, "Level of detail"). With the fitted merges (issue 72) 4 px
-  // also is on the CPU reference, but at 160x120 its frames fell to 30 dB against full detail
-  // (2 px: 36), a size the yardstick has not judged: it stays 2 until it has, on a GPU too.
-  float lod_error_px = 2.0f;
+  // session's shorter side (render/lod_bound.h; 0 = full detail). 4 px (issue 72): with the
+  // fitted merges its picture against a 4x supersampled render is no worse than the 2 px cut
+  // before them on the real paths (GPU, 197-copy city, 720p: +0.61 / +2.29 / +0.31 dB) and at
+  // 160x120 (the bundled scene: 2.3 dB nearer than full detail), at about half the list entries
+  // (RESULTS.md, "Level of detail").
+  float lod_error_px = 4.0f;
   // --splat-budget: Gaussians a frame's LOD cut may hold (render/lod_bound.h): N, 0 = none, or
   // "auto" (the default; CUDA sessions only), sized from the GPU's measured throughput.
   std::uint64_t splat_budget = 0;
   bool auto_splat_budget = true;
   // --lod-max-error: the coarsest bound the splat budget may raise a frame to (LodSettings::
   // max_bound_px; 0 = off, the ladder's top). Past it the door refuses the GPU's next visitor.
-  float lod_max_error_px = 2.0f * 2.82842712f;
+  float lod_max_error_px = 4.0f * 1.41421356f;
   // --splat-budget-share: the share of a GPU's measured throughput the auto budget hands out.
   double splat_budget_share = 0.4;
   // --occlusion-cull on|off: exact frames drop the list entries that the session's last frame

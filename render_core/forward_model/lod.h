@@ -109,9 +109,7 @@ CATGS_HD float drawn_scale(glm::vec3 cov, bool merged) {
   const float det_own = (cov.x - kLowPass) * (cov.z - kLowPass) - cov.y * cov.y;
   return det > 0.0f ? sqrtf(fmaxf(det_own, 0.0f) / det) : 1.0f;
 }
-CATGS_HD float drawn_opacity(float opacity, glm::vec3 cov, bool merged) {
-  return opacity * drawn_scale(cov, merged);
-}
+CATGS_HD float drawn_opacity(float opacity, glm::vec3 cov, bool merged) { return opacity * drawn_scale(cov, merged); }
 
 // The q_max (opacity_aware_qmax) of a Gaussian drawn at opacity x `scale` (drawn_scale, in
 // (0, 1]), from the undrawn opacity's `q_max`, never smaller than the exact 2 ln(255 opacity

@@ -317,6 +317,26 @@ TEST(MultiSession, LoadgenAsksForASceneByName) {
   std::filesystem::remove(json_path);
 }
 
+// The reference check draws each frame's reference at the LOD bound the server drew it at (issue
+// 72): the biker served with its level of detail at 4 px (0.67 px at 160x120, where its frames
+// are about 30 dB from full detail, nearer the supersampled render than full detail is) passes a
+// 35 dB bar, which a full-detail reference would fail; the frames say they were drawn from the cut.
+TEST(MultiSession, LoadgenChecksFramesAtTheirLodBound) {
+  ServerProcess server(
+      server_args(kBiker, {"--lod-min-gaussians", "0", "--lod-error", "4", "--crf", "18", "--bitrate", "off"}));
+  const std::string json_path = "/tmp/catgs-itest-lod-check-" + std::to_string(server.port()) + ".json";
+  const std::string cmd = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
+                          kBiker + " --size 160x120 --rate 10 --seconds 2 --warmup 0 --check-every 2" +
+                          " --check-min-psnr 35 --json " + json_path + " > /dev/null";
+  EXPECT_EQ(std::system(cmd.c_str()), 0);
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));
+  const auto& s = j["run"]["sessions"][0];
+  EXPECT_GT(s["checked"].get<int>(), 0) << s.dump();
+  EXPECT_GE(s["psnr_min_db"].get<double>(), 35.0) << s.dump();
+  EXPECT_NEAR(s["server"]["lod_error_px_max"].get<double>(), 4.0 * 120 / 720, 0.01) << s.dump();
+  std::filesystem::remove(json_path);
+}
+
 // catgs-loadgen against a full server: one session streams, the other is refused. The refused
 // one is reported as refused (status, refusal, no numbers), the run exits 3 (refused, nothing
 // failed), no PSNR is claimed for unchecked frames, and the progress line shows on stderr while

@@ -107,7 +107,9 @@ class PoseLoop {
  public:
   PoseLoop(const LoadSessionConfig& cfg, SessionResult& r, StreamClient& client, Trace trace)
       : cfg_(cfg), r_(r), client_(client), trace_(std::move(trace)), check_(cfg.check_every > 0) {
-    if (check_ || cfg.still_s > 0) reference_ = std::make_unique<cpu::CpuRenderer>(cfg.scene, RenderOptions{});
+    if (check_ || cfg.still_s > 0)
+      reference_ =
+          std::make_unique<cpu::CpuRenderer>(cfg.reference_scene ? cfg.reference_scene : cfg.scene, RenderOptions{});
     // The clock starts once everything is ready: set-up is not sending time.
     t0_ = Clock::now();
     send_end_ = t0_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(cfg.seconds));
@@ -281,6 +283,7 @@ class PoseLoop {
       if (got) {
         r_.decoded++;
         shown_pose_ = f.pose_sequence();
+        shown_bound_px_ = f.timings().lod_error_px();
         have_shown_ = f.pose_sequence() < sent_poses_.size();
       }
       // The server may change the size (adaptive quality: a slow host or link); every frame
@@ -290,14 +293,21 @@ class PoseLoop {
                            std::to_string(f.width()) + "x" + std::to_string(f.height()));
       if (got && check_ && r_.frames % static_cast<std::uint64_t>(cfg_.check_every) == 0 &&
           f.pose_sequence() < sent_poses_.size())
-        check_against_reference(f.pose_sequence(), w, h);
+        check_against_reference(f.pose_sequence(), f.timings().lod_error_px(), w, h);
     } catch (const std::exception& e) {
       note_error(r_, std::string("decode: ") + e.what());
     }
   }
 
-  // The decoded picture (rgba_, w x h) against the CPU reference render of the pose it answers.
-  double reference_psnr(std::uint32_t pose_sequence, int w, int h) {
+  // The decoded picture (rgba_, w x h) against the CPU reference render of the pose it answers,
+  // at the LOD bound the server drew it at (`bound_px`, frame pixels; drawn only where the
+  // reference scene has its level of detail: LoadSessionConfig::reference_scene).
+  double reference_psnr(std::uint32_t pose_sequence, float bound_px, int w, int h) {
+    if (reference_->options().lod_error_px != bound_px) {
+      RenderOptions o = reference_->options();
+      o.lod_error_px = bound_px;
+      reference_->set_options(o);
+    }
     Image decoded_image, want;
     decoded_image.width = w;
     decoded_image.height = h;
@@ -306,8 +316,8 @@ class PoseLoop {
     return psnr_rgba8(decoded_image, want);
   }
 
-  void check_against_reference(std::uint32_t pose_sequence, int w, int h) {
-    const double psnr = reference_psnr(pose_sequence, w, h);
+  void check_against_reference(std::uint32_t pose_sequence, float bound_px, int w, int h) {
+    const double psnr = reference_psnr(pose_sequence, bound_px, w, h);
     r_.psnr_min = r_.checked == 0 ? psnr : std::min(r_.psnr_min, psnr);
     psnr_sum_ += psnr;
     r_.checked++;
@@ -319,7 +329,7 @@ class PoseLoop {
   double shown_psnr() {
     const int w = frame_width_, h = frame_height_;
     if (rgba_.size() != static_cast<std::size_t>(w) * h * 4) return 0;
-    return reference_psnr(shown_pose_, w, h);
+    return reference_psnr(shown_pose_, shown_bound_px_, w, h);
   }
 
   // The camera stopped at send_end_: the picture shown 1 s and 3 s later.
@@ -376,6 +386,7 @@ class PoseLoop {
   std::vector<pb::Pose> sent_poses_;             // reference check: each pose as sent, by sequence
   std::unique_ptr<cpu::CpuRenderer> reference_;  // reference checks and the still picture's
   std::uint32_t shown_pose_ = 0;                 // the pose of the newest decoded picture
+  float shown_bound_px_ = 0;                     // and the LOD bound it was drawn at
   bool have_shown_ = false;
   // Away from the socket longer than this: the frames read next arrived earlier than read.
   static constexpr std::chrono::milliseconds kLateReadMs{50};

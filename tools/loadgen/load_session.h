@@ -52,9 +52,14 @@ struct LoadSessionConfig {
   std::string scene_name;                      // Hello.scene: a name from the server's GET /scenes; "" its first scene
   std::string trace = "orbit";                 // make_load_trace spec
   std::shared_ptr<const GaussianModel> scene;  // optional; needed by "real:" traces
-  double offset_s = 0;                         // start this far into the trace
-  double arrive_after_s = 0;                   // connect this long after the run starts (visitors arriving in turn)
-  double rate_hz = 60;                         // poses per second; 0: closed loop (`depth` poses outstanding)
+  // The reference checks' scene: `scene` with its level of detail (lod/lod_build.h, built as the
+  // server builds it), so a frame is compared with the reference drawn at the bound the server
+  // drew it at (FrameTimings.lod_error_px; 0: the leaves, which are `scene` bit for bit). Null:
+  // `scene` itself, every reference at full detail.
+  std::shared_ptr<const GaussianModel> reference_scene;
+  double offset_s = 0;        // start this far into the trace
+  double arrive_after_s = 0;  // connect this long after the run starts (visitors arriving in turn)
+  double rate_hz = 60;        // poses per second; 0: closed loop (`depth` poses outstanding)
   int depth = 1;
   double seconds = 10;     // how long poses are sent
   bool decode = false;     // decode every frame (latency then ends at the decoded picture)
@@ -69,8 +74,8 @@ struct LoadSessionConfig {
   double stale_ms = 100;   // a frame later than this after its pose counts as stale
   double drain_ms = 1000;  // after the last pose, wait this long at most for its frame
   // Reference check (implies decode): every check_every-th frame is compared with the CPU
-  // reference render (exact pipeline, black background) of the pose it answers, over `scene`
-  // (required). 0: off. The CPU render blocks this session's thread: latency and FPS of a
+  // reference render (exact pipeline, black background) of the pose it answers, over
+  // `reference_scene` at the frame's LOD bound, else `scene` (one of them required). 0: off. The CPU render blocks this session's thread: latency and FPS of a
   // checking run are not the server's.
   int check_every = 0;
   double check_min_psnr = 30;  // dB; frames below count in SessionResult::check_failures
