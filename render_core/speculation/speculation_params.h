@@ -55,7 +55,8 @@ struct SpeculationParams {
   // pose stamped nearest k / F_target after its key frame. 0 (the default): the pose clock's own
   // rate, measured from the poses' stamps (MotionPredictor::pose_interval_s), so a session sending
   // 60 poses/s speculates over 60 Hz steps (issue 48: a fixed 120 put sub-frames 3 and 4 of a
-  // 60 Hz session past the trail's end).
+  // 60 Hz session past the trail's end). A clock slower than 30 Hz counts as 30 Hz
+  // (SpeculationPlanner::kLongestPoseInterval_s).
   double target_fps = 0.0;
 
   // The paper's ablations (Tables 1 and 3).

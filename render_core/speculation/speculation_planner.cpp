@@ -32,7 +32,7 @@ void SpeculationPlanner::set_params(const SpeculationParams& params) {
 double SpeculationPlanner::frame_interval_s() const {
   if (params_.target_fps > 0.0) return 1.0 / params_.target_fps;
   const double measured = predictor_.pose_interval_s();
-  return measured > 0.0 ? measured : 1.0 / 120.0;
+  return measured > 0.0 ? std::min(measured, kLongestPoseInterval_s) : 1.0 / 120.0;
 }
 
 bool SpeculationPlanner::observe(const Camera& camera, double time_s) {

@@ -395,10 +395,12 @@ TEST(MultiSession, LoadgenReportsRefusedSessionsSkipsAndProgress) {
 // compares every 3rd with the CPU reference render of its pose (exit 0 only if all >= 30 dB and
 // every session checked some); an impossible bar must fail the run. One render lane serves the
 // three closed-loop sessions first come first served, so none falls far behind the others.
-// CRF 18, not the default 23: the test is about the check and the lanes. At 23 a loaded CI
-// machine once coded a checked frame of these tiny pictures at 28.6 and 29.3 dB, under the bar
-// (means 36-37 dB; link control never limited them; cause not established). 18 lifts every
-// session's least PSNR by about 3 dB (here: 35.9-38.2 dB at 23, 38.9-41.2 at 18).
+// CRF 18, not the default 23: the test is about the check and the lanes (here: least PSNR
+// 35.9-38.2 dB at 23, 38.9-41.2 at 18). A loaded CI machine checked frames at 28.6, 29.3 (CRF 23)
+// and 28.4 dB (CRF 18): catgs sub-frames of a closed loop at 1.6-6 poses/s, whose windows then
+// spanned seconds of the orbit (23-34 dB against the exact render, every checked frame; the key
+// frames 38 dB and more). The planner now counts a pose clock under 30 Hz as 30 Hz
+// (SpeculationPlanner::kLongestPoseInterval_s), so such poses are key frames.
 TEST(MultiSession, LoadgenReferenceCheckAndFairRenderLanes) {
   ServerProcess server(
       server_args(kBiker, {"--pipeline", "catgs", "--render-lanes", "1", "--threads", "3", "--crf", "18"}));

@@ -2,6 +2,7 @@
 // from the stamps, sub-frames indexed by time, the backoff's threshold scaled with the window, the
 // predictor's fit the same at 30, 60 and 120 poses/s, and windows that open only where the
 // measured costs say they repay.
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 
@@ -65,6 +66,18 @@ TEST(SpeculationClock, SubFramesFollowTheSessionsOwnPoseRate) {
   SpeculationPlanner planner(fixed);
   const std::vector<int> frames = drive(planner, clock_at(60.0, 8), 4);
   EXPECT_EQ(frames, (std::vector<int>{4, -1, -1, 0, 0, 0, 0, 4}));
+}
+
+// A slow pose clock (a busy closed-loop client) stretches no window past (W + 1/2) / 30 s: at 3 and
+// 5 poses/s no pose falls in one and none is a sub-frame (before the cap, each group of 4 served
+// every pose for up to 1.5 s); 30 poses/s is as above.
+TEST(SpeculationClock, ASlowPoseClockServesNoSubFrames) {
+  for (double rate : {3.0, 5.0}) {
+    SpeculationPlanner planner;
+    const std::vector<int> frames = drive(planner, clock_at(rate, 11), 4);
+    EXPECT_EQ(std::count(frames.begin(), frames.end(), -1), 0) << rate << " poses/s";
+    EXPECT_NEAR(planner.frame_interval_s(), SpeculationPlanner::kLongestPoseInterval_s, 1e-12) << rate;
+  }
 }
 
 // A pose the server skipped (rendered late under load) does not make the next one the trail's
