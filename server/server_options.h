@@ -47,9 +47,8 @@ struct ServerOptions {
   // --lod-error: the level-of-detail bound in pixels at 720 lines, scaled down with a smaller
   // session's shorter side (render/lod_bound.h; 0 = full detail). 4 px (issue 72): with the
   // fitted merges its picture against a 4x supersampled render is no worse than the 2 px cut
-  // before them on the real paths (GPU, 197-copy city, 720p: +0.61 / +2.29 / +0.31 dB) and at
-  // 160x120 (the bundled scene: 2.3 dB nearer than full detail), at about half the list entries
-  // (RESULTS.md, "Level of detail").
+  // before them on the real paths and at 160x120, at about half the list entries (the table:
+  // RESULTS.md, "Level of detail").
   float lod_error_px = 4.0f;
   // --splat-budget: Gaussians a frame's LOD cut may hold (render/lod_bound.h): N, 0 = none, or
   // "auto" (the default; CUDA sessions only), sized from the GPU's measured throughput.

@@ -115,10 +115,10 @@ CATGS_HD float drawn_opacity(float opacity, glm::vec3 cov, bool merged) { return
 // (0, 1]), from the undrawn opacity's `q_max`, never smaller than the exact 2 ln(255 opacity
 // scale): 2 ln(scale) = 8 ln(scale^(1/4)) <= 8 (scale^(1/4) - 1), as ln x <= x - 1. Only
 // correctly rounded operations (sqrt, products, sums that never fuse), so the CPU and every CUDA
-// kernel list the same tiles: CUDA's logf is within 1 ulp, not correctly rounded, and with a
-// second logf per merged Gaussian the two cores' lists differed by one entry of 1.36 M
-// (gpu.Compact, 13-copy city at 4 px, H200). A larger q_max lists a few more tiles; the rasterizers still blend only
-// alpha >= 1/255. scale 1 (a leaf) gives q_max itself.
+// kernel list the same tiles: CUDA's logf is not correctly rounded, and a second logf per merged
+// Gaussian made the two cores' lists differ (docs/history/level_of_detail.md, "The fitted merges
+// on a GPU"). A larger q_max lists a few more tiles; the rasterizers still blend only alpha >=
+// 1/255. scale 1 (a leaf) gives q_max itself.
 CATGS_HD float drawn_qmax(float q_max, float scale) {
   if (!(scale < 1.0f)) return q_max;
   return lod_add(q_max, lod_mul(8.0f, lod_add(sqrtf(sqrtf(scale)), -1.0f)));

@@ -49,7 +49,7 @@ struct MergedGaussian {
 //   floored at 1e-12 (a flat merge stays drawable);
 // - opacity: the peak alpha whose Gaussian covers what the children's composite covers, over the
 //   same directions (lod_fit.h opacity), drawn with its integral kept at any distance
-//   (fm::merged_opacity). The rule before it kept optical depth over the merged area, which
+//   (fm::drawn_opacity). The rule before it kept optical depth over the merged area, which
 //   spreads a child's depth over the gaps between children: merges far too opaque (measured:
 //   docs/history/level_of_detail.md, "Fitted merges").
 // One input returns that Gaussian unchanged (spread 0); in a merged level it is still drawn with

@@ -49,11 +49,10 @@ class SpeculationPlanner {
   // s before two poses), at most kLongestPoseInterval_s.
   double frame_interval_s() const;
   // A pose clock slower than 30 Hz does not stretch a group's window: a sub-frame blends in its
-  // key frame's depth order, which holds only while the camera has moved little. A closed-loop
-  // client at 1.6-6 poses/s (a busy CI machine) had windows of 4 span 0.7-2.8 s, 25-100 degrees
-  // of its orbit, and those sub-frames scored 23-34 dB against the exact render where the key
-  // frames scored 38 and more (MultiSession.LoadgenReferenceCheckAndFairRenderLanes). Slower
-  // clients' poses fall outside the window and are key frames.
+  // key frame's depth order, which holds only while the camera has moved little; a slow
+  // closed-loop client's windows spanned seconds of its path and its sub-frames fell far from
+  // the exact render (docs/history/speculation.md, "A slow pose clock"). Slower clients' poses
+  // fall outside the window and are key frames.
   static constexpr double kLongestPoseInterval_s = 1.0 / 30.0;
 
   // Whether a key frame may speculate at all (caching on, W_initial > 0, a motion history, no

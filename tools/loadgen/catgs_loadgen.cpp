@@ -55,7 +55,8 @@ const char* kUsage =
     "  --av1                    offer AV1 in Hello (before H.264): the server streams it where\n"
     "                           its policy affords it; frames of either codec are decoded\n"
     "  --check-every N          decode, and compare every Nth frame with the CPU reference\n"
-    "                           render of its pose (needs --scene; slows the client down)\n"
+    "                           render of its pose at the LOD bound it was drawn at (needs\n"
+    "                           --scene; slows the client down)\n"
     "  --check-min-psnr DB      a checked frame below this fails the run (default 30)\n"
     "  --warmup N               first N frames of a session left out of the statistics (5)\n"
     "  --timeline               every frame's arrival time, latency, size, bytes and time in\n"
@@ -148,18 +149,24 @@ std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConf
   return results;
 }
 
-// The reference checks' scene: `scene` (read from `path`) with its level of detail, built as the
-// server builds it (server/process/scene_with_lod.cpp: default options, a compressed PLY's chunks
-// kept as the leaves), so each checked frame is compared with the reference at the bound the
-// server drew it at, not with full detail: a cut 4 px coarse differs from full detail by design
-// (on the bundled scene at 160x120, 30 dB from full detail and 2.3 dB nearer the supersampled
-// render than full detail is). A scene the server serves without its level of detail reports
-// bound 0, whose reference is the leaves: the scene bit for bit.
-std::shared_ptr<const GaussianModel> reference_scene(const std::string& path, const GaussianModel& scene) {
+// The reference checks' scene: `scene` (read from `path`) with its level of detail: its own where
+// it brings one (a compact scene), else built as the server builds it
+// (server/process/scene_with_lod.cpp: default options, a compressed PLY's chunks kept as the
+// leaves), so each checked frame is compared with the reference at the bound the server drew it
+// at, not with full detail, which a coarse cut differs from by design (RESULTS.md, "Level of
+// detail"). A scene the server serves without its level of detail reports bound 0, whose
+// reference is the leaves: the scene bit for bit.
+std::shared_ptr<const GaussianModel> reference_scene(const std::string& path,
+                                                     const std::shared_ptr<const GaussianModel>& scene) {
+  if (!scene->lod.empty()) return scene;
   LodBuildOptions o;
-  o.keep_order = peek_scene(path).format == "compressed_ply";
+  try {
+    o.keep_order = peek_scene(path).format == "compressed_ply";
+  } catch (const std::exception&) {
+    o.keep_order = false;  // read already: a file that will not peek is not a compressed PLY
+  }
   LodBuildReport report;
-  auto lod = std::make_shared<const GaussianModel>(build_lod(scene, o, &report));
+  auto lod = std::make_shared<const GaussianModel>(build_lod(*scene, o, &report));
   std::cout << "reference: level of detail built in " << static_cast<long>(report.seconds * 1000) << " ms ("
             << lod->size() - lod_leaf_gaussians(*lod) << " merged Gaussians)\n";
   return lod;
@@ -214,7 +221,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
     base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
     std::cout << "scene " << args.get("--scene") << ": " << base.scene->size() << " Gaussians\n";
     if (base.check_every > 0 || base.still_s > 0)
-      base.reference_scene = reference_scene(args.get("--scene"), *base.scene);
+      base.reference_scene = reference_scene(args.get("--scene"), base.scene);
   }
   return base;
 }
