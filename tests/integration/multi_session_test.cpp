@@ -322,8 +322,13 @@ TEST(MultiSession, LoadgenAsksForASceneByName) {
 // are about 30 dB from full detail, nearer the supersampled render than full detail is) passes a
 // 35 dB bar, which a full-detail reference would fail; the frames say they were drawn from the cut.
 TEST(MultiSession, LoadgenChecksFramesAtTheirLodBound) {
-  ServerProcess server(
-      server_args(kBiker, {"--lod-min-gaussians", "0", "--lod-error", "4", "--crf", "18", "--bitrate", "off"}));
+  // A cache folder of its own: the biker's LOD file written there would be served to every later
+  // test's server (a LOD file is used whatever --lod-min-gaussians says), whose checks expect full
+  // detail. The later --cache-dir wins.
+  const std::filesystem::path cache = std::filesystem::temp_directory_path() / "catgs-itest-cache-lod-check";
+  std::filesystem::remove_all(cache);
+  ServerProcess server(server_args(kBiker, {"--lod-min-gaussians", "0", "--lod-error", "4", "--crf", "18", "--bitrate",
+                                            "off", "--cache-dir", cache.string()}));
   const std::string json_path = "/tmp/catgs-itest-lod-check-" + std::to_string(server.port()) + ".json";
   const std::string cmd = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
                           kBiker + " --size 160x120 --rate 10 --seconds 2 --warmup 0 --check-every 2" +
@@ -335,6 +340,7 @@ TEST(MultiSession, LoadgenChecksFramesAtTheirLodBound) {
   EXPECT_GE(s["psnr_min_db"].get<double>(), 35.0) << s.dump();
   EXPECT_NEAR(s["server"]["lod_error_px_max"].get<double>(), 4.0 * 120 / 720, 0.01) << s.dump();
   std::filesystem::remove(json_path);
+  std::filesystem::remove_all(cache);
 }
 
 // catgs-loadgen against a full server: one session streams, the other is refused. The refused
