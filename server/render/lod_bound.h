@@ -82,6 +82,11 @@ class CutCounter {
   // by `camera`, counting only chunks whose node box (of its leaves' means) meets the view frustum
   // widened by 15% on each side.
   std::uint64_t splats(const Camera& camera, float tau) const;
+  // The counts at two bounds, `coarse` >= `fine`, in one walk of the tree (the finer cut's).
+  struct Counts {
+    std::uint64_t coarse = 0, fine = 0;
+  };
+  Counts splats(const Camera& camera, float coarse, float fine) const;
 
  private:
   const GaussianModel& model_;

@@ -117,6 +117,61 @@ TEST(LodBound, PredictedCountBracketsTheCutTheCoreDraws) {
   EXPECT_LT(counter.splats(away, 2.0f), counter.splats(c.views.front(), 2.0f) / 4);
 }
 
+// Whether a node's box lies wholly beyond one plane of the view frustum widened by 15% on each
+// side, worked out from its eight corners (the oracle for CutCounter's centre-and-extent test).
+bool box_outside_by_corners(const fm::LodNode& n, const Camera& cam) {
+  const float w = static_cast<float>(cam.width), h = static_cast<float>(cam.height);
+  const float left = cam.cx + 0.15f * w, right = cam.cx - 1.15f * w;
+  const float top = cam.cy + 0.15f * h, bottom = cam.cy - 1.15f * h;
+  int out[5] = {0, 0, 0, 0, 0};
+  for (int k = 0; k < 8; ++k) {
+    const glm::vec3 corner((k & 1) ? n.hi[0] : n.lo[0], (k & 2) ? n.hi[1] : n.lo[1], (k & 4) ? n.hi[2] : n.lo[2]);
+    const glm::vec3 p = cam.R * corner + cam.t;
+    out[0] += p.z < cam.near_plane;
+    out[1] += cam.fx * p.x + left * p.z < 0.0f;
+    out[2] += cam.fx * p.x + right * p.z > 0.0f;
+    out[3] += cam.fy * p.y + top * p.z < 0.0f;
+    out[4] += cam.fy * p.y + bottom * p.z > 0.0f;
+  }
+  for (int plane : out)
+    if (plane == 8) return true;
+  return false;
+}
+
+// The count, chunk by chunk from the cut the CPU core draws (fm::lod_cut) and each drawn chunk's
+// own box by its corners (a box beyond a plane holds only boxes beyond it, so no ancestor need be
+// tested); and the one walk that counts two bounds gives each bound's count.
+TEST(LodBound, CountIsTheCutsChunksInTheWidenedFrustumAtEitherOfTwoBounds) {
+  CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
+  const test::SmallCity& c = small_flowers_city();
+  const CutCounter counter(*c.lod);
+  const auto oracle = [&c](const Camera& v, float tau) {
+    const fm::LodCut cut = fm::lod_cut(
+        c.lod->lod, fm::View{v.R, v.t, v.fx, v.fy, v.cx, v.cy, v.width, v.height, v.near_plane, v.far_plane, {}}, tau);
+    std::uint64_t in_view = 0, drawn = 0;
+    for (std::size_t ch = 0; ch < c.lod->lod.size(); ++ch) {
+      drawn += cut.drawn(ch) ? fm::kChunkSize : 0;
+      in_view += cut.drawn(ch) && !box_outside_by_corners(c.lod->lod[ch], v) ? fm::kChunkSize : 0;
+    }
+    return std::pair{in_view, drawn};
+  };
+  int partly_in_view = 0;
+  for (const auto& [coarse, fine] : {std::pair{0.71f, 0.5f}, std::pair{2.83f, 2.0f}, std::pair{8.0f, 0.5f}}) {
+    for (std::size_t k = 0; k < c.views.size(); ++k) {
+      const Camera& v = c.views[k];
+      const CutCounter::Counts both = counter.splats(v, coarse, fine);
+      const auto [want_coarse, drawn_coarse] = oracle(v, coarse);
+      const std::uint64_t want_fine = oracle(v, fine).first;
+      EXPECT_EQ(both.coarse, want_coarse) << "bound " << coarse << " view " << k;
+      EXPECT_EQ(both.fine, want_fine) << "bound " << fine << " view " << k;
+      EXPECT_EQ(counter.splats(v, coarse), want_coarse) << "bound " << coarse << " view " << k;
+      EXPECT_LT(both.coarse, both.fine) << "view " << k;
+      partly_in_view += want_coarse < drawn_coarse ? 1 : 0;
+    }
+  }
+  EXPECT_GT(partly_in_view, 0) << "some views must leave part of the city out of the frustum";
+}
+
 TEST(LodBound, BudgetStepsUpUntilTheCutFitsAndDownWithHysteresis) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
   const test::SmallCity& c = small_flowers_city();
