@@ -42,8 +42,10 @@ int main(int argc, char** argv) {
   const GaussianModel lod = build_lod(tile_scene(load_scene(argv[1]), p, &layout), {});
   const Trace trace = fit_trace_to_scene(load_inria_cameras(argv[3]), lod, layout.up, 0.6f, 120.0, 0.5, 1280, 720);
   const server::CutCounter counter(lod);
-  std::printf("%zu Gaussians with LOD, %zu nodes\n| bound px | one count ms | two bounds ms | predicted M |\n|---|---|---|---|\n",
-              lod.size(), lod.lod.size());
+  std::printf(
+      "%zu Gaussians with LOD, %zu nodes\n| bound px | one count ms | two bounds ms | predicted M "
+      "|\n|---|---|---|---|\n",
+      lod.size(), lod.lod.size());
   std::string json = "[";
   for (const float tau : {2.0f, 4.0f, 5.66f}) {
     double one = 0, two = 0, predicted = 0;
