@@ -16,10 +16,10 @@
 //   step's count fits within 3/4 of the budget (hysteresis). The choice depends on the pose and
 //   the budget alone, never on timing: a camera standing still keeps its cut.
 // The ladder stops at a ceiling, --lod-max-error (issue 72): the coarsest bound the budget may
-// raise a frame to, at `reference_lines` and scaled with the size as the bound is (by default
-// three x sqrt(2) steps above the default 2 px: with the merged levels fitted to their children
-// (issue 72), the coarsest step within 1 dB of 2 px's picture on the yardstick's three real
-// paths; RESULTS.md "Level of detail"). A frame whose cut at the ceiling still passes the
+// raise a frame to, at `reference_lines` and scaled with the size as the bound is (the server's
+// default is its default bound, 4 px: the coarsest bound within 1 dB of the earlier 2 px picture
+// on the yardstick's three real paths, the next step losing 1.25 dB on one; RESULTS.md "Level of
+// detail"). So by default the budget never raises the bound: it only tells the door. A frame whose cut at the ceiling still passes the
 // budget draws at the ceiling over budget (LodBoundChooser::over_budget); after kShortStreak such
 // frames in a row of one session, the door refuses the GPU's next visitor
 // (ServerMetrics::gpu_budget_short) rather than blur or slow every visitor's view.

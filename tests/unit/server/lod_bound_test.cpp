@@ -299,12 +299,14 @@ TEST(LodBound, SplatBudgetOption) {
   const char* a3[] = {"catgs-server", "--splat-budget", "lots"};
   ServerOptions o3;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a3), o3), std::invalid_argument);
-  // --lod-max-error: three steps above the 2 px default, a value, or off (the ladder's top).
-  EXPECT_NEAR(session_settings(ServerOptions{}).frame.lod.max_bound_px, 5.657f, 1e-3f);
-  const char* a4[] = {"catgs-server", "--lod-max-error", "4"};
+  // --lod-max-error: by default the default bound (the budget never coarsens the default picture,
+  // issue 72), a value, or off (the ladder's top).
+  EXPECT_EQ(session_settings(ServerOptions{}).frame.lod.max_bound_px, ServerOptions{}.lod_error_px);
+  EXPECT_EQ(lod_max_steps(ServerOptions{}.lod_error_px, session_settings(ServerOptions{}).frame.lod.max_bound_px), 0);
+  const char* a4[] = {"catgs-server", "--lod-max-error", "5.66"};
   ServerOptions o4;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a4), o4));
-  EXPECT_EQ(session_settings(o4).frame.lod.max_bound_px, 4.0f);
+  EXPECT_EQ(session_settings(o4).frame.lod.max_bound_px, 5.66f);
   const char* a5[] = {"catgs-server", "--lod-max-error", "off"};
   ServerOptions o5;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a5), o5));
