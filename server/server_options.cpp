@@ -104,7 +104,7 @@ std::string server_usage() {
          "                        measured throughput and the sessions sharing it (default auto)\n"
          "  --lod-max-error PX|off  the coarsest bound the splat budget may raise a frame to, px at\n"
          "                        720 lines (default 4, the --lod-error default: the budget never\n"
-         "                        blurs that picture; 5.66 lost 1.25 dB: RESULTS.md);\n"
+         "                        blurs that picture; what 5.66 costs: RESULTS.md);\n"
          "                        past it a GPU refuses the next visitor (server full)\n"
          "                        instead of blurring every view; off: up to 16x --lod-error\n"
          "  --splat-budget-share F  the share of a GPU's measured throughput (Gaussians a ms) the\n"

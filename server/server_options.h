@@ -57,8 +57,9 @@ struct ServerOptions {
   // --lod-max-error: the coarsest bound the splat budget may raise a frame to (LodSettings::
   // max_bound_px; 0 = off, the ladder's top). Past it the door refuses the GPU's next visitor.
   // Default: the --lod-error default itself, the coarsest bound within 1 dB of the earlier 2 px
-  // picture on the yardstick's three paths (5.66 px lost 1.25 dB on flowers): the auto budget
-  // never blurs the default picture; where it would have to, the door refuses instead.
+  // picture on the yardstick's three paths (the next step, 5.66 px, is not: RESULTS.md "Level of
+  // detail"): the auto budget never blurs the default picture; where it would have to, the door
+  // refuses instead.
   float lod_max_error_px = 4.0f;
   // --splat-budget-share: the share of a GPU's measured throughput the auto budget hands out.
   double splat_budget_share = 0.4;

@@ -18,11 +18,12 @@
 // The ladder stops at a ceiling, --lod-max-error (issue 72): the coarsest bound the budget may
 // raise a frame to, at `reference_lines` and scaled with the size as the bound is (the server's
 // default is its default bound, 4 px: the coarsest bound within 1 dB of the earlier 2 px picture
-// on the yardstick's three real paths, the next step losing 1.25 dB on one; RESULTS.md "Level of
-// detail"). So by default the budget never raises the bound: it only tells the door. A frame whose cut at the ceiling still passes the
-// budget draws at the ceiling over budget (LodBoundChooser::over_budget); after kShortStreak such
-// frames in a row of one session, the door refuses the GPU's next visitor
-// (ServerMetrics::gpu_budget_short) rather than blur or slow every visitor's view.
+// on the yardstick's three real paths; the next step is not, on one: RESULTS.md "Level of
+// detail"). So by default the budget never raises the bound: it only tells the door. A frame
+// whose cut at the ceiling still passes the budget draws at the ceiling over budget
+// (LodBoundChooser::over_budget); after kShortStreak such frames in a row of one session, the door
+// refuses the GPU's next visitor (ServerMetrics::gpu_budget_short) rather than blur or slow every
+// visitor's view.
 // The budget is --splat-budget N a frame, or, for CUDA sessions by default (auto), sized from the
 // GPU's measured throughput: the best Gaussians per millisecond that GPU has shown (a frame's
 // Gaussians over its render time, times the frames rendering with it; ServerMetrics::
