@@ -98,12 +98,6 @@ void preprocess_gaussian(const GaussianModel& model, const ViewPass& v, std::siz
   if (v.exact && !(q_max > 0.0f)) return;
   const glm::vec2 mean2d(camera.fx * p_cam.x / p_cam.z + camera.cx - 0.5f,
                          camera.fy * p_cam.y / p_cam.z + camera.cy - 0.5f);
-  // Occlusion culling, before the covariance: a small Gaussian behind the map over its whole box.
-  if (v.exact && v.occlusion.cells[0] != nullptr) {
-    const float max_scale =
-        std::exp(std::max({model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]}));
-    if (fm::gaussian_hidden(v.occlusion, mean2d, p_cam, max_scale, q_max, v.view)) return;
-  }
 
   const fm::Cov3 cov3 = fm::covariance_3d(
       {model.log_scales[3 * i], model.log_scales[3 * i + 1], model.log_scales[3 * i + 2]},

@@ -131,13 +131,6 @@ __device__ __forceinline__ GaussianInView preprocess_gaussian(uint64_t i, uint64
   float q_max = fm::opacity_aware_qmax(opacity);  // vanilla: for the splat's exp cut only
   if (exact && !(q_max > 0.0f)) return r;         // never reaches alpha 1/255 anywhere
   const glm::vec2 mean2d(cam.fx * p_cam.x / p_cam.z + cam.cx - 0.5f, cam.fy * p_cam.y / p_cam.z + cam.cy - 0.5f);
-  // Occlusion culling, before the covariance: a small Gaussian behind the map over its whole box.
-  if (exact && occlusion.cells[0] != nullptr) {
-    float s[3];
-    log_scales_of(scene, i, s);
-    const float max_scale = expf(fmaxf(s[0], fmaxf(s[1], s[2])));
-    if (fm::gaussian_hidden(occlusion, mean2d, p_cam, max_scale, q_max, cam)) return r;
-  }
   const glm::vec3 cov2 = fm::covariance_2d(g.covariance(scene, i), cam.R, p_cam, cam.fx, cam.fy, cam.tan_half_fov);
   glm::vec3 conic;
   if (!fm::conic_from_cov2d(cov2, &conic)) return r;

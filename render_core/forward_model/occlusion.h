@@ -180,44 +180,12 @@ CATGS_HD bool entry_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 co
   return entry_half_widths(conic, q_max, &half) && entry_box_hidden(m, mean2d, half, depth, tx, ty, width, height);
 }
 
-// Before its covariance: a Gaussian at camera-space p_cam, mean at mean2d, largest scale
-// `max_scale` (world units) and q_max in view v is hidden whole when the map's deepest over a box
-// that holds its q_max ellipse lies in front of it, so entry_hidden would drop each of its entries
-// (each entry's box lies within this box, and a box's depth at a coarser level is no nearer). The
-// box's half-widths bound sqrt(q * cov2d_xx) and sqrt(q * cov2d_yy): cov2d_xx = j0 W Sigma W^T j0^T
-// + kLowPass <= (max_scale |j0|)^2 + kLowPass, with the Jacobian's row |j0| = fx / z sqrt(1 + tx^2)
-// at the mean's own x / z clamped as covariance_2d clamps it (tx), and likewise for y; plus 1 px for
-// rounding. Tested only for boxes of at most kOcclusionWholePx pixels a side, which cover at most
-// 3 x 3 tiles (so the Gaussian is small: kOcclusionEntryTiles) and read at most 3 x 3 cells.
-inline constexpr float kOcclusionWholePx = 32.0f;
-CATGS_HD bool gaussian_hidden(const OcclusionMap& m, glm::vec2 mean2d, glm::vec3 p_cam, float max_scale, float q_max,
-                              const View& v) {
-  const float depth = p_cam.z;
-  if (m.cells[0] == nullptr || !(depth > 0.0f)) return false;
-  const float tx = fminf(kFrustumClamp * v.tan_half_fov.x, fabsf(p_cam.x / depth));
-  const float ty = fminf(kFrustumClamp * v.tan_half_fov.y, fabsf(p_cam.y / depth));
-  const float sq = sqrtf(q_max + kExactQMargin), low = sqrtf(kLowPass);
-  const float rx = sq * (max_scale * v.fx * sqrtf(1.0f + tx * tx) / depth + low) + 1.0f;
-  const float ry = sq * (max_scale * v.fy * sqrtf(1.0f + ty * ty) / depth + low) + 1.0f;
-  if (!(2.0f * rx <= kOcclusionWholePx && 2.0f * ry <= kOcclusionWholePx) ||
-      !(fabsf(mean2d.x) < 1e7f && fabsf(mean2d.y) < 1e7f))
-    return false;
-  const float x0 = fmaxf(floorf(mean2d.x - rx), 0.0f),
-              x1 = fminf(ceilf(mean2d.x + rx), static_cast<float>(v.width - 1));
-  const float y0 = fmaxf(floorf(mean2d.y - ry), 0.0f),
-              y1 = fminf(ceilf(mean2d.y + ry), static_cast<float>(v.height - 1));
-  if (!(x0 <= x1 && y0 <= y1)) return false;  // off the image: the tile rect is empty anyway
-  const float d =
-      occlusion_box_depth(m, static_cast<int>(x0), static_cast<int>(x1), static_cast<int>(y0), static_cast<int>(y1));
-  return d * kOcclusionDepthSlack < depth;
-}
-
 // Chunk culling by the map, before any per-Gaussian work (the cull stage: cpu/preprocess.cpp's
 // chunk loop, cuda/preprocess.cu cull_chunks_kernel): chunk `b` is hidden whole in view v when its
 // box of means lies in front of the near plane and the map's deepest over a pixel box that holds
 // every ellipse of its Gaussians lies in front of its nearest corner. That box is the means' pixel
-// box (chunk_on_screen) widened by the ellipse bound at q_max + kExactQMargin (chunk_half_extent,
-// as gaussian_hidden bounds one Gaussian) and chunk_outside_view's rounding slack; every mean lies
+// box (chunk_on_screen) widened by the ellipse bound at q_max + kExactQMargin (chunk_half_extent)
+// and chunk_outside_view's rounding slack; every mean lies
 // no nearer than that corner (z is linear over the box; 1e-5 of the terms of z covers its
 // rounding, as chunk_means_off_image allows). So every entry of
 // each of its Gaussians, small or big, lies behind the deepest over its own box (a sub-box, read
