@@ -303,15 +303,23 @@ TEST(MultiSession, LoadgenAsksForASceneByName) {
   const std::string base = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
                            flowers + " --trace cameras:" + cams +
                            " --size 480x320 --rate 10 --seconds 2 --warmup 0 --check-every 2 --json " + json_path;
-  ASSERT_EQ(std::system((base + " --scene-name flowers_sh3 > /dev/null").c_str()), 0);
+  const int named = std::system((base + " --scene-name flowers_sh3 > /dev/null").c_str());
+  ASSERT_TRUE(std::filesystem::exists(json_path)) << "catgs-loadgen wrote no report (status " << named << ")";
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));
   const auto& s = j["run"]["sessions"][0];
+  ASSERT_EQ(named, 0) << s.dump();  // the session's frames, checks and PSNR say which part failed
   EXPECT_EQ(s["scene"].get<std::string>(), "flowers_sh3") << s.dump();
   EXPECT_GT(s["checked"].get<int>(), 0) << s.dump();
   EXPECT_GE(s["psnr_min_db"].get<double>(), 30.0) << s.dump();
-  const int status = std::system((base + " > /dev/null 2>&1").c_str());
+  const std::string err_path = json_path + ".stderr";
+  const int status = std::system((base + " > /dev/null 2> " + err_path).c_str());
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 1) << "biker's frames passed a check against flowers_sh3";
+  // The failure names its kind: frames were checked and one was low (not "no frame checked").
+  std::stringstream err;
+  err << std::ifstream(err_path).rdbuf();
+  EXPECT_NE(err.str().find("1 failed the reference check (a frame below 30 dB"), std::string::npos) << err.str();
+  std::filesystem::remove(err_path);
   const nlohmann::json first = nlohmann::json::parse(std::ifstream(json_path));
   EXPECT_EQ(first["run"]["sessions"][0]["scene"].get<std::string>(), "biker");
   std::filesystem::remove(json_path);

@@ -252,13 +252,26 @@ int run_once(int max_sessions, const std::vector<LoadSessionConfig>& templates, 
   const int code = run_exit_code(results, base);
   if (code != 0) {
     const RunSummary t = summarize_run(results);
-    const auto bad_checks =
-        std::count_if(results.begin(), results.end(), [&](const SessionResult& r) { return check_failed(r, base); });
     std::cerr << "catgs-loadgen: " << t.failed << " of " << t.sessions << " sessions failed, " << t.refused
               << " refused by the server";
-    if (bad_checks > 0)
-      std::cerr << ", " << bad_checks << " failed the reference check (PSNR below " << base.check_min_psnr
-                << " dB, or no frame checked)";
+    // Which of the check's two failures, so a failed run says whether the picture or the count was short.
+    int low = 0, unchecked = 0;
+    double worst = 0;
+    for (const auto& r : results) {
+      if (!check_failed(r, base)) continue;
+      if (r.checked == 0) {
+        ++unchecked;
+      } else {
+        worst = low++ == 0 ? r.psnr_min : std::min(worst, r.psnr_min);
+      }
+    }
+    if (low > 0) {
+      char lowest[32];
+      std::snprintf(lowest, sizeof lowest, "%.2f", worst);
+      std::cerr << ", " << low << " failed the reference check (a frame below " << base.check_min_psnr
+                << " dB; the lowest " << lowest << " dB)";
+    }
+    if (unchecked > 0) std::cerr << ", " << unchecked << " checked no frame (--check-every " << base.check_every << ")";
     std::cerr << " (exit " << code << ")\n";
   }
   return code;
