@@ -616,6 +616,16 @@ test('trace file: round trip; a recording resampled every 0.5 s keeps its ends',
   assert.deepEqual(pause.samples.map((s) => s.t), [0, 2, 2.016]);
   close(paths.poseAtTime(pause.samples, 1.5).position, randomPose(0).position, 1e-12);
   assert.throws(() => paths.fromTraceFile('hello'), /catgs-trace 1/);
+  // A frame's timestamp earlier than the click that started the recording, and a timer's
+  // performance.now() ahead of the next frame's: the path's time holds, it never runs back, and
+  // its trace reads back (a CI run's page trace once failed 'time goes backwards' at its 2nd pose).
+  const clocks = new paths.PathRecorder();
+  clocks.add(1000, randomPose(0));
+  clocks.add(999.5, randomPose(1));
+  clocks.add(1300, randomPose(2));
+  clocks.add(1290, randomPose(3));
+  assert.deepEqual(clocks.samples.map((s) => s.t), [0, 0, 0.3, 0.3]);
+  assert.equal(paths.fromTraceFile(paths.toTraceFile(clocks.samples, 320, 240)).length, 4);
 });
 
 test('tour interpolation: passes through the waypoints, straight on a line, slerp is glm\'s', () => {

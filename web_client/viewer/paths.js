@@ -46,9 +46,13 @@ export class PathRecorder {
   // nothing but, when it moves again, the pose it held until the previous call, so playback
   // (which interpolates between samples) holds still and then moves as recorded, rather than
   // gliding across the pause.
+  // The page's times come from two clocks: requestAnimationFrame's frame start and
+  // performance.now() (timers, clicks), and a frame's start can precede a click handled just
+  // before its callbacks. So a time before the latest one seen counts as that one: the path's
+  // time never runs backwards, which trace readers and the server's export refuse.
   add(nowMs, pose) {
     if (this.t0 === null) this.t0 = nowMs;
-    const t = (nowMs - this.t0) / 1000;
+    const t = Math.max((nowMs - this.t0) / 1000, this.lastSeenT);
     const last = this.samples[this.samples.length - 1];
     const seen = this.lastSeenT;
     this.lastSeenT = t;
