@@ -252,6 +252,11 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
     EXPECT_LE(s["latency"]["p50_ms"].get<double>(), s["latency"]["p99_ms"].get<double>());
   }
   EXPECT_EQ(j["run"]["sessions"][1]["width"].get<int>(), 128);
+  // Issue 92: a trace is made once a run (two sessions, two traces: two), and the run records the
+  // client's own CPU time.
+  EXPECT_EQ(j["traces_made"].get<int>(), 2) << j.dump();
+  EXPECT_GT(j["run"]["client_cpu"]["cpu_s"].get<double>(), 0.0);
+  EXPECT_GE(j["run"]["client_cpu"]["wall_s"].get<double>(), 3.0);
   // Each pose carries the latency of the newest frame before it (Pose.shown_latency_ms); the
   // server's end-to-end histogram must agree with what the client measured (the same samples but
   // for the warm-up and the last frame of each session).
@@ -286,6 +291,9 @@ TEST(MultiSession, LoadgenReportsAndRamps) {
   ASSERT_EQ(ramp["ramp"].size(), 2u) << ramp.dump();  // 1 then 2 sessions, no bound to break
   EXPECT_EQ(ramp["largest_sessions_held"].get<int>(), 2);
   EXPECT_EQ(ramp["ramp"][1]["total"]["sessions"].get<int>(), 2);
+  // Three sessions over the two steps, at two sizes: each orbit made once, not once a session.
+  EXPECT_EQ(ramp["traces_made"].get<int>(), 2) << ramp.dump();
+  EXPECT_TRUE(ramp["ramp"][1].contains("client_cpu"));
   std::filesystem::remove(json_path);
 }
 

@@ -4,6 +4,9 @@
 // stderr while it runs. It does not pass or fail on time, except in ramp mode, where it searches
 // for the largest session count that holds the given bounds; it fails (exit 1) when a session
 // failed or a reference check did, and says so with exit 3 when the server refused sessions.
+// Each trace is made once a run and shared by its sessions (loadgen/trace_cache.h), and each run
+// or ramp step prints the client's own CPU time, warning when it passed a tenth of the host's
+// cores: then the client may have bound the run, not the server (issue 92).
 //
 //   catgs-loadgen --port 8080 --sessions 4 --size 1280x720 --trace orbit --seconds 10
 //   catgs-loadgen --sessions 4 --trace orbit,real:C.json --scene S.ply --size 1280x720,640x480
@@ -18,6 +21,9 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <sched.h>
+#include <sys/resource.h>
 
 #include <nlohmann/json.hpp>
 
@@ -74,6 +80,13 @@ const char* kUsage =
     "  --still-s S              after --seconds the camera stops: no more poses, read on for S s,\n"
     "                           and compare the picture shown 1 s, 3 s after and at the end with\n"
     "                           the CPU reference render of its pose (needs --scene; decodes)\n"
+    "  --record DIR             record each session into DIR/session_I for the shown-picture\n"
+    "                           measure (catgs-shown): the stream, each frame's arrival and pose,\n"
+    "                           the poses, the trace (not with --ramp or --av1)\n"
+    "  --link-rtt-ms MS         emulate a link's round trip: each pose sent is the trace's pose\n"
+    "                           MS/2 ago; the recording adds the frames' MS/2 (default 0)\n"
+    "  --link-mbit R            the emulated link's rate: the stream is capped at 80% of it\n"
+    "                           (Quality) and the recording queues frames at R (default 0: none)\n"
     "  --token T                Hello token\n"
     "  --json FILE              write the report (every ramp step) as JSON\n"
     "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
@@ -82,6 +95,8 @@ const char* kUsage =
     "  --max-p95-ms MS          ramp bound: pooled p95 pose-to-frame latency\n"
     "  --min-fps F              ramp bound: the slowest session's FPS\n"
     "  --progress S             a progress line on stderr every S seconds (default 1; 0: none)\n"
+    "after each run or ramp step: the client's own CPU time (JSON client_cpu), with a warning when\n"
+    "it passed 10% of the usable cores (then the client may have bound the run)\n"
     "exit status: 0 every session streamed; 1 a session failed (no connection, lost connection,\n"
     "server Error, no frame, bad reference check); 3 the server refused sessions (none failed);\n"
     "2 bad arguments. A ramp exits 0 when it ran (its bound breaking is its answer).\n";
@@ -115,6 +130,49 @@ std::string progress_line(const Progress& p, int sessions, double elapsed_s, dou
   return line;
 }
 
+// This process's CPU time so far, user + system seconds (getrusage).
+double process_cpu_s() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  const auto seconds = [](const timeval& t) {
+    return static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_usec);
+  };
+  return seconds(u.ru_utime) + seconds(u.ru_stime);
+}
+
+// The cores this process may run on (its affinity mask; the host's when unrestricted).
+int usable_cores() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0) return CPU_COUNT(&set);
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+// A client busier than this share of the host's cores may have bound the run, not the server
+// (issue 92: on the big cities the fits per session took more cores than the server).
+constexpr double kClientBusyShare = 0.1;
+
+// What the client itself cost over a run (or a ramp step) of `sessions` sessions: its CPU seconds
+// from `cpu_before`, over the wall seconds from `start`. Printed, with a warning when it passed
+// kClientBusyShare of the cores, and returned for the JSON.
+nlohmann::json client_cost(double cpu_before, std::chrono::steady_clock::time_point start, int sessions) {
+  const double cpu_s = process_cpu_s() - cpu_before;
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double cores = wall_s > 0 ? cpu_s / wall_s : 0.0;
+  const int host = usable_cores();
+  const bool busy = cores > kClientBusyShare * host;
+  std::printf("client CPU: %.2f s (user + sys) over %.1f s: %.3f cores, %.4f a session (%d usable cores)\n", cpu_s,
+              wall_s, cores, cores / std::max(1, sessions), host);
+  if (busy)
+    std::printf(
+        "catgs-loadgen: the client used %.0f%% of the %d cores, over the %.0f%% it should: it may have "
+        "bound this run, not the server\n",
+        100.0 * cores / host, host, 100.0 * kClientBusyShare);
+  return {{"cpu_s", cpu_s},       {"wall_s", wall_s},
+          {"cores", cores},       {"cores_per_session", cores / std::max(1, sessions)},
+          {"usable_cores", host}, {"busy", busy}};
+}
+
 // Runs `n` sessions at once, one thread each; prints a progress line every `progress_s` seconds
 // (0: none) while they run.
 std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConfig>& templates, double progress_s = 0) {
@@ -127,6 +185,7 @@ std::vector<SessionResult> run_sessions(int n, const std::vector<LoadSessionConf
     c.offset_s *= i;
     c.arrive_after_s *= i;
     c.progress = &progress;
+    if (!c.record_dir.empty()) c.record_dir += "/session_" + std::to_string(i);
     threads.emplace_back([c, &results, i] { results[static_cast<std::size_t>(i)] = run_load_session(c); });
   }
   if (progress_s > 0) {
@@ -217,6 +276,16 @@ LoadSessionConfig base_config(const tools::Args& args) {
   if (base.still_s > 0 && !args.has("--scene"))
     throw std::invalid_argument("--still-s needs --scene (the reference renders the still pose)");
   if (args.get_double("--progress", 1) < 0) throw std::invalid_argument("--progress must be >= 0 seconds");
+  base.record_dir = args.get("--record");
+  if (!base.record_dir.empty() && args.has("--ramp"))
+    throw std::invalid_argument("--record records one run, not a ramp (each step would replace the last)");
+  if (!base.record_dir.empty() && base.offer_av1)
+    throw std::invalid_argument("--record holds H.264 only: leave out --av1");
+  base.link.rtt_ms = args.get_double("--link-rtt-ms", 0);
+  base.link.rate_mbit = args.get_double("--link-mbit", 0);
+  if (base.link.rtt_ms < 0 || base.link.rate_mbit < 0)
+    throw std::invalid_argument("--link-rtt-ms and --link-mbit must be >= 0");
+  base.traces = std::make_shared<TraceCache>();  // each trace made once a run (issue 92)
   if (args.has("--scene")) {
     base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
     std::cout << "scene " << args.get("--scene") << ": " << base.scene->size() << " Gaussians\n";
@@ -246,9 +315,12 @@ int run_exit_code(const std::vector<SessionResult>& results, const LoadSessionCo
 // One run of `sessions` sessions; returns its exit status.
 int run_once(int max_sessions, const std::vector<LoadSessionConfig>& templates, const LoadSessionConfig& base,
              double progress_s, nlohmann::json& report) {
+  const double cpu_before = process_cpu_s();
+  const auto start = std::chrono::steady_clock::now();
   const auto results = run_sessions(max_sessions, templates, progress_s);
   std::cout << format_table(results);
   report["run"] = run_json(results);
+  report["run"]["client_cpu"] = client_cost(cpu_before, start, max_sessions);
   const int code = run_exit_code(results, base);
   if (code != 0) {
     const RunSummary t = summarize_run(results);
@@ -289,6 +361,8 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
   const int start = args.get_int("--ramp-start", 1);
   if (start < 1) throw std::invalid_argument("--ramp-start must be >= 1");
   for (int n = start; n <= max_sessions; n = add ? n + add : 2 * n) {
+    const double cpu_before = process_cpu_s();
+    const auto started = std::chrono::steady_clock::now();
     const auto results = run_sessions(n, templates, progress_s);
     const RunSummary t = summarize_run(results);
     char broken[96] = "";
@@ -303,6 +377,7 @@ void run_ramp(const tools::Args& args, int max_sessions, const std::vector<LoadS
     std::printf("--- %d session(s): %s%s\n", n, broken[0] ? "broke: " : "held", broken);
     std::cout << format_table(results);
     nlohmann::json step_json = run_json(results);
+    step_json["client_cpu"] = client_cost(cpu_before, started, n);
     step_json["held"] = broken[0] == 0;
     step_json["broken_by"] = broken;
     report["ramp"].push_back(step_json);
@@ -326,7 +401,8 @@ int main(int argc, char** argv) {
                                         "--token",          "--json",          "--ramp!",           "--ramp-step",
                                         "--ramp-start",     "--max-p95-ms",    "--min-fps",         "--progress",
                                         "--tls!",           "--help!",         "--timeline!",       "--av1!",
-                                        "--receipts",       "--read-stall-ms", "--still-s"});
+                                        "--receipts",       "--read-stall-ms", "--still-s",         "--record",
+                                        "--link-rtt-ms",    "--link-mbit"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -363,6 +439,7 @@ int main(int argc, char** argv) {
     } else {
       run_ramp(args, max_sessions, templates, progress_s, report);
     }
+    report["traces_made"] = base.traces->made();
     if (args.has("--json")) {
       std::ofstream(args.get("--json")) << report.dump(1) << "\n";
       std::cout << "JSON: " << args.get("--json") << "\n";

@@ -27,6 +27,10 @@ glm::vec3 to_vec3(const pb::Vec3& v) {
   return {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
 }
 
+glm::quat to_quat(const pb::Quat& q) {
+  return {static_cast<float>(q.w()), static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z())};
+}
+
 constexpr double kTraceRateHz = 120.0;
 constexpr double kSecondsPerView = 0.5;
 
@@ -64,6 +68,24 @@ Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const
   Trace t = read_trace(spec);
   for (auto& tc : t) tc.camera = tc.camera.rescaled(width, height);
   return t;
+}
+
+double page_plane_distance(const pb::Welcome& welcome) {
+  const glm::dvec3 position = to_vec3(welcome.initial_pose().position());
+  const glm::dvec3 forward = glm::dquat(to_quat(welcome.initial_pose().orientation())) * glm::dvec3(0, 0, 1);
+  glm::dvec3 target;
+  double scale = welcome.scene_scale();
+  if (scale > 0) {  // the orbit the server sends
+    target = to_vec3(welcome.orbit_centre());
+  } else {  // the bounds' centre, else a point ahead
+    const glm::dvec3 lo = to_vec3(welcome.scene_bounds().min()), hi = to_vec3(welcome.scene_bounds().max());
+    scale = glm::length(hi - lo);
+    target = 0.5 * (lo + hi);
+    if (!(scale > 0) || glm::length(target - position) < 1e-6)
+      target = position + forward * (scale > 0 ? scale / 2 : 1.0);
+    if (!(scale > 0)) scale = 2 * glm::length(target - position);
+  }
+  return std::max(glm::length(target - position), scale * 1e-3);
 }
 
 const Camera& camera_at(const Trace& trace, double t_s) {
@@ -105,8 +127,16 @@ pb::Welcome open_session(const LoadSessionConfig& cfg, StreamClient& client, Ses
 // and the decoder's set-up throw.
 class PoseLoop {
  public:
-  PoseLoop(const LoadSessionConfig& cfg, SessionResult& r, StreamClient& client, Trace trace)
+  PoseLoop(const LoadSessionConfig& cfg, SessionResult& r, StreamClient& client, Trace trace,
+           const pb::Welcome& welcome)
       : cfg_(cfg), r_(r), client_(client), trace_(std::move(trace)), check_(cfg.check_every > 0) {
+    if (!cfg.record_dir.empty()) start_recording(welcome);
+    if (cfg.link.rate_mbit > 0) {  // the stream under the emulated link's rate
+      pb::ClientMessage m;
+      m.mutable_quality()->set_max_bitrate_kbps(
+          static_cast<std::uint32_t>(std::clamp(kLinkRateShare * 1000.0 * cfg.link.rate_mbit, 100.0, 100000.0)));
+      client_.send(m);
+    }
     if (check_ || cfg.still_s > 0)
       reference_ =
           std::make_unique<cpu::CpuRenderer>(cfg.reference_scene ? cfg.reference_scene : cfg.scene, RenderOptions{});
@@ -164,6 +194,7 @@ class PoseLoop {
     r_.skipped = reached - answered_;
     r_.dropped = r_.poses_sent - reached;
     client_.ws().close();
+    if (recording_) write_recording(*recording_, cfg_.record_dir);
   }
 
  private:
@@ -183,9 +214,28 @@ class PoseLoop {
     }
   }
 
+  // The session's recording (recording.h): its settings and trace now, poses and frames as they go.
+  void start_recording(const pb::Welcome& welcome) {
+    recording_ = std::make_unique<SessionRecording>();
+    SessionRecording& rec = *recording_;
+    rec.width = r_.width;
+    rec.height = r_.height;
+    rec.trace_spec = cfg_.trace;
+    rec.offset_s = cfg_.offset_s;
+    rec.seconds = cfg_.seconds;
+    rec.link = cfg_.link;
+    rec.plane_distance = page_plane_distance(welcome);
+    rec.trace = trace_;
+  }
+
+  double since_start_ms() const { return std::chrono::duration<double, std::milli>(Clock::now() - t0_).count(); }
+
   void send_pose() {
-    const double t_s = std::chrono::duration<double>(Clock::now() - t0_).count() + cfg_.offset_s;
+    // The emulated link holds a pose for half the round trip: the server gets, now, where the
+    // visitor was that long ago.
+    const double t_s = (since_start_ms() - 0.5 * cfg_.link.rtt_ms) / 1000.0 + cfg_.offset_s;
     const auto seq = static_cast<std::uint32_t>(sent_at_.size());
+    if (recording_) recording_->poses.push_back({seq, since_start_ms(), t_s});
     sent_at_.push_back(now_ms());
     pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back());
     // As the web viewer does: the newest frame's latency rides on the next pose to /metrics.
@@ -224,6 +274,7 @@ class PoseLoop {
 
   void on_frame(const pb::Frame& f) {
     const double arrived_ms = now_ms();  // before the decode: the receipt is the network's
+    if (recording_) record_frame(f);
     r_.frames++;
     if (f.width() > 0 &&
         (static_cast<int>(f.width()) != frame_width_ || static_cast<int>(f.height()) != frame_height_)) {
@@ -271,6 +322,26 @@ class PoseLoop {
     if (cfg_.warmup_s > 0 && f.client_time_ms() - sent_at_.front() < 1000.0 * cfg_.warmup_s) return;
     r_.latency_ms.push_back(latency);
     add_server_timings(f.timings());
+  }
+
+  void record_frame(const pb::Frame& f) {
+    if (f.codec() == pb::CODEC_AV1) {
+      note_error(r_, "--record: an AV1 frame (the recording holds H.264 only)");
+      return;
+    }
+    SessionRecording& rec = *recording_;
+    RecordedFrame k;
+    k.sequence = f.sequence();
+    k.pose_sequence = f.pose_sequence();
+    k.arrived_ms = since_start_ms();
+    k.key = f.key_frame();
+    k.width = static_cast<int>(f.width());
+    k.height = static_cast<int>(f.height());
+    k.lod_error_px = f.timings().lod_error_px();
+    k.offset = rec.stream.size();
+    k.bytes = f.payload().size();
+    rec.stream += f.payload();
+    rec.frames.push_back(k);
   }
 
   void decode_and_check(const pb::Frame& f) {
@@ -378,9 +449,10 @@ class PoseLoop {
   StreamClient& client_;
   const Trace trace_;
   const bool check_;
-  std::unique_ptr<VideoDecoder> decoder_;   // of the last frame's codec, made by its first frame
-  bool last_av1_ = false;                   // the last Frame's codec was AV1
-  int frame_width_ = 0, frame_height_ = 0;  // the size of the last Frame
+  std::unique_ptr<SessionRecording> recording_;  // --record
+  std::unique_ptr<VideoDecoder> decoder_;        // of the last frame's codec, made by its first frame
+  bool last_av1_ = false;                        // the last Frame's codec was AV1
+  int frame_width_ = 0, frame_height_ = 0;       // the size of the last Frame
   std::vector<std::uint8_t> rgba_;
   std::vector<double> sent_at_;                  // client time each pose was sent, by sequence
   std::vector<pb::Pose> sent_poses_;             // reference check: each pose as sent, by sequence
@@ -423,9 +495,10 @@ SessionResult run_load_session(const LoadSessionConfig& cfg) {
     const pb::Welcome welcome = open_session(cfg, client, r);
     open = true;
     if (progress) progress->open++;
-    Trace trace = make_load_trace(cfg.trace, cfg.scene.get(), welcome, r.width, r.height);
+    Trace trace = cfg.traces ? *cfg.traces->get(cfg.trace, cfg.scene.get(), welcome, r.width, r.height)
+                             : make_load_trace(cfg.trace, cfg.scene.get(), welcome, r.width, r.height);
     if (trace.empty()) throw std::runtime_error("empty trace " + cfg.trace);
-    PoseLoop(cfg, r, client, std::move(trace)).run();
+    PoseLoop(cfg, r, client, std::move(trace), welcome).run();
   } catch (const Refused& e) {
     r.refused = true;
     r.refusal = pb::ErrorCode_Name(e.error().code()) + ": " + e.error().reason();

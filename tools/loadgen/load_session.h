@@ -11,6 +11,8 @@
 #include "camera/trace.h"
 #include "catgs_stream.pb.h"
 #include "loadgen/load_report.h"
+#include "loadgen/recording.h"
+#include "loadgen/trace_cache.h"
 
 namespace catgs::loadgen {
 
@@ -49,8 +51,11 @@ struct LoadSessionConfig {
   bool tls = false;  // wss:// (WsClient::use_tls)
   int width = 1280, height = 720;
   std::string token;
-  std::string scene_name;                      // Hello.scene: a name from the server's GET /scenes; "" its first scene
-  std::string trace = "orbit";                 // make_load_trace spec
+  std::string scene_name;       // Hello.scene: a name from the server's GET /scenes; "" its first scene
+  std::string trace = "orbit";  // make_load_trace spec
+  // The run's traces, shared by its sessions so each is made once (trace_cache.h); null: each
+  // session makes its own.
+  std::shared_ptr<TraceCache> traces;
   std::shared_ptr<const GaussianModel> scene;  // optional; needed by "real:" traces
   // The reference checks' scene: `scene` with its level of detail (lod/lod_build.h, built as the
   // server builds it), so a frame is compared with the reference drawn at the bound the server
@@ -88,8 +93,24 @@ struct LoadSessionConfig {
   // the last pose, and at the end, is compared with the CPU reference render of the pose it
   // answers (SessionResult::still_psnr_db; needs `scene`). 0: off.
   double still_s = 0;
+  // The shown-picture measure (issue 91): record the session into this folder (recording.h:
+  // the stream, every frame's arrival and pose, the poses, the trace). "": no recording. H.264
+  // only (with offer_av1 the session fails).
+  std::string record_dir;
+  // An emulated link (recording.h): each pose sent is the trace's pose half the round trip ago;
+  // with a rate, a Quality caps the stream at kLinkRateShare of it, as the server's link
+  // controller would settle below a real link's rate.
+  LinkEmulation link;
   Progress* progress = nullptr;  // optional; outlives the session
 };
+
+// The share of an emulated link's rate the stream is capped at (Quality.max_bitrate_kbps).
+inline constexpr double kLinkRateShare = 0.8;
+
+// The page's re-projection plane distance for a session that opened with `welcome` (recording.h
+// SessionRecording::plane_distance): the distance from the first view to the orbit target the
+// page's camera takes from it (web_client/viewer/camera.js OrbitCamera.fromWelcome, setPose).
+double page_plane_distance(const ::catgs::stream::v1::Welcome& welcome);
 
 // Runs one session. Throws std::invalid_argument for check_every > 0 without a scene. Otherwise
 // never throws: a refused Hello sets SessionResult::refused (and `refusal`); other failures are

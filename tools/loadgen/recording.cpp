@@ -1,0 +1,157 @@
+#include "loadgen/recording.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+namespace catgs::loadgen {
+
+namespace {
+
+std::ofstream open_out(const std::string& path, bool binary = false) {
+  std::ofstream out(path, binary ? std::ios::binary : std::ios::out);
+  if (!out) throw std::runtime_error(path + ": cannot write");
+  out << std::setprecision(17);
+  return out;
+}
+
+std::ifstream open_in(const std::string& path, bool binary = false) {
+  std::ifstream in(path, binary ? std::ios::binary : std::ios::in);
+  if (!in) throw std::runtime_error(path + ": cannot read (not a catgs-loadgen --record folder?)");
+  return in;
+}
+
+// The lines of a .tsv file that are not comments, each split into fields; `fields` per line or a
+// runtime_error naming the file and line.
+std::vector<std::vector<std::string>> read_tsv(const std::string& path, std::size_t fields) {
+  std::ifstream in = open_in(path);
+  std::vector<std::vector<std::string>> rows;
+  int number = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++number;
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<std::string> row;
+    std::stringstream ss(line);
+    for (std::string f; std::getline(ss, f, '\t');) row.push_back(f);
+    if (row.size() != fields)
+      throw std::runtime_error(path + ":" + std::to_string(number) + ": " + std::to_string(row.size()) +
+                               " fields, want " + std::to_string(fields));
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+double number_of(const std::string& s, const std::string& where) {
+  std::size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(s, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != s.size() || !std::isfinite(v)) throw std::runtime_error(where + ": '" + s + "' is not a number");
+  return v;
+}
+
+}  // namespace
+
+std::vector<double> visible_ms(const SessionRecording& r) {
+  std::vector<double> out;
+  out.reserve(r.frames.size());
+  double link_free_ms = -1e300;  // when the link has sent the frame before
+  for (const RecordedFrame& f : r.frames) {
+    double leaves = f.arrived_ms;
+    if (r.link.rate_mbit > 0) {
+      leaves = std::max(leaves, link_free_ms) + 8.0 * static_cast<double>(f.bytes) / (1000.0 * r.link.rate_mbit);
+      link_free_ms = leaves;
+    }
+    out.push_back(leaves + 0.5 * r.link.rtt_ms);
+  }
+  return out;
+}
+
+void write_recording(const SessionRecording& r, const std::string& dir) {
+  std::filesystem::create_directories(dir);
+  const nlohmann::json meta = {{"width", r.width},
+                               {"height", r.height},
+                               {"trace", r.trace_spec},
+                               {"offset_s", r.offset_s},
+                               {"seconds", r.seconds},
+                               {"link_rtt_ms", r.link.rtt_ms},
+                               {"link_rate_mbit", r.link.rate_mbit},
+                               {"plane_distance", r.plane_distance}};
+  open_out(dir + "/meta.json") << meta.dump(1) << "\n";
+  write_trace(r.trace, dir + "/display.trace");
+  std::ofstream poses = open_out(dir + "/poses.tsv");
+  poses << "# sequence\tsent_ms\ttrace_s\n";
+  for (const RecordedPose& p : r.poses) poses << p.sequence << '\t' << p.sent_ms << '\t' << p.trace_s << '\n';
+  std::ofstream frames = open_out(dir + "/frames.tsv");
+  frames << "# sequence\tpose_sequence\tarrived_ms\tkey\twidth\theight\tlod_error_px\toffset\tbytes\n";
+  for (const RecordedFrame& f : r.frames)
+    frames << f.sequence << '\t' << f.pose_sequence << '\t' << f.arrived_ms << '\t' << (f.key ? 1 : 0) << '\t'
+           << f.width << '\t' << f.height << '\t' << f.lod_error_px << '\t' << f.offset << '\t' << f.bytes << '\n';
+  open_out(dir + "/stream.h264", true).write(r.stream.data(), static_cast<std::streamsize>(r.stream.size()));
+}
+
+SessionRecording read_recording(const std::string& dir) {
+  SessionRecording r;
+  const std::string meta_path = dir + "/meta.json";
+  try {
+    std::ifstream in = open_in(meta_path);
+    const nlohmann::json meta = nlohmann::json::parse(in);
+    r.width = meta.at("width").get<int>();
+    r.height = meta.at("height").get<int>();
+    r.trace_spec = meta.at("trace").get<std::string>();
+    r.offset_s = meta.at("offset_s").get<double>();
+    r.seconds = meta.at("seconds").get<double>();
+    r.link.rtt_ms = meta.at("link_rtt_ms").get<double>();
+    r.link.rate_mbit = meta.at("link_rate_mbit").get<double>();
+    r.plane_distance = meta.at("plane_distance").get<double>();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(meta_path + ": " + e.what());
+  }
+  r.trace = read_trace(dir + "/display.trace");
+  if (r.trace.empty()) throw std::runtime_error(dir + "/display.trace: no camera");
+  {
+    std::ifstream in = open_in(dir + "/stream.h264", true);
+    r.stream.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const std::string poses_path = dir + "/poses.tsv";
+  for (const auto& row : read_tsv(poses_path, 3)) {
+    RecordedPose p;
+    p.sequence = static_cast<std::uint32_t>(number_of(row[0], poses_path));
+    p.sent_ms = number_of(row[1], poses_path);
+    p.trace_s = number_of(row[2], poses_path);
+    if (p.sequence != r.poses.size())
+      throw std::runtime_error(poses_path + ": pose " + row[0] + " out of order (want " +
+                               std::to_string(r.poses.size()) + ")");
+    r.poses.push_back(p);
+  }
+  const std::string frames_path = dir + "/frames.tsv";
+  for (const auto& row : read_tsv(frames_path, 9)) {
+    RecordedFrame f;
+    f.sequence = static_cast<std::uint32_t>(number_of(row[0], frames_path));
+    f.pose_sequence = static_cast<std::uint32_t>(number_of(row[1], frames_path));
+    f.arrived_ms = number_of(row[2], frames_path);
+    f.key = row[3] == "1";
+    f.width = static_cast<int>(number_of(row[4], frames_path));
+    f.height = static_cast<int>(number_of(row[5], frames_path));
+    f.lod_error_px = static_cast<float>(number_of(row[6], frames_path));
+    f.offset = static_cast<std::uint64_t>(number_of(row[7], frames_path));
+    f.bytes = static_cast<std::uint64_t>(number_of(row[8], frames_path));
+    const std::string which = frames_path + ": frame " + row[0];
+    if (f.offset + f.bytes > r.stream.size())
+      throw std::runtime_error(which + " ends past stream.h264 (" + std::to_string(r.stream.size()) + " bytes)");
+    if (f.pose_sequence >= r.poses.size()) throw std::runtime_error(which + " answers pose " + row[1] + ", never sent");
+    r.frames.push_back(f);
+  }
+  return r;
+}
+
+}  // namespace catgs::loadgen
