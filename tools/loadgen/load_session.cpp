@@ -70,7 +70,7 @@ Trace make_load_trace(const std::string& spec, const GaussianModel* scene, const
   return t;
 }
 
-double page_plane_distance(const pb::Welcome& welcome) {
+PageOrbit page_orbit(const pb::Welcome& welcome) {
   const glm::dvec3 position = to_vec3(welcome.initial_pose().position());
   const glm::dvec3 forward = glm::dquat(to_quat(welcome.initial_pose().orientation())) * glm::dvec3(0, 0, 1);
   glm::dvec3 target;
@@ -85,7 +85,7 @@ double page_plane_distance(const pb::Welcome& welcome) {
       target = position + forward * (scale > 0 ? scale / 2 : 1.0);
     if (!(scale > 0)) scale = 2 * glm::length(target - position);
   }
-  return std::max(glm::length(target - position), scale * 1e-3);
+  return {std::max(glm::length(target - position), scale * 1e-3), scale};
 }
 
 const Camera& camera_at(const Trace& trace, double t_s) {
@@ -224,7 +224,9 @@ class PoseLoop {
     rec.offset_s = cfg_.offset_s;
     rec.seconds = cfg_.seconds;
     rec.link = cfg_.link;
-    rec.plane_distance = page_plane_distance(welcome);
+    const PageOrbit orbit = page_orbit(welcome);
+    rec.plane_distance = orbit.distance;
+    rec.scene_scale = orbit.scene_scale;
     rec.trace = trace_;
   }
 

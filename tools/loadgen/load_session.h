@@ -107,10 +107,14 @@ struct LoadSessionConfig {
 // The share of an emulated link's rate the stream is capped at (Quality.max_bitrate_kbps).
 inline constexpr double kLinkRateShare = 0.8;
 
-// The page's re-projection plane distance for a session that opened with `welcome` (recording.h
-// SessionRecording::plane_distance): the distance from the first view to the orbit target the
-// page's camera takes from it (web_client/viewer/camera.js OrbitCamera.fromWelcome, setPose).
-double page_plane_distance(const ::catgs::stream::v1::Welcome& welcome);
+// The page camera's orbit for a session that opened with `welcome` (web_client/viewer/camera.js
+// OrbitCamera.fromWelcome, setPose): how far ahead of the camera its target stays while a path
+// plays (the first view's distance to the target, world units) and its scene scale
+// (SessionRecording::plane_distance and scene_scale).
+struct PageOrbit {
+  double distance = 1, scene_scale = 1;
+};
+PageOrbit page_orbit(const ::catgs::stream::v1::Welcome& welcome);
 
 // Runs one session. Throws std::invalid_argument for check_every > 0 without a scene. Otherwise
 // never throws: a refused Hello sets SessionResult::refused (and `refusal`); other failures are

@@ -27,11 +27,18 @@ std::ifstream open_in(const std::string& path, bool binary = false) {
   return in;
 }
 
+// A line of a .tsv file: where it is ("FILE:LINE", for errors) and its fields.
+struct TsvRow {
+  std::string where;
+  std::vector<std::string> fields;
+  double number(std::size_t k) const;
+};
+
 // The lines of a .tsv file that are not comments, each split into fields; `fields` per line or a
 // runtime_error naming the file and line.
-std::vector<std::vector<std::string>> read_tsv(const std::string& path, std::size_t fields) {
+std::vector<TsvRow> read_tsv(const std::string& path, std::size_t fields) {
   std::ifstream in = open_in(path);
-  std::vector<std::vector<std::string>> rows;
+  std::vector<TsvRow> rows;
   int number = 0;
   for (std::string line; std::getline(in, line);) {
     ++number;
@@ -42,7 +49,7 @@ std::vector<std::vector<std::string>> read_tsv(const std::string& path, std::siz
     if (row.size() != fields)
       throw std::runtime_error(path + ":" + std::to_string(number) + ": " + std::to_string(row.size()) +
                                " fields, want " + std::to_string(fields));
-    rows.push_back(std::move(row));
+    rows.push_back({path + ":" + std::to_string(number), std::move(row)});
   }
   return rows;
 }
@@ -58,6 +65,8 @@ double number_of(const std::string& s, const std::string& where) {
   if (used != s.size() || !std::isfinite(v)) throw std::runtime_error(where + ": '" + s + "' is not a number");
   return v;
 }
+
+double TsvRow::number(std::size_t k) const { return number_of(fields[k], where); }
 
 }  // namespace
 
@@ -85,7 +94,8 @@ void write_recording(const SessionRecording& r, const std::string& dir) {
                                {"seconds", r.seconds},
                                {"link_rtt_ms", r.link.rtt_ms},
                                {"link_rate_mbit", r.link.rate_mbit},
-                               {"plane_distance", r.plane_distance}};
+                               {"plane_distance", r.plane_distance},
+                               {"scene_scale", r.scene_scale}};
   open_out(dir + "/meta.json") << meta.dump(1) << "\n";
   write_trace(r.trace, dir + "/display.trace");
   std::ofstream poses = open_out(dir + "/poses.tsv");
@@ -113,6 +123,7 @@ SessionRecording read_recording(const std::string& dir) {
     r.link.rtt_ms = meta.at("link_rtt_ms").get<double>();
     r.link.rate_mbit = meta.at("link_rate_mbit").get<double>();
     r.plane_distance = meta.at("plane_distance").get<double>();
+    r.scene_scale = meta.at("scene_scale").get<double>();
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(meta_path + ": " + e.what());
   }
@@ -122,33 +133,33 @@ SessionRecording read_recording(const std::string& dir) {
     std::ifstream in = open_in(dir + "/stream.h264", true);
     r.stream.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
   }
-  const std::string poses_path = dir + "/poses.tsv";
-  for (const auto& row : read_tsv(poses_path, 3)) {
+  for (const TsvRow& row : read_tsv(dir + "/poses.tsv", 3)) {
     RecordedPose p;
-    p.sequence = static_cast<std::uint32_t>(number_of(row[0], poses_path));
-    p.sent_ms = number_of(row[1], poses_path);
-    p.trace_s = number_of(row[2], poses_path);
+    p.sequence = static_cast<std::uint32_t>(row.number(0));
+    p.sent_ms = row.number(1);
+    p.trace_s = row.number(2);
     if (p.sequence != r.poses.size())
-      throw std::runtime_error(poses_path + ": pose " + row[0] + " out of order (want " +
+      throw std::runtime_error(row.where + ": pose " + row.fields[0] + " out of order (want " +
                                std::to_string(r.poses.size()) + ")");
     r.poses.push_back(p);
   }
-  const std::string frames_path = dir + "/frames.tsv";
-  for (const auto& row : read_tsv(frames_path, 9)) {
+  for (const TsvRow& row : read_tsv(dir + "/frames.tsv", 9)) {
     RecordedFrame f;
-    f.sequence = static_cast<std::uint32_t>(number_of(row[0], frames_path));
-    f.pose_sequence = static_cast<std::uint32_t>(number_of(row[1], frames_path));
-    f.arrived_ms = number_of(row[2], frames_path);
-    f.key = row[3] == "1";
-    f.width = static_cast<int>(number_of(row[4], frames_path));
-    f.height = static_cast<int>(number_of(row[5], frames_path));
-    f.lod_error_px = static_cast<float>(number_of(row[6], frames_path));
-    f.offset = static_cast<std::uint64_t>(number_of(row[7], frames_path));
-    f.bytes = static_cast<std::uint64_t>(number_of(row[8], frames_path));
-    const std::string which = frames_path + ": frame " + row[0];
+    f.sequence = static_cast<std::uint32_t>(row.number(0));
+    f.pose_sequence = static_cast<std::uint32_t>(row.number(1));
+    f.arrived_ms = row.number(2);
+    f.key = row.fields[3] == "1";
+    f.width = static_cast<int>(row.number(4));
+    f.height = static_cast<int>(row.number(5));
+    f.lod_error_px = static_cast<float>(row.number(6));
+    f.offset = static_cast<std::uint64_t>(row.number(7));
+    f.bytes = static_cast<std::uint64_t>(row.number(8));
     if (f.offset + f.bytes > r.stream.size())
-      throw std::runtime_error(which + " ends past stream.h264 (" + std::to_string(r.stream.size()) + " bytes)");
-    if (f.pose_sequence >= r.poses.size()) throw std::runtime_error(which + " answers pose " + row[1] + ", never sent");
+      throw std::runtime_error(row.where + ": frame ends past stream.h264 (" + std::to_string(r.stream.size()) +
+                               " bytes)");
+    if (f.pose_sequence >= r.poses.size())
+      throw std::runtime_error(row.where + ": frame answers pose " + row.fields[1] + ", never sent");
+    if (f.width < 1 || f.height < 1) throw std::runtime_error(row.where + ": frame size under 1 pixel");
     r.frames.push_back(f);
   }
   return r;

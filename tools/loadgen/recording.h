@@ -59,6 +59,9 @@ struct SessionRecording {
   // of the camera along its forward axis (camera.js setPose keeps the distance to the target;
   // the first view's target is Welcome.orbit_centre), world units.
   double plane_distance = 1;
+  // The page camera's scene scale (camera.js sceneScale: Welcome.scene_scale, else the bounds'
+  // diagonal): planeDepthFor's fallback when the target is behind the shown frame's camera.
+  double scene_scale = 1;
   Trace trace;
   std::vector<RecordedPose> poses;
   std::vector<RecordedFrame> frames;

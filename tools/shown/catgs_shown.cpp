@@ -1,0 +1,286 @@
+// catgs-shown: the shown-picture measure (issue 91). Scores, per display refresh of a visitor
+// following a real path, what the visitor's screen shows against the ideal picture of where the
+// visitor is then (shown/shown_score.h), beside two pictures with no codec and no delay:
+//   full detail   our renderer at the display pose, every Gaussian
+//   anchor        our renderer at the display pose within a splat budget (--anchor-budget, 1.5 M:
+//                 Spark 2.0's default; the finest cut of the LOD ladder whose predicted Gaussians
+//                 fit it, server/render/lod_bound.h CutCounter), what a client-side renderer shows
+//   shown NAME    each recorded run (catgs-loadgen --record): the newest frame visible by the
+//                 refresh, re-projected by the page's rule to the display pose
+// Every run must hold the same sessions (the same traces, sizes and offsets: the display poses
+// are then the same, so each refresh's ideal is rendered once for every row).
+//
+//   catgs-shown --scene S.ply --run landed=/tmp/rec_a,main=/tmp/rec_b --json shown.json
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+#include "common/cli_args.h"
+#include "common/image_io.h"
+#include "process/scene_with_lod.h"
+#include "render/lod_bound.h"
+#include "shown/shown_score.h"
+
+using namespace catgs;
+using namespace catgs::shown;
+
+namespace {
+
+const char* kUsage =
+    "usage: catgs-shown --scene FILE --run NAME=DIR[,NAME=DIR...] [options]\n"
+    "  --scene FILE          the scene the runs streamed (its level of detail as the server reads\n"
+    "                        it: the LOD file in --cache-dir or beside it, else built here)\n"
+    "  --cache-dir DIR       the server's --cache-dir (where its LOD file is)\n"
+    "  --run NAME=DIR,...    catgs-loadgen --record folders (session_I inside), one row each\n"
+    "  --renderer KIND       cpu | cuda | auto (default auto)\n"
+    "  --aa N                the ideal is rendered N times larger and box-filtered (default 4)\n"
+    "  --refresh-hz HZ       the display's refresh rate (default 60)\n"
+    "  --warmup-s S          refreshes before S seconds are not scored (default 1)\n"
+    "  --every N             score every Nth refresh (default 1)\n"
+    "  --anchor-budget N     the client-side anchor's splat budget (default 1500000)\n"
+    "  --json FILE           write every row's per-refresh scores and summaries\n"
+    "  --png-dir DIR         write the pictures of each session's worst shown refresh\n";
+
+constexpr float kAnchorBase = 0.5f;  // the anchor ladder's finest bound above full detail, px
+
+// The finest bound whose cut's predicted Gaussians fit `budget` (0 = full detail when the whole
+// view fits), up the ladder of x sqrt(2) steps; the ladder's top when none does.
+float anchor_bound(const server::CutCounter& counter, const Camera& camera, std::uint64_t budget) {
+  if (!counter.has_lod() || counter.splats(camera, 0.0f) <= budget) return 0.0f;
+  float tau = kAnchorBase;
+  for (int step = 0; step < 16; ++step, tau *= 1.41421356f)
+    if (counter.splats(camera, tau) <= budget) return tau;
+  return tau;
+}
+
+std::vector<std::string> session_dirs(const std::string& dir) {
+  std::vector<std::string> out;
+  if (std::filesystem::exists(dir + "/meta.json")) return {dir};
+  if (!std::filesystem::is_directory(dir)) throw std::runtime_error(dir + ": not a folder");
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.is_directory() && std::filesystem::exists(e.path() / "meta.json")) out.push_back(e.path().string());
+  std::sort(out.begin(), out.end());
+  if (out.empty()) throw std::runtime_error(dir + ": no recorded session (catgs-loadgen --record)");
+  return out;
+}
+
+struct RunSpec {
+  std::string name, dir;
+};
+
+std::vector<RunSpec> parse_runs(const std::string& text) {
+  std::vector<RunSpec> runs;
+  std::stringstream ss(text);
+  for (std::string item; std::getline(ss, item, ',');) {
+    const auto eq = item.find('=');
+    if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--run wants NAME=DIR, got '" + item + "'");
+    runs.push_back({item.substr(0, eq), item.substr(eq + 1)});
+  }
+  if (runs.empty()) throw std::invalid_argument("--run needs at least one NAME=DIR");
+  return runs;
+}
+
+RenderOptions detail(float lod_error_px) {
+  RenderOptions o;
+  o.lod_error_px = lod_error_px;
+  o.list_budget = RenderListBudget::unlimited();
+  return o;
+}
+
+nlohmann::json row_json(const Row& row) {
+  const Summary p = summarize(row.psnr), s = summarize(row.ssim);
+  return {{"refreshes", p.count}, {"psnr_db_mean", p.mean}, {"psnr_db_p5", p.p5},  {"psnr_db_min", p.min},
+          {"ssim_mean", s.mean},  {"ssim_p5", s.p5},        {"psnr_db", row.psnr}, {"ssim", row.ssim}};
+}
+
+void print_row(const std::string& session, const Row& row) {
+  const Summary p = summarize(row.psnr), s = summarize(row.ssim);
+  std::printf("%-12s %-22s %8zu %9.2f %9.2f %9.4f %9.4f\n", session.c_str(), row.name.c_str(), p.count, p.mean, p.p5,
+              s.mean, s.p5);
+}
+
+// A picture at another size than the display (adaptive quality shrank the stream): stretched to
+// it as the page's CSS does, bilinearly.
+Image stretched(const Image& src, int width, int height) {
+  if (src.width == width && src.height == height) return src;
+  Image out;
+  out.width = width;
+  out.height = height;
+  out.rgba8.resize(static_cast<std::size_t>(width) * height * 4);
+  for (int j = 0; j < height; ++j)
+    for (int i = 0; i < width; ++i) {
+      const double u = std::clamp((i + 0.5) * src.width / width - 0.5, 0.0, src.width - 1.0);
+      const double v = std::clamp((j + 0.5) * src.height / height - 0.5, 0.0, src.height - 1.0);
+      const int i0 = static_cast<int>(u), j0 = static_cast<int>(v);
+      const int i1 = std::min(i0 + 1, src.width - 1), j1 = std::min(j0 + 1, src.height - 1);
+      const double fu = u - i0, fv = v - j0;
+      for (int c = 0; c < 4; ++c) {
+        const auto at = [&](int x, int y) { return src.rgba8[(static_cast<std::size_t>(y) * src.width + x) * 4 + c]; };
+        const double top = at(i0, j0) * (1 - fu) + at(i1, j0) * fu, bottom = at(i0, j1) * (1 - fu) + at(i1, j1) * fu;
+        out.rgba8[(static_cast<std::size_t>(j) * width + i) * 4 + c] =
+            static_cast<std::uint8_t>(std::lround(top * (1 - fv) + bottom * fv));
+      }
+    }
+  return out;
+}
+
+struct Scorer {
+  std::shared_ptr<const GaussianModel> model;
+  std::unique_ptr<server::CutCounter> counter;
+  std::unique_ptr<Renderer> ideal, view;
+  int aa = 4;
+  double refresh_hz = 60, warmup_s = 1;
+  int every = 1;
+  std::uint64_t budget = 1500000;
+  std::string png_dir;
+
+  // One session of every run: rows full detail, anchor, then each run's shown picture.
+  std::vector<Row> score(const std::vector<std::string>& names, std::vector<RecordingPlayer>& players,
+                         const std::string& session) {
+    std::vector<Row> rows(2 + players.size());
+    rows[0].name = "full detail";
+    rows[1].name = "anchor " + std::to_string(budget / 1000) + " k";
+    for (std::size_t r = 0; r < players.size(); ++r) rows[2 + r].name = "shown " + names[r];
+    const loadgen::SessionRecording& first = players.front().recording();
+    double start_ms = 1000.0 * warmup_s;
+    for (const auto& p : players) start_ms = std::max(start_ms, p.first_visible_ms());
+    const double period_ms = 1000.0 / refresh_hz;
+    Image hi, full, anchor;
+    double worst = 1e300;
+    for (double t = std::ceil(start_ms / period_ms) * period_ms; t <= 1000.0 * first.seconds; t += every * period_ms) {
+      const Camera display = players.front().display_pose(t);
+      ideal->render(display.rescaled(display.width * aa, display.height * aa), hi);
+      const Image want = box_downsample(hi, aa);
+      view->set_options(detail(0.0f));
+      view->render(display, full);
+      rows[0].add(full, want);
+      view->set_options(detail(anchor_bound(*counter, display, budget)));
+      view->render(display, anchor);
+      rows[1].add(anchor, want);
+      for (std::size_t r = 0; r < players.size(); ++r) {
+        Camera frame_pose;
+        const Image* frame = players[r].shown_frame(t, frame_pose);
+        if (!frame) throw std::runtime_error(session + ": no decoded frame by " + std::to_string(t) + " ms");
+        const Image shown =
+            stretched(page_shows(*frame, frame_pose, display, players[r].recording()), display.width, display.height);
+        rows[2 + r].add(shown, want);
+        if (!png_dir.empty() && r + 1 == players.size() && rows[2 + r].psnr.back() < worst) {
+          worst = rows[2 + r].psnr.back();
+          const std::string base = png_dir + "/" + session + "_worst_";
+          write_png(want, base + "ideal.png");
+          write_png(*frame, base + "frame.png");
+          write_png(shown, base + "shown.png");
+          write_png(anchor, base + "anchor.png");
+        }
+      }
+    }
+    return rows;
+  }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const tools::Args args(argc, argv,
+                           {"--scene", "--cache-dir", "--run", "--renderer", "--aa", "--refresh-hz", "--warmup-s",
+                            "--every", "--anchor-budget", "--json", "--png-dir", "--help!"});
+    if (args.has("--help")) {
+      std::cout << kUsage;
+      return 0;
+    }
+    const std::vector<RunSpec> runs = parse_runs(args.require("--run"));
+    Scorer s;
+    s.aa = args.get_int("--aa", 4);
+    s.refresh_hz = args.get_double("--refresh-hz", 60);
+    s.warmup_s = args.get_double("--warmup-s", 1);
+    s.every = args.get_int("--every", 1);
+    s.budget = static_cast<std::uint64_t>(args.get_double("--anchor-budget", 1.5e6));
+    s.png_dir = args.get("--png-dir");
+    if (s.aa < 1 || s.refresh_hz <= 0 || s.every < 1)
+      throw std::invalid_argument("--aa and --every must be >= 1, --refresh-hz > 0");
+    if (!s.png_dir.empty()) std::filesystem::create_directories(s.png_dir);
+    server::SceneWithLodOptions lod;
+    lod.lod = server::LodMode::read;
+    lod.cache_dir = args.get("--cache-dir");
+    lod.log = [](const std::string& line) { std::cout << "scene: " << line << "\n"; };
+    s.model = std::make_shared<const GaussianModel>(server::load_scene_with_lod(args.require("--scene"), lod, {}));
+    s.counter = std::make_unique<server::CutCounter>(*s.model);
+    const std::string kind = args.get("--renderer", "auto");
+    std::string why;
+    s.ideal = make_renderer(kind, s.model, detail(0.0f), &why);
+    s.view = make_renderer(kind, s.model, detail(0.0f));
+    std::cout << "scene " << args.get("--scene") << ": " << s.model->size() << " Gaussians; renderer "
+              << s.ideal->name() << (why.empty() ? "" : " (" + why + ")") << "\n";
+
+    std::vector<std::string> names;
+    std::vector<std::vector<std::string>> sessions;
+    for (const RunSpec& r : runs) {
+      names.push_back(r.name);
+      sessions.push_back(session_dirs(r.dir));
+      if (sessions.back().size() != sessions.front().size())
+        throw std::runtime_error("run " + r.name + " holds " + std::to_string(sessions.back().size()) +
+                                 " sessions, run " + runs.front().name + " " + std::to_string(sessions.front().size()));
+    }
+    nlohmann::json report = {{"aa", s.aa},       {"refresh_hz", s.refresh_hz}, {"warmup_s", s.warmup_s},
+                             {"every", s.every}, {"anchor_budget", s.budget},  {"sessions", nlohmann::json::array()}};
+    std::map<std::string, Row> pooled;
+    std::vector<std::string> order;
+    std::printf("%-12s %-22s %8s %9s %9s %9s %9s\n", "session", "picture", "refresh", "PSNR", "PSNR p5", "SSIM",
+                "SSIM p5");
+    for (std::size_t k = 0; k < sessions.front().size(); ++k) {
+      std::vector<RecordingPlayer> players;
+      for (const auto& run : sessions) players.emplace_back(loadgen::read_recording(run[k]));
+      const auto& a = players.front().recording();
+      for (const auto& p : players) {
+        const auto& b = p.recording();
+        if (b.width != a.width || b.height != a.height || b.trace_spec != a.trace_spec || b.offset_s != a.offset_s)
+          throw std::runtime_error("session " + std::to_string(k) + " differs between runs (size, trace or offset)");
+      }
+      const std::string session = std::filesystem::path(sessions.front()[k]).filename().string();
+      const std::vector<Row> rows = s.score(names, players, session);
+      nlohmann::json sj = {{"session", session},
+                           {"trace", a.trace_spec},
+                           {"width", a.width},
+                           {"height", a.height},
+                           {"link_rtt_ms", a.link.rtt_ms},
+                           {"link_rate_mbit", a.link.rate_mbit},
+                           {"rows", nlohmann::json::array()}};
+      for (const Row& row : rows) {
+        print_row(session, row);
+        sj["rows"].push_back(row_json(row));
+        sj["rows"].back()["name"] = row.name;
+        if (!pooled.count(row.name)) order.push_back(row.name);
+        Row& all = pooled[row.name];
+        all.name = row.name;
+        all.psnr.insert(all.psnr.end(), row.psnr.begin(), row.psnr.end());
+        all.ssim.insert(all.ssim.end(), row.ssim.begin(), row.ssim.end());
+      }
+      report["sessions"].push_back(sj);
+    }
+    report["pooled"] = nlohmann::json::array();
+    for (const std::string& name : order) {
+      print_row("all", pooled[name]);
+      nlohmann::json j = row_json(pooled[name]);
+      j.erase("psnr_db");
+      j.erase("ssim");
+      j["name"] = name;
+      report["pooled"].push_back(j);
+    }
+    if (args.has("--json")) {
+      std::ofstream(args.get("--json")) << report.dump(1) << "\n";
+      std::cout << "JSON: " << args.get("--json") << "\n";
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "catgs-shown: " << e.what() << "\n" << kUsage;
+    return 2;
+  }
+}
