@@ -36,6 +36,9 @@
 # `compactcopy NAME`, `readrate FILE` (a scene NAME.catgs is served in place of
 # NAME.compressed.ply where it exists); `hogramp NAME SCENE WxH HOG_GIB START STEP MAX [SERVER ARGS]` (issue 73: the
 # ramp beside another process that holds HOG_GIB GiB of the GPU).
+# The shown-picture measure (issue 91; prepare with CATGS_CARRY_SHOWN=1): `shown NAME SCENE WxH
+# LOADED [SERVER ARGS]`; catgs-loadgen's own CPU, the landed binary beside this one (issue 92;
+# prepare with CATGS_CARRY_BINS=PATH/landed/catgs-loadgen): `clientcpu NAME SCENE N`.
 # CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -55,11 +58,21 @@ prepare() {
   [ "${CATGS_CARRY_TESTS:-1}" = 1 ] && bins+=("$(find "$build" -type f -name catgs_server_unit_tests -perm -u+x | head -1)")
   [ "${CATGS_CARRY_ENCODE_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-encode-bench")
   [ "${CATGS_CARRY_BENCH:-0}" = 1 ] && bins+=("$build/bin/catgs-bench")
+  # catgs-shown (issue 91's measure: `shown`), and any other binaries named in CATGS_CARRY_BINS
+  # (space-separated paths, e.g. the landed build's catgs-loadgen for `clientcpu`).
+  [ "${CATGS_CARRY_SHOWN:-0}" = 1 ] && bins+=("$build/bin/catgs-shown")
+  # shellcheck disable=SC2206
+  [ -n "${CATGS_CARRY_BINS:-}" ] && bins+=(${CATGS_CARRY_BINS})
   # The other process of hogramp (built with the GPU tests), where built.
   [ -x "$build/bin/catgs-memory-hog" ] && bins+=("$build/bin/catgs-memory-hog")
   for b in "${bins[@]}"; do
     [ -x "$b" ] || { echo "prepare: $b missing (build $build with the server)" >&2; return 1; }
-    cp -f "$b" "$carry/stage/bin/"
+    # A binary from another build keeps the name of its folder's tag: .../landed/catgs-loadgen
+    # travels as catgs-loadgen-landed.
+    case "$b" in
+      "$build"/*) cp -f "$b" "$carry/stage/bin/" ;;
+      *) cp -f "$b" "$carry/stage/bin/$(basename "$b")-$(basename "$(dirname "$b")")" ;;
+    esac
   done
   strip "$carry"/stage/bin/* 2>/dev/null || true
   if ldd "${bins[@]}" | grep -q libavformat; then
@@ -319,6 +332,84 @@ compactcopy() {
     ls -l "$W/$name.compressed.ply" "$W/$name.catgs"; } 2>&1 | tee "$OUT/compactcopy-$name.log"
 }
 
+# shown NAME SCENE WxH LOADED [SERVER ARGS]: the shown-picture measure (issue 91) on SCENE's three
+# real paths, one session a path in each run of 10 s at 60 poses/s (catgs-loadgen --record):
+# `one` on loopback (3 sessions), `loaded` on loopback with LOADED sessions (the first three, the
+# same paths and offsets, are scored), `l25` 25 Mbit/s with a 40 ms round trip and `l8` 8 Mbit/s
+# with 80 ms (emulated in the client: tools/loadgen/recording.h); each against the server with
+# SERVER ARGS and --pose-prediction off (`base`: the landed server's frames) and again with
+# --pose-prediction on (`pred`). Then catgs-shown on the GPU
+# scores every 3rd refresh (CATGS_SHOWN_EVERY) of all eight against the 4x supersampled
+# full-detail render -> $OUT/shown-NAME.txt, .json, each session's worst refresh's pictures in
+# $OUT/shown-NAME-pictures.tar, and the runs' loadgen tables in $OUT/shown-NAME-runs.txt.
+shown() {
+  local name=$1 scene=$2 size=$3 loaded=$4 W=/tmp/catgs_sweep
+  shift 4
+  local R=/tmp/catgs_shown/$name
+  export LD_LIBRARY_PATH=$SRV/lib
+  rm -rf "$R" && mkdir -p "$R" "$W/cache"
+  local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
+  local config run n runs=""
+  for config in base pred; do
+    local extra=()
+    extra=(--pose-prediction off)
+    [ "$config" = pred ] && extra=(--pose-prediction on)
+    start_server "$(scene_file "$scene")" "$R/server-$config.log" --cache-dir "$W/cache" "$@" "${extra[@]}" || return 1
+    for run in one loaded l25 l8; do
+      local link=()
+      n=3
+      case $run in
+        loaded) n=$loaded ;;
+        l25) link=(--link-rtt-ms 40 --link-mbit 25) ;;
+        l8) link=(--link-rtt-ms 80 --link-mbit 8) ;;
+      esac
+      "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions "$n" --size "$size" --trace "$traces" --rate 60 \
+        --seconds 10 --progress 0 --record "$R/$config-$run" --json "$R/$config-$run.json" "${link[@]}" \
+        > "$R/$config-$run.txt" 2>&1
+      { echo "== $config-$run: $n sessions ${link[*]}"; tail -5 "$R/$config-$run.txt"; } | tee -a "$OUT/shown-$name-runs.txt"
+      runs="$runs${runs:+,}$config-$run=$R/$config-$run"
+    done
+    stop_server
+  done
+  "$SRV/bin/catgs-shown" --scene "$(scene_file "$scene")" --cache-dir "$W/cache" --renderer cuda --run "$runs" \
+    --every "${CATGS_SHOWN_EVERY:-3}" --json "$OUT/shown-$name.json" --png-dir "$R/pictures" 2>&1 |
+    tee "$OUT/shown-$name.txt"
+  tar -C "$R" -cf "$OUT/shown-$name-pictures.tar" pictures  # one file: a call brings back 8 at most
+}
+
+# clientcpu NAME SCENE N: catgs-loadgen's own CPU time (issue 92) for N sessions of 10 s at 720p
+# on SCENE's three real paths: fitted by the client (`real:`, --scene: the fit that made the client
+# cost more than the server on the big cities) by the landed binary (catgs-loadgen-landed), then
+# by this one, then this one replaying the paths fitted beforehand (`scenes`' .trace files: what
+# the client costs while streaming), one after another against one server ->
+# $OUT/clientcpu-NAME.txt.
+clientcpu() {
+  local name=$1 scene=$2 n=$3 W=/tmp/catgs_sweep T=$ROOT/.carry_srv/traces
+  export LD_LIBRARY_PATH=$SRV/lib
+  start_server "$(scene_file "$scene")" "$W/server_clientcpu-$name.log" --cache-dir "$W/cache" || return 1
+  local real="real:$T/mipnerf360_bicycle.cameras.json,real:$T/tandt_train.cameras.json,real:$T/flowers_sh3.cameras.json"
+  local fitted="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
+  local row
+  for row in "catgs-loadgen-landed --scene $(scene_file "$scene") --trace $real" \
+    "catgs-loadgen --scene $(scene_file "$scene") --trace $real" "catgs-loadgen --trace $fitted"; do
+    # shellcheck disable=SC2086
+    python3 - "$PORT" "$n" "$SRV/bin/"$row <<'PY' | tee -a "$OUT/clientcpu-$name.txt"
+import resource, subprocess, sys, time
+port, n, cmd = sys.argv[1], sys.argv[2], sys.argv[3:]
+t0 = time.time()
+out = subprocess.run(cmd + ['--port', port, '--sessions', n, '--size', '1280x720', '--rate', '60', '--seconds', '10',
+                            '--progress', '0'], capture_output=True, text=True).stdout
+r = resource.getrusage(resource.RUSAGE_CHILDREN)
+total = [l for l in out.splitlines() if l.startswith('total')]
+own = [l for l in out.splitlines() if l.startswith('client CPU')]  # this build's own count, from the run's start
+print('%s: %s sessions, client CPU %.1f s (user %.1f + sys %.1f) over %.1f s wall, the scene's load included\n  %s%s' % (
+    ' '.join(c.split('/')[-1] for c in cmd), n, r.ru_utime + r.ru_stime, r.ru_utime, r.ru_stime, time.time() - t0,
+    total[0] if total else out[-400:], ('\n  ' + own[0]) if own else ''))
+PY
+  done
+  stop_server
+}
+
 # readrate FILE: dd of FILE in 16 MiB pieces, page cache warm (as firstframe reads it) -> stdout.
 readrate() {
   dd if="$1" of=/dev/null bs=16M 2>&1 | tail -1
@@ -535,5 +626,7 @@ case "${1:-}" in
   compactcity) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; compactcity "$@" ;;
   compactcopy) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; compactcopy "$@" ;;
   readrate) shift; readrate "$@" ;;
+  shown) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; shown "$@" ;;
+  clientcpu) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; clientcpu "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
 esac

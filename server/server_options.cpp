@@ -175,6 +175,10 @@ std::string server_usage() {
          "  --adaptive-quality on|off  lower a session's resolution (x0.75, x0.5) while the\n"
          "                        server skips its poses, climb back when frames would fit\n"
          "                        (default off; session/adaptive_quality.h has the rule)\n"
+         "  --pose-prediction on|off  render each frame for where the visitor will be when it is\n"
+         "                        shown (the client's motion, ahead by its reported pose-to-\n"
+         "                        shown delay); the Frame says which pose (default on;\n"
+         "                        session/pose_prediction.h)\n"
          "  --still-refine on|off  when the camera stops on a frame held back (smaller, or\n"
          "                        under a rate cap), draw its pose again at full size and the\n"
          "                        crf with no rate cap (default on; session/still_refine.h)\n"
@@ -376,7 +380,10 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
       out.frames_per_lane = parse_int(a, v, 1, 16);
     else if (a == "--slow-client-timeout-ms")
       out.slow_client_timeout_ms = parse_int(a, v, 100, 3600000);
-    else if (a == "--adaptive-quality") {
+    else if (a == "--pose-prediction") {
+      if (v != "on" && v != "off") throw std::invalid_argument("--pose-prediction: on or off, not '" + v + "'");
+      out.pose_prediction = v == "on";
+    } else if (a == "--adaptive-quality") {
       if (v != "on" && v != "off") throw std::invalid_argument("--adaptive-quality: on or off, not '" + v + "'");
       out.adaptive_quality = v == "on";
     } else if (a == "--crf")
@@ -486,6 +493,7 @@ SessionSettings session_settings(const ServerOptions& o) {
   s.frame.encoder = o.encoder;
   s.frame.encoder_policy = o.encoder_policy;
   s.frame.adaptive_quality = o.adaptive_quality;
+  s.frame.pose_prediction = o.pose_prediction;
   s.frame.link_control = o.link_control;
   s.frame.still_refine = o.still_refine;
   s.frame.frame_deadline_slots = o.frame_deadline_slots;

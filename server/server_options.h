@@ -105,6 +105,7 @@ struct ServerOptions {
   int frames_per_lane = 0;             // --frames-per-lane: frames a lane keeps begun; 0 = 2 CUDA, 1 CPU
   int slow_client_timeout_ms = 10000;  // frames unwritten this long -> ERROR_TOO_SLOW
   bool adaptive_quality = false;       // --adaptive-quality (session/adaptive_quality.h)
+  bool pose_prediction = true;         // --pose-prediction (session/pose_prediction.h)
   // --bitrate, --bits-per-pixel, --crf, --vbv-ms, --intra-refresh, --encoder-threads: how each
   // session's stream is sized (encode/encoder_policy.h); usable_cores is filled at parse time.
   EncoderPolicy encoder_policy;

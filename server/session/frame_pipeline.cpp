@@ -73,6 +73,10 @@ void FramePipeline::refine(Clock::time_point now) {
   pending_ = last_started_;
   pending_->refine = true;
   pending_->received = now;
+  // A still camera is where the client said, not where its motion led: the refine frame draws the
+  // client's pose (a predicted one overshoots the stop).
+  pending_->pose = pending_->sent;
+  pending_->predicted = false;
 }
 
 bool FramePipeline::can_start_render() const {
@@ -512,6 +516,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   r.total_ms = ms_between(job.pose.received, Clock::now());
   r.quality_level = job.shape.quality_level;
   r.refine = job.pose.refine;
+  r.predicted = job.pose.predicted;
   r.rate_capped = !job.pose.refine && encoder_rate_kbps_ > 0;
   r.refine_vbv_bound = job.pose.refine && refine_lifted_cap_;
   refine_lifted_cap_ = false;
@@ -520,6 +525,18 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_sequence(job.frame_sequence);
   f->set_pose_sequence(job.pose.sequence);
   f->set_client_time_ms(job.pose.client_time_ms);
+  if (job.pose.predicted) {  // Frame.shown_pose: the page re-projects from it, not from its Pose
+    pb::Pose* shown = f->mutable_shown_pose();
+    const CameraPose& p = job.pose.pose;
+    shown->mutable_position()->set_x(p.position.x);
+    shown->mutable_position()->set_y(p.position.y);
+    shown->mutable_position()->set_z(p.position.z);
+    shown->mutable_orientation()->set_w(p.orientation.w);
+    shown->mutable_orientation()->set_x(p.orientation.x);
+    shown->mutable_orientation()->set_y(p.orientation.y);
+    shown->mutable_orientation()->set_z(p.orientation.z);
+    shown->set_vertical_fov_deg(p.vertical_fov_deg);
+  }
   f->set_key_frame(enc.key_frame);
   f->set_width(static_cast<std::uint32_t>(job.shape.width));
   f->set_height(static_cast<std::uint32_t>(job.shape.height));

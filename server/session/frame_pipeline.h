@@ -48,7 +48,9 @@ class FramePipeline {
 
   // A validated pose waiting to be rendered.
   struct PendingPose {
-    CameraPose pose;
+    CameraPose pose;         // the pose to render: the client's, or where it will be (pose_prediction.h)
+    CameraPose sent;         // the client's Pose (a refine frame draws it: a still camera is there)
+    bool predicted = false;  // pose is not `sent`: the Frame says which pose it shows
     std::uint32_t sequence = 0;
     double client_time_ms = 0;
     Clock::time_point received;  // arrival on the transport thread
@@ -124,6 +126,7 @@ class FramePipeline {
     double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;
     bool refine = false;       // the still view's refine frame
+    bool predicted = false;    // drawn at a predicted pose (pose_prediction.h), not the client's
     bool rate_capped = false;  // encoded under a VBV rate (the policy's, a client's, the link's cap)
     // A refine frame that lifted x264's VBV cap: x264 keeps the buffer's fill across a new rate,
     // so it was planned against what the capped frames left; the next reaches the crf

@@ -20,6 +20,8 @@ struct FrameSettings {
   EncoderPolicy encoder_policy;
   // --adaptive-quality: a session's size follows what it can keep up with (adaptive_quality.h).
   bool adaptive_quality = false;
+  // --pose-prediction: frames drawn where the visitor will be when shown (pose_prediction.h).
+  bool pose_prediction = true;
   // --link-control: the bitrate follows the link (link_rate.h).
   bool link_control = true;
   // --still-refine: the view a camera stops on is drawn again at full size and the stream's crf

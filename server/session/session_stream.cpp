@@ -64,7 +64,17 @@ void SessionStream::on_pose(const pb::Pose& pose, const CameraPose& cam, Clock::
   if (shared_.settings.frame.adaptive_quality) quality_.on_pose(received, replaced);
   still_.on_pose(received);
   pacing_.on_pose(received);
-  frames_.offer({cam, pose.sequence(), pose.client_time_ms(), received});
+  FramePipeline::PendingPose next;
+  next.pose = next.sent = cam;
+  next.sequence = pose.sequence();
+  next.client_time_ms = pose.client_time_ms();
+  next.received = received;
+  if (shared_.settings.frame.pose_prediction) {
+    prediction_.on_pose(cam, pose.client_time_ms(), pose.shown_latency_ms());
+    next.pose = prediction_.predicted();
+    next.predicted = next.pose.position != cam.position || next.pose.orientation != cam.orientation;
+  }
+  frames_.offer(next);
   admit();
 }
 
@@ -188,7 +198,10 @@ void SessionStream::hand_off(JobResult result) {
   count(result);
   if (shared_.settings.frame.adaptive_quality && !result.refine)
     quality_.on_frame(result.quality_level, result.total_ms);
-  still_.on_frame(result.quality_level > 0 || result.rate_capped, result.refine, result.refine_vbv_bound);
+  // A predicted frame is held back too: its pose ran ahead of a camera that may have stopped, and
+  // the stop's refine frame draws the client's own pose.
+  still_.on_frame(result.quality_level > 0 || result.rate_capped || result.predicted, result.refine,
+                  result.refine_vbv_bound);
   handed_.push_back({Clock::now(), result.message.size(), result.frame_sequence, result.link_read_at, result.refine});
   recent_.push_back(handed_.back());
   if (recent_.size() > kRecentFrames) recent_.pop_front();

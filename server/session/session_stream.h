@@ -35,6 +35,7 @@
 #include "session/frame_pacing.h"
 #include "session/frame_pipeline.h"
 #include "session/link_rate.h"
+#include "session/pose_prediction.h"
 #include "session/session_shared.h"
 #include "session/still_refine.h"
 
@@ -127,6 +128,7 @@ class SessionStream {
   int gpu_ = -1;          // the CUDA device it renders on (open), -1: the CPU renderer
   int width_ = 0, height_ = 0;
   int max_bitrate_kbps_ = 0;                         // the client's Quality
+  PosePrediction prediction_;                        // --pose-prediction
   AdaptiveQuality quality_;                          // --adaptive-quality
   FramePacing pacing_;                               // --frame-deadline
   StillRefine still_;                                // the still view's refine frame

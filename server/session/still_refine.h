@@ -29,7 +29,8 @@ class StillRefine {
 
   // A pose arrived at `now`: the camera moves, and its next stop may need a refine.
   void on_pose(Clock::time_point now);
-  // A frame was handed to the transport. `held_back`: drawn below full size or encoded under a
+  // A frame was handed to the transport. `held_back`: drawn below full size, at a predicted pose
+  // (pose_prediction.h: the stop is elsewhere) or encoded under a
   // rate cap; `refine`: it was a refine frame, `vbv_bound` one the VBV's fill held.
   void on_frame(bool held_back, bool refine, bool vbv_bound = false);
   // True when a refine frame is due: no pose for kAfter and the last frame handed off was held

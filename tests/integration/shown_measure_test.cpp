@@ -1,7 +1,7 @@
 // The shown-picture measure (issue 91) end to end on the CPU core: catgs-loadgen records one
-// session on loopback and the same session over an emulated 150 ms round trip, and catgs-shown
-// scores both per display refresh against the supersampled ideal beside full detail and the
-// client-side anchor.
+// session on loopback and the same session over an emulated 150 ms round trip, without and with
+// pose prediction, and catgs-shown scores them per display refresh against the supersampled ideal
+// beside full detail and the client-side anchor.
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -31,43 +31,61 @@ const nlohmann::json& row_named(const nlohmann::json& rows, const std::string& n
   throw std::runtime_error("no row " + name + " in " + rows.dump());
 }
 
-TEST(ShownMeasure, DelayCostsTheShownPictureAndTheAnchorIsFullDetailWithinItsBudget) {
-  ServerProcess server(server_args(kBiker));
-  const std::string loop = temp_dir("loop"), far = temp_dir("far"), json = temp_dir("json") + ".json";
-  const std::string loadgen = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) +
-                              " --size 192x108 --rate 30 --seconds 3 --trace orbit --progress 0";
-  ASSERT_EQ(std::system((loadgen + " --record " + loop + " > /dev/null").c_str()), 0);
-  ASSERT_EQ(std::system((loadgen + " --record " + far + " --link-rtt-ms 150 > /dev/null").c_str()), 0);
-  // The recording: the poses of the far run are the trace's half a round trip back.
+TEST(ShownMeasure, DelayCostsTheShownPicturePredictionWinsSomeBackAndTheAnchorIsFullDetailWithinItsBudget) {
+  const std::string loop = temp_dir("loop"), far = temp_dir("far"), ahead = temp_dir("ahead");
+  const std::string json = temp_dir("json") + ".json";
+  const auto record = [](int port, const std::string& dir, const std::string& link) {
+    const std::string loadgen = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(port) +
+                                " --size 192x108 --rate 30 --seconds 3 --trace orbit --progress 0";
+    return std::system((loadgen + " --record " + dir + link + " > /dev/null").c_str());
+  };
+  {  // The landed server's frames: drawn at the pose sent.
+    ServerProcess server(server_args(kBiker, {"--pose-prediction", "off"}));
+    ASSERT_EQ(record(server.port(), loop, ""), 0);
+    ASSERT_EQ(record(server.port(), far, " --link-rtt-ms 150"), 0);
+  }
+  {  // Drawn where the visitor will be (the orbit turns at a steady rate: easy to predict).
+    ServerProcess server(server_args(kBiker, {"--pose-prediction", "on"}));
+    ASSERT_EQ(record(server.port(), ahead, " --link-rtt-ms 150"), 0);
+  }
+  // The recording: the poses of the far run are the trace's half a round trip back; a predicted
+  // run's frames say which pose they show.
   const loadgen::SessionRecording rec = loadgen::read_recording(far + "/session_0");
   ASSERT_FALSE(rec.frames.empty());
   EXPECT_EQ(rec.link.rtt_ms, 150);
   EXPECT_NEAR(rec.poses.back().trace_s, rec.poses.back().sent_ms / 1000.0 - 0.075, 1e-3);
   EXPECT_GE(loadgen::visible_ms(rec).front(), rec.frames.front().arrived_ms + 75.0);
+  EXPECT_FALSE(rec.frames.back().shown_pose.has_value());
+  EXPECT_TRUE(loadgen::read_recording(ahead + "/session_0").frames.back().shown_pose.has_value());
 
   const std::string shown = std::string(CATGS_SHOWN_BIN) + " --scene " + kBiker + " --renderer cpu --aa 2 --every 4" +
-                            " --warmup-s 0.5 --run loop=" + loop + ",far=" + far + " --json " + json;
+                            " --warmup-s 0.5 --run loop=" + loop + ",far=" + far + ",ahead=" + ahead + " --json " +
+                            json;
   ASSERT_EQ(std::system((shown + " > /dev/null").c_str()), 0);
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(json));
   const nlohmann::json& rows = j["pooled"];
-  ASSERT_EQ(rows.size(), 4u) << rows.dump();
+  ASSERT_EQ(rows.size(), 5u) << rows.dump();
   const auto& full = row_named(rows, "full detail");
   const auto& anchor = row_named(rows, "anchor 1500 k");
   const auto& near_row = row_named(rows, "shown loop");
   const auto& far_row = row_named(rows, "shown far");
+  const auto& ahead_row = row_named(rows, "shown ahead");
   // 2.5 s of 60 Hz refreshes, every 4th: about 37, the same refreshes in every row.
   EXPECT_GE(full["refreshes"].get<int>(), 30);
-  for (const auto* r : {&anchor, &near_row, &far_row}) EXPECT_EQ((*r)["refreshes"], full["refreshes"]);
+  for (const auto* r : {&anchor, &near_row, &far_row, &ahead_row}) EXPECT_EQ((*r)["refreshes"], full["refreshes"]);
   std::cout << "[ info ] PSNR mean / p5: full " << full["psnr_db_mean"] << " / " << full["psnr_db_p5"] << ", loop "
             << near_row["psnr_db_mean"] << " / " << near_row["psnr_db_p5"] << ", 150 ms " << far_row["psnr_db_mean"]
-            << " / " << far_row["psnr_db_p5"] << "\n";
+            << " / " << far_row["psnr_db_p5"] << ", 150 ms predicted " << ahead_row["psnr_db_mean"] << " / "
+            << ahead_row["psnr_db_p5"] << "\n";
   // The biker (153 k Gaussians) fits the 1.5 M budget whole: the anchor is full detail.
   EXPECT_EQ(anchor["psnr_db_mean"], full["psnr_db_mean"]);
-  // A longer delay costs what the screen shows. (On loopback it may score above full detail: the
-  // codec and the warp's bilinear filter smooth the aliasing the supersampled ideal has not.)
+  // A longer delay costs what the screen shows (on loopback it may score above full detail: the
+  // codec and the warp's bilinear filter smooth the aliasing the supersampled ideal has not), and
+  // a frame drawn where the visitor will be wins some of it back.
   EXPECT_LT(far_row["psnr_db_mean"].get<double>(), near_row["psnr_db_mean"].get<double>() - 0.5);
   EXPECT_LT(far_row["ssim_mean"].get<double>(), near_row["ssim_mean"].get<double>());
-  for (const auto& d : {loop, far}) std::filesystem::remove_all(d);
+  EXPECT_GT(ahead_row["psnr_db_mean"].get<double>(), far_row["psnr_db_mean"].get<double>() + 0.3);
+  for (const auto& d : {loop, far, ahead}) std::filesystem::remove_all(d);
   std::filesystem::remove(json);
 }
 
@@ -80,7 +98,7 @@ TEST(ShownMeasure, AMalformedRecordingNamesTheFileAndLine) {
                             .c_str()),
             0);
   const std::string frames = dir + "/session_0/frames.tsv";
-  std::ofstream(frames, std::ios::app) << "7\t0\tnot-a-time\t0\t160\t96\t0\t0\t1\n";
+  std::ofstream(frames, std::ios::app) << "7\t0\tnot-a-time\t0\t160\t96\t0\t0\t1\t-\n";
   try {
     loadgen::read_recording(dir + "/session_0");
     ADD_FAILURE() << "a malformed frames.tsv was read";

@@ -239,7 +239,8 @@ class PoseLoop {
     const auto seq = static_cast<std::uint32_t>(sent_at_.size());
     if (recording_) recording_->poses.push_back({seq, since_start_ms(), t_s});
     sent_at_.push_back(now_ms());
-    pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back());
+    // On the visitor's clock: it was at this pose half the round trip ago.
+    pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back() - 0.5 * cfg_.link.rtt_ms);
     // As the web viewer does: the newest frame's latency rides on the next pose to /metrics.
     pose.set_shown_latency_ms(unreported_latency_ms_);
     unreported_latency_ms_ = 0;
@@ -301,7 +302,8 @@ class PoseLoop {
       r_.still_bytes += f.payload().size();
     }
     if (cfg_.decode || reference_) decode_and_check(f);
-    const double latency = now_ms() - f.client_time_ms();
+    // Pose to frame as the visitor sees it: the emulated link's frame half comes on top.
+    const double latency = now_ms() + 0.5 * cfg_.link.rtt_ms - f.client_time_ms();
     unreported_latency_ms_ = std::clamp(latency, 0.0, server::kMaxShownLatencyMs);
     // A receipt says when the frame arrived; one read after the client was away says when the
     // client came back (the page does the same: web_client/app.js).
@@ -340,6 +342,11 @@ class PoseLoop {
     k.width = static_cast<int>(f.width());
     k.height = static_cast<int>(f.height());
     k.lod_error_px = f.timings().lod_error_px();
+    if (f.has_shown_pose()) {
+      const pb::Pose& p = f.shown_pose();
+      k.shown_pose = {p.position().x(),    p.position().y(),    p.position().z(),    p.orientation().w(),
+                      p.orientation().x(), p.orientation().y(), p.orientation().z(), p.vertical_fov_deg()};
+    }
     k.offset = rec.stream.size();
     k.bytes = f.payload().size();
     rec.stream += f.payload();
@@ -355,9 +362,11 @@ class PoseLoop {
       const bool got = decoder_->decode(f.payload(), rgba_, w, h);
       if (got) {
         r_.decoded++;
-        shown_pose_ = f.pose_sequence();
         shown_bound_px_ = f.timings().lod_error_px();
         have_shown_ = f.pose_sequence() < sent_poses_.size();
+        // The pose the picture shows: the server's prediction where it made one
+        // (Frame.shown_pose), else the Pose it answers.
+        if (have_shown_) shown_pose_ = f.has_shown_pose() ? f.shown_pose() : sent_poses_[f.pose_sequence()];
       }
       // The server may change the size (adaptive quality: a slow host or link); every frame
       // says its size, and the picture must have it.
@@ -366,16 +375,16 @@ class PoseLoop {
                            std::to_string(f.width()) + "x" + std::to_string(f.height()));
       if (got && check_ && r_.frames % static_cast<std::uint64_t>(cfg_.check_every) == 0 &&
           f.pose_sequence() < sent_poses_.size())
-        check_against_reference(f.pose_sequence(), f.timings().lod_error_px(), w, h);
+        check_against_reference(shown_pose_, f.timings().lod_error_px(), w, h);
     } catch (const std::exception& e) {
       note_error(r_, std::string("decode: ") + e.what());
     }
   }
 
-  // The decoded picture (rgba_, w x h) against the CPU reference render of the pose it answers,
+  // The decoded picture (rgba_, w x h) against the CPU reference render of the pose it shows,
   // at the LOD bound the server drew it at (`bound_px`, frame pixels; drawn only where the
   // reference scene has its level of detail: LoadSessionConfig::reference_scene).
-  double reference_psnr(std::uint32_t pose_sequence, float bound_px, int w, int h) {
+  double reference_psnr(const pb::Pose& pose, float bound_px, int w, int h) {
     if (reference_->options().lod_error_px != bound_px) {
       RenderOptions o = reference_->options();
       o.lod_error_px = bound_px;
@@ -385,12 +394,12 @@ class PoseLoop {
     decoded_image.width = w;
     decoded_image.height = h;
     decoded_image.rgba8 = rgba_;
-    reference_->render(camera_from_pose(sent_poses_[pose_sequence], w, h), want);
+    reference_->render(camera_from_pose(pose, w, h), want);
     return psnr_rgba8(decoded_image, want);
   }
 
-  void check_against_reference(std::uint32_t pose_sequence, float bound_px, int w, int h) {
-    const double psnr = reference_psnr(pose_sequence, bound_px, w, h);
+  void check_against_reference(const pb::Pose& pose, float bound_px, int w, int h) {
+    const double psnr = reference_psnr(pose, bound_px, w, h);
     r_.psnr_min = r_.checked == 0 ? psnr : std::min(r_.psnr_min, psnr);
     psnr_sum_ += psnr;
     r_.checked++;
@@ -459,7 +468,7 @@ class PoseLoop {
   std::vector<double> sent_at_;                  // client time each pose was sent, by sequence
   std::vector<pb::Pose> sent_poses_;             // reference check: each pose as sent, by sequence
   std::unique_ptr<cpu::CpuRenderer> reference_;  // reference checks and the still picture's
-  std::uint32_t shown_pose_ = 0;                 // the pose of the newest decoded picture
+  pb::Pose shown_pose_;                          // the pose the newest decoded picture shows
   float shown_bound_px_ = 0;                     // and the LOD bound it was drawn at
   bool have_shown_ = false;
   // Away from the socket longer than this: the frames read next arrived earlier than read.

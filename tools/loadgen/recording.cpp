@@ -102,10 +102,15 @@ void write_recording(const SessionRecording& r, const std::string& dir) {
   poses << "# sequence\tsent_ms\ttrace_s\n";
   for (const RecordedPose& p : r.poses) poses << p.sequence << '\t' << p.sent_ms << '\t' << p.trace_s << '\n';
   std::ofstream frames = open_out(dir + "/frames.tsv");
-  frames << "# sequence\tpose_sequence\tarrived_ms\tkey\twidth\theight\tlod_error_px\toffset\tbytes\n";
-  for (const RecordedFrame& f : r.frames)
+  frames << "# sequence\tpose_sequence\tarrived_ms\tkey\twidth\theight\tlod_error_px\toffset\tbytes\tshown_pose\n";
+  for (const RecordedFrame& f : r.frames) {
     frames << f.sequence << '\t' << f.pose_sequence << '\t' << f.arrived_ms << '\t' << (f.key ? 1 : 0) << '\t'
-           << f.width << '\t' << f.height << '\t' << f.lod_error_px << '\t' << f.offset << '\t' << f.bytes << '\n';
+           << f.width << '\t' << f.height << '\t' << f.lod_error_px << '\t' << f.offset << '\t' << f.bytes << '\t';
+    if (!f.shown_pose) frames << '-';
+    for (std::size_t k = 0; f.shown_pose && k < f.shown_pose->size(); ++k)
+      frames << (k ? "," : "") << (*f.shown_pose)[k];
+    frames << '\n';
+  }
   open_out(dir + "/stream.h264", true).write(r.stream.data(), static_cast<std::streamsize>(r.stream.size()));
 }
 
@@ -143,7 +148,7 @@ SessionRecording read_recording(const std::string& dir) {
                                std::to_string(r.poses.size()) + ")");
     r.poses.push_back(p);
   }
-  for (const TsvRow& row : read_tsv(dir + "/frames.tsv", 9)) {
+  for (const TsvRow& row : read_tsv(dir + "/frames.tsv", 10)) {
     RecordedFrame f;
     f.sequence = static_cast<std::uint32_t>(row.number(0));
     f.pose_sequence = static_cast<std::uint32_t>(row.number(1));
@@ -154,6 +159,18 @@ SessionRecording read_recording(const std::string& dir) {
     f.lod_error_px = static_cast<float>(row.number(6));
     f.offset = static_cast<std::uint64_t>(row.number(7));
     f.bytes = static_cast<std::uint64_t>(row.number(8));
+    if (row.fields[9] != "-") {
+      std::array<double, 8> pose{};
+      std::stringstream ss(row.fields[9]);
+      std::size_t k = 0;
+      for (std::string v; std::getline(ss, v, ',');) {
+        if (k == pose.size()) throw std::runtime_error(row.where + ": shown pose has more than 8 numbers");
+        pose[k++] = number_of(v, row.where);
+      }
+      if (k != pose.size())
+        throw std::runtime_error(row.where + ": shown pose has " + std::to_string(k) + " numbers, want 8");
+      f.shown_pose = pose;
+    }
     if (f.offset + f.bytes > r.stream.size())
       throw std::runtime_error(row.where + ": frame ends past stream.h264 (" + std::to_string(r.stream.size()) +
                                " bytes)");

@@ -10,7 +10,9 @@
 //                  time t is camera_at(trace, t) (load_session.h)
 //   poses.tsv      one line a pose sent: sequence, sent_ms, trace_s
 //   frames.tsv     one line a frame received: sequence, pose_sequence, arrived_ms, key (0/1),
-//                  width, height, lod_error_px, offset and bytes of its access unit in the stream
+//                  width, height, lod_error_px, offset and bytes of its access unit in the stream,
+//                  and the pose it shows where the server predicted one (Frame.shown_pose:
+//                  px,py,pz,qw,qx,qy,qz,fov_deg; "-" where it shows its Pose)
 //   stream.h264    every frame's H.264 access unit (Annex B) in arrival order: plays elsewhere
 //                  (ffplay, ffmpeg -i)
 // Times (sent_ms, arrived_ms) are milliseconds on the client's clock from the session's first
@@ -20,7 +22,9 @@
 // scoring (visible_ms), so one run's frames could be scored on other links' return paths too.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -47,6 +51,9 @@ struct RecordedFrame {
   int width = 0, height = 0;
   float lod_error_px = 0;
   std::uint64_t offset = 0, bytes = 0;  // its access unit in stream.h264
+  // Frame.shown_pose: position (3), camera-to-world quaternion (w, x, y, z), vertical fov in
+  // degrees; empty where the frame shows its Pose.
+  std::optional<std::array<double, 8>> shown_pose;
 };
 
 struct SessionRecording {

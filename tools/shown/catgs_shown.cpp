@@ -7,14 +7,17 @@
 //                 fit it, server/render/lod_bound.h CutCounter), what a client-side renderer shows
 //   shown NAME    each recorded run (catgs-loadgen --record): the newest frame visible by the
 //                 refresh, re-projected by the page's rule to the display pose
-// Every run must hold the same sessions (the same traces, sizes and offsets: the display poses
-// are then the same, so each refresh's ideal is rendered once for every row).
+// Each session of the first run is scored with the session of the same folder name in every other
+// run (or a run's only session), which must have the same trace, size and offset: the display
+// poses are then the same, so each refresh's ideal is rendered once for every row. A loaded run
+// may hold more sessions than the first: the others are not scored.
 //
 //   catgs-shown --scene S.ply --run landed=/tmp/rec_a,main=/tmp/rec_b --json shown.json
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <iostream>
 #include <map>
 #include <sstream>
@@ -46,7 +49,12 @@ const char* kUsage =
     "  --every N             score every Nth refresh (default 1)\n"
     "  --anchor-budget N     the client-side anchor's splat budget (default 1500000)\n"
     "  --json FILE           write every row's per-refresh scores and summaries\n"
-    "  --png-dir DIR         write the pictures of each session's worst shown refresh\n";
+    "  --png-dir DIR         write the pictures of each session's worst shown refresh\n"
+    "  --plain               also score each run's newest frame as it is (no re-projection)\n"
+    "  --plane-depth D       re-project with a plane D units ahead of the frame, not the page's\n"
+    "The table: PSNR (dB) and SSIM mean and 5th percentile over the refreshes; the last column is\n"
+    "the anchor's mean LOD bound (px) and a shown row's mean frame age (ms: display pose to the\n"
+    "shown frame's pose).\n";
 
 constexpr float kAnchorBase = 0.5f;  // the anchor ladder's finest bound above full detail, px
 
@@ -96,14 +104,18 @@ RenderOptions detail(float lod_error_px) {
 
 nlohmann::json row_json(const Row& row) {
   const Summary p = summarize(row.psnr), s = summarize(row.ssim);
-  return {{"refreshes", p.count}, {"psnr_db_mean", p.mean}, {"psnr_db_p5", p.p5},  {"psnr_db_min", p.min},
-          {"ssim_mean", s.mean},  {"ssim_p5", s.p5},        {"psnr_db", row.psnr}, {"ssim", row.ssim}};
+  nlohmann::json j = {{"refreshes", p.count}, {"psnr_db_mean", p.mean}, {"psnr_db_p5", p.p5},  {"psnr_db_min", p.min},
+                      {"ssim_mean", s.mean},  {"ssim_p5", s.p5},        {"psnr_db", row.psnr}, {"ssim", row.ssim}};
+  // The anchor's LOD bound (px) or a shown row's frame age (ms), as a mean.
+  if (!row.detail.empty())
+    j[row.name.rfind("anchor", 0) == 0 ? "lod_bound_px_mean" : "age_ms_mean"] = summarize(row.detail).mean;
+  return j;
 }
 
 void print_row(const std::string& session, const Row& row) {
   const Summary p = summarize(row.psnr), s = summarize(row.ssim);
-  std::printf("%-12s %-22s %8zu %9.2f %9.2f %9.4f %9.4f\n", session.c_str(), row.name.c_str(), p.count, p.mean, p.p5,
-              s.mean, s.p5);
+  std::printf("%-12s %-22s %8zu %9.2f %9.2f %9.4f %9.4f %9.2f\n", session.c_str(), row.name.c_str(), p.count, p.mean,
+              p.p5, s.mean, s.p5, row.detail.empty() ? 0.0 : summarize(row.detail).mean);
 }
 
 // A picture at another size than the display (adaptive quality shrank the stream): stretched to
@@ -140,14 +152,19 @@ struct Scorer {
   int every = 1;
   std::uint64_t budget = 1500000;
   std::string png_dir;
+  double plane_depth = 0;  // --plane-depth: another plane than the page's (0: the page's)
+  bool plain = false;      // --plain: each run's newest frame also as it is, not re-projected
 
-  // One session of every run: rows full detail, anchor, then each run's shown picture.
+  // One session of every run: rows full detail, anchor, then each run's shown picture (and, with
+  // --plain, each run's frame as it arrived).
   std::vector<Row> score(const std::vector<std::string>& names, std::vector<RecordingPlayer>& players,
                          const std::string& session) {
-    std::vector<Row> rows(2 + players.size());
+    const std::size_t runs = players.size();
+    std::vector<Row> rows(2 + runs * (plain ? 2 : 1));
     rows[0].name = "full detail";
     rows[1].name = "anchor " + std::to_string(budget / 1000) + " k";
-    for (std::size_t r = 0; r < players.size(); ++r) rows[2 + r].name = "shown " + names[r];
+    for (std::size_t r = 0; r < runs; ++r) rows[2 + r].name = "shown " + names[r];
+    for (std::size_t r = 0; plain && r < runs; ++r) rows[2 + runs + r].name = "plain " + names[r];
     const loadgen::SessionRecording& first = players.front().recording();
     double start_ms = 1000.0 * warmup_s;
     for (const auto& p : players) start_ms = std::max(start_ms, p.first_visible_ms());
@@ -160,25 +177,40 @@ struct Scorer {
       const Image want = box_downsample(hi, aa);
       view->set_options(detail(0.0f));
       view->render(display, full);
-      rows[0].add(full, want);
-      view->set_options(detail(anchor_bound(*counter, display, budget)));
+      const float bound = anchor_bound(*counter, display, budget);
+      rows[1].detail.push_back(bound);
+      view->set_options(detail(bound));
       view->render(display, anchor);
-      rows[1].add(anchor, want);
-      for (std::size_t r = 0; r < players.size(); ++r) {
-        Camera frame_pose;
-        const Image* frame = players[r].shown_frame(t, frame_pose);
-        if (!frame) throw std::runtime_error(session + ": no decoded frame by " + std::to_string(t) + " ms");
-        const Image shown =
-            stretched(page_shows(*frame, frame_pose, display, players[r].recording()), display.width, display.height);
-        rows[2 + r].add(shown, want);
-        if (!png_dir.empty() && r + 1 == players.size() && rows[2 + r].psnr.back() < worst) {
-          worst = rows[2 + r].psnr.back();
-          const std::string base = png_dir + "/" + session + "_worst_";
-          write_png(want, base + "ideal.png");
-          write_png(*frame, base + "frame.png");
-          write_png(shown, base + "shown.png");
-          write_png(anchor, base + "anchor.png");
-        }
+      // The rows' re-projections and scores are independent (each run has its own decoder): one
+      // task each.
+      std::vector<Image> shown(players.size());
+      std::vector<Image> frames(players.size());
+      std::vector<std::future<void>> tasks;
+      tasks.push_back(std::async(std::launch::async, [&] { rows[0].add(full, want); }));
+      tasks.push_back(std::async(std::launch::async, [&] { rows[1].add(anchor, want); }));
+      for (std::size_t r = 0; r < players.size(); ++r)
+        tasks.push_back(std::async(std::launch::async, [&, r] {
+          Camera frame_pose;
+          const Image* frame = players[r].shown_frame(t, frame_pose);
+          if (!frame) throw std::runtime_error(session + ": no decoded frame by " + std::to_string(t) + " ms");
+          shown[r] = stretched(page_shows(*frame, frame_pose, display, players[r].recording(), plane_depth),
+                               display.width, display.height);
+          rows[2 + r].add(shown[r], want);
+          if (plain) {
+            rows[2 + runs + r].add(stretched(*frame, display.width, display.height), want);
+            rows[2 + runs + r].detail.push_back(players[r].shown_age_ms(t));
+          }
+          rows[2 + r].detail.push_back(players[r].shown_age_ms(t));
+          if (!png_dir.empty()) frames[r] = *frame;
+        }));
+      for (auto& task : tasks) task.get();
+      if (!png_dir.empty() && rows[1 + runs].psnr.back() < worst) {  // the last run's worst refresh
+        worst = rows[1 + runs].psnr.back();
+        const std::string base = png_dir + "/" + session + "_worst_";
+        write_png(want, base + "ideal.png");
+        write_png(frames.back(), base + "frame.png");
+        write_png(shown.back(), base + "shown.png");
+        write_png(anchor, base + "anchor.png");
       }
     }
     return rows;
@@ -189,9 +221,10 @@ struct Scorer {
 
 int main(int argc, char** argv) {
   try {
-    const tools::Args args(argc, argv,
-                           {"--scene", "--cache-dir", "--run", "--renderer", "--aa", "--refresh-hz", "--warmup-s",
-                            "--every", "--anchor-budget", "--json", "--png-dir", "--help!"});
+    const tools::Args args(
+        argc, argv,
+        {"--scene", "--cache-dir", "--run", "--renderer", "--aa", "--refresh-hz", "--warmup-s", "--every",
+         "--anchor-budget", "--json", "--png-dir", "--help!", "--plain!", "--plane-depth"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -204,6 +237,8 @@ int main(int argc, char** argv) {
     s.every = args.get_int("--every", 1);
     s.budget = static_cast<std::uint64_t>(args.get_double("--anchor-budget", 1.5e6));
     s.png_dir = args.get("--png-dir");
+    s.plain = args.has("--plain");
+    s.plane_depth = args.get_double("--plane-depth", 0);
     if (s.aa < 1 || s.refresh_hz <= 0 || s.every < 1)
       throw std::invalid_argument("--aa and --every must be >= 1, --refresh-hz > 0");
     if (!s.png_dir.empty()) std::filesystem::create_directories(s.png_dir);
@@ -225,26 +260,31 @@ int main(int argc, char** argv) {
     for (const RunSpec& r : runs) {
       names.push_back(r.name);
       sessions.push_back(session_dirs(r.dir));
-      if (sessions.back().size() != sessions.front().size())
-        throw std::runtime_error("run " + r.name + " holds " + std::to_string(sessions.back().size()) +
-                                 " sessions, run " + runs.front().name + " " + std::to_string(sessions.front().size()));
     }
     nlohmann::json report = {{"aa", s.aa},       {"refresh_hz", s.refresh_hz}, {"warmup_s", s.warmup_s},
                              {"every", s.every}, {"anchor_budget", s.budget},  {"sessions", nlohmann::json::array()}};
     std::map<std::string, Row> pooled;
     std::vector<std::string> order;
-    std::printf("%-12s %-22s %8s %9s %9s %9s %9s\n", "session", "picture", "refresh", "PSNR", "PSNR p5", "SSIM",
-                "SSIM p5");
+    std::printf("%-12s %-22s %8s %9s %9s %9s %9s %9s\n", "session", "picture", "refresh", "PSNR", "PSNR p5", "SSIM",
+                "SSIM p5", "px | age");
     for (std::size_t k = 0; k < sessions.front().size(); ++k) {
+      // The first run's session k and the session of the same folder name in every other run
+      // (a loaded run holds more sessions: those the others have are scored).
+      const std::string session = std::filesystem::path(sessions.front()[k]).filename().string();
       std::vector<RecordingPlayer> players;
-      for (const auto& run : sessions) players.emplace_back(loadgen::read_recording(run[k]));
+      for (std::size_t r = 0; r < sessions.size(); ++r) {
+        auto it = std::find_if(sessions[r].begin(), sessions[r].end(), [&](const std::string& d) {
+          return std::filesystem::path(d).filename().string() == session || sessions[r].size() == 1;
+        });
+        if (it == sessions[r].end()) throw std::runtime_error("run " + names[r] + " has no " + session);
+        players.emplace_back(loadgen::read_recording(*it));
+      }
       const auto& a = players.front().recording();
       for (const auto& p : players) {
         const auto& b = p.recording();
         if (b.width != a.width || b.height != a.height || b.trace_spec != a.trace_spec || b.offset_s != a.offset_s)
           throw std::runtime_error("session " + std::to_string(k) + " differs between runs (size, trace or offset)");
       }
-      const std::string session = std::filesystem::path(sessions.front()[k]).filename().string();
       const std::vector<Row> rows = s.score(names, players, session);
       nlohmann::json sj = {{"session", session},
                            {"trace", a.trace_spec},
@@ -262,6 +302,7 @@ int main(int argc, char** argv) {
         all.name = row.name;
         all.psnr.insert(all.psnr.end(), row.psnr.begin(), row.psnr.end());
         all.ssim.insert(all.ssim.end(), row.ssim.begin(), row.ssim.end());
+        all.detail.insert(all.detail.end(), row.detail.begin(), row.detail.end());
       }
       report["sessions"].push_back(sj);
     }

@@ -49,17 +49,36 @@ const Image* RecordingPlayer::shown_frame(double t_ms, Camera& pose) {
   }
   if (shown_ < 0) return nullptr;
   const loadgen::RecordedFrame& f = frames[static_cast<std::size_t>(shown_)];
-  const double trace_s = recording_.poses[f.pose_sequence].trace_s;
-  pose = as_sent(loadgen::camera_at(recording_.trace, trace_s)).rescaled(f.width, f.height);
+  if (f.shown_pose) {  // the server's prediction (Frame.shown_pose): the pose the page re-projects from
+    const auto& v = *f.shown_pose;
+    loadgen::pb::Pose p;
+    p.mutable_position()->set_x(v[0]);
+    p.mutable_position()->set_y(v[1]);
+    p.mutable_position()->set_z(v[2]);
+    p.mutable_orientation()->set_w(v[3]);
+    p.mutable_orientation()->set_x(v[4]);
+    p.mutable_orientation()->set_y(v[5]);
+    p.mutable_orientation()->set_z(v[6]);
+    p.set_vertical_fov_deg(v[7]);
+    pose = loadgen::camera_from_pose(p, f.width, f.height);
+  } else {
+    const double trace_s = recording_.poses[f.pose_sequence].trace_s;
+    pose = as_sent(loadgen::camera_at(recording_.trace, trace_s)).rescaled(f.width, f.height);
+  }
   return &picture_;
 }
 
+double RecordingPlayer::shown_age_ms(double t_ms) const {
+  const loadgen::RecordedFrame& f = recording_.frames[static_cast<std::size_t>(std::max<std::int64_t>(shown_, 0))];
+  return t_ms + 1000.0 * (recording_.offset_s - recording_.poses[f.pose_sequence].trace_s);
+}
+
 Image page_shows(const Image& frame, const Camera& frame_pose, const Camera& display,
-                 const loadgen::SessionRecording& recording) {
+                 const loadgen::SessionRecording& recording, double plane_depth) {
   const PagePose from = page_pose_of(frame_pose), to = page_pose_of(display);
   const glm::dvec3 forward = to.orientation * glm::dvec3(0, 0, 1);
   const glm::dvec3 target = to.position + forward * recording.plane_distance;
-  const double depth = plane_depth_for(from, target, recording.scene_scale);
+  const double depth = plane_depth > 0 ? plane_depth : plane_depth_for(from, target, recording.scene_scale);
   return shown_picture(frame, from, to, depth);
 }
 

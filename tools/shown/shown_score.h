@@ -34,6 +34,10 @@ class RecordingPlayer {
   // with the camera it was rendered for in `pose`; null while none is. Throws std::runtime_error
   // when a frame does not decode or decodes to another size than its Frame said.
   const Image* shown_frame(double t_ms, Camera& pose);
+  // How old the shown frame's Pose is at refresh time t_ms: the display pose's trace time less
+  // that of the Pose it answers, ms (after shown_frame(t_ms) returned a frame; a predicted frame
+  // shows a pose ahead of its Pose, so its picture is younger than this).
+  double shown_age_ms(double t_ms) const;
   // When the first frame is visible, ms (+inf for a recording without frames).
   double first_visible_ms() const { return visible_.empty() ? 1e300 : visible_.front(); }
 
@@ -49,8 +53,10 @@ class RecordingPlayer {
 // What the page shows at `display` of `frame` (rendered for `frame_pose`): the page's
 // re-projection with its plane (the orbit target held recording.plane_distance ahead of the
 // display pose, its depth along the frame's forward axis: catgs_viewer.js _updateReprojection).
+// `plane_depth` > 0 replaces the page's plane by one at that depth along the frame's forward axis
+// (what another plane would show; not the page).
 Image page_shows(const Image& frame, const Camera& frame_pose, const Camera& display,
-                 const loadgen::SessionRecording& recording);
+                 const loadgen::SessionRecording& recording, double plane_depth = 0);
 
 // Mean and the worst 5% (the 5th percentile) of a row's per-refresh scores.
 struct Summary {
@@ -64,6 +70,7 @@ Summary summarize(std::vector<double> values);
 struct Row {
   std::string name;
   std::vector<double> psnr, ssim;
+  std::vector<double> detail;  // per refresh: the LOD bound drawn (px) or the shown frame's age (ms)
   void add(const Image& picture, const Image& ideal);
 };
 

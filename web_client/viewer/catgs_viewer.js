@@ -530,7 +530,9 @@ export class CatgsViewer extends EventTarget {
     try {
       const { width, height } = this.display.draw(frame);
       if (meta) {
-        this.shownPose = this.sentPoses.get(meta.poseSequence) || null;
+        // The frame's pose: where the server predicted the camera would be (Frame.shown_pose), else
+        // the pose it answers; the re-projection starts from it.
+        this.shownPose = meta.shownPose || this.sentPoses.get(meta.poseSequence) || null;
         for (const k of this.sentPoses.keys()) if (k < meta.poseSequence) this.sentPoses.delete(k);
       }
       this._updateReprojection();

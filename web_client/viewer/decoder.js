@@ -7,6 +7,19 @@
 import { inspectAccessUnit } from './h264.js';
 import { inspectTemporalUnit } from './av1.js';
 
+// Frame.shown_pose (the server predicted where the visitor will be when the frame is shown,
+// server/session/pose_prediction.h) as the page's pose { position, orientation, fovDeg }; null
+// where the frame shows the Pose it answers.
+function shownPoseOf(p) {
+  if (!p || !p.position || !p.orientation) return null;
+  const n = (v) => Number(v) || 0;
+  return {
+    position: [n(p.position.x), n(p.position.y), n(p.position.z)],
+    orientation: [n(p.orientation.w), n(p.orientation.x), n(p.orientation.y), n(p.orientation.z)],
+    fovDeg: n(p.vertical_fov_deg),
+  };
+}
+
 // Frame.codec / Welcome.codec values (proto/catgs_stream.proto, enum Codec).
 export const CODEC_H264 = 1;
 export const CODEC_AV1 = 2;
@@ -159,6 +172,7 @@ export class StreamDecoder {
         sequence: f.sequence,
         poseSequence: f.pose_sequence,
         clientTimeMs: f.client_time_ms,
+        shownPose: shownPoseOf(f.shown_pose),
         width: f.width,
         height: f.height,
         keyFrame: isKey,
