@@ -27,8 +27,10 @@
 
 #include "common/cli_args.h"
 #include "common/image_io.h"
+#include "cpu/pixel_depth.h"
 #include "process/scene_with_lod.h"
 #include "render/lod_bound.h"
+#include "scene/scene_bounds.h"
 #include "shown/shown_score.h"
 
 using namespace catgs;
@@ -52,6 +54,8 @@ const char* kUsage =
     "  --png-dir DIR         write the pictures of each session's worst shown refresh\n"
     "  --plain               also score each run's newest frame as it is (no re-projection)\n"
     "  --plane-depth D       re-project with a plane D units ahead of the frame, not the page's\n"
+    "  --centre-plane        also re-project each run with the plane at the depth under the\n"
+    "                        frame's centre pixel (the depth probe at full detail; not the page)\n"
     "The table: PSNR (dB) and SSIM mean and 5th percentile over the refreshes; the last column is\n"
     "the anchor's mean LOD bound (px) and a shown row's mean frame age (ms: display pose to the\n"
     "shown frame's pose).\n";
@@ -154,17 +158,39 @@ struct Scorer {
   std::string png_dir;
   double plane_depth = 0;  // --plane-depth: another plane than the page's (0: the page's)
   bool plain = false;      // --plain: each run's newest frame also as it is, not re-projected
+  // --centre-plane: each run also re-projected with the plane at the depth under the frame's centre
+  // pixel (cpu::probe_pixel_depth at full detail: what a depth sent with each frame would give).
+  bool centre = false;
+  std::vector<fm::ChunkBounds> chunks;  // the probe's chunk culling (--centre-plane)
+
+  // The depth under the centre pixel of frame `frame` of run `r` (0: no surface there), probed
+  // once a frame.
+  std::vector<std::pair<std::int64_t, double>> centre_depths;
+  double centre_depth(std::size_t r, const RecordingPlayer& player, const Camera& frame_pose) {
+    auto& [frame, depth] = centre_depths[r];
+    if (frame != player.shown_index()) {
+      frame = player.shown_index();
+      const cpu::PixelDepth d =
+          cpu::probe_pixel_depth(*model, frame_pose, frame_pose.width / 2.0, frame_pose.height / 2.0, &chunks);
+      depth = d.hit ? d.depth : 0.0;
+    }
+    return depth;
+  }
 
   // One session of every run: rows full detail, anchor, then each run's shown picture (and, with
   // --plain, each run's frame as it arrived).
   std::vector<Row> score(const std::vector<std::string>& names, std::vector<RecordingPlayer>& players,
                          const std::string& session) {
     const std::size_t runs = players.size();
-    std::vector<Row> rows(2 + runs * (plain ? 2 : 1));
+    const std::size_t kinds = 1 + (plain ? 1 : 0) + (centre ? 1 : 0);
+    std::vector<Row> rows(2 + runs * kinds);
+    centre_depths.assign(runs, {-1, 0.0});
     rows[0].name = "full detail";
     rows[1].name = "anchor " + std::to_string(budget / 1000) + " k";
     for (std::size_t r = 0; r < runs; ++r) rows[2 + r].name = "shown " + names[r];
     for (std::size_t r = 0; plain && r < runs; ++r) rows[2 + runs + r].name = "plain " + names[r];
+    const std::size_t centre_row = 2 + runs * (plain ? 2 : 1);
+    for (std::size_t r = 0; centre && r < runs; ++r) rows[centre_row + r].name = "centre " + names[r];
     const loadgen::SessionRecording& first = players.front().recording();
     double start_ms = 1000.0 * warmup_s;
     for (const auto& p : players) start_ms = std::max(start_ms, p.first_visible_ms());
@@ -200,6 +226,13 @@ struct Scorer {
             rows[2 + runs + r].add(stretched(*frame, display.width, display.height), want);
             rows[2 + runs + r].detail.push_back(players[r].shown_age_ms(t));
           }
+          if (centre) {
+            const double depth = centre_depth(r, players[r], frame_pose);
+            rows[centre_row + r].add(stretched(page_shows(*frame, frame_pose, display, players[r].recording(), depth),
+                                               display.width, display.height),
+                                     want);
+            rows[centre_row + r].detail.push_back(players[r].shown_age_ms(t));
+          }
           rows[2 + r].detail.push_back(players[r].shown_age_ms(t));
           if (!png_dir.empty()) frames[r] = *frame;
         }));
@@ -224,7 +257,7 @@ int main(int argc, char** argv) {
     const tools::Args args(
         argc, argv,
         {"--scene", "--cache-dir", "--run", "--renderer", "--aa", "--refresh-hz", "--warmup-s", "--every",
-         "--anchor-budget", "--json", "--png-dir", "--help!", "--plain!", "--plane-depth"});
+         "--anchor-budget", "--json", "--png-dir", "--help!", "--plain!", "--plane-depth", "--centre-plane!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -239,6 +272,7 @@ int main(int argc, char** argv) {
     s.png_dir = args.get("--png-dir");
     s.plain = args.has("--plain");
     s.plane_depth = args.get_double("--plane-depth", 0);
+    s.centre = args.has("--centre-plane");
     if (s.aa < 1 || s.refresh_hz <= 0 || s.every < 1)
       throw std::invalid_argument("--aa and --every must be >= 1, --refresh-hz > 0");
     if (!s.png_dir.empty()) std::filesystem::create_directories(s.png_dir);
@@ -248,6 +282,7 @@ int main(int argc, char** argv) {
     lod.log = [](const std::string& line) { std::cout << "scene: " << line << "\n"; };
     s.model = std::make_shared<const GaussianModel>(server::load_scene_with_lod(args.require("--scene"), lod, {}));
     s.counter = std::make_unique<server::CutCounter>(*s.model);
+    if (s.centre) s.chunks = chunk_bounds_of(*s.model);
     const std::string kind = args.get("--renderer", "auto");
     std::string why;
     s.ideal = make_renderer(kind, s.model, detail(0.0f), &why);

@@ -38,6 +38,8 @@ class RecordingPlayer {
   // that of the Pose it answers, ms (after shown_frame(t_ms) returned a frame; a predicted frame
   // shows a pose ahead of its Pose, so its picture is younger than this).
   double shown_age_ms(double t_ms) const;
+  // The shown frame's index in the recording (-1: none yet).
+  std::int64_t shown_index() const { return shown_; }
   // When the first frame is visible, ms (+inf for a recording without frames).
   double first_visible_ms() const { return visible_.empty() ? 1e300 : visible_.front(); }
 
