@@ -372,7 +372,7 @@ shown() {
     stop_server
   done
   "$SRV/bin/catgs-shown" --scene "$(scene_file "$scene")" --cache-dir "$W/cache" --renderer cuda --run "$runs" \
-    --every "${CATGS_SHOWN_EVERY:-3}" --json "$OUT/shown-$name.json" --png-dir "$R/pictures" 2>&1 |
+    --every "${CATGS_SHOWN_EVERY:-3}" --plain --centre-plane --json "$OUT/shown-$name.json" --png-dir "$R/pictures" 2>&1 |
     tee "$OUT/shown-$name.txt"
   tar -C "$R" -cf "$OUT/shown-$name-pictures.tar" pictures  # one file: a call brings back 8 at most
 }
@@ -402,7 +402,7 @@ out = subprocess.run(cmd + ['--port', port, '--sessions', n, '--size', '1280x720
 r = resource.getrusage(resource.RUSAGE_CHILDREN)
 total = [l for l in out.splitlines() if l.startswith('total')]
 own = [l for l in out.splitlines() if l.startswith('client CPU')]  # this build's own count, from the run's start
-print('%s: %s sessions, client CPU %.1f s (user %.1f + sys %.1f) over %.1f s wall, the scene's load included\n  %s%s' % (
+print('%s: %s sessions, client CPU %.1f s (user %.1f + sys %.1f) over %.1f s wall, the scene load included\n  %s%s' % (
     ' '.join(c.split('/')[-1] for c in cmd), n, r.ru_utime + r.ru_stime, r.ru_utime, r.ru_stime, time.time() - t0,
     total[0] if total else out[-400:], ('\n  ' + own[0]) if own else ''))
 PY

@@ -30,7 +30,7 @@ READMES = [
     "README.md", "server/README.md", "render_core/README.md", "tools/README.md", "web_client/README.md",
     "deploy/README.md", "tests/e2e/README.md", "tests/fuzz/README.md", "tests/results/README.md",
 ]
-PROGRAMS = ["catgs-server", "catgs-loadgen", "catgs-bench", "catgs-scene", "catgs-render", "catgs-encode-bench"]
+PROGRAMS = ["catgs-server", "catgs-loadgen", "catgs-bench", "catgs-scene", "catgs-render", "catgs-encode-bench", "catgs-shown"]
 # Flags of tools that are not ours, named in the READMEs where they say how to run them.
 EXTERNAL_FLAGS = {
     "--build-arg", "--cap-drop", "--context-only", "--digestfile", "--rm", "--network", "--security-opt",  # podman
