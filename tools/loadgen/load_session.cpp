@@ -257,11 +257,12 @@ class PoseLoop {
     if (cfg_.progress) cfg_.progress->poses++;
   }
 
-  // How long recv() may wait: until the next paced pose is due, at most 20 ms.
+  // How long recv() may wait: until the next paced pose is due (rounded up: a wait that ends short
+  // of it spins through the rest with recv(0)), at most 20 ms.
   int wait_ms(bool sending) const {
     if (!(sending && cfg_.rate_hz > 0)) return 20;
     return static_cast<int>(std::clamp<long long>(
-        std::chrono::duration_cast<std::chrono::milliseconds>(next_pose_at_ - Clock::now()).count(), 0, 20));
+        std::chrono::ceil<std::chrono::milliseconds>(next_pose_at_ - Clock::now()).count(), 0, 20));
   }
 
   void on_stats(const pb::Stats& s) {
