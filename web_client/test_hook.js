@@ -5,7 +5,12 @@
 // resetView, toggleRecording, recording(), addWaypoint, play, exportCameras, exportTrace,
 // importText, setRenderScale, setMaxBitrate, notes, walk, toggleWalk, videoExport.
 export function installTestHook(viewer, page) {
+  const errors = []; // every error event's detail, from the start
+  viewer.addEventListener('error', (e) => errors.push({ ...e.detail }));
   window.catgs = {
+    get errors() {
+      return errors.map((e) => ({ ...e }));
+    },
     get framesDecoded() {
       return viewer.framesDecoded;
     },

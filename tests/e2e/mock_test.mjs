@@ -216,11 +216,16 @@ try {
     await page.close();
   }
 
-  // 6. A server that was never reached says so (not "disconnected"); retry now tries at once.
+  // 6. A server that was never reached says so (not "disconnected"), with one error event (a host
+  // page that listens to `error` alone learns it); retry now tries at once.
   {
     const page = await openPage(`${base}/?ws=ws://127.0.0.1:9/ws`);
     check(await waitText(page, /cannot reach the server, retrying (in \d+ s|now)/), 'unreachable: "cannot reach the server"');
     check(!/disconnected/.test(await messageText(page)), 'unreachable: not "disconnected"');
+    await sleep(2500); // the retries that follow fail alike: no second event
+    const errs = await page.evaluate(() => window.catgs.errors);
+    check(errs.length === 1 && errs[0].name === 'UNREACHABLE' && errs[0].permanent === false,
+      `unreachable: one error event UNREACHABLE (${JSON.stringify(errs)})`);
     await page.close();
   }
 

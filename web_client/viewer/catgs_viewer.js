@@ -385,11 +385,25 @@ export class CatgsViewer extends EventTarget {
     this.reconnectAt = performance.now() + (retryInMs || 0);
     // A restarting server's later attempts say "restarting" still (closeStatus says "stopping").
     const status = info.stopping && !error && this.status === 'restarting' ? 'restarting' : closeStatus(info);
+    const was = this.status;
     this._emit('disconnected', { code, reason, error, permanent, retryInMs, reached, status });
     this._setStatus(status);
     if (error) {
       const name = this.protocol.errorCodeName(error.code);
       this._emit('error', { name, code: error.code, reason: error.reason || '', permanent: !!permanent, retryInMs, status });
+    } else if ((status === 'unreachable' || status === 'disconnected') && was !== status) {
+      // No server to say why (never reached, or the connection dropped): an error all the same,
+      // so a host page that listens to `error` alone learns it has no stream. Once an outage: the
+      // retries that follow fail alike.
+      const lost = status === 'disconnected';
+      this._emit('error', {
+        name: lost ? 'CONNECTION_LOST' : 'UNREACHABLE',
+        code: 0,
+        reason: lost ? 'the connection to the server was lost' : 'cannot reach the server',
+        permanent: false,
+        retryInMs,
+        status,
+      });
     }
     console.info(`catgs: connection closed (${code}${reason ? `: ${reason}` : ''})` +
       (permanent ? ', not retrying' : `, retry in ${retryInMs} ms`));

@@ -35,8 +35,13 @@ export function statusText(viewer, scene = '') {
       return null;
     case 'unreachable':
       return { text: `cannot reach the server, retrying ${when()}`, level: 'error' };
-    case 'server-full':
+    case 'server-full': {
+      // A server refuses with SERVER_FULL while its first scene loads too ("server starting: the
+      // scene is loading", server.cpp): not full, and asked back in a few hundred ms.
+      const e = closeError();
+      if (e && /^server starting/.test(e.reason || '')) return { text: `the server is starting (loading its scene), retrying ${when()}`, level: 'info' };
       return { text: `server full, retrying ${when()}`, level: 'warn' };
+    }
     case 'restarting':
     case 'stopping':
       return { text: `server ${viewer.status}, reconnecting ${when()}`, level: 'warn' };
