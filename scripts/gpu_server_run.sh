@@ -403,7 +403,7 @@ r = resource.getrusage(resource.RUSAGE_CHILDREN)
 total = [l for l in out.splitlines() if l.startswith('total')]
 own = [l for l in out.splitlines() if l.startswith('client CPU')]  # this build's own count, from the run's start
 print('%s: %s sessions, client CPU %.1f s (user %.1f + sys %.1f) over %.1f s wall, the scene load included\n  %s%s' % (
-    ' '.join(c.split('/')[-1] for c in cmd), n, r.ru_utime + r.ru_stime, r.ru_utime, r.ru_stime, time.time() - t0,
+    ' '.join(','.join(t.split('/')[-1] for t in c.split(',')) for c in cmd), n, r.ru_utime + r.ru_stime, r.ru_utime, r.ru_stime, time.time() - t0,
     total[0] if total else out[-400:], ('\n  ' + own[0]) if own else ''))
 PY
   done
