@@ -348,8 +348,9 @@ TEST(MultiSession, LoadgenChecksFramesAtTheirLodBound) {
   // detail. The later --cache-dir wins.
   const std::filesystem::path cache = std::filesystem::temp_directory_path() / "catgs-itest-cache-lod-check";
   std::filesystem::remove_all(cache);
+  // Frames at the poses sent, as in LoadgenAsksForASceneByName: this test is about the bound.
   ServerProcess server(server_args(kBiker, {"--lod-min-gaussians", "0", "--lod-error", "4", "--crf", "18", "--bitrate",
-                                            "off", "--cache-dir", cache.string()}));
+                                            "off", "--cache-dir", cache.string(), "--pose-prediction", "off"}));
   const std::string json_path = "/tmp/catgs-itest-lod-check-" + std::to_string(server.port()) + ".json";
   const std::string cmd = std::string(CATGS_LOADGEN_BIN) + " --port " + std::to_string(server.port()) + " --scene " +
                           kBiker + " --size 160x120 --rate 10 --seconds 2 --warmup 0 --check-every 2" +
