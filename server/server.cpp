@@ -40,8 +40,8 @@ TransportOptions transport_options(const ServerOptions& options) {
 }
 
 // A connection while the first scene loads is asked back this soon (issue 91): a load takes about
-// a second (the 13-copy city 0.84 s), and the full server's 2-4 s put a page's first frame 3.4 s
-// after the server listened; an attempt costs the server one refused handshake.
+// a second (RESULTS.md "Scene loading"), and the full server's 2-4 s hint held a page's first
+// frame seconds past it; an attempt costs the server one refused handshake.
 constexpr std::uint32_t kStartingRetryMs = 300;
 
 }  // namespace

@@ -106,6 +106,15 @@ TEST(ShownMeasure, AMalformedRecordingNamesTheFileAndLine) {
     EXPECT_NE(std::string(e.what()).find("frames.tsv:"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("not-a-time"), std::string::npos) << e.what();
   }
+  // An offset past what a count may be is refused by its field, not cast (undefined) or summed
+  // past 2^64 with the frame's bytes.
+  std::ofstream(frames) << "0\t0\t1.5\t1\t160\t96\t0\t18446744073709551615\t2\t-\n";
+  try {
+    loadgen::read_recording(dir + "/session_0");
+    ADD_FAILURE() << "a frame at offset 2^64 - 1 was read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("not a whole number"), std::string::npos) << e.what();
+  }
   std::filesystem::remove(dir + "/session_0/poses.tsv");
   EXPECT_THROW(loadgen::read_recording(dir + "/session_0"), std::runtime_error);
   std::filesystem::remove_all(dir);

@@ -32,6 +32,7 @@ struct TsvRow {
   std::string where;
   std::vector<std::string> fields;
   double number(std::size_t k) const;
+  std::uint64_t count(std::size_t k, double max) const;
 };
 
 // The lines of a .tsv file that are not comments, each split into fields; `fields` per line or a
@@ -67,6 +68,16 @@ double number_of(const std::string& s, const std::string& where) {
 }
 
 double TsvRow::number(std::size_t k) const { return number_of(fields[k], where); }
+
+// Field k as a whole number in [0, max] (2^53 at most: a double holds it exactly), checked
+// before the cast: a float-to-integer cast out of range is undefined behaviour.
+std::uint64_t TsvRow::count(std::size_t k, double max) const {
+  const double v = number(k);
+  if (!(v >= 0 && v <= std::min(max, 9007199254740992.0)) || v != std::floor(v))
+    throw std::runtime_error(where + ": '" + fields[k] + "' is not a whole number in [0, " +
+                             std::to_string(static_cast<std::uint64_t>(std::min(max, 9007199254740992.0))) + "]");
+  return static_cast<std::uint64_t>(v);
+}
 
 }  // namespace
 
@@ -140,7 +151,7 @@ SessionRecording read_recording(const std::string& dir) {
   }
   for (const TsvRow& row : read_tsv(dir + "/poses.tsv", 3)) {
     RecordedPose p;
-    p.sequence = static_cast<std::uint32_t>(row.number(0));
+    p.sequence = static_cast<std::uint32_t>(row.count(0, 4294967295.0));
     p.sent_ms = row.number(1);
     p.trace_s = row.number(2);
     if (p.sequence != r.poses.size())
@@ -150,15 +161,15 @@ SessionRecording read_recording(const std::string& dir) {
   }
   for (const TsvRow& row : read_tsv(dir + "/frames.tsv", 10)) {
     RecordedFrame f;
-    f.sequence = static_cast<std::uint32_t>(row.number(0));
-    f.pose_sequence = static_cast<std::uint32_t>(row.number(1));
+    f.sequence = static_cast<std::uint32_t>(row.count(0, 4294967295.0));
+    f.pose_sequence = static_cast<std::uint32_t>(row.count(1, 4294967295.0));
     f.arrived_ms = row.number(2);
     f.key = row.fields[3] == "1";
-    f.width = static_cast<int>(row.number(4));
-    f.height = static_cast<int>(row.number(5));
+    f.width = static_cast<int>(row.count(4, kMaxImageSide));
+    f.height = static_cast<int>(row.count(5, kMaxImageSide));
     f.lod_error_px = static_cast<float>(row.number(6));
-    f.offset = static_cast<std::uint64_t>(row.number(7));
-    f.bytes = static_cast<std::uint64_t>(row.number(8));
+    f.offset = row.count(7, 1e18);
+    f.bytes = row.count(8, 1e18);
     if (row.fields[9] != "-") {
       std::array<double, 8> pose{};
       std::stringstream ss(row.fields[9]);
@@ -171,7 +182,7 @@ SessionRecording read_recording(const std::string& dir) {
         throw std::runtime_error(row.where + ": shown pose has " + std::to_string(k) + " numbers, want 8");
       f.shown_pose = pose;
     }
-    if (f.offset + f.bytes > r.stream.size())
+    if (f.bytes > r.stream.size() || f.offset > r.stream.size() - f.bytes)  // no overflow
       throw std::runtime_error(row.where + ": frame ends past stream.h264 (" + std::to_string(r.stream.size()) +
                                " bytes)");
     if (f.pose_sequence >= r.poses.size())

@@ -13,8 +13,9 @@
 //                  width, height, lod_error_px, offset and bytes of its access unit in the stream,
 //                  and the pose it shows where the server predicted one (Frame.shown_pose:
 //                  px,py,pz,qw,qx,qy,qz,fov_deg; "-" where it shows its Pose)
-//   stream.h264    every frame's H.264 access unit (Annex B) in arrival order: plays elsewhere
-//                  (ffplay, ffmpeg -i)
+//   stream.h264    every frame's H.264 access unit (Annex B) in arrival order (an elementary
+//                  stream, as FFmpeg's h264 demuxer reads it; catgs-shown decodes it with
+//                  libavcodec)
 // Times (sent_ms, arrived_ms) are milliseconds on the client's clock from the session's first
 // pose. The emulated link (LinkEmulation) holds a pose for half the round trip before the server
 // sees it, so the pose sent at time w is the trace's pose at w - rtt/2 (+ the session's offset):
@@ -83,7 +84,8 @@ std::vector<double> visible_ms(const SessionRecording& recording);
 // Writes `recording` into folder `dir` (made if absent). Throws std::runtime_error naming the file.
 void write_recording(const SessionRecording& recording, const std::string& dir);
 // Reads a folder written by write_recording. Throws std::runtime_error naming the file and line
-// for a missing file, a malformed line, a frame outside the stream or a pose it names not sent.
+// for a missing file, a malformed line, a count out of range (sizes beyond kMaxImageSide), a frame
+// outside the stream or a pose it names not sent.
 SessionRecording read_recording(const std::string& dir);
 
 }  // namespace catgs::loadgen

@@ -31,6 +31,7 @@
 #include "process/scene_with_lod.h"
 #include "render/lod_bound.h"
 #include "scene/scene_bounds.h"
+#include "shown/page_reprojection.h"
 #include "shown/shown_score.h"
 
 using namespace catgs;
@@ -132,17 +133,10 @@ Image stretched(const Image& src, int width, int height) {
   out.rgba8.resize(static_cast<std::size_t>(width) * height * 4);
   for (int j = 0; j < height; ++j)
     for (int i = 0; i < width; ++i) {
-      const double u = std::clamp((i + 0.5) * src.width / width - 0.5, 0.0, src.width - 1.0);
-      const double v = std::clamp((j + 0.5) * src.height / height - 0.5, 0.0, src.height - 1.0);
-      const int i0 = static_cast<int>(u), j0 = static_cast<int>(v);
-      const int i1 = std::min(i0 + 1, src.width - 1), j1 = std::min(j0 + 1, src.height - 1);
-      const double fu = u - i0, fv = v - j0;
-      for (int c = 0; c < 4; ++c) {
-        const auto at = [&](int x, int y) { return src.rgba8[(static_cast<std::size_t>(y) * src.width + x) * 4 + c]; };
-        const double top = at(i0, j0) * (1 - fu) + at(i1, j0) * fu, bottom = at(i0, j1) * (1 - fu) + at(i1, j1) * fu;
-        out.rgba8[(static_cast<std::size_t>(j) * width + i) * 4 + c] =
-            static_cast<std::uint8_t>(std::lround(top * (1 - fv) + bottom * fv));
-      }
+      const auto rgb = sample_bilinear(src, (i + 0.5) * src.width / width, (j + 0.5) * src.height / height);
+      std::uint8_t* o = &out.rgba8[(static_cast<std::size_t>(j) * width + i) * 4];
+      for (int c = 0; c < 3; ++c) o[c] = static_cast<std::uint8_t>(std::lround(rgb[static_cast<std::size_t>(c)]));
+      o[3] = 255;
     }
   return out;
 }
