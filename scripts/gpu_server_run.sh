@@ -350,7 +350,9 @@ shown() {
   rm -rf "$R" && mkdir -p "$R" "$W/cache"
   local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
   local config run n runs=""
-  for config in base pred; do
+  # CATGS_SHOWN_CONFIGS: which servers record (base: --pose-prediction off, the landed build's
+  # frames; pred: on); CATGS_SHOWN_FLAGS: more rows of catgs-shown (e.g. --depth-warp).
+  for config in ${CATGS_SHOWN_CONFIGS:-base pred}; do
     local extra=()
     extra=(--pose-prediction off)
     [ "$config" = pred ] && extra=(--pose-prediction on)
@@ -366,15 +368,36 @@ shown() {
       "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions "$n" --size "$size" --trace "$traces" --rate 60 \
         --seconds 10 --progress 0 --record "$R/$config-$run" --json "$R/$config-$run.json" "${link[@]}" \
         > "$R/$config-$run.txt" 2>&1
-      { echo "== $config-$run: $n sessions ${link[*]}"; tail -5 "$R/$config-$run.txt"; } | tee -a "$OUT/shown-$name-runs.txt"
+      { echo "== $config-$run: $n sessions ${link[*]}"; tail -5 "$R/$config-$run.txt"; depth_share "$R/$config-$run"; } |
+        tee -a "$OUT/shown-$name-runs.txt"
       runs="$runs${runs:+,}$config-$run=$R/$config-$run"
     done
     stop_server
   done
   "$SRV/bin/catgs-shown" --scene "$(scene_file "$scene")" --cache-dir "$W/cache" --renderer cuda --run "$runs" \
-    --every "${CATGS_SHOWN_EVERY:-3}" --plain --centre-plane --json "$OUT/shown-$name.json" --png-dir "$R/pictures" 2>&1 |
+    --every "${CATGS_SHOWN_EVERY:-3}" --plain --centre-plane ${CATGS_SHOWN_FLAGS:-} --json "$OUT/shown-$name.json" --png-dir "$R/pictures" 2>&1 |
     tee "$OUT/shown-$name.txt"
   tar -C "$R" -cf "$OUT/shown-$name-pictures.tar" pictures  # one file: a call brings back 8 at most
+}
+
+# depth_share DIR: the depth grids' bytes (Frame.depth_grid's codes) against the access units' in
+# a --record folder's sessions.
+depth_share() {
+  python3 - "$1" <<'PY'
+import glob, sys, zlib
+au = depth = deflated = frames = grids = 0
+for f in glob.glob(sys.argv[1] + '/*/frames.tsv'):
+    for line in open(f):
+        if line.startswith('#'): continue
+        col = line.rstrip('\n').split('\t')
+        frames += 1; au += int(col[8])
+        if col[10] != '-':
+            grids += 1
+            codes = bytes.fromhex(col[10].split(',')[4])
+            depth += len(codes); deflated += len(zlib.compress(codes, 9))
+print('depth grids: %d of %d frames, %d bytes against %d of video: %.1f%% of the stream (deflated: %d bytes, %.1f%%)' % (
+    grids, frames, depth, au, 100.0 * depth / max(1, depth + au), deflated, 100.0 * deflated / max(1, deflated + au)))
+PY
 }
 
 # clientcpu NAME SCENE N: catgs-loadgen's own CPU time (issue 92) for N sessions of 10 s at 720p

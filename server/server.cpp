@@ -190,6 +190,7 @@ void Server::resolve_renderer() {
   render_options_.list_budget.max_bytes = static_cast<std::uint64_t>(options_.list_memory_mb) << 20;
   if (options_.lod_error_px >= 0.0f) render_options_.lod_error_px = options_.lod_error_px;
   render_options_.occlusion_culling = options_.occlusion_cull;
+  render_options_.depth_grid_cell = options_.depth_grid_px;
   // A session's catgs windows open only where its own measured frame costs say they repay
   // (SpeculationParams::cost_model; --speculation cost=off for the paper's rule alone).
   render_options_.speculation.cost_model = true;

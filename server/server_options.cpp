@@ -111,6 +111,8 @@ std::string server_usage() {
          "                        auto budget hands out to its sessions, in (0, 1] (default 0.4)\n"
          "  --occlusion-cull on|off  exact frames drop the list entries the session's last frame\n"
          "                        found behind its opaque pixels (default on)\n"
+         "  --depth-grid PX|off   each frame carries the scene's depth at a vertex every PX\n"
+         "                        pixels, one byte each, for the page's depth warp (default 32)\n"
          "  --cameras FILE        the scene's training cameras (INRIA cameras.json): the first view,\n"
          "                        orbit centre, up and speeds come from them (default: a\n"
          "                        cameras.json beside the scene or in its INRIA model folder, else\n"
@@ -315,7 +317,9 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
     else if (a == "--occlusion-cull") {
       if (v != "on" && v != "off") throw std::invalid_argument("--occlusion-cull must be on or off, got '" + v + "'");
       out.occlusion_cull = v == "on";
-    } else if (a == "--splat-budget") {
+    } else if (a == "--depth-grid")
+      out.depth_grid_px = v == "off" ? 0 : parse_int(a, v, 4, 512);
+    else if (a == "--splat-budget") {
       out.auto_splat_budget = v == "auto";
       out.splat_budget = v == "auto" || v == "off" ? 0 : static_cast<std::uint64_t>(parse_double(a, v, 0.0, 1e12));
     } else if (a == "--scene-memory-mb")

@@ -67,6 +67,9 @@ struct ServerOptions {
   // found behind its opaque pixels (RenderOptions::occlusion_culling,
   // render_core/forward_model/occlusion.h; issue 72). Default on.
   bool occlusion_cull = true;
+  // --depth-grid PX|off: exact frames carry their depth at a vertex every PX pixels
+  // (Frame.depth_grid; RenderOptions::depth_grid_cell; issue 91). 0: none.
+  int depth_grid_px = 32;
   int port = 8080;                 // TCP port; 0 lets the kernel pick (the chosen one is logged)
   std::string bind = "0.0.0.0";    // interface address to listen on
   std::string renderer = "auto";   // "cpu" | "cuda" | "auto"

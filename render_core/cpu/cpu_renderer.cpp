@@ -68,6 +68,7 @@ void CpuRenderer::render(const Camera& camera, Image& out) {
     buffers.pixel_depth = &occlusion_next_;
   }
   if (count_changes_) buffers.changed = &changed_;
+  buffers.depth = &depth_grid_;
   occlusion_valid_ = false;  // until this frame has drawn its own
   render_full_frame(*model_, chunks_, camera, options_.pipeline, options_, true, buffers, out, stats_);
   if (occlusion) {

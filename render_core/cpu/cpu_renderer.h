@@ -234,6 +234,13 @@ void rasterize(const ProjectedGaussians& projected, const RenderList& list, cons
                const TileGrid& grid, glm::vec3 background, Image& out, std::uint32_t first_tile = 0,
                std::uint32_t end_tile = UINT32_MAX);
 
+// Stage 5b (cpu/depth_grid.cpp; forward_model/depth_grid.h): the frame's depth grid with a vertex
+// every `cell` pixels, from the sorted list's tile ranges; only vertices whose pixel lies in
+// tiles [first_tile, end_tile) are written (a pass's); `out` is reshaped (to +inf) when its shape
+// differs.
+void depth_grid(const ProjectedGaussians& projected, const RenderList& list, const TileRanges& ranges,
+                const TileGrid& grid, int cell, std::uint32_t first_tile, std::uint32_t end_tile, DepthGrid& out);
+
 // A whole frame through the exact or vanilla stages, as both renderers draw it (CpuRenderer's
 // frames, SpeculativeRenderer's key frames without a window; cpu/full_frame.cpp): pre-processing,
 // then, when its list fits options.list_budget (kBytesPerListEntry an entry), keys, the single
@@ -262,6 +269,8 @@ struct FrameBuffers {
   // (blend_tile's `changed`) are counted into FrameStats; the frame is then drawn without task
   // splitting, so every tile's transmittance is the composed one.
   std::vector<std::uint8_t>* changed = nullptr;
+  // exact frames: when given, the frame's depth grid (options.depth_grid_cell > 0; depth_grid).
+  DepthGrid* depth = nullptr;
 };
 void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBounds>& chunks, const Camera& camera,
                        Pipeline stages, const RenderOptions& options, bool early_termination,
@@ -280,6 +289,7 @@ class CpuRenderer final : public Renderer {
   std::string name() const override { return "cpu"; }
   void render(const Camera& camera, Image& out) override;
   const FrameStats& last_stats() const override { return stats_; }
+  const DepthGrid& last_depth_grid() const override { return depth_grid_; }
   const RenderOptions& options() const override { return options_; }
   void set_options(const RenderOptions& options) override;
   // The pre-processed Gaussians (the whole scene: shape.gaussians is not used) and the render
@@ -314,6 +324,7 @@ class CpuRenderer final : public Renderer {
   std::vector<float> occlusion_tiles_;  // this frame's per tile (FrameStats::entries_behind_opaque)
   fm::View occlusion_view_{};
   bool occlusion_valid_ = false;
+  DepthGrid depth_grid_;  // the last frame's (RenderOptions::depth_grid_cell)
   FrameStats stats_;
 };
 

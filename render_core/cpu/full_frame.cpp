@@ -41,6 +41,7 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
   }
   if (buffers.pixel_depth) buffers.pixel_depth->assign(static_cast<std::size_t>(grid.width) * grid.height, INFINITY);
   stats.entries_behind_opaque = 0;
+  if (buffers.depth) *buffers.depth = DepthGrid{};  // vanilla, or no grid asked: none
   stats.preprocess_ms += ms_between(start, clock::now());
   const std::uint64_t entries = count_entries(projected);
   stats.visible = static_cast<std::size_t>(
@@ -81,6 +82,8 @@ void render_full_frame(const GaussianModel& model, const std::vector<fm::ChunkBo
             occlusion_map(projected, list, buffers.ranges, opaque_at.data(), first, end, buffers.tile_depth->data());
       stats.merge_ms += merge_ms;
       stats.slices = buffers.slices.size();
+      if (buffers.depth && options.depth_grid_cell > 0)
+        depth_grid(projected, list, buffers.ranges, grid, options.depth_grid_cell, first, end, *buffers.depth);
     } else {
       rasterize(projected, list, buffers.ranges, grid, options.background, out, first, end);
       stats.slices = static_cast<std::size_t>(end - first);

@@ -6,6 +6,8 @@
 #include <mutex>
 #include <string>
 
+#include "depth_grid.h"
+#include "forward_model/depth_grid.h"
 #include "renderer/render_passes.h"
 #include "renderer_state.h"
 
@@ -271,7 +273,11 @@ DeviceFrame CudaRenderer::render_device(const Camera& camera) {
 DeviceFrame CudaRenderer::render_device_at(const Camera& camera, double time_s) {
   const DeviceGuard on(scene_->device());
   try {
-    if (options_.pipeline == Pipeline::catgs) return render_catgs(camera, time_s);
+    if (options_.pipeline == Pipeline::catgs) {
+      state_->depth_grid_cell = state_->depth_grid_cols = state_->depth_grid_rows = 0;  // no grid (renderer.h)
+      depth_grid_ready_ = false;
+      return render_catgs(camera, time_s);
+    }
     return render_full(camera);
   } catch (...) {
     drop_inter_frame_state();
@@ -371,14 +377,27 @@ DeviceFrame CudaRenderer::render_full(const Camera& camera) {
   }
   s.occlusion_valid = false;  // until this frame has drawn its own
   s.occlusion_map_drawn = occlusion;
+  // The depth grid (exact frames): every pass writes its tiles' vertices, so no fill is needed.
+  const int cell = exact ? options_.depth_grid_cell : 0;
+  s.depth_grid_cell = cell;
+  s.depth_grid_cols = cell > 0 ? fm::depth_grid_cols(camera.width, cell) : 0;
+  s.depth_grid_rows = cell > 0 ? fm::depth_grid_rows(camera.height, cell) : 0;
+  const std::size_t grid_bytes = static_cast<std::size_t>(s.depth_grid_cols) * s.depth_grid_rows * sizeof(float);
+  if (cell > 0) s.depth_grid.ensure(grid_bytes, "depth grid", &s.allocations);
+  depth_grid_ready_ = false;
   draw_full_frame(camera, exact, true, exact && depth_first_sort(), map, occlusion);
   s.occlusion_map_drawn = false;
   if (occlusion) {  // the entries behind the opaque points, for last_stats (after kMerged: recorded next)
     s.occlusion_behind_host.ensure(sizeof(unsigned long long), "entries behind opaque points (host)");
     CATGS_CUDA(cudaMemcpyAsync(s.occlusion_behind_host.data(), s.occlusion_behind.as<void>(),
                                sizeof(unsigned long long), cudaMemcpyDeviceToHost, s.stream));
-    CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
   }
+  if (cell > 0) {  // for last_depth_grid, as the counter above
+    s.depth_grid_host.ensure(grid_bytes, "depth grid (host)");
+    CATGS_CUDA(cudaMemcpyAsync(s.depth_grid_host.data(), s.depth_grid.as<void>(), grid_bytes, cudaMemcpyDeviceToHost,
+                               s.stream));
+  }
+  if (occlusion || cell > 0) CATGS_CUDA(cudaEventRecord(s.events[kMerged], s.stream));
   stats_.occlusion_map_used = map.cells[0] != nullptr;
   s.occlusion_counted = occlusion;
   if (occlusion) {
@@ -447,6 +466,9 @@ void CudaRenderer::draw_full_frame(const Camera& camera, bool exact, bool early_
           draw_map ? stages::OpaquePoints{s.occlusion_opaque_at.as<uint32_t>(), s.occlusion_partial.as<uint32_t>(),
                                           s.occlusion_depth[1 - s.occlusion_read].as<float>()}
                    : stages::OpaquePoints{});
+      if (s.depth_grid_cell > 0)
+        stages::depth_grid(s.ranges.as<uint2>(), s.sorted_values, proj, cam, s.depth_grid_cell, first, end,
+                           s.depth_grid.as<float>(), s.stream);
       if (draw_map)
         stages::occlusion_map(s.occlusion_opaque_at.as<uint32_t>(), s.ranges.as<uint2>(), s.sorted_values, proj, first,
                               end, s.occlusion_tiles.as<float>(), s.occlusion_behind.as<unsigned long long>(),
@@ -518,6 +540,23 @@ const FrameStats& CudaRenderer::last_stats() const {
   }
   stats_ready_ = true;
   return stats_;
+}
+
+const DepthGrid& CudaRenderer::last_depth_grid() const {
+  if (depth_grid_ready_) return depth_grid_;
+  const State& s = *state_;
+  depth_grid_ = DepthGrid{};
+  if (s.depth_grid_cols > 0) {
+    const DeviceGuard on(scene_->device());
+    CATGS_CUDA(cudaEventSynchronize(s.events[kMerged]));  // the copy was queued before it
+    depth_grid_.cols = s.depth_grid_cols;
+    depth_grid_.rows = s.depth_grid_rows;
+    depth_grid_.cell = s.depth_grid_cell;
+    const auto* d = reinterpret_cast<const float*>(s.depth_grid_host.data());
+    depth_grid_.depth.assign(d, d + static_cast<std::size_t>(s.depth_grid_cols) * s.depth_grid_rows);
+  }
+  depth_grid_ready_ = true;
+  return depth_grid_;
 }
 
 std::uint64_t CudaRenderer::device_buffer_bytes() const { return state_->bytes(); }

@@ -239,6 +239,8 @@ class CudaRenderer final : public Renderer {
   DeviceFrame render_device_at(const Camera& camera, double time_s);
   // Stats of the last frame; waits for that frame to finish (stage times from CUDA events).
   const FrameStats& last_stats() const override;
+  // Waits for the frame's last event (as last_stats) the first time after a frame.
+  const DepthGrid& last_depth_grid() const override;
   const RenderOptions& options() const override { return options_; }
   void set_options(const RenderOptions& options) override;
   // Switches to another scene; buffers are kept and grow if it needs more.
@@ -297,6 +299,8 @@ class CudaRenderer final : public Renderer {
   std::unique_ptr<State> state_;
   mutable FrameStats stats_;
   mutable bool stats_ready_ = true;
+  mutable DepthGrid depth_grid_;  // last_depth_grid's copy of the frame's
+  mutable bool depth_grid_ready_ = true;
   CudaOptions cuda_options_;
   bool depth_first_sort() const {
     return cuda_options_.depth_first_sort.value_or(options_.pipeline == Pipeline::catgs);

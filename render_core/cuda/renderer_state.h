@@ -212,6 +212,11 @@ struct CudaRenderer::State {
   // occlusion_behind's copy, queued on the stream before kMerged (a synchronous cudaMemcpy in
   // last_stats would take the legacy default stream, which waits for the process's other work).
   PinnedBuffer occlusion_behind_host;
+  // The frame's depth grid (RenderOptions::depth_grid_cell; exact frames, depth_grid.cu) and its
+  // copy, queued on the stream before kMerged as occlusion_behind's; depth_grid_cols 0: none drawn.
+  GrowBuffer depth_grid;
+  PinnedBuffer depth_grid_host;
+  int depth_grid_cols = 0, depth_grid_rows = 0, depth_grid_cell = 0;
   // catgs (render_catgs.cpp): trails and frustum cache (per Gaussian) and its counters
   // (CatgsCounterSlot; the plan's totals among them).
   GrowBuffer trail_mean0_motion, trail_conic_q, trail_cov, trail_mask, cached, select_temp, catgs_counters;

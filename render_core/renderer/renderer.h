@@ -118,6 +118,18 @@ struct RenderOptions {
   // one map (a session's last frame); set_options and a new scene drop it. Off here, so that a
   // renderer draws each frame alone; the server turns it on (--occlusion-cull).
   bool occlusion_culling = false;
+  // The frame's depth grid (forward_model/depth_grid.h; issue 91), exact frames only: a vertex
+  // every `depth_grid_cell` pixels (0: none), read with Renderer::last_depth_grid().
+  int depth_grid_cell = 0;
+};
+
+// The last frame's depth grid (forward_model/depth_grid.h): cols x rows vertices, row-major, each
+// the median depth (camera-space z, world units; +inf: no surface) at x = min(k cell, width),
+// y = min(l cell, height). Empty (cols = 0) when the options asked for none or the frame was not
+// an exact one.
+struct DepthGrid {
+  int cols = 0, rows = 0, cell = 0;
+  std::vector<float> depth;  // [rows, cols]
 };
 
 // An image in host memory, row-major, top row first.
@@ -234,6 +246,11 @@ class Renderer {
   virtual bool frame_ready() const { return true; }
   // Stats of the last render().
   virtual const FrameStats& last_stats() const = 0;
+  // The last frame's depth grid (RenderOptions::depth_grid_cell), valid as last_stats() is.
+  virtual const DepthGrid& last_depth_grid() const {
+    static const DepthGrid none;
+    return none;
+  }
   virtual const RenderOptions& options() const = 0;
   virtual void set_options(const RenderOptions& options) = 0;
   // Device bytes this renderer's own buffers hold now (GrowBuffers: they only grow), not its

@@ -10,6 +10,7 @@
 #include "base/allocation_faults.h"
 #include "base/cuda_error.h"
 #include "camera/camera.h"
+#include "proto/depth_grid_coding.h"
 #include "encode/encoder_policy.h"
 #include "encode/frame_encoding.h"
 #include "render/render_scheduler.h"
@@ -275,6 +276,9 @@ void FramePipeline::finish_render_into(Rendered& r) {
   r.splats = stats.visible;
   r.buffer_bytes = renderer_->device_buffer_bytes();
   r.buffer_shape = renderer_->buffer_shape();
+  const DepthGrid& depth = renderer_->last_depth_grid();
+  r.depth_grid.Clear();
+  if (depth.cols > 0) pack_depth_grid(depth, &r.depth_grid);
   // Render time includes the plane download (GPU) but not the conversion itself; with frames in
   // flight, also the time the lane spent beginning other frames before this one's finish.
   r.render_ms = std::max(0.0, ms_between(r.render_started, Clock::now()) - r.convert_ms);
@@ -541,6 +545,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_width(static_cast<std::uint32_t>(job.shape.width));
   f->set_height(static_cast<std::uint32_t>(job.shape.height));
   f->set_payload(enc.data.data(), enc.data.size());
+  if (r.depth_grid.cols() > 0) *f->mutable_depth_grid() = r.depth_grid;
   f->set_codec(encoder_->codec() == "av1" ? pb::CODEC_AV1 : pb::CODEC_H264);
   // FrameTimings: the record's times and render outcome, here and nowhere else.
   pb::FrameTimings* t = f->mutable_timings();

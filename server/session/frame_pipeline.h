@@ -104,6 +104,7 @@ class FramePipeline {
     // says what could not grow.
     int memory_fallback = 0;
     std::string memory_note;
+    pb::DepthGrid depth_grid;  // Frame.depth_grid (cols 0: none; proto/depth_grid_coding.h)
   };
   // A rendered frame waiting for (or in) the encode stage.
   struct Rendered : RenderRecord {

@@ -8,7 +8,12 @@
 //             vs CUDA exact with every tile blended whole: PSNR >= 50 dB (renderer.h: the later
 //             slices' termination rule), and tiles were really split.
 //  exact~van  CUDA exact vs CUDA vanilla: PSNR >= 40 dB and a shorter render list.
+//  depthgrid  the exact frames' depth grids (a vertex every 32 px, forward_model/depth_grid.h),
+//             CUDA vs CPU: >= 95% of the vertices agree (both without a surface, or depths within
+//             1%: the cores' lists order near ties alike but alpha differs by ulps); the first
+//             number column is the share agreeing, %.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -24,6 +29,7 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model, con
   catgs::RenderOptions ov, oe;
   ov.pipeline = Pipeline::vanilla;
   oe.pipeline = Pipeline::exact;
+  oe.depth_grid_cell = 32;
   catgs::cpu::CpuRenderer cpu_v(model, ov), cpu_e(model, oe);
   catgs::cuda::CudaRenderer gpu_v(dev, ov), gpu_e(dev, oe);  // two renderers, one scene
   for (std::size_t k = 0; k < views.size(); ++k) {
@@ -42,6 +48,19 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model, con
       add({"equal", name, view, e ? "exact" : "vanilla", d.psnr, d.max_abs, d.max_abs8,
            static_cast<long long>(cs.render_list_length), static_cast<long long>(gs.render_list_length), d.psnr >= 50.0,
            ""});
+    }
+    {
+      const DepthGrid &cg = cpu_e.last_depth_grid(), &gg = gpu_e.last_depth_grid();
+      std::size_t agree = 0;
+      const bool shaped = cg.cols > 0 && cg.cols == gg.cols && cg.rows == gg.rows && cg.depth.size() == gg.depth.size();
+      for (std::size_t i = 0; shaped && i < cg.depth.size(); ++i) {
+        const float a = cg.depth[i], b = gg.depth[i];
+        agree += std::isfinite(a) ? std::isfinite(b) && std::abs(a - b) <= 0.01f * a : !std::isfinite(b);
+      }
+      const double share =
+          cg.depth.empty() ? 0.0 : 100.0 * static_cast<double>(agree) / static_cast<double>(cg.depth.size());
+      add({"depthgrid", name, view, "exact", share, 0.0, 0, static_cast<long long>(cg.depth.size()),
+           static_cast<long long>(agree), shaped && share >= 95.0, "vertices agreeing, CUDA vs CPU"});
     }
     {  // the depth-first sort orders by the full depth, the single sort by the 32-bit key's
        // quantised depth (forward_model/key_packing.h): the same entries, and ties of depths

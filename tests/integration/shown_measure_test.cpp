@@ -56,15 +56,18 @@ TEST(ShownMeasure, DelayCostsTheShownPicturePredictionWinsSomeBackAndTheAnchorIs
   EXPECT_NEAR(rec.poses.back().trace_s, rec.poses.back().sent_ms / 1000.0 - 0.075, 1e-3);
   EXPECT_GE(loadgen::visible_ms(rec).front(), rec.frames.front().arrived_ms + 75.0);
   EXPECT_FALSE(rec.frames.back().shown_pose.has_value());
+  // Exact frames carry their depth grid (--depth-grid 32 by default): 192 x 108 is 7 x 5 vertices.
+  ASSERT_TRUE(rec.frames.back().depth_grid.has_value());
+  EXPECT_EQ(rec.frames.back().depth_grid->cols(), 7u);
+  EXPECT_EQ(rec.frames.back().depth_grid->rows(), 5u);
   EXPECT_TRUE(loadgen::read_recording(ahead + "/session_0").frames.back().shown_pose.has_value());
 
   const std::string shown = std::string(CATGS_SHOWN_BIN) + " --scene " + kBiker + " --renderer cpu --aa 2 --every 4" +
-                            " --warmup-s 0.5 --run loop=" + loop + ",far=" + far + ",ahead=" + ahead + " --json " +
-                            json;
+                            " --warmup-s 0.5 --run loop=" + loop + ",far=" + far + ",ahead=" + ahead + " --depth-warp --json " + json;
   ASSERT_EQ(std::system((shown + " > /dev/null").c_str()), 0);
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(json));
   const nlohmann::json& rows = j["pooled"];
-  ASSERT_EQ(rows.size(), 5u) << rows.dump();
+  ASSERT_EQ(rows.size(), 8u) << rows.dump();  // full, anchor, 3 shown, 3 depth warps
   const auto& full = row_named(rows, "full detail");
   const auto& anchor = row_named(rows, "anchor 1500 k");
   const auto& near_row = row_named(rows, "shown loop");
@@ -77,6 +80,13 @@ TEST(ShownMeasure, DelayCostsTheShownPicturePredictionWinsSomeBackAndTheAnchorIs
             << near_row["psnr_db_mean"] << " / " << near_row["psnr_db_p5"] << ", 150 ms " << far_row["psnr_db_mean"]
             << " / " << far_row["psnr_db_p5"] << ", 150 ms predicted " << ahead_row["psnr_db_mean"] << " / "
             << ahead_row["psnr_db_p5"] << "\n";
+  const auto& warp_row = row_named(rows, "depth warp far");
+  EXPECT_EQ(warp_row["refreshes"], full["refreshes"]);
+  std::cout << "[ info ] 150 ms, depth warp: " << warp_row["psnr_db_mean"] << " / " << warp_row["psnr_db_p5"] << "\n";
+  // The biker is an object in empty space and the orbit's plane sits on it: the grid's vertices
+  // there take the plane (shown/depth_warp.h), so the warp keeps the plane's picture (it gains on
+  // scenes with depth: DepthWarp unit test, RESULTS.md).
+  EXPECT_GT(warp_row["psnr_db_mean"].get<double>(), far_row["psnr_db_mean"].get<double>() - 1.0);
   // The biker (153 k Gaussians) fits the 1.5 M budget whole: the anchor is full detail.
   EXPECT_EQ(anchor["psnr_db_mean"], full["psnr_db_mean"]);
   // A longer delay costs what the screen shows (on loopback it may score above full detail: the
@@ -98,7 +108,7 @@ TEST(ShownMeasure, AMalformedRecordingNamesTheFileAndLine) {
                             .c_str()),
             0);
   const std::string frames = dir + "/session_0/frames.tsv";
-  std::ofstream(frames, std::ios::app) << "7\t0\tnot-a-time\t0\t160\t96\t0\t0\t1\t-\n";
+  std::ofstream(frames, std::ios::app) << "7\t0\tnot-a-time\t0\t160\t96\t0\t0\t1\t-\t-\n";
   try {
     loadgen::read_recording(dir + "/session_0");
     ADD_FAILURE() << "a malformed frames.tsv was read";
@@ -108,12 +118,21 @@ TEST(ShownMeasure, AMalformedRecordingNamesTheFileAndLine) {
   }
   // An offset past what a count may be is refused by its field, not cast (undefined) or summed
   // past 2^64 with the frame's bytes.
-  std::ofstream(frames) << "0\t0\t1.5\t1\t160\t96\t0\t18446744073709551615\t2\t-\n";
+  std::ofstream(frames) << "0\t0\t1.5\t1\t160\t96\t0\t18446744073709551615\t2\t-\t-\n";
   try {
     loadgen::read_recording(dir + "/session_0");
     ADD_FAILURE() << "a frame at offset 2^64 - 1 was read";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("not a whole number"), std::string::npos) << e.what();
+  }
+  // A depth grid whose codes do not fill its shape (2 x 2 vertices, 3 codes).
+  std::ofstream(frames) << "0\t0\t1.5\t1\t160\t96\t0\t0\t1\t-\t2,2,160,0.5,0a0b0c\n";
+  try {
+    loadgen::read_recording(dir + "/session_0");
+    ADD_FAILURE() << "a short depth grid was read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("frames.tsv:1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("3 codes for 2 x 2 vertices"), std::string::npos) << e.what();
   }
   std::filesystem::remove(dir + "/session_0/poses.tsv");
   EXPECT_THROW(loadgen::read_recording(dir + "/session_0"), std::runtime_error);

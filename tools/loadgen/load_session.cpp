@@ -348,6 +348,7 @@ class PoseLoop {
       k.shown_pose = {p.position().x(),    p.position().y(),    p.position().z(),    p.orientation().w(),
                       p.orientation().x(), p.orientation().y(), p.orientation().z(), p.vertical_fov_deg()};
     }
+    if (f.has_depth_grid()) k.depth_grid = f.depth_grid();
     k.offset = rec.stream.size();
     k.bytes = f.payload().size();
     rec.stream += f.payload();

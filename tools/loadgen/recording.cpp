@@ -10,9 +10,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include "proto/depth_grid_coding.h"
+
 namespace catgs::loadgen {
 
 namespace {
+
+namespace pb = ::catgs::stream::v1;
 
 std::ofstream open_out(const std::string& path, bool binary = false) {
   std::ofstream out(path, binary ? std::ios::binary : std::ios::out);
@@ -79,6 +83,57 @@ std::uint64_t TsvRow::count(std::size_t k, double max) const {
   return static_cast<std::uint64_t>(v);
 }
 
+// frames.tsv's depth_grid field: cols,rows,cell_px,inverse_depth_max,codes (hex), or "-".
+std::string depth_grid_field(const std::optional<pb::DepthGrid>& g) {
+  if (!g) return "-";
+  std::ostringstream out;
+  out << std::setprecision(9) << g->cols() << ',' << g->rows() << ',' << g->cell_px() << ',' << g->inverse_depth_max()
+      << ',';
+  static const char* kHex = "0123456789abcdef";
+  for (const char c : g->inverse_depth()) {
+    const auto b = static_cast<unsigned char>(c);
+    out << kHex[b >> 4] << kHex[b & 15];
+  }
+  return out.str();
+}
+
+pb::DepthGrid depth_grid_of(const std::string& field, const std::string& where) {
+  std::vector<std::string> parts;
+  std::stringstream ss(field);
+  for (std::string v; std::getline(ss, v, ',');) parts.push_back(v);
+  if (parts.size() != 5)
+    throw std::runtime_error(where + ": depth grid has " + std::to_string(parts.size()) +
+                             " comma-separated parts, want 5");
+  auto whole = [&](const std::string& v) {
+    const double d = number_of(v, where);
+    if (!(d >= 0 && d <= 4294967295.0) || d != std::floor(d))
+      throw std::runtime_error(where + ": depth grid '" + v + "' is not a whole number");
+    return static_cast<std::uint32_t>(d);
+  };
+  pb::DepthGrid g;
+  g.set_cols(whole(parts[0]));
+  g.set_rows(whole(parts[1]));
+  g.set_cell_px(whole(parts[2]));
+  g.set_inverse_depth_max(static_cast<float>(number_of(parts[3], where)));
+  const std::string& hex = parts[4];
+  if (hex.size() % 2 != 0) throw std::runtime_error(where + ": depth grid codes have an odd number of hex digits");
+  std::string codes(hex.size() / 2, '\0');
+  auto nibble = [&](char c) {
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    throw std::runtime_error(where + ": depth grid code digit '" + std::string(1, c) + "' is not lower-case hex");
+  };
+  for (std::size_t i = 0; i < codes.size(); ++i)
+    codes[i] = static_cast<char>((nibble(hex[2 * i]) << 4) | nibble(hex[2 * i + 1]));
+  g.set_inverse_depth(std::move(codes));
+  try {
+    (void)server::unpack_depth_grid(g);  // its shape and codes agree
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(where + ": " + e.what());
+  }
+  return g;
+}
+
 }  // namespace
 
 std::vector<double> visible_ms(const SessionRecording& r) {
@@ -88,7 +143,10 @@ std::vector<double> visible_ms(const SessionRecording& r) {
   for (const RecordedFrame& f : r.frames) {
     double leaves = f.arrived_ms;
     if (r.link.rate_mbit > 0) {
-      leaves = std::max(leaves, link_free_ms) + 8.0 * static_cast<double>(f.bytes) / (1000.0 * r.link.rate_mbit);
+      // The access unit and the depth grid that travels with it.
+      const std::size_t depth_bytes = f.depth_grid ? f.depth_grid->inverse_depth().size() : 0;
+      leaves = std::max(leaves, link_free_ms) +
+               8.0 * static_cast<double>(f.bytes + depth_bytes) / (1000.0 * r.link.rate_mbit);
       link_free_ms = leaves;
     }
     out.push_back(leaves + 0.5 * r.link.rtt_ms);
@@ -113,14 +171,16 @@ void write_recording(const SessionRecording& r, const std::string& dir) {
   poses << "# sequence\tsent_ms\ttrace_s\n";
   for (const RecordedPose& p : r.poses) poses << p.sequence << '\t' << p.sent_ms << '\t' << p.trace_s << '\n';
   std::ofstream frames = open_out(dir + "/frames.tsv");
-  frames << "# sequence\tpose_sequence\tarrived_ms\tkey\twidth\theight\tlod_error_px\toffset\tbytes\tshown_pose\n";
+  frames << "# "
+            "sequence\tpose_sequence\tarrived_ms\tkey\twidth\theight\tlod_error_px\toffset\tbytes\tshown_pose\tdepth_"
+            "grid\n";
   for (const RecordedFrame& f : r.frames) {
     frames << f.sequence << '\t' << f.pose_sequence << '\t' << f.arrived_ms << '\t' << (f.key ? 1 : 0) << '\t'
            << f.width << '\t' << f.height << '\t' << f.lod_error_px << '\t' << f.offset << '\t' << f.bytes << '\t';
     if (!f.shown_pose) frames << '-';
     for (std::size_t k = 0; f.shown_pose && k < f.shown_pose->size(); ++k)
       frames << (k ? "," : "") << (*f.shown_pose)[k];
-    frames << '\n';
+    frames << '\t' << depth_grid_field(f.depth_grid) << '\n';
   }
   open_out(dir + "/stream.h264", true).write(r.stream.data(), static_cast<std::streamsize>(r.stream.size()));
 }
@@ -159,7 +219,7 @@ SessionRecording read_recording(const std::string& dir) {
                                std::to_string(r.poses.size()) + ")");
     r.poses.push_back(p);
   }
-  for (const TsvRow& row : read_tsv(dir + "/frames.tsv", 10)) {
+  for (const TsvRow& row : read_tsv(dir + "/frames.tsv", 11)) {
     RecordedFrame f;
     f.sequence = static_cast<std::uint32_t>(row.count(0, 4294967295.0));
     f.pose_sequence = static_cast<std::uint32_t>(row.count(1, 4294967295.0));
@@ -182,6 +242,7 @@ SessionRecording read_recording(const std::string& dir) {
         throw std::runtime_error(row.where + ": shown pose has " + std::to_string(k) + " numbers, want 8");
       f.shown_pose = pose;
     }
+    if (row.fields[10] != "-") f.depth_grid = depth_grid_of(row.fields[10], row.where);
     if (f.bytes > r.stream.size() || f.offset > r.stream.size() - f.bytes)  // no overflow
       throw std::runtime_error(row.where + ": frame ends past stream.h264 (" + std::to_string(r.stream.size()) +
                                " bytes)");

@@ -12,7 +12,9 @@
 //   frames.tsv     one line a frame received: sequence, pose_sequence, arrived_ms, key (0/1),
 //                  width, height, lod_error_px, offset and bytes of its access unit in the stream,
 //                  and the pose it shows where the server predicted one (Frame.shown_pose:
-//                  px,py,pz,qw,qx,qy,qz,fov_deg; "-" where it shows its Pose)
+//                  px,py,pz,qw,qx,qy,qz,fov_deg; "-" where it shows its Pose), and its
+//                  depth grid (Frame.depth_grid: cols,rows,cell_px,inverse_depth_max,codes in
+//                  hex; "-" where it has none)
 //   stream.h264    every frame's H.264 access unit (Annex B) in arrival order (an elementary
 //                  stream, as FFmpeg's h264 demuxer reads it; catgs-shown decodes it with
 //                  libavcodec)
@@ -30,6 +32,7 @@
 #include <vector>
 
 #include "camera/trace.h"
+#include "catgs_stream.pb.h"
 
 namespace catgs::loadgen {
 
@@ -55,6 +58,8 @@ struct RecordedFrame {
   // Frame.shown_pose: position (3), camera-to-world quaternion (w, x, y, z), vertical fov in
   // degrees; empty where the frame shows its Pose.
   std::optional<std::array<double, 8>> shown_pose;
+  // Frame.depth_grid as it came (proto/depth_grid_coding.h unpacks it); empty where none.
+  std::optional<::catgs::stream::v1::DepthGrid> depth_grid;
 };
 
 struct SessionRecording {

@@ -31,6 +31,8 @@
 #include "process/scene_with_lod.h"
 #include "render/lod_bound.h"
 #include "scene/scene_bounds.h"
+#include "proto/depth_grid_coding.h"
+#include "shown/depth_warp.h"
 #include "shown/page_reprojection.h"
 #include "shown/shown_score.h"
 
@@ -55,6 +57,8 @@ const char* kUsage =
     "  --png-dir DIR         write the pictures of each session's worst shown refresh\n"
     "  --plain               also score each run's newest frame as it is (no re-projection)\n"
     "  --plane-depth D       re-project with a plane D units ahead of the frame, not the page's\n"
+    "  --depth-warp          also re-project each run by its frames' depth grids as a mesh\n"
+    "                        (shown/depth_warp.h; frames without one: the page's plane)\n"
     "  --centre-plane        also re-project each run with the plane at the depth under the\n"
     "                        frame's centre pixel (the depth probe at full detail; not the page)\n"
     "The table: PSNR (dB) and SSIM mean and 5th percentile over the refreshes; the last column is\n"
@@ -155,6 +159,8 @@ struct Scorer {
   // --centre-plane: each run also re-projected with the plane at the depth under the frame's centre
   // pixel (cpu::probe_pixel_depth at full detail: what a depth sent with each frame would give).
   bool centre = false;
+  // --depth-warp: each run also re-projected by its frames' depth grids (shown/depth_warp.h).
+  bool depth_warp = false;
   std::vector<fm::ChunkBounds> chunks;  // the probe's chunk culling (--centre-plane)
 
   // The depth under the centre pixel of frame `frame` of run `r` (0: no surface there), probed
@@ -176,7 +182,7 @@ struct Scorer {
   std::vector<Row> score(const std::vector<std::string>& names, std::vector<RecordingPlayer>& players,
                          const std::string& session) {
     const std::size_t runs = players.size();
-    const std::size_t kinds = 1 + (plain ? 1 : 0) + (centre ? 1 : 0);
+    const std::size_t kinds = 1 + (plain ? 1 : 0) + (centre ? 1 : 0) + (depth_warp ? 1 : 0);
     std::vector<Row> rows(2 + runs * kinds);
     centre_depths.assign(runs, {-1, 0.0});
     rows[0].name = "full detail";
@@ -185,6 +191,8 @@ struct Scorer {
     for (std::size_t r = 0; plain && r < runs; ++r) rows[2 + runs + r].name = "plain " + names[r];
     const std::size_t centre_row = 2 + runs * (plain ? 2 : 1);
     for (std::size_t r = 0; centre && r < runs; ++r) rows[centre_row + r].name = "centre " + names[r];
+    const std::size_t warp_row = centre_row + (centre ? runs : 0);
+    for (std::size_t r = 0; depth_warp && r < runs; ++r) rows[warp_row + r].name = "depth warp " + names[r];
     const loadgen::SessionRecording& first = players.front().recording();
     double start_ms = 1000.0 * warmup_s;
     for (const auto& p : players) start_ms = std::max(start_ms, p.first_visible_ms());
@@ -227,6 +235,17 @@ struct Scorer {
                                      want);
             rows[centre_row + r].detail.push_back(players[r].shown_age_ms(t));
           }
+          if (depth_warp) {
+            const auto& grid =
+                players[r].recording().frames[static_cast<std::size_t>(players[r].shown_index())].depth_grid;
+            const DepthGrid depth = grid ? server::unpack_depth_grid(*grid) : DepthGrid{};
+            const double plane = page_plane_depth(frame_pose, display, players[r].recording(), plane_depth);
+            rows[warp_row + r].add(
+                stretched(depth_warp_picture(*frame, page_pose_of(frame_pose), page_pose_of(display), depth, plane),
+                          display.width, display.height),
+                want);
+            rows[warp_row + r].detail.push_back(players[r].shown_age_ms(t));
+          }
           rows[2 + r].detail.push_back(players[r].shown_age_ms(t));
           if (!png_dir.empty()) frames[r] = *frame;
         }));
@@ -248,10 +267,10 @@ struct Scorer {
 
 int main(int argc, char** argv) {
   try {
-    const tools::Args args(
-        argc, argv,
-        {"--scene", "--cache-dir", "--run", "--renderer", "--aa", "--refresh-hz", "--warmup-s", "--every",
-         "--anchor-budget", "--json", "--png-dir", "--help!", "--plain!", "--plane-depth", "--centre-plane!"});
+    const tools::Args args(argc, argv,
+                           {"--scene", "--cache-dir", "--run", "--renderer", "--aa", "--refresh-hz", "--warmup-s",
+                            "--every", "--anchor-budget", "--json", "--png-dir", "--help!", "--plain!", "--plane-depth",
+                            "--centre-plane!", "--depth-warp!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -267,6 +286,7 @@ int main(int argc, char** argv) {
     s.plain = args.has("--plain");
     s.plane_depth = args.get_double("--plane-depth", 0);
     s.centre = args.has("--centre-plane");
+    s.depth_warp = args.has("--depth-warp");
     if (s.aa < 1 || s.refresh_hz <= 0 || s.every < 1)
       throw std::invalid_argument("--aa and --every must be >= 1, --refresh-hz > 0");
     if (!s.png_dir.empty()) std::filesystem::create_directories(s.png_dir);

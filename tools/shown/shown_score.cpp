@@ -73,13 +73,19 @@ double RecordingPlayer::shown_age_ms(double t_ms) const {
   return t_ms + 1000.0 * (recording_.offset_s - recording_.poses[f.pose_sequence].trace_s);
 }
 
-Image page_shows(const Image& frame, const Camera& frame_pose, const Camera& display,
-                 const loadgen::SessionRecording& recording, double plane_depth) {
+double page_plane_depth(const Camera& frame_pose, const Camera& display, const loadgen::SessionRecording& recording,
+                        double plane_depth) {
+  if (plane_depth > 0) return plane_depth;
   const PagePose from = page_pose_of(frame_pose), to = page_pose_of(display);
   const glm::dvec3 forward = to.orientation * glm::dvec3(0, 0, 1);
   const glm::dvec3 target = to.position + forward * recording.plane_distance;
-  const double depth = plane_depth > 0 ? plane_depth : plane_depth_for(from, target, recording.scene_scale);
-  return shown_picture(frame, from, to, depth);
+  return plane_depth_for(from, target, recording.scene_scale);
+}
+
+Image page_shows(const Image& frame, const Camera& frame_pose, const Camera& display,
+                 const loadgen::SessionRecording& recording, double plane_depth) {
+  return shown_picture(frame, page_pose_of(frame_pose), page_pose_of(display),
+                       page_plane_depth(frame_pose, display, recording, plane_depth));
 }
 
 Summary summarize(std::vector<double> v) {

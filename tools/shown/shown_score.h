@@ -52,6 +52,11 @@ class RecordingPlayer {
   Image picture_;
 };
 
+// The page's plane depth for showing a frame of `frame_pose` at `display` (below), or
+// `plane_depth` where it is > 0.
+double page_plane_depth(const Camera& frame_pose, const Camera& display, const loadgen::SessionRecording& recording,
+                        double plane_depth);
+
 // What the page shows at `display` of `frame` (rendered for `frame_pose`): the page's
 // re-projection with its plane (the orbit target held recording.plane_distance ahead of the
 // display pose, its depth along the frame's forward axis: catgs_viewer.js _updateReprojection).
