@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <zlib.h>
+
 namespace catgs::server {
 
 void pack_depth_grid(const DepthGrid& grid, pb::DepthGrid* out) {
@@ -22,7 +24,14 @@ void pack_depth_grid(const DepthGrid& grid, pb::DepthGrid* out) {
   out->set_rows(static_cast<std::uint32_t>(grid.rows));
   out->set_cell_px(static_cast<std::uint32_t>(grid.cell));
   out->set_inverse_depth_max(std::isfinite(w_max) ? w_max : 0.0f);
-  out->set_inverse_depth(std::move(codes));
+  // zlib (RFC 1950) at its best level: a 720p grid of 984 codes deflates to about half.
+  uLongf size = compressBound(static_cast<uLong>(codes.size()));
+  std::string deflated(size, '\0');
+  if (compress2(reinterpret_cast<Bytef*>(deflated.data()), &size, reinterpret_cast<const Bytef*>(codes.data()),
+                static_cast<uLong>(codes.size()), Z_BEST_COMPRESSION) != Z_OK)
+    throw std::runtime_error("depth grid: zlib could not deflate " + std::to_string(codes.size()) + " codes");
+  deflated.resize(size);
+  out->set_inverse_depth(std::move(deflated));
 }
 
 DepthGrid unpack_depth_grid(const pb::DepthGrid& in) {
@@ -32,9 +41,18 @@ DepthGrid unpack_depth_grid(const pb::DepthGrid& in) {
                                 " is not 1..4097 a side");
   if (in.cell_px() == 0) throw std::invalid_argument("depth grid: cell_px is 0");
   const std::size_t n = static_cast<std::size_t>(in.cols()) * in.rows();
-  if (in.inverse_depth().size() != n)
-    throw std::invalid_argument("depth grid: " + std::to_string(in.inverse_depth().size()) + " codes for " +
-                                std::to_string(in.cols()) + " x " + std::to_string(in.rows()) + " vertices");
+  // The codes inflated into exactly n bytes: a stream that is not zlib, is cut short, or holds
+  // more or fewer codes is refused.
+  std::string codes(n + 1, '\0');
+  uLongf size = static_cast<uLongf>(codes.size());
+  const int z = uncompress(reinterpret_cast<Bytef*>(codes.data()), &size,
+                           reinterpret_cast<const Bytef*>(in.inverse_depth().data()),
+                           static_cast<uLong>(in.inverse_depth().size()));
+  if (z != Z_OK || size != n)
+    throw std::invalid_argument("depth grid: " + std::to_string(in.inverse_depth().size()) +
+                                " bytes are not a zlib stream of " + std::to_string(in.cols()) + " x " +
+                                std::to_string(in.rows()) + " codes" +
+                                (z == Z_OK ? " (it holds " + std::to_string(size) + ")" : ""));
   const float w_max = in.inverse_depth_max();
   DepthGrid g;
   g.cols = static_cast<int>(in.cols());
@@ -42,7 +60,7 @@ DepthGrid unpack_depth_grid(const pb::DepthGrid& in) {
   g.cell = static_cast<int>(in.cell_px());
   g.depth.assign(n, INFINITY);
   for (std::size_t i = 0; i < n; ++i) {
-    const auto c = static_cast<unsigned char>(in.inverse_depth()[i]);
+    const auto c = static_cast<unsigned char>(codes[i]);
     if (c == 0) continue;
     if (!(std::isfinite(w_max) && w_max > 0.0f))
       throw std::invalid_argument("depth grid: inverse_depth_max " + std::to_string(w_max) +

@@ -393,10 +393,10 @@ for f in glob.glob(sys.argv[1] + '/*/frames.tsv'):
         frames += 1; au += int(col[8])
         if col[10] != '-':
             grids += 1
-            codes = bytes.fromhex(col[10].split(',')[4])
-            depth += len(codes); deflated += len(zlib.compress(codes, 9))
-print('depth grids: %d of %d frames, %d bytes against %d of video: %.1f%% of the stream (deflated: %d bytes, %.1f%%)' % (
-    grids, frames, depth, au, 100.0 * depth / max(1, depth + au), deflated, 100.0 * deflated / max(1, deflated + au)))
+            sent = bytes.fromhex(col[10].split(',')[4])  # deflated (proto/depth_grid_coding.h)
+            depth += len(zlib.decompress(sent)); deflated += len(sent)
+print('depth grids: %d of %d frames, %d bytes sent against %d of video: %.1f%% of the stream (raw codes %d, %.1f%%)' % (
+    grids, frames, deflated, au, 100.0 * deflated / max(1, deflated + au), depth, 100.0 * depth / max(1, depth + au)))
 PY
 }
 

@@ -125,14 +125,14 @@ TEST(ShownMeasure, AMalformedRecordingNamesTheFileAndLine) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("not a whole number"), std::string::npos) << e.what();
   }
-  // A depth grid whose codes do not fill its shape (2 x 2 vertices, 3 codes).
+  // A depth grid whose codes are not a zlib stream of its shape's (2 x 2 vertices).
   std::ofstream(frames) << "0\t0\t1.5\t1\t160\t96\t0\t0\t1\t-\t2,2,160,0.5,0a0b0c\n";
   try {
     loadgen::read_recording(dir + "/session_0");
     ADD_FAILURE() << "a short depth grid was read";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("frames.tsv:1"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("3 codes for 2 x 2 vertices"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("3 bytes are not a zlib stream of 2 x 2 codes"), std::string::npos) << e.what();
   }
   std::filesystem::remove(dir + "/session_0/poses.tsv");
   EXPECT_THROW(loadgen::read_recording(dir + "/session_0"), std::runtime_error);

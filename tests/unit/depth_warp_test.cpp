@@ -8,6 +8,7 @@
 #include <cmath>
 
 #include <gtest/gtest.h>
+#include <zlib.h>
 
 #include "camera/trace.h"
 #include "common/image_io.h"
@@ -68,8 +69,13 @@ TEST(DepthGrid, CodingKeepsInverseDepthWithinHalfACode) {
   server::pb::DepthGrid m;
   server::pack_depth_grid(g, &m);
   EXPECT_FLOAT_EQ(m.inverse_depth_max(), 2.0f);  // the nearest vertex, 0.5 away
-  ASSERT_EQ(m.inverse_depth().size(), 6u);
-  const std::string& c = m.inverse_depth();
+  // The codes, inflated by zlib itself.
+  std::string c(6, '\0');
+  uLongf size = 6;
+  ASSERT_EQ(uncompress(reinterpret_cast<Bytef*>(c.data()), &size,
+                       reinterpret_cast<const Bytef*>(m.inverse_depth().data()), m.inverse_depth().size()),
+            Z_OK);
+  ASSERT_EQ(size, 6u);
   EXPECT_EQ(static_cast<unsigned char>(c[0]), 255);
   EXPECT_EQ(static_cast<unsigned char>(c[1]), 128);  // 1/1 of 2: 127.5 rounds up
   EXPECT_EQ(static_cast<unsigned char>(c[3]), 0);    // no surface
@@ -80,8 +86,16 @@ TEST(DepthGrid, CodingKeepsInverseDepthWithinHalfACode) {
     EXPECT_NEAR(1.0f / back.depth[i], 1.0f / g.depth[i],
                 0.5f * 2.0f / 255.0f + 1e-6f);  // half a code, and float's rounding
   EXPECT_TRUE(std::isinf(back.depth[3]));
-  // Malformed: the codes' length, the shape.
+  // Malformed: not zlib, a stream of other codes than the shape's, the shape.
   m.set_inverse_depth("abc");
+  EXPECT_THROW(server::unpack_depth_grid(m), std::invalid_argument);
+  server::pb::DepthGrid other;
+  DepthGrid wider = g;
+  wider.cols = 4;
+  wider.depth.push_back(3.0f);
+  wider.depth.push_back(3.0f);
+  server::pack_depth_grid(wider, &other);
+  m.set_inverse_depth(other.inverse_depth());
   EXPECT_THROW(server::unpack_depth_grid(m), std::invalid_argument);
   m.set_cols(0);
   EXPECT_THROW(server::unpack_depth_grid(m), std::invalid_argument);
