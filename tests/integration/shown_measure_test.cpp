@@ -63,7 +63,8 @@ TEST(ShownMeasure, DelayCostsTheShownPicturePredictionWinsSomeBackAndTheAnchorIs
   EXPECT_TRUE(loadgen::read_recording(ahead + "/session_0").frames.back().shown_pose.has_value());
 
   const std::string shown = std::string(CATGS_SHOWN_BIN) + " --scene " + kBiker + " --renderer cpu --aa 2 --every 4" +
-                            " --warmup-s 0.5 --run loop=" + loop + ",far=" + far + ",ahead=" + ahead + " --depth-warp --json " + json;
+                            " --warmup-s 0.5 --run loop=" + loop + ",far=" + far + ",ahead=" + ahead +
+                            " --depth-warp --json " + json;
   ASSERT_EQ(std::system((shown + " > /dev/null").c_str()), 0);
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(json));
   const nlohmann::json& rows = j["pooled"];
@@ -132,7 +133,8 @@ TEST(ShownMeasure, AMalformedRecordingNamesTheFileAndLine) {
     ADD_FAILURE() << "a short depth grid was read";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("frames.tsv:1"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("3 bytes are not a zlib stream of 2 x 2 codes"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("3 bytes are not a zlib stream of 2 x 2 codes"), std::string::npos)
+        << e.what();
   }
   std::filesystem::remove(dir + "/session_0/poses.tsv");
   EXPECT_THROW(loadgen::read_recording(dir + "/session_0"), std::runtime_error);
