@@ -67,6 +67,8 @@ export function installTestHook(viewer, page) {
     setMaxBitrate: page.setMaxBitrate,
     // Hotspots, measurement, walk mode (issue 38).
     probe: (x, y) => viewer.probe(x, y), // (cssX, cssY) -> Promise<DepthResult as an object>
+    // The shown frame's depth under CSS pixel (x, y) from its depth grid (no round trip), or null.
+    frameDepthAt: (x, y) => viewer.frameDepthAt(x, y),
     probePose: (pose, width, height, x, y) => viewer.probePose(pose, width, height, x, y),
     get notes() {
       return page.notes.snapshot();

@@ -10,7 +10,9 @@
 // retry_after_ms 1200, "server restarting": a server that knows it comes back) after 5 frames,
 // /ws-stop the same with catgs-server's own reason on SIGTERM or SIGINT ("server shutting down",
 // which does not say whether it comes back); /ws-noframes welcomes but never sends a frame; /ws-hold
-// answers the first Pose only (the page keeps showing that frame, re-projected); /ws-drain sends
+// answers the first Pose only (the page keeps showing that frame, re-projected); /ws-hold-depth the
+// same with a depth grid on the frame (its left part 2 units away, its right part 20, deflated as
+// catgs-server sends it: proto/depth_grid_coding.h); /ws-drain sends
 // Stats.drain_ms_left 2600 (a draining server) right after Welcome and streams on. GET /scenes
 // lists three scenes, one with unknown counts (the page's picker); a Hello naming another scene is
 // refused as catgs-server refuses it (INVALID_ARGUMENT "no scene 'X' on this server (it has:
@@ -24,6 +26,7 @@ import http from 'node:http';
 import { createRequire } from 'node:module';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
+import zlib from 'node:zlib';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const require = createRequire(import.meta.url);
@@ -37,6 +40,16 @@ const SCENES = [
   { name: 'garden', gaussians: 5834784, sh_degree: 3, bounds: { min: [-9, -9, -9], max: [9, 9, 9] }, file: 'garden.ply' },
   { name: 'city', gaussians: null, sh_degree: null, bounds: null, file: 'city.spz', loaded: false },
 ];
+
+// A 160 x 120 frame's depth grid, a vertex every 32 px (6 x 5): the vertices at x <= 64 are 2
+// units away, those at x >= 96 are 20 (inverse depth codes 255 and 26 of 0.5).
+export function twoDepthGrid() {
+  const cols = 6;
+  const rows = 5;
+  const codes = Buffer.alloc(cols * rows);
+  for (let i = 0; i < codes.length; i++) codes[i] = (i % cols) * 32 <= 64 ? 255 : 26;
+  return { cols, rows, cell_px: 32, inverse_depth_max: 0.5, inverse_depth: zlib.deflateSync(codes) };
+}
 
 export function loadFixture(file = path.join(here, 'fixtures/stream_160x120.bin')) {
   const b = fs.readFileSync(file);
@@ -205,7 +218,8 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
         } else if (msg.body === 'key_frame_request') {
           next = 0; // the fixture's first access unit is its IDR
         } else if (msg.body === 'pose') {
-          if (scenario === '/ws-noframes' || (scenario === '/ws-hold' && sent >= 1)) continue;
+          const hold = scenario === '/ws-hold' || scenario === '/ws-hold-depth';
+          if (scenario === '/ws-noframes' || (hold && sent >= 1)) continue;
           let fr = frames[next];
           next = (next + 1) % frames.length;
           if (scenario === '/ws-garbage' && sent === 3) {
@@ -213,7 +227,8 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
             fr = { key: true, data: Buffer.from([0, 0, 0, 1, 0x67, 0xff, 0, 0x1f, 1, 0, 0, 1, 0x65, 9, 9]) };
           }
           send({ frame: { sequence: sent++, pose_sequence: msg.pose.sequence, client_time_ms: msg.pose.client_time_ms,
-            key_frame: fr.key, width: 160, height: 120, payload: fr.data } });
+            key_frame: fr.key, width: 160, height: 120, payload: fr.data,
+            ...(scenario === '/ws-hold-depth' ? { depth_grid: twoDepthGrid() } : {}) } });
           if (scenario === '/ws-error' && sent === 5) return fail(8, 'mock: too slow');
           if (scenario === '/ws-restart' && sent === 5) return fail(7, 'server restarting', 1200);
           if (scenario === '/ws-stop' && sent === 5) return fail(7, 'server shutting down', 1200);

@@ -565,6 +565,80 @@ try {
     await live.close();
   }
 
+  // 11c'. The depth warp (issue 91): a held frame whose depth grid puts its left part 2 units away
+  // and its right part 20. A step sideways moves the left part about ten times as far as the right
+  // (the plane through the orbit target, 5 away, would move both alike), the band between them
+  // stretches over what the frame did not see, and nothing turns black.
+  {
+    const page = await openPage(`${base}/?ws=${wsUrl('/ws-hold-depth')}`);
+    check(await moveUntil(page, (c) => c.framesDecoded >= 1), 'depth warp: the held frame');
+    await sleep(300);
+    const depths = await page.evaluate(() => {
+      const c = document.getElementById('view');
+      return [0.1, 0.9].map((f) => window.catgs.frameDepthAt(f * c.clientWidth, 0.5 * c.clientHeight));
+    });
+    check(Math.abs(depths[0] - 2) < 0.01 && Math.abs(depths[1] - 255 / 13) < 0.01,
+      `depth warp: the grid reads 2 on the left, 19.6 (code 26) on the right without a round trip (${depths})`);
+    const step = 0.1;
+    await page.evaluate((s) => {
+      const p = window.catgs.pose();
+      const [w, x, y, z] = p.orientation; // the camera's right axis: q (1, 0, 0) q*
+      const right = [1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)];
+      window.catgs.setPose(p.position.map((v, i) => v + s * right[i]), p.orientation, p.fovDeg);
+    }, step);
+    await sleep(400);
+    const overlay = await page.evaluate(() => {
+      const c = document.querySelector('#view + canvas');
+      return c ? { hidden: c.hidden, w: c.width, h: c.height } : null;
+    });
+    check(!!overlay && !overlay.hidden && overlay.w === 160, `depth warp: the mesh canvas shows over the view (${JSON.stringify(overlay)})`);
+    const png = (b64) => PNG.sync.read(Buffer.from(b64, 'base64'));
+    const screen = png((await page.screenshot()).toString('base64'));
+    const frame = png((await page.evaluate(() => window.catgs.snapshot())).split(',')[1]);
+    const info = await page.evaluate(() => {
+      const c = document.getElementById('view');
+      return { cssW: c.clientWidth, cssH: c.clientHeight, fov: window.catgs.pose().fovDeg };
+    });
+    const k = info.cssW / 160; // CSS pixels a frame pixel
+    const f = 120 / (2 * Math.tan((info.fov * Math.PI) / 360));
+    // Mean absolute difference of the screen against the frame moved left by `shift` frame pixels,
+    // over screen columns of frame x in [x0, x1) and a band of rows.
+    const mad = (shift, x0, x1) => {
+      let sum = 0;
+      let n = 0;
+      for (let y = Math.round(0.45 * info.cssH); y < Math.round(0.75 * info.cssH); y += 3) {
+        for (let xs = Math.round(x0 * k); xs < Math.round(x1 * k); xs += 2) {
+          const fx = Math.min(159, Math.max(0, Math.round(xs / k + shift - 0.5)));
+          const fy = Math.min(119, Math.round((y * 120) / info.cssH - 0.5));
+          for (let c = 0; c < 3; c++) sum += Math.abs(screen.data[(y * screen.width + xs) * 4 + c] - frame.data[(fy * 160 + fx) * 4 + c]);
+          n += 3;
+        }
+      }
+      return sum / n;
+    };
+    const near = (f * step) / 2; // the left part's shift, frame pixels
+    const far = (f * step) / (255 / 13);
+    const plane = (f * step) / 5;
+    const left = { near: mad(near, 8, 52), plane: mad(plane, 8, 52) };
+    const right = { far: mad(far, 108, 150), plane: mad(plane, 108, 150) };
+    check(left.near < left.plane && right.far < right.plane,
+      `depth warp: the near part moved ${near.toFixed(1)} px, the far part ${far.toFixed(1)}, not the plane's ${plane.toFixed(1)} ` +
+      `(mean differences ${JSON.stringify({ left, right })})`);
+    // The band the step uncovers, between the near part's right edge and the far part (frame x 56
+    // to 104 in the rows above: no dark content in the frame there), is the stretched frame.
+    let dark = 0;
+    let seen = 0;
+    for (let y = Math.round(0.45 * info.cssH); y < Math.round(0.75 * info.cssH); y++) {
+      for (let xs = Math.round(56 * k); xs < Math.round(104 * k); xs++, seen++) {
+        const p = (y * screen.width + xs) * 4;
+        if (Math.max(screen.data[p], screen.data[p + 1], screen.data[p + 2]) < 24) dark++;
+      }
+    }
+    check(seen > 1000 && dark === 0, `depth warp: no black where the step uncovered the far part (${dark} dark of ${seen} pixels)`);
+    await shot(page, 'depth_warp_step');
+    await page.close();
+  }
+
   // 11d. Scene picker: the server lists three scenes; picking one reopens the page on it and its
   // Hello names it. A scene whose size is not known yet (gaussians: null) shows its name alone.
   {

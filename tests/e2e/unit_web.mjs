@@ -246,6 +246,56 @@ test('re-projection: a pure rotation is exact at any depth; the same pose is the
   assert.equal(reproject.cssTransform(I, 320, 240, 640, 480), 'matrix3d(1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1)');
 });
 
+test('depth warp: each vertex lands where the new camera sees its point, at every depth, the background at the plane', async () => {
+  const warp = await imp('depth_warp.js');
+  const from = { position: [0.5, -1.0, -4.0], orientation: cam.lookAt([0.5, -1.0, -4.0], [0.3, -0.2, 0.1], [0, -1, 0]), fovDeg: 55 };
+  const p2 = [1.1, -1.2, -3.7]; // a step sideways and forward, and a turn
+  const to = { position: p2, orientation: cam.qmul(cam.qfromAxisAngle([0, 1, 0], 0.05), from.orientation), fovDeg: 50 };
+  const W = 100;
+  const H = 70;
+  const grid = { cols: 5, rows: 4, cell: 32, depth: Float64Array.from({ length: 20 }, (_, i) => (i % 7 === 3 ? Infinity : 1 + 0.37 * i)) };
+  const v = warp.warpVertices(from, to, grid, 6.5, W, H);
+  const k1 = cam.intrinsicsFor(from.fovDeg, W, H);
+  const [r, d, f] = [cam.cameraRight, cam.cameraDown, cam.cameraForward].map((a) => a(from.orientation));
+  for (let l = 0; l < grid.rows; l++) {
+    for (let k = 0; k < grid.cols; k++) {
+      const i = l * grid.cols + k;
+      const x = Math.min(k * 32, W);
+      const y = Math.min(l * 32, H);
+      const z = Number.isFinite(grid.depth[i]) ? grid.depth[i] : 6.5; // no surface: the plane
+      // The world point on the vertex's ray at depth z, seen by `to`.
+      const X = cam.vadd(cam.vadd(cam.vadd(from.position, cam.vscale(f, z)), cam.vscale(r, ((x - k1.cx) / k1.fx) * z)), cam.vscale(d, ((y - k1.cy) / k1.fy) * z));
+      close([v.sx[i], v.sy[i]], projectPoint(to, X, W, H), 1e-9);
+      assert.equal(v.u[i], x);
+      assert.equal(v.v[i], y);
+      close([1 / v.invZ[i]], [cam.vdot(cam.vsub(X, to.position), cam.cameraForward(to.orientation))], 1e-9);
+    }
+  }
+  // Two triangles a cell, all in front; a vertex behind the camera drops its triangles.
+  assert.equal(warp.warpTriangles(grid, v).length, 4 * 3 * 2 * 3);
+  v.clipW[0] = -1;
+  assert.equal(warp.warpTriangles(grid, v).length, 4 * 3 * 2 * 3 - 2 * 3);
+});
+
+test("depth grid: zlib-deflated codes (made by node's zlib) read as the protocol says; malformed ones are refused", async () => {
+  const warp = await imp('depth_warp.js');
+  const { deflateSync } = await import('node:zlib');
+  const codes = Uint8Array.from([255, 128, 0, 1, 64, 200]);
+  const g = { cols: 3, rows: 2, cell_px: 16, inverse_depth_max: 2, inverse_depth: deflateSync(codes) };
+  const grid = await warp.inflateDepthGrid(g);
+  assert.deepEqual([grid.cols, grid.rows, grid.cell], [3, 2, 16]);
+  close(Array.from(grid.depth).filter(Number.isFinite), [0.5, 255 / 256, 127.5, 255 / 128, 255 / 400], 1e-6);
+  assert.equal(grid.depth[2], Infinity);
+  assert.equal(await warp.inflateDepthGrid(null), null);
+  await assert.rejects(warp.inflateDepthGrid({ ...g, cols: 4 }), /6 codes for 4 x 2/);
+  await assert.rejects(warp.inflateDepthGrid({ ...g, inverse_depth: Uint8Array.from([1, 2, 3]) }));
+  // The depth under a point: bilinear in inverse depth between the four vertices around it.
+  const flat = { cols: 3, rows: 2, cell: 16, depth: Float64Array.from([2, 2, 4, 2, 2, 4]) };
+  close([warp.depthAt(flat, 20, 10, 8, 5)], [2], 1e-12);
+  close([warp.depthAt(flat, 20, 10, 18, 5)], [1 / (0.5 / 2 + 0.5 / 4)], 1e-12); // halfway across the narrow last cell
+  assert.equal(warp.depthAt({ ...flat, depth: Float64Array.from([2, Infinity, 4, 2, 2, 4]) }, 20, 10, 8, 5), null);
+});
+
 test('re-projection fill: where the moved frame does not reach, its nearest edge (clamp-to-edge), never black', () => {
   close(reproject.invert3([[2, 0, 1], [0, 4, 0], [0, 0, 1]]).flat(), [0.5, 0, -0.5, 0, 0.25, 0, 0, 0, 1], 1e-12);
   assert.equal(reproject.invert3([[1, 2, 3], [2, 4, 6], [0, 0, 1]]), null);

@@ -8,16 +8,21 @@
 //   depths:        [{ pose, target: [x, y, z], fallback }]
 //   edgeFills:     [{ from, to, planeDepth, width, height, H, src, out }]  (src, out:
 //                  { width, height, data: [RGBA bytes] }; H: the C++ twin's homography)
+//   warps:         [{ from, to, planeDepth, width, height, grid: { cols, rows, cell, depth:
+//                  [number or null for no surface] } }]  (web_client/viewer/depth_warp.js)
 // Prints (stdout, JSON):
 //   reprojections: [{ H, corners: [[x, y] or null for (0,0), (w,0), (w,h), (0,h)], inverse }]
 //   depths:        [number]
 //   edgeFills:     [{ ok, data, okOwnH, dataOwnH }]  (edgeFill with the given H, and with the
 //                  page's own reprojection() of the case's poses)
+//   warps:         [{ sx, sy, clipW, invZ, u, v, triangles }]  (warpVertices, warpTriangles)
 import { readFileSync } from 'node:fs';
 
 const { applyHomography, edgeFill, invert3, planeDepthFor, reprojection } = await import(
   new URL('../../web_client/viewer/reproject.js', import.meta.url).href
 );
+
+const { warpTriangles, warpVertices } = await import(new URL('../../web_client/viewer/depth_warp.js', import.meta.url).href);
 
 const text = process.argv[2] ? readFileSync(process.argv[2], 'utf8') : readFileSync(0, 'utf8');
 const job = JSON.parse(text);
@@ -42,6 +47,12 @@ const result = {
     const given = fill(c.H, c);
     const own = fill(reprojection(c.from, c.to, c.planeDepth, c.width, c.height), c);
     return { ok: given.ok, data: given.data, okOwnH: own.ok, dataOwnH: own.data };
+  }),
+  warps: (job.warps || []).map((c) => {
+    const grid = { ...c.grid, depth: Float64Array.from(c.grid.depth, (z) => (z === null ? Infinity : z)) };
+    const v = warpVertices(c.from, c.to, grid, c.planeDepth, c.width, c.height);
+    const out = Object.fromEntries(Object.entries(v).map(([k, a]) => [k, Array.from(a)]));
+    return { ...out, triangles: Array.from(warpTriangles(grid, v)) };
   }),
 };
 process.stdout.write(JSON.stringify(result));

@@ -2,6 +2,7 @@
 // page_reprojection_ref.mjs): the same homographies, plane depths and edge-fill bytes; and
 // shown_picture against the exact picture of a textured plane.
 #include "shown/page_reprojection.h"
+#include "shown/depth_warp.h"
 
 #include <algorithm>
 #include <array>
@@ -19,6 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include "camera/camera.h"
+#include "forward_model/depth_grid.h"
 #include "renderer/renderer.h"
 
 namespace catgs::shown {
@@ -439,6 +441,70 @@ TEST(ShownPicture, CornerBehindShowsThePlainFrame) {
   ASSERT_FALSE(apply_homography(H, 0.0, 0.0)) << "a turn right of 92 degrees: the left edge is behind";
   ASSERT_TRUE(apply_homography(H, 160.0, 0.0));
   EXPECT_EQ(shown_picture(frame, a, to, kDepth).rgba8, frame.rgba8);
+}
+
+TEST(PageDepthWarp, MatchesThePagesMeshVertices) {
+  REQUIRE_NODE();
+  json job;
+  job["warps"] = json::array();
+  std::vector<DepthGrid> grids;
+  const auto pairs = pose_pairs();
+  for (const auto& p : pairs) {
+    // A grid of cell 48 over the case's size: depths from 0.6 to 12, every fifth vertex without a
+    // surface (the plane's depth then).
+    DepthGrid g;
+    g.cell = 48;
+    g.cols = fm::depth_grid_cols(p.width, g.cell);
+    g.rows = fm::depth_grid_rows(p.height, g.cell);
+    json depths = json::array();
+    for (int i = 0; i < g.cols * g.rows; ++i) {
+      const float z = i % 5 == 2 ? INFINITY : 0.6f + 0.37f * static_cast<float>(i % 31);
+      g.depth.push_back(z);
+      depths.push_back(std::isfinite(z) ? json(z) : json(nullptr));
+    }
+    grids.push_back(g);
+    job["warps"].push_back({{"from", pose_json(p.from)},
+                            {"to", pose_json(p.to)},
+                            {"planeDepth", p.depth},
+                            {"width", p.width},
+                            {"height", p.height},
+                            {"grid", {{"cols", g.cols}, {"rows", g.rows}, {"cell", g.cell}, {"depth", depths}}}});
+  }
+  json page;
+  const std::string why = run_page(job, page);
+  ASSERT_EQ(why, "");
+  double worst_px = 0.0, worst_rel = 0.0;
+  for (std::size_t c = 0; c < pairs.size(); ++c) {
+    const auto& p = pairs[c];
+    const std::vector<WarpVertex> ours = warp_vertices(p.from, p.to, grids[c], p.depth, p.width, p.height);
+    const json& theirs = page.at("warps").at(c);
+    ASSERT_EQ(theirs.at("sx").size(), ours.size()) << p.name;
+    std::vector<std::uint32_t> triangles;
+    for (std::size_t i = 0; i < ours.size(); ++i) {
+      const WarpVertex& v = ours[i];
+      worst_px = std::max(
+          {worst_px, std::abs(v.sx - theirs["sx"][i].get<double>()), std::abs(v.sy - theirs["sy"][i].get<double>())});
+      worst_rel = std::max({worst_rel, rel_diff(v.clip_w, theirs["clipW"][i].get<double>()),
+                            rel_diff(v.inv_z, theirs["invZ"][i].get<double>())});
+      EXPECT_EQ(v.u, theirs["u"][i].get<double>()) << p.name;
+      EXPECT_EQ(v.v, theirs["v"][i].get<double>()) << p.name;
+    }
+    // The triangles the page draws: two a cell, those with every vertex in front.
+    const int cols = grids[c].cols;
+    for (int l = 0; l + 1 < grids[c].rows; ++l)
+      for (int k = 0; k + 1 < cols; ++k) {
+        const auto a = static_cast<std::uint32_t>(l * cols + k), b = a + 1, cc = a + static_cast<std::uint32_t>(cols),
+                   d = cc + 1;
+        const auto front = [&](std::uint32_t i) { return ours[i].clip_w > 1e-9; };
+        if (front(a) && front(b) && front(d)) triangles.insert(triangles.end(), {a, b, d});
+        if (front(a) && front(d) && front(cc)) triangles.insert(triangles.end(), {a, d, cc});
+      }
+    EXPECT_EQ(theirs.at("triangles").get<std::vector<std::uint32_t>>(), triangles) << p.name;
+  }
+  std::printf("[ page    ] depth warp vertices: max difference from node %.3g px, %.3g relative (clip w, 1/z)\n",
+              worst_px, worst_rel);
+  EXPECT_LT(worst_px, 1e-6);
+  EXPECT_LT(worst_rel, 1e-9);
 }
 
 TEST(PageReprojection, PagePoseOfACameraAndTheBackdropSize) {

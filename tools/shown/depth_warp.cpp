@@ -13,13 +13,7 @@ namespace catgs::shown {
 
 namespace {
 
-// A mesh vertex as the new camera sees it.
-struct Vertex {
-  double sx = 0, sy = 0;  // image point in the new camera, pixels
-  double clip_w = 0;      // X2h.z: > 0 in front
-  double inv_z = 0;       // 1 / z2 (0: the background)
-  double u = 0, v = 0;    // the frame's image point it carries
-};
+using Vertex = WarpVertex;
 
 double edge(double ax, double ay, double bx, double by, double px, double py) {
   return (bx - ax) * (py - ay) - (by - ay) * (px - ax);
@@ -59,17 +53,14 @@ void draw_triangle(const Vertex& a, const Vertex& b, const Vertex& c, const Imag
 
 }  // namespace
 
-Image depth_warp_picture(const Image& frame, const PagePose& from, const PagePose& to, const DepthGrid& grid,
-                         double plane_depth) {
-  Image out = shown_picture(frame, from, to, plane_depth);  // checks the frame; the backdrop
-  if (grid.cols == 0 || same_pose(from, to)) return out;
-  const int w = frame.width, h = frame.height;
+std::vector<WarpVertex> warp_vertices(const PagePose& from, const PagePose& to, const DepthGrid& grid,
+                                      double plane_depth, int w, int h) {
   if (grid.cell < 1 || grid.cols != fm::depth_grid_cols(w, grid.cell) ||
       grid.rows != fm::depth_grid_rows(h, grid.cell) ||
       grid.depth.size() != static_cast<std::size_t>(grid.cols) * grid.rows)
-    throw std::invalid_argument("depth_warp_picture: a " + std::to_string(grid.cols) + " x " +
-                                std::to_string(grid.rows) + " grid of cell " + std::to_string(grid.cell) +
-                                " does not fit a " + std::to_string(w) + " x " + std::to_string(h) + " frame");
+    throw std::invalid_argument("depth warp: a " + std::to_string(grid.cols) + " x " + std::to_string(grid.rows) +
+                                " grid of cell " + std::to_string(grid.cell) + " does not fit a " + std::to_string(w) +
+                                " x " + std::to_string(h) + " frame");
   const Intrinsics k1 = intrinsics_for(from.fov_deg, w, h), k2 = intrinsics_for(to.fov_deg, w, h);
   // R = W2 W1^T, t = W2 (p1 - p2) (reproject.js reprojection's), W the world-to-camera rotations.
   const glm::dmat3 c2w1 = glm::mat3_cast(from.orientation), c2w2 = glm::mat3_cast(to.orientation);
@@ -93,6 +84,15 @@ Image depth_warp_picture(const Image& frame, const PagePose& from, const PagePos
         v.inv_z = inv / X.z;
       }
     }
+  return verts;
+}
+
+Image depth_warp_picture(const Image& frame, const PagePose& from, const PagePose& to, const DepthGrid& grid,
+                         double plane_depth) {
+  Image out = shown_picture(frame, from, to, plane_depth);  // checks the frame; the backdrop
+  if (grid.cols == 0 || same_pose(from, to)) return out;
+  const int w = frame.width, h = frame.height;
+  const std::vector<Vertex> verts = warp_vertices(from, to, grid, plane_depth, w, h);
   std::vector<double> nearest(static_cast<std::size_t>(w) * h, -std::numeric_limits<double>::infinity());
   for (int l = 0; l + 1 < grid.rows; ++l)
     for (int k = 0; k + 1 < grid.cols; ++k) {

@@ -22,15 +22,33 @@
 // triangle covers (past the frame's moved edge) show what the page shows there today:
 // shown_picture() with the plane at `plane_depth`.
 //
-// This is the rule a WebGL mesh on the page would draw (a grid of vertices, a texture with linear
-// filtering and clamp to edge, the depth test); the page does not draw it yet (RESULTS.md, "What
-// the visitor's screen shows": the measure of what it would give).
+// The page draws the same mesh with WebGL2 (web_client/viewer/depth_warp.js, warp_gl.js: the frame
+// as a texture with linear filtering and clamp to edge, clip w, the depth test); warp_vertices is
+// tested equal to its warpVertices under node. The rasterisation is modelled as a GPU does it
+// (pixel centres, bilinear samples), close, not byte-exact, as shown_picture's browser.
 #pragma once
+
+#include <vector>
 
 #include "renderer/renderer.h"
 #include "shown/page_reprojection.h"
 
 namespace catgs::shown {
+
+// A mesh vertex as the new camera sees it (the page's depth_warp.js warpVertices: sx, sy, clipW,
+// invZ, u, v).
+struct WarpVertex {
+  double sx = 0, sy = 0;  // image point in the new camera, pixels (0 where behind)
+  double clip_w = 0;      // X2h.z: > 0 in front
+  double inv_z = 0;       // 1 / z2, world units^-1 (0 where behind)
+  double u = 0, v = 0;    // the frame's image point it carries
+};
+
+// The mesh's vertices, cols x rows row-major, for a width x height frame of `from` and its grid as
+// `to` sees them; vertices with no surface at `plane_depth`. Throws std::invalid_argument for a
+// grid whose shape is not depth_grid_cols/rows of the frame's size at its cell.
+std::vector<WarpVertex> warp_vertices(const PagePose& from, const PagePose& to, const DepthGrid& grid,
+                                      double plane_depth, int width, int height);
 
 // `frame` (RGBA8) rendered at `from`, with its depth grid `grid` (renderer.h DepthGrid: depths in
 // world units, +inf for the background; its cell in the frame's pixels), as seen from `to`, at

@@ -14,6 +14,7 @@ import { Connection, ERROR_INVALID_ARGUMENT, ERROR_SERVER_FULL, ERROR_SHUTTING_D
 import { Controls } from './controls.js';
 import { CODEC_H264, decodableCodecs, hasWebCodecs, StreamDecoder } from './decoder.js';
 import { DepthProbes } from './depth_probes.js';
+import { depthAt, inflateDepthGrid } from './depth_warp.js';
 import { ViewDisplay } from './display.js';
 import { PageBusy } from './page_busy.js';
 import { PathPlayer } from './path_player.js';
@@ -111,6 +112,8 @@ export class CatgsViewer extends EventTarget {
     this.framesDecoded = 0;
     this.sessionFrames = 0;
     this.lastFrame = null;
+    this.depthGrid = null; // the shown frame's depth grid (depth_warp.js), once inflated
+    this.depthGridSequence = -1;
     this.lastPoseSent = null;
     this.reconnectAt = 0;
     this.status = 'starting';
@@ -548,6 +551,7 @@ export class CatgsViewer extends EventTarget {
         // the pose it answers; the re-projection starts from it.
         this.shownPose = meta.shownPose || this.sentPoses.get(meta.poseSequence) || null;
         for (const k of this.sentPoses.keys()) if (k < meta.poseSequence) this.sentPoses.delete(k);
+        this._takeDepthGrid(meta);
       }
       this._updateReprojection();
       const now = performance.now();
@@ -568,6 +572,33 @@ export class CatgsViewer extends EventTarget {
     } finally {
       frame.close(); // VideoFrames hold decoder memory until closed
     }
+  }
+
+  // The frame's depth grid, inflated (depth_warp.js); once it is there (a few ms), the frame is
+  // warped by it, if it is still the one shown.
+  _takeDepthGrid(meta) {
+    this.depthGrid = null;
+    this.depthGridSequence = meta.sequence;
+    if (!meta.depthGrid) return;
+    inflateDepthGrid(meta.depthGrid).then(
+      (grid) => {
+        if (this.depthGridSequence !== meta.sequence || !this.sessionOpen) return;
+        this.depthGrid = grid;
+        this.display.setDepthGrid(grid);
+        this._updateReprojection();
+      },
+      (e) => console.warn('catgs: a frame\'s depth grid is malformed:', e),
+    );
+  }
+
+  // The scene's depth (world units along the shown frame's forward axis) under CSS pixel (x, y) of
+  // the canvas as the frame was drawn (not re-projected), from the frame's depth grid: no round
+  // trip. null where the frame has no grid (yet) or no surface there.
+  frameDepthAt(x, y) {
+    const g = this.depthGrid;
+    const c = this.canvas;
+    if (!g || !c.clientWidth || !c.clientHeight) return null;
+    return depthAt(g, c.width, c.height, (x * c.width) / c.clientWidth, (y * c.height) / c.clientHeight);
   }
 
   _decoderError(e) {

@@ -173,6 +173,7 @@ export class StreamDecoder {
         poseSequence: f.pose_sequence,
         clientTimeMs: f.client_time_ms,
         shownPose: shownPoseOf(f.shown_pose),
+        depthGrid: f.depth_grid && f.depth_grid.cols ? f.depth_grid : null, // Frame.depth_grid, deflated
         width: f.width,
         height: f.height,
         keyFrame: isKey,

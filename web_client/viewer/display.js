@@ -1,9 +1,14 @@
 // The view's canvas: each decoded frame drawn pixel for pixel (CSS stretches the canvas to its
 // box), and latency hiding (reproject.js): until the frame of the newest pose arrives, the shown
 // frame re-projected to that pose as a CSS transform of the canvas, with the frame's nearest edge
-// continued on a small canvas behind it where it no longer covers the box (never black).
+// continued on a small canvas behind it where it no longer covers the box (never black). Where the
+// frame carries a depth grid (Frame.depth_grid) and WebGL2 is there, a canvas over the view draws
+// the frame warped by its depth as a mesh (depth_warp.js, warp_gl.js): parallax for a step
+// sideways; the plane's picture shows only where the mesh does not reach.
 
+import { warpTriangles, warpVertices } from './depth_warp.js';
 import { applyHomography, cssTransform, edgeFill, reprojection } from './reproject.js';
+import { WarpGl } from './warp_gl.js';
 
 const samePose = (a, b) =>
   a.fovDeg === b.fovDeg && a.position.every((v, i) => v === b.position[i]) && a.orientation.every((v, i) => v === b.orientation[i]);
@@ -14,6 +19,9 @@ export class ViewDisplay {
     this.canvas = canvas;
     this.ctx = canvas.getContext('2d', { alpha: false });
     this.backdrop = { el: backdrop, ctx: null, out: null, small: null, smallCtx: null, src: null, stale: true };
+    // The depth warp: its overlay canvas and drawer (made with the first grid), the shown frame's
+    // grid (null: none yet, or the frame has none), and whether WebGL2 failed (the plane then).
+    this.warp = { el: null, gl: null, grid: null, failed: false };
   }
 
   // Draws a VideoFrame (the caller closes it); the backing store follows the stream's size.
@@ -27,7 +35,36 @@ export class ViewDisplay {
     }
     this.ctx.drawImage(frame, 0, 0, w, h);
     this.backdrop.stale = true; // a new frame to continue around the re-projected one
+    this.warp.grid = null; // this frame's grid comes after it (setDepthGrid)
+    if (this.warp.el) this.warp.el.hidden = true;
     return { width: w, height: h };
+  }
+
+  // The shown frame's depth grid (depth_warp.js depthGridOf), or null: the next reproject() warps
+  // the frame by it. Returns whether the warp can draw (WebGL2 there).
+  setDepthGrid(grid) {
+    const wp = this.warp;
+    wp.grid = grid;
+    if (!grid || wp.failed) return false;
+    try {
+      if (!wp.gl) {
+        wp.el = document.createElement('canvas');
+        wp.el.style.cssText = 'position:absolute;inset:0;width:100%;height:100%;pointer-events:none';
+        wp.el.setAttribute('aria-hidden', 'true');
+        wp.el.hidden = true;
+        this.canvas.after(wp.el);
+        wp.gl = new WarpGl(wp.el);
+      }
+      wp.gl.setFrame(this.canvas, this.canvas.width, this.canvas.height);
+      return true;
+    } catch (e) {
+      console.warn('catgs: no depth warp (the plane re-projection stays):', e);
+      wp.failed = true;
+      if (wp.el) wp.el.remove();
+      wp.el = null;
+      wp.gl = null;
+      return false;
+    }
   }
 
   // The shown frame as it was drawn (a new session's first frame replaces it).
@@ -45,8 +82,10 @@ export class ViewDisplay {
     const h = c.height;
     let transform = '';
     let shown = null; // the homography shown
-    if (from && to && w > 0 && h > 0 && !samePose(from, to)) {
-      const H = reprojection(from, to, depthOf(), w, h);
+    const moved = from && to && w > 0 && h > 0 && !samePose(from, to);
+    const depth = moved ? depthOf() : 0;
+    if (moved) {
+      const H = reprojection(from, to, depth, w, h);
       const corners = [[0, 0], [w, 0], [0, h], [w, h]].map(([x, y]) => applyHomography(H, x, y));
       if (corners.every((p) => p !== null)) {
         transform = cssTransform(H, w, h, c.clientWidth, c.clientHeight);
@@ -55,6 +94,23 @@ export class ViewDisplay {
     }
     if (c.style.transform !== transform) c.style.transform = transform;
     this._fillBackdrop(shown);
+    this._drawWarp(moved ? from : null, to, depth);
+  }
+
+  // The frame warped by its depth grid over the view (depth_warp.js), vertices without a surface
+  // at the plane's `depth`; hidden when the poses are the same or there is no grid.
+  _drawWarp(from, to, depth) {
+    const wp = this.warp;
+    if (!wp.el) return;
+    if (!from || !wp.grid || !wp.gl) {
+      wp.el.hidden = true;
+      return;
+    }
+    const w = this.canvas.width;
+    const h = this.canvas.height;
+    const verts = warpVertices(from, to, wp.grid, depth, w, h);
+    wp.gl.draw(verts, warpTriangles(wp.grid, verts));
+    wp.el.hidden = false;
   }
 
   // Where the re-projected frame no longer covers the box (a turn or pan uncovers an edge, a
