@@ -278,6 +278,25 @@ async function run() {
   log(`PSNR streamed vs a view shifted by 2% of the scene: ${psnrShifted.toFixed(2)} dB`);
   check(psnrShifted < psnr - 3, 'the streamed frame matches its own pose better than a shifted one (by > 3 dB)');
 
+  // The frame's depth grid (issue 91: exact frames carry one, --depth-grid 32): the depth under a
+  // vertex read on the page without a round trip agrees with the server's depth probe (its own
+  // walk over every Gaussian) within the grid's one-byte inverse-depth code; the WebGL mesh canvas
+  // that warps the frame by it is over the view.
+  const depthCheck = await page.evaluate(async () => {
+    const c = document.getElementById('view');
+    // The vertices around the centre (multiples of 32): the first the probe finds a surface under.
+    for (const [vx, vy] of [[224, 192], [256, 192], [224, 160], [256, 160], [224, 224], [256, 224], [192, 192], [288, 192]]) {
+      const [x, y] = [vx * (c.clientWidth / c.width), vy * (c.clientHeight / c.height)];
+      const probe = await window.catgs.probe(x, y);
+      if (probe.hit) return { at: [vx, vy], grid: window.catgs.frameDepthAt(x, y), probe: probe.depth, mesh: !!document.querySelector('#view + canvas') };
+    }
+    return { grid: null, probe: null, mesh: !!document.querySelector('#view + canvas') };
+  });
+  log(`depth under a vertex: ${JSON.stringify(depthCheck)}`);
+  check(depthCheck.probe !== null && depthCheck.grid !== null && Math.abs(depthCheck.grid - depthCheck.probe) <= 0.1 * depthCheck.probe,
+    `the frame's depth grid reads the probe's depth within 10% (${JSON.stringify(depthCheck)})`);
+  check(depthCheck.mesh, 'the depth warp\'s WebGL canvas is over the view');
+
   // Overlay: sane numbers and the session's facts.
   log(`overlay:\n${shot.overlay.replace(/^/gm, '    ')}`);
   const fpsMatch = /FPS (\d+(\.\d)?)/.exec(shot.overlay);

@@ -293,7 +293,9 @@ test("depth grid: zlib-deflated codes (made by node's zlib) read as the protocol
   const flat = { cols: 3, rows: 2, cell: 16, depth: Float64Array.from([2, 2, 4, 2, 2, 4]) };
   close([warp.depthAt(flat, 20, 10, 8, 5)], [2], 1e-12);
   close([warp.depthAt(flat, 20, 10, 18, 5)], [1 / (0.5 / 2 + 0.5 / 4)], 1e-12); // halfway across the narrow last cell
-  assert.equal(warp.depthAt({ ...flat, depth: Float64Array.from([2, Infinity, 4, 2, 2, 4]) }, 20, 10, 8, 5), null);
+  const holed = { ...flat, depth: Float64Array.from([2, Infinity, 4, 2, 2, 4]) };
+  assert.equal(warp.depthAt(holed, 20, 10, 8, 5), null);
+  assert.equal(warp.depthAt(holed, 20, 10, 0, 0), 2); // on a vertex: its own depth alone
 });
 
 test('re-projection fill: where the moved frame does not reach, its nearest edge (clamp-to-edge), never black', () => {

@@ -14,7 +14,7 @@ import { Connection, ERROR_INVALID_ARGUMENT, ERROR_SERVER_FULL, ERROR_SHUTTING_D
 import { Controls } from './controls.js';
 import { CODEC_H264, decodableCodecs, hasWebCodecs, StreamDecoder } from './decoder.js';
 import { DepthProbes } from './depth_probes.js';
-import { depthAt, inflateDepthGrid } from './depth_warp.js';
+import { depthAt } from './depth_warp.js';
 import { ViewDisplay } from './display.js';
 import { PageBusy } from './page_busy.js';
 import { PathPlayer } from './path_player.js';
@@ -574,13 +574,17 @@ export class CatgsViewer extends EventTarget {
     }
   }
 
-  // The frame's depth grid, inflated (depth_warp.js); once it is there (a few ms), the frame is
-  // warped by it, if it is still the one shown.
+  // The frame's depth grid (decoder.js inflates it while the frame decodes): at once where it is
+  // there, else once it is (a few ms), if the frame is still the one shown.
   _takeDepthGrid(meta) {
-    this.depthGrid = null;
+    this.depthGrid = meta.depthGridReady;
     this.depthGridSequence = meta.sequence;
+    if (this.depthGrid) {
+      this.display.setDepthGrid(this.depthGrid);
+      return;
+    }
     if (!meta.depthGrid) return;
-    inflateDepthGrid(meta.depthGrid).then(
+    meta.depthGrid.then(
       (grid) => {
         if (this.depthGridSequence !== meta.sequence || !this.sessionOpen) return;
         this.depthGrid = grid;

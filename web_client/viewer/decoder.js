@@ -4,6 +4,7 @@
 // key frames. Reconfigured when a key frame brings another codec (Frame.codec: the server moved the
 // session between H.264 and AV1), codec string or frame size (e.g. after a Resize).
 
+import { inflateDepthGrid } from './depth_warp.js';
 import { inspectAccessUnit } from './h264.js';
 import { inspectTemporalUnit } from './av1.js';
 
@@ -168,16 +169,24 @@ export class StreamDecoder {
         }
       }
       const timestamp = this.nextTimestamp++;
-      this.meta.set(timestamp, {
+      const meta = {
         sequence: f.sequence,
         poseSequence: f.pose_sequence,
         clientTimeMs: f.client_time_ms,
         shownPose: shownPoseOf(f.shown_pose),
-        depthGrid: f.depth_grid && f.depth_grid.cols ? f.depth_grid : null, // Frame.depth_grid, deflated
+        // Frame.depth_grid, inflated while the frame decodes (depth_warp.js): `depthGrid` the
+        // promise, `depthGridReady` the grid once it is there (usually before the picture).
+        depthGrid: null,
+        depthGridReady: null,
         width: f.width,
         height: f.height,
         keyFrame: isKey,
-      });
+      };
+      if (f.depth_grid && f.depth_grid.cols) {
+        meta.depthGrid = inflateDepthGrid(f.depth_grid).then((g) => (meta.depthGridReady = g));
+        meta.depthGrid.catch(() => {}); // reported where it is used (catgs_viewer.js)
+      }
+      this.meta.set(timestamp, meta);
       this.decoder.decode(new EncodedVideoChunk({ type: isKey ? 'key' : 'delta', timestamp, data: payload }));
       this.waitingForKey = false;
     } catch (e) {

@@ -120,7 +120,8 @@ export function warpTriangles(grid, verts) {
 }
 
 // The scene's depth (world units along the frame's forward axis) under image point (x, y) of the
-// frame, bilinear between the four vertices around it; null where one of them has no surface.
+// frame, bilinear between the four vertices around it; null where one of them that counts has no
+// surface.
 export function depthAt(grid, width, height, x, y) {
   const fx = Math.min(Math.max(x, 0), width) / grid.cell;
   const fy = Math.min(Math.max(y, 0), height) / grid.cell;
@@ -136,8 +137,14 @@ export function depthAt(grid, width, height, x, y) {
   const b = (Math.min(Math.max(y, y0), y1) - y0) / Math.max(y1 - y0, 1e-9);
   const at = (dk, dl) => grid.depth[(l + dl) * grid.cols + (k + dk)];
   const z = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
-  if (!z.every(Number.isFinite)) return null;
-  // Bilinear in inverse depth (what is linear across a planar patch's image), then back.
-  const w = (1 - a) * (1 - b) / z[0] + a * (1 - b) / z[1] + (1 - a) * b / z[2] + a * b / z[3];
+  const weight = [(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b];
+  // Bilinear in inverse depth (what is linear across a planar patch's image), then back; a vertex
+  // with no surface that carries weight leaves the point without a depth.
+  let w = 0;
+  for (let i = 0; i < 4; i++) {
+    if (weight[i] === 0) continue;
+    if (!Number.isFinite(z[i])) return null;
+    w += weight[i] / z[i];
+  }
   return 1 / w;
 }
