@@ -41,14 +41,16 @@
 
 namespace catgs::server {
 
+// Defaults: the server's (server_options.h; ServerDefaults.ASessionWithoutOptionsRunsTheServersDefaults
+// holds them equal), so a test or fuzz target that builds settings runs what a server runs.
 struct LodSettings {
-  float bound_px = 2.0f;           // --lod-error: the bound at reference_lines; 0 = full detail
+  float bound_px = 4.0f;           // --lod-error: the bound at reference_lines; 0 = full detail
   int reference_lines = 720;       // the shorter side at which the bound is bound_px
   std::uint64_t splat_budget = 0;  // --splat-budget N: Gaussians a frame's cut (0: none)
   bool auto_budget = true;         // --splat-budget auto (the default): from the GPU's throughput
   // --lod-max-error: the coarsest bound the budget may raise a frame to, px at reference_lines
   // (0: the ladder's top, LodBoundChooser::kSteps above the bound).
-  float max_bound_px = 2.0f * 1.41421356f;
+  float max_bound_px = 4.0f;
   // --splat-budget-share: the share of the GPU's measured throughput the auto budget hands out.
   double budget_share = 0.4;
 };

@@ -326,3 +326,33 @@ TEST(LodBound, SplatBudgetOption) {
 }
 
 }  // namespace
+
+// Issue 93: settings built without options (as tests and the fuzz target build them) are what a
+// server started without options runs, field by field.
+TEST(ServerDefaults, ASessionWithoutOptionsRunsTheServersDefaults) {
+  const SessionSettings plain;
+  const SessionSettings server = session_settings(ServerOptions{});
+  EXPECT_EQ(plain.max_sessions, server.max_sessions);
+  EXPECT_EQ(plain.full_retry_ms, server.full_retry_ms);
+  EXPECT_EQ(plain.hello_timeout_ms, server.hello_timeout_ms);
+  EXPECT_EQ(plain.silent_timeout_ms, server.silent_timeout_ms);
+  EXPECT_EQ(plain.scene_load_timeout_ms, server.scene_load_timeout_ms);
+  EXPECT_EQ(plain.slow_client_timeout_ms, server.slow_client_timeout_ms);
+  EXPECT_EQ(plain.max_viewport_width, server.max_viewport_width);
+  EXPECT_EQ(plain.max_viewport_height, server.max_viewport_height);
+  const FrameSettings &a = plain.frame, &b = server.frame;
+  EXPECT_EQ(a.encoder, b.encoder);
+  EXPECT_EQ(a.adaptive_quality, b.adaptive_quality);
+  EXPECT_EQ(a.pose_prediction, b.pose_prediction);
+  EXPECT_EQ(a.link_control, b.link_control);
+  EXPECT_EQ(a.still_refine, b.still_refine);
+  EXPECT_EQ(a.frame_deadline_slots, b.frame_deadline_slots);
+  EXPECT_EQ(a.max_frames_in_flight, b.max_frames_in_flight);
+  EXPECT_EQ(a.socket_send_buffer, b.socket_send_buffer);
+  EXPECT_EQ(a.lod.bound_px, b.lod.bound_px);
+  EXPECT_EQ(a.lod.splat_budget, b.lod.splat_budget);
+  EXPECT_EQ(a.lod.auto_budget, b.lod.auto_budget);
+  EXPECT_EQ(a.lod.max_bound_px, b.lod.max_bound_px);
+  EXPECT_EQ(a.lod.budget_share, b.lod.budget_share);
+  EXPECT_EQ(a.encoder_policy.crf, b.encoder_policy.crf);
+}
