@@ -380,6 +380,51 @@ shown() {
   tar -C "$R" -cf "$OUT/shown-$name-pictures.tar" pictures  # one file: a call brings back 8 at most
 }
 
+# threadcpu NAME SCENE N [SERVER ARGS]: where the server's cores go with N sessions at 720p on
+# SCENE's three real paths (issue 92): CPU seconds per thread kind (/proc/PID/task/*: catgs-lws,
+# catgs-laneK, catgs-poolK with the x264 threads they start, the rest) over 8 s in the middle of
+# a 12 s run, beside the run's own summary -> $OUT/threadcpu-NAME.txt.
+threadcpu() {
+  local name=$1 scene=$2 n=$3 W=/tmp/catgs_sweep
+  shift 3
+  export LD_LIBRARY_PATH=$SRV/lib
+  start_server "$(scene_file "$scene")" "$W/server_threadcpu-$name.log" --cache-dir "$W/cache" "$@" || return 1
+  local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
+  "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions "$n" --size 1280x720 --trace "$traces" --rate 60 --seconds 12 \
+    --progress 0 > "$W/threadcpu-$name-loadgen.txt" 2>&1 &
+  local lg=$!
+  sleep 3
+  python3 - "$SERVER_PID" 8 <<'PY' | tee "$OUT/threadcpu-$name.txt"
+import glob, os, re, sys, time
+pid, span = sys.argv[1], float(sys.argv[2])
+tick = os.sysconf('SC_CLK_TCK')
+def sample():
+    out = {}
+    for d in glob.glob('/proc/%s/task/*' % pid):
+        try:
+            comm = open(d + '/comm').read().strip()
+            f = open(d + '/stat').read().rsplit(')', 1)[1].split()
+            out[d] = (comm, (int(f[11]) + int(f[12])) / tick)
+        except OSError:
+            pass
+    return out
+a = sample(); time.sleep(span); b = sample()
+kinds = {}
+for d, (comm, t) in b.items():
+    kind = re.sub(r'\d+$', '', comm)
+    k = kinds.setdefault(kind, [0.0, 0])
+    k[0] += t - a.get(d, (comm, 0.0))[1]; k[1] += 1
+total = sum(v[0] for v in kinds.values())
+print('%-16s %8s %8s %7s' % ('thread kind', 'threads', 'CPU s', 'cores'))
+for kind, (t, n) in sorted(kinds.items(), key=lambda kv: -kv[1][0]):
+    print('%-16s %8d %8.2f %7.2f' % (kind, n, t, t / span))
+print('%-16s %8d %8.2f %7.2f' % ('all', sum(v[1] for v in kinds.values()), total, total / span))
+PY
+  wait "$lg"
+  { echo "== catgs-loadgen, $n sessions"; tail -6 "$W/threadcpu-$name-loadgen.txt"; } | tee -a "$OUT/threadcpu-$name.txt"
+  stop_server
+}
+
 # depth_share DIR: the depth grids' bytes (Frame.depth_grid's codes) against the access units' in
 # a --record folder's sessions.
 depth_share() {
@@ -651,5 +696,6 @@ case "${1:-}" in
   readrate) shift; readrate "$@" ;;
   shown) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; shown "$@" ;;
   clientcpu) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; clientcpu "$@" ;;
+  threadcpu) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; threadcpu "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
 esac
