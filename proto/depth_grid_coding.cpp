@@ -24,7 +24,7 @@ void pack_depth_grid(const DepthGrid& grid, pb::DepthGrid* out) {
   out->set_rows(static_cast<std::uint32_t>(grid.rows));
   out->set_cell_px(static_cast<std::uint32_t>(grid.cell));
   out->set_inverse_depth_max(std::isfinite(w_max) ? w_max : 0.0f);
-  // zlib (RFC 1950) at its best level: a 720p grid of 984 codes deflates to about half.
+  // zlib (RFC 1950) at its best level: the grid is small, the level's time with it.
   uLongf size = compressBound(static_cast<uLong>(codes.size()));
   std::string deflated(size, '\0');
   if (compress2(reinterpret_cast<Bytef*>(deflated.data()), &size, reinterpret_cast<const Bytef*>(codes.data()),

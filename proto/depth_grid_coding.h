@@ -9,8 +9,8 @@
 // image by f b w pixels (f the focal length): a linear code spends its precision evenly on
 // parallax, and the background's w = 0 is a code of its own. A vertex nearer than 1/255 of the
 // range's top therefore reads as that (a far vertex of a grid whose nearest lies close). The codes
-// travel deflated (zlib, RFC 1950): 4.4-5.2% of a 720p stream's bytes, against 8.6-9.8% raw
-// (RESULTS.md, "What the visitor's screen shows").
+// travel deflated (zlib, RFC 1950; their share of a stream's bytes, deflated and raw: RESULTS.md,
+// "What the visitor's screen shows").
 #pragma once
 
 #include <string>

@@ -1,6 +1,6 @@
 // Stage 5b: the frame's depth grid (forward_model/depth_grid.h; mirrors cuda/depth_grid.cu): each
 // vertex's pixel walks its tile's sorted range front to back until its transmittance falls to
-// 0.5. A task is a row of vertices (a few dozen walks, each usually a few dozen entries long).
+// 0.5. A task is a row of vertices.
 #include <algorithm>
 #include <cmath>
 

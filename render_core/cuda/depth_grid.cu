@@ -1,12 +1,12 @@
 // Stage 5b: the frame's depth grid (forward_model/depth_grid.h; mirrors cpu/depth_grid.cpp).
 //
-// One thread a vertex: it walks its pixel's tile range front to back, gathering each entry's
-// splat and depth, until the transmittance falls to 0.5. A 720p frame at a 32-pixel cell is 41 x
-// 24 = 984 threads, each walk usually a few dozen entries (the median comes long before the
-// rasterizer's early termination), so the stage is a few microseconds of latency, not of
-// bandwidth; the rasterizer's shared-memory staging would buy nothing at one pixel a tile.
-// fm::MedianDepthWalk is the CPU's own code (expf as the CPU reference, not the rasterizer's
-// base-2 exponential), so the two cores differ only where the list order does.
+// One thread a vertex: it walks its pixel's tile range front to back, one dependent gather of
+// the entry's splat and depth at a time, until the transmittance falls to 0.5. A pixel that never
+// gets there (the sky) walks its tile's whole range, so the frame waits for the longest walk:
+// what the grid costs a frame is in RESULTS.md ("What the visitor's screen shows"). The next step
+// is a warp a vertex (32 entries a round, a prefix product of 1 - alpha over the lanes), not yet
+// run on a GPU. fm::MedianDepthWalk is the CPU's own code (expf as the CPU reference, not the
+// rasterizer's base-2 exponential), so the two cores differ only where the list order does.
 #include "base/cuda_check.h"
 #include "depth_grid.h"
 #include "forward_model/depth_grid.h"

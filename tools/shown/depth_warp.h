@@ -16,8 +16,7 @@
 // across the gap (a rubber sheet), so the hole shows the frame's nearest pixels, never black.
 // A vertex with no surface (the background) takes the page's plane (`plane_depth`), not infinity:
 // an object in empty space (the biker) is drawn between such vertices at a 32-pixel grid, and at
-// infinity its pixels would move as the background does (the biker's orbit at 192x108, a 150 ms
-// round trip: 22.1 dB with the background at infinity, 28.4 at the plane; the plane alone 28.7).
+// infinity its pixels would move as the background does (docs/history/shown_picture.md).
 // A triangle with a vertex at or behind the new camera (X2h.z <= 1e-9) is not drawn. Pixels no
 // triangle covers (past the frame's moved edge) show what the page shows there today:
 // shown_picture() with the plane at `plane_depth`.
