@@ -122,12 +122,17 @@ export class Overlay {
       lines.push(`frame ${this.frameSize || '-'}  ${this.codec || 'H.264'}`);
       const pipeline = this.info.pipeline ? ` (${this.info.pipeline})` : '';
       lines.push(`renderer ${this.info.renderer}${pipeline}  encoder ${this.info.encoder}`);
-      lines.push(`scene ${this.info.scene}${this.rttMs === null ? '' : `  rtt ${Math.round(this.rttMs)} ms`}`);
+      // The page's own round trip (Ping -> Pong, through the server's queue), apart from the
+      // TCP connection's below.
+      lines.push(`scene ${this.info.scene}${this.rttMs === null ? '' : `  ping ${Math.round(this.rttMs)} ms`}`);
       const s = this.serverStats;
       if (s && this.serverIdle) {
         lines.push('server: idle (no frame in the last second)');
       } else if (s) {
         lines.push(`server: render ${num(s.render_ms_mean)} ms  encode ${num(s.encode_ms_mean)} ms`);
+        // The encoder's picture (the coded frame against the rendered one) and the preset it
+        // came from: a host that fills steps the preset down, and this line shows it.
+        if (s.encode_psnr_db_mean) lines.push(`  picture ${num(s.encode_psnr_db_mean)} dB (${s.encoder})`);
         // Level of detail: the cut's bound and the Gaussians a frame drew (a scene served with LOD).
         if (s.lod_error_px_mean) {
           lines.push(`  LOD ${num(s.lod_error_px_mean)} px  ${((s.splats_mean || 0) / 1e6).toFixed(2)} M splats`);
@@ -138,7 +143,7 @@ export class Overlay {
         const cap = s.bitrate_cap_kbps ? `cap ${s.bitrate_cap_kbps} kbit/s` : 'not limited';
         const level = s.quality_level ? `  size level ${s.quality_level}` : '';
         const link = s.link_kbps ? `link ${linkRate(s.link_kbps)}  ` : '';
-        lines.push(`  ${link}rtt ${num(s.rtt_ms || 0)} ms  ${cap}${level}`);
+        lines.push(`  ${link}TCP rtt ${num(s.rtt_ms || 0)} ms  ${cap}${level}`);
       }
     }
     this.statsEl.textContent = lines.join('\n');

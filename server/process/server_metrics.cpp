@@ -95,6 +95,9 @@ std::string ServerMetrics::prometheus_text() const {
       deadline_skips_total.load());
   put("catgs_encoder_rebuilds_total", "counter", "Encoders rebuilt for a new thread share as sessions joined or left.",
       encoder_rebuilds_total.load());
+  put("catgs_encoder_steps_down_total", "counter",
+      "Encoders rebuilt a step down the x264 preset ladder (sessions joined): a cheaper, worse picture.",
+      encoder_steps_down_total.load());
   put("catgs_content_rate_probes_total", "counter",
       "Content-aware rate probes ended (--bits-per-pixel auto): a scene's rate cap measured at a size.",
       content_rate_probes_total.load());
@@ -217,6 +220,9 @@ std::string ServerMetrics::prometheus_text() const {
   convert_seconds.write(o, "catgs_convert_seconds");
   head("catgs_encode_seconds", "histogram", "Encoder time per frame.");
   encode_seconds.write(o, "catgs_encode_seconds");
+  head("catgs_encode_psnr_db", "histogram",
+       "The encoder's picture each frame: the coded frame against the frame it was given, PSNR dB (x264).");
+  encode_psnr_db.write(o, "catgs_encode_psnr_db");
   head("catgs_send_seconds", "histogram", "Frame handed to the transport -> written to the socket.");
   send_seconds.write(o, "catgs_send_seconds");
   head("catgs_frame_lod_bound_px", "histogram",

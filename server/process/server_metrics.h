@@ -8,6 +8,8 @@
 //   catgs_render_seconds{kind="key"|"sub"}            render of a key frame / cached sub-frame
 //   catgs_convert_seconds      RGB -> YUV 4:2:0 (0 when the frame arrives as YUV)
 //   catgs_encode_seconds       encoder
+//   catgs_encode_psnr_db       the encoder's picture each frame (FrameTimings.encode_psnr_db; x264)
+//   catgs_encoder_steps_down_total  encoders rebuilt a step down the preset ladder (host filling)
 //   catgs_send_seconds         frame handed to the transport -> fully written to the socket
 //   catgs_speculation_window   W of the speculation group of each rendered frame (0: none)
 //   catgs_speculation_gain     the catgs cost model's predicted and measured gain a group
@@ -100,6 +102,7 @@ struct ServerMetrics {
   std::atomic<std::uint64_t> deadline_skips_total{0};
   // Encoders rebuilt because the live sessions changed the threads they should get (an IDR each).
   std::atomic<std::uint64_t> encoder_rebuilds_total{0};
+  std::atomic<std::uint64_t> encoder_steps_down_total{0};
   // Content-aware rate probes ended (--bits-per-pixel auto: a scene and size measured).
   std::atomic<std::uint64_t> content_rate_probes_total{0};
   // Frames lost: a pose pending, or a frame rendering or encoding, when its session ended or
@@ -163,6 +166,7 @@ struct ServerMetrics {
   Histogram render_sub_seconds{Histogram::stage_seconds()};
   Histogram convert_seconds{Histogram::stage_seconds()};
   Histogram encode_seconds{Histogram::stage_seconds()};
+  Histogram encode_psnr_db{{20, 25, 28, 30, 31, 32, 33, 34, 36, 38, 40, 45}};
   Histogram send_seconds{Histogram::stage_seconds()};
   Histogram speculation_window{{0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32}};
   // The LOD bound of each frame, px (0: full detail or no LOD): the ladder's x sqrt(2) steps of 2 px.

@@ -422,6 +422,14 @@ FrameEncoding FramePipeline::ensure_encoder(const Job& job, bool& idr) {
   // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
   bool fell_back = false;
   encoder_ = make_encoder(e.av1 ? "av1" : settings_.encoder, cfg, nullptr, &fell_back);
+  const std::string was = encoder_label_;
+  encoder_label_ = encoder_->name() == "x264" ? "x264 " + cfg.x264_preset : encoder_->name();
+  if (!was.empty() && e.step < encoder_step_) {
+    // The ladder stepped down (sessions joined; encoder_policy.h): the picture falls, said here,
+    // in /metrics, and in each Stats (encoder, encode_psnr_db_mean), never silently.
+    metrics_.encoder_steps_down_total++;
+    std::cerr << "encoder: " << was << " -> " << encoder_label_ << " at " << live_sessions() << " sessions\n";
+  }
   encoder_bitrate_kbps_ = s.max_bitrate_kbps;
   encoder_rate_kbps_ = cfg.bitrate_kbps;
   encoder_vbv_ms_ = e.vbv_ms;
@@ -517,6 +525,8 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   JobResult r;
   static_cast<RenderRecord&>(r) = rendered;  // the frame's record, whole
   r.encode_ms = enc.encode_ms;
+  r.encode_psnr_db = enc.psnr_db;
+  r.encoder = encoder_label_;
   r.total_ms = ms_between(job.pose.received, Clock::now());
   r.quality_level = job.shape.quality_level;
   r.refine = job.pose.refine;
@@ -554,6 +564,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_render_ms(r.render_ms);
   t->set_convert_ms(r.convert_ms);
   t->set_encode_ms(r.encode_ms);
+  t->set_encode_psnr_db(static_cast<float>(r.encode_psnr_db));
   t->set_total_ms(r.total_ms);
   t->set_previous_send_ms(job.shape.previous_send_ms);
   t->set_render_key_frame(r.render_key_frame);

@@ -124,7 +124,9 @@ class FramePipeline {
     std::chrono::steady_clock::time_point link_read_at{};  // JobShape's: the rate it was encoded at
     int link_ceiling_kbps = 0;  // the frame's FrameEncoding::link_ceiling_kbps (what the link's controller caps)
     double encode_ms = 0;
-    double total_ms = 0;  // pose received -> frame handed off (FrameTimings.total_ms)
+    double encode_psnr_db = 0;  // EncodedFrame::psnr_db (FrameTimings.encode_psnr_db)
+    std::string encoder;        // Stats.encoder: the encoder that coded it ("x264 superfast")
+    double total_ms = 0;        // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;
     bool refine = false;       // the still view's refine frame
     bool predicted = false;    // drawn at a predicted pose (pose_prediction.h), not the client's
@@ -301,6 +303,7 @@ class FramePipeline {
   int encoder_vbv_ms_ = 0;          // and its VBV's size, ms of that rate
   bool refine_lifted_cap_ = false;  // the frame being encoded is a refine frame that lifted a VBV cap
   int encoder_threads_ = 0;         // its sliced threads (encoder_policy.h)
+  std::string encoder_label_;       // Stats.encoder for its frames: "x264 " + preset, "nvenc", "av1"
   int encoder_step_ = 0;            // its step (FrameEncoding::step): the ladder's preset, or kPresetSteps for AV1
   Clock::time_point encoder_built_{};
   std::shared_ptr<ContentRates> content_rates_;  // the scene's (open)

@@ -215,6 +215,11 @@ void SessionStream::count(const JobResult& result) {
   bytes_since_stats_ += result.payload_bytes;
   render_ms_sum_ += result.render_ms;
   encode_ms_sum_ += result.encode_ms;
+  if (result.encode_psnr_db > 0) {
+    encode_psnr_sum_ += result.encode_psnr_db;
+    encode_psnr_frames_++;
+  }
+  encoder_ = result.encoder;
   lod_error_px_sum_ += result.lod_error_px;
   splats_sum_ += static_cast<double>(result.splats);
   if (result.memory_fallback > 0) {
@@ -239,6 +244,7 @@ void SessionStream::count(const JobResult& result) {
   if (gpu_ >= 0) m.observe_gpu_render(gpu_, result.render_ms / 1000.0);
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
+  if (result.encode_psnr_db > 0) m.encode_psnr_db.observe(result.encode_psnr_db);
   m.speculation_window.observe(result.speculation_window);
   m.frame_lod_bound_px.observe(result.lod_error_px);
 }
@@ -273,6 +279,8 @@ void SessionStream::fill_stats(pb::Stats& s, double seconds) {
   const double n = frames_since_stats_ ? frames_since_stats_ : 1;
   s.set_render_ms_mean(render_ms_sum_ / n);
   s.set_encode_ms_mean(encode_ms_sum_ / n);
+  if (encode_psnr_frames_ > 0) s.set_encode_psnr_db_mean(encode_psnr_sum_ / encode_psnr_frames_);
+  s.set_encoder(encoder_);
   s.set_lod_error_px_mean(lod_error_px_sum_ / n);
   s.set_splats_mean(splats_sum_ / n);
   s.set_memory_fallback_frames(memory_fallbacks_);
@@ -290,7 +298,8 @@ void SessionStream::fill_stats(pb::Stats& s, double seconds) {
   if (frames_since_stats_ > 0) shared_.metrics.session_fps.observe(frames_since_stats_ / seconds);
   frames_since_stats_ = 0;
   bytes_since_stats_ = 0;
-  render_ms_sum_ = encode_ms_sum_ = lod_error_px_sum_ = splats_sum_ = 0;
+  render_ms_sum_ = encode_ms_sum_ = encode_psnr_sum_ = lod_error_px_sum_ = splats_sum_ = 0;
+  encode_psnr_frames_ = 0;
 }
 
 void SessionStream::on_tick(Clock::time_point now) {

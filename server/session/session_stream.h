@@ -147,6 +147,10 @@ class SessionStream {
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;
   std::uint32_t render_key_frames_ = 0, render_sub_frames_ = 0;  // speculation (catgs)
   double render_ms_sum_ = 0, encode_ms_sum_ = 0;
+  // The encoder's picture (Stats.encode_psnr_db_mean: the frames that measured it) and its name.
+  double encode_psnr_sum_ = 0;
+  std::uint32_t encode_psnr_frames_ = 0;
+  std::string encoder_;
   // The interval's frames drawn after a buffer could not grow (Stats.memory_fallback_frames) and
   // the last one's reason.
   std::uint32_t memory_fallbacks_ = 0;

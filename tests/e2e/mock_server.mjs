@@ -185,7 +185,8 @@ export async function startMockServer({ webRoot, protoFile, port = 0 }) {
               const rendered = sent > sentAtStats;
               sentAtStats = sent;
               send({ stats: { frames_sent: sent, poses_received: sent, render_ms_mean: rendered ? 12.5 : 0,
-                encode_ms_mean: rendered ? 3.5 : 0, bytes_per_second: rendered ? 250000 : 0 } });
+                encode_ms_mean: rendered ? 3.5 : 0, bytes_per_second: rendered ? 250000 : 0,
+                encode_psnr_db_mean: rendered ? 31.5 : 0, encoder: 'x264 superfast' } });
             }, 1000);
             send({ welcome: {
               session_id: `mock-${session}`, scene_name: 'mock', renderer: 'cpu', encoder: 'x264', pipeline: 'exact',

@@ -128,7 +128,11 @@ try {
     // only for a rate measured on a full link).
     await moveUntil(page, (c) => /not limited/.test(c.overlayText()));
     const moving = await page.evaluate(() => window.catgs.overlayText());
-    check(/rtt [\d.]+ ms {2}not limited/.test(moving) && !/\blink\b/.test(moving), `stats: no link rate unless measured (${JSON.stringify(moving)})`);
+    check(/TCP rtt [\d.]+ ms {2}not limited/.test(moving) && !/\blink\b/.test(moving), `stats: no link rate unless measured (${JSON.stringify(moving)})`);
+    // The encoder's picture and preset (Stats.encode_psnr_db_mean, .encoder); the connection's
+    // round trip named as TCP's (the page's own is 'ping', when Pongs come).
+    check(/picture 31\.5 dB \(x264 superfast\)/.test(moving) && !/ rtt/.test(moving.replace('TCP rtt', '')),
+      `stats: the encoder's picture, the round trip named (${JSON.stringify(moving)})`);
 
     // Input: a mouse drag orbits (orientation changes, distance to the target is kept), the wheel
     // zooms, a held W flies forward; each goes out as Poses through the animation-frame loop.

@@ -5,7 +5,11 @@
 
 #include <sys/wait.h>
 
+#include <sched.h>
+
 #include <algorithm>
+#include <functional>
+#include <memory>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +20,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "process/first_view.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
 #include "server_process.h"
@@ -57,6 +62,9 @@ pb::Stats stream_and_check(int port, const std::string& name, const Trace& trace
     EXPECT_EQ(m->frame().width(), static_cast<std::uint32_t>(w));
     const double psnr = frame_psnr(dec, ref, m->frame(), pose);
     EXPECT_GE(psnr, 30.0) << name << " frame " << i;
+    // x264's own measure of its picture came with the frame (the unit test holds it equal to a
+    // decoder's).
+    EXPECT_GT(m->frame().timings().encode_psnr_db(), 30.0f) << name << " frame " << i;
     worst = std::min(worst, psnr);
   }
   auto stats = wait_for(c, 3000, [](const pb::ServerMessage& s) { return s.has_stats(); });
@@ -64,6 +72,8 @@ pb::Stats stream_and_check(int port, const std::string& name, const Trace& trace
     ADD_FAILURE() << name << ": no Stats";
     return {};
   }
+  EXPECT_GT(stats->stats().encode_psnr_db_mean(), 30.0);
+  EXPECT_EQ(stats->stats().encoder().rfind("x264 ", 0), 0u) << stats->stats().encoder();
   std::cout << "[ info ] " << name << " " << w << "x" << h << ": " << trace.size() << " frames, worst PSNR " << worst
             << " dB, " << stats->stats().key_frames() << " key frames, " << stats->stats().sub_frames()
             << " sub-frames\n";
@@ -137,7 +147,7 @@ void three_sessions_get_correct_frames(const std::vector<std::string>& extra) {
                 metric_value(metrics, "catgs_render_seconds_count{kind=\"sub\"}"),
             frames);
   for (const char* h : {"catgs_queue_seconds_count", "catgs_convert_seconds_count", "catgs_encode_seconds_count",
-                        "catgs_speculation_window_count"})
+                        "catgs_encode_psnr_db_count", "catgs_speculation_window_count"})
     EXPECT_EQ(metric_value(metrics, h), frames) << h;
   EXPECT_NE(metrics.find("catgs_info{renderer=\"cpu\",encoder=\"x264\",pipeline=\"catgs\"} 1"), std::string::npos)
       << metrics;
@@ -150,6 +160,66 @@ TEST(MultiSession, DifferentTracesAndSizesAllGetCorrectFrames) { three_sessions_
 // before it is finished, and every frame still answers its own pose with its own picture.
 TEST(MultiSession, ALaneWithTwoFramesInFlightServesEverySessionCorrectly) {
   three_sessions_get_correct_frames({"--render-lanes", "1", "--frames-per-lane", "2"});
+}
+
+// The preset ladder never lowers the picture silently (issue 91): a server that may use one core
+// (its affinity mask, inherited from this thread) gives a lone 800x448 session x264 superfast;
+// a second session halves the encoders' share, and the first session's encoder steps down at
+// once. Its Stats say the new preset and the picture it gives, /metrics counts the step, the
+// log names it.
+TEST(MultiSession, APresetStepDownIsSaidInStatsMetricsAndTheLog) {
+  cpu_set_t mine, one;
+  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
+  CPU_ZERO(&one);
+  for (int c = 0; c < CPU_SETSIZE; ++c)
+    if (CPU_ISSET(c, &mine)) {
+      CPU_SET(c, &one);
+      break;
+    }
+  ASSERT_EQ(sched_setaffinity(0, sizeof(one), &one), 0);
+  std::unique_ptr<ServerProcess> server;
+  try {
+    server = std::make_unique<ServerProcess>(server_args(kBiker, {"--pipeline", "exact"}));
+  } catch (...) {
+    sched_setaffinity(0, sizeof(mine), &mine);
+    throw;
+  }
+  ASSERT_EQ(sched_setaffinity(0, sizeof(mine), &mine), 0);
+  const auto model = load_model(kBiker);
+  const server::CameraPose view = server::first_view_pose(server::frame_from_content(*model), 800, 448);
+  std::uint32_t sequence = 0;
+  // Poses until a Stats comes that satisfies `done` (a frame's worth of poses between reads).
+  const auto stats_until = [&](StreamClient& c, const std::function<bool(const pb::Stats&)>& done) {
+    for (int tries = 0; tries < 40; ++tries) {
+      pb::Pose pose =
+          pose_from_camera(Camera::from_pose(view.position + glm::vec3(0.01f * static_cast<float>(sequence), 0, 0),
+                                             view.orientation, view.vertical_fov_deg, 800, 448),
+                           sequence, now_ms());
+      sequence++;
+      c.send_pose(pose);
+      auto m = wait_for(c, 1500, [](const pb::ServerMessage& x) { return x.has_stats(); });
+      if (m && m->stats().frames_sent() > 0 && done(m->stats())) return m->stats();
+    }
+    ADD_FAILURE() << "no such Stats";
+    return pb::Stats{};
+  };
+  StreamClient first;
+  first.connect(server->port());
+  first.hello(800, 448);
+  const pb::Stats alone = stats_until(first, [](const pb::Stats& s) { return s.encode_psnr_db_mean() > 0; });
+  EXPECT_EQ(alone.encoder(), "x264 superfast");
+  StreamClient second;
+  second.connect(server->port());
+  second.hello(800, 448);
+  const pb::Stats shared = stats_until(first, [](const pb::Stats& s) { return s.encoder() != "x264 superfast"; });
+  EXPECT_EQ(shared.encoder().rfind("x264 ultrafast", 0), 0u) << shared.encoder();
+  EXPECT_GT(shared.encode_psnr_db_mean(), 25.0);
+  std::cout << "[ info ] one session: " << alone.encoder() << " " << alone.encode_psnr_db_mean()
+            << " dB; two: " << shared.encoder() << " " << shared.encode_psnr_db_mean() << " dB\n";
+  std::string metrics;
+  ASSERT_EQ(http_get(server->port(), "/metrics", metrics), 200);
+  EXPECT_GE(metric_value(metrics, "catgs_encoder_steps_down_total"), 1) << metrics;
+  EXPECT_NE(server->log().find("encoder: x264 superfast -> x264 ultrafast"), std::string::npos) << server->log();
 }
 
 // 200 connect / Hello / pose / disconnect cycles (clean closes and abrupt drops, before and

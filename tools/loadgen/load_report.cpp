@@ -41,6 +41,8 @@ void StageSums::add(const StageSums& o) {
   lod_error_px += o.lod_error_px;
   lod_error_px_max = std::max(lod_error_px_max, o.lod_error_px_max);
   splats += o.splats;
+  encode_psnr_db += o.encode_psnr_db;
+  encode_psnr_frames += o.encode_psnr_frames;
   for (int k = 0; k < 6; ++k) stage[k] += o.stage[k];
   for (const auto& [lane, l] : o.lanes) {
     lanes[lane].frames += l.frames;
@@ -148,6 +150,7 @@ nlohmann::json stages_json(const StageSums& s) {
       {"lod_error_px_mean", mean(s.lod_error_px, s.frames)},
       {"lod_error_px_max", s.lod_error_px_max},
       {"splats_mean", mean(s.splats, s.frames)},
+      {"encode_psnr_db_mean", mean(s.encode_psnr_db, s.encode_psnr_frames)},
       {"render_stages_ms", render_stages_json(s)},
       {"render_lanes", render_lanes_json(s)},
       {"frames", s.frames}};
@@ -191,6 +194,7 @@ nlohmann::json run_json(const std::vector<SessionResult>& sessions) {
          {"link_cap_kbps_min", s.link_cap_kbps_min},
          {"device_memory_mib_max", s.device_memory_mib_max},
          {"memory_fallback_frames", s.memory_fallback_frames},
+         {"stream_encoder", s.stream_encoder},
          {"link_kbps_last", s.link_kbps_last},
          {"late_reads", s.late_reads},
          {"receipts_sent", s.receipts_sent},
@@ -286,6 +290,19 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
   if (g.lod_error_px_max > 0) {
     std::snprintf(line, sizeof(line), "level of detail: bound %.2f px mean, %.2f px max; %.2f M Gaussians a frame\n",
                   mean(g.lod_error_px, g.frames), g.lod_error_px_max, mean(g.splats, g.frames) / 1e6);
+    out += line;
+  }
+  if (g.encode_psnr_frames > 0) {
+    // The codec's loss, as the encoder measured it: the host's picture, and its worst session's.
+    double worst = 1e9;
+    std::string worst_encoder;
+    for (const SessionResult& s : sessions)
+      if (s.server.encode_psnr_frames > 0 && mean(s.server.encode_psnr_db, s.server.encode_psnr_frames) < worst) {
+        worst = mean(s.server.encode_psnr_db, s.server.encode_psnr_frames);
+        worst_encoder = s.stream_encoder;
+      }
+    std::snprintf(line, sizeof(line), "encoder picture: %.2f dB mean; the lowest session %.2f dB (%s)\n",
+                  mean(g.encode_psnr_db, g.encode_psnr_frames), worst, worst_encoder.c_str());
     out += line;
   }
   for (const SessionResult& s : sessions)

@@ -31,6 +31,10 @@ struct StageSums {
   std::uint64_t predicted_groups = 0, measured_groups = 0;
   // Level of detail (FrameTimings.lod_error_px, .splats): sums over frames, and the largest bound.
   double lod_error_px = 0, lod_error_px_max = 0, splats = 0;
+  // The encoder's picture (FrameTimings.encode_psnr_db, dB): its sum over the frames that carried
+  // one, and their count (x264 streams; 0 for NVENC and AV1).
+  double encode_psnr_db = 0;
+  std::uint64_t encode_psnr_frames = 0;
   // The renderer's own stage times (FrameTimings.stage_*_ms: frame, preprocess, keys, sort,
   // ranges, rasterize), summed over frames, and per render lane its frames and frame times.
   static constexpr const char* kStageNames[6] = {"frame", "preprocess", "keys", "sort", "ranges", "rasterize"};
@@ -78,8 +82,9 @@ struct SessionResult {
   // Frames the server drew after one of this session's buffers could not grow (the sum of
   // Stats.memory_fallback_frames; issue 73).
   std::uint64_t memory_fallback_frames = 0;
-  std::uint64_t stale = 0;   // frames later than the stale bound, or older than one shown
-  std::uint64_t errors = 0;  // server Error, lost connection, undecodable frame
+  std::string stream_encoder;  // the last Stats.encoder: the preset the stream ended at ("x264 ultrafast")
+  std::uint64_t stale = 0;     // frames later than the stale bound, or older than one shown
+  std::uint64_t errors = 0;    // server Error, lost connection, undecodable frame
   std::string first_error;
   // The server refused the Hello (Error instead of Welcome): no session ran. `refusal` names the
   // ErrorCode and reason.

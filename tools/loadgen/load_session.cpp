@@ -269,6 +269,7 @@ class PoseLoop {
     r_.server_skipped = s.poses_skipped();
     r_.device_memory_mib_max = std::max(r_.device_memory_mib_max, s.device_memory_mib());
     r_.memory_fallback_frames += s.memory_fallback_frames();
+    if (!s.encoder().empty()) r_.stream_encoder = s.encoder();
     if (s.link_kbps() > 0) r_.link_kbps_last = s.link_kbps();
     if (s.bitrate_cap_kbps() == 0) return;  // the link does not limit the stream
     r_.link_limited_stats++;
@@ -455,6 +456,10 @@ class PoseLoop {
     r_.server.lod_error_px += t.lod_error_px();
     r_.server.lod_error_px_max = std::max<double>(r_.server.lod_error_px_max, t.lod_error_px());
     r_.server.splats += t.splats();
+    if (t.encode_psnr_db() > 0) {
+      r_.server.encode_psnr_db += t.encode_psnr_db();
+      r_.server.encode_psnr_frames++;
+    }
   }
 
   const LoadSessionConfig& cfg_;

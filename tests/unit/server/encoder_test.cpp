@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 #include "common/image_io.h"
@@ -20,6 +21,7 @@
 #include "colour/yuv420.h"
 
 extern "C" {
+#include <libavcodec/avcodec.h>
 #include <libavutil/log.h>
 }
 
@@ -169,6 +171,79 @@ TEST(Encoder, RenderIntoInputTargetEqualsRenderThenConvert) {
   Yuv420Target device = wrong.target(128, 96);
   device.memory = MemoryKind::device;
   EXPECT_THROW(renderer.render_yuv420_at(cam, 0.0, device), std::invalid_argument);
+}
+
+// The picture a decoder shows, against the encoder's input: PSNR over the three planes by sample
+// count, from libavcodec's own H.264 decoder (not x264's reconstruction), one access unit at a
+// time. Returns the PSNR of each access unit, in order.
+std::vector<double> decoded_psnr_db(const std::vector<EncodedFrame>& stream, const std::vector<Yuv420Image>& inputs) {
+  const AVCodec* codec = avcodec_find_decoder(AV_CODEC_ID_H264);
+  AVCodecContext* ctx = avcodec_alloc_context3(codec);
+  EXPECT_EQ(avcodec_open2(ctx, codec, nullptr), 0);
+  AVPacket* packet = av_packet_alloc();
+  AVFrame* frame = av_frame_alloc();
+  std::vector<double> out;
+  for (std::size_t i = 0; i < stream.size(); ++i) {
+    std::vector<std::uint8_t> bytes = stream[i].data;
+    bytes.resize(bytes.size() + AV_INPUT_BUFFER_PADDING_SIZE, 0);
+    packet->data = bytes.data();
+    packet->size = static_cast<int>(stream[i].data.size());
+    EXPECT_EQ(avcodec_send_packet(ctx, packet), 0);
+    EXPECT_EQ(avcodec_receive_frame(ctx, frame), 0) << "access unit " << i;
+    const Yuv420Image& in = inputs[i];
+    double sse = 0, samples = 0;
+    const auto plane = [&](const std::vector<std::uint8_t>& want, int w, int h, int p) {
+      for (int r = 0; r < h; ++r)
+        for (int c = 0; c < w; ++c) {
+          const double d = frame->data[p][r * frame->linesize[p] + c] - want[static_cast<std::size_t>(r * w + c)];
+          sse += d * d;
+        }
+      samples += static_cast<double>(w) * h;
+    };
+    plane(in.y, in.width, in.height, 0);
+    plane(in.u, in.width / 2, in.height / 2, 1);
+    plane(in.v, in.width / 2, in.height / 2, 2);
+    out.push_back(10.0 * std::log10(255.0 * 255.0 / (sse / samples)));
+  }
+  av_frame_free(&frame);
+  av_packet_free(&packet);
+  avcodec_free_context(&ctx);
+  return out;
+}
+
+// The encoder's picture that stats and /metrics give each session (EncodedFrame::psnr_db) is
+// what a decoder shows: the walk past the biker, encoded as the server does (capped CRF, sliced
+// threads), at a loose and a tight rate cap.
+TEST(Encoder, X264ReportsThePictureADecoderShows) {
+  const int W = 192, H = 128;
+  auto model = test::cached_scene(test::bundled_scene());
+  const CameraPose p = first_view_pose(frame_from_content(*model), W, H);
+  cpu::CpuRenderer renderer(model, RenderOptions{});
+  std::vector<Yuv420Image> pictures;
+  for (int i = 0; i < 8; ++i) {
+    Image img;
+    const glm::vec3 step = p.orientation * glm::vec3(0.02f * static_cast<float>(i), 0.0f, 0.0f);
+    renderer.render(Camera::from_pose(p.position + step, p.orientation, p.vertical_fov_deg, W, H), img);
+    pictures.push_back(rgba_to_yuv420_bt709(img.rgba8.data(), W, H, W * 4));
+  }
+  for (const int kbps : {4000, 150}) {
+    SCOPED_TRACE(kbps);
+    EncoderConfig c = config(W, H);
+    c.crf = 23;
+    c.bitrate_kbps = kbps;
+    c.threads = 2;
+    auto enc = make_encoder("x264", c);
+    std::vector<EncodedFrame> stream;
+    for (std::size_t i = 0; i < pictures.size(); ++i)
+      stream.push_back(enc->encode_yuv420(pictures[i].planes(), i == 4));
+    const std::vector<double> decoded = decoded_psnr_db(stream, pictures);
+    double mean = 0;
+    for (std::size_t i = 0; i < stream.size(); ++i) {
+      EXPECT_NEAR(stream[i].psnr_db, decoded[i], 0.01) << "access unit " << i;
+      mean += decoded[i] / static_cast<double>(stream.size());
+    }
+    std::cout << "[ info ] x264 at " << kbps << " kbit/s: decoded " << mean << " dB a picture\n";
+  }
 }
 
 // Whether NVENC opens here; its error text when not.
