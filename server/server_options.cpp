@@ -194,6 +194,10 @@ std::string server_usage() {
          "                        session count) or an x264 preset,\n"
          "                        with +cabac and +deblock to turn those tools back on\n"
          "                        (e.g. ultrafast+cabac+deblock)\n"
+         "  --x264-floor P|off    the lowest step auto may take (ultrafast,\n"
+         "                        ultrafast+cabac+deblock or superfast); a visitor whose\n"
+         "                        stream half the cores could not encode at it is refused\n"
+         "                        as full (default off: down to ultrafast, no such refusal)\n"
          "  --av1 auto|on|off     AV1 (libaom realtime) for clients that decode it: auto\n"
          "                        (default) while half the cores afford it at the live\n"
          "                        session count and the link does not limit the stream,\n"
@@ -408,6 +412,12 @@ bool parse_server_options(int argc, char** argv, ServerOptions& out) {
         throw std::invalid_argument("--x264-preset: '" + v +
                                     "' is not auto or an x264 preset (ultrafast .. placebo, +cabac, +deblock)");
       out.encoder_policy.x264_preset = v;
+    } else if (a == "--x264-floor") {
+      try {
+        out.encoder_policy.floor_step = ladder_step_named(v);
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("--x264-floor: " + std::string(e.what()));
+      }
     } else if (a == "--av1") {
       if (v != "auto" && v != "on" && v != "off")
         throw std::invalid_argument("--av1: auto, on or off, got '" + v + "'");

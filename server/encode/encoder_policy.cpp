@@ -47,14 +47,36 @@ int encoder_threads(const EncoderPolicy& policy, int width, int height, int live
 
 double ultrafast_cpu_ms(int width, int height) { return 7.7e-6 * static_cast<double>(width) * height; }
 
-int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions) {
-  // CPU ms a second the encoders may use, and what one session's frames cost at each step.
+namespace {
+
+// Whether ladder step k's CPU time, for `live_sessions` streams, fits the encoders' share.
+bool step_fits(const EncoderPolicy& policy, int k, int width, int height, int fps, int live_sessions) {
+  // CPU ms a second the encoders may use, and what the sessions' frames cost at ultrafast.
   const double budget_ms = kEncoderCpuShare * std::max(1, policy.usable_cores) * 1000.0;
-  const double per_session_ms = ultrafast_cpu_ms(width, height) * std::max(fps, 1) * std::max(1, live_sessions);
+  const double sessions_ms = ultrafast_cpu_ms(width, height) * std::max(fps, 1) * std::max(1, live_sessions);
+  return sessions_ms * kPresetLadder[k].cpu_factor <= budget_ms;
+}
+
+}  // namespace
+
+int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions) {
   int step = 0;
   for (int k = 1; k < kPresetSteps; ++k)
-    if (per_session_ms * kPresetLadder[k].cpu_factor <= budget_ms) step = k;
-  return step;
+    if (step_fits(policy, k, width, height, fps, live_sessions)) step = k;
+  return std::max(step, policy.floor_step);
+}
+
+bool cores_hold(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions) {
+  if (policy.floor_step < 0 || policy.x264_preset != "auto") return true;
+  return step_fits(policy, policy.floor_step, width, height, fps, live_sessions);
+}
+
+int ladder_step_named(const std::string& name) {
+  if (name == "off") return -1;
+  for (int k = 0; k < kPresetSteps; ++k)
+    if (name == kPresetLadder[k].name) return k;
+  throw std::invalid_argument("'" + name +
+                              "' is off or a step of the x264 ladder (ultrafast, ultrafast+cabac+deblock, superfast)");
 }
 
 bool use_av1(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions, bool client_decodes_av1,

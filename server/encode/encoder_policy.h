@@ -42,7 +42,12 @@ struct EncoderPolicy {
   int intra_refresh_frames = 0;      // --intra-refresh N: refresh period in frames (0: off)
   int threads = 0;                   // --encoder-threads: > 0 fixed per session; 0 auto (above)
   std::string x264_preset = "auto";  // --x264-preset: "auto" (the ladder above) or one x264 preset
-  int av1_speed = 10;                // --av1-speed: libaom's realtime cpu-used for AV1 streams
+  // --x264-floor: the lowest ladder step (index into kPresetLadder) a session's stream may take
+  // under "auto"; a visitor whose stream the cores could not encode at it is refused at the door
+  // (cores_hold). -1 (off, the default): the ladder goes down to ultrafast and the door does not
+  // count the encoders' cores.
+  int floor_step = -1;
+  int av1_speed = 10;  // --av1-speed: libaom's realtime cpu-used for AV1 streams
   // --av1: "auto" AV1 for a client that decodes it while the host affords it (use_av1), "on" for
   // every such client, "off" never (H.264 only).
   std::string av1 = "auto";
@@ -89,7 +94,17 @@ double ultrafast_cpu_ms(int width, int height);
 // The ladder step (index into kPresetLadder) for one session's encoder at `fps` frames/s while
 // `live_sessions` sessions share the host: the slowest whose CPU time fits the encoders' share of
 // policy.usable_cores; 0 (ultrafast) when none does.
+// Never below policy.floor_step.
 int preset_step(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);
+
+// Whether the encoders' share of the cores holds `live_sessions` width x height x264 streams at
+// `fps` at the ladder's floor (policy.floor_step): the door's question for a visitor about to
+// join (live_sessions counting it). True where no floor is set, or the preset is fixed.
+bool cores_hold(const EncoderPolicy& policy, int width, int height, int fps, int live_sessions);
+
+// The ladder step named `name` (kPresetLadder), or -1 for "off"; throws std::invalid_argument
+// for any other name.
+int ladder_step_named(const std::string& name);
 
 // AV1 (libaom realtime at policy.av1_speed) above the ladder: its CPU time a frame relative to x264
 // ultrafast's, the larger of the factors measured at 1080p and 720p on the H100 host, rounded up

@@ -10,6 +10,8 @@
 //   catgs_encode_seconds       encoder
 //   catgs_encode_psnr_db       the encoder's picture each frame (FrameTimings.encode_psnr_db; x264)
 //   catgs_encoder_steps_down_total  encoders rebuilt a step down the preset ladder (host filling)
+//   catgs_core_refusals_total  visitors refused at the door: the cores could not encode their
+//                              stream at the ladder's floor (--x264-floor)
 //   catgs_send_seconds         frame handed to the transport -> fully written to the socket
 //   catgs_speculation_window   W of the speculation group of each rendered frame (0: none)
 //   catgs_speculation_gain     the catgs cost model's predicted and measured gain a group
@@ -103,6 +105,7 @@ struct ServerMetrics {
   // Encoders rebuilt because the live sessions changed the threads they should get (an IDR each).
   std::atomic<std::uint64_t> encoder_rebuilds_total{0};
   std::atomic<std::uint64_t> encoder_steps_down_total{0};
+  std::atomic<std::uint64_t> core_refusals_total{0};  // visitors refused at the door for the cores (--x264-floor)
   // Content-aware rate probes ended (--bits-per-pixel auto: a scene and size measured).
   std::atomic<std::uint64_t> content_rate_probes_total{0};
   // Frames lost: a pose pending, or a frame rendering or encoding, when its session ended or

@@ -15,6 +15,7 @@
 #include "base/allocation_faults.h"
 #include "camera/camera.h"
 #include "renderer/device_memory.h"
+#include "encode/frame_encoding.h"
 #include "session/annotations.h"
 #include "session/depth_probe.h"
 #include "process/first_view.h"
@@ -398,6 +399,20 @@ void Session::handle_hello(const pb::Hello& hello) {
     // A hint, not a promise: a page that waits this long (or a fresh connection that the Service
     // sends to another replica) is likely to get in.
     return fail(pb::ERROR_SERVER_FULL, "server full (" + std::to_string(shared_.settings.max_sessions) + " sessions)",
+                false, jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
+  }
+  // The cores are counted like device memory (issue 92): with --x264-floor, a visitor whose
+  // stream, beside the live ones, the encoders' share of the cores could not hold at the floor's
+  // preset is refused here rather than stepping every stream below the picture the operator set.
+  const EncoderPolicy& policy = shared_.settings.frame.encoder_policy;
+  if (shared_.encoder_kind == "x264" &&
+      !cores_hold(policy, v.width, v.height, kStreamFps, static_cast<int>(shared_.metrics.sessions_open.load()))) {
+    shared_.metrics.sessions_open--;
+    shared_.metrics.core_refusals_total++;
+    return fail(pb::ERROR_SERVER_FULL,
+                "server full: its cores cannot encode another " + std::to_string(v.width) + "x" +
+                    std::to_string(v.height) + " stream at x264 " + kPresetLadder[policy.floor_step].name +
+                    " (--x264-floor)",
                 false, jittered(static_cast<std::uint32_t>(shared_.settings.full_retry_ms)));
   }
   counted_open_ = true;

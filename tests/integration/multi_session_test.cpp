@@ -222,6 +222,46 @@ TEST(MultiSession, APresetStepDownIsSaidInStatsMetricsAndTheLog) {
   EXPECT_NE(server->log().find("encoder: x264 superfast -> x264 ultrafast"), std::string::npos) << server->log();
 }
 
+// --x264-floor: the same one-core server keeps its lone session at superfast, and the door
+// refuses the second visitor, whose stream would step both below it, with the reason.
+TEST(MultiSession, TheX264FloorRefusesAVisitorTheCoresCannotEncodeAtIt) {
+  cpu_set_t mine, one;
+  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
+  CPU_ZERO(&one);
+  for (int c = 0; c < CPU_SETSIZE; ++c)
+    if (CPU_ISSET(c, &mine)) {
+      CPU_SET(c, &one);
+      break;
+    }
+  ASSERT_EQ(sched_setaffinity(0, sizeof(one), &one), 0);
+  std::unique_ptr<ServerProcess> server;
+  try {
+    server = std::make_unique<ServerProcess>(server_args(kBiker, {"--x264-floor", "superfast"}));
+  } catch (...) {
+    sched_setaffinity(0, sizeof(mine), &mine);
+    throw;
+  }
+  ASSERT_EQ(sched_setaffinity(0, sizeof(mine), &mine), 0);
+  StreamClient first;
+  first.connect(server->port());
+  first.hello(800, 448);
+  StreamClient second;
+  second.connect(server->port());
+  try {
+    second.hello(800, 448);
+    ADD_FAILURE() << "the second visitor was let in";
+  } catch (const loadgen::Refused& r) {
+    EXPECT_EQ(r.error().code(), pb::ERROR_SERVER_FULL);
+    EXPECT_NE(r.error().reason().find("cannot encode another 800x448 stream at x264 superfast"), std::string::npos)
+        << r.error().reason();
+    EXPECT_GT(r.error().retry_after_ms(), 0u);
+  }
+  std::string metrics;
+  ASSERT_EQ(http_get(server->port(), "/metrics", metrics), 200);
+  EXPECT_EQ(metric_value(metrics, "catgs_core_refusals_total"), 1) << metrics;
+  EXPECT_EQ(metric_value(metrics, "catgs_sessions"), 1) << metrics;
+}
+
 // 200 connect / Hello / pose / disconnect cycles (clean closes and abrupt drops, before and
 // after the frame arrived): afterwards no session is left and the server's memory has stopped
 // growing. What the server's allocator holds (catgs_heap_in_use_bytes) is read after the warm-up

@@ -189,6 +189,30 @@ TEST(EncoderPolicy, PresetLadderSpendsTheEncodersShareOfTheCores) {
   EXPECT_FALSE(is_x264_preset("ultrafast "));
 }
 
+// --x264-floor by hand, 16 cores (8000 CPU ms a second for the encoders), 720p at 60 frames/s:
+// ultrafast 7.0963 ms a frame, 425.8 CPU ms a second a session; ultrafast+cabac+deblock 1.4x
+// (596.1): 13 sessions fit, 14 do not; superfast 2.3x (979.3): 8 fit, 9 do not.
+TEST(EncoderPolicy, TheFloorHoldsTheLadderAndTheDoorCountsTheCores) {
+  EncoderPolicy p;
+  p.usable_cores = 16;
+  EXPECT_TRUE(cores_hold(p, 1280, 720, 60, 1000)) << "no floor: the door does not count the cores";
+  EXPECT_EQ(preset_step(p, 1280, 720, 60, 20), 0);
+  p.floor_step = ladder_step_named("ultrafast+cabac+deblock");
+  EXPECT_EQ(p.floor_step, 1);
+  EXPECT_TRUE(cores_hold(p, 1280, 720, 60, 13));
+  EXPECT_FALSE(cores_hold(p, 1280, 720, 60, 14));
+  EXPECT_EQ(preset_step(p, 1280, 720, 60, 13), 1);
+  EXPECT_EQ(preset_step(p, 1280, 720, 60, 20), 1) << "never below the floor (a session the door let in, resized)";
+  EXPECT_EQ(preset_step(p, 1280, 720, 60, 8), 2);
+  p.floor_step = ladder_step_named("superfast");
+  EXPECT_TRUE(cores_hold(p, 1280, 720, 60, 8));
+  EXPECT_FALSE(cores_hold(p, 1280, 720, 60, 9));
+  p.x264_preset = "ultrafast";
+  EXPECT_TRUE(cores_hold(p, 1280, 720, 60, 9)) << "a fixed preset: no ladder, no floor";
+  EXPECT_EQ(ladder_step_named("off"), -1);
+  EXPECT_THROW(ladder_step_named("veryfast"), std::invalid_argument);
+}
+
 // AV1 by hand, 16 cores (8000 CPU ms a second for the encoders), 60 frames/s (10 ms is 0.6 of
 // the interval). 960x540: ultrafast 3.99 ms a frame, AV1 8x that = 31.9 ms on one thread, 6.8 ms
 // on 8 (speed-up 4.7) and 1916 CPU ms a second a session: four fit, five do not. 640x360: 1.77
