@@ -99,7 +99,8 @@ std::string ServerMetrics::prometheus_text() const {
       "Encoders rebuilt a step down the x264 preset ladder (sessions joined): a cheaper, worse picture.",
       encoder_steps_down_total.load());
   put("catgs_core_refusals_total", "counter",
-      "Visitors refused at the door: the cores could not encode their stream at the x264 ladder's floor (--x264-floor).",
+      "Visitors refused at the door: the cores could not encode their stream at the x264 ladder's floor "
+      "(--x264-floor).",
       core_refusals_total.load());
   put("catgs_content_rate_probes_total", "counter",
       "Content-aware rate probes ended (--bits-per-pixel auto): a scene's rate cap measured at a size.",

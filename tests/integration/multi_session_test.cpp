@@ -162,6 +162,29 @@ TEST(MultiSession, ALaneWithTwoFramesInFlightServesEverySessionCorrectly) {
   three_sessions_get_correct_frames({"--render-lanes", "1", "--frames-per-lane", "2"});
 }
 
+// The biker served by a server that may use one core: its affinity mask, inherited from this
+// thread's for the fork (usable_cores reads it), which is restored after.
+std::unique_ptr<ServerProcess> one_core_server(const std::vector<std::string>& flags) {
+  cpu_set_t mine, one;
+  if (sched_getaffinity(0, sizeof(mine), &mine) != 0) throw std::runtime_error("sched_getaffinity failed");
+  CPU_ZERO(&one);
+  for (int c = 0; c < CPU_SETSIZE; ++c)
+    if (CPU_ISSET(c, &mine)) {
+      CPU_SET(c, &one);
+      break;
+    }
+  if (sched_setaffinity(0, sizeof(one), &one) != 0) throw std::runtime_error("sched_setaffinity failed");
+  std::unique_ptr<ServerProcess> server;
+  try {
+    server = std::make_unique<ServerProcess>(server_args(kBiker, flags));
+  } catch (...) {
+    sched_setaffinity(0, sizeof(mine), &mine);
+    throw;
+  }
+  sched_setaffinity(0, sizeof(mine), &mine);
+  return server;
+}
+
 // The preset ladder never lowers the picture silently (issue 91): a server that may use one core
 // (its affinity mask, inherited from this thread) gives a lone 800x448 session x264 superfast;
 // a second session halves the encoders' share, and the first session's encoder steps down at
