@@ -9,6 +9,12 @@ p95 / p99, and at the largest count held: the slowest session's FPS, pooled p95 
 bits a pixel per session, the server's mean render / encode / queue ms, the level of detail's
 bound (mean and largest, px) and Gaussians a frame where the JSON has them, CPU busy, the server's
 CPU (cores) and GPU utilisation; then what broke the next step and the stage that grew most.
+
+A second table follows, one row per step: the sessions that streamed and those refused at the
+door, the bounds' numbers, and the encoder's picture (FrameTimings.encode_psnr_db: the coded
+frame against the rendered one): its mean over every frame, and the lowest session's mean with
+the preset its stream ended at (Stats.encoder), so that a count of visitors comes with the
+picture they saw.
 """
 import glob
 import gzip
@@ -92,6 +98,20 @@ def main(w):
                      + (f", {t['errors']} errors" if t.get("errors") else ""))
         print(f"| {m['name']} | {m['scene']} | {m['size']} | {m['pipeline']} | {m['args'] or 'defaults'} | {n_held} | "
               f"{one} | " + " | ".join(at) + f" | {broke} | {limit(jh, bad[1])} |")
+
+    print()
+    print("| ramp | sessions | refused | held | p95 ms | slowest FPS | encoder picture dB, mean | "
+          "lowest session dB (its preset) |")
+    print("|" + "---|" * 8)
+    for m, steps in load(w):
+        for n, j in steps:
+            t = j["run"]["total"]
+            pic = t["server"].get("encode_psnr_db_mean", 0)
+            streams = [s for s in j["run"]["sessions"] if s.get("server", {}).get("encode_psnr_db_mean", 0) > 0]
+            low = min(streams, key=lambda s: s["server"]["encode_psnr_db_mean"]) if streams else None
+            lowest = f"{low['server']['encode_psnr_db_mean']:.2f} ({low.get('stream_encoder', '')})" if low else "-"
+            print(f"| {m['name']} | {n} | {t.get('refused', 0)} | {'yes' if held(m, j) else 'no'} | "
+                  f"{t['latency']['p95_ms']:.1f} | {t['fps_min']:.1f} | {pic:.2f} | {lowest} |")
 
 
 if __name__ == "__main__":

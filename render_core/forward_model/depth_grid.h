@@ -32,22 +32,35 @@ CATGS_HD int depth_grid_rows(int height, int cell) { return (height + cell - 1) 
 // The forward-model pixel vertex k samples along an axis of `size` pixels.
 CATGS_HD int depth_grid_pixel(int k, int cell, int size) { return k * cell < size - 1 ? k * cell : size - 1; }
 
-// One pixel's walk through its tile's list: feed entries front to back with step(); it returns
-// true once the median is found (depth set), after which the caller stops.
+// The alpha an entry with 2D mean `mean` (pixels), `conic` and `opacity` has at the pixel sampled
+// at (px, py), as the walk counts it: 0 where the rasterizer skips it (power > 0 or alpha <
+// 1/255). Depends on the entry alone, so a core may compute many entries' alphas at once.
+CATGS_HD float median_walk_alpha(glm::vec2 mean, glm::vec3 conic, float opacity, float px, float py) {
+  const float power = gaussian_power(conic, mean.x - px, mean.y - py);
+  if (power > 0.0f) return 0.0f;
+  const float alpha = fminf(kMaxAlpha, opacity * expf(power));
+  return alpha < kMinAlpha ? 0.0f : alpha;
+}
+
+// One pixel's walk through its tile's list: feed entries front to back with step() (or their
+// alphas with take(), in the same order); it returns true once the median is found (depth set),
+// after which the caller stops. The transmittance is the serial product, in list order, on
+// every core.
 struct MedianDepthWalk {
   float T = 1.0f;
   float depth = INFINITY;  // camera-space z of the crossing Gaussian; +inf: none yet
-  // The entry with 2D mean `mean` (pixels), `conic`, `opacity` and camera-space z `z`, at the
-  // pixel sampled at (px, py).
-  CATGS_HD bool step(glm::vec2 mean, glm::vec3 conic, float opacity, float z, float px, float py) {
-    const float power = gaussian_power(conic, mean.x - px, mean.y - py);
-    if (power > 0.0f) return false;
-    const float alpha = fminf(kMaxAlpha, opacity * expf(power));
-    if (alpha < kMinAlpha) return false;
+  // The next entry, of alpha `alpha` (median_walk_alpha) and camera-space z `z`.
+  CATGS_HD bool take(float alpha, float z) {
+    if (alpha == 0.0f) return false;
     T *= 1.0f - alpha;
     if (T > kDepthGridTransmittance) return false;
     depth = z;
     return true;
+  }
+  // The entry with 2D mean `mean` (pixels), `conic`, `opacity` and camera-space z `z`, at the
+  // pixel sampled at (px, py).
+  CATGS_HD bool step(glm::vec2 mean, glm::vec3 conic, float opacity, float z, float px, float py) {
+    return take(median_walk_alpha(mean, conic, opacity, px, py), z);
   }
 };
 
