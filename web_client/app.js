@@ -88,17 +88,10 @@ function onConnected({ welcome: w, newView }) {
 function onDisconnected() {
   state.videoExport.onClosed();
   overlay.clearSession();
-  overlay.clearMessage('drain'); // the state line says what happens next
 }
 
 function onStats({ server: s }) {
-  overlay.setServerStats(s);
-  // The server is shutting down (a rollout, a scale-down): say when this stream ends; the
-  // reconnect then finds another replica.
-  if (s.drain_ms_left > 0) {
-    overlay.showMessage('drain', `server stopping: this stream ends in ${Math.ceil(s.drain_ms_left / 1000)} s, ` +
-      'then reconnects', 'warn');
-  }
+  overlay.setServerStats(s); // a draining server's countdown: the state line (status_text.js)
 }
 
 function onViewerError({ name, reason }) {

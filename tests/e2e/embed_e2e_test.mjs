@@ -13,8 +13,10 @@
 // (and the right token again streams). The element's own box says each in words (issue 75), as
 // it does for a browser without WebCodecs, for the same page on a site --allowed-origins lacks
 // (http://other.test:PORT: the element keeps its box and says why) and for a server stopped with
-// Ctrl-C, and a host page's `messages` replace them. Screenshots: embed.png, embed_error.png,
-// embed_unsupported.png, embed_refused.png, embed_gone.png.
+// Ctrl-C, and a host page's `messages` replace them. The page opened while the server is down,
+// with the README's loader inline: the box counts down, the site's error listener hears it, and
+// the view streams once the server is back. Screenshots: embed.png, embed_error.png,
+// embed_unsupported.png, embed_refused.png, embed_gone.png, embed_down.png, embed_back.png.
 //
 // usage: node embed_e2e_test.mjs --server PATH/catgs-server [--repo ROOT] [--out DIR]
 // Exit codes: 0 pass, 1 fail, 77 skipped (no chromium / npm deps / server binary).
@@ -39,13 +41,21 @@ const { log, check } = run;
 const TOKEN = 'embed-viewer-token';
 const BOX = { width: 480, height: 300 }; // the fixture's CSS for the viewer
 
-// The site: the fixture folder over HTTP, the page with the catgs server's host and token filled in.
+// The site: the fixture folder over HTTP, the page with the catgs server's host and token filled
+// in at /; at /loader the same page embedding as the README says for a server that may be down:
+// the viewer's loader (web_client/viewer/loader.js) inline instead of the module import.
 function startSite(port, catgsHost) {
   const page = readFileSync(path.join(here, 'fixtures/embed/index.html'), 'utf8')
     .replaceAll('CATGS_HOST', catgsHost).replaceAll('CATGS_TOKEN', TOKEN);
+  const importLine = `    import 'http://${catgsHost}/viewer/viewer.js';\n`;
+  if (!page.includes(importLine)) throw new Error('the fixture no longer imports the viewer as the test expects');
+  const loader = readFileSync(path.join(repo, 'web_client/viewer/loader.js'), 'utf8')
+    .replace("})('SRC');", `})('http://${catgsHost}/viewer/viewer.js');`);
+  const loaderPage = page.replace(importLine, '').replace('  <script type="module">', `  <script>\n${loader}</script>\n  <script type="module">`);
   const server = http.createServer((req, res) => {
-    if (new URL(req.url, 'http://x').pathname !== '/') return res.writeHead(404).end();
-    res.writeHead(200, { 'content-type': 'text/html; charset=utf-8' }).end(page);
+    const at = new URL(req.url, 'http://x').pathname;
+    if (at !== '/' && at !== '/loader') return res.writeHead(404).end();
+    res.writeHead(200, { 'content-type': 'text/html; charset=utf-8' }).end(at === '/' ? page : loaderPage);
   });
   return new Promise((resolve) => server.listen(port, '127.0.0.1', () => resolve(server)));
 }
@@ -109,14 +119,14 @@ async function main() {
     const base = await run.startServer(['--scene', scene, '--token-file', tokenFile, '--allowed-origins', siteOrigin]);
     const site = await startSite(sitePort, new URL(base).host);
     try {
-      await embedded(context, base, siteOrigin, otherOrigin);
+      await embedded(context, base, siteOrigin, otherOrigin, tokenFile);
     } finally {
       site.close();
     }
   });
 }
 
-async function embedded(context, base, siteOrigin, otherOrigin) {
+async function embedded(context, base, siteOrigin, otherOrigin, tokenFile) {
   // The server's side of the cross-origin import: CORS for every site (the files are public), and
   // a site that may not open a session is told so.
   const cors = async (origin) => {
@@ -321,14 +331,14 @@ async function embedded(context, base, siteOrigin, otherOrigin) {
   await other.goto(`${otherOrigin}/`);
   const refusedText = await waitFor('the box to say this site may not stream', async () => {
     const t = await boxText(other).catch(() => '');
-    return /may not open a stream/.test(t) ? t : false;
+    return /may not show streams/.test(t) ? t : false;
   }, 15000).catch(() => boxText(other).catch((e) => `(no element: ${e.message})`));
   const otherBox = await other.evaluate(() => {
     const el = document.getElementById('bike');
     return { w: el.clientWidth, h: el.clientHeight, defined: !!customElements.get('catgs-viewer') };
   });
   const refusedError = (await events(other, 'error'))[0];
-  check(/may not open a stream/.test(refusedText) && refusedText.includes(otherOrigin) && /--allowed-origins/.test(refusedText),
+  check(/may not show streams from this server/.test(refusedText) && refusedText.includes(otherOrigin),
     `a site --allowed-origins lacks: the box says why ("${refusedText}")`);
   check(otherBox.defined && otherBox.w === BOX.width && otherBox.h === BOX.height && refusedError &&
     refusedError.detail.name === 'ORIGIN_REFUSED' && refusedError.detail.permanent === true,
@@ -354,6 +364,39 @@ async function embedded(context, base, siteOrigin, otherOrigin) {
   check(/server stopping|cannot reach/.test(gone), `the server stopped: the box says so ("${gone}")`);
   await run.shot(page, 'embed_gone.png');
   await page.close();
+
+  // The page opened while the server is down, embedded as the README says (the loader inline): the
+  // box says so and counts down, the site's own error listener hears of it, and the view streams
+  // once the server is back on its address, with no reload.
+  const down = await context.newPage();
+  down.on('console', (m) => run.pageLog.push(`console.${m.type()}: ${m.text()}`));
+  await down.addInitScript(recordEvents);
+  await down.goto(`${siteOrigin}/loader`);
+  const downText = await waitFor('the box to say the server cannot be reached', async () => {
+    const t = await down.evaluate(() => document.getElementById('bike').innerText);
+    return /cannot reach the server, retrying in \d+ s/.test(t) ? t : false;
+  }, 15000).catch(() => down.evaluate(() => document.getElementById('bike').innerText));
+  const downBox = await down.evaluate(() => {
+    const el = document.getElementById('bike');
+    return { w: el.clientWidth, h: el.clientHeight, defined: !!customElements.get('catgs-viewer'),
+      site: document.getElementById('viewer-status').textContent };
+  });
+  const downErrors = await events(down, 'error');
+  check(/cannot reach the server, retrying in \d+ s/.test(downText) && !downBox.defined && downBox.w === BOX.width &&
+    downBox.h === BOX.height, `server down at load: the box the page gave (${downBox.w}x${downBox.h}) says "${downText}"`);
+  check(downErrors.length > 0 && downErrors[0].detail.name === 'UNREACHABLE' && /^3D view: cannot load the viewer/.test(downBox.site),
+    `...and the README's error listener heard it (${downErrors.length} events; the site says "${downBox.site}")`);
+  await run.shot(down, 'embed_down.png');
+  const startedAt = Date.now();
+  await run.startServer(['--scene', path.join(repo, 'assets/scenes/biker.compressed.ply'), '--token-file', tokenFile,
+    '--allowed-origins', siteOrigin], Number(new URL(base).port));
+  await waitFor('the view to stream after the server came back', async () => (await frames(down)) > 0, 30000)
+    .then(() => check(true, `the server back: the view streams ${((Date.now() - startedAt) / 1000).toFixed(1)} s after it listened, no reload`),
+      () => check(false, 'the server back: the view streams without a reload'));
+  check(!(await down.evaluate(() => document.getElementById('bike').innerText)).includes('cannot reach'),
+    '...and the loader\'s words are gone');
+  await run.shot(down, 'embed_back.png');
+  await down.close();
 }
 
 // The words the <catgs-viewer> shows in its own box ('' when none).

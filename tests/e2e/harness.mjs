@@ -87,10 +87,10 @@ export class BrowserTestRun {
     };
   }
 
-  // Starts catgs-server with `serverArgs` on a free port; resolves with its base URL once it
-  // answers HTTP.
-  async startServer(serverArgs) {
-    const port = await freePort();
+  // Starts catgs-server with `serverArgs` on `port` (a free one when not given); resolves with
+  // its base URL once it answers HTTP.
+  async startServer(serverArgs, port = 0) {
+    port = port || (await freePort());
     const all = [...serverArgs, '--port', String(port), '--renderer', 'cpu', '--web-root', this.webRoot,
       '--cache-dir', path.join(os.tmpdir(), 'catgs-e2e-cache')];
     this.log(`starting catgs-server ${all.join(' ')}`);

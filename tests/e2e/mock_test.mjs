@@ -672,7 +672,7 @@ try {
   {
     const page = await openPage(`${base}/?scene=nosuchscene&ws=${wsUrl('/ws')}`);
     const tries = () => hellos('/ws').filter((h) => h.msg.scene === 'nosuchscene').length;
-    check(await waitText(page, /^There is no scene named 'nosuchscene' on this server\. Choose one:/), `no scene: said in words (${JSON.stringify(await messageText(page))})`);
+    check(await waitText(page, /^There is no scene named 'nosuchscene' on this server; it has mock, garden, city\. Choose one:/), `no scene: said in words (${JSON.stringify(await messageText(page))})`);
     await page.waitForFunction(() => document.querySelectorAll('#messages #scene-picker option').length >= 3, null, { timeout: 5000 }).catch(() => {});
     const ui = await page.evaluate(() => {
       const p = document.querySelector('#messages #scene-picker');

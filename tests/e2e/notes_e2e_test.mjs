@@ -99,7 +99,7 @@ async function bikerScenarios(tmp) {
   }), 10000).catch(() => '');
   await sleep(2500);
   const status = await lost.evaluate(() => window.catgs.status);
-  check(noScene.startsWith('There is no scene named \'nosuchscene\' on this server. Choose one:') && status === 'no-scene',
+  check(noScene.startsWith('There is no scene named \'nosuchscene\' on this server; it has biker. Choose one:') && status === 'no-scene',
     `?scene=nosuchscene: "${noScene}", the picker lists biker, no retries (${status})`);
   await shot(lost, 'notes_no_such_scene.png');
   await lost.close();

@@ -1170,10 +1170,11 @@ test('the viewer library imports nothing from the page', () => {
     importsOf(f).forEach(visit);
   };
   visit('viewer/viewer.js');
+  visit('viewer/loader.js'); // the other entry: the classic script a host page copies inline
   const readme = readFileSync(path.join(web, 'README.md'), 'utf8');
   const marked = new Set([...readme.matchAll(/^\| ([a-z_0-9.,/ ]+\.js) \(library\) \|/gm)].flatMap((m) => m[1].split(/, */)));
   assert.deepEqual([...reached].sort(), [...marked].sort(), 'README.md marks exactly the library\'s modules "(library)"');
-  assert.deepEqual([...reached].sort(), [...libraryFiles].sort(), 'every module in viewer/ is reached from viewer/viewer.js');
+  assert.deepEqual([...reached].sort(), [...libraryFiles].sort(), 'every module in viewer/ is reached from viewer/viewer.js or is the loader');
   // The old entry path re-exports the library and nothing else.
   assert.deepEqual(importsOf('viewer.js'), ['viewer/viewer.js']);
 });
@@ -1188,6 +1189,12 @@ test('state words: each viewer status in words, with its action', () => {
   assert.deepEqual(v('unreachable'), { text: 'cannot reach the server, retrying now', level: 'error', actions: ['retry'] });
   assert.equal(v('no-scene').actions, 'picker');
   assert.match(v('no-scene').text, /no scene named 'nope'/);
+  // The server's reason lists its scenes; the words pass them on.
+  assert.equal(v('no-scene', { closeInfo: { error: { code: 3, reason: "no scene 'nope' on this server (it has: biker, garden)" } } }).text,
+    "There is no scene named 'nope' on this server; it has biker, garden. Choose one:");
+  // A draining server's Stats: the countdown while it still streams, nothing after.
+  assert.equal(v('streaming', { drainEndsAt: performance.now() + 2600 }).text, 'server stopping: this stream ends in 3 s, then reconnects');
+  assert.equal(v('streaming', { drainEndsAt: performance.now() - 10 }), null);
   assert.equal(v('needs-token').text, 'this server needs an access token');
   assert.equal(v('needs-token', { token: 'x' }).text, 'wrong token: enter the access token');
   assert.equal(v('disconnected', { closeInfo: { error: { code: 8, reason: 'queue full' } } }).text,

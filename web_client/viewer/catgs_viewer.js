@@ -116,6 +116,7 @@ export class CatgsViewer extends EventTarget {
     this.depthGridSequence = -1;
     this.lastPoseSent = null;
     this.reconnectAt = 0;
+    this.drainEndsAt = 0; // performance.now() when a draining server ends this session (0: none)
     this.status = 'starting';
     this.startError = ''; // why the viewer could not start (status 'unsupported' or 'error')
     this.loadProgress = null; // the last LoadProgress (the scene loading for this session)
@@ -200,8 +201,8 @@ export class CatgsViewer extends EventTarget {
     // The server would refuse the WebSocket of a page of this origin (403 at the handshake, which
     // a page cannot read): say so rather than retrying as if the server were away.
     if (this.protocol.sessionOriginRefused) {
-      return this._fail('origin-refused', `this site (${location.origin}) may not open a stream on this server: ` +
-        'the server\'s --allowed-origins must list it');
+      return this._fail('origin-refused', `this site (${location.origin}) may not show streams from this server; ` +
+        'its operator can allow it (--allowed-origins)');
     }
     this.codecs = this.codec === 'h264' ? [CODEC_H264] : await decodableCodecs();
     if (this.abort.signal.aborted) return false; // closed meanwhile
@@ -323,6 +324,8 @@ export class CatgsViewer extends EventTarget {
         this._onFrameMessage(msg);
         break;
       case 'stats':
+        // A draining server (SIGTERM) says when it ends this session: the words count it down.
+        this.drainEndsAt = msg.drain_ms_left > 0 ? performance.now() + msg.drain_ms_left : 0;
         this._emit('stats', { server: this._plain('Stats', msg), rttMs: this.rttMs, framesDecoded: this.framesDecoded });
         this._keepAlive(); // message events still run when a hidden tab's timers are throttled
         break;
@@ -386,6 +389,7 @@ export class CatgsViewer extends EventTarget {
     this.closeInfo = info;
     this.decoder.reset();
     this.reconnectAt = performance.now() + (retryInMs || 0);
+    this.drainEndsAt = 0;
     // A restarting server's later attempts say "restarting" still (closeStatus says "stopping").
     const status = info.stopping && !error && this.status === 'restarting' ? 'restarting' : closeStatus(info);
     const was = this.status;

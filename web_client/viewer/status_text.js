@@ -31,8 +31,12 @@ export function statusText(viewer, scene = '') {
     }
     case 'first-view':
       return { text: 'rendering the first view…', level: 'info' };
-    case 'streaming':
-      return null;
+    case 'streaming': {
+      // A draining server (a rollout, a scale-down): when this stream ends; the reconnect then
+      // finds another replica, or this one back.
+      const left = viewer.drainEndsAt ? Math.ceil((viewer.drainEndsAt - performance.now()) / 1000) : 0;
+      return left > 0 ? { text: `server stopping: this stream ends in ${left} s, then reconnects`, level: 'warn' } : null;
+    }
     case 'unreachable':
       return { text: `cannot reach the server, retrying ${when()}`, level: 'error' };
     case 'server-full': {
@@ -45,8 +49,12 @@ export function statusText(viewer, scene = '') {
     case 'restarting':
     case 'stopping':
       return { text: `server ${viewer.status}, reconnecting ${when()}`, level: 'warn' };
-    case 'no-scene':
-      return { text: `There is no scene named '${scene}' on this server.`, level: 'warn' };
+    case 'no-scene': {
+      // The server's reason lists what it has ("no scene 'x' on this server (it has: a, b)").
+      const e = closeError();
+      const has = e && /\(it has: (.+)\)$/.exec(e.reason || '');
+      return { text: `There is no scene named '${scene}' on this server${has ? `; it has ${has[1]}` : ''}.`, level: 'warn' };
+    }
     case 'needs-token':
       return { text: viewer.token ? 'wrong token: this view needs another access token' : 'this server needs an access token',
         level: 'error' };
