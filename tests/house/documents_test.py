@@ -4,16 +4,20 @@
 Checks, each failure printed with the file and the offending name:
   lines     RESULTS.md and tests/gpu/RESULTS.md have at most 400 lines each (the results page is
             today's numbers; what came before lives in docs/history/).
-  flags     every --flag that README.md and the component READMEs name is one some program
+  flags     every --flag that README.md, the component READMEs, docs/DESIGN.md and RESULTS.md name is one some program
             of ours offers: in the --help of the programs in BIN_DIR, or in the text of the
             scripts and test drivers that take it (scripts/, tests/**/*.sh, tests/e2e/*.mjs),
             or one of the outside tools' flags listed below (EXTERNAL_FLAGS).
   paths     every repository path they name (in `code` or as a link target) exists: relative to
-            the repository, to the README's folder or to one of the include roots (server/,
-            render_core/, tools/, web_client/, tests/). Build outputs, the data folder and
-            names with placeholders (NAME, *, {a,b}, <x>) are not paths of the repository.
+            the repository, to the document's folder (`../` too, unless it leaves the
+            repository) or to one of the include roots (server/, render_core/, tools/,
+            web_client/, tests/). Build outputs, the data folder and names with placeholders
+            (NAME, *, {a,b}, <x>) are not paths of the repository; a Markdown file's name is never
+            a placeholder (`docs/NOPE.md` is checked).
+            The documents: the READMEs, docs/DESIGN.md, the RESULTS pages and docs/history/.
   layering  inside render_core/ and server/ a room includes only rooms below it in README.md's
-            "Layout" table, except the includes listed in LAYERING_EXCEPTIONS (each says why).
+            "Layout" table, except the includes listed in LAYERING_EXCEPTIONS (each says why);
+            a folder of sources there that the table does not list fails until it is placed.
 
 usage: documents_test.py [--source-dir DIR] [--bin-dir DIR] [--only lines,flags,paths,layering]
 Exit 0 when every check holds, 1 otherwise; without --bin-dir the flags check reads no --help
@@ -30,6 +34,16 @@ READMES = [
     "README.md", "server/README.md", "render_core/README.md", "tools/README.md", "web_client/README.md",
     "deploy/README.md", "tests/e2e/README.md", "tests/fuzz/README.md", "tests/results/README.md",
 ]
+# Whose paths are checked too, and of those whose flags (the others name removed flags as history).
+DOCUMENTS = ["docs/DESIGN.md", "RESULTS.md", "tests/gpu/RESULTS.md", "tests/gpu/results/README.md"]
+FLAG_DOCUMENTS = ["docs/DESIGN.md", "RESULTS.md"]
+
+
+def documents(root):
+    """Every document whose paths are checked: the READMEs, DOCUMENTS and docs/history/*.md."""
+    history = os.path.join(root, "docs", "history")
+    pages = sorted("docs/history/" + f for f in os.listdir(history) if f.endswith(".md")) if os.path.isdir(history) else []
+    return READMES + DOCUMENTS + pages
 PROGRAMS = ["catgs-server", "catgs-loadgen", "catgs-bench", "catgs-scene", "catgs-render", "catgs-encode-bench", "catgs-shown"]
 # Flags of tools that are not ours, named in the READMEs where they say how to run them.
 EXTERNAL_FLAGS = {
@@ -40,7 +54,7 @@ EXTERNAL_FLAGS = {
     "--encode",  # protoc
 }
 # Paths the READMEs name that are other projects' (a library's source file, an image).
-EXTERNAL_PATHS = {"lib/roles/ws/ops-ws.c", "nvidia/cuda"}
+EXTERNAL_PATHS = {"lib/roles/ws/ops-ws.c", "nvidia/cuda", "gsplat/experimental/render/kernels/cuda/csrc/gaussian_inference/"}
 # Includes against the Layout table's order, each with its reason.
 LAYERING_EXCEPTIONS = {
     ("render_core/renderer", "render_core/cpu"): "the renderer factory picks a core",
@@ -89,7 +103,7 @@ def known_flags(root, bin_dir):
 def check_flags(root, bin_dir):
     known = known_flags(root, bin_dir)
     bad = []
-    for rel in READMES:
+    for rel in READMES + FLAG_DOCUMENTS:
         path = os.path.join(root, rel)
         if not os.path.exists(path):
             continue
@@ -104,24 +118,40 @@ def check_flags(root, bin_dir):
     return bad
 
 
-PLACEHOLDER = re.compile(r"[*{}<>$~ ]|\b[A-Z]{2,}[A-Z0-9_]*\b|\.\.\.")
-NOT_REPO = ("build/", "out/", "/", "http", "../", ".carry", "node_modules", "tests/e2e/node_modules", "$")
+PLACEHOLDER = re.compile(r"[*{}<>$~ ]|\.\.\.")
+CAPS_WORD = re.compile(r"\b[A-Z]{2,}[A-Z0-9_]*\b")  # NAME, WxH: a placeholder, except in a .md name
+NOT_REPO = ("build/", "out/", "/", "http", ".carry", "node_modules", "tests/e2e/node_modules", "$", "../shared/")
 
 
 def path_candidates(text):
-    for m in re.finditer(r"`([^`\n]+)`", text):
-        yield m.group(1)
-    for m in re.finditer(r"\]\(([^)\s]+)\)", text):
-        yield m.group(1)
+    """(token, the text around it): `code` spans and link targets."""
+    for m in re.finditer(r"`([^`\n]+)`|\]\(([^)\s]+)\)", text):
+        around = text[max(0, m.start() - 300):m.end() + 200]
+        yield m.group(1) or m.group(2), around
+
+
+def in_named_commit(root, token, around, bases):
+    """Whether a path gone from the tree is one a commit named near it held (history's
+    `commit 2214945 holds them`), or names a branch of the repository."""
+    if subprocess.run(["git", "-C", root, "rev-parse", "--verify", "-q", token], capture_output=True).returncode == 0:
+        return True
+    for commit in set(re.findall(r"\b[0-9a-f]{7,40}\b", around)):
+        for b in bases:
+            spec = f"{commit}:{os.path.normpath(os.path.join(b, token))}"
+            if subprocess.run(["git", "-C", root, "cat-file", "-e", spec], capture_output=True).returncode == 0:
+                return True
+    return False
 
 
 def looks_like_path(token):
     token = token.split("#")[0].split(":")[0].rstrip(".,;)")
     if not token or PLACEHOLDER.search(token) or token.startswith(NOT_REPO) or token.startswith("-"):
         return None
-    if "/" not in token or "=" in token or "(" in token or token.startswith("."):
+    if CAPS_WORD.search(token) and not token.endswith(".md"):
         return None
-    first = token.split("/")[0]
+    if "/" not in token or "=" in token or "(" in token or (token.startswith(".") and not token.startswith("../")):
+        return None
+    first = token.split("/")[0] if not token.startswith("../") else "up"
     # A domain (docker.io/..., nvidia.com/gpu) or a test's output folder (e2e_out/) is not ours.
     if not re.fullmatch(r"[a-z_][a-z0-9_-]*", first) or first.endswith("_out") or token in EXTERNAL_PATHS:
         return None
@@ -129,16 +159,37 @@ def looks_like_path(token):
 
 
 def check_paths(root):
-    roots = ["", "server", "render_core", "tools", "web_client", "tests", "tests/gpu", "docs"]
+    roots = ["", "server", "render_core", "tools", "web_client", "tests", "tests/gpu", "docs", "tests/gpu/results",
+             "tests/results"]
+    # A results topic's own files are named from its folder (`bench60/` of speculation/).
+    for top in ["tests/gpu/results", "tests/results"]:
+        if os.path.isdir(os.path.join(root, top)):
+            roots += [f"{top}/{d}" for d in sorted(os.listdir(os.path.join(root, top)))
+                      if os.path.isdir(os.path.join(root, top, d))]
     bad = []
-    for rel in READMES:
+    for rel in documents(root):
         path = os.path.join(root, rel)
         if not os.path.exists(path):
             continue
         here = os.path.dirname(rel)
-        for token in sorted(set(filter(None, map(looks_like_path, path_candidates(read(path)))))):
+        seen = set()
+        for raw, around in path_candidates(read(path)):
+            token = looks_like_path(raw)
+            if not token or token in seen:
+                continue
+            seen.add(token)
+            if token.startswith("../"):
+                # Up from the document's folder: checked there, unless it leaves the repository
+                # (../shared, the data beside the clone).
+                up = os.path.normpath(os.path.join(here, token))
+                if up.startswith("..") or token.startswith("../shared/"):
+                    continue
+                if not os.path.exists(os.path.join(root, up)):
+                    bad.append(f"{rel}: `{token}` does not exist ({up})")
+                continue
             bases = [here] + roots
-            if not any(os.path.exists(os.path.join(root, b, token)) for b in bases):
+            if not any(os.path.exists(os.path.join(root, b, token)) for b in bases) and \
+                    not in_named_commit(root, token, around, bases):
                 bad.append(f"{rel}: `{token}` does not exist (looked in the repository, {here or '.'}/ and the "
                            "include roots)")
     return bad
@@ -157,10 +208,14 @@ def layout_rooms(root):
 
 
 def room_of_file(rel, rooms):
+    """The room of a file: its folder, or the nearest folder above it that is a room; a folder
+    directly under render_core/ or server/ that is not a room is no room (None)."""
     folder = os.path.dirname(rel)
     while folder:
         if folder in rooms:
             return folder
+        if os.path.dirname(folder) in ("render_core", "server"):
+            return None
         folder = os.path.dirname(folder)
     return None
 
@@ -184,11 +239,13 @@ def check_layering(root):
     bad = []
     files = subprocess.run(["git", "-C", root, "ls-files", "server", "render_core"], capture_output=True,
                            text=True).stdout.split()
+    unplaced = set()
     for rel in files:
         if not rel.endswith((".h", ".cpp", ".cu", ".cuh")):
             continue
         mine = room_of_file(rel, rooms)
         if not mine:
+            unplaced.add(os.path.dirname(rel))
             continue
         for inc in re.findall(r'^\s*#\s*include\s+"([^"]+)"', read(os.path.join(root, rel)), re.M):
             theirs = room_of_include(inc, mine, root, rooms)
@@ -197,6 +254,8 @@ def check_layering(root):
             if (mine, theirs) in LAYERING_EXCEPTIONS or (mine, "*") in LAYERING_EXCEPTIONS:
                 continue
             bad.append(f"{rel}: includes \"{inc}\" ({theirs}/, above {mine}/ in README.md's Layout table)")
+    for folder in sorted(unplaced):
+        bad.append(f"{folder}/: sources in a folder README.md's Layout table does not list (place it there)")
     return bad
 
 
