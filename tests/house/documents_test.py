@@ -136,6 +136,11 @@ def in_named_commit(root, token, around, bases):
     if subprocess.run(["git", "-C", root, "rev-parse", "--verify", "-q", token], capture_output=True).returncode == 0:
         return True
     for commit in set(re.findall(r"\b[0-9a-f]{7,40}\b", around)):
+        if not re.search(r"[a-f]", commit) or not re.search(r"[0-9]", commit):
+            continue  # a number or a word, not a commit
+        known = subprocess.run(["git", "-C", root, "cat-file", "-e", commit + "^{commit}"], capture_output=True)
+        if known.returncode != 0:
+            return True  # a clone without that history (shallow) cannot tell: not counted against the page
         for b in bases:
             spec = f"{commit}:{os.path.normpath(os.path.join(b, token))}"
             if subprocess.run(["git", "-C", root, "cat-file", "-e", spec], capture_output=True).returncode == 0:
