@@ -55,6 +55,9 @@ EXTERNAL_FLAGS = {
 }
 # Paths the READMEs name that are other projects' (a library's source file, an image).
 EXTERNAL_PATHS = {"lib/roles/ws/ops-ws.c", "nvidia/cuda", "gsplat/experimental/render/kernels/cuda/csrc/gaussian_inference/"}
+# Files scripts/setup_web.sh generates (git-ignored): a fresh clone has them only after it.
+GENERATED_PATHS = {"web_client/viewer/catgs_stream.proto", "web_client/viewer/catgs_stream.json",
+                   "viewer/catgs_stream.proto", "viewer/catgs_stream.json"}
 # Includes against the Layout table's order, each with its reason.
 LAYERING_EXCEPTIONS = {
     ("render_core/renderer", "render_core/cpu"): "the renderer factory picks a core",
@@ -136,11 +139,13 @@ def in_named_commit(root, token, around, bases):
     if subprocess.run(["git", "-C", root, "rev-parse", "--verify", "-q", token], capture_output=True).returncode == 0:
         return True
     for commit in set(re.findall(r"\b[0-9a-f]{7,40}\b", around)):
-        if not re.search(r"[a-f]", commit) or not re.search(r"[0-9]", commit):
-            continue  # a number or a word, not a commit
         known = subprocess.run(["git", "-C", root, "cat-file", "-e", commit + "^{commit}"], capture_output=True)
         if known.returncode != 0:
-            return True  # a clone without that history (shallow) cannot tell: not counted against the page
+            shallow = subprocess.run(["git", "-C", root, "rev-parse", "--is-shallow-repository"], capture_output=True,
+                                     text=True).stdout.strip() == "true"
+            if shallow:
+                return True  # a clone without the history cannot tell: not counted against the page
+            continue  # a number or a word, not a commit
         for b in bases:
             spec = f"{commit}:{os.path.normpath(os.path.join(b, token))}"
             if subprocess.run(["git", "-C", root, "cat-file", "-e", spec], capture_output=True).returncode == 0:
@@ -158,7 +163,7 @@ def looks_like_path(token):
         return None
     first = token.split("/")[0] if not token.startswith("../") else "up"
     # A domain (docker.io/..., nvidia.com/gpu) or a test's output folder (e2e_out/) is not ours.
-    if not re.fullmatch(r"[a-z_][a-z0-9_-]*", first) or first.endswith("_out") or token in EXTERNAL_PATHS:
+    if not re.fullmatch(r"[a-z_][a-z0-9_-]*", first) or first.endswith("_out") or token in EXTERNAL_PATHS | GENERATED_PATHS:
         return None
     return token
 
