@@ -382,7 +382,7 @@ shown() {
 
 # threadcpu NAME SCENE N [SERVER ARGS]: where the server's cores go with N sessions at 720p on
 # SCENE's three real paths (issue 92): CPU seconds per thread kind (/proc/PID/task/*: catgs-lws,
-# catgs-laneK, catgs-poolK with the x264 threads they start, the rest) over 8 s in the middle of
+# catgs-laneK, catgs-poolK, catgs-x264 (x264's sliced threads, named when an encoder opens), the rest) over 8 s in the middle of
 # a 12 s run, beside the run's own summary -> $OUT/threadcpu-NAME.txt.
 threadcpu() {
   local name=$1 scene=$2 n=$3 W=/tmp/catgs_sweep
@@ -411,7 +411,7 @@ def sample():
 a = sample(); time.sleep(span); b = sample()
 kinds = {}
 for d, (comm, t) in b.items():
-    kind = re.sub(r'\d+$', '', comm)
+    kind = comm if comm == 'catgs-x264' else re.sub(r'\d+$', '', comm)
     k = kinds.setdefault(kind, [0.0, 0])
     k[0] += t - a.get(d, (comm, 0.0))[1]; k[1] += 1
 total = sum(v[0] for v in kinds.values())
@@ -565,7 +565,7 @@ j["host"] = {"cpu_busy_fraction": busy, "server_cpu_seconds": (int(s1) - int(s0)
              "gpu_memory_used_mib_max": max(mem) if mem else None}
 # The server's threads (thread_times: the clock, then TID NAME TICKS lines): each one's share of
 # a core over the step, the busiest first, and per name family (digits dropped: catgs-lane,
-# catgs-pool, catgs-lws; x264's threads carry the name of the thread that opened the encoder).
+# catgs-pool, catgs-lws, catgs-x264: x264's sliced threads).
 def times(f):
     lines = open(f).read().split("\n")
     return float(lines[0]), {l.split(" ", 1)[0]: l.split(" ", 1)[1].rsplit(" ", 1) for l in lines[1:] if l}
@@ -577,7 +577,8 @@ share = sorted(((name, (int(ticks) - int(a.get(tid, [name, 0])[1])) / hz / wall)
                key=lambda x: -x[1])
 families = {}
 for name, f in share:
-    fam = families.setdefault(re.sub(r"\d+$", "", name), {"threads": 0, "cores": 0.0, "busiest": 0.0})
+    fam = families.setdefault(name if name == "catgs-x264" else re.sub(r"\d+$", "", name),
+                              {"threads": 0, "cores": 0.0, "busiest": 0.0})
     fam["threads"] += 1; fam["cores"] += f; fam["busiest"] = max(fam["busiest"], f)
 j["host"]["server_threads_busiest"] = [[n, round(f, 3)] for n, f in share[:8]]
 j["host"]["server_thread_families"] = families

@@ -59,6 +59,7 @@ struct EncodedFrame {
                                    // sequence header OBU in band on key frames
   bool key_frame = false;          // IDR (AV1: a key frame)
   double encode_ms = 0;            // encoder time (plane copy included)
+  double thread_cpu_ms = 0;        // the calling thread's CPU time in the call (0 where not measured)
   // The coded picture (what a decoder shows) against the picture given, PSNR over the three
   // planes by sample count, dB, as the encoder measured it; 0 where the encoder does not (NVENC,
   // AV1). x264 only: X264Encoder.

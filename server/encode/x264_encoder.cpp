@@ -6,6 +6,10 @@
 #include <cstdarg>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <set>
 #include <stdexcept>
 #include <string>
 
@@ -24,6 +28,13 @@ constexpr int kDefaultVbvMs = 250;
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The calling thread's CPU time, ms (CLOCK_THREAD_CPUTIME_ID).
+double thread_cpu_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) * 1e3 + static_cast<double>(t.tv_nsec) * 1e-6;
 }
 
 // x264's own options after the preset ("name=value:name=value"): the preset's tools turned back
@@ -52,6 +63,23 @@ void apply_params(x264_param_t& p, const std::string& params) {
 void set_vbv(x264_param_t& p, int kbps, double vbv_ms) {
   p.rc.i_vbv_max_bitrate = kbps;
   p.rc.i_vbv_buffer_size = static_cast<int>(std::clamp(kbps * vbv_ms / 1000.0, 1.0, static_cast<double>(INT_MAX)));
+}
+
+// The process's threads now (Linux: /proc/self/task), to find the ones x264_encoder_open starts.
+std::set<std::string> thread_ids() {
+  std::set<std::string> ids;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator("/proc/self/task", ec)) ids.insert(e.path().filename());
+  return ids;
+}
+
+// Names the sliced threads x264 started "catgs-x264" (they would carry the opening pool thread's
+// name), so a host profile splits the encode from the rest of the pool's work (issue 92). A
+// thread another part of the server started in the same moment would be named so too: the
+// server starts its own threads at start-up only. A failure only loses the name.
+void name_x264_threads(const std::set<std::string>& before) {
+  for (const std::string& id : thread_ids())
+    if (!before.count(id)) std::ofstream("/proc/self/task/" + id + "/comm") << "catgs-x264";
 }
 
 // x264's log: its errors to stderr. The rest (its banner, a warning that PSNR with psy tuning
@@ -117,7 +145,9 @@ X264Encoder::X264Encoder(const EncoderConfig& config) : config_(config), state_(
     // over the reconstructed rows, which x264 filters anyway.
     p.analyse.b_psnr = 1;
     apply_params(p, x264_params(config));
+    const std::set<std::string> threads_before = thread_ids();
     encoder_ = x264_encoder_open(&p);
+    name_x264_threads(threads_before);
     if (!encoder_) throw std::runtime_error("x264: cannot open the encoder with preset " + config.x264_preset);
     if (x264_picture_alloc(&state_->picture, X264_CSP_I420, config.width, config.height) < 0)
       throw std::runtime_error("x264: out of memory for the input picture");
@@ -153,6 +183,7 @@ EncodedFrame X264Encoder::encode_yuv420(const Yuv420Planes& p, bool force_idr) {
     throw std::invalid_argument("x264: encode_yuv420 needs three planes with strides >= " + std::to_string(w) + ", " +
                                 std::to_string(w / 2));
   const auto t0 = std::chrono::steady_clock::now();
+  const double cpu0 = thread_cpu_ms();
   const Yuv420Target to = input_target();
   for (int row = 0; row < h; ++row) std::memcpy(to.y + row * to.y_stride, p.y + row * p.y_stride, w);
   for (int row = 0; row < h / 2; ++row) {
@@ -161,6 +192,7 @@ EncodedFrame X264Encoder::encode_yuv420(const Yuv420Planes& p, bool force_idr) {
   }
   EncodedFrame out = encode_input(force_idr);
   out.encode_ms = ms_since(t0);  // the plane copy counts as encode time
+  out.thread_cpu_ms = thread_cpu_ms() - cpu0;
   return out;
 }
 
@@ -179,6 +211,7 @@ EncodedFrame X264Encoder::encode_input(bool force_idr) {
 
 EncodedFrame X264Encoder::encode_picture(bool force_idr) {
   const auto t0 = std::chrono::steady_clock::now();
+  const double cpu0 = thread_cpu_ms();
   x264_picture_t& in = state_->picture;
   in.i_pts = pts_++;
   in.i_type = (force_idr || in.i_pts == 0) ? X264_TYPE_IDR : X264_TYPE_AUTO;
@@ -198,6 +231,7 @@ EncodedFrame X264Encoder::encode_picture(bool force_idr) {
   out.key_frame = out_picture.b_keyframe != 0;
   out.psnr_db = out_picture.prop.f_psnr_avg;
   out.encode_ms = ms_since(t0);
+  out.thread_cpu_ms = thread_cpu_ms() - cpu0;
   return out;
 }
 

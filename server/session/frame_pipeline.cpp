@@ -526,6 +526,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   static_cast<RenderRecord&>(r) = rendered;  // the frame's record, whole
   r.encode_ms = enc.encode_ms;
   r.encode_psnr_db = enc.psnr_db;
+  r.encode_thread_cpu_ms = enc.thread_cpu_ms;
   r.encoder = encoder_label_;
   r.total_ms = ms_between(job.pose.received, Clock::now());
   r.quality_level = job.shape.quality_level;
@@ -565,6 +566,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_convert_ms(r.convert_ms);
   t->set_encode_ms(r.encode_ms);
   t->set_encode_psnr_db(static_cast<float>(r.encode_psnr_db));
+  t->set_encode_thread_cpu_ms(r.encode_thread_cpu_ms);
   t->set_total_ms(r.total_ms);
   t->set_previous_send_ms(job.shape.previous_send_ms);
   t->set_render_key_frame(r.render_key_frame);

@@ -124,9 +124,10 @@ class FramePipeline {
     std::chrono::steady_clock::time_point link_read_at{};  // JobShape's: the rate it was encoded at
     int link_ceiling_kbps = 0;  // the frame's FrameEncoding::link_ceiling_kbps (what the link's controller caps)
     double encode_ms = 0;
-    double encode_psnr_db = 0;  // EncodedFrame::psnr_db (FrameTimings.encode_psnr_db)
-    std::string encoder;        // Stats.encoder: the encoder that coded it ("x264 superfast")
-    double total_ms = 0;        // pose received -> frame handed off (FrameTimings.total_ms)
+    double encode_psnr_db = 0;        // EncodedFrame::psnr_db (FrameTimings.encode_psnr_db)
+    double encode_thread_cpu_ms = 0;  // EncodedFrame::thread_cpu_ms (FrameTimings.encode_thread_cpu_ms)
+    std::string encoder;              // Stats.encoder: the encoder that coded it ("x264 superfast")
+    double total_ms = 0;              // pose received -> frame handed off (FrameTimings.total_ms)
     int quality_level = 0;
     bool refine = false;       // the still view's refine frame
     bool predicted = false;    // drawn at a predicted pose (pose_prediction.h), not the client's

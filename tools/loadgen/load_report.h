@@ -35,6 +35,7 @@ struct StageSums {
   // one, and their count (x264 streams; 0 for NVENC and AV1).
   double encode_psnr_db = 0;
   std::uint64_t encode_psnr_frames = 0;
+  double encode_thread_cpu = 0;  // FrameTimings.encode_thread_cpu_ms summed over frames
   // The renderer's own stage times (FrameTimings.stage_*_ms: frame, preprocess, keys, sort,
   // ranges, rasterize), summed over frames, and per render lane its frames and frame times.
   static constexpr const char* kStageNames[6] = {"frame", "preprocess", "keys", "sort", "ranges", "rasterize"};

@@ -456,6 +456,7 @@ class PoseLoop {
     r_.server.lod_error_px += t.lod_error_px();
     r_.server.lod_error_px_max = std::max<double>(r_.server.lod_error_px_max, t.lod_error_px());
     r_.server.splats += t.splats();
+    r_.server.encode_thread_cpu += t.encode_thread_cpu_ms();
     if (t.encode_psnr_db() > 0) {
       r_.server.encode_psnr_db += t.encode_psnr_db();
       r_.server.encode_psnr_frames++;
