@@ -264,16 +264,7 @@ void FramePipeline::finish_render_into(Rendered& r) {
     throw;
   }
   if (gpu_ >= 0) frames_with_it = 0.5 * (r.gpu_frames_at_begin + metrics_.gpu_render_end(gpu_));
-  const FrameStats& stats = renderer_->last_stats();
-  const double stages[6] = {stats.total_ms, stats.preprocess_ms, stats.keys_ms,
-                            stats.sort_ms,  stats.ranges_ms,     stats.rasterize_ms};
-  std::copy(std::begin(stages), std::end(stages), std::begin(r.stage_ms));
-  r.render_key_frame = stats.key_frame;
-  r.render_rekey = stats.subframe_rejected;
-  r.predicted_gain = stats.predicted_gain;
-  r.measured_gain = stats.measured_gain;
-  r.speculation_window = stats.window;
-  r.splats = stats.visible;
+  r.frame = renderer_->last_stats();
   r.buffer_bytes = renderer_->device_buffer_bytes();
   r.buffer_shape = renderer_->buffer_shape();
   const DepthGrid& depth = renderer_->last_depth_grid();
@@ -287,9 +278,9 @@ void FramePipeline::finish_render_into(Rendered& r) {
   // against the cut's prediction: the throughput is then counted in the prediction's Gaussians
   // (render/lod_bound.h), else the budget would shrink with every Gaussian the culling saves.
   const std::uint64_t throughput_splats = renderer_->options().occlusion_culling
-                                              ? std::max<std::uint64_t>(r.splats, lod_bound_.predicted_splats())
-                                              : r.splats;
-  if (gpu_ >= 0 && r.render_key_frame)
+                                              ? std::max<std::uint64_t>(r.frame.visible, lod_bound_.predicted_splats())
+                                              : r.frame.visible;
+  if (gpu_ >= 0 && r.frame.key_frame)
     metrics_.observe_gpu_throughput(gpu_, throughput_splats, r.render_ms, frames_with_it);
 }
 
@@ -569,19 +560,19 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_encode_thread_cpu_ms(r.encode_thread_cpu_ms);
   t->set_total_ms(r.total_ms);
   t->set_previous_send_ms(job.shape.previous_send_ms);
-  t->set_render_key_frame(r.render_key_frame);
-  t->set_render_rekey(r.render_rekey);
-  t->set_speculation_predicted_gain(static_cast<float>(r.predicted_gain));
-  t->set_speculation_measured_gain(static_cast<float>(r.measured_gain));
-  t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.speculation_window)));
+  t->set_render_key_frame(r.frame.key_frame);
+  t->set_render_rekey(r.frame.subframe_rejected);
+  t->set_speculation_predicted_gain(static_cast<float>(r.frame.predicted_gain));
+  t->set_speculation_measured_gain(static_cast<float>(r.frame.measured_gain));
+  t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.frame.window)));
   t->set_lod_error_px(r.lod_error_px);
-  t->set_splats(static_cast<std::uint32_t>(std::min<std::uint64_t>(r.splats, UINT32_MAX)));
-  t->set_stage_frame_ms(r.stage_ms[0]);
-  t->set_stage_preprocess_ms(r.stage_ms[1]);
-  t->set_stage_keys_ms(r.stage_ms[2]);
-  t->set_stage_sort_ms(r.stage_ms[3]);
-  t->set_stage_ranges_ms(r.stage_ms[4]);
-  t->set_stage_rasterize_ms(r.stage_ms[5]);
+  t->set_splats(static_cast<std::uint32_t>(std::min<std::uint64_t>(r.frame.visible, UINT32_MAX)));
+  t->set_stage_frame_ms(r.frame.total_ms);
+  t->set_stage_preprocess_ms(r.frame.preprocess_ms);
+  t->set_stage_keys_ms(r.frame.keys_ms);
+  t->set_stage_sort_ms(r.frame.sort_ms);
+  t->set_stage_ranges_ms(r.frame.ranges_ms);
+  t->set_stage_rasterize_ms(r.frame.rasterize_ms);
   t->set_render_lane(static_cast<std::uint32_t>(std::max(0, r.render_lane)));
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;

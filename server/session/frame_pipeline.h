@@ -82,18 +82,14 @@ class FramePipeline {
   // job to the encode job and to the strand, where Stats and /metrics read it; FrameTimings is
   // filled from it in one place, frame_message).
   struct RenderRecord {
-    bool render_key_frame = true;                  // catgs: a full pre-process (false: a cached sub-frame)
-    bool render_rekey = false;                     // catgs: a key frame first tried as a sub-frame (a re-key)
-    double predicted_gain = 0, measured_gain = 0;  // catgs cost model (FrameStats)
-    int speculation_window = 0;
-    float lod_error_px = 0;    // the LOD bound the frame drew at (0: full detail or no LOD)
-    std::uint64_t splats = 0;  // Gaussians that passed culling
+    // The renderer's own record of the frame, whole (renderer.h): a key frame or a catgs
+    // sub-frame, a re-key, the cost model's gains, the window, the Gaussians that passed culling
+    // (visible), the stage times.
+    FrameStats frame;
+    float lod_error_px = 0;  // the LOD bound the frame drew at (0: full detail or no LOD)
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
-    double lane_wait_ms = 0;  // of queue_ms: posted -> its lane began it (FrameTimings.lane_wait_ms)
-    // The renderer's own stage times (FrameStats: total, preprocess, keys, sort, ranges,
-    // rasterize) and the render lane that drew it (-1: none), for FrameTimings.
-    double stage_ms[6] = {};
-    int render_lane = -1;
+    double lane_wait_ms = 0;         // of queue_ms: posted -> its lane began it (FrameTimings.lane_wait_ms)
+    int render_lane = -1;            // the render lane that drew it (-1: none)
     std::string error;               // non-empty: the render (or, in JobResult, the encode) failed
     bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
     bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)

@@ -221,13 +221,13 @@ void SessionStream::count(const JobResult& result) {
   }
   encoder_ = result.encoder;
   lod_error_px_sum_ += result.lod_error_px;
-  splats_sum_ += static_cast<double>(result.splats);
+  splats_sum_ += static_cast<double>(result.frame.visible);
   if (result.memory_fallback > 0) {
     memory_fallbacks_++;
     memory_note_ = result.memory_note;
   }
   if (result.key_frame) key_frames_++;
-  if (result.render_key_frame)
+  if (result.frame.key_frame)
     render_key_frames_++;
   else
     render_sub_frames_++;
@@ -235,17 +235,17 @@ void SessionStream::count(const JobResult& result) {
   m.frames_total++;
   m.bytes_total += result.payload_bytes;
   if (result.key_frame) m.key_frames_total++;
-  (result.render_key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
-  if (result.render_rekey) m.render_rekeys_total++;
-  if (result.predicted_gain > 0) m.speculation_predicted_gain.observe(result.predicted_gain);
-  if (result.measured_gain > 0) m.speculation_measured_gain.observe(result.measured_gain);
+  (result.frame.key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
+  if (result.frame.subframe_rejected) m.render_rekeys_total++;
+  if (result.frame.predicted_gain > 0) m.speculation_predicted_gain.observe(result.frame.predicted_gain);
+  if (result.frame.measured_gain > 0) m.speculation_measured_gain.observe(result.frame.measured_gain);
   m.queue_seconds.observe(result.queue_ms / 1000.0);
-  (result.render_key_frame ? m.render_key_seconds : m.render_sub_seconds).observe(result.render_ms / 1000.0);
+  (result.frame.key_frame ? m.render_key_seconds : m.render_sub_seconds).observe(result.render_ms / 1000.0);
   if (gpu_ >= 0) m.observe_gpu_render(gpu_, result.render_ms / 1000.0);
   m.convert_seconds.observe(result.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   if (result.encode_psnr_db > 0) m.encode_psnr_db.observe(result.encode_psnr_db);
-  m.speculation_window.observe(result.speculation_window);
+  m.speculation_window.observe(result.frame.window);
   m.frame_lod_bound_px.observe(result.lod_error_px);
 }
 
