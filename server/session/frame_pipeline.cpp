@@ -442,8 +442,11 @@ FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
     result.link_ceiling_kbps = settings.link_ceiling_kbps;
     return result;
   } catch (const std::exception& e) {
+    // The frame's record stays with it (what was drawn, the buffers the session holds: the
+    // strand reads them from every result), with the encoder's reason.
     JobResult r;
-    r.error = e.what();
+    static_cast<RenderRecord&>(r) = frame;
+    r.error = e.what();  // the encoder names itself ("x264: ...")
     return r;
   }
 }
