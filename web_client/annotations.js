@@ -10,7 +10,7 @@
 // camera-to-world quaternion [w, x, y, z]) with the intrinsics the server renders with
 // (camera.js intrinsicsFor: square pixels, principal point at the centre).
 
-import { cameraForward, intrinsicsFor, lookAt, qnorm, qrotate, vadd, vcross, vdot, vlen, vnorm, vscale, vsub } from './viewer/camera.js';
+import { cameraForward, intrinsicsFor, lookAt, qnorm, qrotate, vadd, vcross, vdot, vlen, vnorm, vscale, vsub } from './viewer/viewer.js';
 
 export const LIMITS = { hotspots: 200, id: 64, title: 120, text: 2000, bytes: 32 * 1024 };
 

@@ -3,14 +3,12 @@
 // (catgs_viewer.js), which owns the stream: connection, decoding, canvas, camera controls.
 // Wiring only; the pieces live in the modules imported below.
 
-import { defaultWebSocketUrl } from './viewer/connection.js';
-import { CatgsViewer } from './viewer/viewer.js';
+import { CatgsViewer, defaultWebSocketUrl, parseMaxSize } from './viewer/viewer.js';
 import { Overlay } from './overlay.js';
 import {
   LOADGEN_SECONDS_PER_VIEW, PathRecorder, fromInriaCameras, fromTraceFile, resample, toInriaCameras,
   TOUR_SECONDS_PER_VIEW, toTraceFile,
-} from './viewer/paths.js';
-import { parseMaxSize } from './viewer/viewport.js';
+} from './viewer/viewer.js';
 import { NotesUi } from './notes_ui.js';
 import { WalkMode } from './walk.js';
 import { VideoExportUi, tourSamples } from './video_export.js';

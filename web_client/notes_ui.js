@@ -2,7 +2,7 @@
 // the scale; markers and the measurement line drawn over the canvas where the camera sees them.
 // The maths is annotations.js; the page (app.js) gives the camera, the depth probe and navigation.
 
-import { lookAt } from './viewer/camera.js';
+import { lookAt } from './viewer/viewer.js';
 import {
   decodeNotes, encodeNotes, hotspotId, hotspotTour, measure, normaliseAnnotations, projectPoint, scaleFrom, viewOf,
 } from './annotations.js';

@@ -1,7 +1,7 @@
 // The page's one message that says where the connection stands (the viewer library's words,
 // status_text.js), with its action: "retry now", the token field, or the scene picker.
 // README.md "States".
-import { ERROR_WORDS, statusText } from './viewer/status_text.js';
+import { ERROR_WORDS, statusText } from './viewer/viewer.js';
 
 export { ERROR_WORDS };
 

@@ -4,7 +4,7 @@
 // which become a Blob and a download link. The pure parts (the path on the wire, the bar's text,
 // the chunks' assembly) are node-tested (tests/e2e/unit_web.mjs).
 
-import { poseAtTime, tourDuration, tourPoseAt } from './viewer/paths.js';
+import { poseAtTime, tourDuration, tourPoseAt } from './viewer/viewer.js';
 
 const $ = (id) => document.getElementById(id);
 

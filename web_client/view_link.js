@@ -3,7 +3,7 @@
 // numbers a Pose carries: a pose means something only in its scene's world. Pure (no DOM), so
 // node unit-tests it.
 
-import { qnorm } from './viewer/camera.js';
+import { qnorm } from './viewer/viewer.js';
 
 // Parameters a shared link must not carry: the access token is the sender's, not the view's.
 const PRIVATE_PARAMS = ['token'];

@@ -20,7 +20,7 @@
 // to a quarter of the eye height), so the camera comes up to it. Looks alternate between two
 // rolls of the views up and down, and the ground counts once both agree (walkPlan says why).
 
-import { cameraForward, cameraRight, lookAt, vadd, vdot, vlen, vnorm, vscale, vsub } from './viewer/camera.js';
+import { cameraForward, cameraRight, lookAt, vadd, vdot, vlen, vnorm, vscale, vsub } from './viewer/viewer.js';
 import { alongGround, walkGroundAt, walkLookDistance, walkPlan, walkProbes, walkSizes, walkStep } from './annotations.js';
 
 const LOOK_INTERVAL_MS = 250; // walking: one look (4 probes) at most every 250 ms

@@ -1177,6 +1177,21 @@ test('the viewer library imports nothing from the page', () => {
   assert.deepEqual([...reached].sort(), [...libraryFiles].sort(), 'every module in viewer/ is reached from viewer/viewer.js or is the loader');
   // The old entry path re-exports the library and nothing else.
   assert.deepEqual(importsOf('viewer.js'), ['viewer/viewer.js']);
+  // The page reaches the library through its entry only: its API is what viewer.js exports.
+  for (const f of pageFiles) {
+    for (const dep of importsOf(f).filter((d) => d.startsWith('viewer/'))) {
+      assert.equal(dep, 'viewer/viewer.js', `the page's ${f} imports ${dep}: import it from viewer/viewer.js (the library's API)`);
+    }
+  }
+});
+
+test("README.md's table of the module's exports is what viewer/viewer.js exports", async () => {
+  const exported = Object.keys(await import(path.join(web, 'viewer/viewer.js'))).sort();
+  const readme = readFileSync(path.join(web, 'README.md'), 'utf8');
+  const table = readme.slice(readme.indexOf("The module's exports"));
+  const rows = table.slice(0, table.indexOf('\n\n', table.indexOf('| export |')));
+  const listed = [...rows.matchAll(/^\| (`[^|]+`) \|/gm)].flatMap((m) => [...m[1].matchAll(/`(\w+)`/g)].map((x) => x[1])).sort();
+  assert.deepEqual(listed, exported);
 });
 
 test('state words: each viewer status in words, with its action', () => {

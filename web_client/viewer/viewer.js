@@ -8,7 +8,19 @@
 import { CatgsViewer, VIEWER_EVENTS } from './catgs_viewer.js';
 import { statusText } from './status_text.js';
 
+// The library's API is what this module exports (README.md "Embedding", "The module's exports";
+// a test holds the two equal and fails on a page that imports another module of the library).
 export { CatgsViewer, VIEWER_EVENTS };
+export { ERROR_WORDS, statusText } from './status_text.js';
+export { defaultWebSocketUrl } from './connection.js';
+export { parseMaxSize } from './viewport.js';
+export {
+  LOADGEN_SECONDS_PER_VIEW, PathRecorder, TOUR_SECONDS_PER_VIEW, fromInriaCameras, fromTraceFile, poseAtTime, resample,
+  toInriaCameras, toTraceFile, tourDuration, tourPoseAt,
+} from './paths.js';
+export {
+  cameraForward, cameraRight, intrinsicsFor, lookAt, qnorm, qrotate, vadd, vcross, vdot, vlen, vnorm, vscale, vsub,
+} from './camera.js';
 
 // The element's own look: a black box of the page's size (360 px tall unless the page says), the
 // view filling it; what the re-projection moves past the box is cut off there.
@@ -31,7 +43,11 @@ canvas.backdrop[hidden] { display: none; }
 // Attributes the viewer is made with; a change makes a new one (the token: a new connection).
 const OPTIONS = ['server', 'scene', 'token', 'codec', 'controls'];
 
-export class CatgsViewerElement extends HTMLElement {
+// Outside a browser (node, the unit tests that import the page's modules) there is no DOM: the
+// element's class then has a plain base and is never defined.
+const ElementBase = globalThis.HTMLElement ?? class {};
+
+export class CatgsViewerElement extends ElementBase {
   static get observedAttributes() {
     return OPTIONS;
   }
