@@ -139,6 +139,10 @@ int lod_max_steps(float bound_px, float max_bound_px) {
   return std::clamp(static_cast<int>(std::floor(steps)), 0, LodBoundChooser::kSteps);
 }
 
+int LodSettings::max_steps() const { return lod_max_steps(bound_px, max_bound_px); }
+
+float LodSettings::coarsest_bound_px() const { return LodBoundChooser::bound_at(bound_px, max_steps()); }
+
 float LodBoundChooser::bound_at(float base, int step) { return base * std::exp2(0.5f * static_cast<float>(step)); }
 
 float LodBoundChooser::choose(const CutCounter& counter, const Camera& camera, float base, std::uint64_t budget,

@@ -53,6 +53,10 @@ struct LodSettings {
   float max_bound_px = 4.0f;
   // --splat-budget-share: the share of the GPU's measured throughput the auto budget hands out.
   double budget_share = 0.4;
+  // What the two bounds give, said once: the ladder steps the budget may raise a frame's bound
+  // (lod_max_steps), and the coarsest bound that allows, px at reference_lines.
+  int max_steps() const;
+  float coarsest_bound_px() const;
 };
 
 // The ladder steps above `bound_px` that stay within `max_bound_px` (0: LodBoundChooser::kSteps).

@@ -196,8 +196,7 @@ float FramePipeline::set_lod_bound(const Camera& camera) {
   std::uint64_t budget = lod.splat_budget;
   if (budget == 0 && lod.auto_budget && gpu_ >= 0)
     budget = auto_splat_budget(metrics_.gpu_splats_per_ms(gpu_), metrics_.gpu_sessions(gpu_), lod.budget_share);
-  const float tau =
-      lod_bound_.choose(*cut_counter_, camera, base, budget, lod_max_steps(lod.bound_px, lod.max_bound_px));
+  const float tau = lod_bound_.choose(*cut_counter_, camera, base, budget, lod.max_steps());
   // At the ceiling and still over the budget: this GPU holds no more visitors at the picture's
   // floor; the door reads it (Session::on_scene_ready).
   if (lod_bound_.over_budget()) metrics_.lod_over_budget_frames_total++;

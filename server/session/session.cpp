@@ -120,8 +120,7 @@ bool Session::splat_budget_full() {
     return false;
   shared_.metrics.splat_budget_refusals_total++;
   char bound[32];
-  std::snprintf(bound, sizeof(bound), "%.2f",
-                LodBoundChooser::bound_at(lod.bound_px, lod_max_steps(lod.bound_px, lod.max_bound_px)));
+  std::snprintf(bound, sizeof(bound), "%.2f", lod.coarsest_bound_px());
   fail(pb::ERROR_SERVER_FULL,
        "server full: GPU " + std::to_string(gpu_) + "'s sessions already draw at the coarsest bound allowed (" + bound +
            " px, --lod-max-error) over its splat budget",

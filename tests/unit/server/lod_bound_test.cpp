@@ -261,6 +261,11 @@ TEST(LodBound, CeilingStopsTheLadderAndSaysWhenTheBudgetIsShort) {
   EXPECT_EQ(lod_max_steps(2.0f, 1.0f), 0);
   EXPECT_EQ(lod_max_steps(2.0f, 0.0f), LodBoundChooser::kSteps);
   EXPECT_EQ(lod_max_steps(2.0f, 1000.0f), LodBoundChooser::kSteps);
+  LodSettings lod;
+  lod.bound_px = 2.0f;
+  lod.max_bound_px = 4.0f;
+  EXPECT_EQ(lod.max_steps(), 2);
+  EXPECT_FLOAT_EQ(lod.coarsest_bound_px(), 4.0f);
 }
 
 TEST(LodBound, AutoBudgetSharesTheGpusThroughputInPowersOfSqrt2) {
