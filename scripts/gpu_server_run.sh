@@ -351,13 +351,14 @@ shown() {
   local traces="$W/${scene}_mipnerf360_bicycle.trace,$W/${scene}_tandt_train.trace,$W/${scene}_flowers_sh3.trace"
   local config run n runs=""
   # CATGS_SHOWN_CONFIGS: which servers record (base: --pose-prediction off, the landed build's
-  # frames; pred: on); CATGS_SHOWN_FLAGS: more rows of catgs-shown (e.g. --depth-warp).
+  # frames; pred: on); CATGS_SHOWN_RUNS: which links (default one loaded l25 l8);
+  # CATGS_SHOWN_FLAGS: more rows of catgs-shown (e.g. --depth-warp).
   for config in ${CATGS_SHOWN_CONFIGS:-base pred}; do
     local extra=()
     extra=(--pose-prediction off)
     [ "$config" = pred ] && extra=(--pose-prediction on)
     start_server "$(scene_file "$scene")" "$R/server-$config.log" --cache-dir "$W/cache" "$@" "${extra[@]}" || return 1
-    for run in one loaded l25 l8; do
+    for run in ${CATGS_SHOWN_RUNS:-one loaded l25 l8}; do
       local link=()
       n=3
       case $run in
