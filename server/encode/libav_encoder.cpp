@@ -1,6 +1,5 @@
 #include "encode/libav_encoder.h"
 
-#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 
@@ -146,20 +145,10 @@ std::vector<std::uint8_t> LibavEncoder::extradata() const {
   return {ctx_->extradata, ctx_->extradata + ctx_->extradata_size};
 }
 
-bool LibavEncoder::set_max_bitrate_kbps(int kbps, int vbv_buffer_ms) {
-  // libavcodec's libx264 wrapper compares these with x264's parameters before every picture and
-  // calls x264_encoder_reconfig when they changed (a new VBV rate, no IDR). Only with a VBV from
-  // the start: x264 cannot switch one on later.
-  if (name_ != "x264" || kbps <= 0 || ctx_->rc_max_rate <= 0 || ctx_->rc_buffer_size <= 0) return false;
-  const double vbv_s = vbv_buffer_ms > 0
-                           ? vbv_buffer_ms / 1000.0
-                           : static_cast<double>(ctx_->rc_buffer_size) / static_cast<double>(ctx_->rc_max_rate);
-  ctx_->rc_max_rate = static_cast<std::int64_t>(kbps) * 1000;
-  // libavcodec hands x264 the buffer in whole kbit: at least one, or a low rate's small buffer
-  // would round to none.
-  ctx_->rc_buffer_size =
-      static_cast<int>(std::clamp<double>(static_cast<double>(ctx_->rc_max_rate) * vbv_s, 1000.0, INT_MAX));
-  return true;
+bool LibavEncoder::set_max_bitrate_kbps(int, int) {
+  // NVENC and libaom through libavcodec take a new rate only by a rebuild (x264, which takes it
+  // between pictures, is X264Encoder): the caller rebuilds.
+  return false;
 }
 
 EncodedFrame LibavEncoder::encode_frame(bool force_idr, EncodedFrame out) {

@@ -29,7 +29,7 @@ class LibavEncoder : public Encoder {
   Yuv420Target input_target() override;
   EncodedFrame encode_input(bool force_idr) override;
   std::vector<std::uint8_t> extradata() const override;
-  bool set_max_bitrate_kbps(int kbps, int vbv_buffer_ms) override;
+  bool set_max_bitrate_kbps(int kbps, int vbv_buffer_ms) override;  // false: NVENC and AV1 rebuild
 
  protected:
   // Opens libavcodec encoder `codec_name` as `name` for config's size: sets size, yuv420p,

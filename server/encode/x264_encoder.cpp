@@ -75,8 +75,9 @@ std::set<std::string> thread_ids() {
 
 // Names the sliced threads x264 started "catgs-x264" (they would carry the opening pool thread's
 // name), so a host profile splits the encode from the rest of the pool's work (issue 92). A
-// thread another part of the server started in the same moment would be named so too: the
-// server starts its own threads at start-up only. A failure only loses the name.
+// thread another part of the server started in the same moment (a scene's loading thread,
+// another session's AV1 encoder) would be named so too: the name serves a profile only, and a
+// failure only loses it.
 void name_x264_threads(const std::set<std::string>& before) {
   for (const std::string& id : thread_ids())
     if (!before.count(id)) std::ofstream("/proc/self/task/" + id + "/comm") << "catgs-x264";

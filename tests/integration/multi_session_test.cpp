@@ -191,23 +191,7 @@ std::unique_ptr<ServerProcess> one_core_server(const std::vector<std::string>& f
 // once. Its Stats say the new preset and the picture it gives, /metrics counts the step, the
 // log names it.
 TEST(MultiSession, APresetStepDownIsSaidInStatsMetricsAndTheLog) {
-  cpu_set_t mine, one;
-  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
-  CPU_ZERO(&one);
-  for (int c = 0; c < CPU_SETSIZE; ++c)
-    if (CPU_ISSET(c, &mine)) {
-      CPU_SET(c, &one);
-      break;
-    }
-  ASSERT_EQ(sched_setaffinity(0, sizeof(one), &one), 0);
-  std::unique_ptr<ServerProcess> server;
-  try {
-    server = std::make_unique<ServerProcess>(server_args(kBiker, {"--pipeline", "exact"}));
-  } catch (...) {
-    sched_setaffinity(0, sizeof(mine), &mine);
-    throw;
-  }
-  ASSERT_EQ(sched_setaffinity(0, sizeof(mine), &mine), 0);
+  const auto server = one_core_server({"--pipeline", "exact"});
   const auto model = load_model(kBiker);
   const server::CameraPose view = server::first_view_pose(server::frame_from_content(*model), 800, 448);
   std::uint32_t sequence = 0;
@@ -248,23 +232,7 @@ TEST(MultiSession, APresetStepDownIsSaidInStatsMetricsAndTheLog) {
 // --x264-floor: the same one-core server keeps its lone session at superfast, and the door
 // refuses the second visitor, whose stream would step both below it, with the reason.
 TEST(MultiSession, TheX264FloorRefusesAVisitorTheCoresCannotEncodeAtIt) {
-  cpu_set_t mine, one;
-  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
-  CPU_ZERO(&one);
-  for (int c = 0; c < CPU_SETSIZE; ++c)
-    if (CPU_ISSET(c, &mine)) {
-      CPU_SET(c, &one);
-      break;
-    }
-  ASSERT_EQ(sched_setaffinity(0, sizeof(one), &one), 0);
-  std::unique_ptr<ServerProcess> server;
-  try {
-    server = std::make_unique<ServerProcess>(server_args(kBiker, {"--x264-floor", "superfast"}));
-  } catch (...) {
-    sched_setaffinity(0, sizeof(mine), &mine);
-    throw;
-  }
-  ASSERT_EQ(sched_setaffinity(0, sizeof(mine), &mine), 0);
+  const auto server = one_core_server({"--x264-floor", "superfast"});
   StreamClient first;
   first.connect(server->port());
   first.hello(800, 448);
