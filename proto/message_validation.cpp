@@ -73,6 +73,48 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
   return std::nullopt;
 }
 
+namespace {
+
+std::optional<Violation> check_eye(const char* name, const pb::EyeView& eye, EyePose& out) {
+  const std::string who = std::string("Pose ") + name + ": ";
+  // The eye's pose under check_pose's rules (a Pose of it alone, with a field of view that passes).
+  pb::Pose as_pose;
+  *as_pose.mutable_position() = eye.position();
+  *as_pose.mutable_orientation() = eye.orientation();
+  as_pose.set_vertical_fov_deg(90.0);
+  if (!eye.has_position() || !eye.has_orientation())
+    return Violation{pb::ERROR_INVALID_ARGUMENT, who + "needs position and orientation"};
+  CameraPose p;
+  if (auto bad = check_pose(as_pose, p)) return Violation{bad->code, who + bad->reason};
+  const double angles[] = {eye.angle_left(), eye.angle_right(), eye.angle_up(), eye.angle_down()};
+  for (double a : angles)
+    if (!(std::fabs(a) <= kMaxEyeAngle))  // NaN fails too
+      return Violation{pb::ERROR_INVALID_ARGUMENT, who + "an angle is NaN, Inf or beyond 1.5 rad"};
+  if (!(eye.angle_left() < eye.angle_right()) || !(eye.angle_down() < eye.angle_up()))
+    return Violation{pb::ERROR_INVALID_ARGUMENT, who + "needs angle_left < angle_right and angle_down < angle_up"};
+  out.position = p.position;
+  out.orientation = p.orientation;
+  out.angle_left = static_cast<float>(eye.angle_left());
+  out.angle_right = static_cast<float>(eye.angle_right());
+  out.angle_up = static_cast<float>(eye.angle_up());
+  out.angle_down = static_cast<float>(eye.angle_down());
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::optional<Violation> check_stereo(const pb::Pose& pose, std::optional<StereoPose>& out) {
+  out.reset();
+  if (!pose.has_left_eye() && !pose.has_right_eye()) return std::nullopt;
+  if (!pose.has_left_eye() || !pose.has_right_eye())
+    return Violation{pb::ERROR_INVALID_ARGUMENT, "Pose has one eye: a stereo pose needs left_eye and right_eye"};
+  StereoPose s;
+  if (auto bad = check_eye("left_eye", pose.left_eye(), s.left)) return bad;
+  if (auto bad = check_eye("right_eye", pose.right_eye(), s.right)) return bad;
+  out = s;
+  return std::nullopt;
+}
+
 std::optional<Violation> check_quality(const pb::Quality& quality) {
   const std::uint32_t b = quality.max_bitrate_kbps();
   if (b != 0 && (b < kMinBitrateKbps || b > kMaxBitrateKbps))

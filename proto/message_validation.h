@@ -23,6 +23,7 @@ inline constexpr double kMaxFovDeg = 170.0;          // exclusive
 inline constexpr double kMaxPoseComponent = 1e30;    // |position| and |quaternion| components
 inline constexpr double kMaxShownLatencyMs = 3.6e6;  // Pose.shown_latency_ms: an hour
 inline constexpr double kMaxClientTimeMs = 1e15;     // Pose.received_ms: a clock ms, 30,000 years
+inline constexpr double kMaxEyeAngle = 1.5;          // |EyeView.angle_*|, radians (about 86 degrees)
 
 // A protocol violation: the code and reason sent to the client in Error.
 struct Violation {
@@ -63,6 +64,22 @@ struct CameraPose {
 // in [0, 3600000], received_ms in [0, 1e15].
 // ERROR_INVALID_ARGUMENT otherwise.
 std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out);
+
+// A headset's eye ready for the renderer (EyeView; issue 94): its pose as CameraPose's, its
+// frustum's edges in radians (Camera::from_frustum).
+struct EyePose {
+  glm::vec3 position{0.0f};
+  glm::quat orientation{1.0f, 0.0f, 0.0f, 0.0f};  // (w, x, y, z), unit, camera-to-world, OpenCV axes
+  float angle_left = -0.5f, angle_right = 0.5f, angle_up = 0.5f, angle_down = -0.5f;
+};
+struct StereoPose {
+  EyePose left, right;
+};
+
+// Validates a Pose's eyes (left_eye, right_eye): neither (`out` reset), or both, each with a
+// position and orientation checked as check_pose checks the head's, and angles finite, within
+// +-kMaxEyeAngle, left < right and down < up. ERROR_INVALID_ARGUMENT otherwise, naming the eye.
+std::optional<Violation> check_stereo(const pb::Pose& pose, std::optional<StereoPose>& out);
 
 inline constexpr std::uint32_t kMinBitrateKbps = 100;
 inline constexpr std::uint32_t kMaxBitrateKbps = 100000;

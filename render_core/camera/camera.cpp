@@ -40,6 +40,24 @@ Camera Camera::from_pose(const glm::vec3& position, const glm::quat& camera_to_w
   return c;
 }
 
+Camera Camera::from_frustum(const glm::vec3& position, const glm::quat& camera_to_world, float angle_left,
+                            float angle_right, float angle_up, float angle_down, int width, int height) {
+  const float half_pi = 1.5707963f;
+  for (float a : {angle_left, angle_right, angle_up, angle_down})
+    if (!(std::fabs(a) < half_pi)) throw std::invalid_argument("frustum angle outside (-pi/2, pi/2)");
+  if (!(angle_left < angle_right) || !(angle_down < angle_up))
+    throw std::invalid_argument("frustum angles out of order (left < right, down < up)");
+  // The pose's checks and rotation as from_pose (its field of view replaced below).
+  Camera c = from_pose(position, camera_to_world, 90.0f, width, height);
+  const float tl = std::tan(angle_left), tr = std::tan(angle_right);
+  const float tu = std::tan(angle_up), td = std::tan(angle_down);
+  c.fx = static_cast<float>(width) / (tr - tl);
+  c.cx = -tl * c.fx;
+  c.fy = static_cast<float>(height) / (tu - td);
+  c.cy = tu * c.fy;
+  return c;
+}
+
 Camera Camera::rescaled(int new_width, int new_height) const {
   if (new_width < 1 || new_height < 1) throw std::invalid_argument("camera size must be positive");
   Camera c = *this;

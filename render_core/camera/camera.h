@@ -34,6 +34,16 @@ struct Camera {
   static Camera from_pose(const glm::vec3& position, const glm::quat& camera_to_world, float vertical_fov_deg,
                           int width, int height);
 
+  // Builds a camera whose frustum has the given edges (issue 94: a headset's eye, OpenXR's XrFovf
+  // and WebXR's XRView projection): `angle_left` < `angle_right` and `angle_down` < `angle_up`,
+  // radians from the forward axis, each in (-pi/2, pi/2) (left and down negative). The frustum
+  // may be asymmetric: fx = width / (tan(right) - tan(left)), cx = -tan(left) fx, and with y
+  // down fy = height / (tan(up) - tan(down)), cy = tan(up) fy; pixels are square only where the
+  // size's aspect is the frustum's. Throws std::invalid_argument as from_pose does, and for
+  // angles out of order or range.
+  static Camera from_frustum(const glm::vec3& position, const glm::quat& camera_to_world, float angle_left,
+                             float angle_right, float angle_up, float angle_down, int width, int height);
+
   // The same view for another image size: scales fx, cx by width ratio and fy, cy by height ratio.
   Camera rescaled(int new_width, int new_height) const;
 };

@@ -45,6 +45,56 @@ class GpuRenderCount {
   bool ended_ = false;
 };
 
+// The columns [x0, x0 + width) of a target (x0 and width even): an eye's half of a stereo frame.
+Yuv420Target columns_of(const Yuv420Target& t, int x0, int width) {
+  Yuv420Target half = t;
+  half.width = width;
+  half.y += x0;
+  half.u += x0 / 2;
+  half.v += x0 / 2;
+  return half;
+}
+
+// A stereo frame's record from its eyes' (issue 94): the work of both (Gaussians, entries, stage
+// times), a key frame only where both were.
+FrameStats both_eyes(const FrameStats& left, const FrameStats& right) {
+  FrameStats s = right;
+  s.visible += left.visible;
+  s.chunks_preprocessed += left.chunks_preprocessed;
+  s.entries_behind_opaque += left.entries_behind_opaque;
+  s.render_list_length += left.render_list_length;
+  s.longest_pass = std::max(s.longest_pass, left.longest_pass);
+  s.passes += left.passes;
+  s.preprocess_ms += left.preprocess_ms;
+  s.keys_ms += left.keys_ms;
+  s.sort_ms += left.sort_ms;
+  s.ranges_ms += left.ranges_ms;
+  s.rasterize_ms += left.rasterize_ms;
+  s.merge_ms += left.merge_ms;
+  s.total_ms += left.total_ms;
+  s.key_frame = left.key_frame && right.key_frame;
+  s.subframe_rejected = left.subframe_rejected || right.subframe_rejected;
+  return s;
+}
+
+void set_pose(const glm::vec3& position, const glm::quat& orientation, pb::Vec3* p, pb::Quat* q) {
+  p->set_x(position.x);
+  p->set_y(position.y);
+  p->set_z(position.z);
+  q->set_w(orientation.w);
+  q->set_x(orientation.x);
+  q->set_y(orientation.y);
+  q->set_z(orientation.z);
+}
+
+void set_eye(const EyePose& e, pb::EyeView* out) {
+  set_pose(e.position, e.orientation, out->mutable_position(), out->mutable_orientation());
+  out->set_angle_left(e.angle_left);
+  out->set_angle_right(e.angle_right);
+  out->set_angle_up(e.angle_up);
+  out->set_angle_down(e.angle_down);
+}
+
 }  // namespace
 
 FramePipeline::~FramePipeline() {
@@ -86,8 +136,17 @@ bool FramePipeline::can_start_render() const {
 }
 
 Camera FramePipeline::camera_of(const Job& job) {
+  if (job.pose.eyes) return eye_cameras(job)[0];
   return Camera::from_pose(job.pose.pose.position, job.pose.pose.orientation, job.pose.pose.vertical_fov_deg,
                            job.shape.width, job.shape.height);
+}
+
+std::array<Camera, 2> FramePipeline::eye_cameras(const Job& job) {
+  const int w = job.shape.width / 2, h = job.shape.height;
+  auto camera = [w, h](const EyePose& e) {
+    return Camera::from_frustum(e.position, e.orientation, e.angle_left, e.angle_right, e.angle_up, e.angle_down, w, h);
+  };
+  return {camera(job.pose.eyes->left), camera(job.pose.eyes->right)};
 }
 
 FramePipeline::StartedRender FramePipeline::start_render(const JobShape& shape) {
@@ -228,9 +287,7 @@ void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target
   }
   for (int step = 0;; ++step) {
     try {
-      // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
-      // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
-      renderer_->begin_yuv420_at(camera, job.pose.client_time_ms / 1000.0, target);
+      begin_views(job, camera, target, r);
       break;
     } catch (...) {
       // A buffer that could not grow: the same frame again, in passes or coarser (issue 73). The
@@ -253,22 +310,45 @@ void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target
   r.render_begun = true;
 }
 
+void FramePipeline::begin_views(const Job& job, const Camera& camera, const Yuv420Target& target, Rendered& r) {
+  // Rendered and colour-converted where the frame is (on the GPU for the CUDA core: a host
+  // target gets only the I420 planes). The client's clock drives the catgs motion predictor.
+  const double time_s = job.pose.client_time_ms / 1000.0;
+  if (!job.pose.eyes) {
+    renderer_->begin_yuv420_at(camera, time_s, target);
+    return;
+  }
+  // A headset: each eye into its half, one after the other on the session's renderer (the
+  // occlusion map the right eye reads is the left eye's; issue 94).
+  const std::array<Camera, 2> eyes = eye_cameras(job);
+  const int w = eyes[0].width;
+  renderer_->begin_yuv420_at(eyes[0], time_s, columns_of(target, 0, w));
+  r.convert_ms = renderer_->finish_yuv420();
+  r.frame = renderer_->last_stats();
+  renderer_->begin_yuv420_at(eyes[1], time_s, columns_of(target, w, w));
+}
+
 void FramePipeline::finish_render_into(Rendered& r) {
   r.render_begun = false;
   double frames_with_it = 1.0;
+  const bool stereo = r.job.pose.eyes.has_value();
+  double convert_ms = 0;
   try {
-    r.convert_ms = renderer_->finish_yuv420();
+    convert_ms = renderer_->finish_yuv420();
   } catch (...) {
     if (gpu_ >= 0) metrics_.gpu_render_end(gpu_);
     throw;
   }
   if (gpu_ >= 0) frames_with_it = 0.5 * (r.gpu_frames_at_begin + metrics_.gpu_render_end(gpu_));
-  r.frame = renderer_->last_stats();
+  r.convert_ms = stereo ? r.convert_ms + convert_ms : convert_ms;
+  r.frame = stereo ? both_eyes(r.frame, renderer_->last_stats()) : renderer_->last_stats();
   r.buffer_bytes = renderer_->device_buffer_bytes();
   r.buffer_shape = renderer_->buffer_shape();
   const DepthGrid& depth = renderer_->last_depth_grid();
   r.depth_grid.Clear();
-  if (depth.cols > 0) pack_depth_grid(depth, &r.depth_grid);
+  // A stereo frame carries no grid: the renderer's is the right eye's alone (the page warps each
+  // eye by the plane).
+  if (depth.cols > 0 && !stereo) pack_depth_grid(depth, &r.depth_grid);
   // Render time includes the plane download (GPU) but not the conversion itself; with frames in
   // flight, also the time the lane spent beginning other frames before this one's finish.
   r.render_ms = std::max(0.0, ms_between(r.render_started, Clock::now()) - r.convert_ms);
@@ -495,6 +575,7 @@ void FramePipeline::probe_content_rate(const Job& job, const FrameEncoding& sett
 
 FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool gone) {
   Rendered r;
+  r.job = job;  // finish_render_into reads whether it is a stereo frame
   if (gone) {
     r.error = "session gone";
     return failure_of(r);
@@ -536,14 +617,13 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   if (job.pose.predicted) {  // Frame.shown_pose: the page re-projects from it, not from its Pose
     pb::Pose* shown = f->mutable_shown_pose();
     const CameraPose& p = job.pose.pose;
-    shown->mutable_position()->set_x(p.position.x);
-    shown->mutable_position()->set_y(p.position.y);
-    shown->mutable_position()->set_z(p.position.z);
-    shown->mutable_orientation()->set_w(p.orientation.w);
-    shown->mutable_orientation()->set_x(p.orientation.x);
-    shown->mutable_orientation()->set_y(p.orientation.y);
-    shown->mutable_orientation()->set_z(p.orientation.z);
+    set_pose(p.position, p.orientation, shown->mutable_position(), shown->mutable_orientation());
     shown->set_vertical_fov_deg(p.vertical_fov_deg);
+  }
+  if (job.pose.eyes) {  // a headset's frame says the eyes its halves show
+    set_eye(job.pose.eyes->left, f->mutable_left_eye());
+    set_eye(job.pose.eyes->right, f->mutable_right_eye());
+    f->set_eye_width(static_cast<std::uint32_t>(job.shape.width / 2));
   }
   f->set_key_frame(enc.key_frame);
   f->set_width(static_cast<std::uint32_t>(job.shape.width));

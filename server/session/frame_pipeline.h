@@ -19,6 +19,7 @@
 // failure comes back in the result's `error`.
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -48,8 +49,10 @@ class FramePipeline {
 
   // A validated pose waiting to be rendered.
   struct PendingPose {
-    CameraPose pose;         // the pose to render: the client's, or where it will be (pose_prediction.h)
-    CameraPose sent;         // the client's Pose (a refine frame draws it: a still camera is there)
+    CameraPose pose;  // the pose to render: the client's, or where it will be (pose_prediction.h)
+    CameraPose sent;  // the client's Pose (a refine frame draws it: a still camera is there)
+    // A headset's eyes (Pose.left_eye, right_eye; issue 94): the frame shows both, side by side.
+    std::optional<StereoPose> eyes;
     bool predicted = false;  // pose is not `sent`: the Frame says which pose it shows
     std::uint32_t sequence = 0;
     double client_time_ms = 0;
@@ -257,8 +260,15 @@ class FramePipeline {
   // the job is made (start_render, on the strand, no render of the session running), or by the
   // lane where that failed.
   float set_lod_bound(const Camera& camera);
-  // The camera of a job's pose at its shape's size.
+  // The camera of a job's pose at its shape's size; a stereo job's: its left eye's (the level of
+  // detail's bound is chosen once for both eyes).
   static Camera camera_of(const Job& job);
+  // A stereo job's eyes (issue 94): left and right at an eye's size (the shape's width / 2).
+  static std::array<Camera, 2> eye_cameras(const Job& job);
+  // Queues a job's frame on the renderer into `target`: one view, or a stereo job's two eyes into
+  // the target's halves (the left eye drawn and waited for here, the right eye queued; r's
+  // convert_ms and frame hold the left eye's until finish_render_into adds the right eye's).
+  void begin_views(const Job& job, const Camera& camera, const Yuv420Target& target, Rendered& r);
   // What frame_encoding needs of a frame of `shape` (encode/frame_encoding.h).
   FrameEncodeInputs encode_inputs(const JobShape& shape, bool refine, int live_sessions) const;
   int live_sessions() const;  // sessions open on the server, at least 1

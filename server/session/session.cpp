@@ -545,8 +545,10 @@ void Session::on_scene_ready(std::shared_ptr<const LoadedScene> scene, const std
 void Session::handle_pose(const pb::Pose& pose, Clock::time_point received) {
   CameraPose cam;
   if (auto bad = check_pose(pose, cam)) return fail(bad->code, bad->reason);
+  std::optional<StereoPose> eyes;
+  if (auto bad = check_stereo(pose, eyes)) return fail(bad->code, bad->reason);
   last_pose_ = cam;
-  stream_.on_pose(pose, cam, received);
+  stream_.on_pose(pose, cam, eyes, received);
 }
 
 void Session::handle_depth(const pb::DepthRequest& request) {

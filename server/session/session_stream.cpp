@@ -47,7 +47,8 @@ void SessionStream::set_max_bitrate(int kbps) {
   frames_.request_idr();  // the encoder is rebuilt with it; its first frame is an IDR
 }
 
-void SessionStream::on_pose(const pb::Pose& pose, const CameraPose& cam, Clock::time_point received) {
+void SessionStream::on_pose(const pb::Pose& pose, const CameraPose& cam, const std::optional<StereoPose>& eyes,
+                            Clock::time_point received) {
   poses_received_++;
   shared_.metrics.poses_total++;
   // The client's own end-to-end measurement of an earlier frame (0: nothing new).
@@ -69,7 +70,8 @@ void SessionStream::on_pose(const pb::Pose& pose, const CameraPose& cam, Clock::
   next.sequence = pose.sequence();
   next.client_time_ms = pose.client_time_ms();
   next.received = received;
-  if (shared_.settings.frame.pose_prediction) {
+  next.eyes = eyes;
+  if (shared_.settings.frame.pose_prediction && !eyes) {
     prediction_.on_pose(cam, pose.client_time_ms(), pose.shown_latency_ms());
     next.pose = prediction_.predicted();
     next.predicted = next.pose.position != cam.position || next.pose.orientation != cam.orientation;
@@ -90,6 +92,8 @@ void SessionStream::admit() {
   shape.quality_level = fs.adaptive_quality && !frames_.pending()->refine ? quality_.level() : 0;
   shape.width = AdaptiveQuality::scaled_side(width_, shape.quality_level);
   shape.height = AdaptiveQuality::scaled_side(height_, shape.quality_level);
+  // A headset's frame holds two eyes of an even width each (I420's chroma pairs columns).
+  if (frames_.pending()->eyes) shape.width -= shape.width % 4;
   shape.max_bitrate_kbps = max_bitrate_kbps_;
   shape.previous_send_ms = last_send_ms_;
   shape.link = link_inputs();  // read again at its encode

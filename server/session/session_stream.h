@@ -66,9 +66,11 @@ class SessionStream {
   // KeyFrameRequest: the next frame is an IDR.
   void request_idr() { frames_.request_idr(); }
 
-  // A valid Pose (`cam`), received on the transport thread at `received`: its receipt for an
-  // earlier frame, the client's shown latency, then the pose offered (latest wins).
-  void on_pose(const pb::Pose& pose, const CameraPose& cam, Clock::time_point received);
+  // A valid Pose (`cam`, and a headset's `eyes`), received on the transport thread at `received`:
+  // its receipt for an earlier frame, the client's shown latency, then the pose offered (latest
+  // wins). A stereo pose is drawn as sent: the page re-projects each eye to the head's newest pose.
+  void on_pose(const pb::Pose& pose, const CameraPose& cam, const std::optional<StereoPose>& eyes,
+               Clock::time_point received);
   // The admit stage: starts a render job when a pose waits and a slot is free.
   void admit();
   // The transport wrote a Frame (stamped on its thread at `written`; `socket`: TCP_INFO then).

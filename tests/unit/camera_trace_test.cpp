@@ -41,6 +41,33 @@ TEST(Camera, FromPoseRejectsBadInput) {
   EXPECT_THROW(Camera::from_pose({0, 0, 0}, glm::quat(1, 0, 0, 0), 60, 0, 64), std::invalid_argument);
 }
 
+// A headset eye's asymmetric frustum (issue 94; loadgen's HeadsetOptics' left eye): each
+// edge's direction, built from its angle alone, lands on that edge of the image.
+TEST(Camera, FromFrustumPutsEachEdgeOnItsAngle) {
+  const float left = -0.942f, right = 0.698f, up = 0.768f, down = -0.873f;
+  const glm::quat q = glm::normalize(glm::quat(0.9f, 0.1f, -0.3f, 0.2f));
+  const glm::vec3 at(1.0f, -2.0f, 3.0f);
+  const Camera c = Camera::from_frustum(at, q, left, right, up, down, 1280, 1344);
+  const glm::mat3 c2w = glm::mat3_cast(q);
+  // Camera axes: x right, y down, z forward; "up" is -y.
+  auto along = [&](float tx, float ty) { return project(c, at + 4.0f * (c2w * glm::vec3(tx, ty, 1.0f))); };
+  EXPECT_NEAR(along(std::tan(left), 0.0f).x + 0.5f, 0.0f, 1e-2f);
+  EXPECT_NEAR(along(std::tan(right), 0.0f).x + 0.5f, 1280.0f, 1e-2f);
+  EXPECT_NEAR(along(0.0f, -std::tan(up)).y + 0.5f, 0.0f, 1e-2f);
+  EXPECT_NEAR(along(0.0f, -std::tan(down)).y + 0.5f, 1344.0f, 1e-2f);
+  EXPECT_NEAR(glm::distance(c.position(), at), 0.0f, 1e-5f);
+  // A symmetric frustum is from_pose's camera.
+  const float half = glm::radians(30.0f);
+  const Camera s = Camera::from_frustum(at, q, -half, half, half, -half, 640, 640);
+  const Camera p = Camera::from_pose(at, q, 60.0f, 640, 640);
+  EXPECT_NEAR(s.fx, p.fx, 1e-3f);
+  EXPECT_NEAR(s.fy, p.fy, 1e-3f);
+  EXPECT_NEAR(s.cx, p.cx, 1e-3f);
+  EXPECT_NEAR(s.cy, p.cy, 1e-3f);
+  EXPECT_THROW(Camera::from_frustum(at, q, 0.5f, -0.5f, 0.5f, -0.5f, 64, 64), std::invalid_argument);
+  EXPECT_THROW(Camera::from_frustum(at, q, -1.6f, 0.5f, 0.5f, -0.5f, 64, 64), std::invalid_argument);
+}
+
 TEST(Camera, RescaleKeepsTheView) {
   const Camera c = Camera::from_pose({0, 0, 0}, glm::quat(1, 0, 0, 0), 60.0f, 1000, 500);
   const Camera s = c.rescaled(500, 250);

@@ -87,6 +87,12 @@ const char* kUsage =
     "                           MS/2 ago; the recording adds the frames' MS/2 (default 0)\n"
     "  --link-mbit R            the emulated link's rate: the stream is capped at 80% of it\n"
     "                           (Quality) and the recording queues frames at R (default 0: none)\n"
+    "  --stereo WxH@HZ          headsets (issue 94): each session streams both eyes of W x H\n"
+    "                           side by side (the stream 2W x H) and sends HZ stereo poses a\n"
+    "                           second (replacing --size and --rate): the trace's camera as the\n"
+    "                           head, turning +-25 degrees every 0.8 s (196 degrees/s at most),\n"
+    "                           eyes 63 mm apart; latency and FPS are each eye's (one frame\n"
+    "                           holds both)\n"
     "  --token T                Hello token\n"
     "  --json FILE              write the report (every ramp step) as JSON\n"
     "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
@@ -113,6 +119,27 @@ std::pair<int, int> parse_size(const std::string& s) {
   const auto x = s.find('x');
   if (x == std::string::npos) throw std::invalid_argument("size '" + s + "' is not WxH");
   return {std::stoi(s.substr(0, x)), std::stoi(s.substr(x + 1))};
+}
+
+// --stereo WxH@HZ: an eye's size and the display's rate.
+struct StereoSpec {
+  int eye_width = 0, eye_height = 0;
+  double display_hz = 0;
+};
+StereoSpec parse_stereo(const std::string& s) {
+  const auto at = s.find('@');
+  StereoSpec spec;
+  try {
+    if (at == std::string::npos) throw std::invalid_argument("no @");
+    std::tie(spec.eye_width, spec.eye_height) = parse_size(s.substr(0, at));
+    spec.display_hz = std::stod(s.substr(at + 1));
+  } catch (const std::exception&) {
+    spec.eye_width = 0;
+  }
+  if (spec.eye_width < 8 || spec.eye_height < 16 || spec.eye_width % 2 != 0 || !(spec.display_hz > 0))
+    throw std::invalid_argument("--stereo wants WxH@HZ, an eye's even width, its height and the display's rate (got '" +
+                                s + "')");
+  return spec;
 }
 
 // "[3.0 s] sessions 4 open, 1 refused, 0 failed; frames 180 (59.8/s), poses 360"
@@ -285,6 +312,12 @@ LoadSessionConfig base_config(const tools::Args& args) {
   base.link.rate_mbit = args.get_double("--link-mbit", 0);
   if (base.link.rtt_ms < 0 || base.link.rate_mbit < 0)
     throw std::invalid_argument("--link-rtt-ms and --link-mbit must be >= 0");
+  if (args.has("--stereo")) {
+    base.stereo = true;
+    base.rate_hz = parse_stereo(args.get("--stereo")).display_hz;
+    if (base.check_every > 0 || base.still_s > 0 || !base.record_dir.empty())
+      throw std::invalid_argument("--stereo has no reference check, still check or recording (they compare one view)");
+  }
   base.traces = std::make_shared<TraceCache>();  // each trace made once a run (issue 92)
   if (args.has("--scene")) {
     base.scene = std::make_shared<const GaussianModel>(load_scene(args.get("--scene")));
@@ -402,7 +435,7 @@ int main(int argc, char** argv) {
                                         "--ramp-start",     "--max-p95-ms",    "--min-fps",         "--progress",
                                         "--tls!",           "--help!",         "--timeline!",       "--av1!",
                                         "--receipts",       "--read-stall-ms", "--still-s",         "--record",
-                                        "--link-rtt-ms",    "--link-mbit"});
+                                        "--link-rtt-ms",    "--link-mbit",     "--stereo"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -411,6 +444,12 @@ int main(int argc, char** argv) {
     std::vector<std::string> sizes = split(args.get("--size", "1280x720"));
     if (args.has("--width") || args.has("--height"))
       sizes = {std::to_string(args.get_int("--width", 1280)) + "x" + std::to_string(args.get_int("--height", 720))};
+    if (base.stereo) {  // the stream holds both eyes
+      const StereoSpec s = parse_stereo(args.get("--stereo"));
+      sizes = {std::to_string(2 * s.eye_width) + "x" + std::to_string(s.eye_height)};
+      std::printf("headsets: two eyes of %dx%d side by side (%s), %g poses a second\n", s.eye_width, s.eye_height,
+                  sizes[0].c_str(), s.display_hz);
+    }
     const std::vector<std::string> traces = split(args.get("--trace", "orbit"));
     if (sizes.empty() || traces.empty()) throw std::invalid_argument("--size and --trace need values");
     // One template per (size, trace) turn; session i takes template i mod count.
@@ -431,7 +470,8 @@ int main(int argc, char** argv) {
                         {"check_min_psnr", base.check_min_psnr},
                         {"sizes", sizes},
                         {"traces", traces},
-                        {"stale_ms", base.stale_ms}};
+                        {"stale_ms", base.stale_ms},
+                        {"stereo", base.stereo}};
     int exit_code = 0;
     const double progress_s = args.get_double("--progress", 1);
     if (!args.has("--ramp")) {

@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <thread>
 
+#include <glm/gtc/constants.hpp>
+
 #include "cpu/cpu_renderer.h"
 #include "scene/scene_bounds.h"
 #include "scene_tools/city.h"
@@ -86,6 +88,14 @@ PageOrbit page_orbit(const pb::Welcome& welcome) {
     if (!(scale > 0)) scale = 2 * glm::length(target - position);
   }
   return {std::max(glm::length(target - position), scale * 1e-3), scale};
+}
+
+Camera turned_head(const Camera& trace_camera, double t_s, const HeadTurn& turn) {
+  const double yaw = glm::radians(turn.amplitude_deg) * std::sin(2.0 * glm::pi<double>() * t_s / turn.period_s);
+  // About the camera's own y axis (down in OpenCV axes: the head's up, sign aside).
+  const glm::quat q = trace_camera.orientation() * glm::angleAxis(static_cast<float>(yaw), glm::vec3(0, 1, 0));
+  return Camera::from_pose(trace_camera.position(), q, trace_camera.vertical_fov_deg(), trace_camera.width,
+                           trace_camera.height);
 }
 
 const Camera& camera_at(const Trace& trace, double t_s) {
@@ -240,7 +250,10 @@ class PoseLoop {
     if (recording_) recording_->poses.push_back({seq, since_start_ms(), t_s});
     sent_at_.push_back(now_ms());
     // On the visitor's clock: it was at this pose half the round trip ago.
-    pb::Pose pose = pose_from_camera(camera_at(trace_, t_s), seq, sent_at_.back() - 0.5 * cfg_.link.rtt_ms);
+    const double client_ms = sent_at_.back() - 0.5 * cfg_.link.rtt_ms;
+    pb::Pose pose = cfg_.stereo
+                        ? stereo_pose_from_camera(turned_head(camera_at(trace_, t_s), t_s), cfg_.optics, seq, client_ms)
+                        : pose_from_camera(camera_at(trace_, t_s), seq, client_ms);
     // As the web viewer does: the newest frame's latency rides on the next pose to /metrics.
     pose.set_shown_latency_ms(unreported_latency_ms_);
     unreported_latency_ms_ = 0;

@@ -24,6 +24,37 @@ pb::Pose pose_from_camera(const Camera& camera, std::uint32_t sequence, double c
   return p;
 }
 
+pb::Pose stereo_pose_from_camera(const Camera& head, const HeadsetOptics& optics, std::uint32_t sequence,
+                                 double client_time_ms) {
+  pb::Pose p = pose_from_camera(head, sequence, client_time_ms);
+  const glm::quat q = head.orientation();
+  const glm::vec3 right = glm::mat3_cast(q)[0];  // the head's x axis in the world
+  auto eye = [&](pb::EyeView* e, float side) {
+    const glm::vec3 c = head.position() + side * 0.5f * optics.ipd * right;
+    e->mutable_position()->set_x(c.x);
+    e->mutable_position()->set_y(c.y);
+    e->mutable_position()->set_z(c.z);
+    *e->mutable_orientation() = p.orientation();
+    // The right eye's frustum mirrors the left's (its nose side is its left).
+    e->set_angle_left(side < 0 ? optics.angle_left : -optics.angle_right);
+    e->set_angle_right(side < 0 ? optics.angle_right : -optics.angle_left);
+    e->set_angle_up(optics.angle_up);
+    e->set_angle_down(optics.angle_down);
+  };
+  eye(p.mutable_left_eye(), -1.0f);
+  eye(p.mutable_right_eye(), 1.0f);
+  return p;
+}
+
+Camera eye_camera_from_pose(const pb::Pose& pose, bool right, int eye_width, int height) {
+  std::optional<server::StereoPose> eyes;
+  if (auto bad = server::check_stereo(pose, eyes)) throw std::invalid_argument(bad->reason);
+  if (!eyes) throw std::invalid_argument("the pose has no eyes");
+  const server::EyePose& e = right ? eyes->right : eyes->left;
+  return Camera::from_frustum(e.position, e.orientation, e.angle_left, e.angle_right, e.angle_up, e.angle_down,
+                              eye_width, height);
+}
+
 Camera camera_from_pose(const pb::Pose& pose, int width, int height) {
   server::CameraPose cp;
   if (auto bad = server::check_pose(pose, cp)) throw std::invalid_argument(bad->reason);

@@ -23,6 +23,27 @@ pb::Pose pose_from_camera(const Camera& camera, std::uint32_t sequence, double c
 // server would reject.
 Camera camera_from_pose(const pb::Pose& pose, int width, int height);
 
+// A headset's optics (issue 94): the distance between its eyes and the left eye's frustum edges
+// (radians from the forward axis, OpenXR's XrFovf; the right eye's is its mirror image). The
+// defaults are a typical headset's, not a measured one's: 94 degrees each way, wider on the
+// temple's side than the nose's and below than above (as headsets' canted lenses make them), and
+// a 63 mm interpupillary distance, about the adult median.
+struct HeadsetOptics {
+  float ipd = 0.063f;  // world units (a scene in metres: metres)
+  float angle_left = -0.942f, angle_right = 0.698f, angle_up = 0.768f, angle_down = -0.873f;
+};
+
+// The stereo Pose of a head at `head` (its position, orientation and field of view as
+// pose_from_camera's): each eye ipd / 2 along the head's x axis (right), looking where the head
+// looks, with `optics`' frusta.
+pb::Pose stereo_pose_from_camera(const Camera& head, const HeadsetOptics& optics, std::uint32_t sequence,
+                                 double client_time_ms);
+
+// The camera the server renders for one eye of a stereo pose at eye_width x height: the server's
+// own validation (check_stereo) and Camera::from_frustum. Throws std::invalid_argument for a pose
+// the server would reject or one without eyes.
+Camera eye_camera_from_pose(const pb::Pose& pose, bool right, int eye_width, int height);
+
 // The server answered Hello with Error: the session was refused (SERVER_FULL, UNAUTHORIZED,
 // SHUTTING_DOWN, ...). `error` is the server's message, retry_after_ms included.
 class Refused : public std::runtime_error {
