@@ -63,6 +63,9 @@ std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out) {
   if (!(pose.shown_latency_ms() >= 0 && pose.shown_latency_ms() <= kMaxShownLatencyMs))
     return Violation{pb::ERROR_INVALID_ARGUMENT,
                      "shown_latency_ms " + std::to_string(pose.shown_latency_ms()) + " outside 0..3600000"};
+  if (!(pose.display_hz() == 0 || (pose.display_hz() >= kMinDisplayHz && pose.display_hz() <= kMaxDisplayHz)))
+    return Violation{pb::ERROR_INVALID_ARGUMENT,
+                     "display_hz " + std::to_string(pose.display_hz()) + " is neither 0 nor in 24..240"};
   if (!(pose.received_ms() >= 0 && pose.received_ms() <= kMaxClientTimeMs))
     return Violation{pb::ERROR_INVALID_ARGUMENT,
                      "received_ms " + std::to_string(pose.received_ms()) + " outside 0..1e15"};

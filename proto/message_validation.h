@@ -24,6 +24,8 @@ inline constexpr double kMaxPoseComponent = 1e30;    // |position| and |quaterni
 inline constexpr double kMaxShownLatencyMs = 3.6e6;  // Pose.shown_latency_ms: an hour
 inline constexpr double kMaxClientTimeMs = 1e15;     // Pose.received_ms: a clock ms, 30,000 years
 inline constexpr double kMaxEyeAngle = 1.5;          // |EyeView.angle_*|, radians (about 86 degrees)
+inline constexpr double kMinDisplayHz = 24;          // Pose.display_hz, when set
+inline constexpr double kMaxDisplayHz = 240;
 
 // A protocol violation: the code and reason sent to the client in Error.
 struct Violation {
@@ -61,7 +63,7 @@ struct CameraPose {
 // Validates Pose: position and orientation present, every number finite, position components
 // and quaternion components within +-1e30 (so neither float conversion nor the squared norm
 // overflows), quaternion not zero (it is normalised), fov in (1, 170) degrees, shown_latency_ms
-// in [0, 3600000], received_ms in [0, 1e15].
+// in [0, 3600000], received_ms in [0, 1e15], display_hz 0 or in [24, 240].
 // ERROR_INVALID_ARGUMENT otherwise.
 std::optional<Violation> check_pose(const pb::Pose& pose, CameraPose& out);
 

@@ -39,6 +39,8 @@
 # The shown-picture measure (issue 91; prepare with CATGS_CARRY_SHOWN=1): `shown NAME SCENE WxH
 # LOADED [SERVER ARGS]`; catgs-loadgen's own CPU, the landed binary beside this one (issue 92;
 # prepare with CATGS_CARRY_BINS=PATH/landed/catgs-loadgen): `clientcpu NAME SCENE N`.
+# Headsets (issue 94): `stereocost NAME SCENE EWxEH HZ [SERVER ARGS]` (a stereo frame's GPU time
+# against a mono frame of one eye), and `ramp` with CATGS_LOADGEN_ARGS="--stereo EWxEH@HZ".
 # CATGS_RENDERER=cpu makes both use the CPU renderer (to try the script on a machine without GPU).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -426,6 +428,40 @@ PY
   stop_server
 }
 
+# stereocost NAME SCENE EWxEH HZ [SERVER ARGS] (issue 94): what a headset's frame costs the GPU
+# against a mono frame of one eye. One session alone on the server each way (nothing else on the
+# GPU), 10 s on the bicycle path at HZ poses a second, the head turning as catgs-loadgen --stereo
+# turns it: the left eye's view alone (--mono-eye: EWxEH, the eye's vertical field of view), then
+# the headset (--stereo EWxEH@HZ: both eyes). Per row the renderer's frame time and
+# stages (FrameTimings means; the GPU's own events), the encode and the pose-to-frame p95 ->
+# $OUT/stereocost-NAME.txt, JSON in $W/json/stereocost-NAME-{mono,stereo}.json.
+stereocost() {
+  local name=$1 scene=$2 eye=$3 hz=$4 W=/tmp/catgs_sweep
+  shift 4
+  export LD_LIBRARY_PATH=$SRV/lib
+  start_server "$(scene_file "$scene")" "$W/server_stereocost-$name.log" --pipeline exact "$@" || return 1
+  local trace="$W/${scene}_mipnerf360_bicycle.trace"
+  "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions 1 --stereo "$eye@$hz" --mono-eye --trace "$trace" --seconds 10 \
+    --warmup 30 --progress 0 --json "$W/json/stereocost-$name-mono.json" > "$W/stereocost-$name-mono.txt" 2>&1
+  "$SRV/bin/catgs-loadgen" --port "$PORT" --sessions 1 --stereo "$eye@$hz" --trace "$trace" --seconds 10 \
+    --warmup 30 --progress 0 --json "$W/json/stereocost-$name-stereo.json" > "$W/stereocost-$name-stereo.txt" 2>&1
+  stop_server
+  python3 - "$W/json/stereocost-$name-mono.json" "$W/json/stereocost-$name-stereo.json" "$name" <<'PY' | tee "$OUT/stereocost-$name.txt"
+import json, sys
+rows = []
+for label, path in (('mono, one eye', sys.argv[1]), ('stereo, both eyes', sys.argv[2])):
+    t = json.load(open(path))['run']['total']; s = t['server']; st = s['render_stages_ms']
+    rows.append((label, st['frame'], st['preprocess'], st['keys'], st['sort'], st['ranges'], st['rasterize'],
+                 s['splats_mean'], s['encode_ms'], t['latency']['p95_ms'], t['fps_min']))
+print('%s: the renderer\'s frame on the GPU (ms, means), one session alone' % sys.argv[3])
+print('%-18s %7s %7s %6s %6s %6s %7s %10s %7s %7s %6s' % ('row', 'frame', 'preproc', 'keys', 'sort', 'ranges', 'raster',
+                                                     'splats', 'encode', 'p95', 'FPS'))
+for r in rows:
+    print('%-18s %7.2f %7.2f %6.2f %6.2f %6.2f %7.2f %10.0f %7.2f %7.1f %6.1f' % r)
+print('stereo / mono frame: %.2fx' % (rows[1][1] / rows[0][1]))
+PY
+}
+
 # depth_share DIR: the depth grids' bytes (Frame.depth_grid's codes) against the access units' in
 # a --record folder's sessions.
 depth_share() {
@@ -699,5 +735,6 @@ case "${1:-}" in
   shown) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; shown "$@" ;;
   clientcpu) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; clientcpu "$@" ;;
   threadcpu) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; threadcpu "$@" ;;
+  stereocost) shift; OUT=${OUT:-$ROOT/out/gpu_server}; mkdir -p "$OUT"; stereocost "$@" ;;
   *) echo "usage: $0 prepare [BUILD_DIR] | check | sweep [--seconds S] [--counts \"1 2 4\"] [--sizes \"WxH ...\"]" >&2; exit 2 ;;
 esac

@@ -46,6 +46,7 @@ struct FrameEncodeInputs {
   int live_sessions = 1;             // sessions open on the server now (>= 1)
   bool av1_ok = false;               // the client decodes AV1 and the encoders are x264's CPU ones
   double probed_bits_per_pixel = 0;  // the scene's probed rate at this size (0: none yet)
+  int fps = kStreamFps;              // the client's frames a second (Pose.display_hz, else kStreamFps)
 };
 
 // A frame's encoder settings.

@@ -433,6 +433,7 @@ FrameEncodeInputs FramePipeline::encode_inputs(const JobShape& shape, bool refin
   in.refine = refine;
   in.live_sessions = live_sessions;
   in.av1_ok = av1_ok_;
+  in.fps = shape.fps;
   // The probe's table is read (a lock) only where --bits-per-pixel auto uses it.
   const bool probed = settings_.encoder_policy.content_rate && content_rates_;
   in.probed_bits_per_pixel = probed ? content_rates_->bits_per_pixel(shape.width, shape.height) : 0;

@@ -69,6 +69,7 @@ class FramePipeline {
     LinkInputs link;                                       // the link's state (link_rate.h; read again at the encode)
     std::chrono::steady_clock::time_point link_read_at{};  // when `link` was read (at the encode)
     double previous_send_ms = 0;                           // FrameTimings.previous_send_ms
+    int fps = kStreamFps;                                  // the client's display rate (Pose.display_hz)
   };
   struct Job {
     PendingPose pose;

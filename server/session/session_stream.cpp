@@ -71,6 +71,7 @@ void SessionStream::on_pose(const pb::Pose& pose, const CameraPose& cam, const s
   next.client_time_ms = pose.client_time_ms();
   next.received = received;
   next.eyes = eyes;
+  display_hz_ = pose.display_hz();  // the encoder takes it at its next build
   if (shared_.settings.frame.pose_prediction && !eyes) {
     prediction_.on_pose(cam, pose.client_time_ms(), pose.shown_latency_ms());
     next.pose = prediction_.predicted();
@@ -96,6 +97,7 @@ void SessionStream::admit() {
   if (frames_.pending()->eyes) shape.width -= shape.width % 4;
   shape.max_bitrate_kbps = max_bitrate_kbps_;
   shape.previous_send_ms = last_send_ms_;
+  shape.fps = display_hz_ > 0 ? static_cast<int>(std::lround(display_hz_)) : kStreamFps;
   shape.link = link_inputs();  // read again at its encode
   shape.link_read_at = Clock::now();
   FramePipeline::StartedRender started = frames_.start_render(shape);

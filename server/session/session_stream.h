@@ -144,6 +144,7 @@ class SessionStream {
   int link_ceiling_kbps_ = 0;        // the last frame's FrameEncoding::link_ceiling_kbps (link_rate.h's ceiling)
   int send_buffer_ = 0;              // the socket's SO_SNDBUF as the stream last set it (0: the transport's)
   double last_send_ms_ = 0;          // send time of the last frame written
+  double display_hz_ = 0;            // the client's display rate (Pose.display_hz; 0: unknown)
   Clock::time_point last_progress_;  // last time the transport wrote one of our frames
   // Stats counters (totals, and sums since the last Stats message).
   std::uint32_t frames_sent_ = 0, poses_received_ = 0, poses_skipped_ = 0, key_frames_ = 0;

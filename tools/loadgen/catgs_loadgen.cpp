@@ -93,6 +93,9 @@ const char* kUsage =
     "                           head, turning +-25 degrees every 0.8 s (196 degrees/s at most),\n"
     "                           eyes 63 mm apart; latency and FPS are each eye's (one frame\n"
     "                           holds both)\n"
+    "  --mono-eye               with --stereo: stream one eye's view alone (W x H, a mono pose of\n"
+    "                           the left eye, the eye's vertical field of view): its cost, against\n"
+    "                           which a stereo frame's is measured\n"
     "  --token T                Hello token\n"
     "  --json FILE              write the report (every ramp step) as JSON\n"
     "  --ramp                   run 1, 2, 4, ... sessions until a bound breaks\n"
@@ -315,6 +318,7 @@ LoadSessionConfig base_config(const tools::Args& args) {
   if (args.has("--stereo")) {
     base.stereo = true;
     base.rate_hz = parse_stereo(args.get("--stereo")).display_hz;
+    base.mono_eye = args.has("--mono-eye");
     if (base.check_every > 0 || base.still_s > 0 || !base.record_dir.empty())
       throw std::invalid_argument("--stereo has no reference check, still check or recording (they compare one view)");
   }
@@ -435,7 +439,7 @@ int main(int argc, char** argv) {
                                         "--ramp-start",     "--max-p95-ms",    "--min-fps",         "--progress",
                                         "--tls!",           "--help!",         "--timeline!",       "--av1!",
                                         "--receipts",       "--read-stall-ms", "--still-s",         "--record",
-                                        "--link-rtt-ms",    "--link-mbit",     "--stereo"});
+                                        "--link-rtt-ms",    "--link-mbit",     "--stereo",          "--mono-eye!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -446,8 +450,9 @@ int main(int argc, char** argv) {
       sizes = {std::to_string(args.get_int("--width", 1280)) + "x" + std::to_string(args.get_int("--height", 720))};
     if (base.stereo) {  // the stream holds both eyes
       const StereoSpec s = parse_stereo(args.get("--stereo"));
-      sizes = {std::to_string(2 * s.eye_width) + "x" + std::to_string(s.eye_height)};
-      std::printf("headsets: two eyes of %dx%d side by side (%s), %g poses a second\n", s.eye_width, s.eye_height,
+      sizes = {std::to_string((base.mono_eye ? 1 : 2) * s.eye_width) + "x" + std::to_string(s.eye_height)};
+      std::printf("headsets: %s of %dx%d (%s), %g poses a second\n",
+                  base.mono_eye ? "the left eye alone" : "two eyes side by side", s.eye_width, s.eye_height,
                   sizes[0].c_str(), s.display_hz);
     }
     const std::vector<std::string> traces = split(args.get("--trace", "orbit"));

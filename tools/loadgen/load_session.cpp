@@ -90,6 +90,12 @@ PageOrbit page_orbit(const pb::Welcome& welcome) {
   return {std::max(glm::length(target - position), scale * 1e-3), scale};
 }
 
+Camera left_eye_view(const Camera& head, const HeadsetOptics& optics) {
+  const glm::quat q = head.orientation();
+  const glm::vec3 at = head.position() - 0.5f * optics.ipd * (glm::mat3_cast(q)[0]);
+  return Camera::from_pose(at, q, glm::degrees(optics.angle_up - optics.angle_down), head.width, head.height);
+}
+
 Camera turned_head(const Camera& trace_camera, double t_s, const HeadTurn& turn) {
   const double yaw = glm::radians(turn.amplitude_deg) * std::sin(2.0 * glm::pi<double>() * t_s / turn.period_s);
   // About the camera's own y axis (down in OpenCV axes: the head's up, sign aside).
@@ -251,9 +257,12 @@ class PoseLoop {
     sent_at_.push_back(now_ms());
     // On the visitor's clock: it was at this pose half the round trip ago.
     const double client_ms = sent_at_.back() - 0.5 * cfg_.link.rtt_ms;
-    pb::Pose pose = cfg_.stereo
-                        ? stereo_pose_from_camera(turned_head(camera_at(trace_, t_s), t_s), cfg_.optics, seq, client_ms)
-                        : pose_from_camera(camera_at(trace_, t_s), seq, client_ms);
+    pb::Pose pose =
+        cfg_.stereo && cfg_.mono_eye
+            ? pose_from_camera(left_eye_view(turned_head(camera_at(trace_, t_s), t_s), cfg_.optics), seq, client_ms)
+        : cfg_.stereo ? stereo_pose_from_camera(turned_head(camera_at(trace_, t_s), t_s), cfg_.optics, seq, client_ms)
+                      : pose_from_camera(camera_at(trace_, t_s), seq, client_ms);
+    if (cfg_.stereo) pose.set_display_hz(cfg_.rate_hz);  // a headset's display rate: the stream's
     // As the web viewer does: the newest frame's latency rides on the next pose to /metrics.
     pose.set_shown_latency_ms(unreported_latency_ms_);
     unreported_latency_ms_ = 0;

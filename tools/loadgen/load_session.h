@@ -106,6 +106,10 @@ struct LoadSessionConfig {
   // camera turned by kHeadTurn, and width x height is the stream's whole size, both eyes.
   bool stereo = false;
   HeadsetOptics optics;
+  // With `stereo`: one eye's view alone (--mono-eye), a mono Pose of the left eye (its position,
+  // the head's orientation, a vertical field of view of the eye's up-to-down span) at width x
+  // height: what one eye costs the server, against which a stereo frame is measured.
+  bool mono_eye = false;
   Progress* progress = nullptr;  // optional; outlives the session
 };
 
@@ -116,6 +120,9 @@ struct HeadTurn {
   double amplitude_deg = 25.0, period_s = 0.8;
 };
 inline constexpr HeadTurn kHeadTurn{};
+// The left eye of a head as a mono camera (LoadSessionConfig::mono_eye): ipd / 2 to the head's
+// left, the head's orientation, a symmetric vertical field of view of the eye's span.
+Camera left_eye_view(const Camera& head, const HeadsetOptics& optics);
 // The head at time t_s: `trace_camera` yawed by the turn.
 Camera turned_head(const Camera& trace_camera, double t_s, const HeadTurn& turn = kHeadTurn);
 

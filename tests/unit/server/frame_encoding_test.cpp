@@ -141,3 +141,19 @@ TEST(FrameEncoding, ARefineFrameLiftsOnlyACappedStream) {
 }
 
 }  // namespace
+
+// A headset's display rate (Pose.display_hz, issue 94): 0.09 bits a pixel at its frames a second,
+// the encoder's time base, and the link's share counted against it.
+TEST(FrameEncoding, TheClientsDisplayRateSetsTheRateAndTheTimeBase) {
+  const EncoderPolicy p = sixteen_cores();
+  FrameEncodeInputs in = frame(2560, 1344);
+  const FrameEncoding at60 = frame_encoding(p, in);
+  in.fps = 72;
+  const FrameEncoding at72 = frame_encoding(p, in);
+  EXPECT_EQ(at60.config.fps, 60);
+  EXPECT_EQ(at72.config.fps, 72);
+  EXPECT_NEAR(at60.rate_kbps, 2560 * 1344 * 60 * 0.09 / 1000, 1.0);
+  EXPECT_NEAR(at72.rate_kbps, 2560 * 1344 * 72 * 0.09 / 1000, 1.0);
+  in.link.frame_rate = 36;  // half the display's frames reach the client
+  EXPECT_NEAR(frame_encoding(p, in).link_ceiling_kbps, at72.rate_kbps / 2, 1.0);
+}

@@ -125,6 +125,12 @@ TEST(MessageValidation, FrameReceiptTimeIsFiniteAndBounded) {
                           {-0.5, 1e15 * 1.01, std::nan(""), -std::numeric_limits<double>::infinity()});
 }
 
+// A headset's display rate (issue 94): 0 (unknown) or 24..240 Hz.
+TEST(MessageValidation, DisplayRateIsZeroOrAHeadsetsRate) {
+  expect_pose_time_bounds(&pb::Pose::set_display_hz, {0.0, 24.0, 72.0, 90.0, 240.0},
+                          {-72.0, 10.0, 23.9, 240.5, std::nan(""), std::numeric_limits<double>::infinity()});
+}
+
 // ---- ExportVideoRequest (issue 38: "Export video" from the page) ----
 
 // A path of `poses` poses `dt` s apart, moving along x and looking down +z.
