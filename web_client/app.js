@@ -3,14 +3,14 @@
 // (catgs_viewer.js), which owns the stream: connection, decoding, canvas, camera controls.
 // Wiring only; the pieces live in the modules imported below.
 
-import { CatgsViewer, defaultWebSocketUrl, parseMaxSize } from './viewer/viewer.js';
+import { CatgsViewer, defaultWebSocketUrl, parseMaxSize, vrSupported } from './viewer/viewer.js';
 import { Overlay } from './overlay.js';
 import {
   LOADGEN_SECONDS_PER_VIEW, PathRecorder, fromInriaCameras, fromTraceFile, resample, toInriaCameras,
   TOUR_SECONDS_PER_VIEW, toTraceFile,
 } from './viewer/viewer.js';
 import { NotesUi } from './notes_ui.js';
-import { WalkMode } from './walk.js';
+import { VrWalk, WalkMode } from './walk.js';
 import { VideoExportUi, tourSamples } from './video_export.js';
 import { parseView, viewUrl, withoutView } from './view_link.js';
 import { TOKEN_KEY, takeToken } from './token.js';
@@ -463,6 +463,9 @@ function wireUi() {
   $('btn-quality').addEventListener('click', () => togglePanel('quality', 'btn-quality'));
   $('btn-notes').addEventListener('click', () => togglePanel('notes', 'btn-notes'));
   $('btn-walk').addEventListener('click', toggleWalk);
+  $('btn-vr').addEventListener('click', toggleVr);
+  // Shown only where the browser offers immersive VR (a headset, or an emulator).
+  vrSupported().then((yes) => ($('btn-vr').hidden = !yes));
   wirePicking();
   wireQuality();
   wirePaths();
@@ -516,6 +519,30 @@ function wirePaths() {
     if (f) importText(f.name, await f.text());
     e.target.value = '';
   });
+}
+
+// ---- VR (issue 94) ----
+
+// Into the headset (from the button's click: a headset wants a user gesture), or out of it. The
+// scene's scale, where Notes has one, makes a metre in the room a metre in the scene; walk mode,
+// where it is on, checks each thumbstick step with its probes (walk.js VrWalk).
+function toggleVr() {
+  if (viewer.vr) return viewer.exitVr();
+  const mpu = state.notes.metresPerUnit;
+  viewer.driveVr = state.walk.on ? new VrWalk(state.walk).drive : null;
+  return viewer.enterVr({ unitsPerMetre: mpu ? 1 / mpu : null }).catch((e) => {
+    notice(`VR: ${e.message}`, 'error', 5000);
+    return false;
+  });
+}
+
+function onVr({ active }) {
+  $('btn-vr').textContent = active ? 'Exit VR' : 'Enter VR';
+  $('btn-vr').setAttribute('aria-pressed', String(active));
+  if (!active) {
+    viewer.driveVr = null;
+    notice('back from VR at the headset\'s last view');
+  }
 }
 
 function toggleWalk() {
@@ -578,13 +605,14 @@ function wireViewer() {
   viewer.addEventListener('error', (e) => onViewerError(e.detail));
   viewer.addEventListener('message', (e) => onMessage(e.detail));
   viewer.addEventListener('step', (e) => onStep(e.detail));
+  viewer.addEventListener('vr', (e) => onVr(e.detail));
 }
 
 async function main() {
   makeFeatures();
   installTestHook(viewer, {
     overlay, shareUrl, resetView, toggleRecording, addWaypoint, play, exportCameras, exportTrace, importText,
-    setRenderScale, setMaxBitrate, toggleWalk,
+    setRenderScale, setMaxBitrate, toggleWalk, toggleVr,
     recording: () => state.recording,
     get notes() {
       return state.notes;

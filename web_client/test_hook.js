@@ -81,6 +81,24 @@ export function installTestHook(viewer, page) {
     setScale: (metres) => page.notes.setScale(metres),
     saveNotes: () => page.notes.save(),
     toggleWalk: page.toggleWalk,
+    // VR (issue 94): the session's state (xr.js snapshot(), null when not in VR), the button's
+    // action, leaving, and the next display frame's pixels as PNG (both eyes, as the headset
+    // gets them) with the state at that frame.
+    get vr() {
+      return viewer.vr ? viewer.vr.snapshot() : null;
+    },
+    toggleVr: page.toggleVr,
+    exitVr: () => viewer.exitVr(),
+    vrCapture: async () => {
+      if (!viewer.vr) return null;
+      const shot = await viewer.vr.capture();
+      const c = document.createElement('canvas');
+      c.width = shot.width;
+      c.height = shot.height;
+      c.getContext('2d').putImageData(new ImageData(shot.rgba, shot.width, shot.height), 0, 0);
+      const { rgba, ...rest } = shot;
+      return { ...rest, png: c.toDataURL('image/png') };
+    },
     get walk() {
       return page.walk.snapshot();
     },

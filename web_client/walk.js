@@ -217,3 +217,37 @@ export class WalkMode {
     pad.addEventListener('pointercancel', end);
   }
 }
+
+// VR (issue 94): the thumbstick walks by walk mode's rules, a WalkMode of its own on a stand-in
+// camera that is the head, set again each display frame (the viewer's driveVr hook, xr.js). Its
+// looks probe from the head; its plan stops the step short of walls and plants, at edges and at
+// steps; the stick is its pad. While the stick is held the step carries walk mode's height too
+// (the head eased to eye height over the ground, so a step up lifts the visitor); standing still,
+// nothing moves: the headset's own height (crouching, standing up) is the visitor's.
+const NO_KEYS = new Set();
+
+export class VrWalk {
+  // walk: the page's WalkMode (its app: probePose, metresPerUnit, the page's camera for the scale).
+  constructor(walk) {
+    const page = walk.app;
+    this.head = { position: [0, 0, 0], orientation: [1, 0, 0, 0], target: [0, 0, 0], up: [0, -1, 0], sceneScale: 1, version: 0 };
+    this.mode = new WalkMode({ ...page, camera: () => this.head }, null);
+    this.mode.on = true;
+    this.sceneScale = () => (page.camera() ? page.camera().sceneScale : 1);
+    this.drive = (step) => this._drive(step);
+  }
+
+  // xr.js's step: { head (world pose), up, stick ([right, forward]), dt, now } -> the world step.
+  _drive({ head, up, stick, dt, now }) {
+    const h = this.head;
+    h.position = head.position.slice();
+    h.orientation = head.orientation.slice();
+    h.target = vadd(h.position, cameraForward(h.orientation));
+    h.up = up.slice();
+    h.sceneScale = this.sceneScale();
+    this.mode.padVector = stick;
+    this.mode.update(dt, NO_KEYS, false, now);
+    if (!stick[0] && !stick[1]) return [0, 0, 0];
+    return vsub(h.position, head.position);
+  }
+}

@@ -335,6 +335,161 @@ test('re-projection fill: where the moved frame does not reach, its nearest edge
   for (let i = 0; i < out3.data.length; i += 4) assert.ok(out3.data[i] >= 100, `pixel ${i / 4} is black`);
 });
 
+// ---- VR (issue 94): stereo.js, the eye homography, the stereo pose on the wire ----
+
+// A GL projection matrix (column-major) built from frustum angles as glFrustum builds it, at
+// near n and far f: the independent side of fovFromProjection's round trip.
+const frustumMatrix = (a, n = 0.1, f = 1000) => {
+  const [l, r, t, b] = [Math.tan(a.left) * n, Math.tan(a.right) * n, Math.tan(a.up) * n, Math.tan(a.down) * n];
+  const P = new Float32Array(16);
+  P[0] = (2 * n) / (r - l);
+  P[5] = (2 * n) / (t - b);
+  P[8] = (r + l) / (r - l);
+  P[9] = (t + b) / (t - b);
+  P[10] = -(f + n) / (f - n);
+  P[11] = -1;
+  P[14] = (-2 * f * n) / (f - n);
+  return P;
+};
+
+// A camera { position, orientation } with intrinsics k ({ fx, fy, cx, cy }) projecting world X,
+// straight from the pinhole model (OpenCV axes, camera.js's camera axes).
+const projectK = (pose, k, X) => {
+  const v = cam.vsub(X, pose.position);
+  const z = cam.vdot(v, cam.cameraForward(pose.orientation));
+  return [k.fx * (cam.vdot(v, cam.cameraRight(pose.orientation)) / z) + k.cx, k.fy * (cam.vdot(v, cam.cameraDown(pose.orientation)) / z) + k.cy];
+};
+
+test('XR projection matrices read as XrFovf angles; an eye\'s intrinsics put the frustum\'s edges on the image\'s', async () => {
+  const stereo = await imp('stereo.js');
+  // A Quest-like asymmetric eye (the nose side narrower), and a symmetric one.
+  for (const a of [{ left: -0.942, right: 0.698, up: 0.768, down: -0.855 }, { left: -0.7, right: 0.7, up: 0.6, down: -0.6 }]) {
+    const back = stereo.fovFromProjection(frustumMatrix(a));
+    close([back.left, back.right, back.up, back.down], [a.left, a.right, a.up, a.down], 1e-6);
+    // Rays along the frustum's edges land on the image's edges (x right, y down).
+    const k = stereo.eyeIntrinsics(a, 1280, 1344);
+    const id = { position: [0, 0, 0], orientation: [1, 0, 0, 0] };
+    close(projectK(id, k, [Math.tan(a.left), 0, 1]).slice(0, 1), [0], 1e-9);
+    close(projectK(id, k, [Math.tan(a.right), 0, 1]).slice(0, 1), [1280], 1e-9);
+    close(projectK(id, k, [0, -Math.tan(a.up), 1]).slice(1), [0], 1e-9);
+    close(projectK(id, k, [0, -Math.tan(a.down), 1]).slice(1), [1344], 1e-9);
+    assert.ok(Math.abs(stereo.verticalFovDeg(a) - ((a.up - a.down) * 180) / Math.PI) < 1e-9);
+  }
+});
+
+test('XR poses in the world: OpenCV axes, the headset anchored to the page\'s camera, level, scaled', async () => {
+  const stereo = await imp('stereo.js');
+  // XR camera axes (x right, y up, looking along -z) against OpenCV's (y down, along +z).
+  const qXr = cam.qnorm(cam.qmul(cam.qfromAxisAngle([0, 1, 0], 0.4), cam.qfromAxisAngle([1, 0, 0], -0.3)));
+  const qCv = stereo.openCvFromXr(qXr);
+  close(cam.cameraForward(qCv), cam.qrotate(qXr, [0, 0, -1]), 1e-12);
+  close(cam.cameraDown(qCv), cam.qrotate(qXr, [0, -1, 0]), 1e-12);
+  close(cam.cameraRight(qCv), cam.qrotate(qXr, [1, 0, 0]), 1e-12);
+  // A y-down scene; the page's camera looks down 25 degrees towards +x +z.
+  const up = [0, -1, 0];
+  const camPos = [1, -2, -3];
+  const camera = { position: camPos, orientation: cam.lookAt(camPos, [2, -1.2, -2], up) };
+  const head = { position: [0.2, 1.6, 0.1], orientation: qXr }; // turned 0.4 rad left, looking down 0.3 rad
+  for (const unitsPerMetre of [1, 2.5]) {
+    const anchor = stereo.xrAnchor(camera, up, head, unitsPerMetre);
+    const h = stereo.worldPose(anchor, head);
+    close(h.position, camPos, 1e-12); // the first head pose is the camera's position
+    // XR up is the scene's up; the head's level forward is the camera's level forward; the head
+    // keeps its own pitch (0.3 rad down, in the world as in the room).
+    close(cam.qrotate(anchor.rotation, [0, 1, 0]), up, 1e-12);
+    const lvl = (v) => cam.vnorm(cam.vsub(v, cam.vscale(up, cam.vdot(v, up))));
+    close(lvl(cam.cameraForward(h.orientation)), lvl(cam.cameraForward(camera.orientation)), 1e-12);
+    close([Math.asin(cam.vdot(cam.cameraForward(h.orientation), up))], [-0.3], 1e-12);
+    // A metre to the head's right in the room is unitsPerMetre units along its right in the world.
+    const right = cam.qrotate(qXr, [1, 0, 0]);
+    const eye = stereo.worldPose(anchor, { position: cam.vadd(head.position, right), orientation: qXr });
+    close(cam.vsub(eye.position, h.position), cam.vscale(cam.cameraRight(h.orientation), unitsPerMetre), 1e-12);
+    // An XRView: its transform and projection matrix -> an EyeView.
+    const view = {
+      transform: { position: { x: 0.1, y: 1.5, z: 0 }, orientation: { w: qXr[0], x: qXr[1], y: qXr[2], z: qXr[3] } },
+      projectionMatrix: frustumMatrix({ left: -0.9, right: 0.7, up: 0.8, down: -0.85 }),
+    };
+    const ev = stereo.eyeViewOf(anchor, view);
+    close(ev.position, stereo.worldPose(anchor, { position: [0.1, 1.5, 0], orientation: qXr }).position, 1e-12);
+    close([ev.angles.left, ev.angles.right, ev.angles.up, ev.angles.down], [-0.9, 0.7, 0.8, -0.85], 1e-6);
+    // The thumbstick's step moves the anchor: the same head lands that far on.
+    const moved = stereo.worldPose(stereo.moveAnchor(anchor, [0.5, 0, 0.25]), head);
+    close(moved.position, cam.vadd(camPos, [0.5, 0, 0.25]), 1e-12);
+  }
+  // A camera looking straight down still anchors: its image's top is its forward, level.
+  const down = { position: [0, 0, 0], orientation: cam.lookAt([0, 0, 0], [0, 1, 0], [0, 0, 1]) };
+  const a2 = stereo.xrAnchor(down, up, { position: [0, 1.6, 0], orientation: [1, 0, 0, 0] });
+  close(cam.qrotate(a2.rotation, [0, 1, 0]), up, 1e-12);
+});
+
+test('the VR stream: both eyes side by side, even eye widths, within the server\'s viewport limit', async () => {
+  const stereo = await imp('stereo.js');
+  assert.deepEqual(stereo.vrStreamSize(480, 540, 0.5), { eyeWidth: 240, width: 480, height: 270 });
+  assert.deepEqual(stereo.vrStreamSize(1281, 1344, 1), { eyeWidth: 1280, width: 2560, height: 1344 });
+  // Quest 3's full eye (2064 x 2208) does not fit 3840 x 2160 pixels: scaled down together.
+  const big = stereo.vrStreamSize(2064, 2208, 1);
+  assert.ok(big.width * big.height <= 3840 * 2160 && Math.max(big.width, big.height) <= 3840, JSON.stringify(big));
+  assert.ok(big.eyeWidth % 2 === 0 && big.height % 2 === 0 && big.width === 2 * big.eyeWidth);
+  close([big.eyeWidth / big.height], [2064 / 2208], 0.01);
+  // One view (a headset without stereo): the view alone, at least 16 wide.
+  assert.deepEqual(stereo.vrStreamSize(7, 20, 1, 1), { eyeWidth: 16, width: 16, height: 20 });
+});
+
+test('re-projection between asymmetric eyes: a plane\'s points land where the other eye sees them', () => {
+  const eyeK = (a, w, h) => {
+    const fx = w / (Math.tan(a.right) - Math.tan(a.left));
+    const fy = h / (Math.tan(a.up) - Math.tan(a.down));
+    return { fx, fy, cx: -Math.tan(a.left) * fx, cy: Math.tan(a.up) * fy };
+  };
+  const p1 = [0.2, -1.5, -3];
+  const from = { position: p1, orientation: cam.lookAt(p1, [0, -1, 0], [0, -1, 0]) };
+  // The eye a frame's round trip later: turned, a little higher and to the side; its display is
+  // larger than the frame's eye, and its frustum another one.
+  const p2 = cam.vadd(p1, [0.03, -0.01, 0.02]);
+  const to = { position: p2, orientation: cam.qnorm(cam.qmul(cam.qfromAxisAngle([0.2, 1, 0.1], 0.08), from.orientation)) };
+  const k1 = eyeK({ left: -0.94, right: 0.7, up: 0.77, down: -0.86 }, 240, 270);
+  const k2 = eyeK({ left: -0.9, right: 0.72, up: 0.8, down: -0.85 }, 480, 540);
+  const depth = 2.7;
+  const H = reproject.reprojectionK(from, to, depth, k1, k2);
+  const f = cam.cameraForward(from.orientation);
+  for (const [a, b] of [[0, 0], [0.9, -0.4], [-1.2, 0.7], [0.3, 1.1]]) {
+    const X = cam.vadd(cam.vadd(cam.vadd(from.position, cam.vscale(f, depth)), cam.vscale(cam.cameraRight(from.orientation), a)),
+      cam.vscale(cam.cameraDown(from.orientation), b));
+    close(reproject.applyHomography(H, ...projectK(from, k1, X)), projectK(to, k2, X), 1e-6);
+    // The drawer goes the other way: display pixel -> the frame's pixel.
+    close(reproject.applyHomography(reproject.invert3(H), ...projectK(to, k2, X)), projectK(from, k1, X), 1e-6);
+  }
+  // With the flat view's intrinsics it is reprojection() itself.
+  const fp = { ...from, fovDeg: 50 };
+  const tp = { ...to, fovDeg: 50 };
+  const k = cam.intrinsicsFor(50, 320, 240);
+  close(reproject.reprojectionK(fp, tp, 3, k, k).flat(), reproject.reprojection(fp, tp, 3, 320, 240).flat(), 1e-12);
+});
+
+test('a stereo Pose and a stereo Frame on the wire', async () => {
+  const p = proto.makeProtocol(pb.parse(protoText, { keepCase: true }).root);
+  const eye = (x) => ({ position: [x, -1.6, 2], orientation: [0.5, 0.5, -0.5, 0.5], angles: { left: -0.9, right: 0.7, up: 0.8, down: -0.85 } });
+  const msg = p.decodeClient(p.encodePose({ sequence: 3, clientTimeMs: 5, position: [0, -1.6, 2], orientation: [1, 0, 0, 0], fovDeg: 95,
+    leftEye: eye(-0.03), rightEye: eye(0.03), displayHz: 72 })).msg;
+  assert.equal(msg.display_hz, 72);
+  assert.deepEqual({ ...msg.left_eye.position }, { x: -0.03, y: -1.6, z: 2 });
+  assert.deepEqual({ ...msg.right_eye.orientation }, { w: 0.5, x: 0.5, y: -0.5, z: 0.5 });
+  assert.deepEqual([msg.right_eye.angle_left, msg.right_eye.angle_right, msg.right_eye.angle_up, msg.right_eye.angle_down], [-0.9, 0.7, 0.8, -0.85]);
+  assert.equal(msg.vertical_fov_deg, 95);
+  // A flat pose carries no eyes (an older server sees what it always saw).
+  const flat = p.decodeClient(p.encodePose({ sequence: 4, clientTimeMs: 5, position: [0, 0, 0], orientation: [1, 0, 0, 0], fovDeg: 60 })).msg;
+  assert.equal(flat.left_eye, null);
+  assert.equal(flat.display_hz, 0);
+  assert.equal(flat.right_eye, null);
+  // A stereo frame's eyes as the decoder hands them to the viewer.
+  const f = p.decodeServer(p.encodeServer({ frame: { sequence: 1, width: 480, height: 270, eye_width: 240,
+    left_eye: { position: { x: -0.03, y: -1.6, z: 2 }, orientation: { w: 1 }, angle_left: -0.9, angle_right: 0.7, angle_up: 0.8, angle_down: -0.85 },
+    right_eye: { position: { x: 0.03, y: -1.6, z: 2 }, orientation: { w: 1 }, angle_left: -0.7, angle_right: 0.9, angle_up: 0.8, angle_down: -0.85 } } })).msg;
+  assert.equal(f.eye_width, 240);
+  assert.deepEqual(proto.eyeViewFromWire(f.left_eye), { position: [-0.03, -1.6, 2], orientation: [1, 0, 0, 0], angles: { left: -0.9, right: 0.7, up: 0.8, down: -0.85 } });
+  assert.equal(proto.eyeViewFromWire(null), null);
+});
+
 // A Baseline SPS (level 3.0) followed by PPS and an IDR slice header, as x264 would start an IDR.
 const sps = [0x67, 0x42, 0xc0, 0x1e, 0xd9, 0x00, 0xa0, 0x47, 0xfe, 0xc8];
 const pps = [0x68, 0xce, 0x38, 0x80];
@@ -1011,6 +1166,44 @@ test('walk step: never past what the plan allows, eases to eye height, rises onl
   r = notes.walkStep([0, -0.5, 0], null, 0, up, s, { ...landing, confirmed: false }, 0.05);
   assert.deepEqual(r.position, [0, -0.5, 0]);
   close(notes.alongGround([1, 2, 3], up), [1, 0, 3]);
+});
+
+test('VR: the thumbstick walks by walk mode\'s rules (VrWalk): level, along the head, short of a wall', async () => {
+  const { VrWalk, WalkMode } = await imp('walk.js');
+  // A room in a y-down scene: the floor at y = 0, a wall at z = 3 facing the walker. The fake
+  // probe answers its view's centre ray (what walk mode asks for) with the nearest of the two.
+  const up = [0, -1, 0];
+  const probePose = (pose) => {
+    const p = pose.position;
+    const d = cam.cameraForward(pose.orientation);
+    const ts = [d[1] > 1e-9 ? -p[1] / d[1] : Infinity, d[2] > 1e-9 ? (3 - p[2]) / d[2] : Infinity].filter((t) => t > 0);
+    const t = Math.min(...ts);
+    return Promise.resolve(Number.isFinite(t) ? { hit: true, depth: t, point: cam.vadd(p, cam.vscale(d, t)), opacity: 1 } : { hit: false, depth: 0, opacity: 0 });
+  };
+  const page = { camera: () => ({ sceneScale: 10 }), probePose, metresPerUnit: () => 1, notice: () => {} }; // eye 1.6
+  const walk = new VrWalk(new WalkMode(page, null));
+  // The head 1.7 above the floor, looking along +z and down a little (a headset is never level).
+  let head = { position: [0.2, -1.7, 0], orientation: cam.qmul(cam.qfromAxisAngle([1, 0, 0], -0.2), cam.lookAt([0, 0, 0], [0, 0, 1], up)) };
+  const flush = () => new Promise((r) => setImmediate(r));
+  let now = 1000;
+  const step = async (stick) => {
+    const d = walk.drive({ head, up, stick, delta: [0, 0, 0], dt: 1 / 60, now });
+    head = { ...head, position: cam.vadd(head.position, d) };
+    now += 1000 / 60;
+    await flush();
+    return d;
+  };
+  // Standing still: no step, however far the head is from walk mode's eye height.
+  for (let i = 0; i < 30; i++) assert.deepEqual(await step([0, 0]), [0, 0, 0]);
+  // Stick forward for 5 s: along +z (the head's level forward; the head looks down, the walk
+  // does not), eased to the eye height, and stopped a stop distance short of the wall.
+  for (let i = 0; i < 300; i++) await step([0, 1]);
+  const p = head.position;
+  assert.ok(Math.abs(p[0] - 0.2) < 1e-9, `no sideways drift: ${p}`);
+  assert.ok(Math.abs(-p[1] - 1.6) < 0.02, `eye height over the floor: ${p}`);
+  const radius = walk.mode.sizes(walk.head).radius;
+  assert.ok(p[2] > 3 - radius - 0.1 && p[2] <= 3 - radius + 1e-9, `short of the wall at z = 3 by the stop distance ${radius}: ${p}`);
+  assert.ok(walk.mode.blocked, 'the last step was blocked by the wall');
 });
 
 // ---- issue 38: Export video (video_export.js) ----

@@ -7,7 +7,7 @@
 //
 // Events (CustomEvent, `detail` as in README.md): connected, frame, stats, error, status,
 // disconnected, message (a server message the viewer leaves to the page), step (each animation
-// frame, after the camera moved).
+// frame, after the camera moved), vr (a VR session started or ended: xr.js).
 
 import { OrbitCamera } from './camera.js';
 import { Connection, ERROR_INVALID_ARGUMENT, ERROR_SERVER_FULL, ERROR_SHUTTING_DOWN, ERROR_UNAUTHORIZED } from './connection.js';
@@ -23,8 +23,9 @@ import { playbackOf, resolvePose } from './pose_input.js';
 import { loadProtocol } from './protocol.js';
 import { planeDepthFor } from './reproject.js';
 import { capViewport, parseMaxSize } from './viewport.js';
+import { VrSession } from './xr.js';
 
-export const VIEWER_EVENTS = ['connected', 'frame', 'stats', 'error', 'status', 'disconnected', 'message', 'step'];
+export const VIEWER_EVENTS = ['connected', 'frame', 'stats', 'error', 'status', 'disconnected', 'message', 'step', 'vr'];
 
 // Where this module was loaded from: the schema and the protobufjs runtime lie beside it, also
 // when another site's page imports it.
@@ -90,6 +91,9 @@ export class CatgsViewer extends EventTarget {
     // (null: the orbit target's plane).
     this.driveCamera = null;
     this.reprojectDepth = null;
+    // In VR: driveVr({ head, up, stick, delta, dt, now }) -> the world step to take instead of
+    // `delta` (the thumbstick's free step), or null to take it (xr.js).
+    this.driveVr = null;
     this._initState();
   }
 
@@ -132,6 +136,7 @@ export class CatgsViewer extends EventTarget {
     this.busy = new PageBusy();
     this.abort = new AbortController(); // every listener and timer of this viewer ends with it
     this.started = null;
+    this.vr = null; // the VrSession (xr.js) while the headset shows the stream
   }
 
   // ---- what a page reads ----
@@ -278,6 +283,7 @@ export class CatgsViewer extends EventTarget {
 
   // Ends the session and everything the viewer runs (listeners, timers); the canvas stays.
   close() {
+    if (this.vr) this.vr.end();
     this.abort.abort();
     this.busy.stop();
     if (this.connection) this.connection.close();
@@ -377,7 +383,8 @@ export class CatgsViewer extends EventTarget {
     this.sentVersion = -1;
     // Before the first pose: a view set in a handler (setPose) is the first one rendered.
     this._emit('connected', { welcome: this.welcome, newView });
-    if (this.camera.version !== this.sentVersion) this._sendPose();
+    if (this.vr) this.vr.resend(); // in VR the XR loop's next pose is the first
+    else if (this.camera.version !== this.sentVersion) this._sendPose();
   }
 
   _onClose(info) {
@@ -436,6 +443,7 @@ export class CatgsViewer extends EventTarget {
   }
 
   _onResize() {
+    if (this.vr) return; // the headset's eyes size the stream (_vrResize)
     const v = this._viewportSize();
     if (this.viewport && v.width === this.viewport.width && v.height === this.viewport.height) return;
     this.viewport = v;
@@ -472,10 +480,19 @@ export class CatgsViewer extends EventTarget {
   _sendPose() {
     const cam = this.camera;
     if (!cam || !this.sessionOpen) return null;
+    const sequence = this._sendPoseMessage(cam.pose());
+    if (sequence !== null) this.sentVersion = cam.version;
+    return sequence;
+  }
+
+  // Sends `pose` ({ position, orientation, fovDeg }) and, in VR, both eyes (`eyes`: { left, right }
+  // as stereo.js eyeViewOf makes them) and the headset's display rate (Hz, 0: unknown) as one
+  // Pose; returns its sequence, or null when not sent.
+  _sendPoseMessage(pose, eyes = null, displayHz = 0) {
+    if (!this.sessionOpen) return null;
     // Poses are tiny; a large send buffer means the link is stalled, and the newest pose will go
     // out once it drains (latest wins anyway).
     if (this.connection.bufferedAmount > 256 * 1024) return null;
-    const pose = cam.pose();
     const sequence = ++this.poseSequence;
     const clientTimeMs = performance.now();
     // The newest shown frame's latency rides along to the server's /metrics (end to end).
@@ -483,18 +500,25 @@ export class CatgsViewer extends EventTarget {
     // And the newest frame's arrival: the server's rate controller reads the queue on the link
     // from these receipts (server/session/link_rate.h).
     const receipt = this.receipt || { sequence: 0, receivedMs: 0 };
-    if (!this.send(this.protocol.encodePose({ sequence, clientTimeMs, shownLatencyMs, receipt, ...pose }))) return null;
+    const stereo = eyes ? { leftEye: eyes.left, rightEye: eyes.right } : {};
+    if (!this.send(this.protocol.encodePose({ sequence, clientTimeMs, shownLatencyMs, receipt, ...pose, ...stereo, displayHz }))) return null;
     this.unreportedLatencyMs = 0;
     this.receipt = null;
-    this.sentVersion = cam.version;
     this.sentPoses.set(sequence, { position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg });
-    this.lastPoseSent = { sequence, clientTimeMs, position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg };
+    this.lastPoseSent = {
+      sequence, clientTimeMs, position: pose.position, orientation: pose.orientation, fovDeg: pose.fovDeg,
+      leftEye: eyes ? eyes.left : null, rightEye: eyes ? eyes.right : null, displayHz,
+    };
     return sequence;
   }
 
   // The server renders only when a pose arrives (a KeyFrameRequest or Resize just marks the next
   // frame as an IDR), so both are followed by the current pose again, even if the camera is still.
   _resendPose() {
+    if (this.vr) {
+      this.vr.resend(); // the XR loop owns the poses: its next one goes out
+      return null;
+    }
     this.sentVersion = -1;
     return this._sendPose();
   }
@@ -549,15 +573,20 @@ export class CatgsViewer extends EventTarget {
 
   _drawFrame(frame, meta) {
     try {
-      const { width, height } = this.display.draw(frame);
-      if (meta) {
+      // In VR the headset shows the frame (xr.js); the page's canvas keeps its last flat frame.
+      const vr = this.vr;
+      if (vr) vr.takeFrame(frame, meta, meta ? this.sentPoses.get(meta.poseSequence) || null : null);
+      const { width, height } = vr ? { width: frame.displayWidth, height: frame.displayHeight } : this.display.draw(frame);
+      if (vr && meta) {
+        for (const k of this.sentPoses.keys()) if (k < meta.poseSequence) this.sentPoses.delete(k);
+      } else if (meta) {
         // The frame's pose: where the server predicted the camera would be (Frame.shown_pose), else
         // the pose it answers; the re-projection starts from it.
         this.shownPose = meta.shownPose || this.sentPoses.get(meta.poseSequence) || null;
         for (const k of this.sentPoses.keys()) if (k < meta.poseSequence) this.sentPoses.delete(k);
         this._takeDepthGrid(meta);
       }
-      this._updateReprojection();
+      if (!vr) this._updateReprojection();
       const now = performance.now();
       this.framesDecoded++;
       this.sessionFrames++;
@@ -571,6 +600,10 @@ export class CatgsViewer extends EventTarget {
         height,
         keyFrame: meta ? meta.keyFrame : false,
         latencyMs: latency,
+        // A headset's frame (issue 94): an eye's width (0: mono) and the eyes it shows.
+        eyeWidth: meta ? meta.eyeWidth : 0,
+        leftEye: meta ? meta.leftEye : null,
+        rightEye: meta ? meta.rightEye : null,
       };
       this._emit('frame', { ...this.lastFrame, codec: this.decoder.codec, framesDecoded: this.framesDecoded, timeMs: now });
     } finally {
@@ -642,6 +675,48 @@ export class CatgsViewer extends EventTarget {
     return this.probePose(cam.pose(), w, h, x, y);
   }
 
+  // ---- VR (issue 94) ----
+
+  // Starts an immersive VR session (xr.js; call it from a click: a headset wants a user gesture)
+  // on this session's camera: the headset's first pose is the camera's. options: unitsPerMetre
+  // (world units in a metre; default 1, the scene's unit taken as a metre), planeDepth (xr.js).
+  // Resolves once the session runs (a `vr` event with active true); rejects before a session, in
+  // VR already, or when the browser refuses (no WebXR, no headset, no WebGL2).
+  async enterVr(options = {}) {
+    if (!this.camera || !this.sessionOpen) throw new Error('no session yet');
+    if (this.vr) throw new Error('already in VR');
+    this.stopPath();
+    const vr = new VrSession(this, options);
+    await vr.start();
+    this.vr = vr;
+    this._emit('vr', { active: true });
+    return true;
+  }
+
+  // Ends the VR session; resolves with the head's last pose once the page streams its own view
+  // again (null when not in VR).
+  exitVr() {
+    return this.vr ? this.vr.end() : Promise.resolve(null);
+  }
+
+  // The headset's stream size (xr.js: both eyes side by side).
+  _vrResize({ width, height }) {
+    this.viewport = { width, height };
+    if (this.sessionOpen) this.send(this.protocol.encodeResize(width, height));
+  }
+
+  // The session ended (the headset, or exitVr): the camera takes the head's last pose (its
+  // position and orientation; the page's field of view stays), and the stream its page size again.
+  _vrEnded(vr, head) {
+    if (this.vr !== vr) return;
+    this.vr = null;
+    const cam = this.camera;
+    if (head && cam) cam.setPose(head.position, head.orientation, cam.fovDeg);
+    this.viewport = null;
+    this._onResize(); // Resize to the page's size and the camera's pose again
+    this._emit('vr', { active: false, pose: cam ? cam.pose() : null });
+  }
+
   // ---- paths ----
 
   // Plays `path` (pose_input.js playbackOf: timed samples, tour waypoints (each what setPose
@@ -672,6 +747,11 @@ export class CatgsViewer extends EventTarget {
     const dt = (now - this.lastStepMs) / 1000;
     this.lastStepMs = now;
     const cam = this.camera;
+    if (this.vr) {
+      // The XR loop owns the poses (xr.js); the page's own step still runs.
+      this._emit('step', { now, dt });
+      return;
+    }
     if (this.player.current && cam) this.player.step(now, cam);
     else if (this.driveCamera) this.driveCamera(dt, now, this.controls);
     else if (this.controls) this.controls.update(dt);

@@ -7,6 +7,7 @@
 import { inflateDepthGrid } from './depth_warp.js';
 import { inspectAccessUnit } from './h264.js';
 import { inspectTemporalUnit } from './av1.js';
+import { eyeViewFromWire } from './protocol.js';
 
 // Frame.shown_pose (the server predicted where the visitor will be when the frame is shown,
 // server/session/pose_prediction.h) as the page's pose { position, orientation, fovDeg }; null
@@ -181,6 +182,12 @@ export class StreamDecoder {
         width: f.width,
         height: f.height,
         keyFrame: isKey,
+        // A headset's frame (issue 94): both eyes side by side, the left in columns [0, eyeWidth),
+        // the right in [eyeWidth, 2 eyeWidth), each as the server rendered it (the page
+        // re-projects from these, not from what it sent). eyeWidth 0: a mono frame.
+        eyeWidth: f.eye_width || 0,
+        leftEye: eyeViewFromWire(f.left_eye),
+        rightEye: eyeViewFromWire(f.right_eye),
       };
       if (f.depth_grid && f.depth_grid.cols) {
         meta.depthGrid = inflateDepthGrid(f.depth_grid).then((g) => (meta.depthGridReady = g));

@@ -36,6 +36,26 @@ export async function loadProtocol(pb, baseUrl = '') {
 
 const vec3 = (v) => ({ x: v[0], y: v[1], z: v[2] });
 const quat = (q) => ({ w: q[0], x: q[1], y: q[2], z: q[3] });
+const eyeView = (e) => ({
+  position: vec3(e.position),
+  orientation: quat(e.orientation),
+  angle_left: e.angles.left,
+  angle_right: e.angles.right,
+  angle_up: e.angles.up,
+  angle_down: e.angles.down,
+});
+
+// A message's EyeView (Frame.left_eye / right_eye, decoded) in the page's form: { position,
+// orientation, angles: { left, right, up, down } }; null where it is absent.
+export function eyeViewFromWire(e) {
+  if (!e || !e.position || !e.orientation) return null;
+  const n = (v) => Number(v) || 0;
+  return {
+    position: [n(e.position.x), n(e.position.y), n(e.position.z)],
+    orientation: [n(e.orientation.w), n(e.orientation.x), n(e.orientation.y), n(e.orientation.z)],
+    angles: { left: n(e.angle_left), right: n(e.angle_right), up: n(e.angle_up), down: n(e.angle_down) },
+  };
+}
 
 export function makeProtocol(root) {
   // protobufjs 7.6 works out a field's wire features (packed repeated floats: ExportVideoRequest
@@ -79,21 +99,29 @@ export function makeProtocol(root) {
       });
     },
 
-    // receipt: the newest frame's { sequence, receivedMs } (receivedMs 0: none).
+    // receipt: the newest frame's { sequence, receivedMs } (receivedMs 0: none). A headset
+    // (issue 94) adds both eyes, leftEye and rightEye, each { position, orientation, angles:
+    // { left, right, up, down } (radians, XrFovf's) } in the pose's conventions (stereo.js
+    // eyeViewOf); position, orientation and fovDeg stay the head's. displayHz: the rate the
+    // display shows frames at (a headset's; 0 unknown: the server takes 60), 0 or in [24, 240].
     encodePose({ sequence, clientTimeMs, position, orientation, fovDeg, shownLatencyMs = 0,
-      receipt = { sequence: 0, receivedMs: 0 } }) {
-      return encode({
-        pose: {
-          sequence,
-          client_time_ms: clientTimeMs,
-          position: vec3(position),
-          orientation: quat(orientation),
-          vertical_fov_deg: fovDeg,
-          shown_latency_ms: shownLatencyMs,
-          received_frame_sequence: receipt.sequence,
-          received_ms: receipt.receivedMs,
-        },
-      });
+      receipt = { sequence: 0, receivedMs: 0 }, leftEye = null, rightEye = null, displayHz = 0 }) {
+      const pose = {
+        sequence,
+        client_time_ms: clientTimeMs,
+        position: vec3(position),
+        orientation: quat(orientation),
+        vertical_fov_deg: fovDeg,
+        shown_latency_ms: shownLatencyMs,
+        received_frame_sequence: receipt.sequence,
+        received_ms: receipt.receivedMs,
+      };
+      if (leftEye && rightEye) {
+        pose.left_eye = eyeView(leftEye);
+        pose.right_eye = eyeView(rightEye);
+      }
+      if (displayHz > 0) pose.display_hz = displayHz;
+      return encode({ pose });
     },
 
     encodeResize(width, height) {

@@ -26,8 +26,14 @@ const matVec = (m, v) => [vdot(m[0], v), vdot(m[1], v), vdot(m[2], v)];
 // plane points appear at pose `to`; both poses { position, orientation, fovDeg } at width x height
 // pixels; `planeDepth` the plane's distance along `from`'s forward axis (world units, > 0).
 export function reprojection(from, to, planeDepth, width, height) {
-  const k1 = intrinsicsFor(from.fovDeg, width, height);
-  const k2 = intrinsicsFor(to.fovDeg, width, height);
+  return reprojectionK(from, to, planeDepth, intrinsicsFor(from.fovDeg, width, height), intrinsicsFor(to.fovDeg, width, height));
+}
+
+// reprojection() for any two pinhole cameras: `k1`, `k2` { fx, fy, cx, cy } the intrinsics of the
+// images of `from` and `to` ({ position, orientation }), which may differ in size and may be
+// asymmetric (a headset's eye: stereo.js eyeIntrinsics), so a VR eye's frame goes to where the
+// eye looks now (xr.js).
+export function reprojectionK(from, to, planeDepth, k1, k2) {
   const w2 = worldToCamera(to.orientation);
   // R = W2 W1^T (its columns: the first camera's axes seen from the second); t = W2 (p1 - p2).
   const q1 = from.orientation;
@@ -37,7 +43,7 @@ export function reprojection(from, to, planeDepth, width, height) {
   const t = matVec(w2, vsub(from.position, to.position));
   // A = R + t n^T / d with n = (0, 0, 1): only the third column changes.
   const A = R.map((row, i) => [row[0], row[1], row[2] + t[i] / planeDepth]);
-  // H = K2 A K1^-1, K1^-1 = [[1/f, 0, -cx/f], [0, 1/f, -cy/f], [0, 0, 1]].
+  // H = K2 A K1^-1, K1^-1 = [[1/fx, 0, -cx/fx], [0, 1/fy, -cy/fy], [0, 0, 1]].
   const kInv = [
     [1 / k1.fx, 0, -k1.cx / k1.fx],
     [0, 1 / k1.fy, -k1.cy / k1.fy],

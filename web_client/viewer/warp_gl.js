@@ -5,6 +5,8 @@
 // inverse depth (nearest wins). Where no triangle reaches (past the frame's moved edge) the canvas
 // stays clear and the view's own re-projection (display.js) shows through.
 
+import { frameTexture, linkProgram } from './gl_program.js';
+
 const VERTEX = `#version 300 es
 in vec4 clip;
 in vec2 uv;
@@ -18,13 +20,6 @@ in vec2 v_uv;
 out vec4 colour;
 void main() { colour = vec4(texture(frame, v_uv).rgb, 1.0); }`;
 
-function shader(gl, type, source) {
-  const s = gl.createShader(type);
-  gl.shaderSource(s, source);
-  gl.compileShader(s);
-  if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(`depth warp shader: ${gl.getShaderInfoLog(s)}`);
-  return s;
-}
 
 export class WarpGl {
   // canvas: the overlay; throws where WebGL2 is not available (the caller keeps the plane then).
@@ -33,26 +28,14 @@ export class WarpGl {
     if (!gl) throw new Error('no WebGL2');
     this.canvas = canvas;
     this.gl = gl;
-    const p = gl.createProgram();
-    gl.attachShader(p, shader(gl, gl.VERTEX_SHADER, VERTEX));
-    gl.attachShader(p, shader(gl, gl.FRAGMENT_SHADER, FRAGMENT));
-    gl.linkProgram(p);
-    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(`depth warp program: ${gl.getProgramInfoLog(p)}`);
+    const p = linkProgram(gl, VERTEX, FRAGMENT, 'depth warp');
     this.program = p;
     this.clipLoc = gl.getAttribLocation(p, 'clip');
     this.uvLoc = gl.getAttribLocation(p, 'uv');
     this.clipBuf = gl.createBuffer();
     this.uvBuf = gl.createBuffer();
     this.indexBuf = gl.createBuffer();
-    this.texture = gl.createTexture();
-    gl.bindTexture(gl.TEXTURE_2D, this.texture);
-    for (const [k, v] of [
-      [gl.TEXTURE_MIN_FILTER, gl.LINEAR],
-      [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
-      [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE],
-      [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE],
-    ])
-      gl.texParameteri(gl.TEXTURE_2D, k, v);
+    this.texture = frameTexture(gl);
   }
 
   // The frame to warp (a canvas or a VideoFrame), width x height pixels: the overlay's size too.
