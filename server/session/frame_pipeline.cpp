@@ -97,14 +97,11 @@ void set_eye(const EyePose& e, pb::EyeView* out) {
 
 }  // namespace
 
-FramePipeline::~FramePipeline() {
-  if (probe_ && content_rates_) content_rates_->release(probe_->width(), probe_->height());
-}
-
 void FramePipeline::open(std::unique_ptr<Renderer> renderer, std::shared_ptr<const GaussianModel> model, int gpu,
                          bool pipelined, bool av1_ok, std::shared_ptr<ContentRates> content_rates) {
-  av1_ok_ = av1_ok;
-  content_rates_ = std::move(content_rates);
+  // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
+  const bool device_input = !pipelined && renderer && renderer->name() == "cuda";
+  encoder_.open(av1_ok, std::move(content_rates), gpu, device_input, model ? model->name : std::string());
   renderer_ = std::move(renderer);
   if (renderer_) server_list_budget_ = renderer_->options().list_budget;
   model_ = std::move(model);
@@ -424,100 +421,12 @@ void FramePipeline::finish_render(Rendered& frame) {
   }
 }
 
-FrameEncodeInputs FramePipeline::encode_inputs(const JobShape& shape, bool refine, int live_sessions) const {
-  FrameEncodeInputs in;
-  in.width = shape.width;
-  in.height = shape.height;
-  in.client_max_kbps = shape.max_bitrate_kbps;
-  in.link = shape.link;
-  in.refine = refine;
-  in.live_sessions = live_sessions;
-  in.av1_ok = av1_ok_;
-  in.fps = shape.fps;
-  // The probe's table is read (a lock) only where --bits-per-pixel auto uses it.
-  const bool probed = settings_.encoder_policy.content_rate && content_rates_;
-  in.probed_bits_per_pixel = probed ? content_rates_->bits_per_pixel(shape.width, shape.height) : 0;
-  return in;
-}
-
-int FramePipeline::live_sessions() const {
-  return static_cast<int>(std::max<std::int64_t>(1, metrics_.sessions_open.load()));
-}
-
-bool FramePipeline::stream_is_av1(const JobShape& shape, int live_sessions) const {
-  return frame_encoding(settings_.encoder_policy, encode_inputs(shape, false, live_sessions)).av1;
-}
-
-FrameEncoding FramePipeline::ensure_encoder(const Job& job, bool& idr) {
-  const FrameEncoding e =
-      frame_encoding(settings_.encoder_policy, encode_inputs(job.shape, job.pose.refine, live_sessions()));
-  const JobShape& s = job.shape;
-  const auto now = Clock::now();
-  const bool same_stream = encoder_ && encoder_->width() == s.width && encoder_->height() == s.height &&
-                           encoder_bitrate_kbps_ == s.max_bitrate_kbps;
-  // The still view's refine frame: the stream's crf with no rate cap where x264 can take a new
-  // VBV rate for one frame (the next frame sets the stream's again); NVENC's and AV1's encoders
-  // would be rebuilt (an IDR each way), so they keep theirs: a still frame under CBR still gets
-  // the whole frame's budget for what is left to refine.
-  if (e.lift_cap && same_stream && encoder_->name() == "x264" &&
-      encoder_->set_max_bitrate_kbps(kRefineKbps, kRefineVbvMs)) {
-    // This frame lifts the stream's cap (not an earlier refine frame's): x264 plans it against
-    // the buffer's fill the capped frames left, which says nothing of the crf.
-    refine_lifted_cap_ = encoder_rate_kbps_ != kRefineKbps;
-    encoder_rate_kbps_ = kRefineKbps;
-    encoder_vbv_ms_ = kRefineVbvMs;
-    return e;
-  }
-  // The link's cap follows the link frame by frame, and a probed content rate takes effect when
-  // its probe ends: x264 takes a new VBV rate without an IDR. (An AV1 stream cannot: it is
-  // rebuilt below; a limiting link moves it to H.264, use_av1.)
-  if (same_stream && (encoder_rate_kbps_ != e.rate_kbps || encoder_vbv_ms_ != e.vbv_ms) &&
-      encoder_->codec() == "h264" && e.rate_kbps > 0 && encoder_->set_max_bitrate_kbps(e.rate_kbps, e.vbv_ms)) {
-    encoder_rate_kbps_ = e.rate_kbps;
-    encoder_vbv_ms_ = e.vbv_ms;
-  }
-  if (same_stream && encoder_rate_kbps_ == e.rate_kbps && encoder_vbv_ms_ == e.vbv_ms) {
-    // The same stream: rebuilt only for a new share of the cores (x264's threads, preset and the
-    // codec are fixed when it opens; NVENC has none to share). A link that comes to limit an AV1
-    // stream lowers the step, so should_rebuild moves it to H.264 at once.
-    const auto since = now - encoder_built_;
-    const bool threads = should_rebuild(encoder_threads_, e.threads, since);
-    const bool preset = should_rebuild(encoder_step_, e.step, since);
-    if (encoder_->name() == "nvenc" || !(threads || preset)) return e;
-    metrics_.encoder_rebuilds_total++;
-  }
-  EncoderConfig cfg = e.config;
-  // One-job path: a GPU frame goes to NVENC as a CUDA frame (no host copy); x264 ignores it.
-  cfg.device_input = !pipelined_ && renderer_->name() == "cuda";
-  cfg.cuda_device = std::max(gpu_, 0);
-  // The requested kind: "auto" reuses the process's NVENC probe and may fall back per session.
-  bool fell_back = false;
-  encoder_ = make_encoder(e.av1 ? "av1" : settings_.encoder, cfg, nullptr, &fell_back);
-  const std::string was = encoder_label_;
-  encoder_label_ = encoder_->name() == "x264" ? "x264 " + cfg.x264_preset : encoder_->name();
-  if (!was.empty() && e.step < encoder_step_) {
-    // The ladder stepped down (sessions joined; encoder_policy.h): the picture falls, said here,
-    // in /metrics, and in each Stats (encoder, encode_psnr_db_mean), never silently.
-    metrics_.encoder_steps_down_total++;
-    std::cerr << "encoder: " << was << " -> " << encoder_label_ << " at " << live_sessions() << " sessions\n";
-  }
-  encoder_bitrate_kbps_ = s.max_bitrate_kbps;
-  encoder_rate_kbps_ = cfg.bitrate_kbps;
-  encoder_vbv_ms_ = e.vbv_ms;
-  encoder_threads_ = cfg.threads;
-  encoder_step_ = e.step;
-  encoder_built_ = now;
-  if (fell_back) metrics_.encoder_fallbacks_total++;
-  idr = true;
-  return e;
-}
-
 FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
   try {
     bool idr = frame.job.force_idr;
-    const FrameEncoding settings = ensure_encoder(frame.job, idr);
-    const EncodedFrame enc = encoder_->encode_yuv420(frame.planes->planes(), idr);
-    probe_content_rate(frame.job, settings, frame.planes->planes());
+    const FrameEncoding settings = encoder_.prepare(frame.job.shape, frame.job.pose.refine, idr);
+    const EncodedFrame enc = encoder_.encoder().encode_yuv420(frame.planes->planes(), idr);
+    encoder_.probe_content_rate(frame.job.shape, frame.job.pose.pose, settings, frame.planes->planes());
     JobResult result = frame_message(frame.job, enc, frame);
     result.link_ceiling_kbps = settings.link_ceiling_kbps;
     return result;
@@ -531,49 +440,6 @@ FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
   }
 }
 
-void FramePipeline::probe_content_rate(const Job& job, const FrameEncoding& settings, const Yuv420Planes& planes) {
-  const EncoderPolicy& policy = settings_.encoder_policy;
-  // --bitrate off or a fixed rate wins over the probe.
-  if (!policy.content_rate || policy.bitrate_kbps >= 0 || !content_rates_) return;
-  const int w = job.shape.width, h = job.shape.height;
-  if (probe_ && (probe_->width() != w || probe_->height() != h)) {  // a new size: its own probe
-    content_rates_->release(probe_->width(), probe_->height());
-    probe_.reset();
-  }
-  if (!probe_) {
-    if (!content_rates_->claim(w, h)) return;  // measured, or another session measures it
-    try {
-      // The stream's own x264 preset (the ladder's step now; an AV1 stream: the step below it).
-      probe_ = std::make_unique<ContentRateProbe>(policy, w, h, std::max(1, encoder_threads_), settings.preset);
-    } catch (const std::exception&) {
-      content_rates_->release(w, h);
-      return;
-    }
-    probe_last_pose_.reset();
-  }
-  // A still camera's frames say nothing about motion, and cost next to nothing: not counted.
-  const CameraPose& pose = job.pose.pose;
-  if (probe_last_pose_ && probe_last_pose_->position == pose.position &&
-      probe_last_pose_->orientation == pose.orientation && probe_last_pose_->vertical_fov_deg == pose.vertical_fov_deg)
-    return;
-  probe_last_pose_ = pose;
-  try {
-    probe_->add(planes);
-  } catch (const std::exception& e) {  // the probe's failure is not the stream's: it keeps its cap
-    std::cerr << "content rate: probe at " << w << "x" << h << " failed, the policy's rate kept: " << e.what() << "\n";
-    content_rates_->set(w, h, policy.bits_per_pixel);  // not tried again at this size
-    probe_.reset();
-    return;
-  }
-  if (!probe_->done()) return;
-  const double crf_bpp = probe_->crf_bits_per_pixel(), bpp = content_bits_per_pixel(crf_bpp);
-  content_rates_->set(w, h, bpp);
-  metrics_.content_rate_probes_total++;
-  std::cerr << "content rate: scene '" << (model_ ? model_->name : std::string()) << "' at " << w << "x" << h
-            << ": crf " << policy.crf << " takes " << crf_bpp << " bits a pixel, the cap " << bpp << "\n";
-  probe_.reset();
-}
-
 FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool gone) {
   Rendered r;
   r.job = job;  // finish_render_into reads whether it is a stereo frame
@@ -583,10 +449,10 @@ FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool g
   }
   try {
     bool idr = job.force_idr;
-    const FrameEncoding settings = ensure_encoder(job, idr);
+    const FrameEncoding settings = encoder_.prepare(job.shape, job.pose.refine, idr);
     // Straight into the encoder's input planes: the hw frame's device memory for NVENC.
-    render_into(job, encoder_->input_target(), r);
-    JobResult result = frame_message(job, encoder_->encode_input(idr), r);
+    render_into(job, encoder_.encoder().input_target(), r);
+    JobResult result = frame_message(job, encoder_.encoder().encode_input(idr), r);
     result.link_ceiling_kbps = settings.link_ceiling_kbps;
     return result;
   } catch (...) {
@@ -602,14 +468,14 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   r.encode_ms = enc.encode_ms;
   r.encode_psnr_db = enc.psnr_db;
   r.encode_thread_cpu_ms = enc.thread_cpu_ms;
-  r.encoder = encoder_label_;
+  r.encoder = encoder_.label();
   r.total_ms = ms_between(job.pose.received, Clock::now());
   r.quality_level = job.shape.quality_level;
   r.refine = job.pose.refine;
   r.predicted = job.pose.predicted;
-  r.rate_capped = !job.pose.refine && encoder_rate_kbps_ > 0;
-  r.refine_vbv_bound = job.pose.refine && refine_lifted_cap_;
-  refine_lifted_cap_ = false;
+  r.rate_capped = !job.pose.refine && encoder_.rate_capped();
+  const bool lifted_cap = encoder_.take_refine_lifted_cap();
+  r.refine_vbv_bound = job.pose.refine && lifted_cap;
   pb::ServerMessage m;
   pb::Frame* f = m.mutable_frame();
   f->set_sequence(job.frame_sequence);
@@ -631,7 +497,7 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_height(static_cast<std::uint32_t>(job.shape.height));
   f->set_payload(enc.data.data(), enc.data.size());
   if (r.depth_grid.cols() > 0) *f->mutable_depth_grid() = r.depth_grid;
-  f->set_codec(encoder_->codec() == "av1" ? pb::CODEC_AV1 : pb::CODEC_H264);
+  f->set_codec(encoder_.encoder().codec() == "av1" ? pb::CODEC_AV1 : pb::CODEC_H264);
   // FrameTimings: the record's times and render outcome, here and nowhere else.
   pb::FrameTimings* t = f->mutable_timings();
   t->set_queue_ms(r.queue_ms);

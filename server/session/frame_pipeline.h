@@ -3,7 +3,9 @@
 // where it was rendered, the rendered picture waiting for the encoder, the encode job that makes
 // it an access unit (H.264, or AV1 for a client that decodes it where the encoder policy affords
 // it: encode/encoder_policy.h use_av1), and the serialized Frame. The unit owns the frame's state: the pose
-// slots, the two host I420 buffers, the session's renderer and its encoder. The session's
+// slots, the two host I420 buffers, the session's renderer (the render side: poses, the level of
+// detail, the memory fallback, a headset's two eyes; here) and its encoder (the encode side: the
+// encoder's life, its rate, the content-rate probe; StreamEncoder, stream_encoder.h). The session's
 // stream (SessionStream, session_stream.h) decides when a stage may start (protocol state, frames
 // in flight, pacing, adaptive quality, the link's cap) and posts the jobs.
 //
@@ -35,6 +37,7 @@
 #include "process/server_metrics.h"
 #include "render/lod_bound.h"
 #include "session/session_settings.h"
+#include "session/stream_encoder.h"
 
 namespace catgs::server {
 
@@ -61,16 +64,8 @@ class FramePipeline {
     // encoded at the stream's crf with no rate cap (kRefineKbps).
     bool refine = false;
   };
-  // What a render job is asked for, as the session decided it.
-  struct JobShape {
-    int width = 0, height = 0;                             // pixels, after adaptive quality's scaling
-    int quality_level = 0;                                 // AdaptiveQuality level the size was scaled to
-    int max_bitrate_kbps = 0;                              // Quality.max_bitrate_kbps (0: the server's default)
-    LinkInputs link;                                       // the link's state (link_rate.h; read again at the encode)
-    std::chrono::steady_clock::time_point link_read_at{};  // when `link` was read (at the encode)
-    double previous_send_ms = 0;                           // FrameTimings.previous_send_ms
-    int fps = kStreamFps;                                  // the client's display rate (Pose.display_hz)
-  };
+  // What a render job is asked for, as the session decided it (stream_encoder.h).
+  using JobShape = server::JobShape;
   struct Job {
     PendingPose pose;
     JobShape shape;
@@ -144,9 +139,8 @@ class FramePipeline {
   };
 
   // `settings` and `metrics` outlive the pipeline (the server holds them).
-  FramePipeline(const FrameSettings& settings, ServerMetrics& metrics) : settings_(settings), metrics_(metrics) {}
-  // Gives back a content-rate probe's claim that did not end.
-  ~FramePipeline();
+  FramePipeline(const FrameSettings& settings, ServerMetrics& metrics)
+      : settings_(settings), metrics_(metrics), encoder_(settings, metrics) {}
   FramePipeline(const FramePipeline&) = delete;
   FramePipeline& operator=(const FramePipeline&) = delete;
 
@@ -160,7 +154,9 @@ class FramePipeline {
             bool av1_ok, std::shared_ptr<ContentRates> content_rates = nullptr);
   // Whether a stream of `shape` at `live_sessions` sessions would be AV1 now (the encoder policy's
   // use_av1): Welcome.codec before the first frame.
-  bool stream_is_av1(const JobShape& shape, int live_sessions) const;
+  bool stream_is_av1(const JobShape& shape, int live_sessions) const {
+    return encoder_.stream_is_av1(shape, live_sessions);
+  }
   std::string renderer_name() const { return renderer_ ? renderer_->name() : std::string(); }
   bool pipelined() const { return pipelined_; }
 
@@ -270,17 +266,7 @@ class FramePipeline {
   // the target's halves (the left eye drawn and waited for here, the right eye queued; r's
   // convert_ms and frame hold the left eye's until finish_render_into adds the right eye's).
   void begin_views(const Job& job, const Camera& camera, const Yuv420Target& target, Rendered& r);
-  // What frame_encoding needs of a frame of `shape` (encode/frame_encoding.h).
-  FrameEncodeInputs encode_inputs(const JobShape& shape, bool refine, int live_sessions) const;
-  int live_sessions() const;  // sessions open on the server, at least 1
-  // Decides the frame's encoder settings (frame_encoding) and brings the encoder to them: a new
-  // VBV rate where x264 takes one, else a rebuild (sets `idr`). Returns the settings.
-  FrameEncoding ensure_encoder(const Job& job, bool& idr);
   JobResult frame_message(const Job& job, const EncodedFrame& enc, const Rendered& r);
-  // --bits-per-pixel auto: feeds an encoded frame's planes to this session's probe of the scene at
-  // the frame's size, when it holds the size's claim (or takes it) and the camera moved; stores
-  // the result once the probe is done (encode/content_rate.h).
-  void probe_content_rate(const Job& job, const FrameEncoding& settings, const Yuv420Planes& planes);
 
   const FrameSettings& settings_;
   ServerMetrics& metrics_;
@@ -292,7 +278,6 @@ class FramePipeline {
   bool rendering_ = false;                                 // a render (or render-and-encode) job is running
   bool encoding_ = false;                                  // an encode job is running
   bool pipelined_ = true;                                  // render and encode as separate stages
-  bool av1_ok_ = false;                                    // the stream may be AV1 (open)
   std::optional<Rendered> rendered_;                       // rendered, waiting for the encoder
   std::vector<std::unique_ptr<Yuv420Image>> free_planes_;  // the two I420 buffers when idle
   std::uint32_t next_frame_sequence_ = 0;
@@ -305,18 +290,7 @@ class FramePipeline {
   RenderListBudget server_list_budget_;  // the renderer's at open; restored after a memory fallback
   int frames_since_fallback_ = -1;       // frames since the list budget was lowered (-1: it is not)
   int gpu_ = -1;                         // the CUDA device renderer_ renders on, -1: none (CPU renderer)
-  std::unique_ptr<Encoder> encoder_;
-  int encoder_bitrate_kbps_ = 0;    // what encoder_ was built with
-  int encoder_rate_kbps_ = 0;       // its VBV rate now (changed without a rebuild where it can)
-  int encoder_vbv_ms_ = 0;          // and its VBV's size, ms of that rate
-  bool refine_lifted_cap_ = false;  // the frame being encoded is a refine frame that lifted a VBV cap
-  int encoder_threads_ = 0;         // its sliced threads (encoder_policy.h)
-  std::string encoder_label_;       // Stats.encoder for its frames: "x264 " + preset, "nvenc", "av1"
-  int encoder_step_ = 0;            // its step (FrameEncoding::step): the ladder's preset, or kPresetSteps for AV1
-  Clock::time_point encoder_built_{};
-  std::shared_ptr<ContentRates> content_rates_;  // the scene's (open)
-  std::unique_ptr<ContentRateProbe> probe_;      // this session's probe, holding its size's claim
-  std::optional<CameraPose> probe_last_pose_;    // the last pose it was fed
+  StreamEncoder encoder_;                // the encode side: the encoder's life, its rate, the content-rate probe
 };
 
 }  // namespace catgs::server
