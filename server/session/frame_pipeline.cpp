@@ -218,7 +218,7 @@ float FramePipeline::fall_back_for_memory(int step, float lod_error_px) {
 
 FramePipeline::JobResult FramePipeline::failure_of(const Rendered& frame) {
   JobResult failed;
-  static_cast<RenderRecord&>(failed) = frame;  // its error fields with the rest of its record
+  failed.record = frame.record;  // its error fields with the rest of its record
   return failed;
 }
 
@@ -268,11 +268,11 @@ float FramePipeline::set_lod_bound(const Camera& camera) {
 
 void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
   r.render_started = Clock::now();
-  r.queue_ms = ms_between(job.pose.received, r.render_started);
-  r.lane_wait_ms = ms_between(job.posted_at, r.render_started);
-  r.render_lane = RenderScheduler::current_lane();
+  r.record.queue_ms = ms_between(job.pose.received, r.render_started);
+  r.record.lane_wait_ms = ms_between(job.posted_at, r.render_started);
+  r.record.render_lane = RenderScheduler::current_lane();
   const Camera camera = camera_of(job);
-  r.lod_error_px = job.lod_error_px >= 0.0f ? job.lod_error_px : set_lod_bound(camera);
+  r.record.lod_error_px = job.lod_error_px >= 0.0f ? job.lod_error_px : set_lod_bound(camera);
   // Frames on this GPU from the begin to the finish (the throughput model's sharing count).
   r.gpu_frames_at_begin = gpu_ >= 0 ? metrics_.gpu_render_begin(gpu_) : 1;
   // The server's list budget again, a while after a memory fallback lowered it.
@@ -297,13 +297,13 @@ void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target
       try {
         throw;
       } catch (const std::exception& e) {
-        r.memory_note = e.what();
+        r.record.memory_note = e.what();
       }
-      r.memory_fallback = step + 1;
-      r.lod_error_px = fall_back_for_memory(step + 1, r.lod_error_px);
+      r.record.memory_fallback = step + 1;
+      r.record.lod_error_px = fall_back_for_memory(step + 1, r.record.lod_error_px);
     }
   }
-  if (r.memory_fallback > 0) metrics_.render_memory_fallbacks_total++;  // drawn after all
+  if (r.record.memory_fallback > 0) metrics_.render_memory_fallbacks_total++;  // drawn after all
   r.render_begun = true;
 }
 
@@ -320,8 +320,8 @@ void FramePipeline::begin_views(const Job& job, const Camera& camera, const Yuv4
   const std::array<Camera, 2> eyes = eye_cameras(job);
   const int w = eyes[0].width;
   renderer_->begin_yuv420_at(eyes[0], time_s, columns_of(target, 0, w));
-  r.convert_ms = renderer_->finish_yuv420();
-  r.frame = renderer_->last_stats();
+  r.record.convert_ms = renderer_->finish_yuv420();
+  r.record.frame = renderer_->last_stats();
   renderer_->begin_yuv420_at(eyes[1], time_s, columns_of(target, w, w));
 }
 
@@ -337,27 +337,28 @@ void FramePipeline::finish_render_into(Rendered& r) {
     throw;
   }
   if (gpu_ >= 0) frames_with_it = 0.5 * (r.gpu_frames_at_begin + metrics_.gpu_render_end(gpu_));
-  r.convert_ms = stereo ? r.convert_ms + convert_ms : convert_ms;
-  r.frame = stereo ? both_eyes(r.frame, renderer_->last_stats()) : renderer_->last_stats();
-  r.buffer_bytes = renderer_->device_buffer_bytes();
-  r.buffer_shape = renderer_->buffer_shape();
+  r.record.convert_ms = stereo ? r.record.convert_ms + convert_ms : convert_ms;
+  r.record.frame = stereo ? both_eyes(r.record.frame, renderer_->last_stats()) : renderer_->last_stats();
+  r.record.buffer_bytes = renderer_->device_buffer_bytes();
+  r.record.buffer_shape = renderer_->buffer_shape();
   const DepthGrid& depth = renderer_->last_depth_grid();
-  r.depth_grid.Clear();
+  r.record.depth_grid.Clear();
   // A stereo frame carries no grid: the renderer's is the right eye's alone (the page warps each
   // eye by the plane).
-  if (depth.cols > 0 && !stereo) pack_depth_grid(depth, &r.depth_grid);
+  if (depth.cols > 0 && !stereo) pack_depth_grid(depth, &r.record.depth_grid);
   // Render time includes the plane download (GPU) but not the conversion itself; with frames in
   // flight, also the time the lane spent beginning other frames before this one's finish.
-  r.render_ms = std::max(0.0, ms_between(r.render_started, Clock::now()) - r.convert_ms);
+  r.record.render_ms = std::max(0.0, ms_between(r.render_started, Clock::now()) - r.record.convert_ms);
   // A sub-frame's time is not its Gaussians' (the caches skip the pre-process). With occlusion
   // culling the frame draws fewer Gaussians than the cut holds, while the splat budget is held
   // against the cut's prediction: the throughput is then counted in the prediction's Gaussians
   // (render/lod_bound.h), else the budget would shrink with every Gaussian the culling saves.
-  const std::uint64_t throughput_splats = renderer_->options().occlusion_culling
-                                              ? std::max<std::uint64_t>(r.frame.visible, lod_bound_.predicted_splats())
-                                              : r.frame.visible;
-  if (gpu_ >= 0 && r.frame.key_frame)
-    metrics_.observe_gpu_throughput(gpu_, throughput_splats, r.render_ms, frames_with_it);
+  const std::uint64_t throughput_splats =
+      renderer_->options().occlusion_culling
+          ? std::max<std::uint64_t>(r.record.frame.visible, lod_bound_.predicted_splats())
+          : r.record.frame.visible;
+  if (gpu_ >= 0 && r.record.frame.key_frame)
+    metrics_.observe_gpu_throughput(gpu_, throughput_splats, r.record.render_ms, frames_with_it);
 }
 
 void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
@@ -369,22 +370,22 @@ void FramePipeline::note_failure(Rendered& r) {
   try {
     throw;
   } catch (const RenderBudgetError& e) {
-    r.error = e.what();
-    r.over_budget = true;
+    r.record.error = e.what();
+    r.record.over_budget = true;
   } catch (const OutOfMemoryError& e) {
-    r.error = e.what();
-    r.out_of_memory = true;
-    r.buffer_bytes = renderer_->device_buffer_bytes();
-    r.buffer_shape = renderer_->buffer_shape();
+    r.record.error = e.what();
+    r.record.out_of_memory = true;
+    r.record.buffer_bytes = renderer_->device_buffer_bytes();
+    r.record.buffer_shape = renderer_->buffer_shape();
   } catch (const cuda::CudaError& e) {
-    r.error = e.what();
-    r.out_of_memory = e.code() == kCudaOutOfMemory;
-    r.buffer_bytes = renderer_->device_buffer_bytes();
-    r.buffer_shape = renderer_->buffer_shape();
+    r.record.error = e.what();
+    r.record.out_of_memory = e.code() == kCudaOutOfMemory;
+    r.record.buffer_bytes = renderer_->device_buffer_bytes();
+    r.record.buffer_shape = renderer_->buffer_shape();
   } catch (const std::exception& e) {
-    r.error = e.what();
+    r.record.error = e.what();
   } catch (...) {
-    r.error = "unknown error";
+    r.record.error = "unknown error";
   }
 }
 
@@ -393,7 +394,7 @@ FramePipeline::Rendered FramePipeline::begin_render(Job job, std::unique_ptr<Yuv
   r.job = std::move(job);
   r.planes = std::move(planes);
   if (gone) {  // nobody to send it to: the lane moves on to the next session at once
-    r.error = "session gone";
+    r.record.error = "session gone";
     return r;
   }
   try {
@@ -434,8 +435,8 @@ FramePipeline::JobResult FramePipeline::encode(Rendered& frame) {
     // The frame's record stays with it (what was drawn, the buffers the session holds: the
     // strand reads them from every result), with the encoder's reason.
     JobResult r;
-    static_cast<RenderRecord&>(r) = frame;
-    r.error = e.what();  // the encoder names itself ("x264: ...")
+    r.record = frame.record;
+    r.record.error = e.what();  // the encoder names itself ("x264: ...")
     return r;
   }
 }
@@ -444,7 +445,7 @@ FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool g
   Rendered r;
   r.job = job;  // finish_render_into reads whether it is a stereo frame
   if (gone) {
-    r.error = "session gone";
+    r.record.error = "session gone";
     return failure_of(r);
   }
   try {
@@ -464,7 +465,7 @@ FramePipeline::JobResult FramePipeline::render_and_encode(const Job& job, bool g
 FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const EncodedFrame& enc,
                                                       const Rendered& rendered) {
   JobResult r;
-  static_cast<RenderRecord&>(r) = rendered;  // the frame's record, whole
+  r.record = rendered.record;  // the frame's record, whole
   r.encode_ms = enc.encode_ms;
   r.encode_psnr_db = enc.psnr_db;
   r.encode_thread_cpu_ms = enc.thread_cpu_ms;
@@ -496,33 +497,33 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   f->set_width(static_cast<std::uint32_t>(job.shape.width));
   f->set_height(static_cast<std::uint32_t>(job.shape.height));
   f->set_payload(enc.data.data(), enc.data.size());
-  if (r.depth_grid.cols() > 0) *f->mutable_depth_grid() = r.depth_grid;
+  if (r.record.depth_grid.cols() > 0) *f->mutable_depth_grid() = r.record.depth_grid;
   f->set_codec(encoder_.encoder().codec() == "av1" ? pb::CODEC_AV1 : pb::CODEC_H264);
   // FrameTimings: the record's times and render outcome, here and nowhere else.
   pb::FrameTimings* t = f->mutable_timings();
-  t->set_queue_ms(r.queue_ms);
-  t->set_lane_wait_ms(r.lane_wait_ms);
-  t->set_render_ms(r.render_ms);
-  t->set_convert_ms(r.convert_ms);
+  t->set_queue_ms(r.record.queue_ms);
+  t->set_lane_wait_ms(r.record.lane_wait_ms);
+  t->set_render_ms(r.record.render_ms);
+  t->set_convert_ms(r.record.convert_ms);
   t->set_encode_ms(r.encode_ms);
   t->set_encode_psnr_db(static_cast<float>(r.encode_psnr_db));
   t->set_encode_thread_cpu_ms(r.encode_thread_cpu_ms);
   t->set_total_ms(r.total_ms);
   t->set_previous_send_ms(job.shape.previous_send_ms);
-  t->set_render_key_frame(r.frame.key_frame);
-  t->set_render_rekey(r.frame.subframe_rejected);
-  t->set_speculation_predicted_gain(static_cast<float>(r.frame.predicted_gain));
-  t->set_speculation_measured_gain(static_cast<float>(r.frame.measured_gain));
-  t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.frame.window)));
-  t->set_lod_error_px(r.lod_error_px);
-  t->set_splats(static_cast<std::uint32_t>(std::min<std::uint64_t>(r.frame.visible, UINT32_MAX)));
-  t->set_stage_frame_ms(r.frame.total_ms);
-  t->set_stage_preprocess_ms(r.frame.preprocess_ms);
-  t->set_stage_keys_ms(r.frame.keys_ms);
-  t->set_stage_sort_ms(r.frame.sort_ms);
-  t->set_stage_ranges_ms(r.frame.ranges_ms);
-  t->set_stage_rasterize_ms(r.frame.rasterize_ms);
-  t->set_render_lane(static_cast<std::uint32_t>(std::max(0, r.render_lane)));
+  t->set_render_key_frame(r.record.frame.key_frame);
+  t->set_render_rekey(r.record.frame.subframe_rejected);
+  t->set_speculation_predicted_gain(static_cast<float>(r.record.frame.predicted_gain));
+  t->set_speculation_measured_gain(static_cast<float>(r.record.frame.measured_gain));
+  t->set_speculation_window(static_cast<std::uint32_t>(std::max(0, r.record.frame.window)));
+  t->set_lod_error_px(r.record.lod_error_px);
+  t->set_splats(static_cast<std::uint32_t>(std::min<std::uint64_t>(r.record.frame.visible, UINT32_MAX)));
+  t->set_stage_frame_ms(r.record.frame.total_ms);
+  t->set_stage_preprocess_ms(r.record.frame.preprocess_ms);
+  t->set_stage_keys_ms(r.record.frame.keys_ms);
+  t->set_stage_sort_ms(r.record.frame.sort_ms);
+  t->set_stage_ranges_ms(r.record.frame.ranges_ms);
+  t->set_stage_rasterize_ms(r.record.frame.rasterize_ms);
+  t->set_render_lane(static_cast<std::uint32_t>(std::max(0, r.record.render_lane)));
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();

@@ -77,9 +77,9 @@ class FramePipeline {
     float lod_error_px = -1.0f;
     Clock::time_point posted_at{};  // when the job was made and posted to the render lanes
   };
-  // What rendering made of a frame (issue 75: the frame's record, carried whole from the render
-  // job to the encode job and to the strand, where Stats and /metrics read it; FrameTimings is
-  // filled from it in one place, frame_message).
+  // What rendering made of a frame (issue 75: the frame's record, carried whole, a member of
+  // Rendered and then of JobResult, from the render job to the encode job and to the strand,
+  // where Stats and /metrics read it; FrameTimings is filled from it in one place, frame_message).
   struct RenderRecord {
     // The renderer's own record of the frame, whole (renderer.h): a key frame or a catgs
     // sub-frame, a re-key, the cost model's gains, the window, the Gaussians that passed culling
@@ -89,7 +89,7 @@ class FramePipeline {
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
     double lane_wait_ms = 0;         // of queue_ms: posted -> its lane began it (FrameTimings.lane_wait_ms)
     int render_lane = -1;            // the render lane that drew it (-1: none)
-    std::string error;               // non-empty: the render (or, in JobResult, the encode) failed
+    std::string error;               // non-empty: the render (or, in a JobResult, the encode) failed
     bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
     bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)
     std::uint64_t buffer_bytes = 0;  // the renderer's device buffers after it (Renderer::device_buffer_bytes)
@@ -102,8 +102,9 @@ class FramePipeline {
     pb::DepthGrid depth_grid;  // Frame.depth_grid (cols 0: none; proto/depth_grid_coding.h)
   };
   // A rendered frame waiting for (or in) the encode stage.
-  struct Rendered : RenderRecord {
+  struct Rendered {
     Job job;
+    RenderRecord record;
     std::unique_ptr<Yuv420Image> planes;  // null for the one-job (NVENC) path
     // Between begin_render and finish_render: the frame is queued on the renderer.
     bool render_begun = false;
@@ -111,7 +112,8 @@ class FramePipeline {
     int gpu_frames_at_begin = 1;         // frames on its GPU then (ServerMetrics::gpu_render_begin)
   };
   // A finished frame (or why there is none): its render record and what the encode made of it.
-  struct JobResult : RenderRecord {
+  struct JobResult {
+    RenderRecord record;     // the frame's, from its render job (with the encode's error where it failed)
     std::string message;     // serialized ServerMessage{Frame}; empty on failure
     bool key_frame = false;  // an IDR access unit
     std::size_t payload_bytes = 0;

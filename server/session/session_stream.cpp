@@ -129,9 +129,9 @@ RenderScheduler::Finish SessionStream::render(FramePipeline::StartedRender start
 
 void SessionStream::rendered(FramePipeline::Rendered frame) {
   frames_.end_render();
-  if (!frame.error.empty()) return hand_off(frames_.take_failed(std::move(frame)));
-  owner_.on_frame_buffers(frame.buffer_bytes, frame.buffer_shape);
-  pacing_.on_rendered(frame.queue_ms + frame.render_ms + frame.convert_ms);
+  if (!frame.record.error.empty()) return hand_off(frames_.take_failed(std::move(frame)));
+  owner_.on_frame_buffers(frame.record.buffer_bytes, frame.record.buffer_shape);
+  pacing_.on_rendered(frame.record.queue_ms + frame.record.render_ms + frame.record.convert_ms);
   frames_.store_rendered(std::move(frame));
   start_encode();
   admit();
@@ -185,19 +185,20 @@ void SessionStream::hand_off(JobResult result) {
   if (!owner_.is_open() || result.message.empty()) shared_.metrics.dropped_frames_total++;
   if (!owner_.is_open()) return;
   if (!result.message.empty()) link_ceiling_kbps_ = result.link_ceiling_kbps;
-  owner_.on_frame_buffers(result.buffer_bytes, result.buffer_shape);
-  if (result.message.empty() && result.out_of_memory)
-    return owner_.on_out_of_memory(result.error, ++out_of_memory_streak_);
+  owner_.on_frame_buffers(result.record.buffer_bytes, result.record.buffer_shape);
+  if (result.message.empty() && result.record.out_of_memory)
+    return owner_.on_out_of_memory(result.record.error, ++out_of_memory_streak_);
   if (!result.message.empty()) out_of_memory_streak_ = 0;
   // A view whose render list the renderer refused (RenderListBudget: a scene of giant Gaussians,
   // say) is the request's fault, not the server's: INVALID_ARGUMENT with the rule's message, so
   // that a client can tell it from a failure, and a counter for the operator.
-  if (result.message.empty() && result.over_budget) {
+  if (result.message.empty() && result.record.over_budget) {
     shared_.metrics.render_budget_refusals_total++;
-    return owner_.end_session(pb::ERROR_INVALID_ARGUMENT, "this view cannot be rendered: " + result.error +
+    return owner_.end_session(pb::ERROR_INVALID_ARGUMENT, "this view cannot be rendered: " + result.record.error +
                                                               " (a smaller viewport or another view may fit)");
   }
-  if (result.message.empty()) return owner_.end_session(pb::ERROR_INTERNAL, "render/encode failed: " + result.error);
+  if (result.message.empty())
+    return owner_.end_session(pb::ERROR_INTERNAL, "render/encode failed: " + result.record.error);
   pacing_.on_encode(result.encode_ms);
   if (in_flight_ == 0) last_progress_ = Clock::now();  // the slow-reader clock starts now
   in_flight_++;
@@ -219,21 +220,21 @@ void SessionStream::count(const JobResult& result) {
   frames_sent_++;
   frames_since_stats_++;
   bytes_since_stats_ += result.payload_bytes;
-  render_ms_sum_ += result.render_ms;
+  render_ms_sum_ += result.record.render_ms;
   encode_ms_sum_ += result.encode_ms;
   if (result.encode_psnr_db > 0) {
     encode_psnr_sum_ += result.encode_psnr_db;
     encode_psnr_frames_++;
   }
   encoder_ = result.encoder;
-  lod_error_px_sum_ += result.lod_error_px;
-  splats_sum_ += static_cast<double>(result.frame.visible);
-  if (result.memory_fallback > 0) {
+  lod_error_px_sum_ += result.record.lod_error_px;
+  splats_sum_ += static_cast<double>(result.record.frame.visible);
+  if (result.record.memory_fallback > 0) {
     memory_fallbacks_++;
-    memory_note_ = result.memory_note;
+    memory_note_ = result.record.memory_note;
   }
   if (result.key_frame) key_frames_++;
-  if (result.frame.key_frame)
+  if (result.record.frame.key_frame)
     render_key_frames_++;
   else
     render_sub_frames_++;
@@ -241,18 +242,19 @@ void SessionStream::count(const JobResult& result) {
   m.frames_total++;
   m.bytes_total += result.payload_bytes;
   if (result.key_frame) m.key_frames_total++;
-  (result.frame.key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
-  if (result.frame.subframe_rejected) m.render_rekeys_total++;
-  if (result.frame.predicted_gain > 0) m.speculation_predicted_gain.observe(result.frame.predicted_gain);
-  if (result.frame.measured_gain > 0) m.speculation_measured_gain.observe(result.frame.measured_gain);
-  m.queue_seconds.observe(result.queue_ms / 1000.0);
-  (result.frame.key_frame ? m.render_key_seconds : m.render_sub_seconds).observe(result.render_ms / 1000.0);
-  if (gpu_ >= 0) m.observe_gpu_render(gpu_, result.render_ms / 1000.0);
-  m.convert_seconds.observe(result.convert_ms / 1000.0);
+  (result.record.frame.key_frame ? m.render_key_frames_total : m.render_sub_frames_total)++;
+  if (result.record.frame.subframe_rejected) m.render_rekeys_total++;
+  if (result.record.frame.predicted_gain > 0) m.speculation_predicted_gain.observe(result.record.frame.predicted_gain);
+  if (result.record.frame.measured_gain > 0) m.speculation_measured_gain.observe(result.record.frame.measured_gain);
+  m.queue_seconds.observe(result.record.queue_ms / 1000.0);
+  (result.record.frame.key_frame ? m.render_key_seconds : m.render_sub_seconds)
+      .observe(result.record.render_ms / 1000.0);
+  if (gpu_ >= 0) m.observe_gpu_render(gpu_, result.record.render_ms / 1000.0);
+  m.convert_seconds.observe(result.record.convert_ms / 1000.0);
   m.encode_seconds.observe(result.encode_ms / 1000.0);
   if (result.encode_psnr_db > 0) m.encode_psnr_db.observe(result.encode_psnr_db);
-  m.speculation_window.observe(result.frame.window);
-  m.frame_lod_bound_px.observe(result.lod_error_px);
+  m.speculation_window.observe(result.record.frame.window);
+  m.frame_lod_bound_px.observe(result.record.lod_error_px);
 }
 
 void SessionStream::on_sent(Clock::time_point written, const SocketSample& socket) {

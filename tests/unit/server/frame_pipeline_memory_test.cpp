@@ -92,10 +92,10 @@ FramePipeline::Rendered render_once(FramePipeline& frames) {
 TEST(FramePipelineMemory, OutOfMemoryAtTheFinishIsReported) {
   TestPipeline p(std::make_unique<FailingRenderer>(2, /*at_finish=*/true));
   FramePipeline::Rendered oom = render_once(p.frames);
-  EXPECT_TRUE(oom.out_of_memory);
+  EXPECT_TRUE(oom.record.out_of_memory);
   EXPECT_FALSE(oom.render_begun);
-  EXPECT_NE(oom.error.find("out of memory"), std::string::npos) << oom.error;
-  EXPECT_EQ(oom.buffer_bytes, 123ull << 20);
+  EXPECT_NE(oom.record.error.find("out of memory"), std::string::npos) << oom.record.error;
+  EXPECT_EQ(oom.record.buffer_bytes, 123ull << 20);
 }
 
 // A buffer that cannot grow, frame after frame: the frame is tried again kMemoryFallbacks times
@@ -111,14 +111,14 @@ TEST(FramePipelineMemory, OutOfMemoryIsReportedAfterTheFallbacksAndHalvesTheList
   FramePipeline& frames = p.frames;
   FramePipeline::Rendered oom = render_once(frames);
   EXPECT_EQ(r->renders, 1 + FramePipeline::kMemoryFallbacks);
-  EXPECT_TRUE(oom.out_of_memory);
-  EXPECT_FALSE(oom.over_budget);
-  EXPECT_NE(oom.error.find("out of memory"), std::string::npos) << oom.error;
-  EXPECT_EQ(oom.buffer_bytes, 123ull << 20);
-  EXPECT_EQ(oom.buffer_shape.list_entries, 2'000'000u);
+  EXPECT_TRUE(oom.record.out_of_memory);
+  EXPECT_FALSE(oom.record.over_budget);
+  EXPECT_NE(oom.record.error.find("out of memory"), std::string::npos) << oom.record.error;
+  EXPECT_EQ(oom.record.buffer_bytes, 123ull << 20);
+  EXPECT_EQ(oom.record.buffer_shape.list_entries, 2'000'000u);
   const FramePipeline::JobResult failed = frames.take_failed(std::move(oom));
-  EXPECT_TRUE(failed.out_of_memory);
-  EXPECT_EQ(failed.buffer_bytes, 123ull << 20);
+  EXPECT_TRUE(failed.record.out_of_memory);
+  EXPECT_EQ(failed.record.buffer_bytes, 123ull << 20);
   EXPECT_EQ(p.metrics.render_memory_fallbacks_total.load(), 0u) << "a frame lost after every fallback was not drawn";
 
   // The fallback's budget: the 2 M entries the list buffers hold, 24 bytes an entry.
@@ -139,10 +139,10 @@ TEST(FramePipelineMemory, AFrameWhoseBufferCannotGrowIsDrawnInPasses) {
   TestPipeline p(std::move(renderer));
   FramePipeline::Rendered drawn = render_once(p.frames);
   EXPECT_EQ(r->renders, 2);
-  EXPECT_TRUE(drawn.error.empty()) << drawn.error;
-  EXPECT_FALSE(drawn.out_of_memory);
-  EXPECT_EQ(drawn.memory_fallback, 1);
-  EXPECT_NE(drawn.memory_note.find("render-list keys"), std::string::npos) << drawn.memory_note;
+  EXPECT_TRUE(drawn.record.error.empty()) << drawn.record.error;
+  EXPECT_FALSE(drawn.record.out_of_memory);
+  EXPECT_EQ(drawn.record.memory_fallback, 1);
+  EXPECT_NE(drawn.record.memory_note.find("render-list keys"), std::string::npos) << drawn.record.memory_note;
   EXPECT_EQ(r->options().list_budget.max_bytes, 48'000'000u);
   EXPECT_GT(r->options().list_budget.max_passes, RenderListBudget{}.max_passes);
   EXPECT_EQ(p.metrics.render_memory_fallbacks_total.load(), 1u);
@@ -154,7 +154,7 @@ TEST(FramePipelineMemory, AFrameWhoseBufferCannotGrowIsDrawnInPasses) {
 TEST(FramePipelineMemory, ALostFramesPoseWaitsAgain) {
   TestPipeline p(std::make_unique<FailingRenderer>(2));
   FramePipeline::Rendered lost = render_once(p.frames);
-  ASSERT_TRUE(lost.out_of_memory);
+  ASSERT_TRUE(lost.record.out_of_memory);
   ASSERT_FALSE(p.frames.pending().has_value());
   EXPECT_TRUE(p.frames.retry_lost());
   ASSERT_TRUE(p.frames.pending().has_value());
@@ -169,8 +169,8 @@ TEST(FramePipelineMemory, ALostFramesPoseWaitsAgain) {
 TEST(FramePipelineMemory, AnotherCudaErrorIsAFailure) {
   TestPipeline p(std::make_unique<FailingRenderer>(700));  // cudaErrorIllegalAddress
   const FramePipeline::Rendered r = render_once(p.frames);
-  EXPECT_FALSE(r.out_of_memory);
-  EXPECT_FALSE(r.error.empty());
+  EXPECT_FALSE(r.record.out_of_memory);
+  EXPECT_FALSE(r.record.error.empty());
 }
 
 }  // namespace

@@ -60,7 +60,7 @@ Yuv420Image stereo_planes(const std::shared_ptr<const GaussianModel>& model, con
   FramePipeline::StartedRender started = frames.start_render(shape);
   FramePipeline::Rendered r = frames.begin_render(std::move(started.job), std::move(started.planes), false);
   frames.finish_render(r);
-  EXPECT_EQ(r.error, "");
+  EXPECT_EQ(r.record.error, "");
   return std::move(*r.planes);
 }
 
