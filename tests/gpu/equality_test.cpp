@@ -12,6 +12,8 @@
 //             CUDA vs CPU: >= 95% of the vertices agree (both without a surface, or depths within
 //             1%: the cores' lists order near ties alike but alpha differs by ulps); the first
 //             number column is the share agreeing, %.
+// HeadsetEyes runs the same rows on a headset's eyes (issue 94): asymmetric frusta whose principal
+// point lies off the image's centre, two heads of the biker's orbit.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -106,7 +108,32 @@ void equality(const std::string& name, std::shared_ptr<GaussianModel> model, con
   }
 }
 
+// A headset's two eyes for each head (issue 94): asymmetric frusta (Camera::from_frustum, the left
+// eye's edges those of catgs-loadgen's HeadsetOptics, the right eye's their mirror image), so the
+// principal point lies off the image's centre; the eyes `ipd` apart along the head's x axis.
+std::vector<Camera> headset_eyes(const std::vector<Camera>& heads, float ipd) {
+  const float left = -0.942f, right = 0.698f, up = 0.768f, down = -0.873f;
+  std::vector<Camera> eyes;
+  for (const Camera& h : heads) {
+    const glm::quat q = h.orientation();
+    const glm::vec3 x = glm::mat3_cast(q)[0];
+    eyes.push_back(Camera::from_frustum(h.position() - 0.5f * ipd * x, q, left, right, up, down, h.width, h.height));
+    eyes.push_back(Camera::from_frustum(h.position() + 0.5f * ipd * x, q, -right, -left, up, down, h.width, h.height));
+  }
+  return eyes;
+}
+
 class Equality : public GpuTest {};
+
+// The headset's eyes: CUDA == CPU as for any view (the rows "biker eyes").
+TEST_F(Equality, HeadsetEyes) {
+  CATGS_GPU_REQUIRE({"biker"});
+  const SharedScene& s = biker();
+  const std::vector<Camera> heads = orbit_views(*s.model, config().W, config().H);
+  const float ipd = 0.05f * glm::length(s.model->bounds().extent());
+  std::vector<Camera> eyes = headset_eyes({heads[0], heads[heads.size() / 2]}, ipd);
+  equality("biker eyes", s.model, eyes, s.dev);
+}
 
 TEST_F(Equality, Biker) {
   CATGS_GPU_REQUIRE({"biker"});
