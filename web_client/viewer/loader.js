@@ -33,7 +33,12 @@
   // A failed module fetch stays failed in the page's module map: the server is asked with fetch
   // until it answers, and only then is the module imported (a fresh URL if that import failed).
   let attempt = 0, imports = 0, timer = 0;
-  const retry = (reason) => {
+  // A failure can come back before the page is parsed (a refused connection is quick): the boxes
+  // after this script and the page's own listeners (its module scripts run before
+  // DOMContentLoaded) are not there yet, so the words and the event wait for them.
+  const parsed = (f) =>
+    document.readyState === 'loading' ? document.addEventListener('DOMContentLoaded', f, { once: true }) : f();
+  const retry = (reason) => parsed(() => {
     const wait = Math.min(1000 * 2 ** attempt++, 10000), at = performance.now() + wait;
     for (const el of boxes()) {
       el.dispatchEvent(new CustomEvent('error', { detail: { name: 'UNREACHABLE', reason, retryInMs: wait, permanent: false } }));
@@ -43,7 +48,7 @@
     tick();
     timer = setInterval(tick, 500);
     setTimeout(load, wait);
-  };
+  });
   const load = () => fetch(src, { cache: 'no-store', mode: 'cors' })
     .then((r) => {
       if (!r.ok) throw new Error(`${src}: HTTP ${r.status}`);
