@@ -159,10 +159,9 @@ export class CatgsViewerElement extends ElementBase {
   }
 
   // Whether a headset can show the stream is asked once the visitor points at, touches or focuses
-  // the view, not at load: asked at load, the question moved the timing of the embed test's loader
-  // step (a race between the loader's first failure and the host page's listener) enough to fail
-  // it in 5 of 15 runs, against none of 16 without it and none of 12 asked on pointing (README.md
-  // "VR"). A view nobody points at needs no button.
+  // the view, not at load: asked at load, the question moved the timing of a race in the embed's
+  // loader (its first failure before the host page's listener; loader.js now waits for the parse)
+  // enough to fail the embed test (README.md "VR"). A view nobody points at needs no button.
   _askVrOnce() {
     if (this.vrAsked) return;
     const events = ['pointerenter', 'focusin', 'touchstart'];
