@@ -13,7 +13,7 @@ build=(
   libboost-dev libwebsockets-dev libssl-dev
   libavcodec-dev libavformat-dev libavutil-dev libswscale-dev libx264-dev
   libprotobuf-dev protobuf-compiler
-  libglm-dev nlohmann-json3-dev libstb-dev
+  libglm-dev nlohmann-json3-dev libstb-dev libcli11-dev
   zlib1g-dev libzstd-dev libtinygltf-dev libwebp-dev libzip-dev libxxhash-dev
 )
 test=(git clang-format libgtest-dev nodejs npm chromium clang libclang-rt-dev)

@@ -23,22 +23,6 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-TransportOptions transport_options(const ServerOptions& options) {
-  TransportOptions t;
-  t.bind = options.bind;
-  t.port = options.port;
-  t.web_root = options.web_root;
-  t.socket_send_buffer = options.socket_send_buffer;
-  t.notsent_lowat = options.notsent_lowat;
-  t.origins = OriginPolicy(options.allowed_origins);
-  t.max_per_ip = options.max_connections_per_ip;
-  t.max_pre_hello = options.max_pre_hello;
-  t.proxies = TrustedProxies::parse(options.trusted_proxies);
-  t.tls_cert = options.tls_cert;
-  t.tls_key = options.tls_key;
-  return t;
-}
-
 // A connection while the first scene loads is asked back this soon (issue 91): a load takes about
 // a second (RESULTS.md "Scene loading"), and the full server's 2-4 s hint held a page's first
 // frame seconds past it; an attempt costs the server one refused handshake.
@@ -75,7 +59,7 @@ std::string Server::ToManager::metrics_text() {
 }
 int Server::ToManager::metrics_access(const std::string& authorization) {
   if (auto* m = manager.load()) return m->metrics_access(authorization);
-  return metrics_access_status(options->tokens, authorization, *metrics);
+  return metrics_access_status(options->session.tokens, authorization, *metrics);
 }
 void Server::ToManager::on_refused(Refusal why, const std::string& peer, const std::string& detail) {
   count_refusal(*metrics, why, peer, detail);
@@ -90,8 +74,8 @@ int Server::ToManager::readiness(std::string& body) {
   return 503;
 }
 
-Server::Server(const ServerOptions& options) : options_(options), session_settings_(session_settings(options)) {
-  transport_ = std::make_unique<Transport>(transport_options(options_), to_manager_);
+Server::Server(const ServerOptions& options) : options_(options) {
+  transport_ = std::make_unique<Transport>(options_.transport, to_manager_);
   to_manager_.transport = transport_.get();
   to_manager_.options = &options_;
   to_manager_.metrics = &metrics_;
@@ -128,21 +112,21 @@ int Server::run() {
 
 void Server::load_model() {
   SceneStore::Options o;
-  o.budget_bytes = static_cast<std::uint64_t>(options_.scene_memory_mb) << 20;
+  o.budget_bytes = static_cast<std::uint64_t>(options_.store.scene_memory_mb) << 20;
   o.metrics = &metrics_;
   o.log = &std::cout;
-  const SceneCacheMode mode = options_.scene_cache == "write"  ? SceneCacheMode::write
-                              : options_.scene_cache == "read" ? SceneCacheMode::read
-                                                               : SceneCacheMode::off;
+  const SceneCacheMode mode = options_.store.scene_cache == "write"  ? SceneCacheMode::write
+                              : options_.store.scene_cache == "read" ? SceneCacheMode::read
+                                                                     : SceneCacheMode::off;
   // The scene with its level of detail (process/scene_with_lod.h): the LOD file beside it, or
   // built (and written, --lod write) when that is missing or stale.
   SceneWithLodOptions lod;
   lod.cache = mode;
-  lod.lod = parse_lod_mode(options_.lod);
-  lod.min_gaussians = options_.lod_min_gaussians;
-  lod.cache_dir = options_.cache_dir == "beside" ? std::string()
-                  : options_.cache_dir.empty()   ? default_cache_folder()
-                                                 : options_.cache_dir;
+  lod.lod = parse_lod_mode(options_.store.lod);
+  lod.min_gaussians = options_.store.lod_min_gaussians;
+  lod.cache_dir = options_.store.cache_dir == "beside" ? std::string()
+                  : options_.store.cache_dir.empty()   ? default_cache_folder()
+                                                       : options_.store.cache_dir;
   std::cout << "derived files (scene caches, LOD files): "
             << (lod.cache_dir.empty() ? std::string("beside each scene") : lod.cache_dir) << std::endl;
   lod.log = [](const std::string& line) { std::cout << line << std::endl; };
@@ -171,41 +155,43 @@ void Server::load_model() {
                 << " chunks; " << cuda_upload_report(*scene.residents.back()) << ")" << std::endl;
     }
   };
-  std::vector<SceneStore::Source> sources{{options_.scene, options_.cameras}};
-  for (const std::string& file : options_.more_scenes) sources.push_back({file, ""});  // cameras found beside them
+  std::vector<SceneStore::Source> sources{{options_.store.scene, options_.store.cameras}};
+  for (const std::string& file : options_.store.more_scenes)
+    sources.push_back({file, ""});  // cameras found beside them
   scenes_ = std::make_unique<SceneStore>(std::move(sources), std::move(o));
   // The default scene now, so that its first session starts at once and a bad file or --cameras
   // stops the start; the others on first use (process/scene_store.h).
   scenes_->load_now(0);
   if (scenes_->size() > 1)
     std::cout << "scenes: " << scenes_->names() << " (the first loaded; the others load on first use"
-              << (options_.scene_memory_mb ? ", within --scene-memory-mb " + std::to_string(options_.scene_memory_mb)
-                                           : std::string())
+              << (options_.store.scene_memory_mb
+                      ? ", within --scene-memory-mb " + std::to_string(options_.store.scene_memory_mb)
+                      : std::string())
               << ")" << std::endl;
 }
 
 void Server::resolve_renderer() {
-  render_options_.pipeline = parse_pipeline(options_.pipeline);
+  render_options_.pipeline = parse_pipeline(options_.render.pipeline);
   // A session's list buffers are bounded (issue 61): a longer list is drawn in passes.
-  render_options_.list_budget.max_bytes = static_cast<std::uint64_t>(options_.list_memory_mb) << 20;
-  if (options_.lod_error_px >= 0.0f) render_options_.lod_error_px = options_.lod_error_px;
-  render_options_.occlusion_culling = options_.occlusion_cull;
-  render_options_.depth_grid_cell = options_.depth_grid_px;
+  render_options_.list_budget.max_bytes = static_cast<std::uint64_t>(options_.render.list_memory_mb) << 20;
+  render_options_.lod_error_px = options_.session.frame.lod.bound_px;
+  render_options_.occlusion_culling = options_.render.occlusion_cull;
+  render_options_.depth_grid_cell = options_.render.depth_grid_px;
   // A session's catgs windows open only where its own measured frame costs say they repay
   // (SpeculationParams::cost_model; --speculation cost=off for the paper's rule alone).
   render_options_.speculation.cost_model = true;
-  apply_speculation_settings(render_options_.speculation, options_.speculation);
+  apply_speculation_settings(render_options_.speculation, options_.render.speculation);
   // Resolved once, before any scene loads, so every session uses the same core and the log says
   // why: over a one-Gaussian model (the choice does not depend on the scene).
   // Before any CUDA context exists: lanes waiting on a spinning core would take it from the
   // encoders (docs/history/sessions_per_host.md, "Lanes that block while they wait for the GPU").
-  if (options_.renderer != "cpu") set_cuda_host_wait(options_.gpu_wait);
+  if (options_.render.renderer != "cpu") set_cuda_host_wait(options_.render.gpu_wait);
   auto probe = std::make_shared<GaussianModel>();
   probe->name = "probe";
   probe->resize(1);
   probe->rotations[0] = 1.0f;  // (w, x, y, z) = identity
   std::string why;
-  renderer_kind_ = make_renderer(options_.renderer, probe, render_options_, &why)->name();
+  renderer_kind_ = make_renderer(options_.render.renderer, probe, render_options_, &why)->name();
   std::cout << "renderer: " << renderer_kind_ << " (" << why << "), pipeline "
             << pipeline_name(render_options_.pipeline) << "\n";
   resolve_gpus();
@@ -213,14 +199,14 @@ void Server::resolve_renderer() {
 
 void Server::resolve_gpus() {
   std::vector<int> devices;
-  if (renderer_kind_ == "cuda") devices = parse_gpus(options_.gpus, cuda_device_count());
+  if (renderer_kind_ == "cuda") devices = parse_gpus(options_.render.gpus, cuda_device_count());
   // Each GPU's capacity: its memory less the reserve, or --device-memory-mb where smaller; the
   // CPU renderer's host slot: the allowance (0: unlimited).
-  const std::uint64_t allowance = static_cast<std::uint64_t>(options_.device_memory_mb) << 20;
+  const std::uint64_t allowance = static_cast<std::uint64_t>(options_.render.device_memory_mb) << 20;
   std::vector<std::uint64_t> capacity;
   for (int d : devices) {
     const std::uint64_t total = cuda_device_memory_total(d);
-    const std::uint64_t reserve = static_cast<std::uint64_t>(options_.device_memory_reserve_mb) << 20;
+    const std::uint64_t reserve = static_cast<std::uint64_t>(options_.render.device_memory_reserve_mb) << 20;
     std::uint64_t c = total > reserve ? total - reserve : 1;
     if (allowance > 0) c = std::min(c, allowance);
     capacity.push_back(c);
@@ -232,7 +218,7 @@ void Server::resolve_gpus() {
   GpuAssignment::FreeMemory free_memory;
   if (!devices.empty()) free_memory = [](int device) { return cuda_device_memory_free(device); };
   gpus_ = std::make_unique<GpuAssignment>(devices, capacity, free_memory,
-                                          static_cast<std::uint64_t>(options_.device_memory_reserve_mb) << 20);
+                                          static_cast<std::uint64_t>(options_.render.device_memory_reserve_mb) << 20);
   metrics_.set_gpus(devices, [g = gpus_.get()] { return g->sessions(); });
   metrics_.device_memory = [g = gpus_.get()] {
     std::vector<ServerMetrics::MemoryRow> rows;
@@ -251,14 +237,17 @@ void Server::resolve_encoder() {
   probe.height = 256;
   std::string why;
   bool fell_back = false;
-  encoder_kind_ = make_encoder(options_.encoder, probe, &why, &fell_back)->name();
+  encoder_kind_ = make_encoder(options_.session.frame.encoder, probe, &why, &fell_back)->name();
   if (fell_back) metrics_.encoder_fallbacks_total++;
-  std::cout << "encoder: " << encoder_kind_ << " (" << why << "), crf " << options_.encoder_policy.crf << ", bitrate "
-            << (options_.encoder_policy.bitrate_kbps < 0    ? "auto"
-                : options_.encoder_policy.bitrate_kbps == 0 ? "off"
-                                                            : std::to_string(options_.encoder_policy.bitrate_kbps))
-            << ", " << options_.encoder_policy.usable_cores << " cores for encoders, AV1 "
-            << options_.encoder_policy.av1 << " (speed " << options_.encoder_policy.av1_speed << ")\n";
+  std::cout << "encoder: " << encoder_kind_ << " (" << why << "), crf " << options_.session.frame.encoder_policy.crf
+            << ", bitrate "
+            << (options_.session.frame.encoder_policy.bitrate_kbps < 0 ? "auto"
+                : options_.session.frame.encoder_policy.bitrate_kbps == 0
+                    ? "off"
+                    : std::to_string(options_.session.frame.encoder_policy.bitrate_kbps))
+            << ", " << options_.session.frame.encoder_policy.usable_cores << " cores for encoders, AV1 "
+            << options_.session.frame.encoder_policy.av1 << " (speed "
+            << options_.session.frame.encoder_policy.av1_speed << ")\n";
   metrics_.renderer = renderer_kind_;
   metrics_.encoder = encoder_kind_;
   metrics_.pipeline = pipeline_name(render_options_.pipeline);
@@ -266,7 +255,7 @@ void Server::resolve_encoder() {
 
 void Server::build_sessions() {
   shared_ =
-      std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, session_settings_,
+      std::unique_ptr<SessionShared>(new SessionShared{io_, renders_, *gpus_, *transport_, metrics_, options_.session,
                                                        *scenes_, render_options_, renderer_kind_, encoder_kind_});
   manager_ = std::make_unique<SessionManager>(*shared_);
   // /readyz's memory test until the first visitor: a 1280x720 session of the default scene.
@@ -274,7 +263,7 @@ void Server::build_sessions() {
     shared_->next_session_bytes = first_session_device_bytes(first->model->size(), 1280, 720, render_options_.pipeline,
                                                              render_options_.list_budget);
   // Video export's files: a folder of their own, emptied of what an earlier run left there.
-  if (video_export_built() && options_.export_limits.max_concurrent > 0) {
+  if (video_export_built() && options_.session.export_limits.max_concurrent > 0) {
     shared_->export_folder = export_folder(options_.export_dir);
     const int stale = remove_stale_exports(shared_->export_folder);
     std::cout << "video export: files in " << shared_->export_folder;
@@ -304,7 +293,7 @@ std::string Server::url_scheme(const std::string& plain) const { return transpor
 void Server::print_tls() const {
   if (!transport_->tls()) return;
   const TlsCredentials& c = transport_->tls_credentials();
-  std::cout << "tls: " << options_.tls_cert << " (" << c.describe() << "); HTTPS and WSS only, SIGHUP reloads"
+  std::cout << "tls: " << options_.transport.tls_cert << " (" << c.describe() << "); HTTPS and WSS only, SIGHUP reloads"
             << std::endl;
 }
 
@@ -329,17 +318,18 @@ void Server::start_pools() {
       name_this_thread("catgs-pool" + std::to_string(i));
       io_.run();
     });
-  int lanes = RenderScheduler::default_lanes(options_.render_lanes, renderer_kind_, options_.threads);
-  if (options_.render_lanes == 0 && !gpus_->devices().empty())  // the CUDA default is per GPU
+  int lanes = RenderScheduler::default_lanes(options_.render.render_lanes, renderer_kind_, options_.threads);
+  if (options_.render.render_lanes == 0 && !gpus_->devices().empty())  // the CUDA default is per GPU
     lanes *= static_cast<int>(gpus_->devices().size());
-  renders_.set_background_yield(std::chrono::milliseconds(options_.export_yield_ms));
-  renders_.set_frames_per_lane(RenderScheduler::default_frames_per_lane(options_.frames_per_lane, renderer_kind_));
-  renders_.start(lanes, options_.max_pixels_in_flight);
+  renders_.set_background_yield(std::chrono::milliseconds(options_.render.export_yield_ms));
+  renders_.set_frames_per_lane(
+      RenderScheduler::default_frames_per_lane(options_.render.frames_per_lane, renderer_kind_));
+  renders_.start(lanes, options_.render.max_pixels_in_flight);
 }
 
 void Server::print_listening() const {
-  std::cout << "web root: " << options_.web_root << "\n"
-            << "sessions: at most " << options_.max_sessions << ", " << options_.threads << " worker threads, "
+  std::cout << "web root: " << options_.transport.web_root << "\n"
+            << "sessions: at most " << options_.session.max_sessions << ", " << options_.threads << " worker threads, "
             << renders_.lanes() << " render lanes of " << renders_.frames_per_lane() << " frame(s) in flight"
             << (gpus_->devices().empty() ? std::string() : ", " + std::to_string(gpus_->devices().size()) + " GPU(s)")
             << "\n"

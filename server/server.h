@@ -130,7 +130,6 @@ class Server {
   void print_totals() const;
 
   const ServerOptions& options_;
-  const SessionSettings session_settings_;  // the part of options_ sessions read
   ServerMetrics metrics_;
   RenderOptions render_options_;
   std::string renderer_kind_;  // "cpu" or "cuda"

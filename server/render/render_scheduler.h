@@ -98,10 +98,10 @@ class RenderScheduler {
   RenderScheduler(const RenderScheduler&) = delete;
   RenderScheduler& operator=(const RenderScheduler&) = delete;
 
-  // The lane count for `requested` (ServerOptions::render_lanes; > 0 wins), the resolved
+  // The lane count for `requested` (RenderSettings::render_lanes; > 0 wins), the resolved
   // `renderer_kind` ("cpu" or "cuda") and the worker count `threads`.
   static int default_lanes(int requested, const std::string& renderer_kind, int threads);
-  // Frames a lane keeps begun (see above) for `requested` (ServerOptions::frames_per_lane; > 0
+  // Frames a lane keeps begun (see above) for `requested` (RenderSettings::frames_per_lane; > 0
   // wins) and the resolved `renderer_kind`: 2 with the CUDA renderer, 1 with the CPU one.
   static int default_frames_per_lane(int requested, const std::string& renderer_kind);
   // Set before start() (>= 1).

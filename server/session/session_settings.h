@@ -1,7 +1,8 @@
 // What a session is configured with: the part of the command line (server_options.h) a
 // connection's protocol state machine and its frame pipeline read, and nothing else, so a
-// session depends on its own settings and not on every option of the process. The server fills
-// it once at start-up (session_settings() in server_options.h); the defaults are catgs-server's.
+// session depends on its own settings and not on every option of the process. It is
+// ServerOptions::session: the option table (server_options.cpp) writes into it directly, so the
+// member initializers below are catgs-server's defaults, shown by --help.
 #pragma once
 
 #include "encode/encoder_policy.h"

@@ -99,7 +99,7 @@ struct TransportOptions {
   std::size_t max_message_bytes = 64 * 1024;  // incoming messages above this are `oversize`
   int socket_send_buffer = 512 * 1024;        // SO_SNDBUF of WebSocket sockets; 0 = kernel's
   int notsent_lowat = 1024;                   // TCP_NOTSENT_LOWAT of WebSocket sockets; 0 = kernel's
-  OriginPolicy origins;                       // pages allowed to open a WebSocket
+  OriginPolicy origins = OriginPolicy();      // pages allowed to open a WebSocket
   int max_per_ip = 128;                       // WebSocket connections per client address; 0 = no cap
   int max_pre_hello = 256;                    // connections that have not said Hello; 0 = no cap
   TrustedProxies proxies;                     // whose X-Forwarded-For names the client (peer())

@@ -8,7 +8,8 @@ check that must catch it; the unbroken repository passes every check. The holes 
   - a `../` link from a component README (`../docs/gone.md`), once skipped;
   - a path and a flag named in docs/DESIGN.md, once not read;
   - a folder of sources under server/ or render_core/ the Layout table does not list, once taken
-    for the `server` row (or skipped under render_core/).
+    for the `server` row (or skipped under render_core/);
+  - a README table giving a server flag's default other than catgs-server --help's, once unread.
 
 usage: documents_selftest.py   (exit 0 when every case fails as it must and the clean copy passes)
 """
@@ -36,7 +37,8 @@ Design: [docs/DESIGN.md](docs/DESIGN.md); the server: [server/README.md](server/
 FILES = {
     "README.md": README,
     "docs/DESIGN.md": "The server (`server/server.cpp`) runs sessions (`server/session/session.h`).\n",
-    "server/README.md": "Up: [the design](../docs/DESIGN.md). `catgs-server --port 8080`.\n",
+    "server/README.md": "Up: [the design](../docs/DESIGN.md). `catgs-server --port 8080`.\n\n"
+                        "| flag | default | why |\n|---|---|---|\n| `--port N` | 8080 | the web's |\n",
     "server/server.cpp": '#include "session/session.h"\n',
     "server/session/session.h": '#pragma once\n#include "base/util.h"\n',
     "render_core/cpu/stage.cpp": '#include "base/util.h"\n',
@@ -62,6 +64,10 @@ def known_flags_here(root, bin_dir):
     return {"--port"}
 
 
+def server_defaults_here(bin_dir):
+    return {"--port": "8080"}
+
+
 CASES = [
     ("a link to docs/NOPE.md", "paths", {"README.md": README + "See [the missing page](docs/NOPE.md).\n"}),
     ("a ../ link from a component README", "paths",
@@ -71,11 +77,14 @@ CASES = [
     ("an unlisted server/newroom/ that includes session/", "layering",
      {"server/newroom/room.cpp": '#include "session/session.h"\n'}),
     ("an unlisted render_core/newroom/", "layering", {"render_core/newroom/room.h": '#include "base/util.h"\n'}),
+    ("a flag's default in a README table that --help does not give", "flags",
+     {"server/README.md": FILES["server/README.md"].replace("| 8080 |", "| 8081 |")}),
 ]
 
 
 def run(root, check):
     house.known_flags = known_flags_here
+    house.server_defaults = server_defaults_here
     return {
         "paths": lambda: house.check_paths(root),
         "flags": lambda: house.check_flags(root, ""),

@@ -7,7 +7,9 @@ Checks, each failure printed with the file and the offending name:
   flags     every --flag that README.md, the component READMEs, docs/DESIGN.md and RESULTS.md name is one some program
             of ours offers: in the --help of the programs in BIN_DIR, or in the text of the
             scripts and test drivers that take it (scripts/, tests/**/*.sh, tests/e2e/*.mjs),
-            or one of the outside tools' flags listed below (EXTERNAL_FLAGS).
+            or one of the outside tools' flags listed below (EXTERNAL_FLAGS). A table row that
+            gives a catgs-server flag's default (`| `--flag [VALUE]` | DEFAULT ...`) gives the
+            default catgs-server --help shows (the option table, server/server_options.cpp).
   paths     every repository path they name (in `code` or as a link target) exists: relative to
             the repository, to the document's folder (`../` too, unless it leaves the
             repository) or to one of the include roots (server/, render_core/, tools/,
@@ -103,8 +105,39 @@ def known_flags(root, bin_dir):
     return set(re.findall(r"--[a-z][a-z0-9-]*", "\n".join(text))) | EXTERNAL_FLAGS
 
 
+def server_defaults(bin_dir):
+    """{flag: the default catgs-server --help shows}, from each option's '(default X)'."""
+    exe = os.path.join(bin_dir, "catgs-server") if bin_dir else ""
+    if not exe or not os.path.exists(exe):
+        return {}
+    usage = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=30).stdout
+    out = {}
+    for entry in re.split(r"\n(?=  --)", usage):  # an option's line and its wrapped help
+        flat = " ".join(entry.split())
+        m = re.match(r"(--[a-z0-9-]+)", flat)
+        d = re.findall(r"\(default ([^)]*)\)", flat)
+        if m and d:
+            out[m.group(1)] = d[-1]
+    return out
+
+
+TABLE_DEFAULT = re.compile(r"^\| *`(--[a-z0-9-]+)(?: [A-Za-z|]+)?` *\| *([^|]*?) *\|", re.M)
+
+
+def check_flag_defaults(root, rel, text, defaults):
+    bad = []
+    for flag, cell in TABLE_DEFAULT.findall(text):
+        if flag not in defaults or not cell:
+            continue
+        shown = cell.split()[0].strip("`")
+        if shown != defaults[flag].split()[0]:
+            bad.append(f"{rel}: {flag}'s default is {defaults[flag]!r} in catgs-server --help, the table says {cell!r}")
+    return bad
+
+
 def check_flags(root, bin_dir):
     known = known_flags(root, bin_dir)
+    defaults = server_defaults(bin_dir)
     bad = []
     for rel in READMES + FLAG_DOCUMENTS:
         path = os.path.join(root, rel)
@@ -118,6 +151,7 @@ def check_flags(root, bin_dir):
                 continue
             if flag not in known:
                 bad.append(f"{rel}: {flag} is in no program's --help nor any script of ours")
+        bad += check_flag_defaults(root, rel, read(path), defaults)
     return bad
 
 

@@ -141,17 +141,17 @@ TEST(ContentRate, BitsPerPixelOption) {
   const char* none[] = {"catgs-server"};
   ServerOptions o0;
   ASSERT_TRUE(parse_server_options(1, const_cast<char**>(none), o0));
-  EXPECT_FALSE(o0.encoder_policy.content_rate);  // the default stays 0.09 (RESULTS.md)
-  EXPECT_DOUBLE_EQ(o0.encoder_policy.bits_per_pixel, 0.09);
+  EXPECT_FALSE(o0.session.frame.encoder_policy.content_rate);  // the default stays 0.09 (RESULTS.md)
+  EXPECT_DOUBLE_EQ(o0.session.frame.encoder_policy.bits_per_pixel, 0.09);
   const char* fixed[] = {"catgs-server", "--bits-per-pixel", "0.05"};
   ServerOptions o1;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(fixed), o1));
-  EXPECT_FALSE(o1.encoder_policy.content_rate);
-  EXPECT_DOUBLE_EQ(o1.encoder_policy.bits_per_pixel, 0.05);
+  EXPECT_FALSE(o1.session.frame.encoder_policy.content_rate);
+  EXPECT_DOUBLE_EQ(o1.session.frame.encoder_policy.bits_per_pixel, 0.05);
   const char* probed[] = {"catgs-server", "--bits-per-pixel", "auto"};
   ServerOptions o2;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(probed), o2));
-  EXPECT_TRUE(o2.encoder_policy.content_rate);
+  EXPECT_TRUE(o2.session.frame.encoder_policy.content_rate);
   const char* bad[] = {"catgs-server", "--bits-per-pixel", "lots"};
   ServerOptions o3;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(bad), o3), std::invalid_argument);

@@ -40,9 +40,9 @@ TEST(LodBound, ScalesWithTheShorterSideBelowTheReference) {
   EXPECT_FLOAT_EQ(size_scaled_lod_bound(2.0f, 640, 360, 720), 1.0f);
   EXPECT_EQ(size_scaled_lod_bound(0.0f, 320, 180, 720), 0.0f);  // full detail stays full
   ServerOptions defaults;
-  EXPECT_EQ(defaults.lod, "write");              // on by default (issue 46)
-  EXPECT_FLOAT_EQ(defaults.lod_error_px, 4.0f);  // 2 before the fitted merges (issue 72)
-  EXPECT_TRUE(defaults.auto_splat_budget);
+  EXPECT_EQ(defaults.store.lod, "write");                      // on by default (issue 46)
+  EXPECT_FLOAT_EQ(defaults.session.frame.lod.bound_px, 4.0f);  // 2 before the fitted merges (issue 72)
+  EXPECT_TRUE(defaults.session.frame.lod.auto_budget);
 }
 
 // The yardstick (issue 46): at the server's default bound scaled to the session's size, the cut
@@ -52,7 +52,7 @@ TEST(LodBound, ScalesWithTheShorterSideBelowTheReference) {
 TEST(LodBound, DefaultBoundAtEachSizeWithinHalfADbOfFullDetailAgainstSupersampled) {
   CATGS_REQUIRE_DATA(path, "scenes/flowers_sh3.ply");
   const test::SmallCity& c = small_flowers_city();
-  const float bound = ServerOptions{}.lod_error_px;
+  const float bound = ServerOptions{}.session.frame.lod.bound_px;
   constexpr int kFactor = 4;
   for (const int scale : {1, 2}) {
     double full_db = 0, cut_db = 0;
@@ -293,38 +293,37 @@ TEST(LodBound, SplatBudgetOption) {
   const char* a1[] = {"catgs-server", "--splat-budget", "2000000"};
   ServerOptions o1;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a1), o1));
-  EXPECT_EQ(o1.splat_budget, 2000000u);
-  EXPECT_FALSE(o1.auto_splat_budget);
-  EXPECT_EQ(session_settings(o1).frame.lod.splat_budget, 2000000u);
+  EXPECT_EQ(o1.session.frame.lod.splat_budget, 2000000u);
   const char* a2[] = {"catgs-server", "--splat-budget", "off"};
   ServerOptions o2;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a2), o2));
-  EXPECT_EQ(o2.splat_budget, 0u);
-  EXPECT_FALSE(session_settings(o2).frame.lod.auto_budget);
+  EXPECT_EQ(o2.session.frame.lod.splat_budget, 0u);
+  EXPECT_FALSE(o2.session.frame.lod.auto_budget);
   const char* a3[] = {"catgs-server", "--splat-budget", "lots"};
   ServerOptions o3;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a3), o3), std::invalid_argument);
   // --lod-max-error: by default the default bound (the budget never coarsens the default picture,
   // issue 72), a value, or off (the ladder's top).
-  EXPECT_EQ(session_settings(ServerOptions{}).frame.lod.max_bound_px, ServerOptions{}.lod_error_px);
-  EXPECT_EQ(lod_max_steps(ServerOptions{}.lod_error_px, session_settings(ServerOptions{}).frame.lod.max_bound_px), 0);
+  EXPECT_EQ(ServerOptions{}.session.frame.lod.max_bound_px, ServerOptions{}.session.frame.lod.bound_px);
+  EXPECT_EQ(lod_max_steps(ServerOptions{}.session.frame.lod.bound_px, ServerOptions{}.session.frame.lod.max_bound_px),
+            0);
   const char* a4[] = {"catgs-server", "--lod-max-error", "5.66"};
   ServerOptions o4;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a4), o4));
-  EXPECT_EQ(session_settings(o4).frame.lod.max_bound_px, 5.66f);
+  EXPECT_EQ(o4.session.frame.lod.max_bound_px, 5.66f);
   const char* a5[] = {"catgs-server", "--lod-max-error", "off"};
   ServerOptions o5;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a5), o5));
-  EXPECT_EQ(session_settings(o5).frame.lod.max_bound_px, 0.0f);
+  EXPECT_EQ(o5.session.frame.lod.max_bound_px, 0.0f);
   const char* a6[] = {"catgs-server", "--lod-max-error", "-1"};
   ServerOptions o6;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a6), o6), std::invalid_argument);
   // --splat-budget-share: 0.4 by default, in (0, 1].
-  EXPECT_EQ(session_settings(ServerOptions{}).frame.lod.budget_share, 0.4);
+  EXPECT_EQ(ServerOptions{}.session.frame.lod.budget_share, 0.4);
   const char* a7[] = {"catgs-server", "--splat-budget-share", "0.5"};
   ServerOptions o7;
   ASSERT_TRUE(parse_server_options(3, const_cast<char**>(a7), o7));
-  EXPECT_EQ(session_settings(o7).frame.lod.budget_share, 0.5);
+  EXPECT_EQ(o7.session.frame.lod.budget_share, 0.5);
   const char* a8[] = {"catgs-server", "--splat-budget-share", "1.5"};
   ServerOptions o8;
   EXPECT_THROW((void)parse_server_options(3, const_cast<char**>(a8), o8), std::invalid_argument);
@@ -332,32 +331,72 @@ TEST(LodBound, SplatBudgetOption) {
 
 }  // namespace
 
-// Issue 93: settings built without options (as tests and the fuzz target build them) are what a
-// server started without options runs, field by field.
+// Issue 93: one declaration per option. Settings built without options (as tests and the fuzz
+// target build them) are what a server started without options runs: every option's value in
+// a ServerOptions holding a plain SessionSettings equals its value after parsing no arguments,
+// and the text --help shows as each default, given back as the option, changes nothing.
 TEST(ServerDefaults, ASessionWithoutOptionsRunsTheServersDefaults) {
-  const SessionSettings plain;
-  const SessionSettings server = session_settings(ServerOptions{});
-  EXPECT_EQ(plain.max_sessions, server.max_sessions);
-  EXPECT_EQ(plain.full_retry_ms, server.full_retry_ms);
-  EXPECT_EQ(plain.hello_timeout_ms, server.hello_timeout_ms);
-  EXPECT_EQ(plain.silent_timeout_ms, server.silent_timeout_ms);
-  EXPECT_EQ(plain.scene_load_timeout_ms, server.scene_load_timeout_ms);
-  EXPECT_EQ(plain.slow_client_timeout_ms, server.slow_client_timeout_ms);
-  EXPECT_EQ(plain.max_viewport_width, server.max_viewport_width);
-  EXPECT_EQ(plain.max_viewport_height, server.max_viewport_height);
-  const FrameSettings &a = plain.frame, &b = server.frame;
-  EXPECT_EQ(a.encoder, b.encoder);
-  EXPECT_EQ(a.adaptive_quality, b.adaptive_quality);
-  EXPECT_EQ(a.pose_prediction, b.pose_prediction);
-  EXPECT_EQ(a.link_control, b.link_control);
-  EXPECT_EQ(a.still_refine, b.still_refine);
-  EXPECT_EQ(a.frame_deadline_slots, b.frame_deadline_slots);
-  EXPECT_EQ(a.max_frames_in_flight, b.max_frames_in_flight);
-  EXPECT_EQ(a.socket_send_buffer, b.socket_send_buffer);
-  EXPECT_EQ(a.lod.bound_px, b.lod.bound_px);
-  EXPECT_EQ(a.lod.splat_budget, b.lod.splat_budget);
-  EXPECT_EQ(a.lod.auto_budget, b.lod.auto_budget);
-  EXPECT_EQ(a.lod.max_bound_px, b.lod.max_bound_px);
-  EXPECT_EQ(a.lod.budget_share, b.lod.budget_share);
-  EXPECT_EQ(a.encoder_policy.crf, b.encoder_policy.crf);
+  const char* none[] = {"catgs-server"};
+  ServerOptions parsed;
+  ASSERT_TRUE(parse_server_options(1, const_cast<char**>(none), parsed));
+  ServerOptions plain;
+  plain.session = SessionSettings{};
+  const std::map<std::string, std::string> want = option_values(parsed);
+  const std::map<std::string, std::string> got = option_values(plain);
+  ASSERT_GT(want.size(), 50u);  // the options with a value to show
+  for (const auto& [name, value] : want) {
+    if (name == "--threads" || name == "--max-pixels-in-flight") continue;  // resolved at parse time
+    EXPECT_EQ(got.at(name), value) << name;
+  }
+  const std::string usage = server_usage();
+  for (const auto& [name, value] : option_values(ServerOptions{})) {
+    // --help says the default from the same field.
+    const std::size_t at = usage.find("\n  " + name + " ");  // an option line, not a mention
+    ASSERT_NE(at, std::string::npos) << name;
+    const std::size_t next = usage.find("\n  --", at + 1);
+    std::string entry = usage.substr(at + 1, next - at - 1);
+    for (char& c : entry)
+      if (c == '\n') c = ' ';
+    std::string flat;  // the wrapped lines' indentation folded to one space
+    for (char c : entry)
+      if (!(c == ' ' && !flat.empty() && flat.back() == ' ')) flat += c;
+    EXPECT_NE(flat.find("(default " + value + ")"), std::string::npos) << name << ": " << flat;
+    // The default, given back, is parsed to itself.
+    const char* again[] = {"catgs-server", name.c_str(), value.c_str()};
+    ServerOptions o;
+    ASSERT_TRUE(parse_server_options(3, const_cast<char**>(again), o)) << name;
+    EXPECT_EQ(option_values(o), option_values(parsed)) << name << " " << value;
+  }
+}
+
+// The option given as --name=value is the same option; one given twice, the last wins; an
+// unknown one, a value missing or out of range is refused with the option's name.
+TEST(ServerDefaults, OptionsParseAsTheirTableSays) {
+  const char* eq[] = {"catgs-server", "--lod-error=2.5", "--port", "9000", "--port", "9001"};
+  ServerOptions o;
+  ASSERT_TRUE(parse_server_options(6, const_cast<char**>(eq), o));
+  EXPECT_EQ(o.session.frame.lod.bound_px, 2.5f);
+  EXPECT_EQ(o.transport.port, 9001);
+  const std::vector<std::vector<const char*>> bad = {{"catgs-server", "--nope", "1"},
+                                                     {"catgs-server", "--port"},
+                                                     {"catgs-server", "--port", "70000"},
+                                                     {"catgs-server", "--occlusion-cull", "maybe"},
+                                                     {"catgs-server", "scene.ply"}};
+  for (const auto& argv : bad) {
+    ServerOptions b;
+    try {
+      (void)parse_server_options(static_cast<int>(argv.size()), const_cast<char**>(argv.data()), b);
+      ADD_FAILURE() << argv.back() << " accepted";
+    } catch (const std::invalid_argument& e) {
+      const std::string what = e.what(), arg = argv[1];
+      EXPECT_NE(what.find(arg), std::string::npos) << what;
+    }
+  }
+  // --socket-send-buffer is the transport's first size and the session's most: one option, both.
+  const char* sndbuf[] = {"catgs-server", "--socket-send-buffer", "65536"};
+  ServerOptions s;
+  ASSERT_TRUE(parse_server_options(3, const_cast<char**>(sndbuf), s));
+  EXPECT_EQ(s.transport.socket_send_buffer, 65536);
+  EXPECT_EQ(s.session.frame.socket_send_buffer, 65536);
+  EXPECT_EQ(ServerOptions{}.transport.socket_send_buffer, SessionSettings{}.frame.socket_send_buffer);
 }

@@ -71,11 +71,11 @@ TEST(RenderScheduler, GpuWaitOption) {
   const char* none[] = {"catgs-server"};
   catgs::server::ServerOptions o0;
   ASSERT_TRUE(catgs::server::parse_server_options(1, const_cast<char**>(none), o0));
-  EXPECT_EQ(o0.gpu_wait, "block");
+  EXPECT_EQ(o0.render.gpu_wait, "block");
   const char* spin[] = {"catgs-server", "--gpu-wait", "spin"};
   catgs::server::ServerOptions o1;
   ASSERT_TRUE(catgs::server::parse_server_options(3, const_cast<char**>(spin), o1));
-  EXPECT_EQ(o1.gpu_wait, "spin");
+  EXPECT_EQ(o1.render.gpu_wait, "spin");
   const char* bad[] = {"catgs-server", "--gpu-wait", "yield"};
   catgs::server::ServerOptions o2;
   EXPECT_THROW((void)catgs::server::parse_server_options(3, const_cast<char**>(bad), o2), std::invalid_argument);
@@ -199,8 +199,12 @@ TEST(RenderScheduler, FramesPerLaneOption) {
   const char* three[] = {"catgs-server", "--frames-per-lane", "3"};
   catgs::server::ServerOptions o;
   ASSERT_TRUE(catgs::server::parse_server_options(3, const_cast<char**>(three), o));
-  EXPECT_EQ(o.frames_per_lane, 3);
-  for (const char* v : {"0", "17"}) {
+  EXPECT_EQ(o.render.frames_per_lane, 3);
+  const char* zero[] = {"catgs-server", "--frames-per-lane", "0"};  // the renderer's default, as --render-lanes 0
+  catgs::server::ServerOptions oz;
+  ASSERT_TRUE(catgs::server::parse_server_options(3, const_cast<char**>(zero), oz));
+  EXPECT_EQ(oz.render.frames_per_lane, 0);
+  for (const char* v : {"-1", "17"}) {
     const char* bad[] = {"catgs-server", "--frames-per-lane", v};
     catgs::server::ServerOptions ob;
     EXPECT_THROW((void)catgs::server::parse_server_options(3, const_cast<char**>(bad), ob), std::invalid_argument) << v;

@@ -333,8 +333,8 @@ TEST(SceneFolder, ListsItsScenesInNameOrder) {
   const std::string d = dir.string(), extra = "/elsewhere/z.ply";
   const char* argv[] = {"catgs-server", "--scene", d.c_str(), "--scene", extra.c_str()};
   ASSERT_TRUE(parse_server_options(5, const_cast<char**>(argv), o));
-  EXPECT_EQ(o.scene, want[0]);
-  EXPECT_EQ(o.more_scenes, (std::vector<std::string>{want[1], want[2], want[3], extra}));
+  EXPECT_EQ(o.store.scene, want[0]);
+  EXPECT_EQ(o.store.more_scenes, (std::vector<std::string>{want[1], want[2], want[3], extra}));
 
   const fs::path empty = fs::path(test::temp_dir()) / "empty";
   fs::create_directories(empty / "deep");

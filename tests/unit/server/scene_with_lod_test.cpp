@@ -193,8 +193,8 @@ TEST(SceneWithLod, Options) {
   EXPECT_THROW(parse_lod_mode("on"), std::invalid_argument);
   const char* argv[] = {"catgs-server", "--lod", "sometimes"};
   ServerOptions options;
-  EXPECT_EQ(options.lod, "write");
-  EXPECT_GT(options.lod_error_px, 0.0f);
+  EXPECT_EQ(options.store.lod, "write");
+  EXPECT_GT(options.session.frame.lod.bound_px, 0.0f);
   try {
     (void)parse_server_options(3, const_cast<char**>(argv), options);
     ADD_FAILURE() << "--lod sometimes accepted";
