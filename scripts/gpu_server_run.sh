@@ -45,7 +45,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-SRV=/tmp/catgs_srv
+SRV=${CATGS_SRV:-/tmp/catgs_srv}  # CATGS_SRV: another unpacked build (a before/after pair)
 
 prepare() {
   local build=${1:-build/cuda}

@@ -15,6 +15,10 @@ door, the bounds' numbers, and the encoder's picture (FrameTimings.encode_psnr_d
 frame against the rendered one): its mean over every frame, and the lowest session's mean with
 the preset its stream ended at (Stats.encoder), so that a count of visitors comes with the
 picture they saw.
+
+A third, one row per step where the JSON has it (issue 92): the render lane's CPU a frame by step
+(FrameTimings.lane_{lod,begin,finish}_cpu_ms: the LOD bound's choice, the begin, the finish), the
+lanes' cores at the step's frame rate, and the encode call's own thread CPU a frame.
 """
 import glob
 import gzip
@@ -112,6 +116,23 @@ def main(w):
             lowest = f"{low['server']['encode_psnr_db_mean']:.2f} ({low.get('stream_encoder', '')})" if low else "-"
             print(f"| {m['name']} | {n} | {t.get('refused', 0)} | {'yes' if held(m, j) else 'no'} | "
                   f"{t['latency']['p95_ms']:.1f} | {t['fps_min']:.1f} | {pic:.2f} | {lowest} |")
+
+    # Where a frame's host CPU goes, by thread (issue 92; FrameTimings' thread clocks): the render
+    # lane's three steps and the encode call's own thread (x264's slice threads not counted).
+    print()
+    print("| ramp | sessions | lane: LOD bound ms | lane: begin ms | lane: finish ms | lane cores at the frame rate "
+          "| encode call thread ms |")
+    print("|" + "---|" * 7)
+    for m, steps in load(w):
+        for n, j in steps:
+            t = j["run"]["total"]
+            srv = t["server"]
+            if "lane_begin_cpu_ms" not in srv:
+                continue
+            lane = srv["lane_lod_cpu_ms"] + srv["lane_begin_cpu_ms"] + srv["lane_finish_cpu_ms"]
+            fps = sum(x.get("frames", 0) / max(x.get("seconds", 1), 1e-9) for x in j["run"]["sessions"])
+            print(f"| {m['name']} | {n} | {srv['lane_lod_cpu_ms']:.3f} | {srv['lane_begin_cpu_ms']:.3f} | "
+                  f"{srv['lane_finish_cpu_ms']:.3f} | {lane * fps / 1000:.2f} | {srv.get('encode_thread_cpu_ms', 0):.3f} |")
 
 
 if __name__ == "__main__":

@@ -12,8 +12,8 @@
 // It reads the host model, so it answers the same for a CPU and a CUDA server (the CUDA core
 // would need a second path for a one-pixel render). It visits every Gaussian once, serially (a
 // cheap screen-radius test first), or, given the chunk bounds, only the chunks that may reach the
-// pixel: made for a click or a few probes a second, not for every pixel of a frame; RESULTS.md
-// ("Depth under a pixel") has its time.
+// pixel: made for a click or a few probes a second, not for every pixel of a frame;
+// docs/history/depth_probe.md has its time.
 #pragma once
 
 #include <cstddef>

@@ -22,17 +22,19 @@ CudaRenderer::CudaRenderer(std::shared_ptr<const DeviceScene> scene, const Rende
   State& s = *state_;
   CATGS_CUDA(cudaStreamCreateWithFlags(&s.stream, cudaStreamNonBlocking));
   for (cudaEvent_t& e : s.events) CATGS_CUDA(cudaEventCreate(&e));
-  // The readback event only orders the host; no timing needed.
-  CATGS_CUDA(cudaEventCreateWithFlags(&s.counts_ready, cudaEventDisableTiming));
+  // The events the host waits on order it only (no timing), and block it where the server asked
+  // its lanes to sleep while the GPU works (host_wait_event_flags: else the wait spins).
+  const unsigned waited = host_wait_event_flags();
+  CATGS_CUDA(cudaEventCreateWithFlags(&s.counts_ready, waited));
   CATGS_CUDA(cudaMallocHost(&s.host_counts, kReadSlots * sizeof(unsigned long long)));
   s.counters.ensure(kCounterSlots * sizeof(unsigned long long), "counters", &s.allocations);
-  CATGS_CUDA(cudaEventCreateWithFlags(&s.catgs_readback, cudaEventDisableTiming));
-  CATGS_CUDA(cudaEventCreateWithFlags(&s.plan_ready, cudaEventDisableTiming));
+  CATGS_CUDA(cudaEventCreateWithFlags(&s.catgs_readback, waited));
+  CATGS_CUDA(cudaEventCreateWithFlags(&s.plan_ready, waited));
   CATGS_CUDA(cudaMallocHost(&s.host_catgs, kHostCatgsSlots * sizeof(unsigned)));
   s.catgs_counters.ensure(kCatgsCounterSlots * sizeof(unsigned), "catgs counters", &s.allocations);
   CATGS_CUDA(cudaEventCreate(&s.convert_start));
   CATGS_CUDA(cudaEventCreate(&s.converted));
-  CATGS_CUDA(cudaEventCreateWithFlags(&s.planes_ready, cudaEventDisableTiming));
+  CATGS_CUDA(cudaEventCreateWithFlags(&s.planes_ready, waited));
 }
 
 CudaRenderer::~CudaRenderer() {
@@ -149,7 +151,7 @@ CudaRenderer::State::ListCounts CudaRenderer::State::count_render_list(uint64_t 
     stages::scan_chunks(proj, n, chunk_start.as<uint64_t>(), scan_temp.as<void>(), scan_temp.bytes(), stream);
     stages::gaussian_ends(proj, n, walk, chunk_start.as<uint64_t>(), ends.as<uint64_t>(), stream);
   }
-  CATGS_CUDA(cudaEventSynchronize(counts_ready));
+  wait_for(counts_ready);
   ++syncs;
   ListCounts c;
   c.entries = host_counts[0];
@@ -535,7 +537,7 @@ const FrameStats& CudaRenderer::last_stats() const {
       stats_.keys_ms = stats_.sort_ms = stats_.ranges_ms = 0.0;
       stats_.rasterize_ms = ms(kPreprocessed, kRasterized);
     }
-    CATGS_CUDA(cudaEventSynchronize(s.plan_ready));
+    wait_for(s.plan_ready);
     stats_.slices = s.host_catgs[kSliceTotals];
   }
   stats_ready_ = true;

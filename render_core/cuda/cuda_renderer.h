@@ -74,7 +74,17 @@ enum class HostWait {
 };
 // Sets it on every device. Set before a device's first use where possible (later it overwrites
 // that device's flags). Returns false when a device refused. Never throws.
+// The device flag governs stream syncs only: cudaEventSynchronize busy-waits on an event created
+// without cudaEventBlockingSync whatever the flag says (CUDA runtime API, cudaEventSynchronize). So
+// renderers made after set_host_wait(block) create the events their host waits on with it and
+// poll each briefly before sleeping on it (renderer_state.h wait_for; issue 92: the frame's
+// readback wait in a lane's begin spun on the GPU's queue, 0.6-1.8 ms of a core a frame).
 bool set_host_wait(HostWait wait);
+// What set_host_wait last set (spin until it is called).
+HostWait host_wait();
+// The flags for an event a host thread waits on: cudaEventDisableTiming, and cudaEventBlockingSync
+// while host_wait() is block.
+unsigned host_wait_event_flags();
 
 // Makes `device` the calling thread's current CUDA device for the guard's lifetime, and restores
 // the previous one after. Every CudaRenderer and DeviceScene call that touches the GPU holds one,

@@ -1,4 +1,5 @@
 // Device queries for the CUDA core (cuda_renderer.h): usable device, description, memory.
+#include <atomic>
 #include <cstdio>
 #include <string>
 
@@ -68,7 +69,18 @@ int device_count() {
   return count;
 }
 
+namespace {
+std::atomic<HostWait> g_host_wait{HostWait::spin};
+}  // namespace
+
+HostWait host_wait() { return g_host_wait.load(std::memory_order_relaxed); }
+
+unsigned host_wait_event_flags() {
+  return cudaEventDisableTiming | (host_wait() == HostWait::block ? cudaEventBlockingSync : 0u);
+}
+
 bool set_host_wait(HostWait wait) {
+  g_host_wait.store(wait, std::memory_order_relaxed);
   const unsigned flags = wait == HostWait::block ? cudaDeviceScheduleBlockingSync : cudaDeviceScheduleAuto;
   int previous = 0;
   if (cudaGetDevice(&previous) != cudaSuccess) {

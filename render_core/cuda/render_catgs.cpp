@@ -83,7 +83,7 @@ int CudaRenderer::State::measure_window(const stages::SceneView& scene, const st
   CATGS_CUDA(
       cudaMemcpyAsync(host_catgs + kMotionBits, cc + kMotionBits, sizeof(unsigned), cudaMemcpyDeviceToHost, stream));
   CATGS_CUDA(cudaEventRecord(catgs_readback, stream));
-  CATGS_CUDA(cudaEventSynchronize(catgs_readback));
+  wait_for(catgs_readback);
   ++syncs;
   float motion = 0.0f;
   std::memcpy(&motion, host_catgs + kMotionBits, sizeof motion);
@@ -197,7 +197,7 @@ bool CudaRenderer::catgs_sub_frame(const Camera& camera) {
   CATGS_CUDA(
       cudaMemcpyAsync(s.host_catgs + kOutside, cc + kOutside, sizeof(unsigned), cudaMemcpyDeviceToHost, s.stream));
   CATGS_CUDA(cudaEventRecord(s.catgs_readback, s.stream));
-  CATGS_CUDA(cudaEventSynchronize(s.catgs_readback));
+  wait_for(s.catgs_readback);
   ++s.syncs;
   s.key_frame = false;
   return s.host_catgs[kOutside] == 0u;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <algorithm>
+#include <chrono>
 #include <string>
 
 #include "speculation/speculation_planner.h"
@@ -135,6 +136,26 @@ enum Event { kStart, kPreprocessed, kKeysEmitted, kSorted, kRanged, kRasterized,
 
 // The camera as the kernels see it.
 stages::CameraParams camera_params(const Camera& camera);
+
+// How long a host wait for a frame's readback polls before it sleeps (wait_for), microseconds.
+inline constexpr int kPollBeforeSleepUs = 150;
+
+// Waits for `event`, recorded on the renderer's stream. Under HostWait::block it first polls the
+// event for up to kPollBeforeSleepUs, then sleeps in cudaEventSynchronize (the event was made
+// with host_wait_event_flags): a readback the GPU answers at once costs no sleep's wake-up, one
+// queued behind other lanes' work costs the poll, not its whole wait on a core (issue 92: the
+// spinning wait took 0.6-1.8 ms of a core a frame in a lane's begin). HostWait::spin: spins.
+inline void wait_for(cudaEvent_t event) {
+  if (host_wait() == HostWait::block) {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(kPollBeforeSleepUs);
+    for (;;) {
+      const cudaError_t e = cudaEventQuery(event);
+      if (e == cudaSuccess) return;
+      if (e != cudaErrorNotReady || std::chrono::steady_clock::now() >= until) break;
+    }
+  }
+  CATGS_CUDA(cudaEventSynchronize(event));
+}
 
 // The scene as the kernels see it.
 // The scene as the kernels read it, its LOD cut at bound `lod_error_px` (RenderOptions).

@@ -1,3 +1,4 @@
+#include "base/thread_clock.h"
 #include "encode/x264_encoder.h"
 
 #include <algorithm>
@@ -28,13 +29,6 @@ constexpr int kDefaultVbvMs = 250;
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
-// The calling thread's CPU time, ms (CLOCK_THREAD_CPUTIME_ID).
-double thread_cpu_ms() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) * 1e3 + static_cast<double>(t.tv_nsec) * 1e-6;
 }
 
 // x264's own options after the preset ("name=value:name=value"): the preset's tools turned back

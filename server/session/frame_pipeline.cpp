@@ -1,6 +1,7 @@
 // The frame pipeline (frame_pipeline.h): the pose slots and host buffers on the strand, the
 // render and encode stages in their jobs, the encoder configured by the encoder policy
 // (encode/encoder_policy.h).
+#include "base/thread_clock.h"
 #include "session/frame_pipeline.h"
 
 #include <algorithm>
@@ -272,7 +273,10 @@ void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target
   r.record.lane_wait_ms = ms_between(job.posted_at, r.render_started);
   r.record.render_lane = RenderScheduler::current_lane();
   const Camera camera = camera_of(job);
+  const double cpu0 = thread_cpu_ms();
   r.record.lod_error_px = job.lod_error_px >= 0.0f ? job.lod_error_px : set_lod_bound(camera);
+  const double cpu1 = thread_cpu_ms();
+  r.record.lod_cpu_ms = cpu1 - cpu0;
   // Frames on this GPU from the begin to the finish (the throughput model's sharing count).
   r.gpu_frames_at_begin = gpu_ >= 0 ? metrics_.gpu_render_begin(gpu_) : 1;
   // The server's list budget again, a while after a memory fallback lowered it.
@@ -304,6 +308,7 @@ void FramePipeline::begin_render_into(const Job& job, const Yuv420Target& target
     }
   }
   if (r.record.memory_fallback > 0) metrics_.render_memory_fallbacks_total++;  // drawn after all
+  r.record.begin_cpu_ms = thread_cpu_ms() - cpu1;
   r.render_begun = true;
 }
 
@@ -327,6 +332,7 @@ void FramePipeline::begin_views(const Job& job, const Camera& camera, const Yuv4
 
 void FramePipeline::finish_render_into(Rendered& r) {
   r.render_begun = false;
+  const double cpu0 = thread_cpu_ms();
   double frames_with_it = 1.0;
   const bool stereo = r.job.pose.eyes.has_value();
   double convert_ms = 0;
@@ -359,6 +365,7 @@ void FramePipeline::finish_render_into(Rendered& r) {
           : r.record.frame.visible;
   if (gpu_ >= 0 && r.record.frame.key_frame)
     metrics_.observe_gpu_throughput(gpu_, throughput_splats, r.record.render_ms, frames_with_it);
+  r.record.finish_cpu_ms = thread_cpu_ms() - cpu0;
 }
 
 void FramePipeline::render_into(const Job& job, const Yuv420Target& target, Rendered& r) {
@@ -524,6 +531,9 @@ FramePipeline::JobResult FramePipeline::frame_message(const Job& job, const Enco
   t->set_stage_ranges_ms(r.record.frame.ranges_ms);
   t->set_stage_rasterize_ms(r.record.frame.rasterize_ms);
   t->set_render_lane(static_cast<std::uint32_t>(std::max(0, r.record.render_lane)));
+  t->set_lane_lod_cpu_ms(r.record.lod_cpu_ms);
+  t->set_lane_begin_cpu_ms(r.record.begin_cpu_ms);
+  t->set_lane_finish_cpu_ms(r.record.finish_cpu_ms);
   m.SerializeToString(&r.message);
   r.key_frame = enc.key_frame;
   r.payload_bytes = enc.data.size();

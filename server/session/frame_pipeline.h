@@ -87,8 +87,10 @@ class FramePipeline {
     FrameStats frame;
     float lod_error_px = 0;  // the LOD bound the frame drew at (0: full detail or no LOD)
     double queue_ms = 0, render_ms = 0, convert_ms = 0;
-    double lane_wait_ms = 0;         // of queue_ms: posted -> its lane began it (FrameTimings.lane_wait_ms)
-    int render_lane = -1;            // the render lane that drew it (-1: none)
+    double lane_wait_ms = 0;  // of queue_ms: posted -> its lane began it (FrameTimings.lane_wait_ms)
+    int render_lane = -1;     // the render lane that drew it (-1: none)
+    // The lane thread's CPU in the frame's steps, ms (FrameTimings.lane_*_cpu_ms; base/thread_clock.h).
+    double lod_cpu_ms = 0, begin_cpu_ms = 0, finish_cpu_ms = 0;
     std::string error;               // non-empty: the render (or, in a JobResult, the encode) failed
     bool over_budget = false;        // it failed with RenderBudgetError (renderer.h): the view, not the server
     bool out_of_memory = false;      // it failed because a device buffer could not grow (issue 61)

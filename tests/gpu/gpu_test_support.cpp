@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "common/image_io.h"
+#include "lod/lod_build.h"
 #include "scene/ply_io.h"
 #include "scene/scene_bounds.h"
 
@@ -400,6 +401,18 @@ TestCity test_city(int radius_sq) {
   TestCity c;
   auto base = catgs::load_scene(scene_path("tumblewood_sh2"));
   c.model = std::make_shared<GaussianModel>(catgs::tile_scene(base, p, &c.layout));
+  return c;
+}
+
+const CityWithLod& city13_with_lod() {
+  static const CityWithLod c = [] {
+    CityWithLod k;
+    const TestCity city = test_city(4);  // 13 cells
+    k.lod = std::make_shared<GaussianModel>(catgs::build_lod(*city.model));
+    k.dev = catgs::cuda::DeviceScene::upload(*k.lod);
+    k.trace = real_trace(*k.lod, trace_path("mipnerf360_bicycle"), config().W, config().H, 96);
+    return k;
+  }();
   return c;
 }
 

@@ -123,6 +123,15 @@ struct TestCity {
 };
 TestCity test_city(int radius_sq);
 
+// The 13-copy city (test_city(4)) with its level of detail (lod/lod_build.h) on the device, and
+// 96 frames of the real bicycle path over it at the tests' size; built once per process.
+struct CityWithLod {
+  std::shared_ptr<GaussianModel> lod;
+  std::shared_ptr<const catgs::cuda::DeviceScene> dev;
+  catgs::Trace trace;
+};
+const CityWithLod& city13_with_lod();
+
 // Before RUN_ALL_TESTS (gpu_test_main.cpp): a test that fails without a failing row (an exception,
 // a missing file or device with CATGS_GPU_STRICT=1) adds one, "gtest | SUITE | NAME | -".
 void install_row_listener();

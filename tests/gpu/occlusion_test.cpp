@@ -16,28 +16,9 @@
 #include <string>
 
 #include "gpu_test_support.h"
-#include "lod/lod_build.h"
 
 namespace catgs::gputest {
 namespace {
-
-struct OcclusionCity {
-  std::shared_ptr<GaussianModel> lod;
-  std::shared_ptr<const catgs::cuda::DeviceScene> dev;
-  catgs::Trace trace;
-};
-
-const OcclusionCity& occlusion_city() {
-  static const OcclusionCity c = [] {
-    OcclusionCity k;
-    const TestCity city = test_city(4);  // 13 cells
-    k.lod = std::make_shared<GaussianModel>(catgs::build_lod(*city.model));
-    k.dev = catgs::cuda::DeviceScene::upload(*k.lod);
-    k.trace = real_trace(*k.lod, trace_path("mipnerf360_bicycle"), config().W, config().H, 96);
-    return k;
-  }();
-  return c;
-}
 
 catgs::RenderOptions occlusion_options(bool on) {
   catgs::RenderOptions o;
@@ -51,7 +32,7 @@ class Occlusion : public GpuTest {};
 
 TEST_F(Occlusion, CudaAgainstCpuAlongARealPath) {
   CATGS_GPU_REQUIRE({"tumblewood_sh2"}, {"mipnerf360_bicycle"});
-  const OcclusionCity& c = occlusion_city();
+  const CityWithLod& c = city13_with_lod();
   catgs::cpu::CpuRenderer cpu(c.lod, occlusion_options(true));
   catgs::cuda::CudaRenderer gpu(c.dev, occlusion_options(true)), plain(c.dev, occlusion_options(false));
   long long culled = 0, unculled = 0, chunks_cpu = 0, chunks_gpu = 0, chunks_plain = 0;
@@ -87,7 +68,7 @@ TEST_F(Occlusion, CudaAgainstCpuAlongARealPath) {
 
 TEST_F(Occlusion, SamePoseTwice) {
   CATGS_GPU_REQUIRE({"tumblewood_sh2"}, {"mipnerf360_bicycle"});
-  const OcclusionCity& c = occlusion_city();
+  const CityWithLod& c = city13_with_lod();
   for (std::size_t k = 0; k < c.trace.size(); k += c.trace.size() / 3) {
     catgs::cuda::CudaRenderer gpu(c.dev, occlusion_options(true));
     Image first, again;

@@ -44,6 +44,9 @@ void StageSums::add(const StageSums& o) {
   encode_psnr_db += o.encode_psnr_db;
   encode_psnr_frames += o.encode_psnr_frames;
   encode_thread_cpu += o.encode_thread_cpu;
+  lane_lod_cpu += o.lane_lod_cpu;
+  lane_begin_cpu += o.lane_begin_cpu;
+  lane_finish_cpu += o.lane_finish_cpu;
   for (int k = 0; k < 6; ++k) stage[k] += o.stage[k];
   for (const auto& [lane, l] : o.lanes) {
     lanes[lane].frames += l.frames;
@@ -153,6 +156,9 @@ nlohmann::json stages_json(const StageSums& s) {
       {"splats_mean", mean(s.splats, s.frames)},
       {"encode_psnr_db_mean", mean(s.encode_psnr_db, s.encode_psnr_frames)},
       {"encode_thread_cpu_ms", mean(s.encode_thread_cpu, s.frames)},
+      {"lane_lod_cpu_ms", mean(s.lane_lod_cpu, s.frames)},
+      {"lane_begin_cpu_ms", mean(s.lane_begin_cpu, s.frames)},
+      {"lane_finish_cpu_ms", mean(s.lane_finish_cpu, s.frames)},
       {"render_stages_ms", render_stages_json(s)},
       {"render_lanes", render_lanes_json(s)},
       {"frames", s.frames}};
@@ -308,6 +314,12 @@ std::string format_table(const std::vector<SessionResult>& sessions) {
                   "%.2f ms of CPU a frame\n",
                   mean(g.encode_psnr_db, g.encode_psnr_frames), worst, worst_encoder.c_str(),
                   mean(g.encode_thread_cpu, g.frames));
+    out += line;
+  }
+  if (g.frames > 0) {
+    std::snprintf(line, sizeof(line),
+                  "render lane CPU a frame: %.3f ms choosing the LOD bound, %.3f beginning, %.3f finishing\n",
+                  mean(g.lane_lod_cpu, g.frames), mean(g.lane_begin_cpu, g.frames), mean(g.lane_finish_cpu, g.frames));
     out += line;
   }
   for (const SessionResult& s : sessions)

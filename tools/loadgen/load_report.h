@@ -36,6 +36,8 @@ struct StageSums {
   double encode_psnr_db = 0;
   std::uint64_t encode_psnr_frames = 0;
   double encode_thread_cpu = 0;  // FrameTimings.encode_thread_cpu_ms summed over frames
+  // FrameTimings.lane_{lod,begin,finish}_cpu_ms summed over frames: the render lane's CPU.
+  double lane_lod_cpu = 0, lane_begin_cpu = 0, lane_finish_cpu = 0;
   // The renderer's own stage times (FrameTimings.stage_*_ms: frame, preprocess, keys, sort,
   // ranges, rasterize), summed over frames, and per render lane its frames and frame times.
   static constexpr const char* kStageNames[6] = {"frame", "preprocess", "keys", "sort", "ranges", "rasterize"};

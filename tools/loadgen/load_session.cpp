@@ -479,6 +479,9 @@ class PoseLoop {
     r_.server.lod_error_px_max = std::max<double>(r_.server.lod_error_px_max, t.lod_error_px());
     r_.server.splats += t.splats();
     r_.server.encode_thread_cpu += t.encode_thread_cpu_ms();
+    r_.server.lane_lod_cpu += t.lane_lod_cpu_ms();
+    r_.server.lane_begin_cpu += t.lane_begin_cpu_ms();
+    r_.server.lane_finish_cpu += t.lane_finish_cpu_ms();
     if (t.encode_psnr_db() > 0) {
       r_.server.encode_psnr_db += t.encode_psnr_db();
       r_.server.encode_psnr_frames++;
