@@ -259,11 +259,13 @@ Stage1Result check_preprocess(const StageCase& c, Stage1& s) {
           std::fabs(p.depth[s_i] - cpu.depth[g]) / std::max(1.0f, std::fabs(cpu.depth[g])),
           std::max({std::fabs(p.color[s_i].x - cpu.color[g].x), std::fabs(p.color[s_i].y - cpu.color[g].y),
                     std::fabs(p.color[s_i].z - cpu.color[g].z)})};
+      int off = -1;  // the first field out of its tolerance
       for (int k = 0; k < 5; ++k) {
         worst[k] = std::max(worst[k], err[k]);
-        if (!(err[k] <= tolerance[k]) && why.str().empty()) why << field[k] << " off by " << err[k];
+        if (off < 0 && !(err[k] <= tolerance[k])) off = k;
       }
-      if (!why.str().empty() && field[1] == std::string(why.str().substr(0, 5)))
+      if (off >= 0) why << field[off] << " off by " << err[off];
+      if (off == 1)
         why << ": (" << p.conic[s_i].x << ", " << p.conic[s_i].y << ", " << p.conic[s_i].z << "), CPU ("
             << cpu.conic[g].x << ", " << cpu.conic[g].y << ", " << cpu.conic[g].z << ")";
     }
