@@ -78,7 +78,8 @@ enum class HostWait {
 // without cudaEventBlockingSync whatever the flag says (CUDA runtime API, cudaEventSynchronize). So
 // renderers made after set_host_wait(block) create the events their host waits on with it and
 // poll each briefly before sleeping on it (renderer_state.h wait_for; issue 92: the frame's
-// readback wait in a lane's begin spun on the GPU's queue, 0.6-1.8 ms of a core a frame).
+// readback wait in a lane's begin spun for as long as the GPU's queue held it; RESULTS.md, "The
+// server's cores by thread").
 bool set_host_wait(HostWait wait);
 // What set_host_wait last set (spin until it is called).
 HostWait host_wait();

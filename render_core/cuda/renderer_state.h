@@ -143,8 +143,8 @@ inline constexpr int kPollBeforeSleepUs = 150;
 // Waits for `event`, recorded on the renderer's stream. Under HostWait::block it first polls the
 // event for up to kPollBeforeSleepUs, then sleeps in cudaEventSynchronize (the event was made
 // with host_wait_event_flags): a readback the GPU answers at once costs no sleep's wake-up, one
-// queued behind other lanes' work costs the poll, not its whole wait on a core (issue 92: the
-// spinning wait took 0.6-1.8 ms of a core a frame in a lane's begin). HostWait::spin: spins.
+// queued behind other lanes' work costs the poll, not its whole wait on a core (issue 92;
+// RESULTS.md, "The server's cores by thread"). HostWait::spin: spins.
 inline void wait_for(cudaEvent_t event) {
   if (host_wait() == HostWait::block) {
     const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(kPollBeforeSleepUs);

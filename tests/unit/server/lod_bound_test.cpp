@@ -332,9 +332,9 @@ TEST(LodBound, SplatBudgetOption) {
 }  // namespace
 
 // Issue 93: one declaration per option. Settings built without options (as tests and the fuzz
-// target build them) are what a server started without options runs: every option's value in
-// a ServerOptions holding a plain SessionSettings equals its value after parsing no arguments,
-// and the text --help shows as each default, given back as the option, changes nothing.
+// target build them) are what a server started without options runs: parsing no arguments
+// changes no option's value (but the two resolved at parse time), --help shows each option's
+// default from its field, and that text given back as the option changes nothing.
 TEST(ServerDefaults, ASessionWithoutOptionsRunsTheServersDefaults) {
   const char* none[] = {"catgs-server"};
   ServerOptions parsed;

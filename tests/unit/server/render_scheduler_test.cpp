@@ -191,7 +191,8 @@ TEST(RenderScheduler, LanesAreNamedThreads) {
   EXPECT_EQ(cut, "catgs-a-very-lo");
 }
 
-// --frames-per-lane: 2 with the CUDA renderer, 1 with the CPU one, a given count wins; 1 to 16.
+// --frames-per-lane: 2 with the CUDA renderer, 1 with the CPU one, a given count wins; 0 (the
+// renderer's default) to 16.
 TEST(RenderScheduler, FramesPerLaneOption) {
   EXPECT_EQ(RenderScheduler::default_frames_per_lane(0, "cuda"), 2);
   EXPECT_EQ(RenderScheduler::default_frames_per_lane(0, "cpu"), 1);
