@@ -354,7 +354,9 @@ shown() {
   local config run n runs=""
   # CATGS_SHOWN_CONFIGS: which servers record (base: --pose-prediction off, the landed build's
   # frames; pred: on); CATGS_SHOWN_RUNS: which links (default one loaded l25 l8);
-  # CATGS_SHOWN_FLAGS: more rows of catgs-shown (e.g. --depth-warp).
+  # CATGS_SHOWN_FLAGS: more rows of catgs-shown (e.g. --depth-warp, --parts); CATGS_SHOWN_BASE:
+  # the rows always asked (default --plain --centre-plane; the centre probe runs on the CPU at full
+  # detail, most of the scoring's time on a city).
   for config in ${CATGS_SHOWN_CONFIGS:-base pred}; do
     local extra=()
     extra=(--pose-prediction off)
@@ -378,7 +380,7 @@ shown() {
     stop_server
   done
   "$SRV/bin/catgs-shown" --scene "$(scene_file "$scene")" --cache-dir "$W/cache" --renderer cuda --run "$runs" \
-    --every "${CATGS_SHOWN_EVERY:-3}" --plain --centre-plane ${CATGS_SHOWN_FLAGS:-} --json "$OUT/shown-$name.json" --png-dir "$R/pictures" 2>&1 |
+    --every "${CATGS_SHOWN_EVERY:-3}" ${CATGS_SHOWN_BASE---plain --centre-plane} ${CATGS_SHOWN_FLAGS:-} --json "$OUT/shown-$name.json" --png-dir "$R/pictures" 2>&1 |
     tee "$OUT/shown-$name.txt"
   tar -C "$R" -cf "$OUT/shown-$name-pictures.tar" pictures  # one file: a call brings back 8 at most
 }

@@ -7,6 +7,12 @@
 //                 fit it, server/render/lod_bound.h CutCounter), what a client-side renderer shows
 //   shown NAME    each recorded run (catgs-loadgen --record): the newest frame visible by the
 //                 refresh, re-projected by the page's rule to the display pose
+// With --parts, the loss split into its parts (issue 91: which part binds, and by how much):
+//   server cut    our renderer at the display pose at the server's LOD bound (the first run's
+//                 shown frame's): the level of detail alone, no codec, no delay
+//   no codec NAME the shown frame's pose rendered raw at its LOD bound (our renderer, not the
+//                 decoded stream), re-projected as the depth warp row is (the frame's own depth
+//                 grid): the delay alone over `server cut`; the depth warp row less it is the codec
 // Each session of the first run is scored with the session of the same folder name in every other
 // run (or a run's only session), which must have the same trace, size and offset: the display
 // poses are then the same, so each refresh's ideal is rendered once for every row. A loaded run
@@ -61,6 +67,9 @@ const char* kUsage =
     "                        (shown/depth_warp.h; frames without one: the page's plane)\n"
     "  --centre-plane        also re-project each run with the plane at the depth under the\n"
     "                        frame's centre pixel (the depth probe at full detail; not the page)\n"
+    "  --parts               also the loss's parts: the server's LOD cut at the display pose, and\n"
+    "                        each run's frames rendered raw (no codec) and re-projected as\n"
+    "                        --depth-warp does (which it implies)\n"
     "The table: PSNR (dB) and SSIM mean and 5th percentile over the refreshes; the last column is\n"
     "the anchor's mean LOD bound (px) and a shown row's mean frame age (ms: display pose to the\n"
     "shown frame's pose).\n";
@@ -156,6 +165,7 @@ struct Scorer {
   std::string png_dir;
   double plane_depth = 0;  // --plane-depth: another plane than the page's (0: the page's)
   bool plain = false;      // --plain: each run's newest frame also as it is, not re-projected
+  bool parts = false;      // --parts: rows "server cut" and "no codec NAME" (the header says why)
   // --centre-plane: each run also re-projected with the plane at the depth under the frame's centre
   // pixel (cpu::probe_pixel_depth at full detail: what a depth sent with each frame would give).
   bool centre = false;
@@ -177,13 +187,18 @@ struct Scorer {
     return depth;
   }
 
+  // The LOD bound the shown frame of `player` was drawn at, px (Frame.lod_error_px).
+  static float lod_bound_of(const RecordingPlayer& player) {
+    return player.recording().frames[static_cast<std::size_t>(player.shown_index())].lod_error_px;
+  }
+
   // One session of every run: rows full detail, anchor, then each run's shown picture (and, with
   // --plain, each run's frame as it arrived).
   std::vector<Row> score(const std::vector<std::string>& names, std::vector<RecordingPlayer>& players,
                          const std::string& session) {
     const std::size_t runs = players.size();
-    const std::size_t kinds = 1 + (plain ? 1 : 0) + (centre ? 1 : 0) + (depth_warp ? 1 : 0);
-    std::vector<Row> rows(2 + runs * kinds);
+    const std::size_t kinds = 1 + (plain ? 1 : 0) + (centre ? 1 : 0) + (depth_warp ? 1 : 0) + (parts ? 1 : 0);
+    std::vector<Row> rows(2 + runs * kinds + (parts ? 1 : 0));
     centre_depths.assign(runs, {-1, 0.0});
     rows[0].name = "full detail";
     rows[1].name = "anchor " + std::to_string(budget / 1000) + " k";
@@ -193,6 +208,9 @@ struct Scorer {
     for (std::size_t r = 0; centre && r < runs; ++r) rows[centre_row + r].name = "centre " + names[r];
     const std::size_t warp_row = centre_row + (centre ? runs : 0);
     for (std::size_t r = 0; depth_warp && r < runs; ++r) rows[warp_row + r].name = "depth warp " + names[r];
+    const std::size_t raw_row = warp_row + (depth_warp ? runs : 0), cut_row = raw_row + runs;
+    for (std::size_t r = 0; parts && r < runs; ++r) rows[raw_row + r].name = "no codec " + names[r];
+    if (parts) rows[cut_row].name = "server cut";
     const loadgen::SessionRecording& first = players.front().recording();
     double start_ms = 1000.0 * warmup_s;
     for (const auto& p : players) start_ms = std::max(start_ms, p.first_visible_ms());
@@ -209,18 +227,44 @@ struct Scorer {
       rows[1].detail.push_back(bound);
       view->set_options(detail(bound));
       view->render(display, anchor);
-      // The rows' re-projections and scores are independent (each run has its own decoder): one
-      // task each.
+      // Each run's newest frame, decoded (a decoder each: one task a run).
+      std::vector<const Image*> frame_of(runs);
+      std::vector<Camera> pose_of(runs);
+      {
+        std::vector<std::future<void>> decodes;
+        for (std::size_t r = 0; r < runs; ++r)
+          decodes.push_back(
+              std::async(std::launch::async, [&, r] { frame_of[r] = players[r].shown_frame(t, pose_of[r]); }));
+        for (auto& d : decodes) d.get();
+      }
+      for (std::size_t r = 0; r < runs; ++r)
+        if (!frame_of[r]) throw std::runtime_error(session + ": no decoded frame by " + std::to_string(t) + " ms");
+      // --parts: the renders (one renderer, so here, in turn) of the server's cut at the display
+      // pose and of each run's shown pose at its frame's bound, raw.
+      Image cut;
+      std::vector<Image> raw(parts ? runs : 0);
+      if (parts) {
+        view->set_options(detail(lod_bound_of(players[0])));
+        view->render(display, cut);
+        for (std::size_t r = 0; r < runs; ++r) {
+          view->set_options(detail(lod_bound_of(players[r])));
+          view->render(pose_of[r], raw[r]);
+        }
+      }
+      // The rows' re-projections and scores are independent: one task each.
       std::vector<Image> shown(players.size());
       std::vector<Image> frames(players.size());
       std::vector<std::future<void>> tasks;
       tasks.push_back(std::async(std::launch::async, [&] { rows[0].add(full, want); }));
       tasks.push_back(std::async(std::launch::async, [&] { rows[1].add(anchor, want); }));
+      if (parts) {
+        rows[cut_row].detail.push_back(lod_bound_of(players[0]));
+        tasks.push_back(std::async(std::launch::async, [&] { rows[cut_row].add(cut, want); }));
+      }
       for (std::size_t r = 0; r < players.size(); ++r)
         tasks.push_back(std::async(std::launch::async, [&, r] {
-          Camera frame_pose;
-          const Image* frame = players[r].shown_frame(t, frame_pose);
-          if (!frame) throw std::runtime_error(session + ": no decoded frame by " + std::to_string(t) + " ms");
+          const Image* frame = frame_of[r];
+          const Camera& frame_pose = pose_of[r];
           shown[r] = stretched(page_shows(*frame, frame_pose, display, players[r].recording(), plane_depth),
                                display.width, display.height);
           rows[2 + r].add(shown[r], want);
@@ -240,11 +284,17 @@ struct Scorer {
                 players[r].recording().frames[static_cast<std::size_t>(players[r].shown_index())].depth_grid;
             const DepthGrid depth = grid ? server::unpack_depth_grid(*grid) : DepthGrid{};
             const double plane = page_plane_depth(frame_pose, display, players[r].recording(), plane_depth);
-            rows[warp_row + r].add(
-                stretched(depth_warp_picture(*frame, page_pose_of(frame_pose), page_pose_of(display), depth, plane),
-                          display.width, display.height),
-                want);
+            const auto warped = [&](const Image& picture) {
+              return stretched(
+                  depth_warp_picture(picture, page_pose_of(frame_pose), page_pose_of(display), depth, plane),
+                  display.width, display.height);
+            };
+            rows[warp_row + r].add(warped(*frame), want);
             rows[warp_row + r].detail.push_back(players[r].shown_age_ms(t));
+            if (parts) {
+              rows[raw_row + r].add(warped(raw[r]), want);
+              rows[raw_row + r].detail.push_back(players[r].shown_age_ms(t));
+            }
           }
           rows[2 + r].detail.push_back(players[r].shown_age_ms(t));
           if (!png_dir.empty()) frames[r] = *frame;
@@ -270,7 +320,7 @@ int main(int argc, char** argv) {
     const tools::Args args(argc, argv,
                            {"--scene", "--cache-dir", "--run", "--renderer", "--aa", "--refresh-hz", "--warmup-s",
                             "--every", "--anchor-budget", "--json", "--png-dir", "--help!", "--plain!", "--plane-depth",
-                            "--centre-plane!", "--depth-warp!"});
+                            "--centre-plane!", "--depth-warp!", "--parts!"});
     if (args.has("--help")) {
       std::cout << kUsage;
       return 0;
@@ -286,7 +336,8 @@ int main(int argc, char** argv) {
     s.plain = args.has("--plain");
     s.plane_depth = args.get_double("--plane-depth", 0);
     s.centre = args.has("--centre-plane");
-    s.depth_warp = args.has("--depth-warp");
+    s.parts = args.has("--parts");
+    s.depth_warp = args.has("--depth-warp") || s.parts;
     if (s.aa < 1 || s.refresh_hz <= 0 || s.every < 1)
       throw std::invalid_argument("--aa and --every must be >= 1, --refresh-hz > 0");
     if (!s.png_dir.empty()) std::filesystem::create_directories(s.png_dir);
