@@ -357,11 +357,14 @@ shown() {
   # CATGS_SHOWN_FLAGS: more rows of catgs-shown (e.g. --depth-warp, --parts); CATGS_SHOWN_BASE:
   # the rows always asked (default --plain --centre-plane; the centre probe runs on the CPU at full
   # detail, most of the scoring's time on a city).
+  # `before`: as pred, with the server of another unpacked build (CATGS_SRV_BEFORE: a before/after
+  # pair scored in one table).
   for config in ${CATGS_SHOWN_CONFIGS:-base pred}; do
-    local extra=()
-    extra=(--pose-prediction off)
-    [ "$config" = pred ] && extra=(--pose-prediction on)
+    local extra=(--pose-prediction off) srv=$SRV
+    [ "$config" = pred ] || [ "$config" = before ] && extra=(--pose-prediction on)
+    [ "$config" = before ] && SRV=${CATGS_SRV_BEFORE:?CATGS_SRV_BEFORE names the before build}
     start_server "$(scene_file "$scene")" "$R/server-$config.log" --cache-dir "$W/cache" "$@" "${extra[@]}" || return 1
+    SRV=$srv
     for run in ${CATGS_SHOWN_RUNS:-one loaded l25 l8}; do
       local link=()
       n=3
