@@ -73,7 +73,7 @@ void SessionStream::on_pose(const pb::Pose& pose, const CameraPose& cam, const s
   next.eyes = eyes;
   display_hz_ = pose.display_hz();  // the encoder takes it at its next build
   if (shared_.settings.frame.pose_prediction && !eyes) {
-    prediction_.on_pose(cam, pose.client_time_ms(), pose.shown_latency_ms());
+    prediction_.on_pose(cam, pose.client_time_ms(), pose.shown_latency_ms(), pose.display_hz());
     next.pose = prediction_.predicted();
     next.predicted = next.pose.position != cam.position || next.pose.orientation != cam.orientation;
   }
