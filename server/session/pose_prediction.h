@@ -7,9 +7,9 @@
 // poses on the client's clock), and the Frame says which pose it shows (Frame.shown_pose), so the
 // page re-projects from it. The clients report pose to decoded (load_session.cpp, catgs_viewer.js);
 // a decoded frame then waits for the display's next refresh, half a refresh interval on average,
-// which the lead adds where the reported delay is short (kRefreshWaitFullMs .. kRefreshWaitNoneMs:
-// on a round trip of 40 ms or more the same 8 ms more lost 0.3-0.7 dB, docs/history/
-// shown_picture.md, "The display's refresh in the lead"). What is gained and lost, measured by the shown-picture measure
+// which the lead adds where the reported delay is short (kRefreshWaitFullMs .. kRefreshWaitNoneMs;
+// on longer round trips more lead lost picture: docs/history/shown_picture.md, "The display's
+// refresh in the lead"). What is gained and lost, measured by the shown-picture measure
 // (catgs-shown): RESULTS.md "What the visitor's screen shows".
 #pragma once
 
@@ -33,9 +33,9 @@ class PosePrediction {
   // The display rate assumed where a Pose states none (Pose.display_hz: headsets send theirs).
   static constexpr double kDefaultDisplayHz = 60.0;
   // The half refresh is added whole while the reported delay is at most kRefreshWaitFullMs, not at
-  // all from kRefreshWaitNoneMs, and in proportion between (no jump in the lead as a delay drifts):
-  // measured at loopback (a 7.7 ms delay: +1.9 dB) and at 46 and 98 ms (-0.7, -0.25); between
-  // the two bounds it was not measured.
+  // all from kRefreshWaitNoneMs, and in proportion between (no jump in the lead as a delay drifts).
+  // The bounds sit between the delays it was measured at (loopback's, where it gained, and the
+  // 40 and 80 ms round trips', where it lost; the history page above); between them it was not.
   static constexpr double kRefreshWaitFullMs = 16.0;
   static constexpr double kRefreshWaitNoneMs = 40.0;
 

@@ -193,7 +193,8 @@ struct Scorer {
   }
 
   // One session of every run: rows full detail, anchor, then each run's shown picture (and, with
-  // --plain, each run's frame as it arrived).
+  // --plain, each run's frame as it arrived; --centre-plane, --depth-warp and --parts their rows,
+  // the server's cut last).
   std::vector<Row> score(const std::vector<std::string>& names, std::vector<RecordingPlayer>& players,
                          const std::string& session) {
     const std::size_t runs = players.size();
